@@ -1,0 +1,2 @@
+"""Acoustic channel and environment: geometry, delay/Doppler, propagation, noise,
+reverberation, tank."""
