@@ -45,7 +45,9 @@ def _top(name: str) -> str:
 @pytest.mark.parametrize("path", _modules("firmware_protocol"), ids=str)
 def test_firmware_protocol_imports_no_host_or_sim(path: Path) -> None:
     bad = [(ln, m) for ln, m in _imports(path, False) if _top(m) in ("hil", "sim_devices")]
-    assert not bad, f"{path.relative_to(ROOT)} imports {bad}: firmware_protocol must stay standalone"
+    assert not bad, (
+        f"{path.relative_to(ROOT)} imports {bad}: firmware_protocol must stay standalone"
+    )
 
 
 @pytest.mark.parametrize("path", _modules("sim_devices"), ids=str)

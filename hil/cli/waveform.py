@@ -1,0 +1,236 @@
+"""``hil waveform``: synthesise a transmit waveform to a float32 WAV with its schedule file.
+
+Example::
+
+    hil waveform --preset att --family random-cyclic --duration 2 --fs 100000 \\
+        --out x.wav --schedule x.json --plot diag/
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hil.errors import ConfigError
+from hil.signals.presets import PRESETS, check_design, get_preset
+from hil.signals.schedule_file import schedule_document, write_schedule_file
+from hil.signals.synthesis import BlockSynthesizer
+from hil.signals.waveforms import FAMILIES, design_summary
+
+# Samples synthesised per block when writing the WAV: bounded memory for long files.
+_WRITE_BLOCK = 1 << 20
+
+# Command-line option -> WaveformSpec field.
+_OVERRIDES: dict[str, str] = {
+    "fs": "fs_hz",
+    "center": "center_hz",
+    "bandwidth": "bandwidth_hz",
+    "tones": "n_tones",
+    "hop": "hop_s",
+    "code_length": "code_length",
+    "window": "window",
+    "order": "order",
+    "sequence": "sequence",
+    "seed": "seed",
+    "candidates": "candidates",
+    "m_hops": "m_hops",
+    "sweep": "sweep_s",
+    "costas_prime": "costas_prime",
+    "subchirp_bandwidth": "subchirp_bandwidth_hz",
+    "pulse": "pulse_s",
+    "pri": "pri_s",
+    "sound_speed": "sound_speed_mps",
+    "max_speed": "max_speed_mps",
+    "min_speed": "min_speed_mps",
+    "max_range": "max_range_m",
+}
+
+
+def register(sub: Any) -> None:
+    """Add the ``waveform`` sub-command."""
+    p: argparse.ArgumentParser = sub.add_parser(
+        "waveform",
+        help="synthesise a transmit waveform (WAV + schedule JSON + diagnostics)",
+        description="Synthesise a transmit waveform to a float32 WAV and write its hop "
+        "schedule as JSON (format: docs/schedule-format.md). Options override the preset.",
+    )
+    p.add_argument("--preset", default="att", help=f"one of {', '.join(PRESETS)} (default att)")
+    p.add_argument(
+        "--family",
+        default="random-cyclic",
+        help=f"one of {', '.join(FAMILIES)} (default random-cyclic)",
+    )
+    p.add_argument("--duration", type=float, default=2.0, help="seconds to synthesise (default 2)")
+    p.add_argument("--out", type=Path, help="float32 WAV file to write")
+    p.add_argument("--schedule", type=Path, help="schedule JSON file to write")
+    p.add_argument("--plot", type=Path, metavar="DIR", help="write diagnostic PNGs into DIR")
+    p.add_argument(
+        "--amplitude",
+        type=float,
+        default=0.9,
+        help="peak amplitude in the WAV, 0 < a <= 1 (default 0.9)",
+    )
+    g = p.add_argument_group("design overrides (default: the preset's value)")
+    g.add_argument("--fs", type=float, help="sample rate, Hz")
+    g.add_argument("--center", type=float, help="carrier f_c, Hz")
+    g.add_argument("--bandwidth", type=float, help="occupied bandwidth B_w, Hz")
+    g.add_argument("--tones", type=int, help="number of tones N_F")
+    g.add_argument("--hop", type=float, help="hop duration T_h, s")
+    g.add_argument("--code-length", type=int, help="random-cyclic code length L")
+    g.add_argument("--window", type=int, help="random-cyclic unique-window length W")
+    g.add_argument("--order", type=int, help="three-state codeword length L_c")
+    g.add_argument("--sequence", choices=("debruijn", "mseq"), help="three-state bit source")
+    g.add_argument("--seed", type=int, help="random-cyclic code search seed")
+    g.add_argument("--candidates", type=int, help="random-cyclic codes drawn (best d_min kept)")
+    g.add_argument("--m-hops", type=int, help="correlator length M used for d_min")
+    g.add_argument("--sweep", type=float, help="FMCW sweep duration, s")
+    g.add_argument("--costas-prime", type=int, help="prime p of the Welch Costas array")
+    g.add_argument("--subchirp-bandwidth", type=float, help="costas-lfm sub-chirp sweep, Hz")
+    g.add_argument("--pulse", type=float, help="pulse duration, s")
+    g.add_argument("--pri", type=float, help="pulse repetition interval, s")
+    g.add_argument("--sound-speed", type=float, help="sound speed c, m/s")
+    g.add_argument("--max-speed", type=float, help="fastest target of interest, m/s")
+    g.add_argument("--min-speed", type=float, help="slowest target of interest, m/s")
+    g.add_argument("--max-range", type=float, help="largest range of interest, m")
+    p.add_argument("--json", action="store_true", help="print the design summary as JSON")
+    p.set_defaults(func=run)
+
+
+def _validate_io(args: argparse.Namespace) -> None:
+    if not (math.isfinite(args.duration) and args.duration > 0):
+        raise ConfigError("--duration", args.duration, "> 0 s")
+    if not (math.isfinite(args.amplitude) and 0 < args.amplitude <= 1):
+        raise ConfigError("--amplitude", args.amplitude, "in (0, 1] (full scale is 1)")
+    for opt in ("out", "schedule"):
+        path = getattr(args, opt)
+        if path is not None and not path.parent.exists():
+            raise ConfigError(
+                f"--{opt}", str(path), "a path in an existing folder", "create the folder first"
+            )
+
+
+def _write_wav(path: Path, synth: BlockSynthesizer, n_samples: int, fs: float) -> None:
+    """Stream a float32 WAV (IEEE float, mono) block by block."""
+    from scipy.io import wavfile
+
+    if n_samples <= _WRITE_BLOCK:
+        wavfile.write(path, int(round(fs)), synth.render(0, n_samples, np.float32))
+        return
+    # Long files: write the header once, then append blocks, keeping memory bounded.
+    _write_float_wav_streaming(path, synth, n_samples, int(round(fs)))
+
+
+def _write_float_wav_streaming(
+    path: Path, synth: BlockSynthesizer, n_samples: int, fs: int
+) -> None:
+    import struct
+
+    data_bytes = 4 * n_samples
+    header = b"RIFF" + struct.pack("<I", 4 + 26 + 12 + 8 + data_bytes) + b"WAVE"
+    # fmt chunk (18 bytes, WAVE_FORMAT_IEEE_FLOAT = 3), then a fact chunk as float WAVs require.
+    header += b"fmt " + struct.pack("<IHHIIHHH", 18, 3, 1, fs, fs * 4, 4, 32, 0)
+    header += b"fact" + struct.pack("<II", 4, n_samples)
+    header += b"data" + struct.pack("<I", data_bytes)
+    with path.open("wb") as fh:
+        fh.write(header)
+        done = 0
+        while done < n_samples:
+            count = min(_WRITE_BLOCK, n_samples - done)
+            fh.write(synth.render(done, count, np.float32).astype("<f4").tobytes())
+            done += count
+
+
+def _with_option_name(exc: ConfigError) -> ConfigError:
+    """Name the command-line option in a design error (``fs_hz`` -> ``--fs``)."""
+    options = {field: "--" + opt.replace("_", "-") for opt, field in _OVERRIDES.items()}
+    options.update(family="--family", preset="--preset", n_tones="--tones")
+    option = options.get(exc.field)
+    if option is None:
+        return exc
+    return ConfigError(f"{option} ({exc.field})", exc.value, exc.allowed, exc.hint)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Execute ``hil waveform``; return the exit status."""
+    _validate_io(args)
+    overrides = {field: getattr(args, opt) for opt, field in _OVERRIDES.items()}
+    try:
+        preset = get_preset(args.preset)
+        spec = preset.spec(args.family, **overrides)
+        schedule = check_design(spec)
+    except ConfigError as exc:
+        raise _with_option_name(exc) from None
+    fs = spec.fs_hz
+    n = int(round(args.duration * fs))
+    summary = design_summary(schedule, spec.sound_speed_mps)
+    summary.update(preset=preset.name, fs=fs, duration_s=args.duration, samples=n)
+    if args.family == "random-cyclic":
+        summary["d_min"] = schedule.params.get("d_min")
+        summary["m_hops"] = spec.m_hops
+    synth = BlockSynthesizer(schedule, fs, amplitude=args.amplitude)
+    if args.out is not None:
+        _write_wav(args.out, synth, n, fs)
+        summary["wav"] = str(args.out)
+    if args.schedule is not None:
+        doc = schedule_document(
+            schedule,
+            fs,
+            args.duration,
+            sound_speed_mps=spec.sound_speed_mps,
+            amplitude=args.amplitude,
+            spec=spec.to_dict(),
+        )
+        write_schedule_file(args.schedule, doc)
+        summary["schedule"] = str(args.schedule)
+    if args.plot is not None:
+        from hil.signals.plots import write_diagnostics
+
+        paths = write_diagnostics(
+            schedule,
+            fs,
+            args.plot,
+            max_speed_mps=spec.max_speed_mps,
+            sound_speed_mps=spec.sound_speed_mps,
+            duration_s=args.duration,
+        )
+        summary["plots"] = [str(p) for p in paths]
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        _print_summary(summary, schedule.code.tolist())
+    return 0
+
+
+def _print_summary(summary: dict[str, Any], code: list[int]) -> None:
+    lines = [
+        f"preset {summary['preset']}, family {summary['family']}: "
+        f"{summary['samples']} samples at {summary['fs']:g} Hz ({summary['duration_s']:g} s)",
+        "tones (Hz): " + ", ".join(f"{f:.3f}" for f in summary["tones_hz"]),
+        f"code ({summary['period_hops']} hops/period): {code[:64]}"
+        + (" ..." if len(code) > 64 else ""),
+        f"period {summary['period_s']:.6g} s, unambiguous range "
+        f"{summary['unambiguous_range_m']:.2f} m",
+    ]
+    if "hop_s" in summary:
+        lines.append(
+            f"hop {summary['hop_s'] * 1e3:.4g} ms"
+            + (
+                f", tone spacing {summary['tone_spacing_hz']:.6g} Hz, "
+                f"Δf·T_h = {summary['df_times_hop']:.6g}"
+                if "tone_spacing_hz" in summary
+                else ""
+            )
+        )
+    if summary.get("d_min") is not None:
+        lines.append(f"d_min = {summary['d_min']} at M = {summary['m_hops']}")
+    for key in ("wav", "schedule"):
+        if key in summary:
+            lines.append(f"wrote {summary[key]}")
+    if "plots" in summary:
+        lines.append(f"wrote {len(summary['plots'])} plots: " + ", ".join(summary["plots"]))
+    print("\n".join(lines))
