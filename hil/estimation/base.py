@@ -1,0 +1,114 @@
+"""The shared receiver interface and estimate record.
+
+A receiver consumes real samples block by block and emits one :class:`Estimate` per detected
+hop boundary (or per sweep/pulse for the comparison waveforms). Receivers are block-wise with
+explicit state (DESIGN principle 7): for any chunking of the input, the concatenated output of
+:meth:`Receiver.process` followed by :meth:`Receiver.flush` equals that of one call on the
+whole signal.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+from numpy.typing import NDArray
+
+ESTIMATE_FIELDS: tuple[str, ...] = (
+    "t_s",
+    "range_m",
+    "speed_mps",
+    "hop_index",
+    "score",
+    "snr_db",
+    "alpha",
+    "t_tx_s",
+    "codeword",
+    "receiver",
+)
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """One range/speed estimate.
+
+    Attributes
+    ----------
+    t_s:
+        Receive time of the detected hop boundary, s from the first sample of the input
+        (sample ``n`` is at ``n / fs``).
+    range_m:
+        Range at the bounce instant, ``c (t_rx − t_tx) / 2``, m.
+    speed_mps:
+        Radial speed, m/s, positive closing, from the Doppler estimate
+        ``v = c (α − 1)/(α + 1)``.
+    hop_index:
+        Global index (in the transmit schedule) of the hop whose *end* boundary was received
+        at ``t_s``: the boundary between transmit hops ``hop_index`` and ``hop_index + 1``.
+        Consecutive detections of one target advance it by one.
+    score:
+        Detection statistic of the receiver (dimensionless; larger is more confident).
+    snr_db:
+        Estimated output SNR of the detection, dB.
+    alpha:
+        Estimated Doppler time-scale factor α = (c + v)/(c − v).
+    t_tx_s:
+        Transmit time of that boundary, s, in the same time base as ``t_s``.
+    codeword:
+        Index of the detected codeword within the code period (``hop_index mod P``).
+    receiver:
+        Name of the receiver that produced it (``"gcas"``, ``"jifs"``, ``"stft"``,
+        ``"mfbank"``, ``"fmcw"``).
+    """
+
+    t_s: float
+    range_m: float
+    speed_mps: float
+    hop_index: int
+    score: float
+    snr_db: float
+    alpha: float
+    t_tx_s: float
+    codeword: int
+    receiver: str
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary with the fields in :data:`ESTIMATE_FIELDS` order."""
+        d = asdict(self)
+        return {k: d[k] for k in ESTIMATE_FIELDS}
+
+
+@runtime_checkable
+class Receiver(Protocol):
+    """A block-wise estimator with explicit state.
+
+    ``fs_hz`` is the input sample rate. ``samples_seen`` counts the samples consumed so far
+    (gaps included), so ``samples_seen / fs_hz`` is the time of the next input sample.
+    """
+
+    name: str
+    fs_hz: float
+
+    @property
+    def samples_seen(self) -> int:
+        """Samples consumed so far."""
+        ...
+
+    def process(self, block: NDArray[np.floating], *, gap_before: int = 0) -> list[Estimate]:
+        """Consume ``block`` (shape ``(n,)``, real samples) and return new estimates.
+
+        ``gap_before`` is the number of samples missing between the previous block and this
+        one (flagged by the caller from sample indices); the receiver advances its time base
+        by that many samples and restarts its accumulation cleanly, so no estimate straddles
+        a gap.
+        """
+        ...
+
+    def flush(self) -> list[Estimate]:
+        """End of input: return estimates still held back (e.g. awaiting a look-ahead)."""
+        ...
+
+    def reset(self) -> None:
+        """Forget all state; the next sample is sample 0 again."""
+        ...
