@@ -1,0 +1,73 @@
+"""Receivers by name, imported lazily.
+
+Every receiver class provides the common constructor::
+
+    Cls.from_options(schedule, fs_hz, *, sound_speed_mps, max_speed_mps, max_range_m,
+                     m_hops, **extra) -> Receiver
+
+where ``schedule`` is the transmit :class:`~hil.signals.schedule.HopSchedule` (time base: the
+first input sample is at the schedule's t = 0 unless the receiver is told otherwise through
+``extra``), ``fs_hz`` the input sample rate, ``sound_speed_mps`` c, ``max_speed_mps`` the
+Doppler search span (±), ``max_range_m`` the largest range reported, ``m_hops`` the correlator
+length M (receivers without one ignore it). Unknown ``extra`` keys raise a ConfigError.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+from hil.errors import ConfigError
+from hil.estimation.base import Receiver
+from hil.signals.schedule import HopSchedule
+
+RECEIVERS: dict[str, str] = {
+    "gcas": "hil.estimation.gcas:GcasReceiver",
+    "jifs": "hil.estimation.jifs:JifsReceiver",
+    "stft": "hil.estimation.stft:StftReceiver",
+    "mfbank": "hil.estimation.mfbank:MatchedFilterBank",
+    "fmcw": "hil.estimation.fmcw:FmcwReceiver",
+}
+
+
+def receiver_class(name: str) -> Any:
+    """The class registered as ``name`` (imported on first use)."""
+    try:
+        target = RECEIVERS[name]
+    except KeyError:
+        raise ConfigError("receiver", name, f"one of {', '.join(RECEIVERS)}") from None
+    module_name, _, attr = target.partition(":")
+    try:
+        module = importlib.import_module(module_name)
+    except ModuleNotFoundError as exc:
+        if exc.name == module_name:
+            raise ConfigError(
+                "receiver", name, "an implemented receiver", f"{module_name} is not available"
+            ) from None
+        raise
+    return getattr(module, attr)
+
+
+def make_receiver(
+    name: str,
+    schedule: HopSchedule,
+    fs_hz: float,
+    *,
+    sound_speed_mps: float,
+    max_speed_mps: float,
+    max_range_m: float,
+    m_hops: int,
+    **extra: Any,
+) -> Receiver:
+    """Build the receiver ``name`` with the common options and receiver-specific ``extra``."""
+    cls = receiver_class(name)
+    receiver: Receiver = cls.from_options(
+        schedule,
+        fs_hz,
+        sound_speed_mps=sound_speed_mps,
+        max_speed_mps=max_speed_mps,
+        max_range_m=max_range_m,
+        m_hops=m_hops,
+        **extra,
+    )
+    return receiver
