@@ -1,0 +1,1 @@
+"""Device drivers: motion stage, transducer board and audio interface."""

@@ -1,0 +1,86 @@
+"""Audio interface as the cheapest DAC/ADC: full-duplex streams, real and simulated.
+
+- :mod:`~hil.devices.audio.contract`: the real-time callback contract (read it first).
+- :class:`SoundDeviceDuplex`: a real interface over python-sounddevice (PortAudio), imported
+  lazily, so this package imports without PortAudio installed.
+- :class:`SimulatedDuplex`: the same contract, with a pluggable world (e.g.
+  :class:`DigitalLoopbackWorld`) and an injected clock.
+- :func:`play_record`: play a signal and record the input at the same time.
+- :func:`measure_loopback_latency` / :func:`play_record_calibrated`: the loopback latency
+  measured with a reference chirp at every run.
+"""
+
+from hil.devices.audio.contract import (
+    DTYPE,
+    AudioCallback,
+    BlockTime,
+    CallbackStop,
+    DuplexBackend,
+    StatusFlags,
+    XrunLog,
+)
+from hil.devices.audio.latency import (
+    CalibratedRecording,
+    LatencyMeasurement,
+    LatencyMeasurementError,
+    LoopbackCalibration,
+    lfm_chirp,
+    matched_filter_delay,
+    measure_loopback_latency,
+    play_record_calibrated,
+    reference_chirp,
+)
+from hil.devices.audio.playrec import PlayRecording, play_record
+from hil.devices.audio.portaudio_backend import (
+    AudioUnavailableError,
+    DeviceInfo,
+    SoundDeviceDuplex,
+    find_device,
+    list_devices,
+    portaudio_available,
+    rescan_devices,
+)
+from hil.devices.audio.settings import AudioSettings
+from hil.devices.audio.simulated import (
+    Clock,
+    DigitalLoopbackWorld,
+    ManualClock,
+    RealtimeClock,
+    SimulatedDuplex,
+    World,
+)
+
+__all__ = [
+    "DTYPE",
+    "AudioCallback",
+    "AudioSettings",
+    "AudioUnavailableError",
+    "BlockTime",
+    "CalibratedRecording",
+    "CallbackStop",
+    "Clock",
+    "DeviceInfo",
+    "DigitalLoopbackWorld",
+    "DuplexBackend",
+    "LatencyMeasurement",
+    "LatencyMeasurementError",
+    "LoopbackCalibration",
+    "ManualClock",
+    "PlayRecording",
+    "RealtimeClock",
+    "SimulatedDuplex",
+    "SoundDeviceDuplex",
+    "StatusFlags",
+    "World",
+    "XrunLog",
+    "find_device",
+    "lfm_chirp",
+    "list_devices",
+    "matched_filter_delay",
+    "measure_loopback_latency",
+    "play_record",
+    "play_record_calibrated",
+    "portaudio_available",
+    "reference_chirp",
+    "rescan_devices",
+]

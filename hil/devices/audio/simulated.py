@@ -1,0 +1,364 @@
+"""A simulated full-duplex audio interface with the same contract as the PortAudio backend.
+
+:class:`SimulatedDuplex` calls the user callback exactly as
+:class:`~hil.devices.audio.portaudio_backend.SoundDeviceDuplex` does (see
+:mod:`hil.devices.audio.contract`), from its own audio thread, block by block. What the ADC
+captures is produced by a pluggable *world*: a callable that maps the block the DAC emits to
+the block the ADC captures over the same sample indices. :class:`DigitalLoopbackWorld` (a
+cable with a delay) is the one provided here; the tank acoustics plug into the same hook.
+
+Timing model, all in samples of one clock (``t0`` = clock time at ``start()``):
+
+- the callback for the block starting at sample index ``j`` runs at ``t0 + j / fs``;
+- output sample ``n`` leaves the DAC at ``t0 + (n + blocksize) / fs`` (one block of output
+  buffering), the world maps it to the ADC over the same instants;
+- the ADC sample captured at index ``m`` reaches the callback ``io_delay_samples`` later,
+  as input sample index ``m + io_delay_samples``.
+
+So a loopback world with delay ``D`` gives a measured loopback latency of exactly
+``io_delay_samples + D`` samples, whatever the block size. The clock is injected:
+:class:`ManualClock` (the default) jumps forward instantly so tests never sleep;
+:class:`RealtimeClock` paces the blocks at the real sample rate.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Mapping
+from typing import Protocol
+
+import numpy as np
+
+from hil.devices.audio.contract import (
+    AudioCallback,
+    BlockOutcome,
+    CallbackRunner,
+    FloatArray,
+    StatusFlags,
+    check_callback,
+)
+from hil.devices.audio.ring import ring_read, ring_write
+from hil.devices.audio.settings import AudioSettings
+from hil.errors import ConfigError
+
+
+class Clock(Protocol):
+    """Time source of a simulated stream, in seconds."""
+
+    def now(self) -> float:
+        """Current time (s)."""
+        ...
+
+    def sleep_until(self, t_s: float) -> None:
+        """Return at (or after) time ``t_s`` (s)."""
+        ...
+
+
+class ManualClock:
+    """Simulated time that jumps forward when waited on: a stream runs as fast as it can.
+
+    Examples
+    --------
+    >>> clock = ManualClock(start_s=10.0)
+    >>> clock.sleep_until(10.5); clock.now()
+    10.5
+    >>> clock.sleep_until(3.0); clock.now()   # never goes backwards
+    10.5
+    """
+
+    def __init__(self, start_s: float = 0.0) -> None:
+        self._t = float(start_s)
+
+    def now(self) -> float:
+        """Current simulated time (s)."""
+        return self._t
+
+    def sleep_until(self, t_s: float) -> None:
+        """Advance to ``t_s`` (s) at once."""
+        self._t = max(self._t, t_s)
+
+
+class RealtimeClock:
+    """Wall-clock pacing (``time.monotonic``): blocks run at the real sample rate."""
+
+    def now(self) -> float:
+        """Seconds on the monotonic clock."""
+        return time.monotonic()
+
+    def sleep_until(self, t_s: float) -> None:
+        """Sleep until the monotonic clock reaches ``t_s`` (s)."""
+        delay = t_s - time.monotonic()
+        if delay > 0:
+            time.sleep(delay)
+
+
+class World(Protocol):
+    """What the ADC captures, given what the DAC emits, one block at a time.
+
+    ``world(output_block, sample_index, input_block)``: ``output_block`` (frames,
+    channels_out) float32 holds the DAC samples at indices ``sample_index ...
+    sample_index + frames - 1``; fill ``input_block`` (frames, channels_in) float32 in place
+    with the ADC samples at those same indices. Called in the audio thread after the user
+    callback, in sample order, so the same real-time rules apply (no blocking, no buffer
+    allocation). A world with state may define ``reset()``; the backend calls it when a
+    stream opens.
+    """
+
+    def __call__(
+        self, output_block: FloatArray, sample_index: int, input_block: FloatArray, /
+    ) -> None: ...
+
+
+class DigitalLoopbackWorld:
+    """A cable from each DAC channel to the same ADC channel, ``delay_samples`` late.
+
+    Input channel ``k`` receives ``gain * output[k]`` delayed by ``delay_samples``; input
+    channels with no matching output channel stay silent. The delay line grows only when a
+    block longer than any before arrives (in practice: on the first block).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> world = DigitalLoopbackWorld(delay_samples=2)
+    >>> out = np.arange(1, 5, dtype=np.float32).reshape(4, 1)
+    >>> inp = np.empty((4, 1), dtype=np.float32)
+    >>> world(out, 0, inp); inp[:, 0].tolist()
+    [0.0, 0.0, 1.0, 2.0]
+    >>> world(out, 4, inp); inp[:, 0].tolist()
+    [3.0, 4.0, 1.0, 2.0]
+    """
+
+    def __init__(self, delay_samples: int, gain: float = 1.0) -> None:
+        if isinstance(delay_samples, bool) or not isinstance(delay_samples, int):
+            raise ConfigError("delay_samples", delay_samples, "an integer >= 0 (samples)")
+        if delay_samples < 0:
+            raise ConfigError(
+                "delay_samples", delay_samples, "an integer >= 0 (samples)", "a cable is causal"
+            )
+        if not np.isfinite(gain):
+            raise ConfigError("gain", gain, "a finite number")
+        self.delay_samples = delay_samples
+        self.gain = np.float32(gain)
+        self._ring = np.zeros((0, 0), dtype=np.float32)
+
+    def reset(self) -> None:
+        """Empty the cable (silence before the first output sample)."""
+        self._ring.fill(0.0)
+
+    def __call__(
+        self, output_block: FloatArray, sample_index: int, input_block: FloatArray
+    ) -> None:
+        frames, ch_out = output_block.shape
+        needed = self.delay_samples + frames
+        if self._ring.shape[0] < needed or self._ring.shape[1] != ch_out:
+            # Rare: only when a longer block arrives. Keep the history already written.
+            grown = np.zeros((needed, ch_out), dtype=np.float32)
+            if self._ring.shape[1] == ch_out and self._ring.shape[0]:
+                keep = self._ring.shape[0]
+                rows = np.arange(sample_index - keep, sample_index)
+                grown[rows % needed] = self._ring[rows % keep]
+            self._ring = grown
+        ring_write(self._ring, sample_index, output_block)
+        n = min(ch_out, input_block.shape[1])
+        ring_read(self._ring[:, :n], sample_index - self.delay_samples, input_block[:, :n])
+        if self.gain != 1.0:
+            input_block[:, :n] *= self.gain
+        input_block[:, n:] = 0.0
+
+
+class SimulatedDuplex:
+    """Simulated full-duplex interface: the contract of the real one, with a pluggable world.
+
+    Parameters
+    ----------
+    settings:
+        Sample rate, channels and block size (``device`` and ``latency`` are ignored).
+    world:
+        Maps each output block to the input block (see :class:`World`). Default: a digital
+        loopback with no extra delay.
+    io_delay_samples:
+        Converter and buffer latency from ADC capture to the callback, in samples, at least
+        ``settings.blocksize``; default ``2 * blocksize`` (what the JACK dummy server shows).
+    clock:
+        Time source; default :class:`ManualClock` (no real-time waiting).
+    xrun_schedule:
+        Fault injection: ``{sample_index: flags}`` makes the block starting at that index
+        report those :class:`~hil.devices.audio.contract.StatusFlags` (the data path stays
+        exact). Indices must be multiples of the block size.
+    xrun_capacity:
+        Number of xrun events the log keeps.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from hil.devices.audio import play_record
+    >>> s = AudioSettings(samplerate=48000, blocksize=64)
+    >>> sim = SimulatedDuplex(s, DigitalLoopbackWorld(5), io_delay_samples=128)
+    >>> pulse = np.zeros(400, dtype=np.float32); pulse[10] = 1.0
+    >>> int(np.argmax(play_record(sim, pulse).recording[:, 0]))  # 10 + 128 + 5
+    143
+    """
+
+    def __init__(
+        self,
+        settings: AudioSettings,
+        world: World | None = None,
+        *,
+        io_delay_samples: int | None = None,
+        clock: Clock | None = None,
+        xrun_schedule: Mapping[int, int] | None = None,
+        xrun_capacity: int = 4096,
+    ) -> None:
+        self.settings = settings
+        self.world: World = world if world is not None else DigitalLoopbackWorld(0)
+        block = settings.blocksize
+        delay = 2 * block if io_delay_samples is None else io_delay_samples
+        if isinstance(delay, bool) or not isinstance(delay, int) or delay < block:
+            raise ConfigError(
+                "io_delay_samples",
+                delay,
+                f"an integer >= blocksize ({block}) samples",
+                "a block's input can only hold samples captured before its callback runs",
+            )
+        self.io_delay_samples = delay
+        self.clock: Clock = clock if clock is not None else ManualClock()
+        schedule = dict(xrun_schedule or {})
+        for index, flags in schedule.items():
+            if index < 0 or index % block:
+                raise ConfigError(
+                    "xrun_schedule",
+                    index,
+                    f"sample indices >= 0 that are multiples of blocksize ({block})",
+                    "xruns are reported per block, at the block's first sample",
+                )
+            schedule[index] = int(StatusFlags(flags))
+        self._schedule = schedule
+        self._xrun_capacity = xrun_capacity
+        self._runner: CallbackRunner | None = None
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+
+    # --- properties of the DuplexBackend protocol ---
+    @property
+    def samplerate(self) -> float:
+        """Sample rate (Hz)."""
+        return float(self.settings.samplerate)
+
+    @property
+    def channels_in(self) -> int:
+        """Number of input (ADC) channels."""
+        return self.settings.channels_in
+
+    @property
+    def channels_out(self) -> int:
+        """Number of output (DAC) channels."""
+        return self.settings.channels_out
+
+    @property
+    def blocksize(self) -> int:
+        """Frames per callback."""
+        return self.settings.blocksize
+
+    @property
+    def active(self) -> bool:
+        """True while the audio thread runs."""
+        return self._thread is not None and self._thread.is_alive()
+
+    @property
+    def frames_processed(self) -> int:
+        """Frames handed to the callback since the stream opened."""
+        return 0 if self._runner is None else self._runner.sample_index
+
+    @property
+    def xruns(self) -> list[tuple[int, StatusFlags]]:
+        """Xruns of the current stream as ``(sample_index, flags)``."""
+        return [] if self._runner is None else self._runner.xruns.events()
+
+    # --- life cycle ---
+    def open(self, callback: AudioCallback) -> None:
+        """Allocate every buffer and get ready to run ``callback`` (nothing runs yet)."""
+        check_callback(callback)
+        if self.active:
+            raise RuntimeError("the simulated stream is running: stop() it before open()")
+        block, ch_in, ch_out = self.blocksize, self.channels_in, self.channels_out
+        self._runner = CallbackRunner(callback, self._xrun_capacity)
+        self._indata = np.zeros((block, ch_in), dtype=np.float32)
+        self._outdata = np.zeros((block, ch_out), dtype=np.float32)
+        self._captured_block = np.zeros((block, ch_in), dtype=np.float32)
+        self._captured = np.zeros((self.io_delay_samples + block, ch_in), dtype=np.float32)
+        reset = getattr(self.world, "reset", None)
+        if callable(reset):
+            reset()
+        self._thread = None
+
+    def start(self) -> None:
+        """Start the audio thread."""
+        if self._runner is None:
+            raise RuntimeError("open(callback) the stream before start()")
+        if self._thread is not None:
+            raise RuntimeError("this stream already ran: open() it again to rerun")
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name="sim-audio", daemon=True)
+        self._thread.start()
+
+    def wait(self, timeout_s: float | None = None) -> bool:
+        """Wait until the stream ends; True if it has. Re-raises a callback exception."""
+        if self._thread is not None:
+            self._thread.join(timeout_s)
+            if self._thread.is_alive():
+                return False
+        if self._runner is not None:
+            self._runner.raise_pending()
+        return True
+
+    def stop(self) -> None:
+        """Stop after the current block. Re-raises a callback exception."""
+        self._stop.set()
+        self.wait()
+
+    def close(self) -> None:
+        """Stop and release the stream. Re-raises a callback exception not yet raised."""
+        self.stop()
+
+    def __enter__(self) -> SimulatedDuplex:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # --- audio thread ---
+    def _run(self) -> None:
+        runner = self._runner
+        assert runner is not None
+        fs = self.samplerate
+        block = self.blocksize
+        delay = self.io_delay_samples
+        indata, outdata = self._indata, self._outdata
+        captured, captured_block = self._captured, self._captured_block
+        world, clock, schedule = self.world, self.clock, self._schedule
+        t0 = clock.now()
+        while not self._stop.is_set():
+            j = runner.sample_index
+            clock.sleep_until(t0 + j / fs)
+            ring_read(captured, j - delay, indata)
+            outdata.fill(0.0)
+            outcome = runner.run_block(
+                indata,
+                outdata,
+                block,
+                t0 + (j - delay + block) / fs,
+                t0 + (j + block) / fs,
+                clock.now(),
+                schedule.get(j, 0),
+            )
+            if outcome is BlockOutcome.ABORT:
+                return
+            try:
+                world(outdata, j, captured_block)
+            except BaseException as exc:  # same rule as the callback: re-raised in wait()
+                runner.error = exc
+                return
+            ring_write(captured, j, captured_block)
+            if outcome is BlockOutcome.COMPLETE:
+                return
