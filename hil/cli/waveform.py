@@ -108,10 +108,17 @@ def _validate_io(args: argparse.Namespace) -> None:
         raise ConfigError("--amplitude", args.amplitude, "in (0, 1] (full scale is 1)")
     for opt in ("out", "schedule"):
         path = getattr(args, opt)
-        if path is not None and not path.parent.exists():
+        if path is None:
+            continue
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
             raise ConfigError(
-                f"--{opt}", str(path), "a path in an existing folder", "create the folder first"
-            )
+                f"--{opt}",
+                str(path),
+                "a file path whose folder exists or can be created",
+                f"cannot create {path.parent}: {exc.strerror}",
+            ) from None
 
 
 def _write_wav(path: Path, synth: BlockSynthesizer, n_samples: int, fs: float) -> None:

@@ -165,7 +165,6 @@ def test_plots_are_written(tmp_path: Path) -> None:
         (["--family", "sonar"], "--family (family) = 'sonar' is not allowed"),
         (["--family", "three-state", "--order", "3"], "unambiguous range"),
         (["--amplitude", "2"], "--amplitude = 2.0 is not allowed: must be in (0, 1]"),
-        (["--out", "/nonexistent-dir/x.wav"], "create the folder first"),
     ],
 )
 def test_bad_input_exits_2_with_one_clear_line(
@@ -175,6 +174,19 @@ def test_bad_input_exits_2_with_one_clear_line(
     err = capsys.readouterr().err
     assert message in err
     assert err.count("\n") == 1 and "Traceback" not in err
+
+
+def test_output_folders_are_created_or_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "new" / "deeper" / "x.wav"
+    assert main(["waveform", "--duration", "0.05", "--out", str(out)]) == 0
+    assert out.exists()
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a folder")
+    assert main(["waveform", "--duration", "0.05", "--out", str(blocker / "x.wav")]) == 2
+    err = capsys.readouterr().err
+    assert "--out = " in err and "a file path whose folder exists or can be created" in err
 
 
 def test_console_script_exit_code(tmp_path: Path) -> None:
