@@ -1,0 +1,729 @@
+"""GRBL 1.1 stage driver: :class:`GrblStage`, the :class:`~hil.devices.stage.Stage` over serial.
+
+The transport is any pyserial URL (``/dev/ttyUSB0``, a pty path from the simulated
+controller, ``loop://``, ``spy://...``) or a ready serial-like object (tests inject a scripted
+one). The driver speaks SI units; GRBL speaks mm, mm/min and mm/s², converted here at the
+boundary. Lines go out one at a time and wait for their ``ok``/``error:N`` (GRBL's simple
+send-response flow); realtime bytes (``?``, ``!``, ``~``, 0x18, 0x85) go out at any time.
+
+Safety (DESIGN.md): every move is checked against the soft limits, the max rate ``$110`` and
+the acceleration ``$120`` before anything is sent; leaving a ``with GrblStage(...)`` block by
+an exception (Ctrl-C included) sends a feed hold before the port is closed. Status is polled
+at no more than 5 Hz (``poll_interval`` >= 0.2 s).
+
+All waiting goes through the injected clock (:mod:`hil.devices.clock`): with a simulated
+clock whose ``sleep`` advances time, tests run long moves in milliseconds of wall time.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import math
+from collections import deque
+from collections.abc import Callable
+from types import TracebackType
+from typing import Any, Protocol
+
+from hil.devices.clock import Clock, MonotonicClock
+from hil.devices.grbl_codes import alarm_recovery, alarm_text, error_text
+from hil.devices.grbl_protocol import (
+    CYCLE_START,
+    FEED_HOLD,
+    JOG_CANCEL,
+    MAX_LINE_LENGTH,
+    SOFT_RESET,
+    STATUS_QUERY,
+    AlarmMessage,
+    Banner,
+    ErrorResponse,
+    Feedback,
+    GrblMessage,
+    LineSplitter,
+    Ok,
+    SettingLine,
+    StatusReport,
+    Unrecognised,
+    format_dwell_line,
+    format_jog_line,
+    format_move_line,
+    parse_line,
+)
+from hil.devices.grbl_settings import GrblSettings
+from hil.devices.stage import ProfileWindow, StageState, StageStatus
+from hil.devices.stage_errors import (
+    StageAlarmError,
+    StageCommandError,
+    StageError,
+    StageHeldError,
+    StageLimitError,
+    StageTimeoutError,
+)
+from hil.errors import ConfigError
+
+#: The fastest status polling GRBL's documentation recommends (5 Hz).
+MIN_POLL_INTERVAL_S = 0.2
+
+
+class SerialLike(Protocol):
+    """The part of :class:`serial.Serial` the driver uses (injectable in tests)."""
+
+    timeout: float | None
+
+    def write(self, data: bytes) -> int | None: ...
+
+    def read(self, size: int = 1) -> bytes: ...
+
+    @property
+    def in_waiting(self) -> int: ...
+
+    def reset_input_buffer(self) -> None: ...
+
+    def close(self) -> None: ...
+
+
+@dataclasses.dataclass
+class _Pending:
+    line: str
+    result: Ok | ErrorResponse | None = None
+    reset: bool = False
+
+
+class GrblStage:
+    """One-axis (X) GRBL 1.1 motion stage in SI units.
+
+    Parameters
+    ----------
+    port:
+        pyserial URL or path, or an open serial-like object (not closed by the driver).
+    baudrate:
+        Serial speed for URLs (GRBL 1.1: 115200).
+    clock:
+        Clock for all waits and timestamps (default: the wall clock).
+    soft_limits:
+        Optional narrower (low, high) limits in m inside GRBL's machine range
+        ``[-$130, 0]`` mm; moves outside are refused before sending.
+    poll_interval:
+        Seconds between status queries while waiting, >= 0.2 (at most 5 Hz).
+    read_timeout:
+        Real seconds one read blocks waiting for bytes.
+    wait_step:
+        Clock seconds slept between reads when nothing arrived.
+    response_timeout:
+        Clock seconds to wait for ``ok``/``error`` of a non-motion line.
+    reset_on_open:
+        Send a soft reset (0x18) on open and wait for the banner (position is kept by GRBL
+        when idle); otherwise only check that GRBL answers a status query.
+    open_timeout:
+        Clock seconds to wait for the banner / first status report on open.
+
+    Examples
+    --------
+    >>> GrblStage("loop://", poll_interval=0.05)
+    Traceback (most recent call last):
+    ...
+    hil.errors.ConfigError: poll_interval = 0.05 is not allowed: must be >= 0.2 s (status \
+polling at no more than 5 Hz); use the default 0.2
+    """
+
+    def __init__(
+        self,
+        port: str | SerialLike,
+        *,
+        baudrate: int = 115200,
+        clock: Clock | None = None,
+        soft_limits: tuple[float, float] | None = None,
+        poll_interval: float = MIN_POLL_INTERVAL_S,
+        read_timeout: float = 0.02,
+        wait_step: float = 0.02,
+        response_timeout: float = 10.0,
+        reset_on_open: bool = True,
+        open_timeout: float = 5.0,
+    ) -> None:
+        if not (math.isfinite(poll_interval) and poll_interval >= MIN_POLL_INTERVAL_S):
+            raise ConfigError(
+                "poll_interval",
+                poll_interval,
+                f">= {MIN_POLL_INTERVAL_S} s (status polling at no more than 5 Hz)",
+                "use the default 0.2",
+            )
+        for name, value in (
+            ("read_timeout", read_timeout),
+            ("wait_step", wait_step),
+            ("response_timeout", response_timeout),
+            ("open_timeout", open_timeout),
+        ):
+            if not (math.isfinite(value) and value > 0):
+                raise ConfigError(name, value, "a number of seconds > 0")
+        if soft_limits is not None and not (
+            len(soft_limits) == 2 and all(math.isfinite(v) for v in soft_limits)
+            and soft_limits[0] < soft_limits[1]
+        ):  # fmt: skip
+            raise ConfigError(
+                "soft_limits", soft_limits, "(low, high) in m with low < high", "e.g. (-0.4, 0)"
+            )
+        self._port = port
+        self._baudrate = baudrate
+        self._clock: Clock = clock or MonotonicClock()
+        self._user_limits = soft_limits
+        self.poll_interval = poll_interval
+        self._read_timeout = read_timeout
+        self._wait_step = wait_step
+        self.response_timeout = response_timeout
+        self._reset_on_open = reset_on_open
+        self._open_timeout = open_timeout
+        self._ser: SerialLike | None = None
+        self._owns_port = isinstance(port, str)
+        self._splitter = LineSplitter()
+        self._pending: deque[_Pending] = deque()
+        self._setting_lines: list[SettingLine] = []
+        self._banners = 0
+        self._reports = 0
+        self._wco: tuple[float, ...] | None = None
+        self._last_query = -math.inf
+        self._last_status: StageStatus | None = None
+        self._alarm: int | None = None
+        self._new_alarm: int | None = None
+        self._critical = False
+        self._estop_latched = False
+        self._direction = 1.0
+        self._settings: GrblSettings | None = None
+        self._original_accel: float | None = None
+        self.unrecognised: list[str] = []
+        self.messages: list[str] = []
+
+    # ------------------------------------------------------------------ lifecycle
+    def open(self) -> GrblStage:
+        """Open the port, sync with GRBL, read the ``$$`` settings and the status."""
+        if isinstance(self._port, str):
+            import serial
+
+            self._ser = serial.serial_for_url(
+                self._port, baudrate=self._baudrate, timeout=self._read_timeout
+            )
+        else:
+            self._ser = self._port
+            with contextlib.suppress(AttributeError):
+                self._ser.timeout = self._read_timeout
+        self._ser.reset_input_buffer()
+        self._splitter.reset()
+        if self._reset_on_open:
+            self._soft_reset_and_wait(self._open_timeout)
+        self._settings = self._read_settings()
+        if self._settings.report_inches:
+            raise ConfigError(
+                "report_inches ($13)", True, "False (mm reports)", "send $13=0 to the controller"
+            )
+        self._check_user_limits()
+        self._query_status(self._open_timeout)
+        return self
+
+    def close(self) -> None:
+        """Restore a changed acceleration and close the port (if the driver opened it)."""
+        if self._ser is None:
+            return
+        try:
+            if self._original_accel is not None and self._settings is not None:
+                with contextlib.suppress(StageError):
+                    self.write_setting("acceleration_x", self._original_accel)
+        finally:
+            if self._owns_port:
+                self._ser.close()
+            self._ser = None
+
+    def __enter__(self) -> GrblStage:
+        return self.open()
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        if exc_type is not None and self._ser is not None:
+            # Any failure inside the block (Ctrl-C included) stops the carriage first.
+            with contextlib.suppress(Exception):
+                self._ser.write(FEED_HOLD)
+            self._original_accel = None  # no more lines to a controller we know is in trouble
+        self.close()
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def settings(self) -> GrblSettings:
+        """The controller's settings read at open (updated by :meth:`write_setting`)."""
+        if self._settings is None:
+            raise StageError("the stage is not open: call open() or use 'with GrblStage(...)'")
+        return self._settings
+
+    @property
+    def limits(self) -> tuple[float, float]:
+        """Soft limits (low, high) of X in m: GRBL's ``[-$130, 0]`` mm, narrowed by the
+        ``soft_limits`` given to the constructor."""
+        low, high = -self.settings.travel, 0.0
+        if self._user_limits is not None:
+            low, high = max(low, self._user_limits[0]), min(high, self._user_limits[1])
+        return low, high
+
+    @property
+    def last_status(self) -> StageStatus | None:
+        """The last status report received (no query)."""
+        return self._last_status
+
+    # ------------------------------------------------------------------ commands
+    def status(self) -> StageStatus:
+        """Query and return the current status (waits so as to poll at most 5 Hz)."""
+        self._require_open()
+        if self._critical and self._last_status is not None:
+            # GRBL ignores '?' in a critical alarm until it is reset.
+            return dataclasses.replace(
+                self._last_status,
+                state=StageState.ALARM,
+                alarm=self._alarm,
+                host_time=self._clock.now(),
+            )
+        self._clock.sleep(self._last_query + self.poll_interval - self._clock.now())
+        return self._query_status(self.response_timeout)
+
+    def home(self) -> StageStatus:
+        """Run the homing cycle ``$H``; clears alarms and an e-stop latch."""
+        settings = self.settings
+        if not settings.homing_enabled:
+            raise ConfigError(
+                "homing_enabled ($22)",
+                False,
+                "True to run a homing cycle",
+                "enable it with write_setting('homing_enabled', True), or unlock() instead",
+            )
+        self._require_not_critical()
+        seek_s = 1.5 * settings.max_travel_x / settings.homing_seek * 60.0
+        locate_s = 4.0 * settings.homing_pulloff / settings.homing_feed * 60.0
+        # '?' is ignored while homing, so no polling; the timeout covers the longest search.
+        self._command("$H", timeout=1.5 * (seek_s + locate_s) + 10.0, poll=False)
+        self._alarm = None
+        self._estop_latched = False
+        return self.status()
+
+    def unlock(self) -> StageStatus:
+        """Kill the alarm lock ``$X`` (position may be wrong: home when you can)."""
+        self._require_not_critical()
+        self._command("$X")
+        self._alarm = None
+        self._estop_latched = False
+        return self.status()
+
+    def reset(self) -> StageStatus:
+        """Soft reset (0x18) and wait for the banner; needed after a critical alarm."""
+        self._require_open()
+        self._soft_reset_and_wait(self.response_timeout)
+        return self.status()
+
+    def move_to(
+        self, x: float, v: float, a: float | None = None, *, wait: bool = True
+    ) -> StageStatus:
+        """Move X to ``x`` (m) at up to ``v`` (m/s); ``a`` (m/s²) changes ``$120`` first.
+
+        With ``wait`` return after the move completed (``G4 P0`` answers then); raises
+        :class:`StageHeldError` if it is feed-held on the way.
+        """
+        self._check_position("x", x)
+        self._check_speed("v", v)
+        if a is not None:
+            self._check_acceleration(a)
+        self._require_ready()
+        if a is not None:
+            self._set_acceleration(a)
+        start = self._position_estimate()
+        self._direction = 1.0 if x >= start else -1.0
+        self._command(format_move_line(x * 1000.0, v * 60000.0))
+        if wait:
+            self._wait_motion_done(self._move_duration(abs(x - start), v))
+        return self.status()
+
+    def jog(self, dx: float, v: float, *, wait: bool = True) -> StageStatus:
+        """Jog X by ``dx`` (m) at ``v`` (m/s) with ``$J=``; cancel with :meth:`jog_cancel`."""
+        self._check_speed("v", v)
+        self._require_ready()
+        start = self.status().position
+        self._check_position("jog target x", start + dx)
+        self._direction = 1.0 if dx >= 0 else -1.0
+        self._command(format_jog_line(dx * 1000.0, v * 60000.0))
+        if not wait:
+            return self.status()
+        count = self._reports
+        step = self.settings.step
+        self._wait(
+            lambda: (
+                self._reports > count
+                and self._last_status is not None
+                and self._last_status.state is StageState.IDLE
+                and abs(self._last_status.position - (start + dx)) <= step
+            ),
+            self._move_duration(abs(dx), v) * 1.5 + self.response_timeout,
+            "the jog to finish",
+            poll=True,
+        )
+        return self.status()
+
+    def jog_cancel(self) -> StageStatus:
+        """Cancel jogging (0x85): decelerate, flush queued jogs, return to Idle."""
+        self._write_realtime(JOG_CANCEL)
+        return self._wait_state(lambda s: s.state is StageState.IDLE, "Idle after jog cancel")
+
+    def run_profile(
+        self,
+        start: float,
+        end: float,
+        speed: float,
+        run_up: float,
+        run_down: float,
+        *,
+        wait: bool = True,
+    ) -> ProfileWindow:
+        """Tow from ``start`` to ``end`` (m) at constant ``speed`` (m/s).
+
+        Positions at ``start - run_up`` first (at the max rate), then one linear move to
+        ``end + run_down`` at ``speed``. ``run_up``/``run_down`` (m) must cover the
+        acceleration distance ``speed**2 / (2 * $120)``. Returns the driver-clock window in
+        which the carriage is between ``start`` and ``end`` at constant speed, predicted from
+        the time GRBL accepted the move (latency of the ``ok``: one serial round trip).
+        """
+        if not (math.isfinite(start) and math.isfinite(end)) or start == end:
+            raise ConfigError("end", end, f"a finite position != start ({start} m)")
+        self._check_speed("speed", speed)
+        accel = self.settings.acceleration
+        need = speed * speed / (2.0 * accel)
+        for name, value in (("run_up", run_up), ("run_down", run_down)):
+            if not (math.isfinite(value) and value >= need * (1.0 - 1e-9)):
+                raise StageLimitError(
+                    name,
+                    value,
+                    f">= {need:.6g} m, the distance to reach {speed:g} m/s at the axis X "
+                    f"acceleration $120 = {self.settings.acceleration_x:.3f} mm/s^2",
+                    "lengthen it or lower the speed",
+                )
+        d = 1.0 if end > start else -1.0
+        x0, x1 = start - d * run_up, end + d * run_down
+        self._check_position("run-up start x (start - run_up)", x0)
+        self._check_position("run-down end x (end + run_down)", x1)
+        self.move_to(x0, self.settings.max_rate)
+        self._direction = d
+        self._command(format_move_line(x1 * 1000.0, speed * 60000.0))
+        t0 = self._clock.now()
+        t_start = t0 + speed / accel + (run_up - need) / speed
+        window = ProfileWindow(t_start, t_start + abs(end - start) / speed, start, end)
+        if wait:
+            self._wait_motion_done(self._move_duration(abs(x1 - x0), speed))
+        return window
+
+    def stop(self, *, cancel: bool = True) -> StageStatus:
+        """Controlled stop: feed hold ``!`` and wait until stopped; with ``cancel`` then drop
+        the rest of the move (soft reset from ``Hold:0``: GRBL keeps the position, no alarm).
+        Without ``cancel`` the stage stays held; :meth:`resume` continues."""
+        self._write_realtime(FEED_HOLD)
+        status = self._wait_state(
+            lambda s: (
+                (s.state is StageState.HOLD and s.substate == 0)
+                or s.state in (StageState.IDLE, StageState.ALARM)
+            ),
+            "the feed hold to complete",
+        )
+        if cancel and status.state is StageState.HOLD:
+            return self.reset()
+        return status
+
+    def resume(self) -> StageStatus:
+        """Cycle start ``~``: resume a completed feed hold."""
+        self._write_realtime(CYCLE_START)
+        return self._wait_state(lambda s: s.state is not StageState.HOLD, "the hold to end")
+
+    def estop(self) -> StageStatus:
+        """Emergency stop: soft reset 0x18 at once (GRBL halts without deceleration and
+        alarms if it was moving). Latched: motion is refused until :meth:`home` or
+        :meth:`unlock`."""
+        self._require_open()
+        self._estop_latched = True
+        self._soft_reset_and_wait(self.response_timeout)
+        return self.status()
+
+    def write_setting(self, name: str, value: Any) -> None:
+        """Validate and write one ``$`` setting (by its attribute name, e.g.
+        ``"max_rate_x"``); a bad value raises before anything is sent."""
+        line = self.settings.check(name, value)
+        self._command(line)
+        self._settings = self.settings.updated(name, value)
+
+    # ------------------------------------------------------------------ checks
+    def _check_position(self, name: str, x: float) -> None:
+        low, high = self.limits
+        tol = 0.5 * self.settings.step
+        if not (math.isfinite(x) and low - tol <= x <= high + tol):
+            raise StageLimitError(
+                f"{name} (axis X)",
+                x,
+                f"within the soft limits [{low:.6g}, {high:.6g}] m of axis X (max travel "
+                f"$130 = {self.settings.max_travel_x:.3f} mm, machine range [-travel, 0])",
+                "choose a target inside the limits; positions are machine coordinates in m",
+            )
+
+    def _check_speed(self, name: str, v: float) -> None:
+        vmax = self.settings.max_rate
+        if not (math.isfinite(v) and 0.0 < v <= vmax * (1.0 + 1e-9)):
+            raise StageLimitError(
+                f"{name} (axis X)",
+                v,
+                f"in (0, {vmax:.6g}] m/s, the axis X max rate $110 = "
+                f"{self.settings.max_rate_x:.3f} mm/min",
+                "lower the speed or raise $110 with write_setting('max_rate_x', ...)",
+            )
+
+    def _check_acceleration(self, a: float) -> None:
+        cap = (
+            self._original_accel if self._original_accel is not None
+            else self.settings.acceleration_x
+        ) / 1000.0  # fmt: skip
+        if not (math.isfinite(a) and 0.0 < a <= cap * (1.0 + 1e-9)):
+            raise StageLimitError(
+                "a (axis X)",
+                a,
+                f"in (0, {cap:.6g}] m/s^2, the axis X acceleration $120 configured at open",
+                "lower the acceleration",
+            )
+
+    def _set_acceleration(self, a: float) -> None:
+        if abs(a * 1000.0 - self.settings.acceleration_x) < 1e-6:
+            return
+        if self._original_accel is None:
+            self._original_accel = self.settings.acceleration_x
+        self.write_setting("acceleration_x", a * 1000.0)
+
+    def _require_open(self) -> SerialLike:
+        if self._ser is None:
+            raise StageError("the stage is not open: call open() or use 'with GrblStage(...)'")
+        return self._ser
+
+    def _require_not_critical(self) -> None:
+        self._require_open()
+        if self._critical:
+            raise StageAlarmError(self._alarm, self._alarm_words(), alarm_recovery(1))
+
+    def _require_ready(self) -> None:
+        """Refuse motion while latched, in alarm or held, with what to do about it."""
+        self._require_not_critical()
+        if self._estop_latched:
+            text = "emergency stop latched by estop()"
+            if self._alarm is not None:
+                text += f"; controller ALARM:{self._alarm} ({alarm_text(self._alarm)})"
+            raise StageAlarmError(
+                None,
+                text,
+                "check that the axis is clear, then home with $H (GrblStage.home()) or "
+                "unlock with $X (GrblStage.unlock())",
+            )
+        status = self._last_status
+        if status is not None and status.state is StageState.ALARM:
+            raise StageAlarmError(self._alarm, self._alarm_words(), alarm_recovery(self._alarm))
+        if status is not None and status.state is StageState.HOLD:
+            raise StageHeldError(
+                "stage is in a feed hold: call resume() to continue the held move or stop() "
+                "to cancel it"
+            )
+
+    def _alarm_words(self) -> str:
+        if self._alarm is None:
+            return "locked at power-up or reset; GRBL needs homing or an unlock"
+        return alarm_text(self._alarm)
+
+    # ------------------------------------------------------------------ I/O
+    def _write(self, data: bytes) -> None:
+        self._require_open().write(data)
+
+    def _write_realtime(self, byte: bytes) -> None:
+        self._write(byte)
+
+    def _command(self, line: str, *, timeout: float | None = None, poll: bool = False) -> None:
+        """Send one line and wait for its ``ok``; raise on ``error:N`` or an alarm."""
+        if len(line) > MAX_LINE_LENGTH:
+            raise ConfigError("line", line, f"at most {MAX_LINE_LENGTH} characters (GRBL)")
+        pending = _Pending(line)
+        self._pending.append(pending)
+        self._write(line.encode("ascii") + b"\n")
+        self._wait(
+            lambda: pending.result is not None or pending.reset,
+            self.response_timeout if timeout is None else timeout,
+            f"a response to {line!r}",
+            poll=poll,
+        )
+        if pending.reset:
+            raise StageError(f"GRBL reset while {line!r} was pending; it was not executed")
+        if isinstance(pending.result, ErrorResponse):
+            code = pending.result.code
+            raise StageCommandError(code, error_text(code), line)
+
+    def _wait_motion_done(self, expected_s: float) -> None:
+        """Wait for the planner to empty (``G4 P0`` answers then), polling the status."""
+        line = format_dwell_line()
+        pending = _Pending(line)
+        self._pending.append(pending)
+        self._write(line.encode("ascii") + b"\n")
+        timeout = 1.5 * expected_s + self.response_timeout
+        self._wait(
+            lambda: pending.result is not None or pending.reset or self._held(),
+            timeout,
+            "the move to finish",
+            poll=True,
+        )
+        if pending.result is None:
+            raise StageHeldError(
+                "the move was feed-held before reaching its target: call resume() to "
+                "continue or stop() to cancel"
+            )
+
+    def _held(self) -> bool:
+        s = self._last_status
+        return s is not None and s.state is StageState.HOLD
+
+    def _wait_state(self, done: Callable[[StageStatus], bool], what: str) -> StageStatus:
+        count = self._reports
+        self._wait(
+            lambda: (
+                self._reports > count and self._last_status is not None and done(self._last_status)
+            ),
+            self.response_timeout,
+            what,
+            poll=True,
+        )
+        assert self._last_status is not None
+        return self._last_status
+
+    def _query_status(self, timeout: float) -> StageStatus:
+        count = self._reports
+        self._query()
+        self._wait(lambda: self._reports > count, timeout, "a status report", poll=True)
+        assert self._last_status is not None
+        return self._last_status
+
+    def _query(self) -> None:
+        self._last_query = self._clock.now()
+        self._write(STATUS_QUERY)
+
+    def _soft_reset_and_wait(self, timeout: float) -> None:
+        banners = self._banners
+        self._write(SOFT_RESET)
+        self._wait(lambda: self._banners > banners, timeout, "the GRBL banner", raise_alarm=False)
+        # An ALARM:3 (reset in motion) is expected here: it is kept in the status, not raised.
+        self._new_alarm = None
+
+    def _read_settings(self) -> GrblSettings:
+        self._setting_lines = []
+        self._command("$$")
+        return GrblSettings.from_lines(self._setting_lines)
+
+    def _wait(
+        self,
+        done: Callable[[], bool],
+        timeout: float,
+        what: str,
+        *,
+        poll: bool = False,
+        raise_alarm: bool = True,
+    ) -> None:
+        ser = self._require_open()
+        deadline = self._clock.now() + timeout
+        while True:
+            got = self._receive(ser)
+            if raise_alarm and self._new_alarm is not None:
+                code, self._new_alarm = self._new_alarm, None
+                raise StageAlarmError(code, alarm_text(code), alarm_recovery(code))
+            if done():
+                return
+            now = self._clock.now()
+            if now >= deadline:
+                raise StageTimeoutError(
+                    f"no {what} from GRBL within {timeout:.3g} s: check the cable, the port "
+                    "and the controller's power"
+                )
+            if poll and now - self._last_query >= self.poll_interval:
+                self._query()
+            if not got:
+                self._clock.sleep(self._wait_step)
+
+    def _receive(self, ser: SerialLike) -> bool:
+        data = ser.read(1)
+        if not data:
+            return False
+        waiting = ser.in_waiting
+        if waiting:
+            data += ser.read(waiting)
+        for line in self._splitter.feed(data):
+            self._handle(parse_line(line))
+        return True
+
+    def _handle(self, msg: GrblMessage) -> None:
+        if isinstance(msg, Ok | ErrorResponse):
+            if self._pending:
+                self._pending.popleft().result = msg
+        elif isinstance(msg, StatusReport):
+            self._last_status = self._to_status(msg)
+            self._reports += 1
+        elif isinstance(msg, AlarmMessage):
+            self._alarm = msg.code
+            self._new_alarm = msg.code
+        elif isinstance(msg, Banner):
+            self._banners += 1
+            self._critical = False
+            for pending in self._pending:
+                pending.reset = True
+            self._pending.clear()
+        elif isinstance(msg, SettingLine):
+            self._setting_lines.append(msg)
+        elif isinstance(msg, Feedback):
+            self.messages.append(f"[{msg.kind}:{msg.text}]")
+            if msg.kind == "MSG" and msg.text == "Reset to continue":
+                self._critical = True
+        elif isinstance(msg, Unrecognised):
+            self.unrecognised.append(msg.line)
+
+    def _to_status(self, report: StatusReport) -> StageStatus:
+        if report.wco is not None:
+            self._wco = report.wco
+        mpos = report.machine_position(self._wco)
+        position = mpos[0] / 1000.0 if mpos else math.nan
+        state = StageState(report.state)
+        speed = (report.feed or 0.0) / 60000.0
+        return StageStatus(
+            state=state,
+            substate=report.substate,
+            position=position,
+            velocity=self._direction * speed,
+            limit_triggered="X" in report.pins,
+            alarm=self._alarm if state is StageState.ALARM else None,
+            planner_blocks_free=report.planner_blocks_free,
+            rx_bytes_free=report.rx_bytes_free,
+            host_time=self._clock.now(),
+        )
+
+    def _position_estimate(self) -> float:
+        if self._last_status is None or math.isnan(self._last_status.position):
+            return self.status().position
+        return self._last_status.position
+
+    def _move_duration(self, distance: float, v: float) -> float:
+        """Seconds for a rest-to-rest move of ``distance`` m at ``v`` m/s (trapezoid)."""
+        a = self.settings.acceleration
+        if distance >= v * v / a:
+            return distance / v + v / a
+        return 2.0 * math.sqrt(distance / a)
+
+    def _check_user_limits(self) -> None:
+        if self._user_limits is None:
+            return
+        low, high = self._user_limits
+        travel = self.settings.travel
+        if low < -travel or high > 0.0:
+            raise ConfigError(
+                "soft_limits",
+                self._user_limits,
+                f"inside GRBL's machine range [{-travel:g}, 0] m ($130 = "
+                f"{self.settings.max_travel_x:.3f} mm)",
+                "narrow them or raise $130",
+            )

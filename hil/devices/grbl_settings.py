@@ -1,0 +1,206 @@
+"""GRBL 1.1 ``$`` settings as typed attributes with units and validators.
+
+One generic descriptor, :class:`GrblSetting`, declares a setting: its ``$`` number, its type,
+its unit and its allowed range. :class:`GrblSettings` is a snapshot of a ``$$`` dump read
+through those descriptors; :meth:`GrblSettings.check` validates a value for writing and
+formats the ``$x=val`` line, so a bad value raises before anything is sent.
+
+Examples
+--------
+>>> s = GrblSettings({100: "80.000", 110: "600.000", 120: "50.000", 130: "400.000"})
+>>> s.max_rate_x, s.max_rate, s.travel
+(600.0, 0.01, 0.4)
+>>> s.check("max_rate_x", 1200.0)
+'$110=1200.000'
+>>> s.check("acceleration_x", -5.0)
+Traceback (most recent call last):
+...
+hil.errors.ConfigError: acceleration_x ($120) = -5.0 is not allowed: must be a number in \
+(0, 100000] mm/s^2; give the X acceleration in mm/s^2
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from typing import Any, Generic, TypeVar, overload
+
+from hil.devices.grbl_protocol import SettingLine, format_setting_line
+from hil.errors import ConfigError
+
+T = TypeVar("T", float, int, bool)
+
+
+class GrblSetting(Generic[T]):
+    """Descriptor for one GRBL ``$<number>`` setting of type ``kind`` in ``unit``.
+
+    ``low``/``high`` bound the value; ``low_open`` excludes ``low`` itself (``> 0``).
+    """
+
+    def __init__(
+        self,
+        number: int,
+        kind: type[T],
+        unit: str,
+        low: float,
+        high: float,
+        *,
+        low_open: bool = False,
+        hint: str = "",
+    ) -> None:
+        self.number = number
+        self.kind: type[T] = kind
+        self.unit = unit
+        self.low = low
+        self.high = high
+        self.low_open = low_open
+        self.hint = hint
+        self.name = f"${number}"
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name = name
+
+    @overload
+    def __get__(self, obj: None, owner: type) -> GrblSetting[T]: ...
+    @overload
+    def __get__(self, obj: GrblSettings, owner: type) -> T: ...
+    def __get__(self, obj: GrblSettings | None, owner: type) -> GrblSetting[T] | T:
+        if obj is None:
+            return self
+        raw = obj.raw.get(self.number)
+        if raw is None:
+            raise ConfigError(
+                f"{self.name} (${self.number})",
+                None,
+                "present in the $$ settings dump",
+                "the controller did not report it: check the firmware is GRBL 1.1",
+            )
+        return self.parse(raw)
+
+    def __set__(self, obj: GrblSettings, value: Any) -> None:
+        raise AttributeError(
+            f"{self.name} is read-only on a settings snapshot; write it with "
+            f"GrblStage.write_setting({self.name!r}, value)"
+        )
+
+    def parse(self, raw: str) -> T:
+        """Convert the text of a ``$$`` line to the setting's type."""
+        return self.kind(float(raw))
+
+    def allowed(self) -> str:
+        """The allowed range in words, with the unit."""
+        if self.kind is bool:
+            return "a boolean (True/False or 0/1)"
+        what = "an integer" if self.kind is int else "a number"
+        bracket = "(" if self.low_open else "["
+        return f"{what} in {bracket}{self.low:g}, {self.high:g}] {self.unit}".rstrip()
+
+    def validate(self, value: Any) -> T:
+        """Return ``value`` as the setting's type or raise ConfigError naming it."""
+        field = f"{self.name} (${self.number})"
+        if self.kind is bool:
+            if isinstance(value, bool) or value in (0, 1):
+                return self.kind(value)
+            raise ConfigError(field, value, self.allowed(), self.hint)
+        ok_type = isinstance(value, int | float) and not isinstance(value, bool)
+        if self.kind is int and ok_type and float(value) != int(value):
+            ok_type = False
+        if not ok_type or not math.isfinite(float(value)):
+            raise ConfigError(field, value, self.allowed(), self.hint)
+        low_ok = value > self.low if self.low_open else value >= self.low
+        if not (low_ok and value <= self.high):
+            raise ConfigError(field, value, self.allowed(), self.hint)
+        return self.kind(value)
+
+
+class GrblSettings:
+    """Snapshot of the controller's settings (``raw``: ``$`` number -> text as sent).
+
+    X-axis values are in GRBL's units (mm, mm/min, mm/s^2); the properties without a unit
+    suffix in their name give SI values (``max_rate`` m/s, ``acceleration`` m/s^2, ...).
+    """
+
+    step_pulse = GrblSetting(0, int, "us", 3, 255, hint="GRBL needs at least 3 us")
+    status_report_mask = GrblSetting(
+        10, int, "", 0, 255, hint="bit 0: MPos (1) or WPos (0); bit 1: report Bf"
+    )
+    report_inches = GrblSetting(13, bool, "", 0, 1, hint="the drivers need mm: set $13=0")
+    soft_limits = GrblSetting(20, bool, "", 0, 1, hint="soft limits need homing ($22=1)")
+    hard_limits = GrblSetting(21, bool, "", 0, 1)
+    homing_enabled = GrblSetting(22, bool, "", 0, 1)
+    homing_dir_mask = GrblSetting(23, int, "", 0, 255, hint="bit 0 = home X towards -X")
+    homing_feed = GrblSetting(24, float, "mm/min", 0, 1e5, low_open=True)
+    homing_seek = GrblSetting(25, float, "mm/min", 0, 1e5, low_open=True)
+    homing_debounce = GrblSetting(26, int, "ms", 0, 65535)
+    homing_pulloff = GrblSetting(27, float, "mm", 0, 1e4)
+    steps_per_mm_x = GrblSetting(100, float, "steps/mm", 0, 1e5, low_open=True)
+    max_rate_x = GrblSetting(
+        110, float, "mm/min", 0, 1e6, low_open=True, hint="give the X max rate in mm/min"
+    )
+    acceleration_x = GrblSetting(
+        120, float, "mm/s^2", 0, 1e5, low_open=True, hint="give the X acceleration in mm/s^2"
+    )
+    max_travel_x = GrblSetting(
+        130, float, "mm", 0, 1e6, low_open=True, hint="give the X travel in mm"
+    )
+
+    def __init__(self, raw: Mapping[int, str]) -> None:
+        self.raw: dict[int, str] = dict(raw)
+
+    @classmethod
+    def from_lines(cls, lines: Iterable[SettingLine]) -> GrblSettings:
+        """Build from the ``$x=val`` lines of a ``$$`` dump."""
+        return cls({line.number: line.value for line in lines})
+
+    @classmethod
+    def descriptor(cls, name: str) -> GrblSetting[Any]:
+        """The descriptor called ``name``; ConfigError listing the names if unknown."""
+        found = cls.__dict__.get(name)
+        if not isinstance(found, GrblSetting):
+            names = sorted(k for k, v in cls.__dict__.items() if isinstance(v, GrblSetting))
+            raise ConfigError("setting", name, "one of " + ", ".join(names))
+        return found
+
+    def check(self, name: str, value: Any) -> str:
+        """Validate ``value`` for setting ``name``; return the ``$x=val`` line to send."""
+        desc = self.descriptor(name)
+        typed = desc.validate(value)
+        if name == "soft_limits" and typed and not self.raw.get(22, "0").startswith("1"):
+            raise ConfigError(
+                "soft_limits ($20)",
+                value,
+                "False while homing is disabled ($22=0)",
+                "GRBL needs homing for soft limits: enable homing_enabled first",
+            )
+        return format_setting_line(desc.number, typed)
+
+    def updated(self, name: str, value: Any) -> GrblSettings:
+        """A copy with ``name`` set to ``value`` (after a successful write)."""
+        desc = self.descriptor(name)
+        line = format_setting_line(desc.number, desc.validate(value))
+        raw = dict(self.raw)
+        raw[desc.number] = line.partition("=")[2]
+        return GrblSettings(raw)
+
+    @property
+    def max_rate(self) -> float:
+        """X max rate, m/s."""
+        return self.max_rate_x / 60000.0
+
+    @property
+    def acceleration(self) -> float:
+        """X acceleration, m/s^2."""
+        return self.acceleration_x / 1000.0
+
+    @property
+    def travel(self) -> float:
+        """X max travel, m."""
+        return self.max_travel_x / 1000.0
+
+    @property
+    def step(self) -> float:
+        """One X step, m."""
+        return 1e-3 / self.steps_per_mm_x
+
+    def __repr__(self) -> str:
+        return f"GrblSettings({self.raw!r})"

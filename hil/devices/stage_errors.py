@@ -1,0 +1,63 @@
+"""Errors of motion-stage drivers, split by who broke the rule (DESIGN principle 11).
+
+- :class:`StageLimitError` (a :class:`~hil.errors.ConfigError`): the host asked for a move
+  outside the soft limits or above the machine's rates; raised before anything is sent.
+- :class:`StageCommandError`: the controller rejected a line the host sent (``error:N``).
+- :class:`StageAlarmError`: the controller is in (or just entered) an alarm; the message says
+  how to recover.
+- :class:`StageHeldError`: motion was feed-held (by :meth:`stop`, a watchdog or a button).
+- :class:`StageProtocolError`: the controller sent something that is not GRBL.
+- :class:`StageTimeoutError`: no answer in time (cable, port, power).
+"""
+
+from __future__ import annotations
+
+from hil.errors import ConfigError
+
+
+class StageError(Exception):
+    """Base class of run-time stage failures (not configuration mistakes)."""
+
+
+class StageLimitError(ConfigError):
+    """A move outside the soft limits or above a rate limit; nothing was sent.
+
+    >>> str(StageLimitError("x (axis X)", -0.6, "within [-0.5, 0] m", "stay inside"))
+    'x (axis X) = -0.6 is not allowed: must be within [-0.5, 0] m; stay inside'
+    """
+
+
+class StageCommandError(StageError):
+    """The controller answered ``error:<code>`` to ``line``."""
+
+    def __init__(self, code: int, text: str, line: str) -> None:
+        self.code = code
+        self.text = text
+        self.line = line
+        super().__init__(
+            f"GRBL rejected {line!r} with error:{code} ({text}); nothing from that line was "
+            "executed: fix the command or the controller state and send it again"
+        )
+
+
+class StageAlarmError(StageError):
+    """The controller is in ALARM; ``code`` is the alarm number if one was reported."""
+
+    def __init__(self, code: int | None, text: str, recovery: str) -> None:
+        self.code = code
+        self.text = text
+        self.recovery = recovery
+        what = f"ALARM:{code} ({text})" if code is not None else f"ALARM ({text})"
+        super().__init__(f"stage is in {what}; to recover: {recovery}")
+
+
+class StageHeldError(StageError):
+    """Motion stopped in a feed hold before reaching its target."""
+
+
+class StageProtocolError(StageError):
+    """The controller sent bytes that are not a GRBL 1.1 message where one was required."""
+
+
+class StageTimeoutError(StageError):
+    """The controller did not answer in time."""

@@ -1,0 +1,255 @@
+"""GrblStage against a scripted serial peer: exact bytes out, GRBL 1.1 answers in.
+
+The peer replays the exchanges of the GRBL 1.1 interface documentation; any write that is
+not the next expected one fails the test. A manual clock makes every wait deterministic.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import pytest
+
+from hil.devices.grbl import GrblStage
+from hil.devices.stage import StageState
+from hil.devices.stage_errors import (
+    StageAlarmError,
+    StageCommandError,
+    StageHeldError,
+    StageLimitError,
+    StageTimeoutError,
+)
+from hil.errors import ConfigError
+from sim_devices.stage.clock import ManualClock
+
+BANNER = b"\r\nGrbl 1.1h ['$' for help]\r\n"
+SETTINGS = (
+    b"$0=10\r\n$10=3\r\n$13=0\r\n$20=1\r\n$21=1\r\n$22=1\r\n$23=0\r\n$24=25.000\r\n"
+    b"$25=500.000\r\n$27=1.000\r\n$100=80.000\r\n$110=600.000\r\n$120=50.000\r\n"
+    b"$130=400.000\r\nok\r\n"
+)
+IDLE = b"<Idle|MPos:-100.000,0.000,0.000|Bf:15,128|FS:0,0|WCO:0.000,0.000,0.000>\r\n"
+STARTUP = [(b"\x18", BANNER), (b"$$\n", SETTINGS), (b"?", IDLE)]
+
+
+class ScriptedSerial:
+    """A serial peer that checks each write against a script and queues the reply."""
+
+    def __init__(self, script: list[tuple[bytes, bytes]]) -> None:
+        self.script = list(script)
+        self.written: list[bytes] = []
+        self.timeout: float | None = None
+        self._rx = bytearray()
+        self.closed = False
+
+    def write(self, data: bytes) -> int:
+        self.written.append(data)
+        assert self.script, f"unexpected write {data!r}: script finished"
+        expected, reply = self.script.pop(0)
+        assert data == expected, f"wrote {data!r}, script expected {expected!r}"
+        self._rx += reply
+        return len(data)
+
+    def read(self, size: int = 1) -> bytes:
+        out = bytes(self._rx[:size])
+        del self._rx[:size]
+        return out
+
+    @property
+    def in_waiting(self) -> int:
+        return len(self._rx)
+
+    def reset_input_buffer(self) -> None:
+        self._rx.clear()
+
+    def close(self) -> None:
+        self.closed = True
+
+
+def open_stage(
+    script: list[tuple[bytes, bytes]], soft_limits: tuple[float, float] | None = None
+) -> tuple[GrblStage, ScriptedSerial]:
+    peer = ScriptedSerial(STARTUP + script)
+    stage = GrblStage(peer, clock=ManualClock(0.0), soft_limits=soft_limits)
+    stage.open()
+    return stage, peer
+
+
+def test_startup_reads_banner_settings_and_status() -> None:
+    stage, peer = open_stage([])
+    assert peer.written == [b"\x18", b"$$\n", b"?"]
+    assert stage.settings.max_rate == pytest.approx(0.01)
+    assert stage.limits == (-0.4, 0.0)
+    status = stage.last_status
+    assert status is not None
+    assert (status.state, status.position) == (StageState.IDLE, -0.1)
+    assert (status.planner_blocks_free, status.rx_bytes_free) == (15, 128)
+    assert not peer.script and not peer.closed
+
+
+def test_move_sends_mm_and_mm_per_min_and_waits_with_dwell() -> None:
+    running = b"<Run|MPos:-150.000,0.000,0.000|Bf:14,128|FS:600,0>\r\n"
+    done = b"<Idle|MPos:-200.000,0.000,0.000|Bf:15,128|FS:0,0>\r\n"
+    stage, peer = open_stage(
+        [
+            (b"G53 G1 X-200.000 F600.000\n", b"ok\r\n"),
+            (b"G4 P0.000\n", running),
+            (b"?", b"ok\r\n"),
+            (b"?", done),
+        ]
+    )
+    status = stage.move_to(-0.2, 0.01)
+    assert status.position == pytest.approx(-0.2) and status.state is StageState.IDLE
+    assert not peer.script
+
+
+def test_error_response_raises_with_official_text() -> None:
+    stage, _ = open_stage([(b"$X\n", b"error:8\r\n")])
+    with pytest.raises(StageCommandError, match=r"'\$X' with error:8 \(Not idle: Grbl '\$' "
+                       r"command cannot be used unless Grbl is IDLE"):  # fmt: skip
+        stage.unlock()
+
+
+def test_soft_limit_refused_before_sending() -> None:
+    stage, peer = open_stage([])
+    before = list(peer.written)
+    with pytest.raises(StageLimitError, match=r"x \(axis X\) = -0.5 is not allowed: must be "
+                       r"within the soft limits \[-0.4, 0\] m of axis X \(max travel \$130 = "
+                       r"400.000 mm"):  # fmt: skip
+        stage.move_to(-0.5, 0.005)
+    with pytest.raises(StageLimitError, match=r"x \(axis X\) = 0.001 .* \[-0.4, 0\] m"):
+        stage.move_to(0.001, 0.005)
+    assert peer.written == before
+
+
+def test_speed_and_acceleration_limits_refused_before_sending() -> None:
+    stage, peer = open_stage([])
+    before = list(peer.written)
+    with pytest.raises(StageLimitError, match=r"v \(axis X\) = 0.02 is not allowed: must be in "
+                       r"\(0, 0.01\] m/s, the axis X max rate \$110 = 600.000 mm/min"):  # fmt: skip
+        stage.move_to(-0.2, 0.02)
+    with pytest.raises(StageLimitError, match=r"a \(axis X\) = 0.2 .* \(0, 0.05\] m/s\^2"):
+        stage.move_to(-0.2, 0.005, a=0.2)
+    with pytest.raises(StageLimitError, match=r"run_up = 0.0001 .* >= 0.001 m, the distance to "
+                       r"reach 0.01 m/s"):  # fmt: skip
+        stage.run_profile(-0.1, -0.3, 0.01, 0.0001, 0.01)
+    with pytest.raises(StageLimitError, match=r"run-down end x \(end \+ run_down\) \(axis X\) = "
+                       r"-0.41"):  # fmt: skip
+        stage.run_profile(-0.1, -0.3, 0.01, 0.01, 0.11)
+    assert peer.written == before
+
+
+def test_user_soft_limits_narrow_the_machine_range() -> None:
+    stage, peer = open_stage([], soft_limits=(-0.3, -0.05))
+    assert stage.limits == (-0.3, -0.05)
+    with pytest.raises(StageLimitError, match=r"= -0.01 .* \[-0.3, -0.05\] m"):
+        stage.move_to(-0.01, 0.005)
+    assert peer.written == [b"\x18", b"$$\n", b"?"]
+
+
+def test_alarm_state_refuses_motion_and_says_how_to_recover() -> None:
+    peer = ScriptedSerial(
+        [
+            (b"\x18", BANNER + b"[MSG:'$H'|'$X' to unlock]\r\n"),
+            (b"$$\n", SETTINGS),
+            (b"?", b"<Alarm|MPos:0.000,0.000,0.000|FS:0,0>\r\n"),
+        ]
+    )
+    stage = GrblStage(peer, clock=ManualClock())
+    stage.open()
+    with pytest.raises(StageAlarmError, match=r"stage is in ALARM \(locked at power-up or reset"
+                       r".*home with \$H \(GrblStage.home\(\)\).*unlock with \$X"):  # fmt: skip
+        stage.move_to(-0.1, 0.005)
+    assert len(peer.written) == 3
+
+
+def test_alarm_during_a_move_raises_with_the_alarm_text() -> None:
+    stage, _ = open_stage(
+        [
+            (b"G53 G1 X-200.000 F600.000\n", b"ok\r\n"),
+            (b"G4 P0.000\n", b"ALARM:1\r\n[MSG:Reset to continue]\r\n"),
+        ]
+    )
+    with pytest.raises(StageAlarmError, match=r"ALARM:1 \(Hard limit: .*\); to recover: send a "
+                       r"soft reset first"):  # fmt: skip
+        stage.move_to(-0.2, 0.01)
+    status = stage.status()  # '?' is not sent: GRBL ignores it in a critical alarm
+    assert (status.state, status.alarm) == (StageState.ALARM, 1)
+    with pytest.raises(StageAlarmError, match="soft reset first"):
+        stage.unlock()
+
+
+def test_feed_hold_during_a_move_raises_held() -> None:
+    stage, _ = open_stage(
+        [
+            (b"G53 G1 X-200.000 F600.000\n", b"ok\r\n"),
+            (b"G4 P0.000\n", b""),
+            (b"?", b"<Hold:0|MPos:-150.000,0.000,0.000|FS:0,0>\r\n"),
+        ]
+    )
+    with pytest.raises(StageHeldError, match=r"resume\(\) to continue or stop\(\) to cancel"):
+        stage.move_to(-0.2, 0.01)
+
+
+def test_estop_is_latched_until_unlock() -> None:
+    stage, peer = open_stage(
+        [
+            (b"\x18", b"ALARM:3\r\n" + BANNER + b"[MSG:'$H'|'$X' to unlock]\r\n"),
+            (b"?", b"<Alarm|MPos:-120.000,0.000,0.000|FS:0,0>\r\n"),
+            (b"$X\n", b"[MSG:Caution: Unlocked]\r\nok\r\n"),
+            (b"?", IDLE),
+        ]
+    )
+    status = stage.estop()
+    assert (status.state, status.alarm) == (StageState.ALARM, 3)
+    with pytest.raises(StageAlarmError, match=r"emergency stop latched by estop\(\); "
+                       r"controller ALARM:3 \(Abort during cycle.*home with \$H"):  # fmt: skip
+        stage.move_to(-0.2, 0.01)
+    assert stage.unlock().state is StageState.IDLE
+    assert "[MSG:Caution: Unlocked]" in stage.messages
+    assert not peer.script
+
+
+def test_exception_inside_with_block_sends_feed_hold() -> None:
+    peer = ScriptedSerial([*STARTUP, (b"!", b"")])
+    with pytest.raises(RuntimeError, match="boom"), GrblStage(peer, clock=ManualClock()):
+        raise RuntimeError("boom")
+    assert peer.written[-1] == b"!"
+    assert not peer.closed  # an injected port belongs to the caller
+
+
+def test_status_polling_never_faster_than_5_hz() -> None:
+    clock = ManualClock(0.0)
+    peer = ScriptedSerial(STARTUP + [(b"?", IDLE)] * 3)
+    stage = GrblStage(peer, clock=clock)
+    stage.open()
+    times = [stage.status().host_time for _ in range(3)]
+    assert [round(b - a, 9) for a, b in itertools.pairwise(times)] == [0.2, 0.2]
+
+
+def test_silent_controller_times_out_with_advice() -> None:
+    peer = ScriptedSerial([(b"\x18", b"")])
+    stage = GrblStage(peer, clock=ManualClock(), open_timeout=1.0)
+    with pytest.raises(StageTimeoutError, match=r"no the GRBL banner from GRBL within 1 s: "
+                       r"check the cable"):  # fmt: skip
+        stage.open()
+
+
+def test_bad_driver_configuration_rejected_before_opening() -> None:
+    with pytest.raises(ConfigError, match=r"poll_interval = 0.1 .* >= 0.2 s"):
+        GrblStage("loop://", poll_interval=0.1)
+    with pytest.raises(ConfigError, match=r"soft_limits = \(0.0, -1.0\) .* low < high"):
+        GrblStage("loop://", soft_limits=(0.0, -1.0))
+    peer = ScriptedSerial(STARTUP)
+    stage = GrblStage(peer, clock=ManualClock(), soft_limits=(-0.5, 0.0))
+    with pytest.raises(ConfigError, match=r"inside GRBL's machine range \[-0.4, 0\] m"):
+        stage.open()
+
+
+def test_write_setting_validates_then_sends() -> None:
+    stage, peer = open_stage([(b"$110=900.000\n", b"ok\r\n")])
+    with pytest.raises(ConfigError, match=r"max_rate_x \(\$110\) = -1"):
+        stage.write_setting("max_rate_x", -1)
+    assert len(peer.written) == 3
+    stage.write_setting("max_rate_x", 900.0)
+    assert stage.settings.max_rate == pytest.approx(0.015)
