@@ -5,7 +5,7 @@ board's DAC feeder would use it) with the ``tank-board`` preset (fs = 1 MHz) and
 preset re-sampled at 1 MHz, and reports the real-time factor (signal seconds per wall-clock
 second). Target (issue 2): at least 200× real time on one core for every family.
 
-Run: ``python benchmarks/bench_waveform.py [--seconds 10] [--repeat 3]``. The last line is one
+Run: ``python benchmarks/bench_waveform.py [--seconds 10] [--repeat 3] [--quick]``. The last line is one
 JSON object with the figures.
 """
 
@@ -53,7 +53,12 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=10.0, help="signal seconds per run")
     parser.add_argument("--repeat", type=int, default=3, help="runs per family (best kept)")
+    parser.add_argument(
+        "--quick", action="store_true", help="smoke run (0.05 s, 1 repeat): checks it runs"
+    )
     args = parser.parse_args()
+    if args.quick:
+        args.seconds, args.repeat = 0.05, 1
     rows = []
     print(f"{'preset':<11} {'family':<14} {'x real time':>12} {'ratio to 200x':>14}")
     for preset in ("tank-board", "att"):
@@ -63,7 +68,10 @@ def main() -> None:
             print(f"{preset:<11} {family:<14} {xrt:12.1f} {xrt / TARGET_XRT:14.2f}")
     worst = min(r["xrt"] for r in rows)
     hfccw = min(r["xrt"] for r in rows if r["family"] in ("random-cyclic", "three-state"))
-    print(f"worst family: {worst:.1f}x real time; worst HFC-CW: {hfccw:.1f}x (target {TARGET_XRT:.0f}x)")
+    print(
+        f"worst family: {worst:.1f}x real time; worst HFC-CW: {hfccw:.1f}x "
+        f"(target {TARGET_XRT:.0f}x)"
+    )
     print(
         json.dumps(
             {
