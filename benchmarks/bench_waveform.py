@@ -5,8 +5,8 @@ board's DAC feeder would use it) with the ``tank-board`` preset (fs = 1 MHz) and
 preset re-sampled at 1 MHz, and reports the real-time factor (signal seconds per wall-clock
 second). Target (issue 2): at least 200× real time on one core for every family.
 
-Run: ``python benchmarks/bench_waveform.py [--seconds 10] [--repeat 3] [--quick]``. The last line is one
-JSON object with the figures.
+Run: ``python benchmarks/bench_waveform.py [--seconds 10] [--repeat 3] [--quick]``. The last
+line is one JSON object with the figures.
 """
 
 from __future__ import annotations
