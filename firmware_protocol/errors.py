@@ -1,0 +1,86 @@
+"""Error classes of the wire protocol, split by who broke the rule (as in h11).
+
+- :class:`LocalProtocolError`: this side tried something illegal (a send in the wrong state,
+  a field value out of range, more DAC samples than the credit allows). Nothing was encoded.
+- :class:`RemoteProtocolError`: the peer sent a well-formed frame (its CRC is good) whose
+  content breaks the protocol (a message illegal in the current state, a field out of range,
+  an incompatible version). Line noise is *not* an error: the reader resyncs and emits a
+  :class:`~firmware_protocol.events.FrameError` event instead.
+- :class:`TransportError`: the base of every I/O error raised by drivers that move the bytes
+  (serial ports, USB, sockets, pseudo-terminals). This package does no I/O and never raises
+  it; it is defined here so that drivers and simulated devices share one tree.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+class ProtocolError(Exception):
+    """Base class of the protocol rule violations (local and remote)."""
+
+
+class LocalProtocolError(ProtocolError):
+    """This side tried to do something the protocol does not allow; nothing was sent."""
+
+
+class RemoteProtocolError(ProtocolError):
+    """The peer sent an intact frame whose content breaks the protocol."""
+
+
+class FieldValueError(LocalProtocolError, ValueError):
+    """A message field value is out of its allowed range; raised before anything is encoded.
+
+    The message has the same shape as the host's configuration errors.
+
+    Examples
+    --------
+    >>> str(FieldValueError("Configure.sample_rate_hz", 0, "1 .. 100000000 Hz", "set a rate"))
+    'Configure.sample_rate_hz = 0 is not allowed: must be 1 .. 100000000 Hz; set a rate'
+    """
+
+    def __init__(self, field: str, value: Any, allowed: str, hint: str = "") -> None:
+        self.field = field
+        self.value = value
+        self.allowed = allowed
+        self.hint = hint
+        message = f"{field} = {value!r} is not allowed: must be {allowed}"
+        if hint:
+            message += f"; {hint}"
+        super().__init__(message)
+
+
+class IncompatiblePeerError(RemoteProtocolError):
+    """The peer speaks another protocol major version or was built from other definitions.
+
+    Attributes hold both sides' values so a driver can report them: ``local_version`` and
+    ``peer_version`` are ``(major, minor)``; ``local_schema`` and ``peer_schema`` are the
+    32-bit schema hashes.
+    """
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        local_version: tuple[int, int],
+        peer_version: tuple[int, int],
+        local_schema: int,
+        peer_schema: int,
+    ) -> None:
+        super().__init__(message)
+        self.local_version = local_version
+        self.peer_version = peer_version
+        self.local_schema = local_schema
+        self.peer_schema = peer_schema
+
+
+class TransportError(Exception):
+    """Base class of I/O errors raised by drivers (port gone, read timeout, link closed)."""
+
+
+class TransportTimeoutError(TransportError):
+    """No byte arrived within the driver's timeout."""
+
+
+class TransportClosedError(TransportError):
+    """The link was closed (port unplugged, socket reset, pty closed)."""
