@@ -13,13 +13,13 @@ import sys
 from collections.abc import Sequence
 
 from hil import __version__
-from hil.cli import waveform
+from hil.cli import estimate, simulate, waveform
 from hil.errors import ConfigError
 
 EXIT_OK = 0
 EXIT_USAGE = 2
 
-_COMMANDS = (waveform,)
+_COMMANDS = (waveform, estimate, simulate)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -36,6 +36,19 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _name_option(args: argparse.Namespace, exc: ConfigError) -> ConfigError:
+    """Name the command-line option in an error raised deep inside (``m_hops`` -> ``--M``).
+
+    A command module may declare ``OPTION_NAMES``: internal field name -> option.
+    """
+    module = sys.modules.get(getattr(args.func, "__module__", ""), None)
+    names: dict[str, str] = getattr(module, "OPTION_NAMES", {})
+    option = names.get(exc.field)
+    if option is None or exc.field.startswith("-"):
+        return exc
+    return ConfigError(f"{option} ({exc.field})", exc.value, exc.allowed, exc.hint)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``hil`` command; return the exit status."""
     parser = build_parser()
@@ -43,11 +56,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         status: int = args.func(args)
     except ConfigError as exc:
-        print(f"hil {args.command}: error: {exc}", file=sys.stderr)
+        print(f"hil {args.command}: error: {_name_option(args, exc)}", file=sys.stderr)
         return EXIT_USAGE
     except (FileNotFoundError, IsADirectoryError, PermissionError, NotADirectoryError) as exc:
         print(f"hil {args.command}: error: {exc.strerror}: {exc.filename}", file=sys.stderr)
         return EXIT_USAGE
+    except BrokenPipeError:
+        # Output piped into a command that stopped reading (e.g. `| head`): not an error.
+        import os
+
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return EXIT_OK
     except KeyboardInterrupt:
         print(f"hil {args.command}: interrupted", file=sys.stderr)
         return 130

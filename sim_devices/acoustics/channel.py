@@ -1,0 +1,223 @@
+"""The block-wise acoustic channel: transmit schedule in, calibrated receive blocks out.
+
+Everything is in calibrated units. The transmit ``s(t)`` is the unit-amplitude schedule;
+the source level ``SL`` (dB re 1 µPa @ 1 m, RMS) sets its pressure amplitude at 1 m,
+``A = √2 · 10^(SL/20)`` µPa·m. Received pressures are in µPa. The receiver turns pressure into
+volts with its sensitivity (dB re 1 V/µPa) and gain (dB) and into ADC counts, float samples in
+``[-1, 1)`` with ``full_scale_v`` volts at 1 (clipped beyond).
+
+Components, each a pressure stream (µPa), summed per sample:
+
+- target echoes: every target over every :func:`~sim_devices.acoustics.tank.echo_paths` path,
+  exact (:class:`~sim_devices.acoustics.echo.AnalyticEcho` on the solved path), with gain
+  ``A · 10^(TS/20) · R · B(θ) / (r1 r2) · 10^(−α_abs (r1 + r2)/20000)``: target strength TS
+  (dB re 1 m²), reflection ``R`` of image paths, two-way beam response ``B`` of the direction
+  to the target, spherical spreading and absorption (dB/km) on each leg;
+- the direct blast (:class:`DirectBlast`);
+- volume reverberation (:class:`~sim_devices.acoustics.reverberation.VolumeReverberation`);
+- noise (:class:`~sim_devices.acoustics.noise_generator.ShapedNoiseGenerator`).
+
+Echoes and the direct blast are computed per sample from that sample's time; reverberation
+and noise are fixed-frame streams: so :meth:`Channel.read` returns the same samples for any
+chunking. The sonar equation terms match these components: see :func:`echo_level_db`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hil.errors import ConfigError
+from sim_devices.acoustics.beam import TwoWayAmplitudeTable
+from sim_devices.acoustics.delay import OneWayPath, PathSolution, TwoWayPath
+from sim_devices.acoustics.echo import AnalyticEcho, TransmitWaveform, sample_times
+from sim_devices.acoustics.noise_generator import ShapedNoiseGenerator
+from sim_devices.acoustics.reverberation import VolumeReverberation
+from sim_devices.acoustics.tank import Offset, Tank, echo_paths
+from sim_devices.acoustics.trajectory import FloatArray, Trajectory
+
+
+def source_amplitude(source_level_db: float) -> float:
+    """Pressure amplitude at 1 m (µPa·m) of a unit cosine radiated at ``SL`` dB re 1 µPa @ 1 m.
+
+    >>> round(source_amplitude(0.0), 6)
+    1.414214
+    """
+    return math.sqrt(2.0) * 10.0 ** (source_level_db / 20.0)
+
+
+@dataclass(frozen=True)
+class Receiver:
+    """Hydrophone and ADC: ``counts = p · 10^((sensitivity + gain)/20) / full_scale_v``.
+
+    >>> Receiver(-180.0, 40.0, 1.0).to_counts(np.array([1e4]))
+    array([0.001])
+    """
+
+    sensitivity_db: float = -180.0
+    gain_db: float = 0.0
+    full_scale_v: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.full_scale_v) and self.full_scale_v > 0):
+            raise ConfigError("sonar.full_scale_v", self.full_scale_v, "> 0 V")
+
+    @property
+    def volts_per_upa(self) -> float:
+        """V per µPa of the hydrophone and amplifier."""
+        return 10.0 ** ((self.sensitivity_db + self.gain_db) / 20.0)
+
+    def to_counts(self, pressure_upa: FloatArray) -> FloatArray:
+        """Float ADC samples in ``[-1, 1)`` (clipped) for pressures in µPa."""
+        x = pressure_upa * (self.volts_per_upa / self.full_scale_v)
+        return np.clip(x, -1.0, 1.0 - 2.0**-23)
+
+
+@dataclass(frozen=True)
+class Target:
+    """A target: its trajectory and target strength (dB re 1 m²)."""
+
+    trajectory: Trajectory
+    target_strength_db: float = 0.0
+
+
+class _EchoGain:
+    """Path gain hook (see the module docstring) for one echo path."""
+
+    def __init__(
+        self,
+        amplitude: float,
+        rx: Trajectory,
+        beam: TwoWayAmplitudeTable | None,
+        axis: FloatArray,
+        absorption_db_per_km: float,
+        target: Trajectory,
+    ) -> None:
+        self.amplitude, self.rx, self.beam, self.axis = amplitude, rx, beam, axis
+        self.absorption, self.target = absorption_db_per_km, target
+
+    def __call__(self, sol: PathSolution) -> FloatArray:
+        r1, r2 = sol.leg_lengths_m
+        if np.any(r1 <= 0) or np.any(r2 <= 0):
+            raise ConfigError("target range", 0.0, "> 0 m", "a target sits on the transducer")
+        g = self.amplitude / (r1 * r2)
+        if self.absorption > 0:
+            g = g * 10.0 ** (-self.absorption * (r1 + r2) / 20000.0)
+        if self.beam is not None and sol.t_bounce_s is not None:
+            d = self.target.position(sol.t_bounce_s) - self.rx.position(sol.t_rx_s)
+            cos_t = (d @ self.axis) / np.sqrt(np.sum(d * d, axis=1))
+            g = g * self.beam(cos_t)
+        return np.asarray(g, dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class DirectBlast:
+    """Transmitter-to-receiver leakage: a one-way path over ``separation_m`` (m, > 0) with
+    spherical spreading and ``coupling_db`` (dB) on top: ``A · 10^(coupling/20) / r``."""
+
+    coupling_db: float = 0.0
+    separation_m: float = 0.1
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.separation_m) and self.separation_m > 0):
+            raise ConfigError("direct_blast.separation_m", self.separation_m, "> 0 m")
+
+
+@dataclass
+class Channel:
+    """The composed channel; see the module docstring.
+
+    ``sonar`` is the monostatic transducer's trajectory; ``beam``/``beam_axis`` its two-way
+    pattern (``None`` = omni); ``tank``/``image_order`` add image paths;
+    ``components`` (filled by :meth:`read_components`) are pressure streams in µPa.
+    """
+
+    waveform: TransmitWaveform
+    fs_hz: float
+    sonar: Trajectory
+    source_level_db: float
+    sound_speed_mps: float
+    targets: Sequence[Target] = ()
+    receiver: Receiver = field(default_factory=Receiver)
+    beam: TwoWayAmplitudeTable | None = None
+    beam_axis: FloatArray = field(default_factory=lambda: np.array([1.0, 0.0, 0.0]))
+    absorption_db_per_km: float = 0.0
+    tank: Tank | None = None
+    image_order: int = 0
+    direct_blast: DirectBlast | None = None
+    reverberation: VolumeReverberation | None = None
+    noise: ShapedNoiseGenerator | None = None
+    noise_scale: float = 1.0
+    position: int = 0
+
+    def __post_init__(self) -> None:
+        self.amplitude = source_amplitude(self.source_level_db)
+        axis = np.asarray(self.beam_axis, dtype=np.float64)
+        self.beam_axis = axis / np.sqrt(axis @ axis)
+        self._echoes: list[AnalyticEcho] = []
+        for tgt in self.targets:
+            a = self.amplitude * 10.0 ** (tgt.target_strength_db / 20.0)
+            for path in echo_paths(self.sonar, tgt.trajectory, self.tank, self.image_order):
+                gain = _EchoGain(
+                    a * path.gain, path.rx, self.beam, self.beam_axis,
+                    self.absorption_db_per_km, path.target,
+                )  # fmt: skip
+                solved = TwoWayPath(path.tx, path.target, path.rx, self.sound_speed_mps)
+                self._echoes.append(AnalyticEcho(self.waveform, solved, self.fs_hz, gain=gain))
+        self._blast: AnalyticEcho | None = None
+        if self.direct_blast is not None:
+            db = self.direct_blast
+            tx = Offset(self.sonar, (0.0, 0.0, db.separation_m))
+            a = self.amplitude * 10.0 ** (db.coupling_db / 20.0) / db.separation_m
+            self._blast = AnalyticEcho(
+                self.waveform, OneWayPath(tx, self.sonar, self.sound_speed_mps), self.fs_hz,
+                amplitude=a,
+            )  # fmt: skip
+
+    def read_components(self, n_samples: int) -> dict[str, FloatArray]:
+        """The next ``n_samples``: pressure of every component (µPa) and ``received`` counts."""
+        if int(n_samples) != n_samples or n_samples < 0:
+            raise ConfigError("n_samples", n_samples, "an integer >= 0")
+        n = int(n_samples)
+        t = sample_times(self.position, n, self.fs_hz)
+        echo = np.zeros(n)
+        for e in self._echoes:
+            echo += e.at_times(t)
+        parts = {"echo": echo}
+        parts["direct"] = self._blast.at_times(t) if self._blast is not None else np.zeros(n)
+        parts["reverberation"] = (
+            self.reverberation.generate(n) if self.reverberation is not None else np.zeros(n)
+        )
+        parts["noise"] = (
+            self.noise_scale * self.noise.generate(n) if self.noise is not None else np.zeros(n)
+        )
+        total = parts["echo"] + parts["direct"] + parts["reverberation"] + parts["noise"]
+        parts["pressure"] = total
+        parts["received"] = self.receiver.to_counts(total)
+        self.position += n
+        return parts
+
+    def read(self, n_samples: int) -> FloatArray:
+        """The next ``n_samples`` received ADC samples in ``[-1, 1)``, shape ``(n,)``."""
+        return self.read_components(n_samples)["received"]
+
+    def echo_power(self, target_index: int = 0, t_s: float = 0.0) -> float:
+        """Mean-square pressure (µPa²) of a target's direct echo received at ``t_s`` (s)."""
+        echo = self._echoes[target_index * self._paths_per_target()]
+        sol = echo.path.solve(np.array([t_s]))
+        g = float(echo.gain(sol)[0]) * echo.amplitude
+        return g * g / 2.0
+
+    def _paths_per_target(self) -> int:
+        return len(self._echoes) // max(1, len(self.targets))
+
+
+def echo_level_db(
+    source_level_db: float, range_m: float, target_strength_db: float, absorption_db_per_km: float
+) -> float:
+    """Echo level EL = SL − 2 TL + TS (dB re 1 µPa), TL = 20 log r + α r/1000 (monostatic)."""
+    tl = 20.0 * math.log10(range_m) + absorption_db_per_km * range_m / 1000.0
+    return source_level_db - 2.0 * tl + target_strength_db
