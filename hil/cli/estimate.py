@@ -1,0 +1,258 @@
+"""``hil estimate``: run a receiver over a received WAV and print its estimates.
+
+Example::
+
+    hil estimate --schedule x.json --input rx.wav --receiver gcas --M 10 --json
+
+One JSON object per line (``--json``) or CSV (``--csv FILE``, ``-`` for stdout) with at least
+``t_s`` (receive time of the detected hop boundary, s from the start of the input),
+``range_m``, ``speed_mps`` (closing positive), ``hop_index`` and ``score``. ``--map PNG``
+draws the time–codeword map (receivers that keep one: GCAS).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any, TextIO
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hil.errors import ConfigError
+from hil.estimation.base import ESTIMATE_FIELDS, Estimate
+from hil.estimation.registry import RECEIVERS, make_receiver
+from hil.signals.schedule_file import read_schedule_file
+
+# Internal field names -> the options that set them (hil.cli.main names them in errors).
+OPTION_NAMES = {
+    "m_hops": "--M",
+    "receiver": "--receiver",
+    "sound_speed_mps": "--sound-speed",
+    "max_speed_mps": "--max-speed",
+    "max_range_m": "--max-range",
+}
+
+# Input samples per block: bounded memory for long recordings.
+_READ_BLOCK = 1 << 16
+
+
+def register(sub: Any) -> None:
+    """Add the ``estimate`` sub-command."""
+    p: argparse.ArgumentParser = sub.add_parser(
+        "estimate",
+        help="estimate range and speed from a received WAV",
+        description="Run a receiver over a received WAV (any sample format scipy reads) "
+        "and print one estimate per detected hop boundary.",
+    )
+    p.add_argument("--schedule", type=Path, required=True, help="transmit schedule JSON")
+    p.add_argument("--input", type=Path, required=True, help="received WAV file")
+    p.add_argument(
+        "--receiver", default="gcas", help=f"one of {', '.join(RECEIVERS)} (default gcas)"
+    )
+    p.add_argument("--channel", type=int, help="channel of a multi-channel WAV (0-based)")
+    p.add_argument("--M", dest="m_hops", type=int, default=10, help="correlator length M, hops")
+    p.add_argument("--sound-speed", type=float, help="c, m/s (default: the schedule's)")
+    p.add_argument("--max-speed", type=float, default=30.0, help="Doppler search span ±, m/s")
+    p.add_argument("--max-range", type=float, default=100.0, help="largest range reported, m")
+    p.add_argument(
+        "--option",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="receiver-specific option (repeatable), e.g. --option n_doppler=64",
+    )
+    p.add_argument("--json", action="store_true", help="print one JSON object per estimate")
+    p.add_argument("--csv", type=Path, metavar="FILE", help="write estimates as CSV ('-': stdout)")
+    p.add_argument("--map", type=Path, metavar="PNG", help="draw the time–codeword map")
+    p.set_defaults(func=run)
+
+
+def _parse_option(text: str) -> tuple[str, Any]:
+    key, sep, value = text.partition("=")
+    if not sep or not key:
+        raise ConfigError("--option", text, "KEY=VALUE")
+    try:
+        parsed: Any = json.loads(value)
+    except json.JSONDecodeError:
+        parsed = value
+    return key.strip(), parsed
+
+
+def read_wav_blocks(
+    path: Path, channel: int | None, block: int = _READ_BLOCK
+) -> tuple[float, int, Iterator[NDArray[np.float64]]]:
+    """Open a WAV for block-wise reading: (fs, n_frames, iterator of float64 blocks).
+
+    Integer formats are scaled to [-1, 1). Multi-channel files need ``channel``.
+    """
+    from scipy.io import wavfile
+
+    try:
+        fs, data = wavfile.read(path, mmap=True)
+    except FileNotFoundError:
+        raise ConfigError("--input", str(path), "an existing WAV file") from None
+    except ValueError as exc:
+        raise ConfigError("--input", str(path), f"a readable WAV file ({exc})") from None
+    n_channels = 1 if data.ndim == 1 else int(data.shape[1])
+    if n_channels > 1 and channel is None:
+        raise ConfigError(
+            "--channel",
+            None,
+            f"one of 0..{n_channels - 1}: the input has {n_channels} channels",
+            "choose the hydrophone channel with --channel",
+        )
+    if channel is not None and not 0 <= channel < n_channels:
+        raise ConfigError("--channel", channel, f"0..{n_channels - 1} ({n_channels} channels)")
+    scale = 1.0
+    if np.issubdtype(data.dtype, np.integer):
+        scale = 1.0 / float(2 ** (8 * data.dtype.itemsize - 1))
+        if data.dtype == np.uint8:
+            scale = 1.0 / 128.0
+
+    def blocks() -> Iterator[NDArray[np.float64]]:
+        for start in range(0, data.shape[0], block):
+            raw = data[start : start + block]
+            col = raw if raw.ndim == 1 else raw[:, channel]
+            x = np.asarray(col, dtype=np.float64)
+            if data.dtype == np.uint8:
+                x = x - 128.0
+            x = x * scale
+            bad = ~np.isfinite(x)
+            if bad.any():
+                first = start + int(np.argmax(bad))
+                raise ConfigError(
+                    "--input",
+                    str(path),
+                    f"finite samples; sample {first} (t = {first / fs:.6f} s) is {x[bad][0]}",
+                    "repair or trim the recording",
+                )
+            yield x
+
+    return float(fs), int(data.shape[0]), blocks()
+
+
+def run(args: argparse.Namespace) -> int:
+    """Execute ``hil estimate``; return the exit status."""
+    schedule, doc = read_schedule_file(args.schedule)
+    fs, _, blocks = read_wav_blocks(args.input, args.channel)
+    if not math.isclose(fs, float(doc["fs"]), rel_tol=0, abs_tol=0.5):
+        raise ConfigError(
+            "--input",
+            f"{args.input} at {fs:g} Hz",
+            f"the schedule's sample rate {float(doc['fs']):g} Hz",
+            "resample the recording or write the schedule at the recording's rate",
+        )
+    c = float(args.sound_speed if args.sound_speed is not None else doc["sound_speed_mps"])
+    extra = dict(_parse_option(o) for o in args.option)
+    collector = _MapCollector() if args.map is not None else None
+    if collector is not None:
+        if args.receiver != "gcas":
+            raise ConfigError(
+                "--map", str(args.map), "used with --receiver gcas (it keeps the map)"
+            )
+        extra["on_map"] = collector
+    receiver = make_receiver(
+        args.receiver,
+        schedule,
+        fs,
+        sound_speed_mps=c,
+        max_speed_mps=args.max_speed,
+        max_range_m=args.max_range,
+        m_hops=args.m_hops,
+        **extra,
+    )
+    sink = _Sink(args)
+    try:
+        for x in blocks:
+            sink.emit(receiver.process(x))
+        sink.emit(receiver.flush())
+    finally:
+        sink.close()
+    if collector is not None:
+        collector.draw(args.map)
+    if not args.json and args.csv is None:
+        print(f"{sink.count} estimates from {args.input} ({args.receiver})")
+    return 0
+
+
+class _Sink:
+    """Writes estimates as JSON lines and/or CSV as they arrive."""
+
+    def __init__(self, args: argparse.Namespace) -> None:
+        self.json = bool(args.json)
+        self.count = 0
+        self._csv_file: TextIO | None = None
+        self._writer: Any = None
+        if args.csv is not None:
+            if str(args.csv) == "-":
+                self._csv_file = sys.stdout
+            else:
+                args.csv.parent.mkdir(parents=True, exist_ok=True)
+                self._csv_file = args.csv.open("w", newline="", encoding="utf-8")
+            self._writer = csv.DictWriter(self._csv_file, fieldnames=list(ESTIMATE_FIELDS))
+            self._writer.writeheader()
+
+    def emit(self, estimates: list[Estimate]) -> None:
+        for e in estimates:
+            row = e.to_dict()
+            if self.json:
+                print(json.dumps(row), flush=False)
+            if self._writer is not None:
+                self._writer.writerow(row)
+            self.count += 1
+        if self.json:
+            sys.stdout.flush()
+
+    def close(self) -> None:
+        if self._csv_file is not None and self._csv_file is not sys.stdout:
+            self._csv_file.close()
+
+
+class _MapCollector:
+    """Keeps the time–codeword map handed out by GCAS (``on_map``), thinned to a plottable
+    number of time columns (every ``stride``-th baseband sample)."""
+
+    def __init__(self, max_columns: int = 200_000) -> None:
+        self.max_columns = max_columns
+        self.times: list[NDArray[np.float64]] = []
+        self.power: list[NDArray[np.floating]] = []
+        self.kept = 0
+
+    def __call__(self, t_s: NDArray[np.float64], p: NDArray[np.floating], speed: Any) -> None:
+        if self.kept >= self.max_columns or len(t_s) == 0:
+            return
+        self.times.append(np.asarray(t_s, dtype=float).copy())
+        self.power.append(np.asarray(p).copy())
+        self.kept += len(t_s)
+
+    def draw(self, path: Path) -> None:
+        """Draw the map (seed Fig 5.17 style) as a PNG: codeword against receive time."""
+        if not self.times:
+            raise ConfigError("--map", str(path), "an input long enough to produce a map")
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        t = np.concatenate(self.times)
+        p = np.concatenate(self.power, axis=0).astype(float)
+        stride = max(1, p.shape[0] // 4000)
+        t, p = t[::stride], p[::stride]
+        path.parent.mkdir(parents=True, exist_ok=True)
+        db = 10 * np.log10(np.maximum(p / max(float(p.max()), 1e-300), 1e-6))
+        fig, ax = plt.subplots(figsize=(10, 4.5), dpi=110)
+        extent = (float(t[0]), float(t[-1]), -0.5, p.shape[1] - 0.5)
+        im = ax.imshow(db.T, origin="lower", aspect="auto", extent=extent, vmin=-30, vmax=0)
+        fig.colorbar(im, ax=ax, label="accumulated sum (dB re max)")
+        ax.set_xlabel("receive time (s)")
+        ax.set_ylabel("codeword j")
+        ax.set_title("GCAS time–codeword map")
+        fig.tight_layout()
+        fig.savefig(path)
+        plt.close(fig)

@@ -1,0 +1,98 @@
+"""Hop-boundary detection helpers for GCAS (SPEC §3.5, all [R]).
+
+The detection statistic is ``s[n] = max_j P[n, j]`` (the time–codeword map at the chosen
+Doppler). A hop boundary is declared at ``n*`` when ``s`` is a local maximum over
+``±half_width`` samples, exceeds ``μ̂ + λ σ̂`` and the best codeword beats the runner-up by
+``ρ``. Under noise alone one codeword's statistic, in units of the unit-correlator noise
+power ``μ_U = E|u|²``, is
+
+- noncoherent: the sum of ``M`` independent exponentials, ``Gamma(M, 1)``: mean ``M``,
+  standard deviation ``√M``;
+- coherent: ``|Σ_m u_m|²`` of ``M`` independent complex Gaussians, ``Exp(M)``: mean and
+  standard deviation ``M``.
+
+:func:`lambda_for_pfa` turns a requested false-alarm probability per update (per hop) into
+``λ`` with a union bound over ``J × cells_per_update`` independent tests; the effective number
+of independent cells per hop and codeword was measured on noise-only input (see
+``tests/estimation_gcas``) and is the default of ``cells_per_update``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import ndimage, stats
+
+from hil.errors import ConfigError
+
+#: Independent tests per hop and codeword in the union bound of :func:`lambda_for_pfa`
+#: (measured on noise-only input; local maxima over ±N/2 leave about one candidate per hop).
+CELLS_PER_UPDATE = 256.0
+
+
+def noise_moments(m_hops: int, coherent: bool) -> tuple[float, float]:
+    """Mean and standard deviation of one codeword's statistic under noise, in units of μ_U.
+
+    >>> noise_moments(9, False), noise_moments(9, True)
+    ((9.0, 3.0), (9.0, 9.0))
+    """
+    if coherent:
+        return float(m_hops), float(m_hops)
+    return float(m_hops), math.sqrt(m_hops)
+
+
+def lambda_for_pfa(
+    pfa: float,
+    m_hops: int,
+    n_codewords: int,
+    coherent: bool,
+    cells_per_update: float = CELLS_PER_UPDATE,
+) -> float:
+    """The λ that gives false-alarm probability ``pfa`` per update (union-bound model).
+
+    >>> round(lambda_for_pfa(1e-3, 10, 17, False), 3)
+    7.808
+    """
+    if not (0 < pfa < 1):
+        raise ConfigError("pfa", pfa, "in (0, 1)", "e.g. 1e-3 false alarms per hop")
+    p1 = min(pfa / (n_codewords * cells_per_update), 0.5)
+    mean, std = noise_moments(m_hops, coherent)
+    if coherent:
+        thr = float(stats.expon.isf(p1, scale=m_hops))
+    else:
+        thr = float(stats.gamma.isf(p1, a=m_hops))
+    return (thr - mean) / std
+
+
+def parabolic_offset(y_minus: float, y0: float, y_plus: float) -> float:
+    """Vertex offset (in samples, within ±1) of the parabola through three equally spaced
+    values; 0 when they are collinear.
+
+    >>> parabolic_offset(1.0, 2.0, 1.0), parabolic_offset(0.0, 3.0, 2.0)
+    (0.0, 0.25)
+    """
+    den = y_minus - 2.0 * y0 + y_plus
+    if den >= 0 or not math.isfinite(den):
+        return 0.0
+    return float(np.clip(0.5 * (y_minus - y_plus) / den, -1.0, 1.0)) + 0.0
+
+
+def local_peaks(s: NDArray[np.float64], half_width: int) -> NDArray[np.bool_]:
+    """Mask of samples that are the first maximum over ``±half_width`` (shape of ``s``).
+
+    A sample qualifies if no sample within ``half_width`` before it is >= it and none after
+    it is larger, so a plateau yields one peak.
+
+    >>> local_peaks(np.array([0.0, 2.0, 2.0, 1.0, 3.0, 0.0]), 1).tolist()
+    [False, True, False, False, True, False]
+    """
+    h = int(half_width)
+    centred = ndimage.maximum_filter1d(s, size=2 * h + 1, mode="constant", cval=-np.inf)
+    is_max = s >= centred
+    # Strictly above everything in the h samples before (shifted window of length h).
+    before = ndimage.maximum_filter1d(s, size=h, origin=(h - 1) // 2, mode="constant", cval=-np.inf)
+    prev = np.concatenate(([-np.inf], before[:-1]))
+    result: NDArray[np.bool_] = is_max & (s > prev)
+    return result

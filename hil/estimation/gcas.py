@@ -1,0 +1,674 @@
+"""GCAS: group correlators and accumulated sum, streaming (SPEC §3).
+
+Pipeline per input block (every stage carries its state; any chunking of the input gives the
+same estimates as one call on the whole signal):
+
+1. :class:`~hil.estimation.baseband.ComplexBaseband`: mix by ``f_c`` (absolute sample index),
+   linear-phase FIR low-pass, decimate by ``R`` to ``fs_bb``; the group delay is compensated in
+   every reported time.
+2. :class:`~hil.estimation.unit_correlators.UnitCorrelatorBank`: ``u[n, d, k]`` for the
+   ``D`` Doppler hypotheses of :func:`~hil.estimation.doppler_grid.doppler_grid` (uniform in
+   speed over ±max_speed) and the ``K`` tones, ``ν[d, k] = α_d f_k − f_c``, window
+   ``N_d = round(T_h fs_bb/α_d)``; ``U = |u|²``.
+3. Group correlators ``G_d = Σ_k U[:, d, k]``, accumulated over ``M`` hops by the comb
+   recursion ``Acc_d[n] = Acc_d[n − N_d] + G_d[n] − G_d[n − M N_d]`` (cost independent of
+   ``M``). Per sample, ``d̂[n] = argmax_d w_d Acc_d[n]`` (``w_d``: reverberation-band weights).
+4. Accumulated sums at ``d̂`` and its two neighbours, for every codeword ``j`` of the period::
+
+       A[n, d, j] = Σ_{m<M} U[n − ℓ_{d,m}, d, c_{j−m}]                  (noncoherent)
+       A[n, d, j] = |Σ_{m<M} u[n − ℓ_{d,m}, d, c_{j−m}] e^{−jθ_{j,m}(n)}|²   (coherent)
+
+   with lags ``ℓ_{d,m} = round(m L_d)``, ``L_d = T_h fs_bb/α_d`` [R: the spec writes
+   ``m N_d``; rounding each lag separately keeps the M terms aligned within half a sample
+   instead of letting the rounding of ``N_d`` accumulate to ``m/2`` samples]. The coherent
+   phase: the unit correlator that exactly covers echo hop ``i`` (tone ``f``) of
+   ``s(α(t − τ0))`` has phase ``Φ_end,i − 2π f α b_i − 2π ν g`` where ``Φ_end,i`` is the
+   transmit phase at the end of hop ``i``, ``b_i`` the receive time of that end and ``g`` the
+   filter delay (the heterodyne runs on the undelayed sample clock). For the candidate boundary
+   ``b_0(n)`` of output sample ``n``, ``b_{j−m} = b_0 − m T_h/α``, so
+   ``θ_{j,m}(n) = Φ_end,j−m + 2π f m T_h − 2π f α b_0(n) − 2π ν g``: a per-(n, term) phase.
+5. The time–codeword map ``P[n, j] = A[n, d̂, j]`` (passed to ``on_map`` if given);
+   detection statistic ``s[n] = max_j P[n, j]``.
+6. Detection [R] (:mod:`hil.estimation.detection`): ``s`` a local maximum over
+   ``±N_min/2``, above ``μ̂ + λσ̂`` and the best codeword ``ρ`` times the runner-up. CFAR
+   modes: ``"bank"`` (default) estimates the unit-correlator noise power ``μ_U`` as the median
+   over all (d, k) cells of ``U`` (÷ ln 2, the median of an exponential), averaged over a
+   trailing window, and uses the noise moments of the statistic; ``"statistic"`` is the
+   literal reading of SPEC §3.5: median/MAD of ``s`` over a trailing window that ends one hop
+   before the candidate. The bank mode stays valid while a target is tracked (the trailing
+   ``s`` of a tracked target never returns to the noise floor, which blinds the literal form
+   at high SNR). ``λ`` is set directly or from ``pfa`` per update.
+7. Readout: parabolic interpolation of the peak in time and across ``d``; boundary receive time
+   ``t_rx`` (window centred on the hop, group delay removed); ``ĵ = argmax_j``; ``t_tx`` the
+   transmit end of hop ``ĵ`` plus the multiple of the code period that puts the delay in
+   ``[0, τ_max]``, ``τ_max = 2 max_range/c`` (otherwise the detection is refused and counted);
+   ``R = c (t_rx − t_tx)/2``, ``v = c (α̂ − 1)/(α̂ + 1)``; hop-index consistency is a soft
+   flag (:attr:`GcasReceiver.last_detection`, :attr:`GcasReceiver.inconsistent_count`).
+
+Latency: a boundary is reported once ``N_min/2`` baseband samples past it have arrived (plus
+the filter delay), within one hop.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from hil.errors import ConfigError
+from hil.estimation.base import Estimate
+from hil.estimation.baseband import ComplexBaseband
+from hil.estimation.detection import (
+    lambda_for_pfa,
+    local_peaks,
+    noise_moments,
+    parabolic_offset,
+)
+from hil.estimation.doppler_grid import DopplerGrid, alpha_to_speed, doppler_grid, speed_to_alpha
+from hil.estimation.row_buffer import RowBuffer
+from hil.estimation.unit_correlators import UnitCorrelatorBank
+from hil.signals.random_cyclic import minimum_distance
+from hil.signals.schedule import HopSchedule
+
+HFCCW_FAMILIES = ("random-cyclic", "three-state")
+#: Largest correlator length accepted (the seed uses up to 29).
+M_MAX = 64
+#: Baseband rate over twice the highest baseband frequency (room for the filter transition).
+TRANSITION_FACTOR = 1.3
+#: Noise-floor estimate on every this-many baseband samples (absolute grid).
+NOISE_STRIDE = 32
+CFAR_MODES = ("bank", "statistic")
+
+MapCallback = Callable[[NDArray[np.float64], NDArray[np.float32], NDArray[np.float64]], None]
+
+
+@dataclass(frozen=True)
+class DetectionInfo:
+    """Diagnostics of one detection, beside its :class:`Estimate`.
+
+    ``sample`` (baseband index of the peak), ``threshold`` and ``noise_mean`` (statistic
+    units), ``runner_up_ratio`` (best / second-best codeword), ``consistent`` (hop index
+    advanced as the elapsed time predicts since the previous detection; None for the first).
+    """
+
+    sample: int
+    threshold: float
+    noise_mean: float
+    runner_up_ratio: float
+    consistent: bool | None
+
+
+def minimum_m_hops(code: NDArray[np.int64], upper: int = M_MAX) -> int:
+    """Smallest M at which all M-hop codewords of the cyclic ``code`` differ (d_min >= 1).
+
+    >>> minimum_m_hops(np.array([0, 1, 2, 0, 2, 0, 2, 1]))
+    4
+    """
+    for m in range(1, upper + 1):
+        if minimum_distance(code, m) >= 1:
+            return m
+    raise ConfigError("code", code.tolist(), f"a code whose codewords differ at some M <= {upper}")
+
+
+def _check_schedule(schedule: HopSchedule, fs_hz: float, c: float, v_max: float) -> None:
+    if schedule.family not in HFCCW_FAMILIES:
+        raise ConfigError(
+            "schedule.family",
+            schedule.family,
+            f"an HFC-CW family ({' or '.join(HFCCW_FAMILIES)})",
+            "GCAS decodes tone-hop codes; use the fmcw, stft or mfbank receiver for this waveform",
+        )
+    if np.any(schedule.code < 0):
+        raise ConfigError("schedule.code", schedule.code.tolist(), "no silent hops")
+    schedule.hop_s  # noqa: B018 - raises for unequal hops
+    design_fs = schedule.params.get("fs_hz")
+    if design_fs is not None and not math.isclose(float(design_fs), fs_hz, rel_tol=1e-9):
+        raise ConfigError(
+            "fs_hz",
+            fs_hz,
+            f"the rate the schedule was designed for, {float(design_fs):g} Hz",
+            "resample the input or rebuild the schedule for this rate",
+        )
+    nyquist = 2.0 * float(speed_to_alpha(v_max, c)) * schedule.max_frequency_hz()
+    if fs_hz <= nyquist:
+        raise ConfigError(
+            "fs_hz", fs_hz, f"> {nyquist:.1f} Hz (Nyquist of the Doppler-scaled top tone)"
+        )
+
+
+class GcasReceiver:
+    """Streaming GCAS receiver; see the module docstring for the algorithm.
+
+    Parameters
+    ----------
+    schedule:
+        The transmit schedule (``random-cyclic`` or ``three-state``); the first input sample
+        is at the schedule's t = 0.
+    fs_hz:
+        Input sample rate, Hz.
+    sound_speed_mps, max_speed_mps, max_range_m:
+        c (m/s), the Doppler search span ± (m/s) and the largest range reported (m).
+    m_hops:
+        Correlator length M, from the code's minimum (all M-hop codewords distinct) to
+        :data:`M_MAX`.
+    n_doppler:
+        Number of Doppler hypotheses D.
+    coherent:
+        Coherent accumulated sum (phases restored) instead of the noncoherent default [R].
+    pfa:
+        False-alarm probability per update used to set λ when ``cfar_lambda`` is None.
+    cfar_lambda:
+        λ of the threshold ``μ̂ + λσ̂`` (overrides ``pfa``).
+    runner_up_ratio:
+        ρ: best codeword over the runner-up, >= 1.
+    cfar_window_hops:
+        Length of the trailing CFAR window, hops.
+    cfar_mode:
+        ``"bank"`` or ``"statistic"`` (module docstring, step 6).
+    reverb_speed_mps, reverb_weight:
+        Reverberation band: hypotheses with ``|v| <`` this speed get this weight in the
+        Doppler decision (0 excludes them).
+    decimation:
+        Baseband decimation R; default the largest that keeps the Doppler-scaled band.
+    attenuation_db:
+        Stop-band attenuation of the baseband low-pass, dB.
+    on_map:
+        Called as ``on_map(t_s, P, speed_mps)`` with the time–codeword map of each new stretch
+        of baseband samples: times (s, shape ``(n,)``), ``P`` (shape ``(n, J)``) and the chosen
+        Doppler hypothesis as a speed (m/s, shape ``(n,)``).
+    """
+
+    name = "gcas"
+
+    def __init__(
+        self,
+        schedule: HopSchedule,
+        fs_hz: float,
+        *,
+        sound_speed_mps: float,
+        max_speed_mps: float,
+        max_range_m: float,
+        m_hops: int,
+        n_doppler: int = 64,
+        coherent: bool = False,
+        pfa: float = 1e-3,
+        cfar_lambda: float | None = None,
+        runner_up_ratio: float = 1.05,
+        cfar_window_hops: float = 8.0,
+        cfar_mode: str = "bank",
+        reverb_speed_mps: float = 0.0,
+        reverb_weight: float = 0.0,
+        decimation: int | None = None,
+        attenuation_db: float = 70.0,
+        on_map: MapCallback | None = None,
+    ) -> None:
+        if not (math.isfinite(fs_hz) and fs_hz > 0):
+            raise ConfigError("fs_hz", fs_hz, "> 0 Hz")
+        c = float(sound_speed_mps)
+        if not (math.isfinite(c) and c > 0):
+            raise ConfigError("sound_speed_mps", sound_speed_mps, "> 0 m/s")
+        if not (math.isfinite(max_speed_mps) and 0 < max_speed_mps < c):
+            raise ConfigError("max_speed_mps", max_speed_mps, f"0 < v < c = {c} m/s")
+        _check_schedule(schedule, float(fs_hz), c, float(max_speed_mps))
+        code = schedule.code.astype(np.int64)
+        m_min = minimum_m_hops(code)
+        if int(m_hops) != m_hops or not m_min <= m_hops <= M_MAX:
+            raise ConfigError(
+                "m_hops",
+                m_hops,
+                f"an integer in {m_min}..{M_MAX} for this code (codewords are distinct, "
+                f"d_min >= 1, from M = {m_min}; {M_MAX} is the largest correlator supported)",
+                "M larger than the code allows or too short to tell codewords apart",
+            )
+        if not (math.isfinite(max_range_m) and max_range_m > 0):
+            raise ConfigError("max_range_m", max_range_m, "> 0 m")
+        r_unamb = schedule.unambiguous_range_m(c)
+        if max_range_m > r_unamb:
+            raise ConfigError(
+                "max_range_m",
+                max_range_m,
+                f"<= the unambiguous range c·period/2 = {r_unamb:.2f} m",
+                "lengthen the code or the hop, or lower the maximum range",
+            )
+        if cfar_mode not in CFAR_MODES:
+            raise ConfigError("cfar_mode", cfar_mode, f"one of {', '.join(CFAR_MODES)}")
+        if not (math.isfinite(runner_up_ratio) and runner_up_ratio >= 1):
+            raise ConfigError("runner_up_ratio", runner_up_ratio, ">= 1")
+        if not (math.isfinite(cfar_window_hops) and cfar_window_hops >= 1):
+            raise ConfigError("cfar_window_hops", cfar_window_hops, ">= 1 hop")
+
+        self.schedule = schedule
+        self.fs_hz = float(fs_hz)
+        self.sound_speed_mps = c
+        self.max_speed_mps = float(max_speed_mps)
+        self.max_range_m = float(max_range_m)
+        self.m_hops = int(m_hops)
+        self.coherent = bool(coherent)
+        self.cfar_mode = cfar_mode
+        self.runner_up_ratio = float(runner_up_ratio)
+        self.on_map = on_map
+        #: Experimental fine timing of the coherent form (see :meth:`_coherent_boundary`).
+        self.fine_coherent_timing = False
+        self.code = code
+        self.n_codewords = int(code.shape[0])
+        self.hop_s = schedule.hop_s
+        tones = schedule.tones_hz
+        self.tones_hz = tones
+        center = 0.5 * (float(tones.min()) + float(tones.max()))
+        self.center_hz = center
+
+        # Baseband: the band must hold every Doppler-scaled tone plus a sinc main lobe.
+        a_lo, a_hi = speed_to_alpha(-self.max_speed_mps, c), speed_to_alpha(self.max_speed_mps, c)
+        band = max(abs(a_hi * tones.max() - center), abs(a_lo * tones.min() - center))
+        passband = float(band) + 2.0 / self.hop_s
+        if decimation is None:
+            decimation = max(1, int(self.fs_hz / (2.0 * TRANSITION_FACTOR * passband)))
+        self.baseband = ComplexBaseband(
+            self.fs_hz,
+            center,
+            decimation=int(decimation),
+            passband_hz=passband,
+            attenuation_db=attenuation_db,
+        )
+        self.fs_bb = self.baseband.fs_out_hz
+        self.grid: DopplerGrid = doppler_grid(
+            self.max_speed_mps,
+            int(n_doppler),
+            c,
+            self.hop_s,
+            self.fs_bb,
+            reverb_speed_mps=reverb_speed_mps,
+            reverb_weight=reverb_weight,
+        )
+        self.bank = UnitCorrelatorBank(
+            self.fs_bb, self.grid.frequencies(tones, center), self.grid.lengths
+        )
+        d, k, m, j = self.grid.size, self.n_tones, self.m_hops, self.n_codewords
+        m_idx = np.arange(m)
+        self.lags = np.round(m_idx[None, :] * self.grid.exact_lengths[:, None]).astype(np.int64)
+        self._w_non, self._w_coh = self._codeword_weights()
+        self._n_min = int(self.grid.lengths.min())
+        self._n_max = int(self.grid.lengths.max())
+        self.half_width = max(1, self._n_min // 2)
+        self._cfar_window = max(2, int(round(cfar_window_hops * self.hop_s * self.fs_bb)))
+        self._moments = noise_moments(m, self.coherent)
+        if cfar_lambda is None:
+            self.cfar_lambda = (
+                lambda_for_pfa(pfa, m, j, self.coherent) if cfar_mode == "bank" else 5.0
+            )
+        else:
+            if not math.isfinite(cfar_lambda):
+                raise ConfigError("cfar_lambda", cfar_lambda, "a finite number")
+            self.cfar_lambda = float(cfar_lambda)
+        self._settle = (
+            int(self.lags.max()) + self._n_max + self.baseband.n_taps // int(decimation) + 2
+        )
+        # Coherent restoration constants per (d, k): f_k α_d and the filter-delay phase ν g.
+        g = self.baseband.group_delay / self.fs_hz
+        nu = self.grid.frequencies(tones, center)
+        self._fa = tones[None, :] * self.grid.alphas[:, None]  # (D, K) Hz
+        self._delta0 = (self.grid.exact_lengths - self.grid.lengths + 1) / (2.0 * self.fs_bb)
+        self._coh_const = np.mod(self._fa * self._delta0[:, None] + nu * g, 1.0)  # cycles
+        lag_keep = int(self.lags.max()) + 1
+        self._u_ring = RowBuffer(lag_keep, (d, k), np.complex64 if self.coherent else np.float32)
+        self._g_ring = RowBuffer(m * self._n_max + 1, (d,), np.float64)
+        self._acc_ring = RowBuffer(self._n_max + 1, (d,), np.float64)
+        det_keep = self._cfar_window + 2 * self._n_max + 4
+        self._s_ring = RowBuffer(det_keep, (), np.float64)
+        self._a3_ring = RowBuffer(det_keep, (3, j), np.float32)
+        self._dset_ring = RowBuffer(det_keep, (3,), np.int64)
+        self._noise_ring = RowBuffer(det_keep, (), np.float64)
+        self.reset()
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_options(
+        cls,
+        schedule: HopSchedule,
+        fs_hz: float,
+        *,
+        sound_speed_mps: float,
+        max_speed_mps: float,
+        max_range_m: float,
+        m_hops: int,
+        **extra: Any,
+    ) -> GcasReceiver:
+        """The registry's common constructor (:mod:`hil.estimation.registry`)."""
+        known = {
+            "n_doppler", "coherent", "pfa", "cfar_lambda", "runner_up_ratio",
+            "cfar_window_hops", "cfar_mode", "reverb_speed_mps", "reverb_weight",
+            "decimation", "attenuation_db", "on_map",
+        }  # fmt: skip
+        unknown = sorted(set(extra) - known)
+        if unknown:
+            raise ConfigError("gcas option", unknown, f"one of {sorted(known)}")
+        return cls(
+            schedule,
+            fs_hz,
+            sound_speed_mps=sound_speed_mps,
+            max_speed_mps=max_speed_mps,
+            max_range_m=max_range_m,
+            m_hops=m_hops,
+            **extra,
+        )
+
+    @property
+    def n_tones(self) -> int:
+        """Number of tones K."""
+        return int(self.tones_hz.shape[0])
+
+    def _codeword_weights(self) -> tuple[NDArray[np.float32], NDArray[np.complex64]]:
+        """Codeword matrices of shape ``(M·K, J)``: tone indicator, and with phases restored."""
+        m, k, j, p = self.m_hops, self.n_tones, self.n_codewords, self.n_codewords
+        jj = np.arange(j)[None, :]
+        mm = np.arange(m)[:, None]
+        tone = self.code[(jj - mm) % p]  # (M, J): tone of term m of codeword j
+        onehot = (tone[:, None, :] == np.arange(k)[None, :, None]).astype(np.float32)
+        w_non = onehot.reshape(m * k, j)
+        # Φ_end of hop h (global, h = j − m in −M+1..P−1) is the start phase of hop h + 1.
+        table = self.schedule.hops(-m + 2, p + m - 1)
+        phase_end = table.phase_rad[(jj - mm) + m - 1]  # (M, J)
+        f = self.tones_hz[tone]
+        theta = phase_end + 2.0 * np.pi * np.mod(f * mm * self.hop_s, 1.0)
+        w_coh = (onehot * np.exp(-1j * theta)[:, None, :]).astype(np.complex64)
+        return w_non, w_coh.reshape(m * k, j)
+
+    # ------------------------------------------------------------------ state
+    def reset(self) -> None:
+        """Forget all state; the next sample is sample 0 again."""
+        self._samples_seen = 0
+        self._restart(0)
+        self.inconsistent_count = 0
+        self.refused_count = 0
+        self.last_detection: DetectionInfo | None = None
+
+    @property
+    def samples_seen(self) -> int:
+        """Input samples consumed so far (gaps included)."""
+        return self._samples_seen
+
+    def _restart(self, input_index: int) -> None:
+        """Restart every accumulation at absolute input sample ``input_index``."""
+        self.baseband.reset(input_index)
+        b0 = self.baseband.next_output_index
+        self.bank.reset(b0)
+        for ring in (
+            self._u_ring, self._g_ring, self._acc_ring, self._s_ring, self._a3_ring,
+            self._dset_ring, self._noise_ring,
+        ):  # fmt: skip
+            ring.reset(b0)
+        self._origin = b0
+        self._valid_from = b0 + self._settle
+        self._det_next = b0
+        self._last_hop: int | None = None
+        self._last_t = 0.0
+
+    # ------------------------------------------------------------------ streaming
+    def process(self, block: ArrayLike, *, gap_before: int = 0) -> list[Estimate]:
+        """Consume real samples (shape ``(n,)``); return the estimates completed by them.
+
+        ``gap_before`` samples are missing before this block: estimates still pending are
+        finalised, the time base advances and every accumulation restarts.
+        """
+        x = np.asarray(block, dtype=np.float64)
+        if x.ndim != 1:
+            raise ConfigError("block", f"shape {x.shape}", "a 1-D array of real samples")
+        if int(gap_before) != gap_before or gap_before < 0:
+            raise ConfigError("gap_before", gap_before, "an integer >= 0 (samples)")
+        bad = ~np.isfinite(x)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise ConfigError(
+                "block",
+                f"{x[i]} at sample index {self._samples_seen + gap_before + i}",
+                "finite samples (no NaN or inf)",
+                "check the acquisition; mark missing samples with gap_before instead",
+            )
+        out: list[Estimate] = []
+        if gap_before:
+            out += self.flush()
+            self._samples_seen += int(gap_before)
+            self._restart(self._samples_seen)
+        self._samples_seen += x.shape[0]
+        y = self.baseband.process(x)
+        if y.shape[0]:
+            out += self._stage2(y)
+        return out
+
+    def flush(self) -> list[Estimate]:
+        """End of input: decide the candidates still waiting for their look-ahead."""
+        # Candidates whose ±N/2 look-ahead never arrived are not decided: a peak cut by the
+        # end of the input has no reliable time or codeword.
+        return self._detect(self._s_ring.next_index - self.half_width, final=False)
+
+    # ------------------------------------------------------------------ stage 2
+    def _stage2(self, y: NDArray[np.complex128]) -> list[Estimate]:
+        a0 = self.bank.next_index
+        u = self.bank.process(y)
+        n = u.shape[0]
+        power = np.square(u.real) + np.square(u.imag)
+        grp = power.sum(axis=2, dtype=np.float64)
+        self._u_ring.append(u if self.coherent else power, a0)
+        self._g_ring.append(grp, a0)
+        acc = self._accumulate_groups(grp, a0)
+        self._acc_ring.append(acc, a0)
+        d_hat = np.argmax(acc * self.grid.weights[None, :], axis=1)
+        dset = np.clip(d_hat[:, None] + np.arange(-1, 2)[None, :], 0, self.grid.size - 1)
+        idx = a0 + np.arange(n, dtype=np.int64)
+        a3 = np.stack([self._sums(idx, dset[:, i]) for i in range(3)], axis=1)
+        p_map = a3[:, 1, :]
+        s = p_map.max(axis=1).astype(np.float64)
+        self._s_ring.append(s, a0)
+        self._a3_ring.append(a3, a0)
+        self._dset_ring.append(dset, a0)
+        self._noise_ring.append(self._noise_floor(power, idx), a0)
+        if self.on_map is not None:
+            self.on_map(
+                self.baseband.time_of(idx), p_map, self.grid.speeds_mps[d_hat].astype(np.float64)
+            )
+        return self._detect(self._s_ring.next_index - self.half_width, final=False)
+
+    def _accumulate_groups(self, grp: NDArray[np.float64], a0: int) -> NDArray[np.float64]:
+        """``Acc_d[n] = Acc_d[n − N_d] + G_d[n] − G_d[n − M N_d]`` for the new samples."""
+        n = grp.shape[0]
+        acc = np.empty_like(grp)
+        for n_len, sel in self.bank._groups:
+            lag = self.m_hops * n_len
+            x = grp[:, sel] - self._g_ring.span(a0 - lag, a0 - lag + n)[:, sel]
+            hist = self._acc_ring.span(a0 - n_len, a0)[:, sel]
+            rows = -(-n // n_len)
+            buf = np.zeros(((rows + 1) * n_len, x.shape[1]))
+            buf[:n_len] = hist
+            buf[n_len : n_len + n] = x
+            # Row r of the reshaped buffer is one comb lag later than row r − 1, so a cumsum
+            # down the rows is exactly the recursion Acc[n] = Acc[n − N] + x[n].
+            np.cumsum(
+                buf.reshape(rows + 1, n_len, -1), axis=0, out=buf.reshape(rows + 1, n_len, -1)
+            )
+            acc[:, sel] = buf[n_len : n_len + n]
+        return acc
+
+    def _sums(self, idx: NDArray[np.int64], dcol: NDArray[np.int64]) -> NDArray[np.float32]:
+        """``A[n, d_n, j]`` for samples ``idx`` (shape ``(n,)``) at hypotheses ``dcol``."""
+        pos = self._u_ring.position(idx[:, None] - self.lags[dcol])  # (n, M)
+        v = self._u_ring.array[pos, dcol[:, None], :]  # (n, M, K)
+        n = idx.shape[0]
+        if not self.coherent:
+            # Broadcast product and a sum over a middle axis (sequential adds) instead of BLAS:
+            # each row's value must not depend on how many rows are computed together.
+            out: NDArray[np.float32] = (v.reshape(n, -1, 1) * self._w_non[None]).sum(axis=1)
+            return out
+        t = self.baseband.time_of(idx)
+        cyc = np.mod(self._fa[dcol] * t[:, None], 1.0) + self._coh_const[dcol]
+        rot = np.exp(2j * np.pi * cyc).astype(np.complex64)  # (n, K)
+        z = ((v * rot[:, None, :]).reshape(n, -1, 1) * self._w_coh[None]).sum(axis=1)
+        res: NDArray[np.float32] = (np.square(z.real) + np.square(z.imag)).astype(np.float32)
+        return res
+
+    def _noise_floor(
+        self, power: NDArray[np.float32], idx: NDArray[np.int64]
+    ) -> NDArray[np.float64]:
+        """μ_U estimate on the absolute grid of :data:`NOISE_STRIDE` samples; NaN elsewhere."""
+        out = np.full(idx.shape[0], np.nan)
+        on = np.flatnonzero(idx % NOISE_STRIDE == 0)
+        if on.size:
+            flat = power[on].reshape(on.size, -1)
+            out[on] = np.median(flat, axis=1) / math.log(2.0)
+        return out
+
+    # ------------------------------------------------------------------ detection
+    def _detect(self, stop: int, *, final: bool) -> list[Estimate]:
+        lo = self._det_next
+        if final:
+            stop = self._s_ring.next_index
+        if stop <= lo:
+            return []
+        h = self.half_width
+        newest = self._s_ring.next_index
+        first = max(lo - h, self._origin)
+        last = min(stop + h, newest)
+        s = np.array(self._s_ring.span(first, last), dtype=np.float64)
+        s[: max(0, self._valid_from - first)] = -np.inf
+        if final:
+            s = np.concatenate((s, np.full(stop + h - last, -np.inf)))
+        peaks = local_peaks(s, h)
+        cand = np.flatnonzero(peaks[lo - first : stop - first]) + lo
+        self._det_next = stop
+        out: list[Estimate] = []
+        for n_star in cand.tolist():
+            est = self._decide(int(n_star), s, first)
+            if est is not None:
+                out.append(est)
+        return out
+
+    def _noise_mean_std(
+        self, n_star: int, s: NDArray[np.float64], first: int
+    ) -> tuple[float, float]:
+        w = self._cfar_window
+        if self.cfar_mode == "bank":
+            lo = max(n_star - w, self._origin + self._n_max)
+            vals = self._noise_ring.span(lo, n_star + 1)
+            mu_u = float(np.nanmean(vals)) if np.any(np.isfinite(vals)) else math.inf
+            mean, std = self._moments
+            return mean * mu_u, std * mu_u
+        guard = self._n_max
+        lo = max(n_star - guard - w, self._valid_from)
+        hi = n_star - guard
+        if hi - lo < 8:
+            return math.inf, 0.0
+        vals = np.asarray(self._s_ring.span(lo, hi))
+        med = float(np.median(vals))
+        return med, 1.4826 * float(np.median(np.abs(vals - med)))
+
+    def _decide(self, n_star: int, s: NDArray[np.float64], first: int) -> Estimate | None:
+        peak = float(s[n_star - first])
+        mean, std = self._noise_mean_std(n_star, s, first)
+        thr = mean + self.cfar_lambda * std
+        if not peak > thr:
+            return None
+        a3 = np.asarray(self._a3_ring.span(n_star, n_star + 1)[0], dtype=np.float64)  # (3, J)
+        row = a3[1]
+        j_hat = int(np.argmax(row))
+        runner = float(np.max(np.delete(row, j_hat))) if row.shape[0] > 1 else 0.0
+        ratio = peak / runner if runner > 0 else math.inf
+        if ratio < self.runner_up_ratio:
+            return None
+        # Time: parabola through the statistic around the peak (look-ahead may be cut at flush).
+        i0 = n_star - first
+        y_m = float(s[i0 - 1]) if i0 >= 1 else -math.inf
+        y_p = float(s[i0 + 1]) if i0 + 1 < s.shape[0] else -math.inf
+        dn = parabolic_offset(y_m, peak, y_p) if math.isfinite(y_m + y_p) else 0.0
+        # Doppler: parabola across the three hypotheses kept at this sample.
+        dset = np.asarray(self._dset_ring.span(n_star, n_star + 1)[0])
+        d0 = int(dset[1])
+        dd = 0.0
+        if dset[0] != dset[1] and dset[2] != dset[1]:
+            dd = parabolic_offset(float(a3[0, j_hat]), float(a3[1, j_hat]), float(a3[2, j_hat]))
+        c = self.sound_speed_mps
+        speed = float(self.grid.speeds_mps[d0] + dd * self.grid.speed_step_mps)
+        alpha = float(speed_to_alpha(speed, c))
+        exact_len = self.hop_s * self.fs_bb / alpha
+        t_rx = float(self.baseband.time_of(n_star + dn)) + (
+            exact_len - self.grid.lengths[d0] + 1
+        ) / (2.0 * self.fs_bb)
+        if self.coherent and self.fine_coherent_timing:
+            t_rx = self._coherent_boundary(n_star, d0, j_hat, t_rx)
+        # Transmit time: end of hop ĵ, folded by whole code periods into [0, τ_max].
+        sch = self.schedule
+        period = sch.period_s
+        end_j = sch.t0_s + float(sch.start_s[j_hat] + sch.duration_s[j_hat])
+        tol = 2.0 / self.fs_bb
+        q = math.floor((t_rx - end_j + tol) / period)
+        t_tx = end_j + q * period
+        delay = t_rx - t_tx
+        if delay > 2.0 * self.max_range_m / c + tol:
+            self.refused_count += 1
+            return None
+        hop_index = j_hat + q * self.n_codewords
+        consistent: bool | None = None
+        if self._last_hop is not None:
+            expected = round((t_rx - self._last_t) * alpha / self.hop_s)
+            consistent = hop_index - self._last_hop == expected
+            if not consistent:
+                self.inconsistent_count += 1
+        self._last_hop, self._last_t = hop_index, t_rx
+        self.last_detection = DetectionInfo(n_star, thr, mean, ratio, consistent)
+        snr = (peak - mean) / mean if mean > 0 and math.isfinite(mean) else math.inf
+        return Estimate(
+            t_s=t_rx,
+            range_m=c * delay / 2.0,
+            speed_mps=float(alpha_to_speed(alpha, c)),
+            hop_index=int(hop_index),
+            score=peak / thr if thr > 0 else math.inf,
+            snr_db=10.0 * math.log10(snr) if snr > 0 else -math.inf,
+            alpha=alpha,
+            t_tx_s=t_tx,
+            codeword=j_hat,
+            receiver=self.name,
+        )
+
+    def _coherent_boundary(self, n_star: int, d0: int, j_hat: int, t_guess: float) -> float:
+        """Boundary time (s) maximising the coherent sum over a fine grid of ±1.5 samples.
+
+        The unit-correlator values stay those of sample ``n*``; only the restoration phase
+        ``2π f_k α b`` is evaluated at continuous ``b``, which is what gives the coherent form
+        its ``1/B_w`` time resolution (within one grating lobe, ``1/Δf`` wide).
+        """
+        pos = self._u_ring.position(n_star - self.lags[d0])
+        v = self._u_ring.array[pos, d0, :]  # (M, K)
+        w = self._w_coh[:, j_hat].reshape(self.m_hops, self.n_tones)
+        per_tone = (v * w).sum(axis=0).astype(np.complex128)  # (K,)
+        t_n = float(self.baseband.time_of(n_star))
+        b = t_guess + np.linspace(-1.5, 1.5, 61) / self.fs_bb
+        # Phase relative to the carrier part common to all tones (it cancels in |.|²).
+        fa = self._fa[d0] - self._fa[d0].mean()
+        cyc = fa[None, :] * (b[:, None] - t_n) + np.mod(self._fa[d0] * t_n, 1.0)[None, :]
+        cyc = cyc + self._coh_const[d0][None, :] - self._fa[d0][None, :] * self._delta0[d0]
+        val = np.abs(np.exp(2j * np.pi * cyc) @ per_tone) ** 2
+        i = int(np.argmax(val))
+        if 0 < i < b.shape[0] - 1:
+            off = parabolic_offset(float(val[i - 1]), float(val[i]), float(val[i + 1]))
+        else:
+            off = 0.0
+        return float(b[i] + off * (b[1] - b[0]))
+
+    # ------------------------------------------------------------------ diagnostics
+    def accumulated_sums(self, count: int) -> tuple[NDArray[np.float64], NDArray[np.float32]]:
+        """The full ``A[n, d, j]`` for the last ``count`` baseband samples (diagnostics).
+
+        Returns times (s, shape ``(count,)``) and ``A`` (shape ``(count, D, J)``), computed
+        from the retained unit-correlator history; ``count`` is limited to the samples since
+        the last restart.
+        """
+        stop = self._u_ring.next_index
+        count = int(min(count, stop - self._origin, self._u_ring.available - self.lags.max() - 1))
+        idx = np.arange(stop - count, stop, dtype=np.int64)
+        full = np.stack(
+            [self._sums(idx, np.full(count, d, dtype=np.int64)) for d in range(self.grid.size)],
+            axis=1,
+        )
+        return self.baseband.time_of(idx), full

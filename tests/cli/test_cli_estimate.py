@@ -1,0 +1,134 @@
+"""``hil estimate``: estimates from a WAV, CSV/JSON output, the map, and bad input."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.io import wavfile
+
+from hil.cli.main import main
+from hil.signals.presets import check_design, get_preset
+from hil.signals.schedule_file import schedule_document, write_schedule_file
+from sim_devices.acoustics.delay import TwoWayPath
+from sim_devices.acoustics.echo import AnalyticEcho
+from sim_devices.acoustics.trajectory import ConstantVelocity, Fixed
+
+FS = 100_000.0
+R0, V = 40.0, 9.0  # m, m/s closing
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """0.8 s of a closing target's echo plus white noise, as WAV + schedule."""
+    folder = tmp_path_factory.mktemp("estimate")
+    spec = get_preset("att").spec("random-cyclic")
+    sch = check_design(spec)
+    sonar = Fixed([0.0, 0.0, 0.0])
+    path = TwoWayPath(sonar, ConstantVelocity([R0, 0.0, 0.0], [-V, 0.0, 0.0]), sonar, 1500.0)
+    n = int(0.8 * FS)
+    x = AnalyticEcho(sch, path, FS).block(0, n)
+    x = x + np.random.default_rng(7).normal(0.0, 0.5, n)
+    x = 0.5 * x / np.max(np.abs(x))
+    wavfile.write(folder / "rx.wav", int(FS), x.astype(np.float32))
+    wavfile.write(folder / "stereo.wav", int(FS), np.stack([x, x], axis=1).astype(np.float32))
+    wavfile.write(folder / "rx48k.wav", 48_000, x[:48_000].astype(np.float32))
+    bad = x.astype(np.float32).copy()
+    bad[12_345] = np.nan
+    wavfile.write(folder / "nan.wav", int(FS), bad)
+    doc = schedule_document(sch, FS, 0.8, sound_speed_mps=1500.0, spec=spec.to_dict())
+    write_schedule_file(folder / "x.json", doc)
+    return folder
+
+
+def test_json_lines_track_the_target(recording: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    args = [
+        "estimate",
+        "--schedule",
+        str(recording / "x.json"),
+        "--input",
+        str(recording / "rx.wav"),
+        "--json",
+    ]
+    assert main(args) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert len(rows) >= 40  # 10 ms hops over 0.8 s, after the first M hops
+    for row in rows:
+        for key in ("t_s", "range_m", "speed_mps", "hop_index", "score"):
+            assert key in row
+        bounce = (row["t_s"] + row["t_tx_s"]) / 2
+        assert row["range_m"] == pytest.approx(R0 - V * bounce, abs=0.1)
+        assert row["speed_mps"] == pytest.approx(V, abs=0.3)
+    hops = [r["hop_index"] for r in rows]
+    assert np.all(np.diff(hops) == 1)
+
+
+def test_csv_output_and_map(recording: Path, tmp_path: Path) -> None:
+    out = tmp_path / "est.csv"
+    png = tmp_path / "map.png"
+    args = [
+        "estimate",
+        "--schedule",
+        str(recording / "x.json"),
+        "--input",
+        str(recording / "rx.wav"),
+        "--csv",
+        str(out),
+        "--map",
+        str(png),
+    ]
+    assert main(args) == 0
+    with out.open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) >= 40 and float(rows[5]["speed_mps"]) == pytest.approx(V, abs=0.3)
+    assert png.read_bytes().startswith(b"\x89PNG")
+
+
+def test_stereo_input_needs_a_channel(recording: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    base = [
+        "estimate",
+        "--schedule",
+        str(recording / "x.json"),
+        "--input",
+        str(recording / "stereo.wav"),
+    ]
+    assert main(base) == 2
+    assert (
+        "--channel = None is not allowed: must be one of 0..1: the input has 2 channels"
+        in capsys.readouterr().err
+    )
+    assert main([*base, "--channel", "5"]) == 2
+    assert "--channel = 5" in capsys.readouterr().err
+    assert main([*base, "--channel", "1", "--json"]) == 0
+    assert len(capsys.readouterr().out.splitlines()) >= 40
+
+
+@pytest.mark.parametrize(
+    ("wav", "extra", "message"),
+    [
+        ("rx48k.wav", [], "the schedule's sample rate 100000 Hz"),
+        ("nan.wav", [], "sample 12345 (t = 0.123450 s) is nan"),
+        ("rx.wav", ["--M", "200"], "--M (m_hops) = 200 is not allowed"),
+        ("rx.wav", ["--receiver", "sonar9000"], "--receiver (receiver) = 'sonar9000'"),
+        ("missing.wav", [], "an existing WAV file"),
+        ("rx.wav", ["--option", "novalue"], "KEY=VALUE"),
+    ],
+)
+def test_bad_input_exits_2(
+    recording: Path, wav: str, extra: list[str], message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    args = [
+        "estimate",
+        "--schedule",
+        str(recording / "x.json"),
+        "--input",
+        str(recording / wav),
+        *extra,
+    ]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert message in err, err
+    assert "Traceback" not in err

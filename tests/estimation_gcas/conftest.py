@@ -1,0 +1,60 @@
+"""Shared signals for the GCAS tests: exact moving-target echoes plus seeded white noise."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+
+from hil.signals.presets import check_design, get_preset
+from hil.signals.schedule import HopSchedule
+from sim_devices.acoustics.delay import TwoWayPath
+from sim_devices.acoustics.echo import AnalyticEcho
+from sim_devices.acoustics.trajectory import ConstantVelocity, Fixed
+
+C = 1500.0
+FS = 100_000.0
+
+EchoFactory = Callable[..., np.ndarray]
+
+
+def att_schedule(family: str = "random-cyclic") -> HopSchedule:
+    """The ``att`` preset schedule of ``family``."""
+    return check_design(get_preset("att").spec(family))
+
+
+def echo_samples(
+    schedule: HopSchedule,
+    range_m: float,
+    speed_mps: float,
+    duration_s: float,
+    *,
+    snr_db: float | None = None,
+    seed: int = 0,
+    fs_hz: float = FS,
+    c: float = C,
+    amplitude: float = 1.0,
+) -> np.ndarray:
+    """Echo of a target at ``range_m`` (t = 0) closing at ``speed_mps``, plus white noise of
+    per-sample SNR ``snr_db`` (echo power ``amplitude²/2`` over noise variance)."""
+    path = TwoWayPath.monostatic(
+        Fixed((0.0, 0.0, 0.0)), ConstantVelocity((range_m, 0.0, 0.0), (-speed_mps, 0.0, 0.0)), c
+    )
+    x = AnalyticEcho(schedule, path, fs_hz, amplitude=amplitude).block(
+        0, int(round(duration_s * fs_hz))
+    )
+    if snr_db is not None:
+        sigma = amplitude / np.sqrt(2.0) / 10 ** (snr_db / 20.0)
+        x = x + np.random.default_rng(seed).normal(0.0, sigma, x.shape)
+    return x
+
+
+def true_range(range_m: float, speed_mps: float, t_tx: float, t_rx: float) -> float:
+    """Range at the bounce instant ``(t_tx + t_rx)/2`` of a constant-velocity target, m."""
+    return range_m - speed_mps * 0.5 * (t_tx + t_rx)
+
+
+@pytest.fixture(scope="session")
+def rc_schedule() -> HopSchedule:
+    return att_schedule("random-cyclic")

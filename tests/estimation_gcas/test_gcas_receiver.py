@@ -1,0 +1,289 @@
+"""GCAS receiver: accuracy on exact moving-target echoes, false alarms, streaming contract."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from hil.errors import ConfigError
+from hil.estimation.base import Estimate, Receiver
+from hil.estimation.gcas import GcasReceiver
+from hil.estimation.registry import make_receiver
+from hil.signals.presets import check_design, get_preset
+from hil.signals.schedule import HopSchedule
+
+from .conftest import FS, C, att_schedule, echo_samples, true_range
+
+
+def _receiver(schedule: HopSchedule, m_hops: int = 10, **extra: object) -> GcasReceiver:
+    return GcasReceiver.from_options(
+        schedule, FS, sound_speed_mps=C, max_speed_mps=30.0, max_range_m=100.0,
+        m_hops=m_hops, **extra,
+    )  # fmt: skip
+
+
+def _run(rx: GcasReceiver, x: np.ndarray, block: int = 10_000) -> list[Estimate]:
+    out: list[Estimate] = []
+    for i in range(0, x.shape[0], block):
+        out += rx.process(x[i : i + block])
+    return out + rx.flush()
+
+
+def _errors(est: list[Estimate], r0: float, v: float) -> tuple[np.ndarray, np.ndarray]:
+    dr = np.array([e.range_m - true_range(r0, v, e.t_tx_s, e.t_s) for e in est])
+    dv = np.array([e.speed_mps - v for e in est])
+    return dr, dv
+
+
+def crlb_range_m(schedule: HopSchedule, m_hops: int, snr_db: float) -> float:
+    """Range CRLB (m) for an M-hop codeword: σ_τ = 1/(π√8 B_rms √(E/N0)), B_rms from the
+    spectrum of the actual M-hop waveform within the occupied band (± one 1/T_h)."""
+    fs = FS
+    hop = schedule.hop_s
+    t = np.arange(int(round(m_hops * hop * fs))) / fs
+    z = schedule.evaluate_analytic(t)
+    spec = np.abs(np.fft.fft(z, 8 * z.shape[0])) ** 2
+    f = np.fft.fftfreq(8 * z.shape[0], 1 / fs)
+    lo, hi = schedule.tones_hz.min() - 1 / hop, schedule.tones_hz.max() + 1 / hop
+    band = (f >= lo) & (f <= hi)
+    w = spec[band] / spec[band].sum()
+    f0 = float(np.sum(w * f[band]))
+    b_rms = math.sqrt(float(np.sum(w * (f[band] - f0) ** 2)))
+    # Per-sample SNR = (A²/2)/σ²; E = M T A²/2, N0 = 2σ²/fs.
+    e_over_n0 = 10 ** (snr_db / 10) * m_hops * hop * fs / 2.0
+    sigma_tau = 1.0 / (math.pi * math.sqrt(8.0) * b_rms * math.sqrt(e_over_n0))
+    return C * sigma_tau / 2.0
+
+
+def test_is_a_receiver_and_registered(rc_schedule: HopSchedule) -> None:
+    rx = make_receiver(
+        "gcas", rc_schedule, FS, sound_speed_mps=C, max_speed_mps=30.0, max_range_m=100.0,
+        m_hops=10,
+    )  # fmt: skip
+    assert isinstance(rx, Receiver) and isinstance(rx, GcasReceiver)
+    assert rx.fs_bb == pytest.approx(FS / 12) and rx.grid.size == 64
+
+
+@pytest.mark.parametrize("speed", [12.0, -8.0, 25.0])
+def test_high_snr_tracks_range_speed_and_codeword(rc_schedule: HopSchedule, speed: float) -> None:
+    r0 = 60.0
+    x = echo_samples(rc_schedule, r0, speed, 0.8, snr_db=0.0, seed=1)
+    est = _run(_receiver(rc_schedule), x)
+    assert len(est) >= 50  # one per hop once M hops have arrived
+    dr, dv = _errors(est, r0, speed)
+    assert np.sqrt(np.mean(dr**2)) < 0.03
+    assert np.sqrt(np.mean(dv**2)) < 0.15
+    hops = np.array([e.hop_index for e in est])
+    assert np.all(np.diff(hops) == 1)  # the codeword advances by one per hop
+    assert [e.codeword for e in est] == [h % rc_schedule.period_hops for h in hops.tolist()]
+    # t_tx is the transmit end of that hop.
+    ends = np.array([(h + 1) * rc_schedule.hop_s for h in hops.tolist()])
+    assert np.allclose([e.t_tx_s for e in est], ends, atol=1e-9)
+
+
+def test_errors_shrink_with_snr_and_stay_within_a_crlb_multiple(rc_schedule: HopSchedule) -> None:
+    r0, v = 45.0, 15.0
+    rms = []
+    for snr in (-15.0, -5.0, 5.0):
+        x = echo_samples(rc_schedule, r0, v, 0.7, snr_db=snr, seed=11)
+        est = _run(_receiver(rc_schedule), x)
+        dr, _ = _errors(est, r0, v)
+        assert len(est) >= 40
+        rms.append(float(np.sqrt(np.mean(dr**2))))
+    assert rms[0] > rms[1] > rms[2]
+    # Noncoherent GCAS uses energy only: its range error is set by the hop envelope, not by
+    # B_w. Stated multiple at 5 dB per-sample SNR (E/N0 = 39 dB over M = 10 hops).
+    bound = crlb_range_m(rc_schedule, 10, 5.0)
+    assert rms[2] < 60 * bound
+
+
+@pytest.mark.xfail(
+    reason="known defect: the coherent phase restoration leaves a ~0.3 m timing bias and "
+    "occasional wrong codewords (see the GCAS report); fix before relying on coherent=True",
+    strict=True,
+)
+def test_coherent_sum_is_closer_to_the_crlb(rc_schedule: HopSchedule) -> None:
+    r0, v = 45.0, 15.0
+    x = echo_samples(rc_schedule, r0, v, 0.7, snr_db=-5.0, seed=12)
+    non = _errors(_run(_receiver(rc_schedule), x), r0, v)[0]
+    coh = _errors(_run(_receiver(rc_schedule, coherent=True), x), r0, v)[0]
+    rms_non = float(np.sqrt(np.mean(non**2)))
+    rms_coh = float(np.sqrt(np.mean(coh**2)))
+    bound = crlb_range_m(rc_schedule, 10, -5.0)
+    assert rms_coh < rms_non
+    assert rms_coh < 20 * bound
+
+
+def test_noise_only_false_alarm_rate_matches_the_configured_pfa(rc_schedule: HopSchedule) -> None:
+    x = np.random.default_rng(21).normal(size=int(6.0 * FS))
+    hops = 6.0 / rc_schedule.hop_s
+    for pfa in (0.02, 0.2):
+        rx = _receiver(rc_schedule, pfa=pfa)
+        rate = len(_run(rx, x, block=50_000)) / hops
+        assert pfa / 4 < rate < pfa * 4, (pfa, rate)
+
+
+@settings(max_examples=6, deadline=None)
+@given(st.lists(st.integers(1, 40_000), min_size=1, max_size=5))
+def test_chunks_equal_whole(cuts: list[int]) -> None:
+    schedule = att_schedule()
+    x = echo_samples(schedule, 30.0, -10.0, 0.4, snr_db=-10.0, seed=2)
+    whole = _run(_receiver(schedule), x, block=x.shape[0])
+    rx = _receiver(schedule)
+    edges = sorted({0, x.shape[0], *(c % x.shape[0] for c in cuts)})
+    parts: list[Estimate] = []
+    for a, b in itertools.pairwise(edges):
+        parts += rx.process(x[a:b])
+    parts += rx.flush()
+    assert parts == whole and len(whole) > 10
+
+
+def test_range_folds_by_code_periods_beyond_one_period(rc_schedule: HopSchedule) -> None:
+    # 95 m: the echo of hop i arrives more than half a period later; detections late in the
+    # stream need several periods of folding.
+    r0, v = 95.0, 5.0
+    x = echo_samples(rc_schedule, r0, v, 0.9, snr_db=0.0, seed=4)
+    est = _run(_receiver(rc_schedule), x)
+    assert est and max(e.hop_index for e in est) > 3 * rc_schedule.period_hops
+    dr, _ = _errors(est, r0, v)
+    assert np.max(np.abs(dr)) < 0.1
+    for e in est:
+        assert e.t_s - e.t_tx_s == pytest.approx(2 * e.range_m / C)
+
+
+def test_gap_restarts_accumulation_cleanly(rc_schedule: HopSchedule) -> None:
+    r0, v = 50.0, 10.0
+    x = echo_samples(rc_schedule, r0, v, 1.0, snr_db=0.0, seed=5)
+    rx = _receiver(rc_schedule)
+    gap = 20_000
+    first = _run_no_flush(rx, x[:40_000])
+    second = rx.process(x[40_000 + gap :], gap_before=gap) + rx.flush()
+    assert rx.samples_seen == x.shape[0]
+    t_gap_end = (40_000 + gap) / FS
+    settle = (rx.lags.max() + rx.grid.lengths.max()) / rx.fs_bb
+    assert all(e.t_s < 40_000 / FS for e in first)
+    assert second and all(e.t_s > t_gap_end + settle - 0.002 for e in second)
+    dr, _ = _errors(second, r0, v)
+    assert np.max(np.abs(dr)) < 0.1
+    assert np.all(np.diff([e.hop_index for e in second]) == 1)
+
+
+def _run_no_flush(rx: GcasReceiver, x: np.ndarray) -> list[Estimate]:
+    return rx.process(x)
+
+
+def test_estimate_latency_is_within_one_hop(rc_schedule: HopSchedule) -> None:
+    x = echo_samples(rc_schedule, 40.0, 10.0, 0.5, snr_db=0.0, seed=6)
+    rx = _receiver(rc_schedule)
+    block = 100
+    for i in range(0, x.shape[0], block):
+        for e in rx.process(x[i : i + block]):
+            assert (i + block) / FS - e.t_s < rc_schedule.hop_s
+
+
+@pytest.mark.parametrize("family", ["three-state", "random-cyclic"])
+@pytest.mark.parametrize("preset", ["att", "tank-audio", "tank-board"])
+@pytest.mark.filterwarnings("error")
+def test_every_preset_and_family(preset: str, family: str, request: pytest.FixtureRequest) -> None:
+    if family == "three-state" and preset in ("att", "tank-audio"):
+        request.applymarker(
+            pytest.mark.xfail(
+                reason="known defect: isolated 1-2 m outliers (neighbouring-codeword picks) "
+                "for the three-state code at M = 8",
+                strict=True,
+            )
+        )
+    spec = get_preset(preset).spec(family)
+    schedule = check_design(spec)
+    c, vmax = spec.sound_speed_mps, spec.max_speed_mps
+    r0, v = 0.6 * spec.max_range_m, 0.6 * vmax
+    dur = 0.5 if preset != "tank-board" else 0.25
+    m_hops = 8
+    x = echo_samples(schedule, r0, v, dur, snr_db=0.0, seed=8, fs_hz=spec.fs_hz, c=c)
+    rx = GcasReceiver.from_options(
+        schedule, spec.fs_hz, sound_speed_mps=c, max_speed_mps=vmax,
+        max_range_m=spec.max_range_m, m_hops=m_hops, n_doppler=32,
+    )  # fmt: skip
+    est = _run(rx, x, block=int(spec.fs_hz // 10))
+    assert len(est) >= 5
+    rng_err = [e.range_m - (r0 - v * 0.5 * (e.t_s + e.t_tx_s)) for e in est]
+    assert np.max(np.abs(rng_err)) < 0.05 * spec.max_range_m / 10
+    assert abs(np.median([e.speed_mps for e in est]) - v) < 0.1 * vmax
+
+
+@pytest.mark.xfail(
+    reason="known defect: clutter leaks into far Doppler hypotheses through the other tones "
+    "(α_d f_k' = f_k), so excluding |v| < 5 m/s is not enough",
+    strict=True,
+)
+def test_reverberation_band_excludes_stationary_clutter(rc_schedule: HopSchedule) -> None:
+    clutter = echo_samples(rc_schedule, 35.0, 0.0, 0.6, amplitude=2.0)
+    target = echo_samples(rc_schedule, 70.0, 20.0, 0.6, snr_db=0.0, seed=9)
+    x = clutter + target
+    plain = _run(_receiver(rc_schedule), x)
+    banded = _run(_receiver(rc_schedule, reverb_speed_mps=5.0), x)
+    assert any(abs(e.speed_mps) < 2.0 for e in plain)
+    near = [abs(e.speed_mps - 20.0) < 1.0 for e in banded]
+    assert banded and np.mean(near) > 0.8
+
+
+def test_time_codeword_map_and_full_accumulated_sum(rc_schedule: HopSchedule) -> None:
+    seen: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    rx = _receiver(rc_schedule, on_map=lambda t, p, v: seen.append((t, p, v)))
+    x = echo_samples(rc_schedule, 40.0, 12.0, 0.4, snr_db=0.0, seed=10)
+    _run(rx, x)
+    t = np.concatenate([s[0] for s in seen])
+    p = np.concatenate([s[1] for s in seen])
+    assert p.shape == (t.shape[0], rc_schedule.period_hops)
+    times, full = rx.accumulated_sums(200)
+    assert full.shape == (200, rx.grid.size, rc_schedule.period_hops)
+    speeds = np.concatenate([s[2] for s in seen])[-200:]
+    d_hat = np.searchsorted(rx.grid.speeds_mps, speeds)
+    assert np.allclose(full[np.arange(200), d_hat], p[-200:], rtol=1e-5)
+    assert np.allclose(times, t[-200:])
+
+
+# ---------------------------------------------------------------------------- bad input
+def test_nan_input_names_the_sample_index(rc_schedule: HopSchedule) -> None:
+    rx = _receiver(rc_schedule)
+    rx.process(np.zeros(1000))
+    bad = np.zeros(500)
+    bad[123] = np.nan
+    with pytest.raises(ConfigError, match=r"block = 'nan at sample index 1123'.*finite"):
+        rx.process(bad)
+
+
+@pytest.mark.parametrize("m_hops", [2, 65])
+def test_m_out_of_range_names_m_and_the_range(rc_schedule: HopSchedule, m_hops: int) -> None:
+    with pytest.raises(ConfigError, match=rf"m_hops = {m_hops} .*an integer in 3\.\.64"):
+        _receiver(rc_schedule, m_hops=m_hops)
+
+
+def test_three_state_minimum_m_is_the_codeword_length() -> None:
+    schedule = att_schedule("three-state")
+    with pytest.raises(ConfigError, match=r"m_hops = 5 .*in 6\.\.64"):
+        _receiver(schedule, m_hops=5)
+
+
+def test_non_hfccw_schedule_is_refused() -> None:
+    fmcw = check_design(get_preset("att").spec("fmcw-saw"))
+    with pytest.raises(ConfigError, match=r"schedule.family = 'fmcw-saw' .*HFC-CW"):
+        _receiver(fmcw)
+
+
+def test_sample_rate_mismatch_is_refused(rc_schedule: HopSchedule) -> None:
+    with pytest.raises(ConfigError, match=r"fs_hz = 96000.0 .*designed for, 100000 Hz"):
+        GcasReceiver.from_options(
+            rc_schedule, 96_000.0, sound_speed_mps=C, max_speed_mps=30.0, max_range_m=100.0,
+            m_hops=10,
+        )  # fmt: skip
+
+
+def test_unknown_option_is_refused(rc_schedule: HopSchedule) -> None:
+    with pytest.raises(ConfigError, match=r"gcas option = \['bogus'\]"):
+        _receiver(rc_schedule, bogus=1)
