@@ -1,0 +1,501 @@
+"""The full matched-filter bank: the accuracy reference and the cost anchor (SPEC §4).
+
+Every M-hop codeword of the code period (``J = P`` of them: the window of M hops ending at hop
+``j``) is correlated at every Doppler hypothesis ``α_d`` (``D`` of them, speeds evenly spaced
+over ±max_speed) against the input. The replica is exact: the analytic transmit signal read at
+the time-scaled emission times,
+
+    h_{j,d}[i] = s_a(t_end_j + α_d (i − L_{j,d}) / fs),    i = 0 … L_{j,d} − 1,
+
+with ``t_end_j`` the transmit end time of hop ``j`` and ``L_{j,d} = round(T_w fs / α_d)`` the
+received length of the ``T_w``-long window. Correlating the *real* input with the *analytic*
+replica keeps only the positive-frequency half of the input, so ``|c|`` is the envelope of the
+matched-filter output (no carrier ripple).
+
+Implementation (overlap-save, streaming, state carried):
+
+- Fixed frames of ``N`` samples (``N`` the power of two >= 2·L_max) advancing by ``S`` samples,
+  placed on a grid fixed by the first sample, so the arithmetic does not depend on how the
+  caller cuts the input: chunks and one whole block give bit-identical estimates.
+- Only the FFT bins of the Doppler-stretched band are kept (``K`` bins, a power of two), and
+  the inverse FFT of those ``K`` bins gives the correlation at every ``R = N/K``-th lag
+  (band-limited decimation, exact for the in-band part). All ``J·D`` correlators of a frame are
+  one batched inverse FFT.
+- Detection score: the normalised correlation ``ρ = √2 |c| / (‖h‖ ‖x_window‖)`` (1 for a
+  noise-free exact match, about √(2/L) for noise). A hop boundary is declared where the best
+  ``ρ`` over all ``(j, d)`` is a local maximum over ±half a hop and at least ``threshold``.
+- Refinement (``refine=True``, default): the exact correlation ``c(t_c, α)`` is evaluated
+  directly around the detection (``t_c`` the receive time of the window centre, which
+  decouples delay and Doppler): a sweep of ``α`` across the Doppler cell at the coherent
+  resolution ``1/(f0 T_w)``, then alternating parabolic fits in time and ``α``. This reaches
+  the Cramér–Rao bound at high SNR; it is not counted in :mod:`hil.estimation.cost`.
+
+Readout: ``t_s`` is the receive time of the END boundary of the codeword's last hop,
+``hop_index`` the global index of that hop, the transmit time is resolved with the code period
+so that the delay is in ``[0, 2 R_max / c]`` (detections beyond ``max_range_m`` are dropped),
+``range_m = c (t_s − t_tx)/2``, ``speed_mps`` from ``α``. ``snr_db`` is the E/N0 implied by
+``ρ``: ``10 log10(ρ²/(1 − ρ²) · L/2)``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+from numpy.typing import NDArray
+from scipy.signal import correlate
+
+from hil.errors import ConfigError
+from hil.estimation._baseline_common import (
+    alpha_of_speed,
+    check_block,
+    common_options,
+    parabolic_peak,
+    positive,
+    positive_int,
+    reject_unknown,
+    resolve_transmit_time,
+    speed_of_alpha,
+)
+from hil.estimation.base import Estimate
+from hil.estimation.cost import overlap_save_size
+from hil.signals.schedule import HopSchedule
+
+FloatArray = NDArray[np.float64]
+ComplexArray = NDArray[np.complex128]
+
+_OPTIONS = ("n_doppler", "threshold", "refine", "n_candidates")
+# Doppler-grid chunk per batched inverse FFT (bounds the working memory to J·chunk·K values).
+_D_CHUNK = 16
+# Parabolic refinement rounds (each halves the steps).
+_REFINE_ROUNDS = 3
+# Runner-up codewords are refined only when their grid score is this close to the best.
+_CANDIDATE_RATIO = 0.75
+
+
+class MatchedFilterBank:
+    """Streaming overlap-save matched-filter bank over all codewords and Doppler hypotheses.
+
+    Parameters
+    ----------
+    schedule:
+        Transmit schedule (any family; the first input sample is at the schedule's t = 0).
+    fs_hz:
+        Input sample rate, Hz.
+    sound_speed_mps, max_speed_mps, max_range_m:
+        c (m/s), Doppler span ±v_max (m/s), largest range reported (m, at most the
+        unambiguous range ``c·period/2``).
+    m_hops:
+        Codeword length M, hops.
+    n_doppler:
+        Number of Doppler hypotheses D, speeds evenly spaced over ±max_speed (1 → speed 0).
+    threshold:
+        Minimum normalised correlation ρ (0 < ρ <= 1) for a detection.
+    refine:
+        Refine each detection with the exact local correlation (see module docstring).
+    n_candidates:
+        Codewords refined per detection (the strongest on the grid); the best refined one
+        is reported.
+    """
+
+    name = "mfbank"
+
+    def __init__(
+        self,
+        schedule: HopSchedule,
+        fs_hz: float,
+        *,
+        sound_speed_mps: float,
+        max_speed_mps: float,
+        max_range_m: float,
+        m_hops: int = 10,
+        n_doppler: int = 64,
+        threshold: float = 0.2,
+        refine: bool = True,
+        n_candidates: int = 3,
+    ) -> None:
+        fs, c, vmax, rmax, m = common_options(
+            fs_hz, sound_speed_mps, max_speed_mps, max_range_m, m_hops
+        )
+        if not isinstance(schedule, HopSchedule):
+            raise ConfigError("schedule", type(schedule).__name__, "a HopSchedule")
+        n_dop = positive_int("n_doppler", n_doppler)
+        thr = positive("threshold", threshold)
+        if thr > 1.0:
+            raise ConfigError("threshold", threshold, "0 < threshold <= 1 (normalised correlation)")
+        if not isinstance(refine, bool):
+            raise ConfigError("refine", refine, "True or False")
+        r_unamb = schedule.unambiguous_range_m(c)
+        if rmax > r_unamb:
+            raise ConfigError(
+                "max_range_m",
+                max_range_m,
+                f"<= the unambiguous range c·period/2 = {r_unamb:.3f} m",
+                "lower max_range_m or use a longer code",
+            )
+        self.schedule = schedule
+        self.fs_hz = fs
+        self.sound_speed_mps = c
+        self.max_range_m = rmax
+        self.m_hops = m
+        self.threshold = thr
+        self.refine = refine
+        self.n_candidates = positive_int("n_candidates", n_candidates)
+        self.speeds_mps: FloatArray = np.zeros(1) if n_dop == 1 else np.linspace(-vmax, vmax, n_dop)
+        self.alphas: FloatArray = np.asarray(alpha_of_speed(self.speeds_mps, c), dtype=float)
+        self._max_delay_s = 2.0 * rmax / c
+        self._build_codewords()
+        self._build_bank()
+        self.reset()
+
+    @classmethod
+    def from_options(
+        cls,
+        schedule: HopSchedule,
+        fs_hz: float,
+        *,
+        sound_speed_mps: float,
+        max_speed_mps: float,
+        max_range_m: float,
+        m_hops: int,
+        **extra: Any,
+    ) -> MatchedFilterBank:
+        """The registry constructor; ``extra`` may hold ``n_doppler``, ``threshold``, ``refine``."""
+        reject_unknown(extra, _OPTIONS, "mfbank")
+        return cls(
+            schedule,
+            fs_hz,
+            sound_speed_mps=sound_speed_mps,
+            max_speed_mps=max_speed_mps,
+            max_range_m=max_range_m,
+            m_hops=m_hops,
+            **extra,
+        )
+
+    # ------------------------------------------------------------------ set-up
+    def _build_codewords(self) -> None:
+        sch = self.schedule
+        p = sch.period_hops
+        ends = np.empty(p)
+        spans = np.empty(p)
+        for j in range(p):
+            hops = sch.hops(j - self.m_hops + 1, self.m_hops)
+            ends[j] = hops.start_s[-1] + hops.duration_s[-1]
+            spans[j] = ends[j] - hops.start_s[0]
+        self._t_end: FloatArray = ends  # transmit end time of hop j, period 0 (s)
+        self._t_win: FloatArray = spans  # codeword duration T_w (s)
+        self.n_codewords = p
+
+    def _build_bank(self) -> None:
+        fs = self.fs_hz
+        lengths = np.rint(self._t_win[:, None] * fs / self.alphas[None, :]).astype(np.int64)
+        if int(lengths.min()) < 2:
+            raise ConfigError("m_hops", self.m_hops, "codewords of at least 2 samples")
+        self._lengths = lengths  # (J, D)
+        l_max = int(lengths.max())
+        n = overlap_save_size(l_max)
+        self._n_fft = n
+        # The band the stretched replicas occupy, with a margin for the hop sidelobes.
+        margin_hz = 8.0 / float(np.min(self.schedule.duration_s))
+        f_lo = max(0.0, self.schedule.min_frequency_hz() * float(self.alphas.min()) - margin_hz)
+        f_hi = min(fs / 2, self.schedule.max_frequency_hz() * float(self.alphas.max()) + margin_hz)
+        bin_hz = fs / n
+        k_lo = int(math.floor(f_lo / bin_hz))
+        band = int(math.ceil(f_hi / bin_hz)) - k_lo + 1
+        k = 1 << int(math.ceil(math.log2(max(2, int(1.5 * band)))))
+        k = min(k, n // 2)
+        k_lo = max(0, min(k_lo, n // 2 + 1 - k))
+        self._k_lo, self._k = k_lo, k
+        self._dec = n // k  # R: lag decimation of the band-limited correlation
+        step = n - l_max + 1
+        self._step = (step // self._dec) * self._dec
+        self._q_per_frame = self._step // self._dec
+        j_count, d_count = lengths.shape
+        self._hconj = np.empty((j_count, d_count, k), dtype=np.complex128)
+        self._hnorm2 = np.empty((j_count, d_count))
+        for d, a in enumerate(self.alphas):
+            for j in range(j_count):
+                h = self._replica(j, float(a), int(lengths[j, d]))
+                spec = np.fft.fft(h, n)[k_lo : k_lo + k]
+                self._hconj[j, d] = np.conj(spec)
+                self._hnorm2[j, d] = float(np.vdot(h, h).real)
+        # Half a (received, fastest) hop in decimated lags: the local-maximum neighbourhood.
+        hop_min = float(np.min(self.schedule.duration_s))
+        self._half = max(1, int(0.5 * hop_min * fs / float(self.alphas.max()) / self._dec))
+        self._pad = 2 * self._dec + 64
+
+    def _replica(self, j: int, alpha: float, length: int) -> ComplexArray:
+        i = np.arange(length, dtype=np.float64)
+        t = self._t_end[j] + alpha * (i - length) / self.fs_hz
+        return np.asarray(self.schedule.evaluate_analytic(t), dtype=np.complex128)
+
+    # ------------------------------------------------------------------ state
+    def reset(self) -> None:
+        """Forget all state; the next sample is sample 0 again."""
+        self._seen = 0
+        self._restart(0)
+
+    def _restart(self, origin: int) -> None:
+        self._origin = origin  # global index of the first sample of this segment
+        self._x = np.zeros(0)
+        self._x0 = origin  # global index of self._x[0]
+        self._frame_pos = origin  # global index of the next frame start
+        j_count = self.n_codewords
+        self._scores = np.zeros(0)  # best ρ over (j, d) per decimated lag
+        self._rho_j = np.zeros((0, j_count))  # best ρ over d per lag and codeword
+        self._d_j = np.zeros((0, j_count), dtype=np.int64)  # its Doppler index
+        self._s0 = 0  # segment-local decimated lag of self._scores[0]
+        self._q_next = 0  # first segment-local decimated lag not yet decided
+
+    @property
+    def samples_seen(self) -> int:
+        """Samples consumed so far, gaps included."""
+        return self._seen
+
+    # ------------------------------------------------------------------ streaming
+    def process(self, block: NDArray[np.floating], *, gap_before: int = 0) -> list[Estimate]:
+        """Consume ``block`` (shape ``(n,)``, real samples) and return new estimates."""
+        x = check_block(block, gap_before)
+        out: list[Estimate] = []
+        if gap_before:
+            out.extend(self._finish())
+            self._seen += int(gap_before)
+            self._restart(self._seen)
+        self._x = np.concatenate((self._x, x))
+        self._seen += x.shape[0]
+        while self._frame_pos + self._n_fft <= self._seen:
+            self._run_frame(final=False)
+        out.extend(self._decide(final=False))
+        self._trim()
+        return out
+
+    def flush(self) -> list[Estimate]:
+        """End of input: correlate the partial last frames and decide the remaining lags."""
+        out = self._finish()
+        self._restart(self._seen)
+        return out
+
+    def _finish(self) -> list[Estimate]:
+        l_max = int(self._lengths.max())
+        while self._frame_pos + l_max <= self._seen:
+            self._run_frame(final=True)
+        return self._decide(final=True)
+
+    def _run_frame(self, *, final: bool) -> None:
+        n = self._n_fft
+        a = self._frame_pos - self._x0
+        frame = self._x[a : a + n]
+        if frame.shape[0] < n:
+            frame = np.concatenate((frame, np.zeros(n - frame.shape[0])))
+        spec = np.fft.rfft(frame)[self._k_lo : self._k_lo + self._k]
+        qn = self._q_per_frame
+        lags = np.arange(qn) * self._dec  # frame-relative lags
+        cs = np.concatenate(([0.0], np.cumsum(frame * frame)))
+        scale2 = (self._k / n) ** 2
+        j_count, d_count = self._lengths.shape
+        best = np.zeros((j_count, qn))  # best ρ² over Doppler, per codeword and lag
+        best_d = np.zeros((j_count, qn), dtype=np.int64)
+        valid_len = self._seen - self._frame_pos  # samples of real input in this frame
+        for d0 in range(0, d_count, _D_CHUNK):
+            d1 = min(d_count, d0 + _D_CHUNK)
+            corr = np.fft.ifft(spec[None, None, :] * self._hconj[:, d0:d1, :], axis=-1)
+            p2 = (corr.real**2 + corr.imag**2)[:, :, :qn] * scale2
+            lens = self._lengths[:, d0:d1]
+            ends = lags[None, None, :] + lens[:, :, None]
+            energy = cs[np.minimum(ends, n)] - cs[lags][None, None, :]
+            denom = self._hnorm2[:, d0:d1, None] * energy
+            rho2 = np.where(denom > 0, 2.0 * p2 / np.where(denom > 0, denom, 1.0), 0.0)
+            if final:
+                rho2 = np.where(ends <= valid_len, rho2, 0.0)
+            idx = np.argmax(rho2, axis=1)  # (J, qn)
+            val = np.take_along_axis(rho2, idx[:, None, :], axis=1)[:, 0, :]
+            better = val > best
+            best = np.where(better, val, best)
+            best_d = np.where(better, idx + d0, best_d)
+        rho_j = np.sqrt(np.minimum(best, 1.0))
+        self._rho_j = np.concatenate((self._rho_j, rho_j.T))
+        self._d_j = np.concatenate((self._d_j, best_d.T))
+        self._scores = np.concatenate((self._scores, rho_j.max(axis=0)))
+        self._frame_pos += self._step
+
+    def _decide(self, *, final: bool) -> list[Estimate]:
+        h = self._half
+        avail = self._s0 + self._scores.shape[0]  # decimated lags known
+        last = avail if final else avail - h
+        if last <= self._q_next:
+            return []
+        lo = self._q_next - h
+        pad_left = max(0, self._s0 - lo)
+        seg = self._scores[max(0, lo - self._s0) :]
+        seg = np.concatenate((np.full(pad_left, -1.0), seg))
+        if final:
+            seg = np.concatenate((seg, np.full(h, -1.0)))
+        windows = sliding_window_view(seg, 2 * h + 1)[: last - self._q_next]
+        centre = windows[:, h]
+        is_peak = (
+            (centre >= self.threshold)
+            & (centre >= windows.max(axis=1))
+            & (centre > windows[:, :h].max(axis=1))
+        )
+        out: list[Estimate] = []
+        for off in np.flatnonzero(is_peak):
+            q = self._q_next + int(off)
+            est = self._readout(q)
+            if est is not None:
+                out.append(est)
+        self._q_next = last
+        return out
+
+    def _trim(self) -> None:
+        keep_q = self._q_next - self._half - 1
+        if keep_q > self._s0:
+            cut = keep_q - self._s0
+            self._scores = self._scores[cut:]
+            self._rho_j = self._rho_j[cut:]
+            self._d_j = self._d_j[cut:]
+            self._s0 = keep_q
+        keep_x = min(self._frame_pos, self._origin + keep_q * self._dec - self._pad)
+        if keep_x > self._x0:
+            self._x = self._x[keep_x - self._x0 :]
+            self._x0 = keep_x
+
+    # ------------------------------------------------------------------ readout
+    def _corr(self, j: int, t_c: float, alpha: float) -> tuple[float, float, int]:
+        """|c|, normalised ρ and sample count of the exact correlation at (t_c, α)."""
+        fs = self.fs_hz
+        half = 0.5 * self._t_win[j] / alpha
+        k_lo = max(math.ceil((t_c - half) * fs), self._x0)
+        k_hi = min(math.ceil((t_c + half) * fs), self._x0 + self._x.shape[0], self._seen)
+        if k_hi - k_lo < 2:
+            return 0.0, 0.0, 0
+        k = np.arange(k_lo, k_hi)
+        t_mid = self._t_end[j] - 0.5 * self._t_win[j]
+        h = self.schedule.evaluate_analytic(t_mid + alpha * (k / fs - t_c))
+        x = self._x[k_lo - self._x0 : k_hi - self._x0]
+        c = complex(np.dot(x, np.conj(h)))
+        hh = float(np.vdot(h, h).real)
+        xx = float(np.dot(x, x))
+        rho = math.sqrt(2.0) * abs(c) / math.sqrt(hh * xx) if hh * xx > 0 else 0.0
+        return abs(c), rho, int(k.shape[0])
+
+    def _profile_peak(self, j: int, alpha: float, t_c: float, span: int) -> tuple[float, float]:
+        """Best window-centre time (s) within ±``span`` samples of ``t_c`` at fixed ``α``, and
+        the |c| there (parabolic interpolation between integer lags)."""
+        fs = self.fs_hz
+        half = 0.5 * self._t_win[j] / alpha
+        k0 = math.ceil((t_c - half) * fs)
+        k1 = math.ceil((t_c + half) * fs)
+        end = min(self._x0 + self._x.shape[0], self._seen)
+        span = max(0, min(span, k0 - self._x0, end - k1))
+        if k1 - k0 < 2 or k0 - span < self._x0 or k1 + span > end:
+            return t_c, 0.0
+        t_mid = self._t_end[j] - 0.5 * self._t_win[j]
+        h = self.schedule.evaluate_analytic(t_mid + alpha * (np.arange(k0, k1) / fs - t_c))
+        seg = self._x[k0 - span - self._x0 : k1 + span - self._x0]
+        mag = np.abs(correlate(seg, h, mode="valid"))
+        i = int(np.argmax(mag))
+        if 0 < i < mag.shape[0] - 1:
+            off, top = parabolic_peak(float(mag[i - 1]), float(mag[i]), float(mag[i + 1]))
+        else:
+            off, top = 0.0, float(mag[i])
+        return t_c + (i - span + off) / fs, top
+
+    def _refine(self, j: int, d: int, t_c: float) -> tuple[float, float]:
+        """Profile search: for each α the best delay (the delay–Doppler ridge of a hopped code
+        is slanted), first on a grid across the Doppler cell, then parabolic in α."""
+        alpha = float(self.alphas[d])
+        sch = self.schedule
+        f0 = 0.5 * (sch.min_frequency_hz() + sch.max_frequency_hz())
+        b_occ = max(sch.max_frequency_hz() - sch.min_frequency_hz(), 1.0 / self._t_win[j])
+        t_win = float(self._t_win[j])
+        res = 1.0 / (f0 * t_win)  # coherent α resolution
+        d_max = self.alphas.shape[0] - 1
+        if d_max > 0:
+            lo, hi = float(self.alphas[max(d - 1, 0)]), float(self.alphas[min(d + 1, d_max)])
+            cell = (hi - lo) / (2.0 if 0 < d < d_max else 1.0)  # one grid step
+        else:
+            cell = res
+        # Delay shift along the ridge across the searched α span, plus the main-lobe width.
+        ridge_s = 3.0 * cell * f0 * t_win / b_occ + 4.0 / b_occ
+        span = int(min(math.ceil(ridge_s * self.fs_hz), 0.5 * t_win * self.fs_hz))
+        count = min(129, int(math.ceil(3.0 * cell / (res / 3.0))) + 1) | 1
+        best_t, best_v, best_a = t_c, -1.0, alpha
+        for a in alpha + np.linspace(-1.5, 1.5, count) * cell:
+            t_a, v_a = self._profile_peak(j, float(a), t_c, span)
+            if v_a > best_v:
+                best_t, best_v, best_a = t_a, v_a, float(a)
+        t_c, alpha = best_t, best_a
+        step = max(3.0 * cell / max(count - 1, 1), 1e-12)
+        fine = max(4, int(math.ceil(step * f0 * t_win / b_occ * self.fs_hz)) + 4)
+        for _ in range(_REFINE_ROUNDS):
+            alpha = self._parabolic_step(
+                lambda a, t_now=t_c: self._profile_peak(j, a, t_now, fine)[1], alpha, step
+            )
+            t_c = self._profile_peak(j, alpha, t_c, fine)[0]
+            step *= 0.5
+        return t_c, alpha
+
+    @staticmethod
+    def _parabolic_step(f: Any, x0: float, step: float) -> float:
+        """Move ``x0`` to the vertex of the parabola through f at x0 − step, x0, x0 + step."""
+        y_m, y_0, y_p = f(x0 - step), f(x0), f(x0 + step)
+        # Walk uphill (at most a few steps) when the centre is not the largest value.
+        for _ in range(4):
+            if y_0 >= y_m and y_0 >= y_p:
+                break
+            if y_p > y_m:
+                x0, y_m, y_0, y_p = x0 + step, y_0, y_p, f(x0 + 2 * step)
+            else:
+                x0, y_p, y_0, y_m = x0 - step, y_0, y_m, f(x0 - 2 * step)
+        off, _ = parabolic_peak(y_m, y_0, y_p)
+        return x0 + off * step
+
+    def _readout(self, q: int) -> Estimate | None:
+        row = self._rho_j[q - self._s0]
+        n = self._origin + q * self._dec  # global lag of the replica start
+        if self.refine and n + int(self._lengths.max()) + self._pad > self._seen:
+            return None  # the refinement would run off the end of the input
+        # Grid scalloping can let a codeword sharing most hops win on the grid: refine the
+        # strongest few and keep the best refined one.
+        order = np.argsort(-row, kind="stable")[: self.n_candidates if self.refine else 1]
+        best: tuple[float, int, float, float, int] | None = None
+        for j in (int(i) for i in order):
+            if row[j] < _CANDIDATE_RATIO * row[order[0]]:
+                break
+            d = int(self._d_j[q - self._s0, j])
+            alpha = float(self.alphas[d])
+            t_c = (n + int(self._lengths[j, d])) / self.fs_hz - 0.5 * self._t_win[j] / alpha
+            if self.refine:
+                t_c, alpha = self._refine(j, d, t_c)
+            _, rho, count = self._corr(j, t_c, alpha)
+            if count == 0:
+                rho, count = float(row[j]), int(self._lengths[j, d])
+            if best is None or rho > best[0]:
+                best = (rho, j, t_c, alpha, count)
+        assert best is not None
+        rho, j, t_c, alpha, count = best
+        t_win = float(self._t_win[j])
+        t_rx = t_c + 0.5 * t_win / alpha
+        resolved = resolve_transmit_time(
+            t_rx, float(self._t_end[j]), self.schedule.period_s, self._max_delay_s
+        )
+        if resolved is None:
+            return None
+        t_tx, period_no = resolved
+        rho_c = min(rho, 1.0 - 1e-12)
+        snr = 10.0 * math.log10(max(rho_c * rho_c / (1.0 - rho_c * rho_c) * count / 2.0, 1e-30))
+        c = self.sound_speed_mps
+        return Estimate(
+            t_s=t_rx,
+            range_m=c * (t_rx - t_tx) / 2.0,
+            speed_mps=float(speed_of_alpha(alpha, c)),
+            hop_index=j + period_no * self.schedule.period_hops,
+            score=rho,
+            snr_db=snr,
+            alpha=alpha,
+            t_tx_s=t_tx,
+            codeword=j,
+            receiver=self.name,
+        )

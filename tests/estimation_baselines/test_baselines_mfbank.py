@@ -1,0 +1,140 @@
+"""The full matched-filter bank on exact moving-target echoes."""
+
+from __future__ import annotations
+
+import itertools
+import math
+import re
+from typing import Any
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from hil.errors import ConfigError
+from hil.estimation.crlb import sampled_e_over_n0, schedule_crlb
+from hil.estimation.mfbank import MatchedFilterBank
+from hil.estimation.registry import make_receiver
+from hil.signals.presets import check_design, get_preset
+from hil.signals.waveforms import WaveformSpec, build_schedule
+
+FS = 100_000.0
+SCH = check_design(get_preset("att").spec("random-cyclic"))
+M = 5
+
+
+@pytest.fixture(scope="module")
+def bank() -> MatchedFilterBank:
+    return MatchedFilterBank(
+        SCH, FS, sound_speed_mps=1500.0, max_speed_mps=12.0, max_range_m=100.0, m_hops=M,
+        n_doppler=25,
+    )  # fmt: skip
+
+
+def run(rx: MatchedFilterBank, x: np.ndarray) -> list[Any]:
+    rx.reset()
+    return rx.process(x) + rx.flush()
+
+
+@pytest.mark.parametrize("speed", [9.3, -6.1])
+def test_closing_and_opening_targets_are_recovered(
+    bank: MatchedFilterBank, speed: float, kit: Any
+) -> None:
+    scene = kit.Scene(40.0, speed)
+    est = run(bank, kit.echo(SCH, FS, scene, 0.35, snr_db=0.0, seed=3))
+    assert len(est) >= 22  # one per hop (≈ 29 hops with a full window), a few may merge
+    assert np.all(np.abs(scene.range_errors(est)) < 0.01)
+    assert np.all(np.abs(scene.speed_errors(est)) < 0.03)
+    hops = [e.hop_index for e in est]
+    assert hops == sorted(hops)
+    assert all(e.codeword == e.hop_index % SCH.period_hops for e in est)
+    for e in est:
+        assert e.t_s == pytest.approx(scene.true_t_rx(e.t_tx_s), abs=2e-5)
+
+
+def test_errors_shrink_with_snr_and_reach_the_crlb(bank: MatchedFilterBank, kit: Any) -> None:
+    scene = kit.Scene(30.0, 7.7)
+    rmse = {}
+    for snr in (-9.0, 0.0):
+        est = run(bank, kit.echo(SCH, FS, scene, 0.35, snr_db=snr, seed=11))
+        rmse[snr] = float(np.sqrt(np.mean(scene.range_errors(est) ** 2)))
+    assert rmse[0.0] < 0.6 * rmse[-9.0]
+    # CRLB of one codeword (the M-hop window) at the E/N0 it collects at 0 dB per sample.
+    sigma = math.sqrt(1.0 / 2.0)
+    en0 = sampled_e_over_n0(1.0, sigma, FS, M * SCH.hop_s)
+    bound = schedule_crlb(SCH, FS, 0.0, M * SCH.hop_s, 10 * math.log10(en0), 1500.0)
+    assert bound.valid
+    assert rmse[0.0] < 3.0 * bound.sigma_range_m
+
+
+def test_chunks_equal_whole(kit: Any) -> None:
+    sch = check_design(get_preset("att").spec("random-cyclic"))
+    rx = MatchedFilterBank(
+        sch, FS, sound_speed_mps=1500.0, max_speed_mps=3.0, max_range_m=30.0, m_hops=2,
+        n_doppler=3,
+    )  # fmt: skip
+    x = kit.echo(sch, FS, kit.Scene(12.0, 2.0), 0.12, snr_db=10.0, seed=5)
+    whole = run(rx, x)
+    assert len(whole) >= 6
+
+    @settings(max_examples=6, deadline=None)
+    @given(st.lists(st.integers(1, 12_000), min_size=1, max_size=5))
+    def check(cuts: list[int]) -> None:
+        rx.reset()
+        edges = np.cumsum([0, *cuts])
+        out = []
+        for a, b in itertools.pairwise(edges):
+            out += rx.process(x[a:b])
+        out += rx.process(x[edges[-1] :]) + rx.flush()
+        assert out == whole
+        assert rx.samples_seen == x.shape[0]
+
+    check()
+
+
+def test_registry_builds_it_and_samples_seen_counts_gaps() -> None:
+    rx = make_receiver(
+        "mfbank", SCH, FS, sound_speed_mps=1500.0, max_speed_mps=2.0, max_range_m=50.0,
+        m_hops=2, n_doppler=1,
+    )  # fmt: skip
+    assert isinstance(rx, MatchedFilterBank)
+    rx.process(np.zeros(100))
+    rx.process(np.zeros(50), gap_before=25)
+    assert rx.samples_seen == 175
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "text"),
+    [
+        ({"n_doppler": 0}, "n_doppler = 0 is not allowed: must be an integer >= 1"),
+        ({"threshold": 1.5}, "threshold = 1.5 is not allowed"),
+        ({"max_range_m": 500.0}, "max_range_m = 500.0 is not allowed: must be <= the unambiguous"),
+        ({"bogus": 1}, "extra = ['bogus'] is not allowed"),
+        ({"max_speed_mps": 2000.0}, "max_speed_mps = 2000.0 is not allowed"),
+    ],
+)
+def test_bad_options(kwargs: dict[str, Any], text: str) -> None:
+    opts: dict[str, Any] = {
+        "sound_speed_mps": 1500.0,
+        "max_speed_mps": 5.0,
+        "max_range_m": 50.0,
+        "m_hops": 2,
+    }
+    opts.update(kwargs)
+    with pytest.raises(ConfigError, match=re.escape(text)):
+        MatchedFilterBank.from_options(SCH, FS, **opts)
+
+
+def test_bad_blocks() -> None:
+    sch = build_schedule(WaveformSpec(family="random-cyclic", hop_s=0.01, code_length=17))
+    rx = MatchedFilterBank(
+        sch, FS, sound_speed_mps=1500.0, max_speed_mps=1.0, max_range_m=20.0, m_hops=1,
+        n_doppler=1,
+    )  # fmt: skip
+    with pytest.raises(ConfigError, match="block = 'NaN/inf at sample 2' is not allowed"):
+        rx.process(np.array([0.0, 1.0, np.nan]))
+    with pytest.raises(ConfigError, match=r"block = 'shape \(2, 2\)' is not allowed"):
+        rx.process(np.zeros((2, 2)))
+    with pytest.raises(ConfigError, match="gap_before = -1 is not allowed"):
+        rx.process(np.zeros(3), gap_before=-1)
