@@ -27,17 +27,27 @@ same estimates as one call on the whole signal):
    filter delay (the heterodyne runs on the undelayed sample clock). For the candidate boundary
    ``b_0(n)`` of output sample ``n``, ``b_{j−m} = b_0 − m T_h/α``, so
    ``θ_{j,m}(n) = Φ_end,j−m + 2π f m T_h − 2π f α b_0(n) − 2π ν g``: a per-(n, term) phase.
-5. The time–codeword map ``P[n, j] = A[n, d̂, j]`` (passed to ``on_map`` if given);
-   detection statistic ``s[n] = max_j P[n, j]``.
-6. Detection [R] (:mod:`hil.estimation.detection`): ``s`` a local maximum over
-   ``±N_min/2``, above ``μ̂ + λσ̂`` and the best codeword ``ρ`` times the runner-up. CFAR
-   modes: ``"bank"`` (default) estimates the unit-correlator noise power ``μ_U`` as the median
-   over all (d, k) cells of ``U`` (÷ ln 2, the median of an exponential), averaged over a
-   trailing window, and uses the noise moments of the statistic; ``"statistic"`` is the
-   literal reading of SPEC §3.5: median/MAD of ``s`` over a trailing window that ends one hop
-   before the candidate. The bank mode stays valid while a target is tracked (the trailing
-   ``s`` of a tracked target never returns to the noise floor, which blinds the literal form
-   at high SNR). ``λ`` is set directly or from ``pfa`` per update.
+5. The time–codeword map ``P[n, j] = A[n, d̂, j]`` (computed for every sample only when
+   ``on_map`` is given: it costs ``J·M·K`` per sample and grows with ``M``).
+6. Detection [R] (:mod:`hil.estimation.detection`), in two steps so that the cost per sample
+   does not depend on ``M``: candidates are the local maxima over ``±N_min/2`` of the group
+   statistic ``g[n] = max_d w_d Acc_d[n]``; at each candidate the exact sums ``A`` are
+   evaluated for ``n`` within ``±W`` (``W = ⌈(M − 1)/4⌉ + 2``: the comb's integer lag puts
+   its peak up to ``(M − 1)/4`` samples from the exact one) at ``d̂`` and its neighbours;
+   ``s = max_j A[n, d̂, j]`` at its best ``n`` must exceed ``μ̂ + λσ̂`` and the best codeword
+   ``ρ`` times the runner-up. CFAR modes: ``"bank"`` (default) estimates the
+   unit-correlator noise power ``μ_U`` as the median over all (d, k) cells of ``U`` (÷ ln 2,
+   the median of an exponential), averaged over a trailing window, and uses the noise
+   moments of ``s``; ``"statistic"`` is the literal reading of SPEC §3.5 applied to the
+   group statistic: median/MAD of ``g`` over a trailing window that ends one hop before the
+   candidate. The bank mode stays valid while a target is tracked (the trailing statistic of
+   a tracked target never returns to the noise floor, which blinds the literal form at high
+   SNR). ``λ`` is set directly or from ``pfa`` per update.
+   Reverberation band [R]: with ``reverb_speed_mps > 0`` every unit-correlator cell
+   ``(d, k)`` whose frequency ``α_d f_k`` lies within ``[α(−v_r), α(v_r)]·f_k'`` (± half a
+   main lobe) for ANY tone ``k'`` gets ``reverb_weight`` in ``G`` and in ``A``: a stationary
+   echo of tone ``k'`` would otherwise appear as tone ``k`` at the ghost speed where
+   ``α_d f_k = f_k'``.
 7. Readout: parabolic interpolation of the peak in time and across ``d``; boundary receive time
    ``t_rx`` (window centred on the hop, group delay removed); ``ĵ = argmax_j``; ``t_tx`` the
    transmit end of hop ``ĵ`` plus the multiple of the code period that puts the delay in
@@ -82,6 +92,10 @@ TRANSITION_FACTOR = 1.3
 #: Noise-floor estimate on every this-many baseband samples (absolute grid).
 NOISE_STRIDE = 32
 CFAR_MODES = ("bank", "statistic")
+#: Guard around every tone's reverberation band, in unit-correlator main lobes (1/T_h).
+#: Measured: 0.5 leaves no ghost on the clutter-plus-target test; wider guards move the
+#: ghost to the first unmasked hypothesis past the guard instead of removing it.
+REVERB_GUARD_LOBES = 0.5
 
 MapCallback = Callable[[NDArray[np.float64], NDArray[np.float32], NDArray[np.float64]], None]
 
@@ -288,6 +302,9 @@ class GcasReceiver:
             self.fs_bb, self.grid.frequencies(tones, center), self.grid.lengths
         )
         d, k, m, j = self.grid.size, self.n_tones, self.m_hops, self.n_codewords
+        self.reverb_speed_mps = float(reverb_speed_mps)
+        self.reverb_weight = float(reverb_weight)
+        self._tone_w = self._reverb_tone_mask()
         m_idx = np.arange(m)
         self.lags = np.round(m_idx[None, :] * self.grid.exact_lengths[:, None]).astype(np.int64)
         self._w_non, self._w_coh = self._codeword_weights()
@@ -313,14 +330,17 @@ class GcasReceiver:
         self._fa = tones[None, :] * self.grid.alphas[:, None]  # (D, K) Hz
         self._delta0 = (self.grid.exact_lengths - self.grid.lengths + 1) / (2.0 * self.fs_bb)
         self._coh_const = np.mod(self._fa * self._delta0[:, None] + nu * g, 1.0)  # cycles
-        lag_keep = int(self.lags.max()) + 1
+        # Candidate search window (baseband samples) around a peak of the group statistic:
+        # the comb uses the integer lag N_d, so its peak may sit up to (M − 1)|N_d − L_d|/2
+        # <= (M − 1)/4 samples from the peak of the exactly lagged codeword sums.
+        self.search_half = min(int(math.ceil((m - 1) / 4.0)) + 2, max(1, self.half_width - 1))
+        lag_keep = int(self.lags.max()) + 2 * self.search_half + self.half_width + 2
         self._u_ring = RowBuffer(lag_keep, (d, k), np.complex64 if self.coherent else np.float32)
         self._g_ring = RowBuffer(m * self._n_max + 1, (d,), np.float64)
         self._acc_ring = RowBuffer(self._n_max + 1, (d,), np.float64)
         det_keep = self._cfar_window + 2 * self._n_max + 4
         self._s_ring = RowBuffer(det_keep, (), np.float64)
-        self._a3_ring = RowBuffer(det_keep, (3, j), np.float32)
-        self._dset_ring = RowBuffer(det_keep, (3,), np.int64)
+        self._dhat_ring = RowBuffer(det_keep, (), np.int64)
         self._noise_ring = RowBuffer(det_keep, (), np.float64)
         self.reset()
 
@@ -361,6 +381,29 @@ class GcasReceiver:
         """Number of tones K."""
         return int(self.tones_hz.shape[0])
 
+    def _reverb_tone_mask(self) -> NDArray[np.float32] | None:
+        """Per-(d, k) weights of the reverberation band, shape ``(D, K)``; None without one.
+
+        Stationary clutter (``|v| < reverb_speed_mps``) of tone ``k'`` sits at
+        ``α f_k'`` with ``α`` in ``[α(−v_r), α(v_r)]``. The unit correlator ``(d, k)`` listens
+        at ``α_d f_k``; it sees that clutter whenever ``α_d f_k`` lies within one main lobe
+        (``1/T_h``) of the clutter band of ANY tone ``k'``, not only ``k' = k``: a stationary
+        echo of tone ``k'`` looks like tone ``k`` moving at the speed where
+        ``α_d f_k = f_k'`` (a ghost speed). Such cells get ``reverb_weight`` in the group
+        statistic and in the codeword sums [R]: the band is handled per tone in frequency.
+        """
+        if self.reverb_speed_mps <= 0.0:
+            return None
+        c = self.sound_speed_mps
+        a_lo = float(speed_to_alpha(-self.reverb_speed_mps, c))
+        a_hi = float(speed_to_alpha(self.reverb_speed_mps, c))
+        guard = REVERB_GUARD_LOBES / self.hop_s
+        f = self.grid.alphas[:, None] * self.tones_hz[None, :]  # (D, K) Hz
+        lo = a_lo * self.tones_hz - guard
+        hi = a_hi * self.tones_hz + guard
+        hit = np.any((f[:, :, None] > lo) & (f[:, :, None] < hi), axis=2)
+        return np.where(hit, self.reverb_weight, 1.0).astype(np.float32)
+
     def _codeword_weights(self) -> tuple[NDArray[np.float32], NDArray[np.complex64]]:
         """Codeword matrices of shape ``(M·K, J)``: tone indicator, and with phases restored."""
         m, k, j, p = self.m_hops, self.n_tones, self.n_codewords, self.n_codewords
@@ -397,8 +440,8 @@ class GcasReceiver:
         b0 = self.baseband.next_output_index
         self.bank.reset(b0)
         for ring in (
-            self._u_ring, self._g_ring, self._acc_ring, self._s_ring, self._a3_ring,
-            self._dset_ring, self._noise_ring,
+            self._u_ring, self._g_ring, self._acc_ring, self._s_ring, self._dhat_ring,
+            self._noise_ring,
         ):  # fmt: skip
             ring.reset(b0)
         self._origin = b0
@@ -443,34 +486,38 @@ class GcasReceiver:
         """End of input: decide the candidates still waiting for their look-ahead."""
         # Candidates whose ±N/2 look-ahead never arrived are not decided: a peak cut by the
         # end of the input has no reliable time or codeword.
-        return self._detect(self._s_ring.next_index - self.half_width, final=False)
+        return self._detect(self._s_ring.next_index - self.half_width)
 
     # ------------------------------------------------------------------ stage 2
     def _stage2(self, y: NDArray[np.complex128]) -> list[Estimate]:
         a0 = self.bank.next_index
-        u = self.bank.process(y)
-        n = u.shape[0]
+        u = self.bank.process_last(y)  # (D, K, n): samples on the contiguous axis
+        n = u.shape[2]
         power = np.square(u.real) + np.square(u.imag)
-        grp = power.sum(axis=2, dtype=np.float64)
-        self._u_ring.append(u if self.coherent else power, a0)
+        masked = power if self._tone_w is None else power * self._tone_w[:, :, None]
+        grp = masked.sum(axis=1, dtype=np.float64).T
+        kept: NDArray[Any] = masked
+        if self.coherent:
+            kept = u if self._tone_w is None else u * self._tone_w[:, :, None]
+        self._u_ring.append(kept.transpose(2, 0, 1), a0)
         self._g_ring.append(grp, a0)
         acc = self._accumulate_groups(grp, a0)
         self._acc_ring.append(acc, a0)
-        d_hat = np.argmax(acc * self.grid.weights[None, :], axis=1)
-        dset = np.clip(d_hat[:, None] + np.arange(-1, 2)[None, :], 0, self.grid.size - 1)
+        wacc = acc * self.grid.weights[None, :]
+        d_hat = np.argmax(wacc, axis=1)
+        self._s_ring.append(np.take_along_axis(wacc, d_hat[:, None], axis=1)[:, 0], a0)
+        self._dhat_ring.append(d_hat, a0)
         idx = a0 + np.arange(n, dtype=np.int64)
-        a3 = np.stack([self._sums(idx, dset[:, i]) for i in range(3)], axis=1)
-        p_map = a3[:, 1, :]
-        s = p_map.max(axis=1).astype(np.float64)
-        self._s_ring.append(s, a0)
-        self._a3_ring.append(a3, a0)
-        self._dset_ring.append(dset, a0)
-        self._noise_ring.append(self._noise_floor(power, idx), a0)
+        self._noise_ring.append(self._noise_floor(power, idx, a0), a0)
         if self.on_map is not None:
+            # Diagnostics only: the full map costs J·M·K per sample (the detector itself
+            # evaluates the codeword sums only around candidate peaks).
             self.on_map(
-                self.baseband.time_of(idx), p_map, self.grid.speeds_mps[d_hat].astype(np.float64)
+                self.baseband.time_of(idx),
+                self._sums(idx, d_hat),
+                self.grid.speeds_mps[d_hat].astype(np.float64),
             )
-        return self._detect(self._s_ring.next_index - self.half_width, final=False)
+        return self._detect(self._s_ring.next_index - self.half_width)
 
     def _accumulate_groups(self, grp: NDArray[np.float64], a0: int) -> NDArray[np.float64]:
         """``Acc_d[n] = Acc_d[n − N_d] + G_d[n] − G_d[n − M N_d]`` for the new samples."""
@@ -510,51 +557,89 @@ class GcasReceiver:
         return res
 
     def _noise_floor(
-        self, power: NDArray[np.float32], idx: NDArray[np.int64]
+        self, power: NDArray[np.float32], idx: NDArray[np.int64], a0: int
     ) -> NDArray[np.float64]:
-        """μ_U estimate on the absolute grid of :data:`NOISE_STRIDE` samples; NaN elsewhere."""
+        """μ_U estimate on the absolute grid of :data:`NOISE_STRIDE` samples; NaN elsewhere.
+
+        ``power`` is ``|u|²`` with samples last, shape ``(D, K, n)``; ``idx`` the sample
+        indices ``a0 ..``."""
         out = np.full(idx.shape[0], np.nan)
         on = np.flatnonzero(idx % NOISE_STRIDE == 0)
         if on.size:
-            flat = power[on].reshape(on.size, -1)
-            out[on] = np.median(flat, axis=1) / math.log(2.0)
+            flat = power[:, :, on].reshape(-1, on.size)
+            out[on] = np.median(flat, axis=0) / math.log(2.0)
         return out
 
     # ------------------------------------------------------------------ detection
-    def _detect(self, stop: int, *, final: bool) -> list[Estimate]:
+    def _detect(self, stop: int) -> list[Estimate]:
+        """Decide the candidates ``< stop`` (their ±N_min/2 look-ahead has arrived)."""
         lo = self._det_next
-        if final:
-            stop = self._s_ring.next_index
         if stop <= lo:
             return []
         h = self.half_width
-        newest = self._s_ring.next_index
         first = max(lo - h, self._origin)
-        last = min(stop + h, newest)
+        last = min(stop + h, self._s_ring.next_index)
         s = np.array(self._s_ring.span(first, last), dtype=np.float64)
         s[: max(0, self._valid_from - first)] = -np.inf
-        if final:
-            s = np.concatenate((s, np.full(stop + h - last, -np.inf)))
         peaks = local_peaks(s, h)
         cand = np.flatnonzero(peaks[lo - first : stop - first]) + lo
         self._det_next = stop
+        if cand.size == 0:
+            return []
+        # Exact codeword sums A[n, d, j] for every candidate at once: n within ±W of the
+        # candidate, d at the chosen hypothesis and its two neighbours.
+        w = self.search_half
+        offs = np.arange(-w, w + 1, dtype=np.int64)
+        d0 = self._dhat_ring.rows(cand)
+        dset = np.clip(d0[:, None] + np.arange(-1, 2)[None, :], 0, self.grid.size - 1)
+        n_idx = np.broadcast_to(
+            cand[:, None, None] + offs[None, :, None], (*cand.shape, 2 * w + 1, 3)
+        )
+        d_idx = np.broadcast_to(dset[:, None, :], n_idx.shape)
+        a = self._sums(n_idx.reshape(-1), d_idx.reshape(-1)).reshape(*n_idx.shape, -1)
+        # Threshold test for all candidates at once; only the survivors are read out.
+        s_win = a[:, :, 1, :].max(axis=2)  # (C, 2W + 1)
+        i_pk = np.argmax(s_win, axis=1)
+        n_pk = cand - w + i_pk
+        if self.cfar_mode == "bank":
+            mean, std = self._bank_moments(n_pk)
+            tested = s_win[np.arange(cand.shape[0]), i_pk].astype(np.float64)
+        else:
+            ms = [self._statistic_moments(int(v)) for v in n_pk.tolist()]
+            mean, std = np.array([v[0] for v in ms]), np.array([v[1] for v in ms])
+            tested = self._s_ring.rows(cand)
+        thr = mean + self.cfar_lambda * std
         out: list[Estimate] = []
-        for n_star in cand.tolist():
-            est = self._decide(int(n_star), s, first)
+        for i in np.flatnonzero(tested > thr).tolist():
+            est = self._decide(
+                int(cand[i]), np.asarray(a[i], dtype=np.float64), dset[i],
+                float(mean[i]), float(thr[i]),
+            )  # fmt: skip
             if est is not None:
                 out.append(est)
         return out
 
-    def _noise_mean_std(
-        self, n_star: int, s: NDArray[np.float64], first: int
-    ) -> tuple[float, float]:
+    def _bank_moments(
+        self, n_pk: NDArray[np.int64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Noise mean and std of the codeword sum at samples ``n_pk`` (shape ``(C,)``): the
+        noise-floor estimates μ_U over the trailing CFAR window times the noise moments."""
+        lo = np.maximum(n_pk - self._cfar_window, self._origin + self._n_max)
+        first = int(lo.min())
+        vals = np.asarray(self._noise_ring.span(first, int(n_pk.max()) + 1))
+        ok = np.isfinite(vals)
+        csum = np.concatenate(([0.0], np.cumsum(np.where(ok, vals, 0.0))))
+        cnt = np.concatenate(([0], np.cumsum(ok)))
+        a, b = lo - first, n_pk + 1 - first
+        n_ok = cnt[b] - cnt[a]
+        mu_u = np.where(n_ok > 0, (csum[b] - csum[a]) / np.maximum(n_ok, 1), np.inf)
+        mean, std = self._moments
+        return mean * mu_u, std * mu_u
+
+    def _statistic_moments(self, n_star: int) -> tuple[float, float]:
+        """``"statistic"`` CFAR: median and MAD-based std of the group statistic over the
+        trailing window that ends one hop before ``n_star``."""
         w = self._cfar_window
-        if self.cfar_mode == "bank":
-            lo = max(n_star - w, self._origin + self._n_max)
-            vals = self._noise_ring.span(lo, n_star + 1)
-            mu_u = float(np.nanmean(vals)) if np.any(np.isfinite(vals)) else math.inf
-            mean, std = self._moments
-            return mean * mu_u, std * mu_u
         guard = self._n_max
         lo = max(n_star - guard - w, self._valid_from)
         hi = n_star - guard
@@ -564,30 +649,34 @@ class GcasReceiver:
         med = float(np.median(vals))
         return med, 1.4826 * float(np.median(np.abs(vals - med)))
 
-    def _decide(self, n_star: int, s: NDArray[np.float64], first: int) -> Estimate | None:
-        peak = float(s[n_star - first])
-        mean, std = self._noise_mean_std(n_star, s, first)
-        thr = mean + self.cfar_lambda * std
-        if not peak > thr:
-            return None
-        a3 = np.asarray(self._a3_ring.span(n_star, n_star + 1)[0], dtype=np.float64)  # (3, J)
-        row = a3[1]
+    def _decide(
+        self, n_cand: int, a: NDArray[np.float64], dset: NDArray[np.int64], mean: float, thr: float
+    ) -> Estimate | None:
+        """Readout of one candidate that passed the threshold ``thr`` (noise mean ``mean``)
+        from its codeword sums ``a`` (shape ``(2W + 1, 3, J)``: samples
+        ``n_cand − W .. n_cand + W``, hypotheses ``dset``)."""
+        w = self.search_half
+        s_win = a[:, 1, :].max(axis=1)
+        i_pk = int(np.argmax(s_win))
+        n_star = n_cand - w + i_pk
+        peak = float(s_win[i_pk])
+        row = a[i_pk, 1]
         j_hat = int(np.argmax(row))
-        runner = float(np.max(np.delete(row, j_hat))) if row.shape[0] > 1 else 0.0
+        runner = float(np.partition(row, -2)[-2]) if row.shape[0] > 1 else 0.0
         ratio = peak / runner if runner > 0 else math.inf
         if ratio < self.runner_up_ratio:
             return None
-        # Time: parabola through the statistic around the peak (look-ahead may be cut at flush).
-        i0 = n_star - first
-        y_m = float(s[i0 - 1]) if i0 >= 1 else -math.inf
-        y_p = float(s[i0 + 1]) if i0 + 1 < s.shape[0] else -math.inf
-        dn = parabolic_offset(y_m, peak, y_p) if math.isfinite(y_m + y_p) else 0.0
+        # Time: parabola through the statistic around the peak (none at the window edge).
+        dn = 0.0
+        if 0 < i_pk < 2 * w:
+            dn = parabolic_offset(float(s_win[i_pk - 1]), peak, float(s_win[i_pk + 1]))
         # Doppler: parabola across the three hypotheses kept at this sample.
-        dset = np.asarray(self._dset_ring.span(n_star, n_star + 1)[0])
         d0 = int(dset[1])
         dd = 0.0
         if dset[0] != dset[1] and dset[2] != dset[1]:
-            dd = parabolic_offset(float(a3[0, j_hat]), float(a3[1, j_hat]), float(a3[2, j_hat]))
+            dd = parabolic_offset(
+                float(a[i_pk, 0, j_hat]), float(row[j_hat]), float(a[i_pk, 2, j_hat])
+            )
         c = self.sound_speed_mps
         speed = float(self.grid.speeds_mps[d0] + dd * self.grid.speed_step_mps)
         alpha = float(speed_to_alpha(speed, c))

@@ -112,7 +112,10 @@ class UnitCorrelatorBank:
             self._groups.append((int(n_len), sel))
         m = np.arange(self.cell, dtype=np.float64)
         cyc = np.mod(m[:, None, None] * (nu / self.fs_hz)[None, :, :], 1.0)
-        self._step = np.exp(-2j * np.pi * cyc).astype(np.complex64)  # (cell, D, K)
+        # (D, K, cell): samples last, so the running sums run along contiguous memory.
+        self._step = np.ascontiguousarray(
+            np.exp(-2j * np.pi * cyc).astype(np.complex64).transpose(1, 2, 0)
+        )
         self._cell_index = -1
         self._cell_phasor = self._step
         self.reset(0)
@@ -121,7 +124,7 @@ class UnitCorrelatorBank:
     def reset(self, next_index: int = 0) -> None:
         """Forget all sums; the next input sample has absolute index ``next_index``."""
         self._next = int(next_index)
-        self._chist = np.zeros((self.max_length, self.n_hyp, self.n_tones), dtype=np.complex64)
+        self._chist = np.zeros((self.n_hyp, self.n_tones, self.max_length), dtype=np.complex64)
 
     @property
     def next_index(self) -> int:
@@ -132,22 +135,26 @@ class UnitCorrelatorBank:
         if c != self._cell_index:
             cyc = np.mod(float(c * self.cell) * (self.freqs_hz / self.fs_hz), 1.0)
             base = np.exp(-2j * np.pi * cyc).astype(np.complex64)
-            self._cell_phasor = self._step * base[None, :, :]
+            self._cell_phasor = self._step * base[:, :, None]
             self._cell_index = c
         return self._cell_phasor
 
     # ------------------------------------------------------------------ processing
     def process(self, x: ArrayLike) -> Complex64Array:
         """Consume complex samples ``x`` (shape ``(n,)``); return ``u``, shape ``(n, D, K)``."""
+        return np.ascontiguousarray(self.process_last(x).transpose(2, 0, 1))
+
+    def process_last(self, x: ArrayLike) -> Complex64Array:
+        """As :meth:`process` with samples on the last axis: ``u``, shape ``(D, K, n)``."""
         xs = np.asarray(x).reshape(-1)
         n_total = xs.shape[0]
-        out = np.empty((n_total, self.n_hyp, self.n_tones), dtype=np.complex64)
+        out = np.empty((self.n_hyp, self.n_tones, n_total), dtype=np.complex64)
         pos = 0
         while pos < n_total:
             a = self._next
             c = a // self.cell
             b = min(a + (n_total - pos), (c + 1) * self.cell)
-            self._piece(xs[pos : pos + b - a], out[pos : pos + b - a], c, a - c * self.cell)
+            self._piece(xs[pos : pos + b - a], out[:, :, pos : pos + b - a], c, a - c * self.cell)
             pos += b - a
         return out
 
@@ -157,24 +164,26 @@ class UnitCorrelatorBank:
         return np.square(u.real) + np.square(u.imag)
 
     def _piece(self, x: NDArray[np.generic], out: Complex64Array, c: int, off: int) -> None:
-        """Samples within one phasor cell, starting at offset ``off`` in the cell."""
+        """Samples within one phasor cell, starting at offset ``off`` in the cell; ``out`` has
+        shape ``(D, K, n)``."""
         n = x.shape[0]
-        ph = self._phasor(c)[off : off + n]
-        y = ph * x.astype(np.complex64)[:, None, None]
+        hist_len = self.max_length
+        ext = np.empty((self.n_hyp, self.n_tones, hist_len + n), dtype=np.complex64)
+        ext[:, :, :hist_len] = self._chist
+        y = ext[:, :, hist_len:]
+        np.multiply(self._phasor(c)[:, :, off : off + n], x.astype(np.complex64), out=y)
         # Sequential accumulation from the carried value: C[n] = C[n−1] + y[n] exactly, so any
         # split of the stream gives the same bits.
-        y[0] += self._chist[-1]
-        np.cumsum(y, axis=0, out=y)
-        hist_len = self.max_length
-        ext = np.concatenate((self._chist, y), axis=0)
+        y[:, :, 0] += self._chist[:, :, -1]
+        np.cumsum(y, axis=2, out=y)
         for n_len, sel in self._groups:
-            out[:, sel] = (
-                ext[hist_len : hist_len + n, sel]
-                - ext[hist_len - n_len : hist_len - n_len + n, sel]
+            out[sel] = (
+                ext[sel, :, hist_len : hist_len + n]
+                - ext[sel, :, hist_len - n_len : hist_len - n_len + n]
             )
-        self._chist = ext[ext.shape[0] - hist_len :].copy()
+        self._chist = ext[:, :, ext.shape[2] - hist_len :].copy()
         self._next += n
         if self._next % self.anchor == 0:
             # Re-anchor: only differences of C are used, so subtracting the running value from
             # every carried entry changes nothing but the magnitude the sums grow to.
-            self._chist -= self._chist[-1].copy()
+            self._chist -= self._chist[:, :, -1:].copy()

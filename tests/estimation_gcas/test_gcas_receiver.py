@@ -103,8 +103,10 @@ def test_errors_shrink_with_snr_and_stay_within_a_crlb_multiple(rc_schedule: Hop
 
 
 @pytest.mark.xfail(
-    reason="known defect: the coherent phase restoration leaves a ~0.3 m timing bias and "
-    "occasional wrong codewords (see the GCAS report); fix before relying on coherent=True",
+    reason="known defect, not fixed: coherent=True picks wrong codewords (range rms 10-15 m "
+    "at -5 and +10 dB per-sample SNR, noncoherent 0.02 m); the restoration phase "
+    "θ_{j,m}(n) of GcasReceiver._codeword_weights/_sums has not been re-derived and "
+    "verified on a noiseless echo (window-start and mixing-reference terms)",
     strict=True,
 )
 def test_coherent_sum_is_closer_to_the_crlb(rc_schedule: HopSchedule) -> None:
@@ -190,7 +192,7 @@ def test_estimate_latency_is_within_one_hop(rc_schedule: HopSchedule) -> None:
 @pytest.mark.parametrize("preset", ["att", "tank-audio", "tank-board"])
 @pytest.mark.filterwarnings("error")
 def test_every_preset_and_family(preset: str, family: str, request: pytest.FixtureRequest) -> None:
-    if family == "three-state" and preset in ("att", "tank-audio"):
+    if family == "three-state" and preset == "att":
         request.applymarker(
             pytest.mark.xfail(
                 reason="known defect: isolated 1-2 m outliers (neighbouring-codeword picks) "
@@ -216,20 +218,45 @@ def test_every_preset_and_family(preset: str, family: str, request: pytest.Fixtu
     assert abs(np.median([e.speed_mps for e in est]) - v) < 0.1 * vmax
 
 
-@pytest.mark.xfail(
-    reason="known defect: clutter leaks into far Doppler hypotheses through the other tones "
-    "(α_d f_k' = f_k), so excluding |v| < 5 m/s is not enough",
-    strict=True,
-)
-def test_reverberation_band_excludes_stationary_clutter(rc_schedule: HopSchedule) -> None:
+@pytest.mark.parametrize("speed", [20.0, -15.0])
+def test_reverberation_band_excludes_stationary_clutter(
+    rc_schedule: HopSchedule, speed: float
+) -> None:
+    # A stationary echo 6 dB above a moving target: without the band GCAS locks on to the
+    # clutter; with it (per tone in frequency) every estimate is the target's, with no
+    # estimate near zero speed and none at a ghost speed where α_d f_k = f_k'.
+    r0 = 70.0
     clutter = echo_samples(rc_schedule, 35.0, 0.0, 0.6, amplitude=2.0)
-    target = echo_samples(rc_schedule, 70.0, 20.0, 0.6, snr_db=0.0, seed=9)
+    target = echo_samples(rc_schedule, r0, speed, 0.6, snr_db=0.0, seed=9)
     x = clutter + target
     plain = _run(_receiver(rc_schedule), x)
-    banded = _run(_receiver(rc_schedule, reverb_speed_mps=5.0), x)
-    assert any(abs(e.speed_mps) < 2.0 for e in plain)
-    near = [abs(e.speed_mps - 20.0) < 1.0 for e in banded]
-    assert banded and np.mean(near) > 0.8
+    assert sum(abs(e.speed_mps) < 2.0 for e in plain) > 0.8 * len(plain)
+    rx = _receiver(rc_schedule, reverb_speed_mps=5.0)
+    banded = _run(rx, x)
+    assert len(banded) >= 40
+    v = np.array([e.speed_mps for e in banded])
+    assert np.all(np.abs(v - speed) < 1.0), v[np.abs(v - speed) >= 1.0]
+    dr, _ = _errors(banded, r0, speed)
+    # The clutter's sidelobes and the masked cells cost accuracy (0.03 m rms without clutter).
+    assert np.sqrt(np.mean(dr**2)) < 0.15 and np.max(np.abs(dr)) < 0.35
+    # The band removes every cell whose frequency holds the clutter of some tone.
+    assert rx._tone_w is not None and 0.3 < float(np.mean(rx._tone_w == 0)) < 0.6
+
+
+def test_reverberation_tone_mask_covers_every_tones_zero_doppler_frequency(
+    rc_schedule: HopSchedule,
+) -> None:
+    rx = _receiver(rc_schedule, reverb_speed_mps=5.0)
+    assert rx._tone_w is not None
+    f = rx.grid.alphas[:, None] * rx.tones_hz[None, :]
+    for f_clutter in rc_schedule.tones_hz:
+        # Every correlator listening within half a main lobe of a stationary tone is off.
+        near = np.abs(f - f_clutter) < 0.5 / rc_schedule.hop_s
+        assert near.any() and np.all(rx._tone_w[near] == 0)
+    # A hypothesis far from every clutter frequency keeps all its tones.
+    # (The band ±5 m/s is ±0.67 % of a tone, < 215 Hz, plus the 50 Hz guard.)
+    far = np.all(np.abs(f[:, :, None] - rc_schedule.tones_hz).min(axis=2) > 300.0, axis=1)
+    assert far.any() and np.all(rx._tone_w[far] == 1)
 
 
 def test_time_codeword_map_and_full_accumulated_sum(rc_schedule: HopSchedule) -> None:
