@@ -1,0 +1,358 @@
+"""Where trials run: in this process, on a local process pool, or on a Dask cluster.
+
+All runners share one interface (:class:`Runner`): used as a context manager (workers start
+on entry and stop on exit, so one runner can serve several sweeps), ``run(target, tasks)``
+yields each trial's record as soon as it finishes, in completion order. At most
+``window`` trials are handed out at a time, so a sweep of a million trials holds a few
+futures, not a million. Every worker has its BLAS thread pools pinned to one thread
+(:data:`~hil.evaluation.worker.BLAS_THREAD_VARS`).
+
+Dask is imported only by :class:`DaskRunner`; everything else needs no extra package.
+"""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing
+import os
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from types import TracebackType
+from typing import Any
+
+from hil.errors import ConfigError
+from hil.evaluation.worker import (
+    BLAS_THREAD_VARS,
+    TrialTask,
+    execute_trial,
+    init_pool_worker,
+    pin_blas_threads,
+    pinned_blas_env,
+    probe_pool_worker,
+    worker_blas_env,
+)
+
+Record = dict[str, Any]
+
+#: Trials in flight per worker: enough to keep every worker busy between hand-outs.
+_IN_FLIGHT_PER_WORKER = 4
+
+
+class Runner:
+    """Base class: a context manager that runs trials and yields their records."""
+
+    name = "runner"
+
+    def __init__(self) -> None:
+        #: Messages for the user about the set-up (e.g. workers whose BLAS is not pinned).
+        self.notes: list[str] = []
+
+    @property
+    def workers(self) -> int:
+        """Number of trials that can run at once."""
+        return 1
+
+    def __enter__(self) -> Runner:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Stop the workers (idempotent)."""
+
+    def describe(self) -> dict[str, Any]:
+        """What ran the trials, for the manifest."""
+        return {"runner": self.name, "workers": self.workers}
+
+    def run(self, target: str, tasks: Iterable[TrialTask]) -> Iterator[Record]:
+        """Run the trial ``target`` for every task; yield records as trials finish."""
+        raise NotImplementedError
+
+
+class SerialRunner(Runner):
+    """Runs every trial in this process, in order: for debugging (breakpoints work)."""
+
+    name = "serial"
+
+    def run(self, target: str, tasks: Iterable[TrialTask]) -> Iterator[Record]:
+        for task in tasks:
+            yield execute_trial(target, task)
+
+
+class LocalPoolRunner(Runner):
+    """A pool of ``workers`` processes on this machine (default ``os.cpu_count()``).
+
+    Workers are *spawned* (not forked) with the BLAS variables set to 1 in the environment they
+    start with, so numpy in the workers is single-threaded whatever the parent imported; they
+    all start on entry and are reused for every sweep run through this runner.
+    """
+
+    name = "process-pool"
+
+    def __init__(self, workers: int | None = None) -> None:
+        super().__init__()
+        n = (os.cpu_count() or 1) if workers is None else workers
+        if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+            raise ConfigError("--workers", workers, "an integer >= 1")
+        self._workers = n
+        self._pool: ProcessPoolExecutor | None = None
+
+    @property
+    def workers(self) -> int:
+        return self._workers
+
+    def __enter__(self) -> LocalPoolRunner:
+        self._start()
+        return self
+
+    def _start(self) -> None:
+        if self._pool is not None:
+            return
+        context = multiprocessing.get_context("spawn")
+        barrier = context.Barrier(self._workers)
+        with pinned_blas_env():
+            pool = ProcessPoolExecutor(
+                self._workers,
+                mp_context=context,
+                initializer=init_pool_worker,
+                initargs=(barrier,),
+            )
+            # The pool spawns processes on demand while none is idle; the probes wait for one
+            # another, so every process starts now, inside the pinned environment.
+            probes = [pool.submit(probe_pool_worker) for _ in range(self._workers)]
+            reports = [f.result() for f in probes]
+        self._pool = pool
+        self.notes.extend(_unpinned_notes(reports))
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
+
+    def run(self, target: str, tasks: Iterable[TrialTask]) -> Iterator[Record]:
+        self._start()
+        pool = self._pool
+        assert pool is not None
+        pending: set[Future[Record]] = set()
+        todo = iter(tasks)
+        window = _IN_FLIGHT_PER_WORKER * self._workers
+        try:
+            _refill(pending, todo, window, lambda t: pool.submit(execute_trial, target, t))
+            while pending:
+                done, _ = wait(pending, return_when=FIRST_COMPLETED)
+                for future in done:
+                    pending.discard(future)
+                    yield future.result()
+                _refill(pending, todo, window, lambda t: pool.submit(execute_trial, target, t))
+        finally:
+            for future in pending:
+                future.cancel()
+
+
+def _refill(
+    pending: set[Any], todo: Iterator[TrialTask], window: int, submit: Callable[[TrialTask], Any]
+) -> None:
+    while len(pending) < window:
+        task = next(todo, None)
+        if task is None:
+            return
+        pending.add(submit(task))
+
+
+def _unpinned_notes(reports: list[dict[str, str | None]]) -> list[str]:
+    bad = {f"{k}={v}" for r in reports for k, v in r.items() if v != "1"}
+    if not bad:
+        return []
+    return [
+        f"{len(reports)} worker(s) report BLAS threads not pinned to 1 ({', '.join(sorted(bad))}); "
+        f"start the workers with {', '.join(v + '=1' for v in BLAS_THREAD_VARS)}"
+    ]
+
+
+def _import_distributed() -> Any:
+    try:
+        import distributed
+    except ModuleNotFoundError as exc:
+        if exc.name not in ("distributed", "dask"):
+            raise  # installed, but broken: show the real cause
+        raise ConfigError(
+            "runner",
+            "dask",
+            "available only with the dask extra installed",
+            "pip install 'cas-hil[dask]'",
+        ) from None
+    return distributed
+
+
+class DaskRunner(Runner):
+    """Trials on a Dask cluster: an existing scheduler, or a local cluster of processes.
+
+    Give exactly one of ``scheduler`` (``"tcp://HOST:PORT"``: connect to a running
+    ``dask scheduler`` whose workers have this package installed), ``n_workers`` (start a
+    ``LocalCluster`` of that many single-threaded worker processes) or ``client`` (an existing
+    ``distributed.Client``, left open on close). Local workers are spawned with the BLAS
+    variables at 1 (Dask's ``pre-spawn-environ``, with this process's own variables pinned while
+    they start, since Dask lets those win); on a remote cluster the variables are set on
+    connection and workers that started unpinned are reported in :attr:`notes`.
+    """
+
+    name = "dask"
+
+    def __init__(
+        self,
+        scheduler: str | None = None,
+        n_workers: int | None = None,
+        *,
+        client: Any = None,
+        connect_timeout_s: float = 10.0,
+    ) -> None:
+        super().__init__()
+        given = [x is not None for x in (scheduler, n_workers, client)]
+        if sum(given) != 1:
+            raise ConfigError(
+                "--scheduler/--dask-workers",
+                (scheduler, n_workers),
+                "exactly one of a scheduler address or a number of local Dask workers",
+            )
+        if scheduler is not None and not _looks_like_address(scheduler):
+            raise ConfigError(
+                "--scheduler", scheduler, "an address tcp://HOST:PORT (or tls://HOST:PORT)"
+            )
+        if n_workers is not None and (
+            isinstance(n_workers, bool) or not isinstance(n_workers, int) or n_workers < 1
+        ):
+            raise ConfigError("--dask-workers", n_workers, "an integer >= 1")
+        self.scheduler = scheduler
+        self.n_workers = n_workers
+        self.connect_timeout_s = connect_timeout_s
+        self._client: Any = client
+        self._owns_client = client is None
+        self._cluster: Any = None
+
+    @property
+    def client(self) -> Any:
+        """The ``distributed.Client`` (started on first use)."""
+        self._start()
+        return self._client
+
+    @property
+    def workers(self) -> int:
+        if self._client is None:
+            return self.n_workers or 0
+        return len(self._client.scheduler_info().get("workers", {}))
+
+    def describe(self) -> dict[str, Any]:
+        where = self.scheduler or ("local-cluster" if self.n_workers else "client")
+        return {"runner": self.name, "workers": self.workers, "scheduler": where}
+
+    def __enter__(self) -> DaskRunner:
+        self._start()
+        return self
+
+    def _start(self) -> None:
+        if self._client is not None:
+            return
+        distributed = _import_distributed()
+        import dask
+
+        if self.scheduler is not None:
+            try:
+                self._client = distributed.Client(
+                    self.scheduler, timeout=self.connect_timeout_s, set_as_default=False
+                )
+            except (OSError, TimeoutError) as exc:
+                raise ConfigError(
+                    "--scheduler",
+                    self.scheduler,
+                    "the address of a running dask scheduler",
+                    f"cannot connect ({exc}); start one with `dask scheduler` and workers "
+                    "with `dask worker ADDRESS --nthreads 1`",
+                ) from None
+            self._client.run(pin_blas_threads)
+            self.notes.extend(_unpinned_notes(list(self._client.run(worker_blas_env).values())))
+            return
+        pinned = {f"distributed.nanny.pre-spawn-environ.{v}": "1" for v in BLAS_THREAD_VARS}
+        # Dask's pre-spawn-environ gives way to variables already set in this process, so they
+        # are pinned here too while the nannies are made and spawn their workers.
+        with dask.config.set(pinned), pinned_blas_env():
+            self._cluster = distributed.LocalCluster(
+                n_workers=self.n_workers,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=None,
+                # The scheduler serves HTTP routes even without a dashboard, by default on
+                # :8787; any free port avoids clashing with another cluster on this machine.
+                scheduler_kwargs={"dashboard_address": ":0"},
+                silence_logs=logging.ERROR,
+            )
+            self._client = distributed.Client(self._cluster, set_as_default=False)
+
+    def close(self) -> None:
+        if self._client is not None and self._owns_client:
+            self._client.close()
+            self._client = None
+        if self._cluster is not None:
+            self._cluster.close()
+            self._cluster = None
+
+    def run(self, target: str, tasks: Iterable[TrialTask]) -> Iterator[Record]:
+        distributed = _import_distributed()
+        client = self.client
+        window = _IN_FLIGHT_PER_WORKER * max(self.workers, 1)
+        completed = distributed.as_completed(loop=client.loop)
+        todo = iter(tasks)
+
+        def submit(task: TrialTask) -> Any:
+            future = client.submit(execute_trial, target, task, pure=False)
+            completed.add(future)
+            return future
+
+        pending: set[Any] = set()
+        try:
+            _refill(pending, todo, window, submit)
+            for future in completed:
+                pending.discard(future)
+                record: Record = future.result()
+                future.release()
+                yield record
+                _refill(pending, todo, window, submit)
+        finally:
+            for future in pending:
+                future.cancel()
+
+
+def _looks_like_address(address: str) -> bool:
+    scheme, sep, rest = address.partition("://")
+    host, _, port = rest.rpartition(":")
+    return bool(sep) and scheme in ("tcp", "tls") and bool(host) and port.isdigit()
+
+
+def make_runner(
+    workers: int | None = None,
+    dask_workers: int | None = None,
+    scheduler: str | None = None,
+    serial: bool = False,
+) -> Runner:
+    """The runner the command-line options ask for (process pool by default)."""
+    if dask_workers is not None and scheduler is not None:
+        raise ConfigError(
+            "--dask-workers", dask_workers, "not given together with --scheduler", "pick one"
+        )
+    chosen = [serial, workers is not None, dask_workers is not None or scheduler is not None]
+    if sum(chosen) > 1:
+        raise ConfigError(
+            "--workers/--serial/--dask-workers/--scheduler",
+            "several",
+            "one way to run: the local pool (--workers), --serial, or Dask",
+        )
+    if serial:
+        return SerialRunner()
+    if dask_workers is not None or scheduler is not None:
+        return DaskRunner(scheduler=scheduler, n_workers=dask_workers)
+    return LocalPoolRunner(workers)

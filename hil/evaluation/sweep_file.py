@@ -1,0 +1,213 @@
+"""Sweep files (TOML) and their validation, done in full before any trial runs.
+
+Layout (docs/sweeps.md)::
+
+    [sweep]
+    name = "psl-vs-length"            # required, text
+    trial = "waveform_af_sidelobe"     # required: name, module:function or file.py:function
+    trials_per_point = 20              # integer >= 1 (default 1)
+    seed = 20240601                    # required: root entropy, integer >= 0
+    description = "..."                # optional
+
+    [grid]                             # swept: every combination is one grid point
+    code_length = [17, 31]
+    window = [3, 4]
+
+    [fixed]                            # the same for every point
+    n_tones = 4
+
+Every error is a :class:`~hil.errors.ConfigError` naming the field by its dotted path
+(``grid.window``, ``sweep.trials_per_point``) and what is allowed.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from hil.errors import ConfigError
+from hil.evaluation.registry import load_trial, resolve_trial, trial_validator
+from hil.evaluation.seeds import check_entropy
+from hil.evaluation.spec import SweepSpec
+
+_SECTIONS = ("sweep", "grid", "fixed")
+_SWEEP_KEYS = ("name", "trial", "trials_per_point", "seed", "description")
+_PARAM_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+_VALUE_KINDS = "numbers, strings, booleans, or arrays/tables of them (no dates, no NaN)"
+
+
+def load_sweep_file(path: str | Path) -> SweepSpec:
+    """Read and validate the sweep file ``path`` (relative trial files are found next to it)."""
+    path = Path(path)
+    try:
+        with path.open("rb") as fh:
+            doc = tomllib.load(fh)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(str(path), "<file>", "valid TOML", str(exc)) from None
+    return sweep_from_dict(doc, base_dir=path.resolve().parent)
+
+
+def sweep_from_dict(doc: dict[str, Any], base_dir: Path | None = None) -> SweepSpec:
+    """Validate a parsed sweep document and build the :class:`SweepSpec`.
+
+    Checks unknown sections and keys, types and ranges, that the trial exists and can be
+    imported here, and the trial's own parameter check (if it has one) on every grid point.
+
+    >>> s = sweep_from_dict({"sweep": {"name": "d", "trial": "waveform_af_sidelobe", "seed": 3},
+    ...                      "grid": {"code_length": [17, 19]}})
+    >>> s.n_trials, s.point_params(1)
+    (2, {'code_length': 19})
+    >>> try:
+    ...     sweep_from_dict({"sweep": {"name": "d", "trial": "waveform_af_sidelobe", "seed": 3},
+    ...                      "grid": {"code_length": 17}})
+    ... except ConfigError as exc:
+    ...     print(exc.field, "|", exc.allowed)
+    grid.code_length | a non-empty array of values
+    """
+    _check_keys(doc, _SECTIONS, "")
+    for section in _SECTIONS:
+        if section in doc and not isinstance(doc[section], dict):
+            raise ConfigError(section, doc[section], f"a table: write [{section}]")
+    if "sweep" not in doc:
+        raise ConfigError("sweep", None, "a [sweep] table with name, trial and seed")
+    head = doc["sweep"]
+    _check_keys(head, _SWEEP_KEYS, "sweep.")
+    for key in ("name", "trial", "seed"):
+        if key not in head:
+            raise ConfigError(f"sweep.{key}", None, "given (it is required)")
+    name = _text(head["name"], "sweep.name")
+    trial_name = _text(head["trial"], "sweep.trial")
+    description = _text(head["description"], "sweep.description") if "description" in head else ""
+    reps = head.get("trials_per_point", 1)
+    if isinstance(reps, bool) or not isinstance(reps, int) or reps < 1:
+        raise ConfigError("sweep.trials_per_point", reps, "an integer >= 1")
+    seed = check_entropy(head["seed"], "sweep.seed")
+
+    grid = _grid(doc.get("grid", {}))
+    fixed = _fixed(doc.get("fixed", {}), grid)
+
+    target = resolve_trial(trial_name, base_dir, "sweep.trial")
+    trial = load_trial(target, "sweep.trial")
+    spec = SweepSpec(
+        name=name,
+        trial=trial_name,
+        target=target,
+        trials_per_point=reps,
+        seed=seed,
+        grid=grid,
+        fixed=fixed,
+        description=description,
+    )
+    validate = trial_validator(trial)
+    if validate is not None:
+        for point in range(spec.n_points):
+            _validate_point(validate, spec, point)
+    return spec
+
+
+def _check_keys(table: dict[str, Any], allowed: tuple[str, ...], prefix: str) -> None:
+    for key in table:
+        if key not in allowed:
+            where = f"[{prefix.rstrip('.')}]" if prefix else "the top level"
+            raise ConfigError(
+                f"{prefix}{key}",
+                table[key],
+                f"a known key of {where}: one of {', '.join(allowed)}",
+                "check the spelling",
+            )
+
+
+def _text(value: Any, field: str) -> str:
+    if not isinstance(value, str) or not value.strip():
+        raise ConfigError(field, value, "a non-empty string")
+    return value
+
+
+def _param_name(key: str, field: str) -> None:
+    if not _PARAM_NAME.match(key):
+        raise ConfigError(field, key, "a parameter name: letters, digits and _, not first digit")
+
+
+def _check_value(value: Any, field: str) -> None:
+    """Refuse values that JSON cannot carry faithfully (dates, NaN)."""
+    if isinstance(value, (bool, int, str)):
+        return
+    if isinstance(value, float):
+        if math.isnan(value):
+            raise ConfigError(field, value, _VALUE_KINDS)
+        return
+    if isinstance(value, list):
+        for i, item in enumerate(value):
+            _check_value(item, f"{field}[{i}]")
+        return
+    if isinstance(value, dict):
+        for key, item in value.items():
+            _check_value(item, f"{field}.{key}")
+        return
+    raise ConfigError(field, value, _VALUE_KINDS)
+
+
+def _grid(table: dict[str, Any]) -> dict[str, list[Any]]:
+    grid: dict[str, list[Any]] = {}
+    for key, values in table.items():
+        field = f"grid.{key}"
+        _param_name(key, field)
+        if not isinstance(values, list) or not values:
+            hint = (
+                f"write {key} = [{_toml_literal(values)}] to sweep over one value"
+                if not isinstance(values, list)
+                else "give at least one value, or move the parameter to [fixed]"
+            )
+            raise ConfigError(field, values, "a non-empty array of values", hint)
+        seen: set[str] = set()
+        for i, value in enumerate(values):
+            _check_value(value, f"{field}[{i}]")
+            # Compared as JSON text: 1, 1.0 and true are different values of a parameter.
+            text = json.dumps(value, sort_keys=True)
+            if text in seen:
+                raise ConfigError(
+                    f"{field}[{i}]", value, "a value not listed before", "remove the duplicate"
+                )
+            seen.add(text)
+        grid[key] = values
+    return grid
+
+
+def _toml_literal(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return f'"{value}"'
+    return repr(value)
+
+
+def _fixed(table: dict[str, Any], grid: dict[str, list[Any]]) -> dict[str, Any]:
+    for key, value in table.items():
+        field = f"fixed.{key}"
+        _param_name(key, field)
+        if key in grid:
+            raise ConfigError(
+                field, value, "a parameter not also swept in [grid]", "keep it in one table"
+            )
+        _check_value(value, field)
+    return dict(table)
+
+
+def _validate_point(validate: Any, spec: SweepSpec, point: int) -> None:
+    try:
+        validate(spec.point_params(point))
+    except ConfigError as exc:
+        at = f"at grid point {spec.point_values(point)}"
+        if exc.field in spec.grid:
+            where, notes = f"grid.{exc.field}", [at]
+        elif exc.field in spec.fixed:
+            where, notes = f"fixed.{exc.field}", []
+        else:  # a value the trial defaults, unsuitable with the sweep's other values
+            where = f"{exc.field} (the trial's default)"
+            notes = [at, f"set {exc.field} in [fixed] or [grid]"]
+        hint = "; ".join([*notes, exc.hint] if exc.hint else notes)
+        raise ConfigError(where, exc.value, exc.allowed, hint) from None
