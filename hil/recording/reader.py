@@ -1,0 +1,264 @@
+"""Read a run recording: typed views of samples (by board sample index, gap-aware), the
+transmit schedule, events, estimates, sync pairs, stage telemetry and metadata.
+
+The file is opened as an SWMR reader, so a recording still being written can be read (each
+view re-reads the file and sees everything up to the writer's last flush), and so can one
+whose writer was killed.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+from numpy.typing import NDArray
+
+from hil.errors import ConfigError
+from hil.estimation.base import Estimate
+from hil.recording import schema
+from hil.recording.records import (
+    ReceiverSetup,
+    RunEvent,
+    RunMetadata,
+    SampleBlock,
+    StageTelemetry,
+    SyncPairs,
+)
+from hil.recording.tables import read_table
+from hil.signals.schedule import HopSchedule
+
+
+@dataclass(frozen=True)
+class Segments:
+    """Contiguous runs of received samples, shape ``(n_segments,)`` each: segment ``i`` is
+    dataset rows ``row[i] .. row[i] + n_rows[i] - 1`` holding board samples from
+    ``sample_index[i]`` on."""
+
+    row: NDArray[np.int64]
+    sample_index: NDArray[np.int64]
+    n_rows: NDArray[np.int64]
+
+    def __len__(self) -> int:
+        return int(self.row.shape[0])
+
+    @property
+    def stop_index(self) -> NDArray[np.int64]:
+        """Board sample index one past each segment's last sample."""
+        return self.sample_index + self.n_rows
+
+
+def _open_h5(path: Path) -> h5py.File:
+    """Open as an SWMR reader; files of other HDF5 formats fall back to a plain read."""
+    if not path.exists():
+        raise ConfigError("recording", str(path), "an existing run recording (.h5)")
+    if path.is_dir():
+        raise ConfigError("recording", str(path), "a file, not a folder")
+    try:
+        return h5py.File(path, "r", libver="latest", swmr=True)
+    except OSError:
+        pass
+    try:
+        return h5py.File(path, "r")
+    except OSError as exc:
+        raise ConfigError(
+            "recording",
+            str(path),
+            "an HDF5 run recording written by hil",
+            f"it is not readable as HDF5 ({exc})",
+        ) from None
+
+
+class RunRecording:
+    """An open run recording (use :meth:`open`; close it, or use it as a context manager)."""
+
+    def __init__(self, file: h5py.File, path: Path) -> None:
+        self._file = file
+        self.path = path
+        self.metadata = self._read_metadata()
+
+    @classmethod
+    def open(cls, path: str | Path) -> RunRecording:
+        """Open ``path``; :class:`ConfigError` for a file that is not a recording this hil reads.
+
+        The format name and version are checked first, so a file of another format or of
+        another format version is refused naming the attribute.
+        """
+        path = Path(path)
+        f = _open_h5(path)
+        try:
+            fmt = f.attrs.get(schema.ATTR_FORMAT)
+            if fmt != schema.FORMAT_NAME:
+                raise ConfigError(
+                    "recording.format",
+                    fmt if fmt is None else str(fmt),
+                    f'"{schema.FORMAT_NAME}"',
+                    f"{path} is an HDF5 file but not a hil run recording",
+                )
+            version = f.attrs.get(schema.ATTR_VERSION)
+            if version is None or int(version) != schema.FORMAT_VERSION:
+                raise ConfigError(
+                    "recording.format_version",
+                    version if version is None else int(version),
+                    f"{schema.FORMAT_VERSION} (the version this hil reads)",
+                    "read it with the hil release that wrote it",
+                )
+            return cls(f, path)
+        except BaseException:
+            f.close()
+            raise
+
+    def close(self) -> None:
+        """Close the file."""
+        self._file.close()
+
+    def __enter__(self) -> RunRecording:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ metadata
+    def _read_metadata(self) -> RunMetadata:
+        a = self._file.attrs
+        receiver = a.get("receiver")
+        return RunMetadata(
+            fs_hz=float(a["fs_hz"]),
+            n_channels=int(a["n_channels"]),
+            sample_dtype=str(a["sample_dtype"]),
+            origin_sample=int(a["origin_sample"]) if "origin_sample" in a else None,
+            experiment_toml=self._file[schema.EXPERIMENT_TOML].asstr()[()],
+            versions=json.loads(a["versions"]),
+            calibration_ids=tuple(json.loads(a["calibration_ids"])),
+            receiver=None if receiver is None else ReceiverSetup.from_json(str(receiver)),
+            created_utc=str(a["created_utc"]),
+        )
+
+    @property
+    def fs_hz(self) -> float:
+        """ADC sample rate, Hz."""
+        return self.metadata.fs_hz
+
+    @property
+    def origin_sample(self) -> int:
+        """Board sample index of the receiver's sample 0 (schedule t = 0): the recorded
+        origin, else the first sample recorded (0 for a recording without samples)."""
+        if self.metadata.origin_sample is not None:
+            return self.metadata.origin_sample
+        seg = self.segments()
+        return int(seg.sample_index[0]) if len(seg) else 0
+
+    def schedule_document(self) -> dict[str, Any]:
+        """The transmit schedule JSON document as recorded."""
+        doc: dict[str, Any] = json.loads(self._file[schema.SCHEDULE_DOCUMENT].asstr()[()])
+        return doc
+
+    def schedule(self) -> HopSchedule:
+        """The transmit schedule (t = 0 at board sample :attr:`origin_sample`)."""
+        return HopSchedule.from_period_dict(self.schedule_document()["period"])
+
+    # ------------------------------------------------------------------ tables
+    def _table(self, name: str) -> dict[str, NDArray[Any]]:
+        return read_table(self._file[name], refresh=self._file.swmr_mode)
+
+    def _flushed_rows(self) -> int:
+        """Sample rows covered by the writer's last flush."""
+        flushes = self._table("flushes")["sample_rows"]
+        ds = self._file[schema.SAMPLES]
+        if self._file.swmr_mode:
+            ds.refresh()
+        return min(int(flushes[-1]), int(ds.shape[0])) if flushes.size else 0
+
+    def segments(self) -> Segments:
+        """The contiguous runs of received samples up to the last flush."""
+        n = self._flushed_rows()
+        t = self._table("segments")
+        keep = t["row"] < n
+        row = t["row"][keep].astype(np.int64)
+        index = t["sample_index"][keep].astype(np.int64)
+        n_rows = np.diff(np.append(row, n)).astype(np.int64)
+        return Segments(row=row, sample_index=index, n_rows=n_rows)
+
+    @property
+    def n_samples(self) -> int:
+        """Sample frames recorded (received samples only; gaps hold none)."""
+        return int(self.segments().n_rows.sum())
+
+    def gaps(self) -> list[tuple[int, int]]:
+        """``(first missing board sample index, number missing)`` for every gap between
+        recorded segments."""
+        seg = self.segments()
+        starts = seg.stop_index[:-1]
+        lengths = seg.sample_index[1:] - starts
+        return [(int(s), int(n)) for s, n in zip(starts, lengths, strict=True)]
+
+    def samples(self, start: int | None = None, stop: int | None = None) -> list[SampleBlock]:
+        """The received samples with board sample indices in ``[start, stop)`` (default: all),
+        one block per contiguous run; missing samples fall between blocks."""
+        return list(self.iter_blocks(None, start, stop))
+
+    def iter_blocks(
+        self, max_frames: int | None = 65536, start: int | None = None, stop: int | None = None
+    ) -> Iterator[SampleBlock]:
+        """Received samples in ``[start, stop)`` as blocks of at most ``max_frames`` frames
+        (None: whole segments), in board-sample order, never spanning a gap."""
+        if max_frames is not None and max_frames < 1:
+            raise ConfigError("max_frames", max_frames, ">= 1 frame")
+        seg = self.segments()
+        ds = self._file[schema.SAMPLES]
+        lo = -(2**62) if start is None else int(start)
+        hi = 2**62 if stop is None else int(stop)
+        for row, first, count in zip(seg.row, seg.sample_index, seg.n_rows, strict=True):
+            a = max(int(first), lo)
+            b = min(int(first + count), hi)
+            step = (b - a) if max_frames is None else max_frames
+            for s in range(a, b, max(step, 1)):
+                e = min(s + step, b)
+                r = int(row) + s - int(first)
+                yield SampleBlock(s, ds[r : r + e - s])
+
+    def events(self) -> list[RunEvent]:
+        """Every sample-indexed event, in the order recorded."""
+        t = self._table("events")
+        return [
+            RunEvent(str(k), int(i), int(n), str(x))
+            for k, i, n, x in zip(t["kind"], t["sample_index"], t["length"], t["text"], strict=True)
+        ]
+
+    def estimates(self, receiver: str | None = None) -> list[Estimate]:
+        """The recorded estimates (of one receiver by name, or all) in the order recorded."""
+        t = self._table("estimates")
+        out = [
+            Estimate(
+                t_s=float(t["t_s"][i]),
+                range_m=float(t["range_m"][i]),
+                speed_mps=float(t["speed_mps"][i]),
+                hop_index=int(t["hop_index"][i]),
+                score=float(t["score"][i]),
+                snr_db=float(t["snr_db"][i]),
+                alpha=float(t["alpha"][i]),
+                t_tx_s=float(t["t_tx_s"][i]),
+                codeword=int(t["codeword"][i]),
+                receiver=str(t["receiver"][i]),
+            )
+            for i in range(t["t_s"].shape[0])
+        ]
+        return out if receiver is None else [e for e in out if e.receiver == receiver]
+
+    def sync_pairs(self) -> SyncPairs:
+        """The board sample index ↔ host time pairs."""
+        t = self._table("sync")
+        return SyncPairs(t["sample_index"].astype(np.int64), t["host_time_s"].astype(np.float64))
+
+    def telemetry(self) -> list[StageTelemetry]:
+        """The stage status reports, in the order recorded."""
+        t = self._table("telemetry")
+        cols = (t["host_time_s"], t["sample_index"], t["position_m"], t["velocity_mps"], t["state"])
+        return [
+            StageTelemetry(float(h), int(i), float(p), float(v), str(s))
+            for h, i, p, v, s in zip(*cols, strict=True)
+        ]
