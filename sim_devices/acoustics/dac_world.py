@@ -1,0 +1,223 @@
+"""The acoustic world behind a simulated DAC/ADC device: what the hydrophone hears of what
+the DAC actually emits.
+
+:class:`AcousticWorld` follows the simulated board's world contract
+(``world(dac_block, first_sample) -> adc_block``, see :mod:`sim_devices.board.worlds`);
+:class:`InPlaceWorld` adapts it to the simulated audio interface's in-place contract
+(:class:`hil.devices.audio.simulated.World`). Unlike
+:class:`~sim_devices.acoustics.channel.Channel`, which evaluates the known transmit schedule
+analytically, this world echoes the *sampled* DAC output, through the band-limited
+fractional-delay path (:class:`~sim_devices.acoustics.echo.SampledEcho`): whatever the host
+plays (HFC-CW, a calibration sweep, silence) is what comes back.
+
+Time base: sample ``n`` of the device is at ``t = n / fs`` seconds of the world (the device's
+sample clock; a Live target trajectory is a function of that time). The converters add
+``converter_delay_samples`` of latency (DAC reconstruction plus ADC anti-alias group delay,
+real converters have tens of samples): ADC sample ``n`` holds the pressure at
+``t = (n − converter_delay_samples) / fs``. That latency also keeps the world causal: an echo
+never needs DAC samples later than those already emitted, even for the direct blast.
+
+ADC channels: channel 0 is the hydrophone (counts in ``[-1, 1)`` through the
+:class:`~sim_devices.acoustics.channel.Receiver`); further channels monitor the DAC drive
+(channel ``k`` = DAC channel ``k − 1``, delayed by the converter latency), the reference a lab
+records next to the hydrophone for latency and level calibration.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+import numpy.typing as npt
+
+from hil.errors import ConfigError
+from sim_devices.acoustics.channel import (
+    DirectBlast,
+    Receiver,
+    Target,
+    _EchoGain,
+    source_amplitude,
+)
+from sim_devices.acoustics.delay import OneWayPath, TwoWayPath
+from sim_devices.acoustics.echo import SampledEcho, TransmitHistory, history_capacity
+from sim_devices.acoustics.noise_generator import ShapedNoiseGenerator
+from sim_devices.acoustics.tank import Offset, Tank, echo_paths
+from sim_devices.acoustics.trajectory import FloatArray, Trajectory
+
+# Interpolator half-length of SampledEcho's default Kaiser-sinc kernel (32 taps).
+_HALF_TAPS = 16
+
+
+class AcousticWorld:
+    """DAC samples in, ADC samples out, through the tank (see the module docstring).
+
+    Parameters
+    ----------
+    fs_hz:
+        Device sample rate, Hz.
+    sonar:
+        Trajectory of the monostatic transducer (m).
+    targets:
+        Targets (trajectory + target strength); a Live trajectory follows a stage.
+    sound_speed_mps:
+        c, m/s.
+    source_level_db:
+        Source level of a full-scale DAC cosine, dB re 1 µPa @ 1 m (RMS).
+    receiver:
+        Hydrophone sensitivity, gain and ADC full scale.
+    max_range_m:
+        Longest echo path considered (sets the transmit history kept), m.
+    tank, image_order:
+        Tank walls/bottom/surface image paths (order 0 or 1).
+    absorption_db_per_km:
+        Absorption applied on each leg, dB/km.
+    direct_blast:
+        Transmitter-to-hydrophone leakage, or None.
+    noise:
+        Ambient/self noise in µPa (seeded, chunk-invariant), or None.
+    converter_delay_samples:
+        Converter latency, samples (>= 17 so the interpolator stays causal).
+    adc_channels:
+        Number of ADC channels to produce (hydrophone + DAC monitors).
+    max_block_samples:
+        Longest block the device hands over (sizes the transmit history), samples.
+    """
+
+    def __init__(
+        self,
+        fs_hz: float,
+        sonar: Trajectory,
+        targets: Sequence[Target],
+        *,
+        sound_speed_mps: float,
+        source_level_db: float,
+        receiver: Receiver | None = None,
+        max_range_m: float = 30.0,
+        tank: Tank | None = None,
+        image_order: int = 0,
+        absorption_db_per_km: float = 0.0,
+        direct_blast: DirectBlast | None = None,
+        noise: ShapedNoiseGenerator | None = None,
+        converter_delay_samples: int = 64,
+        adc_channels: int = 1,
+        max_block_samples: int = 1 << 18,
+    ) -> None:
+        if not (math.isfinite(fs_hz) and fs_hz > 0):
+            raise ConfigError("fs_hz", fs_hz, "> 0 Hz")
+        if not (math.isfinite(sound_speed_mps) and sound_speed_mps > 0):
+            raise ConfigError("sound_speed_mps", sound_speed_mps, "> 0 m/s")
+        if not (math.isfinite(max_range_m) and max_range_m > 0):
+            raise ConfigError("max_range_m", max_range_m, "> 0 m")
+        if int(converter_delay_samples) != converter_delay_samples or not (
+            converter_delay_samples > _HALF_TAPS
+        ):
+            raise ConfigError(
+                "converter_delay_samples",
+                converter_delay_samples,
+                f"an integer > {_HALF_TAPS} (the interpolator must not need future DAC samples)",
+            )
+        if int(adc_channels) != adc_channels or adc_channels < 1:
+            raise ConfigError("adc_channels", adc_channels, "an integer >= 1")
+        self.fs_hz = float(fs_hz)
+        self.receiver = receiver or Receiver()
+        self.noise = noise
+        self.converter_delay = int(converter_delay_samples)
+        self.adc_channels = int(adc_channels)
+        self.max_delay_s = 2.0 * max_range_m / sound_speed_mps
+        if int(max_block_samples) != max_block_samples or max_block_samples < 1:
+            raise ConfigError("max_block_samples", max_block_samples, "an integer >= 1")
+        self._block_capacity = int(max_block_samples)
+        self._history = TransmitHistory(self.fs_hz, self._capacity(self._block_capacity))
+        self._expected_first = 0
+        amp = source_amplitude(source_level_db)
+        axis = np.array([1.0, 0.0, 0.0])
+        self._echoes: list[SampledEcho] = []
+        for tgt in targets:
+            a = amp * 10.0 ** (tgt.target_strength_db / 20.0)
+            for path in echo_paths(sonar, tgt.trajectory, tank, image_order):
+                gain = _EchoGain(
+                    a * path.gain, path.rx, None, axis, absorption_db_per_km, path.target
+                )
+                solved = TwoWayPath(path.tx, path.target, path.rx, sound_speed_mps)
+                self._echoes.append(SampledEcho(self._history, solved, self.fs_hz, gain=gain))
+        if direct_blast is not None:
+            tx = Offset(sonar, (0.0, 0.0, direct_blast.separation_m))
+            a = amp * 10.0 ** (direct_blast.coupling_db / 20.0) / direct_blast.separation_m
+            one_way = OneWayPath(tx, sonar, sound_speed_mps)
+            self._echoes.append(SampledEcho(self._history, one_way, self.fs_hz, amplitude=a))
+
+    def _capacity(self, block: int) -> int:
+        return history_capacity(self.max_delay_s, block / self.fs_hz, self.fs_hz, _HALF_TAPS) + (
+            self.converter_delay
+        )
+
+    def reset(self) -> None:
+        """Forget the transmit history (a new stream starts at sample 0)."""
+        self._history = TransmitHistory(self.fs_hz, self._capacity(self._block_capacity))
+        for e in self._echoes:
+            e.history = self._history
+        self._expected_first = 0
+
+    def __call__(self, dac_block: npt.NDArray[np.floating], first_sample: int, /) -> FloatArray:
+        """ADC samples ``first_sample …`` (shape ``(n, adc_channels)``) for the DAC block at
+        the same indices (shape ``(n, dac_channels)`` or ``(n,)``), in sample order."""
+        dac = np.asarray(dac_block, dtype=np.float64)
+        if dac.ndim == 1:
+            dac = dac[:, None]
+        n = dac.shape[0]
+        if first_sample != self._expected_first:
+            raise ConfigError(
+                "first_sample",
+                first_sample,
+                f"{self._expected_first} (blocks arrive in sample order)",
+                "reset() the world when a new stream starts",
+            )
+        if n > self._block_capacity:
+            raise ConfigError(
+                "dac_block",
+                f"{n} samples",
+                f"<= max_block_samples = {self._block_capacity}",
+                "build the world with a larger max_block_samples",
+            )
+        self._history.push(dac[:, 0])
+        self._expected_first = first_sample + n
+        out = np.zeros((n, self.adc_channels))
+        t = (np.arange(first_sample, first_sample + n) - self.converter_delay) / self.fs_hz
+        pressure = np.zeros(n)
+        for e in self._echoes:
+            pressure += e.at_times(t)
+        if self.noise is not None:
+            pressure += self.noise.generate(n)
+        out[:, 0] = self.receiver.to_counts(pressure)
+        if self.adc_channels > 1:
+            # DAC monitor channels: the drive, delayed by the converter latency.
+            idx = np.arange(first_sample, first_sample + n) - self.converter_delay
+            monitor = self._history.read(idx)
+            for k in range(1, self.adc_channels):
+                out[:, k] = monitor if k - 1 == 0 else 0.0
+        return out
+
+
+class InPlaceWorld:
+    """Adapter to the simulated audio interface's world contract:
+    ``world(output_block, sample_index, input_block)`` fills ``input_block`` in place."""
+
+    def __init__(self, world: AcousticWorld) -> None:
+        self.world = world
+
+    def reset(self) -> None:
+        """Forget state (the audio backend calls this when a stream opens)."""
+        self.world.reset()
+
+    def __call__(
+        self,
+        output_block: npt.NDArray[np.floating],
+        sample_index: int,
+        input_block: npt.NDArray[np.floating],
+        /,
+    ) -> None:
+        adc = self.world(output_block, sample_index)
+        channels = min(adc.shape[1], input_block.shape[1])
+        input_block[:, :channels] = adc[:, :channels]
+        input_block[:, channels:] = 0.0
