@@ -1,0 +1,375 @@
+"""``hil calibrate``: run a calibration, print it, store it as the current one.
+
+Examples::
+
+    hil calibrate latency                      # simulated loopback, stored in ./calibration
+    hil calibrate response --band 4000 16000
+    hil calibrate level --reference-channel 1 --reference-sensitivity -211 --reference-gain 26
+    hil calibrate sound-speed --temperature 18.3
+    hil calibrate sound-speed --method tof --positions=-0.4:-0.05:8
+    hil calibrate stage --device "Scarlett" --stage /dev/ttyUSB0 --temperature 18.3
+
+Without ``--device`` (or with ``--device sim://audio``) every kind runs in a simulated world
+with injected truths, printed first so the user sees what the calibration should find.
+A :class:`~hil.errors.ConfigError` exits with status 2 (via :mod:`hil.cli.main`); a
+measurement that cannot be trusted (open loop, no echo) prints one line and exits with 1.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hil.errors import ConfigError
+from hil.experiments.calibration.device import CalibrationError, PlayRecordDevice, from_duplex
+from hil.experiments.calibration.latency import calibrate_latency
+from hil.experiments.calibration.level import (
+    ReferenceHydrophone,
+    ReferenceSource,
+    calibrate_level,
+)
+from hil.experiments.calibration.positions import PositioningStage
+from hil.experiments.calibration.ranging import EchoRanger
+from hil.experiments.calibration.response import calibrate_response
+from hil.experiments.calibration.simworld import (
+    SimTruth,
+    sim_hydrophones,
+    sim_loopback,
+    sim_tank,
+    sim_transducer,
+)
+from hil.experiments.calibration.sound_speed import (
+    calibrate_sound_speed_temperature,
+    calibrate_sound_speed_tof,
+)
+from hil.experiments.calibration.stage import calibrate_stage
+from hil.experiments.calibration.store import CalibrationStore
+
+EXIT_MEASUREMENT_FAILED = 1
+SIM_DEVICE = "sim://audio"
+
+# Internal field names -> the options that set them (hil.cli.main names them in errors).
+OPTION_NAMES = {
+    "repeats": "--repeats",
+    "max_latency_frames": "--max-latency",
+    "band_hz": "--band",
+    "duration_s": "--duration",
+    "amplitude": "--amplitude",
+    "equaliser_taps": "--taps",
+    "frequency_hz": "--frequency",
+    "adc_full_scale_v": "--adc-full-scale",
+    "distance_m": "--distance",
+    "temperature_c": "--temperature",
+    "salinity_ppt": "--salinity",
+    "temperature_uncertainty_c": "--temperature-uncertainty",
+    "positions_m": "--positions",
+    "overtravel_m": "--overtravel",
+    "speed_mps": "--speed",
+    "sound_speed_mps": "--sound-speed",
+    "gate_s": "--gate-ms",
+    "averages": "--pings",
+}
+
+
+def parse_positions(text: str) -> list[float]:
+    """``"a:b:n"`` (n evenly spaced from a to b) or ``"x1,x2,..."``, metres.
+
+    >>> [round(x, 6) for x in parse_positions("-0.4:-0.1:4")]
+    [-0.4, -0.3, -0.2, -0.1]
+    >>> parse_positions("-0.3,-0.2")
+    [-0.3, -0.2]
+    """
+    try:
+        if ":" in text:
+            a, b, n = text.split(":")
+            return [float(v) for v in np.linspace(float(a), float(b), int(n))]
+        return [float(v) for v in text.split(",") if v.strip()]
+    except ValueError as exc:
+        raise ConfigError(
+            "--positions", text, "START:STOP:COUNT or a comma-separated list of metres",
+            "e.g. --positions -0.4:-0.05:8",
+        ) from exc  # fmt: skip
+
+
+def _common(p: argparse.ArgumentParser, audio: bool = True) -> None:
+    p.add_argument(
+        "--store", type=Path, default=Path("calibration"),
+        help="calibration store directory (default ./calibration)",
+    )  # fmt: skip
+    if audio:
+        p.add_argument(
+            "--device", default=None,
+            help=f"audio device name or {SIM_DEVICE} (default: a simulated world)",
+        )  # fmt: skip
+        p.add_argument("--samplerate", type=float, default=None, help="Hz (real device)")
+        p.add_argument("--blocksize", type=int, default=256, help="frames (real device)")
+        p.add_argument("--output-channel", type=int, default=0, help="output channel (0-based)")
+        p.add_argument("--input-channel", type=int, default=0, help="input channel (0-based)")
+        p.add_argument("--max-latency", type=int, default=None, help="samples (default 0.1 s)")
+
+
+def _stage_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--stage", default=None, help="GRBL serial URL (with --device)")
+    p.add_argument(
+        "--positions", type=parse_positions, default=parse_positions("-0.4:-0.05:8"),
+        help="stage positions, --positions=START:STOP:COUNT or =x1,x2,... m (default -0.4:-0.05:8)",
+    )  # fmt: skip
+    p.add_argument("--speed", type=float, default=0.05, help="move speed, m/s (default 0.05)")
+    p.add_argument(
+        "--gate-ms", type=float, nargs=2, default=(1.0, 3.0), metavar=("EARLIEST", "LATEST"),
+        help="two-way time-of-flight gate of the target echo, ms (default 1 3)",
+    )  # fmt: skip
+    p.add_argument("--pings", type=int, default=4, help="pings averaged per position")
+    p.add_argument(
+        "--latency", type=int, default=None,
+        help="loop latency to subtract, samples (default: the stored latency calibration)",
+    )  # fmt: skip
+
+
+def register(sub: Any) -> None:
+    """Add the ``calibrate`` sub-command and its kinds."""
+    parser: argparse.ArgumentParser = sub.add_parser(
+        "calibrate",
+        help="calibrate latency, response, level, sound speed or the stage",
+        description="Run one calibration (in simulation when no device is given), print it "
+        "and store it as the current calibration of its kind.",
+    )
+    kinds = parser.add_subparsers(dest="kind", metavar="KIND")
+    kinds.required = True
+
+    p = kinds.add_parser("latency", help="loopback latency, sample-exact, repeated")
+    _common(p)
+    p.add_argument("--repeats", type=int, default=5, help="number of runs (default 5)")
+    p.set_defaults(func=run, kind_func=_latency)
+
+    p = kinds.add_parser("response", help="frequency response (sweep) and equaliser")
+    _common(p)
+    p.add_argument("--band", type=float, nargs=2, metavar=("LOW", "HIGH"), help="Hz")
+    p.add_argument("--duration", type=float, default=1.0, help="sweep length, s")
+    p.add_argument("--amplitude", type=float, default=0.5, help="sweep amplitude, FS")
+    p.add_argument("--taps", type=int, default=1024, help="equaliser length")
+    p.add_argument("--regularisation", type=float, default=-40.0, help="dB re peak |H|^2")
+    p.set_defaults(func=run, kind_func=_response)
+
+    p = kinds.add_parser("level", help="gain (FS/FS) and hydrophone sensitivity")
+    _common(p)
+    p.add_argument("--frequency", type=float, default=1000.0, help="tone, Hz")
+    p.add_argument("--amplitude", type=float, default=0.25, help="tone amplitude, FS")
+    p.add_argument("--adc-full-scale", type=float, default=None, help="V at ADC full scale")
+    p.add_argument("--input-gain", type=float, default=None, help="measured input's gain, dB")
+    p.add_argument("--reference-channel", type=int, help="input of a reference hydrophone")
+    p.add_argument("--reference-sensitivity", type=float, help="its dB re 1 V/µPa")
+    p.add_argument("--reference-gain", type=float, default=0.0, help="its input gain, dB")
+    p.add_argument("--source-level", type=float, help="dB re 1 µPa @ 1 m at full scale")
+    p.add_argument("--distance", type=float, help="projector to hydrophone, m")
+    p.set_defaults(func=run, kind_func=_level)
+
+    p = kinds.add_parser("sound-speed", help="c from temperature or time of flight")
+    _common(p, audio=False)
+    p.add_argument("--device", default=None, help=f"audio device or {SIM_DEVICE} (tof)")
+    p.add_argument("--method", choices=("temperature", "tof"), default=None,
+                   help="default: temperature if --temperature is given, else tof")  # fmt: skip
+    p.add_argument("--temperature", type=float, help="water temperature, °C")
+    p.add_argument("--salinity", type=float, help="ppt (Mackenzie); omit for fresh water")
+    p.add_argument("--temperature-uncertainty", type=float, default=0.1, help="°C")
+    _stage_options(p)
+    p.set_defaults(func=run, kind_func=_sound_speed)
+
+    p = kinds.add_parser("stage", help="stage scale and backlash by echo ranging")
+    _common(p, audio=False)
+    p.add_argument("--device", default=None, help=f"audio device or {SIM_DEVICE}")
+    p.add_argument("--sound-speed", type=float, help="c, m/s (default: --temperature or store)")
+    p.add_argument("--temperature", type=float, help="water temperature, °C")
+    p.add_argument("--overtravel", type=float, default=0.005, help="m (default 0.005)")
+    _stage_options(p)
+    p.set_defaults(func=run, kind_func=_stage)
+
+
+def _simulated(args: argparse.Namespace) -> bool:
+    return args.device in (None, SIM_DEVICE)
+
+
+def _audio_device(args: argparse.Namespace, channels_in: int = 1) -> PlayRecordDevice:
+    """The real audio interface named by ``--device``."""
+    from hil.devices.audio import AudioSettings, SoundDeviceDuplex
+
+    settings = AudioSettings(
+        samplerate=args.samplerate or 48000.0, channels_in=channels_in,
+        blocksize=args.blocksize, device=args.device,
+    )  # fmt: skip
+    return from_duplex(SoundDeviceDuplex(settings), name=str(args.device))
+
+
+def _channel_kwargs(args: argparse.Namespace) -> dict[str, Any]:
+    kw = {"output_channel": args.output_channel, "input_channel": args.input_channel}
+    if args.max_latency is not None:
+        kw["max_latency_frames"] = args.max_latency
+    return kw
+
+
+def _latency(args: argparse.Namespace, truth: SimTruth) -> tuple[Any, dict[str, Any], list[str]]:
+    device, lines = sim_loopback(truth) if _simulated(args) else (_audio_device(args), [])
+    result = calibrate_latency(device, repeats=args.repeats, **_channel_kwargs(args))
+    return result, {"device": device.name, "repeats": args.repeats}, lines
+
+
+def _response(args: argparse.Namespace, truth: SimTruth) -> tuple[Any, dict[str, Any], list[str]]:
+    device, lines = sim_transducer(truth) if _simulated(args) else (_audio_device(args), [])
+    band = None if args.band is None else (args.band[0], args.band[1])
+    result = calibrate_response(
+        device, band_hz=band, duration_s=args.duration, amplitude=args.amplitude,
+        equaliser_taps=args.taps, regularisation_db=args.regularisation,
+        **_channel_kwargs(args),
+    )  # fmt: skip
+    settings = {"device": device.name, "band_hz": band, "duration_s": args.duration}
+    return result, settings, lines
+
+
+def _level(args: argparse.Namespace, truth: SimTruth) -> tuple[Any, dict[str, Any], list[str]]:
+    reference: ReferenceHydrophone | ReferenceSource | None = None
+    if args.reference_sensitivity is not None or args.reference_channel is not None:
+        if args.reference_sensitivity is None or args.reference_channel is None:
+            raise ConfigError(
+                "--reference-channel/--reference-sensitivity", None, "both given together",
+                "name the reference hydrophone's input and its sensitivity (dB re 1 V/µPa)",
+            )  # fmt: skip
+        reference = ReferenceHydrophone(
+            args.reference_channel, args.reference_sensitivity, args.reference_gain
+        )
+    if args.source_level is not None or args.distance is not None:
+        if reference is not None or args.source_level is None or args.distance is None:
+            raise ConfigError(
+                "--source-level/--distance", None,
+                "both given together, and not with a reference hydrophone",
+                "use one reference: a hydrophone or a source of known level",
+            )  # fmt: skip
+        reference = ReferenceSource(args.source_level, args.distance)
+    sim = _simulated(args)
+    channels_in = 2 if isinstance(reference, ReferenceHydrophone) else 1
+    device, lines = sim_hydrophones(truth) if sim else (_audio_device(args, channels_in), [])
+    full_scale = args.adc_full_scale or (truth.adc_full_scale_v if sim else 1.0)
+    gain = args.input_gain if args.input_gain is not None else (truth.input_gain_db if sim else 0)
+    result = calibrate_level(
+        device, frequency_hz=args.frequency, amplitude=args.amplitude,
+        adc_full_scale_v=full_scale, input_gain_db=gain, reference=reference,
+        **_channel_kwargs(args),
+    )  # fmt: skip
+    settings = {"device": device.name, "frequency_hz": args.frequency, "amplitude": args.amplitude}
+    return result, settings, lines
+
+
+@contextlib.contextmanager
+def _tank(
+    args: argparse.Namespace, truth: SimTruth, store: CalibrationStore
+) -> Iterator[tuple[PositioningStage, EchoRanger, list[str], int]]:
+    """Stage and echo ranger: simulated, or the real audio device and GRBL stage."""
+    gate = (args.gate_ms[0] * 1e-3, args.gate_ms[1] * 1e-3)
+    if _simulated(args):
+        with sim_tank(truth) as (stage, tank, lines):
+            latency = truth.tank_latency_samples if args.latency is None else args.latency
+            ranger = EchoRanger(tank.device(), gate, latency_samples=latency, averages=args.pings)
+            yield stage, ranger, lines, latency
+        return
+    if args.stage is None:
+        raise ConfigError("--stage", None, "a GRBL serial URL when --device is given")
+    from hil.devices.grbl import GrblStage
+
+    latency = args.latency
+    if latency is None:
+        record = store.current("latency")
+        latency = 0 if record is None else record.result.latency_samples
+    device = _audio_device(args)
+    with GrblStage(args.stage) as grbl:
+        yield (
+            grbl,
+            EchoRanger(device, gate, latency_samples=latency, averages=args.pings),
+            [],
+            latency,
+        )
+
+
+def _sound_speed(
+    args: argparse.Namespace, truth: SimTruth, store: CalibrationStore
+) -> tuple[Any, dict[str, Any], list[str]]:
+    method = args.method or ("temperature" if args.temperature is not None else "tof")
+    if method == "temperature":
+        if args.temperature is None:
+            raise ConfigError("--temperature", None, "a water temperature in °C")
+        result = calibrate_sound_speed_temperature(
+            args.temperature, salinity_ppt=args.salinity,
+            temperature_uncertainty_c=args.temperature_uncertainty,
+        )  # fmt: skip
+        settings = {"method": method, "temperature_c": args.temperature, "salinity": args.salinity}
+        return result, settings, []
+    temperature = args.temperature
+    if temperature is None and _simulated(args):
+        temperature = truth.temperature_c  # the simulated tank's thermometer log
+    with _tank(args, truth, store) as (stage, ranger, lines, latency):
+        result = calibrate_sound_speed_tof(
+            stage, ranger, args.positions, speed_mps=args.speed,
+            temperature_c=temperature, salinity_ppt=args.salinity,
+        )  # fmt: skip
+    settings = {"method": method, "positions_m": args.positions, "latency_samples": latency}
+    return result, settings, lines
+
+
+def _stage(
+    args: argparse.Namespace, truth: SimTruth, store: CalibrationStore
+) -> tuple[Any, dict[str, Any], list[str]]:
+    c = args.sound_speed
+    source = "--sound-speed"
+    if c is None and args.temperature is not None:
+        c = calibrate_sound_speed_temperature(args.temperature).sound_speed_mps
+        source = f"--temperature {args.temperature:g} °C"
+    if c is None:
+        # A time-of-flight c already absorbed the stage scale (it measures c / scale): only a
+        # temperature-based c is independent of the stage.
+        record = store.current("sound-speed")
+        if record is not None and record.result.method == "temperature":
+            c, source = record.result.sound_speed_mps, f"stored {record.id}"
+    if c is None and _simulated(args):
+        c, source = truth.sound_speed_mps, f"simulated thermometer {truth.temperature_c:g} °C"
+    if c is None:
+        raise ConfigError(
+            "--sound-speed", None, "a sound speed (or --temperature, or a stored calibration)",
+            f"run: hil calibrate sound-speed --store {store.root}",
+        )  # fmt: skip
+    with _tank(args, truth, store) as (stage, ranger, lines, latency):
+        settings = {"positions_m": args.positions, "latency_samples": latency}
+        result = calibrate_stage(
+            stage, ranger, args.positions, sound_speed_mps=c,
+            overtravel_m=args.overtravel, speed_mps=args.speed,
+        )  # fmt: skip
+    settings["sound_speed_from"] = source
+    return result, settings, [*lines, f"sound speed used: {c:.3f} m/s ({source})"]
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the chosen calibration, print it and store it."""
+    truth = SimTruth()
+    store = CalibrationStore(args.store)
+    kind: str = args.kind
+    try:
+        if kind in ("sound-speed", "stage"):
+            result, settings, lines = args.kind_func(args, truth, store)
+        else:
+            result, settings, lines = args.kind_func(args, truth)
+    except CalibrationError as exc:
+        print(f"hil calibrate {kind}: measurement refused: {exc}", flush=True)
+        return EXIT_MEASUREMENT_FAILED
+    simulated = bool(lines)
+    settings = {**settings, "simulated": simulated}
+    if simulated:
+        settings["truth"] = dict(truth.__dict__)
+        for line in lines:
+            print(f"[truth] {line}")
+    for line in result.summary():
+        print(line)
+    record = store.save(kind, result, settings)
+    print(f"stored: {record.path} (id {record.id}, now current for {kind!r})")
+    return 0

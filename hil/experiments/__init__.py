@@ -1,0 +1,1 @@
+"""Experiments run on the testbench: calibration routines (and, later, towed runs)."""

@@ -1,0 +1,1 @@
+"""Calibration routines (latency, response, level, sound speed, stage) and their store."""
