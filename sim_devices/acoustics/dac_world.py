@@ -26,7 +26,7 @@ records next to the hydrophone for latency and level calibration.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -82,6 +82,10 @@ class AcousticWorld:
         Number of ADC channels to produce (hydrophone + DAC monitors).
     max_block_samples:
         Longest block the device hands over (sizes the transmit history), samples.
+
+    ``extra_pressure``, when set, is called as ``extra_pressure(first_sample, n)`` for more
+    pressure (µPa) at the hydrophone, e.g. reverberation and noise from a target-free
+    :class:`~sim_devices.acoustics.channel.Channel`.
     """
 
     def __init__(
@@ -129,7 +133,9 @@ class AcousticWorld:
             raise ConfigError("max_block_samples", max_block_samples, "an integer >= 1")
         self._block_capacity = int(max_block_samples)
         self._history = TransmitHistory(self.fs_hz, self._capacity(self._block_capacity))
-        self._expected_first = 0
+        self.extra_pressure: Callable[[int, int], FloatArray] | None = None
+        self._expected_first: int | None = None
+        self._origin = 0
         amp = source_amplitude(source_level_db)
         axis = np.array([1.0, 0.0, 0.0])
         self._echoes: list[SampledEcho] = []
@@ -153,11 +159,17 @@ class AcousticWorld:
         )
 
     def reset(self) -> None:
-        """Forget the transmit history (a new stream starts at sample 0)."""
-        self._history = TransmitHistory(self.fs_hz, self._capacity(self._block_capacity))
+        """Forget the transmit history; the next block may start at any sample index."""
+        self._expected_first = None
+
+    def _start(self, first_sample: int) -> None:
+        # The DAC was silent before the first block: history sample 0 is device sample
+        # ``first_sample``, at t = first_sample / fs.
+        self._history = TransmitHistory(
+            self.fs_hz, self._capacity(self._block_capacity), t_start_s=first_sample / self.fs_hz
+        )
         for e in self._echoes:
             e.history = self._history
-        self._expected_first = 0
 
     def __call__(self, dac_block: npt.NDArray[np.floating], first_sample: int, /) -> FloatArray:
         """ADC samples ``first_sample …`` (shape ``(n, adc_channels)``) for the DAC block at
@@ -166,7 +178,10 @@ class AcousticWorld:
         if dac.ndim == 1:
             dac = dac[:, None]
         n = dac.shape[0]
-        if first_sample != self._expected_first:
+        if self._expected_first is None:
+            self._start(first_sample)
+            self._origin = first_sample
+        elif first_sample != self._expected_first:
             raise ConfigError(
                 "first_sample",
                 first_sample,
@@ -189,10 +204,12 @@ class AcousticWorld:
             pressure += e.at_times(t)
         if self.noise is not None:
             pressure += self.noise.generate(n)
+        if self.extra_pressure is not None:
+            pressure += self.extra_pressure(first_sample, n)
         out[:, 0] = self.receiver.to_counts(pressure)
         if self.adc_channels > 1:
             # DAC monitor channels: the drive, delayed by the converter latency.
-            idx = np.arange(first_sample, first_sample + n) - self.converter_delay
+            idx = np.arange(n) + (first_sample - self._origin) - self.converter_delay
             monitor = self._history.read(idx)
             for k in range(1, self.adc_channels):
                 out[:, k] = monitor if k - 1 == 0 else 0.0
