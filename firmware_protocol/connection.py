@@ -147,6 +147,17 @@ class Connection:
         self.refusal: str | None = None
         self.peer_max_frame_len = MAX_FRAME_LEN
 
+    @property
+    def last_received_seq(self) -> int | None:
+        """Sequence number of the last intact frame received (None before the first).
+
+        A device quotes it as ``ref_seq`` when it answers the command it just decoded (ACK,
+        NAK), including a NAK for a frame whose content raised RemoteProtocolError.
+        """
+        if self._rx_expected is None:
+            return None
+        return (self._rx_expected - 1) % SEQ_MODULO
+
     # --- sending ---------------------------------------------------------------------------
 
     def make_hello(self) -> Hello:

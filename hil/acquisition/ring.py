@@ -1,0 +1,111 @@
+"""A ring buffer of sample frames addressed by board sample index."""
+
+from __future__ import annotations
+
+import threading
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from hil.errors import ConfigError
+
+
+class SampleRing:
+    """The last ``capacity`` sample frames of a stream, by board sample index.
+
+    ``write(first, block)`` stores ``block`` (n, channels) at indices ``first ..
+    first+n-1``. Indices skipped by a write are filled with zeros and counted in
+    :attr:`missing`; a write that starts before :attr:`end_index` (a repeat) is refused and
+    returns False. ``read(first, n)`` returns a copy, or raises if the span is not held.
+
+    Parameters
+    ----------
+    capacity:
+        Sample frames kept (older ones are overwritten).
+    channels:
+        Channels per frame.
+    dtype:
+        Sample dtype (int16, int32 or float32 as unpacked from the wire).
+
+    Examples
+    --------
+    >>> ring = SampleRing(8, 1, np.int16)
+    >>> ring.write(10, np.array([[1], [2], [3]], dtype=np.int16))
+    True
+    >>> ring.write(15, np.array([[6]], dtype=np.int16)), ring.missing
+    (True, 2)
+    >>> ring.read(10, 6)[:, 0].tolist(), ring.start_index, ring.end_index
+    ([1, 2, 3, 0, 0, 6], 10, 16)
+    """
+
+    def __init__(self, capacity: int, channels: int, dtype: npt.DTypeLike = np.int16) -> None:
+        if isinstance(capacity, bool) or not isinstance(capacity, int) or capacity < 1:
+            raise ConfigError("capacity", capacity, "an integer >= 1 (sample frames)")
+        if isinstance(channels, bool) or not isinstance(channels, int) or channels < 1:
+            raise ConfigError("channels", channels, "an integer >= 1")
+        self.capacity = capacity
+        self.channels = channels
+        self._data = np.zeros((capacity, channels), dtype=dtype)
+        self._lock = threading.Lock()
+        self._cond = threading.Condition(self._lock)
+        self.start_index: int | None = None
+        """Index of the oldest frame held (None before the first write)."""
+        self.end_index: int | None = None
+        """Index after the newest frame held."""
+        self.written = 0
+        """Sample frames stored (each index at most once)."""
+        self.missing = 0
+        """Sample frames skipped (zero-filled)."""
+
+    def write(self, first: int, block: npt.NDArray[Any]) -> bool:
+        """Store ``block`` from index ``first``; False (nothing stored) if it repeats data."""
+        n = block.shape[0]
+        with self._cond:
+            end = self.end_index
+            if end is not None and first < end:
+                return False
+            if end is None:
+                self.start_index = first
+                end = first
+            if first > end:
+                self._put(end, np.zeros((first - end, self.channels), self._data.dtype))
+                self.missing += first - end
+            self._put(first, block)
+            self.end_index = first + n
+            self.written += n
+            assert self.start_index is not None
+            self.start_index = max(self.start_index, self.end_index - self.capacity)
+            self._cond.notify_all()
+        return True
+
+    def _put(self, first: int, block: npt.NDArray[Any]) -> None:
+        n = block.shape[0]
+        if n > self.capacity:
+            block, first, n = block[-self.capacity :], first + n - self.capacity, self.capacity
+        pos = first % self.capacity
+        head = min(n, self.capacity - pos)
+        self._data[pos : pos + head] = block[:head]
+        self._data[: n - head] = block[head:]
+
+    def read(self, first: int, n: int) -> npt.NDArray[Any]:
+        """A copy of frames ``first .. first+n-1`` (n, channels); raises if not all held."""
+        with self._lock:
+            if self.start_index is None or self.end_index is None:
+                raise ConfigError("first", first, "an index held by the ring", "nothing written")
+            if first < self.start_index or first + n > self.end_index or n < 0:
+                raise ConfigError(
+                    "first .. first+n",
+                    f"{first} .. {first + n}",
+                    f"within {self.start_index} .. {self.end_index} (held samples)",
+                    "read more often or enlarge the ring",
+                )
+            pos = np.arange(first, first + n) % self.capacity
+            return self._data[pos].copy()
+
+    def wait_for(self, index: int, timeout_s: float) -> bool:
+        """Block until ``end_index >= index`` (True) or ``timeout_s`` real seconds pass."""
+        with self._cond:
+            return self._cond.wait_for(
+                lambda: self.end_index is not None and self.end_index >= index, timeout_s
+            )

@@ -1,0 +1,68 @@
+"""``hil sim-serve board|stage``: expose a simulated device on a pty for other programs.
+
+Prints the pty path on the first line of stdout (open it like a serial port), then serves in
+real time until Ctrl-C (or SIGTERM). The board is a loopback cable (``--delay`` samples,
+``--gain``); the stage is the simulated GRBL 1.1 controller.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import threading
+from typing import Any
+
+from hil.errors import ConfigError
+
+
+def register(subparsers: Any) -> None:
+    """Add the ``sim-serve`` sub-command."""
+    parser = subparsers.add_parser(
+        "sim-serve",
+        help="serve a simulated board or stage on a pty",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("device", choices=("board", "stage"), help="what to simulate")
+    parser.add_argument(
+        "--delay", type=int, default=0, help="board loopback delay, samples (default 0)"
+    )
+    parser.add_argument(
+        "--gain", type=float, default=1.0, help="board loopback gain, linear (default 1)"
+    )
+    parser.set_defaults(func=run)
+
+
+def _serve(port_name: str, stop: threading.Event) -> None:
+    print(port_name, flush=True)
+    main_thread = threading.current_thread() is threading.main_thread()
+    # Signal handlers can only be installed from the main thread (tests serve from others).
+    previous = signal.signal(signal.SIGTERM, lambda *_: stop.set()) if main_thread else None
+    try:
+        while not stop.wait(0.2):
+            pass
+    except KeyboardInterrupt:
+        pass
+    finally:
+        if main_thread:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
+    """Serve until Ctrl-C / SIGTERM (or ``stop`` is set, for tests); exit status 0."""
+    stop = stop or threading.Event()
+    if args.device == "board":
+        from sim_devices.board import LoopbackWorld, SimulatedBoardOnPty
+
+        if args.delay < 0:
+            raise ConfigError("--delay", args.delay, ">= 0 samples")
+        with SimulatedBoardOnPty(world=LoopbackWorld(args.delay, args.gain)) as board:
+            _serve(board.port_name, stop)
+    else:
+        from sim_devices.stage import SimulatedGrblOnPty
+
+        with SimulatedGrblOnPty() as stage:
+            _serve(stage.port_name, stop)
+    print(f"hil sim-serve {args.device}: stopped", file=sys.stderr)
+    return 0

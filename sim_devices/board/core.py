@@ -1,0 +1,442 @@
+"""The simulated board firmware: the DEVICE role of the real protocol on a sample clock.
+
+:class:`SimulatedBoard` is a sans-IO device (the contract of
+:class:`sim_devices.pty_endpoint.PtyEndpoint`: ``receive_data``, ``data_to_send``, ``tick``,
+``connection_made``, ``connection_lost``). It runs ``Connection(Role.DEVICE)`` of
+:mod:`firmware_protocol`, so every byte it sends is what real firmware must send.
+
+Sample clock: ``index = base_index + floor((now - base_time) * rate)``, with ``now`` from the
+injected clock (s). The clock runs from power-up and never goes back: a CONFIGURE with a new
+rate re-bases it at the current index, a new session (host reconnect) keeps it.
+
+While STREAMING, each :meth:`tick` plays the DAC FIFO over the samples elapsed since the last
+tick, passes the DAC output through the *world* (:mod:`.worlds`) and sends what the ADC
+captured as ADC_DATA frames, every index exactly once, in blocks of at most
+:attr:`adc_frame_samples`. Credit is granted as the DAC FIFO frees space; SYNC and STATUS go
+out periodically; the watchdog stops the stream when host frames stop after a KEEPALIVE.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from firmware_protocol import (
+    MAX_FRAME_LEN,
+    NEED_DATA,
+    Ack,
+    AdcData,
+    Alarm,
+    Configure,
+    Connection,
+    ConnectionClosed,
+    Credit,
+    DacData,
+    Hello,
+    Keepalive,
+    LocalProtocolError,
+    Message,
+    Nak,
+    NakCode,
+    RemoteProtocolError,
+    Role,
+    SampleFormat,
+    Start,
+    State,
+    Status,
+    Stop,
+    Sync,
+    UnknownMessage,
+    channel_count,
+)
+from sim_devices.board.dac_fifo import DacFifo
+from sim_devices.board.faults import FaultPlan
+from sim_devices.board.scaling import from_full_scale, to_full_scale
+from sim_devices.board.spec import BoardSpec
+from sim_devices.board.worlds import LoopbackWorld, World
+
+_FRAME_OVERHEAD = 12 + 14  # header + CRC, then the fixed part of ADC_DATA (bytes)
+_CREDIT_STATES = (
+    State.CONFIGURED,
+    State.STARTING,
+    State.STREAMING,
+    State.STOPPED,
+    State.STOPPING,
+)
+_SESSION_STATES = (*_CREDIT_STATES, State.READY, State.CONFIGURING)
+
+
+@dataclass(frozen=True)
+class BoardSnapshot:
+    """What the simulated board is doing (for tests and the CLI)."""
+
+    state: State
+    sample_index: int
+    """Board sample clock now (samples)."""
+    produced_index: int | None
+    """Next ADC index to capture while streaming, else None (samples)."""
+    dac_buffer_level: int
+    dac_underruns: int
+    adc_overruns: int
+    watchdog_armed: bool
+    host_frames: int
+    dac_samples_received: int
+    adc_samples_sent: int
+
+
+class SimulatedBoard:
+    """Simulated DAC/ADC board firmware (sans-IO; see the module docstring).
+
+    Parameters
+    ----------
+    spec:
+        Channels, formats, rates, buffers and identity (default :class:`BoardSpec`).
+    clock:
+        ``now()`` in seconds: :func:`time.monotonic` for real-time pacing (default) or an
+        injected clock (:class:`sim_devices.stage.clock.ManualClock`) that tests advance.
+    world:
+        What the ADC captures from the DAC output (default: a zero-delay loopback cable).
+    faults:
+        Fault plan to draw injected faults from (default: none pending).
+    """
+
+    _next_sync: float
+    _next_status: float
+
+    def __init__(
+        self,
+        spec: BoardSpec | None = None,
+        *,
+        clock: Callable[[], float] | None = None,
+        world: World | None = None,
+        faults: FaultPlan | None = None,
+    ) -> None:
+        self.spec = spec or BoardSpec()
+        self.clock = clock or time.monotonic
+        self.world: World = world if world is not None else LoopbackWorld()
+        self.faults = faults or FaultPlan()
+        self.dac_underruns = 0
+        self.adc_overruns = 0
+        self.dac_samples_received = 0
+        self.adc_samples_sent = 0
+        self.host_frames = 0
+        self.sessions = 0
+        self._rate = self.spec.sample_rates_hz[0]
+        self._base_index = 0
+        self._base_time = self.clock()
+        self._out = bytearray()
+        self._new_session()
+
+    # --- sans-IO device contract ---------------------------------------------------------
+    def receive_data(self, data: bytes) -> None:
+        """Bytes from the host, any chunking."""
+        if self.faults.unplugged or not data:
+            return
+        self.conn.receive_data(data)
+        self._drain()
+
+    def data_to_send(self) -> bytes:
+        """Bytes for the host produced since the last call."""
+        out = bytes(self._out)
+        self._out.clear()
+        return b"" if self.faults.unplugged else out
+
+    def tick(self) -> None:
+        """Bring the board up to its clock's present: capture, watchdog, sync, status, credit."""
+        if self.faults.unplugged or self.conn.state not in _SESSION_STATES:
+            return
+        now = self.clock()
+        self._check_watchdog(now)
+        if self._capturing:
+            self._capture_until(self.sample_index(now))
+        if now >= self._next_sync:
+            self._send(Sync(self.sample_index(now), max(0, int(now * 1e9))))
+            self._next_sync = now + self.spec.sync_interval_s
+        if now >= self._next_status:
+            self._send_status(now, Alarm.NONE)
+            self._next_status = now + self.spec.status_interval_s
+        self._grant_credit()
+
+    def connection_made(self) -> None:
+        """A host opened the link: start a fresh session (the sample clock keeps running)."""
+        self._new_session()
+
+    def connection_lost(self) -> None:
+        """The host went away: stop output and forget the session."""
+        self._new_session()
+
+    # --- inspection ----------------------------------------------------------------------
+    def sample_index(self, now: float | None = None) -> int:
+        """The board sample clock at ``now`` (default: the clock's present), samples."""
+        t = self.clock() if now is None else now
+        return self._base_index + math.floor((t - self._base_time) * self._rate)
+
+    @property
+    def adc_frame_samples(self) -> int:
+        """Most sample frames per ADC_DATA frame in the current configuration."""
+        config = self.conn.configuration
+        if config is None:
+            return 1
+        size = channel_count(config.adc_channel_mask) * SampleFormat(config.adc_format).size
+        return (MAX_FRAME_LEN - _FRAME_OVERHEAD) // size
+
+    def snapshot(self) -> BoardSnapshot:
+        """The board's state now."""
+        return BoardSnapshot(
+            state=self.conn.state,
+            sample_index=self.sample_index(),
+            produced_index=self._produced if self._capturing else None,
+            dac_buffer_level=self._fifo.level if self._fifo else 0,
+            dac_underruns=self.dac_underruns,
+            adc_overruns=self.adc_overruns,
+            watchdog_armed=self._watchdog_s is not None,
+            host_frames=self.host_frames,
+            dac_samples_received=self.dac_samples_received,
+            adc_samples_sent=self.adc_samples_sent,
+        )
+
+    # --- session -------------------------------------------------------------------------
+    def _new_session(self) -> None:
+        spec = self.spec
+        self.conn = Connection(
+            Role.DEVICE,
+            protocol_version=spec.protocol_version,
+            schema_hash=spec.schema_hash,
+            max_frame_len=spec.max_frame_len,
+        )
+        self.sessions += 1
+        self._out.clear()
+        self._fifo: DacFifo | None = None
+        self._produced = 0
+        self._capturing = False
+        self._in_underrun = False
+        self._overrun_left = 0
+        self._overrun_alarm = False
+        self._watchdog_s: float | None = None
+        self._last_host = self.clock()
+        self._next_sync = math.inf
+        self._next_status = math.inf
+        self._dac_gain = 1.0
+        self._adc_gain = 1.0
+
+    def _send(self, message: Message) -> None:
+        wire = self.conn.send(message)
+        if isinstance(message, AdcData) and self.faults.frame_fault_pending:
+            wire = self.faults.damage(wire)
+        self._out += wire
+
+    def _drain(self) -> None:
+        while True:
+            try:
+                event = self.conn.next_event()
+            except RemoteProtocolError as error:
+                self._refuse(error)
+                continue
+            if event is NEED_DATA or isinstance(event, ConnectionClosed):
+                return
+            if isinstance(event, Message):
+                self.host_frames += 1
+                self._last_host = self.clock()
+                self._handle(event)
+            elif isinstance(event, UnknownMessage) and not event.optional:
+                self._send(event.nak())
+            # FrameError / SequenceGap: counted in conn.stats; a board just goes on.
+
+    def _refuse(self, error: RemoteProtocolError) -> None:
+        """Answer an intact but illegal host frame with NAK (never fatal for the board)."""
+        seq = self.conn.last_received_seq or 0
+        credit = "credit" in str(error)
+        code = NakCode.CREDIT_EXCEEDED if credit else NakCode.BAD_STATE
+        ref_type = DacData.TYPE_ID if credit else 0
+        # Outside a session (e.g. before HELLO) there is nobody to answer: stay silent.
+        with contextlib.suppress(LocalProtocolError):
+            self._send(Nak(seq, ref_type, code, str(error)[:255]))
+
+    def _handle(self, message: Message) -> None:
+        if isinstance(message, Hello):
+            self._send(self.conn.make_version(self.spec.firmware, self.spec.board_serial))
+            if self.conn.refusal is None:
+                self._send(self.spec.capabilities())
+                now = self.clock()
+                self._next_sync = now
+                self._next_status = now
+        elif isinstance(message, Configure):
+            self._configure(message)
+        elif isinstance(message, Start):
+            self._start(message)
+        elif isinstance(message, Stop):
+            if self._capturing:
+                self._capture_until(self.sample_index())
+            self._send(Ack(self.conn.last_received_seq or 0, Stop.TYPE_ID))
+            self._stop_output()
+        elif isinstance(message, Keepalive):
+            self._watchdog_s = message.watchdog_timeout_ms / 1000.0
+        elif isinstance(message, DacData):
+            self._queue_dac(message)
+
+    def _configure(self, config: Configure) -> None:
+        spec = self.spec
+        seq = self.conn.last_received_seq or 0
+        problem: tuple[NakCode, str] | None = None
+        if config.sample_rate_hz not in spec.sample_rates_hz:
+            problem = (NakCode.UNSUPPORTED_RATE, f"rates: {list(spec.sample_rates_hz)} Hz")
+        elif config.dac_channel_mask >> spec.dac_channels or config.adc_channel_mask >> (
+            spec.adc_channels
+        ):
+            problem = (
+                NakCode.UNSUPPORTED_CHANNELS,
+                f"{spec.dac_channels} DAC and {spec.adc_channels} ADC channels",
+            )
+        elif config.dac_format not in spec.formats or config.adc_format not in spec.formats:
+            problem = (
+                NakCode.UNSUPPORTED_FORMAT,
+                "formats: " + ", ".join(f.name for f in spec.formats),
+            )
+        elif not all(
+            spec.gain_min_cdb <= g <= spec.gain_max_cdb
+            for g in (config.dac_gain_cdb, config.adc_gain_cdb)
+        ):
+            problem = (
+                NakCode.GAIN_OUT_OF_RANGE,
+                f"{spec.gain_min_cdb} .. {spec.gain_max_cdb} cdB",
+            )
+        self._stop_output()
+        if problem:
+            self._send(Nak(seq, Configure.TYPE_ID, *problem))
+            return
+        now = self.clock()
+        self._base_index = self.sample_index(now)
+        self._base_time = now
+        self._rate = config.sample_rate_hz
+        self._dac_gain = 10.0 ** (config.dac_gain_cdb / 2000.0)
+        self._adc_gain = 10.0 ** (config.adc_gain_cdb / 2000.0)
+        self._send(Ack(seq, Configure.TYPE_ID))
+        self._fifo = DacFifo(channel_count(config.dac_channel_mask))
+        self._send(Sync(self.sample_index(now), max(0, int(now * 1e9))))
+        self._next_sync = now + self.spec.sync_interval_s
+        self._grant_credit()
+
+    def _start(self, start: Start) -> None:
+        seq = self.conn.last_received_seq or 0
+        now_index = self.sample_index()
+        if start.start_sample_index < now_index:
+            detail = f"clock is at {now_index}; start at a later index"
+            self._send(Nak(seq, Start.TYPE_ID, NakCode.START_INDEX_PASSED, detail))
+            return
+        self._produced = start.start_sample_index
+        self._capturing = True
+        self._in_underrun = False
+        reset = getattr(self.world, "reset", None)
+        if callable(reset):
+            reset()
+        self._send(Ack(seq, Start.TYPE_ID))
+
+    def _stop_output(self) -> None:
+        self._capturing = False
+        if self._fifo is not None:
+            self._fifo.clear()
+
+    def _queue_dac(self, data: DacData) -> None:
+        config = self.conn.configuration
+        if self._fifo is None or config is None:
+            return
+        block = to_full_scale(data.samples(), SampleFormat(config.dac_format))
+        if self._dac_gain != 1.0:
+            block *= self._dac_gain
+        self._fifo.push(data.first_sample_index, block)
+        self.dac_samples_received += block.shape[0]
+
+    def _grant_credit(self) -> None:
+        fifo = self._fifo
+        if fifo is None or self.conn.state not in _CREDIT_STATES:
+            return
+        free = self.spec.dac_buffer_samples - fifo.level - self.conn.dac_credit
+        if free >= max(1, self.spec.dac_buffer_samples // 8):
+            self._send(Credit(free))
+
+    # --- the sample path -----------------------------------------------------------------
+    def _capture_until(self, end: int) -> None:
+        config = self.conn.configuration
+        fifo = self._fifo
+        if config is None or fifo is None:
+            return
+        step = self.adc_frame_samples
+        n_adc = channel_count(config.adc_channel_mask)
+        fmt = SampleFormat(config.adc_format)
+        while self._produced < end:
+            first = self._produced
+            n = min(end - first, step)
+            if self.faults.dac_underrun_samples:
+                fifo.discard(self.faults.dac_underrun_samples)
+                self.faults.dac_underrun_samples = 0
+                self.faults.counters.dac_underruns += 1
+            dac, covered = fifo.play(first, n)
+            underrun = covered < n
+            if underrun and not self._in_underrun:
+                self.dac_underruns += 1
+            self._in_underrun = underrun
+            world_out = np.asarray(self.world(dac, first), dtype=np.float64)
+            adc = np.zeros((n, n_adc))
+            k = min(world_out.shape[1], n_adc)
+            adc[:, :k] = world_out[:, :k]
+            if self._adc_gain != 1.0:
+                adc *= self._adc_gain
+            lost = self._take_overrun(n)
+            self._produced = first + n
+            if lost < n:
+                self._send(
+                    AdcData.from_array(
+                        first + lost, config.adc_channel_mask, fmt, from_full_scale(adc[lost:], fmt)
+                    )
+                )
+                self.adc_samples_sent += n - lost
+
+    def _take_overrun(self, n: int) -> int:
+        if self._overrun_left == 0 and self.faults.adc_overrun_samples:
+            self._overrun_left = self.faults.adc_overrun_samples
+            self.faults.adc_overrun_samples = 0
+            self.faults.counters.adc_overruns += 1
+            self.adc_overruns += 1
+            self._overrun_alarm = True
+        lost = min(n, self._overrun_left)
+        self._overrun_left -= lost
+        return lost
+
+    def _send_status(self, now: float, alarms: Alarm) -> None:
+        if self._in_underrun:
+            alarms |= Alarm.DAC_UNDERRUN
+        if self._overrun_alarm:
+            alarms |= Alarm.ADC_OVERRUN
+            self._overrun_alarm = False
+        self._send(
+            Status(
+                sample_index=self.sample_index(now),
+                dac_buffer_level=self._fifo.level if self._fifo else 0,
+                adc_buffer_level=0,
+                dac_underruns=self.dac_underruns % (1 << 32),
+                adc_overruns=self.adc_overruns % (1 << 32),
+                temperature_cdeg=round(self.spec.temperature_c * 100),
+                alarms=alarms,
+            )
+        )
+
+    def _check_watchdog(self, now: float) -> None:
+        if self._watchdog_s is None:
+            return
+        deadline = self._last_host + self._watchdog_s
+        forced = self.faults.watchdog_now
+        if not forced and now <= deadline:
+            return
+        self.faults.watchdog_now = False
+        self.faults.counters.watchdog_expiries += 1
+        expiry = now if forced else deadline
+        if self._capturing:
+            self._capture_until(self.sample_index(expiry))
+        self._watchdog_s = None
+        self._stop_output()
+        self._send_status(expiry, Alarm.WATCHDOG_EXPIRED)

@@ -1,0 +1,37 @@
+"""Sample formats <-> full-scale floats on the board side (+-1.0 is full scale)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from firmware_protocol import SampleFormat
+
+_FULL_SCALE = {SampleFormat.INT16: 32768.0, SampleFormat.INT24: 8388608.0}
+
+
+def to_full_scale(samples: npt.NDArray[Any], fmt: SampleFormat) -> npt.NDArray[np.float64]:
+    """Wire samples (int16, int32 or float32) as float64 full-scale values.
+
+    >>> to_full_scale(np.array([[16384, -32768]], dtype=np.int16), SampleFormat.INT16).tolist()
+    [[0.5, -1.0]]
+    """
+    if fmt is SampleFormat.FLOAT32:
+        return samples.astype(np.float64)
+    return samples * (1.0 / _FULL_SCALE[fmt])
+
+
+def from_full_scale(values: npt.NDArray[np.floating], fmt: SampleFormat) -> npt.NDArray[Any]:
+    """Full-scale floats as wire samples of ``fmt``, rounded and clipped (ADC clipping).
+
+    >>> from_full_scale(np.array([[0.5, -2.0]]), SampleFormat.INT16).tolist()
+    [[16384, -32768]]
+    """
+    if fmt is SampleFormat.FLOAT32:
+        return values.astype(np.float32)
+    scale = _FULL_SCALE[fmt]
+    counts = np.rint(values * scale)
+    np.clip(counts, -scale, scale - 1, out=counts)
+    return counts.astype(np.int16 if fmt is SampleFormat.INT16 else np.int32)

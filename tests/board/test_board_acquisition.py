@@ -1,0 +1,129 @@
+"""Acquisition pieces: the sample-indexed ring, gap detection, the SYNC clock fit, and the
+settings descriptors and DAC scaling of the driver."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from firmware_protocol import SampleFormat
+from hil.acquisition import AnnotationKind, SampleClockFit, SampleGapDetector, SampleRing
+from hil.devices.board import _DacFeeder
+from hil.devices.board_settings import BoardSettings, Setting, to_wire_samples
+from hil.errors import ConfigError
+
+
+@settings(max_examples=40, deadline=None)
+@given(cuts=st.lists(st.integers(1, 300), min_size=1, max_size=12), capacity=st.integers(50, 900))
+def test_ring_chunks_equal_whole(cuts: list[int], capacity: int) -> None:
+    rng = np.random.default_rng(4)
+    total = sum(cuts)
+    data = rng.integers(-1000, 1000, (total, 2)).astype(np.int16)
+    ring = SampleRing(capacity, 2, np.int16)
+    pos = 500
+    for n in cuts:
+        assert ring.write(pos, data[pos - 500 : pos - 500 + n])
+        pos += n
+    held = min(total, capacity)
+    assert ring.end_index == 500 + total and ring.start_index == 500 + total - held
+    np.testing.assert_array_equal(ring.read(500 + total - held, held), data[total - held :])
+    assert ring.written == total and ring.missing == 0
+
+
+def test_ring_refuses_repeats_and_reads_outside_what_it_holds() -> None:
+    ring = SampleRing(10, 1, np.int16)
+    ring.write(0, np.ones((8, 1), np.int16))
+    assert ring.write(5, np.ones((2, 1), np.int16)) is False and ring.written == 8
+    ring.write(8, np.ones((8, 1), np.int16))
+    with pytest.raises(ConfigError, match=r"first \.\. first\+n = '2 \.\. 6' is not allowed: must"):
+        ring.read(2, 4)
+    with pytest.raises(ConfigError, match="capacity = 0 is not allowed"):
+        SampleRing(0, 1)
+
+
+def test_ring_wait_for_wakes_on_write() -> None:
+    ring = SampleRing(100, 1, np.int16)
+    writer = threading.Timer(0.01, lambda: ring.write(0, np.zeros((50, 1), np.int16)))
+    writer.start()
+    assert ring.wait_for(50, 5.0) and not ring.wait_for(51, 0.01)
+    writer.join()
+
+
+def test_gap_detector_reports_gaps_and_overlaps_once() -> None:
+    det = SampleGapDetector()
+    notes = [det.check(f, n) for f, n in ((0, 10), (10, 10), (25, 5), (28, 4), (32, 1))]
+    kinds = [None if n is None else (n.kind, n.sample_index, n.length) for n in notes]
+    assert kinds == [
+        None,
+        None,
+        (AnnotationKind.GAP, 20, 5),
+        (AnnotationKind.OVERLAP, 28, 2),
+        None,
+    ]
+    assert (det.gap_samples, det.overlap_samples, det.expected) == (5, 2, 33)
+
+
+def test_clock_fit_recovers_rate_and_offset_through_jitter() -> None:
+    rng = np.random.default_rng(8)
+    fit = SampleClockFit(1e6)
+    true_rate, t0 = 1e6 * (1 - 35e-6), 123.0
+    for k in range(200):
+        index = k * 100_000
+        fit.add(index, t0 + index / true_rate + 0.002 + rng.uniform(0, 0.001))
+    assert fit.rate_hz == pytest.approx(true_rate, abs=5.0)  # 5 ppm; the offset is 35 ppm
+    assert fit.host_time(5_000_000) == pytest.approx(t0 + 5_000_000 / true_rate + 0.0025, abs=2e-4)
+    assert abs(fit.sample_index(fit.host_time(7_654_321)) - 7_654_321) <= 1
+    assert np.abs(fit.residuals_s()).max() < 0.001
+
+
+def test_clock_fit_needs_a_pair_first() -> None:
+    with pytest.raises(ConfigError, match="sync pairs = 0 is not allowed: must be >= 1; wait"):
+        SampleClockFit(1e6).host_time(0)
+
+
+def test_setting_descriptor_validates_and_converts() -> None:
+    s = BoardSettings(adc_format="int24", dac_gain_db=-6)
+    assert s.adc_format is SampleFormat.INT24 and s.dac_gain_db == -6.0
+    config = s.to_configure()
+    assert (config.adc_format, config.dac_gain_cdb, config.adc_channel_mask) == (
+        SampleFormat.INT24,
+        -600,
+        0b11,
+    )
+    assert isinstance(BoardSettings.sample_rate_hz, Setting)
+    with pytest.raises(ConfigError, match=r"sample_rate_hz = 1\.5 is not allowed"):
+        BoardSettings(sample_rate_hz=1.5)
+    with pytest.raises(ConfigError, match=r"dac_gain_db = nan is not allowed: must be -120\.0"):
+        BoardSettings(dac_gain_db=float("nan"))
+    with pytest.raises(ConfigError, match="adc_channels = True is not allowed"):
+        BoardSettings(adc_channels=True)
+
+
+def test_dac_feeder_chunks_equal_whole_for_generators_and_callables() -> None:
+    rng = np.random.default_rng(6)
+    signal = rng.uniform(-1, 1, 1000)
+    whole = to_wire_samples(signal, SampleFormat.INT16, 2)
+    blocks = (signal[i : i + 64] for i in range(0, 1000, 64))
+    feeder = _DacFeeder(blocks, SampleFormat.INT16, 2, first=0)
+    out = []
+    for n in (10, 100, 7, 300, 1000):
+        while (block := feeder.take(n)) is not None and block.shape[0]:
+            out.append(block)
+            if sum(b.shape[0] for b in out) >= 1000:
+                break
+    np.testing.assert_array_equal(np.concatenate(out), whole)
+    callable_feeder = _DacFeeder(
+        lambda first, n: signal[first : first + n], SampleFormat.INT16, 2, 0
+    )
+    block = callable_feeder.take(100)
+    assert block is not None
+    np.testing.assert_array_equal(block, whole[:100])
+
+
+def test_dac_block_of_wrong_shape_is_refused() -> None:
+    with pytest.raises(ConfigError, match=r"DAC block shape = \(4, 3\) is not allowed"):
+        to_wire_samples(np.zeros((4, 3)), SampleFormat.INT16, 2)

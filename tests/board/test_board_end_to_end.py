@@ -1,0 +1,249 @@
+"""The Board driver against the simulated board firmware: over a real pty, in memory and
+through the pyusb backend object, at the tank-board rate (1 MS/s, 2 channels, int16), on an
+injected clock that the test advances (no wall-clock pacing, no timed assertions)."""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+
+from firmware_protocol import SampleFormat, State
+from hil.acquisition import AnnotationKind
+from hil.devices.board import Board, ReconnectPolicy
+from hil.devices.board_settings import to_wire_samples
+from hil.signals.presets import get_preset
+from hil.signals.synthesis import BlockSynthesizer
+from hil.signals.waveforms import build_schedule
+from hil.transports import open_transport
+from sim_devices.board import (
+    BoardPort,
+    FaultPlan,
+    LoopbackWorld,
+    MemoryBoardLink,
+    SimulatedBoard,
+)
+from sim_devices.stage.clock import ManualClock
+
+DELAY = 37  # loopback cable, samples
+RATE_HZ = 1_000_000
+WAIT_S = 20.0  # deadlock guard for one step, real seconds (never reached when things work)
+
+
+def wait_until(done: Callable[[], bool], what: str, timeout_s: float = WAIT_S) -> None:
+    """Poll ``done`` until True; fail the test with ``what`` after ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while not done():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out waiting for {what}")
+        time.sleep(0.0005)
+
+
+def stream_for(
+    board: Board,
+    clock: ManualClock,
+    seconds: float,
+    step_s: float = 0.005,
+    dac_level: Callable[[], int] | None = None,
+) -> int:
+    """Advance the shared clock by ``seconds`` in steps, waiting each step until the host
+    holds every ADC sample the board clock has reached (and, with ``dac_level``, until the
+    board's DAC FIFO holds at least two steps). Returns the board index reached."""
+    steps = round(seconds / step_s)
+    index = 0
+    for _ in range(steps):
+        if dac_level is not None:
+            need = 2 * round(step_s * RATE_HZ)
+            wait_until(lambda f=dac_level, k=need: f() >= k, "the DAC feeder")  # type: ignore[misc]
+        clock.advance(step_s)
+        index = math.floor(clock.now() * RATE_HZ)
+        if board.start_index is not None and index > board.start_index:
+            assert board.wait_for_samples(index, WAIT_S), f"ADC samples up to {index}"
+    return index
+
+
+def tank_board_synth() -> BlockSynthesizer:
+    spec = get_preset("tank-board").spec()
+    assert spec.fs_hz == RATE_HZ
+    return BlockSynthesizer(build_schedule(spec), spec.fs_hz, amplitude=0.5)
+
+
+def expected_loopback(first: int, n: int, delay: int = DELAY) -> np.ndarray:
+    """What the ADC must hold at indices first .. first+n-1 for a stream started at
+    ``first`` and fed from the tank-board synthesizer: the DAC samples ``delay`` late."""
+    dac = tank_board_synth().render(0, n - delay)
+    out = np.zeros((n, 2), dtype=np.int16)
+    out[delay:] = to_wire_samples(dac, SampleFormat.INT16, 2)
+    return out
+
+
+def test_pty_stream_at_tank_board_rate_loses_nothing() -> None:
+    clock = ManualClock()
+    transport = open_transport(f"sim://board?via=pty&delay={DELAY}", clock=clock)
+    sim = transport.simulator  # type: ignore[attr-defined]
+    board = Board(transport, clock=clock, keepalive_ms=None)
+    try:
+        board.open()
+        board.configure()
+        first = board.start(tank_board_synth().blocks(4096))
+        level = lambda: sim.call(lambda b: b.snapshot().dac_buffer_level)  # noqa: E731
+        end = stream_for(board, clock, 0.2 + 2.5, dac_level=level)
+        n = end - first
+        assert n >= 2_400_000
+        # Every index from the start present exactly once, nothing missing or repeated.
+        assert board.samples_received == n and board.ring is not None
+        assert board.ring.written == n and board.ring.missing == 0
+        assert board.gaps.gap_samples == board.gaps.overlap_samples == 0
+        assert board.annotations.all() == []
+        stats = board.protocol_stats
+        damage = ("cobs_errors", "crc_errors", "bad_headers", "oversize_frames", "sequence_gaps")
+        assert [stats[k] for k in damage] == [0] * len(damage)
+        np.testing.assert_array_equal(board.read(first, n), expected_loopback(first, n))
+        assert sim.call(lambda b: b.dac_underruns) == 0
+        board.stop()
+        assert board.state is State.STOPPED
+    finally:
+        board.close()
+        transport.close()
+
+
+def _memory_board(
+    clock: ManualClock, faults: FaultPlan | None = None
+) -> tuple[BoardPort, MemoryBoardLink]:
+    world = LoopbackWorld(DELAY)
+    port = BoardPort(SimulatedBoard(clock=clock, world=world, faults=faults), poll_s=0.0002)
+    return port, MemoryBoardLink(port, timeout=0.005)
+
+
+@pytest.mark.parametrize("fault", ["drop_bytes", "flip_bit", "garbage"])
+def test_damaged_frame_is_counted_annotated_and_the_stream_resyncs(fault: str) -> None:
+    clock = ManualClock()
+    faults = FaultPlan(seed=9)
+    port, link = _memory_board(clock, faults)
+    board = Board(link, clock=clock, keepalive_ms=None)
+    with board:
+        board.configure()
+        first = board.start(tank_board_synth().blocks(4096))
+        level = lambda: port.call(lambda b: b.snapshot().dac_buffer_level)  # noqa: E731
+        stream_for(board, clock, 0.25, dac_level=level)
+        getattr(faults, fault)()
+        end = stream_for(board, clock, 0.05, dac_level=level)
+        frame = port.call(lambda b: b.adc_frame_samples)
+        assert board.frame_errors >= 1
+        seq_gaps = board.annotations.of_kind(AnnotationKind.SEQUENCE_GAP)
+        gaps = board.annotations.of_kind(AnnotationKind.GAP)
+        assert len(seq_gaps) == 1 and seq_gaps[0].length == 1  # exactly one frame lost
+        assert len(gaps) == 1 and 0 < gaps[0].length <= frame  # resync within one frame
+        lost = gaps[0]
+        assert board.samples_received == end - first - lost.length
+        # Everything after the lost frame arrived and is the right content.
+        after = lost.sample_index + lost.length
+        np.testing.assert_array_equal(
+            board.read(after, end - after), expected_loopback(first, end - first)[after - first :]
+        )
+
+
+def test_adc_overrun_and_dac_underrun_are_reported_and_annotated() -> None:
+    clock = ManualClock()
+    faults = FaultPlan()
+    port, link = _memory_board(clock, faults)
+    with Board(link, clock=clock, keepalive_ms=None) as board:
+        board.configure()
+        first = board.start(tank_board_synth().blocks(4096))
+        stream_for(board, clock, 0.25)
+        faults.adc_overrun(1234)
+        faults.dac_underrun(3000)
+        level = lambda: port.call(lambda b: b.snapshot().dac_buffer_level)  # noqa: E731
+        end = stream_for(board, clock, 0.6, dac_level=level)
+        gaps = board.annotations.of_kind(AnnotationKind.GAP)
+        assert [g.length for g in gaps] == [1234]
+        assert board.samples_received == end - first - 1234
+        assert len(board.annotations.of_kind(AnnotationKind.ADC_OVERRUN)) == 1
+        assert len(board.annotations.of_kind(AnnotationKind.DAC_UNDERRUN)) == 1
+        assert board.last_status is not None
+        assert (board.last_status.adc_overruns, board.last_status.dac_underruns) == (1, 1)
+        assert board.frame_errors == 0 and board.sequence_gaps == 0
+
+
+def test_disconnect_triggers_reconnect_with_backoff_and_streaming_resumes() -> None:
+    clock = ManualClock()
+    faults = FaultPlan()
+    port, link = _memory_board(clock, faults)
+    attempts: list[float] = []
+
+    def replug_on_third_attempt() -> MemoryBoardLink:
+        attempts.append(clock.now())
+        if len(attempts) == 3:
+            faults.replug()
+        return MemoryBoardLink(port, timeout=0.005)
+
+    board = Board(
+        link,
+        clock=clock,
+        keepalive_ms=None,
+        reconnect=ReconnectPolicy(first_delay_s=0.05, factor=2.0, max_attempts=6),
+        transport_factory=replug_on_third_attempt,
+    )
+    with board:
+        board.configure()
+        first = board.start(tank_board_synth().blocks(4096))
+        stream_for(board, clock, 0.25)
+        t_lost = clock.now()
+        port.call(lambda b: b.faults.disconnect())
+        wait_until(lambda: board.reconnects == 1, "the reconnect")
+        # Backoff: waits of 0.05, 0.1 and 0.2 s of the (injected) clock before the attempts.
+        assert np.allclose(np.diff([t_lost, *attempts]), [0.05, 0.1, 0.2])
+        kinds = [a.kind for a in board.annotations.all()]
+        assert kinds[:2] == [AnnotationKind.DISCONNECT, AnnotationKind.RECONNECT], (
+            board.annotations.all()
+        )
+        resumed = board.start_index
+        assert resumed is not None and resumed > first
+        end = stream_for(board, clock, 0.3)
+        gaps = board.annotations.of_kind(AnnotationKind.GAP)
+        assert len(gaps) == 1 and gaps[0].sample_index + gaps[0].length == resumed
+        assert board.ring is not None and board.ring.end_index == end
+        assert board.state is State.STREAMING
+
+
+def test_watchdog_expiry_stops_the_board_and_is_annotated() -> None:
+    clock = ManualClock()
+    port, link = _memory_board(clock)
+    # A long timeout arms the watchdog without letting the fast injected clock trip it.
+    with Board(link, clock=clock, keepalive_ms=60000) as board:
+        board.configure()
+        board.start()
+        stream_for(board, clock, 0.25)
+        port.call(lambda b: b.faults.expire_watchdog())
+        clock.advance(0.001)
+        wait_until(lambda: board.annotations.count(AnnotationKind.WATCHDOG) == 1, "watchdog")
+        assert board.state is State.STOPPED
+        assert port.call(lambda b: b.snapshot().state) is State.STOPPED
+        held = board.ring.end_index if board.ring else None
+        clock.advance(0.2)
+        assert board.wait_for_samples((held or 0) + 1, 0.1) is False  # nothing more comes
+
+
+def test_usb_bulk_transport_streams_with_zero_loss() -> None:
+    from sim_devices.board.usb_backend import SimulatedUsbBackend
+
+    clock = ManualClock()
+    backend = SimulatedUsbBackend(SimulatedBoard(clock=clock, world=LoopbackWorld(DELAY)))
+    board = Board(
+        "usb://1209:ca50",
+        clock=clock,
+        keepalive_ms=None,
+        transport_options={"usb_backend": backend, "timeout": 0.005},
+    )
+    with board:
+        assert board.capabilities is not None and backend.opened == 1
+        board.configure()
+        first = board.start(tank_board_synth().blocks(4096))
+        end = stream_for(board, clock, 0.2 + 0.5)
+        n = end - first
+        assert board.samples_received == n and board.gaps.gap_samples == 0
+        assert board.annotations.all() == []
+        np.testing.assert_array_equal(board.read(first, n), expected_loopback(first, n))
