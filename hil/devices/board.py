@@ -148,6 +148,9 @@ class _DacFeeder:
         self.fmt = fmt
         self.channels = channels
         self.next_index = first
+        # Index of the next sample the source produces: ahead of next_index (the next one
+        # sent) by what is taken but not yet sent, so a burst asks for fresh samples.
+        self._source_index = first
         self._call: Callable[[int, int], npt.ArrayLike] | None = None
         self._iter: Iterator[npt.ArrayLike] | None = None
         if hasattr(source, "read") and callable(source.read):
@@ -163,7 +166,7 @@ class _DacFeeder:
         """Up to ``n`` wire samples (rows), or None when the source has ended."""
         if self._pending is None or self._pending.shape[0] == 0:
             if self._call is not None:
-                raw = self._call(self.next_index, n)
+                raw = self._call(self._source_index, n)
             else:
                 assert self._iter is not None
                 try:
@@ -172,6 +175,7 @@ class _DacFeeder:
                     self.exhausted = True
                     return None
             self._pending = to_wire_samples(raw, self.fmt, self.channels)
+            self._source_index += self._pending.shape[0]
         block, self._pending = self._pending[:n], self._pending[n:]
         return block
 

@@ -247,3 +247,28 @@ def test_usb_bulk_transport_streams_with_zero_loss() -> None:
         assert board.samples_received == n and board.gaps.gap_samples == 0
         assert board.annotations.all() == []
         np.testing.assert_array_equal(board.read(first, n), expected_loopback(first, n))
+
+
+def test_callable_source_is_asked_for_consecutive_samples() -> None:
+    """A ``source(first, n)`` callable must be asked for fresh, consecutive sample indices,
+    also when one burst takes several blocks from it (regression: the same first index was
+    asked again within a burst, so the DAC repeated its first block)."""
+    clock = ManualClock()
+    port, link = _memory_board(clock)
+    synth = tank_board_synth()
+    calls: list[tuple[int, int]] = []
+
+    def source(first: int, n: int) -> np.ndarray:
+        calls.append((first, n))
+        return synth.render(first - calls[0][0], n)
+
+    with Board(link, clock=clock, keepalive_ms=None) as board:
+        board.configure()
+        first = board.start(source)
+        level = lambda: port.call(lambda b: b.snapshot().dac_buffer_level)  # noqa: E731
+        end = stream_for(board, clock, 0.3, dac_level=level)
+        n = end - first
+        np.testing.assert_array_equal(board.read(first, n), expected_loopback(first, n))
+    starts = [c[0] for c in calls]
+    assert starts[0] == first
+    assert all(b == a + n_a for (a, n_a), b in zip(calls, starts[1:], strict=False))
