@@ -21,12 +21,18 @@ same estimates as one call on the whole signal):
    with lags ``ℓ_{d,m} = round(m L_d)``, ``L_d = T_h fs_bb/α_d`` [R: the spec writes
    ``m N_d``; rounding each lag separately keeps the M terms aligned within half a sample
    instead of letting the rounding of ``N_d`` accumulate to ``m/2`` samples]. The coherent
-   phase: the unit correlator that exactly covers echo hop ``i`` (tone ``f``) of
-   ``s(α(t − τ0))`` has phase ``Φ_end,i − 2π f α b_i − 2π ν g`` where ``Φ_end,i`` is the
-   transmit phase at the end of hop ``i``, ``b_i`` the receive time of that end and ``g`` the
-   filter delay (the heterodyne runs on the undelayed sample clock). For the candidate boundary
-   ``b_0(n)`` of output sample ``n``, ``b_{j−m} = b_0 − m T_h/α``, so
-   ``θ_{j,m}(n) = Φ_end,j−m + 2π f m T_h − 2π f α b_0(n) − 2π ν g``: a per-(n, term) phase.
+   phase (derived in :meth:`GcasReceiver._coherent_refine`, verified on noiseless echoes to
+   < 0.01 rad by ``test_coherent_phase_model_matches_the_unit_correlators``): the unit
+   correlator covering echo hop ``i`` (tone ``f``, start ``t_i``, start phase ``φ_i``) of
+   ``s(α(t − τ0))`` has phase ``φ_i − 2π f (α τ0 + t_i) − 2π ν_d g + 2π (α − α_d) f c_i``
+   (``g`` the filter delay, ``c_i`` the centre of the received hop); ``θ_{j,m}(n)`` below is
+   its value at ``α = α_d`` and the integer-sample boundary of ``n`` (map diagnostics only).
+   [R] With ``coherent=True`` detection, codeword and coarse time still come from the
+   noncoherent sums (whose noise moments set the threshold); the coherent sum then refines
+   each detection's boundary time and α on a fine grid of candidate ``(τ0, α)`` (±½ grating
+   lobe ``1/(α Δf)``, ±1 Doppler step): at integer samples alone its ``1/B_w`` fine structure
+   and the Doppler mismatch ``α − α_d`` (a phase ramp of ``2π f (α − α_d) m T_h`` over the
+   terms) would pick neighbouring lobes.
 5. The time–codeword map ``P[n, j] = A[n, d̂, j]`` (computed for every sample only when
    ``on_map`` is given: it costs ``J·M·K`` per sample and grows with ``M``).
 6. Detection [R] (:mod:`hil.estimation.detection`), in two steps so that the cost per sample
@@ -265,8 +271,6 @@ class GcasReceiver:
         self.cfar_mode = cfar_mode
         self.runner_up_ratio = float(runner_up_ratio)
         self.on_map = on_map
-        #: Experimental fine timing of the coherent form (see :meth:`_coherent_boundary`).
-        self.fine_coherent_timing = False
         self.code = code
         self.n_codewords = int(code.shape[0])
         self.hop_s = schedule.hop_s
@@ -312,11 +316,11 @@ class GcasReceiver:
         self._n_max = int(self.grid.lengths.max())
         self.half_width = max(1, self._n_min // 2)
         self._cfar_window = max(2, int(round(cfar_window_hops * self.hop_s * self.fs_bb)))
-        self._moments = noise_moments(m, self.coherent)
+        # Detection (threshold, codeword, coarse time) always runs on the noncoherent sums;
+        # the coherent form refines the time and Doppler of each detection (step 7).
+        self._moments = noise_moments(m, False)
         if cfar_lambda is None:
-            self.cfar_lambda = (
-                lambda_for_pfa(pfa, m, j, self.coherent) if cfar_mode == "bank" else 5.0
-            )
+            self.cfar_lambda = lambda_for_pfa(pfa, m, j, False) if cfar_mode == "bank" else 5.0
         else:
             if not math.isfinite(cfar_lambda):
                 raise ConfigError("cfar_lambda", cfar_lambda, "a finite number")
@@ -514,7 +518,7 @@ class GcasReceiver:
             # evaluates the codeword sums only around candidate peaks).
             self.on_map(
                 self.baseband.time_of(idx),
-                self._sums(idx, d_hat),
+                self._sums(idx, d_hat, self.coherent),
                 self.grid.speeds_mps[d_hat].astype(np.float64),
             )
         return self._detect(self._s_ring.next_index - self.half_width)
@@ -539,12 +543,18 @@ class GcasReceiver:
             acc[:, sel] = buf[n_len : n_len + n]
         return acc
 
-    def _sums(self, idx: NDArray[np.int64], dcol: NDArray[np.int64]) -> NDArray[np.float32]:
-        """``A[n, d_n, j]`` for samples ``idx`` (shape ``(n,)``) at hypotheses ``dcol``."""
+    def _sums(
+        self, idx: NDArray[np.int64], dcol: NDArray[np.int64], coherent: bool = False
+    ) -> NDArray[np.float32]:
+        """``A[n, d_n, j]`` for samples ``idx`` (shape ``(n,)``) at hypotheses ``dcol``;
+        noncoherent unless ``coherent`` (which needs the complex history of ``coherent=True``).
+        """
         pos = self._u_ring.position(idx[:, None] - self.lags[dcol])  # (n, M)
         v = self._u_ring.array[pos, dcol[:, None], :]  # (n, M, K)
         n = idx.shape[0]
-        if not self.coherent:
+        if not coherent:
+            if self.coherent:
+                v = np.square(v.real) + np.square(v.imag)
             # Broadcast product and a sum over a middle axis (sequential adds) instead of BLAS:
             # each row's value must not depend on how many rows are computed together.
             out: NDArray[np.float32] = (v.reshape(n, -1, 1) * self._w_non[None]).sum(axis=1)
@@ -684,8 +694,6 @@ class GcasReceiver:
         t_rx = float(self.baseband.time_of(n_star + dn)) + (
             exact_len - self.grid.lengths[d0] + 1
         ) / (2.0 * self.fs_bb)
-        if self.coherent and self.fine_coherent_timing:
-            t_rx = self._coherent_boundary(n_star, d0, j_hat, t_rx)
         # Transmit time: end of hop ĵ, folded by whole code periods into [0, τ_max].
         sch = self.schedule
         period = sch.period_s
@@ -693,6 +701,10 @@ class GcasReceiver:
         tol = 2.0 / self.fs_bb
         q = math.floor((t_rx - end_j + tol) / period)
         t_tx = end_j + q * period
+        if self.coherent:
+            t_rx, alpha = self._coherent_refine(
+                n_star, d0, j_hat + q * self.n_codewords, t_rx, alpha
+            )
         delay = t_rx - t_tx
         if delay > 2.0 * self.max_range_m / c + tol:
             self.refused_count += 1
@@ -720,30 +732,72 @@ class GcasReceiver:
             receiver=self.name,
         )
 
-    def _coherent_boundary(self, n_star: int, d0: int, j_hat: int, t_guess: float) -> float:
-        """Boundary time (s) maximising the coherent sum over a fine grid of ±1.5 samples.
+    def _coherent_refine(
+        self, n_star: int, d0: int, hop_end: int, t_guess: float, alpha_guess: float
+    ) -> tuple[float, float]:
+        """Coherent readout: the boundary time (s) and α maximising the coherent sum.
 
-        The unit-correlator values stay those of sample ``n*``; only the restoration phase
-        ``2π f_k α b`` is evaluated at continuous ``b``, which is what gives the coherent form
-        its ``1/B_w`` time resolution (within one grating lobe, ``1/Δf`` wide).
+        ``hop_end`` is the global index of the hop whose end boundary was detected; the M
+        terms are hops ``hop_end − m``, their unit-correlator values those of the detected
+        sample ``n*`` at hypothesis ``d0`` (lags ``ℓ_{d0,m}``). A window that covers echo hop
+        ``i`` (tone ``f``, start ``t_i``, start phase ``φ_i``) of ``a·s(α(t − τ0))`` gives
+
+            arg u_i = φ_i − 2π f (α τ0 + t_i) − 2π ν_d g + 2π (α − α_d) f c_i,
+
+        ``ν_d = α_d f − f_c``, ``g`` the filter group delay (s), ``c_i = τ0 + (t_i + T_h/2)/α``
+        the centre of the received hop (the last term is the residual rotation of a
+        correlator listening at ``α_d ≠ α``; the phase does not depend on where the window
+        sits within ±a few samples of the hop, only its magnitude does). The sum
+        ``|Σ_m u_m e^{−j arg u_m(τ0, α)}|²`` is evaluated on a fine grid of candidate
+        ``(τ0, α)`` around the noncoherent estimate (±½ grating lobe ``1/(α Δf)`` in time,
+        ±1 Doppler grid step) and refined by parabolas; its time resolution is ``~1/B_w``.
         """
+        m = self.m_hops
+        hops = self.schedule.hops(hop_end - m + 1, m)
+        order = np.arange(m - 1, -1, -1)  # term m is hop hop_end − m
+        tone = hops.tone_index[order]
+        f = self.tones_hz[tone]
+        t_i = hops.start_s[order]
+        phi = hops.phase_rad[order]
         pos = self._u_ring.position(n_star - self.lags[d0])
-        v = self._u_ring.array[pos, d0, :]  # (M, K)
-        w = self._w_coh[:, j_hat].reshape(self.m_hops, self.n_tones)
-        per_tone = (v * w).sum(axis=0).astype(np.complex128)  # (K,)
-        t_n = float(self.baseband.time_of(n_star))
-        b = t_guess + np.linspace(-1.5, 1.5, 61) / self.fs_bb
-        # Phase relative to the carrier part common to all tones (it cancels in |.|²).
-        fa = self._fa[d0] - self._fa[d0].mean()
-        cyc = fa[None, :] * (b[:, None] - t_n) + np.mod(self._fa[d0] * t_n, 1.0)[None, :]
-        cyc = cyc + self._coh_const[d0][None, :] - self._fa[d0][None, :] * self._delta0[d0]
-        val = np.abs(np.exp(2j * np.pi * cyc) @ per_tone) ** 2
-        i = int(np.argmax(val))
-        if 0 < i < b.shape[0] - 1:
-            off = parabolic_offset(float(val[i - 1]), float(val[i]), float(val[i + 1]))
-        else:
-            off = 0.0
-        return float(b[i] + off * (b[1] - b[0]))
+        v = self._u_ring.array[pos, d0, tone].astype(np.complex128)  # (M,)
+        a_d = float(self.grid.alphas[d0])
+        g = self.baseband.group_delay / self.fs_hz
+        nu = a_d * f - self.center_hz
+        c = self.sound_speed_mps
+        t_end = float(hops.start_s[-1]) + self.hop_s
+        base = phi / (2.0 * np.pi) - np.mod(f * t_i, 1.0) - nu * g  # cycles, (M,)
+        mid = t_i + 0.5 * self.hop_s
+
+        def power(speeds: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+            """|coherent sum|² on the grid speeds (m/s) × boundary times b (s)."""
+            al = np.asarray(speed_to_alpha(speeds, c))[:, None, None]
+            tau0 = b[None, :, None] - t_end / al
+            cyc = base - f * al * tau0 + (al - a_d) * f * (tau0 + mid / al)
+            result: NDArray[np.float64] = np.abs(np.exp(-2j * np.pi * cyc) @ v) ** 2
+            return result
+
+        df = float(np.min(np.diff(np.sort(self.tones_hz)))) if self.n_tones > 1 else 1 / self.hop_s
+        # Pass 1: ±½ grating lobe in time, ±1 Doppler step; pass 2: a finer grid around the
+        # best cell (the range–Doppler ridge is tilted, so one coarse pass leaves a bias).
+        speed = float(alpha_to_speed(alpha_guess, c))
+        t_rx = t_guess
+        for half_t, half_v, nb in (
+            (0.5 / (df * alpha_guess), self.grid.speed_step_mps, 81),
+            (0.1 / (df * alpha_guess), 0.25 * self.grid.speed_step_mps, 41),
+        ):
+            speeds = speed + np.linspace(-half_v, half_v, 9)
+            b = t_rx + np.linspace(-half_t, half_t, nb)
+            z = power(speeds, b)
+            ia, ib = np.unravel_index(int(np.argmax(z)), z.shape)
+            ob = oa = 0.0
+            if 0 < ib < nb - 1:
+                ob = parabolic_offset(float(z[ia, ib - 1]), float(z[ia, ib]), float(z[ia, ib + 1]))
+            if 0 < ia < 8:
+                oa = parabolic_offset(float(z[ia - 1, ib]), float(z[ia, ib]), float(z[ia + 1, ib]))
+            t_rx = float(b[ib]) + ob * float(b[1] - b[0])
+            speed = float(speeds[ia]) + oa * float(speeds[1] - speeds[0])
+        return float(t_rx), float(speed_to_alpha(speed, c))
 
     # ------------------------------------------------------------------ diagnostics
     def accumulated_sums(self, count: int) -> tuple[NDArray[np.float64], NDArray[np.float32]]:
@@ -757,7 +811,10 @@ class GcasReceiver:
         count = int(min(count, stop - self._origin, self._u_ring.available - self.lags.max() - 1))
         idx = np.arange(stop - count, stop, dtype=np.int64)
         full = np.stack(
-            [self._sums(idx, np.full(count, d, dtype=np.int64)) for d in range(self.grid.size)],
+            [
+                self._sums(idx, np.full(count, d, dtype=np.int64), self.coherent)
+                for d in range(self.grid.size)
+            ],
             axis=1,
         )
         return self.baseband.time_of(idx), full

@@ -12,8 +12,11 @@ from hypothesis import strategies as st
 
 from hil.errors import ConfigError
 from hil.estimation.base import Estimate, Receiver
+from hil.estimation.baseband import ComplexBaseband
+from hil.estimation.crlb import e_over_n0_db, schedule_crlb
 from hil.estimation.gcas import GcasReceiver
 from hil.estimation.registry import make_receiver
+from hil.estimation.unit_correlators import UnitCorrelatorBank
 from hil.signals.presets import check_design, get_preset
 from hil.signals.schedule import HopSchedule
 
@@ -102,23 +105,60 @@ def test_errors_shrink_with_snr_and_stay_within_a_crlb_multiple(rc_schedule: Hop
     assert rms[2] < 60 * bound
 
 
-@pytest.mark.xfail(
-    reason="known defect, not fixed: coherent=True picks wrong codewords (range rms 10-15 m "
-    "at -5 and +10 dB per-sample SNR, noncoherent 0.02 m); the restoration phase "
-    "θ_{j,m}(n) of GcasReceiver._codeword_weights/_sums has not been re-derived and "
-    "verified on a noiseless echo (window-start and mixing-reference terms)",
-    strict=True,
-)
-def test_coherent_sum_is_closer_to_the_crlb(rc_schedule: HopSchedule) -> None:
+@pytest.mark.parametrize(("snr_db", "coh_multiple"), [(-5.0, 3.0), (0.0, 6.0)])
+def test_coherent_sum_is_closer_to_the_crlb(
+    rc_schedule: HopSchedule, snr_db: float, coh_multiple: float
+) -> None:
+    # Measured (seed 12, 60 estimates each): coherent 2.0x / 3.9x the M-hop CRLB at -5 / 0 dB
+    # per-sample SNR (1.8 / 1.0 mm), noncoherent 11x / 17x; the coherent form also refines
+    # the speed (2 mm/s rms noiseless against 40 mm/s noncoherent).
     r0, v = 45.0, 15.0
-    x = echo_samples(rc_schedule, r0, v, 0.7, snr_db=-5.0, seed=12)
-    non = _errors(_run(_receiver(rc_schedule), x), r0, v)[0]
-    coh = _errors(_run(_receiver(rc_schedule, coherent=True), x), r0, v)[0]
-    rms_non = float(np.sqrt(np.mean(non**2)))
-    rms_coh = float(np.sqrt(np.mean(coh**2)))
-    bound = crlb_range_m(rc_schedule, 10, -5.0)
-    assert rms_coh < rms_non
-    assert rms_coh < 20 * bound
+    x = echo_samples(rc_schedule, r0, v, 0.7, snr_db=snr_db, seed=12)
+    est_non = _run(_receiver(rc_schedule), x)
+    est_coh = _run(_receiver(rc_schedule, coherent=True), x)
+    assert len(est_coh) == len(est_non) >= 55
+    window = 10 * rc_schedule.hop_s
+    bound = schedule_crlb(
+        rc_schedule, FS, 0.0, window, e_over_n0_db(snr_db, FS / 2, window), C
+    ).sigma_range_m
+    rms_non = float(np.sqrt(np.mean(_errors(est_non, r0, v)[0] ** 2)))
+    dr_coh, dv_coh = _errors(est_coh, r0, v)
+    rms_coh = float(np.sqrt(np.mean(dr_coh**2)))
+    assert rms_coh < coh_multiple * bound
+    assert rms_non > 2.5 * rms_coh
+    assert np.sqrt(np.mean(dv_coh**2)) < 0.05
+    hops = np.array([e.hop_index for e in est_coh])
+    assert np.all(np.diff(hops) == 1)
+
+
+def test_coherent_phase_model_matches_the_unit_correlators(rc_schedule: HopSchedule) -> None:
+    # The phase of u for a window covering echo hop i of a·s(α(t − τ0)) (GcasReceiver.
+    # _coherent_refine): φ_i − 2π f (α τ0 + t_i) − 2π ν_d g + 2π (α − α_d) f c_i.
+    r0 = 40.0
+    for v, dv in ((12.0, 0.0), (-8.0, 0.0), (12.0, 0.5), (-8.0, -0.4)):
+        alpha, tau0 = (C + v) / (C - v), 2 * r0 / (C + v)
+        a_d = (C + v + dv) / (C - v - dv)
+        bb = ComplexBaseband(FS, 30_000.0, decimation=12, passband_hz=3141.0)
+        y = bb.process(echo_samples(rc_schedule, r0, v, 0.3))
+        fsb, g = bb.fs_out_hz, bb.group_delay / FS
+        exact = rc_schedule.hop_s * fsb / a_d
+        n_len = int(round(exact))
+        nu = a_d * rc_schedule.tones_hz - 30_000.0
+        u = UnitCorrelatorBank(fsb, nu[None, :], [n_len]).process(y)[:, 0, :]
+        tab = rc_schedule.hops(8, 12)
+        for i in range(12):
+            f, t_i, phi = tab.freq_hz[i], tab.start_s[i], tab.phase_rad[i]
+            k = int(tab.tone_index[i])
+            end = tau0 + (t_i + rc_schedule.hop_s) / alpha
+            centre = tau0 + (t_i + 0.5 * rc_schedule.hop_s) / alpha
+            n = int(round((end - (exact - n_len + 1) / (2 * fsb)) * fsb + bb.group_delay / 12))
+            predicted = (
+                phi - 2 * np.pi * f * (alpha * tau0 + t_i) - 2 * np.pi * nu[k] * g
+                + 2 * np.pi * (alpha - a_d) * f * centre
+            )  # fmt: skip
+            assert abs(np.angle(u[n, k] * np.exp(-1j * predicted))) < 0.05, (v, dv, i)
+            # Amplitude a/2 per sample over the window, less the sinc loss when α_d ≠ α.
+            assert 0.85 * 0.5 * n_len < abs(u[n, k]) < 1.02 * 0.5 * n_len
 
 
 def test_noise_only_false_alarm_rate_matches_the_configured_pfa(rc_schedule: HopSchedule) -> None:
