@@ -8,8 +8,9 @@ volts with its sensitivity (dB re 1 V/µPa) and gain (dB) and into ADC counts, f
 
 Components, each a pressure stream (µPa), summed per sample:
 
-- target echoes: every target over every :func:`~sim_devices.acoustics.tank.echo_paths` path,
-  exact (:class:`~sim_devices.acoustics.echo.AnalyticEcho` on the solved path), with gain
+- target echoes: every target over every :func:`~sim_devices.acoustics.tank.echo_paths` path
+  (:class:`~sim_devices.acoustics.grid_echo.GridEcho`: the path solved exactly on a 4 ms grid
+  and interpolated, delay error below 1e-11 s, transmit to float32 precision), with gain
   ``A · 10^(TS/20) · R · B(θ) / (r1 r2) · 10^(−α_abs (r1 + r2)/20000)``: target strength TS
   (dB re 1 m²), reflection ``R`` of image paths, two-way beam response ``B`` of the direction
   to the target, spherical spreading and absorption (dB/km) on each leg;
@@ -17,15 +18,21 @@ Components, each a pressure stream (µPa), summed per sample:
 - volume reverberation (:class:`~sim_devices.acoustics.reverberation.VolumeReverberation`);
 - noise (:class:`~sim_devices.acoustics.noise_generator.ShapedNoiseGenerator`).
 
-Echoes and the direct blast are computed per sample from that sample's time; reverberation
-and noise are fixed-frame streams: so :meth:`Channel.read` returns the same samples for any
-chunking. The sonar equation terms match these components: see :func:`echo_level_db`.
+Echoes and the direct blast are computed per sample from grid data fixed by absolute sample
+index (served from fixed frames of :data:`ECHO_FRAME` samples); reverberation and noise are
+fixed-frame streams: so :meth:`Channel.read` returns the same samples for any chunking. The
+sonar equation terms match these components: see :func:`echo_level_db`.
+
+Look-ahead: echoes are rendered in frames of :data:`ECHO_FRAME` samples and their paths
+solved in batches of about 66 ms (:class:`~sim_devices.acoustics.grid_echo.GridEcho`), so the
+trajectories (a ``Live`` stage too) are queried up to about 80 ms (at 1 MHz) past the last
+sample read.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -33,11 +40,15 @@ import numpy as np
 from hil.errors import ConfigError
 from sim_devices.acoustics.beam import TwoWayAmplitudeTable
 from sim_devices.acoustics.delay import OneWayPath, PathSolution, TwoWayPath
-from sim_devices.acoustics.echo import AnalyticEcho, TransmitWaveform, sample_times
+from sim_devices.acoustics.echo import TransmitWaveform
+from sim_devices.acoustics.grid_echo import EchoBank, GridEcho
 from sim_devices.acoustics.noise_generator import ShapedNoiseGenerator
 from sim_devices.acoustics.reverberation import VolumeReverberation
 from sim_devices.acoustics.tank import Offset, Tank, echo_paths
 from sim_devices.acoustics.trajectory import FloatArray, Trajectory
+
+#: Echo samples rendered at a time (the stream is cut into frames of this many samples).
+ECHO_FRAME = 16384
 
 
 def source_amplitude(source_level_db: float) -> float:
@@ -108,7 +119,11 @@ class _EchoGain:
             g = g * 10.0 ** (-self.absorption * (r1 + r2) / 20000.0)
         if self.beam is not None and sol.t_bounce_s is not None:
             d = self.target.position(sol.t_bounce_s) - self.rx.position(sol.t_rx_s)
-            cos_t = (d @ self.axis) / np.sqrt(np.sum(d * d, axis=1))
+            # Per coordinate, not d @ axis: a BLAS product may round differently for
+            # different array lengths, and the grid solves nodes in batches.
+            dx, dy, dz = d[:, 0], d[:, 1], d[:, 2]
+            ax = self.axis
+            cos_t = (dx * ax[0] + dy * ax[1] + dz * ax[2]) / np.sqrt(dx * dx + dy * dy + dz * dz)
             g = g * self.beam(cos_t)
         return np.asarray(g, dtype=np.float64)
 
@@ -157,7 +172,7 @@ class Channel:
         self.amplitude = source_amplitude(self.source_level_db)
         axis = np.asarray(self.beam_axis, dtype=np.float64)
         self.beam_axis = axis / np.sqrt(axis @ axis)
-        self._echoes: list[AnalyticEcho] = []
+        self._echoes: list[GridEcho] = []
         for tgt in self.targets:
             a = self.amplitude * 10.0 ** (tgt.target_strength_db / 20.0)
             for path in echo_paths(self.sonar, tgt.trajectory, self.tank, self.image_order):
@@ -166,28 +181,26 @@ class Channel:
                     self.absorption_db_per_km, path.target,
                 )  # fmt: skip
                 solved = TwoWayPath(path.tx, path.target, path.rx, self.sound_speed_mps)
-                self._echoes.append(AnalyticEcho(self.waveform, solved, self.fs_hz, gain=gain))
-        self._blast: AnalyticEcho | None = None
+                self._echoes.append(GridEcho(self.waveform, solved, self.fs_hz, gain=gain))
+        self._blast: GridEcho | None = None
         if self.direct_blast is not None:
             db = self.direct_blast
             tx = Offset(self.sonar, (0.0, 0.0, db.separation_m))
             a = self.amplitude * 10.0 ** (db.coupling_db / 20.0) / db.separation_m
-            self._blast = AnalyticEcho(
+            self._blast = GridEcho(
                 self.waveform, OneWayPath(tx, self.sonar, self.sound_speed_mps), self.fs_hz,
                 amplitude=a,
             )  # fmt: skip
+        self._echo_frames = _Frames(EchoBank(self._echoes).block)
+        self._blast_frames = _Frames(EchoBank([self._blast] if self._blast else []).block)
 
     def read_components(self, n_samples: int) -> dict[str, FloatArray]:
         """The next ``n_samples``: pressure of every component (µPa) and ``received`` counts."""
         if int(n_samples) != n_samples or n_samples < 0:
             raise ConfigError("n_samples", n_samples, "an integer >= 0")
-        n = int(n_samples)
-        t = sample_times(self.position, n, self.fs_hz)
-        echo = np.zeros(n)
-        for e in self._echoes:
-            echo += e.at_times(t)
-        parts = {"echo": echo}
-        parts["direct"] = self._blast.at_times(t) if self._blast is not None else np.zeros(n)
+        n, n0 = int(n_samples), int(self.position)
+        parts = {"echo": self._echo_frames.read(n0, n) if self._echoes else np.zeros(n)}
+        parts["direct"] = self._blast_frames.read(n0, n) if self._blast else np.zeros(n)
         parts["reverberation"] = (
             self.reverberation.generate(n) if self.reverberation is not None else np.zeros(n)
         )
@@ -213,6 +226,32 @@ class Channel:
 
     def _paths_per_target(self) -> int:
         return len(self._echoes) // max(1, len(self.targets))
+
+
+class _Frames:
+    """Samples of a block renderer served from fixed frames of :data:`ECHO_FRAME` samples
+    (frame ``k`` is samples ``k F … (k + 1) F − 1``): any chunking of the reads gives the same
+    samples, and small reads cost a slice, not a render."""
+
+    def __init__(self, render: Callable[[int, int], FloatArray]) -> None:
+        self.render = render
+        self._start = 0
+        self._frame = np.zeros(0)
+
+    def read(self, n0: int, count: int) -> FloatArray:
+        out = np.empty(count)
+        done = 0
+        while done < count:
+            m = n0 + done
+            off = m - self._start
+            if not 0 <= off < self._frame.shape[0]:
+                self._start = (m // ECHO_FRAME) * ECHO_FRAME
+                self._frame = self.render(self._start, ECHO_FRAME)
+                off = m - self._start
+            take = min(count - done, self._frame.shape[0] - off)
+            out[done : done + take] = self._frame[off : off + take]
+            done += take
+        return out
 
 
 def echo_level_db(

@@ -36,14 +36,17 @@ True
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from hil.errors import ConfigError
 from sim_devices.acoustics.trajectory import FloatArray, Trajectory, as_times
+
+IntArray = NDArray[np.int64]
 
 #: Convergence tolerance (s) on each leg's delay: far below one sample at any rate used here.
 DEFAULT_TOLERANCE_S = 1e-13
@@ -159,27 +162,54 @@ class _Leg:
     iterations: int
 
 
+def _grouped(
+    sources: Sequence[Trajectory], group: IntArray | None, t: FloatArray, velocity: bool = False
+) -> FloatArray:
+    """Position (or velocity) of element ``i`` of ``t`` on ``sources[group[i]]``, ``(n, 3)``.
+
+    ``group`` is non-decreasing (elements sorted by source), so each source is called once on
+    a contiguous run; ``None`` means a single source.
+    """
+    if group is None:
+        src = sources[0]
+        return src.velocity(t) if velocity else src.position(t)
+    out = np.empty((t.shape[0], 3))
+    cuts = np.searchsorted(group, np.arange(len(sources) + 1))
+    for g, src in enumerate(sources):
+        a, b = int(cuts[g]), int(cuts[g + 1])
+        if b > a:
+            out[a:b] = src.velocity(t[a:b]) if velocity else src.position(t[a:b])
+    return out
+
+
 def _solve_leg(
     t_arrive: FloatArray,
     dst_position: FloatArray,
     dst_velocity: FloatArray,
-    source: Trajectory,
+    sources: Sequence[Trajectory],
     c: float,
     tol_s: float,
     max_iterations: int,
     role: str,
+    group: IntArray | None = None,
 ) -> _Leg:
-    """Delay of the leg ``source(t_arrive − d) → dst_position`` arriving at ``t_arrive``."""
-    delay = _distance(dst_position, source.position(t_arrive)) / c
+    """Delay of the leg ``source(t_arrive − d) → dst_position`` arriving at ``t_arrive``.
+
+    Element ``i`` comes from ``sources[group[i]]`` (``group`` non-decreasing; ``None`` for a
+    single source). Every element is computed with the same arithmetic whatever the other
+    elements and sources are.
+    """
+    delay = _distance(dst_position, _grouped(sources, group, t_arrive)) / c
     # The emission time t − d is rounded to the float64 grid of t; near t = 1e6 s that limits
     # the reachable accuracy, so the tolerance never goes below a few ulps of |t|.
     tol = np.maximum(tol_s, 4.0 * np.finfo(np.float64).eps * np.abs(t_arrive))
     # Work on the still-active samples only; each is written back once, when it converges.
     idx = np.arange(t_arrive.size)
     t_sub, dst_sub, d_sub, tol_sub = t_arrive, dst_position, delay.copy(), tol
+    g_sub = group
     iterations = 0
     while idx.size:
-        new = _distance(dst_sub, source.position(t_sub - d_sub)) / c
+        new = _distance(dst_sub, _grouped(sources, g_sub, t_sub - d_sub)) / c
         change = np.abs(new - d_sub)
         iterations += 1
         done = change < tol_sub
@@ -192,17 +222,21 @@ def _solve_leg(
                 "check the trajectories (e.g. a Live trajectory faster than sound) and c, "
                 "or raise max_iterations",
             )
+        if done.all():
+            delay[idx] = new
+            break
         if done.any():
             delay[idx[done]] = new[done]
             keep = ~done
             idx, t_sub, dst_sub, tol_sub = idx[keep], t_sub[keep], dst_sub[keep], tol_sub[keep]
+            g_sub = None if g_sub is None else g_sub[keep]
             d_sub = new[keep]
         else:
             d_sub = new
 
     t_emit = t_arrive - delay
-    src_position = source.position(t_emit)
-    src_velocity = source.velocity(t_emit)
+    src_position = _grouped(sources, group, t_emit)
+    src_velocity = _grouped(sources, group, t_emit, velocity=True)
     length = _distance(dst_position, src_position)
     # Unit vector source → destination; a zero-length leg has no direction (no Doppler).
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -268,7 +302,7 @@ class OneWayPath:
     def solve(self, t_rx_s: ArrayLike) -> PathSolution:
         t = _receive_times(t_rx_s)
         leg = _solve_leg(
-            t, self.rx.position(t), self.rx.velocity(t), self.tx, self._c, self._tol,
+            t, self.rx.position(t), self.rx.velocity(t), (self.tx,), self._c, self._tol,
             self._max_it, "tx",
         )  # fmt: skip
         return PathSolution(
@@ -313,12 +347,12 @@ class TwoWayPath:
     def solve(self, t_rx_s: ArrayLike) -> PathSolution:
         t = _receive_times(t_rx_s)
         back = _solve_leg(
-            t, self.rx.position(t), self.rx.velocity(t), self.target, self._c, self._tol,
+            t, self.rx.position(t), self.rx.velocity(t), (self.target,), self._c, self._tol,
             self._max_it, "target",
         )  # fmt: skip
         t_b = back.t_emit_s
         out = _solve_leg(
-            t_b, self.target.position(t_b), self.target.velocity(t_b), self.tx, self._c,
+            t_b, self.target.position(t_b), self.target.velocity(t_b), (self.tx,), self._c,
             self._tol, self._max_it, "tx",
         )  # fmt: skip
         return PathSolution(
@@ -330,6 +364,159 @@ class TwoWayPath:
             leg_lengths_m=(out.length_m, back.length_m),
             iterations=max(back.iterations, out.iterations),
         )
+
+
+def solve_paths(paths: Sequence[PropagationPath], t_rx_s: ArrayLike) -> list[PathSolution]:
+    """``[path.solve(t_rx_s) for path in paths]``, solved together: the same delays, emission
+    times, leg lengths and ``alpha``, bit for bit (``iterations`` is the largest over the paths
+    solved together).
+
+    Faster for many paths that share trajectories (a target and its tank images): every
+    distinct trajectory is evaluated once per iteration for all the paths that use it, and
+    the iteration's bookkeeping runs once on all the paths' samples. :class:`OneWayPath` and
+    :class:`TwoWayPath` objects with equal sound speed and solver settings are grouped; any
+    other path is solved on its own.
+
+    >>> from sim_devices.acoustics.trajectory import ConstantVelocity, Fixed
+    >>> sonar = Fixed((0.0, 0.0, 0.0))
+    >>> a = TwoWayPath.monostatic(sonar, ConstantVelocity((9.0, 0, 0), (-2.0, 0, 0)), 1500.0)
+    >>> b = TwoWayPath.monostatic(sonar, ConstantVelocity((0, 4.0, 0), (0, 1.0, 0)), 1500.0)
+    >>> t = np.linspace(0.0, 1.0, 5)
+    >>> both = solve_paths([a, b], t)
+    >>> bool(np.array_equal(both[1].t_emit_s, b.solve(t).t_emit_s))
+    True
+    """
+    t = _receive_times(t_rx_s)
+    solved: list[PathSolution | None] = [None] * len(paths)
+    buckets: dict[tuple[str, float, float, int], list[int]] = {}
+    for i, p in enumerate(paths):
+        if isinstance(p, TwoWayPath | OneWayPath):
+            kind = "two" if isinstance(p, TwoWayPath) else "one"
+            buckets.setdefault((kind, p._c, p._tol, p._max_it), []).append(i)
+        else:
+            solved[i] = p.solve(t)
+    for (kind, c, tol, max_it), members in buckets.items():
+        if len(members) == 1:
+            solved[members[0]] = paths[members[0]].solve(t)
+            continue
+        group = [paths[i] for i in members]
+        if kind == "two":
+            sols = _solve_two_way(group, t, c, tol, max_it)  # type: ignore[arg-type]
+        else:
+            sols = _solve_one_way(group, t, c, tol, max_it)  # type: ignore[arg-type]
+        for i, sol in zip(members, sols, strict=True):
+            solved[i] = sol
+    return [s for s in solved if s is not None]
+
+
+def _distinct(objects: Sequence[Trajectory]) -> tuple[list[Trajectory], list[int]]:
+    """The distinct objects (by identity) and each input's index among them."""
+    seen: dict[int, int] = {}
+    unique: list[Trajectory] = []
+    index = []
+    for obj in objects:
+        if id(obj) not in seen:
+            seen[id(obj)] = len(unique)
+            unique.append(obj)
+        index.append(seen[id(obj)])
+    return unique, index
+
+
+class _Layout:
+    """Paths stacked for one leg, sorted by that leg's source: path ``i``'s samples are
+    ``slot[i] * n … slot[i] * n + n − 1``; ``group`` gives each element's source."""
+
+    def __init__(self, sources: Sequence[Trajectory], n: int) -> None:
+        self.unique, index = _distinct(sources)
+        order = sorted(range(len(sources)), key=index.__getitem__)
+        self.slot = [0] * len(sources)
+        for pos, i in enumerate(order):
+            self.slot[i] = pos
+        self.order, self.n = order, n
+        self.group: IntArray | None = (
+            np.repeat(np.asarray([index[i] for i in order], dtype=np.int64), n)
+            if len(self.unique) > 1
+            else None
+        )
+
+    def rows(self, i: int) -> slice:
+        return slice(self.slot[i] * self.n, (self.slot[i] + 1) * self.n)
+
+    def take_from(self, other: _Layout) -> IntArray:
+        """Indices that rearrange arrays in ``other``'s layout into this one."""
+        n = self.n
+        return np.concatenate(
+            [np.arange(other.slot[i] * n, other.slot[i] * n + n) for i in self.order]
+        )
+
+
+def _at_receiver(
+    receivers: Sequence[Trajectory], layout: _Layout, t: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Receiver positions and velocities at ``t`` for every path, stacked in ``layout``."""
+    cache: dict[int, tuple[FloatArray, FloatArray]] = {}
+    pos, vel = [], []
+    for i in layout.order:
+        rx = receivers[i]
+        if id(rx) not in cache:
+            cache[id(rx)] = (rx.position(t), rx.velocity(t))
+        pos.append(cache[id(rx)][0])
+        vel.append(cache[id(rx)][1])
+    return np.concatenate(pos), np.concatenate(vel)
+
+
+def _solve_two_way(
+    paths: Sequence[TwoWayPath], t: FloatArray, c: float, tol: float, max_it: int
+) -> list[PathSolution]:
+    n = t.shape[0]
+    back_l = _Layout([p.target for p in paths], n)
+    t_all = np.tile(t, len(paths))
+    rx_p, rx_v = _at_receiver([p.rx for p in paths], back_l, t)
+    back = _solve_leg(t_all, rx_p, rx_v, back_l.unique, c, tol, max_it, "target", back_l.group)
+    t_b = back.t_emit_s
+    tgt_p = _grouped(back_l.unique, back_l.group, t_b)
+    tgt_v = _grouped(back_l.unique, back_l.group, t_b, velocity=True)
+    out_l = _Layout([p.tx for p in paths], n)
+    perm = out_l.take_from(back_l)
+    out = _solve_leg(
+        t_b[perm], tgt_p[perm], tgt_v[perm], out_l.unique, c, tol, max_it, "tx", out_l.group
+    )
+    iterations = max(back.iterations, out.iterations)
+    sols = []
+    for i in range(len(paths)):
+        rb, ro = back_l.rows(i), out_l.rows(i)
+        sols.append(
+            PathSolution(
+                t_rx_s=t,
+                t_emit_s=out.t_emit_s[ro],
+                t_bounce_s=t_b[rb],
+                delay_s=back.delay_s[rb] + out.delay_s[ro],
+                alpha=back.alpha[rb] * out.alpha[ro],
+                leg_lengths_m=(out.length_m[ro], back.length_m[rb]),
+                iterations=iterations,
+            )
+        )
+    return sols
+
+
+def _solve_one_way(
+    paths: Sequence[OneWayPath], t: FloatArray, c: float, tol: float, max_it: int
+) -> list[PathSolution]:
+    n = t.shape[0]
+    layout = _Layout([p.tx for p in paths], n)
+    rx_p, rx_v = _at_receiver([p.rx for p in paths], layout, t)
+    leg = _solve_leg(
+        np.tile(t, len(paths)), rx_p, rx_v, layout.unique, c, tol, max_it, "tx", layout.group
+    )
+    sols = []
+    for i in range(len(paths)):
+        r = layout.rows(i)
+        sol = PathSolution(
+            t, leg.t_emit_s[r], None, leg.delay_s[r], leg.alpha[r], (leg.length_m[r],),
+            leg.iterations,
+        )  # fmt: skip
+        sols.append(sol)
+    return sols
 
 
 def _check_solver(tolerance_s: float, max_iterations: int) -> tuple[float, int]:
