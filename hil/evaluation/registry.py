@@ -39,6 +39,9 @@ Validator = Callable[[Params], None]
 #: that needs the simulator or a receiver costs nothing until a sweep uses it.
 TRIALS: dict[str, str] = {
     "waveform_af_sidelobe": "hil.evaluation.trials_waveform:waveform_af_sidelobe",
+    "ch6_receiver": "hil.evaluation.trials_ch6:ch6_receiver_trial",
+    "ch6_fmcw": "hil.evaluation.trials_ch6:ch6_fmcw_trial",
+    "ch6_cost": "hil.evaluation.trials_ch6:ch6_cost_trial",
 }
 
 # Modules loaded from a file path get this prefix plus a hash of the path as module name.
