@@ -33,6 +33,7 @@ import numpy.typing as npt
 
 from hil.errors import ConfigError
 from sim_devices.acoustics.channel import (
+    Channel,
     DirectBlast,
     Receiver,
     Target,
@@ -238,3 +239,61 @@ class InPlaceWorld:
         channels = min(adc.shape[1], input_block.shape[1])
         input_block[:, :channels] = adc[:, :channels]
         input_block[:, channels:] = 0.0
+
+
+class ScheduleWorld:
+    """A faster world for a device that transmits a known schedule from its first sample:
+    the hydrophone channel comes from the analytic :class:`Channel` (exact echoes of the
+    schedule, tank images, direct blast, reverberation, noise), the DAC monitor channels from
+    the actual DAC samples. Same contract and converter latency as :class:`AcousticWorld`.
+
+    The channel's time 0 is the device sample of the first block after :meth:`reset`; build
+    it with the schedule shifted by the converter latency (``schedule.shifted(d / fs)``) so
+    that ADC sample ``n`` holds the pressure at ``(n − d) / fs`` as for the sampled world.
+    Use it when the DAC plays that schedule from the first sample (the tank run); use
+    :class:`AcousticWorld` when the DAC may play anything.
+    """
+
+    def __init__(
+        self,
+        channel: Channel,
+        *,
+        converter_delay_samples: int = 64,
+        adc_channels: int = 2,
+    ) -> None:
+        if int(converter_delay_samples) != converter_delay_samples or converter_delay_samples < 0:
+            raise ConfigError("converter_delay_samples", converter_delay_samples, "an integer >= 0")
+        if int(adc_channels) != adc_channels or adc_channels < 1:
+            raise ConfigError("adc_channels", adc_channels, "an integer >= 1")
+        self.channel = channel
+        self.converter_delay = int(converter_delay_samples)
+        self.adc_channels = int(adc_channels)
+        self._expected_first: int | None = None
+        self._monitor_tail = np.zeros(self.converter_delay)
+        self.origin_index: int | None = None
+        """Device sample of the channel's time 0 (the first block's index)."""
+
+    def reset(self) -> None:
+        """The next block may start at any index (the channel keeps its own position)."""
+        self._expected_first = None
+
+    def __call__(self, dac_block: npt.NDArray[np.floating], first_sample: int, /) -> FloatArray:
+        """ADC samples for the DAC block at the same indices (see the class docstring)."""
+        dac = np.asarray(dac_block, dtype=np.float64)
+        if dac.ndim == 1:
+            dac = dac[:, None]
+        n = dac.shape[0]
+        if self.origin_index is None:
+            self.origin_index = int(first_sample)
+        if self._expected_first is not None and first_sample != self._expected_first:
+            raise ConfigError(
+                "first_sample", first_sample, f"{self._expected_first} (blocks in sample order)"
+            )
+        self._expected_first = first_sample + n
+        out = np.zeros((n, self.adc_channels))
+        out[:, 0] = self.channel.read(n)
+        if self.adc_channels > 1:
+            drive = np.concatenate([self._monitor_tail, dac[:, 0]])
+            out[:, 1] = drive[:n]
+            self._monitor_tail = drive[n:]
+        return out

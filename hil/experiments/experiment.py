@@ -1,0 +1,471 @@
+"""The experiment file of a towed-target tank run (TOML), validated before any device is
+touched.
+
+Every problem is a :class:`~hil.errors.ConfigError` naming the field by its dotted path as
+written in the file (``tow.speed_mps``), the value, the allowed range and what to do. The
+format is documented in ``docs/tank-run.md``; :data:`DEFAULT_EXPERIMENT` is the built-in
+simulated run that ``hil tank-run`` uses without arguments.
+
+Coordinates: the tank frame has x along the tank length, y across, z up with the water
+surface at z = 0 (so depths are negative), metres. The stage is GRBL's X axis, whose machine
+positions are in ``[-travel, 0]`` (0 at the homing switch): the towed target sits at
+``tank.stage_origin_m + x_stage · tank.stage_axis``.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hil.errors import ConfigError
+from hil.signals.presets import check_design, get_preset
+from hil.signals.schedule import HopSchedule
+from hil.signals.waveforms import WaveformSpec
+
+DEFAULT_EXPERIMENT = """\
+# Built-in simulated tank run: `hil tank-run` with no arguments.
+[run]
+name = "sim-towed-pass"
+output_dir = "runs"
+
+[devices]
+board = "sim://board"
+stage = "sim://stage"
+
+[waveform]
+preset = "tank-audio"
+family = "random-cyclic"
+amplitude = 0.5
+
+[tank]
+size_m = [12.0, 4.0, 2.5]
+water_temperature_c = 20.0
+transducer_position_m = [0.5, 2.0, -1.2]
+stage_origin_m = [11.0, 2.0, -1.2]
+stage_axis = [1.0, 0.0, 0.0]
+
+[tow]
+start_m = -2.0
+end_m = -5.0
+speed_mps = 1.5
+repeats = 1
+run_up_m = 0.6
+run_down_m = 0.6
+
+[receiver]
+name = "gcas"
+m_hops = 10
+max_speed_mps = 3.0
+max_range_m = 12.0
+# Ignore stationary echoes (direct blast, walls): the Doppler band of |v| < 0.8 m/s.
+options = { reverb_speed_mps = 0.8 }
+
+[calibration]
+store = "calibration"
+max_age_days = 30.0
+required = []
+
+[simulation]
+source_level_db = 185.0
+target_strength_db = -12.0
+sensitivity_db = -200.0
+gain_db = 10.0
+image_order = 1
+noise_level_db = 55.0
+reverberation = true
+scattering_strength_db = -70.0
+time_scale = 0.15
+seed = 1
+"""
+
+_SECTIONS: dict[str, tuple[str, ...]] = {
+    "run": ("name", "output_dir", "max_duration_s"),
+    "devices": ("board", "stage", "board_channel"),
+    "waveform": ("preset", "family", "amplitude", "overrides"),
+    "tank": (
+        "size_m",
+        "water_temperature_c",
+        "salinity_ppt",
+        "sound_speed_mps",
+        "transducer_position_m",
+        "stage_origin_m",
+        "stage_axis",
+    ),
+    "tow": ("start_m", "end_m", "speed_mps", "repeats", "run_up_m", "run_down_m"),
+    "receiver": ("name", "m_hops", "max_speed_mps", "max_range_m", "options"),
+    "calibration": ("store", "max_age_days", "required"),
+    "simulation": (
+        "source_level_db",
+        "target_strength_db",
+        "sensitivity_db",
+        "gain_db",
+        "image_order",
+        "noise_level_db",
+        "reverberation",
+        "scattering_strength_db",
+        "time_scale",
+        "seed",
+    ),
+}
+_REQUIRED = {"devices": ("board", "stage"), "tow": ("start_m", "end_m", "speed_mps")}
+
+
+@dataclass(frozen=True)
+class TowPlan:
+    """A constant-speed pass of the stage, stage coordinates (m) and m/s."""
+
+    start_m: float
+    end_m: float
+    speed_mps: float
+    repeats: int = 1
+    run_up_m: float = 0.5
+    run_down_m: float = 0.5
+
+
+@dataclass(frozen=True)
+class SimulationSettings:
+    """The simulated world behind ``sim://`` devices (ignored for real hardware)."""
+
+    source_level_db: float = 185.0
+    target_strength_db: float = -12.0
+    sensitivity_db: float = -200.0
+    gain_db: float = 30.0
+    image_order: int = 1
+    noise_level_db: float = 40.0
+    reverberation: bool = True
+    scattering_strength_db: float = -70.0
+    time_scale: float = 0.5
+    seed: int = 1
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """A validated experiment file; build it with :func:`parse_experiment`."""
+
+    name: str
+    output_dir: Path
+    max_duration_s: float
+    board_url: str
+    stage_url: str
+    board_channel: int
+    waveform: WaveformSpec
+    schedule: HopSchedule
+    preset: str
+    amplitude: float
+    tank_size_m: tuple[float, float, float]
+    water_temperature_c: float
+    salinity_ppt: float
+    sound_speed_mps: float
+    transducer_m: tuple[float, float, float]
+    stage_origin_m: tuple[float, float, float]
+    stage_axis: tuple[float, float, float]
+    tow: TowPlan
+    receiver: str
+    m_hops: int
+    max_speed_mps: float
+    max_range_m: float
+    receiver_options: dict[str, Any]
+    calibration_store: Path
+    calibration_max_age_days: float
+    calibration_required: tuple[str, ...]
+    simulation: SimulationSettings
+    text: str = field(default="", compare=False)
+
+    @property
+    def simulated(self) -> bool:
+        """True when both devices are simulated (``sim://``)."""
+        return self.board_url.startswith("sim://") and self.stage_url.startswith("sim://")
+
+    def target_position(self, x_stage_m: np.ndarray) -> np.ndarray:
+        """Tank position (m, shape ``(..., 3)``) of the target at stage positions (m)."""
+        x = np.asarray(x_stage_m, dtype=np.float64)
+        return np.asarray(self.stage_origin_m) + np.multiply.outer(x, np.asarray(self.stage_axis))
+
+    def range_at(self, x_stage_m: np.ndarray) -> np.ndarray:
+        """Distance (m) from the transducer to the target at stage positions (m)."""
+        d = self.target_position(x_stage_m) - np.asarray(self.transducer_m)
+        return np.asarray(np.sqrt(np.sum(d * d, axis=-1)))
+
+
+class _Table:
+    """A TOML table with its dotted path, for messages."""
+
+    def __init__(self, data: Any, path: str, allowed: tuple[str, ...]) -> None:
+        if not isinstance(data, dict):
+            raise ConfigError(path, data, "a table")
+        unknown = sorted(set(data) - set(allowed))
+        if unknown:
+            raise ConfigError(
+                f"{path}.{unknown[0]}",
+                data[unknown[0]],
+                f"one of the keys {', '.join(allowed)}",
+                "check the spelling (docs/tank-run.md lists every key)",
+            )
+        self.data, self.path = data, path
+
+    def _name(self, key: str) -> str:
+        return f"{self.path}.{key}"
+
+    def number(
+        self,
+        key: str,
+        default: float | None = None,
+        *,
+        lo: float | None = None,
+        hi: float | None = None,
+        strict_lo: bool = False,
+        unit: str = "",
+    ) -> float:
+        if key not in self.data:
+            if default is None:
+                raise ConfigError(
+                    self._name(key),
+                    None,
+                    f"a number{' in ' + unit if unit else ''}",
+                    "it is required",
+                )
+            return default
+        v = self.data[key]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise ConfigError(self._name(key), v, f"a finite number ({unit})")
+        low_ok = lo is None or (v > lo if strict_lo else v >= lo)
+        if not low_ok or (hi is not None and v > hi):
+            rng = f"{'>' if strict_lo else '>='} {lo}" if lo is not None else ""
+            if hi is not None:
+                rng = f"{rng} and <= {hi}" if rng else f"<= {hi}"
+            raise ConfigError(self._name(key), v, f"{rng} {unit}".strip())
+        return float(v)
+
+    def integer(self, key: str, default: int, *, lo: int, hi: int | None = None) -> int:
+        v = self.data.get(key, default)
+        if isinstance(v, bool) or not isinstance(v, int) or v < lo or (hi is not None and v > hi):
+            raise ConfigError(
+                self._name(key), v, f"an integer >= {lo}" + (f" and <= {hi}" if hi else "")
+            )
+        return int(v)
+
+    def text(self, key: str, default: str | None = None) -> str:
+        if key not in self.data:
+            if default is None:
+                raise ConfigError(self._name(key), None, "a string", "it is required")
+            return default
+        v = self.data[key]
+        if not isinstance(v, str) or not v:
+            raise ConfigError(self._name(key), v, "a non-empty string")
+        return v
+
+    def point(
+        self, key: str, default: tuple[float, float, float] | None = None
+    ) -> tuple[float, float, float]:
+        if key not in self.data:
+            if default is None:
+                raise ConfigError(self._name(key), None, "[x, y, z] in metres", "it is required")
+            return default
+        v = self.data[key]
+        if (
+            not isinstance(v, list)
+            or len(v) != 3
+            or not all(
+                isinstance(c, (int, float)) and not isinstance(c, bool) and math.isfinite(c)
+                for c in v
+            )
+        ):
+            raise ConfigError(self._name(key), v, "[x, y, z]: three finite numbers (m)")
+        return (float(v[0]), float(v[1]), float(v[2]))
+
+
+def load_experiment(path: Path) -> Experiment:
+    """Read and validate an experiment file."""
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError("experiment", str(path), "an existing TOML file") from None
+    return parse_experiment(text)
+
+
+def parse_experiment(text: str) -> Experiment:
+    """Validate experiment TOML text (see the module docstring); nothing is touched."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError("experiment", "TOML", f"valid TOML ({exc})") from None
+    unknown = sorted(set(data) - set(_SECTIONS))
+    if unknown:
+        raise ConfigError(unknown[0], data[unknown[0]], f"one of the tables {', '.join(_SECTIONS)}")
+    for section, keys in _REQUIRED.items():
+        for key in keys:
+            if key not in data.get(section, {}):
+                raise ConfigError(f"{section}.{key}", None, "a value", "it is required")
+    t = {name: _Table(data.get(name, {}), name, keys) for name, keys in _SECTIONS.items()}
+
+    run, dev, wav, tank, tow, rec, cal, sim = (t[k] for k in _SECTIONS)
+    name = run.text("name", "tank-run")
+    output_dir = Path(run.text("output_dir", "runs"))
+    max_duration = run.number("max_duration_s", 120.0, lo=0.0, strict_lo=True, unit="s")
+    board_url, stage_url = dev.text("board"), dev.text("stage")
+    board_channel = dev.integer("board_channel", 0, lo=0, hi=15)
+
+    preset_name = wav.text("preset", "tank-board")
+    family = wav.text("family", "random-cyclic")
+    amplitude = wav.number("amplitude", 0.5, lo=0.0, hi=1.0, strict_lo=True, unit="(full scale)")
+    overrides = wav.data.get("overrides", {})
+    if not isinstance(overrides, dict):
+        raise ConfigError("waveform.overrides", overrides, "a table of waveform fields")
+
+    size = tank.point("size_m", (12.0, 4.0, 2.5))
+    if min(size) <= 0:
+        raise ConfigError("tank.size_m", list(size), "three lengths > 0 m")
+    temp = tank.number("water_temperature_c", 20.0, lo=0.0, hi=95.0, unit="°C")
+    salinity = tank.number("salinity_ppt", 0.0, lo=0.0, hi=42.0, unit="ppt")
+    if "sound_speed_mps" in tank.data:
+        c = tank.number("sound_speed_mps", lo=1300.0, hi=1700.0, unit="m/s")
+    else:
+        c = _sound_speed_from_water(temp, salinity)
+    xdcr = tank.point("transducer_position_m", (0.5, size[1] / 2, -size[2] / 2))
+    origin = tank.point("stage_origin_m", (size[0] - 1.0, size[1] / 2, -size[2] / 2))
+    axis_raw = np.asarray(tank.point("stage_axis", (1.0, 0.0, 0.0)))
+    norm = float(np.sqrt(axis_raw @ axis_raw))
+    if norm == 0:
+        raise ConfigError("tank.stage_axis", axis_raw.tolist(), "a non-zero direction")
+    axis = axis_raw / norm
+    for key, p in (("transducer_position_m", xdcr), ("stage_origin_m", origin)):
+        _inside_tank(f"tank.{key}", p, size)
+
+    plan = TowPlan(
+        start_m=tow.number("start_m", unit="m"),
+        end_m=tow.number("end_m", unit="m"),
+        speed_mps=tow.number("speed_mps", lo=0.0, strict_lo=True, hi=5.0, unit="m/s"),
+        repeats=tow.integer("repeats", 1, lo=1, hi=1000),
+        run_up_m=tow.number("run_up_m", 0.5, lo=0.0, unit="m"),
+        run_down_m=tow.number("run_down_m", 0.5, lo=0.0, unit="m"),
+    )
+    if plan.start_m == plan.end_m:
+        raise ConfigError("tow.end_m", plan.end_m, f"!= tow.start_m = {plan.start_m} m")
+    d = 1.0 if plan.end_m > plan.start_m else -1.0
+    for key, x in (
+        ("tow.start_m - tow.run_up_m", plan.start_m - d * plan.run_up_m),
+        ("tow.end_m + tow.run_down_m", plan.end_m + d * plan.run_down_m),
+    ):
+        if x > 0:
+            raise ConfigError(key, x, "<= 0 m (GRBL machine positions are in [-travel, 0])")
+        towed = np.asarray(origin) + x * axis
+        _inside_tank(f"target at stage x = {x:g} m ({key})", tuple(towed.tolist()), size)
+
+    receiver = rec.text("name", "gcas")
+    m_hops = rec.integer("m_hops", 10, lo=1, hi=64)
+    v_max = rec.number("max_speed_mps", 3.0, lo=0.0, strict_lo=True, unit="m/s")
+    if v_max < plan.speed_mps:
+        raise ConfigError(
+            "receiver.max_speed_mps",
+            v_max,
+            f">= tow.speed_mps = {plan.speed_mps} m/s",
+            "the Doppler search must cover the tow speed",
+        )
+    diag = float(np.sqrt(sum(s * s for s in size)))
+    r_max = rec.number("max_range_m", diag, lo=0.0, strict_lo=True, unit="m")
+    options = rec.data.get("options", {})
+    if not isinstance(options, dict):
+        raise ConfigError("receiver.options", options, "a table of receiver options")
+
+    # The waveform: preset, family, overrides, with the tank's sound speed and tow limits.
+    preset = get_preset(preset_name)
+    try:
+        spec = preset.spec(family, sound_speed_mps=c, **overrides)
+    except ConfigError as exc:
+        raise ConfigError(f"waveform.{exc.field}", exc.value, exc.allowed, exc.hint) from None
+    spec = spec.with_overrides(max_range_m=min(spec.max_range_m, r_max))
+    try:
+        schedule = check_design(spec)
+    except ConfigError as exc:
+        raise ConfigError(f"waveform.{exc.field}", exc.value, exc.allowed, exc.hint) from None
+    r_unamb = schedule.unambiguous_range_m(c)
+    if r_max > r_unamb:
+        raise ConfigError(
+            "receiver.max_range_m", r_max, f"<= the waveform's unambiguous range {r_unamb:.2f} m"
+        )
+
+    store = Path(cal.text("store", "calibration"))
+    max_age = cal.number("max_age_days", 30.0, lo=0.0, strict_lo=True, unit="days")
+    required = cal.data.get("required", [])
+    if not isinstance(required, list) or not all(isinstance(r, str) for r in required):
+        raise ConfigError("calibration.required", required, "a list of calibration kinds")
+
+    simulation = SimulationSettings(
+        source_level_db=sim.number(
+            "source_level_db", 185.0, lo=100.0, hi=250.0, unit="dB re 1 µPa @ 1 m"
+        ),
+        target_strength_db=sim.number(
+            "target_strength_db", -12.0, lo=-80.0, hi=40.0, unit="dB re 1 m²"
+        ),
+        sensitivity_db=sim.number(
+            "sensitivity_db", -200.0, lo=-260.0, hi=-100.0, unit="dB re 1 V/µPa"
+        ),
+        gain_db=sim.number("gain_db", 30.0, lo=-20.0, hi=80.0, unit="dB"),
+        image_order=sim.integer("image_order", 1, lo=0, hi=1),
+        noise_level_db=sim.number(
+            "noise_level_db", 40.0, lo=-20.0, hi=120.0, unit="dB re 1 µPa²/Hz"
+        ),
+        reverberation=bool(sim.data.get("reverberation", True)),
+        scattering_strength_db=sim.number(
+            "scattering_strength_db", -70.0, lo=-120.0, hi=-10.0, unit="dB"
+        ),
+        time_scale=sim.number("time_scale", 0.5, lo=0.01, hi=1.0, unit="(simulated s per wall s)"),
+        seed=sim.integer("seed", 1, lo=0),
+    )
+    return Experiment(
+        name=name,
+        output_dir=output_dir,
+        max_duration_s=max_duration,
+        board_url=board_url,
+        stage_url=stage_url,
+        board_channel=board_channel,
+        waveform=spec,
+        schedule=schedule,
+        preset=preset_name,
+        amplitude=amplitude,
+        tank_size_m=size,
+        water_temperature_c=temp,
+        salinity_ppt=salinity,
+        sound_speed_mps=c,
+        transducer_m=xdcr,
+        stage_origin_m=origin,
+        stage_axis=(float(axis[0]), float(axis[1]), float(axis[2])),
+        tow=plan,
+        receiver=receiver,
+        m_hops=m_hops,
+        max_speed_mps=v_max,
+        max_range_m=r_max,
+        receiver_options=dict(options),
+        calibration_store=store,
+        calibration_max_age_days=max_age,
+        calibration_required=tuple(required),
+        simulation=simulation,
+        text=text,
+    )
+
+
+def _inside_tank(name: str, p: tuple[float, ...], size: tuple[float, float, float]) -> None:
+    lx, ly, lz = size
+    inside = 0 < p[0] < lx and 0 < p[1] < ly and -lz < p[2] < 0
+    if not inside:
+        raise ConfigError(
+            name,
+            [round(c, 4) for c in p],
+            f"inside the tank: 0 < x < {lx}, 0 < y < {ly}, -{lz} < z < 0 m",
+            "move it, or change tank.size_m / the tow plan",
+        )
+
+
+def _sound_speed_from_water(temperature_c: float, salinity_ppt: float) -> float:
+    """c from the logged water: fresh water (Marczak 1997) or UNESCO for salt water."""
+    # Lazy import: the formulas live with the acoustics (DESIGN: hil imports sim_devices lazily).
+    from sim_devices.acoustics.sound_speed import tank_sound_speed, unesco_sound_speed
+
+    if salinity_ppt == 0.0:
+        return float(tank_sound_speed(temperature_c))
+    return float(unesco_sound_speed(salinity_ppt, temperature_c, 0.0))

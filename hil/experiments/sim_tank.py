@@ -1,0 +1,313 @@
+"""The built-in simulated tank: a simulated GRBL stage and a simulated board on real ptys,
+with the acoustic world between them, all on one shared clock.
+
+The towed target moves exactly as the simulated stage's carriage: the world's Live target
+position at device sample ``n`` is the stage's true position at the board clock time of that
+sample. The clock is scaled (:class:`ScaledClock`): simulated seconds may run slower than wall
+seconds (``simulation.time_scale``), so a world that computes slower than real time still
+gives a correct run; the host drivers see ordinary devices on ordinary serial ports.
+
+Everything from :mod:`sim_devices` is imported inside the functions (DESIGN: the host never
+imports simulated devices at module level).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hil.errors import ConfigError
+from hil.experiments.experiment import Experiment
+
+# Simulated GRBL machine for the tank: 2.5 m/s, 2 m/s², 10 m of travel, 80 steps/mm.
+STAGE_MAX_RATE_MM_MIN = 150_000.0
+STAGE_ACCEL_MM_S2 = 2_000.0
+STAGE_TRAVEL_MM = 10_000.0
+# DAC reconstruction + ADC anti-alias group delay of the simulated board, samples.
+CONVERTER_DELAY_SAMPLES = 64
+
+
+class ScaledClock:
+    """Seconds that run at ``scale`` times the wall clock (:func:`time.monotonic`), counted
+    from the monotonic instant ``wall0`` (default: now). ``time.monotonic`` is system-wide on
+    Linux, so two processes given the same ``wall0`` and ``scale`` share one clock."""
+
+    def __init__(self, scale: float, wall0: float | None = None) -> None:
+        if not 0 < scale <= 1:
+            raise ConfigError("simulation.time_scale", scale, "in (0, 1]")
+        self.scale = float(scale)
+        self._wall0 = time.monotonic() if wall0 is None else float(wall0)
+        self._start = 0.0
+
+    def __call__(self) -> float:
+        return self._start + (time.monotonic() - self._wall0) * self.scale
+
+    def now(self) -> float:
+        """Current simulated time, s."""
+        return self()
+
+    def sleep(self, seconds: float) -> None:
+        """Let ``seconds`` of simulated time pass (``seconds / scale`` of wall time)."""
+        if seconds > 0:
+            time.sleep(seconds / self.scale)
+
+
+@dataclass
+class SimulatedTank:
+    """The running simulated devices; ``board_port``/``stage_port`` are pty paths."""
+
+    board_port: str
+    stage_port: str
+    clock: ScaledClock
+    board_sim: Any
+    stage_sim: Any
+    world: Any
+    _offset: list[float] = field(default_factory=lambda: [0.0])
+    _lock: threading.Lock = field(default_factory=threading.Lock)
+
+    def align_world_time(self, rate_hz: float) -> None:
+        """Tie world time (device sample / rate) to the shared clock after CONFIGURE."""
+        now = self.clock()
+        index = self.board_sim.call(lambda b: b.sample_index(now))
+        self._offset[0] = now - index / rate_hz
+
+    def stage_time(self, world_t: np.ndarray) -> np.ndarray:
+        """Shared-clock time (s) of world times (s)."""
+        return np.asarray(world_t, dtype=np.float64) + self._offset[0]
+
+    def true_stage_position(self, clock_t: np.ndarray) -> np.ndarray:
+        """The simulated carriage's true position (m) at shared-clock times (s)."""
+        t = np.asarray(clock_t, dtype=np.float64)
+        return np.asarray(self.stage_sim.call(lambda g: g.true_position(t)))
+
+    def close(self) -> None:
+        """Stop both simulated devices."""
+        for sim in (self.board_sim, self.stage_sim):
+            with contextlib.suppress(Exception):  # best effort at shutdown
+                sim.close()
+
+
+def start_simulated_tank(exp: Experiment, wall0: float | None = None) -> SimulatedTank:
+    """Start the simulated stage and board for ``exp`` (in this process) and return them."""
+    from sim_devices.acoustics.channel import Channel, DirectBlast, Receiver, Target
+    from sim_devices.acoustics.dac_world import ScheduleWorld
+    from sim_devices.acoustics.scenario import build_channel, parse_scenario
+    from sim_devices.acoustics.tank import Tank
+    from sim_devices.acoustics.trajectory import Fixed, Live
+    from sim_devices.board import SimulatedBoardOnPty
+    from sim_devices.stage.controller import GrblSimConfig
+    from sim_devices.stage.on_pty import SimulatedGrblOnPty
+
+    sim = exp.simulation
+    clock = ScaledClock(sim.time_scale, wall0)
+    stage_sim = SimulatedGrblOnPty(
+        GrblSimConfig(
+            steps_per_mm=80.0,
+            max_rate_mm_min=STAGE_MAX_RATE_MM_MIN,
+            acceleration_mm_s2=STAGE_ACCEL_MM_S2,
+            max_travel_mm=STAGE_TRAVEL_MM,
+            homing=True,
+            homing_seek_mm_min=6000.0,
+            homing_feed_mm_min=600.0,
+            power_up_position_mm=-20.0,
+            host_silence_timeout_s=5.0,
+        ),
+        clock=clock,
+    ).start()
+
+    fs = float(exp.waveform.fs_hz)
+    c = exp.sound_speed_mps
+    size = exp.tank_size_m
+    holder: dict[str, SimulatedTank] = {}
+
+    grid_s = 1e-3  # stage positions on a 1 ms grid: error a·dt²/8 ≈ 0.25 µm at 2 m/s²
+    cache: dict[str, np.ndarray] = {}
+
+    def target_position(t: np.ndarray) -> np.ndarray:
+        # Every echo path and every fixed-point iteration asks for positions over the same
+        # block: sample the stage once per block on a grid and interpolate.
+        tank = holder["tank"]
+        # The channel counts time from its first block: convert to device sample time.
+        origin = tank.world.origin_index or 0
+        tq = np.asarray(t, dtype=np.float64) + origin / fs
+        lo, hi = float(np.min(tq)), float(np.max(tq))
+        g = cache.get("t")
+        if g is None or lo < g[0] or hi > g[-1]:
+            g = np.arange(np.floor(lo / grid_s) - 2, np.ceil(hi / grid_s) + 3) * grid_s
+            cache["t"] = g
+            cache["x"] = tank.true_stage_position(tank.stage_time(g))
+        x = np.interp(tq, cache["t"], cache["x"])
+        return exp.target_position(x)
+
+    live = Live(target_position, max_speed_mps=STAGE_MAX_RATE_MM_MIN / 60_000.0)
+    receiver = Receiver(sensitivity_db=sim.sensitivity_db, gain_db=sim.gain_db, full_scale_v=1.0)
+    # The DAC plays the schedule at ``amplitude`` of full scale: that sets the source level.
+    source_level = sim.source_level_db + 20.0 * float(np.log10(exp.amplitude))
+    diag = float(np.sqrt(sum(s * s for s in size)))
+    scenario: dict[str, Any] = {
+        "preset": exp.preset,
+        "family": exp.waveform.family,
+        "fs_hz": fs,
+        "seed": sim.seed,
+        "environment": {"sound_speed_mps": c},
+        "sonar": {
+            "position_m": list(exp.transducer_m),
+            "source_level_db": source_level,
+            "sensitivity_db": sim.sensitivity_db,
+            "gain_db": sim.gain_db,
+        },
+        "noise": {"self_noise_db": sim.noise_level_db},
+    }
+    if sim.reverberation:
+        scenario["reverberation"] = {
+            "scattering_strength_db": sim.scattering_strength_db,
+            "density_per_m3": 20.0,
+            "min_range_m": 0.3,
+            "max_range_m": diag,
+        }
+    ambient = build_channel(parse_scenario(scenario))
+    delay = CONVERTER_DELAY_SAMPLES
+    # Exact echoes of the transmitted schedule; the converter latency delays everything.
+    channel = Channel(
+        exp.schedule.shifted(delay / fs),
+        fs,
+        Fixed(exp.transducer_m),
+        source_level,
+        c,
+        targets=[Target(live, sim.target_strength_db)],
+        receiver=receiver,
+        tank=Tank(*size),
+        image_order=sim.image_order,
+        direct_blast=DirectBlast(coupling_db=-80.0, separation_m=0.05),
+        reverberation=ambient.reverberation,
+        noise=ambient.noise,
+        noise_scale=ambient.noise_scale,
+    )
+    world = ScheduleWorld(channel, converter_delay_samples=delay, adc_channels=2)
+    # Ticks of 100 ms wall: the world computes whole frames, not a few samples per call.
+    board_sim = SimulatedBoardOnPty(clock=clock, world=world, poll_interval=0.1).start()
+    tank = SimulatedTank(
+        board_sim.port_name, stage_sim.port_name, clock, board_sim, stage_sim, world
+    )
+    holder["tank"] = tank
+    return tank
+
+
+class SimulatedTankProcess:
+    """The simulated tank in a child process (its own core and interpreter: the acoustic
+    world does not compete with the host's capture and estimator for the GIL).
+
+    The child prints the two pty paths; the host shares its clock (same ``wall0`` and
+    scale). :meth:`align` ties world time to the clock after the board is configured;
+    :meth:`close` stops the child, which then writes the simulated carriage's true
+    trajectory (1 ms grid) for the exact-truth check.
+    """
+
+    def __init__(self, exp: Experiment, experiment_file: Path, folder: Path) -> None:
+        import json
+        import subprocess
+        import sys
+
+        self.clock = ScaledClock(exp.simulation.time_scale)
+        self.folder = folder
+        self._offset = 0.0
+        self._proc = subprocess.Popen(
+            [sys.executable, "-m", "hil.experiments.sim_tank", str(experiment_file),
+             repr(self.clock._wall0), str(folder)],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        assert self._proc.stdout is not None
+        line = self._proc.stdout.readline()
+        if not line:
+            raise RuntimeError("the simulated tank process did not start")
+        ports = json.loads(line)
+        self.board_port: str = ports["board"]
+        self.stage_port: str = ports["stage"]
+        self._trajectory: tuple[np.ndarray, np.ndarray] | None = None
+        self.dac_underruns = 0
+        self.adc_overruns = 0
+
+    def _ask(self, text: str) -> str:
+        assert self._proc.stdin is not None and self._proc.stdout is not None
+        self._proc.stdin.write(text + "\n")
+        self._proc.stdin.flush()
+        return self._proc.stdout.readline().strip()
+
+    def align(self, rate_hz: float) -> None:
+        """Tie world time to the shared clock (after CONFIGURE)."""
+        self._offset = float(self._ask(f"align {rate_hz!r}"))
+
+    def stage_time(self, world_t: np.ndarray) -> np.ndarray:
+        """Shared-clock time (s) of world times (s)."""
+        return np.asarray(world_t, dtype=np.float64) + self._offset
+
+    def close(self) -> None:
+        """Stop the child and load the carriage trajectory it wrote."""
+        import json
+
+        if self._proc.poll() is None:
+            with contextlib.suppress(Exception):
+                counters = json.loads(self._ask("stop"))
+                self.dac_underruns = int(counters.get("dac_underruns", 0))
+                self.adc_overruns = int(counters.get("adc_overruns", 0))
+            with contextlib.suppress(Exception):
+                self._proc.wait(timeout=10)
+            if self._proc.poll() is None:
+                self._proc.kill()
+        path = self.folder / "sim_stage_trajectory.npz"
+        if path.exists():
+            data = np.load(path)
+            self._trajectory = (data["t"], data["x"])
+
+    def true_stage_position(self, clock_t: np.ndarray) -> np.ndarray:
+        """The simulated carriage's true position (m) at shared-clock times (s)."""
+        if self._trajectory is None:
+            raise RuntimeError("the trajectory is read after close()")
+        t, x = self._trajectory
+        return np.asarray(np.interp(np.asarray(clock_t, dtype=float), t, x))
+
+
+def _serve(argv: list[str]) -> int:
+    """Child process: run the simulated tank until told to stop (see SimulatedTankProcess)."""
+    import json
+    import sys
+
+    from hil.experiments.experiment import load_experiment
+
+    exp = load_experiment(Path(argv[0]))
+    wall0 = float(argv[1])
+    folder = Path(argv[2])
+    tank = start_simulated_tank(exp, wall0)
+    t_first = tank.clock()
+    print(json.dumps({"board": tank.board_port, "stage": tank.stage_port}), flush=True)
+    for line in sys.stdin:
+        word, _, arg = line.strip().partition(" ")
+        if word == "align":
+            tank.align_world_time(float(arg))
+            print(repr(tank._offset[0]), flush=True)
+        elif word == "stop":
+            counters = {
+                "dac_underruns": int(tank.board_sim.call(lambda b: b.dac_underruns)),
+                "adc_overruns": int(tank.board_sim.call(lambda b: b.adc_overruns)),
+            }
+            t_end = tank.clock()
+            grid = np.arange(t_first, t_end + 1e-3, 1e-3)
+            np.savez(folder / "sim_stage_trajectory.npz", t=grid,
+                     x=tank.true_stage_position(grid))  # fmt: skip
+            tank.close()
+            print(json.dumps(counters), flush=True)
+            return 0
+    tank.close()
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover - the child process entry point
+    import sys
+
+    sys.exit(_serve(sys.argv[1:]))

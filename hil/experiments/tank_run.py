@@ -1,0 +1,616 @@
+"""The towed-target tank run: waveform out, a towed pass on the stage, the estimator live,
+the stage as ground truth, everything recorded.
+
+Order of work (each step refuses with a clear message before the next touches anything):
+
+1. the experiment file is validated (:mod:`hil.experiments.experiment`);
+2. preflight without devices: calibrations required by the file present and recent;
+3. devices opened (simulated ones started first for ``sim://``): stage homed if needed, tow
+   plan inside the stage's soft limits and speed limits, board rates and channels;
+4. continuous transmission starts (DAC fed from the schedule), capture streams into the
+   recording and into the same receiver code used offline (:class:`ReceiverFeed`), the stage
+   makes its passes, telemetry is mapped onto sample time through the board's sync fit;
+5. a clean stop on completion, Ctrl-C or any error: transmission off, stage held, files
+   closed; then truth, summary and report.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as dt
+import json
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TextIO
+
+import numpy as np
+
+from hil.errors import ConfigError
+from hil.estimation.base import Estimate
+from hil.estimation.registry import make_receiver
+from hil.experiments.experiment import Experiment
+from hil.signals.schedule_file import schedule_document
+from hil.signals.synthesis import BlockSynthesizer
+
+# Samples per capture block handed to the recording and the receiver (about 10-20 ms).
+_BLOCK_S = 0.01
+# Capture kept after the stage stops, s: the last echoes still arrive.
+_TAIL_S = 0.3
+_INT16_SCALE = 1.0 / 32768.0
+# Capture used to measure the loopback latency at the start of every run, s.
+_LATENCY_PROBE_S = 0.05
+
+
+def measure_latency(monitor: np.ndarray, sent: np.ndarray, max_lag: int = 4096) -> int:
+    """Integer-sample delay of ``monitor`` (the DAC drive as captured) behind ``sent``.
+
+    >>> x = np.random.default_rng(0).normal(size=2000)
+    >>> measure_latency(np.concatenate([np.zeros(37), x])[:2000], x)
+    37
+    """
+    n = min(monitor.shape[0], sent.shape[0])
+    lags = min(max_lag, n - 1)
+    nfft = 1 << (2 * n - 1).bit_length()
+    xc = np.fft.irfft(np.fft.rfft(monitor[:n], nfft) * np.conj(np.fft.rfft(sent[:n], nfft)), nfft)
+    return int(np.argmax(xc[: lags + 1]))
+
+
+@dataclass
+class Telemetry:
+    """Stage telemetry mapped onto sample time."""
+
+    host_time_s: list[float] = field(default_factory=list)
+    sample_index: list[int] = field(default_factory=list)
+    position_m: list[float] = field(default_factory=list)
+    velocity_mps: list[float] = field(default_factory=list)
+    state: list[str] = field(default_factory=list)
+
+
+@dataclass
+class RunOutcome:
+    """What a run produced (the report is built from it)."""
+
+    folder: Path
+    experiment: Experiment
+    fs_hz: float
+    start_index: int
+    samples: int
+    estimates: list[Estimate]
+    telemetry: Telemetry
+    dropped_samples: int
+    dac_underruns: int
+    adc_overruns: int
+    events: list[tuple[str, int, int, str]]
+    wall_s: float
+    signal_s: float
+    windows: list[tuple[float, float]]
+    exact_truth: Any = None
+    map_times: list[np.ndarray] = field(default_factory=list)
+    map_power: list[np.ndarray] = field(default_factory=list)
+    interrupted: bool = False
+    error: str = ""
+    latency_samples: int | None = None
+
+
+class LiveView:
+    """One status line, redrawn in place on a terminal, or a line a second in a log."""
+
+    def __init__(self, stream: TextIO | None = None, enabled: bool = True) -> None:
+        self.stream = stream or sys.stderr
+        self.enabled = enabled
+        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        self._last = 0.0
+
+    def update(self, text: str, *, force: bool = False) -> None:
+        if not self.enabled:
+            return
+        now = time.monotonic()
+        if self.tty:
+            if force or now - self._last >= 0.1:
+                self.stream.write("\r" + text[:150].ljust(150))
+                self.stream.flush()
+                self._last = now
+        elif force or now - self._last >= 1.0:
+            self.stream.write(text + "\n")
+            self.stream.flush()
+            self._last = now
+
+    def close(self) -> None:
+        if self.enabled and self.tty:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+def check_calibrations(exp: Experiment) -> list[str]:
+    """Preflight: the calibrations the file requires are present and recent; their ids."""
+    if not exp.calibration_required:
+        return []
+    from hil.experiments.calibration.store import CalibrationStore
+
+    store = CalibrationStore(exp.calibration_store)
+    max_age = exp.calibration_max_age_days * 86400.0
+    return [store.require(kind, max_age).id for kind in exp.calibration_required]
+
+
+def run_experiment(
+    exp: Experiment,
+    *,
+    folder: Path | None = None,
+    view: LiveView | None = None,
+) -> RunOutcome:
+    """Run ``exp`` end to end (see the module docstring) and return what it produced.
+
+    Raises ConfigError for problems found before anything moves or transmits.
+    """
+    from hil.devices.board import Board
+    from hil.devices.board_settings import BoardSettings
+    from hil.devices.grbl import GrblStage
+    from hil.recording.records import ReceiverSetup, RunEvent, StageTelemetry
+    from hil.recording.replay import ReceiverFeed
+    from hil.recording.writer import RunWriter
+
+    calibration_ids = check_calibrations(exp)
+    stamp = dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+    folder = folder or exp.output_dir / f"{exp.name}-{stamp}"
+    folder.mkdir(parents=True, exist_ok=True)
+    view = view or LiveView()
+    fs = float(exp.waveform.fs_hz)
+    if fs != int(fs):
+        raise ConfigError("waveform.fs_hz", fs, "a whole number of Hz (a board rate)")
+
+    tank: Any = None
+    clock: Any = None
+    board_url, stage_url = exp.board_url, exp.stage_url
+    if exp.simulated:
+        from hil.experiments.sim_tank import SimulatedTankProcess
+
+        experiment_file = folder / "experiment.toml"
+        experiment_file.write_text(exp.text, encoding="utf-8")
+        tank = SimulatedTankProcess(exp, experiment_file, folder)
+        board_url, stage_url, clock = tank.board_port, tank.stage_port, tank.clock
+    elif exp.board_url.startswith("sim://") or exp.stage_url.startswith("sim://"):
+        raise ConfigError(
+            "devices",
+            f"board {exp.board_url}, stage {exp.stage_url}",
+            "both simulated (sim://) or both real",
+            "the simulated target follows the simulated stage",
+        )
+
+    stage: Any = None
+    board: Any = None
+    writer: Any = None
+    outcome_error = ""
+    interrupted = False
+    estimates: list[Estimate] = []
+    telemetry = Telemetry()
+    windows: list[tuple[float, float]] = []
+    map_t: list[np.ndarray] = []
+    map_p: list[np.ndarray] = []
+    wall0 = time.monotonic()
+    next_index = 0
+    start_index = 0
+    try:
+        # ---- stage: open, home, check the plan against its limits (nothing moves yet)
+        stage = GrblStage(stage_url, clock=clock).open()
+        status = stage.status()
+        if status.state.name == "ALARM" or status.alarm is not None:
+            view.update("stage: homing", force=True)
+            stage.home()
+        lo, hi = stage.limits
+        plan = exp.tow
+        d = 1.0 if plan.end_m > plan.start_m else -1.0
+        for name, x in (
+            ("tow.start_m - tow.run_up_m", plan.start_m - d * plan.run_up_m),
+            ("tow.end_m + tow.run_down_m", plan.end_m + d * plan.run_down_m),
+        ):
+            if not lo <= x <= hi:
+                raise ConfigError(name, x, f"within the stage's soft limits [{lo}, {hi}] m")
+        v_max = stage.settings.max_rate
+        if plan.speed_mps > v_max:
+            raise ConfigError(
+                "tow.speed_mps", plan.speed_mps, f"<= the stage max rate {v_max:.3f} m/s"
+            )
+        # Position for the first pass before anything is transmitted.
+        view.update("stage: positioning for the first pass", force=True)
+        stage.move_to(plan.start_m - d * plan.run_up_m, v_max)
+
+        # ---- board: open, configure (refused before sending if it cannot)
+        settings = BoardSettings(sample_rate_hz=int(fs), dac_channels=1, adc_channels=2)
+        board = Board(board_url, settings=settings, clock=clock, ring_seconds=8.0).open()
+        board.configure()
+        if tank is not None:
+            tank.align(fs)
+
+        # ---- transmission: the schedule from the first transmitted sample
+        synth = BlockSynthesizer(exp.schedule, fs, amplitude=exp.amplitude)
+        origin: list[int] = []
+
+        def dac_source(first: int, n: int) -> np.ndarray:
+            if not origin:
+                origin.append(first)
+            return synth.render(first - origin[0], n)
+
+        start_index = board.start(dac_source)
+        next_index = start_index
+        doc = schedule_document(
+            exp.schedule,
+            fs,
+            0.0,
+            sound_speed_mps=exp.sound_speed_mps,
+            amplitude=exp.amplitude,
+            spec=exp.waveform.to_dict(),
+        )
+        rx_settings = {
+            "sound_speed_mps": exp.sound_speed_mps,
+            "max_speed_mps": exp.max_speed_mps,
+            "max_range_m": exp.max_range_m,
+            "m_hops": exp.m_hops,
+            **exp.receiver_options,
+        }
+        writer = RunWriter.create(
+            folder / "run.h5",
+            fs_hz=fs,
+            n_channels=2,
+            dtype="int16",
+            schedule_document=doc,
+            receiver=ReceiverSetup(
+                exp.receiver, rx_settings, channel=exp.board_channel, scale=_INT16_SCALE
+            ),
+            experiment_toml=exp.text,
+            calibration_ids=calibration_ids,
+            origin_sample=start_index,
+        )
+        extra: dict[str, Any] = dict(exp.receiver_options)
+        if exp.receiver == "gcas":
+
+            def on_map(t_s: np.ndarray, p: np.ndarray, speed: Any) -> None:
+                if sum(len(a) for a in map_t) < 400_000:
+                    map_t.append(np.asarray(t_s, dtype=float).copy())
+                    map_p.append(np.asarray(p, dtype=np.float32).copy())
+
+            extra["on_map"] = on_map
+        receiver = make_receiver(
+            exp.receiver,
+            exp.schedule,
+            fs,
+            sound_speed_mps=exp.sound_speed_mps,
+            max_speed_mps=exp.max_speed_mps,
+            max_range_m=exp.max_range_m,
+            m_hops=exp.m_hops,
+            **extra,
+        )
+        feed: ReceiverFeed | None = None
+        pending: list[tuple[int, np.ndarray]] = []
+        latency: list[int] = []
+
+        block = max(256, int(round(_BLOCK_S * fs)))
+        now = stage._clock.now
+        last_poll = -1.0
+        sync_seen = 0
+        pass_no = 0
+        moving = False
+        tail_until: float | None = None
+        deadline = now() + exp.max_duration_s
+        while True:
+            # Stage: start the next pass when idle, poll at most 5 Hz, record telemetry.
+            t_now = now()
+            if t_now - last_poll >= 0.2:
+                st = stage.status()
+                last_poll = t_now
+                fit = board.clock_fit
+                idx = (
+                    int(fit.sample_index(st.host_time))
+                    if fit is not None and fit.pairs >= 2
+                    else -1
+                )
+                telemetry.host_time_s.append(st.host_time)
+                telemetry.sample_index.append(idx)
+                telemetry.position_m.append(st.position)
+                telemetry.velocity_mps.append(st.velocity)
+                telemetry.state.append(st.state.name)
+                writer.append_telemetry(
+                    StageTelemetry(st.host_time, idx, st.position, st.velocity, st.state.name)
+                )
+                idle = st.state.name == "IDLE"
+                if idle and not moving and pass_no < plan.repeats and tail_until is None:
+                    first, last = (
+                        (plan.start_m, plan.end_m)
+                        if pass_no % 2 == 0
+                        else (plan.end_m, plan.start_m)
+                    )
+                    w = stage.run_profile(
+                        first, last, plan.speed_mps, plan.run_up_m, plan.run_down_m, wait=False
+                    )
+                    windows.append((w.t_start, w.t_end))
+                    pass_no += 1
+                    moving = True
+                elif moving and idle and now() > windows[-1][1]:
+                    moving = False
+                    if pass_no >= plan.repeats:
+                        tail_until = now() + _TAIL_S
+                if st.alarm is not None:
+                    raise RuntimeError(f"stage alarm {st.alarm} during the run")
+            # Sync pairs into the recording as they arrive.
+            pairs = list(getattr(board.clock_fit, "_pairs", ()))
+            for index, host_t in pairs[sync_seen:] if len(pairs) > sync_seen else ():
+                writer.append_sync(index, host_t)
+            sync_seen = len(pairs)
+            # Capture: every complete block goes to the recording and the receiver.
+            while board.wait_for_samples(next_index + block, timeout_s=0.05):
+                data = board.read(next_index, block)
+                writer.append_samples(next_index, data)
+                if feed is None:
+                    # Loopback latency, measured on this run: the DAC monitor channel against
+                    # the transmitted samples. The receiver's sample 0 is the first sample
+                    # that can hold the echo of transmit sample 0.
+                    pending.append((next_index, data))
+                    got = sum(b.shape[0] for _, b in pending)
+                    if got >= _LATENCY_PROBE_S * fs:
+                        captured = np.concatenate([b for _, b in pending])
+                        lat = measure_latency(
+                            captured[:, 1] * _INT16_SCALE, synth.render(0, captured.shape[0])
+                        )
+                        latency.append(lat)
+                        writer.append_event(
+                            RunEvent("note", start_index, lat, f"loopback latency {lat} samples")
+                        )
+                        feed = ReceiverFeed(
+                            receiver,
+                            origin=start_index + lat,
+                            channel=exp.board_channel,
+                            scale=_INT16_SCALE,
+                        )
+                        for first_i, blk in pending:
+                            skip = max(0, start_index + lat - first_i)
+                            if skip < blk.shape[0]:
+                                new = feed.feed(first_i + skip, blk[skip:])
+                                writer.append_estimates(new)
+                                estimates.extend(new)
+                        pending.clear()
+                else:
+                    new = feed.feed(next_index, data)
+                    if new:
+                        writer.append_estimates(new)
+                        estimates.extend(new)
+                next_index += block
+                if now() - last_poll >= 0.2:
+                    break
+            signal_s = (next_index - start_index) / fs
+            est = estimates[-1] if estimates else None
+            view.update(
+                f"t {signal_s:6.2f} s | pass {pass_no}/{plan.repeats} | stage x "
+                f"{telemetry.position_m[-1]:+.3f} m | "
+                + (
+                    f"R̂ {est.range_m:6.3f} m  v̂ {est.speed_mps:+.2f} m/s | "
+                    if est
+                    else "no estimate yet | "
+                )
+                + f"{len(estimates)} estimates | dropped {board.ring.missing if board.ring else 0}"
+            )
+            if tail_until is not None and now() >= tail_until:
+                # End on captured samples, not on the clock: a capture that lags still
+                # records the whole pass and its last echoes.
+                fit = board.clock_fit
+                end_index = (
+                    fit.sample_index(tail_until) if fit is not None and fit.pairs >= 2 else 0
+                )
+                if next_index >= end_index:
+                    break
+            if now() > deadline:
+                raise RuntimeError(f"run.max_duration_s = {exp.max_duration_s} s exceeded")
+        if feed is not None:
+            tail = feed.finish()
+            writer.append_estimates(tail)
+            estimates.extend(tail)
+    except KeyboardInterrupt:
+        interrupted = True
+        outcome_error = "interrupted (Ctrl-C)"
+    except ConfigError:
+        raise
+    except Exception as exc:  # any failure: stop safely below, report it
+        outcome_error = f"{type(exc).__name__}: {exc}"
+    finally:
+        view.close()
+        _safe_stop(board, stage, writer)
+    dropped = int(board.ring.missing) if board is not None and board.ring is not None else 0
+    events: list[tuple[str, int, int, str]] = []
+    if board is not None:
+        for a in board.annotations.all():
+            events.append((a.kind.value, a.sample_index, a.length, a.detail))
+    exact = None
+    dac_underruns = adc_overruns = 0
+    if tank is not None:
+        tank.close()
+        dac_underruns, adc_overruns = tank.dac_underruns, tank.adc_overruns
+        if next_index > start_index:
+            with contextlib.suppress(Exception):
+                exact = _exact_truth(tank, exp, fs, start_index, estimates)
+    elif board is not None and board.last_status is not None:
+        dac_underruns = int(getattr(board.last_status, "underruns", 0))
+        adc_overruns = int(getattr(board.last_status, "overruns", 0))
+    with contextlib.suppress(Exception):
+        if writer is not None:
+            for kind, index, length, text in events:
+                writer.append_event(RunEvent(kind, index, length, text))
+    _close(writer)
+    return RunOutcome(
+        folder=folder,
+        experiment=exp,
+        fs_hz=fs,
+        start_index=start_index,
+        samples=next_index - start_index,
+        estimates=estimates,
+        telemetry=telemetry,
+        dropped_samples=dropped,
+        dac_underruns=dac_underruns,
+        adc_overruns=adc_overruns,
+        events=events,
+        wall_s=time.monotonic() - wall0,
+        signal_s=(next_index - start_index) / fs,
+        windows=windows,
+        exact_truth=exact,
+        map_times=map_t,
+        map_power=map_p,
+        interrupted=interrupted,
+        error=outcome_error,
+        latency_samples=latency[0] if latency else None,
+    )
+
+
+def _safe_stop(board: Any, stage: Any, writer: Any) -> None:
+    """Transmission off, stage held, data flushed: each step even if another fails."""
+    if board is not None:
+        with contextlib.suppress(Exception):
+            board.stop()
+    if stage is not None:
+        with contextlib.suppress(Exception):
+            st = stage.status()
+            if st.state.name in ("RUN", "JOG"):
+                stage.stop()
+    if writer is not None:
+        with contextlib.suppress(Exception):
+            writer.flush()
+    if board is not None:
+        with contextlib.suppress(Exception):
+            board.close()
+    if stage is not None:
+        with contextlib.suppress(Exception):
+            stage.close()
+
+
+def _close(writer: Any) -> None:
+    if writer is not None:
+        with contextlib.suppress(Exception):
+            writer.close()
+
+
+def _exact_truth(
+    tank: Any, exp: Experiment, fs: float, start_index: int, estimates: list[Estimate]
+) -> dict[str, np.ndarray]:
+    """Simulation only: the exact target range and closing speed at each estimate's bounce
+    instant, from the simulated stage's true position (a check of the telemetry truth)."""
+    if not estimates:
+        return {"range_m": np.zeros(0), "speed_mps": np.zeros(0)}
+    t_b = np.array([(e.t_s + e.t_tx_s) / 2.0 for e in estimates])
+    world_t = (start_index + t_b * fs) / fs
+    h = 1e-3
+    x0 = tank.true_stage_position(tank.stage_time(world_t))
+    x1 = tank.true_stage_position(tank.stage_time(world_t + h))
+    r0, r1 = exp.range_at(x0), exp.range_at(x1)
+    return {"range_m": r0, "speed_mps": -(r1 - r0) / h}
+
+
+def telemetry_truth(outcome: RunOutcome) -> dict[str, np.ndarray]:
+    """Range (m) and closing speed (m/s) at every estimate's bounce instant, from the stage
+    telemetry mapped onto sample time (what a lab has as ground truth)."""
+    tel = outcome.telemetry
+    idx = np.asarray(tel.sample_index, dtype=float)
+    pos = np.asarray(tel.position_m, dtype=float)
+    ok = idx >= 0
+    if outcome.estimates == [] or ok.sum() < 2:
+        return {
+            "range_m": np.full(len(outcome.estimates), np.nan),
+            "speed_mps": np.full(len(outcome.estimates), np.nan),
+        }
+    t_tel = (idx[ok] - outcome.start_index) / outcome.fs_hz
+    order = np.argsort(t_tel)
+    t_tel, x_tel = t_tel[order], pos[ok][order]
+    t_b = np.array([(e.t_s + e.t_tx_s) / 2.0 for e in outcome.estimates])
+    h = 0.05
+    r0 = outcome.experiment.range_at(np.interp(t_b, t_tel, x_tel))
+    r1 = outcome.experiment.range_at(np.interp(t_b + h, t_tel, x_tel))
+    inside = (t_b >= t_tel[0]) & (t_b <= t_tel[-1])
+    r0 = np.where(inside, r0, np.nan)
+    return {"range_m": r0, "speed_mps": np.where(inside, -(r1 - r0) / h, np.nan)}
+
+
+def summarize(outcome: RunOutcome) -> dict[str, Any]:
+    """The run summary (also written as ``summary.json``)."""
+    exp = outcome.experiment
+    est = outcome.estimates
+    truth = telemetry_truth(outcome)
+    r = np.array([e.range_m for e in est])
+    v = np.array([e.speed_mps for e in est])
+    t = np.array([e.t_s for e in est])
+    err_r = r - truth["range_m"]
+    err_v = v - truth["speed_mps"]
+    # Estimates inside the constant-speed windows are the ones scored.
+    scored = np.isfinite(err_r)
+    if outcome.windows and len(t):
+        tel_t = np.asarray(outcome.telemetry.host_time_s)
+        tel_i = np.asarray(outcome.telemetry.sample_index, dtype=float)
+        good = tel_i >= 0
+        in_window = np.zeros(len(t), dtype=bool)
+        if good.sum() >= 2:
+            for w0, w1 in outcome.windows:
+                i0, i1 = np.interp([w0, w1], tel_t[good], tel_i[good])
+                s0, s1 = (
+                    (i0 - outcome.start_index) / outcome.fs_hz,
+                    (i1 - outcome.start_index) / outcome.fs_hz,
+                )
+                in_window |= (t >= s0) & (t <= s1)
+        scored &= in_window
+    false_alarm = scored & (np.abs(err_r) > 0.5)
+    good_est = scored & ~false_alarm
+    hop = float(np.min(exp.schedule.duration_s))
+    window_s = 0.0
+    for w0, w1 in outcome.windows:
+        window_s += max(0.0, w1 - w0)
+    expected = window_s / hop if hop > 0 else 0.0
+
+    def rmse(x: np.ndarray) -> float | None:
+        return float(np.sqrt(np.mean(x * x))) if x.size else None
+
+    summary: dict[str, Any] = {
+        "run": exp.name,
+        "folder": str(outcome.folder),
+        "simulated": exp.simulated,
+        "receiver": exp.receiver,
+        "waveform": f"{exp.preset}/{exp.waveform.family}",
+        "fs_hz": outcome.fs_hz,
+        "sound_speed_mps": exp.sound_speed_mps,
+        "signal_s": round(outcome.signal_s, 4),
+        "wall_s": round(outcome.wall_s, 2),
+        "real_time_factor": round(outcome.signal_s / outcome.wall_s, 4) if outcome.wall_s else None,
+        "estimates": len(est),
+        "scored_estimates": int(scored.sum()),
+        "range_rmse_m": rmse(err_r[good_est]),
+        "speed_rmse_mps": rmse(err_v[good_est]),
+        "range_bias_m": float(np.mean(err_r[good_est])) if good_est.any() else None,
+        "update_period_s": float(np.median(np.diff(t))) if len(t) > 1 else None,
+        "detection_rate": round(float(good_est.sum()) / expected, 4) if expected else None,
+        "false_alarms": int(false_alarm.sum()),
+        "loopback_latency_samples": outcome.latency_samples,
+        "dropped_samples": outcome.dropped_samples,
+        "dac_underruns": outcome.dac_underruns,
+        "adc_overruns": outcome.adc_overruns,
+        "events": len(outcome.events),
+        "interrupted": outcome.interrupted,
+        "error": outcome.error,
+    }
+    if outcome.exact_truth is not None and len(est):
+        diff = truth["range_m"] - outcome.exact_truth["range_m"]
+        fin = np.isfinite(diff)
+        summary["telemetry_truth_error_max_m"] = (
+            float(np.max(np.abs(diff[fin]))) if fin.any() else None
+        )
+        e_exact = r - outcome.exact_truth["range_m"]
+        summary["range_rmse_vs_exact_m"] = rmse(e_exact[good_est]) if good_est.any() else None
+    return summary
+
+
+def write_summary(outcome: RunOutcome, summary: dict[str, Any]) -> Path:
+    """``summary.json`` and ``estimates.csv`` in the run folder."""
+    path = outcome.folder / "summary.json"
+    path.write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
+    truth = telemetry_truth(outcome)
+    rows = ["t_s,range_m,speed_mps,hop_index,score,snr_db,true_range_m,true_speed_mps"]
+    for i, e in enumerate(outcome.estimates):
+        rows.append(
+            f"{e.t_s:.6f},{e.range_m:.5f},{e.speed_mps:.4f},{e.hop_index},{e.score:.3f},"
+            f"{e.snr_db:.2f},{truth['range_m'][i]:.5f},{truth['speed_mps'][i]:.4f}"
+        )
+    (outcome.folder / "estimates.csv").write_text("\n".join(rows) + "\n", encoding="utf-8")
+    return path
