@@ -47,6 +47,7 @@ import errno
 import os
 import select
 import threading
+import time
 import tty
 from types import TracebackType
 from typing import Protocol
@@ -130,11 +131,22 @@ class PtyEndpoint:
             self._error = error
 
     def _loop(self) -> None:
+        # The device ticks every poll_interval; output is written whenever the pty can take
+        # it. Waiting for POLLOUT matters: a pty buffer holds only a few KB, so a loop that
+        # waited for host input or the next tick before writing again would cap the stream
+        # at one buffer per tick.
         poller = select.poll()
-        poller.register(self._master, select.POLLIN | select.POLLHUP | select.POLLERR)
-        timeout_ms = max(1, int(self.poll_interval * 1000))
+        base = select.POLLIN | select.POLLHUP | select.POLLERR
+        poller.register(self._master, base)
+        writing = False
+        next_tick = time.monotonic()
         while not self._stop.is_set():
-            events = poller.poll(timeout_ms)
+            want_write = bool(self._pending)
+            if want_write != writing:
+                poller.modify(self._master, base | (select.POLLOUT if want_write else 0))
+                writing = want_write
+            wait_ms = max(0, int((next_tick - time.monotonic()) * 1000))
+            events = poller.poll(max(1, wait_ms) if wait_ms else 0)
             hung_up = False
             for _, mask in events:
                 if mask & select.POLLIN:
@@ -142,9 +154,15 @@ class PtyEndpoint:
                 if mask & (select.POLLHUP | select.POLLERR):
                     hung_up = True
             self._set_host_present(not hung_up)
-            with self.lock:
-                self.device.tick()
-                self._pending += self.device.data_to_send()
+            now = time.monotonic()
+            if now >= next_tick:
+                next_tick = now + self.poll_interval
+                with self.lock:
+                    self.device.tick()
+                    self._pending += self.device.data_to_send()
+            else:
+                with self.lock:
+                    self._pending += self.device.data_to_send()
             self._write()
             if hung_up:
                 # A hung-up master polls ready at once; back off instead of spinning.

@@ -13,13 +13,33 @@ import sys
 from collections.abc import Sequence
 
 from hil import __version__
-from hil.cli import calibrate, estimate, replay, reproduce, sim_serve, simulate, sweep, waveform
+from hil.cli import (
+    calibrate,
+    estimate,
+    replay,
+    reproduce,
+    sim_serve,
+    simulate,
+    sweep,
+    tank_run,
+    waveform,
+)
 from hil.errors import ConfigError
 
 EXIT_OK = 0
 EXIT_USAGE = 2
 
-_COMMANDS = (waveform, estimate, sweep, simulate, sim_serve, replay, calibrate, reproduce)
+_COMMANDS = (
+    tank_run,
+    waveform,
+    estimate,
+    simulate,
+    sweep,
+    reproduce,
+    replay,
+    calibrate,
+    sim_serve,
+)
 
 
 def build_parser() -> argparse.ArgumentParser:

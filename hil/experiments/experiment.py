@@ -79,7 +79,7 @@ image_order = 1
 noise_level_db = 55.0
 reverberation = true
 scattering_strength_db = -70.0
-time_scale = 0.15
+time_scale = 0.4
 seed = 1
 """
 

@@ -260,6 +260,11 @@ class SimulatedTankProcess:
                 self._proc.wait(timeout=10)
             if self._proc.poll() is None:
                 self._proc.kill()
+                self._proc.wait(timeout=10)
+        for pipe in (self._proc.stdin, self._proc.stdout):
+            if pipe is not None:
+                with contextlib.suppress(Exception):
+                    pipe.close()
         path = self.folder / "sim_stage_trajectory.npz"
         if path.exists():
             data = np.load(path)

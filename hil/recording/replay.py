@@ -36,8 +36,8 @@ class ReceiverFeed:
     """Feeds raw sample blocks indexed by board sample to a receiver.
 
     ``origin`` is the board sample index that is the receiver's sample 0 (the schedule's
-    t = 0); samples before it are refused. Column ``channel`` of each block, converted to
-    float64 and multiplied by ``scale``, is the receiver's input.
+    t = 0); samples before it are dropped, samples fed twice are refused. Column ``channel``
+    of each block, converted to float64 and multiplied by ``scale``, is the receiver's input.
     """
 
     def __init__(self, receiver: Receiver, *, origin: int, channel: int = 0, scale: float = 1.0):
@@ -51,6 +51,14 @@ class ReceiverFeed:
         """Process ``block`` (shape ``(n, n_channels)``) received from board sample
         ``first_index``; the samples since the previous block that never arrived go to the
         receiver as ``gap_before``."""
+        if first_index < self.origin:
+            # Samples before the receiver's sample 0 (captured while the loopback latency was
+            # measured) are not the receiver's input: drop them, as live does.
+            skip = min(block.shape[0], self.origin - int(first_index))
+            block = block[skip:]
+            first_index = int(first_index) + skip
+            if block.shape[0] == 0:
+                return []
         gap = int(first_index) - self._next
         if gap < 0:
             raise ConfigError(

@@ -274,3 +274,28 @@ def test_cli_needs_a_receiver_name_when_none_ran_live(
         "hil replay: error: --receiver (receiver) = None is not allowed: must be one of gcas, "
         "jifs, stft, mfbank, fmcw; the recording holds no live receiver: name the one to run\n"
     )
+
+
+def test_feed_drops_samples_before_its_origin() -> None:
+    """Samples captured before the receiver's sample 0 (e.g. while the loopback latency was
+    measured) are dropped; the first fed sample is the origin; repeats are still refused."""
+    from hil.errors import ConfigError
+    from hil.recording.replay import ReceiverFeed
+
+    seen: list[tuple[int, int]] = []
+
+    class Recorder:
+        name = "recorder"
+        fs_hz = 1.0
+
+        def process(self, x: np.ndarray, *, gap_before: int = 0) -> list:
+            seen.append((len(x), gap_before))
+            return []
+
+    feed = ReceiverFeed(Recorder(), origin=100)  # type: ignore[arg-type]
+    assert feed.feed(0, np.zeros((64, 2))) == []
+    feed.feed(64, np.zeros((64, 2)))  # 36 before the origin, 28 after
+    feed.feed(128, np.zeros((10, 2)))
+    assert seen == [(28, 0), (10, 0)]
+    with pytest.raises(ConfigError, match="first_index = 130"):
+        feed.feed(130, np.zeros((5, 2)))

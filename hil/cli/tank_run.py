@@ -1,0 +1,66 @@
+"""``hil tank-run [EXPERIMENT.toml]``: the towed-target tank run.
+
+Without a file it runs the built-in simulated tank (simulated board and GRBL stage over
+ptys, the acoustic world with tank walls, surface, noise, reverberation and the towed target
+following the simulated carriage). Writes the run folder (recording ``run.h5``, estimates,
+``summary.json``, figures) and prints the summary. Ctrl-C stops safely.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from hil.experiments.experiment import DEFAULT_EXPERIMENT, load_experiment, parse_experiment
+
+
+def register(sub: Any) -> None:
+    """Add the ``tank-run`` sub-command."""
+    p: argparse.ArgumentParser = sub.add_parser(
+        "tank-run",
+        help="run a towed-target tank experiment (built-in simulated tank without a file)",
+        description="Transmit continuously, tow the target on the stage, estimate live, "
+        "record everything. Without EXPERIMENT the built-in simulated tank runs.",
+    )
+    p.add_argument("experiment", nargs="?", type=Path, help="experiment TOML file")
+    p.add_argument("--out", type=Path, help="run folder (default: output_dir/name-timestamp)")
+    p.add_argument("--no-live", action="store_true", help="no live status line")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.add_argument(
+        "--print-default", action="store_true", help="print the built-in experiment file and exit"
+    )
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Execute ``hil tank-run``; 0 on success, 1 if the run stopped on an error."""
+    if args.print_default:
+        print(DEFAULT_EXPERIMENT, end="")
+        return 0
+    from hil.experiments.run_report import write_report
+    from hil.experiments.tank_run import LiveView, run_experiment, summarize, write_summary
+
+    exp = (
+        parse_experiment(DEFAULT_EXPERIMENT)
+        if args.experiment is None
+        else load_experiment(args.experiment)
+    )
+    outcome = run_experiment(exp, folder=args.out, view=LiveView(enabled=not args.no_live))
+    summary = summarize(outcome)
+    write_summary(outcome, summary)
+    figures = write_report(outcome)
+    summary["figures"] = [str(p) for p in figures]
+    (outcome.folder / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        width = max(len(k) for k in summary)
+        for key, value in summary.items():
+            if key == "figures":
+                continue
+            shown = f"{value:.4g}" if isinstance(value, float) else value
+            print(f"{key:<{width}}  {shown}")
+        print(f"run folder: {outcome.folder}")
+    return 1 if outcome.error else 0

@@ -1,0 +1,88 @@
+"""The run report: PNG figures of a tank run next to its ``summary.json``.
+
+- ``range_speed.png``: estimated range and speed against receive time, with the truth from
+  the stage telemetry (and the exact simulated truth for simulated runs);
+- ``time_codeword_map.png``: the GCAS time–codeword map (seed Fig 5.17 style);
+- ``errors.png``: histograms of range and speed errors against the truth.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hil.experiments.tank_run import RunOutcome, telemetry_truth
+
+
+def _pyplot() -> Any:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def write_report(outcome: RunOutcome) -> list[Path]:
+    """Write the figures into the run folder; return their paths."""
+    plt = _pyplot()
+    folder = outcome.folder
+    paths: list[Path] = []
+    est = outcome.estimates
+    t = np.array([e.t_s for e in est])
+    r = np.array([e.range_m for e in est])
+    v = np.array([e.speed_mps for e in est])
+    truth = telemetry_truth(outcome)
+
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(10, 6.5), sharex=True, dpi=110)
+    ax1.plot(t, r, ".", ms=3, label="estimate")
+    ax1.plot(t, truth["range_m"], "-", lw=1.2, label="truth (stage telemetry)")
+    if outcome.exact_truth is not None and len(est):
+        ax1.plot(t, outcome.exact_truth["range_m"], "--", lw=0.8, label="truth (simulated, exact)")
+    ax1.set_ylabel("range (m)")
+    ax1.legend(loc="best", fontsize=8)
+    ax1.set_title(f"{outcome.experiment.name}: {outcome.experiment.receiver} estimates")
+    ax2.plot(t, v, ".", ms=3, label="estimate")
+    ax2.plot(t, truth["speed_mps"], "-", lw=1.2, label="truth (stage telemetry)")
+    ax2.set_ylabel("closing speed (m/s)")
+    ax2.set_xlabel("receive time (s)")
+    ax2.legend(loc="best", fontsize=8)
+    fig.tight_layout()
+    paths.append(folder / "range_speed.png")
+    fig.savefig(paths[-1])
+    plt.close(fig)
+
+    if outcome.map_times:
+        tm = np.concatenate(outcome.map_times)
+        pm = np.concatenate(outcome.map_power, axis=0).astype(float)
+        stride = max(1, pm.shape[0] // 4000)
+        tm, pm = tm[::stride], pm[::stride]
+        db = 10 * np.log10(np.maximum(pm / max(float(pm.max()), 1e-300), 1e-6))
+        fig, ax = plt.subplots(figsize=(10, 4.5), dpi=110)
+        extent = (float(tm[0]), float(tm[-1]), -0.5, pm.shape[1] - 0.5)
+        im = ax.imshow(db.T, origin="lower", aspect="auto", extent=extent, vmin=-30, vmax=0)
+        fig.colorbar(im, ax=ax, label="accumulated sum (dB re max)")
+        ax.set_xlabel("receive time (s)")
+        ax.set_ylabel("codeword j")
+        ax.set_title("GCAS time–codeword map")
+        fig.tight_layout()
+        paths.append(folder / "time_codeword_map.png")
+        fig.savefig(paths[-1])
+        plt.close(fig)
+
+    er = r - truth["range_m"]
+    ev = v - truth["speed_mps"]
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.8), dpi=110)
+    for ax, e, label in ((a1, er, "range error (m)"), (a2, ev, "speed error (m/s)")):
+        e = e[np.isfinite(e)]
+        if e.size:
+            ax.hist(np.clip(e, np.percentile(e, 1), np.percentile(e, 99)), bins=40)
+        ax.set_xlabel(label)
+        ax.set_ylabel("estimates")
+    fig.tight_layout()
+    paths.append(folder / "errors.png")
+    fig.savefig(paths[-1])
+    plt.close(fig)
+    return paths
