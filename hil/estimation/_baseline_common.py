@@ -161,3 +161,36 @@ def unique_window(code: NDArray[np.int64]) -> int:
         if len({tuple(r) for r in code[idx].tolist()}) == p:
             return w
     return p
+
+
+class RegistryConstructor:
+    """Mixin: the registry's common ``from_options`` for receivers whose constructor takes
+    the common options as keywords plus the receiver-specific ``OPTIONS``."""
+
+    OPTIONS: tuple[str, ...] = ()
+    name: str
+
+    @classmethod
+    def from_options(
+        cls,
+        schedule: HopSchedule,
+        fs_hz: float,
+        *,
+        sound_speed_mps: float,
+        max_speed_mps: float,
+        max_range_m: float,
+        m_hops: int,
+        **extra: Any,
+    ) -> Any:
+        """The registry constructor (:mod:`hil.estimation.registry`); ``extra`` holds the
+        receiver's own options, listed in ``OPTIONS``."""
+        reject_unknown(extra, cls.OPTIONS, cls.name)
+        return cls(  # type: ignore[call-arg]
+            schedule,
+            fs_hz,
+            sound_speed_mps=sound_speed_mps,
+            max_speed_mps=max_speed_mps,
+            max_range_m=max_range_m,
+            m_hops=m_hops,
+            **extra,
+        )

@@ -34,18 +34,17 @@ beat envelope and ``snr_db`` the beat's E/N0 estimate.
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from hil.errors import ConfigError
 from hil.estimation._baseline_common import (
+    RegistryConstructor,
     alpha_of_speed,
     check_block,
     common_options,
     positive,
-    reject_unknown,
     require_family,
     speed_of_alpha,
 )
@@ -59,7 +58,7 @@ FAMILIES = ("fmcw-saw", "fmcw-tri")
 _OPTIONS = ("speed_mode", "edge_fraction")
 
 
-class FmcwReceiver:
+class FmcwReceiver(RegistryConstructor):
     """Streaming FMCW receiver (see the module docstring).
 
     Parameters
@@ -76,6 +75,7 @@ class FmcwReceiver:
     """
 
     name = "fmcw"
+    OPTIONS = _OPTIONS
 
     def __init__(
         self,
@@ -125,30 +125,6 @@ class FmcwReceiver:
         self._margin = 2 * self._smooth
         self._tri = schedule.family == "fmcw-tri"
         self.reset()
-
-    @classmethod
-    def from_options(
-        cls,
-        schedule: HopSchedule,
-        fs_hz: float,
-        *,
-        sound_speed_mps: float,
-        max_speed_mps: float,
-        max_range_m: float,
-        m_hops: int,
-        **extra: Any,
-    ) -> FmcwReceiver:
-        """The registry constructor; ``extra``: speed_mode, edge_fraction."""
-        reject_unknown(extra, _OPTIONS, "fmcw")
-        return cls(
-            schedule,
-            fs_hz,
-            sound_speed_mps=sound_speed_mps,
-            max_speed_mps=max_speed_mps,
-            max_range_m=max_range_m,
-            m_hops=m_hops,
-            **extra,
-        )
 
     # ------------------------------------------------------------------ state
     def reset(self) -> None:

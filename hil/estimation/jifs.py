@@ -31,7 +31,6 @@ low-pass, decimate) and :mod:`hil.estimation.unit_correlators` (heterodyne + mov
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
@@ -39,13 +38,13 @@ from numpy.typing import NDArray
 
 from hil.errors import ConfigError
 from hil.estimation._baseline_common import (
+    RegistryConstructor,
     alpha_of_speed,
     check_block,
     common_options,
     parabolic_peak,
     positive,
     positive_int,
-    reject_unknown,
     require_family,
     resolve_transmit_time,
     speed_of_alpha,
@@ -75,7 +74,7 @@ def _moving_sum(x: FloatArray, n: int) -> FloatArray:
     return sliding_window_view(x, n, axis=0).sum(axis=-1)
 
 
-class JifsReceiver:
+class JifsReceiver(RegistryConstructor):
     """Streaming edge-detecting HFC-CW receiver (see the module docstring).
 
     Parameters
@@ -94,6 +93,7 @@ class JifsReceiver:
     """
 
     name = "jifs"
+    OPTIONS = _OPTIONS
 
     def __init__(
         self,
@@ -171,30 +171,6 @@ class JifsReceiver:
         self._windows = {tuple(int(v) for v in code[idx[i]]): i for i in range(p)}
         self._t_end = schedule.start_s + schedule.duration_s + schedule.t0_s
         self.reset()
-
-    @classmethod
-    def from_options(
-        cls,
-        schedule: HopSchedule,
-        fs_hz: float,
-        *,
-        sound_speed_mps: float,
-        max_speed_mps: float,
-        max_range_m: float,
-        m_hops: int,
-        **extra: Any,
-    ) -> JifsReceiver:
-        """The registry constructor; ``extra`` holds the options listed in the class."""
-        reject_unknown(extra, _OPTIONS, "jifs")
-        return cls(
-            schedule,
-            fs_hz,
-            sound_speed_mps=sound_speed_mps,
-            max_speed_mps=max_speed_mps,
-            max_range_m=max_range_m,
-            m_hops=m_hops,
-            **extra,
-        )
 
     def _edge_offsets(self, n_u: float) -> tuple[float, float]:
         """Delay (baseband samples) from a boundary to the DMA peak (rise) and trough (fall),

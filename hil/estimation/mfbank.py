@@ -49,13 +49,13 @@ from scipy.signal import correlate
 
 from hil.errors import ConfigError
 from hil.estimation._baseline_common import (
+    RegistryConstructor,
     alpha_of_speed,
     check_block,
     common_options,
     parabolic_peak,
     positive,
     positive_int,
-    reject_unknown,
     resolve_transmit_time,
     speed_of_alpha,
 )
@@ -75,7 +75,7 @@ _REFINE_ROUNDS = 3
 _CANDIDATE_RATIO = 0.75
 
 
-class MatchedFilterBank:
+class MatchedFilterBank(RegistryConstructor):
     """Streaming overlap-save matched-filter bank over all codewords and Doppler hypotheses.
 
     Parameters
@@ -101,6 +101,7 @@ class MatchedFilterBank:
     """
 
     name = "mfbank"
+    OPTIONS = _OPTIONS
 
     def __init__(
         self,
@@ -149,30 +150,6 @@ class MatchedFilterBank:
         self._build_codewords()
         self._build_bank()
         self.reset()
-
-    @classmethod
-    def from_options(
-        cls,
-        schedule: HopSchedule,
-        fs_hz: float,
-        *,
-        sound_speed_mps: float,
-        max_speed_mps: float,
-        max_range_m: float,
-        m_hops: int,
-        **extra: Any,
-    ) -> MatchedFilterBank:
-        """The registry constructor; ``extra`` may hold ``n_doppler``, ``threshold``, ``refine``."""
-        reject_unknown(extra, _OPTIONS, "mfbank")
-        return cls(
-            schedule,
-            fs_hz,
-            sound_speed_mps=sound_speed_mps,
-            max_speed_mps=max_speed_mps,
-            max_range_m=max_range_m,
-            m_hops=m_hops,
-            **extra,
-        )
 
     # ------------------------------------------------------------------ set-up
     def _build_codewords(self) -> None:

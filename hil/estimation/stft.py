@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
@@ -38,11 +37,11 @@ from numpy.typing import NDArray
 
 from hil.errors import ConfigError
 from hil.estimation._baseline_common import (
+    RegistryConstructor,
     alpha_of_speed,
     check_block,
     common_options,
     positive_int,
-    reject_unknown,
     require_family,
     resolve_transmit_time,
     speed_of_alpha,
@@ -67,7 +66,7 @@ class _Segment:
     power_db: float
 
 
-class StftReceiver:
+class StftReceiver(RegistryConstructor):
     """Streaming STFT receiver for tone-hopping schedules (see the module docstring).
 
     Parameters
@@ -91,6 +90,7 @@ class StftReceiver:
     """
 
     name = "stft"
+    OPTIONS = _OPTIONS
 
     def __init__(
         self,
@@ -175,30 +175,6 @@ class StftReceiver:
         # Transmit end time (period 0) of every hop of the period.
         self._t_end = schedule.start_s + schedule.duration_s + schedule.t0_s
         self.reset()
-
-    @classmethod
-    def from_options(
-        cls,
-        schedule: HopSchedule,
-        fs_hz: float,
-        *,
-        sound_speed_mps: float,
-        max_speed_mps: float,
-        max_range_m: float,
-        m_hops: int,
-        **extra: Any,
-    ) -> StftReceiver:
-        """The registry constructor; ``extra``: n_s, segment, ns_reading, step, min_frames."""
-        reject_unknown(extra, _OPTIONS, "stft")
-        return cls(
-            schedule,
-            fs_hz,
-            sound_speed_mps=sound_speed_mps,
-            max_speed_mps=max_speed_mps,
-            max_range_m=max_range_m,
-            m_hops=m_hops,
-            **extra,
-        )
 
     # ------------------------------------------------------------------ state
     def reset(self) -> None:
