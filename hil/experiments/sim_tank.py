@@ -281,10 +281,14 @@ class SimulatedTankProcess:
 def _serve(argv: list[str]) -> int:
     """Child process: run the simulated tank until told to stop (see SimulatedTankProcess)."""
     import json
+    import signal
     import sys
 
     from hil.experiments.experiment import load_experiment
 
+    # Ctrl-C in the terminal reaches the whole process group: the host decides when the
+    # simulated tank stops (it sends "stop" after holding the stage and stopping the board).
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     exp = load_experiment(Path(argv[0]))
     wall0 = float(argv[1])
     folder = Path(argv[2])

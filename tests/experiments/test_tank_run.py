@@ -156,3 +156,39 @@ def test_kill_9_during_a_run_leaves_a_readable_recording(tmp_path: Path) -> None
     assert blocks and sum(b.data.shape[0] for b in blocks) > 10_000
     assert rec.schedule().period_hops == 17
     assert rec.telemetry()
+
+
+@pytest.mark.slow
+def test_ctrl_c_stops_cleanly_and_keeps_the_recording(tmp_path: Path) -> None:
+    """SIGINT mid-run: transmission stopped, stage held, files closed, a summary written
+    that says the run was interrupted, and the recording readable."""
+    from hil.recording.reader import RunRecording
+
+    exp_file = tmp_path / "short.toml"
+    exp_file.write_text(SHORT)
+    folder = tmp_path / "run"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "hil.cli.main", "tank-run", str(exp_file), "--out", str(folder),
+         "--no-live", "--json"],
+        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, start_new_session=True,
+    )  # fmt: skip
+    h5 = folder / "run.h5"
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and not (h5.exists() and h5.stat().st_size > 100_000):
+        time.sleep(0.2)
+    time.sleep(1.0)
+    os.killpg(proc.pid, signal.SIGINT)  # as a terminal's Ctrl-C: the whole process group
+    out, _ = proc.communicate(timeout=60)
+    assert proc.returncode == 1  # the run stopped before its end
+    summary = json.loads(out.strip().splitlines()[-1])
+    assert summary["interrupted"] is True and "interrupted" in summary["error"]
+    rec = RunRecording.open(h5)
+    assert sum(b.data.shape[0] for b in rec.samples()) > 10_000
+    # The stage was held: the simulated carriage (its true trajectory, written by the
+    # simulated tank at stop) is at rest at the end and stopped short of the end of the pass
+    # (end_m - run_down_m = -4.1 m).
+    traj = np.load(folder / "sim_stage_trajectory.npz")
+    t, x = traj["t"], traj["x"]
+    late = t >= t[-1] - 0.2
+    assert np.ptp(x[late]) < 1e-3
+    assert x[-1] > -4.1 + 0.05
