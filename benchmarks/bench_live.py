@@ -1,0 +1,422 @@
+"""The live pipeline at the tank-board rate: capture plus GCAS, in real time, on one host.
+
+Setup: the simulated board firmware runs in a separate process (this file with
+``--serve-board``), real-time paced, on a pseudo-terminal, so only the host's CPU is counted.
+Its world returns a real echo: ADC channel 0 is the DAC output delayed by
+:data:`ECHO_DELAY_SAMPLES` (a stationary target at ``c·delay/(2 fs)`` ≈ 3 m) at
+:data:`ECHO_GAIN`, plus seeded white noise; ADC channel 1 monitors the DAC drive. The DAC is
+fed by :class:`~hil.signals.synthesis.BlockSynthesizer` from the ``tank-board`` preset
+(random cyclic code, 1 MS/s, 2 ADC channels int16). The host process runs the
+:class:`~hil.devices.board.Board` driver (reader and writer threads), the capture loop and
+:class:`~hil.recording.replay.ReceiverFeed` with GCAS on channel 0, block by block as the
+samples arrive (every wait returns whatever the ring holds, at least
+``--min-block-ms`` of it).
+
+Figures (over the ``--seconds`` of streaming, default 30):
+
+- host CPU in cores: ``getrusage(RUSAGE_SELF)`` user+system over wall (all host threads);
+  the main thread's share (capture loop + GCAS, ``time.thread_time``) and GCAS alone;
+- keeping up: samples captured and processed against the board time elapsed, the ring's
+  zero-filled (missing) samples, the gap detector's lost samples, the backlog (captured but
+  not yet processed) at the end and its maximum during the run;
+- estimate latency, per estimate: wall time when ``feed`` returned it minus wall time when the
+  capture loop saw its boundary's sample in the ring (board index ``origin + t_s·fs``; each
+  sample gets the time of the first wait that returned with it held, so a backlog counts);
+  median, 99th percentile and max, in hops, and how many estimates took longer than one hop;
+- estimates per second and how many are at the echo's range.
+
+Targets: host CPU < 0.5 core, latency <= 1 hop (max), keeps up (no missing samples, backlog
+when the last block is done at most :data:`KEEP_UP_BACKLOG_S`).
+Run: ``python benchmarks/bench_live.py [--seconds 30] [--min-block-ms 1] [--profile]
+[--quick]``; the last stdout line is one JSON object.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import signal
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+FS_HZ = 1_000_000
+ADC_CHANNELS = 2
+ECHO_DELAY_SAMPLES = 4000  # 4 ms two-way: a stationary target at ~2.96 m
+ECHO_GAIN = 0.1  # linear, of the DAC output
+NOISE_RMS = 0.02  # full-scale units, white, on the echo channel
+DAC_AMPLITUDE = 0.5  # full scale
+INT16_SCALE = 1.0 / 32768.0
+MAX_SPEED_MPS = 2.0  # the tank-board preset's Doppler span; includes the stationary echo
+MAX_RANGE_M = 20.0
+M_HOPS = 10
+RING_SECONDS = 8.0
+MAX_BLOCK_S = 0.005  # longest block per receiver call: one hop, so a catch-up emits early
+
+TARGET_CPU_CORES = 0.5
+TARGET_LATENCY_HOPS = 1.0
+KEEP_UP_BACKLOG_S = 0.1
+
+
+# --------------------------------------------------------------------------- board process
+class EchoWorld:
+    """Board world: ADC 0 = delayed, attenuated DAC 0 plus white noise; ADC 1 = DAC 0.
+
+    ``dac_block`` (n, dac_channels) full scale in; (n, 2) full scale out. The noise is seeded
+    once; the delay line is :class:`sim_devices.board.LoopbackWorld`.
+    """
+
+    def __init__(self, delay_samples: int, gain: float, noise_rms: float, seed: int = 7) -> None:
+        from sim_devices.board import LoopbackWorld
+
+        self._echo = LoopbackWorld(delay_samples, gain)
+        self._noise_rms = noise_rms
+        self._rng = np.random.default_rng(seed)
+
+    def reset(self) -> None:
+        """A new stream: empty delay line."""
+        self._echo.reset()
+
+    def __call__(self, dac_block: npt.NDArray[np.float64], first_sample: int, /) -> Any:
+        dac = dac_block[:, :1]
+        out = np.empty((dac.shape[0], 2))
+        out[:, 0] = self._echo(dac, first_sample)[:, 0]
+        out[:, 0] += self._rng.normal(0.0, self._noise_rms, dac.shape[0])
+        out[:, 1] = dac[:, 0]
+        return out
+
+
+def serve_board(delay: int, gain: float, noise_rms: float) -> None:
+    """Serve the simulated board on a pty until SIGTERM; the pty path on stdout's first line."""
+    from sim_devices.board import SimulatedBoardOnPty
+
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    with SimulatedBoardOnPty(world=EchoWorld(delay, gain, noise_rms)) as board:
+        print(board.port_name, flush=True)
+        while not stop.wait(0.2):
+            pass
+
+
+# --------------------------------------------------------------------------- host side
+def _host_cpu_s() -> float:
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return usage.ru_utime + usage.ru_stime
+
+
+def _process_cpu_s(pid: int) -> float:
+    """User+system CPU seconds of process ``pid`` (Linux /proc; NaN elsewhere)."""
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            fields = fh.read().rsplit(")", 1)[1].split()
+    except OSError:
+        return float("nan")
+    # Fields 14 and 15 of stat(5) (utime, stime), counted after the ")" that ends comm.
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+@dataclass
+class Arrivals:
+    """When the capture loop saw the ring reach each end index (monotonic s): a sample's
+    arrival is the first observation whose end index is past it."""
+
+    ends: list[int] = field(default_factory=list)
+    times: list[float] = field(default_factory=list)
+
+    def add(self, end_index: int, t: float) -> None:
+        self.ends.append(end_index)
+        self.times.append(t)
+
+    def time_of(self, index: npt.NDArray[np.int64]) -> npt.NDArray[np.float64]:
+        """Arrival time of each board sample ``index`` (NaN if it never arrived)."""
+        ends = np.asarray(self.ends, dtype=np.int64)
+        k = np.searchsorted(ends, index, side="right")  # first block whose end is past index
+        out = np.full(index.shape, np.nan)
+        ok = k < ends.shape[0]
+        out[ok] = np.asarray(self.times)[k[ok]]
+        return out
+
+
+def run_live(seconds: float, min_block_s: float, profile: bool = False) -> dict[str, Any]:
+    """Stream ``seconds`` through Board + capture loop + GCAS; the figures (module docstring)."""
+    from hil.devices.board import Board
+    from hil.devices.board_settings import BoardSettings
+    from hil.estimation.registry import make_receiver
+    from hil.recording.replay import ReceiverFeed
+    from hil.signals.presets import check_design, get_preset
+    from hil.signals.synthesis import BlockSynthesizer
+
+    spec = get_preset("tank-board").spec("random-cyclic")
+    schedule = check_design(spec)
+    assert spec.fs_hz == FS_HZ
+    c = spec.sound_speed_mps
+    echo_range_m = c * ECHO_DELAY_SAMPLES / FS_HZ / 2.0
+    receiver = make_receiver(
+        "gcas",
+        schedule,
+        FS_HZ,
+        sound_speed_mps=c,
+        max_speed_mps=MAX_SPEED_MPS,
+        max_range_m=MAX_RANGE_M,
+        m_hops=M_HOPS,
+    )
+    synth = BlockSynthesizer(schedule, FS_HZ, amplitude=DAC_AMPLITUDE)
+    server = subprocess.Popen(
+        [
+            sys.executable,
+            __file__,
+            "--serve-board",
+            str(ECHO_DELAY_SAMPLES),
+            str(ECHO_GAIN),
+            str(NOISE_RMS),
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    profiler: Any = None
+    if profile:
+        import cProfile
+
+        profiler = cProfile.Profile()
+    try:
+        assert server.stdout is not None
+        port = server.stdout.readline().strip()
+        settings = BoardSettings(sample_rate_hz=FS_HZ, dac_channels=1, adc_channels=ADC_CHANNELS)
+        with Board(port, settings=settings, ring_seconds=RING_SECONDS) as board:
+            board.configure()
+            start = board.start(synth.blocks(4096))
+            # The DAC plays schedule sample 0 at board index `start`, so that is the
+            # receiver's sample 0 (the echo delay is the target's range, not latency).
+            feed = ReceiverFeed(receiver, origin=start, channel=0, scale=INT16_SCALE)
+            ring = board.ring
+            assert ring is not None
+            n_total = int(round(seconds * FS_HZ))
+            end_target = start + n_total
+            min_block = max(1, int(round(min_block_s * FS_HZ)))
+            max_block = int(round(MAX_BLOCK_S * FS_HZ))
+            arrivals = Arrivals()
+            est_boundary: list[int] = []
+            est_emit: list[float] = []
+            est_range: list[float] = []
+            est_speed: list[float] = []
+            blocks = 0
+            max_backlog = 0
+            next_index = start
+            gcas_cpu = 0.0
+            feed_wall: list[float] = []
+            wait_max = 0.0
+            if profiler is not None:
+                profiler.enable()
+            wall0, cpu0, main0 = time.monotonic(), _host_cpu_s(), time.thread_time()
+            server_cpu0 = _process_cpu_s(server.pid)
+            while next_index < end_target:
+                waited = time.monotonic()
+                if not board.wait_for_samples(next_index + min_block, timeout_s=2.0):
+                    raise RuntimeError(
+                        f"no samples past board index {next_index} for 2 s: the board stalled"
+                    )
+                now = time.monotonic()
+                # A long wait means the samples came late (board process or reader thread
+                # starved), not that the receiver was slow.
+                wait_max = max(wait_max, now - waited)
+                held = ring.end_index
+                assert held is not None
+                max_backlog = max(max_backlog, held - next_index)
+                n = min(held, end_target, next_index + max_block) - next_index
+                data = board.read(next_index, n)
+                # Every sample up to `held` has arrived by now (also those left for the next
+                # block), so a backlog counts in the latency.
+                arrivals.add(held, now)
+                t0 = time.thread_time()
+                new = feed.feed(next_index, data)
+                gcas_cpu += time.thread_time() - t0
+                emitted = time.monotonic()
+                feed_wall.append(emitted - now)
+                for e in new:
+                    est_boundary.append(start + round(e.t_s * FS_HZ))
+                    est_emit.append(emitted)
+                    est_range.append(e.range_m)
+                    est_speed.append(e.speed_mps)
+                next_index += n
+                blocks += 1
+            wall = time.monotonic() - wall0
+            held_end = ring.end_index or start
+            cpu = _host_cpu_s() - cpu0
+            main_cpu = time.thread_time() - main0
+            server_cpu = _process_cpu_s(server.pid) - server_cpu0
+            if profiler is not None:
+                profiler.disable()
+            board_now = board.board_index_now()
+            missing = ring.missing
+            gap_samples = board.gaps.gap_samples
+            underruns = board.last_status.dac_underruns if board.last_status else -1
+            overruns = board.last_status.adc_overruns if board.last_status else -1
+            annotations = len(board.annotations.all())
+        flushed = len(feed.finish())
+    finally:
+        server.terminate()
+        server.wait(timeout=10)
+
+    boundary = np.asarray(est_boundary, dtype=np.int64)
+    emit = np.asarray(est_emit)
+    lat_s = emit - arrivals.time_of(boundary)
+    hop_s = schedule.hop_s
+
+    def hops(x: npt.NDArray[np.float64], percentile: float) -> float:
+        x = x[np.isfinite(x)]
+        if x.size == 0:
+            return float("nan")
+        return round(float(np.percentile(x, percentile)) / hop_s, 3)
+
+    ranges = np.asarray(est_range)
+    on_target = int(np.count_nonzero(np.abs(ranges - echo_range_m) < 0.1))
+    board_elapsed = board_now - start
+    processed = next_index - start
+    final_backlog = held_end - next_index
+    # Kept up: nothing lost, and when the last block was done the receiver was behind the
+    # capture by less than KEEP_UP_BACKLOG_S (a transient stall may leave a backlog, a
+    # receiver slower than real time leaves one that grows with the run).
+    keeps_up = bool(
+        missing == 0
+        and gap_samples == 0
+        and overruns <= 0
+        and processed == n_total
+        and final_backlog <= KEEP_UP_BACKLOG_S * FS_HZ
+    )
+    cores = cpu / wall
+    result: dict[str, Any] = {
+        "seconds": seconds,
+        "wall_s": round(wall, 3),
+        "blocks": blocks,
+        "mean_block_samples": round(processed / max(blocks, 1), 1),
+        "host_cpu_cores": round(cores, 3),
+        "main_thread_cores": round(main_cpu / wall, 3),
+        "gcas_cores": round(gcas_cpu / wall, 3),
+        "board_threads_cores": round((cpu - main_cpu) / wall, 3),
+        "sim_board_process_cores": round(server_cpu / wall, 3),
+        "feed_call_median_ms": round(float(np.median(feed_wall)) * 1e3, 3),
+        "feed_call_p99_ms": round(float(np.percentile(feed_wall, 99)) * 1e3, 3),
+        "feed_call_max_ms": round(float(np.max(feed_wall)) * 1e3, 3),
+        "wait_for_samples_max_ms": round(wait_max * 1e3, 3),
+        "board_samples_elapsed": int(board_elapsed),
+        "samples_processed": int(processed),
+        "samples_captured": int(held_end - start),
+        "ring_missing_samples": int(missing),
+        "gap_samples": int(gap_samples),
+        "dac_underruns": int(underruns),
+        "adc_overruns": int(overruns),
+        "annotations": annotations,
+        "final_backlog_samples": int(final_backlog),
+        "max_backlog_samples": int(max_backlog),
+        "keeps_up": keeps_up,
+        "estimates": len(est_boundary),
+        "estimates_flushed": flushed,
+        "estimates_per_s": round(len(est_boundary) / wall, 1),
+        "estimates_on_target": on_target,
+        "echo_range_m": round(echo_range_m, 4),
+        "median_range_m": round(float(np.median(ranges)), 4) if ranges.size else None,
+        "median_speed_mps": round(float(np.median(est_speed)), 4) if est_speed else None,
+        "hop_s": hop_s,
+        "latency_median_hops": hops(lat_s, 50),
+        "latency_p99_hops": hops(lat_s, 99),
+        "latency_max_hops": hops(lat_s, 100),
+        "estimates_over_1_hop": int(np.count_nonzero(lat_s > hop_s)),
+        "target_cpu_cores": TARGET_CPU_CORES,
+        "cpu_ratio": round(TARGET_CPU_CORES / max(cores, 1e-9), 2),
+        "target_latency_hops": TARGET_LATENCY_HOPS,
+    }
+    max_lat = result["latency_max_hops"]
+    result["latency_ratio"] = round(TARGET_LATENCY_HOPS / max_lat, 2) if max_lat > 0 else None
+    result["meets_targets"] = bool(
+        keeps_up and cores < TARGET_CPU_CORES and max_lat <= TARGET_LATENCY_HOPS
+    )
+    if profiler is not None:
+        import pstats
+
+        pstats.Stats(profiler, stream=sys.stderr).sort_stats("cumulative").print_stats(30)
+    return result
+
+
+def print_table(r: dict[str, Any]) -> None:
+    """The figures as a table on stdout."""
+    hop_ms = r["hop_s"] * 1e3
+    rows = [
+        ("streamed", f"{r['seconds']:.1f} s at 1 MS/s x 2 ch int16 (wall {r['wall_s']:.2f} s)"),
+        ("blocks", f"{r['blocks']} (mean {r['mean_block_samples']:.0f} samples)"),
+        (
+            "host CPU",
+            f"{r['host_cpu_cores']:.3f} cores (target < {TARGET_CPU_CORES}; ratio"
+            f" {r['cpu_ratio']:.2f})",
+        ),
+        ("  main thread", f"{r['main_thread_cores']:.3f} cores (capture loop + GCAS)"),
+        ("  GCAS alone", f"{r['gcas_cores']:.3f} cores"),
+        ("  board threads", f"{r['board_threads_cores']:.3f} cores (reader + writer)"),
+        ("  (sim board)", f"{r['sim_board_process_cores']:.3f} cores, other process, not counted"),
+        (
+            "feed call",
+            f"median {r['feed_call_median_ms']:.2f} ms, p99 {r['feed_call_p99_ms']:.2f} ms,"
+            f" max {r['feed_call_max_ms']:.2f} ms wall",
+        ),
+        ("longest wait", f"{r['wait_for_samples_max_ms']:.2f} ms for new samples"),
+        (
+            "kept up",
+            f"{r['keeps_up']}: processed {r['samples_processed']} of"
+            f" {r['samples_captured']} captured ({r['board_samples_elapsed']} board samples"
+            " elapsed, from the SYNC fit)",
+        ),
+        ("missing/gaps", f"ring {r['ring_missing_samples']}, gaps {r['gap_samples']} samples"),
+        (
+            "backlog",
+            f"final {r['final_backlog_samples']}, max {r['max_backlog_samples']} samples",
+        ),
+        ("dac underruns", f"{r['dac_underruns']}, adc overruns {r['adc_overruns']}"),
+        (
+            "estimates",
+            f"{r['estimates']} ({r['estimates_per_s']:.1f}/s), {r['estimates_on_target']} at"
+            f" the echo range {r['echo_range_m']:.3f} m (median {r['median_range_m']} m,"
+            f" {r['median_speed_mps']} m/s)",
+        ),
+        (
+            "latency",
+            f"median {r['latency_median_hops']:.3f}, p99 {r['latency_p99_hops']:.3f},"
+            f" max {r['latency_max_hops']:.3f} hops (hop {hop_ms:.1f} ms; target <="
+            f" {TARGET_LATENCY_HOPS}); {r['estimates_over_1_hop']} estimates over 1 hop",
+        ),
+    ]
+    for name, text in rows:
+        print(f"{name:<18} {text}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description="live capture + GCAS at the tank-board rate")
+    parser.add_argument("--seconds", type=float, default=30.0, help="streaming time, s")
+    parser.add_argument("--quick", action="store_true", help="smoke run (1.5 s of streaming)")
+    parser.add_argument(
+        "--min-block-ms",
+        type=float,
+        default=1.0,
+        help="least new signal per receiver call, ms (default 1)",
+    )
+    parser.add_argument("--profile", action="store_true", help="cProfile the host to stderr")
+    parser.add_argument("--serve-board", nargs=3, metavar=("DELAY", "GAIN", "NOISE"))
+    args = parser.parse_args()
+    if args.serve_board:
+        delay, gain, noise = args.serve_board
+        serve_board(int(delay), float(gain), float(noise))
+        return
+    seconds = 1.5 if args.quick else args.seconds
+    result = run_live(seconds, args.min_block_ms / 1e3, profile=args.profile)
+    print_table(result)
+    print(json.dumps({"benchmark": "bench_live", **result}))
+
+
+if __name__ == "__main__":
+    main()
