@@ -187,10 +187,12 @@ class ComplexBaseband:
         if last < first:
             return np.zeros(0, dtype=np.complex128)
         n = np.arange(first, last + 1, dtype=np.int64)
-        # Window for output n ends at absolute input index nR: buf position nR − start + T − 1.
-        ends = n * self.decimation - start + keep
-        idx = ends[:, None] + np.arange(-keep, 1, dtype=np.int64)[None, :]
-        win = buf[idx]
+        # Window for output n ends at absolute input index nR: buf position nR − start + T − 1,
+        # so it starts at nR − start; the windows are a strided view (no gathered copy).
+        lo = first * self.decimation - start
+        win = np.lib.stride_tricks.sliding_window_view(buf[lo:], self.n_taps)[:: self.decimation][
+            : n.shape[0]
+        ]
         # Row-wise multiply and (pairwise) sum rather than BLAS: the result of every row is then
         # independent of how many rows are computed together, so chunking cannot change a bit.
         acc_re = (win * self._g_re).sum(axis=1)

@@ -79,6 +79,22 @@ def parabolic_offset(y_minus: float, y0: float, y_plus: float) -> float:
     return float(np.clip(0.5 * (y_minus - y_plus) / den, -1.0, 1.0)) + 0.0
 
 
+def parabolic_offsets(
+    y_minus: NDArray[np.float64], y0: NDArray[np.float64], y_plus: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """:func:`parabolic_offset` for arrays of triples (same shape; the same values, bit for
+    bit).
+
+    >>> parabolic_offsets(np.array([1.0, 0.0]), np.array([2.0, 3.0]), np.array([1.0, 2.0]))
+    array([0.  , 0.25])
+    """
+    den = y_minus - 2.0 * y0 + y_plus
+    ok = (den < 0) & np.isfinite(den)
+    off = np.clip(0.5 * (y_minus - y_plus) / np.where(ok, den, -1.0), -1.0, 1.0)
+    result: NDArray[np.float64] = np.where(ok, off, 0.0) + 0.0
+    return result
+
+
 def local_peaks(s: NDArray[np.float64], half_width: int) -> NDArray[np.bool_]:
     """Mask of samples that are the first maximum over ``±half_width`` (shape of ``s``).
 

@@ -83,6 +83,7 @@ from hil.estimation.detection import (
     local_peaks,
     noise_moments,
     parabolic_offset,
+    parabolic_offsets,
 )
 from hil.estimation.doppler_grid import DopplerGrid, alpha_to_speed, doppler_grid, speed_to_alpha
 from hil.estimation.row_buffer import RowBuffer
@@ -311,9 +312,13 @@ class GcasReceiver:
         self._tone_w = self._reverb_tone_mask()
         m_idx = np.arange(m)
         self.lags = np.round(m_idx[None, :] * self.grid.exact_lengths[:, None]).astype(np.int64)
-        self._w_non, self._w_coh = self._codeword_weights()
+        self._w_coh = self._codeword_weights()[1]
+        # Cell m·K + c_{j−m} of the (M·K) terms that is term m of codeword j, shape (M, J):
+        # the noncoherent sums gather these.
+        self._term_cell = m_idx[:, None] * k + code[(np.arange(j)[None, :] - m_idx[:, None]) % j]
         self._n_min = int(self.grid.lengths.min())
         self._n_max = int(self.grid.lengths.max())
+        self._comb_lag = (m * self.grid.lengths)[None, :]  # (1, D) samples
         self.half_width = max(1, self._n_min // 2)
         self._cfar_window = max(2, int(round(cfar_window_hops * self.hop_s * self.fs_bb)))
         # Detection (threshold, codeword, coarse time) always runs on the noncoherent sums;
@@ -526,22 +531,26 @@ class GcasReceiver:
     def _accumulate_groups(self, grp: NDArray[np.float64], a0: int) -> NDArray[np.float64]:
         """``Acc_d[n] = Acc_d[n − N_d] + G_d[n] − G_d[n − M N_d]`` for the new samples."""
         n = grp.shape[0]
-        acc = np.empty_like(grp)
-        for n_len, sel in self.bank._groups:
-            lag = self.m_hops * n_len
-            x = grp[:, sel] - self._g_ring.span(a0 - lag, a0 - lag + n)[:, sel]
-            hist = self._acc_ring.span(a0 - n_len, a0)[:, sel]
-            rows = -(-n // n_len)
-            buf = np.zeros(((rows + 1) * n_len, x.shape[1]))
-            buf[:n_len] = hist
-            buf[n_len : n_len + n] = x
-            # Row r of the reshaped buffer is one comb lag later than row r − 1, so a cumsum
-            # down the rows is exactly the recursion Acc[n] = Acc[n − N] + x[n].
-            np.cumsum(
-                buf.reshape(rows + 1, n_len, -1), axis=0, out=buf.reshape(rows + 1, n_len, -1)
-            )
-            acc[:, sel] = buf[n_len : n_len + n]
-        return acc
+        d = self.grid.size
+        cols = np.arange(d)
+        idx = a0 + np.arange(n, dtype=np.int64)
+        # Flat take() of G_d[n − M N_d]: cheaper than 2-D fancy indexing.
+        flat = self._g_ring.position(idx[:, None] - self._comb_lag) * d + cols
+        g_old = np.take(self._g_ring.array.reshape(-1), flat)
+        x = grp - g_old
+        # Every N_d >= N_min, so the N_min samples of one step depend only on earlier steps:
+        # all hypotheses advance together, one step of the recursion per numpy call.
+        h = self._n_max
+        work = np.empty((h + n, d))
+        work[:h] = self._acc_ring.span(a0 - h, a0)
+        flat_work = work.reshape(-1)
+        back = (h - self.grid.lengths[None, :]) * d + cols  # flat offset of Acc_d[n − N_d]
+        step = self._n_min
+        for s in range(0, n, step):
+            e = min(s + step, n)
+            src = np.take(flat_work, back + d * np.arange(s, e)[:, None])
+            np.add(src, x[s:e], out=work[h + s : h + e])
+        return work[h:]
 
     def _sums(
         self, idx: NDArray[np.int64], dcol: NDArray[np.int64], coherent: bool = False
@@ -550,15 +559,18 @@ class GcasReceiver:
         noncoherent unless ``coherent`` (which needs the complex history of ``coherent=True``).
         """
         pos = self._u_ring.position(idx[:, None] - self.lags[dcol])  # (n, M)
-        v = self._u_ring.array[pos, dcol[:, None], :]  # (n, M, K)
         n = idx.shape[0]
         if not coherent:
+            # Gather term m of every codeword j directly (tone c_{j−m}), then a sum over the
+            # middle axis (sequential adds, not BLAS): each row's value does not depend on
+            # how many rows are computed together.
+            v = self._u_ring.array[pos, dcol[:, None], :].reshape(n, -1)  # (n, M·K)
+            terms = np.take(v, self._term_cell, axis=1)  # (n, M, J)
             if self.coherent:
-                v = np.square(v.real) + np.square(v.imag)
-            # Broadcast product and a sum over a middle axis (sequential adds) instead of BLAS:
-            # each row's value must not depend on how many rows are computed together.
-            out: NDArray[np.float32] = (v.reshape(n, -1, 1) * self._w_non[None]).sum(axis=1)
+                terms = np.square(terms.real) + np.square(terms.imag)
+            out: NDArray[np.float32] = terms.sum(axis=1)  # (n, J)
             return out
+        v = self._u_ring.array[pos, dcol[:, None], :]  # (n, M, K)
         t = self.baseband.time_of(idx)
         cyc = np.mod(self._fa[dcol] * t[:, None], 1.0) + self._coh_const[dcol]
         rot = np.exp(2j * np.pi * cyc).astype(np.complex64)  # (n, K)
@@ -576,8 +588,9 @@ class GcasReceiver:
         out = np.full(idx.shape[0], np.nan)
         on = np.flatnonzero(idx % NOISE_STRIDE == 0)
         if on.size:
-            flat = power[:, :, on].reshape(-1, on.size)
-            out[on] = np.median(flat, axis=0) / math.log(2.0)
+            # One contiguous row of D·K cells per sample: the median partitions along rows.
+            flat = np.ascontiguousarray(power[:, :, on].reshape(-1, on.size).T)
+            out[on] = np.median(flat, axis=1) / math.log(2.0)
         return out
 
     # ------------------------------------------------------------------ detection
@@ -619,11 +632,36 @@ class GcasReceiver:
             mean, std = np.array([v[0] for v in ms]), np.array([v[1] for v in ms])
             tested = self._s_ring.rows(cand)
         thr = mean + self.cfar_lambda * std
+        hit = np.flatnonzero(tested > thr)
+        if hit.size == 0:
+            return []
+        # Readout quantities of every survivor at once (per-candidate numpy calls would
+        # dominate the cost): peak sample, codeword, runner-up ratio, time and Doppler offsets.
+        ah = a[hit].astype(np.float64)  # (H, 2W + 1, 3, J)
+        r = np.arange(hit.size)
+        sw = ah[:, :, 1, :].max(axis=2)
+        ip = np.argmax(sw, axis=1)
+        peak = sw[r, ip]
+        rows = ah[r, ip, 1]  # (H, J)
+        jh = np.argmax(rows, axis=1)
+        runner = np.partition(rows, -2, axis=1)[:, -2] if rows.shape[1] > 1 else np.zeros(r.size)
+        ratio = np.full(r.size, np.inf)
+        np.divide(peak, runner, out=ratio, where=runner > 0)
+        inner = (ip > 0) & (ip < 2 * w)
+        dn = np.where(
+            inner,
+            parabolic_offsets(sw[r, np.maximum(ip - 1, 0)], peak, sw[r, np.minimum(ip + 1, 2 * w)]),
+            0.0,
+        )
+        dh = dset[hit]
+        d_in = (dh[:, 0] != dh[:, 1]) & (dh[:, 2] != dh[:, 1])
+        dd = np.where(d_in, parabolic_offsets(ah[r, ip, 0, jh], rows[r, jh], ah[r, ip, 2, jh]), 0.0)
+        n_star = cand[hit] - w + ip
         out: list[Estimate] = []
-        for i in np.flatnonzero(tested > thr).tolist():
+        for i in np.flatnonzero(ratio >= self.runner_up_ratio).tolist():
             est = self._decide(
-                int(cand[i]), np.asarray(a[i], dtype=np.float64), dset[i],
-                float(mean[i]), float(thr[i]),
+                int(n_star[i]), float(peak[i]), int(jh[i]), float(ratio[i]), float(dn[i]),
+                int(dh[i, 1]), float(dd[i]), float(mean[hit[i]]), float(thr[hit[i]]),
             )  # fmt: skip
             if est is not None:
                 out.append(est)
@@ -660,38 +698,19 @@ class GcasReceiver:
         return med, 1.4826 * float(np.median(np.abs(vals - med)))
 
     def _decide(
-        self, n_cand: int, a: NDArray[np.float64], dset: NDArray[np.int64], mean: float, thr: float
-    ) -> Estimate | None:
+        self, n_star: int, peak: float, j_hat: int, ratio: float, dn: float, d0: int,
+        dd: float, mean: float, thr: float,
+    ) -> Estimate | None:  # fmt: skip
         """Readout of one candidate that passed the threshold ``thr`` (noise mean ``mean``)
-        from its codeword sums ``a`` (shape ``(2W + 1, 3, J)``: samples
-        ``n_cand − W .. n_cand + W``, hypotheses ``dset``)."""
-        w = self.search_half
-        s_win = a[:, 1, :].max(axis=1)
-        i_pk = int(np.argmax(s_win))
-        n_star = n_cand - w + i_pk
-        peak = float(s_win[i_pk])
-        row = a[i_pk, 1]
-        j_hat = int(np.argmax(row))
-        runner = float(np.partition(row, -2)[-2]) if row.shape[0] > 1 else 0.0
-        ratio = peak / runner if runner > 0 else math.inf
-        if ratio < self.runner_up_ratio:
-            return None
-        # Time: parabola through the statistic around the peak (none at the window edge).
-        dn = 0.0
-        if 0 < i_pk < 2 * w:
-            dn = parabolic_offset(float(s_win[i_pk - 1]), peak, float(s_win[i_pk + 1]))
-        # Doppler: parabola across the three hypotheses kept at this sample.
-        d0 = int(dset[1])
-        dd = 0.0
-        if dset[0] != dset[1] and dset[2] != dset[1]:
-            dd = parabolic_offset(
-                float(a[i_pk, 0, j_hat]), float(row[j_hat]), float(a[i_pk, 2, j_hat])
-            )
+        and the runner-up test: peak sample ``n_star`` (baseband index) with sub-sample offset
+        ``dn``, statistic ``peak``, codeword ``j_hat`` (best over runner-up ``ratio``),
+        hypothesis ``d0`` with offset ``dd`` (grid steps)."""
         c = self.sound_speed_mps
-        speed = float(self.grid.speeds_mps[d0] + dd * self.grid.speed_step_mps)
-        alpha = float(speed_to_alpha(speed, c))
+        speed = float(self.grid.speeds_mps[d0]) + dd * self.grid.speed_step_mps
+        alpha = (c + speed) / (c - speed)  # speed_to_alpha, on Python floats
         exact_len = self.hop_s * self.fs_bb / alpha
-        t_rx = float(self.baseband.time_of(n_star + dn)) + (
+        bb = self.baseband
+        t_rx = ((n_star + dn) * bb.decimation - bb.group_delay) / bb.fs_hz + (
             exact_len - self.grid.lengths[d0] + 1
         ) / (2.0 * self.fs_bb)
         # Transmit time: end of hop ĵ, folded by whole code periods into [0, τ_max].
