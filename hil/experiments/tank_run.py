@@ -220,7 +220,12 @@ def run_experiment(
 
         # ---- board: open, configure (refused before sending if it cannot)
         settings = BoardSettings(sample_rate_hz=int(fs), dac_channels=1, adc_channels=2)
-        board = Board(board_url, settings=settings, clock=clock, ring_seconds=8.0).open()
+        if board_url.startswith("audio://"):
+            from hil.devices.audio.daq import AudioDaq
+
+            board = AudioDaq.from_url(board_url, sample_rate_hz=int(fs), ring_seconds=8.0).open()
+        else:
+            board = Board(board_url, settings=settings, clock=clock, ring_seconds=8.0).open()
         board.configure()
         if tank is not None:
             tank.align(fs)
