@@ -16,7 +16,8 @@ Figures and targets:
   GCAS >= 5x faster at M = 10.
 
 Run: ``python benchmarks/bench_gcas.py [--seconds 20] [--repeat 3] [--stream-minutes 10]
-[--quick]``. The last line is one JSON object with the figures and the ratios to the targets.
+[--quick] [--search full|two-stage]`` (``--search`` picks the GCAS correlator search). The last
+line is one JSON object with the figures and the ratios to the targets.
 """
 
 from __future__ import annotations
@@ -85,10 +86,13 @@ def blocks(base: np.ndarray, seconds: float) -> Iterator[np.ndarray]:
         pos += count
 
 
+SEARCH = {"search": "full"}  # set from --search in main()
+
+
 def gcas(sch: HopSchedule, m_hops: int) -> GcasReceiver:
     return GcasReceiver.from_options(
         sch, FS_HZ, sound_speed_mps=C, max_speed_mps=V_MAX, max_range_m=R_MAX,
-        m_hops=m_hops, n_doppler=N_DOPPLER,
+        m_hops=m_hops, n_doppler=N_DOPPLER, search=SEARCH["search"],
     )  # fmt: skip
 
 
@@ -154,7 +158,11 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=3, help="runs per figure (best kept)")
     parser.add_argument("--stream-minutes", type=float, default=10.0, help="memory stream")
     parser.add_argument("--quick", action="store_true", help="few-second smoke run")
+    parser.add_argument(
+        "--search", choices=("full", "two-stage"), default="full", help="GCAS search"
+    )
     args = parser.parse_args()
+    SEARCH["search"] = args.search
     if args.quick:
         args.seconds, args.bank_seconds, args.repeat, args.stream_minutes = 0.5, 0.3, 1, 0.02
     sch = schedule()
@@ -206,6 +214,7 @@ def main() -> None:
             {
                 "benchmark": "gcas",
                 "quick": bool(args.quick),
+                "search": args.search,
                 "preset": "att",
                 "family": "random-cyclic",
                 "fs_hz": FS_HZ,

@@ -87,7 +87,11 @@ from hil.estimation.detection import (
 )
 from hil.estimation.doppler_grid import DopplerGrid, alpha_to_speed, doppler_grid, speed_to_alpha
 from hil.estimation.row_buffer import RowBuffer
-from hil.estimation.unit_correlators import UnitCorrelatorBank
+from hil.estimation.unit_correlators import (
+    BLOCK_ANCHOR,
+    BlockCorrelatorBank,
+    UnitCorrelatorBank,
+)
 from hil.signals.random_cyclic import minimum_distance
 from hil.signals.schedule import HopSchedule
 
@@ -99,6 +103,14 @@ TRANSITION_FACTOR = 1.3
 #: Noise-floor estimate on every this-many baseband samples (absolute grid).
 NOISE_STRIDE = 32
 CFAR_MODES = ("bank", "statistic")
+#: Correlator searches: every hypothesis at every sample, or coarse-then-fine (two-stage).
+SEARCH_MODES = ("full", "two-stage")
+#: Default coarse step B of the two-stage search, baseband samples.
+COARSE_STEP = 8
+#: Times the two-stage search moves its fine window onto an edge peak, at most.
+RECENTRE_STEPS = 4
+#: Hypotheses either side of the coarse choice evaluated exactly by the two-stage search.
+FINE_DOPPLER_HALF = 1
 #: Guard around every tone's reverberation band, in unit-correlator main lobes (1/T_h).
 #: Measured: 0.5 leaves no ghost on the clutter-plus-target test; wider guards move the
 #: ghost to the first unmasked hypothesis past the guard instead of removing it.
@@ -197,6 +209,12 @@ class GcasReceiver:
         Baseband decimation R; default the largest that keeps the Doppler-scaled band.
     attenuation_db:
         Stop-band attenuation of the baseband low-pass, dB.
+    search:
+        ``"full"`` (every unit correlator at every baseband sample) or ``"two-stage"``
+        (coarse correlators every ``coarse_step`` samples choose the hypothesis and the
+        candidate times; exact correlators only at ``d̂ ± 2`` around each candidate).
+    coarse_step:
+        Coarse step B of the two-stage search, baseband samples.
     on_map:
         Called as ``on_map(t_s, P, speed_mps)`` with the time–codeword map of each new stretch
         of baseband samples: times (s, shape ``(n,)``), ``P`` (shape ``(n, J)``) and the chosen
@@ -226,6 +244,8 @@ class GcasReceiver:
         decimation: int | None = None,
         attenuation_db: float = 70.0,
         on_map: MapCallback | None = None,
+        search: str = "full",
+        coarse_step: int = COARSE_STEP,
     ) -> None:
         if not (math.isfinite(fs_hz) and fs_hz > 0):
             raise ConfigError("fs_hz", fs_hz, "> 0 Hz")
@@ -261,6 +281,9 @@ class GcasReceiver:
             raise ConfigError("runner_up_ratio", runner_up_ratio, ">= 1")
         if not (math.isfinite(cfar_window_hops) and cfar_window_hops >= 1):
             raise ConfigError("cfar_window_hops", cfar_window_hops, ">= 1 hop")
+        if search not in SEARCH_MODES:
+            raise ConfigError("search", search, f"one of {', '.join(SEARCH_MODES)}")
+        self.search = search
 
         self.schedule = schedule
         self.fs_hz = float(fs_hz)
@@ -351,6 +374,8 @@ class GcasReceiver:
         self._s_ring = RowBuffer(det_keep, (), np.float64)
         self._dhat_ring = RowBuffer(det_keep, (), np.int64)
         self._noise_ring = RowBuffer(det_keep, (), np.float64)
+        if search == "two-stage":
+            self._init_two_stage(coarse_step, det_keep)
         self.reset()
 
     # ------------------------------------------------------------------ construction
@@ -370,7 +395,7 @@ class GcasReceiver:
         known = {
             "n_doppler", "coherent", "pfa", "cfar_lambda", "runner_up_ratio",
             "cfar_window_hops", "cfar_mode", "reverb_speed_mps", "reverb_weight",
-            "decimation", "attenuation_db", "on_map",
+            "decimation", "attenuation_db", "on_map", "search", "coarse_step",
         }  # fmt: skip
         unknown = sorted(set(extra) - known)
         if unknown:
@@ -456,6 +481,19 @@ class GcasReceiver:
         self._origin = b0
         self._valid_from = b0 + self._settle
         self._det_next = b0
+        if self.search == "two-stage":
+            self.blocks.reset(b0)
+            c0 = self.blocks.next_block
+            for ring in (
+                self._cg_ring, self._cacc_ring, self._cs_ring, self._cd_ring, self._cn_ring,
+                self._cum_ring,
+            ):  # fmt: skip
+                ring.reset(c0)
+            self._y_ring.reset(b0)
+            self._cache_n.fill(-1)
+            self._c_origin = c0
+            self._c_valid_from = -(-self._valid_from // self._B) + 1
+            self._det_next = c0
         self._last_hop: int | None = None
         self._last_t = 0.0
 
@@ -488,13 +526,15 @@ class GcasReceiver:
         self._samples_seen += x.shape[0]
         y = self.baseband.process(x)
         if y.shape[0]:
-            out += self._stage2(y)
+            out += self._two_stage(y) if self.search == "two-stage" else self._stage2(y)
         return out
 
     def flush(self) -> list[Estimate]:
         """End of input: decide the candidates still waiting for their look-ahead."""
         # Candidates whose ±N/2 look-ahead never arrived are not decided: a peak cut by the
         # end of the input has no reliable time or codeword.
+        if self.search == "two-stage":
+            return self._detect_two_stage(self._cs_ring.next_index)
         return self._detect(self._s_ring.next_index - self.half_width)
 
     # ------------------------------------------------------------------ stage 2
@@ -530,27 +570,294 @@ class GcasReceiver:
 
     def _accumulate_groups(self, grp: NDArray[np.float64], a0: int) -> NDArray[np.float64]:
         """``Acc_d[n] = Acc_d[n − N_d] + G_d[n] − G_d[n − M N_d]`` for the new samples."""
-        n = grp.shape[0]
-        d = self.grid.size
-        cols = np.arange(d)
-        idx = a0 + np.arange(n, dtype=np.int64)
-        # Flat take() of G_d[n − M N_d]: cheaper than 2-D fancy indexing.
-        flat = self._g_ring.position(idx[:, None] - self._comb_lag) * d + cols
-        g_old = np.take(self._g_ring.array.reshape(-1), flat)
-        x = grp - g_old
-        # Every N_d >= N_min, so the N_min samples of one step depend only on earlier steps:
-        # all hypotheses advance together, one step of the recursion per numpy call.
-        h = self._n_max
-        work = np.empty((h + n, d))
-        work[:h] = self._acc_ring.span(a0 - h, a0)
-        flat_work = work.reshape(-1)
-        back = (h - self.grid.lengths[None, :]) * d + cols  # flat offset of Acc_d[n − N_d]
-        step = self._n_min
-        for s in range(0, n, step):
-            e = min(s + step, n)
-            src = np.take(flat_work, back + d * np.arange(s, e)[:, None])
-            np.add(src, x[s:e], out=work[h + s : h + e])
-        return work[h:]
+        return _comb(grp, a0, self._g_ring, self._acc_ring, self.grid.lengths, self.m_hops)
+
+    # ------------------------------------------------------------------ two-stage search
+    def _init_two_stage(self, coarse_step: int, det_keep: int) -> None:
+        """State of the two-stage search (:meth:`_two_stage`)."""
+        top = max(1, self._n_min // 4)
+        if int(coarse_step) != coarse_step or not 1 <= coarse_step <= top:
+            raise ConfigError(
+                "coarse_step",
+                coarse_step,
+                f"an integer in 1..{top} (a quarter of the shortest hop, baseband samples)",
+                "the coarse response of a hop boundary is a tent about two hops wide",
+            )
+        b = self._B = int(coarse_step)
+        m, d = self.m_hops, self.grid.size
+        exact = self.grid.exact_lengths
+        self._q = np.maximum(1, np.round(exact / b)).astype(np.int64)  # (D,) blocks per hop
+        self.blocks = BlockCorrelatorBank(
+            self.fs_bb, self.grid.frequencies(self.tones_hz, self.center_hz), self._q, block=b
+        )
+        # Coarse block → fine sample of a candidate: the coarse window (Q_d·B samples) peaks
+        # (Q_d·B − N_d)/2 later than the exact one, and the comb's hop spacing Q_d·B differs
+        # from L_d by e_d per hop, which moves its peak by (M − 1)·e_d/2.
+        e = self._q * b - exact
+        self._c_shift = np.round(
+            b - 1 - 0.5 * (self._q * b - self.grid.lengths) - 0.5 * (m - 1) * e
+        ).astype(np.int64)
+        self._noise_scale = (self.grid.lengths / (self._q * b)).astype(np.float32)
+        self._hc = max(1, self.half_width // b)
+        self.fine_half = self.search_half + 1
+        reach = int(np.max(self._c_shift)) + self.fine_half  # samples past the block start
+        self._c_lookahead = self._hc + max(0, -(-reach // b))
+        self._noise_blocks = max(1, NOISE_STRIDE // b)
+        q_max = int(self._q.max())
+        self._cg_ring = RowBuffer(m * q_max + 1, (d,), np.float64)
+        self._cacc_ring = RowBuffer(q_max + 1, (d,), np.float64)
+        c_keep = det_keep // b + 4
+        self._cs_ring = RowBuffer(c_keep, (), np.float64)
+        self._cd_ring = RowBuffer(c_keep, (), np.int64)
+        self._cn_ring = RowBuffer(c_keep, (), np.float64)
+        y_keep = (
+            int(self.lags.max()) + self._n_max + 2 * self.fine_half + (self._c_lookahead + 2) * b
+            + abs(int(np.min(self._c_shift))) + RECENTRE_STEPS * self.fine_half + 8
+        )  # fmt: skip
+        self._y_ring = RowBuffer(y_keep, (), np.complex64)
+        self._cum_ring = RowBuffer(y_keep // b + 4, (d, self.n_tones), np.complex64)
+        # Cache of exact unit correlators by absolute sample (slot n mod cap, stamped with n):
+        # consecutive candidates share M − 1 of their M lagged windows, so each hop computes
+        # about one new window per hypothesis (cost flat in M).
+        self._cache_cap = 1 << int(math.ceil(math.log2(2 * y_keep)))
+        # Candidates are processed in groups spanning at most this many samples, so that the
+        # samples one group reads never share a cache slot.
+        self._group_span = self._cache_cap - y_keep
+        self._cache_u = np.zeros((self._cache_cap, d, self.n_tones), dtype=np.complex64)
+        self._cache_n = np.full((self._cache_cap, d), -1, dtype=np.int64)
+        r = np.arange(b, dtype=np.float64)
+        nu_fs = self.grid.frequencies(self.tones_hz, self.center_hz) / self.fs_bb
+        # (D, K, B): heterodyne phasor of offset r within a block.
+        self._within = np.exp(-2j * np.pi * np.mod(r * nu_fs[:, :, None], 1.0)).astype(np.complex64)
+        width = 2 * self.fine_half + 1
+        i = np.arange(self._n_max + width, dtype=np.float64)
+        self._nu_fs = self.grid.frequencies(self.tones_hz, self.center_hz) / self.fs_bb  # (D, K)
+        self._fine_step = np.exp(
+            -2j * np.pi * np.mod(i[None, None, :] * self._nu_fs[:, :, None], 1.0)
+        ).astype(np.complex64)
+
+    def _two_stage(self, y: NDArray[np.complex128]) -> list[Estimate]:
+        """Stage 1 on the new baseband samples ``y``; stage 2 at the decided candidates."""
+        self._y_ring.append(y.astype(np.complex64), self._y_ring.next_index)
+        v, c0 = self.blocks.process(y)  # (nb, D, K)
+        nb = v.shape[0]
+        if nb:
+            self._cum_ring.append(self.blocks.last_cumulative, c0)
+            power = np.square(v.real) + np.square(v.imag)
+            masked = power if self._tone_w is None else power * self._tone_w[None]
+            grp = masked.sum(axis=2, dtype=np.float64)  # (nb, D)
+            self._cg_ring.append(grp, c0)
+            acc = _comb(grp, c0, self._cg_ring, self._cacc_ring, self._q, self.m_hops)
+            self._cacc_ring.append(acc, c0)
+            wacc = acc * self.grid.weights[None, :]
+            d_hat = np.argmax(wacc, axis=1)
+            self._cs_ring.append(np.take_along_axis(wacc, d_hat[:, None], axis=1)[:, 0], c0)
+            self._cd_ring.append(d_hat, c0)
+            bidx = c0 + np.arange(nb, dtype=np.int64)
+            noise = np.full(nb, np.nan)
+            on = np.flatnonzero(bidx % self._noise_blocks == 0)
+            if on.size:
+                flat = (power[on] * self._noise_scale[None, :, None]).reshape(on.size, -1)
+                noise[on] = np.median(flat, axis=1) / math.log(2.0)
+            self._cn_ring.append(noise, c0)
+        if self.on_map is not None:
+            stop = self._y_ring.next_index
+            idx = np.arange(stop - y.shape[0], stop, dtype=np.int64)
+            if self._cd_ring.next_index > self._c_origin:
+                blk = np.clip(idx // self._B, self._c_origin, self._cd_ring.next_index - 1)
+                d_map = self._cd_ring.rows(blk)
+            else:
+                d_map = np.zeros(idx.shape[0], dtype=np.int64)
+            self.on_map(
+                self.baseband.time_of(idx),
+                self._sums(idx, d_map, self.coherent),
+                self.grid.speeds_mps[d_map].astype(np.float64),
+            )
+        return self._detect_two_stage(self._cs_ring.next_index)
+
+    def _cumulative(
+        self, f: NDArray[np.int64], dd: NDArray[np.int64], width: int
+    ) -> tuple[NDArray[np.complex64], NDArray[np.int64]]:
+        """Cumulative heterodyned sums ``C[f_r + t, dd_r, k]`` for ``t < width`` (shape
+        ``(R, K, width)``) and the anchor period of each (shape ``(R, width)``).
+
+        ``C[n] = C_blk[b − 1] + Σ_{bB <= i <= n} y[i] e^{−j2πν i/fs}`` (``b = n // B``): the
+        stage-1 cumulative block sums plus a partial sum within block ``b`` that always starts
+        at the block's first sample, so every value is a function of ``n`` alone (chunking
+        and batching cannot change a bit)."""
+        bsz = self._B
+        r_count = f.shape[0]
+        b_lo = f // bsz
+        nblk = (bsz - 1 + width - 1) // bsz + 1
+        blocks = b_lo[:, None] + np.arange(nblk)  # (R, nblk)
+        samp = self._y_ring.position(blocks[:, :, None] * bsz + np.arange(bsz))
+        np.minimum(samp, self._y_ring.array.shape[0] - 1, out=samp)  # beyond n: unused
+        yv = self._y_ring.array[samp]  # (R, nblk, B)
+        z = yv[:, :, None, :] * self._within[dd][:, None, :, :]  # (R, nblk, K, B)
+        np.cumsum(z, axis=3, out=z)
+        cyc = np.mod((blocks * bsz)[:, :, None] * self._nu_fs[dd][:, None, :], 1.0)
+        z *= np.exp(-2j * np.pi * cyc).astype(np.complex64)[:, :, :, None]
+        prev = self._cum_ring.array[self._cum_ring.position(blocks - 1), dd[:, None]]
+        z += prev[:, :, :, None]
+        cf = z.transpose(0, 2, 1, 3).reshape(r_count, self.n_tones, nblk * bsz)
+        idx = (f - b_lo * bsz)[:, None] + np.arange(width)  # (R, width)
+        out = np.take_along_axis(cf, idx[:, None, :], axis=2)
+        epoch = ((f[:, None] + np.arange(width)) // bsz - 1) // BLOCK_ANCHOR
+        return out, epoch
+
+    def _exact_windows(
+        self, first: NDArray[np.int64], dd: NDArray[np.int64], width: int
+    ) -> NDArray[np.complex64]:
+        """Exact unit correlators ``u[first_r + t, dd_r, k]`` for ``t < width`` (shape
+        ``(R, width, K)``; ``first`` and ``dd`` of shape ``(R,)``): differences of
+        :meth:`_cumulative`, re-based across an anchor of the block sums."""
+        hi, e_hi = self._cumulative(first, dd, width)
+        lo, e_lo = self._cumulative(first - self.grid.lengths[dd], dd, width)
+        u = hi - lo
+        cross = e_hi != e_lo
+        if cross.any():
+            rr, tt = np.nonzero(cross)
+            ring = self._cum_ring
+            u[rr, :, tt] += ring.array[ring.position(e_hi[rr, tt] * BLOCK_ANCHOR - 1), dd[rr]]
+        out: NDArray[np.complex64] = u.transpose(0, 2, 1)
+        return out
+
+    def _cached_windows(
+        self, first: NDArray[np.int64], dd: NDArray[np.int64], width: int
+    ) -> NDArray[np.complex64]:
+        """:meth:`_exact_windows` through the per-sample cache (the same values: every value
+        is a function of its sample and hypothesis alone). A row with any sample missing is
+        computed with a margin of one coarse step each side for the next candidates."""
+        cap = self._cache_cap - 1
+        n = first[:, None] + np.arange(width)  # (R, width)
+        slot = n & cap
+        miss = np.flatnonzero(~(self._cache_n[slot, dd[:, None]] == n).all(axis=1))
+        if miss.size:
+            # Rows of one batch overlap (candidate c + 1's term m + 1 is c's term m): merge the
+            # missing rows per hypothesis into runs, computed in pieces of one fixed width.
+            e = self._B
+            seg = width + 2 * e
+            ff, dm = first[miss] - e, dd[miss]
+            order = np.lexsort((ff, dm))
+            ff, dm = ff[order], dm[order]
+            ll = ff + seg
+            new = np.ones(ff.shape[0], dtype=bool)
+            new[1:] = (dm[1:] != dm[:-1]) | (ff[1:] > ll[:-1])
+            heads = np.flatnonzero(new)
+            g_first, g_d = ff[heads], dm[heads]
+            g_len = np.maximum.reduceat(ll, heads) - g_first
+            nch = -(-g_len // seg)
+            total = int(nch.sum())
+            k = np.arange(total) - np.repeat(np.cumsum(nch) - nch, nch)
+            starts = np.repeat(g_first, nch) + k * seg
+            ds = np.repeat(g_d, nch)
+            vals = self._exact_windows(starts, ds, seg)
+            nn = starts[:, None] + np.arange(seg)
+            # Samples not yet received (the margin) are computed from stale history: not kept.
+            ok = nn < self._y_ring.next_index
+            rr, tt = np.nonzero(ok)
+            self._cache_u[nn[rr, tt] & cap, ds[rr]] = vals[rr, tt]
+            self._cache_n[nn[rr, tt] & cap, ds[rr]] = nn[rr, tt]
+        out: NDArray[np.complex64] = self._cache_u[slot, dd[:, None]]
+        return out
+
+    def _exact_terms(self, idx: NDArray[np.int64], dcol: NDArray[np.int64]) -> NDArray[Any]:
+        """Unit-correlator values of the M terms, ``u[n − ℓ_{d,m}, d, k]`` (complex when
+        coherent, else ``w·|u|²``), shape ``(n, M, K)``."""
+        n, m = idx.shape[0], self.m_hops
+        first = (idx[:, None] - self.lags[dcol]).reshape(-1)
+        u = self._exact_windows(first, np.repeat(dcol, m), 1)[:, 0, :].reshape(n, m, -1)
+        w = None if self._tone_w is None else self._tone_w[dcol][:, None, :]
+        if self.coherent:
+            uc = u.astype(np.complex64)
+            return uc if w is None else uc * w
+        p = (np.square(u.real) + np.square(u.imag)).astype(np.float32)
+        return p if w is None else p * w
+
+    def _detect_two_stage(self, next_block: int) -> list[Estimate]:
+        """Decide the coarse candidates whose look-ahead has arrived (blocks below
+        ``next_block − lookahead``); exact codeword sums around each (stage 2)."""
+        return self._decide_blocks(next_block - self._hc)
+
+    def _decide_blocks(self, stop: int) -> list[Estimate]:
+        """Stage 2 for the coarse candidates in blocks ``< stop``."""
+        lo = self._det_next
+        if stop <= lo:
+            return []
+        h = self._hc
+        first = max(lo - h, self._c_origin)
+        last = min(stop + h, self._cs_ring.next_index)
+        s = np.array(self._cs_ring.span(first, last), dtype=np.float64)
+        s[: max(0, self._c_valid_from - first)] = -np.inf
+        peaks = local_peaks(s, h)
+        cand_b = np.flatnonzero(peaks[lo - first : stop - first]) + lo
+        # A candidate waits until its fine window has arrived (its shift depends on d̂).
+        late = cand_b * self._B + self._c_shift[self._cd_ring.rows(cand_b)] + 2 * self.fine_half
+        wait = np.flatnonzero(late >= self._y_ring.next_index)
+        if wait.size:
+            stop = int(cand_b[wait[0]])
+            cand_b = cand_b[: wait[0]]
+        self._det_next = stop
+        if cand_b.size == 0:
+            return []
+        group = (cand_b * self._B) // self._group_span
+        out: list[Estimate] = []
+        for g in np.unique(group).tolist():
+            out += self._fine_stage(cand_b[group == g])
+        return out
+
+    def _fine_stage(self, cand_b: NDArray[np.int64]) -> list[Estimate]:
+        """Stage 2: exact codeword sums around the coarse candidate blocks ``cand_b``."""
+        d0 = self._cd_ring.rows(cand_b)
+        centre = cand_b * self._B + self._c_shift[d0]
+        w = self.fine_half
+        dset, a = self._fine_sums(centre, d0)
+        # A peak on the window's edge lies outside it (early in the stream the coarse comb
+        # is not yet full): move the window onto that edge, a few times at most (later only
+        # once: the look-ahead covers one window more; earlier is in the history).
+        centre = centre.copy()
+        for it in range(RECENTRE_STEPS):
+            ip = np.argmax(a[:, :, 1, :].max(axis=2), axis=1)
+            edge = np.flatnonzero((ip == 0) | ((ip == 2 * w) & (it == 0)))
+            if edge.size == 0:
+                break
+            centre[edge] += ip[edge] - w
+            dset_e, a_e = self._fine_sums(centre[edge], d0[edge])
+            dset, a = dset.copy(), a.copy()
+            dset[edge], a[edge] = dset_e, a_e
+        tested = self._cs_ring.rows(cand_b) if self.cfar_mode == "statistic" else None
+        return self._threshold_readout(centre, w, dset, a, tested)
+
+    def _fine_sums(
+        self, centre: NDArray[np.int64], d0: NDArray[np.int64]
+    ) -> tuple[NDArray[np.int64], NDArray[np.float32]]:
+        """Exact ``A[n, d, j]`` for ``n`` within ``±fine_half`` of ``centre`` (shape ``(C,)``)
+        at the best of ``d0 ± FINE_DOPPLER_HALF`` and its neighbours: the hypotheses (shape
+        ``(C, 3)``) and the sums (shape ``(C, 2·fine_half + 1, 3, J)``)."""
+        w = self.fine_half
+        width = 2 * w + 1
+        nd = 2 * FINE_DOPPLER_HALF + 1
+        dset5 = np.clip(
+            d0[:, None] + np.arange(-FINE_DOPPLER_HALF, FINE_DOPPLER_HALF + 1)[None, :],
+            0,
+            self.grid.size - 1,
+        )  # (C, nd)
+        nc, m = centre.shape[0], self.m_hops
+        first_n = (centre[:, None, None] - w - self.lags[dset5]).reshape(-1)  # (C·nd·M,)
+        u = self._cached_windows(first_n, np.repeat(dset5.reshape(-1), m), width)
+        u = u.reshape(nc, nd, m, width, -1)
+        p = (np.square(u.real) + np.square(u.imag)).astype(np.float32)
+        if self._tone_w is not None:
+            p = p * self._tone_w[dset5][:, :, None, None, :]
+        v = p.transpose(0, 1, 3, 2, 4).reshape(nc, nd, width, -1)  # (C, nd, width, M·K)
+        a5 = np.take(v, self._term_cell, axis=3).sum(axis=3)  # (C, nd, width, J)
+        # Best hypothesis among the inner ones, with its two neighbours for the readout.
+        inner = a5[:, 1:-1] if nd > 1 else a5
+        best = np.argmax(inner.max(axis=(2, 3)), axis=1) + (1 if nd > 1 else 0)
+        pick = np.clip(best[:, None] + np.arange(-1, 2)[None, :], 0, nd - 1)
+        dset = np.take_along_axis(dset5, pick, axis=1)
+        a = np.take_along_axis(a5, pick[:, :, None, None], axis=1).transpose(0, 2, 1, 3)
+        return dset, a
 
     def _sums(
         self, idx: NDArray[np.int64], dcol: NDArray[np.int64], coherent: bool = False
@@ -558,19 +865,23 @@ class GcasReceiver:
         """``A[n, d_n, j]`` for samples ``idx`` (shape ``(n,)``) at hypotheses ``dcol``;
         noncoherent unless ``coherent`` (which needs the complex history of ``coherent=True``).
         """
-        pos = self._u_ring.position(idx[:, None] - self.lags[dcol])  # (n, M)
         n = idx.shape[0]
+        if self.search == "two-stage":
+            terms_all = self._exact_terms(idx, dcol)  # (n, M, K)
+        else:
+            pos = self._u_ring.position(idx[:, None] - self.lags[dcol])  # (n, M)
+            terms_all = self._u_ring.array[pos, dcol[:, None], :]
         if not coherent:
             # Gather term m of every codeword j directly (tone c_{j−m}), then a sum over the
             # middle axis (sequential adds, not BLAS): each row's value does not depend on
             # how many rows are computed together.
-            v = self._u_ring.array[pos, dcol[:, None], :].reshape(n, -1)  # (n, M·K)
+            v = terms_all.reshape(n, -1)  # (n, M·K)
             terms = np.take(v, self._term_cell, axis=1)  # (n, M, J)
             if self.coherent:
                 terms = np.square(terms.real) + np.square(terms.imag)
             out: NDArray[np.float32] = terms.sum(axis=1)  # (n, J)
             return out
-        v = self._u_ring.array[pos, dcol[:, None], :]  # (n, M, K)
+        v = terms_all  # (n, M, K)
         t = self.baseband.time_of(idx)
         cyc = np.mod(self._fa[dcol] * t[:, None], 1.0) + self._coh_const[dcol]
         rot = np.exp(2j * np.pi * cyc).astype(np.complex64)  # (n, K)
@@ -620,6 +931,21 @@ class GcasReceiver:
         )
         d_idx = np.broadcast_to(dset[:, None, :], n_idx.shape)
         a = self._sums(n_idx.reshape(-1), d_idx.reshape(-1)).reshape(*n_idx.shape, -1)
+        tested = self._s_ring.rows(cand) if self.cfar_mode == "statistic" else None
+        return self._threshold_readout(cand, w, dset, a, tested)
+
+    def _threshold_readout(
+        self,
+        cand: NDArray[np.int64],
+        w: int,
+        dset: NDArray[np.int64],
+        a: NDArray[np.float32],
+        stat_tested: NDArray[np.float64] | None,
+    ) -> list[Estimate]:
+        """Threshold test and readout of candidates centred on samples ``cand`` (shape
+        ``(C,)``): ``a`` holds ``A[n, d, j]`` for ``n`` within ``±w`` and the hypotheses
+        ``dset`` (shape ``(C, 3)``, chosen one in the middle), shape ``(C, 2w + 1, 3, J)``;
+        ``stat_tested`` the group statistic at the candidates (``"statistic"`` CFAR)."""
         # Threshold test for all candidates at once; only the survivors are read out.
         s_win = a[:, :, 1, :].max(axis=2)  # (C, 2W + 1)
         i_pk = np.argmax(s_win, axis=1)
@@ -630,7 +956,8 @@ class GcasReceiver:
         else:
             ms = [self._statistic_moments(int(v)) for v in n_pk.tolist()]
             mean, std = np.array([v[0] for v in ms]), np.array([v[1] for v in ms])
-            tested = self._s_ring.rows(cand)
+            assert stat_tested is not None
+            tested = stat_tested
         thr = mean + self.cfar_lambda * std
         hit = np.flatnonzero(tested > thr)
         if hit.size == 0:
@@ -672,9 +999,15 @@ class GcasReceiver:
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Noise mean and std of the codeword sum at samples ``n_pk`` (shape ``(C,)``): the
         noise-floor estimates μ_U over the trailing CFAR window times the noise moments."""
+        ring, origin = self._noise_ring, self._origin
         lo = np.maximum(n_pk - self._cfar_window, self._origin + self._n_max)
+        if self.search == "two-stage":
+            # Coarse noise floor, on blocks; the peak's block may not be complete yet.
+            ring, origin = self._cn_ring, self._c_origin
+            n_pk = np.minimum(n_pk // self._B, ring.next_index - 1)
+            lo = np.minimum(np.maximum(lo // self._B, origin), n_pk)
         first = int(lo.min())
-        vals = np.asarray(self._noise_ring.span(first, int(n_pk.max()) + 1))
+        vals = np.asarray(ring.span(first, int(n_pk.max()) + 1))
         ok = np.isfinite(vals)
         csum = np.concatenate(([0.0], np.cumsum(np.where(ok, vals, 0.0))))
         cnt = np.concatenate(([0], np.cumsum(ok)))
@@ -689,11 +1022,15 @@ class GcasReceiver:
         trailing window that ends one hop before ``n_star``."""
         w = self._cfar_window
         guard = self._n_max
-        lo = max(n_star - guard - w, self._valid_from)
+        ring, valid = self._s_ring, self._valid_from
+        if self.search == "two-stage":
+            ring, valid = self._cs_ring, self._c_valid_from
+            w, guard, n_star = w // self._B, -(-guard // self._B), n_star // self._B
+        lo = max(n_star - guard - w, valid)
         hi = n_star - guard
         if hi - lo < 8:
             return math.inf, 0.0
-        vals = np.asarray(self._s_ring.span(lo, hi))
+        vals = np.asarray(ring.span(lo, hi))
         med = float(np.median(vals))
         return med, 1.4826 * float(np.median(np.abs(vals - med)))
 
@@ -778,8 +1115,15 @@ class GcasReceiver:
         f = self.tones_hz[tone]
         t_i = hops.start_s[order]
         phi = hops.phase_rad[order]
-        pos = self._u_ring.position(n_star - self.lags[d0])
-        v = self._u_ring.array[pos, d0, tone].astype(np.complex128)  # (M,)
+        if self.search == "two-stage":
+            first = n_star - self.lags[d0]
+            u = self._exact_windows(first, np.full(m, d0, dtype=np.int64), 1)[:, 0, :]
+            v = u[np.arange(m), tone]
+            if self._tone_w is not None:
+                v = v * self._tone_w[d0, tone]
+        else:
+            pos = self._u_ring.position(n_star - self.lags[d0])
+            v = self._u_ring.array[pos, d0, tone].astype(np.complex128)  # (M,)
         a_d = float(self.grid.alphas[d0])
         g = self.baseband.group_delay / self.fs_hz
         nu = a_d * f - self.center_hz
@@ -826,8 +1170,10 @@ class GcasReceiver:
         from the retained unit-correlator history; ``count`` is limited to the samples since
         the last restart.
         """
-        stop = self._u_ring.next_index
-        count = int(min(count, stop - self._origin, self._u_ring.available - self.lags.max() - 1))
+        ring = self._y_ring if self.search == "two-stage" else self._u_ring
+        stop = ring.next_index
+        extra = self._n_max if self.search == "two-stage" else 0
+        count = int(min(count, stop - self._origin, ring.available - self.lags.max() - 1 - extra))
         idx = np.arange(stop - count, stop, dtype=np.int64)
         full = np.stack(
             [
@@ -837,3 +1183,36 @@ class GcasReceiver:
             axis=1,
         )
         return self.baseband.time_of(idx), full
+
+
+def _comb(
+    grp: NDArray[np.float64],
+    a0: int,
+    g_ring: RowBuffer,
+    acc_ring: RowBuffer,
+    lengths: NDArray[np.int64],
+    m_hops: int,
+) -> NDArray[np.float64]:
+    """Comb accumulation ``Acc_d[n] = Acc_d[n − N_d] + G_d[n] − G_d[n − M N_d]`` of the new
+    rows ``grp`` (shape ``(n, D)``, first index ``a0``) with the histories of ``G`` and ``Acc``
+    in ``g_ring`` and ``acc_ring``; ``lengths`` is ``N_d`` (shape ``(D,)``) in ring rows."""
+    n, d = grp.shape
+    cols = np.arange(d)
+    idx = a0 + np.arange(n, dtype=np.int64)
+    # Flat take() of G_d[n − M N_d]: cheaper than 2-D fancy indexing.
+    flat = g_ring.position(idx[:, None] - (m_hops * lengths)[None, :]) * d + cols
+    g_old = np.take(g_ring.array.reshape(-1), flat)
+    x = grp - g_old
+    # Every N_d >= N_min, so the N_min samples of one step depend only on earlier steps:
+    # all hypotheses advance together, one step of the recursion per numpy call.
+    h = int(lengths.max())
+    work = np.empty((h + n, d))
+    work[:h] = acc_ring.span(a0 - h, a0)
+    flat_work = work.reshape(-1)
+    back = (h - lengths[None, :]) * d + cols  # flat offset of Acc_d[n − N_d]
+    step = int(lengths.min())
+    for s in range(0, n, step):
+        e = min(s + step, n)
+        src = np.take(flat_work, back + d * np.arange(s, e)[:, None])
+        np.add(src, x[s:e], out=work[h + s : h + e])
+    return work[h:]

@@ -187,3 +187,165 @@ class UnitCorrelatorBank:
             # Re-anchor: only differences of C are used, so subtracting the running value from
             # every carried entry changes nothing but the magnitude the sums grow to.
             self._chist -= self._chist[:, :, -1:].copy()
+
+
+#: Blocks per internal frame of :class:`BlockCorrelatorBank` (one fixed-shape matrix product).
+FRAME_BLOCKS = 64
+#: Re-anchoring period of the block cumulative sums, blocks (a multiple of the frame).
+BLOCK_ANCHOR = 512
+
+
+class BlockCorrelatorBank:
+    """Coarse unit correlators: ``D × K`` heterodyne moving sums evaluated every ``B`` samples.
+
+    Block ``b`` holds input samples ``bB .. bB + B − 1`` (absolute indices). Its partial sums
+
+        P[b, d, k] = Σ_{r<B} x[bB + r] · exp(−j2π ν[d, k] (bB + r)/fs)
+
+    are one matrix product per internal frame of :data:`FRAME_BLOCKS` blocks (frames aligned to
+    absolute block indices and always computed with the same shape, zero-padded while
+    incomplete, so the bits of every block do not depend on how the input is cut). The output
+    is the moving sum over the last ``Q_d`` blocks,
+
+        v[b, d, k] = Σ_{i<Q_d} P[b − i, d, k]   (a window of Q_d·B samples ending at bB + B − 1),
+
+    a difference of cumulative block sums (re-anchored every :data:`BLOCK_ANCHOR` blocks).
+    After each :meth:`process`, :attr:`last_cumulative` holds those cumulative sums for the
+    returned blocks, shape ``(nb, D, K)``: ``Σ_{b' <= b} P[b']`` minus the value at the last
+    block before the anchor (the last block of every anchor period, ``b ≡ −1`` mod
+    :data:`BLOCK_ANCHOR`, holds the running total its successors were re-based by).
+
+    Parameters
+    ----------
+    fs_hz:
+        Sample rate of the complex input, Hz.
+    freqs_hz:
+        Correlator frequencies ``ν[d, k]``, Hz, shape ``(D, K)``.
+    block_lengths:
+        Window length ``Q_d`` per hypothesis, blocks, shape ``(D,)``, each >= 1.
+    block:
+        Samples per block ``B``.
+
+    >>> import numpy as np
+    >>> bank = BlockCorrelatorBank(1000.0, [[100.0]], [3], block=4)
+    >>> v, b0 = bank.process(np.exp(2j * np.pi * 100.0 * np.arange(30) / 1000.0))
+    >>> v.shape, b0, np.round(np.abs(v[2:, 0, 0]), 3).tolist()
+    ((7, 1, 1), 0, [12.0, 12.0, 12.0, 12.0, 12.0])
+    """
+
+    def __init__(
+        self, fs_hz: float, freqs_hz: ArrayLike, block_lengths: ArrayLike, *, block: int
+    ) -> None:
+        if int(block) != block or block < 1:
+            raise ConfigError("block", block, "an integer >= 1 (samples per block)")
+        nu = np.asarray(freqs_hz, dtype=np.float64)
+        if nu.ndim != 2 or nu.size == 0 or not np.all(np.isfinite(nu)):
+            raise ConfigError("freqs_hz", f"shape {nu.shape}", "a finite (D, K) array in Hz")
+        q = np.asarray(block_lengths)
+        if q.shape != (nu.shape[0],) or np.any(q < 1) or np.any(q != np.round(q)):
+            raise ConfigError("block_lengths", q.tolist(), f"{nu.shape[0]} integers >= 1")
+        self.fs_hz = float(fs_hz)
+        self.freqs_hz = nu
+        self.block = int(block)
+        self.block_lengths = q.astype(np.int64)
+        self.n_hyp, self.n_tones = nu.shape
+        self.max_blocks = int(self.block_lengths.max())
+        dk = self.n_hyp * self.n_tones
+        r = np.arange(self.block, dtype=np.float64)
+        # (B, D·K): phasor of offset r within a block; (F, D·K): phasor of block f in a frame.
+        self._within = np.exp(
+            -2j * np.pi * np.mod(r[:, None] * nu.reshape(1, dk) / self.fs_hz, 1.0)
+        ).astype(np.complex64)
+        fb = np.arange(FRAME_BLOCKS, dtype=np.float64) * self.block
+        self._frame_step = np.exp(
+            -2j * np.pi * np.mod(fb[:, None] * nu.reshape(1, dk) / self.fs_hz, 1.0)
+        )
+        # Hypotheses grouped by window length (slices when contiguous: cheap views).
+        self._groups: list[tuple[int, slice | NDArray[np.int64]]] = []
+        for v in np.unique(self.block_lengths):
+            idx = np.flatnonzero(self.block_lengths == v)
+            whole = idx[-1] - idx[0] + 1 == idx.shape[0]
+            self._groups.append((int(v), slice(int(idx[0]), int(idx[-1]) + 1) if whole else idx))
+        self.reset(0)
+
+    def reset(self, next_index: int = 0) -> None:
+        """Forget all sums; the next input sample has absolute index ``next_index``."""
+        self._next = int(next_index)
+        b = self._next // self.block
+        self._block0 = b  # first block index not yet returned
+        # Samples of the current (incomplete) frame, from its first sample.
+        self._frame = np.zeros(FRAME_BLOCKS * self.block, dtype=np.complex64)
+        self._frame_index = b // FRAME_BLOCKS
+        self._frame[: self._next - self._frame_index * FRAME_BLOCKS * self.block] = 0
+        self._chist = np.zeros((self.max_blocks, self.n_hyp, self.n_tones), dtype=np.complex64)
+        self.last_cumulative = np.zeros((0, self.n_hyp, self.n_tones), dtype=np.complex64)
+
+    @property
+    def next_block(self) -> int:
+        """Absolute index of the next block to be returned."""
+        return self._block0
+
+    def _frame_sums(self, f: int) -> Complex64Array:
+        """Partial sums of every block of frame ``f``, shape ``(FRAME_BLOCKS, D·K)``."""
+        start = f * FRAME_BLOCKS * self.block
+        cyc = np.mod(float(start) * self.freqs_hz.reshape(-1) / self.fs_hz, 1.0)
+        rot = (self._frame_step * np.exp(-2j * np.pi * cyc)[None, :]).astype(np.complex64)
+        s = self._frame.reshape(FRAME_BLOCKS, self.block) @ self._within
+        out: Complex64Array = s * rot
+        return out
+
+    def process(self, x: ArrayLike) -> tuple[Complex64Array, int]:
+        """Consume complex samples ``x`` (shape ``(n,)``); return the moving sums of the blocks
+        completed by them, shape ``(nb, D, K)``, and the absolute index of the first block."""
+        xs = np.asarray(x).reshape(-1).astype(np.complex64)
+        fl = FRAME_BLOCKS * self.block
+        parts: list[Complex64Array] = []
+        pos = 0
+        first_block = self._block0
+        while pos < xs.shape[0]:
+            f0 = self._frame_index * fl
+            off = self._next - f0
+            take = min(xs.shape[0] - pos, fl - off)
+            self._frame[off : off + take] = xs[pos : pos + take]
+            pos += take
+            self._next += take
+            done = (self._next - f0) // self.block  # complete blocks in this frame
+            lo = self._block0 - self._frame_index * FRAME_BLOCKS
+            if done > lo:
+                parts.append(self._frame_sums(self._frame_index)[lo:done])
+                self._block0 += done - lo
+            if self._next - f0 == fl:
+                self._frame_index += 1
+                self._frame[:] = 0
+        nb = self._block0 - first_block
+        out = np.empty((nb, self.n_hyp, self.n_tones), dtype=np.complex64)
+        self.last_cumulative = np.empty((nb, self.n_hyp, self.n_tones), dtype=np.complex64)
+        if nb == 0:
+            return out, first_block
+        p = np.concatenate(parts).reshape(nb, self.n_hyp, self.n_tones)
+        self._moving(p, first_block, out)
+        return out, first_block
+
+    def _moving(self, p: Complex64Array, b0: int, out: Complex64Array) -> None:
+        """Moving sums of block partial sums ``p`` (shape ``(nb, D, K)``, first block ``b0``)
+        into ``out`` (shape ``(nb, D, K)``), anchored on the absolute block grid."""
+        nb = p.shape[0]
+        h = self.max_blocks
+        pos = 0
+        while pos < nb:
+            b = b0 + pos
+            end = min(nb, pos + (BLOCK_ANCHOR - b % BLOCK_ANCHOR))
+            n = end - pos
+            ext = np.empty((h + n, self.n_hyp, self.n_tones), dtype=np.complex64)
+            ext[:h] = self._chist
+            y = ext[h:]
+            y[:] = p[pos:end]
+            y[0] += self._chist[-1]
+            np.cumsum(y, axis=0, out=y)
+            self.last_cumulative[pos:end] = y
+            for q, sel in self._groups:
+                out[pos:end, sel] = ext[h:, sel] - ext[h - q : h - q + n, sel]
+            self._chist = ext[ext.shape[0] - h :].copy()
+            if (b0 + end) % BLOCK_ANCHOR == 0:
+                self._chist -= self._chist[-1:].copy()
+            pos = end

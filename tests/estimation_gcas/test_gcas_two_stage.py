@@ -1,0 +1,150 @@
+"""GCAS two-stage search (``search="two-stage"``): coarse block correlators, exact stage 2."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from hil.errors import ConfigError
+from hil.estimation.base import Estimate
+from hil.estimation.gcas import GcasReceiver
+from hil.estimation.unit_correlators import BlockCorrelatorBank, UnitCorrelatorBank
+from hil.signals.schedule import HopSchedule
+
+from .conftest import FS, C, att_schedule, echo_samples, true_range
+
+
+def _receiver(schedule: HopSchedule, search: str, **extra: object) -> GcasReceiver:
+    return GcasReceiver.from_options(
+        schedule, FS, sound_speed_mps=C, max_speed_mps=30.0, max_range_m=100.0,
+        m_hops=10, search=search, **extra,
+    )  # fmt: skip
+
+
+def _run(rx: GcasReceiver, x: np.ndarray, block: int = 10_000) -> list[Estimate]:
+    out: list[Estimate] = []
+    for i in range(0, x.shape[0], block):
+        out += rx.process(x[i : i + block])
+    return out + rx.flush()
+
+
+def test_block_bank_equals_unit_correlators_at_block_ends() -> None:
+    rng = np.random.default_rng(3)
+    nu = rng.uniform(-3000.0, 3000.0, (5, 4))
+    q = np.array([10, 11, 10, 11, 9])
+    x = rng.normal(size=5000) + 1j * rng.normal(size=5000)
+    v, b0 = BlockCorrelatorBank(8333.3, nu, q, block=8).process(x)
+    full = UnitCorrelatorBank(8333.3, nu, q * 8).process(x)  # window Q_d·B
+    assert b0 == 0 and v.shape == (625, 5, 4)
+    ref = full[7::8]
+    assert np.max(np.abs(v - ref)) < 1e-3 * np.max(np.abs(ref))
+
+
+@settings(max_examples=10, deadline=None)
+@given(st.lists(st.integers(1, 9000), min_size=1, max_size=6))
+def test_block_bank_chunks_equal_whole(cuts: list[int]) -> None:
+    rng = np.random.default_rng(4)
+    nu = rng.uniform(-3000.0, 3000.0, (3, 2))
+    x = rng.normal(size=9000) + 1j * rng.normal(size=9000)
+    whole, _ = BlockCorrelatorBank(8000.0, nu, [10, 11, 12], block=4).process(x)
+    bank = BlockCorrelatorBank(8000.0, nu, [10, 11, 12], block=4)
+    edges = sorted({0, x.shape[0], *cuts})
+    parts = [bank.process(x[a:b])[0] for a, b in itertools.pairwise(edges)]
+    assert np.array_equal(np.concatenate(parts, axis=0), whole)
+
+
+def test_exact_stage_two_correlators_equal_the_full_bank(rc_schedule: HopSchedule) -> None:
+    x = echo_samples(rc_schedule, 50.0, 10.0, 0.7, snr_db=0.0, seed=13)
+    full = _receiver(rc_schedule, "full", coherent=True)
+    two = _receiver(rc_schedule, "two-stage")
+    full.process(x)
+    two.process(x)
+    stop = full._u_ring.next_index
+    first = np.array([stop - 900, stop - 500, stop - 40])
+    dd = np.array([3, 31, 60])
+    got = two._exact_windows(first, dd, 30)  # (3, 30, K)
+    ref = np.stack(
+        [
+            full._u_ring.array[full._u_ring.position(f + np.arange(30)), d]
+            for f, d in zip(first, dd, strict=True)
+        ]
+    )
+    assert np.max(np.abs(got - ref)) < 2e-4 * np.max(np.abs(ref))
+
+
+@pytest.mark.parametrize("speed", [12.0, -8.0, 25.0])
+def test_two_stage_estimates_match_the_full_search(rc_schedule: HopSchedule, speed: float) -> None:
+    r0 = 60.0
+    x = echo_samples(rc_schedule, r0, speed, 0.8, snr_db=0.0, seed=1)
+    full = _run(_receiver(rc_schedule, "full"), x)
+    two = _run(_receiver(rc_schedule, "two-stage"), x)
+    assert len(two) >= 50 and abs(len(two) - len(full)) <= 1
+    dr = np.array([e.range_m - true_range(r0, speed, e.t_tx_s, e.t_s) for e in two])
+    dv = np.array([e.speed_mps - speed for e in two])
+    assert np.sqrt(np.mean(dr**2)) < 0.03 and np.sqrt(np.mean(dv**2)) < 0.15
+    assert np.all(np.diff([e.hop_index for e in two]) == 1)
+    # Same hops, same times to well within a sample (stage 2 evaluates the same sums).
+    by_hop = {e.hop_index: e for e in full}
+    common = [e for e in two if e.hop_index in by_hop]
+    assert len(common) >= len(two) - 1
+    assert max(abs(e.t_s - by_hop[e.hop_index].t_s) for e in common) < 0.2 / (FS / 12)
+
+
+def test_two_stage_coherent_refines_like_the_full_search(rc_schedule: HopSchedule) -> None:
+    r0, v = 45.0, 15.0
+    x = echo_samples(rc_schedule, r0, v, 0.7, snr_db=0.0, seed=12)
+    full = _run(_receiver(rc_schedule, "full", coherent=True), x)
+    two = _run(_receiver(rc_schedule, "two-stage", coherent=True), x)
+    assert len(two) >= 55
+    dr = np.array([e.range_m - true_range(r0, v, e.t_tx_s, e.t_s) for e in two])
+    dr_full = np.array([e.range_m - true_range(r0, v, e.t_tx_s, e.t_s) for e in full])
+    assert np.sqrt(np.mean(dr**2)) < 1.2 * np.sqrt(np.mean(dr_full**2)) + 1e-4
+    assert np.sqrt(np.mean(np.array([e.speed_mps - v for e in two]) ** 2)) < 0.05
+
+
+@settings(max_examples=5, deadline=None)
+@given(st.lists(st.integers(1, 40_000), min_size=1, max_size=5))
+def test_two_stage_chunks_equal_whole(cuts: list[int]) -> None:
+    schedule = att_schedule()
+    x = echo_samples(schedule, 30.0, -10.0, 0.4, snr_db=-10.0, seed=2)
+    whole = _run(_receiver(schedule, "two-stage"), x, block=x.shape[0])
+    rx = _receiver(schedule, "two-stage")
+    edges = sorted({0, x.shape[0], *(c % x.shape[0] for c in cuts)})
+    parts: list[Estimate] = []
+    for a, b in itertools.pairwise(edges):
+        parts += rx.process(x[a:b])
+    parts += rx.flush()
+    assert parts == whole and len(whole) > 10
+
+
+def test_two_stage_gap_restarts_cleanly(rc_schedule: HopSchedule) -> None:
+    r0, v = 50.0, 10.0
+    x = echo_samples(rc_schedule, r0, v, 1.0, snr_db=0.0, seed=5)
+    rx = _receiver(rc_schedule, "two-stage")
+    first = rx.process(x[:40_000])
+    second = rx.process(x[60_000:], gap_before=20_000) + rx.flush()
+    assert all(e.t_s < 0.4 for e in first)
+    assert second and all(e.t_s > 0.6 for e in second)
+    dr = np.array([e.range_m - true_range(r0, v, e.t_tx_s, e.t_s) for e in second])
+    assert np.max(np.abs(dr)) < 0.1
+    assert np.all(np.diff([e.hop_index for e in second]) == 1)
+
+
+def test_unknown_search_is_refused(rc_schedule: HopSchedule) -> None:
+    with pytest.raises(ConfigError, match=r"search = 'exhaustive' .*one of full, two-stage"):
+        _receiver(rc_schedule, "exhaustive")
+
+
+@pytest.mark.parametrize("step", [0, 30])
+def test_coarse_step_out_of_range_is_refused(rc_schedule: HopSchedule, step: int) -> None:
+    with pytest.raises(ConfigError, match=rf"coarse_step = {step} .*an integer in 1\.\.20"):
+        _receiver(rc_schedule, "two-stage", coarse_step=step)
+
+
+def test_block_bank_rejects_a_bad_block() -> None:
+    with pytest.raises(ConfigError, match=r"block = 0 .*integer >= 1"):
+        BlockCorrelatorBank(8000.0, [[100.0]], [3], block=0)
