@@ -437,7 +437,8 @@ def run_experiment(
         outcome_error = f"{type(exc).__name__}: {exc}"
     finally:
         view.close()
-        _safe_stop(board, stage, writer)
+        failing = interrupted or bool(outcome_error) or sys.exc_info()[0] is not None
+        _safe_stop(board, stage, writer, hold=failing)
     # Telemetry onto sample time after the run, by minimum-delay filtering of the SYNC pairs:
     # a SYNC is stamped when the host reads it, which during streaming is after the ADC
     # frames queued before it, so every pair is late by a varying backlog. With the known
@@ -491,15 +492,20 @@ def run_experiment(
     )
 
 
-def _safe_stop(board: Any, stage: Any, writer: Any) -> None:
-    """Transmission off, stage held, data flushed: each step even if another fails."""
+def _safe_stop(board: Any, stage: Any, writer: Any, *, hold: bool) -> None:
+    """Transmission off, stage held, data flushed: each step even if another fails.
+
+    ``hold`` (an interrupted or failed run) sends the feed hold unconditionally: the
+    interruption may have landed inside a status query, so a fresh query cannot be trusted
+    to tell whether the queued move is still running.
+    """
     if board is not None:
         with contextlib.suppress(Exception):
             board.stop()
     if stage is not None:
         with contextlib.suppress(Exception):
-            st = stage.status()
-            if st.state.name in ("RUN", "JOG"):
+            # Short-circuit: with hold, no status query at all.
+            if hold or stage.status().state.name in ("RUN", "JOG"):
                 stage.stop()
     if writer is not None:
         with contextlib.suppress(Exception):
