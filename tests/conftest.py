@@ -8,6 +8,7 @@ installs JACK, PortAudio and libusb) turns skips for missing system components i
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 
 import pytest
 
@@ -32,3 +33,13 @@ def require_system_component(available: bool, reason: str) -> None:
     if os.environ.get("HIL_REQUIRE_SYSTEM_DEPS") == "1":
         pytest.fail(f"{reason} (HIL_REQUIRE_SYSTEM_DEPS=1: .ci/run should have installed it)")
     pytest.skip(reason)
+
+
+RequireSystem = Callable[[bool, str], None]
+
+
+@pytest.fixture(scope="session")
+def require_system() -> RequireSystem:
+    """:func:`require_system_component` for tests and fixtures anywhere in the suite (the
+    root conftest is not importable as a module under ``--import-mode=importlib``)."""
+    return require_system_component

@@ -50,6 +50,14 @@ _OVERRIDES: dict[str, str] = {
     "max_range": "max_range_m",
 }
 
+# Internal field names -> the options that set them (hil.cli.main names them in errors).
+OPTION_NAMES = {
+    **{field: "--" + opt.replace("_", "-") for opt, field in _OVERRIDES.items()},
+    "family": "--family",
+    "preset": "--preset",
+    "n_tones": "--tones",
+}
+
 
 def register(sub: Any) -> None:
     """Add the ``waveform`` sub-command."""
@@ -152,26 +160,13 @@ def _write_float_wav_streaming(
             done += count
 
 
-def _with_option_name(exc: ConfigError) -> ConfigError:
-    """Name the command-line option in a design error (``fs_hz`` -> ``--fs``)."""
-    options = {field: "--" + opt.replace("_", "-") for opt, field in _OVERRIDES.items()}
-    options.update(family="--family", preset="--preset", n_tones="--tones")
-    option = options.get(exc.field)
-    if option is None:
-        return exc
-    return ConfigError(f"{option} ({exc.field})", exc.value, exc.allowed, exc.hint)
-
-
 def run(args: argparse.Namespace) -> int:
     """Execute ``hil waveform``; return the exit status."""
     _validate_io(args)
     overrides = {field: getattr(args, opt) for opt, field in _OVERRIDES.items()}
-    try:
-        preset = get_preset(args.preset)
-        spec = preset.spec(args.family, **overrides)
-        schedule = check_design(spec)
-    except ConfigError as exc:
-        raise _with_option_name(exc) from None
+    preset = get_preset(args.preset)
+    spec = preset.spec(args.family, **overrides)
+    schedule = check_design(spec)
     fs = spec.fs_hz
     n = int(round(args.duration * fs))
     summary = design_summary(schedule, spec.sound_speed_mps)

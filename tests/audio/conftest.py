@@ -15,7 +15,7 @@ import subprocess
 import tempfile
 import time
 import uuid
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,19 +25,6 @@ JACK_SAMPLERATE = 192000
 JACK_PERIOD = 256
 JACK_TOOLS = ("jackd", "jack_lsp", "jack_connect")
 STARTUP_TIMEOUT_S = 15.0
-
-
-def require_system_component(available: bool, reason: str) -> None:
-    """Skip when a system component is missing, or fail under ``HIL_REQUIRE_SYSTEM_DEPS=1``.
-
-    The logic of ``tests/conftest.py``, repeated here because ``--import-mode=importlib``
-    does not make the root conftest importable as a module.
-    """
-    if available:
-        return
-    if os.environ.get("HIL_REQUIRE_SYSTEM_DEPS") == "1":
-        pytest.fail(f"{reason} (HIL_REQUIRE_SYSTEM_DEPS=1: .ci/run should have installed it)")
-    pytest.skip(reason)
 
 
 @dataclass(frozen=True)
@@ -57,16 +44,16 @@ def _jack_answers(env: dict[str, str]) -> bool:
 
 
 @pytest.fixture(scope="session")
-def jack_server() -> Iterator[JackServer]:
+def jack_server(require_system: Callable[[bool, str], None]) -> Iterator[JackServer]:
     """A private ``jackd -d dummy`` server for the whole session (killed at the end)."""
     missing = [tool for tool in JACK_TOOLS if shutil.which(tool) is None]
-    require_system_component(
+    require_system(
         not missing, f"JACK is not installed ({', '.join(missing)} missing; apt-get install jackd2)"
     )
     from hil.devices.audio import portaudio_available
 
     ok, why = portaudio_available()
-    require_system_component(ok, f"PortAudio is not available: {why}")
+    require_system(ok, f"PortAudio is not available: {why}")
 
     name = f"hil-test-{os.getpid()}-{uuid.uuid4().hex[:6]}"
     saved = {k: os.environ.get(k) for k in _JACK_ENV}
@@ -105,7 +92,7 @@ def jack_server() -> Iterator[JackServer]:
 
         rescan_devices()  # PortAudio enumerated devices at import, maybe before jackd ran
         has_jack = any(d.hostapi.startswith("JACK") for d in list_devices())
-        require_system_component(has_jack, "this PortAudio build has no JACK host API")
+        require_system(has_jack, "this PortAudio build has no JACK host API")
         yield JackServer(name=name, samplerate=JACK_SAMPLERATE, period=JACK_PERIOD)
     finally:
         import sounddevice

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -296,10 +297,9 @@ def test_backend_with_the_wrong_channel_count_is_refused() -> None:
         AudioDaq(backend)
 
 
-def test_unknown_device_is_refused_on_open() -> None:
+def test_unknown_device_is_refused_on_open(require_system: Callable[[bool, str], None]) -> None:
     ok, why = portaudio_available()
-    if not ok:
-        pytest.skip(f"PortAudio is not available: {why}")
+    require_system(ok, f"PortAudio is not available: {why}")
     daq = AudioDaq.from_url("audio://NoSuchInterface-7f3?rate=48000", sample_rate_hz=48000)
     with pytest.raises(ConfigError, match="device = 'NoSuchInterface-7f3' is not allowed"):
         daq.open()

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-import os
 import socket
 import threading
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -23,15 +23,6 @@ from hil.transports import (
 from hil.transports.spy import hexdump_lines
 from sim_devices.board.usb_backend import SimulatedUsbBackend
 from sim_devices.stage.clock import ManualClock
-
-
-def require_system_component(available: bool, reason: str) -> None:
-    """Skip, or fail under HIL_REQUIRE_SYSTEM_DEPS=1 (as tests/conftest.py describes)."""
-    if available:
-        return
-    if os.environ.get("HIL_REQUIRE_SYSTEM_DEPS") == "1":
-        pytest.fail(f"{reason} (HIL_REQUIRE_SYSTEM_DEPS=1: .ci/run should have installed it)")
-    pytest.skip(reason)
 
 
 def handshake(transport: object) -> list[object]:
@@ -192,12 +183,12 @@ def test_usb_unplug_is_a_closed_link_and_the_device_vanishes() -> None:
         open_transport("usb://1209:ca50", usb_backend=backend)
 
 
-def test_real_libusb_backend_enumerates() -> None:
+def test_real_libusb_backend_enumerates(require_system: Callable[[bool, str], None]) -> None:
     import usb.backend.libusb1
     import usb.core
 
     backend = usb.backend.libusb1.get_backend()
-    require_system_component(
+    require_system(
         backend is not None, "libusb-1.0 is not installed (apt-get install libusb-1.0-0)"
     )
     devices = list(usb.core.find(find_all=True, backend=backend))

@@ -24,7 +24,7 @@ from hil.devices.audio.contract import (
     StatusFlags,
     check_callback,
 )
-from hil.devices.audio.settings import AudioSettings
+from hil.devices.audio.settings import AudioSettings, SettingsView
 from hil.errors import ConfigError
 
 PORTAUDIO_HINT = (
@@ -182,7 +182,7 @@ def _flags_of(status: Any) -> int:
     )
 
 
-class SoundDeviceDuplex:
+class SoundDeviceDuplex(SettingsView):
     """Full-duplex stream on a real audio interface, float32, fixed block size.
 
     Follows :class:`~hil.devices.audio.contract.DuplexBackend`: ``open(callback)`` resolves
@@ -206,26 +206,6 @@ class SoundDeviceDuplex:
         self._done = threading.Event()
         self._started = False
         self.device: DeviceInfo | None = None
-
-    @property
-    def samplerate(self) -> float:
-        """Sample rate (Hz)."""
-        return float(self.settings.samplerate)
-
-    @property
-    def channels_in(self) -> int:
-        """Number of input (ADC) channels."""
-        return self.settings.channels_in
-
-    @property
-    def channels_out(self) -> int:
-        """Number of output (DAC) channels."""
-        return self.settings.channels_out
-
-    @property
-    def blocksize(self) -> int:
-        """Frames per callback."""
-        return self.settings.blocksize
 
     @property
     def active(self) -> bool:

@@ -123,3 +123,30 @@ loopback latency would change from run to run)
 
 def _is_int(value: object) -> bool:
     return isinstance(value, int) and not isinstance(value, bool)
+
+
+class SettingsView:
+    """Mixin for backends that keep an :class:`AudioSettings` as ``self.settings``: the
+    stream properties every :class:`~hil.devices.audio.contract.DuplexBackend` exposes."""
+
+    settings: AudioSettings
+
+    @property
+    def samplerate(self) -> float:
+        """Sample rate (Hz)."""
+        return float(self.settings.samplerate)
+
+    @property
+    def channels_in(self) -> int:
+        """Number of input (ADC) channels."""
+        return self.settings.channels_in
+
+    @property
+    def channels_out(self) -> int:
+        """Number of output (DAC) channels."""
+        return self.settings.channels_out
+
+    @property
+    def blocksize(self) -> int:
+        """Frames per callback."""
+        return self.settings.blocksize

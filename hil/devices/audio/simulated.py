@@ -39,7 +39,7 @@ from hil.devices.audio.contract import (
     check_callback,
 )
 from hil.devices.audio.ring import ring_read, ring_write
-from hil.devices.audio.settings import AudioSettings
+from hil.devices.audio.settings import AudioSettings, SettingsView
 from hil.errors import ConfigError
 
 
@@ -167,7 +167,7 @@ class DigitalLoopbackWorld:
         input_block[:, n:] = 0.0
 
 
-class SimulatedDuplex:
+class SimulatedDuplex(SettingsView):
     """Simulated full-duplex interface: the contract of the real one, with a pluggable world.
 
     Parameters
@@ -238,27 +238,6 @@ class SimulatedDuplex:
         self._runner: CallbackRunner | None = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
-
-    # --- properties of the DuplexBackend protocol ---
-    @property
-    def samplerate(self) -> float:
-        """Sample rate (Hz)."""
-        return float(self.settings.samplerate)
-
-    @property
-    def channels_in(self) -> int:
-        """Number of input (ADC) channels."""
-        return self.settings.channels_in
-
-    @property
-    def channels_out(self) -> int:
-        """Number of output (DAC) channels."""
-        return self.settings.channels_out
-
-    @property
-    def blocksize(self) -> int:
-        """Frames per callback."""
-        return self.settings.blocksize
 
     @property
     def active(self) -> bool:
