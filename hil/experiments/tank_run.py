@@ -331,7 +331,16 @@ def run_experiment(
                 else:
                     writer.append_telemetry(record)
                 idle = st.state.name == "IDLE"
-                if idle and not moving and pass_no < plan.repeats and tail_until is None:
+                # A pass starts only once capture flows into the receiver and the recording
+                # (the loopback latency is measured): no part of it goes unrecorded.
+                capturing = feed is not None
+                if (
+                    capturing
+                    and idle
+                    and not moving
+                    and pass_no < plan.repeats
+                    and tail_until is None
+                ):
                     first, last = (
                         (plan.start_m, plan.end_m)
                         if pass_no % 2 == 0
@@ -445,7 +454,12 @@ def run_experiment(
     # sample rate, the least-delayed pair gives the host-time offset of sample 0.
     pairs = list(getattr(board.clock_fit, "_pairs", ())) if board is not None else []
     if pairs:
-        offset = min(host_t - index / fs for index, host_t in pairs)
+        offsets = np.array([host_t - index / fs for index, host_t in pairs])
+        # A SYNC sent before CONFIGURE (other rate) may arrive after it: such a pair is far
+        # below the others. Backlog delays are positive and well under a second, so the
+        # least-delayed pair is sought within a second below the median.
+        plausible = offsets[offsets >= np.median(offsets) - 1.0]
+        offset = float(plausible.min())
         telemetry.sample_index = [int(round((t - offset) * fs)) for t in telemetry.host_time_s]
     dropped = int(board.ring.missing) if board is not None and board.ring is not None else 0
     events: list[tuple[str, int, int, str]] = []
