@@ -86,7 +86,7 @@ def blocks(base: np.ndarray, seconds: float) -> Iterator[np.ndarray]:
         pos += count
 
 
-SEARCH = {"search": "full"}  # set from --search in main()
+SEARCH = {"search": "two-stage"}  # set from --search in main()
 
 
 def gcas(sch: HopSchedule, m_hops: int) -> GcasReceiver:
@@ -159,7 +159,7 @@ def main() -> None:
     parser.add_argument("--stream-minutes", type=float, default=10.0, help="memory stream")
     parser.add_argument("--quick", action="store_true", help="few-second smoke run")
     parser.add_argument(
-        "--search", choices=("full", "two-stage"), default="full", help="GCAS search"
+        "--search", choices=("full", "two-stage"), default="two-stage", help="GCAS search"
     )
     args = parser.parse_args()
     SEARCH["search"] = args.search

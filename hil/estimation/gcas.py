@@ -61,6 +61,18 @@ same estimates as one call on the whole signal):
    ``R = c (t_rx − t_tx)/2``, ``v = c (α̂ − 1)/(α̂ + 1)``; hop-index consistency is a soft
    flag (:attr:`GcasReceiver.last_detection`, :attr:`GcasReceiver.inconsistent_count`).
 
+Searches. Steps 2–6 above are the ``search="full"`` form: every unit correlator at every
+baseband sample (the reference). The default ``search="two-stage"`` computes the same
+detections at a fraction of the cost [R]: stage 1
+(:class:`~hil.estimation.coarse_search.CoarseSearch`) runs steps 2–3 on blocks of ``B``
+baseband samples (windows of ``Q_d = round(L_d/B)`` blocks), giving the Doppler choice, the
+candidate blocks (local maxima of the coarse statistic) and the noise floor; stage 2 evaluates
+the exact sums ``A`` of step 4 (:func:`~hil.estimation.kernels.codeword_sums`, straight from
+the baseband history) within ``±(W + 1)`` samples of each candidate at ``d̂``, and at
+``d̂ ± 1`` only at the chosen peak sample for the Doppler interpolation. Thresholds and readout
+are shared. The hot loops of both stages and of the front end are compiled
+(:mod:`hil.estimation.kernels`).
+
 Latency: a boundary is reported once ``N_min/2`` baseband samples past it have arrived (plus
 the filter delay), within one hop.
 """
@@ -78,6 +90,7 @@ from numpy.typing import ArrayLike, NDArray
 from hil.errors import ConfigError
 from hil.estimation.base import Estimate
 from hil.estimation.baseband import ComplexBaseband
+from hil.estimation.coarse_search import CoarseSearch
 from hil.estimation.detection import (
     lambda_for_pfa,
     local_peaks,
@@ -86,12 +99,9 @@ from hil.estimation.detection import (
     parabolic_offsets,
 )
 from hil.estimation.doppler_grid import DopplerGrid, alpha_to_speed, doppler_grid, speed_to_alpha
+from hil.estimation.kernels import codeword_sums, exact_windows
 from hil.estimation.row_buffer import RowBuffer
-from hil.estimation.unit_correlators import (
-    BLOCK_ANCHOR,
-    BlockCorrelatorBank,
-    UnitCorrelatorBank,
-)
+from hil.estimation.unit_correlators import UnitCorrelatorBank
 from hil.signals.random_cyclic import minimum_distance
 from hil.signals.schedule import HopSchedule
 
@@ -173,6 +183,22 @@ def _check_schedule(schedule: HopSchedule, fs_hz: float, c: float, v_max: float)
         )
 
 
+@dataclass(frozen=True)
+class _ReadoutConstants:
+    """Per-receiver constants of :meth:`GcasReceiver._decide` as Python numbers (the readout
+    runs once per detection; NumPy scalars there cost more than the arithmetic)."""
+
+    speeds: list[float]
+    speed_step: float
+    lengths: list[int]
+    hop_samples: float
+    decimation: int
+    group_delay: float
+    fs_in: float
+    period: float
+    hop_end: list[float]
+
+
 class GcasReceiver:
     """Streaming GCAS receiver; see the module docstring for the algorithm.
 
@@ -210,9 +236,9 @@ class GcasReceiver:
     attenuation_db:
         Stop-band attenuation of the baseband low-pass, dB.
     search:
-        ``"full"`` (every unit correlator at every baseband sample) or ``"two-stage"``
-        (coarse correlators every ``coarse_step`` samples choose the hypothesis and the
-        candidate times; exact correlators only at ``d̂ ± 2`` around each candidate).
+        ``"two-stage"`` (default: coarse correlators every ``coarse_step`` samples choose the
+        hypothesis and the candidate times; exact sums only around each candidate) or
+        ``"full"`` (every unit correlator at every baseband sample; the reference).
     coarse_step:
         Coarse step B of the two-stage search, baseband samples.
     on_map:
@@ -244,7 +270,7 @@ class GcasReceiver:
         decimation: int | None = None,
         attenuation_db: float = 70.0,
         on_map: MapCallback | None = None,
-        search: str = "full",
+        search: str = "two-stage",
         coarse_step: int = COARSE_STEP,
     ) -> None:
         if not (math.isfinite(fs_hz) and fs_hz > 0):
@@ -376,6 +402,18 @@ class GcasReceiver:
         self._noise_ring = RowBuffer(det_keep, (), np.float64)
         if search == "two-stage":
             self._init_two_stage(coarse_step, det_keep)
+        sch = schedule
+        self._readout_constants = _ReadoutConstants(
+            speeds=self.grid.speeds_mps.tolist(),
+            speed_step=self.grid.speed_step_mps,
+            lengths=self.grid.lengths.tolist(),
+            hop_samples=self.hop_s * self.fs_bb,
+            decimation=self.baseband.decimation,
+            group_delay=self.baseband.group_delay,
+            fs_in=self.baseband.fs_hz,
+            period=sch.period_s,
+            hop_end=(sch.t0_s + sch.start_s + sch.duration_s).astype(np.float64).tolist(),
+        )
         self.reset()
 
     # ------------------------------------------------------------------ construction
@@ -482,15 +520,11 @@ class GcasReceiver:
         self._valid_from = b0 + self._settle
         self._det_next = b0
         if self.search == "two-stage":
-            self.blocks.reset(b0)
-            c0 = self.blocks.next_block
-            for ring in (
-                self._cg_ring, self._cacc_ring, self._cs_ring, self._cd_ring, self._cn_ring,
-                self._cum_ring,
-            ):  # fmt: skip
+            self.coarse.reset(b0)
+            c0 = self.coarse.next_block
+            for ring in (self._cs_ring, self._cd_ring, self._cn_ring):
                 ring.reset(c0)
             self._y_ring.reset(b0)
-            self._cache_n.fill(-1)
             self._c_origin = c0
             self._c_valid_from = -(-self._valid_from // self._B) + 1
             self._det_next = c0
@@ -584,12 +618,9 @@ class GcasReceiver:
                 "the coarse response of a hop boundary is a tent about two hops wide",
             )
         b = self._B = int(coarse_step)
-        m, d = self.m_hops, self.grid.size
+        m = self.m_hops
         exact = self.grid.exact_lengths
         self._q = np.maximum(1, np.round(exact / b)).astype(np.int64)  # (D,) blocks per hop
-        self.blocks = BlockCorrelatorBank(
-            self.fs_bb, self.grid.frequencies(self.tones_hz, self.center_hz), self._q, block=b
-        )
         # Coarse block → fine sample of a candidate: the coarse window (Q_d·B samples) peaks
         # (Q_d·B − N_d)/2 later than the exact one, and the comb's hop spacing Q_d·B differs
         # from L_d by e_d per hop, which moves its peak by (M − 1)·e_d/2.
@@ -597,15 +628,21 @@ class GcasReceiver:
         self._c_shift = np.round(
             b - 1 - 0.5 * (self._q * b - self.grid.lengths) - 0.5 * (m - 1) * e
         ).astype(np.int64)
-        self._noise_scale = (self.grid.lengths / (self._q * b)).astype(np.float32)
         self._hc = max(1, self.half_width // b)
         self.fine_half = self.search_half + 1
         reach = int(np.max(self._c_shift)) + self.fine_half  # samples past the block start
         self._c_lookahead = self._hc + max(0, -(-reach // b))
-        self._noise_blocks = max(1, NOISE_STRIDE // b)
-        q_max = int(self._q.max())
-        self._cg_ring = RowBuffer(m * q_max + 1, (d,), np.float64)
-        self._cacc_ring = RowBuffer(q_max + 1, (d,), np.float64)
+        self.coarse = CoarseSearch(
+            self.fs_bb,
+            self.grid.frequencies(self.tones_hz, self.center_hz),
+            self._q,
+            block=b,
+            m_hops=m,
+            cell_weights=self._tone_w,
+            hyp_weights=self.grid.weights,
+            noise_every=max(1, NOISE_STRIDE // b),
+            noise_scale=self.grid.lengths / (self._q * b),
+        )
         c_keep = det_keep // b + 4
         self._cs_ring = RowBuffer(c_keep, (), np.float64)
         self._cd_ring = RowBuffer(c_keep, (), np.int64)
@@ -614,51 +651,34 @@ class GcasReceiver:
             int(self.lags.max()) + self._n_max + 2 * self.fine_half + (self._c_lookahead + 2) * b
             + abs(int(np.min(self._c_shift))) + RECENTRE_STEPS * self.fine_half + 8
         )  # fmt: skip
-        self._y_ring = RowBuffer(y_keep, (), np.complex64)
-        self._cum_ring = RowBuffer(y_keep // b + 4, (d, self.n_tones), np.complex64)
-        # Cache of exact unit correlators by absolute sample (slot n mod cap, stamped with n):
-        # consecutive candidates share M − 1 of their M lagged windows, so each hop computes
-        # about one new window per hypothesis (cost flat in M).
-        self._cache_cap = 1 << int(math.ceil(math.log2(2 * y_keep)))
-        # Candidates are processed in groups spanning at most this many samples, so that the
-        # samples one group reads never share a cache slot.
-        self._group_span = self._cache_cap - y_keep
-        self._cache_u = np.zeros((self._cache_cap, d, self.n_tones), dtype=np.complex64)
-        self._cache_n = np.full((self._cache_cap, d), -1, dtype=np.int64)
-        r = np.arange(b, dtype=np.float64)
-        nu_fs = self.grid.frequencies(self.tones_hz, self.center_hz) / self.fs_bb
-        # (D, K, B): heterodyne phasor of offset r within a block.
-        self._within = np.exp(-2j * np.pi * np.mod(r * nu_fs[:, :, None], 1.0)).astype(np.complex64)
-        width = 2 * self.fine_half + 1
-        i = np.arange(self._n_max + width, dtype=np.float64)
+        self._y_ring = RowBuffer(y_keep, (), np.complex128)
         self._nu_fs = self.grid.frequencies(self.tones_hz, self.center_hz) / self.fs_bb  # (D, K)
-        self._fine_step = np.exp(
-            -2j * np.pi * np.mod(i[None, None, :] * self._nu_fs[:, :, None], 1.0)
-        ).astype(np.complex64)
+        self._table: NDArray[np.float64] | None = None
+        self._phasor_table(2 * self.fine_half + 1)
+        code, m_idx = self.code, np.arange(m)
+        self._term_tone = code[(np.arange(self.n_codewords)[None, :] - m_idx[:, None]) % code.size]
+        tone_w = (
+            self._tone_w if self._tone_w is not None else np.ones((self.grid.size, self.n_tones))
+        )
+        self._cell_w = np.ascontiguousarray(tone_w, dtype=np.float64)
+
+    def _phasor_table(self, width: int) -> NDArray[np.float64]:
+        """``e^{−j2πν[d, k] i/fs}`` for offsets ``i < N_max + width − 1``, shape
+        ``(D, ·, K, 2)`` (re, im), grown on demand."""
+        need = self._n_max + width - 1
+        if self._table is None or self._table.shape[1] < need:
+            i = np.arange(need, dtype=np.float64)
+            ph = np.exp(-2j * np.pi * np.mod(i[None, :, None] * self._nu_fs[:, None, :], 1.0))
+            self._table = np.ascontiguousarray(np.stack((ph.real, ph.imag), axis=-1))
+        return self._table
 
     def _two_stage(self, y: NDArray[np.complex128]) -> list[Estimate]:
         """Stage 1 on the new baseband samples ``y``; stage 2 at the decided candidates."""
-        self._y_ring.append(y.astype(np.complex64), self._y_ring.next_index)
-        v, c0 = self.blocks.process(y)  # (nb, D, K)
-        nb = v.shape[0]
-        if nb:
-            self._cum_ring.append(self.blocks.last_cumulative, c0)
-            power = np.square(v.real) + np.square(v.imag)
-            masked = power if self._tone_w is None else power * self._tone_w[None]
-            grp = masked.sum(axis=2, dtype=np.float64)  # (nb, D)
-            self._cg_ring.append(grp, c0)
-            acc = _comb(grp, c0, self._cg_ring, self._cacc_ring, self._q, self.m_hops)
-            self._cacc_ring.append(acc, c0)
-            wacc = acc * self.grid.weights[None, :]
-            d_hat = np.argmax(wacc, axis=1)
-            self._cs_ring.append(np.take_along_axis(wacc, d_hat[:, None], axis=1)[:, 0], c0)
+        self._y_ring.append(y, self._y_ring.next_index)
+        stat, d_hat, noise, c0 = self.coarse.process(y)
+        if stat.shape[0]:
+            self._cs_ring.append(stat, c0)
             self._cd_ring.append(d_hat, c0)
-            bidx = c0 + np.arange(nb, dtype=np.int64)
-            noise = np.full(nb, np.nan)
-            on = np.flatnonzero(bidx % self._noise_blocks == 0)
-            if on.size:
-                flat = (power[on] * self._noise_scale[None, :, None]).reshape(on.size, -1)
-                noise[on] = np.median(flat, axis=1) / math.log(2.0)
             self._cn_ring.append(noise, c0)
         if self.on_map is not None:
             stop = self._y_ring.next_index
@@ -675,91 +695,21 @@ class GcasReceiver:
             )
         return self._detect_two_stage(self._cs_ring.next_index)
 
-    def _cumulative(
-        self, f: NDArray[np.int64], dd: NDArray[np.int64], width: int
-    ) -> tuple[NDArray[np.complex64], NDArray[np.int64]]:
-        """Cumulative heterodyned sums ``C[f_r + t, dd_r, k]`` for ``t < width`` (shape
-        ``(R, K, width)``) and the anchor period of each (shape ``(R, width)``).
-
-        ``C[n] = C_blk[b − 1] + Σ_{bB <= i <= n} y[i] e^{−j2πν i/fs}`` (``b = n // B``): the
-        stage-1 cumulative block sums plus a partial sum within block ``b`` that always starts
-        at the block's first sample, so every value is a function of ``n`` alone (chunking
-        and batching cannot change a bit)."""
-        bsz = self._B
-        r_count = f.shape[0]
-        b_lo = f // bsz
-        nblk = (bsz - 1 + width - 1) // bsz + 1
-        blocks = b_lo[:, None] + np.arange(nblk)  # (R, nblk)
-        samp = self._y_ring.position(blocks[:, :, None] * bsz + np.arange(bsz))
-        np.minimum(samp, self._y_ring.array.shape[0] - 1, out=samp)  # beyond n: unused
-        yv = self._y_ring.array[samp]  # (R, nblk, B)
-        z = yv[:, :, None, :] * self._within[dd][:, None, :, :]  # (R, nblk, K, B)
-        np.cumsum(z, axis=3, out=z)
-        cyc = np.mod((blocks * bsz)[:, :, None] * self._nu_fs[dd][:, None, :], 1.0)
-        z *= np.exp(-2j * np.pi * cyc).astype(np.complex64)[:, :, :, None]
-        prev = self._cum_ring.array[self._cum_ring.position(blocks - 1), dd[:, None]]
-        z += prev[:, :, :, None]
-        cf = z.transpose(0, 2, 1, 3).reshape(r_count, self.n_tones, nblk * bsz)
-        idx = (f - b_lo * bsz)[:, None] + np.arange(width)  # (R, width)
-        out = np.take_along_axis(cf, idx[:, None, :], axis=2)
-        epoch = ((f[:, None] + np.arange(width)) // bsz - 1) // BLOCK_ANCHOR
-        return out, epoch
-
     def _exact_windows(
         self, first: NDArray[np.int64], dd: NDArray[np.int64], width: int
-    ) -> NDArray[np.complex64]:
+    ) -> NDArray[np.complex128]:
         """Exact unit correlators ``u[first_r + t, dd_r, k]`` for ``t < width`` (shape
-        ``(R, width, K)``; ``first`` and ``dd`` of shape ``(R,)``): differences of
-        :meth:`_cumulative`, re-based across an anchor of the block sums."""
-        hi, e_hi = self._cumulative(first, dd, width)
-        lo, e_lo = self._cumulative(first - self.grid.lengths[dd], dd, width)
-        u = hi - lo
-        cross = e_hi != e_lo
-        if cross.any():
-            rr, tt = np.nonzero(cross)
-            ring = self._cum_ring
-            u[rr, :, tt] += ring.array[ring.position(e_hi[rr, tt] * BLOCK_ANCHOR - 1), dd[rr]]
-        out: NDArray[np.complex64] = u.transpose(0, 2, 1)
-        return out
-
-    def _cached_windows(
-        self, first: NDArray[np.int64], dd: NDArray[np.int64], width: int
-    ) -> NDArray[np.complex64]:
-        """:meth:`_exact_windows` through the per-sample cache (the same values: every value
-        is a function of its sample and hypothesis alone). A row with any sample missing is
-        computed with a margin of one coarse step each side for the next candidates."""
-        cap = self._cache_cap - 1
-        n = first[:, None] + np.arange(width)  # (R, width)
-        slot = n & cap
-        miss = np.flatnonzero(~(self._cache_n[slot, dd[:, None]] == n).all(axis=1))
-        if miss.size:
-            # Rows of one batch overlap (candidate c + 1's term m + 1 is c's term m): merge the
-            # missing rows per hypothesis into runs, computed in pieces of one fixed width.
-            e = self._B
-            seg = width + 2 * e
-            ff, dm = first[miss] - e, dd[miss]
-            order = np.lexsort((ff, dm))
-            ff, dm = ff[order], dm[order]
-            ll = ff + seg
-            new = np.ones(ff.shape[0], dtype=bool)
-            new[1:] = (dm[1:] != dm[:-1]) | (ff[1:] > ll[:-1])
-            heads = np.flatnonzero(new)
-            g_first, g_d = ff[heads], dm[heads]
-            g_len = np.maximum.reduceat(ll, heads) - g_first
-            nch = -(-g_len // seg)
-            total = int(nch.sum())
-            k = np.arange(total) - np.repeat(np.cumsum(nch) - nch, nch)
-            starts = np.repeat(g_first, nch) + k * seg
-            ds = np.repeat(g_d, nch)
-            vals = self._exact_windows(starts, ds, seg)
-            nn = starts[:, None] + np.arange(seg)
-            # Samples not yet received (the margin) are computed from stale history: not kept.
-            ok = nn < self._y_ring.next_index
-            rr, tt = np.nonzero(ok)
-            self._cache_u[nn[rr, tt] & cap, ds[rr]] = vals[rr, tt]
-            self._cache_n[nn[rr, tt] & cap, ds[rr]] = nn[rr, tt]
-        out: NDArray[np.complex64] = self._cache_u[slot, dd[:, None]]
-        return out
+        ``(R, width, K)``; ``first`` and ``dd`` of shape ``(R,)``) from the baseband history
+        (:func:`hil.estimation.kernels.exact_windows`: every row is a function of its own
+        ``first``, ``dd`` and ``width``, so batching and chunking cannot change a bit)."""
+        ring = self._y_ring
+        out = np.empty((first.shape[0], width, self.n_tones, 2))
+        exact_windows(
+            ring.array[: ring.available], ring.next_index - ring.available,
+            np.ascontiguousarray(first, dtype=np.int64), np.ascontiguousarray(dd, dtype=np.int64),
+            width, self.grid.lengths, self._nu_fs, self._phasor_table(width), out,
+        )  # fmt: skip
+        return out[..., 0] + 1j * out[..., 1]
 
     def _exact_terms(self, idx: NDArray[np.int64], dcol: NDArray[np.int64]) -> NDArray[Any]:
         """Unit-correlator values of the M terms, ``u[n − ℓ_{d,m}, d, k]`` (complex when
@@ -800,64 +750,48 @@ class GcasReceiver:
         self._det_next = stop
         if cand_b.size == 0:
             return []
-        group = (cand_b * self._B) // self._group_span
-        out: list[Estimate] = []
-        for g in np.unique(group).tolist():
-            out += self._fine_stage(cand_b[group == g])
-        return out
+        return self._fine_stage(cand_b)
 
     def _fine_stage(self, cand_b: NDArray[np.int64]) -> list[Estimate]:
         """Stage 2: exact codeword sums around the coarse candidate blocks ``cand_b``."""
         d0 = self._cd_ring.rows(cand_b)
         centre = cand_b * self._B + self._c_shift[d0]
         w = self.fine_half
-        dset, a = self._fine_sums(centre, d0)
+        a = self._fine_sums(centre, d0[:, None], w)[:, 0]  # (C, 2w + 1, J)
         # A peak on the window's edge lies outside it (early in the stream the coarse comb
         # is not yet full): move the window onto that edge, a few times at most (later only
         # once: the look-ahead covers one window more; earlier is in the history).
-        centre = centre.copy()
         for it in range(RECENTRE_STEPS):
-            ip = np.argmax(a[:, :, 1, :].max(axis=2), axis=1)
+            ip = np.argmax(a.max(axis=2), axis=1)
             edge = np.flatnonzero((ip == 0) | ((ip == 2 * w) & (it == 0)))
             if edge.size == 0:
                 break
             centre[edge] += ip[edge] - w
-            dset_e, a_e = self._fine_sums(centre[edge], d0[edge])
-            dset, a = dset.copy(), a.copy()
-            dset[edge], a[edge] = dset_e, a_e
+            a[edge] = self._fine_sums(centre[edge], d0[edge, None], w)[:, 0]
+        dset = np.clip(d0[:, None] + np.arange(-1, 2)[None, :], 0, self.grid.size - 1)
+
+        def sides(hit: NDArray[np.int64], n_pk: NDArray[np.int64]) -> NDArray[np.float64]:
+            return self._fine_sums(n_pk, dset[hit][:, [0, 2]], 0)[:, :, 0]
+
         tested = self._cs_ring.rows(cand_b) if self.cfar_mode == "statistic" else None
-        return self._threshold_readout(centre, w, dset, a, tested)
+        return self._threshold_readout(centre, w, dset, a, sides, tested)
 
     def _fine_sums(
-        self, centre: NDArray[np.int64], d0: NDArray[np.int64]
-    ) -> tuple[NDArray[np.int64], NDArray[np.float32]]:
-        """Exact ``A[n, d, j]`` for ``n`` within ``±fine_half`` of ``centre`` (shape ``(C,)``)
-        at the best of ``d0 ± FINE_DOPPLER_HALF`` and its neighbours: the hypotheses (shape
-        ``(C, 3)``) and the sums (shape ``(C, 2·fine_half + 1, 3, J)``)."""
-        w = self.fine_half
-        width = 2 * w + 1
-        nd = 2 * FINE_DOPPLER_HALF + 1
-        dset5 = np.clip(
-            d0[:, None] + np.arange(-FINE_DOPPLER_HALF, FINE_DOPPLER_HALF + 1)[None, :],
-            0,
-            self.grid.size - 1,
-        )  # (C, nd)
-        nc, m = centre.shape[0], self.m_hops
-        first_n = (centre[:, None, None] - w - self.lags[dset5]).reshape(-1)  # (C·nd·M,)
-        u = self._cached_windows(first_n, np.repeat(dset5.reshape(-1), m), width)
-        u = u.reshape(nc, nd, m, width, -1)
-        p = (np.square(u.real) + np.square(u.imag)).astype(np.float32)
-        if self._tone_w is not None:
-            p = p * self._tone_w[dset5][:, :, None, None, :]
-        v = p.transpose(0, 1, 3, 2, 4).reshape(nc, nd, width, -1)  # (C, nd, width, M·K)
-        a5 = np.take(v, self._term_cell, axis=3).sum(axis=3)  # (C, nd, width, J)
-        # Best hypothesis among the inner ones, with its two neighbours for the readout.
-        inner = a5[:, 1:-1] if nd > 1 else a5
-        best = np.argmax(inner.max(axis=(2, 3)), axis=1) + (1 if nd > 1 else 0)
-        pick = np.clip(best[:, None] + np.arange(-1, 2)[None, :], 0, nd - 1)
-        dset = np.take_along_axis(dset5, pick, axis=1)
-        a = np.take_along_axis(a5, pick[:, :, None, None], axis=1).transpose(0, 2, 1, 3)
-        return dset, a
+        self, centre: NDArray[np.int64], dset: NDArray[np.int64], half: int
+    ) -> NDArray[np.float64]:
+        """Exact noncoherent ``A[n, d, j]`` for ``n`` within ``±half`` of ``centre`` (shape
+        ``(C,)``) at the hypotheses ``dset`` (shape ``(C, nd)``): shape
+        ``(C, nd, 2·half + 1, J)`` (:func:`hil.estimation.kernels.codeword_sums`)."""
+        ring = self._y_ring
+        width = 2 * half + 1
+        out = np.empty((centre.shape[0], dset.shape[1], width, self.n_codewords))
+        codeword_sums(
+            ring.array[: ring.available], ring.next_index - ring.available,
+            np.ascontiguousarray(centre, dtype=np.int64),
+            np.ascontiguousarray(dset, dtype=np.int64), half, self.lags, self.grid.lengths,
+            self._phasor_table(width), self._term_tone, self._cell_w, out,
+        )  # fmt: skip
+        return out
 
     def _sums(
         self, idx: NDArray[np.int64], dcol: NDArray[np.int64], coherent: bool = False
@@ -931,28 +865,37 @@ class GcasReceiver:
         )
         d_idx = np.broadcast_to(dset[:, None, :], n_idx.shape)
         a = self._sums(n_idx.reshape(-1), d_idx.reshape(-1)).reshape(*n_idx.shape, -1)
+
+        def sides(hit: NDArray[np.int64], n_pk: NDArray[np.int64]) -> NDArray[np.float32]:
+            side: NDArray[np.float32] = a[hit, n_pk - cand[hit] + w][:, [0, 2], :]
+            return side
+
         tested = self._s_ring.rows(cand) if self.cfar_mode == "statistic" else None
-        return self._threshold_readout(cand, w, dset, a, tested)
+        return self._threshold_readout(cand, w, dset, a[:, :, 1, :], sides, tested)
 
     def _threshold_readout(
         self,
         cand: NDArray[np.int64],
         w: int,
         dset: NDArray[np.int64],
-        a: NDArray[np.float32],
+        a: NDArray[np.floating[Any]],
+        sides: Callable[[NDArray[np.int64], NDArray[np.int64]], NDArray[np.floating[Any]]],
         stat_tested: NDArray[np.float64] | None,
     ) -> list[Estimate]:
         """Threshold test and readout of candidates centred on samples ``cand`` (shape
-        ``(C,)``): ``a`` holds ``A[n, d, j]`` for ``n`` within ``±w`` and the hypotheses
-        ``dset`` (shape ``(C, 3)``, chosen one in the middle), shape ``(C, 2w + 1, 3, J)``;
-        ``stat_tested`` the group statistic at the candidates (``"statistic"`` CFAR)."""
+        ``(C,)``): ``a`` holds ``A[n, d, j]`` at the chosen hypothesis (middle of ``dset``,
+        shape ``(C, 3)``) for ``n`` within ``±w``, shape ``(C, 2w + 1, J)``;
+        ``sides(hit, n)`` gives ``A`` at the two neighbouring hypotheses at samples ``n`` of
+        candidates ``hit`` (shape ``(H, 2, J)``); ``stat_tested`` the group statistic at the
+        candidates (``"statistic"`` CFAR)."""
         # Threshold test for all candidates at once; only the survivors are read out.
-        s_win = a[:, :, 1, :].max(axis=2)  # (C, 2W + 1)
+        s_win = a.max(axis=2)  # (C, 2W + 1)
         i_pk = np.argmax(s_win, axis=1)
         n_pk = cand - w + i_pk
+        r_all = np.arange(cand.shape[0])
         if self.cfar_mode == "bank":
             mean, std = self._bank_moments(n_pk)
-            tested = s_win[np.arange(cand.shape[0]), i_pk].astype(np.float64)
+            tested = s_win[r_all, i_pk].astype(np.float64)
         else:
             ms = [self._statistic_moments(int(v)) for v in n_pk.tolist()]
             mean, std = np.array([v[0] for v in ms]), np.array([v[1] for v in ms])
@@ -964,16 +907,18 @@ class GcasReceiver:
             return []
         # Readout quantities of every survivor at once (per-candidate numpy calls would
         # dominate the cost): peak sample, codeword, runner-up ratio, time and Doppler offsets.
-        ah = a[hit].astype(np.float64)  # (H, 2W + 1, 3, J)
+        ip = i_pk[hit]
+        sw = s_win[hit].astype(np.float64)
         r = np.arange(hit.size)
-        sw = ah[:, :, 1, :].max(axis=2)
-        ip = np.argmax(sw, axis=1)
         peak = sw[r, ip]
-        rows = ah[r, ip, 1]  # (H, J)
+        rows = a[hit, ip].astype(np.float64)  # (H, J)
         jh = np.argmax(rows, axis=1)
         runner = np.partition(rows, -2, axis=1)[:, -2] if rows.shape[1] > 1 else np.zeros(r.size)
         ratio = np.full(r.size, np.inf)
         np.divide(peak, runner, out=ratio, where=runner > 0)
+        keep = np.flatnonzero(ratio >= self.runner_up_ratio)
+        if keep.size == 0:
+            return []
         inner = (ip > 0) & (ip < 2 * w)
         dn = np.where(
             inner,
@@ -981,15 +926,22 @@ class GcasReceiver:
             0.0,
         )
         dh = dset[hit]
-        d_in = (dh[:, 0] != dh[:, 1]) & (dh[:, 2] != dh[:, 1])
-        dd = np.where(d_in, parabolic_offsets(ah[r, ip, 0, jh], rows[r, jh], ah[r, ip, 2, jh]), 0.0)
-        n_star = cand[hit] - w + ip
+        side = sides(hit[keep], n_pk[hit[keep]]).astype(np.float64)  # (H', 2, J)
+        jk = jh[keep]
+        rk = np.arange(keep.size)
+        d_in = (dh[keep, 0] != dh[keep, 1]) & (dh[keep, 2] != dh[keep, 1])
+        dd = np.where(
+            d_in, parabolic_offsets(side[rk, 0, jk], rows[keep, jk], side[rk, 1, jk]), 0.0
+        )
+        n_star = (cand[hit] - w + ip)[keep].tolist()
+        values = zip(
+            n_star, peak[keep].tolist(), jk.tolist(), ratio[keep].tolist(), dn[keep].tolist(),
+            dh[keep, 1].tolist(), dd.tolist(), mean[hit[keep]].tolist(), thr[hit[keep]].tolist(),
+            strict=True,
+        )  # fmt: skip
         out: list[Estimate] = []
-        for i in np.flatnonzero(ratio >= self.runner_up_ratio).tolist():
-            est = self._decide(
-                int(n_star[i]), float(peak[i]), int(jh[i]), float(ratio[i]), float(dn[i]),
-                int(dh[i, 1]), float(dd[i]), float(mean[hit[i]]), float(thr[hit[i]]),
-            )  # fmt: skip
+        for args in values:
+            est = self._decide(*args)
             if est is not None:
                 out.append(est)
         return out
@@ -1006,14 +958,18 @@ class GcasReceiver:
             ring, origin = self._cn_ring, self._c_origin
             n_pk = np.minimum(n_pk // self._B, ring.next_index - 1)
             lo = np.minimum(np.maximum(lo // self._B, origin), n_pk)
-        first = int(lo.min())
-        vals = np.asarray(ring.span(first, int(n_pk.max()) + 1))
-        ok = np.isfinite(vals)
-        csum = np.concatenate(([0.0], np.cumsum(np.where(ok, vals, 0.0))))
-        cnt = np.concatenate(([0], np.cumsum(ok)))
-        a, b = lo - first, n_pk + 1 - first
-        n_ok = cnt[b] - cnt[a]
-        mu_u = np.where(n_ok > 0, (csum[b] - csum[a]) / np.maximum(n_ok, 1), np.inf)
+        # One fixed-length row per candidate, summed along the row: each window's sum is then
+        # independent of the other candidates decided with it (chunking cannot change a bit).
+        width = self._cfar_window + 1
+        if self.search == "two-stage":
+            width = self._cfar_window // self._B + 2
+        idx = lo[:, None] + np.arange(width)
+        inside = idx <= n_pk[:, None]
+        vals = ring.rows(np.where(inside, idx, n_pk[:, None]))
+        ok = inside & np.isfinite(vals)
+        n_ok = ok.sum(axis=1)
+        total = np.where(ok, vals, 0.0).sum(axis=1)
+        mu_u = np.where(n_ok > 0, total / np.maximum(n_ok, 1), np.inf)
         mean, std = self._moments
         return mean * mu_u, std * mu_u
 
@@ -1043,17 +999,16 @@ class GcasReceiver:
         ``dn``, statistic ``peak``, codeword ``j_hat`` (best over runner-up ``ratio``),
         hypothesis ``d0`` with offset ``dd`` (grid steps)."""
         c = self.sound_speed_mps
-        speed = float(self.grid.speeds_mps[d0]) + dd * self.grid.speed_step_mps
+        k = self._readout_constants
+        speed = k.speeds[d0] + dd * k.speed_step
         alpha = (c + speed) / (c - speed)  # speed_to_alpha, on Python floats
-        exact_len = self.hop_s * self.fs_bb / alpha
-        bb = self.baseband
-        t_rx = ((n_star + dn) * bb.decimation - bb.group_delay) / bb.fs_hz + (
-            exact_len - self.grid.lengths[d0] + 1
+        exact_len = k.hop_samples / alpha
+        t_rx = ((n_star + dn) * k.decimation - k.group_delay) / k.fs_in + (
+            exact_len - k.lengths[d0] + 1
         ) / (2.0 * self.fs_bb)
         # Transmit time: end of hop ĵ, folded by whole code periods into [0, τ_max].
-        sch = self.schedule
-        period = sch.period_s
-        end_j = sch.t0_s + float(sch.start_s[j_hat] + sch.duration_s[j_hat])
+        period = k.period
+        end_j = k.hop_end[j_hat]
         tol = 2.0 / self.fs_bb
         q = math.floor((t_rx - end_j + tol) / period)
         t_tx = end_j + q * period
@@ -1078,7 +1033,7 @@ class GcasReceiver:
         return Estimate(
             t_s=t_rx,
             range_m=c * delay / 2.0,
-            speed_mps=float(alpha_to_speed(alpha, c)),
+            speed_mps=c * (alpha - 1.0) / (alpha + 1.0),  # alpha_to_speed, on Python floats
             hop_index=int(hop_index),
             score=peak / thr if thr > 0 else math.inf,
             snr_db=10.0 * math.log10(snr) if snr > 0 else -math.inf,
