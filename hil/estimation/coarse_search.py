@@ -6,11 +6,17 @@ every Doppler hypothesis ``d`` and tone ``k``:
     P[b, d, k] = Σ_{r<B} y[bB + r] · exp(−j2π ν[d, k] (bB + r)/fs)        (block partial sum)
     v[b, d, k] = Σ_{i<Q_d} P[b − i, d, k]          (a window of Q_d·B samples ending at bB + B − 1)
     G_d[b]     = Σ_k w[d, k] |v[b, d, k]|²
-    Acc_d[b]   = Acc_d[b − Q_d] + G_d[b] − G_d[b − M Q_d]       (M hops, cost independent of M)
+    Acc_d[b]   = Σ_{m<M} G_d[b − round(m H_d)]          (M hops of H_d blocks each)
 
-and per block the statistic ``s[b] = max_d h_d Acc_d[b]``, its hypothesis ``d̂[b]`` and, on
+and per block the statistic ``s[b] = max_d h_d Acc_d[b]``, its hypothesis ``d̂[b]``, the
+runner-up ``d₂[b]`` (the best more than one step from ``d̂``) and, on
 every ``noise_every``-th block, the unit-correlator noise floor ``median_{d,k}(|v|² σ_d)/ln 2``
-(``σ_d`` rescales a window of ``Q_d B`` samples to the exact ``N_d``). The loops are compiled
+(``σ_d`` rescales a window of ``Q_d B`` samples to the exact ``N_d``). ``H_d`` is the exact
+hop length in blocks (``L_d/B``, not an integer in general): each term's lag is rounded on its
+own, so the M terms stay aligned within half a block instead of drifting by ``m·|Q_d − H_d|``
+blocks (a uniform comb of ``Q_d`` blocks loses most of the later terms of a hypothesis whose
+``L_d/B`` is near a half-integer, which then loses to a ghost hypothesis at low SNR). The
+comb costs ``M`` adds per hypothesis and block, at the block rate. The loops are compiled
 (:func:`hil.estimation.kernels.coarse_search`); the moving sums are differences of float64
 cumulative sums. Samples before the first one after a :meth:`CoarseSearch.reset` count as
 zero, and any chunking of the input gives the same bits.
@@ -20,6 +26,8 @@ zero, and any chunking of the input gives the same bits.
 >>> s, d_hat, noise, b0 = cs.process(np.exp(2j * np.pi * 100.0 * np.arange(40) / 1000.0))
 >>> b0, np.round(s, 3).tolist()  # |v|² = 12² once 3 blocks are in; Acc adds 2 hops
 (0, [16.0, 64.0, 144.0, 160.0, 208.0, 288.0, 288.0, 288.0, 288.0, 288.0])
+>>> cs.comb_lags.tolist()  # H_d defaults to Q_d
+[[0, 3]]
 """
 
 from __future__ import annotations
@@ -51,6 +59,8 @@ class CoarseSearch:
         Samples per block ``B``.
     m_hops:
         Hops ``M`` in the comb.
+    hop_blocks:
+        ``H_d``, the exact hop length in blocks (shape ``(D,)``; default ``Q_d``).
     cell_weights:
         ``w[d, k]`` (shape ``(D, K)``; default ones).
     hyp_weights:
@@ -69,6 +79,7 @@ class CoarseSearch:
         *,
         block: int,
         m_hops: int,
+        hop_blocks: ArrayLike | None = None,
         cell_weights: ArrayLike | None = None,
         hyp_weights: ArrayLike | None = None,
         noise_every: int = 4,
@@ -95,6 +106,12 @@ class CoarseSearch:
         self.noise_every = int(noise_every)
         self.block_lengths = q.astype(np.int64)
         self.n_hyp, self.n_tones = n_hyp, n_tones
+        h = self.block_lengths.astype(np.float64) if hop_blocks is None else hop_blocks
+        hop = np.asarray(h, dtype=np.float64)
+        if hop.shape != (n_hyp,) or not np.all(np.isfinite(hop)) or np.any(hop < 1):
+            raise ConfigError("hop_blocks", hop.tolist(), f"{n_hyp} finite lengths >= 1 block")
+        #: Lag of term m for hypothesis d, blocks, shape ``(D, M)``.
+        self.comb_lags = np.round(np.arange(self.m_hops)[None, :] * hop[:, None]).astype(np.int64)
         cells = nu.reshape(-1) / self.fs_hz  # cycles per sample, (D·K,)
         r = np.arange(self.block, dtype=np.float64)
         within = np.exp(-2j * np.pi * np.mod(r[:, None] * cells[None, :], 1.0))  # (B, D·K)
@@ -106,10 +123,8 @@ class CoarseSearch:
         self._cell_w = self._vector(cell_weights, (n_hyp, n_tones), "cell_weights")
         self._hyp_w = self._vector(hyp_weights, (n_hyp,), "hyp_weights")
         self._noise_scale = self._vector(noise_scale, (n_hyp,), "noise_scale")
-        q_max = int(self.block_lengths.max())
-        self._h_cum = q_max + 1
-        self._h_g = self.m_hops * q_max + 1
-        self._h_acc = q_max + 1
+        self._h_cum = int(self.block_lengths.max()) + 1
+        self._h_g = int(self.comb_lags.max()) + 1
         self.reset(0)
 
     @staticmethod
@@ -131,7 +146,6 @@ class CoarseSearch:
         self._cum = np.zeros((2, n_cells))
         self._cum_ring = np.zeros((self._h_cum, 2, n_cells))
         self._g_ring = np.zeros((self._h_g, self.n_hyp))
-        self._acc_ring = np.zeros((self._h_acc, self.n_hyp))
         self._frame_rot = np.zeros((2, n_cells))
 
     @property
@@ -143,7 +157,8 @@ class CoarseSearch:
         self, y: ArrayLike
     ) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.float64], int]:
         """Consume complex baseband samples ``y`` (shape ``(n,)``); for the blocks they
-        complete return ``s`` (shape ``(nb,)``), ``d̂`` (shape ``(nb,)``), the noise floor
+        complete return ``s`` (shape ``(nb,)``), ``d̂`` and the runner-up hypothesis more than
+        one step from it (shape ``(nb, 2)``, −1 for none), the noise floor
         (shape ``(nb,)``, NaN off the ``noise_every`` grid) and the first block's index."""
         ys = np.asarray(y, dtype=np.complex128).reshape(-1)
         self._next += ys.shape[0]
@@ -153,15 +168,14 @@ class CoarseSearch:
         self._carry = buf[used:].copy()
         b0 = self._next_block
         s = np.empty(nb)
-        d_hat = np.empty(nb, dtype=np.int64)
+        d_hat = np.empty((nb, 2), dtype=np.int64)
         noise = np.empty(nb)
         if nb:
             coarse_search(
                 np.ascontiguousarray(buf[:used]), b0, self.block, *self._within, *self._step,
                 self._cycles_per_block, FRAME_BLOCKS, self.block_lengths, self.n_tones,
-                self.m_hops, self._cell_w, self._hyp_w, self.noise_every, self._noise_scale,
-                self._cum, self._cum_ring, self._g_ring, self._acc_ring, self._frame_rot, s,
-                d_hat, noise,
+                self.comb_lags, self._cell_w, self._hyp_w, self.noise_every, self._noise_scale,
+                self._cum, self._cum_ring, self._g_ring, self._frame_rot, s, d_hat, noise,
             )  # fmt: skip
             self._next_block += nb
         return s, d_hat, noise, b0

@@ -119,8 +119,6 @@ SEARCH_MODES = ("full", "two-stage")
 COARSE_STEP = 8
 #: Times the two-stage search moves its fine window onto an edge peak, at most.
 RECENTRE_STEPS = 4
-#: Hypotheses either side of the coarse choice evaluated exactly by the two-stage search.
-FINE_DOPPLER_HALF = 1
 #: Guard around every tone's reverberation band, in unit-correlator main lobes (1/T_h).
 #: Measured: 0.5 leaves no ghost on the clutter-plus-target test; wider guards move the
 #: ghost to the first unmasked hypothesis past the guard instead of removing it.
@@ -621,15 +619,19 @@ class GcasReceiver:
         m = self.m_hops
         exact = self.grid.exact_lengths
         self._q = np.maximum(1, np.round(exact / b)).astype(np.int64)  # (D,) blocks per hop
+        hop_blocks = exact / b
+        lag_blocks = np.round(np.arange(m)[None, :] * hop_blocks[:, None])  # (D, M), as stage 1
         # Coarse block → fine sample of a candidate: the coarse window (Q_d·B samples) peaks
-        # (Q_d·B − N_d)/2 later than the exact one, and the comb's hop spacing Q_d·B differs
-        # from L_d by e_d per hop, which moves its peak by (M − 1)·e_d/2.
-        e = self._q * b - exact
+        # (Q_d·B − N_d)/2 later than the exact one, and term m of the coarse comb sits
+        # ℓ_{d,m} − B·lag_m samples off the exact one, which moves its peak by their mean.
         self._c_shift = np.round(
-            b - 1 - 0.5 * (self._q * b - self.grid.lengths) - 0.5 * (m - 1) * e
+            b
+            - 1
+            - 0.5 * (self._q * b - self.grid.lengths)
+            + np.mean(self.lags - b * lag_blocks, axis=1)
         ).astype(np.int64)
         self._hc = max(1, self.half_width // b)
-        self.fine_half = self.search_half + 1
+        self.fine_half = self.search_half + 6
         reach = int(np.max(self._c_shift)) + self.fine_half  # samples past the block start
         self._c_lookahead = self._hc + max(0, -(-reach // b))
         self.coarse = CoarseSearch(
@@ -638,6 +640,7 @@ class GcasReceiver:
             self._q,
             block=b,
             m_hops=m,
+            hop_blocks=hop_blocks,
             cell_weights=self._tone_w,
             hyp_weights=self.grid.weights,
             noise_every=max(1, NOISE_STRIDE // b),
@@ -645,7 +648,7 @@ class GcasReceiver:
         )
         c_keep = det_keep // b + 4
         self._cs_ring = RowBuffer(c_keep, (), np.float64)
-        self._cd_ring = RowBuffer(c_keep, (), np.int64)
+        self._cd_ring = RowBuffer(c_keep, (2,), np.int64)  # d̂ and the runner-up
         self._cn_ring = RowBuffer(c_keep, (), np.float64)
         y_keep = (
             int(self.lags.max()) + self._n_max + 2 * self.fine_half + (self._c_lookahead + 2) * b
@@ -685,7 +688,7 @@ class GcasReceiver:
             idx = np.arange(stop - y.shape[0], stop, dtype=np.int64)
             if self._cd_ring.next_index > self._c_origin:
                 blk = np.clip(idx // self._B, self._c_origin, self._cd_ring.next_index - 1)
-                d_map = self._cd_ring.rows(blk)
+                d_map = self._cd_ring.rows(blk)[:, 0]
             else:
                 d_map = np.zeros(idx.shape[0], dtype=np.int64)
             self.on_map(
@@ -742,7 +745,8 @@ class GcasReceiver:
         peaks = local_peaks(s, h)
         cand_b = np.flatnonzero(peaks[lo - first : stop - first]) + lo
         # A candidate waits until its fine window has arrived (its shift depends on d̂).
-        late = cand_b * self._B + self._c_shift[self._cd_ring.rows(cand_b)] + 2 * self.fine_half
+        shift = self._c_shift[self._cd_ring.rows(cand_b)].max(axis=1)  # of d̂ and runner-up
+        late = cand_b * self._B + shift + 2 * self.fine_half
         wait = np.flatnonzero(late >= self._y_ring.next_index)
         if wait.size:
             stop = int(cand_b[wait[0]])
@@ -754,10 +758,18 @@ class GcasReceiver:
 
     def _fine_stage(self, cand_b: NDArray[np.int64]) -> list[Estimate]:
         """Stage 2: exact codeword sums around the coarse candidate blocks ``cand_b``."""
-        d0 = self._cd_ring.rows(cand_b)
-        centre = cand_b * self._B + self._c_shift[d0]
+        pair = self._cd_ring.rows(cand_b)  # (C, 2): d̂ and the runner-up
+        pair[:, 1] = np.where(pair[:, 1] < 0, pair[:, 0], pair[:, 1])
+        centres = cand_b[:, None] * self._B + self._c_shift[pair]
         w = self.fine_half
-        a = self._fine_sums(centre, d0[:, None], w)[:, 0]  # (C, 2w + 1, J)
+        # The hypothesis is the better of the two by the exact sums: the group statistic
+        # cannot tell a hypothesis from its ghost (every tone seen as its neighbour at another
+        # speed), the codeword sums can.
+        a2 = self._fine_sums(centres.reshape(-1), pair.reshape(-1, 1), w)
+        a2 = a2.reshape(cand_b.shape[0], pair.shape[1], 2 * w + 1, self.n_codewords)
+        pick = np.argmax(a2.max(axis=(2, 3)), axis=1)
+        r = np.arange(cand_b.shape[0])
+        d0, centre, a = pair[r, pick], centres[r, pick], a2[r, pick]  # a: (C, 2w + 1, J)
         # A peak on the window's edge lies outside it (early in the stream the coarse comb
         # is not yet full): move the window onto that edge, a few times at most (later only
         # once: the look-ahead covers one window more; earlier is in the history).

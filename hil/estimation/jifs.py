@@ -163,6 +163,12 @@ class JifsReceiver(RegistryConstructor):
         self._n_a = max(2, int(round(float(edge_fraction) * hop * fs_b)))
         self._hop_b = hop * fs_b  # samples per hop at baseband
         self._off_rise, self._off_fall = self._edge_offsets(float(np.median(n_u)))
+        self._tol = self.coincidence * self._n_a  # largest rise/fall separation, samples
+        # Pairing delay: the edge filters delay detections by up to max(offsets) + N_a, a
+        # partner may come tol later, the tone-present check looks half a hop ahead.
+        self._margin = (
+            2 * self._tol + max(self._off_rise, self._off_fall) + self._n_a + 0.5 * self._hop_b + 2
+        )
         self._w = unique_window(schedule.code)
         code = schedule.code
         p = schedule.period_hops
@@ -275,18 +281,29 @@ class JifsReceiver(RegistryConstructor):
                 self._events.append((t, int(k), int(sign)))
         self._decided = hi
         out = self._pair(hi if not final else math.inf, energy)
-        keep = int(min(self._decided - 3 * self._hop_b, end - 2 * n_a - 2))
+        # History still needed: the edge filters of the next undecided centre (3 N_a back)
+        # and, for the boundaries still to pair (after ``hi − margin − tol``), the Doppler sum
+        # (a hop back) and the tone-present check. Trimming never changes a result.
+        keep = math.floor(
+            min(hi - 3 * self._hop_b, hi - self._margin - 2 * self._tol - self._hop_b - 2)
+        )
+        keep = min(keep, hi - 3 * n_a)
         if keep > self._u0:
             self._u = self._u[keep - self._u0 :]
             self._u0 = keep
         return out
 
     def _pair(self, decided: float, energy: FloatArray) -> list[Estimate]:
-        tol = self.coincidence * self._n_a
-        # An event is paired only once every partner it could have is detected and the
-        # tone-present check after it has data: the edge filters delay detections by up to
-        # max(offsets) + N_a, the present check looks half a hop ahead.
-        margin = 2 * tol + max(self._off_rise, self._off_fall) + self._n_a + 0.5 * self._hop_b + 2
+        """Pair each ready rise (in time order) with the nearest unused legal fall.
+
+        A rise is ready once every partner it could have is detected and the tone-present
+        check after it has data (``t <= decided − margin``). A fall is kept, even when ready,
+        while a rise not yet ready could still claim it (``t > decided − margin − tol``; kept
+        with a 2·tol guard, extra ones are harmless): dropping it earlier made the result
+        depend on where the input was cut.
+        """
+        tol = self._tol
+        margin = self._margin
         self._events.sort()
         ready = [e for e in self._events if e[0] <= decided - margin]
         rest = [e for e in self._events if e[0] > decided - margin]
@@ -311,7 +328,12 @@ class JifsReceiver(RegistryConstructor):
                 if est is not None:
                     out.append(est)
         pool = ready + rest
-        self._events = [e for j, e in enumerate(pool) if j not in used and e[0] > decided - margin]
+        horizon = decided - margin
+        self._events = [
+            e
+            for j, e in enumerate(pool)
+            if j not in used and (e[0] > horizon or (e[2] < 0 and e[0] > horizon - 2 * tol))
+        ]
         return out
 
     def _present(self, boundary: float, old: int, new: int, energy: FloatArray) -> bool:

@@ -82,7 +82,7 @@ def coarse_search(
     frame: int,
     q: Any,
     n_tones: int,
-    m_hops: int,
+    comb_lags: Any,
     cell_w: Any,
     hyp_w: Any,
     noise_every: int,
@@ -90,7 +90,6 @@ def coarse_search(
     cum: Any,
     cum_ring: Any,
     g_ring: Any,
-    acc_ring: Any,
     frame_rot: Any,
     s_out: Any,
     d_out: Any,
@@ -108,10 +107,12 @@ def coarse_search(
     - cumulative sum ``cum[c]`` (shape ``(2, D·K)``, state) and its history ``cum_ring``
       (shape ``(H, 2, D·K)``, row ``b mod H``, ``H > max Q``); the coarse correlator
       ``v = cum[b] − cum[b − Q_d]`` (a window of ``Q_d`` blocks);
-    - group ``G_d = Σ_k cell_w[c] |v|²`` and the comb ``Acc_d[b] = Acc_d[b − Q_d] + G_d[b] −
-      G_d[b − M Q_d]`` (histories ``g_ring`` shape ``(Hg, D)``, ``Hg > M max Q``, and
-      ``acc_ring`` shape ``(Ha, D)``, ``Ha > max Q``; rows ``b mod H``);
-    - outputs ``s_out[i] = max_d hyp_w[d] Acc_d``, ``d_out[i]`` its ``d``, and every
+    - group ``G_d = Σ_k cell_w[c] |v|²`` and the comb ``Acc_d[b] = Σ_m G_d[b − comb_lags[d, m]]``
+      (lags in blocks, shape ``(D, M)``; history ``g_ring`` shape ``(Hg, D)``, row ``b mod
+      Hg``, ``Hg`` > the largest lag);
+    - outputs ``s_out[i] = max_d hyp_w[d] Acc_d``, ``d_out[i, 0]`` its ``d`` and
+      ``d_out[i, 1]`` the best ``d`` more than one step away (−1 if none; shape ``(nb, 2)``),
+      and every
       ``noise_every`` blocks (absolute) ``noise_out[i] = median_c(|v|² noise_scale[d]) / ln 2``
       (NaN otherwise).
     """
@@ -120,11 +121,12 @@ def coarse_search(
     nb = y.shape[0] // block
     hc = cum_ring.shape[0]
     hg = g_ring.shape[0]
-    ha = acc_ring.shape[0]
+    n_terms = comb_lags.shape[1]
     p_re = np.empty(n_cells)
     p_im = np.empty(n_cells)
     pw = np.empty(n_cells)
     grp = np.empty(n_hyp)
+    acc_row = np.empty(n_hyp)
     ln2 = math.log(2.0)
     for i in range(nb):
         b = b_first + i
@@ -172,25 +174,31 @@ def coarse_search(
                 acc += pv * cell_w[c]
             grp[d] = acc
         gs = b % hg
-        a_slot = b % ha
         best = -math.inf
         best_d = 0
         for d in range(n_hyp):
-            a_old = a_slot - q[d]
-            if a_old < 0:
-                a_old += ha
-            g_old = gs - m_hops * q[d]
-            if g_old < 0:
-                g_old += hg
-            a = acc_ring[a_old, d] + grp[d] - g_ring[g_old, d]
             g_ring[gs, d] = grp[d]
-            acc_ring[a_slot, d] = a
-            wa = a * hyp_w[d]
-            if wa > best:
-                best = wa
+            a = 0.0
+            for m in range(n_terms):
+                row = gs - comb_lags[d, m]
+                if row < 0:
+                    row += hg
+                a += g_ring[row, d]
+            acc_row[d] = a * hyp_w[d]
+            if acc_row[d] > best:
+                best = acc_row[d]
                 best_d = d
+        # Runner-up: the best hypothesis more than one step from the best (a ghost of the
+        # group statistic, e.g. tones shifted by one at another speed, can beat the truth).
+        second = -math.inf
+        second_d = -1
+        for d in range(n_hyp):
+            if abs(d - best_d) > 1 and acc_row[d] > second:
+                second = acc_row[d]
+                second_d = d
         s_out[i] = best
-        d_out[i] = best_d
+        d_out[i, 0] = best_d
+        d_out[i, 1] = second_d
         noise_out[i] = np.median(pw) / ln2 if b % noise_every == 0 else np.nan
 
 

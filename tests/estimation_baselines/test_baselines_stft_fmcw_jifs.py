@@ -160,12 +160,24 @@ def test_jifs_errors_shrink_with_snr_and_chunks(kit: Any) -> None:
     whole = run(rx, x)
     assert len(whole) >= 5
 
-    @settings(max_examples=10, deadline=None)
+    @settings(max_examples=100, deadline=None)
     @given(st.lists(st.integers(1, 4000), min_size=1, max_size=6))
     def check(cuts: list[int]) -> None:
         assert chunked(rx, x, cuts) == whole
 
     check()
+
+
+def test_jifs_keeps_a_fall_whose_rise_is_not_yet_ready(kit: Any) -> None:
+    """Regression: a cut that leaves a fall ready but its rise partner (2.4 baseband samples
+    later) not yet ready used to drop the fall, losing the pair and the next hop indices."""
+    rx = JifsReceiver.from_options(HFC, FS, **COMMON)
+    x = kit.echo(HFC, FS, kit.Scene(30.0, -4.0), 0.15, snr_db=15.0, seed=2)
+    whole = run(rx, x)
+    assert len(whole) == 13
+    assert [e.hop_index for e in whole] == list(range(-3, 10))
+    for cuts in ([1259, 4000], [1, 1, 1257, 4000], [1, 1258, 4000], [1, 1, 5257], [1257, 4000]):
+        assert chunked(rx, x, cuts) == whole, cuts
 
 
 # ---------------------------------------------------------------- configuration
