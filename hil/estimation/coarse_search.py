@@ -42,6 +42,9 @@ from hil.estimation.kernels import coarse_search
 
 #: Blocks per frame of the block rotation (one set of transcendental calls per frame).
 FRAME_BLOCKS = 64
+#: Hypotheses per block that get the comb with per-term rounded lags (chosen by the O(1)
+#: uniform comb), so that the cost per block hardly grows with M.
+COARSE_SHORTLIST = 8
 
 
 class CoarseSearch:
@@ -123,8 +126,11 @@ class CoarseSearch:
         self._cell_w = self._vector(cell_weights, (n_hyp, n_tones), "cell_weights")
         self._hyp_w = self._vector(hyp_weights, (n_hyp,), "hyp_weights")
         self._noise_scale = self._vector(noise_scale, (n_hyp,), "noise_scale")
-        self._h_cum = int(self.block_lengths.max()) + 1
-        self._h_g = int(self.comb_lags.max()) + 1
+        # Ring lengths: powers of two (rows by masking), longer than the longest reach back.
+        q_max = int(self.block_lengths.max())
+        self._h_cum = 1 << q_max.bit_length()
+        self._h_g = 1 << max(int(self.comb_lags.max()), self.m_hops * q_max).bit_length()
+        self.shortlist = min(COARSE_SHORTLIST, n_hyp)
         self.reset(0)
 
     @staticmethod
@@ -145,7 +151,8 @@ class CoarseSearch:
         n_cells = self.n_hyp * self.n_tones
         self._cum = np.zeros((2, n_cells))
         self._cum_ring = np.zeros((self._h_cum, 2, n_cells))
-        self._g_ring = np.zeros((self._h_g, self.n_hyp))
+        self._g_ring = np.zeros((self.n_hyp, self._h_g))
+        self._uacc_ring = np.zeros((self.n_hyp, self._h_cum))
         self._frame_rot = np.zeros((2, n_cells))
 
     @property
@@ -175,7 +182,8 @@ class CoarseSearch:
                 np.ascontiguousarray(buf[:used]), b0, self.block, *self._within, *self._step,
                 self._cycles_per_block, FRAME_BLOCKS, self.block_lengths, self.n_tones,
                 self.comb_lags, self._cell_w, self._hyp_w, self.noise_every, self._noise_scale,
-                self._cum, self._cum_ring, self._g_ring, self._frame_rot, s, d_hat, noise,
+                self._cum, self._cum_ring, self._g_ring, self._uacc_ring, self.shortlist,
+                self._frame_rot, s, d_hat, noise,
             )  # fmt: skip
             self._next_block += nb
         return s, d_hat, noise, b0

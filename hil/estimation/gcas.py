@@ -117,6 +117,8 @@ CFAR_MODES = ("bank", "statistic")
 SEARCH_MODES = ("full", "two-stage")
 #: Default coarse step B of the two-stage search, baseband samples.
 COARSE_STEP = 8
+#: Anchor grid of the stage-2 prefix sums, baseband samples (values cached per sample).
+EXACT_ANCHOR = 16
 #: Times the two-stage search moves its fine window onto an edge peak, at most.
 RECENTRE_STEPS = 4
 #: Guard around every tone's reverberation band, in unit-correlator main lobes (1/T_h).
@@ -523,6 +525,7 @@ class GcasReceiver:
             for ring in (self._cs_ring, self._cd_ring, self._cn_ring):
                 ring.reset(c0)
             self._y_ring.reset(b0)
+            self._cache_n.fill(-1)
             self._c_origin = c0
             self._c_valid_from = -(-self._valid_from // self._B) + 1
             self._det_next = c0
@@ -657,7 +660,16 @@ class GcasReceiver:
         self._y_ring = RowBuffer(y_keep, (), np.complex128)
         self._nu_fs = self.grid.frequencies(self.tones_hz, self.center_hz) / self.fs_bb  # (D, K)
         self._table: NDArray[np.float64] | None = None
-        self._phasor_table(2 * self.fine_half + 1)
+        self._phasor_table(max(2 * self.fine_half + 1, EXACT_ANCHOR))
+        # Stage-2 cache of |u|² by absolute sample (slot n mod cap, stamped with n).
+        reach = (
+            int(self.lags.max()) + self._n_max + 2 * self.fine_half + 2 * EXACT_ANCHOR
+            + 2 * self._B
+        )  # fmt: skip
+        cap = 1 << int(math.ceil(math.log2(2 * reach)))
+        self._cache_p = np.zeros((self.grid.size, self.n_tones, cap))
+        self._cache_max = np.zeros((self.grid.size, cap))
+        self._cache_n = np.full((self.grid.size, cap), -1, dtype=np.int64)
         code, m_idx = self.code, np.arange(m)
         self._term_tone = code[(np.arange(self.n_codewords)[None, :] - m_idx[:, None]) % code.size]
         tone_w = (
@@ -765,8 +777,7 @@ class GcasReceiver:
         # The hypothesis is the better of the two by the exact sums: the group statistic
         # cannot tell a hypothesis from its ghost (every tone seen as its neighbour at another
         # speed), the codeword sums can.
-        a2 = self._fine_sums(centres.reshape(-1), pair.reshape(-1, 1), w)
-        a2 = a2.reshape(cand_b.shape[0], pair.shape[1], 2 * w + 1, self.n_codewords)
+        a2 = self._fine_sums(centres, pair, w, prune=True)  # (C, 2, 2w + 1, J)
         pick = np.argmax(a2.max(axis=(2, 3)), axis=1)
         r = np.arange(cand_b.shape[0])
         d0, centre, a = pair[r, pick], centres[r, pick], a2[r, pick]  # a: (C, 2w + 1, J)
@@ -789,19 +800,22 @@ class GcasReceiver:
         return self._threshold_readout(centre, w, dset, a, sides, tested)
 
     def _fine_sums(
-        self, centre: NDArray[np.int64], dset: NDArray[np.int64], half: int
+        self, centre: NDArray[np.int64], dset: NDArray[np.int64], half: int, prune: bool = False
     ) -> NDArray[np.float64]:
         """Exact noncoherent ``A[n, d, j]`` for ``n`` within ``±half`` of ``centre`` (shape
-        ``(C,)``) at the hypotheses ``dset`` (shape ``(C, nd)``): shape
-        ``(C, nd, 2·half + 1, J)`` (:func:`hil.estimation.kernels.codeword_sums`)."""
+        ``(C,)``, or ``(C, nd)``: one per hypothesis) at the hypotheses ``dset`` (shape
+        ``(C, nd)``): shape ``(C, nd, 2·half + 1, J)``
+        (:func:`hil.estimation.kernels.codeword_sums`; with ``prune``, rows that cannot hold a
+        maximum are −inf)."""
         ring = self._y_ring
         width = 2 * half + 1
         out = np.empty((centre.shape[0], dset.shape[1], width, self.n_codewords))
         codeword_sums(
-            ring.array[: ring.available], ring.next_index - ring.available,
-            np.ascontiguousarray(centre, dtype=np.int64),
+            ring.array[: ring.available], ring.next_index - ring.available, ring.next_index,
+            np.ascontiguousarray(np.broadcast_to(centre.reshape(dset.shape[0], -1), dset.shape)),
             np.ascontiguousarray(dset, dtype=np.int64), half, self.lags, self.grid.lengths,
-            self._phasor_table(width), self._term_tone, self._cell_w, out,
+            self._phasor_table(EXACT_ANCHOR), self._term_tone, self._cell_w, EXACT_ANCHOR,
+            self._cache_p, self._cache_max, self._cache_n, self._B, prune, out,
         )  # fmt: skip
         return out
 

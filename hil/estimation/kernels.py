@@ -90,6 +90,8 @@ def coarse_search(
     cum: Any,
     cum_ring: Any,
     g_ring: Any,
+    uacc_ring: Any,
+    shortlist: int,
     frame_rot: Any,
     s_out: Any,
     d_out: Any,
@@ -105,12 +107,16 @@ def coarse_search(
       (``frame_rot`` recomputed from ``cycles_per_block[c] = ν_c B/fs`` at every frame of
       ``F = frame`` blocks; shape ``(2, D·K)``, re and im, carried state);
     - cumulative sum ``cum[c]`` (shape ``(2, D·K)``, state) and its history ``cum_ring``
-      (shape ``(H, 2, D·K)``, row ``b mod H``, ``H > max Q``); the coarse correlator
+      (shape ``(H, 2, D·K)``, row ``b mod H``, ``H > max Q`` a power of two); the coarse
+      correlator
       ``v = cum[b] − cum[b − Q_d]`` (a window of ``Q_d`` blocks);
-    - group ``G_d = Σ_k cell_w[c] |v|²`` and the comb ``Acc_d[b] = Σ_m G_d[b − comb_lags[d, m]]``
-      (lags in blocks, shape ``(D, M)``; history ``g_ring`` shape ``(Hg, D)``, row ``b mod
-      Hg``, ``Hg`` > the largest lag);
-    - outputs ``s_out[i] = max_d hyp_w[d] Acc_d``, ``d_out[i, 0]`` its ``d`` and
+    - group ``G_d = Σ_k cell_w[c] |v|²``; the uniform comb ``Acc_d[b − Q_d] + G_d[b] −
+      G_d[b − M Q_d]`` (O(1), history ``uacc_ring`` shape ``(D, Hu)``) picks the
+      ``shortlist`` best hypotheses, and for those only the comb with per-term rounded lags
+      ``Acc_d[b] = Σ_m G_d[b − comb_lags[d, m]]`` (lags in blocks, shape ``(D, M)``; history
+      ``g_ring`` shape ``(D, Hg)``, column ``b mod Hg``, ``Hg > max(M max Q, max lag)``; ring
+      lengths are powers of two);
+    - outputs ``s_out[i] = max hyp_w[d] Acc_d`` over the shortlist, ``d_out[i, 0]`` its ``d`` and
       ``d_out[i, 1]`` the best ``d`` more than one step away (−1 if none; shape ``(nb, 2)``),
       and every
       ``noise_every`` blocks (absolute) ``noise_out[i] = median_c(|v|² noise_scale[d]) / ln 2``
@@ -119,14 +125,17 @@ def coarse_search(
     n_cells = cum.shape[1]
     n_hyp = n_cells // n_tones
     nb = y.shape[0] // block
-    hc = cum_ring.shape[0]
-    hg = g_ring.shape[0]
+    c_mask = cum_ring.shape[0] - 1
+    g_mask = g_ring.shape[1] - 1
     n_terms = comb_lags.shape[1]
     p_re = np.empty(n_cells)
     p_im = np.empty(n_cells)
     pw = np.empty(n_cells)
     grp = np.empty(n_hyp)
     acc_row = np.empty(n_hyp)
+    short_v = np.empty(shortlist)
+    short_d = np.empty(shortlist, dtype=np.int64)
+    u_mask = uacc_ring.shape[1] - 1
     ln2 = math.log(2.0)
     for i in range(nb):
         b = b_first + i
@@ -151,8 +160,7 @@ def coarse_search(
                 ang = -2.0 * math.pi * ((start * cycles_per_block[c]) % 1.0)
                 frame_rot[0, c] = math.cos(ang)
                 frame_rot[1, c] = math.sin(ang)
-        # Ring rows by subtraction from this block's rows (no integer division per cell).
-        slot = b % hc
+        slot = b & c_mask
         for c in range(n_cells):
             rr = frame_rot[0, c] * step_re[f, c] - frame_rot[1, c] * step_im[f, c]
             ri = frame_rot[0, c] * step_im[f, c] + frame_rot[1, c] * step_re[f, c]
@@ -161,9 +169,7 @@ def coarse_search(
             cum_ring[slot, 0, c] = cum[0, c]
             cum_ring[slot, 1, c] = cum[1, c]
         for d in range(n_hyp):
-            old = slot - q[d]
-            if old < 0:
-                old += hc
+            old = (b - q[d]) & c_mask
             acc = 0.0
             for k in range(n_tones):
                 c = d * n_tones + k
@@ -173,18 +179,39 @@ def coarse_search(
                 pw[c] = pv * noise_scale[d]
                 acc += pv * cell_w[c]
             grp[d] = acc
-        gs = b % hg
+        # Shortlist by the uniform comb Acc_d[b − Q_d] + G_d[b] − G_d[b − M Q_d] (O(1) per
+        # hypothesis; its terms drift by up to (M − 1)·|Q_d − H_d| blocks), then the comb with
+        # per-term rounded lags for the shortlisted hypotheses only.
+        n_short = 0
+        for d in range(n_hyp):
+            hist = g_ring[d]
+            hist[b & g_mask] = grp[d]
+            u = uacc_ring[d, (b - q[d]) & u_mask] + grp[d] - hist[(b - n_terms * q[d]) & g_mask]
+            uacc_ring[d, b & u_mask] = u
+            u *= hyp_w[d]
+            # Insert into the descending shortlist (ties keep the lower d first).
+            if n_short < shortlist or u > short_v[n_short - 1]:
+                pos = min(n_short, shortlist - 1)
+                while pos > 0 and short_v[pos - 1] < u:
+                    short_v[pos] = short_v[pos - 1]
+                    short_d[pos] = short_d[pos - 1]
+                    pos -= 1
+                short_v[pos] = u
+                short_d[pos] = d
+                n_short = min(n_short + 1, shortlist)
+        for d in range(n_hyp):
+            acc_row[d] = -math.inf
+        for e in range(n_short):
+            d = short_d[e]
+            hist = g_ring[d]
+            lag = comb_lags[d]
+            a = 0.0
+            for m in range(n_terms):
+                a += hist[(b - lag[m]) & g_mask]
+            acc_row[d] = a * hyp_w[d]
         best = -math.inf
         best_d = 0
         for d in range(n_hyp):
-            g_ring[gs, d] = grp[d]
-            a = 0.0
-            for m in range(n_terms):
-                row = gs - comb_lags[d, m]
-                if row < 0:
-                    row += hg
-                a += g_ring[row, d]
-            acc_row[d] = a * hyp_w[d]
             if acc_row[d] > best:
                 best = acc_row[d]
                 best_d = d
@@ -268,9 +295,28 @@ def exact_windows(
 
 
 @numba.njit(**_JIT)
+def _anchored_powers(
+    y: Any, origin: int, a: int, n_len: int, group: int, d: int, table: Any, pre: Any, out: Any
+) -> None:
+    """``|u[n, d, k]|²`` for the ``group`` samples ``n = a + N − 1 + r`` (``r < group``) whose
+    windows start at ``a + r``: one prefix sum from ``a`` (``out`` shape ``(group, K)``).
+
+    Every window start in ``[a, a + group)`` maps to the same anchor ``a``, so each value is a
+    function of ``n`` and ``d`` alone whichever call computes it."""
+    n_tones = table.shape[2]
+    _window_prefix(y, origin, a, n_len + group - 1, d, table, pre)
+    for r in range(group):
+        for k in range(n_tones):
+            ur = pre[r + n_len, k, 0] - pre[r, k, 0]
+            ui = pre[r + n_len, k, 1] - pre[r, k, 1]
+            out[r, k] = ur * ur + ui * ui
+
+
+@numba.njit(**_JIT)
 def codeword_sums(
     y: Any,
     origin: int,
+    n_avail: int,
     centre: Any,
     dset: Any,
     half: int,
@@ -279,38 +325,155 @@ def codeword_sums(
     table: Any,
     term_tone: Any,
     cell_w: Any,
+    anchor: int,
+    cache_p: Any,
+    cache_max: Any,
+    cache_n: Any,
+    margin: int,
+    prune: bool,
     out: Any,
 ) -> None:
     """Exact noncoherent codeword sums around candidates (stage 2 of the two-stage search).
 
     ``out[c, i, t, j] = Σ_{m<M} w[d, k] |u[n − ℓ_{d,m}, d, k]|²`` with ``k = term_tone[m, j]``
-    (the tone of term ``m`` of codeword ``j``), ``d = dset[c, i]``, ``n = centre[c] − half +
-    t`` for ``t <= 2·half`` (``centre`` shape ``(C,)``, ``dset`` shape ``(C, nd)``, ``out``
-    shape ``(C, nd, 2·half + 1, J)``); ``lags`` ``ℓ`` (shape ``(D, M)``), ``cell_w`` ``w``
-    (shape ``(D, K)``); ``y``, ``origin``, ``lengths`` and ``table`` as in
-    :func:`exact_windows`. Terms are added in the order ``m = 0, 1, ..``.
+    (the tone of term ``m`` of codeword ``j``), ``d = dset[c, i]``, ``n = centre[c, i] −
+    half + t`` for ``t <= 2·half`` (``centre`` and ``dset`` shape ``(C, nd)``, ``out`` shape
+    ``(C, nd, 2·half + 1, J)``); ``lags`` ``ℓ`` (shape ``(D, M)``), ``cell_w`` ``w``
+    (shape ``(D, K)``). Terms are added in the order ``m = 0, 1, ..``.
+
+    ``|u|²`` of sample ``n`` is computed from a prefix sum anchored at the multiple of
+    ``anchor`` at or below its window start (so its bits depend on ``n`` and ``d`` only), for
+    the whole anchor group at once, and kept, weighted by ``w``, in ``cache_p`` (shape
+    ``(D, K, cap)``, ``cap`` a power of two, slot ``n mod cap``) with its maximum over ``k``
+    in ``cache_max`` (shape ``(D, cap)``), stamped in ``cache_n`` (shape ``(D, cap)``) when
+    sample ``n`` has arrived (``n < n_avail``); a run with a missing sample fills every
+    group within ``margin`` samples of it. Consecutive candidates share ``M − 1`` of their
+    ``M`` terms (a few samples apart), so each computes about one new term per hypothesis.
+    ``table`` holds the phasor ``e^{−j2π ν[d, k] i/fs}`` for ``i < max N + anchor − 1``
+    (shape ``(D, ·, K, 2)``).
+
+    With ``prune`` the sums of a sample ``t`` are formed only while its bound
+    ``Σ_m max_k w|u|²`` (>= the sum of every codeword) is at least the best sum found so far
+    for this candidate (over this and earlier hypotheses of ``dset[c]``); the others are left
+    at −inf. The maximum over ``(i, t, j)``, every hypothesis's maximum that could be the
+    overall one, its sample and the neighbouring samples' rows are then exactly those of the
+    unpruned sums.
     """
     n_cand, n_sets = dset.shape
     width = 2 * half + 1
-    n_terms, n_words = term_tone.shape
+    n_terms = term_tone.shape[0]
     n_tones = table.shape[2]
+    mask = cache_p.shape[2] - 1
     pre = np.empty((table.shape[1] + 1, n_tones, 2))
-    power = np.empty((width, n_tones))
+    fresh = np.empty((anchor, n_tones))
+    # Samples not yet arrived are computed for this call only, never cached.
+    late_p = np.empty((n_terms, width, n_tones))
+    late = np.zeros((n_terms, width), dtype=np.bool_)
+    bound = np.empty(width)
+    done = np.empty(width, dtype=np.bool_)
+    vals = np.empty(n_tones)
     for c in range(n_cand):
+        best_c = -math.inf
         for i in range(n_sets):
             d = dset[c, i]
             n_len = lengths[d]
-            for t in range(width):
-                for j in range(n_words):
-                    out[c, i, t, j] = 0.0
+            stamps = cache_n[d]
+            top = cache_max[d]
+            bound[:] = 0.0
+            late[:, :] = False
             for m in range(n_terms):
-                s0 = centre[c] - half - lags[d, m] - n_len + 1
-                _window_prefix(y, origin, s0, n_len + width - 1, d, table, pre)
-                for t in range(width):
-                    for k in range(n_tones):
-                        ur = pre[n_len + t, k, 0] - pre[t, k, 0]
-                        ui = pre[n_len + t, k, 1] - pre[t, k, 1]
-                        power[t, k] = cell_w[d, k] * (ur * ur + ui * ui)
-                for t in range(width):
-                    for j in range(n_words):
-                        out[c, i, t, j] += power[t, term_tone[m, j]]
+                s0 = centre[c, i] - half - lags[d, m]
+                t = 0
+                while t < width:
+                    n = s0 + t
+                    slot = n & mask
+                    if stamps[slot] == n:
+                        bound[t] += top[slot]
+                        t += 1
+                        continue
+                    # Fill every anchor group within `margin` of the run: the next candidate's
+                    # runs sit a few samples off this one's (coarse quantisation), and would
+                    # otherwise miss at their edges every time.
+                    g = ((s0 - margin - n_len + 1) // anchor) * anchor
+                    g_end = s0 + width - 1 + margin - n_len + 1
+                    while g <= g_end:
+                        first = g + n_len - 1
+                        need = False
+                        for r in range(anchor):
+                            n_r = first + r
+                            if stamps[n_r & mask] != n_r and (n_r < n_avail or s0 <= n_r):
+                                need = True
+                                break
+                        if need:
+                            _anchored_powers(y, origin, g, n_len, anchor, d, table, pre, fresh)
+                            for r in range(anchor):
+                                n_r = first + r
+                                if n_r < n_avail:
+                                    s_r = n_r & mask
+                                    stamps[s_r] = n_r
+                                    mx = -math.inf
+                                    for k in range(n_tones):
+                                        v = cell_w[d, k] * fresh[r, k]
+                                        cache_p[d, k, s_r] = v
+                                        mx = max(mx, v)
+                                    top[s_r] = mx
+                                elif s0 <= n_r < s0 + width:
+                                    late[m, n_r - s0] = True
+                                    for k in range(n_tones):
+                                        late_p[m, n_r - s0, k] = cell_w[d, k] * fresh[r, k]
+                        g += anchor
+                    # Resume at n: now cached (or late) — the loop adds it to the bound.
+                    if late[m, t]:
+                        mx = -math.inf
+                        for k in range(n_tones):
+                            mx = max(mx, late_p[m, t, k])
+                        bound[t] += mx
+                        t += 1
+            # Rows in decreasing order of their bound: with pruning, a row is summed only
+            # while it could still hold this hypothesis's peak or beat an earlier hypothesis;
+            # the others stay −inf (callers take maxima).
+            out[c, i] = -math.inf
+            done[:] = False
+            best_i = -math.inf
+            i_pk = -1
+            for t in np.argsort(-bound, kind="mergesort"):
+                if prune and bound[t] < max(best_c, best_i):
+                    break
+                v = _codeword_row(c, i, t, half, d, centre, lags, term_tone, cache_p, mask,
+                                  late, late_p, vals, out[c, i, t])  # fmt: skip
+                done[t] = True
+                if v > best_i or (v == best_i and t < i_pk):
+                    best_i = v
+                    i_pk = t
+            # The readout interpolates the peak with its neighbours.
+            for t in (i_pk - 1, i_pk + 1):
+                if i_pk >= 0 and 0 <= t < width and not done[t]:
+                    _codeword_row(c, i, t, half, d, centre, lags, term_tone, cache_p, mask,
+                                  late, late_p, vals, out[c, i, t])  # fmt: skip
+            best_c = max(best_c, best_i)
+
+
+@numba.njit(**_JIT)
+def _codeword_row(
+    c: int, i: int, t: int, half: int, d: int, centre: Any, lags: Any, term_tone: Any,
+    cache_p: Any, mask: int, late: Any, late_p: Any, vals: Any, row: Any,
+) -> float:  # fmt: skip
+    """``row[j] = Σ_m w|u|²`` of term ``m``'s tone ``term_tone[m, j]`` at sample ``t`` of the
+    window (added in the order ``m = 0, 1, ..``); returns ``max_j row[j]``."""
+    n_terms, n_words = term_tone.shape
+    n_tones = vals.shape[0]
+    row[:] = 0.0
+    for m in range(n_terms):
+        if late[m, t]:
+            for k in range(n_tones):
+                vals[k] = late_p[m, t, k]
+        else:
+            slot = (centre[c, i] - half - lags[d, m] + t) & mask
+            for k in range(n_tones):
+                vals[k] = cache_p[d, k, slot]
+        for j in range(n_words):
+            row[j] += vals[term_tone[m, j]]
+    top = -math.inf
+    for j in range(n_words):
+        top = max(top, row[j])
+    return top

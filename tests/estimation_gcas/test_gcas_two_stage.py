@@ -109,6 +109,34 @@ def test_coarse_search_rounds_each_comb_lag() -> None:
     assert np.mean(d_hat[:, 0] == acc.argmax(axis=1)) > 0.99  # near-ties may differ
 
 
+def test_coarse_search_rounds_the_lags_of_a_shortlist_chosen_by_the_uniform_comb() -> None:
+    rng = np.random.default_rng(9)
+    n_hyp = 20
+    nu = rng.uniform(-3000.0, 3000.0, (n_hyp, 2))
+    q = np.full(n_hyp, 10)
+    hop = 9.6 + 0.05 * np.arange(n_hyp)
+    cs = CoarseSearch(8000.0, nu, q, block=8, m_hops=6, hop_blocks=hop)
+    assert cs.shortlist == 8
+    x = rng.normal(size=6000) + 1j * rng.normal(size=6000)
+    s, d_hat, _, _ = cs.process(x)
+    g = np.sum(np.abs(UnitCorrelatorBank(8000.0, nu, q * 8).process(x)[7::8]) ** 2, axis=2)
+    nb = g.shape[0]
+    uniform = np.zeros_like(g)
+    rounded = np.zeros_like(g)
+    for d in range(n_hyp):
+        for m in range(6):
+            uniform[m * 10 :, d] += g[: nb - m * 10, d]
+            lag = cs.comb_lags[d, m]
+            rounded[lag:, d] += g[: nb - lag, d]
+    short = np.argsort(-uniform, axis=1, kind="stable")[:, :8]
+    picked = np.take_along_axis(rounded, short, axis=1)
+    np.testing.assert_allclose(s, picked.max(axis=1), rtol=1e-4)  # the reference is complex64
+    ref_d = np.take_along_axis(short, picked.argmax(axis=1)[:, None], axis=1)[:, 0]
+    assert np.mean(d_hat[:, 0] == ref_d) > 0.99  # near-ties may differ
+    # The shortlist matters here: on some blocks the best rounded comb lies outside it.
+    assert np.count_nonzero(rounded.max(axis=1) > picked.max(axis=1) * (1 + 1e-3)) >= 2
+
+
 def test_coarse_search_counts_samples_before_the_start_as_zero() -> None:
     nu = np.array([[100.0]])
     x = np.exp(2j * np.pi * 100.0 * np.arange(6, 40) / 1000.0)  # samples 6..39
