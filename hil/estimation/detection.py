@@ -23,9 +23,10 @@ import math
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import ndimage, stats
+from scipy import stats
 
 from hil.errors import ConfigError
+from hil.estimation.kernels import peak_indices
 
 #: Independent tests per hop and codeword in the union bound of :func:`lambda_for_pfa`
 #: (measured on noise-only input; local maxima over ±N/2 leave about one candidate per hop).
@@ -104,11 +105,7 @@ def local_peaks(s: NDArray[np.float64], half_width: int) -> NDArray[np.bool_]:
     >>> local_peaks(np.array([0.0, 2.0, 2.0, 1.0, 3.0, 0.0]), 1).tolist()
     [False, True, False, False, True, False]
     """
-    h = int(half_width)
-    centred = ndimage.maximum_filter1d(s, size=2 * h + 1, mode="constant", cval=-np.inf)
-    is_max = s >= centred
-    # Strictly above everything in the h samples before (shifted window of length h).
-    before = ndimage.maximum_filter1d(s, size=h, origin=(h - 1) // 2, mode="constant", cval=-np.inf)
-    prev = np.concatenate(([-np.inf], before[:-1]))
-    result: NDArray[np.bool_] = is_max & (s > prev)
+    values = np.ascontiguousarray(s, dtype=np.float64)
+    result = np.zeros(values.shape[0], dtype=np.bool_)
+    result[peak_indices(values, int(half_width), 0, values.shape[0])] = True
     return result

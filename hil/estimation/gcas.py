@@ -93,13 +93,12 @@ from hil.estimation.baseband import ComplexBaseband
 from hil.estimation.coarse_search import CoarseSearch
 from hil.estimation.detection import (
     lambda_for_pfa,
-    local_peaks,
     noise_moments,
     parabolic_offset,
     parabolic_offsets,
 )
 from hil.estimation.doppler_grid import DopplerGrid, alpha_to_speed, doppler_grid, speed_to_alpha
-from hil.estimation.kernels import codeword_sums, exact_windows
+from hil.estimation.kernels import codeword_sums, exact_windows, peak_indices
 from hil.estimation.row_buffer import RowBuffer
 from hil.estimation.unit_correlators import UnitCorrelatorBank
 from hil.signals.random_cyclic import minimum_distance
@@ -414,6 +413,20 @@ class GcasReceiver:
             period=sch.period_s,
             hop_end=(sch.t0_s + sch.start_s + sch.duration_s).astype(np.float64).tolist(),
         )
+        self.reset()
+        self._warm_up()
+
+    def _warm_up(self) -> None:
+        """Run every compiled kernel once on a few zeros, then forget it: the first call in a
+        process loads the machine code from numba's cache (or compiles it, seconds), which must
+        not happen inside the first live block."""
+        self.process(np.zeros(self.baseband.decimation * 64))
+        peak_indices(np.zeros(3), 1, 0, 3)
+        if self.search == "two-stage":
+            one = np.zeros((1, 1), dtype=np.int64)
+            self._fine_sums(one[:, 0], one, self.fine_half, prune=True)
+            if self.coherent:
+                self._exact_windows(one[:, 0], one[:, 0], 1)
         self.reset()
 
     # ------------------------------------------------------------------ construction
@@ -754,8 +767,7 @@ class GcasReceiver:
         last = min(stop + h, self._cs_ring.next_index)
         s = np.array(self._cs_ring.span(first, last), dtype=np.float64)
         s[: max(0, self._c_valid_from - first)] = -np.inf
-        peaks = local_peaks(s, h)
-        cand_b = np.flatnonzero(peaks[lo - first : stop - first]) + lo
+        cand_b = peak_indices(s, h, lo - first, stop - first) + first
         # A candidate waits until its fine window has arrived (its shift depends on d̂).
         shift = self._c_shift[self._cd_ring.rows(cand_b)].max(axis=1)  # of d̂ and runner-up
         late = cand_b * self._B + shift + 2 * self.fine_half
@@ -875,8 +887,7 @@ class GcasReceiver:
         last = min(stop + h, self._s_ring.next_index)
         s = np.array(self._s_ring.span(first, last), dtype=np.float64)
         s[: max(0, self._valid_from - first)] = -np.inf
-        peaks = local_peaks(s, h)
-        cand = np.flatnonzero(peaks[lo - first : stop - first]) + lo
+        cand = peak_indices(s, h, lo - first, stop - first) + first
         self._det_next = stop
         if cand.size == 0:
             return []

@@ -70,6 +70,35 @@ def fir_decimate(
 
 
 @numba.njit(**_JIT)
+def peak_indices(s: Any, half_width: int, lo: int, hi: int) -> Any:
+    """Indices ``i`` in ``[lo, hi)`` that are the first maximum of ``s`` over ``±half_width``:
+    greater than every sample in the ``half_width`` before it and not smaller than any in the
+    ``half_width`` after it (samples outside ``s`` count as −inf; a plateau yields one peak).
+    ``s`` shape ``(n,)``; returns int64 indices, ascending."""
+    n = s.shape[0]
+    out = np.empty(max(hi - lo, 0), dtype=np.int64)
+    count = 0
+    for i in range(lo, hi):
+        v = s[i]
+        if not v > -math.inf:
+            continue
+        ok = True
+        for j in range(max(0, i - half_width), i):
+            if s[j] >= v:
+                ok = False
+                break
+        if ok:
+            for j in range(i + 1, min(n, i + half_width + 1)):
+                if s[j] > v:
+                    ok = False
+                    break
+        if ok:
+            out[count] = i
+            count += 1
+    return out[:count]
+
+
+@numba.njit(**_JIT)
 def coarse_search(
     y: Any,
     b_first: int,

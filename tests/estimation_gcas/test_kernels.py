@@ -1,0 +1,87 @@
+"""Compiled GCAS kernels against plain NumPy references: peaks, pruned and cached sums."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy import ndimage
+
+from hil.estimation.gcas import GcasReceiver
+from hil.estimation.kernels import peak_indices
+
+from .conftest import FS, C, att_schedule, echo_samples
+
+
+def _peaks_reference(s: np.ndarray, h: int) -> np.ndarray:
+    """First maxima over ±h with SciPy filters (the implementation the kernel replaced)."""
+    centred = ndimage.maximum_filter1d(s, size=2 * h + 1, mode="constant", cval=-np.inf)
+    before = ndimage.maximum_filter1d(s, size=h, origin=(h - 1) // 2, mode="constant", cval=-np.inf)
+    prev = np.concatenate(([-np.inf], before[:-1]))
+    return np.flatnonzero((s >= centred) & (s > prev))
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.lists(st.sampled_from([-np.inf, 0.0, 1.0, 2.0, 3.0, 2.5]), min_size=1, max_size=60),
+    st.integers(1, 6),
+)
+def test_peak_indices_equal_the_filter_reference(values: list[float], h: int) -> None:
+    s = np.array(values)
+    assert peak_indices(s, h, 0, s.shape[0]).tolist() == _peaks_reference(s, h).tolist()
+
+
+def test_peak_indices_of_a_window_are_those_of_the_whole() -> None:
+    s = np.random.default_rng(3).normal(size=500)
+    whole = peak_indices(s, 7, 0, 500)
+    part = peak_indices(s, 7, 120, 377)
+    assert part.tolist() == [i for i in whole.tolist() if 120 <= i < 377]
+
+
+def _stage_two_receiver(m_hops: int = 10) -> tuple[GcasReceiver, np.ndarray, np.ndarray]:
+    """A receiver fed an echo, with candidate centres and hypotheses of its recent blocks."""
+    schedule = att_schedule()
+    rx = GcasReceiver(
+        schedule, FS, sound_speed_mps=C, max_speed_mps=30.0, max_range_m=100.0, m_hops=m_hops
+    )
+    rx.process(echo_samples(schedule, 55.0, 9.0, 0.6, snr_db=-12.0, seed=4))
+    stop = rx._cs_ring.next_index - 20
+    cand_b = np.arange(stop - 300, stop, 10)
+    pair = rx._cd_ring.rows(cand_b)
+    pair[:, 1] = np.where(pair[:, 1] < 0, pair[:, 0], pair[:, 1])
+    centres = cand_b[:, None] * rx._B + rx._c_shift[pair]
+    return rx, centres, pair
+
+
+def test_pruned_sums_keep_every_maximum_of_the_full_sums() -> None:
+    rx, centres, pair = _stage_two_receiver()
+    w = rx.fine_half
+    full = rx._fine_sums(centres, pair, w)
+    pruned = rx._fine_sums(centres, pair, w, prune=True)
+    assert np.all(np.isfinite(full))
+    assert np.count_nonzero(np.isinf(pruned)) > pruned.size // 2  # most rows were skipped
+    evaluated = np.isfinite(pruned)
+    assert np.array_equal(pruned[evaluated], full[evaluated])
+    r = np.arange(pair.shape[0])
+    best = np.argmax(full.max(axis=(2, 3)), axis=1)
+    assert np.array_equal(best, np.argmax(pruned.max(axis=(2, 3)), axis=1))
+    a_full, a_pruned = full[r, best], pruned[r, best]  # (C, 2w + 1, J)
+    ip = np.argmax(a_full.max(axis=2), axis=1)
+    assert np.array_equal(ip, np.argmax(a_pruned.max(axis=2), axis=1))
+    for t in (ip - 1, ip, ip + 1):
+        inside = (t >= 0) & (t <= 2 * w)
+        assert np.array_equal(a_pruned[r[inside], t[inside]], a_full[r[inside], t[inside]])
+
+
+def test_cached_sums_equal_sums_from_an_empty_cache() -> None:
+    rx, centres, pair = _stage_two_receiver(m_hops=15)
+    w = rx.fine_half
+    rx._cache_n.fill(-1)
+    cold = rx._fine_sums(centres, pair, w)
+    warm = rx._fine_sums(centres, pair, w)  # every value now from the cache
+    one_by_one = []
+    rx._cache_n.fill(-1)
+    for c in range(centres.shape[0] - 1, -1, -1):  # another order: other fills
+        one_by_one.append(rx._fine_sums(centres[c : c + 1], pair[c : c + 1], w))
+    assert np.array_equal(cold, warm)
+    assert np.array_equal(cold, np.concatenate(one_by_one[::-1]))
