@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import math
 import os
 import select
 import threading
@@ -61,6 +62,17 @@ class SansIODevice(Protocol):
     def data_to_send(self) -> bytes: ...
 
     def tick(self) -> None: ...
+
+
+def poll_timeout_ms(next_tick: float, now: float) -> int:
+    """Milliseconds ``poll`` may wait for the next tick at ``next_tick`` (s, monotonic),
+    rounded up: truncating a sub-millisecond wait to ``poll(0)`` would spin a core until the
+    tick (with a 1 ms tick interval, all the time).
+
+    >>> poll_timeout_ms(10.0004, 10.0), poll_timeout_ms(10.0022, 10.0), poll_timeout_ms(9.9, 10.0)
+    (1, 3, 0)
+    """
+    return max(0, math.ceil((next_tick - now) * 1000.0))
 
 
 class PtyEndpoint:
@@ -145,8 +157,7 @@ class PtyEndpoint:
             if want_write != writing:
                 poller.modify(self._master, base | (select.POLLOUT if want_write else 0))
                 writing = want_write
-            wait_ms = max(0, int((next_tick - time.monotonic()) * 1000))
-            events = poller.poll(max(1, wait_ms) if wait_ms else 0)
+            events = poller.poll(poll_timeout_ms(next_tick, time.monotonic()))
             hung_up = False
             for _, mask in events:
                 if mask & select.POLLIN:
