@@ -6,17 +6,19 @@ every Doppler hypothesis ``d`` and tone ``k``:
     P[b, d, k] = Σ_{r<B} y[bB + r] · exp(−j2π ν[d, k] (bB + r)/fs)        (block partial sum)
     v[b, d, k] = Σ_{i<Q_d} P[b − i, d, k]          (a window of Q_d·B samples ending at bB + B − 1)
     G_d[b]     = Σ_k w[d, k] |v[b, d, k]|²
-    Acc_d[b]   = Σ_{m<M} G_d[b − round(m H_d)]          (M hops of H_d blocks each)
+    U_d[b]     = U_d[b − Q_d] + G_d[b] − G_d[b − M Q_d]             (uniform comb, O(1))
+    Acc_d[b]   = Σ_{m<M} G_d[b − round(m H_d)]                     (rounded lags)
 
-and per block the statistic ``s[b] = max_d h_d Acc_d[b]``, its hypothesis ``d̂[b]``, the
-runner-up ``d₂[b]`` (the best more than one step from ``d̂``) and, on
-every ``noise_every``-th block, the unit-correlator noise floor ``median_{d,k}(|v|² σ_d)/ln 2``
-(``σ_d`` rescales a window of ``Q_d B`` samples to the exact ``N_d``). ``H_d`` is the exact
-hop length in blocks (``L_d/B``, not an integer in general): each term's lag is rounded on its
-own, so the M terms stay aligned within half a block instead of drifting by ``m·|Q_d − H_d|``
-blocks (a uniform comb of ``Q_d`` blocks loses most of the later terms of a hypothesis whose
-``L_d/B`` is near a half-integer, which then loses to a ghost hypothesis at low SNR). The
-comb costs ``M`` adds per hypothesis and block, at the block rate. The loops are compiled
+``H_d`` is the exact hop length in blocks (``L_d/B``, not an integer in general). The uniform
+comb's terms drift by ``m·|Q_d − H_d|`` blocks (for ``L_d/B`` near a half-integer it loses most
+of its later terms, and the hypothesis then loses to a ghost at low SNR); rounding each term's
+lag on its own keeps the M terms within half a block, but costs M adds. So per block the
+uniform comb ranks all hypotheses and only the :data:`COARSE_SHORTLIST` best get the rounded
+comb (cost per block nearly independent of M). Per block: the statistic
+``s[b] = max h_d Acc_d[b]`` over the shortlist, its hypothesis ``d̂[b]``, the runner-up
+``d₂[b]`` (the best shortlisted hypothesis more than one step from ``d̂``) and, on every
+``noise_every``-th block, the unit-correlator noise floor ``median_{d,k}(|v|² σ_d)/ln 2``
+(``σ_d`` rescales a window of ``Q_d B`` samples to the exact ``N_d``). The loops are compiled
 (:func:`hil.estimation.kernels.coarse_search`); the moving sums are differences of float64
 cumulative sums. Samples before the first one after a :meth:`CoarseSearch.reset` count as
 zero, and any chunking of the input gives the same bits.
@@ -138,8 +140,14 @@ class CoarseSearch:
         if value is None:
             return np.ones(int(np.prod(shape)))
         arr = np.asarray(value, dtype=np.float64)
-        if arr.shape != shape or not np.all(np.isfinite(arr)) or np.any(arr < 0):
+        if arr.shape != shape:
             raise ConfigError(name, f"shape {arr.shape}", f"finite weights >= 0 of shape {shape}")
+        bad = ~(np.isfinite(arr) & (arr >= 0))
+        if bad.any():
+            where = tuple(int(i) for i in np.argwhere(bad)[0])
+            raise ConfigError(
+                f"{name}{list(where)}", float(arr[where]), f"finite weights >= 0 of shape {shape}"
+            )
         return np.ascontiguousarray(arr.reshape(-1))
 
     def reset(self, next_index: int = 0) -> None:

@@ -26,7 +26,6 @@ from numpy.typing import NDArray
 from scipy import stats
 
 from hil.errors import ConfigError
-from hil.estimation.kernels import peak_indices
 
 #: Independent tests per hop and codeword in the union bound of :func:`lambda_for_pfa`
 #: (measured on noise-only input; local maxima over ±N/2 leave about one candidate per hop).
@@ -93,19 +92,4 @@ def parabolic_offsets(
     ok = (den < 0) & np.isfinite(den)
     off = np.clip(0.5 * (y_minus - y_plus) / np.where(ok, den, -1.0), -1.0, 1.0)
     result: NDArray[np.float64] = np.where(ok, off, 0.0) + 0.0
-    return result
-
-
-def local_peaks(s: NDArray[np.float64], half_width: int) -> NDArray[np.bool_]:
-    """Mask of samples that are the first maximum over ``±half_width`` (shape of ``s``).
-
-    A sample qualifies if no sample within ``half_width`` before it is >= it and none after
-    it is larger, so a plateau yields one peak.
-
-    >>> local_peaks(np.array([0.0, 2.0, 2.0, 1.0, 3.0, 0.0]), 1).tolist()
-    [False, True, False, False, True, False]
-    """
-    values = np.ascontiguousarray(s, dtype=np.float64)
-    result = np.zeros(values.shape[0], dtype=np.bool_)
-    result[peak_indices(values, int(half_width), 0, values.shape[0])] = True
     return result

@@ -62,16 +62,20 @@ same estimates as one call on the whole signal):
    flag (:attr:`GcasReceiver.last_detection`, :attr:`GcasReceiver.inconsistent_count`).
 
 Searches. Steps 2–6 above are the ``search="full"`` form: every unit correlator at every
-baseband sample (the reference). The default ``search="two-stage"`` computes the same
-detections at a fraction of the cost [R]: stage 1
-(:class:`~hil.estimation.coarse_search.CoarseSearch`) runs steps 2–3 on blocks of ``B``
-baseband samples (windows of ``Q_d = round(L_d/B)`` blocks), giving the Doppler choice, the
-candidate blocks (local maxima of the coarse statistic) and the noise floor; stage 2 evaluates
-the exact sums ``A`` of step 4 (:func:`~hil.estimation.kernels.codeword_sums`, straight from
-the baseband history) within ``±(W + 1)`` samples of each candidate at ``d̂``, and at
-``d̂ ± 1`` only at the chosen peak sample for the Doppler interpolation. Thresholds and readout
-are shared. The hot loops of both stages and of the front end are compiled
-(:mod:`hil.estimation.kernels`).
+baseband sample (the reference). The default ``search="two-stage"`` [R] finds the same
+boundaries at a fraction of the cost. Stage 1 (:class:`~hil.estimation.coarse_search.CoarseSearch`)
+runs steps 2–3 on blocks of ``B`` baseband samples (windows of ``Q_d = round(L_d/B)`` blocks,
+the comb's lags rounded per term for a shortlist of hypotheses) and gives the candidate blocks
+(local maxima of the coarse statistic over ``±N_min/2``), ``d̂``, a runner-up hypothesis more
+than one step from ``d̂`` and the noise floor. Stage 2
+(:func:`~hil.estimation.kernels.codeword_sums`, straight from the baseband history, ``w·|u|²``
+cached per sample) evaluates the exact sums ``A`` of step 4 within ``±(W + 6)`` samples of
+each candidate for ``d̂`` and the runner-up (only the samples that can hold a maximum), keeps
+the one with the larger weighted maximum (the group statistic cannot tell a hypothesis from
+its ghost, every tone seen as its neighbour at another speed; the codeword sums can), moves
+the window onto a peak at its edge, and evaluates ``d ± 1`` at the peak sample for the
+Doppler interpolation. Thresholds and readout are shared. The hot loops of both stages and
+of the front end are compiled (:mod:`hil.estimation.kernels`).
 
 Latency: a boundary is reported once ``N_min/2`` baseband samples past it have arrived (plus
 the filter delay), within one hop.
@@ -118,6 +122,9 @@ SEARCH_MODES = ("full", "two-stage")
 COARSE_STEP = 8
 #: Anchor grid of the stage-2 prefix sums, baseband samples (values cached per sample).
 EXACT_ANCHOR = 16
+#: Stamp of an empty stage-2 cache slot (no sample index can equal it; −1 can, before a
+#: stream's first sample).
+NO_SAMPLE = np.iinfo(np.int64).min
 #: Times the two-stage search moves its fine window onto an edge peak, at most.
 RECENTRE_STEPS = 4
 #: Guard around every tone's reverberation band, in unit-correlator main lobes (1/T_h).
@@ -351,9 +358,12 @@ class GcasReceiver:
             reverb_speed_mps=reverb_speed_mps,
             reverb_weight=reverb_weight,
         )
-        self.bank = UnitCorrelatorBank(
-            self.fs_bb, self.grid.frequencies(tones, center), self.grid.lengths
-        )
+        # The per-sample bank of the full search (the two-stage search never builds it).
+        self.bank: UnitCorrelatorBank | None = None
+        if search == "full":
+            self.bank = UnitCorrelatorBank(
+                self.fs_bb, self.grid.frequencies(tones, center), self.grid.lengths
+            )
         d, k, m, j = self.grid.size, self.n_tones, self.m_hops, self.n_codewords
         self.reverb_speed_mps = float(reverb_speed_mps)
         self.reverb_weight = float(reverb_weight)
@@ -411,7 +421,7 @@ class GcasReceiver:
             group_delay=self.baseband.group_delay,
             fs_in=self.baseband.fs_hz,
             period=sch.period_s,
-            hop_end=(sch.t0_s + sch.start_s + sch.duration_s).astype(np.float64).tolist(),
+            hop_end=(sch.t0_s + (sch.start_s + sch.duration_s)).astype(np.float64).tolist(),
         )
         self.reset()
         self._warm_up()
@@ -419,14 +429,18 @@ class GcasReceiver:
     def _warm_up(self) -> None:
         """Run every compiled kernel once on a few zeros, then forget it: the first call in a
         process loads the machine code from numba's cache (or compiles it, seconds), which must
-        not happen inside the first live block."""
-        self.process(np.zeros(self.baseband.decimation * 64))
-        peak_indices(np.zeros(3), 1, 0, 3)
-        if self.search == "two-stage":
-            one = np.zeros((1, 1), dtype=np.int64)
-            self._fine_sums(one[:, 0], one, self.fine_half, prune=True)
-            if self.coherent:
-                self._exact_windows(one[:, 0], one[:, 0], 1)
+        not happen inside the first live block. The map callback is not called."""
+        on_map, self.on_map = self.on_map, None
+        try:
+            self.process(np.zeros(self.baseband.decimation * 64))
+            peak_indices(np.zeros(3), 1, 0, 3)
+            if self.search == "two-stage":
+                one = np.zeros((1, 1), dtype=np.int64)
+                self._fine_sums(one[:, 0], one, self.fine_half, prune=True)
+                if self.coherent:
+                    self._exact_windows(one[:, 0], one[:, 0], 1)
+        finally:
+            self.on_map = on_map
         self.reset()
 
     # ------------------------------------------------------------------ construction
@@ -523,7 +537,8 @@ class GcasReceiver:
         """Restart every accumulation at absolute input sample ``input_index``."""
         self.baseband.reset(input_index)
         b0 = self.baseband.next_output_index
-        self.bank.reset(b0)
+        if self.bank is not None:
+            self.bank.reset(b0)
         for ring in (
             self._u_ring, self._g_ring, self._acc_ring, self._s_ring, self._dhat_ring,
             self._noise_ring,
@@ -538,7 +553,7 @@ class GcasReceiver:
             for ring in (self._cs_ring, self._cd_ring, self._cn_ring):
                 ring.reset(c0)
             self._y_ring.reset(b0)
-            self._cache_n.fill(-1)
+            self._cache_n.fill(NO_SAMPLE)
             self._c_origin = c0
             self._c_valid_from = -(-self._valid_from // self._B) + 1
             self._det_next = c0
@@ -587,6 +602,7 @@ class GcasReceiver:
 
     # ------------------------------------------------------------------ stage 2
     def _stage2(self, y: NDArray[np.complex128]) -> list[Estimate]:
+        assert self.bank is not None  # built for the full search
         a0 = self.bank.next_index
         u = self.bank.process_last(y)  # (D, K, n): samples on the contiguous axis
         n = u.shape[2]
@@ -674,7 +690,7 @@ class GcasReceiver:
         self._nu_fs = self.grid.frequencies(self.tones_hz, self.center_hz) / self.fs_bb  # (D, K)
         self._table: NDArray[np.float64] | None = None
         self._phasor_table(max(2 * self.fine_half + 1, EXACT_ANCHOR))
-        # Stage-2 cache of |u|² by absolute sample (slot n mod cap, stamped with n).
+        # Stage-2 cache of w·|u|² by absolute sample (slot n mod cap, stamped with n).
         reach = (
             int(self.lags.max()) + self._n_max + 2 * self.fine_half + 2 * EXACT_ANCHOR
             + 2 * self._B
@@ -682,7 +698,8 @@ class GcasReceiver:
         cap = 1 << int(math.ceil(math.log2(2 * reach)))
         self._cache_p = np.zeros((self.grid.size, self.n_tones, cap))
         self._cache_max = np.zeros((self.grid.size, cap))
-        self._cache_n = np.full((self.grid.size, cap), -1, dtype=np.int64)
+        self._hyp_w = np.ascontiguousarray(self.grid.weights, dtype=np.float64)
+        self._cache_n = np.full((self.grid.size, cap), NO_SAMPLE, dtype=np.int64)
         code, m_idx = self.code, np.arange(m)
         self._term_tone = code[(np.arange(self.n_codewords)[None, :] - m_idx[:, None]) % code.size]
         tone_w = (
@@ -769,7 +786,7 @@ class GcasReceiver:
         s[: max(0, self._c_valid_from - first)] = -np.inf
         cand_b = peak_indices(s, h, lo - first, stop - first) + first
         # A candidate waits until its fine window has arrived (its shift depends on d̂).
-        shift = self._c_shift[self._cd_ring.rows(cand_b)].max(axis=1)  # of d̂ and runner-up
+        shift = self._c_shift[self._hypotheses(cand_b)].max(axis=1)  # of d̂ and runner-up
         late = cand_b * self._B + shift + 2 * self.fine_half
         wait = np.flatnonzero(late >= self._y_ring.next_index)
         if wait.size:
@@ -780,17 +797,27 @@ class GcasReceiver:
             return []
         return self._fine_stage(cand_b)
 
+    def _hypotheses(self, cand_b: NDArray[np.int64]) -> NDArray[np.int64]:
+        """d̂ and the runner-up of coarse blocks ``cand_b`` (shape ``(C, 2)``; d̂ twice where
+        no runner-up was found)."""
+        pair: NDArray[np.int64] = self._cd_ring.rows(cand_b)
+        pair[:, 1] = np.where(pair[:, 1] < 0, pair[:, 0], pair[:, 1])
+        return pair
+
     def _fine_stage(self, cand_b: NDArray[np.int64]) -> list[Estimate]:
         """Stage 2: exact codeword sums around the coarse candidate blocks ``cand_b``."""
-        pair = self._cd_ring.rows(cand_b)  # (C, 2): d̂ and the runner-up
-        pair[:, 1] = np.where(pair[:, 1] < 0, pair[:, 0], pair[:, 1])
+        pair = self._hypotheses(cand_b)  # (C, 2): d̂ and the runner-up
         centres = cand_b[:, None] * self._B + self._c_shift[pair]
         w = self.fine_half
         # The hypothesis is the better of the two by the exact sums: the group statistic
         # cannot tell a hypothesis from its ghost (every tone seen as its neighbour at another
         # speed), the codeword sums can.
         a2 = self._fine_sums(centres, pair, w, prune=True)  # (C, 2, 2w + 1, J)
-        pick = np.argmax(a2.max(axis=(2, 3)), axis=1)
+        # Weighted as stage 1 ranks them (the reverberation band's weights); a hypothesis
+        # pruned whole (−inf) cannot win, even at weight 0.
+        best = a2.max(axis=(2, 3))
+        score = np.where(np.isfinite(best), best * self._hyp_w[pair], -np.inf)
+        pick = np.argmax(score, axis=1)
         r = np.arange(cand_b.shape[0])
         d0, centre, a = pair[r, pick], centres[r, pick], a2[r, pick]  # a: (C, 2w + 1, J)
         # A peak on the window's edge lies outside it (early in the stream the coarse comb
@@ -827,7 +854,7 @@ class GcasReceiver:
             np.ascontiguousarray(np.broadcast_to(centre.reshape(dset.shape[0], -1), dset.shape)),
             np.ascontiguousarray(dset, dtype=np.int64), half, self.lags, self.grid.lengths,
             self._phasor_table(EXACT_ANCHOR), self._term_tone, self._cell_w, EXACT_ANCHOR,
-            self._cache_p, self._cache_max, self._cache_n, self._B, prune, out,
+            self._cache_p, self._cache_max, self._cache_n, self._B, self._hyp_w, prune, out,
         )  # fmt: skip
         return out
 

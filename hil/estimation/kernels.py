@@ -359,6 +359,7 @@ def codeword_sums(
     cache_max: Any,
     cache_n: Any,
     margin: int,
+    hyp_w: Any,
     prune: bool,
     out: Any,
 ) -> None:
@@ -382,11 +383,11 @@ def codeword_sums(
     (shape ``(D, ·, K, 2)``).
 
     With ``prune`` the sums of a sample ``t`` are formed only while its bound
-    ``Σ_m max_k w|u|²`` (>= the sum of every codeword) is at least the best sum found so far
-    for this candidate (over this and earlier hypotheses of ``dset[c]``); the others are left
-    at −inf. The maximum over ``(i, t, j)``, every hypothesis's maximum that could be the
-    overall one, its sample and the neighbouring samples' rows are then exactly those of the
-    unpruned sums.
+    ``Σ_m max_k w|u|²`` (>= the sum of every codeword) could still hold this hypothesis's
+    maximum or, weighted by ``hyp_w[d]`` (shape ``(D,)``), beat the weighted maximum of an
+    earlier hypothesis of ``dset[c]``; the others are left at −inf. The weighted maximum over
+    ``(i, t, j)``, every hypothesis's maximum that could be it, its sample and the neighbouring
+    samples' rows are then exactly those of the unpruned sums.
     """
     n_cand, n_sets = dset.shape
     width = 2 * half + 1
@@ -466,7 +467,7 @@ def codeword_sums(
             best_i = -math.inf
             i_pk = -1
             for t in np.argsort(-bound, kind="mergesort"):
-                if prune and bound[t] < max(best_c, best_i):
+                if prune and (bound[t] * hyp_w[d] < best_c or bound[t] < best_i):
                     break
                 v = _codeword_row(c, i, t, half, d, centre, lags, term_tone, cache_p, mask,
                                   late, late_p, vals, out[c, i, t])  # fmt: skip
@@ -479,7 +480,7 @@ def codeword_sums(
                 if i_pk >= 0 and 0 <= t < width and not done[t]:
                     _codeword_row(c, i, t, half, d, centre, lags, term_tone, cache_p, mask,
                                   late, late_p, vals, out[c, i, t])  # fmt: skip
-            best_c = max(best_c, best_i)
+            best_c = max(best_c, best_i * hyp_w[d])
 
 
 @numba.njit(**_JIT)

@@ -154,7 +154,7 @@ def test_coarse_search_counts_samples_before_the_start_as_zero() -> None:
         ({"m_hops": 0}, r"m_hops = 0 .*integer >= 1"),
         ({"noise_every": 0}, r"noise_every = 0 .*integer >= 1"),
         ({"cell_weights": np.ones((2, 1))}, r"cell_weights = 'shape \(2, 1\)' .*shape \(1, 1\)"),
-        ({"hyp_weights": [-1.0]}, r"hyp_weights = 'shape \(1,\)' .*finite weights >= 0"),
+        ({"hyp_weights": [-1.0]}, r"hyp_weights\[0\] = -1\.0 .*finite weights >= 0 of shape"),
         ({"hop_blocks": [0.5]}, r"hop_blocks = \[0\.5\] .*1 finite lengths >= 1 block"),
     ],
 )

@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import ndimage
 
-from hil.estimation.gcas import GcasReceiver
+from hil.estimation.gcas import NO_SAMPLE, GcasReceiver
 from hil.estimation.kernels import peak_indices
 
 from .conftest import FS, C, att_schedule, echo_samples
@@ -76,12 +76,59 @@ def test_pruned_sums_keep_every_maximum_of_the_full_sums() -> None:
 def test_cached_sums_equal_sums_from_an_empty_cache() -> None:
     rx, centres, pair = _stage_two_receiver(m_hops=15)
     w = rx.fine_half
-    rx._cache_n.fill(-1)
+    rx._cache_n.fill(NO_SAMPLE)
     cold = rx._fine_sums(centres, pair, w)
     warm = rx._fine_sums(centres, pair, w)  # every value now from the cache
     one_by_one = []
-    rx._cache_n.fill(-1)
+    rx._cache_n.fill(NO_SAMPLE)
     for c in range(centres.shape[0] - 1, -1, -1):  # another order: other fills
         one_by_one.append(rx._fine_sums(centres[c : c + 1], pair[c : c + 1], w))
     assert np.array_equal(cold, warm)
     assert np.array_equal(cold, np.concatenate(one_by_one[::-1]))
+
+
+def test_samples_not_yet_received_are_never_cached() -> None:
+    rx, _, _ = _stage_two_receiver()
+    newest = rx._y_ring.next_index
+    w = rx.fine_half
+    centre = np.array([newest - 3, newest - 40])  # windows running past the newest sample
+    dset = np.array([[5, 9], [5, 9]])
+    late = rx._fine_sums(centre, dset, w)
+    stamped = rx._cache_n[rx._cache_n != NO_SAMPLE]
+    assert stamped.size > 0 and stamped.max() < newest
+    # Rows whose samples had all arrived equal those of a receiver that has seen more.
+    more, _, _ = _stage_two_receiver()
+    more.process(np.zeros(2000))
+    more._cache_n.fill(NO_SAMPLE)
+    ahead = more._fine_sums(centre, dset, w)
+    arrived = centre[:, None] - w + np.arange(2 * w + 1)[None, :] < newest  # (2, 2w + 1)
+    for c in range(2):
+        assert np.array_equal(late[c][:, arrived[c]], ahead[c][:, arrived[c]])
+
+
+def test_a_reset_receiver_equals_a_fresh_one() -> None:
+    schedule = att_schedule()
+    x = echo_samples(schedule, 40.0, -6.0, 0.4, snr_db=-5.0, seed=7)
+
+    def build() -> GcasReceiver:
+        return GcasReceiver(
+            schedule, FS, sound_speed_mps=C, max_speed_mps=30.0, max_range_m=100.0, m_hops=10
+        )
+
+    used = build()
+    used.process(echo_samples(schedule, 70.0, 20.0, 0.4, snr_db=10.0, seed=8))
+    used.reset()
+    fresh = build()
+    first = used.process(x) + used.flush()
+    assert first == fresh.process(x) + fresh.flush() and len(first) > 10
+
+
+def test_building_a_receiver_does_not_call_the_map() -> None:
+    calls: list[int] = []
+    rx = GcasReceiver(
+        att_schedule(), FS, sound_speed_mps=C, max_speed_mps=30.0, max_range_m=100.0,
+        m_hops=10, on_map=lambda t, p, v: calls.append(t.shape[0]),
+    )  # fmt: skip
+    assert calls == []
+    rx.process(np.zeros(12_000))
+    assert sum(calls) == 1000  # 12 000 input samples at R = 12
