@@ -44,7 +44,6 @@ from __future__ import annotations
 
 import contextlib
 import errno
-import math
 import os
 import select
 import threading
@@ -64,15 +63,15 @@ class SansIODevice(Protocol):
     def tick(self) -> None: ...
 
 
-def poll_timeout_ms(next_tick: float, now: float) -> int:
-    """Milliseconds ``poll`` may wait for the next tick at ``next_tick`` (s, monotonic),
-    rounded up: truncating a sub-millisecond wait to ``poll(0)`` would spin a core until the
-    tick (with a 1 ms tick interval, all the time).
+def tick_wait_s(next_tick: float, now: float) -> float:
+    """Seconds the pump may sleep before the tick due at ``next_tick`` (s, monotonic): the
+    exact remainder, never rounded down to zero while the tick is still ahead (a pump that
+    waited zero would spin a core until the tick).
 
-    >>> poll_timeout_ms(10.0004, 10.0), poll_timeout_ms(10.0022, 10.0), poll_timeout_ms(9.9, 10.0)
-    (1, 3, 0)
+    >>> tick_wait_s(10.0004, 10.0) > 0, tick_wait_s(9.9, 10.0)
+    (True, 0.0)
     """
-    return max(0, math.ceil((next_tick - now) * 1000.0))
+    return max(0.0, next_tick - now)
 
 
 class PtyEndpoint:
@@ -144,26 +143,24 @@ class PtyEndpoint:
 
     def _loop(self) -> None:
         # The device ticks every poll_interval; output is written whenever the pty can take
-        # it. Waiting for POLLOUT matters: a pty buffer holds only a few KB, so a loop that
+        # it. Waiting for writability matters: a pty buffer holds only a few KB, so a loop that
         # waited for host input or the next tick before writing again would cap the stream
-        # at one buffer per tick.
-        poller = select.poll()
-        base = select.POLLIN | select.POLLHUP | select.POLLERR
-        poller.register(self._master, base)
-        writing = False
+        # at one buffer per tick. select, not poll: its timeout has microsecond resolution,
+        # so the pump sleeps exactly until the next tick (poll's milliseconds either spin
+        # through the last one or tick up to a millisecond late, which starved the DAC FIFO).
+        fd = self._master
         next_tick = time.monotonic()
         while not self._stop.is_set():
-            want_write = bool(self._pending)
-            if want_write != writing:
-                poller.modify(self._master, base | (select.POLLOUT if want_write else 0))
-                writing = want_write
-            events = poller.poll(poll_timeout_ms(next_tick, time.monotonic()))
+            writers = [fd] if self._pending else []
+            readable, _, broken = select.select(
+                [fd], writers, [fd], tick_wait_s(next_tick, time.monotonic())
+            )
             hung_up = False
-            for _, mask in events:
-                if mask & select.POLLIN:
-                    hung_up |= self._read()
-                if mask & (select.POLLHUP | select.POLLERR):
-                    hung_up = True
+            if readable:
+                # A master whose slave is closed reads as ready and then fails with EIO.
+                hung_up |= self._read()
+            if broken:
+                hung_up = True
             self._set_host_present(not hung_up)
             now = time.monotonic()
             if now >= next_tick:
