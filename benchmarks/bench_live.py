@@ -115,15 +115,31 @@ def _host_cpu_s() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
-def _process_cpu_s(pid: int) -> float:
+def _process_cpu_s(pid: int, stat: str = "/proc/{pid}/stat") -> float:
     """User+system CPU seconds of process ``pid`` (Linux /proc; NaN elsewhere)."""
     try:
-        with open(f"/proc/{pid}/stat") as fh:
+        with open(stat.format(pid=pid)) as fh:
             fields = fh.read().rsplit(")", 1)[1].split()
     except OSError:
         return float("nan")
     # Fields 14 and 15 of stat(5) (utime, stime), counted after the ")" that ends comm.
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _thread_cpu_s(native_id: int | None) -> float:
+    """User+system CPU seconds of this process's thread ``native_id`` (Linux /proc; NaN
+    elsewhere or when the thread is gone)."""
+    if native_id is None:
+        return float("nan")
+    return _process_cpu_s(native_id, "/proc/self/task/{pid}/stat")
+
+
+def _board_thread_ids(board: Any) -> dict[str, int | None]:
+    """Native thread ids of the board driver's reader and writer threads."""
+    return {
+        name: getattr(getattr(board, attr, None), "native_id", None)
+        for name, attr in (("reader", "_reader"), ("writer", "_writer"))
+    }
 
 
 @dataclass
@@ -195,7 +211,7 @@ def run_live(seconds: float, min_block_s: float, profile: bool = False) -> dict[
         settings = BoardSettings(sample_rate_hz=FS_HZ, dac_channels=1, adc_channels=ADC_CHANNELS)
         with Board(port, settings=settings, ring_seconds=RING_SECONDS) as board:
             board.configure()
-            start = board.start(synth.blocks(4096))
+            start = board.start(synth.blocks(1 << 15))
             # The DAC plays schedule sample 0 at board index `start`, so that is the
             # receiver's sample 0 (the echo delay is the target's range, not latency).
             feed = ReceiverFeed(receiver, origin=start, channel=0, scale=INT16_SCALE)
@@ -219,6 +235,8 @@ def run_live(seconds: float, min_block_s: float, profile: bool = False) -> dict[
             wait_max = 0.0
             if profiler is not None:
                 profiler.enable()
+            threads = _board_thread_ids(board)
+            thread0 = {name: _thread_cpu_s(tid) for name, tid in threads.items()}
             wall0, cpu0, main0 = time.monotonic(), _host_cpu_s(), time.thread_time()
             server_cpu0 = _process_cpu_s(server.pid)
             while next_index < end_target:
@@ -257,6 +275,7 @@ def run_live(seconds: float, min_block_s: float, profile: bool = False) -> dict[
             cpu = _host_cpu_s() - cpu0
             main_cpu = time.thread_time() - main0
             server_cpu = _process_cpu_s(server.pid) - server_cpu0
+            thread_cpu = {name: _thread_cpu_s(tid) - thread0[name] for name, tid in threads.items()}
             if profiler is not None:
                 profiler.disable()
             board_now = board.board_index_now()
@@ -306,6 +325,8 @@ def run_live(seconds: float, min_block_s: float, profile: bool = False) -> dict[
         "main_thread_cores": round(main_cpu / wall, 3),
         "gcas_cores": round(gcas_cpu / wall, 3),
         "board_threads_cores": round((cpu - main_cpu) / wall, 3),
+        "reader_thread_cores": round(thread_cpu["reader"] / wall, 3),
+        "writer_thread_cores": round(thread_cpu["writer"] / wall, 3),
         "sim_board_process_cores": round(server_cpu / wall, 3),
         "feed_call_median_ms": round(float(np.median(feed_wall)) * 1e3, 3),
         "feed_call_p99_ms": round(float(np.percentile(feed_wall, 99)) * 1e3, 3),
@@ -365,7 +386,11 @@ def print_table(r: dict[str, Any]) -> None:
         ),
         ("  main thread", f"{r['main_thread_cores']:.3f} cores (capture loop + GCAS)"),
         ("  GCAS alone", f"{r['gcas_cores']:.3f} cores"),
-        ("  board threads", f"{r['board_threads_cores']:.3f} cores (reader + writer)"),
+        (
+            "  board threads",
+            f"{r['board_threads_cores']:.3f} cores (reader {r['reader_thread_cores']:.3f},"
+            f" writer {r['writer_thread_cores']:.3f})",
+        ),
         ("  (sim board)", f"{r['sim_board_process_cores']:.3f} cores, other process, not counted"),
         (
             "feed call",

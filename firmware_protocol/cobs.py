@@ -6,17 +6,33 @@ except a block with code 0xFF and the last block. The encoder follows the canoni
 Wikipedia's examples (254 non-zero bytes at the end encode as ``FF`` + data, without a
 trailing ``01``).
 
-Both directions avoid per-byte Python loops: the encoder splits at zero bytes with
-``bytes.split`` (or places code bytes with numpy when zeros are dense); the decoder walks the
-block chain one block at a time (a slice per block) and switches to a vectorised
-pointer-doubling walk with numpy when blocks are short (zero-dense data such as silence).
+Both directions avoid per-byte Python loops. Frames of at least :data:`COMPILED_MIN_BYTES`
+(sample data) go through the compiled one-pass loops of
+:mod:`firmware_protocol.cobs_kernels` (numba) when numba is installed. Otherwise the encoder
+splits at zero bytes with ``bytes.split`` (or places code bytes with numpy when zeros are
+dense), and the decoder walks the block chain one block at a time (a slice per block),
+switching to a vectorised pointer-doubling walk with numpy when blocks are short (zero-dense
+data such as silence). All paths give the same bytes (tested against each other).
 """
 
 from __future__ import annotations
 
+from types import ModuleType
+
 import numpy as np
 
 from firmware_protocol.errors import RemoteProtocolError
+
+try:  # numba is a runtime dependency of the testbench, not of the protocol itself
+    from firmware_protocol import cobs_kernels as _kernels
+
+    kernels: ModuleType | None = _kernels
+except ImportError:  # pragma: no cover - exercised only where numba is missing
+    kernels = None
+
+# From this many bytes on, the compiled loop beats the pure-Python paths (its call costs a
+# few microseconds of argument conversion).
+COMPILED_MIN_BYTES = 256
 
 # Below this many zero bytes the per-block loop beats numpy's fixed call overhead.
 _DENSE_ZEROS = 48
@@ -26,6 +42,14 @@ _PROBE_BLOCKS = 24
 _SHORT_BLOCK = 40
 # Fewest remaining bytes worth the numpy walk's fixed cost.
 _NUMPY_TAIL = 512
+
+
+def warm_up() -> None:
+    """Load the compiled loops now (a no-op without numba): their first call in a process
+    loads machine code from numba's cache (or compiles it on a fresh checkout, about a
+    second), which a driver does before streaming rather than inside its first frame."""
+    if kernels is not None:
+        kernels.warm_up()
 
 
 class CobsDecodeError(RemoteProtocolError):
@@ -42,11 +66,25 @@ def encode(data: bytes) -> bytes:
     >>> encode(b"").hex(" ")
     '01'
     """
+    if kernels is not None and len(data) >= COMPILED_MIN_BYTES:
+        return _encode_compiled(data)
+    return _encode_pure(data)
+
+
+def _encode_pure(data: bytes) -> bytes:
+    """:func:`encode` without the compiled loop (where numba is missing; tests)."""
     if data.count(0) >= _DENSE_ZEROS:
         dense = _encode_dense(data)
         if dense is not None:
             return dense
     return _encode_pieces(data)
+
+
+def _encode_compiled(data: bytes | bytearray) -> bytes:
+    assert kernels is not None
+    src = np.frombuffer(data, dtype=np.uint8)
+    dst = np.empty(src.size + src.size // 254 + 1, dtype=np.uint8)
+    return dst[: kernels.encode_into(src, dst)].tobytes()
 
 
 def _encode_pieces(data: bytes) -> bytes:
@@ -105,6 +143,29 @@ def decode(encoded: bytes | bytearray) -> bytes:
         raise CobsDecodeError("empty COBS frame")
     if encoded.find(0) >= 0:
         raise CobsDecodeError(f"0x00 inside a COBS frame at offset {encoded.find(0)}")
+    if kernels is not None and n >= COMPILED_MIN_BYTES:
+        return _decode_compiled(encoded)
+    return _decode_pure(encoded)
+
+
+def _decode_compiled(encoded: bytes | bytearray) -> bytes:
+    assert kernels is not None
+    src = np.frombuffer(encoded, dtype=np.uint8)
+    dst = np.empty(src.size, dtype=np.uint8)
+    m = kernels.decode_into(src, dst)
+    if m < 0:
+        i = -m - 1
+        code = int(src[i])
+        raise CobsDecodeError(
+            f"COBS block at offset {i} (code 0x{code:02x}) runs {i + code - src.size} bytes"
+            f" past the end of the {src.size}-byte frame"
+        )
+    return dst[:m].tobytes()
+
+
+def _decode_pure(encoded: bytes | bytearray) -> bytes:
+    """:func:`decode` without the compiled loop (where numba is missing; tests)."""
+    n = len(encoded)
     out = bytearray()
     i = 0
     blocks = 0

@@ -65,6 +65,7 @@ from firmware_protocol import (
     UnknownMessage,
     Version,
     channel_count,
+    cobs,
 )
 from hil.acquisition import (
     Annotation,
@@ -247,6 +248,8 @@ class Board:
 
         self._lock = threading.RLock()
         self._cond = threading.Condition(self._lock)
+        self._write_lock = threading.Lock()  # held by the one thread writing (see _flush)
+        self._outgoing = bytearray()  # encoded frames not yet written, in sequence order
         self._transport: Transport | None = None
         self._conn = Connection(Role.HOST)
         self._replies: dict[int, Ack | Nak] = {}
@@ -301,6 +304,7 @@ class Board:
     def open(self) -> Board:
         """Open the transport, handshake, and start the reader and writer threads."""
         self._thread_error = None
+        cobs.warm_up()  # not inside the first ADC frame
         try:
             self._handshake(self._open_transport(first=True))
         except BaseException:
@@ -382,11 +386,38 @@ class Board:
     # ------------------------------------------------------------------ sending
     def _send(self, message: Message) -> None:
         with self._lock:
-            transport = self._transport
-            if transport is None:
+            if self._transport is None:
                 raise TransportClosedError(f"{self.url}: not connected")
-            wire = self._conn.send(message)
-            transport.write(wire)
+            self._outgoing += self._conn.send(message)
+        self._flush()
+
+    def _flush(self) -> None:
+        """Write the queued frames in sequence order, without holding the session lock.
+
+        Frames are encoded (sequence numbers, credit) under the lock and queued; the write,
+        which blocks while the link is full (a 64 KB DAC burst: milliseconds), happens
+        outside it, so the reader keeps taking ADC data meanwhile. One thread writes at a
+        time and keeps writing until the queue is empty; a sender that finds a write in
+        progress leaves its bytes to that thread. The write lock is released under the
+        session lock once the queue is seen empty, so no queued byte is ever left behind.
+        """
+        if not self._write_lock.acquire(blocking=False):
+            return
+        held = True
+        try:
+            while True:
+                with self._lock:
+                    data = bytes(self._outgoing)
+                    self._outgoing.clear()
+                    transport = self._transport
+                    if not data or transport is None:
+                        self._write_lock.release()
+                        held = False
+                        return
+                transport.write(data)
+        finally:
+            if held:
+                self._write_lock.release()
 
     def _wait(self, done: Callable[[], bool], timeout_s: float, what: str) -> None:
         """Wait until ``done()``; pump the link ourselves if no reader thread runs.
@@ -434,6 +465,7 @@ class Board:
         with self._lock:  # the writer thread must never see a half-replaced session
             self._transport = transport
             self._conn = Connection(Role.HOST)
+            self._outgoing.clear()  # frames of the old session must not reach the new one
             self._refusal = None
             self._link_up = True
             self._send(self._conn.make_hello())
@@ -565,6 +597,11 @@ class Board:
             return True
         with self._cond:
             self._conn.receive_data(data)
+            # Only what a waiter on the condition can be waiting for (credit, replies, SYNC,
+            # status, errors) wakes it: ADC data has the ring's own condition, and waking
+            # the writer for every read (about 1000 a second at 4 MB/s) cost more CPU than
+            # the data itself.
+            wake = False
             while True:
                 try:
                     event = self._conn.next_event()
@@ -581,8 +618,13 @@ class Board:
                 if isinstance(event, ConnectionClosed):
                     self._link_lost("the board closed the session")
                     return False
+                if isinstance(event, AdcData):
+                    self._on_adc(event)
+                    continue
+                wake = True
                 self._handle(event)
-            self._cond.notify_all()
+            if wake:
+                self._cond.notify_all()
         return True
 
     def _annotate(
@@ -707,15 +749,14 @@ class Board:
             ):
                 feeder.put_back(np.concatenate(blocks))
                 return False
-            wire = bytearray()
             for block in blocks:
                 message = DacData.from_array(feeder.next_index, mask, fmt, block)
-                wire += self._conn.send(message)
+                self._outgoing += self._conn.send(message)
                 feeder.next_index += block.shape[0]
-            # One write per burst: fewer system calls and lock hand-overs at 4 MB/s.
-            transport.write(bytes(wire))
             self.dac_samples_sent += needed
             self._cond.notify_all()
+        # One write per burst: fewer system calls and lock hand-overs at 4 MB/s.
+        self._flush()
         return True
 
     def _keepalive_if_due(self) -> None:

@@ -849,9 +849,13 @@ class GcasReceiver:
         ring = self._y_ring
         width = 2 * half + 1
         out = np.empty((centre.shape[0], dset.shape[1], width, self.n_codewords))
+        # A fresh writable array every time: a read-only view (what broadcasting gives when
+        # no copy is needed) is another numba signature, loaded mid-stream on first use.
+        centres = np.empty(dset.shape, dtype=np.int64)
+        centres[...] = centre.reshape(dset.shape[0], -1)
         codeword_sums(
             ring.array[: ring.available], ring.next_index - ring.available, ring.next_index,
-            np.ascontiguousarray(np.broadcast_to(centre.reshape(dset.shape[0], -1), dset.shape)),
+            centres,
             np.ascontiguousarray(dset, dtype=np.int64), half, self.lags, self.grid.lengths,
             self._phasor_table(EXACT_ANCHOR), self._term_tone, self._cell_w, EXACT_ANCHOR,
             self._cache_p, self._cache_max, self._cache_n, self._B, self._hyp_w, prune, out,

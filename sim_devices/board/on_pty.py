@@ -18,6 +18,7 @@ from collections.abc import Callable
 from types import TracebackType
 from typing import TypeVar
 
+from firmware_protocol import cobs
 from sim_devices.board.core import SimulatedBoard
 from sim_devices.board.faults import FaultPlan
 from sim_devices.board.spec import BoardSpec
@@ -60,6 +61,7 @@ class SimulatedBoardOnPty:
 
     def start(self) -> SimulatedBoardOnPty:
         """Start serving (returns self)."""
+        cobs.warm_up()  # the pump thread must not stall in its first ADC frame
         self.endpoint.start()
         return self
 

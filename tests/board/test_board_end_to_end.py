@@ -5,6 +5,7 @@ injected clock that the test advances (no wall-clock pacing, no timed assertions
 from __future__ import annotations
 
 import math
+import threading
 import time
 from collections.abc import Callable
 
@@ -272,3 +273,63 @@ def test_callable_source_is_asked_for_consecutive_samples() -> None:
     starts = [c[0] for c in calls]
     assert starts[0] == first
     assert all(b == a + n_a for (a, n_a), b in zip(calls, starts[1:], strict=False))
+
+
+class GatedWrites:
+    """A transport whose next write of ``size`` bytes or more, once armed, blocks until the
+    test releases it (a link that cannot take a DAC burst for a while)."""
+
+    def __init__(self, inner: MemoryBoardLink, size: int) -> None:
+        self.inner, self.size = inner, size
+        self.url, self.timeout = inner.url, inner.timeout
+        self.armed = False
+        self.blocked = threading.Event()
+        self.release = threading.Event()
+
+    def read(self, size: int) -> bytes:
+        return self.inner.read(size)
+
+    def write(self, data: bytes) -> int:
+        if self.armed and len(data) >= self.size:
+            self.armed = False
+            self.blocked.set()
+            assert self.release.wait(WAIT_S), "the test never released the write"
+        return self.inner.write(data)
+
+    def close(self) -> None:
+        self.release.set()
+        self.inner.close()
+
+
+def test_adc_data_keeps_flowing_while_a_dac_write_blocks() -> None:
+    """A DAC burst that blocks in the transport must not stop the reader: frames are encoded
+    under the session lock but written outside it (regression: the write held the lock the
+    reader needs, so every full link stalled ADC capture, by up to 24 ms at 1 MS/s)."""
+    clock = ManualClock()
+    port, link = _memory_board(clock)
+    gate = GatedWrites(link, 8192)
+    with Board(gate, clock=clock, keepalive_ms=None) as board:  # type: ignore[arg-type]
+        board.configure()
+        first = board.start(tank_board_synth().blocks(4096))
+        level = lambda: port.call(lambda b: b.snapshot().dac_buffer_level)  # noqa: E731
+        stream_for(board, clock, 0.25, dac_level=level)
+        gate.armed = True
+        # The board grants credit as its FIFO drains; the writer's next burst blocks.
+        while not gate.blocked.is_set():
+            stream_for(board, clock, 0.01)
+            assert clock.now() < 5.0, "no DAC burst was written"
+        before = board.ring.end_index if board.ring else None
+        assert before is not None
+        end = stream_for(board, clock, 0.1)  # fails in wait_for_samples if the reader stalls
+        assert board.ring is not None and board.ring.end_index >= end >= before + 90_000
+        sent_while_blocked = board.dac_samples_sent
+        gate.release.set()
+        # The queued burst and everything after it reach the board in order.
+        wait_until(
+            lambda: port.call(lambda b: b.dac_samples_received) >= sent_while_blocked,
+            "the queued DAC frames",
+        )
+        assert board.protocol_stats["sequence_gaps"] == 0
+        assert port.call(lambda b: b.conn.stats.sequence_gaps) == 0
+        board.stop()
+    assert first < before

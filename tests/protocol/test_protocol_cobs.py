@@ -63,6 +63,44 @@ def test_cobs_round_trip_and_no_zero(data: bytes) -> None:
     assert reference_decode(encoded) == data
 
 
+def _zero_rich_bytes() -> st.SearchStrategy[bytes]:
+    """Bytes with runs of zeros and of 253–256 non-zero bytes: every block-boundary case."""
+    piece = st.one_of(
+        st.binary(max_size=40),
+        st.integers(0, 30).map(lambda n: b"\x00" * n),
+        st.integers(250, 260).map(lambda n: bytes([7]) * n),
+    )
+    return st.lists(piece, max_size=30).map(b"".join)
+
+
+@settings(max_examples=300, deadline=None)
+@given(_zero_rich_bytes())
+def test_cobs_compiled_loops_give_the_pure_bytes(data: bytes) -> None:
+    pure = cobs._encode_pure(data)
+    assert cobs._encode_compiled(data) == pure
+    assert cobs._decode_compiled(pure) == cobs._decode_pure(pure) == data
+
+
+def test_cobs_compiled_path_is_taken_from_its_threshold() -> None:
+    assert cobs.kernels is not None  # numba is a runtime dependency
+    calls: list[int] = []
+    real = cobs.kernels.decode_into
+
+    def spy(src: np.ndarray, dst: np.ndarray) -> int:
+        calls.append(src.size)
+        return int(real(src, dst))
+
+    n = cobs.COMPILED_MIN_BYTES
+    small, large = cobs.encode(b"\x05" * (n - 10)), cobs.encode(b"\x00\x05" * n)
+    try:
+        cobs.kernels.decode_into = spy  # type: ignore[assignment]
+        assert cobs.decode(small) == b"\x05" * (n - 10)
+        assert cobs.decode(large) == b"\x00\x05" * n
+    finally:
+        cobs.kernels.decode_into = real  # type: ignore[assignment]
+    assert calls == [len(large)]
+
+
 @pytest.mark.parametrize("zero_fraction", [0.0, 0.01, 0.3, 0.9, 1.0])
 def test_cobs_dense_and_sparse_paths_agree_with_the_oracle(zero_fraction: float) -> None:
     rng = np.random.default_rng(11)
@@ -71,15 +109,16 @@ def test_cobs_dense_and_sparse_paths_agree_with_the_oracle(zero_fraction: float)
         values[rng.random(n) < zero_fraction] = 0
         data = values.astype(np.uint8).tobytes()
         encoded = cobs.encode(data)
-        assert encoded == cobs._encode_pieces(data)
+        assert encoded == cobs._encode_pieces(data) == cobs._encode_pure(data)
         assert cobs.decode(encoded) == data == reference_decode(encoded)
+        assert cobs._decode_pure(encoded) == data
 
 
 def test_cobs_numpy_tail_walk_handles_0xff_blocks_after_short_ones() -> None:
     # Many zeros first (switches to the numpy walk), then long runs (0xFF blocks).
     data = b"\x00\x05" * 400 + bytes(range(1, 256)) * 3 + b"\x00" + b"\x07" * 600
     encoded = cobs.encode(data)
-    assert cobs.decode(encoded) == data == reference_decode(encoded)
+    assert cobs._decode_pure(encoded) == data == reference_decode(encoded)
 
 
 def test_cobs_decode_errors_name_the_problem() -> None:
@@ -89,7 +128,10 @@ def test_cobs_decode_errors_name_the_problem() -> None:
         cobs.decode(b"\x02\x00")
     with pytest.raises(cobs.CobsDecodeError, match=r"offset 2 \(code 0x09\) runs 6 bytes past"):
         cobs.decode(b"\x02\x11\x09\x01\x01")
-    # Long enough and zero-dense, so the numpy walk finds the overrunning block.
+    # Long and zero-dense: the compiled loop and the numpy walk find the overrunning block.
     truncated = cobs.encode(b"\x00\x01" * 800) + b"\x40"
-    with pytest.raises(cobs.CobsDecodeError, match=r"\(code 0x40\) runs 63 bytes past the end"):
+    message = r"offset 1601 \(code 0x40\) runs 63 bytes past the end of the 1602-byte frame"
+    with pytest.raises(cobs.CobsDecodeError, match=message):
         cobs.decode(truncated)
+    with pytest.raises(cobs.CobsDecodeError, match=message):
+        cobs._decode_pure(truncated)
