@@ -26,6 +26,13 @@ Figures (over the ``--seconds`` of streaming, default 30):
   capture loop saw its boundary's sample in the ring (board index ``origin + t_s·fs``; each
   sample gets the time of the first wait that returned with it held, so a backlog counts);
   median, 99th percentile and max, in hops, and how many estimates took longer than one hop;
+- its two parts: waiting, from the boundary's arrival until the samples of the block that
+  emitted the estimate were seen (the receiver's look-ahead past the boundary, about half a
+  hop for GCAS, plus any stall of the stream meanwhile), and the feed call itself; both also
+  for the estimates that took longer than one hop;
+- stream lateness: when the capture loop saw each block's newest sample, against the board's
+  clock on the host's time axis (the SYNC fit moved to its earliest pair): a stall anywhere
+  upstream of the receiver (simulated board, pty, reader thread) shows here;
 - estimates per second and how many are at the echo's range.
 
 Targets: host CPU < 0.5 core, latency <= 1 hop (max), keeps up (no missing samples, backlog
@@ -142,6 +149,29 @@ def _board_thread_ids(board: Any) -> dict[str, int | None]:
     }
 
 
+def _ms(x: npt.NDArray[np.float64], percentile: float) -> float | None:
+    """A percentile of ``x`` (s) in ms, rounded; None when ``x`` holds no finite value."""
+    x = x[np.isfinite(x)]
+    return round(float(np.percentile(x, percentile)) * 1e3, 3) if x.size else None
+
+
+def _stream_lateness_s(board: Any, arrivals: Arrivals) -> npt.NDArray[np.float64]:
+    """How late each block's newest sample was seen, against the board's clock (s).
+
+    The board clock on the host's time axis is the SYNC fit moved down to its earliest pair
+    (the fastest delivery seen), so 0 is "as early as the link ever delivered" and a stall
+    anywhere upstream of the capture loop (simulated board, pty, reader thread) shows as
+    lateness. Empty without SYNC pairs.
+    """
+    fit = board.clock_fit
+    if fit is None or fit.pairs < 2 or not arrivals.ends:
+        return np.zeros(0)
+    floor = float(np.min(fit.residuals_s()))
+    ends = np.asarray(arrivals.ends, dtype=np.float64)
+    on_time = np.array([fit.host_time(e - 1) for e in ends]) + floor
+    return np.asarray(arrivals.times) - on_time
+
+
 @dataclass
 class Arrivals:
     """When the capture loop saw the ring reach each end index (monotonic s): a sample's
@@ -224,6 +254,7 @@ def run_live(seconds: float, min_block_s: float, profile: bool = False) -> dict[
             arrivals = Arrivals()
             est_boundary: list[int] = []
             est_emit: list[float] = []
+            est_seen: list[float] = []  # when the samples of the emitting block were seen
             est_range: list[float] = []
             est_speed: list[float] = []
             blocks = 0
@@ -266,6 +297,7 @@ def run_live(seconds: float, min_block_s: float, profile: bool = False) -> dict[
                 for e in new:
                     est_boundary.append(start + round(e.t_s * FS_HZ))
                     est_emit.append(emitted)
+                    est_seen.append(now)
                     est_range.append(e.range_m)
                     est_speed.append(e.speed_mps)
                 next_index += n
@@ -284,6 +316,7 @@ def run_live(seconds: float, min_block_s: float, profile: bool = False) -> dict[
             underruns = board.last_status.dac_underruns if board.last_status else -1
             overruns = board.last_status.adc_overruns if board.last_status else -1
             annotations = len(board.annotations.all())
+            stream_late_s = _stream_lateness_s(board, arrivals)
         flushed = len(feed.finish())
     finally:
         server.terminate()
@@ -291,7 +324,13 @@ def run_live(seconds: float, min_block_s: float, profile: bool = False) -> dict[
 
     boundary = np.asarray(est_boundary, dtype=np.int64)
     emit = np.asarray(est_emit)
-    lat_s = emit - arrivals.time_of(boundary)
+    boundary_seen = arrivals.time_of(boundary)
+    lat_s = emit - boundary_seen
+    # The two parts of each latency: waiting for the samples past the boundary that the
+    # receiver needs (its look-ahead, plus any stall of the stream), then the feed call.
+    wait_s = np.asarray(est_seen) - boundary_seen
+    proc_s = emit - np.asarray(est_seen)
+    over = lat_s > schedule.hop_s
     hop_s = schedule.hop_s
 
     def hops(x: npt.NDArray[np.float64], percentile: float) -> float:
@@ -356,7 +395,16 @@ def run_live(seconds: float, min_block_s: float, profile: bool = False) -> dict[
         "latency_median_hops": hops(lat_s, 50),
         "latency_p99_hops": hops(lat_s, 99),
         "latency_max_hops": hops(lat_s, 100),
-        "estimates_over_1_hop": int(np.count_nonzero(lat_s > hop_s)),
+        "estimates_over_1_hop": int(np.count_nonzero(over)),
+        "latency_wait_median_ms": _ms(wait_s, 50),
+        "latency_wait_max_ms": _ms(wait_s, 100),
+        "latency_processing_median_ms": _ms(proc_s, 50),
+        "latency_processing_max_ms": _ms(proc_s, 100),
+        "over_1_hop_wait_median_ms": _ms(wait_s[over], 50),
+        "over_1_hop_processing_median_ms": _ms(proc_s[over], 50),
+        "stream_lateness_median_ms": _ms(stream_late_s, 50),
+        "stream_lateness_p99_ms": _ms(stream_late_s, 99),
+        "stream_lateness_max_ms": _ms(stream_late_s, 100),
         "target_cpu_cores": TARGET_CPU_CORES,
         "cpu_ratio": round(TARGET_CPU_CORES / max(cores, 1e-9), 2),
         "target_latency_hops": TARGET_LATENCY_HOPS,
@@ -422,6 +470,25 @@ def print_table(r: dict[str, Any]) -> None:
             f"median {r['latency_median_hops']:.3f}, p99 {r['latency_p99_hops']:.3f},"
             f" max {r['latency_max_hops']:.3f} hops (hop {hop_ms:.1f} ms; target <="
             f" {TARGET_LATENCY_HOPS}); {r['estimates_over_1_hop']} estimates over 1 hop",
+        ),
+    ]
+    rows += [
+        (
+            "  its parts",
+            f"waiting for the look-ahead samples: median {r['latency_wait_median_ms']} ms, max"
+            f" {r['latency_wait_max_ms']} ms; feed call: median"
+            f" {r['latency_processing_median_ms']} ms, max {r['latency_processing_max_ms']} ms",
+        ),
+        (
+            "  over 1 hop",
+            f"median wait {r['over_1_hop_wait_median_ms']} ms, median feed call"
+            f" {r['over_1_hop_processing_median_ms']} ms",
+        ),
+        (
+            "stream lateness",
+            f"median {r['stream_lateness_median_ms']} ms, p99 {r['stream_lateness_p99_ms']} ms,"
+            f" max {r['stream_lateness_max_ms']} ms (samples seen after the board clock,"
+            " against the fastest delivery)",
         ),
     ]
     for name, text in rows:

@@ -99,6 +99,8 @@ _KEEPALIVE_STATES = (
 _FRAME_OVERHEAD = 12 + 14  # header + CRC, then the fixed part of DAC_DATA (bytes)
 _READ_SIZE = 1 << 16
 _DAC_BURST_FRAMES = 8  # DAC frames sent per write (8 x 8 KB)
+# Longest idle sleep of the writer (s): it used to poll every 5 ms, 200 wake-ups a second.
+_WRITER_IDLE_S = 0.05
 
 DacSource = Callable[[int, int], npt.ArrayLike] | Iterable[npt.ArrayLike]
 """A callable ``source(first_sample, n) -> block`` or an iterable of blocks. Blocks are (n,)
@@ -713,7 +715,16 @@ class Board:
                 continue
             if not sent:
                 with self._cond:
-                    self._cond.wait(0.005)
+                    self._cond.wait(self._writer_idle_s())
+
+    def _writer_idle_s(self) -> float:
+        """How long the writer may sleep when it has nothing to send: until the next
+        keepalive is due, at most :data:`_WRITER_IDLE_S`. Credit, a new DAC source, a reply
+        and a stop all notify it; the cap only bounds the effect of a missed notification."""
+        if self.keepalive_ms is None:
+            return _WRITER_IDLE_S
+        due = self._next_keepalive - self._clock.now()
+        return min(_WRITER_IDLE_S, max(0.0, due))
 
     def _frame_samples(self, config: Configure) -> int:
         size = channel_count(config.dac_channel_mask) * SampleFormat(config.dac_format).size

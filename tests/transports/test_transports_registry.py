@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import socket
 import threading
 from collections.abc import Callable
@@ -20,6 +21,7 @@ from hil.transports import (
     open_transport,
     split_url,
 )
+from hil.transports.serial_transport import open_serial
 from hil.transports.spy import hexdump_lines
 from sim_devices.board.usb_backend import SimulatedUsbBackend
 from sim_devices.stage.clock import ManualClock
@@ -50,6 +52,30 @@ def test_loop_url_echoes_and_chunks_are_whole() -> None:
     assert got == payload and t.read(10) == b""
     t.close()
     t.close()  # idempotent
+
+
+def test_posix_port_reads_what_is_there_and_reports_a_hang_up() -> None:
+    master, slave = os.openpty()
+    t = open_serial(os.ttyname(slave), timeout=0.05)  # pyserial puts the port in raw mode
+    try:
+        assert t._posix_fd() is not None  # the select + read path, not pyserial's read
+        assert t.read(100) == b""  # nothing sent: the timeout
+        payload = bytes(range(1, 256)) * 40
+        os.write(master, payload)
+        got = b""
+        while len(got) < len(payload):
+            chunk = t.read(1 << 16)
+            assert chunk, "the bytes written did not arrive"
+            got += chunk
+        assert got == payload
+        os.close(master)
+        with pytest.raises(TransportClosedError, match="link lost while reading"):
+            for _ in range(3):
+                t.read(10)
+    finally:
+        t.close()
+        os.close(slave)
+    assert open_transport("loop://")._posix_fd() is None  # type: ignore[attr-defined]
 
 
 def test_socket_url_reaches_a_tcp_server() -> None:
