@@ -174,8 +174,8 @@ def _stream_lateness_s(board: Any, arrivals: Arrivals) -> npt.NDArray[np.float64
 
 @dataclass
 class Arrivals:
-    """When the capture loop saw the ring reach each end index (monotonic s): a sample's
-    arrival is the first observation whose end index is past it."""
+    """When the ring reached each end index (monotonic s, stamped by the board's reader
+    thread as it stores a block): a sample's arrival is the first stamp past it."""
 
     ends: list[int] = field(default_factory=list)
     times: list[float] = field(default_factory=list)
@@ -194,7 +194,9 @@ class Arrivals:
         return out
 
 
-def run_live(seconds: float, min_block_s: float, profile: bool = False) -> dict[str, Any]:
+def run_live(
+    seconds: float, min_block_s: float, profile: bool = False, every_block: bool = False
+) -> dict[str, Any]:
     """Stream ``seconds`` through Board + capture loop + GCAS; the figures (module docstring)."""
     from hil.devices.board import Board
     from hil.devices.board_settings import BoardSettings
@@ -241,17 +243,26 @@ def run_live(seconds: float, min_block_s: float, profile: bool = False) -> dict[
         settings = BoardSettings(sample_rate_hz=FS_HZ, dac_channels=1, adc_channels=ADC_CHANNELS)
         with Board(port, settings=settings, ring_seconds=RING_SECONDS) as board:
             board.configure()
+            ring = board.ring
+            assert ring is not None
+            arrivals = Arrivals()
+            store = ring.write
+
+            def stamped_write(first: int, block: npt.NDArray[Any]) -> bool:
+                stored = store(first, block)
+                if stored:
+                    arrivals.add(first + block.shape[0], time.monotonic())
+                return stored
+
+            setattr(ring, "write", stamped_write)  # noqa: B010 - the reader thread calls it
             start = board.start(synth.blocks(1 << 15))
             # The DAC plays schedule sample 0 at board index `start`, so that is the
             # receiver's sample 0 (the echo delay is the target's range, not latency).
             feed = ReceiverFeed(receiver, origin=start, channel=0, scale=INT16_SCALE)
-            ring = board.ring
-            assert ring is not None
             n_total = int(round(seconds * FS_HZ))
             end_target = start + n_total
             min_block = max(1, int(round(min_block_s * FS_HZ)))
             max_block = int(round(MAX_BLOCK_S * FS_HZ))
-            arrivals = Arrivals()
             est_boundary: list[int] = []
             est_emit: list[float] = []
             est_seen: list[float] = []  # when the samples of the emitting block were seen
@@ -272,7 +283,11 @@ def run_live(seconds: float, min_block_s: float, profile: bool = False) -> dict[
             server_cpu0 = _process_cpu_s(server.pid)
             while next_index < end_target:
                 waited = time.monotonic()
-                if not board.wait_for_samples(next_index + min_block, timeout_s=2.0):
+                wanted = next_index + min_block
+                if not every_block:
+                    # Nothing can come out before the receiver's next decision: wait for it.
+                    wanted = max(wanted, min(feed.next_useful_index, end_target))
+                if not board.wait_for_samples(wanted, timeout_s=2.0):
                     raise RuntimeError(
                         f"no samples past board index {next_index} for 2 s: the board stalled"
                     )
@@ -285,9 +300,6 @@ def run_live(seconds: float, min_block_s: float, profile: bool = False) -> dict[
                 max_backlog = max(max_backlog, held - next_index)
                 n = min(held, end_target, next_index + max_block) - next_index
                 data = board.read(next_index, n)
-                # Every sample up to `held` has arrived by now (also those left for the next
-                # block), so a backlog counts in the latency.
-                arrivals.add(held, now)
                 t0 = time.thread_time()
                 new = feed.feed(next_index, data)
                 feed_cpu.append(time.thread_time() - t0)
@@ -506,6 +518,11 @@ def main() -> None:
         help="least new signal per receiver call, ms (default 1)",
     )
     parser.add_argument("--profile", action="store_true", help="cProfile the host to stderr")
+    parser.add_argument(
+        "--every-block",
+        action="store_true",
+        help="call the receiver for every new block, not only when it can decide",
+    )
     parser.add_argument("--serve-board", nargs=3, metavar=("DELAY", "GAIN", "NOISE"))
     args = parser.parse_args()
     if args.serve_board:
@@ -513,7 +530,9 @@ def main() -> None:
         serve_board(int(delay), float(gain), float(noise))
         return
     seconds = 1.5 if args.quick else args.seconds
-    result = run_live(seconds, args.min_block_ms / 1e3, profile=args.profile)
+    result = run_live(
+        seconds, args.min_block_ms / 1e3, profile=args.profile, every_block=args.every_block
+    )
     print_table(result)
     print(json.dumps({"benchmark": "bench_live", **result}))
 

@@ -102,7 +102,12 @@ from hil.estimation.detection import (
     parabolic_offsets,
 )
 from hil.estimation.doppler_grid import DopplerGrid, alpha_to_speed, doppler_grid, speed_to_alpha
-from hil.estimation.kernels import codeword_sums, exact_windows, peak_indices
+from hil.estimation.kernels import (
+    codeword_sums,
+    exact_windows,
+    first_possible_peak,
+    peak_indices,
+)
 from hil.estimation.row_buffer import RowBuffer
 from hil.estimation.unit_correlators import UnitCorrelatorBank
 from hil.signals.random_cyclic import minimum_distance
@@ -559,6 +564,7 @@ class GcasReceiver:
             self._det_next = c0
         self._last_hop: int | None = None
         self._last_t = 0.0
+        self._next_decision = 0  # no bound until the two-stage search has one
 
     # ------------------------------------------------------------------ streaming
     def process(self, block: ArrayLike, *, gap_before: int = 0) -> list[Estimate]:
@@ -663,6 +669,7 @@ class GcasReceiver:
             + np.mean(self.lags - b * lag_blocks, axis=1)
         ).astype(np.int64)
         self._hc = max(1, self.half_width // b)
+        self._max_shift = int(np.max(self._c_shift))
         self.fine_half = self.search_half + 6
         reach = int(np.max(self._c_shift)) + self.fine_half  # samples past the block start
         self._c_lookahead = self._hc + max(0, -(-reach // b))
@@ -772,7 +779,42 @@ class GcasReceiver:
     def _detect_two_stage(self, next_block: int) -> list[Estimate]:
         """Decide the coarse candidates whose look-ahead has arrived (blocks below
         ``next_block − lookahead``); exact codeword sums around each (stage 2)."""
-        return self._decide_blocks(next_block - self._hc)
+        out = self._decide_blocks(next_block - self._hc)
+        self._next_decision = self._decision_input(next_block)
+        return out
+
+    @property
+    def next_decision_index(self) -> int:
+        """Input sample count (as :attr:`samples_seen`) the stream must reach before the next
+        estimate can come out: :meth:`process` returns nothing while ``samples_seen`` stays
+        below it (an unbroken stream; a gap flushes). A live loop may wait for that many
+        samples instead of calling once per block: fewer, larger calls, the same estimates,
+        emitted no later. The full search gives no such bound (``samples_seen``)."""
+        return max(self._next_decision, self._samples_seen)
+
+    def _decision_input(self, next_block: int) -> int:
+        """:attr:`next_decision_index` after the coarse blocks below ``next_block``.
+
+        A candidate is a coarse peak (greater than the ``hc`` blocks before it, not smaller
+        than the ``hc`` after), so the earliest block that can still become one is the first
+        undecided block greater than its ``hc`` predecessors and not exceeded by a block
+        already known after it (or the next block to come). It
+        is decided once the ``hc`` blocks after it are complete and its fine window, which
+        ends at most ``max(c_shift) + 2·fine_half`` samples past its start, has arrived;
+        baseband sample ``k`` exists once input sample ``k·R`` has.
+        """
+        h = self._hc
+        lo = self._det_next
+        first = max(lo - h, self._c_origin)
+        if next_block > lo:
+            s = np.array(self._cs_ring.span(first, next_block), dtype=np.float64)
+            s[: max(0, self._c_valid_from - first)] = -np.inf
+            cand = first_possible_peak(s, h, lo - first, next_block - first) + first
+        else:
+            cand = max(lo, next_block)
+        b = self._B
+        need_bb = max((cand + h + 1) * b - 1, cand * b + self._max_shift + 2 * self.fine_half)
+        return need_bb * self.baseband.decimation + 1
 
     def _decide_blocks(self, stop: int) -> list[Estimate]:
         """Stage 2 for the coarse candidates in blocks ``< stop``."""

@@ -70,6 +70,31 @@ def fir_decimate(
 
 
 @numba.njit(**_JIT)
+def first_possible_peak(s: Any, half_width: int, lo: int, hi: int) -> int:
+    """The first ``i`` in ``[lo, hi)`` that can still become a :func:`peak_indices` peak when
+    the samples from ``hi`` on arrive: finite, greater than every sample in the
+    ``half_width`` before it and not smaller than any known one in the ``half_width`` after;
+    ``hi`` if none can. ``s`` shape ``(>= hi,)`` (only ``s[:hi]`` is read)."""
+    for i in range(lo, hi):
+        v = s[i]
+        if not v > -math.inf:
+            continue
+        ok = True
+        for j in range(max(0, i - half_width), i):
+            if s[j] >= v:
+                ok = False
+                break
+        if ok:
+            for j in range(i + 1, min(hi, i + half_width + 1)):
+                if s[j] > v:
+                    ok = False
+                    break
+        if ok:
+            return i
+    return hi
+
+
+@numba.njit(**_JIT)
 def peak_indices(s: Any, half_width: int, lo: int, hi: int) -> Any:
     """Indices ``i`` in ``[lo, hi)`` that are the first maximum of ``s`` over ``±half_width``:
     greater than every sample in the ``half_width`` before it and not smaller than any in the

@@ -47,6 +47,23 @@ class ReceiverFeed:
         self.scale = float(scale)
         self._next = self.origin
 
+    @property
+    def next_index(self) -> int:
+        """Board index of the next sample the receiver expects."""
+        return self._next
+
+    @property
+    def next_useful_index(self) -> int:
+        """Board index the stream must reach before the receiver can emit its next estimate
+        (receivers with a ``next_decision_index``, such as the two-stage GCAS); otherwise
+        :attr:`next_index`. A live loop that waits for it calls the receiver less often and
+        gets every estimate as early (see :attr:`GcasReceiver.next_decision_index
+        <hil.estimation.gcas.GcasReceiver.next_decision_index>`)."""
+        hint = getattr(self.receiver, "next_decision_index", None)
+        if hint is None:
+            return self._next
+        return max(self._next, self.origin + int(hint))
+
     def feed(self, first_index: int, block: NDArray[Any]) -> list[Estimate]:
         """Process ``block`` (shape ``(n, n_channels)``) received from board sample
         ``first_index``; the samples since the previous block that never arrived go to the

@@ -228,6 +228,64 @@ def test_two_stage_chunks_equal_whole(cuts: list[int]) -> None:
     assert parts == whole and len(whole) > 10
 
 
+@settings(max_examples=8, deadline=None)
+@given(st.lists(st.integers(1, 3_000), min_size=20, max_size=60), st.integers(0, 3))
+def test_nothing_comes_out_before_the_next_decision_index(sizes: list[int], seed: int) -> None:
+    # Mostly noise with a lax threshold, so false alarms come out at random places (seed 3:
+    # a strong target at the default threshold).
+    schedule = att_schedule()
+    x = echo_samples(schedule, 30.0, -10.0, 0.4, snr_db=0.0 if seed == 3 else -30.0, seed=seed)
+    extra = {} if seed == 3 else {"pfa": 0.5}
+    rx = _receiver(schedule, "two-stage", **extra)
+    i, out = 0, []
+    for n in itertools.cycle(sizes):
+        if i >= x.shape[0]:
+            break
+        bound = rx.next_decision_index
+        assert bound >= rx.samples_seen
+        new = rx.process(x[i : i + n])
+        i += n
+        if rx.samples_seen < bound:
+            assert new == [], f"estimate before the decision index {bound} (fed {rx.samples_seen})"
+        out += new
+    whole = _run(_receiver(schedule, "two-stage", **extra), x, block=x.shape[0])
+    assert out + rx.flush() == whole and len(whole) >= 3
+
+
+def test_feeding_up_to_the_next_decision_index_gives_every_estimate_in_few_calls(
+    rc_schedule: HopSchedule,
+) -> None:
+    x = echo_samples(rc_schedule, 60.0, 12.0, 0.8, snr_db=0.0, seed=1)
+    whole = _run(_receiver(rc_schedule, "two-stage"), x, block=x.shape[0])
+    rx = _receiver(rc_schedule, "two-stage")
+    out: list[Estimate] = []
+    calls = 0
+    emitted_at: list[int] = []
+    while rx.samples_seen < x.shape[0]:
+        stop = min(max(rx.next_decision_index, rx.samples_seen + 1), x.shape[0])
+        new = rx.process(x[rx.samples_seen : stop])
+        calls += 1
+        emitted_at += [rx.samples_seen] * len(new)
+        out += new
+    assert out + rx.flush() == whole and len(whole) >= 50
+    # Each estimate came out the moment its bound was reached (no later than a 1-sample
+    # feed would give it), and the calls are about two per hop, not one per sample block.
+    hops = x.shape[0] / (rc_schedule.hop_s * FS)
+    assert calls <= 2.5 * hops + 20
+    one = _receiver(rc_schedule, "two-stage")
+    first_seen: list[int] = []
+    for k in range(0, x.shape[0], 25):
+        first_seen += [k + 25] * len(one.process(x[k : k + 25]))
+    assert len(first_seen) == len(emitted_at)
+    assert all(a <= b for a, b in zip(emitted_at, first_seen, strict=True))
+
+
+def test_full_search_gives_no_decision_bound(rc_schedule: HopSchedule) -> None:
+    rx = _receiver(rc_schedule, "full")
+    rx.process(np.zeros(12_345))
+    assert rx.next_decision_index == rx.samples_seen == 12_345
+
+
 def test_two_stage_gap_restarts_cleanly(rc_schedule: HopSchedule) -> None:
     r0, v = 50.0, 10.0
     x = echo_samples(rc_schedule, r0, v, 1.0, snr_db=0.0, seed=5)

@@ -299,3 +299,27 @@ def test_feed_drops_samples_before_its_origin() -> None:
     assert seen == [(28, 0), (10, 0)]
     with pytest.raises(ConfigError, match="first_index = 130"):
         feed.feed(130, np.zeros((5, 2)))
+
+
+def test_receiver_feed_says_how_far_the_stream_must_go_before_an_estimate() -> None:
+    from hil.recording.replay import ReceiverFeed
+
+    class Plain:
+        name, fs_hz = "plain", 1.0
+
+        def process(self, x: np.ndarray, *, gap_before: int = 0) -> list:
+            return []
+
+    class Bounded(Plain):
+        next_decision_index = 0
+
+    plain = ReceiverFeed(Plain(), origin=100)  # type: ignore[arg-type]
+    plain.feed(100, np.zeros((50, 1)))
+    assert plain.next_index == plain.next_useful_index == 150
+    rx = Bounded()
+    bounded = ReceiverFeed(rx, origin=100)  # type: ignore[arg-type]
+    bounded.feed(100, np.zeros((50, 1)))
+    rx.next_decision_index = 400  # receiver input samples: board index origin + 400
+    assert (bounded.next_index, bounded.next_useful_index) == (150, 500)
+    rx.next_decision_index = 20  # a bound already passed never points back
+    assert bounded.next_useful_index == 150
