@@ -164,33 +164,40 @@ def _stream_lateness_s(board: Any, arrivals: Arrivals) -> npt.NDArray[np.float64
     lateness. Empty without SYNC pairs.
     """
     fit = board.clock_fit
-    if fit is None or fit.pairs < 2 or not arrivals.ends:
+    ends, times = arrivals.arrays()
+    if fit is None or fit.pairs < 2 or ends.size == 0:
         return np.zeros(0)
     floor = float(np.min(fit.residuals_s()))
-    ends = np.asarray(arrivals.ends, dtype=np.float64)
-    on_time = np.array([fit.host_time(e - 1) for e in ends]) + floor
-    return np.asarray(arrivals.times) - on_time
+    on_time = np.array([fit.host_time(e - 1) for e in ends.tolist()]) + floor
+    return times - on_time
 
 
 @dataclass
 class Arrivals:
     """When the ring reached each end index (monotonic s, stamped by the board's reader
-    thread as it stores a block): a sample's arrival is the first stamp past it."""
+    thread as it stores a block): a sample's arrival is the first stamp past it.
 
-    ends: list[int] = field(default_factory=list)
-    times: list[float] = field(default_factory=list)
+    One list of pairs, appended whole, so a reader in another thread never sees an end
+    without its time."""
+
+    stamps: list[tuple[int, float]] = field(default_factory=list)
 
     def add(self, end_index: int, t: float) -> None:
-        self.ends.append(end_index)
-        self.times.append(t)
+        self.stamps.append((end_index, t))
+
+    def arrays(self) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]:
+        """End indices and their times, as recorded so far."""
+        stamps = list(self.stamps)
+        ends = np.array([e for e, _ in stamps], dtype=np.int64)
+        return ends, np.array([t for _, t in stamps], dtype=np.float64)
 
     def time_of(self, index: npt.NDArray[np.int64]) -> npt.NDArray[np.float64]:
         """Arrival time of each board sample ``index`` (NaN if it never arrived)."""
-        ends = np.asarray(self.ends, dtype=np.int64)
+        ends, times = self.arrays()
         k = np.searchsorted(ends, index, side="right")  # first block whose end is past index
         out = np.full(index.shape, np.nan)
         ok = k < ends.shape[0]
-        out[ok] = np.asarray(self.times)[k[ok]]
+        out[ok] = times[k[ok]]
         return out
 
 

@@ -57,6 +57,7 @@ class SampleRing:
         """Sample frames stored (each index at most once)."""
         self.missing = 0
         """Sample frames skipped (zero-filled)."""
+        self._targets: list[int] = []  # end indices the threads in wait_for are waiting for
 
     def write(self, first: int, block: npt.NDArray[Any]) -> bool:
         """Store ``block`` from index ``first``; False (nothing stored) if it repeats data."""
@@ -76,7 +77,11 @@ class SampleRing:
             self.written += n
             assert self.start_index is not None
             self.start_index = max(self.start_index, self.end_index - self.capacity)
-            self._cond.notify_all()
+            # Wake a waiter only once its index is reached: at 1 MS/s a block arrives about
+            # every millisecond, and a loop waiting for several blocks would otherwise wake
+            # (and take the GIL) for each one.
+            if self._targets and self.end_index >= min(self._targets):
+                self._cond.notify_all()
         return True
 
     def _put(self, first: int, block: npt.NDArray[Any]) -> None:
@@ -106,6 +111,10 @@ class SampleRing:
     def wait_for(self, index: int, timeout_s: float) -> bool:
         """Block until ``end_index >= index`` (True) or ``timeout_s`` real seconds pass."""
         with self._cond:
-            return self._cond.wait_for(
-                lambda: self.end_index is not None and self.end_index >= index, timeout_s
-            )
+            self._targets.append(index)
+            try:
+                return self._cond.wait_for(
+                    lambda: self.end_index is not None and self.end_index >= index, timeout_s
+                )
+            finally:
+                self._targets.remove(index)

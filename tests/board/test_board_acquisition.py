@@ -53,6 +53,46 @@ def test_ring_wait_for_wakes_on_write() -> None:
     writer.join()
 
 
+class CountingCondition(threading.Condition):
+    """A condition that counts its notify_all calls."""
+
+    notified = 0
+
+    def notify_all(self) -> None:
+        self.notified += 1
+        super().notify_all()
+
+
+def test_ring_wakes_a_waiter_only_once_its_index_is_held() -> None:
+    ring = SampleRing(1000, 1, np.int16)
+    cond = CountingCondition(ring._lock)
+    ring._cond = cond
+    block = np.zeros((10, 1), np.int16)
+    ring.write(0, block)  # nobody waits: no notification at all
+    assert cond.notified == 0
+    results: dict[str, bool] = {}
+    waiters = [
+        threading.Thread(target=lambda k=k, i=i: results.__setitem__(k, ring.wait_for(i, 10.0)))
+        for k, i in (("near", 40), ("far", 100))
+    ]
+    for w in waiters:
+        w.start()
+    while len(ring._targets) < 2:  # both registered
+        threading.Event().wait(0.001)
+    for first in (10, 20):
+        ring.write(first, block)  # end 30: below both indices
+    assert cond.notified == 0 and results == {}
+    ring.write(30, block)  # end 40: the near waiter's index
+    waiters[0].join(10.0)
+    assert results == {"near": True} and cond.notified == 1
+    ring.write(40, np.zeros((60, 1), np.int16))  # end 100
+    waiters[1].join(10.0)
+    assert results == {"near": True, "far": True} and cond.notified == 2
+    assert not ring.wait_for(500, 0.01) and ring._targets == []  # a timed-out wait is forgotten
+    ring.write(100, block)
+    assert cond.notified == 2
+
+
 def test_gap_detector_reports_gaps_and_overlaps_once() -> None:
     det = SampleGapDetector()
     notes = [det.check(f, n) for f, n in ((0, 10), (10, 10), (25, 5), (28, 4), (32, 1))]
