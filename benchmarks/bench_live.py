@@ -291,9 +291,11 @@ def run_live(
             while next_index < end_target:
                 waited = time.monotonic()
                 wanted = next_index + min_block
-                if not every_block:
-                    # Nothing can come out before the receiver's next decision: wait for it.
-                    wanted = max(wanted, min(feed.next_useful_index, end_target))
+                useful = min(feed.next_useful_index, end_target)
+                if not every_block and useful > next_index:
+                    # Nothing can come out before the receiver's next decision: wait for
+                    # exactly that (it may come out then), not a block more.
+                    wanted = useful
                 if not board.wait_for_samples(wanted, timeout_s=2.0):
                     raise RuntimeError(
                         f"no samples past board index {next_index} for 2 s: the board stalled"

@@ -813,7 +813,11 @@ class GcasReceiver:
         else:
             cand = max(lo, next_block)
         b = self._B
-        need_bb = max((cand + h + 1) * b - 1, cand * b + self._max_shift + 2 * self.fine_half)
+        # The fine window's shift depends on the block's hypotheses (known once it is seen).
+        seen = cand < next_block
+        shift = int(self._c_shift[self._hypotheses(np.array([cand]))].max()) if seen else None
+        late = cand * b + (self._max_shift if shift is None else shift) + 2 * self.fine_half
+        need_bb = max((cand + h + 1) * b - 1, late)
         return need_bb * self.baseband.decimation + 1
 
     def _decide_blocks(self, stop: int) -> list[Estimate]:
