@@ -564,7 +564,6 @@ class GcasReceiver:
             self._det_next = c0
         self._last_hop: int | None = None
         self._last_t = 0.0
-        self._next_decision = 0  # no bound until the two-stage search has one
 
     # ------------------------------------------------------------------ streaming
     def process(self, block: ArrayLike, *, gap_before: int = 0) -> list[Estimate]:
@@ -779,9 +778,7 @@ class GcasReceiver:
     def _detect_two_stage(self, next_block: int) -> list[Estimate]:
         """Decide the coarse candidates whose look-ahead has arrived (blocks below
         ``next_block − lookahead``); exact codeword sums around each (stage 2)."""
-        out = self._decide_blocks(next_block - self._hc)
-        self._next_decision = self._decision_input(next_block)
-        return out
+        return self._decide_blocks(next_block - self._hc)
 
     @property
     def next_decision_index(self) -> int:
@@ -790,7 +787,9 @@ class GcasReceiver:
         below it (an unbroken stream; a gap flushes). A live loop may wait for that many
         samples instead of calling once per block: fewer, larger calls, the same estimates,
         emitted no later. The full search gives no such bound (``samples_seen``)."""
-        return max(self._next_decision, self._samples_seen)
+        if self.search != "two-stage":
+            return self._samples_seen
+        return max(self._decision_input(self.coarse.next_block), self._samples_seen)
 
     def _decision_input(self, next_block: int) -> int:
         """:attr:`next_decision_index` after the coarse blocks below ``next_block``.
