@@ -44,6 +44,7 @@ Run: ``python benchmarks/bench_live.py [--seconds 30] [--min-block-ms 1] [--prof
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import os
 import resource
@@ -111,6 +112,10 @@ def serve_board(delay: int, gain: float, noise_rms: float) -> None:
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     with SimulatedBoardOnPty(world=EchoWorld(delay, gain, noise_rms)) as board:
+        # A stand-in for hardware, which has no garbage collector: its setup's objects stay
+        # out of the collector's full passes (20 ms each here), as the host's do.
+        gc.collect()
+        gc.freeze()
         print(board.port_name, flush=True)
         while not stop.wait(0.2):
             pass
@@ -205,6 +210,7 @@ def run_live(
     seconds: float, min_block_s: float, profile: bool = False, every_block: bool = False
 ) -> dict[str, Any]:
     """Stream ``seconds`` through Board + capture loop + GCAS; the figures (module docstring)."""
+    from hil.acquisition import HeapFreeze
     from hil.devices.board import Board
     from hil.devices.board_settings import BoardSettings
     from hil.estimation.registry import make_receiver
@@ -282,6 +288,8 @@ def run_live(
             feed_wall: list[float] = []
             feed_cpu: list[float] = []
             wait_max = 0.0
+            heap = HeapFreeze()
+            heap.start()  # as the tank run does: no 75 ms full collection mid-stream
             if profiler is not None:
                 profiler.enable()
             threads = _board_thread_ids(board)
@@ -329,6 +337,7 @@ def run_live(
             main_cpu = time.thread_time() - main0
             server_cpu = _process_cpu_s(server.pid) - server_cpu0
             thread_cpu = {name: _thread_cpu_s(tid) - thread0[name] for name, tid in threads.items()}
+            heap.stop()
             if profiler is not None:
                 profiler.disable()
             board_now = board.board_index_now()

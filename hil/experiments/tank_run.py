@@ -27,6 +27,7 @@ from typing import Any, TextIO
 
 import numpy as np
 
+from hil.acquisition import HeapFreeze
 from hil.errors import ConfigError
 from hil.estimation.base import Estimate
 from hil.estimation.registry import make_receiver
@@ -193,6 +194,7 @@ def run_experiment(
     wall0 = time.monotonic()
     next_index = 0
     start_index = 0
+    heap = HeapFreeze()
     try:
         # ---- stage: open, home, check the plan against its limits (nothing moves yet)
         stage = GrblStage(stage_url, clock=clock).open()
@@ -308,6 +310,7 @@ def run_experiment(
         moving = False
         tail_until: float | None = None
         deadline = now() + exp.max_duration_s
+        heap.start()  # setup done: its objects stay out of the collector's full passes
         while True:
             # Stage: start the next pass when idle, poll at most 5 Hz, record telemetry.
             t_now = now()
@@ -445,6 +448,7 @@ def run_experiment(
     except Exception as exc:  # any failure: stop safely below, report it
         outcome_error = f"{type(exc).__name__}: {exc}"
     finally:
+        heap.stop()
         view.close()
         failing = interrupted or bool(outcome_error) or sys.exc_info()[0] is not None
         _safe_stop(board, stage, writer, hold=failing)

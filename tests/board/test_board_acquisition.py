@@ -167,3 +167,23 @@ def test_dac_feeder_chunks_equal_whole_for_generators_and_callables() -> None:
 def test_dac_block_of_wrong_shape_is_refused() -> None:
     with pytest.raises(ConfigError, match=r"DAC block shape = \(4, 3\) is not allowed"):
         to_wire_samples(np.zeros((4, 3)), SampleFormat.INT16, 2)
+
+
+def test_heap_freeze_keeps_setup_objects_out_of_full_collections_until_stopped() -> None:
+    import gc
+
+    from hil.acquisition import HeapFreeze
+
+    before = gc.get_freeze_count()
+    setup = [[i] for i in range(1000)]  # objects alive when the run starts
+    heap = HeapFreeze()
+    heap.start()
+    frozen = gc.get_freeze_count()
+    heap.start()  # a second start changes nothing
+    assert frozen >= before + len(setup) and gc.get_freeze_count() == frozen
+    heap.stop()
+    heap.stop()
+    assert gc.get_freeze_count() == 0
+    with HeapFreeze() as h:
+        assert gc.get_freeze_count() >= len(setup) and isinstance(h, HeapFreeze)
+    assert gc.get_freeze_count() == 0
