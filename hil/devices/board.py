@@ -156,10 +156,12 @@ class _DacFeeder:
         self._source_index = first
         self._call: Callable[[int, int], npt.ArrayLike] | None = None
         self._iter: Iterator[npt.ArrayLike] | None = None
+        self._indexed = False  # a source(first, n) callable: samples asked by index
         if hasattr(source, "read") and callable(source.read):
             self._call = lambda first, n: source.read(n)
         elif callable(source):
             self._call = source
+            self._indexed = True
         else:
             self._iter = iter(source)
         self._pending: npt.NDArray[Any] | None = None
@@ -181,6 +183,23 @@ class _DacFeeder:
             self._source_index += self._pending.shape[0]
         block, self._pending = self._pending[:n], self._pending[n:]
         return block
+
+    def skip(self, n: int) -> None:
+        """Drop the next ``n`` samples unsent (their time has passed on the board)."""
+        pending = 0 if self._pending is None else self._pending.shape[0]
+        from_pending = min(n, pending)
+        if self._pending is not None:
+            self._pending = self._pending[from_pending:]
+        rest = n - from_pending
+        if self._indexed:
+            self._source_index += rest  # asked by index: nothing to render
+            rest = 0
+        while rest > 0:  # a sequential source: read and drop
+            block = self.take(rest)
+            if block is None:
+                break
+            rest -= block.shape[0]
+        self.next_index += n
 
     def put_back(self, block: npt.NDArray[Any]) -> None:
         """Return samples that could not be sent (credit was reset)."""
@@ -282,6 +301,10 @@ class Board:
         self.missed_frames = 0
         self.samples_received = 0
         self.dac_samples_sent = 0
+        self.dac_samples_skipped = 0
+        """DAC samples never sent because their time had passed (see dac_resync_lead_s)."""
+        self.dac_resync_lead_s = 0.05
+        """After falling behind, how far ahead of the board clock transmission resumes (s)."""
         self.unknown_messages = 0
         self.remote_errors = 0
 
@@ -736,6 +759,7 @@ class Board:
         feeder, config = self._feeder, self._configured
         if feeder is None or config is None or feeder.exhausted:
             return False
+        self._skip_late_dac(feeder, config)
         with self._lock:
             credit = self._conn.dac_credit if self._conn.state in _DAC_STATES else 0
         per_frame = self._frame_samples(config)
@@ -769,6 +793,34 @@ class Board:
         # One write per burst: fewer system calls and lock hand-overs at 4 MB/s.
         self._flush()
         return True
+
+    def _skip_late_dac(self, feeder: _DacFeeder, config: Configure) -> None:
+        """After the host fell behind (the board's DAC FIFO ran dry), jump the feeder to
+        :attr:`dac_resync_lead_s` ahead of the board clock instead of sending samples whose
+        time has passed: the board would drop them as late, and a host that is only just
+        faster than real time would never catch up (the transmission would stay silent). The
+        samples played stay those of their board indices, so the waveform keeps its
+        schedule; the silent span shows as the board's DAC underrun."""
+        if not self._streaming or self._last_sync is None:
+            return
+        index, host_t = self._last_sync
+        rate = config.sample_rate_hz
+        # From the latest SYNC, read late by its delivery delay: an underestimate, so a skip
+        # never drops samples that could still be played.
+        board_now = index + int((self._clock.now() - host_t) * rate)
+        if feeder.next_index >= board_now:
+            return
+        target = board_now + round(self.dac_resync_lead_s * rate)
+        skipped = target - feeder.next_index
+        at = feeder.next_index
+        feeder.skip(skipped)
+        self.dac_samples_skipped += skipped
+        self._annotate(
+            AnnotationKind.DAC_UNDERRUN,
+            skipped,
+            f"host behind the board clock: skipped {skipped} DAC samples whose time had passed",
+            at,
+        )
 
     def _keepalive_if_due(self) -> None:
         if self.keepalive_ms is None:

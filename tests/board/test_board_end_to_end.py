@@ -14,7 +14,7 @@ import pytest
 
 from firmware_protocol import SampleFormat, State
 from hil.acquisition import AnnotationKind
-from hil.devices.board import Board, ReconnectPolicy
+from hil.devices.board import Board, ReconnectPolicy, _DacFeeder
 from hil.devices.board_settings import to_wire_samples
 from hil.signals.presets import get_preset
 from hil.signals.synthesis import BlockSynthesizer
@@ -333,3 +333,53 @@ def test_adc_data_keeps_flowing_while_a_dac_write_blocks() -> None:
         assert port.call(lambda b: b.conn.stats.sequence_gaps) == 0
         board.stop()
     assert first < before
+
+
+def test_a_host_that_fell_behind_skips_to_the_board_clock_and_the_waveform_stays_aligned() -> None:
+    """The DAC FIFO runs dry while the host cannot write (a long stall): afterwards the host
+    skips the samples whose time has passed instead of sending them late, so transmission
+    resumes at once and every sample played is the one of its board index."""
+    clock = ManualClock()
+    port, link = _memory_board(clock)
+    gate = GatedWrites(link, 8192)
+    with Board(gate, clock=clock, keepalive_ms=None) as board:  # type: ignore[arg-type]
+        board.configure()
+        first = board.start(tank_board_synth().blocks(4096))
+        level = lambda: port.call(lambda b: b.snapshot().dac_buffer_level)  # noqa: E731
+        stream_for(board, clock, 0.25, dac_level=level)
+        gate.armed = True
+        while not gate.blocked.is_set():
+            stream_for(board, clock, 0.01)
+            assert clock.now() < 5.0, "no DAC burst was written"
+        stream_for(board, clock, 0.6)  # longer than the 262 ms FIFO: it runs dry
+        assert port.call(lambda b: b.dac_underruns) >= 1
+        assert board.dac_samples_skipped == 0
+        gate.release.set()
+        end = stream_for(board, clock, 0.4, dac_level=level)
+        skipped = board.dac_samples_skipped
+        # Skipped: the samples from where the host stood to 50 ms past the board clock.
+        assert 300_000 < skipped < 700_000
+        notes = [a for a in board.annotations.all() if "skipped" in a.detail]
+        assert len(notes) == 1 and notes[0].length == skipped
+        # The last 0.2 s: the loopback of exactly the samples of those board indices.
+        n, m = end - first, 200_000
+        np.testing.assert_array_equal(board.read(end - m, m), expected_loopback(first, n)[-m:])
+        board.stop()
+
+
+@pytest.mark.parametrize("kind", ["iterable", "reader", "callable"])
+def test_dac_feeder_skip_drops_exactly_the_next_samples(kind: str) -> None:
+    synth = tank_board_synth()
+    ref = to_wire_samples(synth.render(0, 30_000), SampleFormat.INT16, 1)
+    sources = {
+        "iterable": lambda: tank_board_synth().blocks(4096),
+        "reader": tank_board_synth,
+        "callable": lambda: lambda first, n: synth.render(first - 1000, n),
+    }
+    feeder = _DacFeeder(sources[kind](), SampleFormat.INT16, 1, 1000)
+    a = feeder.take(100)
+    feeder.skip(9_000)
+    b = feeder.take(5_000)
+    assert a is not None and b is not None and feeder.next_index == 1000 + 9_000
+    np.testing.assert_array_equal(a, ref[:100])
+    np.testing.assert_array_equal(b[: min(5_000, b.shape[0])], ref[9_100 : 9_100 + b.shape[0]])
