@@ -105,8 +105,12 @@ class SampleRing:
                     f"within {self.start_index} .. {self.end_index} (held samples)",
                     "read more often or enlarge the ring",
                 )
-            pos = np.arange(first, first + n) % self.capacity
-            return self._data[pos].copy()
+            out = np.empty((n, self.channels), dtype=self._data.dtype)
+            pos = first % self.capacity
+            head = min(n, self.capacity - pos)  # two slices where the span wraps
+            out[:head] = self._data[pos : pos + head]
+            out[head:] = self._data[: n - head]
+            return out
 
     def wait_for(self, index: int, timeout_s: float) -> bool:
         """Block until ``end_index >= index`` (True) or ``timeout_s`` real seconds pass."""
