@@ -795,22 +795,23 @@ class Board:
         return True
 
     def _skip_late_dac(self, feeder: _DacFeeder, config: Configure) -> None:
-        """After the host fell behind (the board's DAC FIFO ran dry), jump the feeder to
-        :attr:`dac_resync_lead_s` ahead of the board clock instead of sending samples whose
-        time has passed: the board would drop them as late, and a host that is only just
-        faster than real time would never catch up (the transmission would stay silent). The
-        samples played stay those of their board indices, so the waveform keeps its
-        schedule; the silent span shows as the board's DAC underrun."""
-        if not self._streaming or self._last_sync is None:
+        """After the host fell behind (the board's DAC FIFO ran dry: the ADC stream is past
+        the next DAC sample to send), jump the feeder to :attr:`dac_resync_lead_s` ahead of
+        the ADC stream instead of sending samples whose time has passed: the board would
+        drop them as late, and a host only just faster than real time would never catch up
+        (the transmission would stay silent). The samples played stay those of their board
+        indices, so the waveform keeps its schedule; the silent span shows as the board's
+        DAC underrun."""
+        ring = self.ring
+        held = ring.end_index if ring is not None else None
+        if not self._streaming or held is None:
             return
-        index, host_t = self._last_sync
-        rate = config.sample_rate_hz
-        # From the latest SYNC, read late by its delivery delay: an underestimate, so a skip
-        # never drops samples that could still be played.
-        board_now = index + int((self._clock.now() - host_t) * rate)
-        if feeder.next_index >= board_now:
+        # The ADC samples received so far: the board has converted (and played) at least up
+        # to there. Not its clock from SYNC: a board (or a simulation) whose conversion lags
+        # its clock has not played those indices yet, and skipping them would gap the DAC.
+        if feeder.next_index >= held:
             return
-        target = board_now + round(self.dac_resync_lead_s * rate)
+        target = held + round(self.dac_resync_lead_s * config.sample_rate_hz)
         skipped = target - feeder.next_index
         at = feeder.next_index
         feeder.skip(skipped)
@@ -818,7 +819,7 @@ class Board:
         self._annotate(
             AnnotationKind.DAC_UNDERRUN,
             skipped,
-            f"host behind the board clock: skipped {skipped} DAC samples whose time had passed",
+            f"host behind the board: skipped {skipped} DAC samples whose time had passed",
             at,
         )
 

@@ -23,17 +23,20 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 import numpy as np
 
-from hil.acquisition import HeapFreeze
+from hil.acquisition import Annotation, AnnotationKind, HeapFreeze
 from hil.errors import ConfigError
 from hil.estimation.base import Estimate
 from hil.estimation.registry import make_receiver
 from hil.experiments.experiment import Experiment
 from hil.signals.schedule_file import schedule_document
 from hil.signals.synthesis import BlockSynthesizer
+
+if TYPE_CHECKING:
+    from hil.recording.records import RunEvent
 
 # Samples per capture block handed to the recording and the receiver (about 10-20 ms).
 _BLOCK_S = 0.01
@@ -44,6 +47,40 @@ _INT16_SCALE = 1.0 / 32768.0
 FALSE_ALARM_GATE_M = 1.0
 # Capture used to measure the loopback latency at the start of every run, s.
 _LATENCY_PROBE_S = 0.05
+
+# Board annotations as recording events: the recording's kinds are coarser (schema
+# EVENT_KINDS); the event's text starts with the annotation's own kind.
+EVENT_KIND: dict[AnnotationKind, str] = {
+    AnnotationKind.GAP: "gap",
+    AnnotationKind.SEQUENCE_GAP: "gap",
+    AnnotationKind.OVERLAP: "note",
+    AnnotationKind.FRAME_ERROR: "alarm",
+    AnnotationKind.DAC_UNDERRUN: "underrun",
+    AnnotationKind.ADC_OVERRUN: "overrun",
+    AnnotationKind.WATCHDOG: "alarm",
+    AnnotationKind.DISCONNECT: "alarm",
+    AnnotationKind.RECONNECT: "note",
+    AnnotationKind.ALARM: "alarm",
+    AnnotationKind.PROTOCOL_ERROR: "alarm",
+}
+
+
+def run_event(annotation: Annotation) -> RunEvent:
+    """A board annotation as a recording event (kind mapped by :data:`EVENT_KIND`, the text
+    led by the annotation's own kind).
+
+    >>> from hil.acquisition import Annotation
+    >>> run_event(Annotation(120, AnnotationKind.SEQUENCE_GAP, 2, "seq 5 expected"))
+    RunEvent(kind='gap', sample_index=120, length=2, text='sequence_gap: seq 5 expected')
+    """
+    from hil.recording.records import RunEvent
+
+    return RunEvent(
+        EVENT_KIND[annotation.kind],
+        annotation.sample_index,
+        annotation.length,
+        f"{annotation.kind.value}: {annotation.detail}",
+    )
 
 
 def measure_latency(monitor: np.ndarray, sent: np.ndarray, max_lag: int = 4096) -> int:
@@ -469,7 +506,8 @@ def run_experiment(
     events: list[tuple[str, int, int, str]] = []
     if board is not None:
         for a in board.annotations.all():
-            events.append((a.kind.value, a.sample_index, a.length, a.detail))
+            ev = run_event(a)
+            events.append((ev.kind, ev.sample_index, ev.length, ev.text))
     exact = None
     dac_underruns = adc_overruns = 0
     if tank is not None:

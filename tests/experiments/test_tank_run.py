@@ -87,6 +87,19 @@ def test_mixed_simulated_and_real_devices_are_refused(tmp_path: Path) -> None:
         run_experiment(exp, folder=tmp_path / "run")
 
 
+def test_every_board_annotation_becomes_a_recordable_event() -> None:
+    from hil.acquisition import Annotation, AnnotationKind
+    from hil.experiments.tank_run import run_event
+    from hil.recording.schema import EVENT_KINDS
+
+    for kind in AnnotationKind:
+        ev = run_event(Annotation(7, kind, 3, "detail"))  # RunEvent refuses unknown kinds
+        assert ev.kind in EVENT_KINDS and ev.text == f"{kind.value}: detail"
+        assert (ev.sample_index, ev.length) == (7, 3)
+    underrun = run_event(Annotation(0, AnnotationKind.DAC_UNDERRUN))
+    assert underrun.kind == "underrun"
+
+
 def test_measure_latency_golden() -> None:
     x = np.random.default_rng(3).normal(size=5000)
     assert measure_latency(np.concatenate([np.zeros(64), x])[:5000], x) == 64
@@ -125,6 +138,9 @@ def test_simulated_run_end_to_end_and_replay_equals_live(
     assert summary["detection_rate"] > 0.9
     # Replay with the live settings reproduces the live estimates exactly.
     rec = RunRecording.open(folder / "run.h5")
+    # Every board annotation is in the recording, after the loopback-latency note.
+    events = rec.events()
+    assert events[0].kind == "note" and len(events) == summary["events"] + 1
     live = rec.estimates()
     assert len(live) == summary["estimates"]
     again = replay(rec)
