@@ -70,26 +70,29 @@ def fir_decimate(
 
 
 @numba.njit(**_JIT)
+def _peak_at(s: Any, i: int, half_width: int, known: int) -> bool:
+    """Whether ``s[i]`` is finite, greater than every sample in the ``half_width`` before it
+    and not smaller than any in the ``half_width`` after it that is below index ``known``."""
+    v = s[i]
+    if not v > -math.inf:
+        return False
+    for j in range(max(0, i - half_width), i):
+        if s[j] >= v:
+            return False
+    for j in range(i + 1, min(known, i + half_width + 1)):  # noqa: SIM110 - numba: no all(genexpr)
+        if s[j] > v:
+            return False
+    return True
+
+
+@numba.njit(**_JIT)
 def first_possible_peak(s: Any, half_width: int, lo: int, hi: int) -> int:
     """The first ``i`` in ``[lo, hi)`` that can still become a :func:`peak_indices` peak when
     the samples from ``hi`` on arrive: finite, greater than every sample in the
     ``half_width`` before it and not smaller than any known one in the ``half_width`` after;
     ``hi`` if none can. ``s`` shape ``(>= hi,)`` (only ``s[:hi]`` is read)."""
     for i in range(lo, hi):
-        v = s[i]
-        if not v > -math.inf:
-            continue
-        ok = True
-        for j in range(max(0, i - half_width), i):
-            if s[j] >= v:
-                ok = False
-                break
-        if ok:
-            for j in range(i + 1, min(hi, i + half_width + 1)):
-                if s[j] > v:
-                    ok = False
-                    break
-        if ok:
+        if _peak_at(s, i, half_width, hi):
             return i
     return hi
 
@@ -100,24 +103,10 @@ def peak_indices(s: Any, half_width: int, lo: int, hi: int) -> Any:
     greater than every sample in the ``half_width`` before it and not smaller than any in the
     ``half_width`` after it (samples outside ``s`` count as −inf; a plateau yields one peak).
     ``s`` shape ``(n,)``; returns int64 indices, ascending."""
-    n = s.shape[0]
     out = np.empty(max(hi - lo, 0), dtype=np.int64)
     count = 0
     for i in range(lo, hi):
-        v = s[i]
-        if not v > -math.inf:
-            continue
-        ok = True
-        for j in range(max(0, i - half_width), i):
-            if s[j] >= v:
-                ok = False
-                break
-        if ok:
-            for j in range(i + 1, min(n, i + half_width + 1)):
-                if s[j] > v:
-                    ok = False
-                    break
-        if ok:
+        if _peak_at(s, i, half_width, s.shape[0]):
             out[count] = i
             count += 1
     return out[:count]

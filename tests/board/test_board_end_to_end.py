@@ -301,6 +301,22 @@ class GatedWrites:
         self.inner.close()
 
 
+def _stream_until_a_dac_write_blocks(
+    board: Board, clock: ManualClock, port: BoardPort, gate: GatedWrites
+) -> tuple[int, Callable[[], int]]:
+    """Start streaming, then arm the gate: the board grants credit as its FIFO drains and the
+    writer's next burst blocks. Returns the first board index and the DAC level probe."""
+    board.configure()
+    first = board.start(tank_board_synth().blocks(4096))
+    level = lambda: port.call(lambda b: b.snapshot().dac_buffer_level)  # noqa: E731
+    stream_for(board, clock, 0.25, dac_level=level)
+    gate.armed = True
+    while not gate.blocked.is_set():
+        stream_for(board, clock, 0.01)
+        assert clock.now() < 5.0, "no DAC burst was written"
+    return first, level
+
+
 def test_adc_data_keeps_flowing_while_a_dac_write_blocks() -> None:
     """A DAC burst that blocks in the transport must not stop the reader: frames are encoded
     under the session lock but written outside it (regression: the write held the lock the
@@ -309,15 +325,7 @@ def test_adc_data_keeps_flowing_while_a_dac_write_blocks() -> None:
     port, link = _memory_board(clock)
     gate = GatedWrites(link, 8192)
     with Board(gate, clock=clock, keepalive_ms=None) as board:  # type: ignore[arg-type]
-        board.configure()
-        first = board.start(tank_board_synth().blocks(4096))
-        level = lambda: port.call(lambda b: b.snapshot().dac_buffer_level)  # noqa: E731
-        stream_for(board, clock, 0.25, dac_level=level)
-        gate.armed = True
-        # The board grants credit as its FIFO drains; the writer's next burst blocks.
-        while not gate.blocked.is_set():
-            stream_for(board, clock, 0.01)
-            assert clock.now() < 5.0, "no DAC burst was written"
+        first, _ = _stream_until_a_dac_write_blocks(board, clock, port, gate)
         before = board.ring.end_index if board.ring else None
         assert before is not None
         end = stream_for(board, clock, 0.1)  # fails in wait_for_samples if the reader stalls
@@ -343,14 +351,7 @@ def test_a_host_that_fell_behind_skips_to_the_board_clock_and_the_waveform_stays
     port, link = _memory_board(clock)
     gate = GatedWrites(link, 8192)
     with Board(gate, clock=clock, keepalive_ms=None) as board:  # type: ignore[arg-type]
-        board.configure()
-        first = board.start(tank_board_synth().blocks(4096))
-        level = lambda: port.call(lambda b: b.snapshot().dac_buffer_level)  # noqa: E731
-        stream_for(board, clock, 0.25, dac_level=level)
-        gate.armed = True
-        while not gate.blocked.is_set():
-            stream_for(board, clock, 0.01)
-            assert clock.now() < 5.0, "no DAC burst was written"
+        first, level = _stream_until_a_dac_write_blocks(board, clock, port, gate)
         stream_for(board, clock, 0.6)  # longer than the 262 ms FIFO: it runs dry
         assert port.call(lambda b: b.dac_underruns) >= 1
         assert board.dac_samples_skipped == 0

@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 from scipy import ndimage
 
 from hil.estimation.gcas import NO_SAMPLE, GcasReceiver
-from hil.estimation.kernels import peak_indices
+from hil.estimation.kernels import first_possible_peak, peak_indices
 
 from .conftest import FS, C, att_schedule, echo_samples
 
@@ -36,6 +36,33 @@ def test_peak_indices_of_a_window_are_those_of_the_whole() -> None:
     whole = peak_indices(s, 7, 0, 500)
     part = peak_indices(s, 7, 120, 377)
     assert part.tolist() == [i for i in whole.tolist() if 120 <= i < 377]
+
+
+VALUES = st.sampled_from([-np.inf, 0.0, 1.0, 2.0, 3.0, 2.5])
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.lists(VALUES, min_size=1, max_size=40),
+    st.lists(VALUES, max_size=12),
+    st.integers(1, 5),
+    st.data(),
+)
+def test_first_possible_peak_is_the_earliest_peak_any_continuation_can_make(
+    known: list[float], later: list[float], h: int, data: st.DataObject
+) -> None:
+    s = np.array(known)
+    hi = s.shape[0]
+    lo = data.draw(st.integers(0, hi))
+    first = first_possible_peak(s, h, lo, hi)
+    assert lo <= first <= hi
+    # No continuation makes an earlier block a peak ...
+    ext = np.concatenate((s, later))
+    assert all(p >= first for p in peak_indices(ext, h, lo, hi).tolist())
+    # ... and one that only falls makes `first` a peak (when it is a known block).
+    if first < hi:
+        low = np.concatenate((s, np.full(h, -np.inf)))
+        assert first in peak_indices(low, h, lo, hi).tolist()
 
 
 def _stage_two_receiver(m_hops: int = 10) -> tuple[GcasReceiver, np.ndarray, np.ndarray]:
