@@ -37,6 +37,7 @@ class SerialTransport:
         self.url = url
         self._on_close = on_close
         self.closed = False
+        self._posix = isinstance(port, _posix_serial_class())
 
     @property
     def timeout(self) -> float:
@@ -68,7 +69,7 @@ class SerialTransport:
 
     def _posix_fd(self) -> int | None:
         """The descriptor of an open POSIX serial port (device or pty), else None."""
-        if not isinstance(self.port, _posix_serial_class()):
+        if not self._posix:
             return None
         fd = getattr(self.port, "fd", None)
         return fd if isinstance(fd, int) and getattr(self.port, "is_open", False) else None
