@@ -12,14 +12,17 @@ The board is reached through any transport URL (:mod:`hil.transports`: a serial 
   board alarms, frame errors, reconnects) as sample-indexed annotations;
 - runs a writer thread that feeds the DAC from a callable or a block generator (e.g.
   :class:`hil.signals.synthesis.BlockSynthesizer`) within the credit the board grants, and
-  sends keepalives;
+  sends keepalives; if the host fell behind the board (the DAC FIFO ran dry), it skips the
+  samples whose time has passed rather than sending them late;
 - fits SYNC pairs into a sample-index <-> host-time map (:attr:`Board.clock_fit`);
 - reconnects with exponential backoff when the link drops, and resumes streaming;
 - stops transmission (STOP) when a ``with Board(...)`` block exits by an exception,
   Ctrl-C included.
 
-Threads: the reader owns all receiving; every send goes through one lock that also guards
-the protocol state, so frames leave in sequence order.
+Threads: the reader owns all receiving. Every frame is encoded under the one lock that also
+guards the protocol state and queued, so frames leave in sequence order; the write itself
+happens outside that lock (one writer at a time), so a link that is slow to take a DAC burst
+never holds up the reader.
 """
 
 from __future__ import annotations
