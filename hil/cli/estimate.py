@@ -235,24 +235,6 @@ class _MapCollector:
         """Draw the map (seed Fig 5.17 style) as a PNG: codeword against receive time."""
         if not self.times:
             raise ConfigError("--map", str(path), "an input long enough to produce a map")
-        import matplotlib
+        from hil.experiments.codeword_map import save_time_codeword_map
 
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        t = np.concatenate(self.times)
-        p = np.concatenate(self.power, axis=0).astype(float)
-        stride = max(1, p.shape[0] // 4000)
-        t, p = t[::stride], p[::stride]
-        path.parent.mkdir(parents=True, exist_ok=True)
-        db = 10 * np.log10(np.maximum(p / max(float(p.max()), 1e-300), 1e-6))
-        fig, ax = plt.subplots(figsize=(10, 4.5), dpi=110)
-        extent = (float(t[0]), float(t[-1]), -0.5, p.shape[1] - 0.5)
-        im = ax.imshow(db.T, origin="lower", aspect="auto", extent=extent, vmin=-30, vmax=0)
-        fig.colorbar(im, ax=ax, label="accumulated sum (dB re max)")
-        ax.set_xlabel("receive time (s)")
-        ax.set_ylabel("codeword j")
-        ax.set_title("GCAS time–codeword map")
-        fig.tight_layout()
-        fig.savefig(path)
-        plt.close(fig)
+        save_time_codeword_map(path, self.times, self.power)

@@ -789,19 +789,20 @@ class GcasReceiver:
         emitted no later. The full search gives no such bound (``samples_seen``)."""
         if self.search != "two-stage":
             return self._samples_seen
-        return max(self._decision_input(self.coarse.next_block), self._samples_seen)
+        return max(self._decision_input(), self._samples_seen)
 
-    def _decision_input(self, next_block: int) -> int:
-        """:attr:`next_decision_index` after the coarse blocks below ``next_block``.
+    def _decision_input(self) -> int:
+        """:attr:`next_decision_index` from the coarse blocks completed so far.
 
         A candidate is a coarse peak (greater than the ``hc`` blocks before it, not smaller
         than the ``hc`` after), so the earliest block that can still become one is the first
         undecided block greater than its ``hc`` predecessors and not exceeded by a block
-        already known after it (or the next block to come). It
-        is decided once the ``hc`` blocks after it are complete and its fine window, which
-        ends at most ``max(c_shift) + 2·fine_half`` samples past its start, has arrived;
-        baseband sample ``k`` exists once input sample ``k·R`` has.
+        already known after it (or the next block to come). It is decided once the ``hc``
+        blocks after it are complete and its fine window (which ends ``c_shift`` of its
+        hypotheses, at most ``max(c_shift)``, plus ``2·fine_half`` samples past its start)
+        has arrived; baseband sample ``k`` exists once input sample ``k·R`` has.
         """
+        next_block = self.coarse.next_block
         h = self._hc
         lo = self._det_next
         first = max(lo - h, self._c_origin)

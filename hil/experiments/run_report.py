@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from hil.experiments.codeword_map import save_time_codeword_map
 from hil.experiments.tank_run import RunOutcome, telemetry_truth
 
 
@@ -55,22 +56,8 @@ def write_report(outcome: RunOutcome) -> list[Path]:
     plt.close(fig)
 
     if outcome.map_times:
-        tm = np.concatenate(outcome.map_times)
-        pm = np.concatenate(outcome.map_power, axis=0).astype(float)
-        stride = max(1, pm.shape[0] // 4000)
-        tm, pm = tm[::stride], pm[::stride]
-        db = 10 * np.log10(np.maximum(pm / max(float(pm.max()), 1e-300), 1e-6))
-        fig, ax = plt.subplots(figsize=(10, 4.5), dpi=110)
-        extent = (float(tm[0]), float(tm[-1]), -0.5, pm.shape[1] - 0.5)
-        im = ax.imshow(db.T, origin="lower", aspect="auto", extent=extent, vmin=-30, vmax=0)
-        fig.colorbar(im, ax=ax, label="accumulated sum (dB re max)")
-        ax.set_xlabel("receive time (s)")
-        ax.set_ylabel("codeword j")
-        ax.set_title("GCAS time–codeword map")
-        fig.tight_layout()
         paths.append(folder / "time_codeword_map.png")
-        fig.savefig(paths[-1])
-        plt.close(fig)
+        save_time_codeword_map(paths[-1], outcome.map_times, outcome.map_power)
 
     er = r - truth["range_m"]
     ev = v - truth["speed_mps"]

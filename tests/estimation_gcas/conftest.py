@@ -7,6 +7,8 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
+from hil.estimation.base import Estimate, Receiver
+from hil.estimation.gcas import GcasReceiver
 from hil.signals.presets import check_design, get_preset
 from hil.signals.schedule import HopSchedule
 from sim_devices.acoustics.delay import TwoWayPath
@@ -58,3 +60,19 @@ def true_range(range_m: float, speed_mps: float, t_tx: float, t_rx: float) -> fl
 @pytest.fixture(scope="session")
 def rc_schedule() -> HopSchedule:
     return att_schedule("random-cyclic")
+
+
+def make_gcas(schedule: HopSchedule, m_hops: int = 10, **extra: object) -> GcasReceiver:
+    """The GCAS receiver these tests use (30 m/s, 100 m) with ``extra`` options."""
+    return GcasReceiver.from_options(
+        schedule, FS, sound_speed_mps=C, max_speed_mps=30.0, max_range_m=100.0,
+        m_hops=m_hops, **extra,
+    )  # fmt: skip
+
+
+def run_blocks(rx: Receiver, x: np.ndarray, block: int = 10_000) -> list[Estimate]:
+    """``x`` through ``rx`` in blocks of ``block`` samples, then its flush."""
+    out: list[Estimate] = []
+    for i in range(0, x.shape[0], block):
+        out += rx.process(x[i : i + block])
+    return out + rx.flush()

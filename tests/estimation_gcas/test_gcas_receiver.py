@@ -20,21 +20,10 @@ from hil.estimation.unit_correlators import UnitCorrelatorBank
 from hil.signals.presets import check_design, get_preset
 from hil.signals.schedule import HopSchedule
 
-from .conftest import FS, C, att_schedule, echo_samples, true_range
+from .conftest import FS, C, att_schedule, echo_samples, make_gcas, run_blocks, true_range
 
-
-def _receiver(schedule: HopSchedule, m_hops: int = 10, **extra: object) -> GcasReceiver:
-    return GcasReceiver.from_options(
-        schedule, FS, sound_speed_mps=C, max_speed_mps=30.0, max_range_m=100.0,
-        m_hops=m_hops, **extra,
-    )  # fmt: skip
-
-
-def _run(rx: GcasReceiver, x: np.ndarray, block: int = 10_000) -> list[Estimate]:
-    out: list[Estimate] = []
-    for i in range(0, x.shape[0], block):
-        out += rx.process(x[i : i + block])
-    return out + rx.flush()
+_receiver = make_gcas
+_run = run_blocks
 
 
 def _errors(est: list[Estimate], r0: float, v: float) -> tuple[np.ndarray, np.ndarray]:

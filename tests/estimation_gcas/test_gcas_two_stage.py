@@ -16,21 +16,14 @@ from hil.estimation.gcas import GcasReceiver
 from hil.estimation.unit_correlators import UnitCorrelatorBank
 from hil.signals.schedule import HopSchedule
 
-from .conftest import FS, C, att_schedule, echo_samples, true_range
+from .conftest import FS, att_schedule, echo_samples, make_gcas, run_blocks, true_range
 
 
 def _receiver(schedule: HopSchedule, search: str, **extra: object) -> GcasReceiver:
-    return GcasReceiver.from_options(
-        schedule, FS, sound_speed_mps=C, max_speed_mps=30.0, max_range_m=100.0,
-        m_hops=10, search=search, **extra,
-    )  # fmt: skip
+    return make_gcas(schedule, search=search, **extra)
 
 
-def _run(rx: GcasReceiver, x: np.ndarray, block: int = 10_000) -> list[Estimate]:
-    out: list[Estimate] = []
-    for i in range(0, x.shape[0], block):
-        out += rx.process(x[i : i + block])
-    return out + rx.flush()
+_run = run_blocks
 
 
 def _coarse_reference(

@@ -1,0 +1,46 @@
+"""The GCAS time–codeword map as a PNG (seed Fig 5.17 style), for `hil estimate --map` and
+the tank run's report."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+
+# Columns drawn at most: longer maps are thinned evenly (the PNG has fewer pixels anyway).
+MAX_COLUMNS = 4000
+
+
+def save_time_codeword_map(
+    path: Path,
+    times: Sequence[npt.ArrayLike],
+    power: Sequence[npt.ArrayLike],
+) -> None:
+    """Draw codeword sums against receive time, in dB re their maximum (−30 … 0 dB).
+
+    ``times``: chunks of receive times (s), shape ``(n_i,)``; ``power``: the matching chunks
+    of codeword sums, shape ``(n_i, J)``, as the receiver's ``on_map`` callback gives them.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t = np.concatenate([np.asarray(c, dtype=float) for c in times])
+    p = np.concatenate([np.asarray(c, dtype=float) for c in power], axis=0)
+    stride = max(1, p.shape[0] // MAX_COLUMNS)
+    t, p = t[::stride], p[::stride]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    db = 10 * np.log10(np.maximum(p / max(float(p.max()), 1e-300), 1e-6))
+    fig, ax = plt.subplots(figsize=(10, 4.5), dpi=110)
+    extent = (float(t[0]), float(t[-1]), -0.5, p.shape[1] - 0.5)
+    im = ax.imshow(db.T, origin="lower", aspect="auto", extent=extent, vmin=-30, vmax=0)
+    fig.colorbar(im, ax=ax, label="accumulated sum (dB re max)")
+    ax.set_xlabel("receive time (s)")
+    ax.set_ylabel("codeword j")
+    ax.set_title("GCAS time–codeword map")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
