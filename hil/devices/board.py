@@ -104,9 +104,6 @@ _READ_SIZE = 1 << 16
 _DAC_BURST_FRAMES = 8  # DAC frames sent per write (8 x 8 KB)
 # Longest idle sleep of the writer (s): it used to poll every 5 ms, 200 wake-ups a second.
 _WRITER_IDLE_S = 0.05
-# After the host fell behind, how far ahead of the ADC stream transmission resumes (s): room
-# for the burst to reach the board before its first sample is due.
-_DAC_RESYNC_LEAD_S = 0.05
 
 DacSource = Callable[[int, int], npt.ArrayLike] | Iterable[npt.ArrayLike]
 """A callable ``source(first_sample, n) -> block`` or an iterable of blocks. Blocks are (n,)
@@ -800,12 +797,12 @@ class Board:
 
     def _skip_late_dac(self, feeder: _DacFeeder, config: Configure) -> None:
         """After the host fell behind (the board's DAC FIFO ran dry: the ADC stream is past
-        the next DAC sample to send), jump the feeder to :data:`_DAC_RESYNC_LEAD_S` ahead of
-        the ADC stream instead of sending samples whose time has passed: the board would
-        drop them as late, and a host only just faster than real time would never catch up
-        (the transmission would stay silent). The samples played stay those of their board
-        indices, so the waveform keeps its schedule; the silent span shows as the board's
-        DAC underrun."""
+        the next DAC sample to send), jump the feeder :attr:`start_lead_s` ahead of the ADC
+        stream, as :meth:`start` schedules the first sample, instead of sending samples whose
+        time has passed: the board would drop them as late, and a host only just faster
+        than real time would never catch up (the transmission would stay silent). The
+        samples played stay those of their board indices, so the waveform keeps its
+        schedule; the silent span shows as the board's DAC underrun."""
         ring = self.ring
         held = ring.end_index if ring is not None else None
         if not self._streaming or held is None:
@@ -815,7 +812,7 @@ class Board:
         # its clock has not played those indices yet, and skipping them would gap the DAC.
         if feeder.next_index >= held:
             return
-        target = held + round(_DAC_RESYNC_LEAD_S * config.sample_rate_hz)
+        target = held + round(self.start_lead_s * config.sample_rate_hz)
         skipped = target - feeder.next_index
         at = feeder.next_index
         feeder.skip(skipped)

@@ -83,6 +83,28 @@ def run_event(annotation: Annotation) -> RunEvent:
     )
 
 
+def sample_zero_time_s(pairs: list[tuple[int, float]], fs: float) -> float | None:
+    """Host time (s) of board sample 0, from SYNC pairs ``(sample_index, host_time_s)`` by
+    minimum-delay filtering; None without pairs.
+
+    A SYNC is stamped when the host reads it, which during streaming is after the ADC
+    frames queued before it, so every pair is late by a varying backlog: with the known
+    sample rate ``fs`` (Hz), the least-delayed pair gives the offset. A SYNC sent before
+    CONFIGURE (another rate) may arrive after it and sits far below the others; backlog
+    delays are positive and well under a second, so the least-delayed pair is sought within
+    a second below the median.
+
+    >>> pairs = [(1000, 11.003), (2000, 12.0015), (3000, 13.004)]  # delays 3, 1.5, 4 ms
+    >>> round(sample_zero_time_s(pairs + [(2_000_000, 12.5)], 1000.0), 6)  # + a stale SYNC
+    10.0015
+    """
+    if not pairs:
+        return None
+    offsets = np.array([host_t - index / fs for index, host_t in pairs])
+    plausible = offsets[offsets >= np.median(offsets) - 1.0]
+    return float(plausible.min())
+
+
 def measure_latency(monitor: np.ndarray, sent: np.ndarray, max_lag: int = 4096) -> int:
     """Integer-sample delay of ``monitor`` (the DAC drive as captured) behind ``sent``.
 
@@ -465,10 +487,11 @@ def run_experiment(
             if tail_until is not None and now() >= tail_until:
                 # End on captured samples, not on the clock: a capture that lags still
                 # records the whole pass and its last echoes.
-                fit = board.clock_fit
-                end_index = (
-                    fit.sample_index(tail_until) if fit is not None and fit.pairs >= 2 else 0
-                )
+                # The board's clock at tail_until, from the least-delayed SYNC: a board that
+                # falls behind its clock (a simulated world computing slowly) delivers every
+                # later SYNC late, and a fit through them would end the capture early.
+                zero = sample_zero_time_s(list(getattr(board.clock_fit, "_pairs", ())), fs)
+                end_index = int((tail_until - zero) * fs) if zero is not None else 0
                 if next_index >= end_index:
                     break
             if now() > deadline:
@@ -494,13 +517,8 @@ def run_experiment(
     # frames queued before it, so every pair is late by a varying backlog. With the known
     # sample rate, the least-delayed pair gives the host-time offset of sample 0.
     pairs = list(getattr(board.clock_fit, "_pairs", ())) if board is not None else []
-    if pairs:
-        offsets = np.array([host_t - index / fs for index, host_t in pairs])
-        # A SYNC sent before CONFIGURE (other rate) may arrive after it: such a pair is far
-        # below the others. Backlog delays are positive and well under a second, so the
-        # least-delayed pair is sought within a second below the median.
-        plausible = offsets[offsets >= np.median(offsets) - 1.0]
-        offset = float(plausible.min())
+    offset = sample_zero_time_s(pairs, fs)
+    if offset is not None:
         telemetry.sample_index = [int(round((t - offset) * fs)) for t in telemetry.host_time_s]
     dropped = int(board.ring.missing) if board is not None and board.ring is not None else 0
     events: list[tuple[str, int, int, str]] = []

@@ -356,15 +356,21 @@ def test_a_host_that_fell_behind_skips_to_the_board_clock_and_the_waveform_stays
         assert port.call(lambda b: b.dac_underruns) >= 1
         assert board.dac_samples_skipped == 0
         gate.release.set()
-        end = stream_for(board, clock, 0.4, dac_level=level)
+        end = stream_for(board, clock, 0.6, dac_level=level)
         skipped = board.dac_samples_skipped
-        # Skipped: the samples from where the host stood to 50 ms past the board clock.
-        assert 300_000 < skipped < 700_000
+        # Skipped: from where the host stood to start_lead_s (0.2 s) past the ADC stream,
+        # which the 0.6 s stall had put 0.35-0.6 s ahead of it.
+        assert 500_000 < skipped < 850_000
         notes = [a for a in board.annotations.all() if "skipped" in a.detail]
         assert len(notes) == 1 and notes[0].length == skipped
-        # The last 0.2 s: the loopback of exactly the samples of those board indices.
-        n, m = end - first, 200_000
+        resumed = notes[0].sample_index + skipped  # 0.2 s past the ADC stream at the skip
+        assert notes[0].sample_index < resumed - 200_000 < end
+        # From where transmission resumed: the loopback of exactly the samples of those board
+        # indices (and silence in the span skipped, before it).
+        n, m = end - first, end - (resumed + DELAY)
+        assert m >= 100_000
         np.testing.assert_array_equal(board.read(end - m, m), expected_loopback(first, n)[-m:])
+        assert not board.read(resumed - 1000, 1000).any()
         board.stop()
 
 
