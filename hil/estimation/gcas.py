@@ -110,6 +110,7 @@ from hil.estimation.kernels import (
 )
 from hil.estimation.row_buffer import RowBuffer
 from hil.estimation.unit_correlators import UnitCorrelatorBank
+from hil.resident_arrays import resident_zeros
 from hil.signals.random_cyclic import minimum_distance
 from hil.signals.schedule import HopSchedule
 
@@ -702,8 +703,9 @@ class GcasReceiver:
             + 2 * self._B
         )  # fmt: skip
         cap = 1 << int(math.ceil(math.log2(2 * reach)))
-        self._cache_p = np.zeros((self.grid.size, self.n_tones, cap))
-        self._cache_max = np.zeros((self.grid.size, cap))
+        # Mapped now, not page by page in the first live blocks (hil.resident_arrays).
+        self._cache_p = resident_zeros((self.grid.size, self.n_tones, cap))
+        self._cache_max = resident_zeros((self.grid.size, cap))
         self._hyp_w = np.ascontiguousarray(self.grid.weights, dtype=np.float64)
         self._cache_n = np.full((self.grid.size, cap), NO_SAMPLE, dtype=np.int64)
         code, m_idx = self.code, np.arange(m)

@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import DTypeLike, NDArray
 
 from hil.errors import ConfigError
+from hil.resident_arrays import resident_zeros
 
 
 class RowBuffer:
@@ -47,7 +48,8 @@ class RowBuffer:
 
     def reset(self, next_index: int) -> None:
         """Clear to zeros; the next appended row has absolute index ``next_index``."""
-        self._arr = np.zeros((self._cap, *self.row_shape), dtype=self.dtype)
+        # Mapped now, not page by page as the stream first fills it (hil.resident_arrays).
+        self._arr = resident_zeros((self._cap, *self.row_shape), self.dtype)
         self._w = self.keep
         self._next = int(next_index)
 
@@ -79,7 +81,7 @@ class RowBuffer:
             need = self.keep + n
             if need > self._arr.shape[0]:
                 self._cap = max(2 * need, self._cap)
-                new = np.zeros((self._cap, *self.row_shape), dtype=self.dtype)
+                new = resident_zeros((self._cap, *self.row_shape), self.dtype)
             else:
                 new = self._arr
             new[: self.keep] = self._arr[self._w - self.keep : self._w]
