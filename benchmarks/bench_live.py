@@ -55,6 +55,7 @@ import resource
 import signal
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from dataclasses import dataclass, field
@@ -79,6 +80,9 @@ MAX_BLOCK_S = 0.005  # longest block per receiver call: one hop, so a catch-up e
 TARGET_CPU_CORES = 0.5
 TARGET_LATENCY_HOPS = 1.0
 KEEP_UP_BACKLOG_S = 0.1
+#: Gap between two captures of the simulated board (it captures every 1 ms) that counts as
+#: a stall of the stand-in, s.
+STANDIN_STALL_S = 0.003
 
 
 # --------------------------------------------------------------------------- board process
@@ -87,6 +91,10 @@ class EchoWorld:
 
     ``dac_block`` (n, dac_channels) full scale in; (n, 2) full scale out. The noise is seeded
     once; the delay line is :class:`sim_devices.board.LoopbackWorld`.
+
+    It also times the stand-in board: the board calls its world whenever it captures, once
+    per 1 ms tick, so a gap of more than :data:`STANDIN_STALL_S` between two calls is a
+    stall of the simulated board's pump (``stalls``: (start, end) monotonic s).
     """
 
     def __init__(self, delay_samples: int, gain: float, noise_rms: float, seed: int = 7) -> None:
@@ -95,12 +103,18 @@ class EchoWorld:
         self._echo = LoopbackWorld(delay_samples, gain)
         self._noise_rms = noise_rms
         self._rng = np.random.default_rng(seed)
+        self._last_call: float | None = None
+        self.stalls: list[tuple[float, float]] = []
 
     def reset(self) -> None:
         """A new stream: empty delay line."""
         self._echo.reset()
 
     def __call__(self, dac_block: npt.NDArray[np.float64], first_sample: int, /) -> Any:
+        now = time.monotonic()
+        if self._last_call is not None and now - self._last_call > STANDIN_STALL_S:
+            self.stalls.append((self._last_call, now))
+        self._last_call = now
         dac = dac_block[:, :1]
         out = np.empty((dac.shape[0], 2))
         out[:, 0] = self._echo(dac, first_sample)[:, 0]
@@ -109,13 +123,15 @@ class EchoWorld:
         return out
 
 
-def serve_board(delay: int, gain: float, noise_rms: float) -> None:
-    """Serve the simulated board on a pty until SIGTERM; the pty path on stdout's first line."""
+def serve_board(delay: int, gain: float, noise_rms: float, stalls_out: str) -> None:
+    """Serve the simulated board on a pty until SIGTERM; the pty path on stdout's first line.
+    At the end its pump's stalls (:class:`EchoWorld`) go to ``stalls_out`` as JSON pairs."""
     from sim_devices.board import SimulatedBoardOnPty
 
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    with SimulatedBoardOnPty(world=EchoWorld(delay, gain, noise_rms)) as board:
+    world = EchoWorld(delay, gain, noise_rms)
+    with SimulatedBoardOnPty(world=world) as board:
         # A stand-in for hardware, which has no garbage collector: its setup's objects stay
         # out of the collector's full passes (20 ms each here), as the host's do.
         gc.collect()
@@ -123,6 +139,8 @@ def serve_board(delay: int, gain: float, noise_rms: float) -> None:
         print(board.port_name, flush=True)
         while not stop.wait(0.2):
             pass
+    with open(stalls_out, "w") as fh:
+        json.dump(world.stalls, fh)
 
 
 # --------------------------------------------------------------------------- host side
@@ -211,10 +229,15 @@ class Arrivals:
 
 
 def run_live(
-    seconds: float, min_block_s: float, profile: bool = False, every_block: bool = False
+    seconds: float,
+    min_block_s: float,
+    profile: bool = False,
+    every_block: bool = False,
+    stall_probes: bool = True,
 ) -> dict[str, Any]:
     """Stream ``seconds`` through Board + capture loop + GCAS; the figures (module docstring)."""
     from hil.acquisition import HeapFreeze
+    from hil.acquisition.stall_probe import StallProbes, overlapping
     from hil.devices.board import Board
     from hil.devices.board_settings import BoardSettings
     from hil.estimation.registry import make_receiver
@@ -237,6 +260,12 @@ def run_live(
         m_hops=M_HOPS,
     )
     synth = BlockSynthesizer(schedule, FS_HZ, amplitude=DAC_AMPLITUDE)
+    # Started first: their start-up (two interpreters importing NumPy) must not land in the
+    # stream.
+    probes = StallProbes().start() if stall_probes else None
+    machine = None
+    fd, standin_path = tempfile.mkstemp(prefix="standin-stalls-", suffix=".json")
+    os.close(fd)
     server = subprocess.Popen(
         [
             sys.executable,
@@ -245,6 +274,7 @@ def run_live(
             str(ECHO_DELAY_SAMPLES),
             str(ECHO_GAIN),
             str(NOISE_RMS),
+            standin_path,
         ],
         stdout=subprocess.PIPE,
         text=True,
@@ -342,6 +372,7 @@ def run_live(
             server_cpu = _process_cpu_s(server.pid) - server_cpu0
             thread_cpu = {name: _thread_cpu_s(tid) - thread0[name] for name, tid in threads.items()}
             heap.stop()
+            machine = probes.stop() if probes is not None else None
             if profiler is not None:
                 profiler.disable()
             board_now = board.board_index_now()
@@ -355,6 +386,11 @@ def run_live(
     finally:
         server.terminate()
         server.wait(timeout=10)
+        if probes is not None and machine is None:
+            probes.stop()
+    with open(standin_path) as fh:
+        standin = np.array(json.load(fh), dtype=np.float64).reshape(-1, 2)
+    os.unlink(standin_path)
 
     boundary = np.asarray(est_boundary, dtype=np.int64)
     emit = np.asarray(est_emit)
@@ -366,6 +402,19 @@ def run_live(
     proc_s = emit - np.asarray(est_seen)
     over = lat_s > schedule.hop_s
     hop_s = schedule.hop_s
+    # Estimates whose time from boundary to estimate overlapped a machine stall: the
+    # machine (hypervisor, kernel) held a CPU away from every thread meanwhile.
+    if machine is not None:
+        in_stall = machine.overlapping(boundary_seen, emit)
+    else:
+        in_stall = np.zeros(lat_s.shape, dtype=bool)
+    # ... and those during which the stand-in board's pump stalled (it shares the host's
+    # CPUs; hardware would not).
+    in_standin = overlapping(standin[:, 0], standin[:, 1], boundary_seen, emit)
+    t_run = (wall0, wall0 + wall)
+    standin_run = standin[(standin[:, 1] >= t_run[0]) & (standin[:, 0] <= t_run[1])]
+    standin_d = standin_run[:, 1] - standin_run[:, 0]
+    clear = ~in_stall & ~in_standin
 
     def hops(x: npt.NDArray[np.float64], percentile: float) -> float:
         x = x[np.isfinite(x)]
@@ -440,6 +489,18 @@ def run_live(
         "stream_lateness_median_ms": _ms(stream_late_s, 50),
         "stream_lateness_p99_ms": _ms(stream_late_s, 99),
         "stream_lateness_max_ms": _ms(stream_late_s, 100),
+        **machine_figures(machine),
+        "estimates_in_machine_stall": int(np.count_nonzero(in_stall)),
+        "over_1_hop_in_machine_stall": int(np.count_nonzero(over & in_stall)),
+        "latency_p99_outside_machine_stalls_hops": hops(lat_s[~in_stall], 99),
+        "latency_max_outside_machine_stalls_hops": hops(lat_s[~in_stall], 100),
+        "standin_stalls": int(standin_d.size),
+        "standin_stall_max_ms": round(float(standin_d.max()) * 1e3, 3) if standin_d.size else 0.0,
+        "estimates_in_standin_stall": int(np.count_nonzero(in_standin)),
+        "over_1_hop_in_standin_stall": int(np.count_nonzero(over & in_standin)),
+        "over_1_hop_outside_both": int(np.count_nonzero(over & clear)),
+        "latency_p99_outside_both_hops": hops(lat_s[clear], 99),
+        "latency_max_outside_both_hops": hops(lat_s[clear], 100),
         "target_cpu_cores": TARGET_CPU_CORES,
         "cpu_ratio": round(TARGET_CPU_CORES / max(cores, 1e-9), 2),
         "target_latency_hops": TARGET_LATENCY_HOPS,
@@ -454,6 +515,28 @@ def run_live(
 
         pstats.Stats(profiler, stream=sys.stderr).sort_stats("cumulative").print_stats(30)
     return result
+
+
+def machine_figures(machine: Any) -> dict[str, Any]:
+    """The stall probes' summary, keys prefixed ``machine_`` (empty without probes)."""
+    if machine is None:
+        return {}
+    return {f"machine_{k}": v for k, v in machine.summary().items()}
+
+
+def machine_rows(r: dict[str, Any]) -> list[tuple[str, str]]:
+    """Table rows for the stall probes' figures (none without probes)."""
+    if "machine_stalls" not in r:
+        return []
+    kind = "real-time" if r["machine_probe_realtime"] else "ordinary (no real-time priority)"
+    return [
+        (
+            "machine stalls",
+            f"{r['machine_stalls']} over 1 ms on CPUs {r['machine_probe_cpus']}, longest"
+            f" {r['machine_stall_max_ms']} ms, {r['machine_stalls_over_5ms']} over 5 ms;"
+            f" {r['machine_stalled_ms_per_s']} ms/s per CPU ({kind} probes)",
+        )
+    ]
 
 
 def print_table(r: dict[str, Any]) -> None:
@@ -526,8 +609,47 @@ def print_table(r: dict[str, Any]) -> None:
             " against the fastest delivery)",
         ),
     ]
+    rows += machine_rows(r)
+    if "estimates_in_machine_stall" in r and "machine_stalls" in r:
+        rows.append(
+            (
+                "  outside them",
+                f"{r['estimates_in_machine_stall']} estimates overlapped a stall"
+                f" ({r['over_1_hop_in_machine_stall']} of those over 1 hop); the others:"
+                f" latency p99 {r['latency_p99_outside_machine_stalls_hops']}, max"
+                f" {r['latency_max_outside_machine_stalls_hops']} hops",
+            )
+        )
+    rows.append(
+        (
+            "stand-in stalls",
+            f"{r['standin_stalls']} gaps over {STANDIN_STALL_S * 1e3:.0f} ms between the"
+            f" simulated board's captures, longest {r['standin_stall_max_ms']} ms;"
+            f" {r['estimates_in_standin_stall']} estimates overlapped one"
+            f" ({r['over_1_hop_in_standin_stall']} of those over 1 hop)",
+        )
+    )
+    rows.append(
+        (
+            "  outside both",
+            f"{r['over_1_hop_outside_both']} estimates over 1 hop; latency p99"
+            f" {r['latency_p99_outside_both_hops']}, max {r['latency_max_outside_both_hops']}"
+            " hops",
+        )
+    )
     for name, text in rows:
         print(f"{name:<18} {text}")
+
+
+def run_machine_only(seconds: float) -> dict[str, Any]:
+    """Only the stall probes, for ``seconds``, on a machine left otherwise idle: what any
+    live pipeline on it would lose."""
+    from hil.acquisition.stall_probe import StallProbes
+
+    with StallProbes() as probes:
+        time.sleep(seconds)
+    assert probes.result is not None
+    return {"seconds": seconds, "machine_only": True, **machine_figures(probes.result)}
 
 
 def main() -> None:
@@ -546,15 +668,35 @@ def main() -> None:
         action="store_true",
         help="call the receiver for every new block, not only when it can decide",
     )
-    parser.add_argument("--serve-board", nargs=3, metavar=("DELAY", "GAIN", "NOISE"))
+    parser.add_argument(
+        "--no-stall-probes",
+        action="store_true",
+        help="do not run the machine stall probes (one small process per CPU)",
+    )
+    parser.add_argument(
+        "--machine-only",
+        action="store_true",
+        help="run only the stall probes for --seconds: the machine's own stalls",
+    )
+    parser.add_argument("--serve-board", nargs=4, metavar=("DELAY", "GAIN", "NOISE", "OUT"))
     args = parser.parse_args()
     if args.serve_board:
-        delay, gain, noise = args.serve_board
-        serve_board(int(delay), float(gain), float(noise))
+        delay, gain, noise, out = args.serve_board
+        serve_board(int(delay), float(gain), float(noise), out)
         return
     seconds = 1.5 if args.quick else args.seconds
+    if args.machine_only:
+        result = run_machine_only(seconds)
+        for name, text in machine_rows(result):
+            print(f"{name:<18} {text}")
+        print(json.dumps({"benchmark": "bench_live", **result}))
+        return
     result = run_live(
-        seconds, args.min_block_ms / 1e3, profile=args.profile, every_block=args.every_block
+        seconds,
+        args.min_block_ms / 1e3,
+        profile=args.profile,
+        every_block=args.every_block,
+        stall_probes=not args.no_stall_probes,
     )
     print_table(result)
     print(json.dumps({"benchmark": "bench_live", **result}))
