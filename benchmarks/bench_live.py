@@ -149,6 +149,15 @@ def _host_cpu_s() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
+def _rss_bytes() -> float:
+    """This process's resident memory, bytes (Linux /proc; NaN elsewhere)."""
+    try:
+        with open("/proc/self/statm") as fh:
+            return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    except OSError:
+        return float("nan")
+
+
 def _process_cpu_s(pid: int, stat: str = "/proc/{pid}/stat") -> float:
     """User+system CPU seconds of process ``pid`` (Linux /proc; NaN elsewhere)."""
     try:
@@ -328,6 +337,7 @@ def run_live(
                 profiler.enable()
             threads = _board_thread_ids(board)
             thread0 = {name: _thread_cpu_s(tid) for name, tid in threads.items()}
+            rss0 = _rss_bytes()
             wall0, cpu0, main0 = time.monotonic(), _host_cpu_s(), time.thread_time()
             server_cpu0 = _process_cpu_s(server.pid)
             while next_index < end_target:
@@ -366,6 +376,7 @@ def run_live(
                 next_index += n
                 blocks += 1
             wall = time.monotonic() - wall0
+            rss_growth = _rss_bytes() - rss0
             held_end = ring.end_index or start
             cpu = _host_cpu_s() - cpu0
             main_cpu = time.thread_time() - main0
@@ -451,6 +462,7 @@ def run_live(
         "reader_thread_cores": round(thread_cpu["reader"] / wall, 3),
         "writer_thread_cores": round(thread_cpu["writer"] / wall, 3),
         "sim_board_process_cores": round(server_cpu / wall, 3),
+        "host_rss_growth_mib": round(rss_growth / 2**20, 2),
         "feed_call_median_ms": round(float(np.median(feed_wall)) * 1e3, 3),
         "feed_call_p99_ms": round(float(np.percentile(feed_wall, 99)) * 1e3, 3),
         "feed_call_max_ms": round(float(np.max(feed_wall)) * 1e3, 3),
@@ -558,6 +570,7 @@ def print_table(r: dict[str, Any]) -> None:
             f" writer {r['writer_thread_cores']:.3f})",
         ),
         ("  (sim board)", f"{r['sim_board_process_cores']:.3f} cores, other process, not counted"),
+        ("host memory", f"resident set grew {r['host_rss_growth_mib']} MiB while streaming"),
         (
             "feed call",
             f"median {r['feed_call_median_ms']:.2f} ms, p99 {r['feed_call_p99_ms']:.2f} ms,"
