@@ -37,12 +37,21 @@ Figures (over the ``--seconds`` of streaming, default 30):
 - stream lateness: when each block was stored in the ring, against the board's clock on the
   host's time axis (the SYNC fit moved to its earliest pair): a stall anywhere upstream of
   the capture loop (simulated board, pty, reader thread) shows here;
-- estimates per second and how many are at the echo's range.
+- estimates per second and how many are at the echo's range;
+- the host's resident-set growth while streaming (a page fault in the live path shows here);
+- what else held the CPUs: the machine's stalls, seen by one real-time stall probe per CPU
+  (:class:`hil.acquisition.stall_probe.StallProbes`; count, longest, steal time), and the
+  stand-in board's stalls (gaps over :data:`STANDIN_STALL_S` between its 1 ms captures);
+  how many estimates each touched (the stall overlaps the time from the boundary's arrival
+  to the estimate), and the latency over the estimates that neither touched.
 
-Targets: host CPU < 0.5 core, latency <= 1 hop (max), keeps up (no missing samples, no DAC
-underrun, backlog when the last block is done at most :data:`KEEP_UP_BACKLOG_S`).
+Targets: host CPU < 0.5 core, latency <= 1 hop (max over all estimates), keeps up (no
+missing samples, no DAC underrun, backlog when the last block is done at most
+:data:`KEEP_UP_BACKLOG_S`).
 Run: ``python benchmarks/bench_live.py [--seconds 30] [--min-block-ms 1] [--every-block]
-[--profile] [--quick]``; the last stdout line is one JSON object.
+[--profile] [--no-stall-probes] [--quick]``; ``--machine-only`` runs the stall probes alone
+for ``--seconds`` (what the machine takes away from any pipeline). The last stdout line is
+one JSON object.
 """
 
 from __future__ import annotations
@@ -245,8 +254,8 @@ def run_live(
     stall_probes: bool = True,
 ) -> dict[str, Any]:
     """Stream ``seconds`` through Board + capture loop + GCAS; the figures (module docstring)."""
-    from hil.acquisition import HeapFreeze
-    from hil.acquisition.stall_probe import StallProbes, overlapping
+    from hil.acquisition import HeapFreeze, StallProbes
+    from hil.acquisition.stall_probe import overlapping
     from hil.devices.board import Board
     from hil.devices.board_settings import BoardSettings
     from hil.estimation.registry import make_receiver
