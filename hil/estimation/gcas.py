@@ -133,6 +133,8 @@ EXACT_ANCHOR = 16
 NO_SAMPLE = np.iinfo(np.int64).min
 #: Times the two-stage search moves its fine window onto an edge peak, at most.
 RECENTRE_STEPS = 4
+#: A hypothesis and its two neighbours on the Doppler grid (offsets, shape (1, 3)).
+_NEIGHBOURS = np.arange(-1, 2, dtype=np.int64)[None, :]
 #: Guard around every tone's reverberation band, in unit-correlator main lobes (1/T_h).
 #: Measured: 0.5 leaves no ghost on the clutter-plus-target test; wider guards move the
 #: ghost to the first unmasked hypothesis past the guard instead of removing it.
@@ -878,7 +880,7 @@ class GcasReceiver:
                 break
             centre[edge] += ip[edge] - w
             a[edge] = self._fine_sums(centre[edge], d0[edge, None], w)[:, 0]
-        dset = np.clip(d0[:, None] + np.arange(-1, 2)[None, :], 0, self.grid.size - 1)
+        dset = np.minimum(np.maximum(d0[:, None] + _NEIGHBOURS, 0), self.grid.size - 1)
 
         def sides(hit: NDArray[np.int64], n_pk: NDArray[np.int64]) -> NDArray[np.float64]:
             return self._fine_sums(n_pk, dset[hit][:, [0, 2]], 0)[:, :, 0]
