@@ -40,7 +40,7 @@ Figures (over the ``--seconds`` of streaming, default 30):
 - estimates per second and how many are at the echo's range;
 - the host's resident-set growth while streaming (a page fault in the live path shows here);
 - what else held the CPUs: the machine's stalls, seen by one real-time stall probe per CPU
-  (:class:`hil.acquisition.stall_probe.StallProbes`; count, longest, steal time), and the
+  (:class:`hil.acquisition.StallProbes`; count, longest, steal time), and the
   stand-in board's stalls (gaps over :data:`STANDIN_STALL_S` between its 1 ms captures);
   how many estimates each touched (the stall overlaps the time from the boundary's arrival
   to the estimate), and the latency over the estimates that neither touched.
@@ -255,7 +255,7 @@ def run_live(
 ) -> dict[str, Any]:
     """Stream ``seconds`` through Board + capture loop + GCAS; the figures (module docstring)."""
     from hil.acquisition import HeapFreeze, StallProbes
-    from hil.acquisition.stall_probe import overlapping
+    from hil.acquisition.machine_stalls import overlapping, steal_s
     from hil.devices.board import Board
     from hil.devices.board_settings import BoardSettings
     from hil.estimation.registry import make_receiver
@@ -278,31 +278,32 @@ def run_live(
         m_hops=M_HOPS,
     )
     synth = BlockSynthesizer(schedule, FS_HZ, amplitude=DAC_AMPLITUDE)
-    # Started first: their start-up (two interpreters importing NumPy) must not land in the
-    # stream.
-    probes = StallProbes().start() if stall_probes else None
+    probes = StallProbes() if stall_probes else None
     machine = None
     fd, standin_path = tempfile.mkstemp(prefix="standin-stalls-", suffix=".json")
     os.close(fd)
-    server = subprocess.Popen(
-        [
-            sys.executable,
-            __file__,
-            "--serve-board",
-            str(ECHO_DELAY_SAMPLES),
-            str(ECHO_GAIN),
-            str(NOISE_RMS),
-            standin_path,
-        ],
-        stdout=subprocess.PIPE,
-        text=True,
-    )
+    server: subprocess.Popen[str] | None = None
     profiler: Any = None
     if profile:
         import cProfile
 
         profiler = cProfile.Profile()
     try:
+        if probes is not None:
+            probes.start()  # before the board: their start-up must not land in the stream
+        server = subprocess.Popen(
+            [
+                sys.executable,
+                __file__,
+                "--serve-board",
+                str(ECHO_DELAY_SAMPLES),
+                str(ECHO_GAIN),
+                str(NOISE_RMS),
+                standin_path,
+            ],
+            stdout=subprocess.PIPE,
+            text=True,
+        )
         assert server.stdout is not None
         port = server.stdout.readline().strip()
         settings = BoardSettings(sample_rate_hz=FS_HZ, dac_channels=1, adc_channels=ADC_CHANNELS)
@@ -347,6 +348,7 @@ def run_live(
             threads = _board_thread_ids(board)
             thread0 = {name: _thread_cpu_s(tid) for name, tid in threads.items()}
             rss0 = _rss_bytes()
+            steal0 = steal_s(probes.cpus) if probes is not None else float("nan")
             wall0, cpu0, main0 = time.monotonic(), _host_cpu_s(), time.thread_time()
             server_cpu0 = _process_cpu_s(server.pid)
             while next_index < end_target:
@@ -385,6 +387,7 @@ def run_live(
                 next_index += n
                 blocks += 1
             wall = time.monotonic() - wall0
+            steal = (steal_s(probes.cpus) if probes is not None else float("nan")) - steal0
             rss_growth = _rss_bytes() - rss0
             held_end = ring.end_index or start
             cpu = _host_cpu_s() - cpu0
@@ -392,7 +395,9 @@ def run_live(
             server_cpu = _process_cpu_s(server.pid) - server_cpu0
             thread_cpu = {name: _thread_cpu_s(tid) - thread0[name] for name, tid in threads.items()}
             heap.stop()
-            machine = probes.stop() if probes is not None else None
+            if probes is not None:
+                # The machine while streaming (not while the board and probes started).
+                machine = probes.stop().between(wall0, wall0 + wall, steal)
             if profiler is not None:
                 profiler.disable()
             board_now = board.board_index_now()
@@ -404,13 +409,19 @@ def run_live(
             stream_late_s = _stream_lateness_s(board, arrivals)
         flushed = len(feed.finish())
     finally:
-        server.terminate()
-        server.wait(timeout=10)
-        if probes is not None and machine is None:
-            probes.stop()
-    with open(standin_path) as fh:
-        standin = np.array(json.load(fh), dtype=np.float64).reshape(-1, 2)
-    os.unlink(standin_path)
+        if server is not None:
+            server.terminate()
+            try:
+                server.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                server.kill()
+                server.wait()
+            if server.stdout is not None:
+                server.stdout.close()
+        if probes is not None:
+            probes.close()  # after stop() nothing is left; on an error, kill them
+        standin = _standin_stalls(standin_path)
+        os.unlink(standin_path)
 
     boundary = np.asarray(est_boundary, dtype=np.int64)
     emit = np.asarray(est_emit)
@@ -431,9 +442,8 @@ def run_live(
     # ... and those during which the stand-in board's pump stalled (it shares the host's
     # CPUs; hardware would not).
     in_standin = overlapping(standin[:, 0], standin[:, 1], boundary_seen, emit)
-    t_run = (wall0, wall0 + wall)
-    standin_run = standin[(standin[:, 1] >= t_run[0]) & (standin[:, 0] <= t_run[1])]
-    standin_d = standin_run[:, 1] - standin_run[:, 0]
+    standin_run = standin[(standin[:, 1] >= wall0) & (standin[:, 0] <= wall0 + wall)]
+    standin_d = np.minimum(standin_run[:, 1], wall0 + wall) - np.maximum(standin_run[:, 0], wall0)
     clear = ~in_stall & ~in_standin
 
     def hops(x: npt.NDArray[np.float64], percentile: float) -> float:
@@ -511,17 +521,21 @@ def run_live(
         "stream_lateness_p99_ms": _ms(stream_late_s, 99),
         "stream_lateness_max_ms": _ms(stream_late_s, 100),
         **machine_figures(machine),
-        "estimates_in_machine_stall": int(np.count_nonzero(in_stall)),
-        "over_1_hop_in_machine_stall": int(np.count_nonzero(over & in_stall)),
-        "latency_p99_outside_machine_stalls_hops": hops(lat_s[~in_stall], 99),
-        "latency_max_outside_machine_stalls_hops": hops(lat_s[~in_stall], 100),
+        **(
+            {
+                "estimates_in_machine_stall": int(np.count_nonzero(in_stall)),
+                "over_1_hop_in_machine_stall": int(np.count_nonzero(over & in_stall)),
+            }
+            if machine is not None
+            else {}
+        ),
         "standin_stalls": int(standin_d.size),
         "standin_stall_max_ms": round(float(standin_d.max()) * 1e3, 3) if standin_d.size else 0.0,
         "estimates_in_standin_stall": int(np.count_nonzero(in_standin)),
         "over_1_hop_in_standin_stall": int(np.count_nonzero(over & in_standin)),
-        "over_1_hop_outside_both": int(np.count_nonzero(over & clear)),
-        "latency_p99_outside_both_hops": hops(lat_s[clear], 99),
-        "latency_max_outside_both_hops": hops(lat_s[clear], 100),
+        "over_1_hop_outside_stalls": int(np.count_nonzero(over & clear)),
+        "latency_p99_outside_stalls_hops": hops(lat_s[clear], 99),
+        "latency_max_outside_stalls_hops": hops(lat_s[clear], 100),
         "target_cpu_cores": TARGET_CPU_CORES,
         "cpu_ratio": round(TARGET_CPU_CORES / max(cores, 1e-9), 2),
         "target_latency_hops": TARGET_LATENCY_HOPS,
@@ -536,6 +550,16 @@ def run_live(
 
         pstats.Stats(profiler, stream=sys.stderr).sort_stats("cumulative").print_stats(30)
     return result
+
+
+def _standin_stalls(path: str) -> npt.NDArray[np.float64]:
+    """The stand-in board's stalls, shape (n, 2) (start, end monotonic s), from the file
+    its process wrote at exit; none if it wrote nothing (it failed: its error is above)."""
+    try:
+        with open(path) as fh:
+            return np.array(json.load(fh), dtype=np.float64).reshape(-1, 2)
+    except (OSError, ValueError):
+        return np.zeros((0, 2))
 
 
 def machine_figures(machine: Any) -> dict[str, Any]:
@@ -555,7 +579,9 @@ def machine_rows(r: dict[str, Any]) -> list[tuple[str, str]]:
             "machine stalls",
             f"{r['machine_stalls']} over 1 ms on CPUs {r['machine_probe_cpus']}, longest"
             f" {r['machine_stall_max_ms']} ms, {r['machine_stalls_over_5ms']} over 5 ms;"
-            f" {r['machine_stalled_ms_per_s']} ms/s per CPU ({kind} probes)",
+            f" {r['machine_stalled_ms_per_s']} ms/s stalled and"
+            f" {r['machine_steal_ms_per_s']} ms/s stolen by the hypervisor per CPU ({kind}"
+            " probes)",
         )
     ]
 
@@ -632,14 +658,12 @@ def print_table(r: dict[str, Any]) -> None:
         ),
     ]
     rows += machine_rows(r)
-    if "estimates_in_machine_stall" in r and "machine_stalls" in r:
+    if "estimates_in_machine_stall" in r:
         rows.append(
             (
-                "  outside them",
-                f"{r['estimates_in_machine_stall']} estimates overlapped a stall"
-                f" ({r['over_1_hop_in_machine_stall']} of those over 1 hop); the others:"
-                f" latency p99 {r['latency_p99_outside_machine_stalls_hops']}, max"
-                f" {r['latency_max_outside_machine_stalls_hops']} hops",
+                "  estimates",
+                f"{r['estimates_in_machine_stall']} overlapped a machine stall"
+                f" ({r['over_1_hop_in_machine_stall']} of those over 1 hop)",
             )
         )
     rows.append(
@@ -651,12 +675,13 @@ def print_table(r: dict[str, Any]) -> None:
             f" ({r['over_1_hop_in_standin_stall']} of those over 1 hop)",
         )
     )
+    untouched = "no stall of either" if "machine_stalls" in r else "no stand-in stall"
     rows.append(
         (
-            "  outside both",
-            f"{r['over_1_hop_outside_both']} estimates over 1 hop; latency p99"
-            f" {r['latency_p99_outside_both_hops']}, max {r['latency_max_outside_both_hops']}"
-            " hops",
+            "host alone",
+            f"estimates {untouched} touched: {r['over_1_hop_outside_stalls']} over 1 hop;"
+            f" latency p99 {r['latency_p99_outside_stalls_hops']}, max"
+            f" {r['latency_max_outside_stalls_hops']} hops",
         )
     )
     for name, text in rows:
@@ -666,7 +691,7 @@ def print_table(r: dict[str, Any]) -> None:
 def run_machine_only(seconds: float) -> dict[str, Any]:
     """Only the stall probes, for ``seconds``, on a machine left otherwise idle: what any
     live pipeline on it would lose."""
-    from hil.acquisition.stall_probe import StallProbes
+    from hil.acquisition import StallProbes
 
     with StallProbes() as probes:
         time.sleep(seconds)

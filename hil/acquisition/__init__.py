@@ -6,8 +6,8 @@ from hil.acquisition.annotations import Annotation, AnnotationKind, AnnotationLo
 from hil.acquisition.clock_fit import SampleClockFit
 from hil.acquisition.gaps import SampleGapDetector
 from hil.acquisition.heap import HeapFreeze
+from hil.acquisition.machine_stalls import MachineStalls, StallProbes
 from hil.acquisition.ring import SampleRing
-from hil.acquisition.stall_probe import MachineStalls, StallProbes
 
 __all__ = [
     "Annotation",
