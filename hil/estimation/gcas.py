@@ -105,6 +105,8 @@ from hil.estimation.doppler_grid import DopplerGrid, alpha_to_speed, doppler_gri
 from hil.estimation.kernels import (
     codeword_sums,
     exact_windows,
+    fine_readout,
+    fine_select,
     first_possible_peak,
     peak_indices,
 )
@@ -445,6 +447,15 @@ class GcasReceiver:
             if self.search == "two-stage":
                 one = np.zeros((1, 1), dtype=np.int64)
                 self._fine_sums(one[:, 0], one, self.fine_half, prune=True)
+                sums = self._stage_two_arrays()
+                _, d0, a, s_win, i_pk, n_pk = fine_select(
+                    one[0], np.zeros((1, 2), dtype=np.int64), self._c_shift, self._B,
+                    self.fine_half, RECENTRE_STEPS, *sums,
+                )  # fmt: skip
+                fine_readout(
+                    one[0], a, s_win, i_pk, n_pk, d0, self.grid.size, self.fine_half,
+                    float(self.runner_up_ratio), self._B, *sums,
+                )  # fmt: skip
                 if self.coherent:
                     self._exact_windows(one[:, 0], one[:, 0], 1)
         finally:
@@ -855,7 +866,61 @@ class GcasReceiver:
         return pair
 
     def _fine_stage(self, cand_b: NDArray[np.int64]) -> list[Estimate]:
-        """Stage 2: exact codeword sums around the coarse candidate blocks ``cand_b``."""
+        """Stage 2: exact codeword sums around the coarse candidate blocks ``cand_b``.
+
+        Compiled (:func:`~hil.estimation.kernels.fine_select`, then the threshold here, then
+        :func:`~hil.estimation.kernels.fine_readout`): as NumPy it took some 60 small array
+        calls per estimate, most of the call that emits it. :meth:`_fine_stage_reference`
+        is the NumPy formulation; tests check the two give the same estimates, bit for bit.
+        """
+        pair = np.ascontiguousarray(self._hypotheses(cand_b), dtype=np.int64)
+        sums = self._stage_two_arrays()
+        cand = np.ascontiguousarray(cand_b, dtype=np.int64)
+        _, d0, a, s_win, i_pk, n_pk = fine_select(
+            cand, pair, self._c_shift, self._B, self.fine_half, RECENTRE_STEPS, *sums
+        )
+        if self.cfar_mode == "bank":
+            mean, std = self._bank_moments(n_pk)
+            tested = s_win[np.arange(cand.shape[0]), i_pk]
+        else:
+            ms = [self._statistic_moments(int(v)) for v in n_pk.tolist()]
+            mean, std = np.array([v[0] for v in ms]), np.array([v[1] for v in ms])
+            tested = self._cs_ring.rows(cand_b)
+        thr = mean + self.cfar_lambda * std
+        hit = np.flatnonzero(tested > thr)
+        if hit.size == 0:
+            return []
+        keep, n_star, peak, word, ratio, dn, d_mid, dd = fine_readout(
+            hit, a, s_win, i_pk, n_pk, d0, self.grid.size, self.fine_half,
+            float(self.runner_up_ratio), self._B, *sums,
+        )  # fmt: skip
+        kept = hit[keep]
+        values = zip(
+            n_star.tolist(), peak.tolist(), word.tolist(), ratio.tolist(), dn.tolist(),
+            d_mid.tolist(), dd.tolist(), mean[kept].tolist(), thr[kept].tolist(),
+            strict=True,
+        )  # fmt: skip
+        out: list[Estimate] = []
+        for args in values:
+            est = self._decide(*args)
+            if est is not None:
+                out.append(est)
+        return out
+
+    def _stage_two_arrays(self) -> tuple[Any, ...]:
+        """The arguments of :func:`~hil.estimation.kernels.codeword_sums` that describe the
+        receiver (history, tables, caches), in its order, as the stage-2 kernels take them."""
+        ring = self._y_ring
+        return (
+            ring.array[: ring.available], ring.next_index - ring.available, ring.next_index,
+            self.lags, self.grid.lengths, self._phasor_table(EXACT_ANCHOR), self._term_tone,
+            self._cell_w, EXACT_ANCHOR, self._cache_p, self._cache_max, self._cache_n,
+            self._hyp_w,
+        )  # fmt: skip
+
+    def _fine_stage_reference(self, cand_b: NDArray[np.int64]) -> list[Estimate]:
+        """:meth:`_fine_stage` as NumPy expressions (the reference the compiled path is
+        tested against)."""
         pair = self._hypotheses(cand_b)  # (C, 2): d̂ and the runner-up
         centres = cand_b[:, None] * self._B + self._c_shift[pair]
         w = self.fine_half

@@ -521,3 +521,208 @@ def _codeword_row(
     for j in range(n_words):
         top = max(top, row[j])
     return top
+
+
+@numba.njit(**_JIT)
+def parabolic_offset_scalar(y_minus: float, y0: float, y_plus: float) -> float:
+    """:func:`hil.estimation.detection.parabolic_offset`, compiled (the same value, bit for
+    bit): the vertex of the parabola through three equally spaced points, in samples from
+    the middle one, within ±1; 0 unless the middle is a strict peak with a finite curvature."""
+    den = y_minus - 2.0 * y0 + y_plus
+    if not den < 0.0 or not math.isfinite(den):
+        return 0.0
+    return min(max(0.5 * (y_minus - y_plus) / den, -1.0), 1.0) + 0.0
+
+
+@numba.njit(**_JIT)
+def fine_select(
+    cand_b: Any, pair: Any, c_shift: Any, block: int, half: int, recentre_steps: int,
+    y: Any, origin: int, n_avail: int, lags: Any, lengths: Any, table: Any, term_tone: Any,
+    cell_w: Any, anchor: int, cache_p: Any, cache_max: Any, cache_n: Any, hyp_w: Any,
+) -> Any:  # fmt: skip
+    """Stage 2 of the two-stage search up to the peak of each coarse candidate block.
+
+    For candidate blocks ``cand_b`` (shape ``(C,)``) with their hypothesis pair ``pair``
+    (d̂ and the runner-up, shape ``(C, 2)``): the exact codeword sums (:func:`codeword_sums`,
+    pruned) within ``±half`` of each hypothesis's centre ``cand_b·block + c_shift[d]``; the
+    better hypothesis by its maximum weighted with ``hyp_w``; its window moved onto a peak
+    on the window's edge, ``recentre_steps`` times at most (the last edge only the first
+    time). The remaining arguments are :func:`codeword_sums`'s (``block`` is its margin).
+
+    Returns ``centre`` and ``d0`` (shape ``(C,)``), the sums ``a`` of the chosen hypothesis
+    (``(C, 2·half + 1, J)``), their maximum over codewords ``s_win`` (``(C, 2·half + 1)``),
+    its first maximum ``i_pk`` and that sample ``n_pk = centre − half + i_pk`` (``(C,)``).
+    Every value equals the NumPy formulation's (same operations, same order)."""
+    n_cand = cand_b.shape[0]
+    width = 2 * half + 1
+    n_words = term_tone.shape[1]
+    centres = np.empty((n_cand, 2), dtype=np.int64)
+    for c in range(n_cand):
+        for i in range(2):
+            centres[c, i] = cand_b[c] * block + c_shift[pair[c, i]]
+    a2 = np.empty((n_cand, 2, width, n_words))
+    codeword_sums(
+        y, origin, n_avail, centres, pair, half, lags, lengths, table, term_tone, cell_w,
+        anchor, cache_p, cache_max, cache_n, block, hyp_w, True, a2,
+    )  # fmt: skip
+    centre = np.empty(n_cand, dtype=np.int64)
+    d0 = np.empty(n_cand, dtype=np.int64)
+    a = np.empty((n_cand, width, n_words))
+    for c in range(n_cand):
+        # The hypothesis is the better of the two by the exact sums (weighted as stage 1
+        # ranks them); one pruned whole (−inf) cannot win.
+        pick = 0
+        best = -math.inf
+        for i in range(2):
+            top = -math.inf
+            for t in range(width):
+                for j in range(n_words):
+                    top = max(top, a2[c, i, t, j])
+            score = top * hyp_w[pair[c, i]] if math.isfinite(top) else -math.inf
+            if i == 0 or score > best:
+                best = score
+                pick = i
+        d0[c] = pair[c, pick]
+        centre[c] = centres[c, pick]
+        a[c] = a2[c, pick]
+    s_win = np.empty((n_cand, width))
+    edge = np.empty(n_cand, dtype=np.int64)
+    for it in range(recentre_steps):
+        n_edge = 0
+        for c in range(n_cand):
+            ip = _row_peak(a[c], s_win[c])
+            if ip == 0 or (ip == 2 * half and it == 0):
+                centre[c] += ip - half
+                edge[n_edge] = c
+                n_edge += 1
+        if n_edge == 0:
+            break
+        cen = np.empty((n_edge, 1), dtype=np.int64)
+        dset = np.empty((n_edge, 1), dtype=np.int64)
+        for e in range(n_edge):
+            cen[e, 0] = centre[edge[e]]
+            dset[e, 0] = d0[edge[e]]
+        out = np.empty((n_edge, 1, width, n_words))
+        codeword_sums(
+            y, origin, n_avail, cen, dset, half, lags, lengths, table, term_tone, cell_w,
+            anchor, cache_p, cache_max, cache_n, block, hyp_w, False, out,
+        )  # fmt: skip
+        for e in range(n_edge):
+            a[edge[e]] = out[e, 0]
+    i_pk = np.empty(n_cand, dtype=np.int64)
+    n_pk = np.empty(n_cand, dtype=np.int64)
+    for c in range(n_cand):
+        i_pk[c] = _row_peak(a[c], s_win[c])
+        n_pk[c] = centre[c] - half + i_pk[c]
+    return centre, d0, a, s_win, i_pk, n_pk
+
+
+@numba.njit(**_JIT)
+def _row_peak(a: Any, s: Any) -> int:
+    """``s[t] = max_j a[t, j]`` (``a`` shape ``(T, J)``); the first ``t`` of the largest."""
+    ip = 0
+    for t in range(a.shape[0]):
+        top = -math.inf
+        for j in range(a.shape[1]):
+            top = max(top, a[t, j])
+        s[t] = top
+        if t > 0 and top > s[ip]:
+            ip = t
+    return ip
+
+
+@numba.njit(**_JIT)
+def fine_readout(
+    hit: Any, a: Any, s_win: Any, i_pk: Any, n_pk: Any, d0: Any, n_hyp: int, half: int,
+    runner_up_ratio: float, block: int,
+    y: Any, origin: int, n_avail: int, lags: Any, lengths: Any, table: Any, term_tone: Any,
+    cell_w: Any, anchor: int, cache_p: Any, cache_max: Any, cache_n: Any, hyp_w: Any,
+) -> Any:  # fmt: skip
+    """Readout of the candidates ``hit`` (indices into :func:`fine_select`'s outputs ``a``,
+    ``s_win``, ``i_pk``, ``n_pk``, ``d0``) that passed the threshold.
+
+    A candidate is kept when its peak codeword beats the runner-up codeword by at least
+    ``runner_up_ratio`` (any ratio when the runner-up is 0). For the kept ones: the peak's
+    sub-sample offset from its neighbours in time (0 on the window's edge), and the Doppler
+    offset from the codeword sums of the neighbouring hypotheses ``d0 ± 1`` (clipped to
+    ``0 .. n_hyp − 1``; 0 where one is clipped) at the peak sample, computed with
+    :func:`codeword_sums` (arguments after ``block``, which is its margin).
+
+    Returns, for the kept candidates in ``hit`` order: their position in ``hit``, peak
+    sample, peak value, codeword, ratio, time offset, hypothesis ``d0`` and Doppler offset.
+    Every value equals the NumPy formulation's (same operations, same order)."""
+    n_hit = hit.shape[0]
+    n_words = a.shape[2]
+    last = 2 * half
+    keep = np.empty(n_hit, dtype=np.int64)
+    peak = np.empty(n_hit)
+    word = np.empty(n_hit, dtype=np.int64)
+    ratio = np.empty(n_hit)
+    dn = np.empty(n_hit)
+    n_keep = 0
+    for h in range(n_hit):
+        c = hit[h]
+        ip = i_pk[c]
+        p = s_win[c, ip]
+        jh = 0
+        first = -math.inf
+        second = -math.inf
+        for j in range(n_words):
+            v = a[c, ip, j]
+            if v > a[c, ip, jh]:
+                jh = j
+            if v > first:
+                second = first
+                first = v
+            elif v > second:
+                second = v
+        runner = second if n_words > 1 else 0.0
+        r = p / runner if runner > 0 else math.inf
+        if not r >= runner_up_ratio:
+            continue
+        keep[n_keep] = h
+        peak[n_keep] = p
+        word[n_keep] = jh
+        ratio[n_keep] = r
+        if 0 < ip < last:
+            dn[n_keep] = parabolic_offset_scalar(s_win[c, ip - 1], p, s_win[c, ip + 1])
+        else:
+            dn[n_keep] = 0.0
+        n_keep += 1
+    n_star = np.empty(n_keep, dtype=np.int64)
+    d_mid = np.empty(n_keep, dtype=np.int64)
+    centres = np.empty((n_keep, 2), dtype=np.int64)
+    sides = np.empty((n_keep, 2), dtype=np.int64)
+    inside = np.empty(n_keep, dtype=np.bool_)
+    for k in range(n_keep):
+        c = hit[keep[k]]
+        n_star[k] = n_pk[c]
+        d_mid[k] = d0[c]
+        lo = min(max(d0[c] - 1, 0), n_hyp - 1)
+        hi = min(max(d0[c] + 1, 0), n_hyp - 1)
+        centres[k, 0] = n_pk[c]
+        centres[k, 1] = n_pk[c]
+        sides[k, 0] = lo
+        sides[k, 1] = hi
+        inside[k] = lo != d0[c] and hi != d0[c]
+    side = np.empty((n_keep, 2, 1, n_words))
+    codeword_sums(
+        y, origin, n_avail, centres, sides, 0, lags, lengths, table, term_tone, cell_w,
+        anchor, cache_p, cache_max, cache_n, block, hyp_w, False, side,
+    )  # fmt: skip
+    dd = np.zeros(n_keep)
+    for k in range(n_keep):
+        if inside[k]:
+            c = hit[keep[k]]
+            j = word[k]
+            dd[k] = parabolic_offset_scalar(side[k, 0, 0, j], a[c, i_pk[c], j], side[k, 1, 0, j])
+    return (
+        keep[:n_keep],
+        n_star,
+        peak[:n_keep],
+        word[:n_keep],
+        ratio[:n_keep],
+        dn[:n_keep],
+        d_mid,
+        dd,
+    )

@@ -1,5 +1,5 @@
-"""The vectorised three-point peak interpolation equals the scalar one bit for bit, for any
-triple (non-finite values and flat or convex triples included)."""
+"""The vectorised and the compiled three-point peak interpolation equal the scalar one bit for
+bit, for any triple (non-finite values and flat or convex triples included)."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from hil.estimation.detection import parabolic_offset, parabolic_offsets
+from hil.estimation.kernels import parabolic_offset_scalar
 
 values = st.one_of(
     st.floats(allow_nan=True, allow_infinity=True, width=64),
@@ -27,6 +28,9 @@ def test_vector_equals_scalar(triples: list[tuple[float, float, float]]) -> None
     # Never NaN, never beyond one sample, never a negative zero.
     assert np.all(np.abs(got) <= 1.0)
     assert not any(math.copysign(1.0, v) < 0 and v == 0 for v in got.tolist())
+    # The compiled scalar used by the stage-2 readout, too.
+    compiled = [parabolic_offset_scalar(*t) for t in triples]
+    assert np.array_equal(np.array(compiled), np.array(want)), (compiled, want)
 
 
 def test_golden() -> None:
