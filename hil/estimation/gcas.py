@@ -105,8 +105,10 @@ from hil.estimation.doppler_grid import DopplerGrid, alpha_to_speed, doppler_gri
 from hil.estimation.kernels import (
     codeword_sums,
     exact_windows,
-    fine_readout,
-    fine_select,
+    fine_doppler,
+    fine_keep,
+    fine_pick,
+    fine_recentre,
     first_possible_peak,
     peak_indices,
 )
@@ -447,15 +449,19 @@ class GcasReceiver:
             if self.search == "two-stage":
                 one = np.zeros((1, 1), dtype=np.int64)
                 self._fine_sums(one[:, 0], one, self.fine_half, prune=True)
-                sums = self._stage_two_arrays()
-                _, d0, a, s_win, i_pk, n_pk = fine_select(
-                    one[0], np.zeros((1, 2), dtype=np.int64), self._c_shift, self._B,
-                    self.fine_half, RECENTRE_STEPS, *sums,
-                )  # fmt: skip
-                fine_readout(
-                    one[0], a, s_win, i_pk, n_pk, d0, self.grid.size, self.fine_half,
-                    float(self.runner_up_ratio), self._B, *sums,
-                )  # fmt: skip
+                # The stage-2 kernels between the sums, on one made-up candidate.
+                two = np.zeros((1, 2), dtype=np.int64)
+                a2 = self._fine_sums(two, two, self.fine_half, prune=True)
+                d0, centre, a, s_win, i_pk, edges = fine_pick(
+                    a2, two, two, self._hyp_w, self.fine_half, True
+                )
+                sums = self._fine_sums(centre[edges], d0[edges, None], self.fine_half)
+                fine_recentre(a, sums, edges, s_win, i_pk, centre, self.fine_half, True)
+                _, _, word, _, _, sides = fine_keep(
+                    one[0], a, s_win, i_pk, d0, self.grid.size, self.fine_half, 1.0
+                )
+                side = self._fine_sums(one[0], sides, 0)
+                fine_doppler(side, a, one[0], i_pk, word, d0, sides)
                 if self.coherent:
                     self._exact_windows(one[:, 0], one[:, 0], 1)
         finally:
@@ -868,20 +874,31 @@ class GcasReceiver:
     def _fine_stage(self, cand_b: NDArray[np.int64]) -> list[Estimate]:
         """Stage 2: exact codeword sums around the coarse candidate blocks ``cand_b``.
 
-        Compiled (:func:`~hil.estimation.kernels.fine_select`, then the threshold here, then
-        :func:`~hil.estimation.kernels.fine_readout`): as NumPy it took some 60 small array
-        calls per estimate, most of the call that emits it. :meth:`_fine_stage_reference`
-        is the NumPy formulation; tests check the two give the same estimates, bit for bit.
+        The sums come from :func:`~hil.estimation.kernels.codeword_sums`, everything between
+        them from small compiled kernels (:func:`~hil.estimation.kernels.fine_pick`,
+        ``fine_recentre``, ``fine_keep``, ``fine_doppler``): as NumPy it took some 60 small
+        array calls per estimate, most of the call that emits it. (One kernel calling
+        ``codeword_sums`` inside would save a few more calls but tripled the first
+        compilation, to about 30 s.) :meth:`_fine_stage_reference` is the NumPy formulation;
+        tests check that both give the same estimates, bit for bit.
         """
+        w = self.fine_half
         pair = np.ascontiguousarray(self._hypotheses(cand_b), dtype=np.int64)
-        sums = self._stage_two_arrays()
-        cand = np.ascontiguousarray(cand_b, dtype=np.int64)
-        _, d0, a, s_win, i_pk, n_pk = fine_select(
-            cand, pair, self._c_shift, self._B, self.fine_half, RECENTRE_STEPS, *sums
+        centres = np.empty(pair.shape, dtype=np.int64)
+        np.add(cand_b[:, None] * self._B, self._c_shift[pair], out=centres)
+        a2 = self._fine_sums(centres, pair, w, prune=True)
+        d0, centre, a, s_win, i_pk, edges = fine_pick(
+            a2, pair, centres, self._hyp_w, w, RECENTRE_STEPS > 0
         )
+        for it in range(RECENTRE_STEPS):
+            if edges.size == 0:
+                break
+            sums = self._fine_sums(centre[edges], d0[edges, None], w)
+            edges = fine_recentre(a, sums, edges, s_win, i_pk, centre, w, it + 1 < RECENTRE_STEPS)
+        n_pk = centre - w + i_pk
         if self.cfar_mode == "bank":
             mean, std = self._bank_moments(n_pk)
-            tested = s_win[np.arange(cand.shape[0]), i_pk]
+            tested = s_win[np.arange(cand_b.shape[0]), i_pk]
         else:
             ms = [self._statistic_moments(int(v)) for v in n_pk.tolist()]
             mean, std = np.array([v[0] for v in ms]), np.array([v[1] for v in ms])
@@ -890,14 +907,15 @@ class GcasReceiver:
         hit = np.flatnonzero(tested > thr)
         if hit.size == 0:
             return []
-        keep, n_star, peak, word, ratio, dn, d_mid, dd = fine_readout(
-            hit, a, s_win, i_pk, n_pk, d0, self.grid.size, self.fine_half,
-            float(self.runner_up_ratio), self._B, *sums,
-        )  # fmt: skip
+        keep, peak, word, ratio, dn, sides = fine_keep(
+            hit, a, s_win, i_pk, d0, self.grid.size, w, float(self.runner_up_ratio)
+        )
         kept = hit[keep]
+        side = self._fine_sums(n_pk[kept], sides, 0)
+        dd = fine_doppler(side, a, kept, i_pk, word, d0, sides)
         values = zip(
-            n_star.tolist(), peak.tolist(), word.tolist(), ratio.tolist(), dn.tolist(),
-            d_mid.tolist(), dd.tolist(), mean[kept].tolist(), thr[kept].tolist(),
+            n_pk[kept].tolist(), peak.tolist(), word.tolist(), ratio.tolist(), dn.tolist(),
+            d0[kept].tolist(), dd.tolist(), mean[kept].tolist(), thr[kept].tolist(),
             strict=True,
         )  # fmt: skip
         out: list[Estimate] = []
@@ -906,17 +924,6 @@ class GcasReceiver:
             if est is not None:
                 out.append(est)
         return out
-
-    def _stage_two_arrays(self) -> tuple[Any, ...]:
-        """The arguments of :func:`~hil.estimation.kernels.codeword_sums` that describe the
-        receiver (history, tables, caches), in its order, as the stage-2 kernels take them."""
-        ring = self._y_ring
-        return (
-            ring.array[: ring.available], ring.next_index - ring.available, ring.next_index,
-            self.lags, self.grid.lengths, self._phasor_table(EXACT_ANCHOR), self._term_tone,
-            self._cell_w, EXACT_ANCHOR, self._cache_p, self._cache_max, self._cache_n,
-            self._hyp_w,
-        )  # fmt: skip
 
     def _fine_stage_reference(self, cand_b: NDArray[np.int64]) -> list[Estimate]:
         """:meth:`_fine_stage` as NumPy expressions (the reference the compiled path is

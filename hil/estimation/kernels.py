@@ -535,42 +535,54 @@ def parabolic_offset_scalar(y_minus: float, y0: float, y_plus: float) -> float:
 
 
 @numba.njit(**_JIT)
-def fine_select(
-    cand_b: Any, pair: Any, c_shift: Any, block: int, half: int, recentre_steps: int,
-    y: Any, origin: int, n_avail: int, lags: Any, lengths: Any, table: Any, term_tone: Any,
-    cell_w: Any, anchor: int, cache_p: Any, cache_max: Any, cache_n: Any, hyp_w: Any,
-) -> Any:  # fmt: skip
-    """Stage 2 of the two-stage search up to the peak of each coarse candidate block.
+def _row_peak(a: Any, s: Any) -> int:
+    """``s[t] = max_j a[t, j]`` (``a`` shape ``(T, J)``); the first ``t`` of the largest."""
+    ip = 0
+    for t in range(a.shape[0]):
+        top = -math.inf
+        for j in range(a.shape[1]):
+            top = max(top, a[t, j])
+        s[t] = top
+        if t > 0 and top > s[ip]:
+            ip = t
+    return ip
 
-    For candidate blocks ``cand_b`` (shape ``(C,)``) with their hypothesis pair ``pair``
-    (d̂ and the runner-up, shape ``(C, 2)``): the exact codeword sums (:func:`codeword_sums`,
-    pruned) within ``±half`` of each hypothesis's centre ``cand_b·block + c_shift[d]``; the
-    better hypothesis by its maximum weighted with ``hyp_w``; its window moved onto a peak
-    on the window's edge, ``recentre_steps`` times at most (the last edge only the first
-    time). The remaining arguments are :func:`codeword_sums`'s (``block`` is its margin).
 
-    Returns ``centre`` and ``d0`` (shape ``(C,)``), the sums ``a`` of the chosen hypothesis
-    (``(C, 2·half + 1, J)``), their maximum over codewords ``s_win`` (``(C, 2·half + 1)``),
-    its first maximum ``i_pk`` and that sample ``n_pk = centre − half + i_pk`` (``(C,)``).
-    Every value equals the NumPy formulation's (same operations, same order)."""
-    n_cand = cand_b.shape[0]
-    width = 2 * half + 1
-    n_words = term_tone.shape[1]
-    centres = np.empty((n_cand, 2), dtype=np.int64)
-    for c in range(n_cand):
-        for i in range(2):
-            centres[c, i] = cand_b[c] * block + c_shift[pair[c, i]]
-    a2 = np.empty((n_cand, 2, width, n_words))
-    codeword_sums(
-        y, origin, n_avail, centres, pair, half, lags, lengths, table, term_tone, cell_w,
-        anchor, cache_p, cache_max, cache_n, block, hyp_w, True, a2,
-    )  # fmt: skip
-    centre = np.empty(n_cand, dtype=np.int64)
+@numba.njit(**_JIT)
+def _edges(
+    rows: Any, a: Any, s_win: Any, i_pk: Any, centre: Any, half: int, last_edge: bool, out: Any
+) -> int:
+    """Peaks of candidates ``rows``: ``s_win``, ``i_pk``; the ones on the window's first
+    sample (or, with ``last_edge``, its last) move their ``centre`` onto it and go to
+    ``out``; returns how many did."""
+    n_edge = 0
+    for c in rows:
+        ip = _row_peak(a[c], s_win[c])
+        i_pk[c] = ip
+        if ip == 0 or (last_edge and ip == 2 * half):
+            centre[c] += ip - half
+            out[n_edge] = c
+            n_edge += 1
+    return n_edge
+
+
+@numba.njit(**_JIT)
+def fine_pick(a2: Any, pair: Any, centres: Any, hyp_w: Any, half: int, find_edges: bool) -> Any:
+    """The better hypothesis of each candidate's pair, and its peak.
+
+    ``a2``: exact codeword sums of both hypotheses ``pair`` (shape ``(C, 2)``) within
+    ``±half`` of ``centres`` (:func:`codeword_sums` with pruning, shape
+    ``(C, 2, 2·half + 1, J)``). The hypothesis is the better of the two by its maximum
+    weighted with ``hyp_w`` (one pruned whole, −inf, cannot win). Returns ``d0``, ``centre``
+    (``(C,)``), its sums ``a`` (``(C, 2·half + 1, J)``), their maximum over codewords
+    ``s_win``, its first maximum ``i_pk`` and, with ``find_edges``, the candidates whose
+    peak lies on either edge of the window, their ``centre`` moved onto it (to be summed
+    again there; see :func:`fine_recentre`). Every value equals the NumPy formulation's."""
+    n_cand, _, width, n_words = a2.shape
     d0 = np.empty(n_cand, dtype=np.int64)
+    centre = np.empty(n_cand, dtype=np.int64)
     a = np.empty((n_cand, width, n_words))
     for c in range(n_cand):
-        # The hypothesis is the better of the two by the exact sums (weighted as stage 1
-        # ranks them); one pruned whole (−inf) cannot win.
         pick = 0
         best = -math.inf
         for i in range(2):
@@ -586,71 +598,50 @@ def fine_select(
         centre[c] = centres[c, pick]
         a[c] = a2[c, pick]
     s_win = np.empty((n_cand, width))
-    edge = np.empty(n_cand, dtype=np.int64)
-    for it in range(recentre_steps):
+    i_pk = np.empty(n_cand, dtype=np.int64)
+    edges = np.empty(n_cand, dtype=np.int64)
+    if find_edges:
+        n_edge = _edges(np.arange(n_cand), a, s_win, i_pk, centre, half, True, edges)
+    else:
         n_edge = 0
         for c in range(n_cand):
-            ip = _row_peak(a[c], s_win[c])
-            if ip == 0 or (ip == 2 * half and it == 0):
-                centre[c] += ip - half
-                edge[n_edge] = c
-                n_edge += 1
-        if n_edge == 0:
-            break
-        cen = np.empty((n_edge, 1), dtype=np.int64)
-        dset = np.empty((n_edge, 1), dtype=np.int64)
-        for e in range(n_edge):
-            cen[e, 0] = centre[edge[e]]
-            dset[e, 0] = d0[edge[e]]
-        out = np.empty((n_edge, 1, width, n_words))
-        codeword_sums(
-            y, origin, n_avail, cen, dset, half, lags, lengths, table, term_tone, cell_w,
-            anchor, cache_p, cache_max, cache_n, block, hyp_w, False, out,
-        )  # fmt: skip
-        for e in range(n_edge):
-            a[edge[e]] = out[e, 0]
-    i_pk = np.empty(n_cand, dtype=np.int64)
-    n_pk = np.empty(n_cand, dtype=np.int64)
-    for c in range(n_cand):
-        i_pk[c] = _row_peak(a[c], s_win[c])
-        n_pk[c] = centre[c] - half + i_pk[c]
-    return centre, d0, a, s_win, i_pk, n_pk
+            i_pk[c] = _row_peak(a[c], s_win[c])
+    return d0, centre, a, s_win, i_pk, edges[:n_edge]
 
 
 @numba.njit(**_JIT)
-def _row_peak(a: Any, s: Any) -> int:
-    """``s[t] = max_j a[t, j]`` (``a`` shape ``(T, J)``); the first ``t`` of the largest."""
-    ip = 0
-    for t in range(a.shape[0]):
-        top = -math.inf
-        for j in range(a.shape[1]):
-            top = max(top, a[t, j])
-        s[t] = top
-        if t > 0 and top > s[ip]:
-            ip = t
-    return ip
-
-
-@numba.njit(**_JIT)
-def fine_readout(
-    hit: Any, a: Any, s_win: Any, i_pk: Any, n_pk: Any, d0: Any, n_hyp: int, half: int,
-    runner_up_ratio: float, block: int,
-    y: Any, origin: int, n_avail: int, lags: Any, lengths: Any, table: Any, term_tone: Any,
-    cell_w: Any, anchor: int, cache_p: Any, cache_max: Any, cache_n: Any, hyp_w: Any,
+def fine_recentre(
+    a: Any, sums: Any, edges: Any, s_win: Any, i_pk: Any, centre: Any, half: int,
+    find_edges: bool,
 ) -> Any:  # fmt: skip
-    """Readout of the candidates ``hit`` (indices into :func:`fine_select`'s outputs ``a``,
-    ``s_win``, ``i_pk``, ``n_pk``, ``d0``) that passed the threshold.
+    """Put the sums of the recentred candidates ``edges`` (``sums`` shape
+    ``(E, 1, 2·half + 1, J)``, at their new ``centre``) into ``a`` and update their peaks;
+    with ``find_edges``, return the ones whose peak is again on the window's first sample,
+    their ``centre`` moved onto it (the last edge is followed only once)."""
+    for e in range(edges.shape[0]):
+        a[edges[e]] = sums[e, 0]
+    out = np.empty(edges.shape[0], dtype=np.int64)
+    if not find_edges:
+        for c in edges:
+            i_pk[c] = _row_peak(a[c], s_win[c])
+        return out[:0]
+    n_edge = _edges(edges, a, s_win, i_pk, centre, half, False, out)
+    return out[:n_edge]
 
-    A candidate is kept when its peak codeword beats the runner-up codeword by at least
-    ``runner_up_ratio`` (any ratio when the runner-up is 0). For the kept ones: the peak's
-    sub-sample offset from its neighbours in time (0 on the window's edge), and the Doppler
-    offset from the codeword sums of the neighbouring hypotheses ``d0 ± 1`` (clipped to
-    ``0 .. n_hyp − 1``; 0 where one is clipped) at the peak sample, computed with
-    :func:`codeword_sums` (arguments after ``block``, which is its margin).
 
-    Returns, for the kept candidates in ``hit`` order: their position in ``hit``, peak
-    sample, peak value, codeword, ratio, time offset, hypothesis ``d0`` and Doppler offset.
-    Every value equals the NumPy formulation's (same operations, same order)."""
+@numba.njit(**_JIT)
+def fine_keep(
+    hit: Any, a: Any, s_win: Any, i_pk: Any, d0: Any, n_hyp: int, half: int,
+    runner_up_ratio: float,
+) -> Any:  # fmt: skip
+    """Readout of the candidates ``hit`` (indices into :func:`fine_pick`'s outputs) that
+    passed the threshold: kept when the peak codeword beats the runner-up codeword by at
+    least ``runner_up_ratio`` (any ratio when the runner-up is 0).
+
+    Returns, for the kept ones in ``hit`` order: their position in ``hit``, peak value,
+    codeword, ratio, time offset (parabolic, 0 on the window's edge), and the neighbouring
+    hypotheses ``d0 ± 1`` clipped to ``0 .. n_hyp − 1`` (shape ``(K, 2)``) at which the
+    Doppler offset is read (:func:`fine_doppler`). Equal to the NumPy formulation."""
     n_hit = hit.shape[0]
     n_words = a.shape[2]
     last = 2 * half
@@ -659,6 +650,7 @@ def fine_readout(
     word = np.empty(n_hit, dtype=np.int64)
     ratio = np.empty(n_hit)
     dn = np.empty(n_hit)
+    sides = np.empty((n_hit, 2), dtype=np.int64)
     n_keep = 0
     for h in range(n_hit):
         c = hit[h]
@@ -688,41 +680,25 @@ def fine_readout(
             dn[n_keep] = parabolic_offset_scalar(s_win[c, ip - 1], p, s_win[c, ip + 1])
         else:
             dn[n_keep] = 0.0
+        sides[n_keep, 0] = min(max(d0[c] - 1, 0), n_hyp - 1)
+        sides[n_keep, 1] = min(max(d0[c] + 1, 0), n_hyp - 1)
         n_keep += 1
-    n_star = np.empty(n_keep, dtype=np.int64)
-    d_mid = np.empty(n_keep, dtype=np.int64)
-    centres = np.empty((n_keep, 2), dtype=np.int64)
-    sides = np.empty((n_keep, 2), dtype=np.int64)
-    inside = np.empty(n_keep, dtype=np.bool_)
-    for k in range(n_keep):
-        c = hit[keep[k]]
-        n_star[k] = n_pk[c]
-        d_mid[k] = d0[c]
-        lo = min(max(d0[c] - 1, 0), n_hyp - 1)
-        hi = min(max(d0[c] + 1, 0), n_hyp - 1)
-        centres[k, 0] = n_pk[c]
-        centres[k, 1] = n_pk[c]
-        sides[k, 0] = lo
-        sides[k, 1] = hi
-        inside[k] = lo != d0[c] and hi != d0[c]
-    side = np.empty((n_keep, 2, 1, n_words))
-    codeword_sums(
-        y, origin, n_avail, centres, sides, 0, lags, lengths, table, term_tone, cell_w,
-        anchor, cache_p, cache_max, cache_n, block, hyp_w, False, side,
-    )  # fmt: skip
-    dd = np.zeros(n_keep)
-    for k in range(n_keep):
-        if inside[k]:
-            c = hit[keep[k]]
-            j = word[k]
-            dd[k] = parabolic_offset_scalar(side[k, 0, 0, j], a[c, i_pk[c], j], side[k, 1, 0, j])
     return (
-        keep[:n_keep],
-        n_star,
-        peak[:n_keep],
-        word[:n_keep],
-        ratio[:n_keep],
-        dn[:n_keep],
-        d_mid,
-        dd,
-    )
+        keep[:n_keep], peak[:n_keep], word[:n_keep], ratio[:n_keep], dn[:n_keep],
+        sides[:n_keep],
+    )  # fmt: skip
+
+
+@numba.njit(**_JIT)
+def fine_doppler(side: Any, a: Any, cand: Any, i_pk: Any, word: Any, d0: Any, sides: Any) -> Any:
+    """Doppler offsets of the kept candidates ``cand`` (indices into :func:`fine_pick`'s
+    outputs): parabolic through the sums of codeword ``word`` at the peak at hypotheses
+    ``sides[:, 0]``, ``d0``, ``sides[:, 1]`` (``side`` from :func:`codeword_sums` at the
+    peak sample, shape ``(K, 2, 1, J)``); 0 where a neighbour was clipped onto ``d0``."""
+    out = np.zeros(cand.shape[0])
+    for k in range(cand.shape[0]):
+        c = cand[k]
+        if sides[k, 0] != d0[c] and sides[k, 1] != d0[c]:
+            j = word[k]
+            out[k] = parabolic_offset_scalar(side[k, 0, 0, j], a[c, i_pk[c], j], side[k, 1, 0, j])
+    return out
