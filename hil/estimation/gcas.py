@@ -910,6 +910,8 @@ class GcasReceiver:
         keep, peak, word, ratio, dn, sides = fine_keep(
             hit, a, s_win, i_pk, d0, self.grid.size, w, float(self.runner_up_ratio)
         )
+        if keep.size == 0:
+            return []
         kept = hit[keep]
         side = self._fine_sums(n_pk[kept], sides, 0)
         dd = fine_doppler(side, a, kept, i_pk, word, d0, sides)

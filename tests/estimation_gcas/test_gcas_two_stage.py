@@ -355,6 +355,8 @@ def _with_reference_fine_stage(rx: GcasReceiver) -> GcasReceiver:
         # The trailing-window statistic CFAR needs target-free history to detect at all.
         ("random-cyclic", {"cfar_mode": "statistic"}, -12.0, 3.0, 1.0, 5),
         ("three-state", {}, -12.0, 20.0, 0.0, 20),
+        # Calls whose every candidate passes the threshold and fails the runner-up test.
+        ("random-cyclic", {"runner_up_ratio": 1.5}, -15.0, 12.0, 0.0, 1),
     ],
 )
 def test_compiled_stage_two_equals_the_numpy_reference(
