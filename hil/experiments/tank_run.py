@@ -250,11 +250,38 @@ def run_experiment(
     windows: list[tuple[float, float]] = []
     map_t: list[np.ndarray] = []
     map_p: list[np.ndarray] = []
+    latency: list[int] = []  # the run's loopback latency measurement, samples
     wall0 = time.monotonic()
     next_index = 0
     start_index = 0
     heap = HeapFreeze()
     try:
+        # ---- receiver first: building it loads its compiled kernels (on a fresh install it
+        # compiles them, tens of seconds). Later, with the board streaming, a stall that long
+        # would overflow the capture ring; now nothing moves or transmits meanwhile.
+        view.update(
+            "receiver: loading its compiled kernels (a first run compiles them)", force=True
+        )
+        extra: dict[str, Any] = dict(exp.receiver_options)
+        if exp.receiver == "gcas":
+
+            def on_map(t_s: np.ndarray, p: np.ndarray, speed: Any) -> None:
+                if sum(len(a) for a in map_t) < 400_000:
+                    map_t.append(np.asarray(t_s, dtype=float).copy())
+                    map_p.append(np.asarray(p, dtype=np.float32).copy())
+
+            extra["on_map"] = on_map
+        receiver = make_receiver(
+            exp.receiver,
+            exp.schedule,
+            fs,
+            sound_speed_mps=exp.sound_speed_mps,
+            max_speed_mps=exp.max_speed_mps,
+            max_range_m=exp.max_range_m,
+            m_hops=exp.m_hops,
+            **extra,
+        )
+
         # ---- stage: open, home, check the plan against its limits (nothing moves yet)
         stage = GrblStage(stage_url, clock=clock).open()
         status = stage.status()
@@ -338,28 +365,8 @@ def run_experiment(
             )
 
         telemetry_backlog: list[StageTelemetry] = []
-        extra: dict[str, Any] = dict(exp.receiver_options)
-        if exp.receiver == "gcas":
-
-            def on_map(t_s: np.ndarray, p: np.ndarray, speed: Any) -> None:
-                if sum(len(a) for a in map_t) < 400_000:
-                    map_t.append(np.asarray(t_s, dtype=float).copy())
-                    map_p.append(np.asarray(p, dtype=np.float32).copy())
-
-            extra["on_map"] = on_map
-        receiver = make_receiver(
-            exp.receiver,
-            exp.schedule,
-            fs,
-            sound_speed_mps=exp.sound_speed_mps,
-            max_speed_mps=exp.max_speed_mps,
-            max_range_m=exp.max_range_m,
-            m_hops=exp.m_hops,
-            **extra,
-        )
         feed: ReceiverFeed | None = None
         pending: list[tuple[int, np.ndarray]] = []
-        latency: list[int] = []
 
         block = max(256, int(round(_BLOCK_S * fs)))
         now = stage._clock.now

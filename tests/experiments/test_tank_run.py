@@ -222,3 +222,33 @@ def test_ctrl_c_stops_cleanly_and_keeps_the_recording(tmp_path: Path) -> None:
     late = t >= t[-1] - 0.2
     assert np.ptp(x[late]) < 1e-3
     assert x[-1] > -4.1 + 0.05
+
+
+def test_the_receiver_is_built_before_anything_moves_or_transmits(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Building the receiver loads (on a fresh install: compiles) its kernels, tens of seconds:
+    with the board already streaming that overflowed the capture ring. It comes first."""
+    import hil.experiments.tank_run as tank_run
+    from hil.devices.grbl import GrblStage
+
+    order: list[str] = []
+    make = tank_run.make_receiver
+
+    def recording_make(*args: object, **kwargs: object) -> object:
+        order.append("receiver")
+        return make(*args, **kwargs)  # type: ignore[arg-type]
+
+    def stop_at_stage(self: GrblStage) -> GrblStage:
+        order.append("stage")
+        raise RuntimeError("the test stops the run at the stage")
+
+    monkeypatch.setattr(tank_run, "make_receiver", recording_make)
+    monkeypatch.setattr(GrblStage, "open", stop_at_stage)
+    exp_file = tmp_path / "short.toml"
+    exp_file.write_text(SHORT)
+    code = main(["tank-run", str(exp_file), "--out", str(tmp_path / "run"), "--no-live", "--json"])
+    summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert code != 0
+    assert "the test stops the run at the stage" in summary["error"]
+    assert order == ["receiver", "stage"]
