@@ -281,6 +281,7 @@ def run_experiment(
             m_hops=exp.m_hops,
             **extra,
         )
+        wall0 = time.monotonic()  # the run's wall time, without that set-up
 
         # ---- stage: open, home, check the plan against its limits (nothing moves yet)
         stage = GrblStage(stage_url, clock=clock).open()
