@@ -84,7 +84,7 @@ the filter delay), within one hop.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any
 
@@ -920,6 +920,10 @@ class GcasReceiver:
             d0[kept].tolist(), dd.tolist(), mean[kept].tolist(), thr[kept].tolist(),
             strict=True,
         )  # fmt: skip
+        return self._decide_all(values)
+
+    def _decide_all(self, values: Iterable[tuple[Any, ...]]) -> list[Estimate]:
+        """:meth:`_decide` on each readout tuple, in order; the estimates it accepts."""
         out: list[Estimate] = []
         for args in values:
             est = self._decide(*args)
@@ -1131,12 +1135,7 @@ class GcasReceiver:
             dh[keep, 1].tolist(), dd.tolist(), mean[hit[keep]].tolist(), thr[hit[keep]].tolist(),
             strict=True,
         )  # fmt: skip
-        out: list[Estimate] = []
-        for args in values:
-            est = self._decide(*args)
-            if est is not None:
-                out.append(est)
-        return out
+        return self._decide_all(values)
 
     def _bank_moments(
         self, n_pk: NDArray[np.int64]
