@@ -18,7 +18,6 @@ import json
 import math
 import os
 import signal
-import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -162,7 +161,6 @@ def main(argv: list[str] | None = None) -> None:
         print(text)
     else:
         args.out.write_text(text)
-    sys.exit(0)
 
 
 if __name__ == "__main__":

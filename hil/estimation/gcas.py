@@ -896,15 +896,8 @@ class GcasReceiver:
             sums = self._fine_sums(centre[edges], d0[edges, None], w)
             edges = fine_recentre(a, sums, edges, s_win, i_pk, centre, w, it + 1 < RECENTRE_STEPS)
         n_pk = centre - w + i_pk
-        if self.cfar_mode == "bank":
-            mean, std = self._bank_moments(n_pk)
-            tested = s_win[np.arange(cand_b.shape[0]), i_pk]
-        else:
-            ms = [self._statistic_moments(int(v)) for v in n_pk.tolist()]
-            mean, std = np.array([v[0] for v in ms]), np.array([v[1] for v in ms])
-            tested = self._cs_ring.rows(cand_b)
-        thr = mean + self.cfar_lambda * std
-        hit = np.flatnonzero(tested > thr)
+        stat = self._cs_ring.rows(cand_b) if self.cfar_mode == "statistic" else None
+        mean, thr, hit = self._cfar_test(n_pk, s_win[np.arange(cand_b.shape[0]), i_pk], stat)
         if hit.size == 0:
             return []
         keep, peak, word, ratio, dn, sides = fine_keep(
@@ -1069,6 +1062,27 @@ class GcasReceiver:
         tested = self._s_ring.rows(cand) if self.cfar_mode == "statistic" else None
         return self._threshold_readout(cand, w, dset, a[:, :, 1, :], sides, tested)
 
+    def _cfar_test(
+        self,
+        n_pk: NDArray[np.int64],
+        peak: NDArray[np.floating[Any]],
+        stat_tested: NDArray[np.float64] | None,
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
+        """The CFAR test of candidates peaking at samples ``n_pk`` (shape ``(C,)``): the
+        noise mean and threshold per candidate and the indices of those over it. ``"bank"``
+        tests the codeword-sum ``peak``; ``"statistic"`` tests ``stat_tested``, the group
+        statistic at the candidates."""
+        if self.cfar_mode == "bank":
+            mean, std = self._bank_moments(n_pk)
+            tested = np.asarray(peak, dtype=np.float64)
+        else:
+            ms = [self._statistic_moments(int(v)) for v in n_pk.tolist()]
+            mean, std = np.array([v[0] for v in ms]), np.array([v[1] for v in ms])
+            assert stat_tested is not None
+            tested = stat_tested
+        thr = mean + self.cfar_lambda * std
+        return mean, thr, np.flatnonzero(tested > thr)
+
     def _threshold_readout(
         self,
         cand: NDArray[np.int64],
@@ -1088,17 +1102,8 @@ class GcasReceiver:
         s_win = a.max(axis=2)  # (C, 2W + 1)
         i_pk = np.argmax(s_win, axis=1)
         n_pk = cand - w + i_pk
-        r_all = np.arange(cand.shape[0])
-        if self.cfar_mode == "bank":
-            mean, std = self._bank_moments(n_pk)
-            tested = s_win[r_all, i_pk].astype(np.float64)
-        else:
-            ms = [self._statistic_moments(int(v)) for v in n_pk.tolist()]
-            mean, std = np.array([v[0] for v in ms]), np.array([v[1] for v in ms])
-            assert stat_tested is not None
-            tested = stat_tested
-        thr = mean + self.cfar_lambda * std
-        hit = np.flatnonzero(tested > thr)
+        peak_all = s_win[np.arange(cand.shape[0]), i_pk].astype(np.float64)
+        mean, thr, hit = self._cfar_test(n_pk, peak_all, stat_tested)
         if hit.size == 0:
             return []
         # Readout quantities of every survivor at once (per-candidate numpy calls would
