@@ -196,8 +196,12 @@ def test_ctrl_c_stops_cleanly_and_keeps_the_recording(tmp_path: Path) -> None:
     that says the run was interrupted, and the recording readable."""
     from hil.recording.reader import RunRecording
 
-    exp_file = tmp_path / "short.toml"
-    exp_file.write_text(SHORT)
+    exp_file = tmp_path / "slow.toml"
+    # A slow tow (0.5 m/s: a 2.7 m pass takes 13.5 s of wall time at time_scale 0.4) leaves
+    # the interrupt many seconds of the pass to land in, even when the telemetry that shows
+    # the carriage moving is read seconds late on a loaded machine (CI once saw a 1.5 m/s pass,
+    # 4.5 s of wall time, all but over before the interrupt arrived).
+    exp_file.write_text(SHORT.replace("speed_mps = 1.5", "speed_mps = 0.5"))
     folder = tmp_path / "run"
     proc = subprocess.Popen(
         [sys.executable, "-m", "hil.cli.main", "tank-run", str(exp_file), "--out", str(folder),
