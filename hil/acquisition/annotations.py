@@ -26,6 +26,9 @@ class AnnotationKind(Enum):
     RECONNECT = "reconnect"
     ALARM = "alarm"
     PROTOCOL_ERROR = "protocol_error"
+    START_RETRY = "start_retry"
+    """The board refused START as its index had passed; streaming started at
+    ``sample_index`` after ``length`` refusals."""
 
 
 @dataclass(frozen=True)

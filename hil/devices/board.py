@@ -56,6 +56,7 @@ from firmware_protocol import (
     Log,
     Message,
     Nak,
+    NakCode,
     RemoteProtocolError,
     Role,
     SampleFormat,
@@ -148,18 +149,26 @@ class ReconnectPolicy:
 
 
 class _DacFeeder:
-    """Turns a DAC source into wire sample blocks of any requested length."""
+    """Turns a DAC source into wire sample blocks of any requested length.
+
+    Sample ``k`` of the transmission plays at board index ``first + k``; a callable source
+    is asked ``source(k, n)`` by that sample number. Until :meth:`started`, the blocks sent
+    are kept, so a START the board refused can be retried later with the same samples
+    (:meth:`restart_at`). ``lock`` is held by whoever takes from or moves the feeder (the
+    writer thread, a retried start).
+    """
 
     def __init__(self, source: Any, fmt: SampleFormat, channels: int, first: int) -> None:
         self.fmt = fmt
         self.channels = channels
         self.next_index = first
-        # Index of the next sample the source produces: ahead of next_index (the next one
-        # sent) by what is taken but not yet sent, so a burst asks for fresh samples.
-        self._source_index = first
+        self.lock = threading.Lock()
+        # Sample number of the next sample the source produces: ahead of the next one sent
+        # by what is taken but not yet sent, so a burst asks for fresh samples.
+        self._source_index = 0
         self._call: Callable[[int, int], npt.ArrayLike] | None = None
         self._iter: Iterator[npt.ArrayLike] | None = None
-        self._indexed = False  # a source(first, n) callable: samples asked by index
+        self._indexed = False  # a source(k, n) callable: samples asked by number
         if hasattr(source, "read") and callable(source.read):
             self._call = lambda first, n: source.read(n)
         elif callable(source):
@@ -168,7 +177,30 @@ class _DacFeeder:
         else:
             self._iter = iter(source)
         self._pending: npt.NDArray[Any] | None = None
+        self._sent: list[npt.NDArray[Any]] | None = []  # None once started
         self.exhausted = False
+
+    def sent(self, blocks: list[npt.NDArray[Any]]) -> None:
+        """Record blocks that went to the board (kept until :meth:`started`)."""
+        if self._sent is not None:
+            self._sent.extend(blocks)
+
+    def started(self) -> None:
+        """The board accepted START: what was sent need not be kept any longer."""
+        self._sent = None
+
+    def restart_at(self, first: int) -> None:
+        """Send everything again from sample 0, at board index ``first`` (the board dropped
+        what it had: its START was refused and it was stopped)."""
+        if self._sent is None:
+            raise RuntimeError("restart_at() after started(): the sent samples are gone")
+        rest = [] if self._pending is None else [self._pending]
+        if self._sent or rest:
+            self._pending = np.concatenate(self._sent + rest)
+        self._sent = []
+        self.next_index = first
+        if self._pending is not None and self._pending.shape[0]:
+            self.exhausted = False  # the source may have ended; what it gave is sent again
 
     def take(self, n: int) -> npt.NDArray[Any] | None:
         """Up to ``n`` wire samples (rows), or None when the source has ended."""
@@ -235,6 +267,9 @@ class Board:
         Keyword options for :func:`hil.transports.open_transport`.
     start_lead_s:
         How far ahead of the board clock :meth:`start` schedules the first sample (s).
+    start_attempts:
+        How many times :meth:`start` tries, doubling the lead each time, when the board
+        refuses START because its index has passed (1 .. 10).
     command_timeout_s:
         Clock seconds to wait for a reply.
     """
@@ -251,12 +286,17 @@ class Board:
         transport_factory: Callable[[], Transport] | None = None,
         transport_options: dict[str, Any] | None = None,
         start_lead_s: float = 0.2,
+        start_attempts: int = 3,
         command_timeout_s: float = 5.0,
     ) -> None:
         if keepalive_ms is not None and not 1 <= keepalive_ms <= 65535:
             raise ConfigError("keepalive_ms", keepalive_ms, "1 .. 65535 ms, or None")
         if not ring_seconds > 0:
             raise ConfigError("ring_seconds", ring_seconds, "> 0 s")
+        if not 0 < start_lead_s <= 10:
+            raise ConfigError("start_lead_s", start_lead_s, "in (0, 10] s")
+        if isinstance(start_attempts, bool) or start_attempts not in range(1, 11):
+            raise ConfigError("start_attempts", start_attempts, "an integer in 1 .. 10")
         self.settings = settings or BoardSettings()
         self._url = transport if isinstance(transport, str) else None
         self._injected = None if isinstance(transport, str) else transport
@@ -268,6 +308,7 @@ class Board:
         self.reconnect_policy = reconnect if reconnect is not None else ReconnectPolicy()
         self._reconnect_enabled = bool(reconnect is not None or self._url or transport_factory)
         self.start_lead_s = start_lead_s
+        self.start_attempts = start_attempts
         self.command_timeout_s = command_timeout_s
 
         self._lock = threading.RLock()
@@ -552,31 +593,77 @@ class Board:
         """Start streaming; returns the board sample index of the first sample.
 
         With a DAC ``source`` the DAC buffer is preloaded (within the granted credit) before
-        START, so playback begins without an underrun.
+        START, so playback begins without an underrun. Sample ``k`` of the source plays at
+        the returned index ``+ k``; a callable source is asked ``source(k, n)`` for samples
+        ``k .. k+n-1`` (consecutive, from 0).
+
+        The first sample is scheduled :attr:`start_lead_s` after the board clock. If the
+        board refuses START because that index has passed (the preload took longer than the
+        lead: a loaded host), the driver stops the board (which empties its DAC buffer),
+        doubles the lead and starts again with the same samples, up to
+        :attr:`start_attempts` times; a retried start is annotated (``START_RETRY``).
         """
         config = self._configured
         if config is None:
             raise BoardError("configure() the board before start()")
         rate = config.sample_rate_hz
-        first = self.board_index_now() + round(self.start_lead_s * rate)
-        self.start_index = first
-        self.gaps.reset(first)
+        feeder = None
         if source is not None:
-            self._feeder = feeder = _DacFeeder(
-                source, config.dac_format, channel_count(config.dac_channel_mask), first
+            feeder = _DacFeeder(
+                source, config.dac_format, channel_count(config.dac_channel_mask), 0
             )
-            with self._cond:
-                self._cond.notify_all()
-            self._wait(
-                lambda: (
-                    feeder.exhausted or (self._conn.dac_credit == 0 and feeder.next_index > first)
-                ),
-                preload_timeout_s,
-                "DAC preload (credit)",
-            )
-        self._command(Start(first))
-        self._streaming = True
-        return first
+        refusals: list[str] = []
+        for attempt in range(self.start_attempts):
+            lead_s = self.start_lead_s * 2**attempt
+            first = self.board_index_now() + round(lead_s * rate)
+            self.start_index = first
+            self.gaps.reset(first)
+            if feeder is not None:
+                self._preload(feeder, first, preload_timeout_s)
+            try:
+                self._command(Start(first))
+            except BoardCommandError as error:
+                if error.nak is None or error.nak.code != NakCode.START_INDEX_PASSED:
+                    raise
+                refusals.append(f"at {first} with a {lead_s:g} s lead ({error.nak.detail})")
+                with self._cond:
+                    self._feeder = None  # the writer stops feeding this attempt
+                self._command(Stop())  # the board drops the samples it holds for it
+                continue
+            if feeder is not None:
+                with feeder.lock:
+                    feeder.started()
+            self._streaming = True
+            if refusals:
+                self._annotate(
+                    AnnotationKind.START_RETRY,
+                    len(refusals),
+                    f"START refused {len(refusals)} time(s) as its index had passed ("
+                    + "; ".join(refusals)
+                    + f"); started at {first} with a {lead_s:g} s lead",
+                    first,
+                )
+            return first
+        raise BoardCommandError(
+            f"{self.url}: board refused START {len(refusals)} times because its start index"
+            f" had passed ({'; '.join(refusals)}): the host took longer than the start lead"
+            " to preload the DAC. Raise start_lead_s, or give the host more CPU time (close"
+            " other programs, use a faster source)",
+        )
+
+    def _preload(self, feeder: _DacFeeder, first: int, timeout_s: float) -> None:
+        """Fill the board's DAC buffer from ``feeder`` for a start at ``first``: from its
+        sample 0 (again, if an earlier attempt was refused) up to the granted credit."""
+        with feeder.lock:
+            feeder.restart_at(first)
+        with self._cond:
+            self._feeder = feeder
+            self._cond.notify_all()
+        self._wait(
+            lambda: feeder.exhausted or (self._conn.dac_credit == 0 and feeder.next_index > first),
+            timeout_s,
+            "DAC preload (credit)",
+        )
 
     def stop(self) -> None:
         """Stop transmission and capture (STOP, wait for its ACK)."""
@@ -760,37 +847,39 @@ class Board:
         feeder, config = self._feeder, self._configured
         if feeder is None or config is None or feeder.exhausted:
             return False
-        self._skip_late_dac(feeder, config)
-        with self._lock:
-            credit = self._conn.dac_credit if self._conn.state in _DAC_STATES else 0
-        per_frame = self._frame_samples(config)
-        blocks: list[npt.NDArray[Any]] = []
-        while credit > 0 and len(blocks) < _DAC_BURST_FRAMES:
-            block = feeder.take(min(credit, per_frame))
-            if block is None or block.shape[0] == 0:
-                break
-            blocks.append(block)
-            credit -= block.shape[0]
-        if not blocks:
-            return False
-        mask, fmt = config.dac_channel_mask, config.dac_format
-        with self._lock:
-            transport = self._transport
-            needed = sum(b.shape[0] for b in blocks)
-            if (
-                self._feeder is not feeder
-                or self._conn.state not in _DAC_STATES
-                or self._conn.dac_credit < needed
-                or transport is None
-            ):
-                feeder.put_back(np.concatenate(blocks))
+        with feeder.lock:  # a retried start() may be moving it back to sample 0
+            self._skip_late_dac(feeder, config)
+            with self._lock:
+                credit = self._conn.dac_credit if self._conn.state in _DAC_STATES else 0
+            per_frame = self._frame_samples(config)
+            blocks: list[npt.NDArray[Any]] = []
+            while credit > 0 and len(blocks) < _DAC_BURST_FRAMES:
+                block = feeder.take(min(credit, per_frame))
+                if block is None or block.shape[0] == 0:
+                    break
+                blocks.append(block)
+                credit -= block.shape[0]
+            if not blocks:
                 return False
-            for block in blocks:
-                message = DacData.from_array(feeder.next_index, mask, fmt, block)
-                self._outgoing += self._conn.send(message)
-                feeder.next_index += block.shape[0]
-            self.dac_samples_sent += needed
-            self._cond.notify_all()
+            mask, fmt = config.dac_channel_mask, config.dac_format
+            with self._lock:
+                transport = self._transport
+                needed = sum(b.shape[0] for b in blocks)
+                if (
+                    self._feeder is not feeder
+                    or self._conn.state not in _DAC_STATES
+                    or self._conn.dac_credit < needed
+                    or transport is None
+                ):
+                    feeder.put_back(np.concatenate(blocks))
+                    return False
+                for block in blocks:
+                    message = DacData.from_array(feeder.next_index, mask, fmt, block)
+                    self._outgoing += self._conn.send(message)
+                    feeder.next_index += block.shape[0]
+                feeder.sent(blocks)
+                self.dac_samples_sent += needed
+                self._cond.notify_all()
         # One write per burst: fewer system calls and lock hand-overs at 4 MB/s.
         self._flush()
         return True

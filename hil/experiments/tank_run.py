@@ -62,6 +62,7 @@ EVENT_KIND: dict[AnnotationKind, str] = {
     AnnotationKind.RECONNECT: "note",
     AnnotationKind.ALARM: "alarm",
     AnnotationKind.PROTOCOL_ERROR: "alarm",
+    AnnotationKind.START_RETRY: "note",
 }
 
 
@@ -321,14 +322,9 @@ def run_experiment(
 
         # ---- transmission: the schedule from the first transmitted sample
         synth = BlockSynthesizer(exp.schedule, fs, amplitude=exp.amplitude)
-        origin: list[int] = []
-
-        def dac_source(first: int, n: int) -> np.ndarray:
-            if not origin:
-                origin.append(first)
-            return synth.render(first - origin[0], n)
-
-        start_index = board.start(dac_source)
+        # Board and audio interface both ask for samples by their number in the
+        # transmission: sample k plays at start_index + k.
+        start_index = board.start(synth.render)
         next_index = start_index
         doc = schedule_document(
             exp.schedule,

@@ -19,6 +19,8 @@ from firmware_protocol import (
     Credit,
     Keepalive,
     Message,
+    Nak,
+    NakCode,
     Role,
     SampleFormat,
     Start,
@@ -26,7 +28,7 @@ from firmware_protocol import (
     Sync,
 )
 from hil.acquisition import AnnotationKind
-from hil.devices.board import Board
+from hil.devices.board import Board, BoardCommandError
 from hil.devices.board_settings import BoardSettings
 from hil.errors import ConfigError
 from sim_devices.board import BoardSpec
@@ -224,3 +226,63 @@ def test_no_answer_to_hello_times_out_with_advice() -> None:
         TransportTimeoutError, match=r"no VERSION within 0\.1 s; check that the board"
     ):
         board.open()
+
+
+def test_start_refused_as_passed_is_retried_with_a_doubled_lead_then_given_up() -> None:
+    """Each refusal: STOP (the board drops what it holds), a fresh look at the board clock,
+    twice the lead; after start_attempts refusals, an error that says what to change."""
+    script = Script()
+    script.handshake()
+    config = BoardSettings().to_configure()
+    script.step(config, Ack(1, Configure.TYPE_ID), Sync(1000, 5_000_000))
+    seq = 2
+    sync = 1000
+    firsts = []
+    for lead in (200_000, 400_000, 800_000):
+        first = sync + lead
+        firsts.append(first)
+        sync = first + 50_000  # the board's clock has passed it by the time START arrives
+        passed = Nak(seq, Start.TYPE_ID, NakCode.START_INDEX_PASSED, f"clock is at {sync}")
+        script.step(Start(first), passed, Sync(sync, 6_000_000))
+        script.step(Stop(), Ack(seq + 1, Stop.TYPE_ID))
+        seq += 2
+    transport = ScriptedTransport(script.steps)
+    board = Board(transport, clock=ManualClock(), keepalive_ms=None, ring_seconds=0.01)
+    with board:
+        board.configure()
+        with pytest.raises(BoardCommandError) as info:
+            board.start()
+    assert transport.mismatches == [] and transport.script == []
+    words = str(info.value)
+    assert "refused START 3 times because its start index had passed" in words
+    assert f"at {firsts[0]} with a 0.2 s lead" in words and "0.8 s lead" in words
+    assert "Raise start_lead_s" in words
+
+
+def test_start_refused_for_another_reason_is_not_retried() -> None:
+    script = Script()
+    script.handshake()
+    config = BoardSettings().to_configure()
+    script.step(config, Ack(1, Configure.TYPE_ID), Sync(1000, 5_000_000))
+    script.step(Start(201_000), Nak(2, Start.TYPE_ID, NakCode.BUSY, "busy"))
+    transport = ScriptedTransport(script.steps)
+    board = Board(transport, clock=ManualClock(), keepalive_ms=None, ring_seconds=0.01)
+    with board:
+        board.configure()
+        with pytest.raises(BoardCommandError, match=r"refused START with .*BUSY.*busy"):
+            board.start()
+        assert transport.script == []  # nothing more was sent: no STOP, no second START
+    assert transport.mismatches == []
+
+
+@pytest.mark.parametrize(
+    ("options", "words"),
+    [
+        ({"start_lead_s": 0.0}, r"start_lead_s = 0.0 is not allowed: must be in \(0, 10\] s"),
+        ({"start_attempts": 0}, "start_attempts = 0 is not allowed: must be an integer in 1 .. 10"),
+        ({"start_attempts": 2.5}, "start_attempts = 2.5 is not allowed"),
+    ],
+)
+def test_bad_start_options_are_refused(options: dict[str, float], words: str) -> None:
+    with pytest.raises(ConfigError, match=words):
+        Board("sim://board", **options)  # type: ignore[arg-type]

@@ -251,7 +251,7 @@ def test_usb_bulk_transport_streams_with_zero_loss() -> None:
 
 
 def test_callable_source_is_asked_for_consecutive_samples() -> None:
-    """A ``source(first, n)`` callable must be asked for fresh, consecutive sample indices,
+    """A ``source(k, n)`` callable must be asked for fresh, consecutive sample numbers,
     also when one burst takes several blocks from it (regression: the same first index was
     asked again within a burst, so the DAC repeated its first block)."""
     clock = ManualClock()
@@ -259,9 +259,9 @@ def test_callable_source_is_asked_for_consecutive_samples() -> None:
     synth = tank_board_synth()
     calls: list[tuple[int, int]] = []
 
-    def source(first: int, n: int) -> np.ndarray:
-        calls.append((first, n))
-        return synth.render(first - calls[0][0], n)
+    def source(k: int, n: int) -> np.ndarray:
+        calls.append((k, n))
+        return synth.render(k, n)
 
     with Board(link, clock=clock, keepalive_ms=None) as board:
         board.configure()
@@ -271,7 +271,7 @@ def test_callable_source_is_asked_for_consecutive_samples() -> None:
         n = end - first
         np.testing.assert_array_equal(board.read(first, n), expected_loopback(first, n))
     starts = [c[0] for c in calls]
-    assert starts[0] == first
+    assert starts[0] == 0  # sample numbers of the transmission: sample k plays at first + k
     assert all(b == a + n_a for (a, n_a), b in zip(calls, starts[1:], strict=False))
 
 
@@ -381,7 +381,7 @@ def test_dac_feeder_skip_drops_exactly_the_next_samples(kind: str) -> None:
     sources = {
         "iterable": lambda: tank_board_synth().blocks(4096),
         "reader": tank_board_synth,
-        "callable": lambda: lambda first, n: synth.render(first - 1000, n),
+        "callable": lambda: synth.render,
     }
     feeder = _DacFeeder(sources[kind](), SampleFormat.INT16, 1, 1000)
     a = feeder.take(100)
@@ -390,3 +390,80 @@ def test_dac_feeder_skip_drops_exactly_the_next_samples(kind: str) -> None:
     assert a is not None and b is not None and feeder.next_index == 1000 + 9_000
     np.testing.assert_array_equal(a, ref[:100])
     np.testing.assert_array_equal(b[: min(5_000, b.shape[0])], ref[9_100 : 9_100 + b.shape[0]])
+
+
+def test_a_refused_start_is_retried_later_with_the_same_samples() -> None:
+    """The preload outlasts the start lead (here the source's first call takes 0.3 s of board
+    time, the lead is 0.2 s): the board refuses START as its index has passed; the driver
+    stops it, doubles the lead and starts again, and sample 0 still plays at the index
+    start() returns."""
+    clock = ManualClock()
+    port, link = _memory_board(clock)
+    synth = tank_board_synth()
+    calls: list[tuple[int, int]] = []
+
+    def slow_source(k: int, n: int) -> np.ndarray:
+        if not calls:
+            clock.advance(0.3)  # a host busy elsewhere while it fills the DAC buffer
+        calls.append((k, n))
+        return synth.render(k, n)
+
+    with Board(link, clock=clock, keepalive_ms=None) as board:
+        board.configure()
+        first_try = board.board_index_now() + 200_000
+        first = board.start(slow_source)
+        # Retried with twice the lead, from the clock after the 0.3 s.
+        assert first == first_try + 300_000 + 200_000
+        level = lambda: port.call(lambda b: b.snapshot().dac_buffer_level)  # noqa: E731
+        end = stream_for(board, clock, 0.7, dac_level=level)  # to 1.0 s: 0.3 s streamed
+        n = end - first
+        assert n == 300_000
+        np.testing.assert_array_equal(board.read(first, n), expected_loopback(first, n))
+        retries = board.annotations.of_kind(AnnotationKind.START_RETRY)
+        assert [(a.sample_index, a.length) for a in retries] == [(first, 1)]
+        assert f"at {first_try} with a 0.2 s lead" in retries[0].detail
+        assert "started at" in retries[0].detail and "0.4 s lead" in retries[0].detail
+        board.stop()
+    # The samples sent for the refused start were sent again, not asked for again.
+    starts = [c[0] for c in calls]
+    assert starts[0] == 0
+    assert all(b == a + n_a for (a, n_a), b in zip(calls, starts[1:], strict=False))
+
+
+@pytest.mark.parametrize("kind", ["iterable", "reader", "callable"])
+def test_dac_feeder_restart_sends_the_same_samples_from_sample_0(kind: str) -> None:
+    ref = to_wire_samples(tank_board_synth().render(0, 20_000), SampleFormat.INT16, 1)
+    sources = {
+        "iterable": lambda: tank_board_synth().blocks(4096),
+        "reader": tank_board_synth,
+        "callable": lambda: tank_board_synth().render,
+    }
+    feeder = _DacFeeder(sources[kind](), SampleFormat.INT16, 1, 1000)
+    sent = [feeder.take(3000), feeder.take(2000)]
+    assert sent[0] is not None and sent[1] is not None
+    feeder.sent([sent[0], sent[1]])
+    feeder.next_index += 5000
+    feeder.restart_at(7000)
+    assert feeder.next_index == 7000
+    again = [feeder.take(4000), feeder.take(6000)]
+    assert again[0] is not None and again[1] is not None
+    np.testing.assert_array_equal(
+        np.concatenate([*again]), ref[: again[0].shape[0] + again[1].shape[0]]
+    )
+    feeder.started()
+    with pytest.raises(RuntimeError, match="after started"):
+        feeder.restart_at(9000)
+
+
+def test_restart_of_an_ended_source_sends_what_it_gave() -> None:
+    block = np.linspace(-0.5, 0.5, 500)
+    feeder = _DacFeeder([block], SampleFormat.INT16, 1, 0)
+    taken = feeder.take(1000)
+    assert taken is not None and feeder.take(1000) is None and feeder.exhausted
+    feeder.sent([taken])
+    feeder.restart_at(100)
+    assert not feeder.exhausted
+    again = feeder.take(1000)
+    assert again is not None
+    np.testing.assert_array_equal(again, taken)
+    assert feeder.take(1000) is None and feeder.exhausted
