@@ -3,7 +3,8 @@ transmit schedule, events, estimates, sync pairs, stage telemetry and metadata.
 
 The file is opened as an SWMR reader, so a recording still being written can be read (each
 view re-reads the file and sees everything up to the writer's last flush), and so can one
-whose writer was killed.
+whose writer was killed. Every column reads while the writer runs in format version 2;
+version-1 files (variable-length table strings, outside SWMR) read once their writer stopped.
 """
 
 from __future__ import annotations
@@ -86,7 +87,7 @@ class RunRecording:
         """Open ``path``; :class:`ConfigError` for a file that is not a recording this hil reads.
 
         The format name and version are checked first, so a file of another format or of
-        another format version is refused naming the attribute.
+        a format version not in ``schema.READABLE_VERSIONS`` is refused naming the attribute.
         """
         path = Path(path)
         f = _open_h5(path)
@@ -100,11 +101,12 @@ class RunRecording:
                     f"{path} is an HDF5 file but not a hil run recording",
                 )
             version = f.attrs.get(schema.ATTR_VERSION)
-            if version is None or int(version) != schema.FORMAT_VERSION:
+            if version is None or int(version) not in schema.READABLE_VERSIONS:
+                readable = ", ".join(str(v) for v in schema.READABLE_VERSIONS)
                 raise ConfigError(
                     "recording.format_version",
                     version if version is None else int(version),
-                    f"{schema.FORMAT_VERSION} (the version this hil reads)",
+                    f"one of {readable} (the versions this hil reads)",
                     "read it with the hil release that wrote it",
                 )
             return cls(f, path)

@@ -8,13 +8,17 @@ shortest of its columns (so a writer killed between two column writes leaves who
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import h5py
 import numpy as np
 
 FORMAT_NAME = "cas-hil-run"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+"""The version this hil writes: 2 stores the table string columns as fixed-length UTF-8."""
+READABLE_VERSIONS: tuple[int, ...] = (1, 2)
+"""Versions this hil reads (version 1: variable-length table strings, unsafe to read live)."""
 
 # Root attributes.
 ATTR_FORMAT = "format"
@@ -32,7 +36,44 @@ EXPERIMENT_TOML = "metadata/experiment_toml"
 """Scalar UTF-8 string: the experiment file as given (empty for none)."""
 
 STR = h5py.string_dtype("utf-8")
-"""Variable-length UTF-8 strings."""
+"""Variable-length UTF-8 strings: the scalar strings, written once before SWMR starts (and
+the table string columns of version-1 files)."""
+
+TELEMETRY_STATE_BYTES = 16
+"""Bytes of UTF-8 in a telemetry ``state`` (GRBL states are short words: ``Hold:0``)."""
+EVENT_KIND_BYTES = 16
+"""Bytes of UTF-8 in an event ``kind`` (the longest of :data:`EVENT_KINDS` has 8)."""
+EVENT_TEXT_BYTES = 512
+"""Bytes of UTF-8 in an event ``text``; a longer text is cut to fit and ends with "…"."""
+ESTIMATE_RECEIVER_BYTES = 32
+"""Bytes of UTF-8 in an estimate's ``receiver`` name."""
+
+
+@dataclass(frozen=True)
+class FixedText:
+    """A table column of fixed-length UTF-8 strings of at most ``max_bytes`` bytes.
+
+    Fixed-length data lives in the dataset's chunks, which SWMR covers, so a live reader can
+    read the column after any flush (variable-length strings live in the global heap, which
+    SWMR does not cover). Shorter values are padded with NULs, so a trailing NUL is not kept.
+
+    A longer value is cut on a UTF-8 character boundary and ends with :data:`ELLIPSIS` when
+    ``truncate`` (free text); otherwise it is refused with a :class:`~hil.errors.ConfigError`
+    whose hint is ``hint`` (names: a cut name would no longer mean the same thing).
+    """
+
+    max_bytes: int
+    truncate: bool
+    hint: str = ""
+
+    @property
+    def dtype(self) -> np.dtype[Any]:
+        """The HDF5/h5py dtype of the column."""
+        return h5py.string_dtype("utf-8", length=self.max_bytes)
+
+
+ELLIPSIS = "…"
+"""Marks a cut text ("…", 3 bytes of UTF-8)."""
 
 SAMPLE_DTYPES: tuple[str, ...] = ("int16", "int32", "float32")
 """Sample formats as captured: 16/32-bit integer ADC codes or float32 (audio interfaces)."""
@@ -40,7 +81,7 @@ SAMPLE_DTYPES: tuple[str, ...] = ("int16", "int32", "float32")
 EVENT_KINDS: tuple[str, ...] = ("gap", "xrun", "alarm", "overrun", "underrun", "note")
 """Kinds of sample-indexed event."""
 
-# Table name -> ((column, dtype), ...). Units are in the column names.
+# Table name -> ((column, NumPy dtype or FixedText), ...). Units are in the column names.
 TABLES: dict[str, tuple[tuple[str, Any], ...]] = {
     # Contiguous runs of received samples: dataset row ``row`` holds board sample
     # ``sample_index``; the run lasts until the next segment's row (or the last row).
@@ -54,13 +95,20 @@ TABLES: dict[str, tuple[tuple[str, Any], ...]] = {
         ("sample_index", np.int64),
         ("position_m", np.float64),
         ("velocity_mps", np.float64),
-        ("state", STR),
+        (
+            "state",
+            FixedText(
+                TELEMETRY_STATE_BYTES,
+                truncate=False,
+                hint="record the controller's state word; longer text goes in an event",
+            ),
+        ),
     ),
     "events": (
-        ("kind", STR),
+        ("kind", FixedText(EVENT_KIND_BYTES, truncate=False, hint="use one of EVENT_KINDS")),
         ("sample_index", np.int64),
         ("length", np.int64),
-        ("text", STR),
+        ("text", FixedText(EVENT_TEXT_BYTES, truncate=True)),
     ),
     "estimates": (
         ("t_s", np.float64),
@@ -72,9 +120,22 @@ TABLES: dict[str, tuple[tuple[str, Any], ...]] = {
         ("alpha", np.float64),
         ("t_tx_s", np.float64),
         ("codeword", np.int64),
-        ("receiver", STR),
+        (
+            "receiver",
+            FixedText(
+                ESTIMATE_RECEIVER_BYTES,
+                truncate=False,
+                hint="a cut name would not find the receiver on replay; register a shorter name",
+            ),
+        ),
     ),
 }
+
+
+def column_dtype(spec: Any) -> Any:
+    """The dtype a column of ``TABLES`` is stored as (its own, or a :class:`FixedText`'s)."""
+    return spec.dtype if isinstance(spec, FixedText) else spec
+
 
 TABLE_CHUNK_ROWS = 1024
 """Rows per chunk of the small tables (a chunk is written only once it holds data)."""

@@ -3,6 +3,9 @@
 Rows are appended column by column; readers take the shortest column as the row count, so
 a table read while (or after) its writer was interrupted between two column writes still
 yields whole rows only.
+
+String columns are fixed-length UTF-8 (:class:`~hil.recording.schema.FixedText`, format
+version 2) or variable-length UTF-8 (version 1); both read back as ``str`` objects.
 """
 
 from __future__ import annotations
@@ -14,34 +17,100 @@ import h5py
 import numpy as np
 from numpy.typing import NDArray
 
-from hil.recording.schema import TABLE_CHUNK_ROWS
+from hil.errors import ConfigError
+from hil.recording.schema import ELLIPSIS, TABLE_CHUNK_ROWS, TABLES, FixedText, column_dtype
 
 
 def create_table(parent: h5py.Group, name: str, columns: Sequence[tuple[str, Any]]) -> h5py.Group:
-    """Create the group ``name`` with an empty, resizable dataset per ``(column, dtype)``."""
+    """Create the group ``name`` with an empty, resizable dataset per ``(column, dtype)`` (a
+    dtype or a :class:`~hil.recording.schema.FixedText`)."""
     group = parent.create_group(name)
-    for column, dtype in columns:
+    for column, spec in columns:
         group.create_dataset(
-            column, shape=(0,), maxshape=(None,), dtype=dtype, chunks=(TABLE_CHUNK_ROWS,)
+            column,
+            shape=(0,),
+            maxshape=(None,),
+            dtype=column_dtype(spec),
+            chunks=(TABLE_CHUNK_ROWS,),
         )
     group.attrs["columns"] = [column for column, _ in columns]
     return group
 
 
+def fit_text(value: Any, spec: FixedText, field: str) -> bytes:
+    """``value`` as UTF-8 that fits a fixed-length column of ``spec``.
+
+    A longer value is cut on a character boundary and ends with ``…`` when ``spec.truncate``
+    (so it still decodes); otherwise :class:`ConfigError` names ``field`` (``table.column``).
+
+    >>> fit_text("ümlaut", FixedText(16, truncate=False), "t.c").decode()
+    'ümlaut'
+    >>> fit_text("ab€cd", FixedText(6, truncate=True), "t.c").decode()  # 7 bytes: € has 3
+    'ab…'
+    >>> fit_text("ab€cd", FixedText(6, truncate=False, hint="shorten it"), "t.c")
+    Traceback (most recent call last):
+    ...
+    hil.errors.ConfigError: t.c = 'ab€cd' is not allowed: must be at most 6 bytes of UTF-8 ...
+    """
+    raw = str(value).encode("utf-8")
+    if len(raw) <= spec.max_bytes:
+        return raw
+    if not spec.truncate:
+        raise ConfigError(
+            field, value, f"at most {spec.max_bytes} bytes of UTF-8 (it has {len(raw)})", spec.hint
+        )
+    mark = ELLIPSIS.encode("utf-8")
+    # Cutting the bytes may split the last character: dropping its incomplete tail on decode
+    # leaves a whole-character prefix.
+    head = raw[: spec.max_bytes - len(mark)].decode("utf-8", errors="ignore")
+    return head.encode("utf-8") + mark
+
+
+def check_row(table: str, row: Sequence[Any]) -> None:
+    """Raise the :class:`ConfigError` that appending ``row`` (one value per column of
+    ``schema.TABLES[table]``) would raise, without writing anything: a writer that queues
+    rows refuses a bad one when it is given, not at a later flush."""
+    for (column, spec), value in zip(TABLES[table], row, strict=True):
+        if isinstance(spec, FixedText):
+            fit_text(value, spec, f"{table}.{column}")
+
+
+def _stored(
+    ds: h5py.Dataset, values: Sequence[Any] | NDArray[Any], spec: Any, field: str
+) -> Sequence[Any] | NDArray[Any]:
+    """``values`` as the column ``ds`` stores them (strings encoded, fitted to the length)."""
+    info = h5py.check_string_dtype(ds.dtype)
+    if info is None:
+        return values
+    if info.length is None:  # variable-length (format version 1)
+        return np.asarray(values, dtype=object)
+    if not isinstance(spec, FixedText):  # a column the schema does not describe: never cut
+        spec = FixedText(info.length, truncate=False)
+    return np.array([fit_text(v, spec, field) for v in values], dtype=ds.dtype)
+
+
 def append_rows(group: h5py.Group, columns: Mapping[str, Sequence[Any] | NDArray[Any]]) -> None:
-    """Append equal-length column arrays (every column of the table) as new rows."""
+    """Append equal-length column arrays (every column of the table) as new rows.
+
+    Text for a fixed-length string column is encoded as UTF-8 and fitted to the column as
+    the schema says (:class:`~hil.recording.schema.FixedText`: cut, or refused with
+    :class:`ConfigError`). Every column is converted before any is written, so a refused
+    value leaves the table as it was.
+    """
     lengths = {len(v) for v in columns.values()}
     if len(lengths) != 1:
         raise ValueError(f"columns of unequal length {sorted(lengths)}")
     n = lengths.pop()
     if n == 0:
         return
-    for column, values in columns.items():
+    table = group.name.rsplit("/", 1)[-1]
+    specs = dict(TABLES.get(table, ()))
+    data = {c: _stored(group[c], v, specs.get(c), f"{table}.{c}") for c, v in columns.items()}
+    for column, values in data.items():
         ds = group[column]
         start = ds.shape[0]
         ds.resize((start + n,))
-        is_text = h5py.check_string_dtype(ds.dtype) is not None
-        ds[start:] = np.asarray(values, dtype=object) if is_text else values
+        ds[start:] = values
 
 
 def table_rows(group: h5py.Group, *, refresh: bool) -> int:
@@ -54,7 +123,8 @@ def table_rows(group: h5py.Group, *, refresh: bool) -> int:
 
 
 def read_table(group: h5py.Group, *, refresh: bool) -> dict[str, NDArray[Any]]:
-    """Every column as an array of the table's whole rows (strings as ``str`` objects)."""
+    """Every column as an array of the table's whole rows (strings, fixed- or variable-length,
+    as ``str`` objects; fixed-length values lose their NUL padding)."""
     n = table_rows(group, refresh=refresh)
     out: dict[str, NDArray[Any]] = {}
     for c in (str(c) for c in group.attrs["columns"]):

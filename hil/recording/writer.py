@@ -33,7 +33,7 @@ from hil.errors import ConfigError
 from hil.estimation.base import ESTIMATE_FIELDS, Estimate
 from hil.recording import schema
 from hil.recording.records import ReceiverSetup, RunEvent, StageTelemetry
-from hil.recording.tables import append_rows, create_table
+from hil.recording.tables import append_rows, check_row, create_table
 from hil.signals.schedule import HopSchedule
 from hil.signals.schedule_file import FORMAT_NAME as SCHEDULE_FORMAT
 
@@ -289,28 +289,38 @@ class RunWriter:
         self._maybe_flush()
 
     def append_telemetry(self, record: StageTelemetry) -> None:
-        """Append one stage status report."""
-        self._pending["telemetry"].append(
-            (
-                float(record.host_time_s),
-                int(record.sample_index),
-                float(record.position_m),
-                float(record.velocity_mps),
-                str(record.state),
-            )
+        """Append one stage status report (:class:`ConfigError` for a ``state`` longer than
+        ``schema.TELEMETRY_STATE_BYTES`` bytes of UTF-8)."""
+        row = (
+            float(record.host_time_s),
+            int(record.sample_index),
+            float(record.position_m),
+            float(record.velocity_mps),
+            str(record.state),
         )
+        check_row("telemetry", row)
+        self._pending["telemetry"].append(row)
         self._maybe_flush()
 
     def append_event(self, event: RunEvent) -> None:
-        """Append one sample-indexed event (gaps in the samples are recorded automatically)."""
-        self._pending["events"].append((event.kind, event.sample_index, event.length, event.text))
+        """Append one sample-indexed event (gaps in the samples are recorded automatically).
+
+        A ``text`` longer than ``schema.EVENT_TEXT_BYTES`` bytes of UTF-8 is recorded cut,
+        ending with "…"."""
+        row = (event.kind, event.sample_index, event.length, event.text)
+        check_row("events", row)
+        self._pending["events"].append(row)
         self._maybe_flush()
 
     def append_estimates(self, estimates: Iterable[Estimate]) -> None:
-        """Append estimates (any receiver; the ``receiver`` field tells them apart)."""
-        rows = self._pending["estimates"]
-        for e in estimates:
-            rows.append(tuple(getattr(e, k) for k in ESTIMATE_FIELDS))
+        """Append estimates (any receiver; the ``receiver`` field tells them apart).
+
+        :class:`ConfigError`, with none of them appended, for a ``receiver`` name longer than
+        ``schema.ESTIMATE_RECEIVER_BYTES`` bytes of UTF-8."""
+        new = [tuple(getattr(e, k) for k in ESTIMATE_FIELDS) for e in estimates]
+        for row in new:
+            check_row("estimates", row)
+        self._pending["estimates"].extend(new)
         self._maybe_flush()
 
     # ------------------------------------------------------------------ flushing

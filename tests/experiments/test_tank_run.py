@@ -184,9 +184,9 @@ def _carriage_moving(h5: Path) -> bool:
         with RunRecording.open(h5) as rec:
             return any(abs(t.velocity_mps) > 0.05 for t in rec.telemetry())
     except (OSError, KeyError, ConfigError):
-        # Not yet a complete recording, or a read racing the writer: HDF5's SWMR does not
-        # cover variable-length strings (the telemetry's state column), so a live read of
-        # one can fail until a later flush (docs/recording-format.md). Poll again.
+        # Not yet a complete recording (the file is being created: not yet readable, or its
+        # groups not yet written). Once it is in SWMR mode every column reads while the run
+        # writes it (docs/recording-format.md). Poll again.
         return False
 
 

@@ -230,7 +230,7 @@ def test_cli_reports_a_replay_that_differs_from_live(
     ("make", "extra", "message"),
     [
         ("text", [], "RUN (recording) = '{path}' is not allowed: must be an HDF5 run recording"),
-        ("version", [], "recording.format_version = 7 is not allowed: must be 1"),
+        ("version", [], "recording.format_version = 7 is not allowed: must be one of 1, 2 (the"),
         ("copy", ["--receiver", "sonar9000"], "--receiver (receiver) = 'sonar9000' is not"),
         ("copy", ["--option", "bogus=1"], "gcas option = ['bogus'] is not allowed"),
         ("copy", ["--option", "novalue"], "--option = 'novalue' is not allowed: must be KEY=VALUE"),

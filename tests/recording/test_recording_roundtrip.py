@@ -321,6 +321,7 @@ def test_files_that_are_not_recordings_are_refused(
     with h5py.File(future, "r+") as f:
         f.attrs["format_version"] = 99
     with pytest.raises(
-        ConfigError, match=r"recording.format_version = 99 .* must be 1 \(the version this hil"
+        ConfigError,
+        match=r"recording.format_version = 99 .* must be one of 1, 2 \(the versions this hil",
     ):
         RunRecording.open(future)
