@@ -362,7 +362,8 @@ class Start(Message):
 
 @dataclass(frozen=True)
 class Stop(Message):
-    """HOST -> DEVICE: stop output and capture now; the device flushes and ACKs."""
+    """HOST -> DEVICE: stop output and capture now and drop the DAC samples held; the device
+    flushes and ACKs."""
 
     TYPE_ID = 0x12
     NAME = "STOP"

@@ -107,7 +107,9 @@ _DAC_BURST_FRAMES = 8  # DAC frames sent per write (8 x 8 KB)
 _WRITER_IDLE_S = 0.05
 
 DacSource = Callable[[int, int], npt.ArrayLike] | Iterable[npt.ArrayLike]
-"""A callable ``source(first_sample, n) -> block`` or an iterable of blocks. Blocks are (n,)
+"""A callable ``source(k, n) -> block`` (samples ``k .. k+n-1`` of the transmission, numbered
+from 0 at the index :meth:`Board.start` returns; not board indices) or an iterable of
+blocks. Blocks are (n,)
 (played on every channel) or (n, dac_channels); floats are full scale (+-1.0), integers are
 counts of the DAC format. An object with ``read(n)`` (BlockSynthesizer) is accepted too."""
 
@@ -977,13 +979,15 @@ class Board:
 
 
 class _ResumedSource:
-    """The remaining samples of a feeder, as a callable source for a new start."""
+    """The remaining samples of a feeder, as a sequential source (an iterable of blocks) for
+    a new start: skipping late samples reads and drops them, so every later sample still
+    plays at its own place, and the source's end is passed on."""
+
+    _BLOCK = 4096  # samples per block taken from the old feeder
 
     def __init__(self, feeder: _DacFeeder) -> None:
         self._feeder = feeder
 
-    def __call__(self, first: int, n: int) -> npt.NDArray[Any]:
-        block = self._feeder.take(n)
-        if block is None:
-            return np.zeros((0, self._feeder.channels), dtype=np.int16)
-        return block
+    def __iter__(self) -> Iterator[npt.NDArray[Any]]:
+        while (block := self._feeder.take(self._BLOCK)) is not None and block.shape[0]:
+            yield block

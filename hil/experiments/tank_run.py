@@ -443,8 +443,11 @@ def run_experiment(
                     got = sum(b.shape[0] for _, b in pending)
                     if got >= _LATENCY_PROBE_S * fs:
                         captured = np.concatenate([b for _, b in pending])
+                        # Its own synthesizer: the one transmitting renders on the board's
+                        # writer thread (or the audio callback) and is not re-entrant.
+                        reference = BlockSynthesizer(exp.schedule, fs, amplitude=exp.amplitude)
                         lat = measure_latency(
-                            captured[:, 1] * _INT16_SCALE, synth.render(0, captured.shape[0])
+                            captured[:, 1] * _INT16_SCALE, reference.render(0, captured.shape[0])
                         )
                         latency.append(lat)
                         writer = open_writer(start_index + lat)

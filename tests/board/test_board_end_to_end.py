@@ -14,7 +14,7 @@ import pytest
 
 from firmware_protocol import SampleFormat, State
 from hil.acquisition import AnnotationKind
-from hil.devices.board import Board, ReconnectPolicy, _DacFeeder
+from hil.devices.board import Board, ReconnectPolicy, _DacFeeder, _ResumedSource
 from hil.devices.board_settings import to_wire_samples
 from hil.signals.presets import get_preset
 from hil.signals.synthesis import BlockSynthesizer
@@ -467,3 +467,28 @@ def test_restart_of_an_ended_source_sends_what_it_gave() -> None:
     assert again is not None
     np.testing.assert_array_equal(again, taken)
     assert feeder.take(1000) is None and feeder.exhausted
+
+
+def test_a_resumed_source_skips_by_reading_and_passes_its_end_on() -> None:
+    """After a reconnect the remaining samples of the old feeder are a sequential source:
+    a late-DAC skip drops exactly the next samples (each later sample keeps its place), and
+    when the old source ends the new feeder is exhausted (a preload can finish)."""
+    ref = to_wire_samples(tank_board_synth().render(0, 30_000), SampleFormat.INT16, 1)
+    old = _DacFeeder(tank_board_synth().blocks(4096), SampleFormat.INT16, 1, 0)
+    head = old.take(2500)
+    assert head is not None
+    resumed = _DacFeeder(_ResumedSource(old), SampleFormat.INT16, 1, 50_000)
+    a = resumed.take(1000)
+    resumed.skip(7000)
+    b = resumed.take(3000)
+    assert a is not None and b is not None
+    np.testing.assert_array_equal(a, ref[2500 : 2500 + a.shape[0]])
+    start_b = 2500 + a.shape[0] + 7000
+    np.testing.assert_array_equal(b, ref[start_b : start_b + b.shape[0]])
+
+    short = _DacFeeder([np.full(300, 0.25)], SampleFormat.INT16, 1, 0)
+    assert short.take(100) is not None
+    tail = _DacFeeder(_ResumedSource(short), SampleFormat.INT16, 1, 1000)
+    rest = tail.take(1000)
+    assert rest is not None and rest.shape[0] == 200
+    assert tail.take(1000) is None and tail.exhausted
