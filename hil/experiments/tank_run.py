@@ -47,6 +47,12 @@ _INT16_SCALE = 1.0 / 32768.0
 FALSE_ALARM_GATE_M = 1.0
 # Capture used to measure the loopback latency at the start of every run, s.
 _LATENCY_PROBE_S = 0.05
+#: The board's watchdog (ms of its clock): it stops when the host has sent nothing for this
+#: long (a crashed or stalled host), so a run never leaves it streaming unattended.
+_WATCHDOG_MS = 1000
+#: The simulated board's: the simulated tank is a child process on the same CPUs, scaled in
+#: time, so a stall of the machine (seconds on a loaded CI host) must not stop it.
+_SIM_WATCHDOG_MS = 10_000
 
 # Board annotations as recording events: the recording's kinds are coarser (schema
 # EVENT_KINDS); the event's text starts with the annotation's own kind.
@@ -81,6 +87,27 @@ def run_event(annotation: Annotation) -> RunEvent:
         annotation.sample_index,
         annotation.length,
         f"{annotation.kind.value}: {annotation.detail}",
+    )
+
+
+def board_stopped(board: Any) -> str | None:
+    """Why the board stopped streaming on its own (its watchdog expired: the host sent it
+    nothing for the watchdog timeout), as an error message; None while it streams. A run
+    stops at once on it: no more samples will come.
+
+    Works for any device with ``annotations.of_kind`` (the board, the audio interface).
+    """
+    annotations = getattr(board, "annotations", None)
+    if annotations is None:
+        return None
+    stops = annotations.of_kind(AnnotationKind.WATCHDOG)
+    if not stops:
+        return None
+    at = stops[0]
+    return (
+        f"the board stopped streaming at sample {at.sample_index} ({at.detail}): the host"
+        " sent it nothing for its watchdog timeout, so the host stalled (a loaded machine, a"
+        " slow disk); the recording holds everything before it"
     )
 
 
@@ -315,7 +342,13 @@ def run_experiment(
 
             board = AudioDaq.from_url(board_url, sample_rate_hz=int(fs), ring_seconds=8.0).open()
         else:
-            board = Board(board_url, settings=settings, clock=clock, ring_seconds=8.0).open()
+            board = Board(
+                board_url,
+                settings=settings,
+                clock=clock,
+                ring_seconds=8.0,
+                keepalive_ms=_SIM_WATCHDOG_MS if tank is not None else _WATCHDOG_MS,
+            ).open()
         board.configure()
         if tank is not None:
             tank.align(fs)
@@ -479,6 +512,9 @@ def run_experiment(
                 next_index += block
                 if now() - last_poll >= 0.2:
                     break
+            stopped = board_stopped(board)
+            if stopped is not None:
+                raise RuntimeError(stopped)
             signal_s = (next_index - start_index) / fs
             est = estimates[-1] if estimates else None
             view.update(

@@ -264,3 +264,31 @@ def test_the_receiver_is_built_before_anything_moves_or_transmits(
     assert code != 0
     assert "the test stops the run at the stage" in summary["error"]
     assert order == ["receiver", "stage"]
+
+
+def test_a_board_stopped_by_its_watchdog_ends_the_run_with_the_reason() -> None:
+    """The board stops streaming when its watchdog expires; the run must stop at once with
+    that reason, not wait for samples until run.max_duration_s."""
+    from hil.devices.board import Board
+    from hil.experiments.tank_run import board_stopped
+    from sim_devices.board import BoardPort, LoopbackWorld, MemoryBoardLink, SimulatedBoard
+    from sim_devices.stage.clock import ManualClock
+
+    clock = ManualClock()
+    port = BoardPort(SimulatedBoard(clock=clock, world=LoopbackWorld(5)), poll_s=0.0002)
+    with Board(MemoryBoardLink(port, timeout=0.005), clock=clock, keepalive_ms=60000) as board:
+        board.configure()
+        first = board.start()
+        clock.advance(0.25)  # past the start lead (0.2 s)
+        assert board.wait_for_samples(first + 100, 10.0)
+        assert board_stopped(board) is None
+        port.call(lambda b: b.faults.expire_watchdog())
+        clock.advance(0.001)
+        deadline = time.monotonic() + 10.0
+        while board_stopped(board) is None and time.monotonic() < deadline:
+            time.sleep(0.001)
+        why = board_stopped(board)
+    assert why is not None
+    assert why.startswith("the board stopped streaming at sample ")
+    assert "board watchdog expired: transmission stopped" in why
+    assert "the host sent it nothing for its watchdog timeout" in why
