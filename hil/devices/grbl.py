@@ -89,6 +89,11 @@ class _Pending:
     reset: bool = False
 
 
+#: A status query unanswered for this long (driver-clock s) is taken as dropped and sent
+#: again: GRBL answers within milliseconds, but ignores '?' while homing.
+QUERY_LOST_S = 1.0
+
+
 class GrblStage:
     """One-axis (X) GRBL 1.1 motion stage in SI units.
 
@@ -181,6 +186,8 @@ polling at no more than 5 Hz); use the default 0.2
         self._reports = 0
         self._wco: tuple[float, ...] | None = None
         self._last_query = -math.inf
+        # Times of the '?' sent and not yet answered: a report is stamped with its query's.
+        self._queries: deque[float] = deque()
         self._last_status: StageStatus | None = None
         self._alarm: int | None = None
         self._new_alarm: int | None = None
@@ -603,8 +610,27 @@ polling at no more than 5 Hz); use the default 0.2
         return self._last_status
 
     def _query(self) -> None:
-        self._last_query = self._clock.now()
+        """Send '?' unless one is in flight: with one query at a time, every report is known
+        to answer the oldest (real GRBL merges two '?' that arrive before its main loop runs,
+        so with more in flight a report's time would be ambiguous)."""
+        now = self._clock.now()
+        while self._queries and now - self._queries[0] >= QUERY_LOST_S:
+            self._queries.popleft()  # dropped (GRBL ignores '?' while homing)
+        if self._queries:
+            return
+        self._last_query = now
+        self._queries.append(now)
         self._write(STATUS_QUERY)
+
+    def _report_time(self) -> float:
+        """Driver-clock time a status report describes: that of the query in flight.
+
+        GRBL samples its state on the main-loop pass after the '?' arrives (well under a
+        millisecond later), while the report's ~60 bytes take 5 ms at 115 200 baud and the
+        host may read them later still: a stalled host would otherwise date the position
+        late by the whole stall. A report with no query in flight gets its receipt time.
+        """
+        return self._queries.popleft() if self._queries else self._clock.now()
 
     def _soft_reset_and_wait(self, timeout: float) -> None:
         banners = self._banners
@@ -663,7 +689,7 @@ polling at no more than 5 Hz); use the default 0.2
             if self._pending:
                 self._pending.popleft().result = msg
         elif isinstance(msg, StatusReport):
-            self._last_status = self._to_status(msg)
+            self._last_status = self._to_status(msg, self._report_time())
             self._reports += 1
         elif isinstance(msg, AlarmMessage):
             self._alarm = msg.code
@@ -671,6 +697,7 @@ polling at no more than 5 Hz); use the default 0.2
         elif isinstance(msg, Banner):
             self._banners += 1
             self._critical = False
+            self._queries.clear()  # a reset drops the queries GRBL had not answered
             for pending in self._pending:
                 pending.reset = True
             self._pending.clear()
@@ -683,7 +710,7 @@ polling at no more than 5 Hz); use the default 0.2
         elif isinstance(msg, Unrecognised):
             self.unrecognised.append(msg.line)
 
-    def _to_status(self, report: StatusReport) -> StageStatus:
+    def _to_status(self, report: StatusReport, host_time: float) -> StageStatus:
         if report.wco is not None:
             self._wco = report.wco
         mpos = report.machine_position(self._wco)
@@ -699,7 +726,7 @@ polling at no more than 5 Hz); use the default 0.2
             alarm=self._alarm if state is StageState.ALARM else None,
             planner_blocks_free=report.planner_blocks_free,
             rx_bytes_free=report.rx_bytes_free,
-            host_time=self._clock.now(),
+            host_time=host_time,
         )
 
     def _position_estimate(self) -> float:

@@ -52,7 +52,10 @@ class StageStatus:
     planner_blocks_free, rx_bytes_free:
         Free planner blocks and serial RX bytes (``Bf:``), ``None`` if not reported.
     host_time:
-        Driver-clock time (s) at which the report was received.
+        Driver-clock time (s) the report describes: when the status query it answers was
+        sent (the controller samples its state right after; the report reaches the host
+        later, by its transmission and however long the host took to read it), or when it
+        was received if no query was pending.
     """
 
     state: StageState

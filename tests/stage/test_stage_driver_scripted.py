@@ -10,7 +10,7 @@ import itertools
 
 import pytest
 
-from hil.devices.grbl import GrblStage
+from hil.devices.grbl import QUERY_LOST_S, GrblStage
 from hil.devices.stage import StageState
 from hil.devices.stage_errors import (
     StageAlarmError,
@@ -253,3 +253,91 @@ def test_write_setting_validates_then_sends() -> None:
     assert len(peer.written) == 3
     stage.write_setting("max_rate_x", 900.0)
     assert stage.settings.max_rate == pytest.approx(0.015)
+
+
+class DelayedSerial(ScriptedSerial):
+    """A scripted peer whose replies reach the host ``delay`` s (clock time) after the write:
+    a slow link or a host that reads late."""
+
+    def __init__(self, script: list[tuple[bytes, bytes]], clock: ManualClock) -> None:
+        super().__init__(script)
+        self.clock, self.delay = clock, 0.0
+        self.query_times: list[float] = []
+        self._held: list[tuple[float, bytes]] = []
+
+    def write(self, data: bytes) -> int:
+        if data == b"?":
+            self.query_times.append(self.clock.now())
+        n = super().write(data)
+        self._held.append((self.clock.now() + self.delay, bytes(self._rx)))
+        self._rx.clear()
+        return n
+
+    def _release(self) -> None:
+        while self._held and self._held[0][0] <= self.clock.now():
+            self._rx += self._held.pop(0)[1]
+
+    def read(self, size: int = 1) -> bytes:
+        self._release()
+        return super().read(size)
+
+    @property
+    def in_waiting(self) -> int:
+        self._release()
+        return len(self._rx)
+
+
+def _delayed_stage(
+    script: list[tuple[bytes, bytes]], delay: float, **options: float
+) -> tuple[GrblStage, DelayedSerial, ManualClock]:
+    clock = ManualClock(0.0)
+    peer = DelayedSerial(STARTUP + script, clock)
+    stage = GrblStage(peer, clock=clock, **options)
+    stage.open()
+    peer.delay = delay
+    return stage, peer, clock
+
+
+def _report(mm: int, state: bytes = b"Run") -> bytes:
+    return b"<%s|MPos:-%d.000,0.000,0.000|Bf:14,128|FS:600,0>\r\n" % (state, mm)
+
+
+def test_a_status_is_dated_by_its_query_not_by_when_it_was_read() -> None:
+    # The reply is read 0.7 s after the '?' (a stalled host): the position is GRBL's at
+    # the query, so that is the report's time. No second '?' while one is in flight.
+    stage, peer, clock = _delayed_stage([(b"?", _report(150))], delay=0.7)
+    status = stage.status()
+    assert status.host_time == peer.query_times[-1]
+    assert clock.now() - status.host_time == pytest.approx(0.7, abs=0.021)
+    assert status.position == pytest.approx(-0.15) and status.state is StageState.RUN
+    assert not peer.script and peer.written.count(b"?") == 2  # open() and this one
+
+
+def test_successive_reports_are_dated_by_their_own_queries() -> None:
+    stage, peer, _ = _delayed_stage([(b"?", _report(m)) for m in (110, 120, 130)], 0.3)
+    seen = [stage.status() for _ in range(3)]
+    assert [s.host_time for s in seen] == peer.query_times[-3:]
+    assert [s.position for s in seen] == pytest.approx([-0.11, -0.12, -0.13])
+    # Each query waits for the previous answer (0.3 s, longer than the 5 Hz spacing).
+    spacing = [round(b - a, 9) for a, b in itertools.pairwise(peer.query_times[-3:])]
+    assert spacing == [0.3, 0.3]
+
+
+def test_an_unanswered_query_is_sent_again_after_query_lost_s() -> None:
+    # GRBL ignores '?' while homing: after QUERY_LOST_S the driver asks again, and the
+    # report that comes is dated by the query it answers, not the lost one.
+    stage, peer, _ = _delayed_stage(
+        [(b"?", b""), (b"?", _report(100, b"Idle"))], delay=0.0, response_timeout=3.0
+    )
+    status = stage.status()
+    lost, answered = peer.query_times[-2:]
+    assert answered - lost == pytest.approx(QUERY_LOST_S, abs=0.021)
+    assert status.host_time == answered and not peer.script
+
+
+def test_a_report_nobody_asked_for_is_dated_on_receipt() -> None:
+    stage, peer, clock = _delayed_stage([], delay=0.0)
+    clock.advance(3.0)
+    peer._rx += _report(120, b"Idle")  # e.g. a reply to a '?' typed on a shared terminal
+    stage._wait(lambda: stage._reports >= 2, 1.0, "the report")
+    assert stage.last_status is not None and stage.last_status.host_time == 3.0
