@@ -3,7 +3,8 @@
 - ``range_speed.png``: estimated range and speed against receive time, with the truth from
   the stage telemetry (and the exact simulated truth for simulated runs);
 - ``time_codeword_map.png``: the GCAS time–codeword map (seed Fig 5.17 style);
-- ``errors.png``: histograms of range and speed errors against the truth.
+- ``errors.png``: histograms of range and speed errors against the truth, for the scored
+  estimates (inside the constant-speed segments, as the summary).
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from hil.experiments.codeword_map import save_time_codeword_map
-from hil.experiments.tank_run import RunOutcome, telemetry_truth
+from hil.experiments.tank_run import RunOutcome, scored_mask, telemetry_truth
 
 
 def _pyplot() -> Any:
@@ -59,8 +60,10 @@ def write_report(outcome: RunOutcome) -> list[Path]:
         paths.append(folder / "time_codeword_map.png")
         save_time_codeword_map(paths[-1], outcome.map_times, outcome.map_power)
 
-    er = r - truth["range_m"]
-    ev = v - truth["speed_mps"]
+    # The estimates the summary scores: inside the constant-speed segments.
+    scored = scored_mask(outcome, truth)
+    er = (r - truth["range_m"])[scored]
+    ev = (v - truth["speed_mps"])[scored]
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.8), dpi=110)
     for ax, e, label in ((a1, er, "range error (m)"), (a2, ev, "speed error (m/s)")):
         e = e[np.isfinite(e)]

@@ -40,6 +40,11 @@ if TYPE_CHECKING:
 
 # Samples per capture block handed to the recording and the receiver (about 10-20 ms).
 _BLOCK_S = 0.01
+# Stage status polled every this many seconds of the driver clock (GRBL's 5 Hz).
+_POLL_S = 0.2
+#: Telemetry truth is not interpolated across reports farther apart than this (s of sample
+#: time): a stalled host or stage leaves the carriage's motion in between unknown.
+TELEMETRY_GAP_S = 3 * _POLL_S
 # Capture kept after the stage stops, s: the last echoes still arrive.
 _TAIL_S = 0.3
 _INT16_SCALE = 1.0 / 32768.0
@@ -175,6 +180,8 @@ class RunOutcome:
     events: list[tuple[str, int, int, str]]
     wall_s: float
     signal_s: float
+    #: Constant-speed windows the stage driver predicted for each pass (driver clock, s): they
+    #: tell the run when a pass is over; scoring uses what the telemetry saw (scored_mask).
     windows: list[tuple[float, float]]
     exact_truth: Any = None
     map_times: list[np.ndarray] = field(default_factory=list)
@@ -410,7 +417,7 @@ def run_experiment(
         while True:
             # Stage: start the next pass when idle, poll at most 5 Hz, record telemetry.
             t_now = now()
-            if t_now - last_poll >= 0.2:
+            if t_now - last_poll >= _POLL_S:
                 st = stage.status()
                 last_poll = t_now
                 fit = board.clock_fit
@@ -510,7 +517,7 @@ def run_experiment(
                         writer.append_estimates(new)
                         estimates.extend(new)
                 next_index += block
-                if now() - last_poll >= 0.2:
+                if now() - last_poll >= _POLL_S:
                     break
             stopped = board_stopped(board)
             if stopped is not None:
@@ -657,11 +664,17 @@ def _exact_truth(
     return {"range_m": r0, "speed_mps": -(r1 - r0) / h}
 
 
+_TRUTH_KEYS = ("range_m", "speed_mps", "stage_x_m", "stage_v_mps")
+
+
 def telemetry_truth(outcome: RunOutcome) -> dict[str, np.ndarray]:
     """Range (m) and closing speed (m/s) at every estimate's bounce instant, from the stage
     telemetry mapped onto sample time (what a lab has as ground truth): positions
     interpolated between status reports, speed from the reported feed rate projected on the
-    line of sight (differencing 5 Hz positions would be far noisier)."""
+    line of sight (differencing 5 Hz positions would be far noisier). Also the stage's own
+    position (``stage_x_m``, m) and velocity (``stage_v_mps``, m/s). All shape
+    ``(n_estimates,)``; NaN outside the telemetry and inside a gap between reports longer
+    than :data:`TELEMETRY_GAP_S` (the motion there is unknown)."""
     tel = outcome.telemetry
     idx = np.asarray(tel.sample_index, dtype=float)
     pos = np.asarray(tel.position_m, dtype=float)
@@ -669,7 +682,7 @@ def telemetry_truth(outcome: RunOutcome) -> dict[str, np.ndarray]:
     ok = idx >= 0
     n = len(outcome.estimates)
     if n == 0 or ok.sum() < 2:
-        return {"range_m": np.full(n, np.nan), "speed_mps": np.full(n, np.nan)}
+        return {key: np.full(n, np.nan) for key in _TRUTH_KEYS}
     t_tel = (idx[ok] - outcome.start_index) / outcome.fs_hz
     order = np.argsort(t_tel)
     t_tel, x_tel, v_tel = t_tel[order], pos[ok][order], vel[ok][order]
@@ -680,11 +693,46 @@ def telemetry_truth(outcome: RunOutcome) -> dict[str, np.ndarray]:
     d = exp.target_position(x) - np.asarray(exp.transducer_m)
     r = np.sqrt(np.sum(d * d, axis=-1))
     along = (d @ np.asarray(exp.stage_axis)) / r
-    inside = (t_b >= t_tel[0]) & (t_b <= t_tel[-1])
+    after = np.clip(np.searchsorted(t_tel, t_b, side="left"), 1, t_tel.size - 1)
+    gap = t_tel[after] - t_tel[after - 1]
+    inside = (t_b >= t_tel[0]) & (t_b <= t_tel[-1]) & (gap <= TELEMETRY_GAP_S)
     return {
         "range_m": np.where(inside, r, np.nan),
         "speed_mps": np.where(inside, -along * v, np.nan),
+        "stage_x_m": np.where(inside, x, np.nan),
+        "stage_v_mps": np.where(inside, v, np.nan),
     }
+
+
+#: Scored estimates: the stage reported at least this fraction of the tow speed, so the
+#: carriage is past its acceleration (a report inside the run-up blends into the interpolated
+#: truth near the segment's ends and is not trusted).
+SCORED_SPEED_FRACTION = 0.95
+
+
+def scored_mask(outcome: RunOutcome, truth: dict[str, np.ndarray] | None = None) -> np.ndarray:
+    """Which estimates are scored (shape ``(n_estimates,)``, bool): those whose bounce
+    instant falls inside a tow pass's constant-speed segment as the stage telemetry saw it:
+    the carriage between ``tow.start_m`` and ``tow.end_m`` moving at the tow speed (at least
+    :data:`SCORED_SPEED_FRACTION` of it, either direction), with a finite truth.
+
+    Measured, not predicted: the segment's times are where the stage's own reports put the
+    carriage, so a late ``ok`` or a stalled host or stage shifts nothing (the window predicted
+    from the time GRBL accepted the move did, by up to the stall).
+    """
+    truth = telemetry_truth(outcome) if truth is None else truth
+    if len(outcome.estimates) == 0:
+        return np.zeros(0, dtype=bool)
+    plan = outcome.experiment.tow
+    lo, hi = sorted((plan.start_m, plan.end_m))
+    x, v = truth["stage_x_m"], truth["stage_v_mps"]
+    with np.errstate(invalid="ignore"):
+        in_segment = (x >= lo) & (x <= hi)
+        at_speed = np.abs(v) >= SCORED_SPEED_FRACTION * plan.speed_mps
+    ranges = np.array([e.range_m for e in outcome.estimates])
+    return np.asarray(
+        in_segment & at_speed & np.isfinite(truth["range_m"]) & np.isfinite(ranges), dtype=bool
+    )
 
 
 def summarize(outcome: RunOutcome) -> dict[str, Any]:
@@ -697,31 +745,19 @@ def summarize(outcome: RunOutcome) -> dict[str, Any]:
     t = np.array([e.t_s for e in est])
     err_r = r - truth["range_m"]
     err_v = v - truth["speed_mps"]
-    # Estimates inside the constant-speed windows are the ones scored.
-    scored = np.isfinite(err_r)
-    if outcome.windows and len(t):
-        tel_t = np.asarray(outcome.telemetry.host_time_s)
-        tel_i = np.asarray(outcome.telemetry.sample_index, dtype=float)
-        good = tel_i >= 0
-        in_window = np.zeros(len(t), dtype=bool)
-        if good.sum() >= 2:
-            for w0, w1 in outcome.windows:
-                i0, i1 = np.interp([w0, w1], tel_t[good], tel_i[good])
-                s0, s1 = (
-                    (i0 - outcome.start_index) / outcome.fs_hz,
-                    (i1 - outcome.start_index) / outcome.fs_hz,
-                )
-                in_window |= (t >= s0) & (t <= s1)
-        scored &= in_window
+    scored = scored_mask(outcome, truth)
     # Farther than FALSE_ALARM_GATE_M from the truth: a false alarm (tank multipath
     # legitimately biases ranges by a few decimetres).
     false_alarm = scored & (np.abs(err_r) > FALSE_ALARM_GATE_M)
     good_est = scored & ~false_alarm
     # Detection rate: distinct hop boundaries detected (and correct) over the boundaries
-    # that reached the receiver during the constant-speed windows.
+    # that reached the receiver during the constant-speed segments, counted per pass (the
+    # hops between passes are not expected).
     hops = np.array([e.hop_index for e in est], dtype=np.int64)
-    in_span = hops[scored] if scored.any() else np.zeros(0, dtype=np.int64)
-    expected = float(in_span.max() - in_span.min() + 1) if in_span.size else 0.0
+    pass_id = np.cumsum(scored & ~np.concatenate([[False], scored[:-1]]))
+    expected = float(
+        sum(np.ptp(hops[scored & (pass_id == k)]) + 1 for k in np.unique(pass_id[scored]))
+    )
     detected = float(np.unique(hops[good_est]).size)
 
     def rmse(x: np.ndarray) -> float | None:
@@ -770,11 +806,13 @@ def write_summary(outcome: RunOutcome, summary: dict[str, Any]) -> Path:
     path = outcome.folder / "summary.json"
     path.write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
     truth = telemetry_truth(outcome)
-    rows = ["t_s,range_m,speed_mps,hop_index,score,snr_db,true_range_m,true_speed_mps"]
+    scored = scored_mask(outcome, truth)
+    rows = ["t_s,range_m,speed_mps,hop_index,score,snr_db,true_range_m,true_speed_mps,scored"]
     for i, e in enumerate(outcome.estimates):
         rows.append(
             f"{e.t_s:.6f},{e.range_m:.5f},{e.speed_mps:.4f},{e.hop_index},{e.score:.3f},"
-            f"{e.snr_db:.2f},{truth['range_m'][i]:.5f},{truth['speed_mps'][i]:.4f}"
+            f"{e.snr_db:.2f},{truth['range_m'][i]:.5f},{truth['speed_mps'][i]:.4f},"
+            f"{int(scored[i])}"
         )
     (outcome.folder / "estimates.csv").write_text("\n".join(rows) + "\n", encoding="utf-8")
     return path

@@ -1,0 +1,174 @@
+"""Scoring a tank run against the stage telemetry: which estimates count (the constant-speed
+segments the telemetry saw, not the windows the driver predicted), gaps in the telemetry,
+and the detection rate counted per pass. Synthetic runs with a known carriage motion."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hil.estimation.base import Estimate
+from hil.experiments.experiment import DEFAULT_EXPERIMENT, parse_experiment
+from hil.experiments.tank_run import (
+    TELEMETRY_GAP_S,
+    RunOutcome,
+    Telemetry,
+    scored_mask,
+    summarize,
+    telemetry_truth,
+)
+
+EXP = parse_experiment(DEFAULT_EXPERIMENT)  # tow -2 m -> -5 m at 1.5 m/s, run-up 0.6 m
+FS = 1000.0  # sample time = index / FS
+ACCEL = 2.0  # m/s^2
+SPEED = 1.5
+
+
+def _pass_x(t: np.ndarray, t0: float, x0: float, x1: float) -> tuple[np.ndarray, np.ndarray]:
+    """Trapezoidal move x0 -> x1 starting at t0: position (m) and signed velocity (m/s)."""
+    d = np.sign(x1 - x0)
+    ta = SPEED / ACCEL
+    tc = (abs(x1 - x0) - SPEED * ta) / SPEED
+    s = np.clip(t - t0, 0.0, 2 * ta + tc)
+    acc = np.minimum(s, ta)
+    cru = np.clip(s - ta, 0.0, tc)
+    dec = np.clip(s - ta - tc, 0.0, ta)
+    dist = 0.5 * ACCEL * acc**2 + SPEED * cru + SPEED * dec - 0.5 * ACCEL * dec**2
+    speed = np.where(s < ta, ACCEL * s, np.where(s < ta + tc, SPEED, SPEED - ACCEL * dec))
+    speed = np.where((t < t0) | (s >= 2 * ta + tc), 0.0, speed)
+    return x0 + d * dist, d * speed
+
+
+def _motion(t: np.ndarray, passes: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """The carriage: at -1.4 m, first pass (-1.4 -> -5.6 m) at t = 1 s; a return pass
+    (-5.6 -> -1.4 m) at t = 6 s when ``passes == 2``."""
+    x, v = _pass_x(t, 1.0, -1.4, -5.6)
+    if passes == 2:
+        x2, v2 = _pass_x(t, 6.0, -5.6, -1.4)
+        late = t >= 6.0
+        x, v = np.where(late, x2, x), np.where(late, v2, v)
+    return x, v
+
+
+def _outcome(
+    t_tel: np.ndarray, t_est: np.ndarray, *, passes: int = 1, range_error_m: float = 0.0
+) -> RunOutcome:
+    x_tel, v_tel = _motion(t_tel, passes)
+    x_est, _ = _motion(t_est, passes)
+    r_est = EXP.range_at(x_est) + range_error_m
+    estimates = [
+        # Bounce instant = receive time (t_tx_s = t_s), one hop boundary per 10 ms.
+        Estimate(float(t), float(r), 1.5, int(round(t / 0.01)), 10.0, 20.0, 1.0, float(t), 0, "x")
+        for t, r in zip(t_est, r_est, strict=True)
+    ]
+    telemetry = Telemetry(
+        host_time_s=list(t_tel),
+        sample_index=[int(round(t * FS)) for t in t_tel],
+        position_m=list(x_tel),
+        velocity_mps=list(v_tel),
+        state=["RUN" if v else "IDLE" for v in v_tel],
+    )
+    return RunOutcome(
+        folder=Path("unused"),
+        experiment=EXP,
+        fs_hz=FS,
+        start_index=0,
+        samples=int(t_est[-1] * FS),
+        estimates=estimates,
+        telemetry=telemetry,
+        dropped_samples=0,
+        dac_underruns=0,
+        adc_overruns=0,
+        events=[],
+        wall_s=1.0,
+        signal_s=float(t_est[-1]),
+        # Deliberately wrong: a stall made the driver's prediction late. Scoring ignores it.
+        windows=[(20.0, 22.0)],
+    )
+
+
+T_TEL = np.round(np.arange(0.0, 12.0, 0.2), 6)  # 5 Hz reports
+T_EST = 0.003 + 0.01 * np.arange(1200)  # off the report grid: no ties
+
+
+def test_scored_segment_golden() -> None:
+    # The carriage accelerates until t = 1.75 s (x = -1.9625 m) and cruises past -2 m at
+    # 1.775 s and -5 m at 3.775 s. Interpolating the 1.6 s (accelerating, 1.2 m/s) and 1.8 s
+    # reports puts the -2 m crossing at 1.77297 s with |v| = 1.46 > 0.95 * 1.5 there, so the
+    # scored estimates are t = 1.773 ... 3.773 s: 201 of them.
+    out = _outcome(T_TEL, T_EST)
+    scored = scored_mask(out)
+    t = T_EST[scored]
+    assert scored.sum() == 201
+    assert t[0] == pytest.approx(1.773) and t[-1] == pytest.approx(3.773)
+    # Contiguous, and every scored estimate really is in the segment (within the 3 mm the
+    # interpolation across the end of the run-up is off by) at the tow speed.
+    assert np.all(np.diff(np.flatnonzero(scored)) == 1)
+    x, v = _motion(t)
+    assert np.all((x <= -2.0 + 3.5e-3) & (x >= -5.0)) and np.all(np.abs(v) == SPEED)
+
+
+def test_scoring_does_not_use_the_predicted_window() -> None:
+    # The outcome's predicted window (20-22 s) is far from the pass; the CI run that scored
+    # 48 of 100 estimates had a window shifted by a stall.
+    summary = summarize(_outcome(T_TEL, T_EST))
+    assert summary["scored_estimates"] == 201
+    assert summary["detection_rate"] == 1.0 and summary["false_alarms"] == 0
+    assert summary["range_rmse_m"] == pytest.approx(0.0, abs=0.02)
+
+
+def test_truth_is_unknown_inside_a_telemetry_gap() -> None:
+    # No reports between 2.0 and 3.2 s (a 1.2 s stall > TELEMETRY_GAP_S): the truth is NaN
+    # there instead of a straight line through the missing motion.
+    assert TELEMETRY_GAP_S < 1.2
+    keep = (T_TEL <= 2.0) | (T_TEL >= 3.2)
+    out = _outcome(T_TEL[keep], T_EST)
+    truth = telemetry_truth(out)
+    gap = (T_EST > 2.0) & (T_EST < 3.2)
+    assert np.all(np.isnan(truth["range_m"][gap])) and np.all(np.isnan(truth["stage_x_m"][gap]))
+    assert np.all(np.isfinite(truth["range_m"][~gap & (T_EST < 11.8)]))
+    scored = scored_mask(out, truth)
+    # 1.773 ... 1.993 s (23) and 3.203 ... 3.773 s (58).
+    assert scored.sum() == 23 + 58
+    assert not np.any(scored & gap)
+    # Outside the telemetry: unknown as well.
+    assert np.isnan(truth["range_m"][-1])
+
+
+def test_detection_rate_is_counted_per_pass() -> None:
+    # Two passes (out at 1 s, back at 6 s): the hops between them are not expected.
+    out = _outcome(T_TEL, T_EST, passes=2)
+    scored = scored_mask(out)
+    starts = np.flatnonzero(np.diff(scored.astype(int)) == 1) + 1
+    np.testing.assert_allclose(T_EST[starts], [1.773, 6.773])  # two runs of scored estimates
+    summary = summarize(out)
+    assert summary["detection_rate"] == 1.0
+    # Half the boundaries of the second pass missed: (201 + 100) / (201 + 201).
+    second = scored & (T_EST > 6.0)
+    drop = set(np.flatnonzero(second)[1::2].tolist())
+    out.estimates = [e for i, e in enumerate(out.estimates) if i not in drop]
+    n_second = int(second.sum())
+    missed = len(drop)
+    summary = summarize(out)
+    assert summary["scored_estimates"] == 201 + n_second - missed
+    assert summary["detection_rate"] == pytest.approx(
+        round((201 + n_second - missed) / (201 + n_second), 4)
+    )
+
+
+def test_false_alarms_are_scored_estimates_far_from_the_truth() -> None:
+    summary = summarize(_outcome(T_TEL, T_EST, range_error_m=1.5))
+    assert summary["scored_estimates"] == 201 and summary["false_alarms"] == 201
+    assert summary["detection_rate"] == 0.0 and summary["range_rmse_m"] is None
+
+
+def test_no_estimates_or_no_telemetry() -> None:
+    out = _outcome(T_TEL, T_EST)
+    out.estimates = []
+    assert scored_mask(out).shape == (0,)
+    out = _outcome(T_TEL[:1], T_EST)
+    truth = telemetry_truth(out)
+    assert set(truth) == {"range_m", "speed_mps", "stage_x_m", "stage_v_mps"}
+    assert not scored_mask(out, truth).any()
