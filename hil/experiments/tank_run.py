@@ -45,6 +45,9 @@ _POLL_S = 0.2
 #: Telemetry truth is not interpolated across reports farther apart than this (s of sample
 #: time): a stalled host or stage leaves the carriage's motion in between unknown.
 TELEMETRY_GAP_S = 3 * _POLL_S
+#: A SYNC whose host-time offset lies alone this far (s) below every other is stale (sent
+#: before CONFIGURE): backlog delays only ever make offsets larger.
+STALE_SYNC_S = 1.0
 # Capture kept after the stage stops, s: the last echoes still arrive.
 _TAIL_S = 0.3
 _INT16_SCALE = 1.0 / 32768.0
@@ -122,20 +125,26 @@ def sample_zero_time_s(pairs: list[tuple[int, float]], fs: float) -> float | Non
 
     A SYNC is stamped when the host reads it, which during streaming is after the ADC
     frames queued before it, so every pair is late by a varying backlog: with the known
-    sample rate ``fs`` (Hz), the least-delayed pair gives the offset. A SYNC sent before
-    CONFIGURE (another rate) may arrive after it and sits far below the others; backlog
-    delays are positive and well under a second, so the least-delayed pair is sought within
-    a second below the median.
+    sample rate ``fs`` (Hz), the least-delayed pair gives the offset. The backlog is a few
+    ms on a quiet machine but seconds after a stall of the host or the board, and then most
+    pairs can be that late: only the least-delayed pairs count, however few. A SYNC sent
+    before CONFIGURE (another rate) may arrive after it; its offset sits alone far below
+    the rest, so a lowest offset more than :data:`STALE_SYNC_S` below every other (with at
+    least two others) is dropped as stale.
 
     >>> pairs = [(1000, 11.003), (2000, 12.0015), (3000, 13.004)]  # delays 3, 1.5, 4 ms
     >>> round(sample_zero_time_s(pairs + [(2_000_000, 12.5)], 1000.0), 6)  # + a stale SYNC
     10.0015
+    >>> late = [(4000 + k, 17.0 + k / 1000) for k in range(0, 5000, 500)]  # 3 s late
+    >>> round(sample_zero_time_s(pairs + late, 1000.0), 6)
+    10.0015
     """
     if not pairs:
         return None
-    offsets = np.array([host_t - index / fs for index, host_t in pairs])
-    plausible = offsets[offsets >= np.median(offsets) - 1.0]
-    return float(plausible.min())
+    offsets = np.sort(np.array([host_t - index / fs for index, host_t in pairs]))
+    while offsets.size >= 3 and offsets[1] - offsets[0] > STALE_SYNC_S:
+        offsets = offsets[1:]
+    return float(offsets[0])
 
 
 def measure_latency(monitor: np.ndarray, sent: np.ndarray, max_lag: int = 4096) -> int:

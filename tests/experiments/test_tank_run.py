@@ -106,6 +106,31 @@ def test_measure_latency_golden() -> None:
     assert measure_latency(x, x) == 0
 
 
+def test_sample_zero_time_survives_a_stall_where_most_syncs_are_late() -> None:
+    from hil.experiments.tank_run import sample_zero_time_s
+
+    fs = 192_000.0
+    # The SYNC pairs recorded by a CI run whose simulated board stalled for 4.3 s of clock
+    # time, then caught up in a burst: every pair after the stall is late by 6-7 s.
+    ci = [(2593430, 3.4508), (2616505, 3.5614), (2640036, 3.6247), (2663412, 3.7669),
+          (2688194, 4.0276), (2723066, 8.3419), (2763225, 8.4109), (2880314, 8.4596),
+          (3038893, 8.4947)]  # fmt: skip
+    burst = [(2_900_000 + 20_000 * k, 8.5 + 0.005 * k) for k in range(8)]
+    pairs = ci + burst
+    offsets = np.array([t - i / fs for i, t in pairs])
+    truth = 3.6247 - 2640036 / fs  # the least-delayed pair, before the stall
+    assert offsets.min() == pytest.approx(truth)
+    # The former rule (least delay within 1 s below the median) dropped the true pairs here:
+    # the run then ended its capture 2 s of signal early and mapped the telemetry 2 s off.
+    assert np.median(offsets) > truth + 1.0
+    assert sample_zero_time_s(pairs, fs) == pytest.approx(truth, abs=1e-9)
+    # A stale SYNC (sent before CONFIGURE, another rate) alone far below is still dropped.
+    assert sample_zero_time_s([(50_000_000, 3.5), *pairs], fs) == pytest.approx(truth, abs=1e-9)
+    # With only two pairs nothing can be told stale: the least delayed counts.
+    assert sample_zero_time_s(ci[:2], fs) == pytest.approx(3.5614 - 2616505 / fs, abs=1e-9)
+    assert sample_zero_time_s([], fs) is None
+
+
 @pytest.mark.slow
 def test_simulated_run_end_to_end_and_replay_equals_live(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
