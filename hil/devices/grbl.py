@@ -90,7 +90,7 @@ class _Pending:
 
 
 #: A status query unanswered for this long (driver-clock s) is taken as dropped and sent
-#: again: GRBL answers within milliseconds, but ignores '?' while homing.
+#: again: GRBL answers within milliseconds (a reset drops a pending query).
 QUERY_LOST_S = 1.0
 
 
@@ -188,6 +188,7 @@ polling at no more than 5 Hz); use the default 0.2
         self._last_query = -math.inf
         # Times of the '?' sent and not yet answered: a report is stamped with its query's.
         self._queries: deque[float] = deque()
+        self._lost = 0  # queries given up as lost whose late answer may still come
         self._last_status: StageStatus | None = None
         self._alarm: int | None = None
         self._new_alarm: int | None = None
@@ -287,6 +288,7 @@ polling at no more than 5 Hz); use the default 0.2
                 state=StageState.ALARM,
                 alarm=self._alarm,
                 host_time=self._clock.now(),
+                reply_s=0.0,
             )
         self._clock.sleep(self._last_query + self.poll_interval - self._clock.now())
         return self._query_status(self.response_timeout)
@@ -603,8 +605,8 @@ polling at no more than 5 Hz); use the default 0.2
         return self._last_status
 
     def _query_status(self, timeout: float) -> StageStatus:
-        count = self._reports
         self._query()
+        count = self._reports  # after the reports read before the '?' went out
         self._wait(lambda: self._reports > count, timeout, "a status report", poll=True)
         assert self._last_status is not None
         return self._last_status
@@ -613,24 +615,40 @@ polling at no more than 5 Hz); use the default 0.2
         """Send '?' unless one is in flight: with one query at a time, every report is known
         to answer the oldest (real GRBL merges two '?' that arrive before its main loop runs,
         so with more in flight a report's time would be ambiguous)."""
+        ser = self._require_open()
+        # A report already waiting answers the query in flight (or a query given up as
+        # lost, answered late): read it first, so the next '?' is paired with its own answer.
+        while ser.in_waiting:
+            self._receive(ser)
         now = self._clock.now()
         while self._queries and now - self._queries[0] >= QUERY_LOST_S:
-            self._queries.popleft()  # dropped (GRBL ignores '?' while homing)
+            self._queries.popleft()  # dropped: GRBL answers in ms, a reset drops the query
+            self._lost += 1
         if self._queries:
             return
         self._last_query = now
         self._queries.append(now)
         self._write(STATUS_QUERY)
 
-    def _report_time(self) -> float:
-        """Driver-clock time a status report describes: that of the query in flight.
+    def _date_report(self) -> tuple[float, float]:
+        """``(host_time, reply_s)`` of a status report just received: the time of the query
+        in flight and how long its answer took.
 
         GRBL samples its state on the main-loop pass after the '?' arrives (well under a
         millisecond later), while the report's ~60 bytes take 5 ms at 115 200 baud and the
         host may read them later still: a stalled host would otherwise date the position
-        late by the whole stall. A report with no query in flight gets its receipt time.
+        late by the whole stall. A report with no query in flight gets its receipt time,
+        with ``reply_s`` 0, or infinite when it is the late answer to a query given up as
+        lost (its instant is unknown).
         """
-        return self._queries.popleft() if self._queries else self._clock.now()
+        received = self._clock.now()
+        if self._queries:
+            asked = self._queries.popleft()
+            return asked, received - asked
+        if self._lost:
+            self._lost -= 1
+            return received, math.inf
+        return received, 0.0
 
     def _soft_reset_and_wait(self, timeout: float) -> None:
         banners = self._banners
@@ -689,7 +707,7 @@ polling at no more than 5 Hz); use the default 0.2
             if self._pending:
                 self._pending.popleft().result = msg
         elif isinstance(msg, StatusReport):
-            self._last_status = self._to_status(msg, self._report_time())
+            self._last_status = self._to_status(msg, *self._date_report())
             self._reports += 1
         elif isinstance(msg, AlarmMessage):
             self._alarm = msg.code
@@ -698,6 +716,7 @@ polling at no more than 5 Hz); use the default 0.2
             self._banners += 1
             self._critical = False
             self._queries.clear()  # a reset drops the queries GRBL had not answered
+            self._lost = 0
             for pending in self._pending:
                 pending.reset = True
             self._pending.clear()
@@ -710,7 +729,7 @@ polling at no more than 5 Hz); use the default 0.2
         elif isinstance(msg, Unrecognised):
             self.unrecognised.append(msg.line)
 
-    def _to_status(self, report: StatusReport, host_time: float) -> StageStatus:
+    def _to_status(self, report: StatusReport, host_time: float, reply_s: float) -> StageStatus:
         if report.wco is not None:
             self._wco = report.wco
         mpos = report.machine_position(self._wco)
@@ -727,6 +746,7 @@ polling at no more than 5 Hz); use the default 0.2
             planner_blocks_free=report.planner_blocks_free,
             rx_bytes_free=report.rx_bytes_free,
             host_time=host_time,
+            reply_s=reply_s,
         )
 
     def _position_estimate(self) -> float:

@@ -56,6 +56,10 @@ class StageStatus:
         sent (the controller samples its state right after; the report reaches the host
         later, by its transmission and however long the host took to read it), or when it
         was received if no query was pending.
+    reply_s:
+        How long after that query the report was received, s (0 with no query pending).
+        The controller sampled its state somewhere in between: a long reply (a stalled host
+        or controller) leaves that instant uncertain by up to ``reply_s``.
     """
 
     state: StageState
@@ -67,6 +71,7 @@ class StageStatus:
     planner_blocks_free: int | None
     rx_bytes_free: int | None
     host_time: float
+    reply_s: float = 0.0
 
     @property
     def moving(self) -> bool:

@@ -4,7 +4,8 @@
   the stage telemetry (and the exact simulated truth for simulated runs);
 - ``time_codeword_map.png``: the GCAS time–codeword map (seed Fig 5.17 style);
 - ``errors.png``: histograms of range and speed errors against the truth, for the scored
-  estimates (inside the constant-speed segments, as the summary).
+  estimates (inside the constant-speed segments; false alarms included, the summary's RMSE
+  leaves them out).
 """
 
 from __future__ import annotations

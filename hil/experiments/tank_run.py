@@ -45,6 +45,10 @@ _POLL_S = 0.2
 #: Telemetry truth is not interpolated across reports farther apart than this (s of sample
 #: time): a stalled host or stage leaves the carriage's motion in between unknown.
 TELEMETRY_GAP_S = 3 * _POLL_S
+#: Reports that took longer than this (s) to answer their query are left out of the truth:
+#: the stage sampled its position somewhere in that time (GRBL answers in ~10 ms, a USB
+#: serial adapter adds up to 16 ms).
+TELEMETRY_MAX_REPLY_S = 0.05
 #: A SYNC whose host-time offset lies alone this far (s) below every other is stale (sent
 #: before CONFIGURE): backlog delays only ever make offsets larger.
 STALE_SYNC_S = 1.0
@@ -170,6 +174,8 @@ class Telemetry:
     position_m: list[float] = field(default_factory=list)
     velocity_mps: list[float] = field(default_factory=list)
     state: list[str] = field(default_factory=list)
+    #: How long each report took to arrive after its query, s (``StageStatus.reply_s``).
+    reply_s: list[float] = field(default_factory=list)
 
 
 @dataclass
@@ -440,6 +446,7 @@ def run_experiment(
                 telemetry.position_m.append(st.position)
                 telemetry.velocity_mps.append(st.velocity)
                 telemetry.state.append(st.state.name)
+                telemetry.reply_s.append(st.reply_s)
                 record = StageTelemetry(st.host_time, idx, st.position, st.velocity, st.state.name)
                 if writer is None:
                     telemetry_backlog.append(record)
@@ -680,7 +687,8 @@ def telemetry_truth(outcome: RunOutcome) -> dict[str, np.ndarray]:
     """Range (m) and closing speed (m/s) at every estimate's bounce instant, from the stage
     telemetry mapped onto sample time (what a lab has as ground truth): positions
     interpolated between status reports, speed from the reported feed rate projected on the
-    line of sight (differencing 5 Hz positions would be far noisier). Also the stage's own
+    line of sight (differencing 5 Hz positions would be far noisier); reports answered
+    later than :data:`TELEMETRY_MAX_REPLY_S` are not used. Also the stage's own
     position (``stage_x_m``, m) and velocity (``stage_v_mps``, m/s). All shape
     ``(n_estimates,)``; NaN outside the telemetry and inside a gap between reports longer
     than :data:`TELEMETRY_GAP_S` (the motion there is unknown)."""
@@ -688,7 +696,8 @@ def telemetry_truth(outcome: RunOutcome) -> dict[str, np.ndarray]:
     idx = np.asarray(tel.sample_index, dtype=float)
     pos = np.asarray(tel.position_m, dtype=float)
     vel = np.asarray(tel.velocity_mps, dtype=float)
-    ok = idx >= 0
+    reply = np.asarray(tel.reply_s, dtype=float) if tel.reply_s else np.zeros(idx.size)
+    ok = (idx >= 0) & (reply <= TELEMETRY_MAX_REPLY_S)
     n = len(outcome.estimates)
     if n == 0 or ok.sum() < 2:
         return {key: np.full(n, np.nan) for key in _TRUTH_KEYS}

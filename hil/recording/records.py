@@ -39,8 +39,9 @@ class RunEvent:
 class StageTelemetry:
     """One stage status report.
 
-    ``host_time_s`` is the host clock when it was received (s), ``sample_index`` that time
-    mapped to the board's sample clock, ``position_m`` and ``velocity_mps`` the carriage's
+    ``host_time_s`` is the host clock time the report describes (s; the GRBL driver dates a
+    report by the status query it answers, see ``StageStatus.host_time``), ``sample_index``
+    that time mapped to the board's sample clock, ``position_m`` and ``velocity_mps`` the carriage's
     position (m) and velocity (m/s) along the tow axis, ``state`` the controller's state as
     it reports it (GRBL: ``"Run"``, ``"Hold:0"``, ...).
     """

@@ -13,6 +13,7 @@ from hil.estimation.base import Estimate
 from hil.experiments.experiment import DEFAULT_EXPERIMENT, parse_experiment
 from hil.experiments.tank_run import (
     TELEMETRY_GAP_S,
+    TELEMETRY_MAX_REPLY_S,
     RunOutcome,
     Telemetry,
     scored_mask,
@@ -172,3 +173,20 @@ def test_no_estimates_or_no_telemetry() -> None:
     truth = telemetry_truth(out)
     assert set(truth) == {"range_m", "speed_mps", "stage_x_m", "stage_v_mps"}
     assert not scored_mask(out, truth).any()
+
+
+def test_reports_answered_late_are_left_out_of_the_truth() -> None:
+    clean = telemetry_truth(_outcome(T_TEL, T_EST))
+    out = _outcome(T_TEL, T_EST)
+    tel = out.telemetry
+    k = int(np.searchsorted(T_TEL, 2.4))  # mid-pass
+    # That report came back 0.3 s after its query (a stalled stage): its position is the
+    # carriage's 0.3 s later than its date says.
+    tel.position_m[k] -= SPEED * 0.3
+    tel.reply_s = [0.0] * len(T_TEL)
+    tel.reply_s[k] = 0.3
+    truth = telemetry_truth(out)
+    np.testing.assert_allclose(truth["range_m"], clean["range_m"], atol=1e-12)
+    # Kept, it would have pulled the truth by up to 0.45 m.
+    tel.reply_s[k] = TELEMETRY_MAX_REPLY_S
+    assert np.nanmax(np.abs(telemetry_truth(out)["stage_x_m"] - clean["stage_x_m"])) > 0.4

@@ -7,6 +7,7 @@ not the next expected one fails the test. A manual clock makes every wait determ
 from __future__ import annotations
 
 import itertools
+import math
 
 import pytest
 
@@ -262,6 +263,7 @@ class DelayedSerial(ScriptedSerial):
     def __init__(self, script: list[tuple[bytes, bytes]], clock: ManualClock) -> None:
         super().__init__(script)
         self.clock, self.delay = clock, 0.0
+        self.delays: list[float] = []  # per write, before falling back to ``delay``
         self.query_times: list[float] = []
         self._held: list[tuple[float, bytes]] = []
 
@@ -269,7 +271,8 @@ class DelayedSerial(ScriptedSerial):
         if data == b"?":
             self.query_times.append(self.clock.now())
         n = super().write(data)
-        self._held.append((self.clock.now() + self.delay, bytes(self._rx)))
+        delay = self.delays.pop(0) if self.delays else self.delay
+        self._held.append((self.clock.now() + delay, bytes(self._rx)))
         self._rx.clear()
         return n
 
@@ -309,6 +312,7 @@ def test_a_status_is_dated_by_its_query_not_by_when_it_was_read() -> None:
     status = stage.status()
     assert status.host_time == peer.query_times[-1]
     assert clock.now() - status.host_time == pytest.approx(0.7, abs=0.021)
+    assert status.reply_s == clock.now() - status.host_time
     assert status.position == pytest.approx(-0.15) and status.state is StageState.RUN
     assert not peer.script and peer.written.count(b"?") == 2  # open() and this one
 
@@ -341,3 +345,22 @@ def test_a_report_nobody_asked_for_is_dated_on_receipt() -> None:
     peer._rx += _report(120, b"Idle")  # e.g. a reply to a '?' typed on a shared terminal
     stage._wait(lambda: stage._reports >= 2, 1.0, "the report")
     assert stage.last_status is not None and stage.last_status.host_time == 3.0
+
+
+def test_a_late_answer_to_a_lost_query_is_flagged_and_the_pairing_recovers() -> None:
+    # The controller stalls 1.2 s on the first '?': given up as lost after QUERY_LOST_S, the
+    # '?' is sent again; both answers then come together. Neither can be dated (a reply of
+    # 0.2 s is too slow to trust, the extra one is marked infinite); the next query is
+    # paired with its own answer again.
+    stage, peer, _ = _delayed_stage(
+        [(b"?", _report(110)), (b"?", _report(120)), (b"?", _report(130))], delay=0.01
+    )
+    peer.delays = [1.2]
+    first = stage.status()
+    assert first.reply_s == math.inf and first.position == pytest.approx(-0.12)
+    q_resent = peer.query_times[-1]
+    assert q_resent - peer.query_times[-2] == pytest.approx(QUERY_LOST_S, abs=0.021)
+    after = stage.status()
+    assert after.host_time == peer.query_times[-1] > q_resent
+    assert after.position == pytest.approx(-0.13) and after.reply_s <= 0.021
+    assert not peer.script
