@@ -57,7 +57,8 @@ class StageStatus:
         later, by its transmission and however long the host took to read it), or when it
         was received if no query was pending.
     reply_s:
-        How long after that query the report was received, s (0 with no query pending).
+        How long after that query the report was received, s (0 with no query pending;
+        infinite for the late answer to a query the driver had given up as lost).
         The controller sampled its state somewhere in between: a long reply (a stalled host
         or controller) leaves that instant uncertain by up to ``reply_s``.
     """

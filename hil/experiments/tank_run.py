@@ -46,12 +46,10 @@ _POLL_S = 0.2
 #: time): a stalled host or stage leaves the carriage's motion in between unknown.
 TELEMETRY_GAP_S = 3 * _POLL_S
 #: Reports that took longer than this (s) to answer their query are left out of the truth:
-#: the stage sampled its position somewhere in that time (GRBL answers in ~10 ms, a USB
-#: serial adapter adds up to 16 ms).
-TELEMETRY_MAX_REPLY_S = 0.05
-#: A SYNC whose host-time offset lies alone this far (s) below every other is stale (sent
-#: before CONFIGURE): backlog delays only ever make offsets larger.
-STALE_SYNC_S = 1.0
+#: the stage sampled its position somewhere in that time. A prompt reply measures up to
+#: ~60 ms: GRBL answers at once, a USB serial adapter holds a short report up to its 16 ms
+#: latency timer, and the driver reads every 20 ms with 20 ms sleeps between.
+TELEMETRY_MAX_REPLY_S = 0.08
 # Capture kept after the stage stops, s: the last echoes still arrive.
 _TAIL_S = 0.3
 _INT16_SCALE = 1.0 / 32768.0
@@ -131,24 +129,29 @@ def sample_zero_time_s(pairs: list[tuple[int, float]], fs: float) -> float | Non
     frames queued before it, so every pair is late by a varying backlog: with the known
     sample rate ``fs`` (Hz), the least-delayed pair gives the offset. The backlog is a few
     ms on a quiet machine but seconds after a stall of the host or the board, and then most
-    pairs can be that late: only the least-delayed pairs count, however few. A SYNC sent
-    before CONFIGURE (another rate) may arrive after it; its offset sits alone far below
-    the rest, so a lowest offset more than :data:`STALE_SYNC_S` below every other (with at
-    least two others) is dropped as stale.
+    pairs can be that late: only the least-delayed pair counts, however few are near it.
+    No pair is early: the board's clock fit starts afresh when CONFIGURE is acknowledged and
+    the link delivers in order, so a SYNC from an earlier configuration never reaches it.
 
     >>> pairs = [(1000, 11.003), (2000, 12.0015), (3000, 13.004)]  # delays 3, 1.5, 4 ms
-    >>> round(sample_zero_time_s(pairs + [(2_000_000, 12.5)], 1000.0), 6)  # + a stale SYNC
-    10.0015
     >>> late = [(4000 + k, 17.0 + k / 1000) for k in range(0, 5000, 500)]  # 3 s late
     >>> round(sample_zero_time_s(pairs + late, 1000.0), 6)
     10.0015
     """
     if not pairs:
         return None
-    offsets = np.sort(np.array([host_t - index / fs for index, host_t in pairs]))
-    while offsets.size >= 3 and offsets[1] - offsets[0] > STALE_SYNC_S:
-        offsets = offsets[1:]
-    return float(offsets[0])
+    return float(min(host_t - index / fs for index, host_t in pairs))
+
+
+def collect_sync_pairs(board: Any, run_pairs: list[tuple[int, float]]) -> None:
+    """Append to ``run_pairs`` the board's SYNC pairs ``(sample_index, host_time_s)`` it does
+    not hold yet. The board's clock fit keeps only its latest pairs (a sliding window), so
+    the run keeps its own list: every pair is recorded, and the least-delayed one of the
+    whole run is never forgotten."""
+    fit = getattr(board, "clock_fit", None) if board is not None else None
+    pairs = list(getattr(fit, "_pairs", ()))
+    last = run_pairs[-1][0] if run_pairs else None
+    run_pairs.extend(p for p in pairs if last is None or p[0] > last)
 
 
 def measure_latency(monitor: np.ndarray, sent: np.ndarray, max_lag: int = 4096) -> int:
@@ -301,6 +304,8 @@ def run_experiment(
     map_t: list[np.ndarray] = []
     map_p: list[np.ndarray] = []
     latency: list[int] = []  # the run's loopback latency measurement, samples
+    run_pairs: list[tuple[int, float]] = []  # every SYNC pair of the run
+    sync_seen = 0  # of them in the recording
     wall0 = time.monotonic()
     next_index = 0
     start_index = 0
@@ -423,7 +428,6 @@ def run_experiment(
         block = max(256, int(round(_BLOCK_S * fs)))
         now = stage._clock.now
         last_poll = -1.0
-        sync_seen = 0
         pass_no = 0
         moving = False
         tail_until: float | None = None
@@ -481,11 +485,11 @@ def run_experiment(
                 if st.alarm is not None:
                     raise RuntimeError(f"stage alarm {st.alarm} during the run")
             # Sync pairs into the recording as they arrive.
-            pairs = list(getattr(board.clock_fit, "_pairs", ()))
+            collect_sync_pairs(board, run_pairs)
             if writer is not None:
-                for index, host_t in pairs[sync_seen:]:
+                for index, host_t in run_pairs[sync_seen:]:
                     writer.append_sync(index, host_t)
-                sync_seen = len(pairs)
+                sync_seen = len(run_pairs)
             # Capture: every complete block goes to the recording and the receiver.
             while board.wait_for_samples(next_index + block, timeout_s=0.05):
                 data = board.read(next_index, block)
@@ -556,7 +560,8 @@ def run_experiment(
                 # The board's clock at tail_until, from the least-delayed SYNC: a board that
                 # falls behind its clock (a simulated world computing slowly) delivers every
                 # later SYNC late, and a fit through them would end the capture early.
-                zero = sample_zero_time_s(list(getattr(board.clock_fit, "_pairs", ())), fs)
+                collect_sync_pairs(board, run_pairs)
+                zero = sample_zero_time_s(run_pairs, fs)
                 end_index = int((tail_until - zero) * fs) if zero is not None else 0
                 if next_index >= end_index:
                     break
@@ -582,8 +587,8 @@ def run_experiment(
     # a SYNC is stamped when the host reads it, which during streaming is after the ADC
     # frames queued before it, so every pair is late by a varying backlog. With the known
     # sample rate, the least-delayed pair gives the host-time offset of sample 0.
-    pairs = list(getattr(board.clock_fit, "_pairs", ())) if board is not None else []
-    offset = sample_zero_time_s(pairs, fs)
+    collect_sync_pairs(board, run_pairs)
+    offset = sample_zero_time_s(run_pairs, fs)
     if offset is not None:
         telemetry.sample_index = [int(round((t - offset) * fs)) for t in telemetry.host_time_s]
     dropped = int(board.ring.missing) if board is not None and board.ring is not None else 0
@@ -607,6 +612,8 @@ def run_experiment(
         if writer is not None:
             for kind, index, length, text in events:
                 writer.append_event(RunEvent(kind, index, length, text))
+            for index, host_t in run_pairs[sync_seen:]:  # those that came after the loop
+                writer.append_sync(index, host_t)
     _close(writer)
     return RunOutcome(
         folder=folder,

@@ -124,11 +124,38 @@ def test_sample_zero_time_survives_a_stall_where_most_syncs_are_late() -> None:
     # the run then ended its capture 2 s of signal early and mapped the telemetry 2 s off.
     assert np.median(offsets) > truth + 1.0
     assert sample_zero_time_s(pairs, fs) == pytest.approx(truth, abs=1e-9)
-    # A stale SYNC (sent before CONFIGURE, another rate) alone far below is still dropped.
-    assert sample_zero_time_s([(50_000_000, 3.5), *pairs], fs) == pytest.approx(truth, abs=1e-9)
-    # With only two pairs nothing can be told stale: the least delayed counts.
-    assert sample_zero_time_s(ci[:2], fs) == pytest.approx(3.5614 - 2616505 / fs, abs=1e-9)
+    # A single early pair followed only by late ones (a stall from the start that never
+    # drains) is still the one that counts.
+    lone = [ci[2], *burst]
+    assert sample_zero_time_s(lone, fs) == pytest.approx(truth, abs=1e-9)
     assert sample_zero_time_s([], fs) is None
+
+
+def test_the_run_keeps_every_sync_pair_beyond_the_fits_window() -> None:
+    from collections import deque
+    from types import SimpleNamespace
+
+    from hil.experiments.tank_run import collect_sync_pairs
+
+    # The board's fit keeps its latest 256 pairs; the run collects as they come.
+    fit = SimpleNamespace(_pairs=deque(maxlen=256))
+    board = SimpleNamespace(clock_fit=fit)
+    run_pairs: list[tuple[int, float]] = []
+    for k in range(1000):
+        fit._pairs.append((1000 * k, 5.0 + k / 100 + (0.0 if k == 3 else 0.002)))
+        if k % 7 == 0:
+            collect_sync_pairs(board, run_pairs)
+    collect_sync_pairs(board, run_pairs)
+    assert [p[0] for p in run_pairs] == [1000 * k for k in range(1000)]
+    collect_sync_pairs(board, run_pairs)  # nothing new: nothing added
+    assert len(run_pairs) == 1000
+    from hil.experiments.tank_run import sample_zero_time_s
+
+    # The least-delayed pair (k = 3) left the fit's window long ago; the run still has it.
+    assert sample_zero_time_s(run_pairs, 100_000.0) == pytest.approx(5.0)
+    assert sample_zero_time_s(list(fit._pairs), 100_000.0) == pytest.approx(5.002)
+    collect_sync_pairs(None, run_pairs)  # no board (it failed to open): nothing to add
+    assert len(run_pairs) == 1000
 
 
 @pytest.mark.slow

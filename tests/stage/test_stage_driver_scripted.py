@@ -328,8 +328,9 @@ def test_successive_reports_are_dated_by_their_own_queries() -> None:
 
 
 def test_an_unanswered_query_is_sent_again_after_query_lost_s() -> None:
-    # GRBL ignores '?' while homing: after QUERY_LOST_S the driver asks again, and the
-    # report that comes is dated by the query it answers, not the lost one.
+    # A '?' the controller never answers (lost on the line): after QUERY_LOST_S the driver
+    # asks again, and the report that comes is dated by the query it answers, not the lost
+    # one.
     stage, peer, _ = _delayed_stage(
         [(b"?", b""), (b"?", _report(100, b"Idle"))], delay=0.0, response_timeout=3.0
     )
