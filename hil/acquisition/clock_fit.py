@@ -61,6 +61,12 @@ class SampleClockFit:
         """Number of pairs in the fit."""
         return len(self._pairs)
 
+    def pair_list(self) -> list[tuple[int, float]]:
+        """The pairs in the fit, oldest first: ``(sample_index, host_time_s)``. The fit keeps
+        only the latest ``max_pairs``; a copy, safe while another thread adds pairs."""
+        with self._lock:
+            return list(self._pairs)
+
     def _solve(self) -> tuple[float, float, float]:
         idx = np.array([p[0] for p in self._pairs], dtype=np.float64)
         t = np.array([p[1] for p in self._pairs])

@@ -149,7 +149,7 @@ def collect_sync_pairs(board: Any, run_pairs: list[tuple[int, float]]) -> None:
     the run keeps its own list: every pair is recorded, and the least-delayed one of the
     whole run is never forgotten."""
     fit = getattr(board, "clock_fit", None) if board is not None else None
-    pairs = list(getattr(fit, "_pairs", ()))
+    pairs = fit.pair_list() if fit is not None else []
     last = run_pairs[-1][0] if run_pairs else None
     run_pairs.extend(p for p in pairs if last is None or p[0] > last)
 

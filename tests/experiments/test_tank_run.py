@@ -132,17 +132,17 @@ def test_sample_zero_time_survives_a_stall_where_most_syncs_are_late() -> None:
 
 
 def test_the_run_keeps_every_sync_pair_beyond_the_fits_window() -> None:
-    from collections import deque
     from types import SimpleNamespace
 
+    from hil.acquisition.clock_fit import SampleClockFit
     from hil.experiments.tank_run import collect_sync_pairs
 
     # The board's fit keeps its latest 256 pairs; the run collects as they come.
-    fit = SimpleNamespace(_pairs=deque(maxlen=256))
-    board = SimpleNamespace(clock_fit=fit)
+    fit = SampleClockFit(100_000.0, max_pairs=256)
+    board = SimpleNamespace(clock_fit=fit)  # what the run reads of a Board or AudioDaq
     run_pairs: list[tuple[int, float]] = []
     for k in range(1000):
-        fit._pairs.append((1000 * k, 5.0 + k / 100 + (0.0 if k == 3 else 0.002)))
+        fit.add(1000 * k, 5.0 + k / 100 + (0.0 if k == 3 else 0.002))
         if k % 7 == 0:
             collect_sync_pairs(board, run_pairs)
     collect_sync_pairs(board, run_pairs)
@@ -153,7 +153,8 @@ def test_the_run_keeps_every_sync_pair_beyond_the_fits_window() -> None:
 
     # The least-delayed pair (k = 3) left the fit's window long ago; the run still has it.
     assert sample_zero_time_s(run_pairs, 100_000.0) == pytest.approx(5.0)
-    assert sample_zero_time_s(list(fit._pairs), 100_000.0) == pytest.approx(5.002)
+    assert len(fit.pair_list()) == 256
+    assert sample_zero_time_s(fit.pair_list(), 100_000.0) == pytest.approx(5.002)
     collect_sync_pairs(None, run_pairs)  # no board (it failed to open): nothing to add
     assert len(run_pairs) == 1000
 
