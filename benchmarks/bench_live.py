@@ -34,7 +34,9 @@ Figures (over the ``--seconds`` of streaming, default 30):
 - its two parts: waiting, from the boundary's arrival until the samples of the block that
   emitted the estimate were seen (the receiver's look-ahead past the boundary, about half a
   hop for GCAS, plus any stall of the stream meanwhile), and the feed call itself; both also
-  for the estimates that took longer than one hop;
+  for the estimates that took longer than one hop; finer, the wait as the stream delivering
+  the look-ahead plus the loop waking up, and the feed call's time off the CPU (waiting for
+  a core or the GIL);
 - stream lateness: when each block was stored in the ring, against the board's clock on the
   host's time axis (the SYNC fit moved to its earliest pair): a stall anywhere upstream of
   the capture loop (simulated board, pty, reader thread) shows here;
@@ -50,9 +52,10 @@ Targets: host CPU < 0.5 core, latency <= 1 hop (max over all estimates), keeps u
 missing samples, no DAC underrun, backlog when the last block is done at most
 :data:`KEEP_UP_BACKLOG_S`).
 Run: ``python benchmarks/bench_live.py [--seconds 30] [--min-block-ms 1] [--every-block]
-[--profile] [--no-stall-probes] [--quick]``; ``--machine-only`` runs the stall probes alone
-for ``--seconds`` (what the machine takes away from any pipeline). The last stdout line is
-one JSON object.
+[--profile] [--no-stall-probes] [--quick] [--dump TIMES.npz]``; ``--machine-only`` runs the
+stall probes alone for ``--seconds`` (what the machine takes away from any pipeline);
+``--dump`` also saves the per-estimate and per-block times for analysis. The last stdout
+line is one JSON object.
 """
 
 from __future__ import annotations
@@ -253,6 +256,7 @@ def run_live(
     profile: bool = False,
     every_block: bool = False,
     stall_probes: bool = True,
+    dump: str | None = None,
 ) -> dict[str, Any]:
     """Stream ``seconds`` through Board + capture loop + GCAS; the figures (module docstring)."""
     from hil.acquisition import HeapFreeze, StallProbes
@@ -333,6 +337,8 @@ def run_live(
             est_boundary: list[int] = []
             est_emit: list[float] = []
             est_seen: list[float] = []  # when the samples of the emitting block were seen
+            est_wanted: list[int] = []  # the board index the loop waited for before it
+            est_cpu: list[float] = []  # main-thread CPU time of the emitting feed call
             est_range: list[float] = []
             est_speed: list[float] = []
             blocks = 0
@@ -341,6 +347,7 @@ def run_live(
             gcas_cpu = 0.0
             feed_wall: list[float] = []
             feed_cpu: list[float] = []
+            block_times: list[tuple[float, float]] = []  # (wait began, samples seen)
             wait_max = 0.0
             heap = HeapFreeze()
             heap.start()  # as the tank run does: no 75 ms full collection mid-stream
@@ -379,10 +386,13 @@ def run_live(
                 gcas_cpu += feed_cpu[-1]
                 emitted = time.monotonic()
                 feed_wall.append(emitted - now)
+                block_times.append((waited, now))
                 for e in new:
                     est_boundary.append(start + round(e.t_s * FS_HZ))
                     est_emit.append(emitted)
                     est_seen.append(now)
+                    est_wanted.append(wanted)
+                    est_cpu.append(feed_cpu[-1])
                     est_range.append(e.range_m)
                     est_speed.append(e.speed_mps)
                 next_index += n
@@ -432,6 +442,14 @@ def run_live(
     # receiver needs (its look-ahead, plus any stall of the stream), then the feed call.
     wait_s = np.asarray(est_seen) - boundary_seen
     proc_s = emit - np.asarray(est_seen)
+    # Finer: the wait is the stream delivering the look-ahead (the arrival of the last sample
+    # the loop waited for) plus the loop waking up; the feed call is CPU plus time off the
+    # CPU (waiting for a core or the GIL).
+    wanted = np.asarray(est_wanted, dtype=np.int64)
+    wanted_seen = arrivals.time_of(wanted - 1)
+    stream_s = wanted_seen - boundary_seen
+    wake_s = np.asarray(est_seen) - wanted_seen
+    off_cpu_s = proc_s - np.asarray(est_cpu)
     over = lat_s > schedule.hop_s
     hop_s = schedule.hop_s
     # Estimates whose time from boundary to estimate overlapped a machine stall: the
@@ -446,6 +464,27 @@ def run_live(
     standin_run = standin[(standin[:, 1] >= wall0) & (standin[:, 0] <= wall0 + wall)]
     standin_d = np.minimum(standin_run[:, 1], wall0 + wall) - np.maximum(standin_run[:, 0], wall0)
     clear = ~in_stall & ~in_standin
+    if dump is not None:
+        arr_index, arr_time = arrivals.arrays()
+        np.savez(
+            dump,
+            boundary=boundary,
+            boundary_seen=boundary_seen,
+            wanted=wanted,
+            wanted_seen=wanted_seen,
+            feed_cpu_of_estimate=np.asarray(est_cpu),
+            seen=np.asarray(est_seen),
+            emit=emit,
+            in_machine_stall=in_stall,
+            in_standin_stall=in_standin,
+            arrival_end_index=arr_index,
+            arrival_time=arr_time,
+            feed_wall=np.asarray(feed_wall),
+            block_times=np.asarray(block_times),
+            feed_cpu=np.asarray(feed_cpu),
+            start=start,
+            wall0=wall0,
+        )
 
     def hops(x: npt.NDArray[np.float64], percentile: float) -> float:
         x = x[np.isfinite(x)]
@@ -522,6 +561,13 @@ def run_live(
         "latency_processing_max_ms": _ms(proc_s, 100),
         "over_1_hop_wait_median_ms": _ms(wait_s[over], 50),
         "over_1_hop_processing_median_ms": _ms(proc_s[over], 50),
+        "lookahead_median_ms": _ms((wanted - boundary) / FS_HZ, 50),
+        "stream_median_ms": _ms(stream_s, 50),
+        "over_1_hop_stream_median_ms": _ms(stream_s[over], 50),
+        "wake_median_ms": _ms(wake_s, 50),
+        "over_1_hop_wake_median_ms": _ms(wake_s[over], 50),
+        "feed_off_cpu_median_ms": _ms(off_cpu_s, 50),
+        "over_1_hop_feed_off_cpu_median_ms": _ms(off_cpu_s[over], 50),
         "stream_lateness_median_ms": _ms(stream_late_s, 50),
         "stream_lateness_p99_ms": _ms(stream_late_s, 99),
         "stream_lateness_max_ms": _ms(stream_late_s, 100),
@@ -661,6 +707,15 @@ def print_table(r: dict[str, Any]) -> None:
             f" {r['over_1_hop_processing_median_ms']} ms",
         ),
         (
+            "  finer, median",
+            f"look-ahead {r['lookahead_median_ms']} ms of signal; the stream took"
+            f" {r['stream_median_ms']} ms to deliver it ({r['over_1_hop_stream_median_ms']} ms"
+            f" over 1 hop), the loop {r['wake_median_ms']} ms to wake"
+            f" ({r['over_1_hop_wake_median_ms']}); the feed call spent"
+            f" {r['feed_off_cpu_median_ms']} ms off the CPU"
+            f" ({r['over_1_hop_feed_off_cpu_median_ms']})",
+        ),
+        (
             "stream lateness",
             f"median {r['stream_lateness_median_ms']} ms, p99 {r['stream_lateness_p99_ms']} ms,"
             f" max {r['stream_lateness_max_ms']} ms (samples seen after the board clock,"
@@ -735,6 +790,11 @@ def main() -> None:
         action="store_true",
         help="run only the stall probes for --seconds: the machine's own stalls",
     )
+    parser.add_argument(
+        "--dump",
+        metavar="NPZ",
+        help="also save the per-estimate and per-block times (NumPy .npz) for analysis",
+    )
     parser.add_argument("--serve-board", nargs=4, metavar=("DELAY", "GAIN", "NOISE", "OUT"))
     args = parser.parse_args()
     if args.serve_board:
@@ -754,6 +814,7 @@ def main() -> None:
         profile=args.profile,
         every_block=args.every_block,
         stall_probes=not args.no_stall_probes,
+        dump=args.dump,
     )
     print_table(result)
     print(json.dumps({"benchmark": "bench_live", **result}))
