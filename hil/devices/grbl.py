@@ -92,6 +92,10 @@ class _Pending:
 #: A status query unanswered for this long (driver-clock s) is taken as dropped and sent
 #: again: GRBL answers within milliseconds (a reset drops a pending query).
 QUERY_LOST_S = 1.0
+#: A query given up as lost is still awaited this long after it was sent (driver-clock s):
+#: any report read meanwhile may be its late answer, so none of them is dated (``reply_s``
+#: infinite). After that it is taken as never answered.
+QUERY_FORGOTTEN_S = 2.0 * QUERY_LOST_S
 
 
 class GrblStage:
@@ -188,7 +192,8 @@ polling at no more than 5 Hz); use the default 0.2
         self._last_query = -math.inf
         # Times of the '?' sent and not yet answered: a report is stamped with its query's.
         self._queries: deque[float] = deque()
-        self._lost = 0  # queries given up as lost whose late answer may still come
+        # Send times of queries given up as lost whose late answer may still come.
+        self._lost: deque[float] = deque()
         self._last_status: StageStatus | None = None
         self._alarm: int | None = None
         self._new_alarm: int | None = None
@@ -622,8 +627,8 @@ polling at no more than 5 Hz); use the default 0.2
             self._receive(ser)
         now = self._clock.now()
         while self._queries and now - self._queries[0] >= QUERY_LOST_S:
-            self._queries.popleft()  # dropped: GRBL answers in ms, a reset drops the query
-            self._lost += 1
+            # Dropped: GRBL answers in ms, a reset drops the query.
+            self._lost.append(self._queries.popleft())
         if self._queries:
             return
         self._last_query = now
@@ -638,15 +643,22 @@ polling at no more than 5 Hz); use the default 0.2
         millisecond later), while the report's ~60 bytes take 5 ms at 115 200 baud and the
         host may read them later still: a stalled host would otherwise date the position
         late by the whole stall. A report with no query in flight gets its receipt time,
-        with ``reply_s`` 0, or infinite when it is the late answer to a query given up as
-        lost (its instant is unknown).
+        with ``reply_s`` 0.
+
+        While a query given up as lost may still be answered (for
+        :data:`QUERY_FORGOTTEN_S` after it was sent), a report cannot be told from its late
+        answer: its ``reply_s`` is infinite (its instant is unknown). Otherwise a late
+        answer that came just after the '?' sent again would pass as that query's prompt
+        answer, dated by it: as much as the whole stall late if the link held the answer.
         """
         received = self._clock.now()
+        while self._lost and received - self._lost[0] >= QUERY_FORGOTTEN_S:
+            self._lost.popleft()
         if self._queries:
             asked = self._queries.popleft()
-            return asked, received - asked
+            return asked, math.inf if self._lost else received - asked
         if self._lost:
-            self._lost -= 1
+            self._lost.popleft()  # its late answer, with none in flight: nothing else awaited
             return received, math.inf
         return received, 0.0
 
@@ -716,7 +728,7 @@ polling at no more than 5 Hz); use the default 0.2
             self._banners += 1
             self._critical = False
             self._queries.clear()  # a reset drops the queries GRBL had not answered
-            self._lost = 0
+            self._lost.clear()
             for pending in self._pending:
                 pending.reset = True
             self._pending.clear()

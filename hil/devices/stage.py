@@ -58,7 +58,8 @@ class StageStatus:
         was received if no query was pending.
     reply_s:
         How long after that query the report was received, s (0 with no query pending;
-        infinite for the late answer to a query the driver had given up as lost).
+        infinite while a query the driver gave up as lost may still be answered late, as
+        the report may be that answer).
         The controller sampled its state somewhere in between: a long reply (a stalled host
         or controller) leaves that instant uncertain by up to ``reply_s``.
     """

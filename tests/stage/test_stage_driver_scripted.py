@@ -11,7 +11,7 @@ import math
 
 import pytest
 
-from hil.devices.grbl import QUERY_LOST_S, GrblStage
+from hil.devices.grbl import QUERY_FORGOTTEN_S, QUERY_LOST_S, GrblStage
 from hil.devices.stage import StageState
 from hil.devices.stage_errors import (
     StageAlarmError,
@@ -338,6 +338,26 @@ def test_an_unanswered_query_is_sent_again_after_query_lost_s() -> None:
     lost, answered = peer.query_times[-2:]
     assert answered - lost == pytest.approx(QUERY_LOST_S, abs=0.021)
     assert status.host_time == answered and not peer.script
+    # The lost '?' might still have been answered late, so this report is not trusted.
+    assert status.reply_s == math.inf
+
+
+def test_reports_are_trusted_again_once_a_lost_query_is_forgotten() -> None:
+    # The lost '?' is never answered: the reports read within QUERY_FORGOTTEN_S of it are
+    # flagged, those read after are dated by their own queries again.
+    script = [(b"?", b"")] + [(b"?", _report(100 + m, b"Idle")) for m in range(8)]
+    stage, peer, clock = _delayed_stage(script, delay=0.01, response_timeout=3.0)
+    seen = [stage.status()]
+    for _ in range(7):
+        clock.advance(0.2)
+        seen.append(stage.status())
+    q_lost = peer.query_times[1]  # [0] is open()'s
+    flagged = [s.reply_s == math.inf for s in seen]
+    assert flagged == [True] * 5 + [False] * 3  # golden for 0.2 s polls, 0.01 s replies
+    assert seen[4].host_time < q_lost + QUERY_FORGOTTEN_S <= seen[5].host_time
+    assert [s.host_time for s in seen[5:]] == peer.query_times[-3:]
+    assert all(s.reply_s == pytest.approx(0.01, abs=0.021) for s in seen[5:])
+    assert not peer.script
 
 
 def test_a_report_nobody_asked_for_is_dated_on_receipt() -> None:
@@ -364,4 +384,23 @@ def test_a_late_answer_to_a_lost_query_is_flagged_and_the_pairing_recovers() -> 
     after = stage.status()
     assert after.host_time == peer.query_times[-1] > q_resent
     assert after.position == pytest.approx(-0.13) and after.reply_s <= 0.021
+    assert not peer.script
+
+
+def test_a_late_answer_just_after_the_query_sent_again_is_not_taken_for_its_answer() -> None:
+    # The first '?' is answered 1.03 s late, just after the driver gave it up (QUERY_LOST_S)
+    # and asked again. That late answer looks like a prompt (0.03 s) reply to the second
+    # '?', but it is GRBL's state at the first: it must not be dated by the second query.
+    # The second answer (0.1 s later) is read, flagged, before the next '?'; from then on
+    # each report is dated by its own query again.
+    stage, peer, _ = _delayed_stage([(b"?", _report(110 + m)) for m in range(4)], delay=0.01)
+    peer.delays = [1.03, 0.1]
+    first = stage.status()
+    q_lost, q_resent = peer.query_times[-2:]
+    assert q_resent - q_lost == pytest.approx(QUERY_LOST_S, abs=0.021)
+    assert first.position == pytest.approx(-0.11) and first.reply_s == math.inf
+    later = [stage.status() for _ in range(2)]
+    assert [s.position for s in later] == pytest.approx([-0.112, -0.113])
+    assert [s.host_time for s in later] == peer.query_times[-2:]
+    assert all(s.reply_s == pytest.approx(0.01, abs=0.021) for s in later)
     assert not peer.script
