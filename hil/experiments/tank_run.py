@@ -121,6 +121,32 @@ def board_stopped(board: Any) -> str | None:
     )
 
 
+def xrun_counts(status: object | None) -> tuple[int, int]:
+    """``(dac_underruns, adc_overruns)`` in a device's status: the board's
+    :class:`~firmware_protocol.messages.Status` (``dac_underruns``, ``adc_overruns``, counted
+    since the board powered up) or the audio interface's
+    :class:`~hil.devices.audio.daq.AudioDaqStatus` (``underruns``, ``overruns``, since the
+    stream started); ``(0, 0)`` before any status.
+
+    >>> from hil.devices.audio.daq import AudioDaqStatus
+    >>> xrun_counts(AudioDaqStatus(frames=4096, overruns=2, underruns=1))
+    (1, 2)
+    """
+    if status is None:
+        return 0, 0
+    if hasattr(status, "dac_underruns"):
+        return int(status.dac_underruns), int(status.adc_overruns)  # type: ignore[attr-defined]
+    return int(status.underruns), int(status.overruns)  # type: ignore[attr-defined]
+
+
+def xruns_since(before: tuple[int, int], status: object | None) -> tuple[int, int]:
+    """``(dac_underruns, adc_overruns)`` since the counts ``before`` (from
+    :func:`xrun_counts`), in ``status``; the board's counters are u32, so the difference is
+    taken modulo 2^32 (it survives a wrap)."""
+    after = xrun_counts(status)
+    return (after[0] - before[0]) % (1 << 32), (after[1] - before[1]) % (1 << 32)
+
+
 def sample_zero_time_s(pairs: list[tuple[int, float]], fs: float) -> float | None:
     """Host time (s) of board sample 0, from SYNC pairs ``(sample_index, host_time_s)`` by
     minimum-delay filtering; None without pairs.
@@ -309,6 +335,7 @@ def run_experiment(
     wall0 = time.monotonic()
     next_index = 0
     start_index = 0
+    xruns_before = (0, 0)  # xrun counters at the start of transmission
     heap = HeapFreeze()
     try:
         # ---- receiver first: building it loads its compiled kernels (on a fresh install it
@@ -385,6 +412,8 @@ def run_experiment(
         # Board and audio interface both ask for samples by their number in the
         # transmission: sample k plays at start_index + k.
         start_index = board.start(synth.render)
+        # A board counts xruns since it powered up: the run's are those after its start.
+        xruns_before = xrun_counts(board.last_status)
         next_index = start_index
         doc = schedule_document(
             exp.schedule,
@@ -605,9 +634,8 @@ def run_experiment(
         if next_index > start_index:
             with contextlib.suppress(Exception):
                 exact = _exact_truth(tank, exp, fs, start_index, estimates)
-    elif board is not None and board.last_status is not None:
-        dac_underruns = int(getattr(board.last_status, "underruns", 0))
-        adc_overruns = int(getattr(board.last_status, "overruns", 0))
+    elif board is not None:
+        dac_underruns, adc_overruns = xruns_since(xruns_before, board.last_status)
     with contextlib.suppress(Exception):
         if writer is not None:
             for kind, index, length, text in events:

@@ -14,10 +14,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from firmware_protocol.messages import Status
 from hil.cli.main import main
+from hil.devices.audio.daq import AudioDaqStatus
 from hil.errors import ConfigError
 from hil.experiments.experiment import DEFAULT_EXPERIMENT, parse_experiment
-from hil.experiments.tank_run import measure_latency, run_experiment
+from hil.experiments.tank_run import measure_latency, run_experiment, xrun_counts, xruns_since
 
 # A shorter pass than the built-in run keeps the suite quick.
 SHORT = DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -3.5").replace(
@@ -98,6 +100,37 @@ def test_every_board_annotation_becomes_a_recordable_event() -> None:
         assert (ev.sample_index, ev.length) == (7, 3)
     underrun = run_event(Annotation(0, AnnotationKind.DAC_UNDERRUN))
     assert underrun.kind == "underrun"
+
+
+def _board_status(underruns: int, overruns: int) -> Status:
+    return Status(
+        sample_index=48_000,
+        dac_buffer_level=4096,
+        adc_buffer_level=0,
+        dac_underruns=underruns,
+        adc_overruns=overruns,
+        temperature_cdeg=2150,
+    )
+
+
+def test_xrun_counts_read_the_board_and_the_audio_interface() -> None:
+    # The board's Status names them dac_underruns/adc_overruns, the audio interface's
+    # status underruns/overruns: a run over either reports its own counts (not always 0).
+    assert xrun_counts(_board_status(7, 3)) == (7, 3)
+    assert xrun_counts(AudioDaqStatus(frames=4096, overruns=2, underruns=5)) == (5, 2)
+    assert xrun_counts(None) == (0, 0)
+
+
+def test_the_run_counts_only_the_xruns_after_its_start() -> None:
+    # A board counts since power-up: 5 underruns and 2 overruns came before this run.
+    before = xrun_counts(_board_status(5, 2))
+    assert xruns_since(before, _board_status(7, 2)) == (2, 0)
+    assert xruns_since(before, _board_status(5, 2)) == (0, 0)
+    # u32 counters that wrapped during the run.
+    assert xruns_since(xrun_counts(_board_status(2**32 - 1, 0)), _board_status(1, 0)) == (2, 0)
+    # No status yet at the start (audio: counted from the stream's start).
+    assert xruns_since((0, 0), AudioDaqStatus(frames=1, overruns=1, underruns=0)) == (0, 1)
+    assert xruns_since((0, 0), None) == (0, 0)
 
 
 def test_measure_latency_golden() -> None:
