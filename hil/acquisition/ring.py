@@ -67,6 +67,8 @@ class SampleRing:
         n = block.shape[0]
         with self._cond:
             end = self.end_index
+            if self.written == 0 and end is not None and first < end:
+                end = None  # before the index expect() named: the stream starts here
             if end is not None and first < end:
                 return False
             if end is None:
@@ -86,6 +88,30 @@ class SampleRing:
             if self._targets and self.end_index >= min(self._targets):
                 self._cond.notify_all()
         return True
+
+    def expect(self, first: int) -> None:
+        """The stream starts at index ``first``: if its first samples are lost (an ADC
+        overrun or a dropped frame at the start), the first block that arrives is preceded by
+        zero-filled :attr:`missing` frames, as after any gap, so the span from ``first`` can
+        be read. Before anything is stored only (a ring that holds samples keeps them).
+
+        >>> ring = SampleRing(8, 1, np.int16)
+        >>> ring.expect(10)
+        >>> ring.write(12, np.array([[3]], dtype=np.int16)), ring.missing
+        (True, 2)
+        >>> ring.read(10, 3)[:, 0].tolist()
+        [0, 0, 3]
+
+        A stream that starts earlier than expected starts the ring where it starts:
+
+        >>> early = SampleRing(8, 1, np.int16)
+        >>> early.expect(10)
+        >>> early.write(9, np.array([[1], [2]], dtype=np.int16)), early.start_index
+        (True, 9)
+        """
+        with self._cond:
+            if self.written == 0 and self.missing == 0:
+                self.start_index = self.end_index = int(first)
 
     def _put(self, first: int, block: npt.NDArray[Any]) -> None:
         n = block.shape[0]

@@ -620,6 +620,10 @@ class Board:
             first = self.board_index_now() + round(lead_s * rate)
             self.start_index = first
             self.gaps.reset(first)
+            if self.ring is not None:
+                # Samples lost at the very start are then a gap like any other, not a
+                # stream that begins later than the run reads it from.
+                self.ring.expect(first)
             if feeder is not None:
                 self._preload(feeder, first, preload_timeout_s)
             try:

@@ -45,6 +45,30 @@ def test_ring_refuses_repeats_and_reads_outside_what_it_holds() -> None:
         SampleRing(0, 1)
 
 
+def test_ring_expecting_a_start_zero_fills_samples_lost_before_the_first_block() -> None:
+    ring = SampleRing(16, 2, np.int16)
+    ring.expect(100)
+    assert (ring.start_index, ring.end_index) == (100, 100)
+    block = np.full((3, 2), 7, np.int16)
+    assert ring.write(104, block)
+    assert (ring.start_index, ring.end_index, ring.missing, ring.written) == (100, 107, 4, 3)
+    np.testing.assert_array_equal(ring.read(100, 7)[:, 0], [0, 0, 0, 0, 7, 7, 7])
+    # Once samples are held the expectation is spent: a later expect() changes nothing.
+    ring.expect(200)
+    assert (ring.start_index, ring.end_index) == (100, 107)
+    with pytest.raises(ConfigError, match=r"within 100 \.\. 107"):
+        ring.read(99, 2)
+
+
+def test_ring_expecting_a_later_start_begins_where_the_stream_does() -> None:
+    ring = SampleRing(16, 1, np.int16)
+    ring.expect(100)
+    ring.expect(120)  # a START refused and sent again: nothing held yet, so it moves
+    assert ring.write(118, np.arange(4, dtype=np.int16).reshape(4, 1))
+    assert (ring.start_index, ring.end_index, ring.missing) == (118, 122, 0)
+    assert not ring.write(120, np.zeros((1, 1), np.int16))  # a repeat is still refused
+
+
 def test_ring_wait_for_wakes_on_write() -> None:
     ring = SampleRing(100, 1, np.int16)
     writer = threading.Timer(0.01, lambda: ring.write(0, np.zeros((50, 1), np.int16)))
