@@ -283,7 +283,9 @@ def run_experiment(
 ) -> RunOutcome:
     """Run ``exp`` end to end (see the module docstring) and return what it produced.
 
-    Raises ConfigError for problems found before anything moves or transmits.
+    Raises ConfigError for problems found before anything transmits. Once transmission
+    has started, every failure (a ConfigError too) stops the run safely and is reported in
+    :attr:`RunOutcome.error`, with what was recorded until then.
     """
     from hil.devices.board import Board
     from hil.devices.board_settings import BoardSettings
@@ -336,6 +338,7 @@ def run_experiment(
     next_index = 0
     start_index = 0
     xruns_before = (0, 0)  # xrun counters at the start of transmission
+    transmitting = False
     heap = HeapFreeze()
     try:
         # ---- receiver first: building it loads its compiled kernels (on a fresh install it
@@ -412,6 +415,7 @@ def run_experiment(
         # Board and audio interface both ask for samples by their number in the
         # transmission: sample k plays at start_index + k.
         start_index = board.start(synth.render)
+        transmitting = True
         # A board counts xruns since it powered up: the run's are those after its start.
         xruns_before = xrun_counts(board.last_status)
         next_index = start_index
@@ -603,8 +607,12 @@ def run_experiment(
     except KeyboardInterrupt:
         interrupted = True
         outcome_error = "interrupted (Ctrl-C)"
-    except ConfigError:
-        raise
+    except ConfigError as exc:
+        if not transmitting:
+            raise  # found before anything transmits: the file or the set-up is wrong
+        # Once transmitting, a refusal (say, a capture read the ring no longer holds) is a
+        # failure of the run: stop safely and report it with what was recorded.
+        outcome_error = f"ConfigError: {exc}"
     except Exception as exc:  # any failure: stop safely below, report it
         outcome_error = f"{type(exc).__name__}: {exc}"
     finally:

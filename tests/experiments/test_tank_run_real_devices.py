@@ -8,14 +8,20 @@ the recording exactly, and the xruns the board counted before the run must not."
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from hil.errors import ConfigError
 from hil.experiments import tank_run
-from hil.experiments.experiment import DEFAULT_EXPERIMENT, parse_experiment
+from hil.experiments.experiment import DEFAULT_EXPERIMENT, Experiment, parse_experiment
 from hil.experiments.sim_tank import STAGE_ACCEL_MM_S2, STAGE_MAX_RATE_MM_MIN, STAGE_TRAVEL_MM
 from hil.experiments.tank_run import LiveView, run_experiment, summarize, write_summary
+from hil.recording.reader import RunRecording
+from hil.recording.replay import ReceiverFeed
 from sim_devices.board import FaultPlan, LoopbackWorld, SimulatedBoardOnPty
 from sim_devices.stage.controller import GrblSimConfig
 from sim_devices.stage.on_pty import SimulatedGrblOnPty
@@ -23,10 +29,29 @@ from sim_devices.stage.on_pty import SimulatedGrblOnPty
 LOST_AT_START = 500  # ADC samples lost to an overrun as the stream starts
 
 
-@pytest.mark.slow
-def test_a_run_over_devices_given_by_port_reports_its_own_xruns_and_a_lost_start(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+@dataclass
+class PtyDevices:
+    """The simulated board and GRBL controller on ptys, and the board's fault plan."""
+
+    board: SimulatedBoardOnPty
+    stage: SimulatedGrblOnPty
+    faults: FaultPlan
+
+    def experiment(self, out: Path) -> Experiment:
+        """The short built-in pass with the devices given by their pty paths."""
+        text = (
+            DEFAULT_EXPERIMENT.replace('"sim://board"', f'"{self.board.port_name}"')
+            .replace('"sim://stage"', f'"{self.stage.port_name}"')
+            .replace("end_m = -5.0", "end_m = -3.5")
+            .replace('output_dir = "runs"', f'output_dir = "{out}"')
+        )
+        exp = parse_experiment(text)
+        assert not exp.simulated
+        return exp
+
+
+@pytest.fixture
+def devices(monkeypatch: pytest.MonkeyPatch) -> Iterator[PtyDevices]:
     # The simulated devices share this process with the host: a loaded CI machine may stall
     # it for more than the hardware watchdog's 1 s, which would stop the board mid-run.
     monkeypatch.setattr(tank_run, "_WATCHDOG_MS", 10_000)
@@ -48,26 +73,27 @@ def test_a_run_over_devices_given_by_port_reports_its_own_xruns_and_a_lost_start
         world=LoopbackWorld(delay_samples=64, gain=0.5), faults=faults
     ).start()
     try:
-        # The board had xruns before this run (its counters run from power-up) ...
-        board_sim.call(lambda b: (setattr(b, "dac_underruns", 5), setattr(b, "adc_overruns", 3)))
-        # ... and has one of each as it starts: the first ADC samples are lost, a stretch
-        # of the DAC buffer plays silence.
-        faults.adc_overrun(LOST_AT_START)
-        faults.dac_underrun(1000)
-        text = (
-            DEFAULT_EXPERIMENT.replace('"sim://board"', f'"{board_sim.port_name}"')
-            .replace('"sim://stage"', f'"{stage_sim.port_name}"')
-            .replace("end_m = -5.0", "end_m = -3.5")
-            .replace('output_dir = "runs"', f'output_dir = "{tmp_path}"')
-        )
-        exp = parse_experiment(text)
-        assert not exp.simulated
-        folder = tmp_path / "run"
-        outcome = run_experiment(exp, folder=folder, view=LiveView(enabled=False))
-        counters = board_sim.call(lambda b: (b.dac_underruns, b.adc_overruns))
+        yield PtyDevices(board_sim, stage_sim, faults)
     finally:
         board_sim.close()
         stage_sim.close()
+
+
+@pytest.mark.slow
+def test_a_run_over_devices_given_by_port_reports_its_own_xruns_and_a_lost_start(
+    tmp_path: Path, devices: PtyDevices
+) -> None:
+    # The board had xruns before this run (its counters run from power-up) ...
+    devices.board.call(lambda b: (setattr(b, "dac_underruns", 5), setattr(b, "adc_overruns", 3)))
+    # ... and has one of each as it starts: the first ADC samples are lost, a stretch of the
+    # DAC buffer plays silence.
+    devices.faults.adc_overrun(LOST_AT_START)
+    devices.faults.dac_underrun(1000)
+    folder = tmp_path / "run"
+    outcome = run_experiment(
+        devices.experiment(tmp_path), folder=folder, view=LiveView(enabled=False)
+    )
+    counters = devices.board.call(lambda b: (b.dac_underruns, b.adc_overruns))
 
     summary = summarize(outcome)
     write_summary(outcome, summary)
@@ -86,8 +112,6 @@ def test_a_run_over_devices_given_by_port_reports_its_own_xruns_and_a_lost_start
     on_disk = json.loads((folder / "summary.json").read_text())
     assert on_disk["dac_underruns"] == summary["dac_underruns"]
 
-    from hil.recording.reader import RunRecording
-
     with RunRecording.open(folder / "run.h5") as rec:
         # Recorded from the first transmitted sample on, the lost ones as zeros.
         assert rec.origin_sample == outcome.start_index + summary["loopback_latency_samples"]
@@ -102,3 +126,38 @@ def test_a_run_over_devices_given_by_port_reports_its_own_xruns_and_a_lost_start
         positions = [t.position_m for t in rec.telemetry()]
         assert min(positions) == pytest.approx(-4.1, abs=1e-3)
         assert max(positions) == pytest.approx(-1.4, abs=1e-3)
+
+
+@pytest.mark.slow
+def test_a_refusal_once_transmitting_ends_the_run_safely_with_the_reason(
+    tmp_path: Path, devices: PtyDevices, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # A ConfigError before anything transmits means a bad file or set-up and is raised;
+    # once transmitting (here: the receiver refuses its 40th block) it is a failure of the
+    # run like any other: transmission off, stage held, the recording closed and readable,
+    # the reason in the outcome.
+    feed = ReceiverFeed.feed
+    calls = 0
+
+    def refusing_feed(self: ReceiverFeed, first: int, block: np.ndarray) -> list[object]:
+        nonlocal calls
+        calls += 1
+        if calls == 40:
+            raise ConfigError("block", first, "a block the receiver can take", "test")
+        return feed(self, first, block)
+
+    monkeypatch.setattr(ReceiverFeed, "feed", refusing_feed)
+    folder = tmp_path / "run"
+    outcome = run_experiment(
+        devices.experiment(tmp_path), folder=folder, view=LiveView(enabled=False)
+    )
+    assert outcome.error.startswith("ConfigError: block = ")
+    assert "is not allowed: must be a block the receiver can take" in outcome.error
+    assert not outcome.interrupted
+    # Transmission is off and the stage is not left running.
+    assert devices.board.call(lambda b: b.conn.state.name) != "STREAMING"
+    assert devices.stage.status().state.name in ("IDLE", "HOLD")  # held, or already done
+    with RunRecording.open(folder / "run.h5") as rec:
+        # Up to the refused block, which was recorded before the receiver refused it.
+        block = round(tank_run._BLOCK_S * 192_000)
+        assert outcome.samples > 0 and rec.n_samples - outcome.samples in (0, block)
