@@ -60,7 +60,12 @@ def run(args: argparse.Namespace) -> int:
         for key, value in summary.items():
             if key == "figures":
                 continue
-            shown = f"{value:.4g}" if isinstance(value, float) else value
+            if isinstance(value, float):
+                shown = f"{value:.4g}"
+            elif isinstance(value, list):
+                shown = ", ".join(str(v) for v in value) or "none"
+            else:
+                shown = value
             print(f"{key:<{width}}  {shown}")
         print(f"run folder: {outcome.folder}")
     return 1 if outcome.error else 0

@@ -32,6 +32,11 @@ from hil.errors import ConfigError
 from hil.estimation.base import Estimate
 from hil.estimation.registry import make_receiver
 from hil.experiments.experiment import Experiment
+from hil.experiments.run_calibrations import (
+    RunCalibrations,
+    load_run_calibrations,
+    true_stage_motion,
+)
 from hil.signals.schedule_file import schedule_document
 from hil.signals.synthesis import BlockSynthesizer
 
@@ -187,11 +192,61 @@ def measure_latency(monitor: np.ndarray, sent: np.ndarray, max_lag: int = 4096) 
     >>> measure_latency(np.concatenate([np.zeros(37), x])[:2000], x)
     37
     """
+    return measure_loopback(monitor, sent, max_lag)[0]
+
+
+#: Least normalised correlation between the DAC monitor input and the transmitted samples
+#: that counts as a loopback (a cabled monitor gives about 1; an open input about 0).
+LOOPBACK_MIN_CORRELATION = 0.5
+
+
+def measure_loopback(
+    monitor: np.ndarray, sent: np.ndarray, max_lag: int = 4096
+) -> tuple[int, float]:
+    """``(delay, correlation)``: the integer-sample delay (0 .. ``max_lag``) of ``monitor``
+    behind ``sent`` (both shape ``(n,)``) and the normalised correlation at that delay
+    (1 for a scaled, delayed copy; about 0 when the monitor does not carry ``sent``).
+
+    >>> x = np.random.default_rng(0).normal(size=2000)
+    >>> lag, rho = measure_loopback(0.1 * np.concatenate([np.zeros(37), x])[:2000], x)
+    >>> lag, round(rho, 3)
+    (37, 1.0)
+    >>> measure_loopback(np.zeros(2000), x)
+    (0, 0.0)
+    """
     n = min(monitor.shape[0], sent.shape[0])
     lags = min(max_lag, n - 1)
     nfft = 1 << (2 * n - 1).bit_length()
-    xc = np.fft.irfft(np.fft.rfft(monitor[:n], nfft) * np.conj(np.fft.rfft(sent[:n], nfft)), nfft)
-    return int(np.argmax(xc[: lags + 1]))
+    m, s = np.asarray(monitor[:n], dtype=float), np.asarray(sent[:n], dtype=float)
+    xc = np.fft.irfft(np.fft.rfft(m, nfft) * np.conj(np.fft.rfft(s, nfft)), nfft)
+    lag = int(np.argmax(xc[: lags + 1]))
+    # Over the overlap at that delay: monitor[lag:] against sent[:n - lag].
+    energy = float(np.sum(m[lag:] ** 2) * np.sum(s[: n - lag] ** 2))
+    rho = float(xc[lag] / np.sqrt(energy)) if energy > 0 else 0.0
+    return lag, rho
+
+
+def _loopback_latency(lat: int, rho: float, cals: RunCalibrations) -> tuple[int, str]:
+    """The receiver's latency (samples) and the recording's note about it: measured on the
+    DAC monitor input when it carries the loopback, else the required latency calibration's,
+    else the run cannot place its sample 0 (RuntimeError: the run stops and says why)."""
+    calibrated = cals.latency_samples
+    if rho >= LOOPBACK_MIN_CORRELATION:
+        note = f"loopback latency {lat} samples"
+        if calibrated is not None and calibrated != lat:
+            note += f" (calibration {cals.id_of('latency')} says {calibrated})"
+        return lat, note
+    if calibrated is None:
+        raise RuntimeError(
+            f"no loopback on the DAC monitor input (ADC input 2): normalised correlation"
+            f" {rho:.2f} < {LOOPBACK_MIN_CORRELATION}, so the loopback latency cannot be"
+            " measured. Cable DAC output 2 to ADC input 2 (docs/tank-run.md), or require a"
+            ' latency calibration: calibration.required = ["latency"]'
+        )
+    return calibrated, (
+        f"loopback latency {calibrated} samples from calibration {cals.id_of('latency')}"
+        f" (the DAC monitor input carried no loopback: correlation {rho:.2f})"
+    )
 
 
 @dataclass
@@ -233,6 +288,8 @@ class RunOutcome:
     interrupted: bool = False
     error: str = ""
     latency_samples: int | None = None
+    #: The required calibrations the run applied (see :mod:`hil.experiments.run_calibrations`).
+    calibrations: RunCalibrations = field(default_factory=RunCalibrations)
 
 
 class LiveView:
@@ -264,17 +321,6 @@ class LiveView:
             self.stream.flush()
 
 
-def check_calibrations(exp: Experiment) -> list[str]:
-    """Preflight: the calibrations the file requires are present and recent; their ids."""
-    if not exp.calibration_required:
-        return []
-    from hil.experiments.calibration.store import CalibrationStore
-
-    store = CalibrationStore(exp.calibration_store)
-    max_age = exp.calibration_max_age_days * 86400.0
-    return [store.require(kind, max_age).id for kind in exp.calibration_required]
-
-
 def run_experiment(
     exp: Experiment,
     *,
@@ -294,14 +340,17 @@ def run_experiment(
     from hil.recording.replay import ReceiverFeed
     from hil.recording.writer import RunWriter
 
-    calibration_ids = check_calibrations(exp)
+    fs = float(exp.waveform.fs_hz)
+    if fs != int(fs):
+        raise ConfigError("waveform.fs_hz", fs, "a whole number of Hz (a board rate)")
+    # The required calibrations: checked before anything is touched, then applied.
+    cals = load_run_calibrations(exp, fs)
+    calibration_ids = list(cals.ids)
+    exp = cals.apply(exp)
     stamp = dt.datetime.now().strftime("%Y%m%d-%H%M%S")
     folder = folder or exp.output_dir / f"{exp.name}-{stamp}"
     folder.mkdir(parents=True, exist_ok=True)
     view = view or LiveView()
-    fs = float(exp.waveform.fs_hz)
-    if fs != int(fs):
-        raise ConfigError("waveform.fs_hz", fs, "a whole number of Hz (a board rate)")
 
     tank: Any = None
     clock: Any = None
@@ -539,14 +588,13 @@ def run_experiment(
                         # Its own synthesizer: the one transmitting renders on the board's
                         # writer thread (or the audio callback) and is not re-entrant.
                         reference = BlockSynthesizer(exp.schedule, fs, amplitude=exp.amplitude)
-                        lat = measure_latency(
+                        lat, rho = measure_loopback(
                             captured[:, 1] * _INT16_SCALE, reference.render(0, captured.shape[0])
                         )
+                        lat, latency_note = _loopback_latency(lat, rho, cals)
                         latency.append(lat)
                         writer = open_writer(start_index + lat)
-                        writer.append_event(
-                            RunEvent("note", start_index, lat, f"loopback latency {lat} samples")
-                        )
+                        writer.append_event(RunEvent("note", start_index, lat, latency_note))
                         for record in telemetry_backlog:
                             writer.append_telemetry(record)
                         for first_i, blk in pending:
@@ -672,6 +720,7 @@ def run_experiment(
         interrupted=interrupted,
         error=outcome_error,
         latency_samples=latency[0] if latency else None,
+        calibrations=cals,
     )
 
 
@@ -731,8 +780,10 @@ def telemetry_truth(outcome: RunOutcome) -> dict[str, np.ndarray]:
     telemetry mapped onto sample time (what a lab has as ground truth): positions
     interpolated between status reports, speed from the reported feed rate projected on the
     line of sight (differencing 5 Hz positions would be far noisier); reports answered
-    later than :data:`TELEMETRY_MAX_REPLY_S` are not used. Also the stage's own
-    position (``stage_x_m``, m) and velocity (``stage_v_mps``, m/s). All shape
+    later than :data:`TELEMETRY_MAX_REPLY_S` are not used. With a stage calibration
+    applied (:attr:`RunOutcome.calibrations`), range and speed are the carriage's true ones.
+    Also the stage's own reported position (``stage_x_m``, m) and velocity
+    (``stage_v_mps``, m/s), in the tow plan's commanded coordinates. All shape
     ``(n_estimates,)``; NaN outside the telemetry and inside a gap between reports longer
     than :data:`TELEMETRY_GAP_S` (the motion there is unknown)."""
     tel = outcome.telemetry
@@ -751,15 +802,19 @@ def telemetry_truth(outcome: RunOutcome) -> dict[str, np.ndarray]:
     exp = outcome.experiment
     x = np.interp(t_b, t_tel, x_tel)
     v = np.interp(t_b, t_tel, v_tel)
-    d = exp.target_position(x) - np.asarray(exp.transducer_m)
+    # The range and speed of the carriage itself: through the stage calibration, if the run
+    # applied one (the reported position is the commanded one, in steps).
+    x_true, v_true = true_stage_motion(outcome.calibrations.stage, x_tel, v_tel)
+    d = exp.target_position(np.interp(t_b, t_tel, x_true)) - np.asarray(exp.transducer_m)
     r = np.sqrt(np.sum(d * d, axis=-1))
     along = (d @ np.asarray(exp.stage_axis)) / r
+    v_carriage = np.interp(t_b, t_tel, v_true)
     after = np.clip(np.searchsorted(t_tel, t_b, side="left"), 1, t_tel.size - 1)
     gap = t_tel[after] - t_tel[after - 1]
     inside = (t_b >= t_tel[0]) & (t_b <= t_tel[-1]) & (gap <= TELEMETRY_GAP_S)
     return {
         "range_m": np.where(inside, r, np.nan),
-        "speed_mps": np.where(inside, -along * v, np.nan),
+        "speed_mps": np.where(inside, -along * v_carriage, np.nan),
         "stage_x_m": np.where(inside, x, np.nan),
         "stage_v_mps": np.where(inside, v, np.nan),
     }
@@ -832,6 +887,9 @@ def summarize(outcome: RunOutcome) -> dict[str, Any]:
         "waveform": f"{exp.preset}/{exp.waveform.family}",
         "fs_hz": outcome.fs_hz,
         "sound_speed_mps": exp.sound_speed_mps,
+        # Where c came from: a required sound-speed calibration, or the experiment file.
+        "sound_speed_from": outcome.calibrations.id_of("sound-speed") or "experiment file",
+        "calibrations": list(outcome.calibrations.ids),
         "signal_s": round(outcome.signal_s, 4),
         "wall_s": round(outcome.wall_s, 2),
         "real_time_factor": round(outcome.signal_s / outcome.wall_s, 4) if outcome.wall_s else None,

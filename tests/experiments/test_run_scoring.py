@@ -190,3 +190,30 @@ def test_reports_answered_late_are_left_out_of_the_truth() -> None:
     # Kept, it would have pulled the truth by up to 0.45 m.
     tel.reply_s[k] = TELEMETRY_MAX_REPLY_S
     assert np.nanmax(np.abs(telemetry_truth(out)["stage_x_m"] - clean["stage_x_m"])) > 0.4
+
+
+def test_a_stage_calibration_corrects_the_truth_not_the_scoring() -> None:
+    # Scale 1.002 about -3 m, backlash 1 mm: the carriage is where the calibration says,
+    # so the truth's range follows it, and its speed is 1.002 times the reported one. The
+    # scored segment stays in the tow plan's commanded coordinates.
+    from hil.experiments.calibration.apply import StagePositionCorrection
+    from hil.experiments.run_calibrations import RunCalibrations
+
+    plain = _outcome(T_TEL, T_EST)
+    corr = StagePositionCorrection(scale=1.002, backlash_m=0.001, reference_m=-3.0)
+    calibrated = _outcome(T_TEL, T_EST)
+    calibrated.calibrations = RunCalibrations(ids=("stage-x",), stage=corr, kinds=("stage",))
+    a, b = telemetry_truth(plain), telemetry_truth(calibrated)
+    np.testing.assert_array_equal(scored_mask(plain), scored_mask(calibrated))
+    np.testing.assert_array_equal(a["stage_x_m"], b["stage_x_m"])
+    scored = scored_mask(plain)
+    # Moving -x: half the backlash adds +0.5 mm and the scale moves -2 m by +2 mm, -5 m by
+    # -4 mm, so the carriage is 2.5 mm short of -2 m and 3.5 mm past -5 m (on the axis
+    # through the transducer: the range changes by as much).
+    x = a["stage_x_m"][scored]
+    x_true = -3.0 + 1.002 * (x + 3.0) + 0.0005
+    np.testing.assert_allclose(b["range_m"][scored], EXP.range_at(x_true), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(b["speed_mps"][scored], 1.002 * a["speed_mps"][scored], rtol=1e-12)
+    dr = (b["range_m"] - a["range_m"])[scored]  # the target nears as the carriage goes -x
+    assert dr.max() == pytest.approx(0.0025, abs=1e-5)
+    assert dr.min() == pytest.approx(-0.0035, abs=1e-5)

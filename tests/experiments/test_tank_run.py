@@ -83,6 +83,61 @@ def test_missing_calibration_is_refused_before_anything_runs(tmp_path: Path) -> 
     assert not (tmp_path / "run" / "run.h5").exists()
 
 
+def _store_calibrations(store: Path, latency_rate_hz: float = 192_000.0) -> dict[str, str]:
+    from hil.experiments.calibration.latency import LatencyResult
+    from hil.experiments.calibration.sound_speed import SoundSpeedResult
+    from hil.experiments.calibration.stage import StageResult
+    from hil.experiments.calibration.store import CalibrationStore
+
+    cal = CalibrationStore(store)
+    latency = LatencyResult((64, 64, 65), latency_rate_hz, 64, 64.3, 0.5, 1, 40.0, 0.5)
+    c = SoundSpeedResult(1490.0, 0.3, "time-of-flight")
+    stage = StageResult(1.002, 1e-4, 0.001, 5e-5, -3.0, -1, 1490.0)
+    return {
+        kind: cal.save(kind, result, {"device": "test"}).id
+        for kind, result in (("latency", latency), ("sound-speed", c), ("stage", stage))
+    }
+
+
+def test_required_calibrations_are_loaded_and_applied(tmp_path: Path) -> None:
+    from hil.experiments.run_calibrations import load_run_calibrations
+
+    ids = _store_calibrations(tmp_path / "cal")
+    text = _edit("required = []", 'required = ["sound-speed", "stage", "latency"]').replace(
+        'store = "calibration"', f'store = "{tmp_path / "cal"}"'
+    )
+    exp = parse_experiment(text)
+    cals = load_run_calibrations(exp, 192_000.0)
+    assert cals.ids == (ids["sound-speed"], ids["stage"], ids["latency"])
+    assert cals.id_of("latency") == ids["latency"] and cals.id_of("level") is None
+    assert cals.sound_speed_mps == 1490.0 and cals.latency_samples == 64
+    assert cals.stage is not None and (cals.stage.scale, cals.stage.backlash_m) == (1.002, 0.001)
+    applied = cals.apply(exp)
+    assert applied.sound_speed_mps == 1490.0 and exp.sound_speed_mps == pytest.approx(
+        1482.38, abs=0.01
+    )
+    # Kinds the file does not list are not used, though the store holds them.
+    only_stage = parse_experiment(text.replace('"sound-speed", "stage", "latency"', '"stage"'))
+    cals = load_run_calibrations(only_stage, 192_000.0)
+    assert (cals.sound_speed_mps, cals.latency_samples) == (None, None)
+    assert cals.apply(only_stage) is only_stage
+
+
+def test_a_latency_calibration_at_another_rate_is_refused_before_anything_runs(
+    tmp_path: Path,
+) -> None:
+    _store_calibrations(tmp_path / "cal", latency_rate_hz=48_000.0)
+    text = _edit("required = []", 'required = ["latency"]').replace(
+        'store = "calibration"', f'store = "{tmp_path / "cal"}"'
+    )
+    with pytest.raises(ConfigError) as info:
+        run_experiment(parse_experiment(text), folder=tmp_path / "run")
+    message = str(info.value)
+    assert "calibration 'latency' = 'measured at 48000 Hz' is not allowed" in message
+    assert "must be the run's rate, 192000 Hz" in message and "hil calibrate latency" in message
+    assert not (tmp_path / "run" / "run.h5").exists()
+
+
 def test_mixed_simulated_and_real_devices_are_refused(tmp_path: Path) -> None:
     exp = parse_experiment(_edit('stage = "sim://stage"', 'stage = "serial:///dev/ttyUSB9"'))
     with pytest.raises(ConfigError, match="both simulated"):

@@ -27,6 +27,28 @@ from sim_devices.stage.controller import GrblSimConfig
 from sim_devices.stage.on_pty import SimulatedGrblOnPty
 
 LOST_AT_START = 500  # ADC samples lost to an overrun as the stream starts
+LATENCY = 64  # converters and cable, samples
+ECHO_DELAY = 2000  # a fixed echo: 2000 samples at 192 kHz, about 7.7 m
+
+
+class WiredTank:
+    """The board's world wired as for a tank run: DAC output to ADC input 2 by a cable (the
+    monitor), and to ADC input 1 as one fixed echo. ``monitor = False`` unplugs the cable.
+    Shapes: ``dac_block`` (n, 1) full scale in, (n, 2) out."""
+
+    def __init__(self) -> None:
+        self.monitor = True
+        self._cable = LoopbackWorld(delay_samples=LATENCY, gain=0.5)
+        self._echo = LoopbackWorld(delay_samples=LATENCY + ECHO_DELAY, gain=0.05)
+
+    def reset(self) -> None:
+        self._cable.reset()
+        self._echo.reset()
+
+    def __call__(self, dac_block: np.ndarray, first_sample: int, /) -> np.ndarray:
+        cable = self._cable(dac_block, first_sample)[:, :1]
+        echo = self._echo(dac_block, first_sample)[:, :1]
+        return np.hstack([echo, cable if self.monitor else np.zeros_like(cable)])
 
 
 @dataclass
@@ -36,15 +58,22 @@ class PtyDevices:
     board: SimulatedBoardOnPty
     stage: SimulatedGrblOnPty
     faults: FaultPlan
+    world: WiredTank
 
-    def experiment(self, out: Path) -> Experiment:
-        """The short built-in pass with the devices given by their pty paths."""
+    def experiment(self, out: Path, calibration: str = "") -> Experiment:
+        """The short built-in pass with the devices given by their pty paths, the receiver
+        keeping stationary echoes (the wired echo does not move); ``calibration`` replaces
+        the ``[calibration]`` table's keys."""
         text = (
             DEFAULT_EXPERIMENT.replace('"sim://board"', f'"{self.board.port_name}"')
             .replace('"sim://stage"', f'"{self.stage.port_name}"')
             .replace("end_m = -5.0", "end_m = -3.5")
             .replace('output_dir = "runs"', f'output_dir = "{out}"')
+            .replace("options = { reverb_speed_mps = 0.8 }", "")
         )
+        if calibration:
+            head, _, tail = text.partition("[calibration]\n")
+            text = head + "[calibration]\n" + calibration + "\n" + tail.split("\n\n", 1)[1]
         exp = parse_experiment(text)
         assert not exp.simulated
         return exp
@@ -69,11 +98,10 @@ def devices(monkeypatch: pytest.MonkeyPatch) -> Iterator[PtyDevices]:
         )
     ).start()
     faults = FaultPlan(seed=3)
-    board_sim = SimulatedBoardOnPty(
-        world=LoopbackWorld(delay_samples=64, gain=0.5), faults=faults
-    ).start()
+    world = WiredTank()
+    board_sim = SimulatedBoardOnPty(world=world, faults=faults).start()
     try:
-        yield PtyDevices(board_sim, stage_sim, faults)
+        yield PtyDevices(board_sim, stage_sim, faults, world)
     finally:
         board_sim.close()
         stage_sim.close()
@@ -98,6 +126,8 @@ def test_a_run_over_devices_given_by_port_reports_its_own_xruns_and_a_lost_start
     summary = summarize(outcome)
     write_summary(outcome, summary)
     assert summary["error"] == "" and not summary["interrupted"]
+    assert summary["loopback_latency_samples"] == LATENCY  # measured on the monitor
+    assert summary["calibrations"] == [] and summary["sound_speed_from"] == "experiment file"
     # Exactly the board's own count since the run started (on a loaded machine the
     # simulated board, paced by the wall clock, may add real xruns to the injected ones).
     assert counters[0] >= 6 and counters[1] >= 4
@@ -161,3 +191,67 @@ def test_a_refusal_once_transmitting_ends_the_run_safely_with_the_reason(
         # Up to the refused block, which was recorded before the receiver refused it.
         block = round(tank_run._BLOCK_S * 192_000)
         assert outcome.samples > 0 and rec.n_samples - outcome.samples in (0, block)
+
+
+@pytest.mark.slow
+def test_without_a_monitor_signal_the_run_stops_and_says_what_to_cable(
+    tmp_path: Path, devices: PtyDevices
+) -> None:
+    devices.world.monitor = False
+    outcome = run_experiment(
+        devices.experiment(tmp_path), folder=tmp_path / "run", view=LiveView(enabled=False)
+    )
+    assert outcome.error.startswith(
+        "RuntimeError: no loopback on the DAC monitor input (ADC input 2): normalised"
+        " correlation 0.00 < 0.5"
+    )
+    assert "Cable DAC output 2 to ADC input 2" in outcome.error
+    assert 'calibration.required = ["latency"]' in outcome.error
+    assert outcome.estimates == [] and devices.board.call(lambda b: b.conn.state.name) != (
+        "STREAMING"
+    )
+
+
+@pytest.mark.slow
+def test_required_calibrations_are_applied_in_the_run(tmp_path: Path, devices: PtyDevices) -> None:
+    from hil.experiments.calibration.latency import LatencyResult
+    from hil.experiments.calibration.sound_speed import SoundSpeedResult
+    from hil.experiments.calibration.stage import StageResult
+    from hil.experiments.calibration.store import CalibrationStore
+
+    store = CalibrationStore(tmp_path / "cal")
+    ids = {
+        kind: store.save(kind, result, {"device": "test"}).id
+        for kind, result in (
+            ("latency", LatencyResult((LATENCY,) * 3, 192_000.0, LATENCY, 64.0, 0.0, 0, 40.0, 0.5)),
+            ("sound-speed", SoundSpeedResult(1490.0, 0.3, "time-of-flight")),
+            ("stage", StageResult(1.002, 1e-4, 0.001, 5e-5, -3.0, -1, 1490.0)),
+        )
+    }
+    # The monitor cable is out: the calibrated latency places the receiver's sample 0.
+    devices.world.monitor = False
+    exp = devices.experiment(
+        tmp_path,
+        f'store = "{tmp_path / "cal"}"\nmax_age_days = 1.0\n'
+        'required = ["latency", "sound-speed", "stage"]',
+    )
+    folder = tmp_path / "run"
+    outcome = run_experiment(exp, folder=folder, view=LiveView(enabled=False))
+    summary = summarize(outcome)
+    assert summary["error"] == ""
+    assert summary["calibrations"] == [ids["latency"], ids["sound-speed"], ids["stage"]]
+    assert summary["sound_speed_mps"] == 1490.0
+    assert summary["sound_speed_from"] == ids["sound-speed"]
+    assert summary["loopback_latency_samples"] == LATENCY
+    assert outcome.calibrations.stage is not None and outcome.calibrations.stage.scale == 1.002
+    # The fixed echo at the calibrated c: (ECHO_DELAY / fs) * c / 2 = 7.760 m.
+    ranges = np.array([e.range_m for e in outcome.estimates])
+    assert np.median(ranges) == pytest.approx(ECHO_DELAY / 192_000.0 * 1490.0 / 2, abs=0.01)
+    with RunRecording.open(folder / "run.h5") as rec:
+        assert rec.metadata.calibration_ids == tuple(summary["calibrations"])
+        assert rec.origin_sample == outcome.start_index + LATENCY
+        (note,) = [e for e in rec.events() if e.kind == "note"]
+        assert note.text == (
+            f"loopback latency {LATENCY} samples from calibration {ids['latency']} (the DAC"
+            " monitor input carried no loopback: correlation 0.00)"
+        )
