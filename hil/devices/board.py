@@ -980,6 +980,9 @@ class Board:
         self.start(source)
         if expected is not None:
             self.gaps.reset(expected)  # the span lost while away shows up as a GAP
+            if self.ring is not None:
+                # Lost before the first frame came: the ring still expects the first start.
+                self.ring.expect(expected)
 
 
 class _ResumedSource:

@@ -642,8 +642,9 @@ polling at no more than 5 Hz); use the default 0.2
         GRBL samples its state on the main-loop pass after the '?' arrives (well under a
         millisecond later), while the report's ~60 bytes take 5 ms at 115 200 baud and the
         host may read them later still: a stalled host would otherwise date the position
-        late by the whole stall. A report with no query in flight gets its receipt time,
-        with ``reply_s`` 0.
+        late by the whole stall. A report with no query in flight gets its receipt time and
+        an infinite ``reply_s``: it answers a query the driver no longer waits for, or none
+        (a '?' typed on a shared terminal), so its instant is unknown.
 
         While a query given up as lost may still be answered (for
         :data:`QUERY_FORGOTTEN_S` after it was sent), a report cannot be told from its late
@@ -659,8 +660,7 @@ polling at no more than 5 Hz); use the default 0.2
             return asked, math.inf if self._lost else received - asked
         if self._lost:
             self._lost.popleft()  # its late answer, with none in flight: nothing else awaited
-            return received, math.inf
-        return received, 0.0
+        return received, math.inf
 
     def _soft_reset_and_wait(self, timeout: float) -> None:
         banners = self._banners

@@ -57,9 +57,9 @@ class StageStatus:
         later, by its transmission and however long the host took to read it), or when it
         was received if no query was pending.
     reply_s:
-        How long after that query the report was received, s (0 with no query pending;
-        infinite while a query the driver gave up as lost may still be answered late, as
-        the report may be that answer).
+        How long after that query the report was received, s (infinite with no query
+        pending, and while a query the driver gave up as lost may still be answered late,
+        as the report may be that answer: its instant is unknown).
         The controller sampled its state somewhere in between: a long reply (a stalled host
         or controller) leaves that instant uncertain by up to ``reply_s``.
     """

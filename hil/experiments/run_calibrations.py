@@ -49,10 +49,23 @@ class RunCalibrations:
         return dict(zip(self.kinds, self.ids, strict=True)).get(kind)
 
     def apply(self, exp: Experiment) -> Experiment:
-        """``exp`` with the calibrated sound speed, if one is required."""
-        if self.sound_speed_mps is None:
+        """``exp`` with the calibrated sound speed (also in its waveform spec), if one is
+        required; :class:`ConfigError` if ``receiver.max_range_m`` is then beyond the
+        schedule's unambiguous range."""
+        c = self.sound_speed_mps
+        if c is None:
             return exp
-        return dataclasses.replace(exp, sound_speed_mps=self.sound_speed_mps)
+        r_unamb = exp.schedule.unambiguous_range_m(c)
+        if exp.max_range_m > r_unamb:
+            raise ConfigError(
+                "receiver.max_range_m",
+                exp.max_range_m,
+                f"<= the unambiguous range {r_unamb:.2f} m at the calibrated sound speed"
+                f" {c:.1f} m/s (calibration {self.id_of('sound-speed')})",
+                "lower receiver.max_range_m, or check that calibration",
+            )
+        waveform = dataclasses.replace(exp.waveform, sound_speed_mps=c)
+        return dataclasses.replace(exp, sound_speed_mps=c, waveform=waveform)
 
 
 def load_run_calibrations(exp: Experiment, fs_hz: float) -> RunCalibrations:

@@ -146,10 +146,10 @@ def xrun_counts(status: object | None) -> tuple[int, int]:
 
 def xruns_since(before: tuple[int, int], status: object | None) -> tuple[int, int]:
     """``(dac_underruns, adc_overruns)`` since the counts ``before`` (from
-    :func:`xrun_counts`), in ``status``; the board's counters are u32, so the difference is
-    taken modulo 2^32 (it survives a wrap)."""
-    after = xrun_counts(status)
-    return (after[0] - before[0]) % (1 << 32), (after[1] - before[1]) % (1 << 32)
+    :func:`xrun_counts`), in ``status``. A counter lower than before has restarted (the
+    board was power-cycled and the driver reconnected): its count is then the new value."""
+    (dac, adc), (dac0, adc0) = xrun_counts(status), before
+    return (dac - dac0 if dac >= dac0 else dac), (adc - adc0 if adc >= adc0 else adc)
 
 
 def sample_zero_time_s(pairs: list[tuple[int, float]], fs: float) -> float | None:
@@ -218,11 +218,19 @@ def measure_loopback(
     lags = min(max_lag, n - 1)
     nfft = 1 << (2 * n - 1).bit_length()
     m, s = np.asarray(monitor[:n], dtype=float), np.asarray(sent[:n], dtype=float)
-    xc = np.fft.irfft(np.fft.rfft(m, nfft) * np.conj(np.fft.rfft(s, nfft)), nfft)
-    lag = int(np.argmax(xc[: lags + 1]))
+    spectrum = np.fft.rfft(m, nfft) * np.conj(np.fft.rfft(s, nfft))
+    # The envelope of the cross-correlation (its analytic signal: positive frequencies
+    # doubled): a few tones a couple of kHz apart give a correlation whose carrier peaks
+    # repeat every few hundred µs, and a delay between two samples can put a neighbouring
+    # carrier peak above the true one. The envelope peaks at the delay.
+    analytic = np.zeros(nfft, dtype=complex)
+    analytic[: spectrum.size] = spectrum
+    analytic[1 : spectrum.size - 1] *= 2.0
+    envelope = np.abs(np.fft.ifft(analytic))
+    lag = int(np.argmax(envelope[: lags + 1]))
     # Over the overlap at that delay: monitor[lag:] against sent[:n - lag].
     energy = float(np.sum(m[lag:] ** 2) * np.sum(s[: n - lag] ** 2))
-    rho = float(xc[lag] / np.sqrt(energy)) if energy > 0 else 0.0
+    rho = float(envelope[lag] / np.sqrt(energy)) if energy > 0 else 0.0
     return lag, rho
 
 
@@ -238,10 +246,12 @@ def _loopback_latency(lat: int, rho: float, cals: RunCalibrations) -> tuple[int,
         return lat, note
     if calibrated is None:
         raise RuntimeError(
-            f"no loopback on the DAC monitor input (ADC input 2): normalised correlation"
-            f" {rho:.2f} < {LOOPBACK_MIN_CORRELATION}, so the loopback latency cannot be"
-            " measured. Cable DAC output 2 to ADC input 2 (docs/tank-run.md), or require a"
-            ' latency calibration: calibration.required = ["latency"]'
+            f"no loopback on the DAC monitor input (ADC input 2, channel 1): normalised"
+            f" correlation {rho:.2f} < {LOOPBACK_MIN_CORRELATION}, so the loopback latency"
+            " cannot be measured. Connect the transmit drive to ADC input 2 (on an audio"
+            " interface: output 2, which plays the same signal; on the board: a tap on its"
+            " DAC output; docs/tank-run.md), or require a latency calibration:"
+            ' calibration.required = ["latency"]'
         )
     return calibrated, (
         f"loopback latency {calibrated} samples from calibration {cals.id_of('latency')}"
@@ -386,7 +396,9 @@ def run_experiment(
     wall0 = time.monotonic()
     next_index = 0
     start_index = 0
-    xruns_before = (0, 0)  # xrun counters at the start of transmission
+    # The device's xrun counters before transmission starts (a board counts them since it
+    # powered up, and only while streaming); None until it has reported a status.
+    xruns_before: tuple[int, int] | None = None
     transmitting = False
     heap = HeapFreeze()
     try:
@@ -463,10 +475,10 @@ def run_experiment(
         synth = BlockSynthesizer(exp.schedule, fs, amplitude=exp.amplitude)
         # Board and audio interface both ask for samples by their number in the
         # transmission: sample k plays at start_index + k.
+        if board.last_status is not None:
+            xruns_before = xrun_counts(board.last_status)
         start_index = board.start(synth.render)
         transmitting = True
-        # A board counts xruns since it powered up: the run's are those after its start.
-        xruns_before = xrun_counts(board.last_status)
         next_index = start_index
         doc = schedule_document(
             exp.schedule,
@@ -566,6 +578,9 @@ def run_experiment(
                         tail_until = now() + _TAIL_S
                 if st.alarm is not None:
                     raise RuntimeError(f"stage alarm {st.alarm} during the run")
+            if xruns_before is None and board.last_status is not None:
+                # No status before the start: the first one is the baseline.
+                xruns_before = xrun_counts(board.last_status)
             # Sync pairs into the recording as they arrive.
             collect_sync_pairs(board, run_pairs)
             if writer is not None:
@@ -666,8 +681,11 @@ def run_experiment(
     finally:
         heap.stop()
         view.close()
-        failing = interrupted or bool(outcome_error) or sys.exc_info()[0] is not None
+        refused = sys.exc_info()[0] is not None  # a refusal before transmitting, raised
+        failing = interrupted or bool(outcome_error) or refused
         _safe_stop(board, stage, writer, hold=failing)
+        if refused and tank is not None:
+            tank.close()  # no outcome follows: stop the simulated tank's process here
     # Telemetry onto sample time after the run, by minimum-delay filtering of the SYNC pairs:
     # a SYNC is stamped when the host reads it, which during streaming is after the ADC
     # frames queued before it, so every pair is late by a varying backlog. With the known
@@ -691,7 +709,7 @@ def run_experiment(
             with contextlib.suppress(Exception):
                 exact = _exact_truth(tank, exp, fs, start_index, estimates)
     elif board is not None:
-        dac_underruns, adc_overruns = xruns_since(xruns_before, board.last_status)
+        dac_underruns, adc_overruns = xruns_since(xruns_before or (0, 0), board.last_status)
     with contextlib.suppress(Exception):
         if writer is not None:
             for kind, index, length, text in events:

@@ -3,6 +3,7 @@ simulated run end to end (short), replay equals live, and kill -9 leaves a reada
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import signal
@@ -113,8 +114,15 @@ def test_required_calibrations_are_loaded_and_applied(tmp_path: Path) -> None:
     assert cals.sound_speed_mps == 1490.0 and cals.latency_samples == 64
     assert cals.stage is not None and (cals.stage.scale, cals.stage.backlash_m) == (1.002, 0.001)
     applied = cals.apply(exp)
-    assert applied.sound_speed_mps == 1490.0 and exp.sound_speed_mps == pytest.approx(
-        1482.38, abs=0.01
+    assert applied.sound_speed_mps == 1490.0 and applied.waveform.sound_speed_mps == 1490.0
+    assert exp.sound_speed_mps == pytest.approx(1482.38, abs=0.01)
+    # A c so low that the receiver's range is beyond the unambiguous one: named, with the id.
+    slow = dataclasses.replace(cals, sound_speed_mps=100.0)
+    with pytest.raises(ConfigError) as info:
+        slow.apply(exp)
+    assert str(info.value).startswith("receiver.max_range_m = 12.0 is not allowed: must be <=")
+    assert f"at the calibrated sound speed 100.0 m/s (calibration {ids['sound-speed']})" in str(
+        info.value
     )
     # Kinds the file does not list are not used, though the store holds them.
     only_stage = parse_experiment(text.replace('"sound-speed", "stage", "latency"', '"stage"'))
@@ -136,6 +144,28 @@ def test_a_latency_calibration_at_another_rate_is_refused_before_anything_runs(
     assert "calibration 'latency' = 'measured at 48000 Hz' is not allowed" in message
     assert "must be the run's rate, 192000 Hz" in message and "hil calibrate latency" in message
     assert not (tmp_path / "run" / "run.h5").exists()
+
+
+def _child_commands() -> list[str]:
+    """Command lines of this process's live children (Linux /proc)."""
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(") ", 1)[1].split()
+            if int(fields[1]) == os.getpid() and fields[0] != "Z":
+                found.append((stat.parent / "cmdline").read_text().replace("\0", " "))
+        except (OSError, IndexError, ValueError):
+            continue  # it ended while we looked
+    return found
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc")
+def test_a_refusal_in_a_simulated_run_leaves_no_simulated_tank_running(tmp_path: Path) -> None:
+    # The simulated tank's process starts first; the receiver then refuses its options.
+    text = _edit("reverb_speed_mps = 0.8", "reverb_speed_mps = -5.0")
+    with pytest.raises(ConfigError, match=r"reverb_speed_mps = -5\.0 is not allowed"):
+        run_experiment(parse_experiment(text), folder=tmp_path / "run")
+    assert not [c for c in _child_commands() if "hil.experiments.sim_tank" in c]
 
 
 def test_mixed_simulated_and_real_devices_are_refused(tmp_path: Path) -> None:
@@ -181,8 +211,8 @@ def test_the_run_counts_only_the_xruns_after_its_start() -> None:
     before = xrun_counts(_board_status(5, 2))
     assert xruns_since(before, _board_status(7, 2)) == (2, 0)
     assert xruns_since(before, _board_status(5, 2)) == (0, 0)
-    # u32 counters that wrapped during the run.
-    assert xruns_since(xrun_counts(_board_status(2**32 - 1, 0)), _board_status(1, 0)) == (2, 0)
+    # A counter that went down restarted (power-cycled board, driver reconnected).
+    assert xruns_since(xrun_counts(_board_status(9, 4)), _board_status(2, 4)) == (2, 0)
     # No status yet at the start (audio: counted from the stream's start).
     assert xruns_since((0, 0), AudioDaqStatus(frames=1, overruns=1, underruns=0)) == (0, 1)
     assert xruns_since((0, 0), None) == (0, 0)
@@ -192,6 +222,28 @@ def test_measure_latency_golden() -> None:
     x = np.random.default_rng(3).normal(size=5000)
     assert measure_latency(np.concatenate([np.zeros(64), x])[:5000], x) == 64
     assert measure_latency(x, x) == 0
+
+
+@pytest.mark.parametrize(
+    ("fraction", "expected"), [(0.0, 64), (0.15, 64), (0.45, 64), (0.55, 65), (0.7, 65), (0.9, 65)]
+)
+def test_loopback_latency_between_two_samples_rounds_to_a_neighbour(
+    fraction: float, expected: int
+) -> None:
+    # The built-in run's four tones 2 kHz apart: the raw cross-correlation's carrier peaks
+    # repeat every 0.5 ms, and a delay between two samples put a neighbouring one (about 96
+    # samples off) on top. The envelope's peak is the nearest sample to the delay.
+    from hil.experiments.tank_run import measure_loopback
+    from hil.signals.synthesis import BlockSynthesizer
+
+    exp = parse_experiment(DEFAULT_EXPERIMENT)
+    n = 9600  # the run's 50 ms probe at 192 kHz
+    sent = BlockSynthesizer(exp.schedule, exp.waveform.fs_hz, amplitude=0.5).render(0, n)
+    f = np.fft.rfftfreq(2 * n)
+    padded = np.concatenate([sent, np.zeros(n)])  # silence after: the shift wraps nothing in
+    delayed = np.fft.irfft(np.fft.rfft(padded) * np.exp(-2j * np.pi * f * (64 + fraction)))
+    lag, rho = measure_loopback(0.3 * delayed[:n], sent)
+    assert lag == expected and rho > 0.99
 
 
 def test_sample_zero_time_survives_a_stall_where_most_syncs_are_late() -> None:

@@ -202,10 +202,10 @@ def test_without_a_monitor_signal_the_run_stops_and_says_what_to_cable(
         devices.experiment(tmp_path), folder=tmp_path / "run", view=LiveView(enabled=False)
     )
     assert outcome.error.startswith(
-        "RuntimeError: no loopback on the DAC monitor input (ADC input 2): normalised"
-        " correlation 0.00 < 0.5"
+        "RuntimeError: no loopback on the DAC monitor input (ADC input 2, channel 1):"
+        " normalised correlation 0.00 < 0.5"
     )
-    assert "Cable DAC output 2 to ADC input 2" in outcome.error
+    assert "Connect the transmit drive to ADC input 2" in outcome.error
     assert 'calibration.required = ["latency"]' in outcome.error
     assert outcome.estimates == [] and devices.board.call(lambda b: b.conn.state.name) != (
         "STREAMING"

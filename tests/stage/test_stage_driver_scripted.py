@@ -366,6 +366,7 @@ def test_a_report_nobody_asked_for_is_dated_on_receipt() -> None:
     peer._rx += _report(120, b"Idle")  # e.g. a reply to a '?' typed on a shared terminal
     stage._wait(lambda: stage._reports >= 2, 1.0, "the report")
     assert stage.last_status is not None and stage.last_status.host_time == 3.0
+    assert stage.last_status.reply_s == math.inf  # when GRBL sampled it is unknown
 
 
 def test_a_late_answer_to_a_lost_query_is_flagged_and_the_pairing_recovers() -> None:
