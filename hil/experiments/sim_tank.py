@@ -93,6 +93,24 @@ class SimulatedTank:
                 sim.close()
 
 
+def tank_stage_config() -> Any:
+    """The simulated tank's GRBL controller (a ``sim_devices.stage.controller.GrblSimConfig``):
+    a fast 10 m axis, powered up in ALARM 20 mm from home, so a run homes it first."""
+    from sim_devices.stage.controller import GrblSimConfig
+
+    return GrblSimConfig(
+        steps_per_mm=80.0,
+        max_rate_mm_min=STAGE_MAX_RATE_MM_MIN,
+        acceleration_mm_s2=STAGE_ACCEL_MM_S2,
+        max_travel_mm=STAGE_TRAVEL_MM,
+        homing=True,
+        homing_seek_mm_min=6000.0,
+        homing_feed_mm_min=600.0,
+        power_up_position_mm=-20.0,
+        host_silence_timeout_s=5.0,
+    )
+
+
 def start_simulated_tank(exp: Experiment, wall0: float | None = None) -> SimulatedTank:
     """Start the simulated stage and board for ``exp`` (in this process) and return them."""
     from sim_devices.acoustics.channel import Channel, DirectBlast, Receiver, Target
@@ -101,25 +119,11 @@ def start_simulated_tank(exp: Experiment, wall0: float | None = None) -> Simulat
     from sim_devices.acoustics.tank import Tank
     from sim_devices.acoustics.trajectory import Fixed, Live
     from sim_devices.board import SimulatedBoardOnPty
-    from sim_devices.stage.controller import GrblSimConfig
     from sim_devices.stage.on_pty import SimulatedGrblOnPty
 
     sim = exp.simulation
     clock = ScaledClock(sim.time_scale, wall0)
-    stage_sim = SimulatedGrblOnPty(
-        GrblSimConfig(
-            steps_per_mm=80.0,
-            max_rate_mm_min=STAGE_MAX_RATE_MM_MIN,
-            acceleration_mm_s2=STAGE_ACCEL_MM_S2,
-            max_travel_mm=STAGE_TRAVEL_MM,
-            homing=True,
-            homing_seek_mm_min=6000.0,
-            homing_feed_mm_min=600.0,
-            power_up_position_mm=-20.0,
-            host_silence_timeout_s=5.0,
-        ),
-        clock=clock,
-    ).start()
+    stage_sim = SimulatedGrblOnPty(tank_stage_config(), clock=clock).start()
 
     fs = float(exp.waveform.fs_hz)
     c = exp.sound_speed_mps

@@ -18,12 +18,11 @@ import pytest
 from hil.errors import ConfigError
 from hil.experiments import tank_run
 from hil.experiments.experiment import DEFAULT_EXPERIMENT, Experiment, parse_experiment
-from hil.experiments.sim_tank import STAGE_ACCEL_MM_S2, STAGE_MAX_RATE_MM_MIN, STAGE_TRAVEL_MM
+from hil.experiments.sim_tank import tank_stage_config
 from hil.experiments.tank_run import LiveView, run_experiment, summarize, write_summary
 from hil.recording.reader import RunRecording
 from hil.recording.replay import ReceiverFeed
 from sim_devices.board import FaultPlan, LoopbackWorld, SimulatedBoardOnPty
-from sim_devices.stage.controller import GrblSimConfig
 from sim_devices.stage.on_pty import SimulatedGrblOnPty
 
 LOST_AT_START = 500  # ADC samples lost to an overrun as the stream starts
@@ -84,19 +83,7 @@ def devices(monkeypatch: pytest.MonkeyPatch) -> Iterator[PtyDevices]:
     # The simulated devices share this process with the host: a loaded CI machine may stall
     # it for more than the hardware watchdog's 1 s, which would stop the board mid-run.
     monkeypatch.setattr(tank_run, "_WATCHDOG_MS", 10_000)
-    stage_sim = SimulatedGrblOnPty(
-        GrblSimConfig(
-            steps_per_mm=80.0,
-            max_rate_mm_min=STAGE_MAX_RATE_MM_MIN,
-            acceleration_mm_s2=STAGE_ACCEL_MM_S2,
-            max_travel_mm=STAGE_TRAVEL_MM,
-            homing=True,
-            homing_seek_mm_min=6000.0,
-            homing_feed_mm_min=600.0,
-            power_up_position_mm=-20.0,
-            host_silence_timeout_s=5.0,
-        )
-    ).start()
+    stage_sim = SimulatedGrblOnPty(tank_stage_config()).start()  # paced by the wall clock
     faults = FaultPlan(seed=3)
     world = WiredTank()
     board_sim = SimulatedBoardOnPty(world=world, faults=faults).start()
