@@ -23,7 +23,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TextIO
+from typing import TYPE_CHECKING, Any, Protocol, TextIO
 
 import numpy as np
 
@@ -126,12 +126,21 @@ def board_stopped(board: Any) -> str | None:
     )
 
 
-def xrun_counts(status: object | None) -> tuple[int, int]:
-    """``(dac_underruns, adc_overruns)`` in a device's status: the board's
-    :class:`~firmware_protocol.messages.Status` (``dac_underruns``, ``adc_overruns``, counted
-    since the board powered up) or the audio interface's
-    :class:`~hil.devices.audio.daq.AudioDaqStatus` (``underruns``, ``overruns``, since the
-    stream started); ``(0, 0)`` before any status.
+class XrunStatus(Protocol):
+    """A device status with xrun counters: the board's
+    :class:`~firmware_protocol.messages.Status` (counted since the board powered up) or the
+    audio interface's :class:`~hil.devices.audio.daq.AudioDaqStatus` (since the stream
+    started)."""
+
+    @property
+    def dac_underruns(self) -> int: ...
+
+    @property
+    def adc_overruns(self) -> int: ...
+
+
+def xrun_counts(status: XrunStatus | None) -> tuple[int, int]:
+    """``(dac_underruns, adc_overruns)`` in a device's status; ``(0, 0)`` before any status.
 
     >>> from hil.devices.audio.daq import AudioDaqStatus
     >>> xrun_counts(AudioDaqStatus(frames=4096, overruns=2, underruns=1))
@@ -139,12 +148,10 @@ def xrun_counts(status: object | None) -> tuple[int, int]:
     """
     if status is None:
         return 0, 0
-    if hasattr(status, "dac_underruns"):
-        return int(status.dac_underruns), int(status.adc_overruns)  # type: ignore[attr-defined]
-    return int(status.underruns), int(status.overruns)  # type: ignore[attr-defined]
+    return int(status.dac_underruns), int(status.adc_overruns)
 
 
-def xruns_since(before: tuple[int, int], status: object | None) -> tuple[int, int]:
+def xruns_since(before: tuple[int, int], status: XrunStatus | None) -> tuple[int, int]:
     """``(dac_underruns, adc_overruns)`` since the counts ``before`` (from
     :func:`xrun_counts`), in ``status``. A counter lower than before has restarted (the
     board was power-cycled and the driver reconnected): its count is then the new value."""

@@ -153,6 +153,17 @@ class AudioDaqStatus:
     underruns: int
     """Blocks with output xrun flags (a gap was played before them)."""
 
+    # The board's Status names, so a run reads either device's counters the same way.
+    @property
+    def dac_underruns(self) -> int:
+        """:attr:`underruns`, by the board's name for it."""
+        return self.underruns
+
+    @property
+    def adc_overruns(self) -> int:
+        """:attr:`overruns`, by the board's name for it."""
+        return self.overruns
+
 
 class AudioDaq:
     """An audio interface used as the run's DAC/ADC, with the Board API the runner uses.
