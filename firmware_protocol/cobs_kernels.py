@@ -81,8 +81,14 @@ def encode_into(src: Any, dst: Any) -> int:
 
 
 def warm_up() -> None:
-    """Load (or compile) both kernels now rather than inside the first large frame."""
-    one = np.ones(1, dtype=np.uint8)
+    """Load (or compile) both kernels now rather than inside the first large frame.
+
+    Each for a writable and a read-only source (what ``np.frombuffer`` gives over ``bytes``):
+    numba compiles one machine-code version per argument type, and read-only is another type.
+    A version first needed mid-stream costs about 0.1 s to compile on a fresh checkout (the
+    writer thread starves, the DAC underruns) and milliseconds to load from the cache after.
+    """
     out = np.empty(4, dtype=np.uint8)
-    decode_into(one, out)
-    encode_into(one, out)
+    for one in (np.ones(1, dtype=np.uint8), np.frombuffer(b"\x01", dtype=np.uint8)):
+        decode_into(one, out)
+        encode_into(one, out)

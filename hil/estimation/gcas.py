@@ -462,8 +462,9 @@ class GcasReceiver:
                 )
                 side = self._fine_sums(one[0], sides, 0)
                 fine_doppler(side, a, one[0], i_pk, word, d0, sides)
-                if self.coherent:
-                    self._exact_windows(one[:, 0], one[:, 0], 1)
+                # The coherent readout and the time–codeword map (``on_map``, off here) both
+                # read exact windows, the map also when noncoherent.
+                self._exact_windows(one[:, 0], one[:, 0], 1)
         finally:
             self.on_map = on_map
         self.reset()

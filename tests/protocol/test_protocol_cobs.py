@@ -101,6 +101,43 @@ def test_cobs_compiled_path_is_taken_from_its_threshold() -> None:
     assert calls == [len(large)]
 
 
+_WARM_SCRIPT = """
+import json
+from firmware_protocol import cobs, cobs_kernels as k
+
+def counts():
+    return {f.py_func.__name__: len(f.signatures) for f in (k.decode_into, k.encode_into)}
+
+cobs.warm_up()
+before = counts()
+frame = bytes(range(1, 256)) * 4 + bytes(300)  # over the compiled threshold, zeros inside
+for data in (frame, bytearray(frame)):
+    enc = cobs.encode(data)
+    assert cobs.decode(enc) == frame
+    assert cobs.decode(bytearray(enc)) == frame
+print(json.dumps({"before": before, "after": counts()}))
+"""
+
+
+def test_cobs_warm_up_loads_every_version_a_driver_calls() -> None:
+    # A read-only source (np.frombuffer over bytes) is another numba type: before warm_up
+    # covered it, its first frame compiled mid-stream (0.1 s on a fresh checkout, a DAC
+    # underrun in the first tank run). A fresh interpreter shows what streaming adds.
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    done = subprocess.run(
+        [sys.executable, "-c", _WARM_SCRIPT],
+        capture_output=True, text=True, cwd=root, timeout=300, check=True,
+    )  # fmt: skip
+    result = json.loads(done.stdout.strip().splitlines()[-1])
+    assert result["before"] == {"decode_into": 2, "encode_into": 2}
+    assert result["after"] == result["before"]
+
+
 @pytest.mark.parametrize("zero_fraction", [0.0, 0.01, 0.3, 0.9, 1.0])
 def test_cobs_dense_and_sparse_paths_agree_with_the_oracle(zero_fraction: float) -> None:
     rng = np.random.default_rng(11)
