@@ -85,8 +85,9 @@ def warm_up() -> None:
 
     Each for a writable and a read-only source (what ``np.frombuffer`` gives over ``bytes``):
     numba compiles one machine-code version per argument type, and read-only is another type.
-    A version first needed mid-stream costs about 0.1 s to compile on a fresh checkout (the
-    writer thread starves, the DAC underruns) and milliseconds to load from the cache after.
+    A version first needed mid-stream costs about 0.1 s to compile on a fresh checkout, with
+    the GIL held (the driver's reader and writer threads wait), and milliseconds to load from
+    the cache after.
     """
     out = np.empty(4, dtype=np.uint8)
     for one in (np.ones(1, dtype=np.uint8), np.frombuffer(b"\x01", dtype=np.uint8)):

@@ -121,8 +121,8 @@ print(json.dumps({"before": before, "after": counts()}))
 
 def test_cobs_warm_up_loads_every_version_a_driver_calls() -> None:
     # A read-only source (np.frombuffer over bytes) is another numba type: before warm_up
-    # covered it, its first frame compiled mid-stream (0.1 s on a fresh checkout, a DAC
-    # underrun in the first tank run). A fresh interpreter shows what streaming adds.
+    # covered it, the tank run's first read-only frame compiled mid-stream (0.12 s on a
+    # fresh checkout, GIL held). A fresh interpreter shows what streaming adds.
     import json
     import subprocess
     import sys
