@@ -2,8 +2,10 @@
 
 :class:`PtyEndpoint` opens a pty pair with :func:`os.openpty`, makes the slave raw with
 :func:`tty.setraw` *before* anybody opens it (so no echo, no line editing, no CR/LF
-translation ever touches the bytes), and runs a background thread that pumps bytes between
-the master side and the device. A driver opens :attr:`PtyEndpoint.port_name` like any serial
+translation ever touches the bytes), and serves the master side from two background threads:
+an I/O thread that moves bytes between the pty and two in-memory queues whenever the pty is
+readable or writable, and a device thread that feeds the host's bytes to the device, ticks it
+and queues its output. A driver opens :attr:`PtyEndpoint.port_name` like any serial
 port (``serial.serial_for_url(port_name)``).
 
 The device contract (:class:`SansIODevice`)
@@ -20,9 +22,12 @@ The device contract (:class:`SansIODevice`)
     A host opened the slave / the last host closed it (or died): a pty master sees a hang-up
     (``POLLHUP``/``EIO``) when no process holds the slave open.
 
-All device calls are made from the pump thread while holding :attr:`PtyEndpoint.lock`; to
-inspect or poke the device from another thread, hold the same lock. Every call must return
-quickly and never block.
+All device calls are made from the device thread while holding :attr:`PtyEndpoint.lock`; to
+inspect or poke the device from another thread, hold the same lock. A call may take a while
+(a simulated world computing a whole tick): the host's bytes keep flowing both ways
+meanwhile, as a UART with its own FIFOs keeps moving bytes while firmware computes. Input
+and connection changes reach the device in arrival order; output leaves in the order the
+device produced it (:attr:`PtyEndpoint.output_backlog` is what the host has not taken yet).
 
 Examples
 --------
@@ -49,6 +54,8 @@ import select
 import threading
 import time
 import tty
+from collections import deque
+from collections.abc import Callable
 from types import TracebackType
 from typing import Protocol
 
@@ -75,7 +82,7 @@ def tick_wait_s(next_tick: float, now: float) -> float:
 
 
 class PtyEndpoint:
-    """A raw pty whose master side is served by ``device`` from a background thread.
+    """A raw pty whose master side is served by ``device`` from two background threads.
 
     Parameters
     ----------
@@ -97,24 +104,43 @@ class PtyEndpoint:
         # the port, which is how a killed host is detected. The raw settings stay with the pty.
         os.close(slave)
         os.set_blocking(self._master, False)
-        self._pending = bytearray()
+        # The device thread hands output to the I/O thread through ``_outgoing`` and wakes
+        # it through a pipe (it may sit in select); the I/O thread hands host bytes and
+        # connection changes to the device thread through ``_incoming`` in arrival order.
+        self._io_lock = threading.Lock()
+        self._outgoing = bytearray()
+        self._incoming: deque[bytes | bool] = deque()
+        self._wake_io_r, self._wake_io_w = os.pipe()
+        os.set_blocking(self._wake_io_r, False)
+        os.set_blocking(self._wake_io_w, False)
+        self._wake_device = threading.Event()
         self._stop = threading.Event()
         self._host_present = False
         self._error: BaseException | None = None
-        self._thread = threading.Thread(target=self._run, name="pty-endpoint", daemon=True)
+        self._threads = (
+            threading.Thread(target=self._run, args=(self._io_loop,), name="pty-io", daemon=True),
+            threading.Thread(
+                target=self._run, args=(self._device_loop,), name="pty-device", daemon=True
+            ),
+        )
 
     def start(self) -> PtyEndpoint:
-        """Start the pump thread (returns self)."""
-        self._thread.start()
+        """Start serving (returns self)."""
+        for thread in self._threads:
+            thread.start()
         return self
 
     def close(self) -> None:
-        """Stop the pump thread and close the master side (the host sees a hang-up)."""
+        """Stop both threads and close the master side (the host sees a hang-up)."""
         self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join(timeout=5.0)
-        with contextlib.suppress(OSError):
-            os.close(self._master)
+        self._wake_io()
+        self._wake_device.set()
+        for thread in self._threads:
+            if thread.is_alive():
+                thread.join(timeout=5.0)
+        for fd in (self._master, self._wake_io_r, self._wake_io_w):
+            with contextlib.suppress(OSError):
+                os.close(fd)
         if self._error is not None:
             raise RuntimeError(f"pty endpoint pump failed: {self._error!r}") from self._error
 
@@ -122,6 +148,13 @@ class PtyEndpoint:
     def host_present(self) -> bool:
         """Whether a host currently holds the port open."""
         return self._host_present
+
+    @property
+    def output_backlog(self) -> int:
+        """Bytes the device has produced that the host has not taken yet (beyond what the
+        pty itself buffers)."""
+        with self._io_lock:
+            return len(self._outgoing)
 
     def __enter__(self) -> PtyEndpoint:
         return self.start()
@@ -134,82 +167,139 @@ class PtyEndpoint:
     ) -> None:
         self.close()
 
-    # ------------------------------------------------------------------ pump
-    def _run(self) -> None:
+    # ------------------------------------------------------------------ threads
+    def _run(self, loop: Callable[[], None]) -> None:
         try:
-            self._loop()
+            loop()
         except BaseException as error:  # reported by close(); a dead pump must not be silent
-            self._error = error
+            if self._error is None:
+                self._error = error
+            self._stop.set()  # the other thread stops too: half a device is no device
+            self._wake_io()
+            self._wake_device.set()
 
-    def _loop(self) -> None:
-        # The device ticks every poll_interval; output is written whenever the pty can take
-        # it. Waiting for writability matters: a pty buffer holds only a few KB, so a loop that
-        # waited for host input or the next tick before writing again would cap the stream
-        # at one buffer per tick. select, not poll: its timeout has microsecond resolution,
-        # so the pump sleeps exactly until the next tick (poll's milliseconds either spin
-        # through the last one or tick up to a millisecond late, which starved the DAC FIFO).
-        fd = self._master
+    def _wake_io(self) -> None:
+        with contextlib.suppress(BlockingIOError, OSError):
+            os.write(self._wake_io_w, b"\0")  # a full pipe already holds a wake-up
+
+    def _device_loop(self) -> None:
+        # Device calls (which may be slow: a simulated world computing a whole tick) run
+        # here, never in the I/O thread: while a tick computes, the I/O thread goes on
+        # moving bytes both ways. With one thread doing both, a tick longer than the poll
+        # interval let out only what the pty buffers (about 14 KB) per tick; a simulated
+        # board whose world took 0.2 s per tick queued 0.5 MB of ADC data, its CREDIT
+        # messages queued behind it, and the host could not refill the DAC FIFO in time.
         next_tick = time.monotonic()
         while not self._stop.is_set():
-            writers = [fd] if self._pending else []
-            readable, _, broken = select.select(
-                [fd], writers, [fd], tick_wait_s(next_tick, time.monotonic())
-            )
-            hung_up = False
-            if readable:
+            # Event.wait sleeps to the microsecond: a wait rounded to whole milliseconds
+            # ticked up to a millisecond late at 1 MS/s and starved the DAC FIFO.
+            self._wake_device.wait(tick_wait_s(next_tick, time.monotonic()))
+            self._wake_device.clear()  # before taking the input: a later arrival re-sets it
+            with self._io_lock:
+                incoming = list(self._incoming)
+                self._incoming.clear()
+            with self.lock:
+                for item in _joined(incoming):
+                    if isinstance(item, bool):
+                        hook = getattr(
+                            self.device, "connection_made" if item else "connection_lost", None
+                        )
+                        if hook is not None:
+                            hook()
+                    else:
+                        self.device.receive_data(item)
+                now = time.monotonic()
+                if now >= next_tick:
+                    next_tick = now + self.poll_interval
+                    self.device.tick()
+                out = self.device.data_to_send()
+            if out:
+                with self._io_lock:
+                    self._outgoing += out
+                self._wake_io()
+
+    def _io_loop(self) -> None:
+        # select, not poll: its timeout has microsecond resolution (the back-off below).
+        fd, wake = self._master, self._wake_io_r
+        while not self._stop.is_set():
+            with self._io_lock:
+                writers = [fd] if self._outgoing else []
+            # A host opening the port shows no event on the master: until one is present,
+            # look again every poll interval (a hang-up, though, reads ready at once).
+            timeout = None if self._host_present else self.poll_interval
+            readable, writable, broken = select.select([fd, wake], writers, [fd], timeout)
+            if wake in readable:
+                with contextlib.suppress(BlockingIOError):
+                    os.read(wake, 4096)
+            hung_up = bool(broken)
+            if fd in readable:
                 # A master whose slave is closed reads as ready and then fails with EIO.
                 hung_up |= self._read()
-            if broken:
-                hung_up = True
+            if writable and not hung_up:
+                self._write()
             self._set_host_present(not hung_up)
-            now = time.monotonic()
-            if now >= next_tick:
-                next_tick = now + self.poll_interval
-                with self.lock:
-                    self.device.tick()
-                    self._pending += self.device.data_to_send()
-            else:
-                with self.lock:
-                    self._pending += self.device.data_to_send()
-            self._write()
             if hung_up:
-                # A hung-up master polls ready at once; back off instead of spinning.
+                # A hung-up master selects ready at once; back off instead of spinning.
                 self._stop.wait(self.poll_interval)
 
     def _read(self) -> bool:
-        """Read what the host wrote; return True if the host has hung up."""
+        """Read what the host wrote into the device's input; True if the host hung up."""
         try:
-            data = os.read(self._master, 4096)
+            data = os.read(self._master, 65536)
         except BlockingIOError:
             return False
         except OSError as error:
             if error.errno == errno.EIO:
                 return True
             raise
-        if data:
-            self._set_host_present(True)
-            with self.lock:
-                self.device.receive_data(data)
-        return not data
+        if not data:
+            return True
+        self._set_host_present(True)
+        with self._io_lock:
+            self._incoming.append(data)
+        self._wake_device.set()
+        return False
 
     def _write(self) -> None:
-        while self._pending:
-            try:
-                sent = os.write(self._master, self._pending)
-            except BlockingIOError:
-                return  # the host is not reading; keep the bytes for later
-            except OSError as error:
-                if error.errno == errno.EIO:
-                    return
-                raise
-            del self._pending[:sent]
+        """Write as much pending output as the pty takes now."""
+        with self._io_lock:
+            chunk = bytes(self._outgoing[:65536])
+        try:
+            sent = os.write(self._master, chunk)
+        except BlockingIOError:
+            return  # the host is not reading; keep the bytes for later
+        except OSError as error:
+            if error.errno == errno.EIO:
+                return
+            raise
+        with self._io_lock:
+            del self._outgoing[:sent]  # only this thread takes from the front
 
     def _set_host_present(self, present: bool) -> None:
         if present == self._host_present:
             return
         self._host_present = present
-        hook = "connection_made" if present else "connection_lost"
-        with self.lock:
-            callback = getattr(self.device, hook, None)
-            if callback is not None:
-                callback()
+        with self._io_lock:
+            self._incoming.append(present)
+        self._wake_device.set()
+
+
+def _joined(items: list[bytes | bool]) -> list[bytes | bool]:
+    """Runs of consecutive byte chunks joined into one, connection changes kept in place.
+
+    >>> _joined([True, b"ab", b"c", False, b"d"])
+    [True, b'abc', False, b'd']
+    """
+    out: list[bytes | bool] = []
+    run: list[bytes] = []
+    for item in items:
+        if isinstance(item, bool):
+            if run:
+                out.append(b"".join(run))
+                run = []
+            out.append(item)
+        else:
+            run.append(item)
+    if run:
+        out.append(b"".join(run))
+    return out

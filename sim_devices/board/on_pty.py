@@ -55,13 +55,13 @@ class SimulatedBoardOnPty:
         self.port_name = self.endpoint.port_name
 
     def call(self, fn: Callable[[SimulatedBoard], R]) -> R:
-        """Run ``fn(board)`` under the pump lock (safe from any thread)."""
+        """Run ``fn(board)`` under the endpoint's device lock (safe from any thread)."""
         with self.endpoint.lock:
             return fn(self.board)
 
     def start(self) -> SimulatedBoardOnPty:
         """Start serving (returns self)."""
-        cobs.warm_up()  # the pump thread must not stall in its first ADC frame
+        cobs.warm_up()  # the device thread must not stall in its first ADC frame
         self.endpoint.start()
         return self
 

@@ -43,7 +43,7 @@ class SimulatedGrblOnPty:
         self.port_name = self.endpoint.port_name
 
     def call(self, fn: Callable[[SimulatedGrbl], R]) -> R:
-        """Run ``fn(grbl)`` under the pump lock (safe from any thread)."""
+        """Run ``fn(grbl)`` under the endpoint's device lock (safe from any thread)."""
         with self.endpoint.lock:
             return fn(self.grbl)
 
