@@ -8,10 +8,10 @@ Its world returns a real echo: ADC channel 0 is the DAC output delayed by
 fed by :class:`~hil.signals.synthesis.BlockSynthesizer` from the ``tank-board`` preset
 (random cyclic code, 1 MS/s, 2 ADC channels int16). The host process runs the
 :class:`~hil.devices.board.Board` driver (reader and writer threads), the capture loop and
-:class:`~hil.recording.replay.ReceiverFeed` with GCAS on channel 0. The loop waits until the
-ring holds the receiver's next decision index
-(:attr:`~hil.recording.replay.ReceiverFeed.next_useful_index`: no estimate can come out
-earlier), then feeds everything the ring holds; with ``--every-block`` it feeds every
+:class:`~hil.recording.replay.ReceiverFeed` with GCAS on channel 0. The loop waits, by the
+same rule as ``hil tank-run`` (:meth:`~hil.recording.replay.ReceiverFeed.wait_index`), until
+the ring holds the receiver's next decision index (no estimate can come out earlier) or one
+block, then feeds everything the ring holds up to one block; with ``--every-block`` it feeds every
 ``--min-block-ms`` instead (more calls, the same estimates). The setup's objects are kept
 out of the garbage collector's full passes (:class:`~hil.acquisition.HeapFreeze`), as in
 ``hil tank-run``.
@@ -361,12 +361,11 @@ def run_live(
             server_cpu0 = _process_cpu_s(server.pid)
             while next_index < end_target:
                 waited = time.monotonic()
-                wanted = next_index + min_block
-                useful = min(feed.next_useful_index, end_target)
-                if not every_block and useful > next_index:
-                    # Nothing can come out before the receiver's next decision: wait for
-                    # exactly that (it may come out then), not a block more.
-                    wanted = useful
+                # As `hil tank-run` waits: nothing can come out before the receiver's next
+                # decision, so wait for exactly that (it may come out then), or one block
+                # when no decision comes within it.
+                wanted = next_index + min_block if every_block else feed.wait_index(max_block)
+                wanted = min(wanted, end_target)
                 if not board.wait_for_samples(wanted, timeout_s=2.0):
                     raise RuntimeError(
                         f"no samples past board index {next_index} for 2 s: the board stalled"

@@ -305,6 +305,9 @@ class RunOutcome:
     interrupted: bool = False
     error: str = ""
     latency_samples: int | None = None
+    #: Most the capture loop fell behind the board (samples held but not yet recorded and
+    #: estimated), s of signal. The board's ring holds 8 s: past that, samples are lost.
+    capture_backlog_max_s: float = 0.0
     #: The required calibrations the run applied (see :mod:`hil.experiments.run_calibrations`).
     calibrations: RunCalibrations = field(default_factory=RunCalibrations)
 
@@ -389,6 +392,7 @@ def run_experiment(
 
     stage: Any = None
     board: Any = None
+    backlog_max = 0  # samples: the most the capture loop fell behind the board
     writer: Any = None
     outcome_error = ""
     interrupted = False
@@ -539,7 +543,10 @@ def run_experiment(
             t_now = now()
             if t_now - last_poll >= _POLL_S:
                 st = stage.status()
-                last_poll = t_now
+                # Timed from the reply: status() paces itself at 5 Hz from its own last
+                # query, so timing from before the call made it sleep out a whole interval
+                # at every poll, and the capture in between got one block per 0.2 s.
+                last_poll = now()
                 fit = board.clock_fit
                 idx = (
                     int(fit.sample_index(st.host_time))
@@ -594,9 +601,20 @@ def run_experiment(
                 for index, host_t in run_pairs[sync_seen:]:
                     writer.append_sync(index, host_t)
                 sync_seen = len(run_pairs)
-            # Capture: every complete block goes to the recording and the receiver.
-            while board.wait_for_samples(next_index + block, timeout_s=0.05):
-                data = board.read(next_index, block)
+            # Capture: what the board holds goes to the recording and the receiver, in blocks
+            # of at most `block`. Once the receiver runs, the loop waits only until its next
+            # decision index when that comes first, so an estimate leaves as soon as its
+            # look-ahead has arrived (not at the end of a fixed block).
+            while board.wait_for_samples(
+                max(next_index + 1, feed.wait_index(block))
+                if feed is not None
+                else next_index + block,
+                timeout_s=0.05,
+            ):
+                held = board.ring.end_index if board.ring is not None else None
+                n = min(held, next_index + block) - next_index if held else block
+                backlog_max = max(backlog_max, (held or 0) - next_index)
+                data = board.read(next_index, n)
                 if writer is not None:
                     writer.append_samples(next_index, data)
                 if feed is None:
@@ -639,7 +657,7 @@ def run_experiment(
                     if new:
                         writer.append_estimates(new)
                         estimates.extend(new)
-                next_index += block
+                next_index += n
                 if now() - last_poll >= _POLL_S:
                     break
             stopped = board_stopped(board)
@@ -745,6 +763,7 @@ def run_experiment(
         interrupted=interrupted,
         error=outcome_error,
         latency_samples=latency[0] if latency else None,
+        capture_backlog_max_s=backlog_max / fs,
         calibrations=cals,
     )
 
@@ -928,6 +947,7 @@ def summarize(outcome: RunOutcome) -> dict[str, Any]:
         "false_alarms": int(false_alarm.sum()),
         "loopback_latency_samples": outcome.latency_samples,
         "dropped_samples": outcome.dropped_samples,
+        "capture_backlog_max_s": round(outcome.capture_backlog_max_s, 3),
         "dac_underruns": outcome.dac_underruns,
         "adc_overruns": outcome.adc_overruns,
         "events": len(outcome.events),

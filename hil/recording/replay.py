@@ -64,6 +64,25 @@ class ReceiverFeed:
             return self._next
         return max(self._next, self.origin + int(hint))
 
+    def wait_index(self, max_block: int) -> int:
+        """Board index a live loop waits for before it feeds again: the receiver's next
+        decision (:attr:`next_useful_index`) when it comes within ``max_block`` samples of
+        :attr:`next_index`, else ``max_block`` samples on. No estimate can come out before
+        the decision index, and waiting past it only makes the estimate later; the cap keeps
+        a receiver without decisions (or far from one) fed in bounded blocks.
+
+        >>> class Deciding:  # decides at its sample 700 (board index 1700)
+        ...     next_decision_index = 700
+        >>> feed = ReceiverFeed(Deciding(), origin=1000)  # type: ignore[arg-type]
+        >>> feed.wait_index(1920), feed.wait_index(500)
+        (1700, 1500)
+        """
+        if max_block < 1:
+            raise ConfigError("max_block", max_block, ">= 1 sample", "wait at least one sample")
+        cap = self._next + int(max_block)
+        useful = self.next_useful_index
+        return useful if self._next < useful < cap else cap
+
     def feed(self, first_index: int, block: NDArray[Any]) -> list[Estimate]:
         """Process ``block`` (shape ``(n, n_channels)``) received from board sample
         ``first_index``; the samples since the previous block that never arrived go to the

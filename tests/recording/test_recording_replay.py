@@ -323,3 +323,32 @@ def test_receiver_feed_says_how_far_the_stream_must_go_before_an_estimate() -> N
     assert (bounded.next_index, bounded.next_useful_index) == (150, 500)
     rx.next_decision_index = 20  # a bound already passed never points back
     assert bounded.next_useful_index == 150
+
+
+def test_live_loop_waits_for_the_next_decision_or_one_block() -> None:
+    from hil.recording.replay import ReceiverFeed
+
+    class Plain:
+        name, fs_hz = "plain", 1.0
+
+        def process(self, x: np.ndarray, *, gap_before: int = 0) -> list:
+            return []
+
+    class Bounded(Plain):
+        next_decision_index = 0
+
+    plain = ReceiverFeed(Plain(), origin=100)  # type: ignore[arg-type]
+    plain.feed(100, np.zeros((50, 1)))
+    assert plain.wait_index(1920) == 150 + 1920  # no decisions: a whole block
+    rx = Bounded()
+    bounded = ReceiverFeed(rx, origin=100)  # type: ignore[arg-type]
+    bounded.feed(100, np.zeros((50, 1)))
+    rx.next_decision_index = 400  # board index 500
+    assert bounded.wait_index(1920) == 500  # the decision comes first: wait for it only
+    assert bounded.wait_index(350) == 500  # ... also when it ends the block exactly
+    assert bounded.wait_index(349) == 499  # beyond the block: one block, then look again
+    rx.next_decision_index = 50  # board index 150, already reached: a whole block
+    assert bounded.wait_index(8) == 158
+    for bad in (0, -5):
+        with pytest.raises(ConfigError, match=rf"max_block = {bad} is not allowed: must be >= 1"):
+            bounded.wait_index(bad)
