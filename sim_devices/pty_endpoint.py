@@ -117,6 +117,7 @@ class PtyEndpoint:
         self._stop = threading.Event()
         self._host_present = False
         self._error: BaseException | None = None
+        self._closed = False
         self._threads = (
             threading.Thread(target=self._run, args=(self._io_loop,), name="pty-io", daemon=True),
             threading.Thread(
@@ -138,9 +139,13 @@ class PtyEndpoint:
         for thread in self._threads:
             if thread.is_alive():
                 thread.join(timeout=5.0)
-        for fd in (self._master, self._wake_io_r, self._wake_io_w):
-            with contextlib.suppress(OSError):
-                os.close(fd)
+        if not self._closed and not any(t.is_alive() for t in self._threads):
+            # A thread still inside a device call keeps its descriptors: closed, their
+            # numbers could be reused by another pty before it touches them again.
+            self._closed = True
+            for fd in (self._master, self._wake_io_r, self._wake_io_w):
+                with contextlib.suppress(OSError):
+                    os.close(fd)
         if self._error is not None:
             raise RuntimeError(f"pty endpoint pump failed: {self._error!r}") from self._error
 

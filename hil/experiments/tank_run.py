@@ -611,9 +611,9 @@ def run_experiment(
                 else next_index + block,
                 timeout_s=0.05,
             ):
-                held = board.ring.end_index if board.ring is not None else None
-                n = min(held, next_index + block) - next_index if held else block
-                backlog_max = max(backlog_max, (held or 0) - next_index)
+                held = board.ring.end_index  # >= the index waited for
+                n = min(held, next_index + block) - next_index
+                backlog_max = max(backlog_max, held - next_index)
                 data = board.read(next_index, n)
                 if writer is not None:
                     writer.append_samples(next_index, data)

