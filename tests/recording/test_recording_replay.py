@@ -301,17 +301,23 @@ def test_feed_drops_samples_before_its_origin() -> None:
         feed.feed(130, np.zeros((5, 2)))
 
 
+class Plain:
+    """A receiver with no decision index (it may emit after any sample)."""
+
+    name, fs_hz = "plain", 1.0
+
+    def process(self, x: np.ndarray, *, gap_before: int = 0) -> list:
+        return []
+
+
+class Bounded(Plain):
+    """A receiver that says before which input sample no estimate can come out."""
+
+    next_decision_index = 0
+
+
 def test_receiver_feed_says_how_far_the_stream_must_go_before_an_estimate() -> None:
     from hil.recording.replay import ReceiverFeed
-
-    class Plain:
-        name, fs_hz = "plain", 1.0
-
-        def process(self, x: np.ndarray, *, gap_before: int = 0) -> list:
-            return []
-
-    class Bounded(Plain):
-        next_decision_index = 0
 
     plain = ReceiverFeed(Plain(), origin=100)  # type: ignore[arg-type]
     plain.feed(100, np.zeros((50, 1)))
@@ -327,15 +333,6 @@ def test_receiver_feed_says_how_far_the_stream_must_go_before_an_estimate() -> N
 
 def test_live_loop_waits_for_the_next_decision_or_one_block() -> None:
     from hil.recording.replay import ReceiverFeed
-
-    class Plain:
-        name, fs_hz = "plain", 1.0
-
-        def process(self, x: np.ndarray, *, gap_before: int = 0) -> list:
-            return []
-
-    class Bounded(Plain):
-        next_decision_index = 0
 
     plain = ReceiverFeed(Plain(), origin=100)  # type: ignore[arg-type]
     plain.feed(100, np.zeros((50, 1)))
