@@ -395,7 +395,8 @@ polling at no more than 5 Hz); use the default 0.2
     ) -> ProfileWindow:
         """Tow from ``start`` to ``end`` (m) at constant ``speed`` (m/s).
 
-        Positions at ``start - run_up`` first (at the max rate), then one linear move to
+        Positions at ``start - run_up`` first (at the max rate; not when the last status
+        report has the carriage at rest there, within half a step), then one linear move to
         ``end + run_down`` at ``speed``. ``run_up``/``run_down`` (m) must cover the
         acceleration distance ``speed**2 / (2 * $120)``. Returns the driver-clock window in
         which the carriage is between ``start`` and ``end`` at constant speed, predicted from
@@ -419,7 +420,16 @@ polling at no more than 5 Hz); use the default 0.2
         x0, x1 = start - d * run_up, end + d * run_down
         self._check_position("run-up start x (start - run_up)", x0)
         self._check_position("run-down end x (end + run_down)", x1)
-        self.move_to(x0, self.settings.max_rate)
+        here = self._last_status
+        if not (
+            here is not None
+            and here.state is StageState.IDLE
+            and abs(here.position - x0) <= 0.5 * self.settings.step
+        ):
+            # Not already resting there (a tow's next pass starts where the last one ended):
+            # positioning ends by waiting for the planner and a 5 Hz status poll, up to 0.2 s
+            # in which a caller streaming meanwhile (hil tank-run) captures nothing.
+            self.move_to(x0, self.settings.max_rate)
         self._direction = d
         self._command(format_move_line(x1 * 1000.0, speed * 60000.0))
         t0 = self._clock.now()

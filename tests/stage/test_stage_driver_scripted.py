@@ -164,6 +164,31 @@ def test_alarm_state_refuses_motion_and_says_how_to_recover() -> None:
     assert len(peer.written) == 3
 
 
+def test_profile_from_where_the_carriage_rests_sends_only_the_tow_move() -> None:
+    # The last report has the carriage idle at -100 mm, the run-up start of a tow from
+    # -0.11 m to -0.3 m with a 10 mm run-up: no positioning move, no dwell, no status wait.
+    stage, peer = open_stage([(b"G53 G1 X-310.000 F300.000\n", b"ok\r\n")])
+    window = stage.run_profile(-0.11, -0.3, 0.005, 0.01, 0.01, wait=False)
+    assert peer.written[-1] == b"G53 G1 X-310.000 F300.000\n" and not peer.script
+    # From the ok: 0.1 s to reach speed, then the rest of the 10 mm run-up, then 190 mm.
+    assert (window.x_start, window.x_end) == (-0.11, -0.3)
+    assert window.t_end - window.t_start == pytest.approx(38.0)
+
+
+def test_profile_from_elsewhere_positions_first() -> None:
+    running = b"<Run|MPos:-100.000,0.000,0.000|Bf:14,128|FS:600,0>\r\n"
+    stage, peer = open_stage(
+        [
+            (b"G53 G1 X-90.000 F600.000\n", b"ok\r\n"),
+            (b"G4 P0.000\n", running + b"ok\r\n"),
+            (b"?", b"<Idle|MPos:-90.000,0.000,0.000|Bf:15,128|FS:0,0>\r\n"),
+            (b"G53 G1 X-310.000 F300.000\n", b"ok\r\n"),
+        ]
+    )
+    stage.run_profile(-0.1, -0.3, 0.005, 0.01, 0.01, wait=False)
+    assert not peer.script  # every line above, in that order
+
+
 def test_alarm_during_a_move_raises_with_the_alarm_text() -> None:
     stage, _ = open_stage(
         [
