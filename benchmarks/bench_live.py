@@ -560,7 +560,7 @@ def run_live(
         "latency_processing_median_ms": _ms(proc_s, 50),
         "latency_processing_max_ms": _ms(proc_s, 100),
         # Estimates already a hop late when the feed call began: the look-ahead and the
-        # stream alone took longer, so no receiver, however fast, could have met the target.
+        # stream alone took longer, so GCAS could not have met the target however fast it ran.
         "wait_over_1_hop": int(np.count_nonzero(wait_s > hop_s)),
         "over_1_hop_wait_median_ms": _ms(wait_s[over], 50),
         "over_1_hop_processing_median_ms": _ms(proc_s[over], 50),
