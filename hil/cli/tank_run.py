@@ -40,7 +40,8 @@ def run(args: argparse.Namespace) -> int:
         print(DEFAULT_EXPERIMENT, end="")
         return 0
     from hil.experiments.run_report import write_report
-    from hil.experiments.tank_run import LiveView, run_experiment, summarize, write_summary
+    from hil.experiments.run_scoring import summarize, write_summary
+    from hil.experiments.tank_run import LiveView, run_experiment
 
     exp = (
         parse_experiment(DEFAULT_EXPERIMENT)

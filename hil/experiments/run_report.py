@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 
 from hil.experiments.codeword_map import save_time_codeword_map
-from hil.experiments.tank_run import RunOutcome, scored_mask, telemetry_truth
+from hil.experiments.run_scoring import scored_mask, telemetry_truth
+from hil.experiments.tank_run import RunOutcome
 
 
 def _pyplot() -> Any:

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import contextlib
 import datetime as dt
-import json
 import sys
 import time
 from dataclasses import dataclass, field
@@ -32,11 +31,7 @@ from hil.errors import ConfigError
 from hil.estimation.base import Estimate
 from hil.estimation.registry import make_receiver
 from hil.experiments.experiment import Experiment
-from hil.experiments.run_calibrations import (
-    RunCalibrations,
-    load_run_calibrations,
-    true_stage_motion,
-)
+from hil.experiments.run_calibrations import RunCalibrations, load_run_calibrations
 from hil.signals.schedule_file import schedule_document
 from hil.signals.synthesis import BlockSynthesizer
 
@@ -46,10 +41,7 @@ if TYPE_CHECKING:
 # Samples per capture block handed to the recording and the receiver (about 10-20 ms).
 _BLOCK_S = 0.01
 # Stage status polled every this many seconds of the driver clock (GRBL's 5 Hz).
-_POLL_S = 0.2
-#: Telemetry truth is not interpolated across reports farther apart than this (s of sample
-#: time): a stalled host or stage leaves the carriage's motion in between unknown.
-TELEMETRY_GAP_S = 3 * _POLL_S
+STAGE_POLL_S = 0.2
 #: Reports that took longer than this (s) to answer their query are left out of the truth:
 #: the stage sampled its position somewhere in that time. A prompt reply measures up to
 #: ~60 ms: GRBL answers at once, a USB serial adapter holds a short report up to its 16 ms
@@ -58,8 +50,6 @@ TELEMETRY_MAX_REPLY_S = 0.08
 # Capture kept after the stage stops, s: the last echoes still arrive.
 _TAIL_S = 0.3
 _INT16_SCALE = 1.0 / 32768.0
-# An estimate farther than this from the truth counts as a false alarm, m.
-FALSE_ALARM_GATE_M = 1.0
 # Capture used to measure the loopback latency at the start of every run, s.
 _LATENCY_PROBE_S = 0.05
 #: The board's watchdog (ms of its clock): it stops when the host has sent nothing for this
@@ -541,7 +531,7 @@ def run_experiment(
         while True:
             # Stage: start the next pass when idle, poll at most 5 Hz, record telemetry.
             t_now = now()
-            if t_now - last_poll >= _POLL_S:
+            if t_now - last_poll >= STAGE_POLL_S:
                 st = stage.status()
                 # Timed from the reply: status() paces itself at 5 Hz from its own last
                 # query, so timing from before the call made it sleep out a whole interval
@@ -658,7 +648,7 @@ def run_experiment(
                         writer.append_estimates(new)
                         estimates.extend(new)
                 next_index += n
-                if now() - last_poll >= _POLL_S:
+                if now() - last_poll >= STAGE_POLL_S:
                     break
             stopped = board_stopped(board)
             if stopped is not None:
@@ -814,169 +804,3 @@ def _exact_truth(
     x1 = tank.true_stage_position(tank.stage_time(world_t + h))
     r0, r1 = exp.range_at(x0), exp.range_at(x1)
     return {"range_m": r0, "speed_mps": -(r1 - r0) / h}
-
-
-_TRUTH_KEYS = ("range_m", "speed_mps", "stage_x_m", "stage_v_mps")
-
-
-def telemetry_truth(outcome: RunOutcome) -> dict[str, np.ndarray]:
-    """Range (m) and closing speed (m/s) at every estimate's bounce instant, from the stage
-    telemetry mapped onto sample time (what a lab has as ground truth): positions
-    interpolated between status reports, speed from the reported feed rate projected on the
-    line of sight (differencing 5 Hz positions would be far noisier); reports answered
-    later than :data:`TELEMETRY_MAX_REPLY_S` are not used. With a stage calibration
-    applied (:attr:`RunOutcome.calibrations`), range and speed are the carriage's true ones.
-    Also the stage's own reported position (``stage_x_m``, m) and velocity
-    (``stage_v_mps``, m/s), in the tow plan's commanded coordinates. All shape
-    ``(n_estimates,)``; NaN outside the telemetry and inside a gap between reports longer
-    than :data:`TELEMETRY_GAP_S` (the motion there is unknown)."""
-    tel = outcome.telemetry
-    idx = np.asarray(tel.sample_index, dtype=float)
-    pos = np.asarray(tel.position_m, dtype=float)
-    vel = np.asarray(tel.velocity_mps, dtype=float)
-    reply = np.asarray(tel.reply_s, dtype=float) if tel.reply_s else np.zeros(idx.size)
-    ok = (idx >= 0) & (reply <= TELEMETRY_MAX_REPLY_S)
-    n = len(outcome.estimates)
-    if n == 0 or ok.sum() < 2:
-        return {key: np.full(n, np.nan) for key in _TRUTH_KEYS}
-    t_tel = (idx[ok] - outcome.start_index) / outcome.fs_hz
-    order = np.argsort(t_tel)
-    t_tel, x_tel, v_tel = t_tel[order], pos[ok][order], vel[ok][order]
-    t_b = np.array([(e.t_s + e.t_tx_s) / 2.0 for e in outcome.estimates])
-    exp = outcome.experiment
-    x = np.interp(t_b, t_tel, x_tel)
-    v = np.interp(t_b, t_tel, v_tel)
-    # The range and speed of the carriage itself: through the stage calibration, if the run
-    # applied one (the reported position is the commanded one, in steps).
-    x_true, v_true = true_stage_motion(outcome.calibrations.stage, x_tel, v_tel)
-    d = exp.target_position(np.interp(t_b, t_tel, x_true)) - np.asarray(exp.transducer_m)
-    r = np.sqrt(np.sum(d * d, axis=-1))
-    along = (d @ np.asarray(exp.stage_axis)) / r
-    v_carriage = np.interp(t_b, t_tel, v_true)
-    after = np.clip(np.searchsorted(t_tel, t_b, side="left"), 1, t_tel.size - 1)
-    gap = t_tel[after] - t_tel[after - 1]
-    inside = (t_b >= t_tel[0]) & (t_b <= t_tel[-1]) & (gap <= TELEMETRY_GAP_S)
-    return {
-        "range_m": np.where(inside, r, np.nan),
-        "speed_mps": np.where(inside, -along * v_carriage, np.nan),
-        "stage_x_m": np.where(inside, x, np.nan),
-        "stage_v_mps": np.where(inside, v, np.nan),
-    }
-
-
-#: Scored estimates: the stage reported at least this fraction of the tow speed, so the
-#: carriage is past its acceleration (a report inside the run-up blends into the interpolated
-#: truth near the segment's ends and is not trusted).
-SCORED_SPEED_FRACTION = 0.95
-
-
-def scored_mask(outcome: RunOutcome, truth: dict[str, np.ndarray] | None = None) -> np.ndarray:
-    """Which estimates are scored (shape ``(n_estimates,)``, bool): those whose bounce
-    instant falls inside a tow pass's constant-speed segment as the stage telemetry saw it:
-    the carriage between ``tow.start_m`` and ``tow.end_m`` moving at the tow speed (at least
-    :data:`SCORED_SPEED_FRACTION` of it, either direction), with a finite truth.
-
-    Measured, not predicted: the segment's times are where the stage's own reports put the
-    carriage, so a late ``ok`` or a stalled host or stage shifts nothing (the window predicted
-    from the time GRBL accepted the move did, by up to the stall).
-    """
-    truth = telemetry_truth(outcome) if truth is None else truth
-    if len(outcome.estimates) == 0:
-        return np.zeros(0, dtype=bool)
-    plan = outcome.experiment.tow
-    lo, hi = sorted((plan.start_m, plan.end_m))
-    x, v = truth["stage_x_m"], truth["stage_v_mps"]
-    with np.errstate(invalid="ignore"):
-        in_segment = (x >= lo) & (x <= hi)
-        at_speed = np.abs(v) >= SCORED_SPEED_FRACTION * plan.speed_mps
-    ranges = np.array([e.range_m for e in outcome.estimates])
-    return np.asarray(
-        in_segment & at_speed & np.isfinite(truth["range_m"]) & np.isfinite(ranges), dtype=bool
-    )
-
-
-def summarize(outcome: RunOutcome) -> dict[str, Any]:
-    """The run summary (also written as ``summary.json``)."""
-    exp = outcome.experiment
-    est = outcome.estimates
-    truth = telemetry_truth(outcome)
-    r = np.array([e.range_m for e in est])
-    v = np.array([e.speed_mps for e in est])
-    t = np.array([e.t_s for e in est])
-    err_r = r - truth["range_m"]
-    err_v = v - truth["speed_mps"]
-    scored = scored_mask(outcome, truth)
-    # Farther than FALSE_ALARM_GATE_M from the truth: a false alarm (tank multipath
-    # legitimately biases ranges by a few decimetres).
-    false_alarm = scored & (np.abs(err_r) > FALSE_ALARM_GATE_M)
-    good_est = scored & ~false_alarm
-    # Detection rate: distinct hop boundaries detected (and correct) over the boundaries
-    # that reached the receiver during the constant-speed segments, counted per pass (the
-    # hops between passes are not expected).
-    hops = np.array([e.hop_index for e in est], dtype=np.int64)
-    pass_id = np.cumsum(scored & ~np.concatenate([[False], scored[:-1]]))
-    expected = float(
-        sum(np.ptp(hops[scored & (pass_id == k)]) + 1 for k in np.unique(pass_id[scored]))
-    )
-    detected = float(np.unique(hops[good_est]).size)
-
-    def rmse(x: np.ndarray) -> float | None:
-        return float(np.sqrt(np.mean(x * x))) if x.size else None
-
-    summary: dict[str, Any] = {
-        "run": exp.name,
-        "folder": str(outcome.folder),
-        "simulated": exp.simulated,
-        "receiver": exp.receiver,
-        "waveform": f"{exp.preset}/{exp.waveform.family}",
-        "fs_hz": outcome.fs_hz,
-        "sound_speed_mps": exp.sound_speed_mps,
-        # Where c came from: a required sound-speed calibration, or the experiment file.
-        "sound_speed_from": outcome.calibrations.id_of("sound-speed") or "experiment file",
-        "calibrations": list(outcome.calibrations.ids),
-        "signal_s": round(outcome.signal_s, 4),
-        "wall_s": round(outcome.wall_s, 2),
-        "real_time_factor": round(outcome.signal_s / outcome.wall_s, 4) if outcome.wall_s else None,
-        "estimates": len(est),
-        "scored_estimates": int(scored.sum()),
-        "range_rmse_m": rmse(err_r[good_est]),
-        "speed_rmse_mps": rmse(err_v[good_est]),
-        "range_bias_m": float(np.mean(err_r[good_est])) if good_est.any() else None,
-        "update_period_s": float(np.median(np.diff(t))) if len(t) > 1 else None,
-        "detection_rate": round(detected / expected, 4) if expected else None,
-        "false_alarms": int(false_alarm.sum()),
-        "loopback_latency_samples": outcome.latency_samples,
-        "dropped_samples": outcome.dropped_samples,
-        "capture_backlog_max_s": round(outcome.capture_backlog_max_s, 3),
-        "dac_underruns": outcome.dac_underruns,
-        "adc_overruns": outcome.adc_overruns,
-        "events": len(outcome.events),
-        "interrupted": outcome.interrupted,
-        "error": outcome.error,
-    }
-    if outcome.exact_truth is not None and len(est):
-        diff = truth["range_m"] - outcome.exact_truth["range_m"]
-        fin = np.isfinite(diff)
-        summary["telemetry_truth_error_max_m"] = (
-            float(np.max(np.abs(diff[fin]))) if fin.any() else None
-        )
-        e_exact = r - outcome.exact_truth["range_m"]
-        summary["range_rmse_vs_exact_m"] = rmse(e_exact[good_est]) if good_est.any() else None
-    return summary
-
-
-def write_summary(outcome: RunOutcome, summary: dict[str, Any]) -> Path:
-    """``summary.json`` and ``estimates.csv`` in the run folder."""
-    path = outcome.folder / "summary.json"
-    path.write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
-    truth = telemetry_truth(outcome)
-    scored = scored_mask(outcome, truth)
-    rows = ["t_s,range_m,speed_mps,hop_index,score,snr_db,true_range_m,true_speed_mps,scored"]
-    for i, e in enumerate(outcome.estimates):
-        rows.append(
-            f"{e.t_s:.6f},{e.range_m:.5f},{e.speed_mps:.4f},{e.hop_index},{e.score:.3f},"
-            f"{e.snr_db:.2f},{truth['range_m'][i]:.5f},{truth['speed_mps'][i]:.4f},"
-            f"{int(scored[i])}"
-        )
-    (outcome.folder / "estimates.csv").write_text("\n".join(rows) + "\n", encoding="utf-8")
-    return path

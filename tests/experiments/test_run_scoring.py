@@ -11,15 +11,8 @@ import pytest
 
 from hil.estimation.base import Estimate
 from hil.experiments.experiment import DEFAULT_EXPERIMENT, parse_experiment
-from hil.experiments.tank_run import (
-    TELEMETRY_GAP_S,
-    TELEMETRY_MAX_REPLY_S,
-    RunOutcome,
-    Telemetry,
-    scored_mask,
-    summarize,
-    telemetry_truth,
-)
+from hil.experiments.run_scoring import TELEMETRY_GAP_S, scored_mask, summarize, telemetry_truth
+from hil.experiments.tank_run import TELEMETRY_MAX_REPLY_S, RunOutcome, Telemetry
 
 EXP = parse_experiment(DEFAULT_EXPERIMENT)  # tow -2 m -> -5 m at 1.5 m/s, run-up 0.6 m
 FS = 1000.0  # sample time = index / FS

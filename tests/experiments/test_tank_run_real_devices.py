@@ -18,8 +18,9 @@ import pytest
 from hil.errors import ConfigError
 from hil.experiments import tank_run
 from hil.experiments.experiment import DEFAULT_EXPERIMENT, Experiment, parse_experiment
+from hil.experiments.run_scoring import summarize, write_summary
 from hil.experiments.sim_tank import tank_stage_config
-from hil.experiments.tank_run import LiveView, run_experiment, summarize, write_summary
+from hil.experiments.tank_run import LiveView, run_experiment
 from hil.recording.reader import RunRecording
 from hil.recording.replay import ReceiverFeed
 from sim_devices.board import FaultPlan, LoopbackWorld, SimulatedBoardOnPty
