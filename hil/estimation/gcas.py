@@ -112,6 +112,12 @@ from hil.estimation.kernels import (
     first_possible_peak,
     peak_indices,
 )
+from hil.estimation.reverb_band import (
+    AUTO,
+    clutter_cells,
+    edge_hypotheses,
+    resolve_reverb_speed,
+)
 from hil.estimation.row_buffer import RowBuffer
 from hil.estimation.unit_correlators import UnitCorrelatorBank
 from hil.resident_arrays import resident_zeros
@@ -247,8 +253,12 @@ class GcasReceiver:
     cfar_mode:
         ``"bank"`` or ``"statistic"`` (module docstring, step 6).
     reverb_speed_mps, reverb_weight:
-        Reverberation band: hypotheses with ``|v| <`` this speed get this weight in the
-        Doppler decision (0 excludes them).
+        Reverberation band: Doppler cells that stationary clutter of speed ``|v| <``
+        ``reverb_speed_mps`` (m/s) fills get ``reverb_weight`` in the Doppler decision (0
+        excludes them). Default ``"auto"``: the waveform's clutter main lobe
+        (:mod:`hil.estimation.reverb_band`: targets slower than the Doppler resolution
+        ``c/(2 f T_h)`` are not reported); 0 turns the band off (a stationary or slow target).
+        Detections on the band's edge are refused (:attr:`in_band_count`).
     decimation:
         Baseband decimation R; default the largest that keeps the Doppler-scaled band.
     attenuation_db:
@@ -283,7 +293,7 @@ class GcasReceiver:
         runner_up_ratio: float = 1.05,
         cfar_window_hops: float = 8.0,
         cfar_mode: str = "bank",
-        reverb_speed_mps: float = 0.0,
+        reverb_speed_mps: float | str | None = AUTO,
         reverb_weight: float = 0.0,
         decimation: int | None = None,
         attenuation_db: float = 70.0,
@@ -361,13 +371,16 @@ class GcasReceiver:
             attenuation_db=attenuation_db,
         )
         self.fs_bb = self.baseband.fs_out_hz
+        reverb_speed = resolve_reverb_speed(
+            reverb_speed_mps, tones, self.hop_s, c, self.max_speed_mps
+        )
         self.grid: DopplerGrid = doppler_grid(
             self.max_speed_mps,
             int(n_doppler),
             c,
             self.hop_s,
             self.fs_bb,
-            reverb_speed_mps=reverb_speed_mps,
+            reverb_speed_mps=reverb_speed,
             reverb_weight=reverb_weight,
         )
         # The per-sample bank of the full search (the two-stage search never builds it).
@@ -377,9 +390,12 @@ class GcasReceiver:
                 self.fs_bb, self.grid.frequencies(tones, center), self.grid.lengths
             )
         d, k, m, j = self.grid.size, self.n_tones, self.m_hops, self.n_codewords
-        self.reverb_speed_mps = float(reverb_speed_mps)
+        #: The band's clutter speed in use, m/s (0: no band).
+        self.reverb_speed_mps = reverb_speed
         self.reverb_weight = float(reverb_weight)
         self._tone_w = self._reverb_tone_mask()
+        #: Hypotheses whose detections are refused (the band's edge; see reverb_band).
+        self.refused_hypotheses = self._refused_hypotheses()
         m_idx = np.arange(m)
         self.lags = np.round(m_idx[None, :] * self.grid.exact_lengths[:, None]).astype(np.int64)
         self._w_coh = self._codeword_weights()[1]
@@ -509,25 +525,34 @@ class GcasReceiver:
     def _reverb_tone_mask(self) -> NDArray[np.float32] | None:
         """Per-(d, k) weights of the reverberation band, shape ``(D, K)``; None without one.
 
-        Stationary clutter (``|v| < reverb_speed_mps``) of tone ``k'`` sits at
-        ``α f_k'`` with ``α`` in ``[α(−v_r), α(v_r)]``. The unit correlator ``(d, k)`` listens
-        at ``α_d f_k``; it sees that clutter whenever ``α_d f_k`` lies within one main lobe
-        (``1/T_h``) of the clutter band of ANY tone ``k'``, not only ``k' = k``: a stationary
-        echo of tone ``k'`` looks like tone ``k`` moving at the speed where
+        The unit correlator ``(d, k)`` listens at ``α_d f_k``; it sees stationary clutter
+        whenever that frequency lies within half a main lobe of the clutter band of ANY tone
+        ``k'`` (:func:`~hil.estimation.reverb_band.clutter_cells`), not only ``k' = k``: a
+        stationary echo of tone ``k'`` looks like tone ``k`` moving at the speed where
         ``α_d f_k = f_k'`` (a ghost speed). Such cells get ``reverb_weight`` in the group
         statistic and in the codeword sums [R]: the band is handled per tone in frequency.
         """
         if self.reverb_speed_mps <= 0.0:
             return None
-        c = self.sound_speed_mps
-        a_lo = float(speed_to_alpha(-self.reverb_speed_mps, c))
-        a_hi = float(speed_to_alpha(self.reverb_speed_mps, c))
-        guard = REVERB_GUARD_LOBES / self.hop_s
-        f = self.grid.alphas[:, None] * self.tones_hz[None, :]  # (D, K) Hz
-        lo = a_lo * self.tones_hz - guard
-        hi = a_hi * self.tones_hz + guard
-        hit = np.any((f[:, :, None] > lo) & (f[:, :, None] < hi), axis=2)
+        hit = clutter_cells(
+            self.grid.alphas, self.tones_hz, self.reverb_speed_mps, self.sound_speed_mps,
+            REVERB_GUARD_LOBES / self.hop_s, any_tone=True,
+        )  # fmt: skip
         return np.where(hit, self.reverb_weight, 1.0).astype(np.float32)
+
+    def _refused_hypotheses(self) -> NDArray[np.bool_]:
+        """Hypotheses whose detections are refused, shape ``(D,)``: the edge of the band
+        around zero Doppler (:func:`~hil.estimation.reverb_band.edge_hypotheses`). Cells
+        masked as another tone's clutter (the ghost speeds) are not an edge: a target there
+        keeps its other tones, and the codeword sums tell it from the clutter."""
+        if self.reverb_speed_mps <= 0.0:
+            return np.zeros(self.grid.size, dtype=bool)
+        own = clutter_cells(
+            self.grid.alphas, self.tones_hz, self.reverb_speed_mps, self.sound_speed_mps,
+            REVERB_GUARD_LOBES / self.hop_s, any_tone=False,
+        ).any(axis=1)  # fmt: skip
+        in_band = own | (self.grid.weights < 1.0)
+        return edge_hypotheses(np.where(in_band, 0.0, 1.0), self.reverb_weight > 0)
 
     def _codeword_weights(self) -> tuple[NDArray[np.float32], NDArray[np.complex64]]:
         """Codeword matrices of shape ``(M·K, J)``: tone indicator, and with phases restored."""
@@ -552,6 +577,8 @@ class GcasReceiver:
         self._restart(0)
         self.inconsistent_count = 0
         self.refused_count = 0
+        #: Detections refused as the edge leak of an echo inside the reverberation band.
+        self.in_band_count = 0
         self.last_detection: DetectionInfo | None = None
 
     @property
@@ -1195,6 +1222,9 @@ class GcasReceiver:
         and the runner-up test: peak sample ``n_star`` (baseband index) with sub-sample offset
         ``dn``, statistic ``peak``, codeword ``j_hat`` (best over runner-up ``ratio``),
         hypothesis ``d0`` with offset ``dd`` (grid steps)."""
+        if self.refused_hypotheses[d0]:
+            self.in_band_count += 1
+            return None
         c = self.sound_speed_mps
         k = self._readout_constants
         speed = k.speeds[d0] + dd * k.speed_step

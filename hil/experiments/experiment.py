@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from hil.errors import ConfigError
+from hil.estimation.reverb_band import AUTO, doppler_resolution_mps
 from hil.signals.presets import check_design, get_preset
 from hil.signals.schedule import HopSchedule
 from hil.signals.waveforms import WaveformSpec
@@ -62,8 +63,7 @@ name = "gcas"
 m_hops = 10
 max_speed_mps = 3.0
 max_range_m = 12.0
-# Ignore stationary echoes (direct blast, walls): the Doppler band of |v| < 0.8 m/s.
-options = { reverb_speed_mps = 0.8 }
+# No options: the reverberation band is derived from the tow (see docs/tank-run.md).
 
 [calibration]
 store = "calibration"
@@ -440,7 +440,7 @@ def parse_experiment(text: str) -> Experiment:
         m_hops=m_hops,
         max_speed_mps=v_max,
         max_range_m=r_max,
-        receiver_options=dict(options),
+        receiver_options=tank_receiver_options(receiver, dict(options), schedule, c, plan),
         calibration_store=store,
         calibration_max_age_days=max_age,
         calibration_required=tuple(required),
@@ -469,3 +469,23 @@ def _sound_speed_from_water(temperature_c: float, salinity_ppt: float) -> float:
     if salinity_ppt == 0.0:
         return float(tank_sound_speed(temperature_c))
     return float(unesco_sound_speed(salinity_ppt, temperature_c, 0.0))
+
+
+def tank_receiver_options(
+    receiver: str, options: dict[str, Any], schedule: HopSchedule, c: float, plan: TowPlan
+) -> dict[str, Any]:
+    """The receiver options of a tank run: ``options`` as given, with GCAS's reverberation
+    band (``reverb_speed_mps``, m/s) derived from the tow when the file does not set it.
+
+    A tow starts and ends at rest, so the target passes through every speed below the tow
+    speed. The band hides targets slower than the waveform's Doppler resolution
+    ``v_res = c/(2 f_lo T_h)`` (:mod:`hil.estimation.reverb_band`): it stays on
+    (``"auto"``) only when the tow speed clears the band's edge by a resolution cell
+    (``>= 2 v_res``), and is off (0) otherwise, where it would remove the tow itself
+    (tank-audio: ``v_res`` = 1.30 m/s, so tows below 2.6 m/s run without it).
+    """
+    if receiver != "gcas" or "reverb_speed_mps" in options:
+        return options
+    v_res = doppler_resolution_mps(schedule.tones_hz, schedule.hop_s, c)
+    band = AUTO if plan.speed_mps >= 2.0 * v_res else 0.0
+    return {**options, "reverb_speed_mps": band}

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from hil.experiments.codeword_map import save_time_codeword_map
-from hil.experiments.run_scoring import scored_mask, telemetry_truth
+from hil.experiments.run_scoring import score_run, telemetry_truth
 from hil.experiments.tank_run import RunOutcome
 
 
@@ -39,16 +39,24 @@ def write_report(outcome: RunOutcome) -> list[Path]:
     r = np.array([e.range_m for e in est])
     v = np.array([e.speed_mps for e in est])
     truth = telemetry_truth(outcome)
+    score = score_run(outcome, truth)
+    figures = score.figures()
+    wrong = score.wrong
 
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(10, 6.5), sharex=True, dpi=110)
-    ax1.plot(t, r, ".", ms=3, label="estimate")
+    ax1.plot(t[~wrong], r[~wrong], ".", ms=3, label="estimate")
+    ax1.plot(
+        t[wrong], r[wrong], "x", ms=4, color="tab:red",
+        label=f"wrong (> {figures['wrong_gate_m']:g} m off): {figures['wrong_estimates']}",
+    )  # fmt: skip
     ax1.plot(t, truth["range_m"], "-", lw=1.2, label="truth (stage telemetry)")
     if outcome.exact_truth is not None and len(est):
         ax1.plot(t, outcome.exact_truth["range_m"], "--", lw=0.8, label="truth (simulated, exact)")
     ax1.set_ylabel("range (m)")
     ax1.legend(loc="best", fontsize=8)
     ax1.set_title(f"{outcome.experiment.name}: {outcome.experiment.receiver} estimates")
-    ax2.plot(t, v, ".", ms=3, label="estimate")
+    ax2.plot(t[~wrong], v[~wrong], ".", ms=3, label="estimate")
+    ax2.plot(t[wrong], v[wrong], "x", ms=4, color="tab:red", label="wrong in range")
     ax2.plot(t, truth["speed_mps"], "-", lw=1.2, label="truth (stage telemetry)")
     ax2.set_ylabel("closing speed (m/s)")
     ax2.set_xlabel("receive time (s)")
@@ -62,17 +70,34 @@ def write_report(outcome: RunOutcome) -> list[Path]:
         paths.append(folder / "time_codeword_map.png")
         save_time_codeword_map(paths[-1], outcome.map_times, outcome.map_power)
 
-    # The estimates the summary scores: inside the constant-speed segments.
-    scored = scored_mask(outcome, truth)
-    er = (r - truth["range_m"])[scored]
-    ev = (v - truth["speed_mps"])[scored]
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.8), dpi=110)
-    for ax, e, label in ((a1, er, "range error (m)"), (a2, ev, "speed error (m/s)")):
-        e = e[np.isfinite(e)]
-        if e.size:
-            ax.hist(np.clip(e, np.percentile(e, 1), np.percentile(e, 99)), bins=40)
+    # Every estimate with a known truth; the scored ones (constant-speed segments) on top.
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 4.2), dpi=110)
+    panels = (
+        (a1, score.range_error_m, "range error (m)", "range_rmse_m", "range_bias_m", "m"),
+        (a2, score.speed_error_mps, "speed error (m/s)", "speed_rmse_mps", "speed_bias_mps", "m/s"),
+    )
+    for ax, err, label, rmse_key, bias_key, unit in panels:
+        e_all = err[score.known]
+        e_sc = err[score.good_scored]
+        if e_all.size:
+            lo, hi = np.percentile(e_all, [0.5, 99.5])
+            bins = np.linspace(float(lo), float(hi) + 1e-9, 41)
+            ax.hist(np.clip(e_all, bins[0], bins[-1]), bins=bins, color="0.75", label="all known")
+            ax.hist(np.clip(e_sc, bins[0], bins[-1]), bins=bins, label="scored, not wrong")
+        rmse, bias = figures[rmse_key], figures[bias_key]
+        title = "no scored estimate"
+        if rmse is not None:
+            title = f"scored: rmse {rmse:.3g} {unit}, bias {bias:+.3g} {unit}"
+        ax.set_title(title, fontsize=9)
         ax.set_xlabel(label)
         ax.set_ylabel("estimates")
+        ax.legend(fontsize=7)
+    fig.suptitle(
+        f"{figures['estimates_with_truth']} estimates with truth, "
+        f"{figures['wrong_estimates']} wrong (> {figures['wrong_gate_m']:g} m), "
+        f"{figures['scored_estimates']} scored, {figures['false_alarms']} wrong among them",
+        fontsize=9,
+    )
     fig.tight_layout()
     paths.append(folder / "errors.png")
     fig.savefig(paths[-1])

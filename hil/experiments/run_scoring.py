@@ -4,6 +4,7 @@ estimates are scored, the run summary (``summary.json``) and ``estimates.csv``."
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -97,21 +98,82 @@ def scored_mask(outcome: RunOutcome, truth: dict[str, np.ndarray] | None = None)
     )
 
 
+@dataclass(frozen=True)
+class RunScore:
+    """Every estimate of a run against the telemetry truth; arrays of shape
+    ``(n_estimates,)``.
+
+    ``known``: the truth is known (the stage telemetry covers the bounce instant);
+    ``scored``: inside a constant-speed segment (:func:`scored_mask`); ``wrong``: known and
+    more than :data:`FALSE_ALARM_GATE_M` off in range, wherever it falls in the run (the
+    ramps, the stop, between passes): no estimate is hidden from the count.
+    """
+
+    range_error_m: np.ndarray
+    speed_error_mps: np.ndarray
+    known: np.ndarray
+    scored: np.ndarray
+    wrong: np.ndarray
+
+    @property
+    def good_scored(self) -> np.ndarray:
+        """Scored and not wrong: the estimates of the RMSEs and the bias."""
+        return np.asarray(self.scored & ~self.wrong, dtype=bool)
+
+    def figures(self) -> dict[str, Any]:
+        """Counts (all known, wrong, scored) and RMSEs (m, m/s), as ``summary.json`` gives
+        them and the figures print them."""
+        good = self.good_scored
+        known_ok = self.known & ~self.wrong
+        n_known = int(self.known.sum())
+        return {
+            "estimates_with_truth": n_known,
+            "wrong_estimates": int(self.wrong.sum()),
+            "wrong_fraction": round(float(self.wrong.sum()) / n_known, 4) if n_known else None,
+            "wrong_gate_m": FALSE_ALARM_GATE_M,
+            "scored_estimates": int(self.scored.sum()),
+            "false_alarms": int((self.scored & self.wrong).sum()),
+            "range_rmse_m": _rmse(self.range_error_m[good]),
+            "speed_rmse_mps": _rmse(self.speed_error_mps[good]),
+            "range_bias_m": float(np.mean(self.range_error_m[good])) if good.any() else None,
+            "speed_bias_mps": float(np.mean(self.speed_error_mps[good])) if good.any() else None,
+            "range_rmse_all_m": _rmse(self.range_error_m[known_ok]),
+            "speed_rmse_all_mps": _rmse(self.speed_error_mps[known_ok]),
+        }
+
+
+def _rmse(x: np.ndarray) -> float | None:
+    return float(np.sqrt(np.mean(x * x))) if x.size else None
+
+
+def score_run(outcome: RunOutcome, truth: dict[str, np.ndarray] | None = None) -> RunScore:
+    """:class:`RunScore` of ``outcome`` (``truth`` from :func:`telemetry_truth` if None)."""
+    truth = telemetry_truth(outcome) if truth is None else truth
+    r = np.array([e.range_m for e in outcome.estimates], dtype=float)
+    v = np.array([e.speed_mps for e in outcome.estimates], dtype=float)
+    err_r = r - truth["range_m"]
+    err_v = v - truth["speed_mps"]
+    known = np.isfinite(err_r)
+    with np.errstate(invalid="ignore"):
+        wrong = known & (np.abs(err_r) > FALSE_ALARM_GATE_M)
+    return RunScore(err_r, err_v, known, scored_mask(outcome, truth), wrong)
+
+
 def summarize(outcome: RunOutcome) -> dict[str, Any]:
-    """The run summary (also written as ``summary.json``)."""
+    """The run summary (also written as ``summary.json``).
+
+    Counts every estimate whose truth is known: ``wrong_estimates`` over the whole run
+    (``wrong_gate_m`` off in range; ``wrong_fraction`` of ``estimates_with_truth``), and
+    ``false_alarms``, the wrong ones inside the scored window. RMSEs and biases are over the
+    scored estimates that are not wrong (``*_all_*``: over every known one that is not).
+    """
     exp = outcome.experiment
     est = outcome.estimates
     truth = telemetry_truth(outcome)
+    score = score_run(outcome, truth)
     r = np.array([e.range_m for e in est])
-    v = np.array([e.speed_mps for e in est])
     t = np.array([e.t_s for e in est])
-    err_r = r - truth["range_m"]
-    err_v = v - truth["speed_mps"]
-    scored = scored_mask(outcome, truth)
-    # Farther than FALSE_ALARM_GATE_M from the truth: a false alarm (tank multipath
-    # legitimately biases ranges by a few decimetres).
-    false_alarm = scored & (np.abs(err_r) > FALSE_ALARM_GATE_M)
-    good_est = scored & ~false_alarm
+    scored, good_est = score.scored, score.good_scored
     # Detection rate: distinct hop boundaries detected (and correct) over the boundaries
     # that reached the receiver during the constant-speed segments, counted per pass (the
     # hops between passes are not expected).
@@ -122,14 +184,12 @@ def summarize(outcome: RunOutcome) -> dict[str, Any]:
     )
     detected = float(np.unique(hops[good_est]).size)
 
-    def rmse(x: np.ndarray) -> float | None:
-        return float(np.sqrt(np.mean(x * x))) if x.size else None
-
     summary: dict[str, Any] = {
         "run": exp.name,
         "folder": str(outcome.folder),
         "simulated": exp.simulated,
         "receiver": exp.receiver,
+        "receiver_options": {k: v for k, v in exp.receiver_options.items() if k != "on_map"},
         "waveform": f"{exp.preset}/{exp.waveform.family}",
         "fs_hz": outcome.fs_hz,
         "sound_speed_mps": exp.sound_speed_mps,
@@ -140,13 +200,9 @@ def summarize(outcome: RunOutcome) -> dict[str, Any]:
         "wall_s": round(outcome.wall_s, 2),
         "real_time_factor": round(outcome.signal_s / outcome.wall_s, 4) if outcome.wall_s else None,
         "estimates": len(est),
-        "scored_estimates": int(scored.sum()),
-        "range_rmse_m": rmse(err_r[good_est]),
-        "speed_rmse_mps": rmse(err_v[good_est]),
-        "range_bias_m": float(np.mean(err_r[good_est])) if good_est.any() else None,
+        **score.figures(),
         "update_period_s": float(np.median(np.diff(t))) if len(t) > 1 else None,
         "detection_rate": round(detected / expected, 4) if expected else None,
-        "false_alarms": int(false_alarm.sum()),
         "loopback_latency_samples": outcome.latency_samples,
         "dropped_samples": outcome.dropped_samples,
         "capture_backlog_max_s": round(outcome.capture_backlog_max_s, 3),
@@ -163,7 +219,7 @@ def summarize(outcome: RunOutcome) -> dict[str, Any]:
             float(np.max(np.abs(diff[fin]))) if fin.any() else None
         )
         e_exact = r - outcome.exact_truth["range_m"]
-        summary["range_rmse_vs_exact_m"] = rmse(e_exact[good_est]) if good_est.any() else None
+        summary["range_rmse_vs_exact_m"] = _rmse(e_exact[good_est]) if good_est.any() else None
     return summary
 
 
@@ -172,13 +228,14 @@ def write_summary(outcome: RunOutcome, summary: dict[str, Any]) -> Path:
     path = outcome.folder / "summary.json"
     path.write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
     truth = telemetry_truth(outcome)
-    scored = scored_mask(outcome, truth)
-    rows = ["t_s,range_m,speed_mps,hop_index,score,snr_db,true_range_m,true_speed_mps,scored"]
+    score = score_run(outcome, truth)
+    scored, wrong = score.scored, score.wrong
+    rows = ["t_s,range_m,speed_mps,hop_index,score,snr_db,true_range_m,true_speed_mps,scored,wrong"]
     for i, e in enumerate(outcome.estimates):
         rows.append(
             f"{e.t_s:.6f},{e.range_m:.5f},{e.speed_mps:.4f},{e.hop_index},{e.score:.3f},"
             f"{e.snr_db:.2f},{truth['range_m'][i]:.5f},{truth['speed_mps'][i]:.4f},"
-            f"{int(scored[i])}"
+            f"{int(scored[i])},{int(wrong[i])}"
         )
     (outcome.folder / "estimates.csv").write_text("\n".join(rows) + "\n", encoding="utf-8")
     return path

@@ -11,7 +11,13 @@ import pytest
 
 from hil.estimation.base import Estimate
 from hil.experiments.experiment import DEFAULT_EXPERIMENT, parse_experiment
-from hil.experiments.run_scoring import TELEMETRY_GAP_S, scored_mask, summarize, telemetry_truth
+from hil.experiments.run_scoring import (
+    TELEMETRY_GAP_S,
+    score_run,
+    scored_mask,
+    summarize,
+    telemetry_truth,
+)
 from hil.experiments.tank_run import TELEMETRY_MAX_REPLY_S, RunOutcome, Telemetry
 
 EXP = parse_experiment(DEFAULT_EXPERIMENT)  # tow -2 m -> -5 m at 1.5 m/s, run-up 0.6 m
@@ -210,3 +216,28 @@ def test_a_stage_calibration_corrects_the_truth_not_the_scoring() -> None:
     dr = (b["range_m"] - a["range_m"])[scored]  # the target nears as the carriage goes -x
     assert dr.max() == pytest.approx(0.0025, abs=1e-5)
     assert dr.min() == pytest.approx(-0.0035, abs=1e-5)
+
+
+def test_wrong_estimates_outside_the_scored_window_are_counted() -> None:
+    # Ghosts during the ramps and after the stop (2 m off) fall outside the scored window:
+    # they count as wrong over the run, not as false alarms of the scored window.
+    out = _outcome(T_TEL, T_EST)
+    scored = scored_mask(out)
+    ghosts = np.flatnonzero(~scored & (T_EST > 1.0) & (T_EST < 6.0))
+    for i in ghosts.tolist():
+        e = out.estimates[i]
+        out.estimates[i] = Estimate(
+            e.t_s, e.range_m + 2.0, e.speed_mps, e.hop_index, e.score, e.snr_db, e.alpha,
+            e.t_tx_s, e.codeword, e.receiver,
+        )  # fmt: skip
+    summary = summarize(out)
+    known = int(np.isfinite(telemetry_truth(out)["range_m"]).sum())
+    assert summary["estimates_with_truth"] == known
+    assert summary["wrong_estimates"] == ghosts.size > 100
+    assert summary["wrong_fraction"] == pytest.approx(round(ghosts.size / known, 4))
+    assert summary["false_alarms"] == 0 and summary["scored_estimates"] == 201
+    assert summary["range_rmse_m"] < 1e-3  # the interpolated telemetry truth: 0.26 mm
+    assert summary["wrong_gate_m"] == 1.0
+    score = score_run(out)
+    assert np.array_equal(np.flatnonzero(score.wrong), ghosts)
+    assert not (score.good_scored & score.wrong).any()

@@ -1,0 +1,128 @@
+"""The reverberation band of a GCAS receiver: which Doppler cells stationary clutter fills.
+
+Stationary clutter (volume reverberation, walls, the direct blast) returns every tone at zero
+Doppler. A unit correlator integrates one hop, ``T_h`` seconds, so its Doppler main lobe is
+``±1/T_h`` Hz wide to the first null: clutter of tone ``f`` fills the cells within ``1/T_h`` of
+``f``, i.e. targets slower than the waveform's **Doppler resolution in speed**
+
+    ``v_res = c / (2 f T_h)``  (m/s)
+
+cannot be told from clutter by a single hop (tank-audio: 60 kHz, 10 ms → 1.24 m/s; att:
+30 kHz, 30 ms → 0.83 m/s). The default band (``reverb_speed_mps = "auto"``) rejects exactly
+those cells: half a resolution cell of clutter speeds (:func:`auto_reverb_speed_mps`) plus the
+receiver's half-lobe guard puts the band's edge at each tone's first null.
+
+Trade-off: with the band on, a target slower than ``v_res`` gives no estimate (it is where the
+clutter is); with it off (``reverb_speed_mps = 0``) such a target is estimated, and so is any
+stationary clutter stronger than the noise (a stationary target's echo, a tank wall, the direct
+blast) as a zero-speed estimate. Turn it off for a stationary or slow target in a quiet tank.
+
+A target inside the band is not reported at the band's edge: its Doppler response leaks into
+the first allowed cells, whose weighted maximum is then a ghost at the edge speed. Detections
+whose hypothesis lies on the edge (:func:`edge_hypotheses`) are therefore refused, and counted
+(:attr:`hil.estimation.gcas.GcasReceiver.in_band_count`).
+
+>>> round(auto_reverb_speed_mps(np.array([57e3, 59e3, 61e3, 63e3]), 0.01, 1482.3), 3)
+0.65
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from hil.errors import ConfigError
+
+#: The setting that derives the band from the waveform (:func:`auto_reverb_speed_mps`).
+AUTO = "auto"
+
+
+def doppler_resolution_mps(tones_hz: ArrayLike, hop_s: float, sound_speed_mps: float) -> float:
+    """The speed whose two-way Doppler shift at the lowest tone is one unit-correlator main
+    lobe, ``1/T_h`` Hz: ``c / (2 f_lo T_h)``, m/s (the widest of the tones' cells)."""
+    f_lo = float(np.min(np.asarray(tones_hz, dtype=np.float64)))
+    return float(sound_speed_mps) / (2.0 * f_lo * float(hop_s))
+
+
+def auto_reverb_speed_mps(tones_hz: ArrayLike, hop_s: float, sound_speed_mps: float) -> float:
+    """Clutter speeds the default band covers: half the Doppler resolution, m/s.
+
+    With the receiver's guard of half a main lobe around each tone's clutter band, the band
+    then reaches each tone's first null, ``1/T_h`` from zero Doppler."""
+    return 0.5 * doppler_resolution_mps(tones_hz, hop_s, sound_speed_mps)
+
+
+def resolve_reverb_speed(
+    value: float | str | None,
+    tones_hz: ArrayLike,
+    hop_s: float,
+    sound_speed_mps: float,
+    max_speed_mps: float,
+) -> float:
+    """The band's clutter speed (m/s) for a ``reverb_speed_mps`` setting.
+
+    ``"auto"`` (or None) gives :func:`auto_reverb_speed_mps`, or 0 (no band) when the band
+    would cover the whole search span ``±max_speed_mps``: no target of that span could then be
+    told from clutter. A number (m/s, ``>= 0``) is taken as it is; 0 turns the band off.
+    """
+    if value is None or value == AUTO:
+        v = auto_reverb_speed_mps(tones_hz, hop_s, sound_speed_mps)
+        edge = 2.0 * v  # the band's edge with the half-lobe guard, m/s
+        return v if edge < max_speed_mps else 0.0
+    if isinstance(value, bool) or not isinstance(value, int | float | np.floating):
+        raise ConfigError(
+            "reverb_speed_mps",
+            value,
+            f"'{AUTO}' or a speed >= 0 m/s",
+            "give a number such as 0.8, 0 to turn the band off, or 'auto'",
+        )
+    v = float(value)
+    if not (math.isfinite(v) and v >= 0):
+        raise ConfigError("reverb_speed_mps", value, f"'{AUTO}' or a speed >= 0 m/s")
+    return v
+
+
+def clutter_cells(
+    alphas: NDArray[np.floating],
+    tones_hz: NDArray[np.floating],
+    reverb_speed_mps: float,
+    sound_speed_mps: float,
+    guard_hz: float,
+    *,
+    any_tone: bool,
+) -> NDArray[np.bool_]:
+    """Unit-correlator cells that stationary clutter fills, shape ``(D, K)`` bool.
+
+    Cell ``(d, k)`` listens at ``α_d f_k`` (``alphas`` shape ``(D,)``, ``tones_hz`` shape
+    ``(K,)``). Clutter of speed ``|v| < reverb_speed_mps`` (m/s) of tone ``f_k'`` lies in
+    ``[α(−v), α(v)]·f_k'``; a cell within ``guard_hz`` of that band is filled. ``any_tone``:
+    by the clutter of any tone ``k'`` (ghost speeds included); else of its own tone only.
+    """
+    c = float(sound_speed_mps)
+    v = float(reverb_speed_mps)
+    a_lo, a_hi = (c - v) / (c + v), (c + v) / (c - v)
+    tones = np.asarray(tones_hz, dtype=np.float64)
+    f = np.asarray(alphas, dtype=np.float64)[:, None] * tones[None, :]  # (D, K) Hz
+    lo = a_lo * tones - guard_hz
+    hi = a_hi * tones + guard_hz
+    if any_tone:
+        return np.any((f[:, :, None] > lo) & (f[:, :, None] < hi), axis=2)
+    return (f > lo[None, :]) & (f < hi[None, :])
+
+
+def edge_hypotheses(hyp_weights: NDArray[np.floating], allow_in_band: bool) -> NDArray[np.bool_]:
+    """Hypotheses whose detections are refused, shape ``(D,)`` bool.
+
+    ``hyp_weights`` (shape ``(D,)``) is each hypothesis's smallest cell weight (1 outside the
+    band). Refused: every hypothesis next to one with a weight below 1 (the band's edge, where
+    an in-band target's leak peaks), and, unless ``allow_in_band`` (a soft band with weight
+    > 0, where the user asked for in-band detections), those inside the band as well.
+    """
+    w = np.asarray(hyp_weights, dtype=np.float64)
+    band = w < 1.0
+    near = band.copy()
+    near[1:] |= band[:-1]
+    near[:-1] |= band[1:]
+    return near & ~band if allow_in_band else near

@@ -1,0 +1,146 @@
+"""The default reverberation band: derived from the waveform, no ghost at its edge."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hil.errors import ConfigError
+from hil.estimation.gcas import GcasReceiver
+from hil.estimation.reverb_band import (
+    auto_reverb_speed_mps,
+    doppler_resolution_mps,
+    edge_hypotheses,
+    resolve_reverb_speed,
+)
+from hil.experiments.experiment import DEFAULT_EXPERIMENT, parse_experiment
+from hil.signals.presets import check_design, get_preset
+from hil.signals.schedule import HopSchedule
+
+from .conftest import echo_samples, make_gcas, run_blocks
+
+TANK_TONES = np.array([57e3, 59e3, 61e3, 63e3])
+
+
+def test_doppler_resolution_golden() -> None:
+    # c / (2 f_lo T_h): tank-audio 1482.3 / (2 · 57 kHz · 10 ms) = 1.3003 m/s.
+    assert doppler_resolution_mps(TANK_TONES, 0.01, 1482.3) == pytest.approx(1.30026, abs=1e-5)
+    assert auto_reverb_speed_mps(TANK_TONES, 0.01, 1482.3) == pytest.approx(0.65013, abs=1e-5)
+
+
+def test_resolve_auto_numbers_and_off() -> None:
+    assert resolve_reverb_speed("auto", TANK_TONES, 0.01, 1482.3, 3.0) == pytest.approx(
+        0.65013, 1e-4
+    )
+    assert resolve_reverb_speed(None, TANK_TONES, 0.01, 1482.3, 3.0) == pytest.approx(0.65013, 1e-4)
+    # The band's edge (1.30 m/s) would cover a ±1.2 m/s span: no band.
+    assert resolve_reverb_speed("auto", TANK_TONES, 0.01, 1482.3, 1.2) == 0.0
+    assert resolve_reverb_speed(0.8, TANK_TONES, 0.01, 1482.3, 3.0) == 0.8
+    assert resolve_reverb_speed(0, TANK_TONES, 0.01, 1482.3, 3.0) == 0.0
+
+
+@pytest.mark.parametrize("bad", ["fast", True, [1.0]])
+def test_resolve_refuses_what_is_not_a_speed(bad: object) -> None:
+    with pytest.raises(ConfigError) as info:
+        resolve_reverb_speed(bad, TANK_TONES, 0.01, 1482.3, 3.0)  # type: ignore[arg-type]
+    msg = str(info.value)
+    assert "reverb_speed_mps" in msg and repr(bad) in msg and "'auto' or a speed >= 0 m/s" in msg
+
+
+@pytest.mark.parametrize("bad", [-0.5, float("nan"), float("inf")])
+def test_resolve_refuses_negative_and_non_finite(bad: float) -> None:
+    with pytest.raises(ConfigError, match="reverb_speed_mps"):
+        resolve_reverb_speed(bad, TANK_TONES, 0.01, 1482.3, 3.0)
+
+
+def test_edge_hypotheses_golden() -> None:
+    w = np.array([1, 1, 1, 0, 0, 0, 1, 1, 1], dtype=float)
+    assert edge_hypotheses(w, allow_in_band=False).tolist() == [0, 0, 1, 1, 1, 1, 1, 0, 0]
+    assert edge_hypotheses(w, allow_in_band=True).tolist() == [0, 0, 1, 0, 0, 0, 1, 0, 0]
+    assert not edge_hypotheses(np.ones(5), allow_in_band=False).any()
+
+
+def _tank_schedule() -> HopSchedule:
+    return check_design(get_preset("tank-audio").spec("random-cyclic"))
+
+
+def _tank_receiver(**extra: object) -> GcasReceiver:
+    return GcasReceiver.from_options(
+        _tank_schedule(), 192_000.0, sound_speed_mps=1482.3, max_speed_mps=3.0,
+        max_range_m=12.0, m_hops=10, **extra,
+    )  # fmt: skip
+
+
+def _tank_echo(range_m: float, speed_mps: float, seed: int) -> np.ndarray:
+    """A target in the tank plus its surface and bottom images (two weaker copies a few
+    decimetres behind), 0 dB per-sample SNR."""
+    s = _tank_schedule()
+    x = echo_samples(s, range_m, speed_mps, 1.0, snr_db=0.0, seed=seed, fs_hz=192_000.0, c=1482.3)
+    for extra_m, amp in ((0.2, -0.6), (0.23, 0.4)):
+        x += echo_samples(
+            s, range_m + extra_m, speed_mps, 1.0, fs_hz=192_000.0, c=1482.3, amplitude=amp
+        )
+    return x
+
+
+def test_default_receiver_has_the_waveform_band() -> None:
+    rx = _tank_receiver()
+    assert rx.reverb_speed_mps == pytest.approx(0.65013, 1e-4)
+    v = rx.grid.speeds_mps[rx.refused_hypotheses]
+    # Refused: the band around zero Doppler and its edge, nothing beyond 1.5 m/s.
+    assert v.size and np.max(np.abs(v)) < 1.5 and np.min(np.abs(v)) == pytest.approx(0, abs=0.05)
+    assert not _tank_receiver(reverb_speed_mps=0.0).refused_hypotheses.any()
+
+
+@pytest.mark.parametrize("speed", [0.0, 0.5, -0.7])
+def test_a_target_inside_the_band_gives_no_ghost(speed: float) -> None:
+    x = _tank_echo(6.0, speed, seed=5)
+    rx = _tank_receiver()
+    est = run_blocks(rx, x, 19_200)
+    # No estimate at all (before the edge rule the peak sat on the band's edge, ~1.4 m/s).
+    assert est == []
+    assert rx.in_band_count > 20
+
+
+@pytest.mark.parametrize("speed", [0.0, 0.5])
+def test_with_the_band_off_a_slow_target_is_estimated(speed: float) -> None:
+    x = _tank_echo(6.0, speed, seed=6)
+    est = run_blocks(_tank_receiver(reverb_speed_mps=0.0), x, 19_200)
+    assert len(est) >= 80
+    v = np.array([e.speed_mps for e in est])
+    assert np.all(np.abs(v - speed) < 0.3)
+
+
+@pytest.mark.parametrize("speed", [2.4, -2.6])
+def test_a_target_past_the_band_is_estimated_with_the_default(speed: float) -> None:
+    x = _tank_echo(6.0, speed, seed=7)
+    est = run_blocks(_tank_receiver(), x, 19_200)
+    assert len(est) >= 80
+    v = np.array([e.speed_mps for e in est])
+    assert np.all(np.abs(v - speed) < 0.3)
+
+
+def test_default_band_costs_at_ghost_speeds(rc_schedule: HopSchedule) -> None:
+    # att tones 1.1 kHz apart: a stationary echo of one tone looks like the next tone at
+    # ±27.5 m/s, so those cells are masked; a 25 m/s target keeps its estimates but loses
+    # speed accuracy (0.02 m/s rms with the band off).
+    x = echo_samples(rc_schedule, 60.0, 25.0, 0.8, snr_db=0.0, seed=1)
+    est = run_blocks(make_gcas(rc_schedule), x)
+    assert len(est) >= 50
+    dv = np.array([e.speed_mps - 25.0 for e in est])
+    # Measured 0.50 m/s rms (a half-step bias of the Doppler readout next to masked cells).
+    assert np.sqrt(np.mean(dv**2)) < 0.6
+
+
+def test_tank_run_derives_the_band_from_the_tow() -> None:
+    exp = parse_experiment(DEFAULT_EXPERIMENT)
+    # The default tow (1.5 m/s) is within two resolution cells (2 × 1.30 m/s): no band.
+    assert exp.receiver_options["reverb_speed_mps"] == 0.0
+    fast = parse_experiment(DEFAULT_EXPERIMENT.replace("speed_mps = 1.5", "speed_mps = 2.8"))
+    assert fast.receiver_options["reverb_speed_mps"] == "auto"
+    given = parse_experiment(
+        DEFAULT_EXPERIMENT.replace(
+            "[calibration]", "options = { reverb_speed_mps = 0.3 }\n\n[calibration]"
+        )
+    )
+    assert given.receiver_options["reverb_speed_mps"] == 0.3
