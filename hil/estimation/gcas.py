@@ -102,6 +102,7 @@ from hil.estimation.detection import (
     parabolic_offsets,
 )
 from hil.estimation.doppler_grid import DopplerGrid, alpha_to_speed, doppler_grid, speed_to_alpha
+from hil.estimation.first_arrival import MAX_SPREAD_S, FirstArrivalReadout
 from hil.estimation.kernels import (
     codeword_sums,
     exact_windows,
@@ -134,6 +135,8 @@ NOISE_STRIDE = 32
 CFAR_MODES = ("bank", "statistic")
 #: Correlator searches: every hypothesis at every sample, or coarse-then-fine (two-stage).
 SEARCH_MODES = ("full", "two-stage")
+#: Range readouts: the peak of the accumulated sums, or the first arrival (tank multipath).
+RANGE_READOUTS = ("peak", "first-arrival")
 #: Default coarse step B of the two-stage search, baseband samples.
 COARSE_STEP = 8
 #: Anchor grid of the stage-2 prefix sums, baseband samples (values cached per sample).
@@ -269,6 +272,11 @@ class GcasReceiver:
         ``"full"`` (every unit correlator at every baseband sample; the reference).
     coarse_step:
         Coarse step B of the two-stage search, baseband samples.
+    range_readout, max_spread_s:
+        ``"peak"`` (default): the boundary time is the peak of the accumulated sums (in
+        multipath, the centroid of the arrivals); ``"first-arrival"``: the onset of the next
+        tone, the direct path in a tank (:mod:`hil.estimation.first_arrival`; arrivals up to
+        ``max_spread_s`` s before the peak).
     on_map:
         Called as ``on_map(t_s, P, speed_mps)`` with the time–codeword map of each new stretch
         of baseband samples: times (s, shape ``(n,)``), ``P`` (shape ``(n, J)``) and the chosen
@@ -300,6 +308,8 @@ class GcasReceiver:
         on_map: MapCallback | None = None,
         search: str = "two-stage",
         coarse_step: int = COARSE_STEP,
+        range_readout: str = "peak",
+        max_spread_s: float = MAX_SPREAD_S,
     ) -> None:
         if not (math.isfinite(fs_hz) and fs_hz > 0):
             raise ConfigError("fs_hz", fs_hz, "> 0 Hz")
@@ -338,6 +348,14 @@ class GcasReceiver:
         if search not in SEARCH_MODES:
             raise ConfigError("search", search, f"one of {', '.join(SEARCH_MODES)}")
         self.search = search
+        if range_readout not in RANGE_READOUTS:
+            raise ConfigError("range_readout", range_readout, f"one of {', '.join(RANGE_READOUTS)}")
+        self.range_readout = range_readout
+        self._first_arrival = (
+            FirstArrivalReadout(schedule, float(fs_hz), int(m_hops), max_spread_s)
+            if range_readout == "first-arrival"
+            else None
+        )
 
         self.schedule = schedule
         self.fs_hz = float(fs_hz)
@@ -503,6 +521,7 @@ class GcasReceiver:
             "n_doppler", "coherent", "pfa", "cfar_lambda", "runner_up_ratio",
             "cfar_window_hops", "cfar_mode", "reverb_speed_mps", "reverb_weight",
             "decimation", "attenuation_db", "on_map", "search", "coarse_step",
+            "range_readout", "max_spread_s",
         }  # fmt: skip
         unknown = sorted(set(extra) - known)
         if unknown:
@@ -589,6 +608,8 @@ class GcasReceiver:
     def _restart(self, input_index: int) -> None:
         """Restart every accumulation at absolute input sample ``input_index``."""
         self.baseband.reset(input_index)
+        if self._first_arrival is not None:
+            self._first_arrival.reset(input_index)
         b0 = self.baseband.next_output_index
         if self.bank is not None:
             self.bank.reset(b0)
@@ -639,6 +660,8 @@ class GcasReceiver:
             out += self.flush()
             self._samples_seen += int(gap_before)
             self._restart(self._samples_seen)
+        if self._first_arrival is not None:
+            self._first_arrival.push(x, self._samples_seen)
         self._samples_seen += x.shape[0]
         y = self.baseband.process(x)
         if y.shape[0]:
@@ -1243,6 +1266,10 @@ class GcasReceiver:
             t_rx, alpha = self._coherent_refine(
                 n_star, d0, j_hat + q * self.n_codewords, t_rx, alpha
             )
+        if self._first_arrival is not None:
+            t_first = self._first_arrival.first_arrival(t_rx, alpha, j_hat + q * self.n_codewords)
+            if t_first is not None:
+                t_rx = t_first
         delay = t_rx - t_tx
         if delay > 2.0 * self.max_range_m / c + tol:
             self.refused_count += 1

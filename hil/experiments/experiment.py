@@ -440,7 +440,9 @@ def parse_experiment(text: str) -> Experiment:
         m_hops=m_hops,
         max_speed_mps=v_max,
         max_range_m=r_max,
-        receiver_options=tank_receiver_options(receiver, dict(options), schedule, c, plan),
+        receiver_options=tank_receiver_options(
+            receiver, dict(options), schedule, spec.fs_hz, c, plan
+        ),
         calibration_store=store,
         calibration_max_age_days=max_age,
         calibration_required=tuple(required),
@@ -472,10 +474,23 @@ def _sound_speed_from_water(temperature_c: float, salinity_ppt: float) -> float:
 
 
 def tank_receiver_options(
-    receiver: str, options: dict[str, Any], schedule: HopSchedule, c: float, plan: TowPlan
+    receiver: str,
+    options: dict[str, Any],
+    schedule: HopSchedule,
+    fs_hz: float,
+    c: float,
+    plan: TowPlan,
 ) -> dict[str, Any]:
-    """The receiver options of a tank run: ``options`` as given, with GCAS's reverberation
-    band (``reverb_speed_mps``, m/s) derived from the tow when the file does not set it.
+    """The receiver options of a tank run: ``options`` as given, with two GCAS settings
+    derived from the tank when the file does not set them.
+
+    ``range_readout``: ``"first-arrival"`` (:mod:`hil.estimation.first_arrival`): in a tank
+    the surface, bottom and wall images follow the direct echo by a few tenths of a
+    millisecond and pull the peak of the accumulated sums to their centroid (+0.45 m in the
+    built-in tank); the peak readout only where the code period is not a whole number of
+    samples (the first-arrival readout's clutter canceller needs one).
+
+    ``reverb_speed_mps``, the reverberation band (m/s):
 
     A tow starts and ends at rest, so the target passes through every speed below the tow
     speed. The band hides targets slower than the waveform's Doppler resolution
@@ -484,8 +499,14 @@ def tank_receiver_options(
     (``>= 2 v_res``), and is off (0) otherwise, where it would remove the tow itself
     (tank-audio: ``v_res`` = 1.30 m/s, so tows below 2.6 m/s run without it).
     """
-    if receiver != "gcas" or "reverb_speed_mps" in options:
+    if receiver != "gcas":
         return options
-    v_res = doppler_resolution_mps(schedule.tones_hz, schedule.hop_s, c)
-    band = AUTO if plan.speed_mps >= 2.0 * v_res else 0.0
-    return {**options, "reverb_speed_mps": band}
+    out = dict(options)
+    if "reverb_speed_mps" not in out:
+        v_res = doppler_resolution_mps(schedule.tones_hz, schedule.hop_s, c)
+        out["reverb_speed_mps"] = AUTO if plan.speed_mps >= 2.0 * v_res else 0.0
+    if "range_readout" not in out:
+        period = schedule.period_s * fs_hz
+        whole = abs(period - round(period)) <= 1e-6 * period
+        out["range_readout"] = "first-arrival" if whole else "peak"
+    return out

@@ -1,0 +1,182 @@
+"""First-arrival range readout: the onset of the next tone at each hop boundary (tank ranging).
+
+In a tank every echo arrives several times: the direct path, then its images in the surface,
+the bottom and the walls, a few tenths of a millisecond later and about as strong. The
+accumulated sums of GCAS integrate a whole hop, so their peak lands on the energy centroid of
+those arrivals (+0.45 m in the built-in tank), not on the direct path. The direct path is the
+first arrival, and at a hop boundary it is the first to switch to the next tone: this readout
+times that switch.
+
+For each of the ``M`` boundaries the GCAS detection used (receive times from its boundary time
+``t_c`` and time scale ``α``; the tone after boundary ``m`` from the schedule):
+
+1. **Clutter canceller**: ``d(t) = x(t) − x(t − P)``, ``P`` the code period (samples, an
+   integer). The transmission repeats exactly every period, so every time-invariant return
+   (the direct blast, walls, volume reverberation of a still tank) cancels; the moving echo
+   does not, it leaves a copy of itself shifted by ``δ = P (α − 1)/α`` (later for a closing
+   target, earlier for an opening one, whose first onset is then corrected by ``−δ``).
+2. **Next-tone channel**: ``z(t) = boxcar_w(d(t) e^{−j2π α f_next t})`` with a causal boxcar
+   of ``w = 1/Δf`` (``Δf`` the tone spacing): it nulls every other tone of the echo exactly, so
+   ``|z|`` stays at the noise floor until the first arrival switches, then ramps up linearly
+   over ``w``.
+3. **Onset**: the noncoherent mean of ``|z|²`` over the ``M`` boundaries, less its level in a
+   window before any arrival, as an amplitude; walking back from its maximum after ``t_c`` to
+   where it falls below ``hi`` and then ``lo`` of that maximum, a line through that stretch of
+   the ramp meets zero at the first arrival.
+
+The range then comes from the first arrival instead of the centroid. Measured on the built-in
+simulated tank (12 × 4 × 2.5 m, first-order images, reverberation, direct blast; 1.5 m/s
+tow): range bias +0.02 m and 0.02 m standard deviation, against +0.45 m for the peak; with the
+images off, +0.02 m against −0.01 m.
+
+Limits: a target slower than about one carrier wavelength per code period is mostly cancelled
+with the clutter (no onset found: the peak readout is kept); the readout needs the samples of
+one code period plus ``M`` hops behind the boundary (:attr:`FirstArrivalReadout.history`); it
+assumes first arrivals within ``max_spread_s`` before the centroid.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hil.errors import ConfigError
+from hil.estimation.row_buffer import RowBuffer
+from hil.signals.schedule import HopSchedule
+
+#: Default bound on how far the first arrival can precede the peak (centroid), s: the
+#: first-order images of a tank up to ~1 m of extra path (1.35 ms round trip).
+MAX_SPREAD_S = 1.5e-3
+#: The level before any arrival is measured over this long, s.
+BASELINE_S = 0.4e-3
+#: After the peak, the ramp's top is searched this long, s.
+TOP_S = 1.0e-3
+#: Fractions of the ramp's top between which the line is fitted.
+LO_FRACTION = 0.03
+HI_FRACTION = 0.12
+#: The fit's lower level stays this many standard deviations of the noise's amplitude above
+#: the baseline (noise crossing a level set by the top alone gave onsets 0.2-0.7 m early at
+#: 0 dB per-sample SNR).
+NOISE_MARGIN = 4.0
+
+
+class FirstArrivalReadout:
+    """Times the first arrival at the hop boundaries of a GCAS detection.
+
+    Parameters
+    ----------
+    schedule:
+        The transmit schedule (equal hop lengths, tones on a common spacing).
+    fs_hz:
+        Input sample rate, Hz; ``schedule.period_s · fs_hz`` must be an integer.
+    m_hops:
+        Boundaries used per detection (GCAS's M).
+    max_spread_s:
+        How far before the centroid the first arrival may be, s.
+    """
+
+    def __init__(
+        self, schedule: HopSchedule, fs_hz: float, m_hops: int, max_spread_s: float = MAX_SPREAD_S
+    ) -> None:
+        period = schedule.period_s * fs_hz
+        if abs(period - round(period)) > 1e-6 * period:
+            raise ConfigError(
+                "range_readout",
+                "first-arrival",
+                "a code period of a whole number of samples",
+                f"period {schedule.period_s} s × {fs_hz} Hz = {period:.4f} samples: "
+                "the clutter canceller subtracts the period before; use the peak readout",
+            )
+        if not (math.isfinite(max_spread_s) and 0 < max_spread_s < schedule.hop_s / 2):
+            raise ConfigError(
+                "max_spread_s", max_spread_s, f"0 < spread < half a hop ({schedule.hop_s / 2} s)"
+            )
+        tones = np.sort(np.asarray(schedule.tones_hz, dtype=np.float64))
+        spacing = float(np.min(np.diff(tones))) if tones.size > 1 else 1.0 / schedule.hop_s
+        self.schedule = schedule
+        self.fs_hz = float(fs_hz)
+        self.m_hops = int(m_hops)
+        self.period = int(round(period))
+        self.boxcar = max(2, int(round(fs_hz / spacing)))
+        self.max_spread_s = float(max_spread_s)
+        self._pre = int(round((max_spread_s + BASELINE_S) * fs_hz)) + self.boxcar
+        self._post = int(round(TOP_S * fs_hz))
+        offs = np.arange(-self._pre, self._post)
+        self._offsets = offs
+        t_rel = offs / self.fs_hz
+        self._base = (t_rel >= -max_spread_s - BASELINE_S) & (t_rel < -max_spread_s)
+        self._search_from = int(np.flatnonzero(t_rel >= -max_spread_s)[0])
+        self._after = int(np.flatnonzero(t_rel >= 0.0)[0])
+        #: Input samples kept behind the newest: one period plus the M boundaries' windows.
+        self.history = self.period + int(math.ceil((m_hops + 1) * schedule.hop_s * fs_hz))
+        self.history += self._pre + self._post
+        self._ring = RowBuffer(self.history, (), np.float64)
+        self._valid_from = 0
+
+    def reset(self, input_index: int) -> None:
+        """Forget the history; the next sample is ``input_index`` (after a gap)."""
+        self._ring.reset(input_index)
+        self._valid_from = int(input_index)
+
+    def push(self, x: NDArray[np.float64], first_index: int) -> None:
+        """Append input samples (shape ``(n,)``) starting at absolute index ``first_index``."""
+        self._ring.append(x, first_index)
+
+    def first_arrival(self, t_c: float, alpha: float, hop_index: int) -> float | None:
+        """The first arrival's time (s, input time base) at the boundary that ends hop
+        ``hop_index``, received at ``t_c`` (s, the centroid) with time scale ``alpha``; None
+        where its history is missing (start, gaps) or no onset stands out."""
+        fs = self.fs_hz
+        sch = self.schedule
+        hops = sch.hops(hop_index - self.m_hops + 2, self.m_hops)  # hops h-M+2 .. h+1
+        f_next = hops.freq_hz[::-1]  # tone after boundary m (m = 0: after hop h)
+        # Receive times of the boundaries, from their transmit spacing compressed by α.
+        ends = hops.start_s[::-1]  # start of the hop after boundary m = its transmit time
+        t_b = t_c - (ends[0] - ends) / alpha
+        n_b = np.round(t_b * fs).astype(np.int64)
+        first = n_b - self._pre - self.period
+        if first.min() < self._valid_from or n_b.max() + self._post > self._ring.next_index:
+            return None
+        idx = n_b[:, None] + self._offsets[None, :]  # (M, L)
+        d = self._ring.rows(idx) - self._ring.rows(idx - self.period)
+        t = idx / fs
+        z = d * np.exp(-2j * np.pi * alpha * f_next[:, None] * t)
+        c = np.cumsum(z, axis=1)
+        w = self.boxcar
+        box = np.empty_like(c)
+        box[:, :w] = c[:, :w]
+        box[:, w:] = c[:, w:] - c[:, :-w]
+        power = np.mean(np.abs(box / w) ** 2, axis=0)  # (L,)
+        amp = np.sqrt(np.maximum(power - power[self._base].mean(), 0.0))
+        top_i = self._after + int(np.argmax(amp[self._after :]))
+        top = float(amp[top_i])
+        noise = float(np.sqrt(power[self._base].mean()))
+        if not top > 3.0 * noise:
+            return None
+        # The fit's levels: fractions of the top, but clear of the noise's own fluctuation.
+        wobble = NOISE_MARGIN * float(np.std(amp[self._base]))
+        lo_level = max(LO_FRACTION * top, wobble)
+        hi_level = max(HI_FRACTION * top, lo_level + wobble)
+        j = top_i
+        k0 = self._search_from
+        while j > k0 and amp[j - 1] >= hi_level:
+            j -= 1
+        j_hi = j
+        while j > k0 and amp[j - 1] >= lo_level:
+            j -= 1
+        j_lo = min(j, j_hi - 2)
+        if j_lo <= k0:
+            return None  # the ramp runs into the baseline: no clean onset
+        tt = self._offsets[j_lo : j_hi + 1] / fs
+        slope, icept = np.polyfit(tt, amp[j_lo : j_hi + 1], 1)
+        if not slope > 0:
+            return None
+        rel = -icept / slope  # s after boundary 0's sample
+        if not -self.max_spread_s - BASELINE_S < rel < TOP_S:
+            return None
+        onset = float(n_b[0] / fs + rel)
+        # The canceller's copy of an opening target (δ < 0) arrives |δ| earlier.
+        delta = sch.period_s * (alpha - 1.0) / alpha
+        return onset - min(0.0, delta)
