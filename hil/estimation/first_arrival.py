@@ -26,13 +26,13 @@ For each of the ``M`` boundaries the GCAS detection used (receive times from its
 
 The range then comes from the first arrival instead of the centroid. Measured on the built-in
 simulated tank (12 × 4 × 2.5 m, first-order images, reverberation, direct blast; 1.5 m/s
-tow): range bias +0.02 m and 0.02 m standard deviation, against +0.45 m for the peak; with the
-images off, +0.02 m against −0.01 m.
+tow): range bias +0.022 m, RMSE 0.027 m, against +0.46 m for the peak; with the images off,
++0.021 m against −0.009 m (docs/tank-run.md has the table).
 
 Limits: a target slower than about one carrier wavelength per code period is mostly cancelled
 with the clutter (no onset found: the peak readout is kept); the readout needs the samples of
 one code period plus ``M`` hops behind the boundary (:attr:`FirstArrivalReadout.history`); it
-assumes first arrivals within ``max_spread_s`` before the centroid.
+assumes first arrivals within ``max_spread_s`` before the centroid (default 0.3 hop).
 """
 
 from __future__ import annotations
@@ -46,9 +46,10 @@ from hil.errors import ConfigError
 from hil.estimation.row_buffer import RowBuffer
 from hil.signals.schedule import HopSchedule
 
-#: Default bound on how far the first arrival can precede the peak (centroid), s: the
-#: first-order images of a tank up to ~1 m of extra path (1.35 ms round trip).
-MAX_SPREAD_S = 1.5e-3
+#: Default bound on how far the first arrival can precede the peak (centroid), in hops: 3 ms
+#: (2.2 m of range) at 10 ms hops. In a 12 × 6 × 4 m tank the side-wall images put the
+#: centroid 1.3 m behind the direct path at 5 m; 1.5 ms missed those onsets.
+MAX_SPREAD_HOPS = 0.3
 #: The level before any arrival is measured over this long, s.
 BASELINE_S = 0.4e-3
 #: After the peak, the ramp's top is searched this long, s.
@@ -74,12 +75,19 @@ class FirstArrivalReadout:
     m_hops:
         Boundaries used per detection (GCAS's M).
     max_spread_s:
-        How far before the centroid the first arrival may be, s.
+        How far before the centroid the first arrival may be, s (default
+        :data:`MAX_SPREAD_HOPS` hops).
     """
 
     def __init__(
-        self, schedule: HopSchedule, fs_hz: float, m_hops: int, max_spread_s: float = MAX_SPREAD_S
+        self,
+        schedule: HopSchedule,
+        fs_hz: float,
+        m_hops: int,
+        max_spread_s: float | None = None,
     ) -> None:
+        if max_spread_s is None:
+            max_spread_s = MAX_SPREAD_HOPS * schedule.hop_s
         period = schedule.period_s * fs_hz
         if abs(period - round(period)) > 1e-6 * period:
             raise ConfigError(

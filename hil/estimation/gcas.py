@@ -102,7 +102,7 @@ from hil.estimation.detection import (
     parabolic_offsets,
 )
 from hil.estimation.doppler_grid import DopplerGrid, alpha_to_speed, doppler_grid, speed_to_alpha
-from hil.estimation.first_arrival import MAX_SPREAD_S, FirstArrivalReadout
+from hil.estimation.first_arrival import FirstArrivalReadout
 from hil.estimation.kernels import (
     codeword_sums,
     exact_windows,
@@ -276,7 +276,7 @@ class GcasReceiver:
         ``"peak"`` (default): the boundary time is the peak of the accumulated sums (in
         multipath, the centroid of the arrivals); ``"first-arrival"``: the onset of the next
         tone, the direct path in a tank (:mod:`hil.estimation.first_arrival`; arrivals up to
-        ``max_spread_s`` s before the peak).
+        ``max_spread_s`` s before the peak; default 0.3 hop).
     on_map:
         Called as ``on_map(t_s, P, speed_mps)`` with the time–codeword map of each new stretch
         of baseband samples: times (s, shape ``(n,)``), ``P`` (shape ``(n, J)``) and the chosen
@@ -309,7 +309,7 @@ class GcasReceiver:
         search: str = "two-stage",
         coarse_step: int = COARSE_STEP,
         range_readout: str = "peak",
-        max_spread_s: float = MAX_SPREAD_S,
+        max_spread_s: float | None = None,
     ) -> None:
         if not (math.isfinite(fs_hz) and fs_hz > 0):
             raise ConfigError("fs_hz", fs_hz, "> 0 Hz")

@@ -97,19 +97,27 @@ def clutter_cells(
 
     Cell ``(d, k)`` listens at ``α_d f_k`` (``alphas`` shape ``(D,)``, ``tones_hz`` shape
     ``(K,)``). Clutter of speed ``|v| < reverb_speed_mps`` (m/s) of tone ``f_k'`` lies in
-    ``[α(−v), α(v)]·f_k'``; a cell within ``guard_hz`` of that band is filled. ``any_tone``:
-    by the clutter of any tone ``k'`` (ghost speeds included); else of its own tone only.
+    ``[α(−v), α(v)]·f_k'``. A cell within ``guard_hz`` of its own tone's band is filled;
+    with ``any_tone``, so is a cell inside another tone's band (a ghost speed, where
+    ``α_d f_k = f_k'``), without the guard. Measured on the ``att`` random-cyclic code: the
+    guard on the ghost cells as well removed most of a 25 m/s target next to the ghost
+    speed (27.5 m/s): 0.22 of its hops detected at −20 dB against 0.88 without, while
+    rejecting a stationary echo 6 dB above a target equally well.
     """
     c = float(sound_speed_mps)
     v = float(reverb_speed_mps)
     a_lo, a_hi = (c - v) / (c + v), (c + v) / (c - v)
     tones = np.asarray(tones_hz, dtype=np.float64)
     f = np.asarray(alphas, dtype=np.float64)[:, None] * tones[None, :]  # (D, K) Hz
-    lo = a_lo * tones - guard_hz
-    hi = a_hi * tones + guard_hz
-    if any_tone:
-        return np.any((f[:, :, None] > lo) & (f[:, :, None] < hi), axis=2)
-    return (f > lo[None, :]) & (f < hi[None, :])
+    own = (f > a_lo * tones[None, :] - guard_hz) & (f < a_hi * tones[None, :] + guard_hz)
+    if not any_tone:
+        return np.asarray(own, dtype=bool)
+    ghost = np.any(
+        (f[:, :, None] > a_lo * tones[None, None, :])
+        & (f[:, :, None] < a_hi * tones[None, None, :]),
+        axis=2,
+    )
+    return np.asarray(own | ghost, dtype=bool)
 
 
 def edge_hypotheses(hyp_weights: NDArray[np.floating], allow_in_band: bool) -> NDArray[np.bool_]:

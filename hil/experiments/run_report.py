@@ -91,7 +91,8 @@ def write_report(outcome: RunOutcome) -> list[Path]:
         ax.set_title(title, fontsize=9)
         ax.set_xlabel(label)
         ax.set_ylabel("estimates")
-        ax.legend(fontsize=7)
+        if e_all.size:
+            ax.legend(fontsize=7)
     fig.suptitle(
         f"{figures['estimates_with_truth']} estimates with truth, "
         f"{figures['wrong_estimates']} wrong (> {figures['wrong_gate_m']:g} m), "

@@ -62,14 +62,18 @@ class PtyDevices:
 
     def experiment(self, out: Path, calibration: str = "") -> Experiment:
         """The short built-in pass with the devices given by their pty paths, the receiver
-        keeping stationary echoes (the wired echo does not move); ``calibration`` replaces
+        keeping stationary echoes with the peak readout (the wired echo does not move: the band
+        and the first-arrival readout's clutter canceller would remove it); ``calibration`` replaces
         the ``[calibration]`` table's keys."""
         text = (
             DEFAULT_EXPERIMENT.replace('"sim://board"', f'"{self.board.port_name}"')
             .replace('"sim://stage"', f'"{self.stage.port_name}"')
             .replace("end_m = -5.0", "end_m = -3.5")
             .replace('output_dir = "runs"', f'output_dir = "{out}"')
-            .replace("options = { reverb_speed_mps = 0.8 }", "")
+            .replace(
+                "[calibration]",
+                'options = { reverb_speed_mps = 0.0, range_readout = "peak" }\n\n[calibration]',
+            )
         )
         if calibration:
             head, _, tail = text.partition("[calibration]\n")
