@@ -22,13 +22,42 @@ hil.errors.ConfigError: acceleration_x ($120) = -5.0 is not allowed: must be a n
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any, Generic, TypeVar, overload
 
 from hil.devices.grbl_protocol import SettingLine, format_setting_line
 from hil.errors import ConfigError
 
 T = TypeVar("T", float, int, bool)
+
+#: The axes of a GRBL 1.1 build, in ``$`` setting order (``$100`` X, ``$101`` Y, ``$102`` Z).
+AXES = "XYZ"
+#: GRBL 1.1h's stock homing cycles (``config.h``: ``HOMING_CYCLE_0`` Z, then
+#: ``HOMING_CYCLE_1`` X and Y together). Every axis in them needs its switch, else ALARM:9.
+STOCK_HOMING_CYCLES = ("Z", "XY")
+#: ``limits.c``: the search covers 1.5 x the max travel, the locate phase 5 x the pull-off.
+HOMING_SEARCH_SCALAR = 1.5
+HOMING_LOCATE_SCALAR = 5.0
+
+
+def check_homing_cycles(cycles: Sequence[str]) -> tuple[str, ...]:
+    """``cycles`` as a tuple, or ConfigError naming a cycle that is not axes of X, Y, Z.
+
+    >>> check_homing_cycles(["Z", "XY"])
+    ('Z', 'XY')
+    >>> check_homing_cycles(("XA",))
+    Traceback (most recent call last):
+    ...
+    hil.errors.ConfigError: homing cycle = 'XA' is not allowed: must be a non-empty string \
+of the axes X, Y, Z; GRBL 1.1's stock cycles are ('Z', 'XY')
+    """
+    for cycle in cycles:
+        if not isinstance(cycle, str) or not cycle or any(a not in AXES for a in cycle):
+            raise ConfigError(
+                "homing cycle", cycle, "a non-empty string of the axes X, Y, Z",
+                "GRBL 1.1's stock cycles are ('Z', 'XY')",
+            )  # fmt: skip
+    return tuple(cycles)
 
 
 class GrblSetting(Generic[T]):
@@ -134,15 +163,23 @@ class GrblSettings:
     homing_debounce = GrblSetting(26, int, "ms", 0, 65535)
     homing_pulloff = GrblSetting(27, float, "mm", 0, 1e4)
     steps_per_mm_x = GrblSetting(100, float, "steps/mm", 0, 1e5, low_open=True)
+    steps_per_mm_y = GrblSetting(101, float, "steps/mm", 0, 1e5, low_open=True)
+    steps_per_mm_z = GrblSetting(102, float, "steps/mm", 0, 1e5, low_open=True)
     max_rate_x = GrblSetting(
         110, float, "mm/min", 0, 1e6, low_open=True, hint="give the X max rate in mm/min"
     )
+    max_rate_y = GrblSetting(111, float, "mm/min", 0, 1e6, low_open=True)
+    max_rate_z = GrblSetting(112, float, "mm/min", 0, 1e6, low_open=True)
     acceleration_x = GrblSetting(
         120, float, "mm/s^2", 0, 1e5, low_open=True, hint="give the X acceleration in mm/s^2"
     )
+    acceleration_y = GrblSetting(121, float, "mm/s^2", 0, 1e5, low_open=True)
+    acceleration_z = GrblSetting(122, float, "mm/s^2", 0, 1e5, low_open=True)
     max_travel_x = GrblSetting(
         130, float, "mm", 0, 1e6, low_open=True, hint="give the X travel in mm"
     )
+    max_travel_y = GrblSetting(131, float, "mm", 0, 1e6, low_open=True)
+    max_travel_z = GrblSetting(132, float, "mm", 0, 1e6, low_open=True)
 
     def __init__(self, raw: Mapping[int, str]) -> None:
         self.raw: dict[int, str] = dict(raw)
@@ -201,6 +238,42 @@ class GrblSettings:
     def step(self) -> float:
         """One X step, m."""
         return 1e-3 / self.steps_per_mm_x
+
+    def travel_mm(self, axis: str) -> float | None:
+        """Max travel ``$130``-``$132`` of ``axis`` ("X", "Y" or "Z") in mm, or None when
+        the dump has no such setting (a build without that axis)."""
+        number = 130 + AXES.index(axis)
+        return float(self.raw[number]) if number in self.raw else None
+
+    def homing_time_bound(self, cycles: Sequence[str] = STOCK_HOMING_CYCLES) -> float:
+        """The longest ``$H`` can take before GRBL gives up with ``ALARM:9``, s.
+
+        GRBL 1.1h homes the axes of each cycle together (``cycles``: its ``HOMING_CYCLE_n``
+        masks, stock ``("Z", "XY")``), and per cycle: searches 1.5 x the largest travel at
+        the seek rate ``$25``, pulls off ``$27`` at ``$25``, locates the switch within 5 x
+        ``$27`` at the feed rate ``$24``, pulls off again, with the debounce ``$26`` after
+        each of the 4 phases. Axes the dump has no travel for are skipped. Acceleration is
+        not counted (the caller adds a margin).
+
+        >>> s = GrblSettings({24: "25", 25: "500", 26: "250", 27: "1", 130: "200", 132: "100"})
+        >>> round(s.homing_time_bound(), 3)  # Z: 18 + 0.24 + 12 + 1; XY: 36 + 0.24 + 12 + 1
+        80.48
+        """
+        check_homing_cycles(cycles)
+        seek, feed, pulloff = self.homing_seek, self.homing_feed, self.homing_pulloff
+        debounce = (int(self.raw[26]) if 26 in self.raw else 250) / 1000.0
+        total = 0.0
+        for cycle in cycles:
+            travels = [t for t in (self.travel_mm(axis) for axis in cycle) if t is not None]
+            if not travels:
+                continue
+            total += (
+                HOMING_SEARCH_SCALAR * max(travels) / seek * 60.0
+                + 2.0 * pulloff / seek * 60.0
+                + HOMING_LOCATE_SCALAR * pulloff / feed * 60.0
+                + 4.0 * debounce
+            )
+        return total
 
     def __repr__(self) -> str:
         return f"GrblSettings({self.raw!r})"

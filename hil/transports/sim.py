@@ -10,9 +10,10 @@ delay, samples) and ``gain`` (loopback gain, linear). Keyword options: ``clock``
 injected ``now()``; default real time), ``world``, ``spec``, ``faults``. The returned
 transport has a ``simulator`` attribute: what serves it (for fault injection in tests).
 
-``sim://stage`` starts the simulated GRBL controller on a pty and returns the open serial
-port (a serial-like object :class:`~hil.devices.grbl.GrblStage` accepts); closing it stops
-the simulator. Keyword options: ``config`` (a ``GrblSimConfig``), ``clock``.
+``sim://stage`` starts the simulated GRBL controller on a pty and returns a transport to it
+(its ``simulator`` attribute is the ``SimulatedGrblOnPty``); closing it stops the
+simulator. Keyword options: ``config`` (a ``GrblSimConfig``), ``clock`` (an injected
+``now()``; :class:`~hil.devices.grbl.GrblStage` passes its own clock's).
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from typing import Any
 
 from hil.errors import ConfigError
 from hil.transports.base import Transport
-from hil.transports.serial_transport import SerialTransport, open_serial
+from hil.transports.serial_transport import open_serial
 
 _VIAS = ("memory", "pty", "usb")
 
@@ -83,53 +84,8 @@ def open_sim_board(query: dict[str, str], options: dict[str, Any], timeout: floa
     return link
 
 
-class SimStagePort:
-    """The serial port of a simulated GRBL stage; closing it stops the simulator.
-
-    Offers what :class:`~hil.devices.grbl.GrblStage` uses of a serial port (``read``,
-    ``write``, ``in_waiting``, ``reset_input_buffer``, ``timeout``, ``close``) and the
-    transport contract's ``url``.
-    """
-
-    def __init__(self, transport: SerialTransport, simulator: Any) -> None:
-        self._transport = transport
-        self.port = transport.port
-        self.simulator = simulator
-        self.url = "sim://stage"
-
-    @property
-    def timeout(self) -> float:
-        """Read timeout, s."""
-        return float(self.port.timeout)
-
-    @timeout.setter
-    def timeout(self, value: float) -> None:
-        self.port.timeout = value
-
-    @property
-    def in_waiting(self) -> int:
-        """Bytes ready to read."""
-        return int(self.port.in_waiting)
-
-    def read(self, size: int = 1) -> bytes:
-        """pyserial semantics: wait for ``size`` bytes or the timeout."""
-        return bytes(self.port.read(size))
-
-    def write(self, data: bytes) -> int:
-        """Write all of ``data``."""
-        return self._transport.write(data)
-
-    def reset_input_buffer(self) -> None:
-        """Drop unread input."""
-        self.port.reset_input_buffer()
-
-    def close(self) -> None:
-        """Close the port and stop the simulator."""
-        self._transport.close()
-
-
-def open_sim_stage(query: dict[str, str], options: dict[str, Any], timeout: float) -> Any:
-    """Start the simulated GRBL controller on a pty; return its open serial port."""
+def open_sim_stage(query: dict[str, str], options: dict[str, Any], timeout: float) -> Transport:
+    """Start the simulated GRBL controller on a pty; return a transport to it."""
     from sim_devices.stage import SimulatedGrblOnPty
 
     if query:
@@ -138,4 +94,6 @@ def open_sim_stage(query: dict[str, str], options: dict[str, Any], timeout: floa
         )
     sim = SimulatedGrblOnPty(options.get("config"), clock=options.get("clock")).start()
     transport = open_serial(sim.port_name, timeout=timeout, on_close=sim.close)
-    return SimStagePort(transport, sim)
+    transport.url = "sim://stage"
+    transport.simulator = sim  # type: ignore[attr-defined]
+    return transport
