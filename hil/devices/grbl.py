@@ -292,6 +292,11 @@ polling at no more than 5 Hz); use the default 0.2
         return self._last_status
 
     @property
+    def transport(self) -> ByteLink:
+        """The open link to GRBL (what the URL opened, or the transport given)."""
+        return self._require_open()
+
+    @property
     def messages(self) -> list[str]:
         """Push messages received (``[MSG:...]`` as sent), oldest first."""
         return self.connection.messages

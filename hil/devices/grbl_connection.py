@@ -83,6 +83,9 @@ class PendingLine:
     line: str
     result: Ok | ErrorResponse | None = None
     reset: bool = False
+    #: An alarm came while it was pending (a failed ``$H`` is answered ``ok`` after its
+    #: ``ALARM:9``: that ``ok`` ends no alarm).
+    alarmed: bool = False
 
     @property
     def done(self) -> bool:
@@ -281,7 +284,7 @@ class GrblConnection:
             return Noise(line)
         pending = self.pending.popleft()
         pending.result = msg
-        if isinstance(msg, Ok) and pending.line in ("$X", "$H"):
+        if isinstance(msg, Ok) and pending.line in ("$X", "$H") and not pending.alarmed:
             self.alarm = None  # unlocked or homed: the alarm is over
         return LineAnswered(pending)
 
@@ -296,6 +299,8 @@ class GrblConnection:
 
     def _alarm(self, code: int, now: float) -> Alarm:
         self.alarm = code
+        for pending in self.pending:
+            pending.alarmed = True
         critical = code in CRITICAL_ALARMS
         if critical:
             self.critical, self.critical_since = True, now
