@@ -32,7 +32,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from types import TracebackType
 from typing import Any, Protocol
 
@@ -123,6 +123,9 @@ class GrblStage:
     homing_cycles:
         The axes GRBL homes together, cycle by cycle (the firmware's ``HOMING_CYCLE_n``
         masks; stock GRBL 1.1h: ``("Z", "XY")``); the ``$H`` timeout covers them all.
+    transport_options:
+        More keyword options for the transport opener of a URL (``config=`` a
+        ``GrblSimConfig`` for ``sim://stage``).
 
     Examples
     --------
@@ -148,6 +151,7 @@ polling at no more than 5 Hz); use the default 0.2
         dtr: bool = False,
         rts: bool = False,
         homing_cycles: Sequence[str] = STOCK_HOMING_CYCLES,
+        transport_options: Mapping[str, Any] | None = None,
     ) -> None:
         if not (math.isfinite(poll_interval) and poll_interval >= MIN_POLL_INTERVAL_S):
             raise ConfigError(
@@ -174,6 +178,7 @@ polling at no more than 5 Hz); use the default 0.2
         self._homing_cycles = check_homing_cycles(homing_cycles)
         self._port = port
         self._dtr, self._rts = dtr, rts
+        self._transport_options = dict(transport_options or {})
         self._clock: Clock = clock or MonotonicClock()
         self._user_limits = soft_limits
         self.poll_interval = poll_interval
@@ -205,6 +210,7 @@ polling at no more than 5 Hz); use the default 0.2
                 dtr=self._dtr,
                 rts=self._rts,
                 clock=self._clock.now,
+                **self._transport_options,
             )
         else:
             self._ser = self._port
@@ -361,6 +367,34 @@ polling at no more than 5 Hz); use the default 0.2
         """Clock seconds ``$H`` may take: 1.5 x GRBL's longest homing of every axis in
         ``homing_cycles`` (:meth:`GrblSettings.homing_time_bound`) + ``response_timeout``."""
         return 1.5 * self.settings.homing_time_bound(self._homing_cycles) + self.response_timeout
+
+    def make_ready(self, on_step: Callable[[str], None] | None = None) -> StageStatus:
+        """Leave any alarm the way a run does before its first move.
+
+        A critical alarm is reset first (0x18). Then, in ALARM (power-up or reset with
+        homing enabled, an earlier alarm): home with ``$H`` when homing is enabled
+        (``$22=1``), else unlock with ``$X`` (no switches to find the origin with: the
+        position is GRBL's count). An :meth:`estop` latch is cleared the same way.
+        ``on_step(text)`` hears each action before it starts (progress for the user).
+        """
+
+        def step(text: str) -> None:
+            if on_step is not None:
+                on_step(text)
+
+        if self.connection.critical:
+            code = self.connection.alarm
+            step(f"soft reset after ALARM:{code} ({alarm_text(code or 0).split(':')[0]})")
+            status = self.reset()
+        else:
+            status = self.status()
+        if status.state is not StageState.ALARM and not self._estop_latched:
+            return status
+        if self.settings.homing_enabled:
+            step(f"homing ($H, up to {self.homing_timeout():.0f} s)")
+            return self.home()
+        step("unlocking ($X; homing is disabled, $22=0)")
+        return self.unlock()
 
     def unlock(self) -> StageStatus:
         """Kill the alarm lock ``$X`` (position may be wrong: home when you can)."""

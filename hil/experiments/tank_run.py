@@ -432,10 +432,8 @@ def run_experiment(
 
         # ---- stage: open, home, check the plan against its limits (nothing moves yet)
         stage = GrblStage(stage_url, clock=clock).open()
-        status = stage.status()
-        if status.state.name == "ALARM" or status.alarm is not None:
-            view.update("stage: homing", force=True)
-            stage.home()
+        # Out of any alarm: reset a critical one, then home ($22=1) or unlock ($22=0).
+        stage.make_ready(lambda step: view.update(f"stage: {step}", force=True))
         lo, hi = stage.limits
         plan = exp.tow
         d = 1.0 if plan.end_m > plan.start_m else -1.0

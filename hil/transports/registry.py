@@ -11,7 +11,8 @@ URL                                         transport
                                             ``?backend=libusb1|libusb0|openusb`` or the
                                             ``usb_backend=`` keyword (a backend object)
 ``sim://board?via=memory|pty|usb``          a simulated board started now (:mod:`.sim`)
-``sim://stage``                             the simulated GRBL stage on a pty
+``sim://stage?via=pty|memory``              the simulated GRBL stage on a pty, or in the
+                                            reader's thread
 ``spy://<inner-url>?file=traffic.log``      any of the above, traffic dumped to a file
 ==========================================  ================================================
 

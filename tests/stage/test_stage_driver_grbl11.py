@@ -376,3 +376,44 @@ def test_connection_refuses_a_line_grbl_cannot_take() -> None:
         conn.send_line("G1 X" + "1" * 80)
     with pytest.raises(ConfigError, match=r"line = '\$X\\nG0' is not allowed"):
         conn.send_line("$X\nG0")
+
+
+# ---------------------------------------------------------------- make_ready (runs, calibrate)
+def test_make_ready_resets_a_critical_alarm_then_homes() -> None:
+    stage, peer, _ = open_stage(
+        [
+            (b"G53 G1 X-200.000 F600.000\n", b"ok\r\n"),
+            (b"G4 P0.000\n", b""),
+            (b"?", report("Run", -150.0, 600)),
+            (b"\x18", BANNER + LOCKED),
+            (b"?", report("Alarm", -150.0)),
+            (b"$H\n", [(30.0, b"ok\r\n")]),
+            (b"?", report("Idle", -1.0)),
+        ]
+    )
+    peer.critical_alarm(at=0.3, code=1)
+    with pytest.raises(StageAlarmError):
+        stage.move_to(-0.2, 0.01)
+    steps: list[str] = []
+    status = stage.make_ready(steps.append)
+    assert (status.state, status.position, status.alarm) == (StageState.IDLE, -0.001, None)
+    assert steps == ["soft reset after ALARM:1 (Hard limit)", "homing ($H, up to 293 s)"]
+    assert not peer.script
+
+
+def test_make_ready_unlocks_when_homing_is_disabled_and_leaves_an_idle_stage_alone() -> None:
+    no_homing = {**TANK_SETTINGS, 20: "0", 22: "0"}
+    stage, peer, _ = open_stage(
+        [
+            (b"?", report("Alarm", -20.0)),
+            (b"$X\n", b"[MSG:Caution: Unlocked]\r\nok\r\n"),
+            (b"?", report("Idle", -20.0)),
+            (b"?", report("Idle", -20.0)),
+        ],
+        settings=no_homing,
+    )
+    steps: list[str] = []
+    assert stage.make_ready(steps.append).state is StageState.IDLE
+    assert steps == ["unlocking ($X; homing is disabled, $22=0)"]
+    assert stage.make_ready(steps.append).state is StageState.IDLE and len(steps) == 1
+    assert not peer.script

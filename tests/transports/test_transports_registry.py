@@ -122,6 +122,16 @@ def test_sim_stage_is_a_port_grblstage_can_open() -> None:
         port.close()
 
 
+def test_sim_stage_in_memory_runs_on_the_injected_clock() -> None:
+    from hil.devices.grbl import GrblStage
+
+    clock = ManualClock(0.0)
+    with GrblStage("sim://stage?via=memory", clock=clock) as stage:
+        assert stage.transport.url == "sim://stage?via=memory"
+        homed = stage.make_ready()  # the simulated GRBL powers up locked
+        assert homed.position == pytest.approx(-0.001) and clock.now() > 1.0
+
+
 def test_spy_dumps_both_directions_with_hex_and_ascii(tmp_path: Path) -> None:
     log = tmp_path / "traffic.log"
     t = open_transport(f"spy://loop://?file={log}", timeout=0.05)
@@ -167,6 +177,8 @@ def test_split_url_keeps_paths_and_options() -> None:
         ("sim://tank", "sim:// device = 'tank' is not allowed: must be board or stage"),
         ("sim://board?via=can", "via = 'can' is not allowed: must be one of memory, pty, usb"),
         ("sim://board?delay=x", "delay = 'x' is not allowed: must be an integer"),
+        ("sim://stage?via=usb", "via = 'usb' is not allowed: must be one of pty, memory"),
+        ("sim://stage?speed=1", "sim://stage option = 'speed' is not allowed: must be via"),
         ("serial:///dev/null?baud=fast", "baud = 'fast' is not allowed: must be an integer"),
         ("serial:///dev/null?dtr=off", "serial:// option dtr = 'off' is not allowed: must be 0"),
         ("serial:///dev/null?parity=E", "serial:// option = 'parity' is not allowed: must be one"),
