@@ -150,9 +150,17 @@ class GrblSettings:
     """
 
     step_pulse = GrblSetting(0, int, "us", 3, 255, hint="GRBL needs at least 3 us")
+    step_idle_delay = GrblSetting(1, int, "ms", 0, 255, hint="255 keeps the motors enabled")
+    step_port_invert = GrblSetting(2, int, "", 0, 255)
+    direction_port_invert = GrblSetting(3, int, "", 0, 255)
+    step_enable_invert = GrblSetting(4, bool, "", 0, 1)
+    limit_pins_invert = GrblSetting(5, bool, "", 0, 1, hint="1 for normally-closed switches")
+    probe_pin_invert = GrblSetting(6, bool, "", 0, 1)
     status_report_mask = GrblSetting(
         10, int, "", 0, 255, hint="bit 0: MPos (1) or WPos (0); bit 1: report Bf"
     )
+    junction_deviation = GrblSetting(11, float, "mm", 0, 1e3)
+    arc_tolerance = GrblSetting(12, float, "mm", 0, 1e3)
     report_inches = GrblSetting(13, bool, "", 0, 1, hint="the drivers need mm: set $13=0")
     soft_limits = GrblSetting(20, bool, "", 0, 1, hint="soft limits need homing ($22=1)")
     hard_limits = GrblSetting(21, bool, "", 0, 1)
@@ -162,6 +170,9 @@ class GrblSettings:
     homing_seek = GrblSetting(25, float, "mm/min", 0, 1e5, low_open=True)
     homing_debounce = GrblSetting(26, int, "ms", 0, 65535)
     homing_pulloff = GrblSetting(27, float, "mm", 0, 1e4)
+    max_spindle_speed = GrblSetting(30, float, "rpm", 0, 1e6)
+    min_spindle_speed = GrblSetting(31, float, "rpm", 0, 1e6)
+    laser_mode = GrblSetting(32, bool, "", 0, 1)
     steps_per_mm_x = GrblSetting(100, float, "steps/mm", 0, 1e5, low_open=True)
     steps_per_mm_y = GrblSetting(101, float, "steps/mm", 0, 1e5, low_open=True)
     steps_per_mm_z = GrblSetting(102, float, "steps/mm", 0, 1e5, low_open=True)
