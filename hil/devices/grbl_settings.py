@@ -1,9 +1,11 @@
 """GRBL 1.1 ``$`` settings as typed attributes with units and validators.
 
-One generic descriptor, :class:`GrblSetting`, declares a setting: its ``$`` number, its type,
-its unit and its allowed range. :class:`GrblSettings` is a snapshot of a ``$$`` dump read
-through those descriptors; :meth:`GrblSettings.check` validates a value for writing and
-formats the ``$x=val`` line, so a bad value raises before anything is sent.
+One generic descriptor, :class:`GrblSetting`, declares a setting: its ``$`` number, its
+type, its unit and its allowed range, in the settings style the board's settings share
+(:class:`~hil.devices.setting_descriptor.TypedSetting`). :class:`GrblSettings` is a snapshot
+of a ``$$`` dump read through those descriptors; :meth:`GrblSettings.check` validates a
+value for writing and formats the ``$x=val`` line, so a bad value raises before anything is
+sent.
 
 Examples
 --------
@@ -22,10 +24,11 @@ hil.errors.ConfigError: acceleration_x ($120) = -5.0 is not allowed: must be a n
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping, Sequence
-from typing import Any, Generic, TypeVar, overload
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from typing import Any, TypeVar, overload
 
 from hil.devices.grbl_protocol import SettingLine, format_setting_line
+from hil.devices.setting_descriptor import TypedSetting
 from hil.errors import ConfigError
 
 T = TypeVar("T", float, int, bool)
@@ -60,8 +63,27 @@ of the axes X, Y, Z; GRBL 1.1's stock cycles are ('Z', 'XY')
     return tuple(cycles)
 
 
-class GrblSetting(Generic[T]):
-    """Descriptor for one GRBL ``$<number>`` setting of type ``kind`` in ``unit``.
+def _number(kind: type[Any]) -> Callable[[Any], Any]:
+    """A converter to ``kind`` (float, int or bool) for values given by the host."""
+
+    def convert(value: Any) -> Any:
+        if kind is bool:
+            if isinstance(value, bool) or value in (0, 1):
+                return bool(value)
+            raise ValueError(value)
+        if not isinstance(value, int | float) or not math.isfinite(value):
+            raise TypeError(value)
+        if kind is int and float(value) != int(value):
+            raise ValueError(value)
+        return kind(value)
+
+    return convert
+
+
+class GrblSetting(TypedSetting[T]):
+    """A GRBL ``$<number>`` setting of type ``kind`` in ``unit``
+    (:class:`~hil.devices.setting_descriptor.TypedSetting`), read from the controller's
+    ``$$`` dump.
 
     ``low``/``high`` bound the value; ``low_open`` excludes ``low`` itself (``> 0``).
     """
@@ -77,17 +99,30 @@ class GrblSetting(Generic[T]):
         low_open: bool = False,
         hint: str = "",
     ) -> None:
+        if kind is bool:
+            allowed = "a boolean (True/False or 0/1)"
+        else:
+            what = "an integer" if kind is int else "a number"
+            allowed = f"{what} in {'(' if low_open else '['}{low:g}, {high:g}]"
+        super().__init__(
+            _number(kind),
+            unit="" if kind is bool else unit,
+            check=lambda v: (v > low if low_open else v >= low) and v <= high,
+            allowed=allowed,
+            hint=hint,
+            takes_bool=kind is bool,
+        )
         self.number = number
         self.kind: type[T] = kind
-        self.unit = unit
         self.low = low
         self.high = high
         self.low_open = low_open
-        self.hint = hint
         self.name = f"${number}"
 
-    def __set_name__(self, owner: type, name: str) -> None:
-        self.name = name
+    @property
+    def label(self) -> str:
+        """``name ($number)``, as messages name a GRBL setting."""
+        return f"{self.name} (${self.number})"
 
     @overload
     def __get__(self, obj: None, owner: type) -> GrblSetting[T]: ...
@@ -99,7 +134,7 @@ class GrblSetting(Generic[T]):
         raw = obj.raw.get(self.number)
         if raw is None:
             raise ConfigError(
-                f"{self.name} (${self.number})",
+                self.label,
                 None,
                 "present in the $$ settings dump",
                 "the controller did not report it: check the firmware is GRBL 1.1",
@@ -115,31 +150,6 @@ class GrblSetting(Generic[T]):
     def parse(self, raw: str) -> T:
         """Convert the text of a ``$$`` line to the setting's type."""
         return self.kind(float(raw))
-
-    def allowed(self) -> str:
-        """The allowed range in words, with the unit."""
-        if self.kind is bool:
-            return "a boolean (True/False or 0/1)"
-        what = "an integer" if self.kind is int else "a number"
-        bracket = "(" if self.low_open else "["
-        return f"{what} in {bracket}{self.low:g}, {self.high:g}] {self.unit}".rstrip()
-
-    def validate(self, value: Any) -> T:
-        """Return ``value`` as the setting's type or raise ConfigError naming it."""
-        field = f"{self.name} (${self.number})"
-        if self.kind is bool:
-            if isinstance(value, bool) or value in (0, 1):
-                return self.kind(value)
-            raise ConfigError(field, value, self.allowed(), self.hint)
-        ok_type = isinstance(value, int | float) and not isinstance(value, bool)
-        if self.kind is int and ok_type and float(value) != int(value):
-            ok_type = False
-        if not ok_type or not math.isfinite(float(value)):
-            raise ConfigError(field, value, self.allowed(), self.hint)
-        low_ok = value > self.low if self.low_open else value >= self.low
-        if not (low_ok and value <= self.high):
-            raise ConfigError(field, value, self.allowed(), self.hint)
-        return self.kind(value)
 
 
 class GrblSettings:
