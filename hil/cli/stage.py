@@ -33,6 +33,7 @@ from typing import Any
 from hil.devices.grbl_codes import alarm_text
 from hil.devices.stage import StageState, StageStatus
 from hil.devices.stage_errors import StageError
+from hil.transports.base import TransportError
 
 EXIT_OK = 0
 EXIT_STAGE_FAILED = 1
@@ -160,7 +161,7 @@ def run(args: argparse.Namespace) -> int:
         with GrblStage(url, **options) as stage:
             status: int = args.do(stage, args)
             return status
-    except StageError as exc:
+    except (StageError, TransportError) as exc:
         print(f"{name}: {url}: {exc}", file=sys.stderr)
         return EXIT_STAGE_FAILED
 

@@ -663,17 +663,16 @@ polling at no more than 5 Hz); use the default 0.2
     def _command(self, line: str, *, timeout: float | None = None, poll: bool = False) -> None:
         """Send one line and wait for its ``ok``; raise on ``error:N`` or an alarm."""
         pending = self._send_line(line)
-        self._wait(
-            lambda: pending.done,
-            self.response_timeout if timeout is None else timeout,
-            f"a response to {line!r}",
-            poll=poll,
-        )
+        self._wait_answer(pending, self.response_timeout if timeout is None else timeout, poll)
         if pending.reset:
             raise StageError(f"GRBL reset while {line!r} was pending; it was not executed")
         if isinstance(pending.result, ErrorResponse):
             code = pending.result.code
             raise StageCommandError(code, error_text(code), line)
+
+    def _wait_answer(self, pending: PendingLine, timeout: float, poll: bool) -> None:
+        """Wait for ``pending``'s ``ok``/``error:N`` (or the reset that drops it)."""
+        self._wait(lambda: pending.done, timeout, f"a response to {pending.line!r}", poll=poll)
 
     def _send_line(self, line: str) -> PendingLine:
         pending, data = self.connection.send_line(line)
@@ -761,8 +760,19 @@ polling at no more than 5 Hz); use the default 0.2
         self._new_alarm = None
 
     def _read_settings(self) -> GrblSettings:
-        self.connection.settings.clear()
-        self._command("$$")
+        """``$$``, asked again if a reset drops it: a board that restarts as the port opens
+        (an Arduino on DTR) prints its power-up banner late, after the driver's own."""
+        for _ in range(3):
+            self.connection.settings.clear()
+            pending = self._send_line("$$")
+            self._wait_answer(pending, self.response_timeout, poll=False)
+            if not pending.reset:
+                break
+        if isinstance(pending.result, ErrorResponse) or pending.reset:
+            raise StageError(
+                f"GRBL did not answer '$$' with its settings ({pending.result or 'reset'}): "
+                "check that the firmware is GRBL 1.1 and that nothing else resets it"
+            )
         return GrblSettings(self.connection.settings)
 
     def _wait(

@@ -100,7 +100,7 @@ def alarm_recovery(code: int | None, *, homing: bool | None = None) -> str:
     again; a homing cycle is what backs off it (GRBL ignores the switches while homing).
 
     >>> alarm_recovery(1).split(";")[0]
-    'send a soft reset first (GrblStage.reset(), 0x18)'
+    'send a soft reset first (GrblStage.reset() or hil stage reset: 0x18)'
     >>> "home with $H" in alarm_recovery(1, homing=True)
     True
     """
@@ -113,15 +113,15 @@ def alarm_recovery(code: int | None, *, homing: bool | None = None) -> str:
     elif code == 1 and homing is False:
         steps = (
             "check that the axis is clear; to get off the switch, turn hard limits off "
-            "($21=0), unlock with $X (GrblStage.unlock()), jog away from the switch, then turn "
-            "them on again ($21=1); the position is lost, so set up the origin again"
+            "($21=0), unlock with $X (GrblStage.unlock(), hil stage unlock), jog away from the "
+            "switch, then turn them on again ($21=1); the position is lost: set up the origin"
         )
     else:
         steps = (
             "check that the axis is clear and the carriage is not on a limit switch, then "
-            "home with $H (GrblStage.home()) or, if the position is known to be right, "
-            "unlock with $X (GrblStage.unlock())"
+            "home with $H (GrblStage.home(), hil stage home) or, if the position is known to "
+            "be right, unlock with $X (GrblStage.unlock(), hil stage unlock)"
         )
     if code in CRITICAL_ALARMS:
-        return "send a soft reset first (GrblStage.reset(), 0x18); then " + steps
+        return "send a soft reset first (GrblStage.reset() or hil stage reset: 0x18); then " + steps
     return steps

@@ -189,3 +189,38 @@ def test_every_action_documents_its_units_and_defaults(
             main(["stage", action, "--help"])
         out = " ".join(capsys.readouterr().out.split())
         assert all(w in out for w in words), (action, out)
+
+
+def test_a_missing_port_exits_1_naming_it(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["stage", "status", "--url", "serial:///dev/does-not-exist"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("hil stage status: serial:///dev/does-not-exist: cannot open")
+    assert "dialout" in err
+
+
+def test_a_hard_limit_hit_by_a_move_exits_1_saying_reset_then_home(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Not homed: GRBL counts from where it powered up, 480 mm from the homing switch, so a
+    # move to machine -60 mm (inside the travel the driver knows) runs into the far
+    # switch. The same controller then serves the reset.
+    import hil.transports.sim as sim_transport
+    from sim_devices.stage import SimulatedGrbl
+
+    config = GrblSimConfig(
+        max_travel_mm=500.0, max_rate_mm_min=600.0, acceleration_mm_s2=50.0,
+        soft_limits=False, power_up_position_mm=-480.0,
+    )  # fmt: skip
+    grbl = SimulatedGrbl(config, clock=stage_cli.STAGE_OPTIONS["clock"])
+    monkeypatch.setattr(
+        sim_transport,
+        "open_sim_stage",
+        lambda query, options, timeout: sim_transport.MemoryStageLink(grbl, timeout=timeout),
+    )
+    assert main(["stage", "unlock", *URL]) == 0
+    capsys.readouterr()
+    assert main(["stage", "move", "-0.06", "--speed", "0.01", *URL]) == 1
+    err = capsys.readouterr().err
+    assert "stage is in ALARM:1 (Hard limit" in err
+    assert "send a soft reset first (GrblStage.reset() or hil stage reset: 0x18)" in err
+    assert "home with $H (GrblStage.home(), hil stage home)" in err

@@ -417,3 +417,21 @@ def test_make_ready_unlocks_when_homing_is_disabled_and_leaves_an_idle_stage_alo
     assert steps == ["unlocking ($X; homing is disabled, $22=0)"]
     assert stage.make_ready(steps.append).state is StageState.IDLE and len(steps) == 1
     assert not peer.script
+
+
+def test_settings_asked_again_when_a_late_power_up_banner_drops_them() -> None:
+    # An Uno reset by the open prints its power-up banner after the driver's reset was
+    # answered: the '$$' sent meanwhile is dropped and is asked again.
+    clock = ManualClock(0.0)
+    peer = Grbl11Peer(
+        clock,
+        [
+            (b"\x18", BANNER),
+            (b"$$\n", BANNER + LOCKED),
+            (b"$$\n", dump(TANK_SETTINGS)),
+            (b"?", report("Alarm", 0.0)),
+        ],
+    )
+    stage = GrblStage(peer, clock=clock).open()
+    assert stage.settings.max_travel_z == 500.0 and not peer.script
+    assert stage.connection.banners == 2
