@@ -750,12 +750,16 @@ polling at no more than 5 Hz); use the default 0.2
     def _soft_reset_and_wait(self, timeout: float) -> None:
         banners = self.connection.banners
         self._write(self.connection.send_reset(self._clock.now()))
-        self._wait(
-            lambda: self.connection.banners > banners,
-            timeout,
-            "the GRBL banner",
-            raise_alarm=False,
-        )
+        try:
+            self._wait(
+                lambda: self.connection.banners > banners,
+                timeout,
+                "the GRBL banner",
+                raise_alarm=False,
+            )
+        except StageTimeoutError:
+            self.connection.abandon_reset()  # no 0x18 resent behind a later command
+            raise
         # An ALARM:3 (reset in motion) is expected here: it is kept in the status, not raised.
         self._new_alarm = None
 

@@ -161,7 +161,8 @@ class GrblConnection:
     banners, reports:
         Banners and status reports received so far (waits compare counts).
     alarm:
-        The last alarm code since the last reset, ``$X`` or ``$H`` that ended it, or None.
+        The last alarm code, until an ``$X`` or ``$H`` answered ``ok`` ends it, or None (a
+        reset does not end it: with homing enabled GRBL stays locked after one).
     critical:
         A critical alarm (``ALARM:1``/``ALARM:2``) holds GRBL until a soft reset.
     critical_since:
@@ -228,6 +229,11 @@ class GrblConnection:
         self._reset_sent = now
         self._reset_heard = False
         return SOFT_RESET
+
+    def abandon_reset(self) -> None:
+        """Stop awaiting the banner of the reset sent (the caller gave up on it): no more
+        resends are due."""
+        self._reset_sent = None
 
     @property
     def resetting(self) -> bool:

@@ -28,7 +28,7 @@ from hil.devices.grbl_connection import (
     Setting,
 )
 from hil.devices.stage import StageState
-from hil.devices.stage_errors import StageAlarmError
+from hil.devices.stage_errors import StageAlarmError, StageTimeoutError
 from hil.errors import ConfigError
 from sim_devices.stage.clock import ManualClock
 
@@ -195,6 +195,17 @@ def test_reset_lost_on_the_line_is_sent_again() -> None:
     first, second = peer.sent(b"\x18")[1:]
     assert second - first == pytest.approx(RESET_RETRY_S, abs=0.021)
     assert clock.now() - t0 < 1.0 and not peer.script
+
+
+def test_a_reset_given_up_on_is_not_resent_behind_later_commands() -> None:
+    stage, peer, _ = open_stage(
+        [(b"\x18", b""), (b"\x18", b""), (b"$X\n", b"ok\r\n"), (b"?", report("Idle", 0))],
+        response_timeout=1.0,
+    )
+    with pytest.raises(StageTimeoutError, match="no the GRBL banner from GRBL within 1 s"):
+        stage.reset()
+    assert stage.unlock().state is StageState.IDLE  # no 0x18 during the unlock's wait
+    assert not peer.script
 
 
 def test_a_reset_in_motion_is_not_resent_while_grbl_reports_alarm_3() -> None:

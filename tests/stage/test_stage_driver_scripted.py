@@ -159,7 +159,8 @@ def test_alarm_state_refuses_motion_and_says_how_to_recover() -> None:
     stage = GrblStage(peer, clock=ManualClock())
     stage.open()
     with pytest.raises(StageAlarmError, match=r"stage is in ALARM \(locked at power-up or reset"
-                       r".*home with \$H \(GrblStage.home\(\), hil stage home\).*unlock with \$X"):  # fmt: skip
+                       r".*home with \$H \(GrblStage.home\(\), hil stage home\)"
+                       r".*unlock with \$X"):  # fmt: skip
         stage.move_to(-0.1, 0.005)
     assert len(peer.written) == 3
 
