@@ -28,7 +28,7 @@ from hil.devices.grbl_connection import (
     Setting,
 )
 from hil.devices.stage import StageState
-from hil.devices.stage_errors import StageAlarmError, StageTimeoutError
+from hil.devices.stage_errors import StageAlarmError, StageError, StageTimeoutError
 from hil.errors import ConfigError
 from sim_devices.stage.clock import ManualClock
 
@@ -239,6 +239,24 @@ def test_hard_limit_mid_profile_stops_the_run_within_a_second() -> None:
     assert clock.now() - 5.0 < 1.0
     assert status.state is StageState.ALARM and status.alarm == 1
     assert [d for t, d in peer.written if t >= 5.0] == [d for t, d in peer.ignored]
+
+
+def test_the_tank_runs_stop_sequence_after_a_hard_limit_takes_under_a_second() -> None:
+    # hil tank-run's stop on an error: feed hold unconditionally (hold=True), flush, close.
+    from hil.experiments.tank_run import _safe_stop
+
+    stage, peer, clock = open_stage(
+        [(b"G53 G1 X-310.000 F300.000\n", b"ok\r\n"), (b"G4 P0.000\n", b"")]
+        + [(b"?", report("Run", -150.0, 300))] * 30,
+    )
+    peer.critical_alarm(at=3.0, code=1)
+    with pytest.raises(StageAlarmError):
+        stage.run_profile(-0.11, -0.3, 0.005, 0.01, 0.01)
+    _safe_stop(None, stage, None, hold=True)
+    assert clock.now() - 3.0 < 1.0
+    assert stage.last_status is not None and stage.critical
+    with pytest.raises(StageError, match="the stage is not open"):
+        stage.status()  # closed by the stop sequence
 
 
 def test_hard_limit_seen_by_a_status_poll_during_a_run_without_wait() -> None:
