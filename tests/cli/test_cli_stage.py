@@ -22,7 +22,7 @@ URL = ["--url", "sim://stage?via=memory"]
 #: Homing on, 400 mm of travel, 600 mm/min, 50 mm/s^2, 20 mm from the switch at power-up.
 CONFIG = GrblSimConfig(
     max_travel_mm=400.0, max_rate_mm_min=600.0, acceleration_mm_s2=50.0,
-    power_up_position_mm=-20.0,
+    power_up_position_mm=-20.0, homing=True, soft_limits=True, hard_limits=True,
 )  # fmt: skip
 
 
@@ -209,7 +209,7 @@ def test_a_hard_limit_hit_by_a_move_exits_1_saying_reset_then_home(
 
     config = GrblSimConfig(
         max_travel_mm=500.0, max_rate_mm_min=600.0, acceleration_mm_s2=50.0,
-        soft_limits=False, power_up_position_mm=-480.0,
+        homing=True, soft_limits=False, hard_limits=True, power_up_position_mm=-480.0,
     )  # fmt: skip
     grbl = SimulatedGrbl(config, clock=stage_cli.STAGE_OPTIONS["clock"])
     monkeypatch.setattr(

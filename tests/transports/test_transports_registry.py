@@ -124,9 +124,12 @@ def test_sim_stage_is_a_port_grblstage_can_open() -> None:
 
 def test_sim_stage_in_memory_runs_on_the_injected_clock() -> None:
     from hil.devices.grbl import GrblStage
+    from sim_devices.stage import GrblSimConfig
 
     clock = ManualClock(0.0)
-    with GrblStage("sim://stage?via=memory", clock=clock) as stage:
+    config = GrblSimConfig(homing=True, power_up_position_mm=-20.0)
+    options = {"config": config}
+    with GrblStage("sim://stage?via=memory", clock=clock, transport_options=options) as stage:
         assert stage.transport.url == "sim://stage?via=memory"
         homed = stage.make_ready()  # the simulated GRBL powers up locked
         assert homed.position == pytest.approx(-0.001) and clock.now() > 1.0
