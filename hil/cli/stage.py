@@ -80,7 +80,7 @@ def register(sub: Any) -> None:
     )
     common.add_argument("--json", action="store_true", help="print the result as JSON")
 
-    def action(name: str, help_text: str, func: Callable[..., int]) -> argparse.ArgumentParser:
+    def action(name: str, help_text: str, func: Callable[..., Any]) -> argparse.ArgumentParser:
         a: argparse.ArgumentParser = actions.add_parser(
             name, help=help_text, description=help_text, parents=[common]
         )
@@ -159,8 +159,14 @@ def run(args: argparse.Namespace) -> int:
     name = f"hil stage {args.action}"
     try:
         with GrblStage(url, **options) as stage:
-            status: int = args.do(stage, args)
-            return status
+            opened = len(stage.messages)
+            result: StageStatus | int = args.do(stage, args)
+            if isinstance(result, int):
+                return result
+            # status: what GRBL said since the port opened; the others: during the action.
+            messages = stage.messages[0 if args.action == "status" else opened :]
+            _print_status(stage, result, args, messages)
+            return EXIT_OK
     except (StageError, TransportError) as exc:
         print(f"{name}: {url}: {exc}", file=sys.stderr)
         return EXIT_STAGE_FAILED
@@ -185,9 +191,11 @@ def status_fields(status: StageStatus) -> dict[str, Any]:
     }
 
 
-def _print_status(stage: Any, status: StageStatus, args: argparse.Namespace) -> None:
+def _print_status(
+    stage: Any, status: StageStatus, args: argparse.Namespace, messages: list[str]
+) -> None:
     if args.json:
-        print(json.dumps({**status_fields(status), "messages": stage.messages}))
+        print(json.dumps({**status_fields(status), "messages": messages}))
         return
     state = status.state.value + (f":{status.substate}" if status.substate is not None else "")
     print(f"state      {state}")
@@ -208,41 +216,41 @@ def _print_status(stage: Any, status: StageStatus, args: argparse.Namespace) -> 
         )
     if stage.critical:
         print("note       GRBL is locked by a critical alarm: run 'hil stage reset' first")
-    for message in stage.messages:
+    for message in messages:
         print(f"message    {message}")
 
 
-def _status(stage: Any, args: argparse.Namespace) -> int:
-    _print_status(stage, stage.status(), args)
-    return EXIT_OK
+def _status(stage: Any, args: argparse.Namespace) -> StageStatus:
+    status: StageStatus = stage.status()
+    return status
 
 
-def _home(stage: Any, args: argparse.Namespace) -> int:
+def _home(stage: Any, args: argparse.Namespace) -> StageStatus:
     _progress(f"homing ($H, up to {stage.homing_timeout():.0f} s)")
-    _print_status(stage, stage.home(), args)
-    return EXIT_OK
+    status: StageStatus = stage.home()
+    return status
 
 
-def _unlock(stage: Any, args: argparse.Namespace) -> int:
-    _print_status(stage, stage.unlock(), args)
-    return EXIT_OK
+def _unlock(stage: Any, args: argparse.Namespace) -> StageStatus:
+    status: StageStatus = stage.unlock()
+    return status
 
 
-def _reset(stage: Any, args: argparse.Namespace) -> int:
-    _print_status(stage, stage.reset(), args)
-    return EXIT_OK
+def _reset(stage: Any, args: argparse.Namespace) -> StageStatus:
+    status: StageStatus = stage.reset()
+    return status
 
 
-def _jog(stage: Any, args: argparse.Namespace) -> int:
+def _jog(stage: Any, args: argparse.Namespace) -> StageStatus:
     _progress(f"jogging {1000 * args.dx:+.3f} mm at {1000 * args.speed:g} mm/s")
-    _print_status(stage, stage.jog(args.dx, args.speed), args)
-    return EXIT_OK
+    status: StageStatus = stage.jog(args.dx, args.speed)
+    return status
 
 
-def _move(stage: Any, args: argparse.Namespace) -> int:
+def _move(stage: Any, args: argparse.Namespace) -> StageStatus:
     _progress(f"moving to {1000 * args.x:.3f} mm at {1000 * args.speed:g} mm/s")
-    _print_status(stage, stage.move_to(args.x, args.speed, args.accel), args)
-    return EXIT_OK
+    status: StageStatus = stage.move_to(args.x, args.speed, args.accel)
+    return status
 
 
 def settings_rows(settings: Any) -> list[tuple[int, str, str, str]]:

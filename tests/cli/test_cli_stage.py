@@ -56,6 +56,7 @@ def test_home_then_status_as_json(capsys: pytest.CaptureFixture[str]) -> None:
     captured = capsys.readouterr()
     doc = json.loads(captured.out)
     assert (doc["state"], doc["position_m"], doc["alarm"]) == ("Idle", -0.001, None)
+    assert doc["messages"] == []  # the power-up lock message came before the homing
     assert captured.err.startswith("stage: homing ($H, up to ")
 
 
