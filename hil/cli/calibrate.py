@@ -285,6 +285,8 @@ def _tank(
         latency = 0 if record is None else record.result.latency_samples
     device = _audio_device(args)
     with GrblStage(args.stage) as grbl:
+        # As hil tank-run does: out of any alarm (reset, then $H or $X) before moving.
+        grbl.make_ready(lambda step: print(f"stage: {step}", flush=True))
         yield (
             grbl,
             EchoRanger(device, gate, latency_samples=latency, averages=args.pings),

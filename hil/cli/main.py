@@ -20,6 +20,7 @@ from hil.cli import (
     reproduce,
     sim_serve,
     simulate,
+    stage,
     sweep,
     tank_run,
     waveform,
@@ -38,6 +39,7 @@ _COMMANDS = (
     reproduce,
     replay,
     calibrate,
+    stage,
     sim_serve,
 )
 

@@ -1,10 +1,11 @@
 """Declarative, typed settings of the transducer board, checked before anything is sent.
 
-Each setting is a :class:`Setting` descriptor (pymeasure's ``control()`` idea as one generic
-descriptor): a type, a unit and a validator. Assigning an invalid value raises
-:class:`~hil.errors.ConfigError` naming the setting, the value, the allowed range and the
-unit. :meth:`BoardSettings.check_against` then checks the values against what the board
-said it can do (CAPABILITIES) before the driver sends CONFIGURE.
+Each setting is a :class:`Setting` descriptor, in the settings style every device shares
+(:class:`~hil.devices.setting_descriptor.TypedSetting`): a type, a unit and a validator.
+Assigning an invalid value raises :class:`~hil.errors.ConfigError` naming the setting, the
+value, the allowed range and the unit. :meth:`BoardSettings.check_against` then checks the
+values against what the board said it can do (CAPABILITIES) before the driver sends
+CONFIGURE.
 
 >>> s = BoardSettings(sample_rate_hz=1_000_000, adc_channels=2)
 >>> s.adc_gain_db = 130.0
@@ -18,37 +19,21 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Any, Generic, TypeVar, overload
+from typing import Any, TypeVar, overload
 
 import numpy as np
 import numpy.typing as npt
 
 from firmware_protocol import Capabilities, Configure, SampleFormat
+from hil.devices.setting_descriptor import Check, TypedSetting
 from hil.errors import ConfigError
 
 T = TypeVar("T")
-Check = Callable[[Any], bool]
 
 
-class Setting(Generic[T]):
-    """One typed setting with a unit and a validator, stored on the instance.
-
-    Parameters
-    ----------
-    convert:
-        Turns the assigned value into the stored type (raising ``ValueError``/``TypeError``
-        for values of the wrong kind).
-    unit:
-        Unit for messages ("Hz", "dB", "" for none).
-    check:
-        True for an allowed (converted) value.
-    allowed:
-        The allowed values in words, for messages.
-    default:
-        Initial value.
-    hint:
-        What to do about a bad value.
-    """
+class Setting(TypedSetting[T]):
+    """One typed setting with a unit and a validator (:class:`TypedSetting`), its value
+    stored on the instance (``default`` until assigned)."""
 
     def __init__(
         self,
@@ -60,16 +45,8 @@ class Setting(Generic[T]):
         default: T,
         hint: str = "",
     ) -> None:
-        self.convert = convert
-        self.unit = unit
-        self.check = check
-        self.allowed = allowed
+        super().__init__(convert, unit=unit, check=check, allowed=allowed, hint=hint)
         self.default = default
-        self.hint = hint
-        self.name = ""
-
-    def __set_name__(self, owner: type, name: str) -> None:
-        self.name = name
 
     @overload
     def __get__(self, obj: None, objtype: type | None = None) -> Setting[T]: ...
@@ -85,19 +62,6 @@ class Setting(Generic[T]):
 
     def __set__(self, obj: object, value: Any) -> None:
         obj.__dict__[self.name] = self.validate(value)
-
-    def validate(self, value: Any) -> T:
-        """The converted value, or ConfigError naming the setting, range and unit."""
-        allowed = f"{self.allowed} {self.unit}".rstrip()
-        if isinstance(value, bool):
-            raise ConfigError(self.name, value, allowed, self.hint)
-        try:
-            converted = self.convert(value)
-        except (TypeError, ValueError):
-            raise ConfigError(self.name, value, allowed, self.hint) from None
-        if not self.check(converted):
-            raise ConfigError(self.name, value, allowed, self.hint)
-        return converted
 
 
 def _int(value: Any) -> int:

@@ -1,10 +1,22 @@
 """GRBL 1.1 stage driver: :class:`GrblStage`, the :class:`~hil.devices.stage.Stage` over serial.
 
-The transport is any pyserial URL (``/dev/ttyUSB0``, a pty path from the simulated
-controller, ``loop://``, ``spy://...``) or a ready serial-like object (tests inject a scripted
-one). The driver speaks SI units; GRBL speaks mm, mm/min and mm/s², converted here at the
-boundary. Lines go out one at a time and wait for their ``ok``/``error:N`` (GRBL's simple
-send-response flow); realtime bytes (``?``, ``!``, ``~``, 0x18, 0x85) go out at any time.
+The link is opened by URL through the transport registry the board uses
+(:mod:`hil.transports.registry`: ``serial:///dev/ttyUSB0?dtr=0``, a plain device path,
+``sim://stage``, ``spy://<url>?file=...``), or is a ready transport (tests inject a scripted
+one). Serial lines open with DTR and RTS low unless the URL says ``?dtr=1``: an Arduino
+Uno/Nano running GRBL resets on a raised DTR, losing its position.
+
+The protocol lives in :class:`~hil.devices.grbl_connection.GrblConnection` (bytes in,
+events out, no I/O); this class is its I/O shell: it writes what the connection returns,
+feeds it what it reads, waits on the injected clock and converts to SI units (GRBL speaks mm,
+mm/min and mm/s²). Lines go out one at a time and wait for their ``ok``/``error:N`` (GRBL's
+simple send-response flow); realtime bytes (``?``, ``!``, ``~``, 0x18, 0x85) go out at any
+time.
+
+A critical alarm (``ALARM:1`` hard limit, ``ALARM:2`` soft limit) is known from its code:
+GRBL then ignores everything but a soft reset, so :meth:`GrblStage.status` answers from the
+last report, :meth:`GrblStage.stop` returns at once, and :meth:`GrblStage.reset` sends 0x18
+again until the banner comes (GRBL drops one that arrives in the 0.5 s after the alarm).
 
 Safety (DESIGN.md): every move is checked against the soft limits, the max rate ``$110`` and
 the acceleration ``$120`` before anything is sent; leaving a ``with GrblStage(...)`` block by
@@ -20,36 +32,30 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import math
-from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from types import TracebackType
 from typing import Any, Protocol
 
 from hil.devices.clock import Clock, MonotonicClock
 from hil.devices.grbl_codes import alarm_recovery, alarm_text, error_text
+from hil.devices.grbl_connection import (
+    QUERY_FORGOTTEN_S,
+    QUERY_LOST_S,
+    Alarm,
+    GrblConnection,
+    PendingLine,
+    Report,
+)
 from hil.devices.grbl_protocol import (
     CYCLE_START,
     FEED_HOLD,
     JOG_CANCEL,
-    MAX_LINE_LENGTH,
-    SOFT_RESET,
-    STATUS_QUERY,
-    AlarmMessage,
-    Banner,
     ErrorResponse,
-    Feedback,
-    GrblMessage,
-    LineSplitter,
-    Ok,
-    SettingLine,
-    StatusReport,
-    Unrecognised,
     format_dwell_line,
     format_jog_line,
     format_move_line,
-    parse_line,
 )
-from hil.devices.grbl_settings import GrblSettings
+from hil.devices.grbl_settings import STOCK_HOMING_CYCLES, GrblSettings, check_homing_cycles
 from hil.devices.stage import ProfileWindow, StageState, StageStatus
 from hil.devices.stage_errors import (
     StageAlarmError,
@@ -63,39 +69,24 @@ from hil.errors import ConfigError
 
 #: The fastest status polling GRBL's documentation recommends (5 Hz).
 MIN_POLL_INTERVAL_S = 0.2
+#: Reads of whatever a link already holds when the driver opens it, at most: stale output
+#: of an earlier session is dropped (a chattering line cannot hold the open up for ever).
+_STALE_READS = 64
+
+__all__ = ["MIN_POLL_INTERVAL_S", "QUERY_FORGOTTEN_S", "QUERY_LOST_S", "ByteLink", "GrblStage"]
 
 
-class SerialLike(Protocol):
-    """The part of :class:`serial.Serial` the driver uses (injectable in tests)."""
+class ByteLink(Protocol):
+    """The transport contract the driver uses (:mod:`hil.transports.base`): ``read`` returns
+    as soon as any bytes are there, ``b""`` after ``timeout`` seconds."""
 
-    timeout: float | None
+    timeout: float
 
     def write(self, data: bytes) -> int | None: ...
 
-    def read(self, size: int = 1) -> bytes: ...
-
-    @property
-    def in_waiting(self) -> int: ...
-
-    def reset_input_buffer(self) -> None: ...
+    def read(self, size: int) -> bytes: ...
 
     def close(self) -> None: ...
-
-
-@dataclasses.dataclass
-class _Pending:
-    line: str
-    result: Ok | ErrorResponse | None = None
-    reset: bool = False
-
-
-#: A status query unanswered for this long (driver-clock s) is taken as dropped and sent
-#: again: GRBL answers within milliseconds (a reset drops a pending query).
-QUERY_LOST_S = 1.0
-#: A query given up as lost is still awaited this long after it was sent (driver-clock s):
-#: any report read meanwhile may be its late answer, so none of them is dated (``reply_s``
-#: infinite). After that it is taken as never answered.
-QUERY_FORGOTTEN_S = 2.0 * QUERY_LOST_S
 
 
 class GrblStage:
@@ -104,9 +95,9 @@ class GrblStage:
     Parameters
     ----------
     port:
-        pyserial URL or path, or an open serial-like object (not closed by the driver).
-    baudrate:
-        Serial speed for URLs (GRBL 1.1: 115200).
+        Transport URL or device path (:mod:`hil.transports.registry`; the baud rate is the
+        URL's ``?baud=``, default GRBL 1.1's 115200), or an open transport (not closed by
+        the driver).
     clock:
         Clock for all waits and timestamps (default: the wall clock).
     soft_limits:
@@ -125,6 +116,16 @@ class GrblStage:
         when idle); otherwise only check that GRBL answers a status query.
     open_timeout:
         Clock seconds to wait for the banner / first status report on open.
+    dtr, rts:
+        Level of the serial modem lines when the driver opens a serial URL or path (a
+        ``?dtr=``/``?rts=`` in the URL wins). Low by default: an Arduino Uno/Nano resets on
+        a raised DTR.
+    homing_cycles:
+        The axes GRBL homes together, cycle by cycle (the firmware's ``HOMING_CYCLE_n``
+        masks; stock GRBL 1.1h: ``("Z", "XY")``); the ``$H`` timeout covers them all.
+    transport_options:
+        More keyword options for the transport opener of a URL (``config=`` a
+        ``GrblSimConfig`` for ``sim://stage``).
 
     Examples
     --------
@@ -137,9 +138,8 @@ polling at no more than 5 Hz); use the default 0.2
 
     def __init__(
         self,
-        port: str | SerialLike,
+        port: str | ByteLink,
         *,
-        baudrate: int = 115200,
         clock: Clock | None = None,
         soft_limits: tuple[float, float] | None = None,
         poll_interval: float = MIN_POLL_INTERVAL_S,
@@ -148,6 +148,10 @@ polling at no more than 5 Hz); use the default 0.2
         response_timeout: float = 10.0,
         reset_on_open: bool = True,
         open_timeout: float = 5.0,
+        dtr: bool = False,
+        rts: bool = False,
+        homing_cycles: Sequence[str] = STOCK_HOMING_CYCLES,
+        transport_options: Mapping[str, Any] | None = None,
     ) -> None:
         if not (math.isfinite(poll_interval) and poll_interval >= MIN_POLL_INTERVAL_S):
             raise ConfigError(
@@ -171,8 +175,10 @@ polling at no more than 5 Hz); use the default 0.2
             raise ConfigError(
                 "soft_limits", soft_limits, "(low, high) in m with low < high", "e.g. (-0.4, 0)"
             )
+        self._homing_cycles = check_homing_cycles(homing_cycles)
         self._port = port
-        self._baudrate = baudrate
+        self._dtr, self._rts = dtr, rts
+        self._transport_options = dict(transport_options or {})
         self._clock: Clock = clock or MonotonicClock()
         self._user_limits = soft_limits
         self.poll_interval = poll_interval
@@ -181,45 +187,49 @@ polling at no more than 5 Hz); use the default 0.2
         self.response_timeout = response_timeout
         self._reset_on_open = reset_on_open
         self._open_timeout = open_timeout
-        self._ser: SerialLike | None = None
+        self._ser: ByteLink | None = None
         self._owns_port = isinstance(port, str)
-        self._splitter = LineSplitter()
-        self._pending: deque[_Pending] = deque()
-        self._setting_lines: list[SettingLine] = []
-        self._banners = 0
-        self._reports = 0
-        self._wco: tuple[float, ...] | None = None
+        self.connection = GrblConnection()
         self._last_query = -math.inf
-        # Times of the '?' sent and not yet answered: a report is stamped with its query's.
-        self._queries: deque[float] = deque()
-        # Send times of queries given up as lost whose late answer may still come.
-        self._lost: deque[float] = deque()
         self._last_status: StageStatus | None = None
-        self._alarm: int | None = None
         self._new_alarm: int | None = None
-        self._critical = False
         self._estop_latched = False
         self._direction = 1.0
         self._settings: GrblSettings | None = None
         self._original_accel: float | None = None
-        self.unrecognised: list[str] = []
-        self.messages: list[str] = []
 
     # ------------------------------------------------------------------ lifecycle
     def open(self) -> GrblStage:
         """Open the port, sync with GRBL, read the ``$$`` settings and the status."""
         if isinstance(self._port, str):
-            import serial
+            from hil.transports.registry import open_transport
 
-            self._ser = serial.serial_for_url(
-                self._port, baudrate=self._baudrate, timeout=self._read_timeout
+            self._ser = open_transport(
+                self._port,
+                timeout=self._read_timeout,
+                dtr=self._dtr,
+                rts=self._rts,
+                clock=self._clock.now,
+                **self._transport_options,
             )
         else:
             self._ser = self._port
             with contextlib.suppress(AttributeError):
                 self._ser.timeout = self._read_timeout
-        self._ser.reset_input_buffer()
-        self._splitter.reset()
+        try:
+            self._sync()
+        except BaseException:
+            self.close()
+            raise
+        return self
+
+    def _sync(self) -> None:
+        """Drop stale input, reset GRBL (or check it answers), read ``$$`` and the status."""
+        ser = self._require_open()
+        for _ in range(_STALE_READS):
+            if not ser.read(4096):
+                break
+        self.connection.discard_partial()
         if self._reset_on_open:
             self._soft_reset_and_wait(self._open_timeout)
         self._settings = self._read_settings()
@@ -229,14 +239,19 @@ polling at no more than 5 Hz); use the default 0.2
             )
         self._check_user_limits()
         self._query_status(self._open_timeout)
-        return self
 
     def close(self) -> None:
-        """Restore a changed acceleration and close the port (if the driver opened it)."""
+        """Restore a changed acceleration and close the port (if the driver opened it).
+
+        In a critical alarm GRBL ignores lines until reset: nothing is sent then."""
         if self._ser is None:
             return
         try:
-            if self._original_accel is not None and self._settings is not None:
+            if (
+                self._original_accel is not None
+                and self._settings is not None
+                and not self.connection.critical
+            ):
                 with contextlib.suppress(StageError):
                     self.write_setting("acceleration_x", self._original_accel)
         finally:
@@ -282,21 +297,54 @@ polling at no more than 5 Hz); use the default 0.2
         """The last status report received (no query)."""
         return self._last_status
 
+    @property
+    def transport(self) -> ByteLink:
+        """The open link to GRBL (what the URL opened, or the transport given)."""
+        return self._require_open()
+
+    @property
+    def messages(self) -> list[str]:
+        """Push messages received (``[MSG:...]`` as sent), oldest first."""
+        return self.connection.messages
+
+    @property
+    def unrecognised(self) -> list[str]:
+        """Lines received that are not GRBL 1.1, oldest first."""
+        return self.connection.noise
+
+    @property
+    def critical(self) -> bool:
+        """GRBL is held by a critical alarm (``ALARM:1``/``ALARM:2``) until :meth:`reset`."""
+        return self.connection.critical
+
     # ------------------------------------------------------------------ commands
     def status(self) -> StageStatus:
-        """Query and return the current status (waits so as to poll at most 5 Hz)."""
+        """Query and return the current status (waits so as to poll at most 5 Hz).
+
+        Never raises for an alarm: the status says it. In a critical alarm GRBL answers no
+        query, so the answer is what is known: the last report's position and time, state
+        ALARM with the alarm's code, velocity 0 (GRBL has halted)."""
         self._require_open()
-        if self._critical and self._last_status is not None:
-            # GRBL ignores '?' in a critical alarm until it is reset.
-            return dataclasses.replace(
-                self._last_status,
-                state=StageState.ALARM,
-                alarm=self._alarm,
-                host_time=self._clock.now(),
-                reply_s=0.0,
+        if not self.connection.critical:
+            self._clock.sleep(self._last_query + self.poll_interval - self._clock.now())
+            self._query_status(self.response_timeout)
+        self._new_alarm = None  # reported in the status
+        if self.connection.critical:
+            return self._known_status()
+        assert self._last_status is not None
+        return self._last_status
+
+    def _known_status(self) -> StageStatus:
+        """The status in a critical alarm, from the last report (GRBL answers none)."""
+        code = self.connection.alarm
+        if self._last_status is None:
+            now = self._clock.now()
+            return StageStatus(
+                StageState.ALARM, None, math.nan, 0.0, False, code, None, None, now, math.inf
             )
-        self._clock.sleep(self._last_query + self.poll_interval - self._clock.now())
-        return self._query_status(self.response_timeout)
+        return dataclasses.replace(
+            self._last_status, state=StageState.ALARM, substate=None, velocity=0.0, alarm=code
+        )
 
     def home(self) -> StageStatus:
         """Run the homing cycle ``$H``; clears alarms and an e-stop latch."""
@@ -309,24 +357,56 @@ polling at no more than 5 Hz); use the default 0.2
                 "enable it with write_setting('homing_enabled', True), or unlock() instead",
             )
         self._require_not_critical()
-        seek_s = 1.5 * settings.max_travel_x / settings.homing_seek * 60.0
-        locate_s = 4.0 * settings.homing_pulloff / settings.homing_feed * 60.0
-        # '?' is ignored while homing, so no polling; the timeout covers the longest search.
-        self._command("$H", timeout=1.5 * (seek_s + locate_s) + 10.0, poll=False)
-        self._alarm = None
+        # No polling while homing; the timeout covers the longest search of every cycle
+        # (GRBL gives up with ALARM:9 before it), with a margin for acceleration.
+        self._command("$H", timeout=self.homing_timeout(), poll=False)
         self._estop_latched = False
         return self.status()
+
+    def homing_timeout(self) -> float:
+        """Clock seconds ``$H`` may take: 1.5 x GRBL's longest homing of every axis in
+        ``homing_cycles`` (:meth:`GrblSettings.homing_time_bound`) + ``response_timeout``."""
+        return 1.5 * self.settings.homing_time_bound(self._homing_cycles) + self.response_timeout
+
+    def make_ready(self, on_step: Callable[[str], None] | None = None) -> StageStatus:
+        """Leave any alarm the way a run does before its first move.
+
+        A critical alarm is reset first (0x18). Then, in ALARM (power-up or reset with
+        homing enabled, an earlier alarm): home with ``$H`` when homing is enabled
+        (``$22=1``), else unlock with ``$X`` (no switches to find the origin with: the
+        position is GRBL's count). An :meth:`estop` latch is cleared the same way.
+        ``on_step(text)`` hears each action before it starts (progress for the user).
+        """
+
+        def step(text: str) -> None:
+            if on_step is not None:
+                on_step(text)
+
+        if self.connection.critical:
+            code = self.connection.alarm
+            step(f"soft reset after ALARM:{code} ({alarm_text(code or 0).split(':')[0]})")
+            status = self.reset()
+        else:
+            status = self.status()
+        if status.state is not StageState.ALARM and not self._estop_latched:
+            return status
+        if self.settings.homing_enabled:
+            step(f"homing ($H, up to {self.homing_timeout():.0f} s)")
+            return self.home()
+        step("unlocking ($X; homing is disabled, $22=0)")
+        return self.unlock()
 
     def unlock(self) -> StageStatus:
         """Kill the alarm lock ``$X`` (position may be wrong: home when you can)."""
         self._require_not_critical()
         self._command("$X")
-        self._alarm = None
         self._estop_latched = False
         return self.status()
 
     def reset(self) -> StageStatus:
-        """Soft reset (0x18) and wait for the banner; needed after a critical alarm."""
+        """Soft reset (0x18) and wait for the banner; needed after a critical alarm. The
+        reset is sent again every :data:`~hil.devices.grbl_connection.RESET_RETRY_S` without
+        an answer (GRBL drops one that arrives in the 0.5 s after a critical alarm)."""
         self._require_open()
         self._soft_reset_and_wait(self.response_timeout)
         return self.status()
@@ -363,11 +443,11 @@ polling at no more than 5 Hz); use the default 0.2
         self._command(format_jog_line(dx * 1000.0, v * 60000.0))
         if not wait:
             return self.status()
-        count = self._reports
+        count = self.connection.reports
         step = self.settings.step
         self._wait(
             lambda: (
-                self._reports > count
+                self.connection.reports > count
                 and self._last_status is not None
                 and self._last_status.state is StageState.IDLE
                 and abs(self._last_status.position - (start + dx)) <= step
@@ -442,7 +522,12 @@ polling at no more than 5 Hz); use the default 0.2
     def stop(self, *, cancel: bool = True) -> StageStatus:
         """Controlled stop: feed hold ``!`` and wait until stopped; with ``cancel`` then drop
         the rest of the move (soft reset from ``Hold:0``: GRBL keeps the position, no alarm).
-        Without ``cancel`` the stage stays held; :meth:`resume` continues."""
+        Without ``cancel`` the stage stays held; :meth:`resume` continues. In a critical
+        alarm GRBL has halted already and answers nothing: the known status returns at once.
+        """
+        self._require_open()
+        if self.connection.critical:
+            return self._known_status()
         self._write_realtime(FEED_HOLD)
         status = self._wait_state(
             lambda s: (
@@ -450,7 +535,10 @@ polling at no more than 5 Hz); use the default 0.2
                 or s.state in (StageState.IDLE, StageState.ALARM)
             ),
             "the feed hold to complete",
+            raise_alarm=False,
         )
+        if self.connection.critical:
+            return self._known_status()
         if cancel and status.state is StageState.HOLD:
             return self.reset()
         return status
@@ -520,23 +608,29 @@ polling at no more than 5 Hz); use the default 0.2
             self._original_accel = self.settings.acceleration_x
         self.write_setting("acceleration_x", a * 1000.0)
 
-    def _require_open(self) -> SerialLike:
+    def _require_open(self) -> ByteLink:
         if self._ser is None:
             raise StageError("the stage is not open: call open() or use 'with GrblStage(...)'")
         return self._ser
 
+    def _recovery(self, code: int | None) -> str:
+        homing = None if self._settings is None else self._settings.homing_enabled
+        return alarm_recovery(code, homing=homing)
+
     def _require_not_critical(self) -> None:
         self._require_open()
-        if self._critical:
-            raise StageAlarmError(self._alarm, self._alarm_words(), alarm_recovery(1))
+        if self.connection.critical:
+            code = self.connection.alarm
+            raise StageAlarmError(code, self._alarm_words(), self._recovery(code))
 
     def _require_ready(self) -> None:
         """Refuse motion while latched, in alarm or held, with what to do about it."""
         self._require_not_critical()
         if self._estop_latched:
             text = "emergency stop latched by estop()"
-            if self._alarm is not None:
-                text += f"; controller ALARM:{self._alarm} ({alarm_text(self._alarm)})"
+            code = self.connection.alarm
+            if code is not None:
+                text += f"; controller ALARM:{code} ({alarm_text(code)})"
             raise StageAlarmError(
                 None,
                 text,
@@ -545,7 +639,8 @@ polling at no more than 5 Hz); use the default 0.2
             )
         status = self._last_status
         if status is not None and status.state is StageState.ALARM:
-            raise StageAlarmError(self._alarm, self._alarm_words(), alarm_recovery(self._alarm))
+            code = self.connection.alarm
+            raise StageAlarmError(code, self._alarm_words(), self._recovery(code))
         if status is not None and status.state is StageState.HOLD:
             raise StageHeldError(
                 "stage is in a feed hold: call resume() to continue the held move or stop() "
@@ -553,9 +648,10 @@ polling at no more than 5 Hz); use the default 0.2
             )
 
     def _alarm_words(self) -> str:
-        if self._alarm is None:
+        code = self.connection.alarm
+        if code is None:
             return "locked at power-up or reset; GRBL needs homing or an unlock"
-        return alarm_text(self._alarm)
+        return alarm_text(code)
 
     # ------------------------------------------------------------------ I/O
     def _write(self, data: bytes) -> None:
@@ -566,32 +662,29 @@ polling at no more than 5 Hz); use the default 0.2
 
     def _command(self, line: str, *, timeout: float | None = None, poll: bool = False) -> None:
         """Send one line and wait for its ``ok``; raise on ``error:N`` or an alarm."""
-        if len(line) > MAX_LINE_LENGTH:
-            raise ConfigError("line", line, f"at most {MAX_LINE_LENGTH} characters (GRBL)")
-        pending = _Pending(line)
-        self._pending.append(pending)
-        self._write(line.encode("ascii") + b"\n")
-        self._wait(
-            lambda: pending.result is not None or pending.reset,
-            self.response_timeout if timeout is None else timeout,
-            f"a response to {line!r}",
-            poll=poll,
-        )
+        pending = self._send_line(line)
+        self._wait_answer(pending, self.response_timeout if timeout is None else timeout, poll)
         if pending.reset:
             raise StageError(f"GRBL reset while {line!r} was pending; it was not executed")
         if isinstance(pending.result, ErrorResponse):
             code = pending.result.code
             raise StageCommandError(code, error_text(code), line)
 
+    def _wait_answer(self, pending: PendingLine, timeout: float, poll: bool) -> None:
+        """Wait for ``pending``'s ``ok``/``error:N`` (or the reset that drops it)."""
+        self._wait(lambda: pending.done, timeout, f"a response to {pending.line!r}", poll=poll)
+
+    def _send_line(self, line: str) -> PendingLine:
+        pending, data = self.connection.send_line(line)
+        self._write(data)
+        return pending
+
     def _wait_motion_done(self, expected_s: float) -> None:
         """Wait for the planner to empty (``G4 P0`` answers then), polling the status."""
-        line = format_dwell_line()
-        pending = _Pending(line)
-        self._pending.append(pending)
-        self._write(line.encode("ascii") + b"\n")
+        pending = self._send_line(format_dwell_line())
         timeout = 1.5 * expected_s + self.response_timeout
         self._wait(
-            lambda: pending.result is not None or pending.reset or self._held(),
+            lambda: pending.done or self._held(),
             timeout,
             "the move to finish",
             poll=True,
@@ -606,83 +699,85 @@ polling at no more than 5 Hz); use the default 0.2
         s = self._last_status
         return s is not None and s.state is StageState.HOLD
 
-    def _wait_state(self, done: Callable[[StageStatus], bool], what: str) -> StageStatus:
-        count = self._reports
+    def _wait_state(
+        self, done: Callable[[StageStatus], bool], what: str, *, raise_alarm: bool = True
+    ) -> StageStatus:
+        count = self.connection.reports
         self._wait(
             lambda: (
-                self._reports > count and self._last_status is not None and done(self._last_status)
+                self.connection.critical
+                or (
+                    self.connection.reports > count
+                    and self._last_status is not None
+                    and done(self._last_status)
+                )
             ),
             self.response_timeout,
             what,
             poll=True,
+            raise_alarm=raise_alarm,
         )
         assert self._last_status is not None
         return self._last_status
 
-    def _query_status(self, timeout: float) -> StageStatus:
+    def _query_status(self, timeout: float) -> None:
+        """Query and wait for the answer, or for a critical alarm (no answer then)."""
         self._query()
-        count = self._reports  # after the reports read before the '?' went out
-        self._wait(lambda: self._reports > count, timeout, "a status report", poll=True)
-        assert self._last_status is not None
-        return self._last_status
+        count = self.connection.reports  # after the reports read before the '?' went out
+        self._wait(
+            lambda: self.connection.reports > count or self.connection.critical,
+            timeout,
+            "a status report",
+            poll=True,
+            raise_alarm=False,
+        )
 
     def _query(self) -> None:
-        """Send '?' unless one is in flight: with one query at a time, every report is known
-        to answer the oldest (real GRBL merges two '?' that arrive before its main loop runs,
-        so with more in flight a report's time would be ambiguous)."""
+        """Send '?' unless one is in flight (see :meth:`GrblConnection.send_query`)."""
         ser = self._require_open()
-        # A report already waiting answers the query in flight (or a query given up as
-        # lost, answered late): read it first, so the next '?' is paired with its own answer.
-        while ser.in_waiting:
-            self._receive(ser)
-        now = self._clock.now()
-        while self._queries and now - self._queries[0] >= QUERY_LOST_S:
-            # Dropped: GRBL answers in ms, a reset drops the query.
-            self._lost.append(self._queries.popleft())
-        if self._queries:
-            return
-        self._last_query = now
-        self._queries.append(now)
-        self._write(STATUS_QUERY)
-
-    def _date_report(self) -> tuple[float, float]:
-        """``(host_time, reply_s)`` of a status report just received: the time of the query
-        in flight and how long its answer took.
-
-        GRBL samples its state on the main-loop pass after the '?' arrives (well under a
-        millisecond later), while the report's ~60 bytes take 5 ms at 115 200 baud and the
-        host may read them later still: a stalled host would otherwise date the position
-        late by the whole stall. A report with no query in flight gets its receipt time and
-        an infinite ``reply_s``: it answers a query the driver no longer waits for, or none
-        (a '?' typed on a shared terminal), so its instant is unknown.
-
-        While a query given up as lost may still be answered (for
-        :data:`QUERY_FORGOTTEN_S` after it was sent), a report cannot be told from its late
-        answer: its ``reply_s`` is infinite (its instant is unknown). Otherwise a late
-        answer that came just after the '?' sent again would pass as that query's prompt
-        answer, dated by it: as much as the whole stall late if the link held the answer.
-        """
-        received = self._clock.now()
-        while self._lost and received - self._lost[0] >= QUERY_FORGOTTEN_S:
-            self._lost.popleft()
-        if self._queries:
-            asked = self._queries.popleft()
-            return asked, math.inf if self._lost else received - asked
-        if self._lost:
-            self._lost.popleft()  # its late answer, with none in flight: nothing else awaited
-        return received, math.inf
+        if self.connection.expects_report():
+            # A report already received answers the query in flight (or one given up as
+            # lost, answered late): read it first, so the next '?' is paired with its own.
+            while self._receive(ser):
+                pass
+        if self.connection.critical:
+            return  # GRBL answers no query until reset
+        data = self.connection.send_query(self._clock.now())
+        if data:
+            self._last_query = self.connection.last_query
+            self._write(data)
 
     def _soft_reset_and_wait(self, timeout: float) -> None:
-        banners = self._banners
-        self._write(SOFT_RESET)
-        self._wait(lambda: self._banners > banners, timeout, "the GRBL banner", raise_alarm=False)
+        banners = self.connection.banners
+        self._write(self.connection.send_reset(self._clock.now()))
+        try:
+            self._wait(
+                lambda: self.connection.banners > banners,
+                timeout,
+                "the GRBL banner",
+                raise_alarm=False,
+            )
+        except StageTimeoutError:
+            self.connection.abandon_reset()  # no 0x18 resent behind a later command
+            raise
         # An ALARM:3 (reset in motion) is expected here: it is kept in the status, not raised.
         self._new_alarm = None
 
     def _read_settings(self) -> GrblSettings:
-        self._setting_lines = []
-        self._command("$$")
-        return GrblSettings.from_lines(self._setting_lines)
+        """``$$``, asked again if a reset drops it: a board that restarts as the port opens
+        (an Arduino on DTR) prints its power-up banner late, after the driver's own."""
+        for _ in range(3):
+            self.connection.settings.clear()
+            pending = self._send_line("$$")
+            self._wait_answer(pending, self.response_timeout, poll=False)
+            if not pending.reset:
+                break
+        if isinstance(pending.result, ErrorResponse) or pending.reset:
+            raise StageError(
+                f"GRBL did not answer '$$' with its settings ({pending.result or 'reset'}): "
+                "check that the firmware is GRBL 1.1 and that nothing else resets it"
+            )
+        return GrblSettings(self.connection.settings)
 
     def _wait(
         self,
@@ -693,13 +788,17 @@ polling at no more than 5 Hz); use the default 0.2
         poll: bool = False,
         raise_alarm: bool = True,
     ) -> None:
+        """Read and handle input until ``done()``; meanwhile query the status every
+        ``poll_interval`` (with ``poll``) and resend a soft reset GRBL dropped. Raises
+        :class:`StageAlarmError` for an alarm received meanwhile (with ``raise_alarm``) and
+        :class:`StageTimeoutError` after ``timeout`` clock seconds."""
         ser = self._require_open()
         deadline = self._clock.now() + timeout
         while True:
             got = self._receive(ser)
             if raise_alarm and self._new_alarm is not None:
                 code, self._new_alarm = self._new_alarm, None
-                raise StageAlarmError(code, alarm_text(code), alarm_recovery(code))
+                raise StageAlarmError(code, alarm_text(code), self._recovery(code))
             if done():
                 return
             now = self._clock.now()
@@ -708,53 +807,31 @@ polling at no more than 5 Hz); use the default 0.2
                     f"no {what} from GRBL within {timeout:.3g} s: check the cable, the port "
                     "and the controller's power"
                 )
-            if poll and now - self._last_query >= self.poll_interval:
+            if self.connection.reset_due(now):
+                self._write(self.connection.send_reset(now))
+            elif (
+                poll
+                and not self.connection.critical
+                and now - self._last_query >= (self.poll_interval)
+            ):
                 self._query()
             if not got:
                 self._clock.sleep(self._wait_step)
 
-    def _receive(self, ser: SerialLike) -> bool:
-        data = ser.read(1)
+    def _receive(self, ser: ByteLink) -> bool:
+        """Read what is there (waiting up to the read timeout) and handle its events."""
+        data = ser.read(4096)
         if not data:
             return False
-        waiting = ser.in_waiting
-        if waiting:
-            data += ser.read(waiting)
-        for line in self._splitter.feed(data):
-            self._handle(parse_line(line))
+        for event in self.connection.receive_data(data, self._clock.now()):
+            if isinstance(event, Report):
+                self._last_status = self._to_status(event)
+            elif isinstance(event, Alarm):
+                self._new_alarm = event.code
         return True
 
-    def _handle(self, msg: GrblMessage) -> None:
-        if isinstance(msg, Ok | ErrorResponse):
-            if self._pending:
-                self._pending.popleft().result = msg
-        elif isinstance(msg, StatusReport):
-            self._last_status = self._to_status(msg, *self._date_report())
-            self._reports += 1
-        elif isinstance(msg, AlarmMessage):
-            self._alarm = msg.code
-            self._new_alarm = msg.code
-        elif isinstance(msg, Banner):
-            self._banners += 1
-            self._critical = False
-            self._queries.clear()  # a reset drops the queries GRBL had not answered
-            self._lost.clear()
-            for pending in self._pending:
-                pending.reset = True
-            self._pending.clear()
-        elif isinstance(msg, SettingLine):
-            self._setting_lines.append(msg)
-        elif isinstance(msg, Feedback):
-            self.messages.append(f"[{msg.kind}:{msg.text}]")
-            if msg.kind == "MSG" and msg.text == "Reset to continue":
-                self._critical = True
-        elif isinstance(msg, Unrecognised):
-            self.unrecognised.append(msg.line)
-
-    def _to_status(self, report: StatusReport, host_time: float, reply_s: float) -> StageStatus:
-        if report.wco is not None:
-            self._wco = report.wco
-        mpos = report.machine_position(self._wco)
+    def _to_status(self, event: Report) -> StageStatus:
+        report, mpos = event.report, event.mpos
         position = mpos[0] / 1000.0 if mpos else math.nan
         state = StageState(report.state)
         speed = (report.feed or 0.0) / 60000.0
@@ -764,11 +841,11 @@ polling at no more than 5 Hz); use the default 0.2
             position=position,
             velocity=self._direction * speed,
             limit_triggered="X" in report.pins,
-            alarm=self._alarm if state is StageState.ALARM else None,
+            alarm=self.connection.alarm if state is StageState.ALARM else None,
             planner_blocks_free=report.planner_blocks_free,
             rx_bytes_free=report.rx_bytes_free,
-            host_time=host_time,
-            reply_s=reply_s,
+            host_time=event.host_time,
+            reply_s=event.reply_s,
         )
 
     def _position_estimate(self) -> float:

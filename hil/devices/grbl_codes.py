@@ -70,8 +70,9 @@ ALARM_CODES: dict[int, tuple[str, str]] = {
     9: ("Homing fail", "Could not find limit switch within search distances. Try increasing max travel, decreasing pull-off distance, or check wiring."),
 }  # fmt: skip
 
-#: Alarms after which GRBL prints ``[MSG:Reset to continue]`` and ignores everything but a
-#: soft reset (0x18): the hard and soft limit alarms.
+#: Alarms after which GRBL 1.1 prints ``[MSG:Reset to continue]`` (500 ms after the alarm
+#: line) and ignores everything but a soft reset (0x18), status queries included: the hard
+#: and soft limit alarms (``protocol.c``: ``EXEC_ALARM_HARD_LIMIT``, ``EXEC_ALARM_SOFT_LIMIT``).
 CRITICAL_ALARMS = frozenset({1, 2})
 
 
@@ -91,17 +92,36 @@ def alarm_text(code: int) -> str:
     return f"{name}: {description}"
 
 
-def alarm_recovery(code: int | None) -> str:
+def alarm_recovery(code: int | None, *, homing: bool | None = None) -> str:
     """What the operator does to leave an alarm, in words, for error messages.
 
+    ``homing`` is ``$22`` when known: after a hard limit (``ALARM:1``) the carriage may
+    still press the switch, and with hard limits on, leaving the switch trips the alarm
+    again; a homing cycle is what backs off it (GRBL ignores the switches while homing).
+
     >>> alarm_recovery(1).split(";")[0]
-    'send a soft reset first (GrblStage.reset(), 0x18)'
+    'send a soft reset first (GrblStage.reset() or hil stage reset: 0x18)'
+    >>> "home with $H" in alarm_recovery(1, homing=True)
+    True
     """
-    steps = (
-        "check that the axis is clear and the carriage is not on a limit switch, then home "
-        "with $H (GrblStage.home()) or, if the position is known to be right, unlock with $X "
-        "(GrblStage.unlock())"
-    )
+    if code == 1 and homing:
+        steps = (
+            "check that the axis is clear, then home with $H (GrblStage.home(), hil stage "
+            "home): the homing cycle backs the carriage off the limit switch; do not unlock "
+            "with $X while a switch is pressed, since moving off it trips the hard limit again"
+        )
+    elif code == 1 and homing is False:
+        steps = (
+            "check that the axis is clear; to get off the switch, turn hard limits off "
+            "($21=0), unlock with $X (GrblStage.unlock(), hil stage unlock), jog away from the "
+            "switch, then turn them on again ($21=1); the position is lost: set up the origin"
+        )
+    else:
+        steps = (
+            "check that the axis is clear and the carriage is not on a limit switch, then "
+            "home with $H (GrblStage.home(), hil stage home) or, if the position is known to "
+            "be right, unlock with $X (GrblStage.unlock(), hil stage unlock)"
+        )
     if code in CRITICAL_ALARMS:
-        return "send a soft reset first (GrblStage.reset(), 0x18); then " + steps
+        return "send a soft reset first (GrblStage.reset() or hil stage reset: 0x18); then " + steps
     return steps

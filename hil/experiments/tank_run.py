@@ -346,6 +346,7 @@ def run_experiment(
     from hil.devices.board import Board
     from hil.devices.board_settings import BoardSettings
     from hil.devices.grbl import GrblStage
+    from hil.experiments.stage_checks import raise_first_failure, tow_checks
     from hil.recording.records import ReceiverSetup, RunEvent, StageTelemetry
     from hil.recording.replay import ReceiverFeed
     from hil.recording.writer import RunWriter
@@ -432,24 +433,12 @@ def run_experiment(
 
         # ---- stage: open, home, check the plan against its limits (nothing moves yet)
         stage = GrblStage(stage_url, clock=clock).open()
-        status = stage.status()
-        if status.state.name == "ALARM" or status.alarm is not None:
-            view.update("stage: homing", force=True)
-            stage.home()
-        lo, hi = stage.limits
+        # Out of any alarm: reset a critical one, then home ($22=1) or unlock ($22=0).
+        stage.make_ready(lambda step: view.update(f"stage: {step}", force=True))
         plan = exp.tow
         d = 1.0 if plan.end_m > plan.start_m else -1.0
-        for name, x in (
-            ("tow.start_m - tow.run_up_m", plan.start_m - d * plan.run_up_m),
-            ("tow.end_m + tow.run_down_m", plan.end_m + d * plan.run_down_m),
-        ):
-            if not lo <= x <= hi:
-                raise ConfigError(name, x, f"within the stage's soft limits [{lo}, {hi}] m")
         v_max = stage.settings.max_rate
-        if plan.speed_mps > v_max:
-            raise ConfigError(
-                "tow.speed_mps", plan.speed_mps, f"<= the stage max rate {v_max:.3f} m/s"
-            )
+        raise_first_failure(tow_checks(plan, stage.settings, stage.limits))
         # Position for the first pass before anything is transmitted.
         view.update("stage: positioning for the first pass", force=True)
         stage.move_to(plan.start_m - d * plan.run_up_m, v_max)

@@ -4,13 +4,15 @@
 URL                                         transport
 ==========================================  ================================================
 ``/dev/ttyACM0``, ``COM3``                  serial port (pyserial), default baud 115200
-``serial:///dev/ttyACM0?baud=921600``       the same, with options
+``serial:///dev/ttyACM0?baud=921600``       the same, with options: ``baud``; ``dtr``,
+                                            ``rts`` (``0``/``1``: the modem lines once open)
 ``loop://``, ``socket://host:port``         pyserial's own URL handlers
 ``usb://1209:ca50?interface=0``             bulk endpoints via pyusb (libusb-1.0);
                                             ``?backend=libusb1|libusb0|openusb`` or the
                                             ``usb_backend=`` keyword (a backend object)
 ``sim://board?via=memory|pty|usb``          a simulated board started now (:mod:`.sim`)
-``sim://stage``                             the simulated GRBL stage on a pty
+``sim://stage?via=pty|memory``              the simulated GRBL stage on a pty, or in the
+                                            reader's thread
 ``spy://<inner-url>?file=traffic.log``      any of the above, traffic dumped to a file
 ==========================================  ================================================
 
@@ -72,15 +74,35 @@ def _check_keys(scheme: str, query: dict[str, str], allowed: tuple[str, ...]) ->
         )
 
 
+def _line_option(query: dict[str, str], options: dict[str, Any], name: str) -> bool | None:
+    """A modem line's level from the URL (``?dtr=0``) or else the caller's default
+    (``dtr=False`` keyword; ``None``: pyserial's default, raised)."""
+    raw = query.get(name)
+    if raw is None:
+        default = options.get(name)
+        return None if default is None else bool(default)
+    if raw not in ("0", "1"):
+        raise ConfigError(
+            f"serial:// option {name}", raw, "0 (line low) or 1 (line raised)", f"e.g. ?{name}=0"
+        )
+    return raw == "1"
+
+
 def _open_serial(rest: str, query: dict[str, str], options: dict[str, Any], timeout: float) -> Any:
-    _check_keys("serial", query, ("baud",))
+    _check_keys("serial", query, ("baud", "dtr", "rts"))
     try:
         baud = int(query.get("baud", "115200"))
     except ValueError:
         raise ConfigError(
             "baud", query["baud"], "an integer (bit/s)", "e.g. ?baud=115200"
         ) from None
-    return open_serial(rest, baudrate=baud, timeout=timeout)
+    return open_serial(
+        rest,
+        baudrate=baud,
+        timeout=timeout,
+        dtr=_line_option(query, options, "dtr"),
+        rts=_line_option(query, options, "rts"),
+    )
 
 
 def _open_pyserial_url(scheme: str) -> Opener:
@@ -158,7 +180,9 @@ def open_transport(url: str, *, timeout: float = 0.05, **options: Any) -> Transp
     """Open ``url`` (table in the module docstring); ``timeout`` is the read wait, s.
 
     Keyword ``options`` go to the scheme's opener (``usb_backend=``; ``clock=``,
-    ``world=``, ``spec=``, ``faults=`` for ``sim://``).
+    ``world=``, ``spec=``, ``faults=`` for ``sim://``; ``dtr=``, ``rts=`` for serial ports
+    and plain device paths: the level the line is set to before the port opens, unless the
+    URL gives ``?dtr=``/``?rts=``; default pyserial's, raised).
     """
     if not isinstance(url, str) or not url:
         raise ConfigError("url", url, "a non-empty transport URL or device path")
@@ -167,7 +191,8 @@ def open_transport(url: str, *, timeout: float = 0.05, **options: Any) -> Transp
         return transport
     scheme, rest, query = split_url(url)
     if scheme == "":
-        return open_serial(url, timeout=timeout)
+        plain: Transport = _open_serial(url, {}, options, timeout)
+        return plain
     opener = _OPENERS.get(scheme)
     if opener is None:
         known = ", ".join(f"{s}://" for s in (*_OPENERS, "spy"))

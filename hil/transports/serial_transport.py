@@ -130,12 +130,32 @@ def open_serial(
     baudrate: int = 115200,
     timeout: float = 0.05,
     on_close: Callable[[], None] | None = None,
+    dtr: bool | None = None,
+    rts: bool | None = None,
 ) -> SerialTransport:
-    """Open a pyserial URL or device path as a :class:`SerialTransport`."""
+    """Open a pyserial URL or device path as a :class:`SerialTransport`.
+
+    ``dtr``/``rts``: the level of that modem line, set before the port opens so pyserial
+    applies it as it opens (``None``: pyserial's default, raised). An Arduino Uno or Nano
+    resets on a raised DTR; ``dtr=False`` keeps it running (see docs/grbl-stage.md for the
+    brief pulse some operating systems give at open regardless).
+
+    >>> t = open_serial("loop://", timeout=0.1, dtr=False, rts=False)
+    >>> t.port.dtr, t.port.rts
+    (False, False)
+    >>> t.close()
+    """
     import serial
 
     try:
-        port = serial.serial_for_url(url, baudrate=baudrate, timeout=timeout, write_timeout=5.0)
+        port = serial.serial_for_url(
+            url, baudrate=baudrate, timeout=timeout, write_timeout=5.0, do_not_open=True
+        )
+        if dtr is not None:
+            port.dtr = dtr
+        if rts is not None:
+            port.rts = rts
+        port.open()
     except (serial.SerialException, OSError, ValueError) as error:
         if on_close is not None:
             on_close()

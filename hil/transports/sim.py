@@ -10,9 +10,12 @@ delay, samples) and ``gain`` (loopback gain, linear). Keyword options: ``clock``
 injected ``now()``; default real time), ``world``, ``spec``, ``faults``. The returned
 transport has a ``simulator`` attribute: what serves it (for fault injection in tests).
 
-``sim://stage`` starts the simulated GRBL controller on a pty and returns the open serial
-port (a serial-like object :class:`~hil.devices.grbl.GrblStage` accepts); closing it stops
-the simulator. Keyword options: ``config`` (a ``GrblSimConfig``), ``clock``.
+``sim://stage`` starts the simulated GRBL controller on a pty and returns a transport to it
+(its ``simulator`` attribute is the ``SimulatedGrblOnPty``); closing it stops the
+simulator. ``sim://stage?via=memory`` runs the controller in the reader's thread instead
+(:class:`MemoryStageLink`; ``simulator`` is the ``SimulatedGrbl``). Keyword options:
+``config`` (a ``GrblSimConfig``), ``clock`` (an injected ``now()``;
+:class:`~hil.devices.grbl.GrblStage` passes its own clock's).
 """
 
 from __future__ import annotations
@@ -21,7 +24,7 @@ from typing import Any
 
 from hil.errors import ConfigError
 from hil.transports.base import Transport
-from hil.transports.serial_transport import SerialTransport, open_serial
+from hil.transports.serial_transport import open_serial
 
 _VIAS = ("memory", "pty", "usb")
 
@@ -83,59 +86,70 @@ def open_sim_board(query: dict[str, str], options: dict[str, Any], timeout: floa
     return link
 
 
-class SimStagePort:
-    """The serial port of a simulated GRBL stage; closing it stops the simulator.
+class MemoryStageLink:
+    """A transport wired straight into a simulated GRBL controller that runs in the reader's
+    thread: every read and write first brings the controller up to its clock's present.
 
-    Offers what :class:`~hil.devices.grbl.GrblStage` uses of a serial port (``read``,
-    ``write``, ``in_waiting``, ``reset_input_buffer``, ``timeout``, ``close``) and the
-    transport contract's ``url``.
+    No thread and no pty: with an injected clock the conversation is deterministic, and a
+    read with nothing to say returns ``b""`` at once (the driver's wait then advances the
+    clock). ``simulator`` is the ``SimulatedGrbl``.
     """
 
-    def __init__(self, transport: SerialTransport, simulator: Any) -> None:
-        self._transport = transport
-        self.port = transport.port
-        self.simulator = simulator
-        self.url = "sim://stage"
+    def __init__(self, grbl: Any, *, timeout: float, url: str = "sim://stage?via=memory") -> None:
+        self.simulator = grbl
+        self.timeout = timeout
+        self.url = url
+        self._rx = bytearray()
+        self._open = True
+        grbl.data_to_send()  # the power-up banner: nobody was listening yet
+        grbl.connection_made()
 
-    @property
-    def timeout(self) -> float:
-        """Read timeout, s."""
-        return float(self.port.timeout)
-
-    @timeout.setter
-    def timeout(self, value: float) -> None:
-        self.port.timeout = value
-
-    @property
-    def in_waiting(self) -> int:
-        """Bytes ready to read."""
-        return int(self.port.in_waiting)
-
-    def read(self, size: int = 1) -> bytes:
-        """pyserial semantics: wait for ``size`` bytes or the timeout."""
-        return bytes(self.port.read(size))
+    def read(self, size: int) -> bytes:
+        """Up to ``size`` bytes the controller has sent by now (``b""`` if none)."""
+        self.simulator.tick()
+        self._rx += self.simulator.data_to_send()
+        out = bytes(self._rx[:size])
+        del self._rx[:size]
+        return out
 
     def write(self, data: bytes) -> int:
-        """Write all of ``data``."""
-        return self._transport.write(data)
-
-    def reset_input_buffer(self) -> None:
-        """Drop unread input."""
-        self.port.reset_input_buffer()
+        """Hand ``data`` to the controller at the present time."""
+        self.simulator.tick()
+        self.simulator.receive_data(bytes(data))
+        return len(data)
 
     def close(self) -> None:
-        """Close the port and stop the simulator."""
-        self._transport.close()
+        """Hang up (idempotent)."""
+        if self._open:
+            self._open = False
+            self.simulator.connection_lost()
 
 
-def open_sim_stage(query: dict[str, str], options: dict[str, Any], timeout: float) -> Any:
-    """Start the simulated GRBL controller on a pty; return its open serial port."""
+_STAGE_VIAS = ("pty", "memory")
+
+
+def open_sim_stage(query: dict[str, str], options: dict[str, Any], timeout: float) -> Transport:
+    """Start the simulated GRBL controller (``?via=pty``, the default, or ``?via=memory``)
+    and return a transport to it."""
+    extra = sorted(set(query) - {"via"})
+    if extra:
+        raise ConfigError(
+            "sim://stage option", extra[0], "via", "other settings: pass config= instead"
+        )
+    via = query.get("via", "pty")
+    if via not in _STAGE_VIAS:
+        raise ConfigError("via", via, "one of pty, memory", "e.g. sim://stage?via=memory")
+    if via == "memory":
+        import time
+
+        from sim_devices.stage import SimulatedGrbl
+
+        clock = options.get("clock") or time.monotonic
+        return MemoryStageLink(SimulatedGrbl(options.get("config"), clock=clock), timeout=timeout)
     from sim_devices.stage import SimulatedGrblOnPty
 
-    if query:
-        raise ConfigError(
-            "sim://stage options", sorted(query), "none in the URL", "pass config= instead"
-        )
     sim = SimulatedGrblOnPty(options.get("config"), clock=options.get("clock")).start()
     transport = open_serial(sim.port_name, timeout=timeout, on_close=sim.close)
-    return SimStagePort(transport, sim)
+    transport.url = "sim://stage"
+    transport.simulator = sim  # type: ignore[attr-defined]
+    return transport

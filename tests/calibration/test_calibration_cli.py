@@ -32,6 +32,8 @@ def test_sound_speed_from_temperature_then_stage(
     out = capsys.readouterr().out
     assert "sound speed used: 1477.038 m/s (stored sound-speed-" in out
     assert "stage scale:" in out and "backlash:" in out
+    # The simulated GRBL powers up locked ($22=1): the stage is homed before it moves.
+    assert "[truth] simulated stage powered up locked ($22=1): homing ($H, up to" in out
     cal = CalibrationSet.current(tmp_path)
     assert cal.stage is not None and cal.stage.scale == pytest.approx(1.0015, abs=5e-4)
 

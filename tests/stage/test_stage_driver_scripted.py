@@ -159,7 +159,8 @@ def test_alarm_state_refuses_motion_and_says_how_to_recover() -> None:
     stage = GrblStage(peer, clock=ManualClock())
     stage.open()
     with pytest.raises(StageAlarmError, match=r"stage is in ALARM \(locked at power-up or reset"
-                       r".*home with \$H \(GrblStage.home\(\)\).*unlock with \$X"):  # fmt: skip
+                       r".*home with \$H \(GrblStage.home\(\), hil stage home\)"
+                       r".*unlock with \$X"):  # fmt: skip
         stage.move_to(-0.1, 0.005)
     assert len(peer.written) == 3
 
@@ -254,11 +255,13 @@ def test_status_polling_never_faster_than_5_hz() -> None:
 
 
 def test_silent_controller_times_out_with_advice() -> None:
-    peer = ScriptedSerial([(b"\x18", b"")])
+    # The reset unanswered for RESET_RETRY_S (0.7 s) is sent once more within the 1 s.
+    peer = ScriptedSerial([(b"\x18", b""), (b"\x18", b"")])
     stage = GrblStage(peer, clock=ManualClock(), open_timeout=1.0)
     with pytest.raises(StageTimeoutError, match=r"no the GRBL banner from GRBL within 1 s: "
                        r"check the cable"):  # fmt: skip
         stage.open()
+    assert peer.written == [b"\x18", b"\x18"] and not peer.script
 
 
 def test_bad_driver_configuration_rejected_before_opening() -> None:
@@ -389,7 +392,7 @@ def test_a_report_nobody_asked_for_is_dated_on_receipt() -> None:
     stage, peer, clock = _delayed_stage([], delay=0.0)
     clock.advance(3.0)
     peer._rx += _report(120, b"Idle")  # e.g. a reply to a '?' typed on a shared terminal
-    stage._wait(lambda: stage._reports >= 2, 1.0, "the report")
+    stage._wait(lambda: stage.connection.reports >= 2, 1.0, "the report")
     assert stage.last_status is not None and stage.last_status.host_time == 3.0
     assert stage.last_status.reply_s == math.inf  # when GRBL sampled it is unknown
 

@@ -122,6 +122,19 @@ def test_sim_stage_is_a_port_grblstage_can_open() -> None:
         port.close()
 
 
+def test_sim_stage_in_memory_runs_on_the_injected_clock() -> None:
+    from hil.devices.grbl import GrblStage
+    from sim_devices.stage import GrblSimConfig
+
+    clock = ManualClock(0.0)
+    config = GrblSimConfig(homing=True, power_up_position_mm=-20.0)
+    options = {"config": config}
+    with GrblStage("sim://stage?via=memory", clock=clock, transport_options=options) as stage:
+        assert stage.transport.url == "sim://stage?via=memory"
+        homed = stage.make_ready()  # the simulated GRBL powers up locked
+        assert homed.position == pytest.approx(-0.001) and clock.now() > 1.0
+
+
 def test_spy_dumps_both_directions_with_hex_and_ascii(tmp_path: Path) -> None:
     log = tmp_path / "traffic.log"
     t = open_transport(f"spy://loop://?file={log}", timeout=0.05)
@@ -167,13 +180,46 @@ def test_split_url_keeps_paths_and_options() -> None:
         ("sim://tank", "sim:// device = 'tank' is not allowed: must be board or stage"),
         ("sim://board?via=can", "via = 'can' is not allowed: must be one of memory, pty, usb"),
         ("sim://board?delay=x", "delay = 'x' is not allowed: must be an integer"),
+        ("sim://stage?via=usb", "via = 'usb' is not allowed: must be one of pty, memory"),
+        ("sim://stage?speed=1", "sim://stage option = 'speed' is not allowed: must be via"),
         ("serial:///dev/null?baud=fast", "baud = 'fast' is not allowed: must be an integer"),
+        ("serial:///dev/null?dtr=off", "serial:// option dtr = 'off' is not allowed: must be 0"),
+        ("serial:///dev/null?parity=E", "serial:// option = 'parity' is not allowed: must be one"),
         ("", "url = '' is not allowed: must be a non-empty transport URL"),
     ],
 )
 def test_bad_urls_are_config_errors_naming_the_field(url: str, message: str) -> None:
     with pytest.raises(ConfigError, match=message.replace("(", r"\(")):
         open_transport(url)
+
+
+@pytest.mark.parametrize(
+    ("query", "options", "levels"),
+    [
+        ("", {}, (True, True)),  # pyserial's default: both raised
+        ("", {"dtr": False, "rts": False}, (False, False)),  # a driver's default
+        ("?dtr=1", {"dtr": False, "rts": False}, (True, False)),  # the URL wins
+        ("?dtr=0&rts=1", {}, (False, True)),
+    ],
+)
+def test_serial_modem_lines_are_set_before_the_port_opens(
+    query: str, options: dict[str, bool], levels: tuple[bool, bool]
+) -> None:
+    # A real pty pair: the port is opened by path through serial:// and as a plain path.
+    controller, device = os.openpty()
+    try:
+        name = os.ttyname(device)
+        for url in (f"serial://{name}{query}", *([name] if not query else [])):
+            t: Any = open_transport(url, timeout=0.1, **options)
+            try:
+                assert (t.port.dtr, t.port.rts) == levels
+                t.write(b"?")
+                assert os.read(controller, 10) == b"?"
+            finally:
+                t.close()
+    finally:
+        os.close(controller)
+        os.close(device)
 
 
 def test_missing_serial_device_is_a_transport_open_error() -> None:

@@ -367,26 +367,30 @@ def default_references(truth: SimTruth) -> tuple[ReferenceHydrophone, ReferenceS
 
 @contextlib.contextmanager
 def sim_tank(truth: SimTruth) -> Iterator[tuple[MechanicalStage, EchoTank, list[str]]]:
-    """The GRBL driver on the simulated controller (pty, manual clock) with the injected
-    scale and backlash, and the echo tank around it; closed on exit."""
+    """The GRBL driver on the simulated controller (in memory, manual clock) with the injected
+    scale and backlash, and the echo tank around it; closed on exit.
+
+    The controller powers up locked, as a GRBL with homing enabled does (``$22=1``), 5 mm
+    from its homing switch: the stage is made ready (homed) as ``hil tank-run`` does."""
     from hil.devices.grbl import GrblStage
-    from sim_devices.stage import GrblSimConfig, ManualClock, SimulatedGrblOnPty
+    from sim_devices.stage import GrblSimConfig, ManualClock
 
     clock = ManualClock(0.0)
     config = GrblSimConfig(
-        homing=False, soft_limits=False, hard_limits=False, power_up_position_mm=0.0,
+        homing=True, soft_limits=False, hard_limits=False, power_up_position_mm=-5.0,
         max_rate_mm_min=6000.0, acceleration_mm_s2=500.0,
     )  # fmt: skip
-    with (
-        SimulatedGrblOnPty(config, clock=clock) as sim,
-        GrblStage(
-            sim.port_name,
-            clock=clock,
-            wait_step=0.5,
-            read_timeout=0.002,
-            soft_limits=(-0.45, 0.0),
-        ) as grbl,
-    ):
+    # In memory, in this thread: the controller answers at once on the manual clock, so no
+    # wait depends on how fast another thread is scheduled.
+    with GrblStage(
+        "sim://stage?via=memory",
+        clock=clock,
+        wait_step=0.5,
+        soft_limits=(-0.45, 0.0),
+        transport_options={"config": config},
+    ) as grbl:
+        steps: list[str] = []
+        grbl.make_ready(steps.append)
         stage = MechanicalStage(grbl, scale=truth.stage_scale, backlash_m=truth.backlash_m)
         tank = EchoTank(
             stage, sound_speed_mps=truth.sound_speed_mps, samplerate=truth.tank_samplerate,
@@ -398,6 +402,7 @@ def sim_tank(truth: SimTruth) -> Iterator[tuple[MechanicalStage, EchoTank, list[
             f"{truth.sound_speed_mps:.3f} m/s (Marczak); target {truth.standoff_m:g} m + "
             f"carriage position from the transducer; stage scale {truth.stage_scale:g}, "
             f"backlash {1e6 * truth.backlash_m:g} µm; latency {truth.tank_latency_samples} "
-            f"samples at {truth.tank_samplerate:g} Hz (GRBL simulated on a pty)"
+            f"samples at {truth.tank_samplerate:g} Hz (GRBL simulated in memory)",
+            *(f"simulated stage powered up locked ($22=1): {step}" for step in steps),
         ]
         yield stage, tank, lines
