@@ -2,7 +2,8 @@
 
 Example::
 
-    hil simulate scenarios/att.toml --out runs/att/
+    hil simulate att --out runs/att/          # a shipped example scenario
+    hil simulate my-tank.toml --out runs/mine/
 
 Writes into ``--out``: ``received.wav`` (float32, one channel per ``[output].channels``
 entry), ``schedule.json`` (the transmit schedule, ``hil.signals.schedule_file`` format),
@@ -33,11 +34,25 @@ def register(sub: Any) -> None:
         "simulated acoustic channel and write the received WAV, the transmit schedule, the "
         "hop-by-hop truth and plots into --out.",
     )
-    p.add_argument("scenario", type=Path, help="scenario TOML file")
+    p.add_argument(
+        "scenario",
+        help="scenario TOML file, or the name of a shipped example "
+        "(att, tank-audio, tank-board; see docs/scenarios.md)",
+    )
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
     p.add_argument("--duration", type=float, help="override duration_s, s")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     p.set_defaults(func=run)
+
+
+def _scenario_file(text: str) -> Path:
+    """The scenario file ``text`` names: a path, else a shipped example's name."""
+    path = Path(text)
+    if path.exists() or path.suffix == ".toml":
+        return path
+    from hil.data import scenario_path
+
+    return scenario_path(text)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -46,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
     from sim_devices.acoustics.scenario import build_channel, load_scenario
     from sim_devices.acoustics.truth import hop_truth, write_truth
 
-    sc = load_scenario(args.scenario)
+    sc = load_scenario(_scenario_file(args.scenario))
     if args.duration is not None:
         if not (np.isfinite(args.duration) and args.duration > 0):
             raise ConfigError("--duration", args.duration, "> 0 s")

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
 
+from hil.data import sweeps_dir
 from hil.errors import ConfigError
 from hil.evaluation.engine import run_sweep
 from hil.evaluation.report import ItemResult, write_report
@@ -79,8 +80,8 @@ ITEM_IDS = tuple(item.id for item in ITEMS)
 
 
 def default_sweeps_dir() -> Path:
-    """The repository's ``evaluation/`` folder (next to the ``hil`` package)."""
-    return Path(__file__).resolve().parents[2] / "evaluation"
+    """The shipped sweep files (``hil/data/sweeps/``, found through importlib.resources)."""
+    return sweeps_dir()
 
 
 def select_items(names: Sequence[str] | None) -> list[Item]:
@@ -194,8 +195,8 @@ def reproduce(
 
 
 def _display_path(path: Path) -> str:
-    """``evaluation/x.toml`` when the file is in the repository, else the absolute path."""
-    repo = default_sweeps_dir().parent
+    """``hil/data/sweeps/x.toml`` for a shipped sweep file, else the absolute path."""
+    repo = default_sweeps_dir().parents[2]
     try:
         return path.resolve().relative_to(repo).as_posix()
     except ValueError:
