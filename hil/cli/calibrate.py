@@ -49,9 +49,12 @@ from hil.experiments.calibration.sound_speed import (
 )
 from hil.experiments.calibration.stage import calibrate_stage
 from hil.experiments.calibration.store import CalibrationStore
+from hil.paths import resolve_calibration_dir
 
 EXIT_MEASUREMENT_FAILED = 1
 SIM_DEVICE = "sim://audio"
+SIMULATED_SUBDIR = "simulated"
+"""Sub-folder of the store holding the results measured on the simulated bench."""
 
 # Internal field names -> the options that set them (hil.cli.main names them in errors).
 OPTION_NAMES = {
@@ -98,16 +101,18 @@ def parse_positions(text: str) -> list[float]:
 
 def _common(p: argparse.ArgumentParser, audio: bool = True) -> None:
     p.add_argument(
-        "--store", type=Path, default=Path("calibration"),
-        help="calibration store directory (default ./calibration)",
+        "--store", type=Path, default=None,
+        help="calibration store directory (default $HIL_CALIBRATION_DIR, else ./calibration); "
+        "simulated results go to its simulated/ subfolder, never applied to a real run",
     )  # fmt: skip
     if audio:
         p.add_argument(
             "--device", default=None,
             help=f"audio device name or {SIM_DEVICE} (default: a simulated world)",
         )  # fmt: skip
-        p.add_argument("--samplerate", type=float, default=None, help="Hz (real device)")
-        p.add_argument("--blocksize", type=int, default=256, help="frames (real device)")
+        p.add_argument("--samplerate", type=float, default=None,
+                       help="Hz (default: the device's; simulated bench 48000)")  # fmt: skip
+        p.add_argument("--blocksize", type=int, default=256, help="frames (default 256)")
         p.add_argument("--output-channel", type=int, default=0, help="output channel (0-based)")
         p.add_argument("--input-channel", type=int, default=0, help="input channel (0-based)")
         p.add_argument("--max-latency", type=int, default=None, help="samples (default 0.1 s)")
@@ -188,6 +193,26 @@ def register(sub: Any) -> None:
     p.add_argument("--overtravel", type=float, default=0.005, help="m (default 0.005)")
     _stage_options(p)
     p.set_defaults(func=run, kind_func=_stage)
+
+
+def _truth(args: argparse.Namespace) -> SimTruth:
+    """The simulated bench's truths, at ``--samplerate`` and ``--blocksize`` when given."""
+    rate = getattr(args, "samplerate", None)
+    if rate is None:
+        return SimTruth()
+    if not (np.isfinite(rate) and 8000.0 <= rate <= 384000.0):
+        raise ConfigError("--samplerate", rate, "8000 ... 384000 Hz")
+    return SimTruth(samplerate=float(rate), blocksize=int(args.blocksize))
+
+
+def _runs_simulated(args: argparse.Namespace) -> bool:
+    """Whether this calibration measures the simulated bench (stored apart, never applied to
+    a real run): every kind without ``--device``, except sound speed from a thermometer."""
+    if args.kind == "sound-speed":
+        method = args.method or ("temperature" if args.temperature is not None else "tof")
+        if method == "temperature":
+            return False
+    return _simulated(args)
 
 
 def _simulated(args: argparse.Namespace) -> bool:
@@ -351,9 +376,11 @@ def _stage(
 
 def run(args: argparse.Namespace) -> int:
     """Run the chosen calibration, print it and store it."""
-    truth = SimTruth()
-    store = CalibrationStore(args.store)
+    truth = _truth(args)
+    root = resolve_calibration_dir(args.store)
     kind: str = args.kind
+    simulated = _runs_simulated(args)
+    store = CalibrationStore(root / SIMULATED_SUBDIR if simulated else root)
     try:
         if kind in ("sound-speed", "stage"):
             result, settings, lines = args.kind_func(args, truth, store)
@@ -362,7 +389,6 @@ def run(args: argparse.Namespace) -> int:
     except CalibrationError as exc:
         print(f"hil calibrate {kind}: measurement refused: {exc}", flush=True)
         return EXIT_MEASUREMENT_FAILED
-    simulated = bool(lines)
     settings = {**settings, "simulated": simulated}
     if simulated:
         settings["truth"] = dict(truth.__dict__)
@@ -372,4 +398,6 @@ def run(args: argparse.Namespace) -> int:
         print(line)
     record = store.save(kind, result, settings)
     print(f"stored: {record.path} (id {record.id}, now current for {kind!r})")
+    if simulated:
+        print(f"simulated: kept apart in {store.root}; a real run never applies it")
     return 0

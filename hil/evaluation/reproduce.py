@@ -14,7 +14,6 @@ overrides the count of every item.
 
 from __future__ import annotations
 
-import tomllib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,6 +26,7 @@ from hil.evaluation.report import ItemResult, write_report
 from hil.evaluation.runners import Runner
 from hil.evaluation.spec import SweepSpec
 from hil.evaluation.sweep_file import sweep_from_dict
+from hil.toml_table import read_toml
 
 
 @dataclass(frozen=True)
@@ -108,15 +108,12 @@ def load_item(
     """Read, reduce (quick) and validate the sweep file of ``item``; return it and its path."""
     path = Path(sweeps_dir) / f"{item.id}.toml"
     try:
-        with path.open("rb") as fh:
-            doc = tomllib.load(fh)
+        doc = read_toml(path, "sweep")
     except FileNotFoundError:
         raise ConfigError(
             "--sweeps", str(sweeps_dir), f"a folder holding {item.id}.toml",
-            "point --sweeps at the repository's evaluation/ folder",
+            "leave --sweeps out to use the shipped sweep files",
         ) from None  # fmt: skip
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(str(path), "<file>", "valid TOML", str(exc)) from None
     head = doc.setdefault("sweep", {})
     if quick:
         doc.setdefault("grid", {}).update(item.quick_grid)

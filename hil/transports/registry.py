@@ -116,6 +116,38 @@ def _open_usb(rest: str, query: dict[str, str], options: dict[str, Any], timeout
     )
 
 
+SIM_DEVICES = ("board", "stage")
+
+
+def check_url(url: str, field: str = "url", sim_device: str | None = None) -> None:
+    """Refuse ``url`` as the setting ``field`` when no opener could open it, without opening.
+
+    ``sim_device``: the simulated device the setting must name when the URL is ``sim://``.
+
+    >>> check_url("sim://bord", "devices.board", "board")
+    Traceback (most recent call last):
+    ...
+    hil.errors.ConfigError: devices.board = 'sim://bord' is not allowed: must be sim://board \
+(a simulated board); did you mean sim://board?
+    """
+    if not isinstance(url, str) or not url:
+        raise ConfigError(field, url, "a non-empty transport URL or device path")
+    scheme, rest, _ = split_url(url[len("spy://") :] if url.startswith("spy://") else url)
+    if scheme and scheme not in _OPENERS:
+        known = ", ".join(f"{s}://" for s in (*_OPENERS, "spy"))
+        raise ConfigError(field, url, f"a device path or one of {known}")
+    if scheme != "sim":
+        return
+    wanted = (sim_device,) if sim_device else SIM_DEVICES
+    if rest not in wanted:
+        import difflib
+
+        close = difflib.get_close_matches(rest, SIM_DEVICES, n=1)
+        hint = f"did you mean sim://{close[0]}?" if close else "see hil.transports.registry"
+        what = f" (a simulated {sim_device})" if sim_device else ""
+        raise ConfigError(field, url, " or ".join(f"sim://{w}" for w in wanted) + what, hint)
+
+
 def _open_sim(rest: str, query: dict[str, str], options: dict[str, Any], timeout: float) -> Any:
     from hil.transports.sim import open_sim_board, open_sim_stage
 
