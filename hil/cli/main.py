@@ -44,6 +44,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "calibrate latency, response, level, sound speed or the stage",
     ),
     "sim-serve": ("hil.cli.sim_serve", "serve a simulated board or stage on a pty"),
+    "devices": ("hil.cli.devices", "list serial ports, USB devices, PortAudio and JACK devices"),
 }
 """Sub-command name -> (module with ``register``, one-line summary for ``hil --help``).
 

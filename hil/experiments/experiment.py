@@ -177,6 +177,13 @@ class Experiment:
     simulation: SimulationSettings
     text: str = field(default="", compare=False)
 
+    def new_run_folder(self) -> Path:
+        """``output_dir/name-YYYYmmdd-HHMMSS`` (local time) for a run starting now."""
+        import datetime as dt
+
+        stamp = dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+        return self.output_dir / f"{self.name}-{stamp}"
+
     @property
     def simulated(self) -> bool:
         """True when both devices are simulated (``sim://``)."""
