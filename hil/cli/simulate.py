@@ -137,20 +137,16 @@ class _FloatWav:
 
 
 def _plots(out: Path, x: np.ndarray, fs: float, rows: list[Any]) -> list[str]:
-    import matplotlib
+    from hil.figures import new_figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(8, 4))
+    fig, ax = new_figure(figsize=(8, 4))
     nfft = 1024 if x.size >= 1024 else max(16, x.size)
     ax.specgram(x + 1e-12, NFFT=nfft, Fs=fs, noverlap=nfft // 2, cmap="viridis")
     ax.set_xlabel("time (s)")
     ax.set_ylabel("frequency (Hz)")
     ax.set_title("received signal")
     fig.savefig(out / "spectrogram.png", dpi=90)
-    plt.close(fig)
-    fig, (a1, a2) = plt.subplots(2, 1, sharex=True, figsize=(8, 5))
+    fig, (a1, a2) = new_figure(2, 1, sharex=True, figsize=(8, 5))
     for tgt in sorted({r.target for r in rows}):
         sel = [r for r in rows if r.target == tgt]
         a1.plot([r.t_rx_s for r in sel], [r.range_m for r in sel], ".", label=f"target {tgt}")
@@ -161,5 +157,4 @@ def _plots(out: Path, x: np.ndarray, fs: float, rows: list[Any]) -> list[str]:
     if rows:
         a1.legend()
     fig.savefig(out / "truth.png", dpi=90)
-    plt.close(fig)
     return ["spectrogram.png", "truth.png"]

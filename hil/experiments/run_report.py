@@ -11,27 +11,17 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from hil.experiments.codeword_map import save_time_codeword_map
 from hil.experiments.run_scoring import scored_mask, telemetry_truth
 from hil.experiments.tank_run import RunOutcome
-
-
-def _pyplot() -> Any:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
+from hil.figures import new_figure
 
 
 def write_report(outcome: RunOutcome) -> list[Path]:
     """Write the figures into the run folder; return their paths."""
-    plt = _pyplot()
     folder = outcome.folder
     paths: list[Path] = []
     est = outcome.estimates
@@ -40,7 +30,7 @@ def write_report(outcome: RunOutcome) -> list[Path]:
     v = np.array([e.speed_mps for e in est])
     truth = telemetry_truth(outcome)
 
-    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(10, 6.5), sharex=True, dpi=110)
+    fig, (ax1, ax2) = new_figure(2, 1, figsize=(10, 6.5), sharex=True, dpi=110)
     ax1.plot(t, r, ".", ms=3, label="estimate")
     ax1.plot(t, truth["range_m"], "-", lw=1.2, label="truth (stage telemetry)")
     if outcome.exact_truth is not None and len(est):
@@ -56,7 +46,6 @@ def write_report(outcome: RunOutcome) -> list[Path]:
     fig.tight_layout()
     paths.append(folder / "range_speed.png")
     fig.savefig(paths[-1])
-    plt.close(fig)
 
     if outcome.map_times:
         paths.append(folder / "time_codeword_map.png")
@@ -66,7 +55,7 @@ def write_report(outcome: RunOutcome) -> list[Path]:
     scored = scored_mask(outcome, truth)
     er = (r - truth["range_m"])[scored]
     ev = (v - truth["speed_mps"])[scored]
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.8), dpi=110)
+    fig, (a1, a2) = new_figure(1, 2, figsize=(10, 3.8), dpi=110)
     for ax, e, label in ((a1, er, "range error (m)"), (a2, ev, "speed error (m/s)")):
         e = e[np.isfinite(e)]
         if e.size:
@@ -76,5 +65,4 @@ def write_report(outcome: RunOutcome) -> list[Path]:
     fig.tight_layout()
     paths.append(folder / "errors.png")
     fig.savefig(paths[-1])
-    plt.close(fig)
     return paths
