@@ -54,6 +54,10 @@ from hil.paths import resolve_calibration_dir
 EXIT_MEASUREMENT_FAILED = 1
 SIM_DEVICE = "sim://audio"
 SIMULATED_SUBDIR = "simulated"
+_WHERE = (
+    " Without --device it runs on a simulated bench whose truths are printed first and "
+    "stores the result apart, in STORE/simulated/, where a real run never looks."
+)
 """Sub-folder of the store holding the results measured on the simulated bench."""
 
 # Internal field names -> the options that set them (hil.cli.main names them in errors).
@@ -142,26 +146,44 @@ def register(sub: Any) -> None:
         "calibrate",
         help="calibrate latency, response, level, sound speed or the stage",
         description="Run one calibration (in simulation when no device is given), print it "
-        "and store it as the current calibration of its kind.",
+        "and store it as the current calibration of its kind (docs/calibration.md). "
+        "'hil calibrate KIND --help' describes each kind.",
     )
     kinds = parser.add_subparsers(dest="kind", metavar="KIND")
     kinds.required = True
 
-    p = kinds.add_parser("latency", help="loopback latency, sample-exact, repeated")
+    p = kinds.add_parser(
+        "latency", help="loopback latency, sample-exact, repeated",
+        description="Play a reference LFM chirp out of --output-channel, record it on "
+        "--input-channel (a cable or the DAC monitor), find its delay with a matched filter, "
+        "--repeats times: the loop latency in samples at the run's rate. Refused when the "
+        "chirp does not come back (peak-to-sidelobe < 20 dB or loop gain < 1e-3)." + _WHERE,
+    )  # fmt: skip
     _common(p)
-    p.add_argument("--repeats", type=int, default=5, help="number of runs (default 5)")
+    p.add_argument("--repeats", type=int, default=5, help="number of chirps (default 5)")
     p.set_defaults(func=run, kind_func=_latency)
 
-    p = kinds.add_parser("response", help="frequency response (sweep) and equaliser")
+    p = kinds.add_parser(
+        "response", help="frequency response (sweep) and equaliser",
+        description="Exponential sine sweep (Farina) through the transducer pair: magnitude "
+        "(dB re FS/FS) and phase over --band LOW HIGH (Hz, default 5-40 % of the sample "
+        "rate), and a regularised inverse FIR equaliser of --taps taps." + _WHERE,
+    )  # fmt: skip
     _common(p)
     p.add_argument("--band", type=float, nargs=2, metavar=("LOW", "HIGH"), help="Hz")
-    p.add_argument("--duration", type=float, default=1.0, help="sweep length, s")
+    p.add_argument("--duration", type=float, default=1.0, help="sweep length, s (default 1)")
     p.add_argument("--amplitude", type=float, default=0.5, help="sweep amplitude, FS")
     p.add_argument("--taps", type=int, default=1024, help="equaliser length")
     p.add_argument("--regularisation", type=float, default=-40.0, help="dB re peak |H|^2")
     p.set_defaults(func=run, kind_func=_response)
 
-    p = kinds.add_parser("level", help="gain (FS/FS) and hydrophone sensitivity")
+    p = kinds.add_parser(
+        "level", help="gain (FS/FS) and hydrophone sensitivity",
+        description="Play a --frequency tone, fit its amplitude on the input: the loop gain "
+        "(FS/FS, dB), volts with --adc-full-scale, and the hydrophone sensitivity (dB re "
+        "1 V/µPa) from a reference hydrophone (--reference-channel, --reference-sensitivity) "
+        "or a known source level (--source-level at --distance)." + _WHERE,
+    )  # fmt: skip
     _common(p)
     p.add_argument("--frequency", type=float, default=1000.0, help="tone, Hz")
     p.add_argument("--amplitude", type=float, default=0.25, help="tone amplitude, FS")
@@ -174,7 +196,12 @@ def register(sub: Any) -> None:
     p.add_argument("--distance", type=float, help="projector to hydrophone, m")
     p.set_defaults(func=run, kind_func=_level)
 
-    p = kinds.add_parser("sound-speed", help="c from temperature or time of flight")
+    p = kinds.add_parser(
+        "sound-speed", help="c from temperature or time of flight",
+        description="The water's sound speed c (m/s): from --temperature (°C; Marczak for "
+        "fresh water, Mackenzie with --salinity, a real measurement kept with the real "
+        "calibrations) or by time of flight of an echo at stage --positions (m)." + _WHERE,
+    )  # fmt: skip
     _common(p, audio=False)
     p.add_argument("--device", default=None, help=f"audio device or {SIM_DEVICE} (tof)")
     p.add_argument("--method", choices=("temperature", "tof"), default=None,
@@ -185,7 +212,12 @@ def register(sub: Any) -> None:
     _stage_options(p)
     p.set_defaults(func=run, kind_func=_sound_speed)
 
-    p = kinds.add_parser("stage", help="stage scale and backlash by echo ranging")
+    p = kinds.add_parser(
+        "stage", help="stage scale and backlash by echo ranging",
+        description="Range an echo at stage --positions (m), approached from both sides: "
+        "the stage scale (true/commanded) and its backlash (m), against a sound speed from "
+        "--sound-speed, --temperature or the store." + _WHERE,
+    )  # fmt: skip
     _common(p, audio=False)
     p.add_argument("--device", default=None, help=f"audio device or {SIM_DEVICE}")
     p.add_argument("--sound-speed", type=float, help="c, m/s (default: --temperature or store)")

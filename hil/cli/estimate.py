@@ -35,7 +35,7 @@ _LOG = logging.getLogger(__name__)
 
 # Internal field names -> the options that set them (hil.cli.main names them in errors).
 OPTION_NAMES = {
-    "m_hops": "--M",
+    "m_hops": "--m-hops",
     "receiver": "--receiver",
     "sound_speed_mps": "--sound-speed",
     "max_speed_mps": "--max-speed",
@@ -52,7 +52,9 @@ def register(sub: Any) -> None:
         "estimate",
         help="estimate range and speed from a received WAV",
         description="Run a receiver over a received WAV (any sample format scipy reads) "
-        "and print one estimate per detected hop boundary.",
+        "and print one estimate per detected hop boundary: time (s), range (m), speed (m/s), "
+        "SNR (dB). The WAV's sample 0 is the schedule's t = 0. Warns when the WAV does not "
+        "follow the schedule's hop code (a schedule of another seed) or is clipped.",
     )
     p.add_argument("--schedule", type=Path, required=True, help="transmit schedule JSON")
     p.add_argument("--input", type=Path, required=True, help="received WAV file")
@@ -60,10 +62,17 @@ def register(sub: Any) -> None:
         "--receiver", default="gcas", help=f"one of {', '.join(RECEIVERS)} (default gcas)"
     )
     p.add_argument("--channel", type=int, help="channel of a multi-channel WAV (0-based)")
-    p.add_argument("--M", dest="m_hops", type=int, default=10, help="correlator length M, hops")
+    p.add_argument(
+        "--m-hops", "--M", dest="m_hops", type=int, default=10,
+        help="correlator length M, hops (as hil waveform --m-hops; --M is the same)",
+    )  # fmt: skip
     p.add_argument("--sound-speed", type=float, help="c, m/s (default: the schedule's)")
-    p.add_argument("--max-speed", type=float, default=30.0, help="Doppler search span ±, m/s")
-    p.add_argument("--max-range", type=float, default=100.0, help="largest range reported, m")
+    p.add_argument(
+        "--max-speed", type=float, default=30.0, help="Doppler search span ±, m/s (default 30)"
+    )
+    p.add_argument(
+        "--max-range", type=float, default=100.0, help="largest range reported, m (default 100)"
+    )
     p.add_argument(
         "--option",
         action="append",

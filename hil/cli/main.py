@@ -12,6 +12,7 @@ import argparse
 import importlib
 import sys
 from collections.abc import Sequence
+from typing import Any
 
 from hil import __version__
 from hil.errors import ConfigError
@@ -57,6 +58,41 @@ Matplotlib, h5py, numba). The summary must equal the ``help=`` the module regist
 _VALUE_OPTIONS = ("--log-level", "--log-file")
 
 
+class HelpFormatter(argparse.HelpFormatter):
+    """Help with every default shown and hand-laid-out descriptions kept.
+
+    An option's default is appended as ``(default: X)`` unless its help already says it (or
+    it has none: a flag, a required option, an empty list). A description holding line
+    breaks is printed as written; a one-line one is wrapped.
+    """
+
+    def _fill_text(self, text: str, width: int, indent: str) -> str:
+        if "\n" in text:
+            return "".join(indent + line for line in text.splitlines(keepends=True))
+        return super()._fill_text(text, width, indent)
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        default = action.default
+        if (
+            "default" in text
+            or action.required
+            or any(default is none for none in (None, False, True, argparse.SUPPRESS))
+            or (isinstance(default, list | tuple) and not default)
+            or not action.option_strings
+        ):
+            return text
+        return f"{text} (default: %(default)s)"
+
+
+class HilParser(argparse.ArgumentParser):
+    """The parser class of every ``hil`` command and sub-command (:class:`HelpFormatter`)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kwargs)
+
+
 def _command_name(argv: Sequence[str]) -> str | None:
     """The sub-command named in ``argv`` (first word that is not a top-level option).
 
@@ -82,7 +118,7 @@ def build_parser(load: Sequence[str] | None = None) -> argparse.ArgumentParser:
     """
     from hil.logs import LEVELS
 
-    parser = argparse.ArgumentParser(
+    parser = HilParser(
         prog="hil",
         description="Continuous active sonar (HFC-CW / GCAS) hardware-in-the-loop testbench. "
         "'hil COMMAND --help' describes a command, its options, defaults and units.",

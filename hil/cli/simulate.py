@@ -40,7 +40,9 @@ def register(sub: Any) -> None:
         "(att, tank-audio, tank-board; see docs/scenarios.md)",
     )
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
-    p.add_argument("--duration", type=float, help="override duration_s, s")
+    p.add_argument(
+        "--duration", type=float, help="override duration_s, s (default: the scenario's)"
+    )
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     p.set_defaults(func=run)
 

@@ -25,7 +25,10 @@ def register(sub: Any) -> None:
         "tank-run",
         help="run a towed-target tank experiment (built-in simulated tank without a file)",
         description="Transmit continuously, tow the target on the stage, estimate live, "
-        "record everything. Without EXPERIMENT the built-in simulated tank runs.",
+        "record everything. Without EXPERIMENT the built-in simulated tank runs. Writes the "
+        'run folder (--out, else run.output_dir/NAME-YYYYmmdd-HHMMSS; output_dir "runs" '
+        "means $HIL_RUNS_DIR when set): run.h5 (the recording), run.log, summary.json, "
+        "estimates.csv and the report figures; prints the summary. Format: docs/tank-run.md.",
     )
     p.add_argument("experiment", nargs="?", type=Path, help="experiment TOML file")
     p.add_argument("--out", type=Path, help="run folder (default: output_dir/name-timestamp)")

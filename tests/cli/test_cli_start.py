@@ -72,3 +72,47 @@ def test_unknown_command_is_a_usage_error(capsys: pytest.CaptureFixture[str]) ->
     assert stop.value.code == 2
     err = capsys.readouterr().err
     assert "invalid choice: 'simulat'" in err
+
+
+def _help(capsys: pytest.CaptureFixture[str], *argv: str) -> str:
+    with pytest.raises(SystemExit) as stop:
+        main([*argv, "--help"])
+    assert stop.value.code == 0
+    return capsys.readouterr().out
+
+
+@pytest.mark.parametrize("kind", ["latency", "response", "level", "sound-speed", "stage"])
+def test_calibrate_kinds_have_descriptions_and_defaults(
+    kind: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = " ".join(_help(capsys, "calibrate", kind).split())
+    assert "stores the result apart, in STORE/simulated/" in out
+    assert "$HIL_CALIBRATION_DIR" in out
+    assert "(default" in out.split("options:")[1]
+    assert "%%" not in out
+
+
+def test_defaults_are_shown_once(capsys: pytest.CaptureFixture[str]) -> None:
+    out = " ".join(_help(capsys, "estimate").split())
+    assert (
+        "correlator length M, hops (as hil waveform --m-hops; --M is the same) (default: 10)" in out
+    )
+    assert "input channel" not in out  # estimate has none; calibrate shows its 0 below
+    assert "output channel (0-based) (default: 0)" in " ".join(
+        _help(capsys, "calibrate", "latency").split()
+    )
+    assert out.count("(default") == out.count("default") - out.count("defaults")
+
+
+def test_sim_serve_help_is_plain_text_and_says_how_to_use_it(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    out = _help(capsys, "sim-serve")
+    assert "``" not in out and ":class:" not in out
+    assert 'board = "/dev/pts/5"' in out and "$ hil tank-run my-experiment.toml" in out
+
+
+def test_tank_run_help_says_where_outputs_go(capsys: pytest.CaptureFixture[str]) -> None:
+    out = " ".join(_help(capsys, "tank-run").split())
+    assert "run.output_dir/NAME-YYYYmmdd-HHMMSS" in out and "$HIL_RUNS_DIR" in out
+    assert "run.h5 (the recording), run.log, summary.json" in out
