@@ -45,6 +45,7 @@ _EXPORTS: dict[str, str] = {
     "RunRecording": "hil.recording.reader",
     "replay": "hil.recording.replay",
     "compare_estimates": "hil.recording.replay",
+    "load_arrays": "hil.recording.arrays",
     # figures (matplotlib Figures, no backend switch)
     "spectrogram_figure": "hil.signals.plots",
     "occupancy_figure": "hil.signals.plots",
