@@ -41,9 +41,7 @@ def configure_logging(level: str = "warning", log_file: str | Path | None = None
 
         raise ConfigError("--log-level", level, f"one of {', '.join(LEVELS)}")
     threshold = getattr(logging, level.upper())
-    for handler in [h for h in _LOGGER.handlers if _is_cli_handler(h)]:
-        _LOGGER.removeHandler(handler)
-        handler.close()
+    reset_logging()
     console = logging.StreamHandler(sys.stderr)
     console.setFormatter(logging.Formatter(CONSOLE_FORMAT))
     handlers: list[logging.Handler] = [console]
@@ -57,6 +55,13 @@ def configure_logging(level: str = "warning", log_file: str | Path | None = None
         _LOGGER.addHandler(handler)
     _LOGGER.setLevel(logging.DEBUG)
     _LOGGER.propagate = False
+
+
+def reset_logging() -> None:
+    """Remove and close the handlers :func:`configure_logging` installed."""
+    for handler in [h for h in _LOGGER.handlers if _is_cli_handler(h)]:
+        _LOGGER.removeHandler(handler)
+        handler.close()
 
 
 @contextmanager

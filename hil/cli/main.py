@@ -164,7 +164,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     words = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(load=[name] if (name := _command_name(words)) in COMMANDS else [])
     args = parser.parse_args(words)
-    from hil.logs import configure_logging
+    from hil.logs import configure_logging, reset_logging
 
     try:
         configure_logging(args.log_level, args.log_file)
@@ -185,6 +185,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"hil {args.command}: interrupted", file=sys.stderr)
         return 130
+    finally:
+        reset_logging()
     return status
 
 
