@@ -8,6 +8,18 @@ receiver's ``from_options`` (which lists the known ones).
 
 >>> from hil.estimation.gcas import GcasReceiver
 >>> check_option_types(GcasReceiver, {"n_doppler": 32, "reverb_speed_mps": 0.8}, "gcas")
+>>> check_option_types(GcasReceiver, {"n_doppler": np.int64(32), "pfa": np.float32(1e-3)}, "gcas")
+>>> check_option_types(GcasReceiver, {"cfar_lambda": None, "search": "full"}, "gcas")
+>>> check_option_types(GcasReceiver, {"coherent": "yes"}, "gcas")
+Traceback (most recent call last):
+...
+hil.errors.ConfigError: coherent = 'yes' is not allowed: must be true or false (a gcas option); \
+e.g. coherent=false
+>>> check_option_types(GcasReceiver, {"n_doppler": 2.5}, "gcas", "receiver.options.")
+Traceback (most recent call last):
+...
+hil.errors.ConfigError: receiver.options.n_doppler = 2.5 is not allowed: must be an integer \
+(a gcas option); e.g. n_doppler=64
 >>> check_option_types(GcasReceiver, {"n_doppler": "abc"}, "gcas")
 Traceback (most recent call last):
 ...
@@ -19,7 +31,10 @@ from __future__ import annotations
 
 import inspect
 import math
+import numbers
 from typing import Any
+
+import numpy as np
 
 from hil.errors import ConfigError
 
@@ -37,14 +52,15 @@ def _kinds(annotation: str) -> set[str] | None:
 
 
 def _fits(value: Any, kinds: set[str]) -> bool:
+    """Whether ``value`` (NumPy scalars included) is of one of ``kinds``."""
     if value is None:
         return "None" in kinds
-    if isinstance(value, bool):
+    if isinstance(value, bool | np.bool_):
         return "bool" in kinds
-    if isinstance(value, int):
+    if isinstance(value, numbers.Integral):
         return bool(kinds & {"int", "float"})
-    if isinstance(value, float):
-        return "float" in kinds and math.isfinite(value)
+    if isinstance(value, numbers.Real):
+        return "float" in kinds and math.isfinite(float(value))
     if isinstance(value, str):
         return "str" in kinds
     return False
