@@ -11,8 +11,8 @@ The main entry points are attributes of the package, imported on first use (PEP 
     import hil
     schedule = hil.check_design(hil.get_preset("att").spec("random-cyclic"))
     fig = hil.spectrogram_figure(schedule, 100_000.0, 0.2)      # a matplotlib Figure
-    with hil.RunRecording.open("runs/x/run.h5") as rec: ...
-    estimates = hil.replay(rec)                                    # re-run the receiver
+    run = hil.load_arrays("runs/x/run.h5")                        # NumPy arrays
+    estimates = hil.replay("runs/x/run.h5")                        # re-run the live receiver
 
 >>> import hil
 >>> sorted(set(hil.__all__) - set(dir(hil)))
