@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from hil.data import scenario_path
 from sim_devices.acoustics.channel import Channel
 from sim_devices.acoustics.scenario import build_channel, load_scenario, parse_scenario
 
@@ -43,7 +44,6 @@ TARGET_XRT = 10.0
 TANK_TARGET_XRT = 2.0  # per channel: two live channels at 1x
 TANK_AIM_XRT = 4.0  # per channel: two live channels at 2x
 SCATTERERS = 100_000
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def scenario(density: float) -> dict[str, Any]:
@@ -130,7 +130,7 @@ def main() -> None:
     bins = rev.bins_used / max(1, rev.frames_done)
     mem = memory_pass(block, max(4, int(round(args.memory_seconds / args.block))))
 
-    tank = build_channel(load_scenario(ROOT / "scenarios" / "tank-board.toml"))
+    tank = build_channel(load_scenario(scenario_path("tank-board")))
     tb = args.board_block
     t_blocks = max(1, int(round(args.tank_seconds * tank.fs_hz / tb)))
     tank.read(tb)

@@ -49,9 +49,16 @@ from hil.experiments.calibration.sound_speed import (
 )
 from hil.experiments.calibration.stage import calibrate_stage
 from hil.experiments.calibration.store import CalibrationStore
+from hil.paths import resolve_calibration_dir
 
 EXIT_MEASUREMENT_FAILED = 1
 SIM_DEVICE = "sim://audio"
+SIMULATED_SUBDIR = "simulated"
+_WHERE = (
+    " Without --device it runs on a simulated bench whose truths are printed first and "
+    "stores the result apart, in STORE/simulated/, where a real run never looks."
+)
+"""Sub-folder of the store holding the results measured on the simulated bench."""
 
 # Internal field names -> the options that set them (hil.cli.main names them in errors).
 OPTION_NAMES = {
@@ -98,16 +105,18 @@ def parse_positions(text: str) -> list[float]:
 
 def _common(p: argparse.ArgumentParser, audio: bool = True) -> None:
     p.add_argument(
-        "--store", type=Path, default=Path("calibration"),
-        help="calibration store directory (default ./calibration)",
+        "--store", type=Path, default=None,
+        help="calibration store directory (default $HIL_CALIBRATION_DIR, else ./calibration); "
+        "simulated results go to its simulated/ subfolder, never applied to a real run",
     )  # fmt: skip
     if audio:
         p.add_argument(
             "--device", default=None,
             help=f"audio device name or {SIM_DEVICE} (default: a simulated world)",
         )  # fmt: skip
-        p.add_argument("--samplerate", type=float, default=None, help="Hz (real device)")
-        p.add_argument("--blocksize", type=int, default=256, help="frames (real device)")
+        p.add_argument("--samplerate", type=float, default=None,
+                       help="Hz (default: the device's; simulated bench 48000)")  # fmt: skip
+        p.add_argument("--blocksize", type=int, default=256, help="frames (default 256)")
         p.add_argument("--output-channel", type=int, default=0, help="output channel (0-based)")
         p.add_argument("--input-channel", type=int, default=0, help="input channel (0-based)")
         p.add_argument("--max-latency", type=int, default=None, help="samples (default 0.1 s)")
@@ -137,26 +146,44 @@ def register(sub: Any) -> None:
         "calibrate",
         help="calibrate latency, response, level, sound speed or the stage",
         description="Run one calibration (in simulation when no device is given), print it "
-        "and store it as the current calibration of its kind.",
+        "and store it as the current calibration of its kind (docs/calibration.md). "
+        "'hil calibrate KIND --help' describes each kind.",
     )
     kinds = parser.add_subparsers(dest="kind", metavar="KIND")
     kinds.required = True
 
-    p = kinds.add_parser("latency", help="loopback latency, sample-exact, repeated")
+    p = kinds.add_parser(
+        "latency", help="loopback latency, sample-exact, repeated",
+        description="Play a reference LFM chirp out of --output-channel, record it on "
+        "--input-channel (a cable or the DAC monitor), find its delay with a matched filter, "
+        "--repeats times: the loop latency in samples at the run's rate. Refused when the "
+        "chirp does not come back (peak-to-sidelobe < 20 dB or loop gain < 1e-3)." + _WHERE,
+    )  # fmt: skip
     _common(p)
-    p.add_argument("--repeats", type=int, default=5, help="number of runs (default 5)")
+    p.add_argument("--repeats", type=int, default=5, help="number of chirps (default 5)")
     p.set_defaults(func=run, kind_func=_latency)
 
-    p = kinds.add_parser("response", help="frequency response (sweep) and equaliser")
+    p = kinds.add_parser(
+        "response", help="frequency response (sweep) and equaliser",
+        description="Exponential sine sweep (Farina) through the transducer pair: magnitude "
+        "(dB re FS/FS) and phase over --band LOW HIGH (Hz, default 5-40 % of the sample "
+        "rate), and a regularised inverse FIR equaliser of --taps taps." + _WHERE,
+    )  # fmt: skip
     _common(p)
     p.add_argument("--band", type=float, nargs=2, metavar=("LOW", "HIGH"), help="Hz")
-    p.add_argument("--duration", type=float, default=1.0, help="sweep length, s")
+    p.add_argument("--duration", type=float, default=1.0, help="sweep length, s (default 1)")
     p.add_argument("--amplitude", type=float, default=0.5, help="sweep amplitude, FS")
     p.add_argument("--taps", type=int, default=1024, help="equaliser length")
     p.add_argument("--regularisation", type=float, default=-40.0, help="dB re peak |H|^2")
     p.set_defaults(func=run, kind_func=_response)
 
-    p = kinds.add_parser("level", help="gain (FS/FS) and hydrophone sensitivity")
+    p = kinds.add_parser(
+        "level", help="gain (FS/FS) and hydrophone sensitivity",
+        description="Play a --frequency tone, fit its amplitude on the input: the loop gain "
+        "(FS/FS, dB), volts with --adc-full-scale, and the hydrophone sensitivity (dB re "
+        "1 V/µPa) from a reference hydrophone (--reference-channel, --reference-sensitivity) "
+        "or a known source level (--source-level at --distance)." + _WHERE,
+    )  # fmt: skip
     _common(p)
     p.add_argument("--frequency", type=float, default=1000.0, help="tone, Hz")
     p.add_argument("--amplitude", type=float, default=0.25, help="tone amplitude, FS")
@@ -169,7 +196,12 @@ def register(sub: Any) -> None:
     p.add_argument("--distance", type=float, help="projector to hydrophone, m")
     p.set_defaults(func=run, kind_func=_level)
 
-    p = kinds.add_parser("sound-speed", help="c from temperature or time of flight")
+    p = kinds.add_parser(
+        "sound-speed", help="c from temperature or time of flight",
+        description="The water's sound speed c (m/s): from --temperature (°C; Marczak for "
+        "fresh water, Mackenzie with --salinity, a real measurement kept with the real "
+        "calibrations) or by time of flight of an echo at stage --positions (m)." + _WHERE,
+    )  # fmt: skip
     _common(p, audio=False)
     p.add_argument("--device", default=None, help=f"audio device or {SIM_DEVICE} (tof)")
     p.add_argument("--method", choices=("temperature", "tof"), default=None,
@@ -180,7 +212,12 @@ def register(sub: Any) -> None:
     _stage_options(p)
     p.set_defaults(func=run, kind_func=_sound_speed)
 
-    p = kinds.add_parser("stage", help="stage scale and backlash by echo ranging")
+    p = kinds.add_parser(
+        "stage", help="stage scale and backlash by echo ranging",
+        description="Range an echo at stage --positions (m), approached from both sides: "
+        "the stage scale (true/commanded) and its backlash (m), against a sound speed from "
+        "--sound-speed, --temperature or the store." + _WHERE,
+    )  # fmt: skip
     _common(p, audio=False)
     p.add_argument("--device", default=None, help=f"audio device or {SIM_DEVICE}")
     p.add_argument("--sound-speed", type=float, help="c, m/s (default: --temperature or store)")
@@ -188,6 +225,26 @@ def register(sub: Any) -> None:
     p.add_argument("--overtravel", type=float, default=0.005, help="m (default 0.005)")
     _stage_options(p)
     p.set_defaults(func=run, kind_func=_stage)
+
+
+def _truth(args: argparse.Namespace) -> SimTruth:
+    """The simulated bench's truths, at ``--samplerate`` and ``--blocksize`` when given."""
+    rate = getattr(args, "samplerate", None)
+    if rate is None:
+        return SimTruth()
+    if not (np.isfinite(rate) and 8000.0 <= rate <= 384000.0):
+        raise ConfigError("--samplerate", rate, "8000 ... 384000 Hz")
+    return SimTruth(samplerate=float(rate), blocksize=int(args.blocksize))
+
+
+def _runs_simulated(args: argparse.Namespace) -> bool:
+    """Whether this calibration measures the simulated bench (stored apart, never applied to
+    a real run): every kind without ``--device``, except sound speed from a thermometer."""
+    if args.kind == "sound-speed":
+        method = args.method or ("temperature" if args.temperature is not None else "tof")
+        if method == "temperature":
+            return False
+    return _simulated(args)
 
 
 def _simulated(args: argparse.Namespace) -> bool:
@@ -353,9 +410,11 @@ def _stage(
 
 def run(args: argparse.Namespace) -> int:
     """Run the chosen calibration, print it and store it."""
-    truth = SimTruth()
-    store = CalibrationStore(args.store)
+    truth = _truth(args)
+    root = resolve_calibration_dir(args.store)
     kind: str = args.kind
+    simulated = _runs_simulated(args)
+    store = CalibrationStore(root / SIMULATED_SUBDIR if simulated else root)
     try:
         if kind in ("sound-speed", "stage"):
             result, settings, lines = args.kind_func(args, truth, store)
@@ -364,7 +423,6 @@ def run(args: argparse.Namespace) -> int:
     except CalibrationError as exc:
         print(f"hil calibrate {kind}: measurement refused: {exc}", flush=True)
         return EXIT_MEASUREMENT_FAILED
-    simulated = bool(lines)
     settings = {**settings, "simulated": simulated}
     if simulated:
         settings["truth"] = dict(truth.__dict__)
@@ -374,4 +432,6 @@ def run(args: argparse.Namespace) -> int:
         print(line)
     record = store.save(kind, result, settings)
     print(f"stored: {record.path} (id {record.id}, now current for {kind!r})")
+    if simulated:
+        print(f"simulated: kept apart in {store.root}; a real run never applies it")
     return 0

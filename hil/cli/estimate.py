@@ -14,7 +14,9 @@ from __future__ import annotations
 
 import argparse
 import csv
+import itertools
 import json
+import logging
 import math
 import sys
 from collections.abc import Iterator
@@ -29,9 +31,11 @@ from hil.estimation.base import ESTIMATE_FIELDS, Estimate
 from hil.estimation.registry import RECEIVERS, make_receiver
 from hil.signals.schedule_file import read_schedule_file
 
+_LOG = logging.getLogger(__name__)
+
 # Internal field names -> the options that set them (hil.cli.main names them in errors).
 OPTION_NAMES = {
-    "m_hops": "--M",
+    "m_hops": "--m-hops",
     "receiver": "--receiver",
     "sound_speed_mps": "--sound-speed",
     "max_speed_mps": "--max-speed",
@@ -48,7 +52,9 @@ def register(sub: Any) -> None:
         "estimate",
         help="estimate range and speed from a received WAV",
         description="Run a receiver over a received WAV (any sample format scipy reads) "
-        "and print one estimate per detected hop boundary.",
+        "and print one estimate per detected hop boundary: time (s), range (m), speed (m/s), "
+        "SNR (dB). The WAV's sample 0 is the schedule's t = 0. Warns when the WAV does not "
+        "follow the schedule's hop code (a schedule of another seed) or is clipped.",
     )
     p.add_argument("--schedule", type=Path, required=True, help="transmit schedule JSON")
     p.add_argument("--input", type=Path, required=True, help="received WAV file")
@@ -56,10 +62,17 @@ def register(sub: Any) -> None:
         "--receiver", default="gcas", help=f"one of {', '.join(RECEIVERS)} (default gcas)"
     )
     p.add_argument("--channel", type=int, help="channel of a multi-channel WAV (0-based)")
-    p.add_argument("--M", dest="m_hops", type=int, default=10, help="correlator length M, hops")
+    p.add_argument(
+        "--m-hops", "--M", dest="m_hops", type=int, default=10,
+        help="correlator length M, hops (as hil waveform --m-hops; --M is the same)",
+    )  # fmt: skip
     p.add_argument("--sound-speed", type=float, help="c, m/s (default: the schedule's)")
-    p.add_argument("--max-speed", type=float, default=30.0, help="Doppler search span ±, m/s")
-    p.add_argument("--max-range", type=float, default=100.0, help="largest range reported, m")
+    p.add_argument(
+        "--max-speed", type=float, default=30.0, help="Doppler search span ±, m/s (default 30)"
+    )
+    p.add_argument(
+        "--max-range", type=float, default=100.0, help="largest range reported, m (default 100)"
+    )
     p.add_argument(
         "--option",
         action="append",
@@ -84,12 +97,28 @@ def _parse_option(text: str) -> tuple[str, Any]:
     return key.strip(), parsed
 
 
+class ClipCount:
+    """Samples of an integer WAV at its format's full scale (clipped), counted while read."""
+
+    def __init__(self) -> None:
+        self.count = 0
+        self.first = -1
+
+    def add(self, start: int, at_full_scale: NDArray[np.bool_]) -> None:
+        """Count the flagged samples of the block starting at sample ``start``."""
+        hits = int(np.count_nonzero(at_full_scale))
+        if hits and self.first < 0:
+            self.first = start + int(np.argmax(at_full_scale))
+        self.count += hits
+
+
 def read_wav_blocks(
-    path: Path, channel: int | None, block: int = _READ_BLOCK
+    path: Path, channel: int | None, block: int = _READ_BLOCK, clip: ClipCount | None = None
 ) -> tuple[float, int, Iterator[NDArray[np.float64]]]:
     """Open a WAV for block-wise reading: (fs, n_frames, iterator of float64 blocks).
 
-    Integer formats are scaled to [-1, 1). Multi-channel files need ``channel``.
+    Integer formats are scaled to [-1, 1). Multi-channel files need ``channel``. ``clip``
+    counts the integer samples at the format's minimum or maximum.
     """
     from scipy.io import wavfile
 
@@ -119,6 +148,10 @@ def read_wav_blocks(
         for start in range(0, data.shape[0], block):
             raw = data[start : start + block]
             col = raw if raw.ndim == 1 else raw[:, channel]
+            if clip is not None and np.issubdtype(data.dtype, np.integer):
+                info = np.iinfo(data.dtype)
+                low = info.min + 1 if info.min < 0 else info.min  # -32767 clips as -32768 does
+                clip.add(start, (col <= low) | (col >= info.max))
             x = np.asarray(col, dtype=np.float64)
             if data.dtype == np.uint8:
                 x = x - 128.0
@@ -137,10 +170,42 @@ def read_wav_blocks(
     return float(fs), int(data.shape[0]), blocks()
 
 
+def _check_schedule(
+    args: argparse.Namespace,
+    blocks: Iterator[NDArray[np.float64]],
+    schedule: Any,
+    fs: float,
+    c: float,
+) -> Iterator[NDArray[np.float64]]:
+    """Warn when the input's first hops do not follow the schedule's code; the blocks again."""
+    from hil.signals.schedule_match import match_schedule
+
+    head: list[NDArray[np.float64]] = []
+    wanted = int(fs * float(np.sum(schedule.duration_s)) * 8)
+    for x in blocks:
+        head.append(x)
+        if sum(len(h) for h in head) >= wanted:
+            break
+    if head:
+        verdict = match_schedule(
+            np.concatenate(head), fs, schedule, sound_speed_mps=c, max_speed_mps=args.max_speed
+        )
+        if verdict is not None and not verdict.matched:
+            _LOG.warning(
+                "%s does not follow the hop code of %s: over its first %d hops the code's "
+                "tones hold %.0f %% of the tone energy, random codes reach %.0f %% (chance "
+                "%.0f %%); is the schedule from another seed or run? Estimates would be wrong",
+                args.input, args.schedule, verdict.n_hops, 100 * verdict.score,
+                100 * verdict.null, 100 * verdict.chance,
+            )  # fmt: skip
+    return itertools.chain(head, blocks)
+
+
 def run(args: argparse.Namespace) -> int:
     """Execute ``hil estimate``; return the exit status."""
     schedule, doc = read_schedule_file(args.schedule)
-    fs, _, blocks = read_wav_blocks(args.input, args.channel)
+    clip = ClipCount()
+    fs, _, blocks = read_wav_blocks(args.input, args.channel, clip=clip)
     if not math.isclose(fs, float(doc["fs"]), rel_tol=0, abs_tol=0.5):
         raise ConfigError(
             "--input",
@@ -167,6 +232,7 @@ def run(args: argparse.Namespace) -> int:
         m_hops=args.m_hops,
         **extra,
     )
+    blocks = _check_schedule(args, blocks, schedule, fs, c)
     sink = _Sink(args)
     try:
         for x in blocks:
@@ -174,6 +240,12 @@ def run(args: argparse.Namespace) -> int:
         sink.emit(receiver.flush())
     finally:
         sink.close()
+    if clip.count:
+        _LOG.warning(
+            "%s is clipped: %d samples at the integer format's full scale, the first at "
+            "t = %.6f s; lower the input gain and record again (estimates there are unreliable)",
+            args.input, clip.count, clip.first / fs,
+        )  # fmt: skip
     if collector is not None:
         collector.draw(args.map)
     if not args.json and args.csv is None:

@@ -9,52 +9,144 @@ status 2, never a traceback; argparse's own usage errors exit with 2 as well.
 from __future__ import annotations
 
 import argparse
+import importlib
 import sys
 from collections.abc import Sequence
+from typing import Any
 
 from hil import __version__
-from hil.cli import (
-    calibrate,
-    estimate,
-    replay,
-    reproduce,
-    sim_serve,
-    simulate,
-    stage,
-    sweep,
-    tank_run,
-    waveform,
-)
 from hil.errors import ConfigError
 
 EXIT_OK = 0
 EXIT_USAGE = 2
 
-_COMMANDS = (
-    tank_run,
-    waveform,
-    estimate,
-    simulate,
-    sweep,
-    reproduce,
-    replay,
-    calibrate,
-    stage,
-    sim_serve,
-)
+COMMANDS: dict[str, tuple[str, str]] = {
+    "tank-run": (
+        "hil.cli.tank_run",
+        "run a towed-target tank experiment (built-in simulated tank without a file)",
+    ),
+    "waveform": (
+        "hil.cli.waveform",
+        "synthesise a transmit waveform (WAV + schedule JSON + diagnostics)",
+    ),
+    "estimate": ("hil.cli.estimate", "estimate range and speed from a received WAV"),
+    "simulate": (
+        "hil.cli.simulate",
+        "simulate the received signal of a scenario (WAV + schedule + truth + plots)",
+    ),
+    "sweep": ("hil.cli.sweep", "run a Monte Carlo sweep (grid x repetitions) and summarise it"),
+    "reproduce": (
+        "hil.cli.reproduce",
+        "run the seed's chapter-6 evaluation and write figures, tables and report.md",
+    ),
+    "replay": ("hil.cli.replay", "re-run a receiver over a run recording"),
+    "calibrate": (
+        "hil.cli.calibrate",
+        "calibrate latency, response, level, sound speed or the stage",
+    ),
+    "stage": (
+        "hil.cli.stage",
+        "GRBL stage at the bench: status, home, unlock, jog, move, settings, reset",
+    ),
+    "sim-serve": ("hil.cli.sim_serve", "serve a simulated board or stage on a pty"),
+    "devices": ("hil.cli.devices", "list serial ports, USB devices, PortAudio and JACK devices"),
+}
+"""Sub-command name -> (module with ``register``, one-line summary for ``hil --help``).
+
+A command's module is imported only when that command runs (or its ``--help`` is asked
+for), so ``hil --help`` and every command start without the others' imports (SciPy,
+Matplotlib, h5py, numba). The summary must equal the ``help=`` the module registers
+(checked by tests/cli/test_cli_start.py).
+"""
+
+_VALUE_OPTIONS = ("--log-level", "--log-file")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The top-level parser with every sub-command registered."""
-    parser = argparse.ArgumentParser(
+class HelpFormatter(argparse.HelpFormatter):
+    """Help with every default shown and hand-laid-out descriptions kept.
+
+    An option's default is appended as ``(default: X)`` unless its help already says it (or
+    it has none: a flag, a required option, an empty list). A description holding line
+    breaks is printed as written; a one-line one is wrapped.
+    """
+
+    def _fill_text(self, text: str, width: int, indent: str) -> str:
+        if "\n" in text:
+            return "".join(indent + line for line in text.splitlines(keepends=True))
+        return super()._fill_text(text, width, indent)
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        default = action.default
+        if (
+            "default" in text
+            or action.required
+            or any(default is none for none in (None, False, True, argparse.SUPPRESS))
+            or (isinstance(default, list | tuple) and not default)
+            or not action.option_strings
+        ):
+            return text
+        return f"{text} (default: %(default)s)"
+
+
+class HilParser(argparse.ArgumentParser):
+    """The parser class of every ``hil`` command and sub-command (:class:`HelpFormatter`)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kwargs)
+
+
+def _command_name(argv: Sequence[str]) -> str | None:
+    """The sub-command named in ``argv`` (first word that is not a top-level option).
+
+    >>> _command_name(["--log-level", "debug", "simulate", "att"])
+    'simulate'
+    >>> _command_name(["--help"]) is None
+    True
+    """
+    words = iter(argv)
+    for word in words:
+        if word in _VALUE_OPTIONS:
+            next(words, None)
+        elif not word.startswith("-"):
+            return word
+    return None
+
+
+def build_parser(load: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The top-level parser; ``load``: the sub-commands registered in full (None: all).
+
+    The others get a placeholder parser carrying only their summary, enough for
+    ``hil --help`` and for argparse's "invalid choice" message.
+    """
+    from hil.logs import LEVELS
+
+    parser = HilParser(
         prog="hil",
-        description="Continuous active sonar (HFC-CW / GCAS) hardware-in-the-loop testbench.",
+        description="Continuous active sonar (HFC-CW / GCAS) hardware-in-the-loop testbench. "
+        "'hil COMMAND --help' describes a command, its options, defaults and units.",
+        epilog="Environment: HIL_CALIBRATION_DIR (calibration store, default ./calibration), "
+        "HIL_RUNS_DIR (where tank runs are written, default ./runs).",
     )
     parser.add_argument("--version", action="version", version=f"hil {__version__}")
+    parser.add_argument(
+        "--log-level",
+        type=str.lower,
+        choices=LEVELS,
+        default="warning",
+        help="messages shown on stderr and written to --log-file (default: warning)",
+    )
+    parser.add_argument(
+        "--log-file", metavar="FILE", help="also append every log message at --log-level here"
+    )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
-    for module in _COMMANDS:
-        module.register(sub)
+    for name, (module_name, summary) in COMMANDS.items():
+        if load is None or name in load:
+            importlib.import_module(module_name).register(sub)
+        else:
+            sub.add_parser(name, help=summary, add_help=False)
     return parser
 
 
@@ -73,9 +165,13 @@ def _name_option(args: argparse.Namespace, exc: ConfigError) -> ConfigError:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``hil`` command; return the exit status."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    words = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(load=[name] if (name := _command_name(words)) in COMMANDS else [])
+    args = parser.parse_args(words)
+    from hil.logs import configure_logging, reset_logging
+
     try:
+        configure_logging(args.log_level, args.log_file)
         status: int = args.func(args)
     except ConfigError as exc:
         print(f"hil {args.command}: error: {_name_option(args, exc)}", file=sys.stderr)
@@ -93,6 +189,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"hil {args.command}: interrupted", file=sys.stderr)
         return 130
+    finally:
+        reset_logging()
     return status
 
 

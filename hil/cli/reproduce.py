@@ -31,7 +31,7 @@ def register(sub: Any) -> None:
     p: argparse.ArgumentParser = sub.add_parser(
         "reproduce",
         help="run the seed's chapter-6 evaluation and write figures, tables and report.md",
-        description="Run every chapter-6 item (sweep files in evaluation/, see "
+        description="Run every chapter-6 item (the shipped sweep files in hil/data/sweeps/, see "
         "docs/results.md), then write PNG figures, CSV tables and DIR/report.md. Items: "
         + ", ".join(ITEM_IDS),
     )
@@ -49,7 +49,7 @@ def register(sub: Any) -> None:
         "--sweeps",
         type=Path,
         metavar="DIR",
-        help="folder of the sweep files (default: evaluation/)",
+        help="folder of the sweep files (default: the shipped ones, hil/data/sweeps/)",
     )
     where = p.add_mutually_exclusive_group()
     where.add_argument(

@@ -15,14 +15,40 @@ from typing import Any
 
 from hil.errors import ConfigError
 
+DESCRIPTION = """\
+Serve a simulated device on a pseudo-terminal (pty) for other programs. The pty path is
+printed alone on the first line of stdout; open it like a serial port (115200 baud). Serves
+in real time until Ctrl-C or SIGTERM.
+
+  board  the transducer board (firmware_protocol/SPEC.md) wired as a loopback cable:
+         DAC out -> ADC in after --delay samples, times --gain
+  stage  the simulated GRBL 1.1 controller (homing, jogging, status reports)
+
+Point a tank run at them: start both, each in its own terminal,
+
+  $ hil sim-serve board --delay 64      # prints e.g. /dev/pts/5
+  $ hil sim-serve stage                 # prints e.g. /dev/pts/6
+
+then put the printed paths in the experiment file and run it:
+
+  [devices]
+  board = "/dev/pts/5"
+  stage = "/dev/pts/6"
+
+  $ hil tank-run my-experiment.toml
+
+The run treats them as real devices: no simulated tank (the ADC hears the loopback, not an
+echo), and the rules of real runs apply (calibrations measured on the simulated bench are
+refused). For a run with the simulated tank in between, use devices sim://board and
+sim://stage (the default of 'hil tank-run')."""
+
 
 def register(subparsers: Any) -> None:
     """Add the ``sim-serve`` sub-command."""
     parser = subparsers.add_parser(
         "sim-serve",
         help="serve a simulated board or stage on a pty",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description=DESCRIPTION,
     )
     parser.add_argument("device", choices=("board", "stage"), help="what to simulate")
     parser.add_argument(

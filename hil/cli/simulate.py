@@ -2,7 +2,8 @@
 
 Example::
 
-    hil simulate scenarios/att.toml --out runs/att/
+    hil simulate att --out runs/att/          # a shipped example scenario
+    hil simulate my-tank.toml --out runs/mine/
 
 Writes into ``--out``: ``received.wav`` (float32, one channel per ``[output].channels``
 entry), ``schedule.json`` (the transmit schedule, ``hil.signals.schedule_file`` format),
@@ -33,11 +34,27 @@ def register(sub: Any) -> None:
         "simulated acoustic channel and write the received WAV, the transmit schedule, the "
         "hop-by-hop truth and plots into --out.",
     )
-    p.add_argument("scenario", type=Path, help="scenario TOML file")
+    p.add_argument(
+        "scenario",
+        help="scenario TOML file, or the name of a shipped example "
+        "(att, tank-audio, tank-board; see docs/scenarios.md)",
+    )
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
-    p.add_argument("--duration", type=float, help="override duration_s, s")
+    p.add_argument(
+        "--duration", type=float, help="override duration_s, s (default: the scenario's)"
+    )
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     p.set_defaults(func=run)
+
+
+def _scenario_file(text: str) -> Path:
+    """The scenario file ``text`` names: a path, else a shipped example's name."""
+    path = Path(text)
+    if path.exists() or path.suffix == ".toml":
+        return path
+    from hil.data import scenario_path
+
+    return scenario_path(text)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -46,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
     from sim_devices.acoustics.scenario import build_channel, load_scenario
     from sim_devices.acoustics.truth import hop_truth, write_truth
 
-    sc = load_scenario(args.scenario)
+    sc = load_scenario(_scenario_file(args.scenario))
     if args.duration is not None:
         if not (np.isfinite(args.duration) and args.duration > 0):
             raise ConfigError("--duration", args.duration, "> 0 s")
@@ -122,20 +139,16 @@ class _FloatWav:
 
 
 def _plots(out: Path, x: np.ndarray, fs: float, rows: list[Any]) -> list[str]:
-    import matplotlib
+    from hil.figures import new_figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(8, 4))
+    fig, ax = new_figure(figsize=(8, 4))
     nfft = 1024 if x.size >= 1024 else max(16, x.size)
     ax.specgram(x + 1e-12, NFFT=nfft, Fs=fs, noverlap=nfft // 2, cmap="viridis")
     ax.set_xlabel("time (s)")
     ax.set_ylabel("frequency (Hz)")
     ax.set_title("received signal")
     fig.savefig(out / "spectrogram.png", dpi=90)
-    plt.close(fig)
-    fig, (a1, a2) = plt.subplots(2, 1, sharex=True, figsize=(8, 5))
+    fig, (a1, a2) = new_figure(2, 1, sharex=True, figsize=(8, 5))
     for tgt in sorted({r.target for r in rows}):
         sel = [r for r in rows if r.target == tgt]
         a1.plot([r.t_rx_s for r in sel], [r.range_m for r in sel], ".", label=f"target {tgt}")
@@ -146,5 +159,4 @@ def _plots(out: Path, x: np.ndarray, fs: float, rows: list[Any]) -> list[str]:
     if rows:
         a1.legend()
     fig.savefig(out / "truth.png", dpi=90)
-    plt.close(fig)
     return ["spectrogram.png", "truth.png"]

@@ -10,10 +10,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 from pathlib import Path
 from typing import Any
 
 from hil.experiments.experiment import DEFAULT_EXPERIMENT, load_experiment, parse_experiment
+
+_LOG = logging.getLogger(__name__)
 
 
 def register(sub: Any) -> None:
@@ -22,7 +25,10 @@ def register(sub: Any) -> None:
         "tank-run",
         help="run a towed-target tank experiment (built-in simulated tank without a file)",
         description="Transmit continuously, tow the target on the stage, estimate live, "
-        "record everything. Without EXPERIMENT the built-in simulated tank runs.",
+        "record everything. Without EXPERIMENT the built-in simulated tank runs. Writes the "
+        'run folder (--out, else run.output_dir/NAME-YYYYmmdd-HHMMSS; output_dir "runs" '
+        "means $HIL_RUNS_DIR when set): run.h5 (the recording), run.log, summary.json, "
+        "estimates.csv and the report figures; prints the summary. Format: docs/tank-run.md.",
     )
     p.add_argument("experiment", nargs="?", type=Path, help="experiment TOML file")
     p.add_argument("--out", type=Path, help="run folder (default: output_dir/name-timestamp)")
@@ -39,21 +45,27 @@ def run(args: argparse.Namespace) -> int:
     if args.print_default:
         print(DEFAULT_EXPERIMENT, end="")
         return 0
+    from hil.experiments.run_log import log_outcome
     from hil.experiments.run_report import write_report
     from hil.experiments.run_scoring import summarize, write_summary
     from hil.experiments.tank_run import LiveView, run_experiment
+    from hil.logs import run_log
 
     exp = (
         parse_experiment(DEFAULT_EXPERIMENT)
         if args.experiment is None
         else load_experiment(args.experiment)
     )
-    outcome = run_experiment(exp, folder=args.out, view=LiveView(enabled=not args.no_live))
-    summary = summarize(outcome)
-    write_summary(outcome, summary)
-    figures = write_report(outcome)
-    summary["figures"] = [str(p) for p in figures]
-    (outcome.folder / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
+    folder = args.out or exp.new_run_folder()
+    with run_log(folder):
+        _LOG.info("tank run %r into %s", exp.name, folder)
+        outcome = run_experiment(exp, folder=folder, view=LiveView(enabled=not args.no_live))
+        summary = summarize(outcome)
+        write_summary(outcome, summary)
+        figures = write_report(outcome)
+        summary["figures"] = [str(p) for p in figures]
+        (outcome.folder / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
+        log_outcome(outcome, summary)
     if args.json:
         print(json.dumps(summary))
     else:

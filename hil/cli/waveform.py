@@ -75,6 +75,10 @@ def register(sub: Any) -> None:
     )
     p.add_argument("--duration", type=float, default=2.0, help="seconds to synthesise (default 2)")
     p.add_argument("--out", type=Path, help="float32 WAV file to write")
+    p.add_argument(
+        "--max-size", type=float, default=4.0, metavar="GB",
+        help="refuse a WAV larger than this, GB (default 4; above 4 GiB the file is RF64)",
+    )  # fmt: skip
     p.add_argument("--schedule", type=Path, help="schedule JSON file to write")
     p.add_argument("--plot", type=Path, metavar="DIR", help="write diagnostic PNGs into DIR")
     p.add_argument(
@@ -114,6 +118,8 @@ def _validate_io(args: argparse.Namespace) -> None:
         raise ConfigError("--duration", args.duration, "> 0 s")
     if not (math.isfinite(args.amplitude) and 0 < args.amplitude <= 1):
         raise ConfigError("--amplitude", args.amplitude, "in (0, 1] (full scale is 1)")
+    if not (math.isfinite(args.max_size) and args.max_size > 0):
+        raise ConfigError("--max-size", args.max_size, "> 0 GB")
     for opt in ("out", "schedule"):
         path = getattr(args, opt)
         if path is None:
@@ -130,34 +136,35 @@ def _validate_io(args: argparse.Namespace) -> None:
 
 
 def _write_wav(path: Path, synth: BlockSynthesizer, n_samples: int, fs: float) -> None:
-    """Stream a float32 WAV (IEEE float, mono) block by block."""
-    from scipy.io import wavfile
+    """Stream a float32 WAV (IEEE float, mono) block by block (RF64 above 4 GiB)."""
+    from hil.signals.wav_stream import write_float_wav
 
-    if n_samples <= _WRITE_BLOCK:
-        wavfile.write(path, int(round(fs)), synth.render(0, n_samples, np.float32))
-        return
-    # Long files: write the header once, then append blocks, keeping memory bounded.
-    _write_float_wav_streaming(path, synth, n_samples, int(round(fs)))
+    def render(start: int, count: int) -> np.ndarray:
+        return synth.render(start, count, np.float32)
 
-
-def _write_float_wav_streaming(
-    path: Path, synth: BlockSynthesizer, n_samples: int, fs: int
-) -> None:
-    import struct
-
-    data_bytes = 4 * n_samples
-    header = b"RIFF" + struct.pack("<I", 4 + 26 + 12 + 8 + data_bytes) + b"WAVE"
-    # fmt chunk (18 bytes, WAVE_FORMAT_IEEE_FLOAT = 3), then a fact chunk as float WAVs require.
-    header += b"fmt " + struct.pack("<IHHIIHHH", 18, 3, 1, fs, fs * 4, 4, 32, 0)
-    header += b"fact" + struct.pack("<II", 4, n_samples)
-    header += b"data" + struct.pack("<I", data_bytes)
     with path.open("wb") as fh:
-        fh.write(header)
-        done = 0
-        while done < n_samples:
-            count = min(_WRITE_BLOCK, n_samples - done)
-            fh.write(synth.render(done, count, np.float32).astype("<f4").tobytes())
-            done += count
+        write_float_wav(fh, render, n_samples, int(round(fs)), block=_WRITE_BLOCK)
+
+
+def _check_size(args: argparse.Namespace, n_samples: int, fs: float) -> None:
+    """Refuse a WAV larger than ``--max-size`` or than the free space of its folder."""
+    import shutil
+
+    from hil.signals.wav_stream import wav_bytes
+
+    size = wav_bytes(n_samples)
+    what = f"{args.duration:g} s at {fs:g} Hz is {size / 1e9:.3g} GB of float32 WAV"
+    if size > args.max_size * 1e9:
+        raise ConfigError(
+            "--duration", args.duration, f"a WAV of at most --max-size {args.max_size:g} GB",
+            f"{what}; shorten --duration or raise --max-size (above 4 GiB the file is RF64)",
+        )  # fmt: skip
+    free = shutil.disk_usage(args.out.resolve().parent).free
+    if size > free:
+        raise ConfigError(
+            "--duration", args.duration, f"a WAV that fits the {free / 1e9:.3g} GB free",
+            f"{what}; shorten --duration or write --out elsewhere",
+        )  # fmt: skip
 
 
 def run(args: argparse.Namespace) -> int:
@@ -176,6 +183,7 @@ def run(args: argparse.Namespace) -> int:
         summary["m_hops"] = spec.m_hops
     synth = BlockSynthesizer(schedule, fs, amplitude=args.amplitude)
     if args.out is not None:
+        _check_size(args, n, fs)
         _write_wav(args.out, synth, n, fs)
         summary["wav"] = str(args.out)
     if args.schedule is not None:

@@ -19,6 +19,7 @@ from typing import Any
 
 from hil.errors import ConfigError
 from hil.estimation.base import Receiver
+from hil.estimation.option_types import check_option_types
 from hil.signals.schedule import HopSchedule
 
 RECEIVERS: dict[str, str] = {
@@ -61,6 +62,7 @@ def make_receiver(
 ) -> Receiver:
     """Build the receiver ``name`` with the common options and receiver-specific ``extra``."""
     cls = receiver_class(name)
+    check_option_types(cls, extra, name)
     receiver: Receiver = cls.from_options(
         schedule,
         fs_hz,

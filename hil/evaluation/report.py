@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from hil.evaluation.spec import SweepSpec
+from hil.figures import new_figure
 
 #: Pooled columns of an HFC-CW or FMCW table, after the grid parameters.
 POOLED = (
@@ -180,14 +181,6 @@ def threshold_x(group: list[dict[str, Any]], x: str, pd_min: float = PD_THRESHOL
 
 
 # ----------------------------------------------------------------------------- figures
-def _pyplot() -> Any:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
 
 _X_LABELS = {
     "snr_db": "per-sample input SNR over 0…fs/2 (dB)",
@@ -204,9 +197,8 @@ def _finite(xs: list[float], ys: list[float]) -> tuple[list[float], list[float]]
 
 def plot_rmse(res: ItemResult, rows: list[dict[str, Any]], path: Path) -> Path:
     """Range and speed RMSE against ``res.x`` with each series' CRLB dashed."""
-    plt = _pyplot()
     groups = series(rows, list(res.spec.grid), res.x)
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    fig, axes = new_figure(1, 2, figsize=(11, 4.2))
     panels = (("range_rmse_m", "crlb_range_m", "range RMSE (m)"),
               ("speed_rmse_mps", "crlb_speed_mps", "speed RMSE (m/s)"))  # fmt: skip
     for ax, (key, bound, ylabel) in zip(axes, panels, strict=True):
@@ -229,15 +221,13 @@ def plot_rmse(res: ItemResult, rows: list[dict[str, Any]], path: Path) -> Path:
     fig.suptitle(f"{res.title} — detected boundaries only; dashed: CRLB", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     return path
 
 
 def plot_detection(res: ItemResult, rows: list[dict[str, Any]], path: Path) -> Path:
     """Detection probability and false alarms per second against ``res.x``."""
-    plt = _pyplot()
     groups = series(rows, list(res.spec.grid), res.x)
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.0))
+    fig, axes = new_figure(1, 2, figsize=(11, 4.0))
     for i, (name, group) in enumerate(groups.items()):
         xs = [float(r[res.x]) for r in group]
         axes[0].plot(xs, [r["pd"] for r in group], "o-", color=f"C{i % 10}", label=name)
@@ -252,17 +242,15 @@ def plot_detection(res: ItemResult, rows: list[dict[str, Any]], path: Path) -> P
     fig.suptitle(f"{res.title} — detection", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     return path
 
 
 def plot_cost(res: ItemResult, rows: list[dict[str, Any]], path: Path) -> Path:
     """Complex multiplies per sample against M (log scale); measured GCAS time if present."""
-    plt = _pyplot()
     rows = sorted(rows, key=lambda r: float(r["m_hops"]))
     m = [float(r["m_hops"]) for r in rows]
     measured = all(math.isfinite(r.get("gcas_cpu_s_per_s", math.nan)) for r in rows)
-    fig, axes = plt.subplots(1, 2 if measured else 1, figsize=(11 if measured else 6, 4.2))
+    fig, axes = new_figure(1, 2 if measured else 1, figsize=(11 if measured else 6, 4.2))
     ax = axes[0] if measured else axes
     curves = (
         ("gcas_mults", "GCAS (2 N_F D)"),
@@ -285,15 +273,13 @@ def plot_cost(res: ItemResult, rows: list[dict[str, Any]], path: Path) -> Path:
     fig.suptitle(res.title, fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     return path
 
 
 def plot_fmcw(res: ItemResult, rows: list[dict[str, Any]], path: Path) -> Path:
     """FMCW range bias (with the predicted sawtooth bias) and range RMSE against speed."""
-    plt = _pyplot()
     groups = series(rows, list(res.spec.grid), res.x)
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    fig, axes = new_figure(1, 2, figsize=(11, 4.2))
     for i, (name, group) in enumerate(groups.items()):
         c = f"C{i % 10}"
         xs = [float(r[res.x]) for r in group]
@@ -313,7 +299,6 @@ def plot_fmcw(res: ItemResult, rows: list[dict[str, Any]], path: Path) -> Path:
     fig.suptitle(res.title, fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     return path
 
 
@@ -330,11 +315,10 @@ def map_records(res: ItemResult) -> list[dict[str, Any]]:
 
 def plot_map(res: ItemResult, rec: dict[str, Any], path: Path) -> Path:
     """Time–codeword map (dB over its median) with the true codewords marked (seed Fig 5.17)."""
-    plt = _pyplot()
     r = rec["result"]
     t = np.asarray(r["map_t_s"])
     p = np.asarray(r["map_db"], dtype=float).T  # (J, n)
-    fig, ax = plt.subplots(figsize=(10, 4.2))
+    fig, ax = new_figure(figsize=(10, 4.2))
     step = float(t[1] - t[0]) if t.shape[0] > 1 else 1e-3
     extent = (t[0] - step / 2, t[-1] + step / 2, -0.5, p.shape[0] - 0.5)
     top = float(np.nanmax(p)) if np.isfinite(p).any() else 1.0
@@ -351,7 +335,6 @@ def plot_map(res: ItemResult, rec: dict[str, Any], path: Path) -> Path:
     ax.legend(fontsize=8, loc="upper right")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     return path
 
 

@@ -14,18 +14,19 @@ overrides the count of every item.
 
 from __future__ import annotations
 
-import tomllib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
 
+from hil.data import sweeps_dir
 from hil.errors import ConfigError
 from hil.evaluation.engine import run_sweep
 from hil.evaluation.report import ItemResult, write_report
 from hil.evaluation.runners import Runner
 from hil.evaluation.spec import SweepSpec
 from hil.evaluation.sweep_file import sweep_from_dict
+from hil.toml_table import read_toml
 
 
 @dataclass(frozen=True)
@@ -79,8 +80,8 @@ ITEM_IDS = tuple(item.id for item in ITEMS)
 
 
 def default_sweeps_dir() -> Path:
-    """The repository's ``evaluation/`` folder (next to the ``hil`` package)."""
-    return Path(__file__).resolve().parents[2] / "evaluation"
+    """The shipped sweep files (``hil/data/sweeps/``, found through importlib.resources)."""
+    return sweeps_dir()
 
 
 def select_items(names: Sequence[str] | None) -> list[Item]:
@@ -107,15 +108,12 @@ def load_item(
     """Read, reduce (quick) and validate the sweep file of ``item``; return it and its path."""
     path = Path(sweeps_dir) / f"{item.id}.toml"
     try:
-        with path.open("rb") as fh:
-            doc = tomllib.load(fh)
+        doc = read_toml(path, "sweep")
     except FileNotFoundError:
         raise ConfigError(
             "--sweeps", str(sweeps_dir), f"a folder holding {item.id}.toml",
-            "point --sweeps at the repository's evaluation/ folder",
+            "leave --sweeps out to use the shipped sweep files",
         ) from None  # fmt: skip
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(str(path), "<file>", "valid TOML", str(exc)) from None
     head = doc.setdefault("sweep", {})
     if quick:
         doc.setdefault("grid", {}).update(item.quick_grid)
@@ -194,8 +192,8 @@ def reproduce(
 
 
 def _display_path(path: Path) -> str:
-    """``evaluation/x.toml`` when the file is in the repository, else the absolute path."""
-    repo = default_sweeps_dir().parent
+    """``hil/data/sweeps/x.toml`` for a shipped sweep file, else the absolute path."""
+    repo = default_sweeps_dir().parents[2]
     try:
         return path.resolve().relative_to(repo).as_posix()
     except ValueError:

@@ -25,7 +25,6 @@ from __future__ import annotations
 import json
 import math
 import re
-import tomllib
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +32,7 @@ from hil.errors import ConfigError
 from hil.evaluation.registry import load_trial, resolve_trial, trial_validator
 from hil.evaluation.seeds import check_entropy
 from hil.evaluation.spec import SweepSpec
+from hil.toml_table import read_toml
 
 _SECTIONS = ("sweep", "grid", "fixed")
 _SWEEP_KEYS = ("name", "trial", "trials_per_point", "seed", "description")
@@ -43,11 +43,7 @@ _VALUE_KINDS = "numbers, strings, booleans, or arrays/tables of them (no dates, 
 def load_sweep_file(path: str | Path) -> SweepSpec:
     """Read and validate the sweep file ``path`` (relative trial files are found next to it)."""
     path = Path(path)
-    try:
-        with path.open("rb") as fh:
-            doc = tomllib.load(fh)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(str(path), "<file>", "valid TOML", str(exc)) from None
+    doc = read_toml(path, "sweep")
     return sweep_from_dict(doc, base_dir=path.resolve().parent)
 
 

@@ -5,9 +5,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 # Columns drawn at most: longer maps are thinned evenly (the PNG has fewer pixels anyway).
 MAX_COLUMNS = 4000
@@ -18,23 +22,27 @@ def save_time_codeword_map(
     times: Sequence[npt.ArrayLike],
     power: Sequence[npt.ArrayLike],
 ) -> None:
-    """Draw codeword sums against receive time, in dB re their maximum (−30 … 0 dB).
+    """Save :func:`time_codeword_map_figure` to ``path`` (its folder created if needed)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    time_codeword_map_figure(times, power).savefig(path)
+
+
+def time_codeword_map_figure(
+    times: Sequence[npt.ArrayLike], power: Sequence[npt.ArrayLike]
+) -> Figure:
+    """Codeword sums against receive time, in dB re their maximum (−30 … 0 dB).
 
     ``times``: chunks of receive times (s), shape ``(n_i,)``; ``power``: the matching chunks
     of codeword sums, shape ``(n_i, J)``, as the receiver's ``on_map`` callback gives them.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from hil.figures import new_figure
 
     t = np.concatenate([np.asarray(c, dtype=float) for c in times])
     p = np.concatenate([np.asarray(c, dtype=float) for c in power], axis=0)
     stride = max(1, p.shape[0] // MAX_COLUMNS)
     t, p = t[::stride], p[::stride]
-    path.parent.mkdir(parents=True, exist_ok=True)
     db = 10 * np.log10(np.maximum(p / max(float(p.max()), 1e-300), 1e-6))
-    fig, ax = plt.subplots(figsize=(10, 4.5), dpi=110)
+    fig, ax = new_figure(figsize=(10, 4.5), dpi=110)
     extent = (float(t[0]), float(t[-1]), -0.5, p.shape[1] - 0.5)
     im = ax.imshow(db.T, origin="lower", aspect="auto", extent=extent, vmin=-30, vmax=0)
     fig.colorbar(im, ax=ax, label="accumulated sum (dB re max)")
@@ -42,5 +50,4 @@ def save_time_codeword_map(
     ax.set_ylabel("codeword j")
     ax.set_title("GCAS time–codeword map")
     fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    return fig

@@ -14,8 +14,6 @@ positions are in ``[-travel, 0]`` (0 at the homing switch): the towed target sit
 
 from __future__ import annotations
 
-import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -24,9 +22,12 @@ import numpy as np
 
 from hil.errors import ConfigError
 from hil.estimation.reverb_band import AUTO, doppler_resolution_mps
+from hil.paths import resolve_calibration_dir, resolve_runs_dir
 from hil.signals.presets import check_design, get_preset
 from hil.signals.schedule import HopSchedule
 from hil.signals.waveforms import WaveformSpec
+from hil.toml_table import Table, parse_toml, read_text_file
+from hil.transports.registry import check_url
 
 DEFAULT_EXPERIMENT = """\
 # Built-in simulated tank run: `hil tank-run` with no arguments.
@@ -176,6 +177,13 @@ class Experiment:
     simulation: SimulationSettings
     text: str = field(default="", compare=False)
 
+    def new_run_folder(self) -> Path:
+        """``output_dir/name-YYYYmmdd-HHMMSS`` (local time) for a run starting now."""
+        import datetime as dt
+
+        stamp = dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+        return self.output_dir / f"{self.name}-{stamp}"
+
     @property
     def simulated(self) -> bool:
         """True when both devices are simulated (``sim://``)."""
@@ -192,108 +200,18 @@ class Experiment:
         return np.asarray(np.sqrt(np.sum(d * d, axis=-1)))
 
 
-class _Table:
-    """A TOML table with its dotted path, for messages."""
-
-    def __init__(self, data: Any, path: str, allowed: tuple[str, ...]) -> None:
-        if not isinstance(data, dict):
-            raise ConfigError(path, data, "a table")
-        unknown = sorted(set(data) - set(allowed))
-        if unknown:
-            raise ConfigError(
-                f"{path}.{unknown[0]}",
-                data[unknown[0]],
-                f"one of the keys {', '.join(allowed)}",
-                "check the spelling (docs/tank-run.md lists every key)",
-            )
-        self.data, self.path = data, path
-
-    def _name(self, key: str) -> str:
-        return f"{self.path}.{key}"
-
-    def number(
-        self,
-        key: str,
-        default: float | None = None,
-        *,
-        lo: float | None = None,
-        hi: float | None = None,
-        strict_lo: bool = False,
-        unit: str = "",
-    ) -> float:
-        if key not in self.data:
-            if default is None:
-                raise ConfigError(
-                    self._name(key),
-                    None,
-                    f"a number{' in ' + unit if unit else ''}",
-                    "it is required",
-                )
-            return default
-        v = self.data[key]
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise ConfigError(self._name(key), v, f"a finite number ({unit})")
-        low_ok = lo is None or (v > lo if strict_lo else v >= lo)
-        if not low_ok or (hi is not None and v > hi):
-            rng = f"{'>' if strict_lo else '>='} {lo}" if lo is not None else ""
-            if hi is not None:
-                rng = f"{rng} and <= {hi}" if rng else f"<= {hi}"
-            raise ConfigError(self._name(key), v, f"{rng} {unit}".strip())
-        return float(v)
-
-    def integer(self, key: str, default: int, *, lo: int, hi: int | None = None) -> int:
-        v = self.data.get(key, default)
-        if isinstance(v, bool) or not isinstance(v, int) or v < lo or (hi is not None and v > hi):
-            raise ConfigError(
-                self._name(key), v, f"an integer >= {lo}" + (f" and <= {hi}" if hi else "")
-            )
-        return int(v)
-
-    def text(self, key: str, default: str | None = None) -> str:
-        if key not in self.data:
-            if default is None:
-                raise ConfigError(self._name(key), None, "a string", "it is required")
-            return default
-        v = self.data[key]
-        if not isinstance(v, str) or not v:
-            raise ConfigError(self._name(key), v, "a non-empty string")
-        return v
-
-    def point(
-        self, key: str, default: tuple[float, float, float] | None = None
-    ) -> tuple[float, float, float]:
-        if key not in self.data:
-            if default is None:
-                raise ConfigError(self._name(key), None, "[x, y, z] in metres", "it is required")
-            return default
-        v = self.data[key]
-        if (
-            not isinstance(v, list)
-            or len(v) != 3
-            or not all(
-                isinstance(c, (int, float)) and not isinstance(c, bool) and math.isfinite(c)
-                for c in v
-            )
-        ):
-            raise ConfigError(self._name(key), v, "[x, y, z]: three finite numbers (m)")
-        return (float(v[0]), float(v[1]), float(v[2]))
-
-
 def load_experiment(path: Path) -> Experiment:
     """Read and validate an experiment file."""
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        text = read_text_file(path, "experiment")
     except FileNotFoundError:
         raise ConfigError("experiment", str(path), "an existing TOML file") from None
-    return parse_experiment(text)
+    return parse_experiment(text, str(path))
 
 
-def parse_experiment(text: str) -> Experiment:
+def parse_experiment(text: str, source: str = "<text>") -> Experiment:
     """Validate experiment TOML text (see the module docstring); nothing is touched."""
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError("experiment", "TOML", f"valid TOML ({exc})") from None
+    data = parse_toml(text, "experiment", source)
     unknown = sorted(set(data) - set(_SECTIONS))
     if unknown:
         raise ConfigError(unknown[0], data[unknown[0]], f"one of the tables {', '.join(_SECTIONS)}")
@@ -301,18 +219,23 @@ def parse_experiment(text: str) -> Experiment:
         for key in keys:
             if key not in data.get(section, {}):
                 raise ConfigError(f"{section}.{key}", None, "a value", "it is required")
-    t = {name: _Table(data.get(name, {}), name, keys) for name, keys in _SECTIONS.items()}
+    t = {
+        name: Table(data.get(name, {}), name, keys, "docs/tank-run.md")
+        for name, keys in _SECTIONS.items()
+    }
 
     run, dev, wav, tank, tow, rec, cal, sim = (t[k] for k in _SECTIONS)
     name = run.text("name", "tank-run")
-    output_dir = Path(run.text("output_dir", "runs"))
-    max_duration = run.number("max_duration_s", 120.0, lo=0.0, strict_lo=True, unit="s")
+    output_dir = resolve_runs_dir(run.text("output_dir", "runs"))
+    max_duration = run.number("max_duration_s", 120.0, lo=0.0, lo_open=True, unit="s")
     board_url, stage_url = dev.text("board"), dev.text("stage")
+    check_url(board_url, "devices.board", "board")
+    check_url(stage_url, "devices.stage", "stage")
     board_channel = dev.integer("board_channel", 0, lo=0, hi=15)
 
     preset_name = wav.text("preset", "tank-board")
     family = wav.text("family", "random-cyclic")
-    amplitude = wav.number("amplitude", 0.5, lo=0.0, hi=1.0, strict_lo=True, unit="(full scale)")
+    amplitude = wav.number("amplitude", 0.5, lo=0.0, hi=1.0, lo_open=True, unit="(full scale)")
     overrides = wav.data.get("overrides", {})
     if not isinstance(overrides, dict):
         raise ConfigError("waveform.overrides", overrides, "a table of waveform fields")
@@ -339,7 +262,7 @@ def parse_experiment(text: str) -> Experiment:
     plan = TowPlan(
         start_m=tow.number("start_m", unit="m"),
         end_m=tow.number("end_m", unit="m"),
-        speed_mps=tow.number("speed_mps", lo=0.0, strict_lo=True, hi=5.0, unit="m/s"),
+        speed_mps=tow.number("speed_mps", lo=0.0, lo_open=True, hi=5.0, unit="m/s"),
         repeats=tow.integer("repeats", 1, lo=1, hi=1000),
         run_up_m=tow.number("run_up_m", 0.5, lo=0.0, unit="m"),
         run_down_m=tow.number("run_down_m", 0.5, lo=0.0, unit="m"),
@@ -358,7 +281,7 @@ def parse_experiment(text: str) -> Experiment:
 
     receiver = rec.text("name", "gcas")
     m_hops = rec.integer("m_hops", 10, lo=1, hi=64)
-    v_max = rec.number("max_speed_mps", 3.0, lo=0.0, strict_lo=True, unit="m/s")
+    v_max = rec.number("max_speed_mps", 3.0, lo=0.0, lo_open=True, unit="m/s")
     if v_max < plan.speed_mps:
         raise ConfigError(
             "receiver.max_speed_mps",
@@ -367,10 +290,14 @@ def parse_experiment(text: str) -> Experiment:
             "the Doppler search must cover the tow speed",
         )
     diag = float(np.sqrt(sum(s * s for s in size)))
-    r_max = rec.number("max_range_m", diag, lo=0.0, strict_lo=True, unit="m")
+    r_max = rec.number("max_range_m", diag, lo=0.0, lo_open=True, unit="m")
     options = rec.data.get("options", {})
     if not isinstance(options, dict):
         raise ConfigError("receiver.options", options, "a table of receiver options")
+    from hil.estimation.option_types import check_option_types
+    from hil.estimation.registry import receiver_class
+
+    check_option_types(receiver_class(receiver), options, receiver, "receiver.options.")
 
     # The waveform: preset, family, overrides, with the tank's sound speed and tow limits.
     preset = get_preset(preset_name)
@@ -389,8 +316,8 @@ def parse_experiment(text: str) -> Experiment:
             "receiver.max_range_m", r_max, f"<= the waveform's unambiguous range {r_unamb:.2f} m"
         )
 
-    store = Path(cal.text("store", "calibration"))
-    max_age = cal.number("max_age_days", 30.0, lo=0.0, strict_lo=True, unit="days")
+    store = resolve_calibration_dir(cal.text("store", "calibration"))
+    max_age = cal.number("max_age_days", 30.0, lo=0.0, lo_open=True, unit="days")
     required = cal.data.get("required", [])
     if not isinstance(required, list) or not all(isinstance(r, str) for r in required):
         raise ConfigError("calibration.required", required, "a list of calibration kinds")
@@ -410,7 +337,7 @@ def parse_experiment(text: str) -> Experiment:
         noise_level_db=sim.number(
             "noise_level_db", 40.0, lo=-20.0, hi=120.0, unit="dB re 1 µPa²/Hz"
         ),
-        reverberation=bool(sim.data.get("reverberation", True)),
+        reverberation=sim.flag("reverberation", True),
         scattering_strength_db=sim.number(
             "scattering_strength_db", -70.0, lo=-120.0, hi=-10.0, unit="dB"
         ),

@@ -81,6 +81,15 @@ def load_run_calibrations(exp: Experiment, fs_hz: float) -> RunCalibrations:
     cal = CalibrationSet.require(
         exp.calibration_store, kinds, exp.calibration_max_age_days * 86400.0
     )
+    if not exp.simulated:
+        for kind in kinds:
+            record = cal.records[kind]
+            if record.settings.get("simulated"):
+                raise ConfigError(
+                    f"calibration {kind!r}", f"simulated (id {record.id})",
+                    "measured on the real devices: a real run never applies a simulated one",
+                    f"run: hil calibrate {kind} --device DEVICE --store {exp.calibration_store}",
+                )  # fmt: skip
     latency = None
     if "latency" in kinds:
         assert cal.latency is not None  # required, so present

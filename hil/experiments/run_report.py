@@ -3,35 +3,25 @@
 - ``range_speed.png``: estimated range and speed against receive time, with the truth from
   the stage telemetry (and the exact simulated truth for simulated runs);
 - ``time_codeword_map.png``: the GCAS time–codeword map (seed Fig 5.17 style);
-- ``errors.png``: histograms of range and speed errors against the truth, for the scored
-  estimates (inside the constant-speed segments; false alarms included, the summary's RMSE
-  leaves them out).
+- ``errors.png``: histograms of range and speed errors against the truth, of every estimate
+  with a known truth and of the scored ones that are not wrong (inside the constant-speed
+  segments), titled with the counts, RMSEs and biases of ``summary.json``.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from hil.experiments.codeword_map import save_time_codeword_map
 from hil.experiments.run_scoring import score_run, telemetry_truth
 from hil.experiments.tank_run import RunOutcome
-
-
-def _pyplot() -> Any:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
+from hil.figures import new_figure
 
 
 def write_report(outcome: RunOutcome) -> list[Path]:
     """Write the figures into the run folder; return their paths."""
-    plt = _pyplot()
     folder = outcome.folder
     paths: list[Path] = []
     est = outcome.estimates
@@ -43,7 +33,7 @@ def write_report(outcome: RunOutcome) -> list[Path]:
     figures = score.figures()
     wrong = score.wrong
 
-    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(10, 6.5), sharex=True, dpi=110)
+    fig, (ax1, ax2) = new_figure(2, 1, figsize=(10, 6.5), sharex=True, dpi=110)
     ax1.plot(t[~wrong], r[~wrong], ".", ms=3, label="estimate")
     ax1.plot(
         t[wrong], r[wrong], "x", ms=4, color="tab:red",
@@ -64,14 +54,13 @@ def write_report(outcome: RunOutcome) -> list[Path]:
     fig.tight_layout()
     paths.append(folder / "range_speed.png")
     fig.savefig(paths[-1])
-    plt.close(fig)
 
     if outcome.map_times:
         paths.append(folder / "time_codeword_map.png")
         save_time_codeword_map(paths[-1], outcome.map_times, outcome.map_power)
 
     # Every estimate with a known truth; the scored ones (constant-speed segments) on top.
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 4.2), dpi=110)
+    fig, (a1, a2) = new_figure(1, 2, figsize=(10, 4.2), dpi=110)
     panels = (
         (a1, score.range_error_m, "range error (m)", "range_rmse_m", "range_bias_m", "m"),
         (a2, score.speed_error_mps, "speed error (m/s)", "speed_rmse_mps", "speed_bias_mps", "m/s"),
@@ -102,5 +91,4 @@ def write_report(outcome: RunOutcome) -> list[Path]:
     fig.tight_layout()
     paths.append(folder / "errors.png")
     fig.savefig(paths[-1])
-    plt.close(fig)
     return paths

@@ -17,7 +17,6 @@ Order of work (each step refuses with a clear message before the next touches an
 from __future__ import annotations
 
 import contextlib
-import datetime as dt
 import sys
 import time
 from dataclasses import dataclass, field
@@ -358,8 +357,7 @@ def run_experiment(
     cals = load_run_calibrations(exp, fs)
     calibration_ids = list(cals.ids)
     exp = cals.apply(exp)
-    stamp = dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-    folder = folder or exp.output_dir / f"{exp.name}-{stamp}"
+    folder = folder or exp.new_run_folder()
     folder.mkdir(parents=True, exist_ok=True)
     view = view or LiveView()
 

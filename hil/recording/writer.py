@@ -16,6 +16,7 @@ not per row); samples go to the file as they arrive.
 from __future__ import annotations
 
 import json
+import logging
 import math
 import platform
 import time
@@ -32,12 +33,16 @@ import hil
 from hil.errors import ConfigError
 from hil.estimation.base import ESTIMATE_FIELDS, Estimate
 from hil.recording import schema
+from hil.recording.nexus import annotate
 from hil.recording.records import ReceiverSetup, RunEvent, StageTelemetry
 from hil.recording.tables import append_rows, check_row, create_table
 from hil.signals.schedule import HopSchedule
 from hil.signals.schedule_file import FORMAT_NAME as SCHEDULE_FORMAT
 
 DEFAULT_CHUNK_FRAMES = 65536
+_LOG = logging.getLogger(__name__)
+_WARNING_EVENTS = ("gap", "xrun", "alarm", "overrun", "underrun")
+"""Event kinds logged as warnings (the rest, notes, as information)."""
 """Sample frames per HDF5 chunk (0.65 s at 100 kHz)."""
 
 
@@ -184,6 +189,8 @@ class RunWriter:
             )
         path.parent.mkdir(parents=True, exist_ok=True)
 
+        _LOG.info("recording %s: %g Hz, %d channel(s) of %s", path, fs_hz, n_channels,
+                  sample_dtype.name)  # fmt: skip
         f = h5py.File(path, "w", libver="latest")
         try:
             attrs = f.attrs
@@ -216,6 +223,7 @@ class RunWriter:
             f.create_dataset(schema.EXPERIMENT_TOML, data=experiment_toml, dtype=schema.STR)
             for name, columns in schema.TABLES.items():
                 create_table(f, name, columns)
+            annotate(f, schema.SAMPLES, tuple(schema.TABLES))
             f.flush()
             # From here on only appends: readers may attach at any time.
             f.swmr_mode = True
@@ -275,6 +283,7 @@ class RunWriter:
             append_rows(self._file["segments"], {"row": [row], "sample_index": [first_index]})
             if expected is not None:
                 missing = first_index - expected
+                _LOG.warning("gap at sample %d: %d samples missing", expected, missing)
                 self._pending["events"].append(
                     ("gap", expected, missing, f"samples {expected} .. {first_index - 1} missing")
                 )
@@ -309,6 +318,9 @@ class RunWriter:
         ending with "…"."""
         row = (event.kind, event.sample_index, event.length, event.text)
         check_row("events", row)
+        level = logging.WARNING if event.kind in _WARNING_EVENTS else logging.INFO
+        _LOG.log(level, "%s at sample %d (%d samples): %s", event.kind, event.sample_index,
+                 event.length, event.text)  # fmt: skip
         self._pending["events"].append(row)
         self._maybe_flush()
 

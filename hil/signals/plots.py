@@ -1,37 +1,38 @@
 """PNG diagnostics of a waveform: spectrogram, time–frequency occupancy, ambiguity functions.
 
-matplotlib is imported inside the functions with the headless Agg backend, so importing this
-module costs nothing and works without a display.
+Each ``*_figure`` function returns a :class:`matplotlib.figure.Figure` (shown inline in a
+notebook); each ``plot_*`` saves one to a file. matplotlib is imported inside the functions
+and never told which backend to use (:mod:`hil.figures`), so importing this module costs
+nothing and the caller's backend is left alone.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from hil.figures import new_figure, save_figure
 from hil.signals.ambiguity import AmbiguitySurface, narrowband_af, periodic_af, wideband_af
 from hil.signals.random_cyclic import occupancy
 from hil.signals.schedule import HopSchedule
 from hil.signals.synthesis import synthesize
 
-
-def _pyplot() -> Any:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 
 def plot_spectrogram(schedule: HopSchedule, fs_hz: float, duration_s: float, path: Path) -> Path:
+    """Save :func:`spectrogram_figure` to ``path``."""
+    return save_figure(spectrogram_figure(schedule, fs_hz, duration_s), path)
+
+
+def spectrogram_figure(schedule: HopSchedule, fs_hz: float, duration_s: float) -> Figure:
     """Spectrogram (dB) of ``duration_s`` seconds of the waveform, zoomed on its band."""
     from scipy.signal import ShortTimeFFT
     from scipy.signal.windows import hann
 
-    plt = _pyplot()
     x = synthesize(schedule, fs_hz, duration_s)
     hop_guess = float(np.min(schedule.duration_s))
     nperseg = int(max(64, min(4096, 2 ** round(np.log2(max(hop_guess * fs_hz / 2, 64))))))
@@ -43,7 +44,7 @@ def plot_spectrogram(schedule: HopSchedule, fs_hz: float, duration_s: float, pat
     margin = max(0.25 * (hi - lo), 500.0)
     keep = (f >= lo - margin) & (f <= hi + margin)
     db = 10 * np.log10(s[keep] / np.max(s) + 1e-12)
-    fig, ax = plt.subplots(figsize=(9, 4.5), dpi=110)
+    fig, ax = new_figure(figsize=(9, 4.5), dpi=110)
     mesh = ax.pcolormesh(t, f[keep] / 1e3, db, shading="auto", vmin=-60, vmax=0, cmap="viridis")
     fig.colorbar(mesh, ax=ax, label="power (dB re max)")
     ax.set_xlim(0, duration_s)
@@ -51,16 +52,18 @@ def plot_spectrogram(schedule: HopSchedule, fs_hz: float, duration_s: float, pat
     ax.set_ylabel("frequency (kHz)")
     ax.set_title(f"{schedule.family}: spectrogram ({nperseg}-sample Hann frames)")
     fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return fig
 
 
 def plot_occupancy(schedule: HopSchedule, path: Path) -> Path:
+    """Save :func:`occupancy_figure` to ``path``."""
+    return save_figure(occupancy_figure(schedule), path, dpi=110)
+
+
+def occupancy_figure(schedule: HopSchedule) -> Figure:
     """The N_F × P time–frequency occupancy array of one period (one mark per hop)."""
-    plt = _pyplot()
     occ = occupancy(schedule.code, schedule.n_tones)
-    fig, ax = plt.subplots(figsize=(max(4.0, 0.35 * occ.shape[1] + 2), 0.5 * occ.shape[0] + 2))
+    fig, ax = new_figure(figsize=(max(4.0, 0.35 * occ.shape[1] + 2), 0.5 * occ.shape[0] + 2))
     ax.imshow(occ, origin="lower", aspect="auto", cmap="Greys", interpolation="nearest")
     ax.set_yticks(range(occ.shape[0]))
     ax.set_yticklabels([f"{f / 1e3:.3f}" for f in schedule.tones_hz])
@@ -70,16 +73,18 @@ def plot_occupancy(schedule: HopSchedule, path: Path) -> Path:
     ax.set_ylabel("tone (kHz)")
     ax.set_title(f"{schedule.family}: occupancy, code {schedule.code.tolist()[:40]}", fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return fig
 
 
 def plot_ambiguity(surface: AmbiguitySurface, title: str, path: Path) -> Path:
+    """Save :func:`ambiguity_figure` to ``path``."""
+    return save_figure(ambiguity_figure(surface, title), path)
+
+
+def ambiguity_figure(surface: AmbiguitySurface, title: str) -> Figure:
     """|χ| in dB over delay and Doppler (shift in Hz, or scale α shown as speed-like axis)."""
-    plt = _pyplot()
     db = 20 * np.log10(np.maximum(surface.magnitude, 1e-6))
-    fig, ax = plt.subplots(figsize=(8, 4.5), dpi=110)
+    fig, ax = new_figure(figsize=(8, 4.5), dpi=110)
     extent = (
         surface.delay_s[0] * 1e3,
         surface.delay_s[-1] * 1e3,
@@ -92,9 +97,7 @@ def plot_ambiguity(surface: AmbiguitySurface, title: str, path: Path) -> Path:
     ax.set_ylabel("Doppler shift (Hz)" if surface.doppler_kind == "shift_hz" else "time scale α")
     ax.set_title(title)
     fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return fig
 
 
 def write_diagnostics(

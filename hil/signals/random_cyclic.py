@@ -47,8 +47,13 @@ def validate_code_request(n_tones: int, length: int, window: int) -> None:
             "even with 2 tones (the code must alternate, wrap-around included)",
             "use an even length or more tones",
         )
-    if not isinstance(window, (int, np.integer)) or not 1 <= window <= length:
-        raise ConfigError("window", window, f"an integer in 1..code_length = {length}")
+    if not isinstance(window, (int, np.integer)) or window < 1:
+        raise ConfigError("window", window, "an integer >= 1")
+    if window > length:
+        raise ConfigError(
+            "code_length", length, f">= the window W = {window} (a code holds its windows)",
+            f"lengthen the code to >= {window} or shorten the window (--window)",
+        )  # fmt: skip
     available = distinct_window_count(int(n_tones), int(window))
     if available < length:
         raise ConfigError(

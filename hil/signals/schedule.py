@@ -78,7 +78,13 @@ class HopTable:
 
 
 def _as_1d(name: str, values: ArrayLike, n: int | None, dtype: type) -> NDArray[Any]:
-    arr: NDArray[Any] = np.asarray(values, dtype=dtype).reshape(-1)
+    kind = "integers" if dtype is int else "numbers"
+    if isinstance(values, str | bytes | dict):
+        raise ConfigError(name, values, f"a list of {kind}")
+    try:
+        arr: NDArray[Any] = np.asarray(values, dtype=dtype).reshape(-1)
+    except (TypeError, ValueError):
+        raise ConfigError(name, values, f"a list of {kind}") from None
     if n is not None and arr.shape[0] != n:
         raise ConfigError(name, f"{arr.shape[0]} values", f"{n} values (one per hop)")
     if dtype is float and not np.all(np.isfinite(arr)):

@@ -69,8 +69,10 @@ def read_schedule_file(path: Path) -> tuple[HopSchedule, dict[str, Any]]:
 
     Raises :class:`ConfigError` naming the problem for a file that is not a schedule file.
     """
+    from hil.toml_table import read_text_file
+
     try:
-        doc = json.loads(Path(path).read_text(encoding="utf-8"))
+        doc = json.loads(read_text_file(path, "schedule"))
     except FileNotFoundError:
         raise ConfigError("schedule", str(path), "an existing schedule JSON file") from None
     except json.JSONDecodeError as exc:
@@ -88,4 +90,17 @@ def read_schedule_file(path: Path) -> tuple[HopSchedule, dict[str, Any]]:
         raise ConfigError("schedule.version", doc.get("version"), f"{FORMAT_VERSION}")
     if "period" not in doc or "fs" not in doc:
         raise ConfigError("schedule", str(path), "a document with 'period' and 'fs'")
-    return HopSchedule.from_period_dict(doc["period"]), doc
+    for key, unit in (("fs", "Hz"), ("sound_speed_mps", "m/s")):
+        value = doc.get(key, 1.0)
+        if isinstance(value, bool) or not isinstance(value, int | float) or not value > 0:
+            raise ConfigError(
+                f"schedule.{key}", value, f"a number > 0 ({unit})",
+                f"{path} is damaged: write it again with `hil waveform --schedule FILE`",
+            )  # fmt: skip
+    if not isinstance(doc["period"], dict):
+        raise ConfigError("schedule.period", doc["period"], "an object (the hop period)")
+    try:
+        schedule = HopSchedule.from_period_dict(doc["period"])
+    except ConfigError as exc:
+        raise ConfigError(f"schedule.{exc.field}", exc.value, exc.allowed, exc.hint) from None
+    return schedule, doc

@@ -13,6 +13,10 @@ URL                                         transport
 ``sim://board?via=memory|pty|usb``          a simulated board started now (:mod:`.sim`)
 ``sim://stage?via=pty|memory``              the simulated GRBL stage on a pty, or in the
                                             reader's thread
+``hwgrep://REGEXP[&n=N][&baud=B]``          the N-th serial port (0-based) whose name,
+                                            description or hardware id (USB VID:PID, serial
+                                            number) matches REGEXP (pyserial's hwgrep;
+                                            ``hil devices`` lists them)
 ``spy://<inner-url>?file=traffic.log``      any of the above, traffic dumped to a file
 ==========================================  ================================================
 
@@ -24,7 +28,8 @@ URL                                         transport
 Traceback (most recent call last):
 ...
 hil.errors.ConfigError: url = 'ftp://x' is not allowed: must be a device path or one of \
-serial://, loop://, socket://, rfc2217://, usb://, sim://, spy://; see hil.transports.registry
+serial://, loop://, socket://, rfc2217://, usb://, sim://, hwgrep://, spy://; see \
+hil.transports.registry
 """
 
 from __future__ import annotations
@@ -138,6 +143,38 @@ def _open_usb(rest: str, query: dict[str, str], options: dict[str, Any], timeout
     )
 
 
+SIM_DEVICES = ("board", "stage")
+
+
+def check_url(url: str, field: str = "url", sim_device: str | None = None) -> None:
+    """Refuse ``url`` as the setting ``field`` when no opener could open it, without opening.
+
+    ``sim_device``: the simulated device the setting must name when the URL is ``sim://``.
+
+    >>> check_url("sim://bord", "devices.board", "board")
+    Traceback (most recent call last):
+    ...
+    hil.errors.ConfigError: devices.board = 'sim://bord' is not allowed: must be sim://board \
+(a simulated board); did you mean sim://board?
+    """
+    if not isinstance(url, str) or not url:
+        raise ConfigError(field, url, "a non-empty transport URL or device path")
+    scheme, rest, _ = split_url(url[len("spy://") :] if url.startswith("spy://") else url)
+    if scheme and scheme not in _OPENERS and scheme != "hwgrep":
+        known = ", ".join(f"{s}://" for s in (*_OPENERS, "hwgrep", "spy"))
+        raise ConfigError(field, url, f"a device path or one of {known}")
+    if scheme != "sim":
+        return
+    wanted = (sim_device,) if sim_device else SIM_DEVICES
+    if rest not in wanted:
+        import difflib
+
+        close = difflib.get_close_matches(rest, SIM_DEVICES, n=1)
+        hint = f"did you mean sim://{close[0]}?" if close else "see hil.transports.registry"
+        what = f" (a simulated {sim_device})" if sim_device else ""
+        raise ConfigError(field, url, " or ".join(f"sim://{w}" for w in wanted) + what, hint)
+
+
 def _open_sim(rest: str, query: dict[str, str], options: dict[str, Any], timeout: float) -> Any:
     from hil.transports.sim import open_sim_board, open_sim_stage
 
@@ -147,6 +184,38 @@ def _open_sim(rest: str, query: dict[str, str], options: dict[str, Any], timeout
     if rest == "stage":
         return open_sim_stage(query, options, timeout)
     raise ConfigError("sim:// device", rest, "board or stage", "e.g. sim://board?via=pty")
+
+
+def resolve_hwgrep(url: str) -> tuple[str, int]:
+    """The serial device and baud rate ``hwgrep://REGEXP[&n=N][&baud=B]`` names.
+
+    The regexp is matched (case-insensitive) against every port's name, description and
+    hardware id by pyserial's ``list_ports.grep``, in sorted order of the device names.
+    """
+    from serial.tools import list_ports
+
+    body = url[len("hwgrep://") :]
+    regexp, *options = body.split("&")
+    settings = {"n": "0", "baud": "115200"}
+    for option in options:
+        key, _, value = option.partition("=")
+        if key not in settings:
+            raise ConfigError("hwgrep:// option", key, "n=N or baud=B", "e.g. hwgrep://2341:&n=0")
+        settings[key] = value
+    try:
+        index, baud = int(settings["n"]), int(settings["baud"])
+    except ValueError:
+        raise ConfigError("hwgrep:// option", body, "integers in n=N and baud=B") from None
+    if not regexp:
+        raise ConfigError("url", url, "hwgrep://REGEXP", "e.g. hwgrep://USB VID:PID=2341")
+    ports = sorted(list_ports.grep(regexp), key=lambda p: p.device)
+    if index >= len(ports) or index < 0:
+        listed = ", ".join(f"{p.device} ({p.hwid})" for p in list_ports.comports()) or "none"
+        raise ConfigError(
+            "url", url, f"a regexp matching at least {index + 1} serial port(s); "
+            f"{len(ports)} match", f"ports on this machine: {listed}; see hil devices",
+        )  # fmt: skip
+    return str(ports[index].device), baud
 
 
 def _open_spy(url: str, options: dict[str, Any], timeout: float) -> Any:
@@ -189,13 +258,16 @@ def open_transport(url: str, *, timeout: float = 0.05, **options: Any) -> Transp
     if url.startswith("spy://"):
         transport: Transport = _open_spy(url, options, timeout)
         return transport
+    if url.startswith("hwgrep://"):
+        device, baud = resolve_hwgrep(url)
+        return open_serial(device, baudrate=baud, timeout=timeout)
     scheme, rest, query = split_url(url)
     if scheme == "":
         plain: Transport = _open_serial(url, {}, options, timeout)
         return plain
     opener = _OPENERS.get(scheme)
     if opener is None:
-        known = ", ".join(f"{s}://" for s in (*_OPENERS, "spy"))
+        known = ", ".join(f"{s}://" for s in (*_OPENERS, "hwgrep", "spy"))
         raise ConfigError(
             "url", url, f"a device path or one of {known}", "see hil.transports.registry"
         )

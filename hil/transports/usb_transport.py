@@ -62,10 +62,14 @@ class UsbTransport:
         timeout: float = 0.05,
         url: str | None = None,
     ) -> None:
-        import usb.core
-        import usb.util
-
         self.url = url or f"usb://{vendor_id:04x}:{product_id:04x}"
+        try:
+            import usb.core
+            import usb.util
+        except ImportError as error:
+            raise TransportOpenError(
+                f"{self.url}: pyusb is not installed; pip install 'cas-hil[usb]'"
+            ) from error
         self.timeout = timeout
         self.interface = interface
         try:

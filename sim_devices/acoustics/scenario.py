@@ -21,7 +21,6 @@ hil.errors.ConfigError: colour = 'red' is not allowed: must be one of the keys .
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -32,6 +31,7 @@ from hil.errors import ConfigError
 from hil.signals.presets import check_design, get_preset
 from hil.signals.schedule import HopSchedule
 from hil.signals.waveforms import WaveformSpec
+from hil.toml_table import Table, read_toml
 from sim_devices.acoustics.ambient_noise import AmbientNoiseModel
 from sim_devices.acoustics.beam import (
     BeamPattern,
@@ -57,95 +57,6 @@ TRAJECTORIES = ("fixed", "constant-velocity", "radial", "piecewise")
 
 _TOP = ("preset", "family", "fs_hz", "duration_s", "seed", "waveform", "environment", "sonar",
         "targets", "noise", "reverberation", "tank", "direct_blast", "output")  # fmt: skip
-
-
-class _Table:
-    """A TOML table with its dotted path; every key read is checked, unknown keys refused."""
-
-    def __init__(self, data: Any, path: str, allowed: tuple[str, ...]) -> None:
-        if not isinstance(data, dict):
-            raise ConfigError(path or "scenario", data, "a table (key = value pairs)")
-        for key in data:
-            if key not in allowed:
-                raise ConfigError(
-                    _join(path, key), data[key], f"one of the keys {', '.join(allowed)}",
-                    "remove it or fix its spelling",
-                )  # fmt: skip
-        self.data, self.path = data, path
-
-    def name(self, key: str) -> str:
-        return _join(self.path, key)
-
-    def has(self, key: str) -> bool:
-        return key in self.data
-
-    def number(
-        self, key: str, default: float | None = None, *, lo: float | None = None,
-        hi: float | None = None, lo_open: bool = False, unit: str = "",
-    ) -> float:  # fmt: skip
-        if key not in self.data:
-            if default is None:
-                raise ConfigError(
-                    self.name(key),
-                    None,
-                    f"a number{(' in ' + unit) if unit else ''}",
-                    "it is required",
-                )
-            return default
-        v = self.data[key]
-        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-            raise ConfigError(
-                self.name(key), v, f"a finite number{(' in ' + unit) if unit else ''}"
-            )
-        bad_lo = lo is not None and (v <= lo if lo_open else v < lo)
-        bad_hi = hi is not None and v > hi
-        if bad_lo or bad_hi:
-            rng = []
-            if lo is not None:
-                rng.append(f"{'>' if lo_open else '>='} {lo:g}")
-            if hi is not None:
-                rng.append(f"<= {hi:g}")
-            raise ConfigError(self.name(key), v, " and ".join(rng) + (f" {unit}" if unit else ""))
-        return float(v)
-
-    def integer(self, key: str, default: int, lo: int, hi: int) -> int:
-        v = self.data.get(key, default)
-        if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
-            raise ConfigError(self.name(key), v, f"an integer {lo} … {hi}")
-        return int(v)
-
-    def flag(self, key: str, default: bool) -> bool:
-        v = self.data.get(key, default)
-        if not isinstance(v, bool):
-            raise ConfigError(self.name(key), v, "true or false")
-        return v
-
-    def text(self, key: str, default: str | None, choices: tuple[str, ...]) -> str:
-        v = self.data.get(key, default)
-        if v not in choices:
-            raise ConfigError(self.name(key), v, f"one of {', '.join(choices)}")
-        return str(v)
-
-    def vector(self, key: str, default: tuple[float, ...] | None = None, n: int = 3) -> FloatArray:
-        v = self.data.get(key, default)
-        ok = (
-            isinstance(v, list | tuple)
-            and len(v) == n
-            and all(
-                isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
-                for x in v
-            )
-        )
-        if not ok:
-            raise ConfigError(self.name(key), v, f"a list of {n} finite numbers")
-        return np.asarray(v, dtype=np.float64)
-
-    def sub(self, key: str, allowed: tuple[str, ...]) -> _Table:
-        return _Table(self.data.get(key, {}), self.name(key), allowed)
-
-
-def _join(path: str, key: str) -> str:
-    return f"{path}.{key}" if path else key
 
 
 @dataclass(frozen=True)
@@ -204,15 +115,10 @@ class Scenario:
 
 def load_scenario(path: Path) -> Scenario:
     """Read and validate a scenario TOML file."""
-    try:
-        with Path(path).open("rb") as fh:
-            data = tomllib.load(fh)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError("scenario", str(path), "valid TOML", str(exc)) from None
-    return parse_scenario(data)
+    return parse_scenario(read_toml(path, "scenario"))
 
 
-def _sound_speed(env: _Table) -> float:
+def _sound_speed(env: Table) -> float:
     if env.has("sound_speed_mps"):
         for other in ("temperature_c", "salinity_ppt"):
             if env.has(other):
@@ -231,7 +137,7 @@ def _sound_speed(env: _Table) -> float:
     return float("nan")  # the preset's
 
 
-def _target(tbl: _Table, sonar_p: FloatArray, c: float) -> TargetSpec:
+def _target(tbl: Table, sonar_p: FloatArray, c: float) -> TargetSpec:
     kind = tbl.text("trajectory", None, TRAJECTORIES)
     ts = tbl.number("target_strength_db", 0.0, lo=-100.0, hi=60.0, unit="dB re 1 m²")
 
@@ -279,7 +185,7 @@ def _target(tbl: _Table, sonar_p: FloatArray, c: float) -> TargetSpec:
 
 def parse_scenario(data: dict[str, Any]) -> Scenario:
     """Validate a scenario given as a dict (a parsed TOML document)."""
-    top = _Table(data, "", _TOP)
+    top = Table(data, "", _TOP)
     preset_name = top.data.get("preset")
     if preset_name is None:
         raise ConfigError("preset", None, "one of att, tank-audio, tank-board", "it is required")
@@ -318,7 +224,7 @@ def parse_scenario(data: dict[str, Any]) -> Scenario:
         raise ConfigError("targets", raw_targets, "an array of tables [[targets]]")
     targets = [
         _target(
-            _Table(
+            Table(
                 t,
                 f"targets[{i}]",
                 (
@@ -343,7 +249,7 @@ def parse_scenario(data: dict[str, Any]) -> Scenario:
     ]
 
     wt = top.data.get("waveform", {})
-    wtab = _Table(wt, "waveform", tuple(WaveformSpec.__dataclass_fields__))
+    wtab = Table(wt, "waveform", tuple(WaveformSpec.__dataclass_fields__))
     fastest = max([t.max_speed_mps for t in targets] + [0.0]) + sonar_speed
     overrides = dict(wtab.data)
     overrides["sound_speed_mps"] = c

@@ -20,7 +20,6 @@ from sim_devices.acoustics.sonar_equation import active_snr_noise_limited, band_
 from sim_devices.acoustics.trajectory import ConstantVelocity, Fixed, Live
 from sim_devices.acoustics.truth import hop_truth
 
-ROOT = Path(__file__).resolve().parents[2]
 FS = 100_000.0
 SCHED = check_design(get_preset("att").spec("random-cyclic"))
 
@@ -166,7 +165,7 @@ def test_target_outside_the_tank_is_refused() -> None:
 
 @pytest.mark.parametrize("name", ["att", "tank-audio", "tank-board"])
 def test_every_example_scenario_runs(tmp_path: Path, name: str) -> None:
-    status = main(["simulate", str(ROOT / "scenarios" / f"{name}.toml"), "--out",
+    status = main(["simulate", name, "--out",
                    str(tmp_path), "--duration", "0.02", "--quiet"])  # fmt: skip
     assert status == 0
     for f in ("received.wav", "schedule.json", "truth.csv", "truth.json"):

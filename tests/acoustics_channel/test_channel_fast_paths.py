@@ -3,13 +3,12 @@ and the reverberation cull, each against its exact reference."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from hil.data import scenario_path
 from hil.errors import ConfigError
 from hil.signals.presets import check_design, get_preset
 from hil.signals.schedule import HopSchedule
@@ -28,14 +27,13 @@ from sim_devices.acoustics.tank import Offset
 from sim_devices.acoustics.trajectory import ConstantVelocity, Fixed, Live, Piecewise
 from sim_devices.acoustics.transmit_eval import FLOAT32_TRANSMIT_ERROR, TransmitEvaluator
 
-ROOT = Path(__file__).resolve().parents[2]
 ATT = check_design(get_preset("att").spec("random-cyclic"))
 BOARD = check_design(get_preset("tank-board").spec("random-cyclic"))
 FS_BOARD = 1_000_000.0
 
 
 def _tank_board_channel() -> Channel:
-    return build_channel(load_scenario(ROOT / "scenarios" / "tank-board.toml"))
+    return build_channel(load_scenario(scenario_path("tank-board")))
 
 
 # ------------------------------------------------------------------ transmit evaluation

@@ -17,8 +17,10 @@ def test_latency_in_simulation_prints_truth_result_and_store(
     out = capsys.readouterr().out
     assert "[truth] simulated loopback" in out and "expect latency 549 samples" in out
     assert "latency: 549 samples" in out and "runs: 3: [549, 549, 549]" in out
-    assert f"stored: {tmp_path}/latency/latency-" in out
-    assert CalibrationSet.current(tmp_path).sample_offset == 549
+    assert f"stored: {tmp_path}/simulated/latency/latency-" in out
+    assert f"simulated: kept apart in {tmp_path}/simulated; a real run never applies it" in out
+    assert CalibrationSet.current(tmp_path / "simulated").sample_offset == 549
+    assert CalibrationSet.current(tmp_path).latency is None
 
 
 def test_sound_speed_from_temperature_then_stage(
@@ -30,11 +32,13 @@ def test_sound_speed_from_temperature_then_stage(
     args = ["calibrate", "stage", "--positions=-0.3:-0.1:4", "--pings", "2", *store]
     assert main(args) == 0
     out = capsys.readouterr().out
-    assert "sound speed used: 1477.038 m/s (stored sound-speed-" in out
+    # The simulated bench reads its own store: its thermometer, not the real calibration.
+    assert "sound speed used: 1477.038 m/s (simulated thermometer 18.3 °C)" in out
     assert "stage scale:" in out and "backlash:" in out
     # The simulated GRBL powers up locked ($22=1): the stage is homed before it moves.
     assert "[truth] simulated stage powered up locked ($22=1): homing ($H, up to" in out
-    cal = CalibrationSet.current(tmp_path)
+    assert CalibrationSet.current(tmp_path).sound_speed is not None  # by thermometer: real
+    cal = CalibrationSet.current(tmp_path / "simulated")
     assert cal.stage is not None and cal.stage.scale == pytest.approx(1.0015, abs=5e-4)
 
 

@@ -111,7 +111,7 @@ def test_stereo_input_needs_a_channel(recording: Path, capsys: pytest.CaptureFix
     [
         ("rx48k.wav", [], "the schedule's sample rate 100000 Hz"),
         ("nan.wav", [], "sample 12345 (t = 0.123450 s) is nan"),
-        ("rx.wav", ["--M", "200"], "--M (m_hops) = 200 is not allowed"),
+        ("rx.wav", ["--M", "200"], "--m-hops (m_hops) = 200 is not allowed"),
         ("rx.wav", ["--receiver", "sonar9000"], "--receiver (receiver) = 'sonar9000'"),
         ("missing.wav", [], "an existing WAV file"),
         ("rx.wav", ["--option", "novalue"], "KEY=VALUE"),

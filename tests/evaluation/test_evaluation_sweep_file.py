@@ -190,7 +190,10 @@ def test_toml_syntax_error_names_the_file(tmp_path: Path) -> None:
     path = _write(tmp_path, "[sweep\nname = 1")
     with pytest.raises(ConfigError) as err:
         load_sweep_file(path)
-    assert str(err.value).startswith(f"{path} = '<file>' is not allowed: must be valid TOML; ")
+    assert str(err.value).startswith(
+        f"sweep = '{path}' is not allowed: must be valid TOML (Expected ']' at the end of a "
+        "table declaration (at line 1, column 7))"
+    )
 
 
 def test_bad_file_runs_no_trial_and_cli_exits_2(

@@ -147,7 +147,7 @@ def test_random_cyclic_constraints_hold(args: tuple[int, int, int], seed: int) -
         ((1, 5, 1), "n_tones", "at least two tones"),
         ((3, 1, 1), "code_length", ">= 2"),
         ((2, 5, 2), "code_length", "even with 2 tones"),
-        ((4, 17, 18), "window", "1..code_length = 17"),
+        ((4, 17, 18), "code_length", ">= the window W = 18"),
     ],
 )
 def test_impossible_codes_are_refused(

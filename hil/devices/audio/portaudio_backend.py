@@ -29,7 +29,7 @@ from hil.errors import ConfigError
 
 PORTAUDIO_HINT = (
     "install the PortAudio library (Debian/Ubuntu: apt-get install libportaudio2) "
-    "and python-sounddevice"
+    "and python-sounddevice (pip install 'cas-hil[audio]')"
 )
 
 

@@ -320,6 +320,13 @@ def calibrate_response(
     check_channel("output_channel", output_channel, device.channels_out)
     check_channel("input_channel", input_channel, device.channels_in)
     band = (0.05 * fs, 0.4 * fs) if band_hz is None else (float(band_hz[0]), float(band_hz[1]))
+    if not (0 < band[0] < band[1] < fs / 2):
+        raise ConfigError(
+            "band_hz", f"{band[0]:g} {band[1]:g}",
+            f"LOW HIGH in Hz with 0 < LOW < HIGH < Nyquist ({fs / 2:g} Hz)",
+            f"give the lower edge first, e.g. --band {min(band):g} {max(band):g}"
+            if band[0] > band[1] else "narrow the band or raise --samplerate",
+        )  # fmt: skip
     if sweep_hz is None:
         sweep = (0.5 * band[0], min(1.15 * band[1], 0.48 * fs))
     else:
