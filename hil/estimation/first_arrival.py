@@ -38,14 +38,18 @@ assumes first arrivals within ``max_spread_s`` before the centroid (default 0.3 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
 from hil.errors import ConfigError
+from hil.estimation.reverb_band import doppler_resolution_mps
 from hil.estimation.row_buffer import RowBuffer
-from hil.signals.schedule import HopSchedule
+from hil.signals.schedule import HopSchedule, HopTable
 
+#: GCAS range readouts: the peak of the accumulated sums, or the first arrival (this module).
+RANGE_READOUTS = ("peak", "first-arrival")
 #: Default bound on how far the first arrival can precede the peak (centroid), in hops: 3 ms
 #: (2.2 m of range) at 10 ms hops. In a 12 × 6 × 4 m tank the side-wall images put the
 #: centroid 1.3 m behind the direct path at 5 m; 1.5 ms missed those onsets.
@@ -61,6 +65,20 @@ HI_FRACTION = 0.12
 #: the baseline (noise crossing a level set by the top alone gave onsets 0.2-0.7 m early at
 #: 0 dB per-sample SNR).
 NOISE_MARGIN = 4.0
+#: The direct path's phase is read this far into its ramp, s: before the first image in a
+#: tank 2.5 m deep (the surface image of a target 1.2 m down comes 0.27 ms after it).
+DIRECT_S = 0.2e-3
+#: Speed step of the direct path's Doppler search, m/s.
+DIRECT_SPEED_STEP = 0.002
+
+
+@dataclass(frozen=True)
+class FirstArrival:
+    """The direct path at one hop boundary: receive time ``t_s`` (s) and time scale
+    ``alpha`` (dimensionless)."""
+
+    t_s: float
+    alpha: float
 
 
 class FirstArrivalReadout:
@@ -74,6 +92,8 @@ class FirstArrivalReadout:
         Input sample rate, Hz; ``schedule.period_s · fs_hz`` must be an integer.
     m_hops:
         Boundaries used per detection (GCAS's M).
+    sound_speed_mps:
+        c, m/s.
     max_spread_s:
         How far before the centroid the first arrival may be, s (default
         :data:`MAX_SPREAD_HOPS` hops).
@@ -84,6 +104,7 @@ class FirstArrivalReadout:
         schedule: HopSchedule,
         fs_hz: float,
         m_hops: int,
+        sound_speed_mps: float,
         max_spread_s: float | None = None,
     ) -> None:
         if max_spread_s is None:
@@ -122,6 +143,10 @@ class FirstArrivalReadout:
         self.history += self._pre + self._post
         self._ring = RowBuffer(self.history, (), np.float64)
         self._valid_from = 0
+        self.sound_speed_mps = float(sound_speed_mps)
+        span = 0.25 * doppler_resolution_mps(schedule.tones_hz, schedule.hop_s, sound_speed_mps)
+        n = int(round(span / DIRECT_SPEED_STEP))
+        self._speed_grid = np.arange(-n, n + 1) * DIRECT_SPEED_STEP  # m/s
 
     def reset(self, input_index: int) -> None:
         """Forget the history; the next sample is ``input_index`` (after a gap)."""
@@ -132,10 +157,11 @@ class FirstArrivalReadout:
         """Append input samples (shape ``(n,)``) starting at absolute index ``first_index``."""
         self._ring.append(x, first_index)
 
-    def first_arrival(self, t_c: float, alpha: float, hop_index: int) -> float | None:
-        """The first arrival's time (s, input time base) at the boundary that ends hop
-        ``hop_index``, received at ``t_c`` (s, the centroid) with time scale ``alpha``; None
-        where its history is missing (start, gaps) or no onset stands out."""
+    def first_arrival(self, t_c: float, alpha: float, hop_index: int) -> FirstArrival | None:
+        """The first arrival at the boundary that ends hop ``hop_index``, received at ``t_c``
+        (s, input time base: the centroid) with time scale ``alpha``: its time and its own
+        time scale (:meth:`_direct_alpha`); None where the history is missing (start, gaps)
+        or no onset stands out."""
         fs = self.fs_hz
         sch = self.schedule
         hops = sch.hops(hop_index - self.m_hops + 2, self.m_hops)  # hops h-M+2 .. h+1
@@ -187,4 +213,49 @@ class FirstArrivalReadout:
         onset = float(n_b[0] / fs + rel)
         # The canceller's copy of an opening target (δ < 0) arrives |δ| earlier.
         delta = sch.period_s * (alpha - 1.0) / alpha
-        return onset - min(0.0, delta)
+        # The direct path alone, DIRECT_S into its ramp (before the first image).
+        j_direct = self._pre + int(round((rel + DIRECT_S) * fs))
+        direct_alpha = None
+        if j_direct < box.shape[1]:
+            p = np.asarray(box[:, j_direct], dtype=np.complex128) / w
+            direct_alpha = self._direct_alpha(p, hops, n_b, alpha)
+        return FirstArrival(
+            onset - min(0.0, delta), alpha if direct_alpha is None else direct_alpha
+        )
+
+    def _direct_alpha(
+        self, p: NDArray[np.complexfloating], hops: HopTable, n_b: NDArray[np.int64], alpha: float
+    ) -> float | None:
+        """The direct path's time scale from its phase at the ``M`` boundaries.
+
+        ``p`` (shape ``(M,)``) holds the next-tone channel, demodulated at ``α f``, a fixed
+        time into the first arrival's ramp, where no image has arrived yet. Once the known
+        transmit phase of each hop (start phase ``φ_m`` at start time ``T_m``) is removed, its
+        phase is ``θ_k + 2π f_m Δα t_m``: ``θ_k`` one unknown per tone (the delay, the copy of
+        the canceller, the target's reflection), ``Δα`` what GCAS's time scale lacks. GCAS's
+        comes from the whole hop, so every image weighs in, each at its path's own radial
+        speed (the cosine of its elevation: 5 % slow in the built-in tank); this one is the
+        direct path's. ``Δα`` maximises ``Σ_k |Σ_{m: tone k} p_m e^{−j2π f_m Δα t_m}|²`` over
+        ``±v_res/4`` (:func:`~hil.estimation.reverb_band.doppler_resolution_mps`; the boundaries
+        are a hop apart, so the phase repeats every ``v_res``); None where no tone recurs.
+        """
+        fs = self.fs_hz
+        f = hops.freq_hz[::-1]
+        start = hops.start_s[::-1]
+        known = np.exp(-1j * (hops.phase_rad[::-1] - 2.0 * np.pi * f * start))
+        q = p * known
+        tones, group = np.unique(f, return_inverse=True)
+        if np.bincount(group).max() < 2:
+            return None
+        t_m = (n_b - n_b[-1]) / fs  # relative: a common shift is a per-tone phase
+        c = self.sound_speed_mps
+        d_alpha = 2.0 * self._speed_grid / c  # (G,)
+        rot = np.exp(-2j * np.pi * d_alpha[:, None] * (f * t_m)[None, :])  # (G, M)
+        sums = np.zeros((d_alpha.size, tones.size), dtype=np.complex128)
+        for k in range(tones.size):
+            sums[:, k] = (rot[:, group == k] * q[group == k]).sum(axis=1)
+        score = np.sum(np.abs(sums) ** 2, axis=1)
+        g = int(np.argmax(score))
+        if g in (0, d_alpha.size - 1):
+            return None  # the peak is outside the span: keep GCAS's
+        return float(alpha + d_alpha[g])

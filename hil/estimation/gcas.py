@@ -102,7 +102,7 @@ from hil.estimation.detection import (
     parabolic_offsets,
 )
 from hil.estimation.doppler_grid import DopplerGrid, alpha_to_speed, doppler_grid, speed_to_alpha
-from hil.estimation.first_arrival import FirstArrivalReadout
+from hil.estimation.first_arrival import RANGE_READOUTS, FirstArrivalReadout
 from hil.estimation.kernels import (
     codeword_sums,
     exact_windows,
@@ -135,8 +135,6 @@ NOISE_STRIDE = 32
 CFAR_MODES = ("bank", "statistic")
 #: Correlator searches: every hypothesis at every sample, or coarse-then-fine (two-stage).
 SEARCH_MODES = ("full", "two-stage")
-#: Range readouts: the peak of the accumulated sums, or the first arrival (tank multipath).
-RANGE_READOUTS = ("peak", "first-arrival")
 #: Default coarse step B of the two-stage search, baseband samples.
 COARSE_STEP = 8
 #: Anchor grid of the stage-2 prefix sums, baseband samples (values cached per sample).
@@ -352,7 +350,7 @@ class GcasReceiver:
             raise ConfigError("range_readout", range_readout, f"one of {', '.join(RANGE_READOUTS)}")
         self.range_readout = range_readout
         self._first_arrival = (
-            FirstArrivalReadout(schedule, float(fs_hz), int(m_hops), max_spread_s)
+            FirstArrivalReadout(schedule, float(fs_hz), int(m_hops), c, max_spread_s)
             if range_readout == "first-arrival"
             else None
         )
@@ -1267,9 +1265,9 @@ class GcasReceiver:
                 n_star, d0, j_hat + q * self.n_codewords, t_rx, alpha
             )
         if self._first_arrival is not None:
-            t_first = self._first_arrival.first_arrival(t_rx, alpha, j_hat + q * self.n_codewords)
-            if t_first is not None:
-                t_rx = t_first
+            first = self._first_arrival.first_arrival(t_rx, alpha, j_hat + q * self.n_codewords)
+            if first is not None:
+                t_rx, alpha = first.t_s, first.alpha
         delay = t_rx - t_tx
         if delay > 2.0 * self.max_range_m / c + tol:
             self.refused_count += 1

@@ -24,6 +24,8 @@ Definitions (the seed's tables are not available; these are this project's choic
 - ``srr_db``: echo power over the expected reverberation power at t = 0
   (:meth:`~sim_devices.acoustics.reverberation.VolumeReverberation.expected_power`); the sonar is
   at rest, so the reverberation sits at zero Doppler around every tone.
+- ``reverb_speed_mps`` (GCAS): its reverberation band, ``"auto"`` (the receiver's default,
+  derived from the waveform: :mod:`hil.estimation.reverb_band`), a speed in m/s, or 0 (off).
 - Truth per hop boundary (:func:`sim_devices.acoustics.truth.hop_truth`): receive time, range
   at the bounce instant and radial speed from the exact path. An estimate with ``hop_index =
   h`` reports the boundary that starts transmit hop ``h + 1``.
@@ -77,6 +79,7 @@ RECEIVER_DEFAULTS: dict[str, Any] = {
     "coherent": False,
     "n_s": 10,
     "receiver_options": {},
+    "reverb_speed_mps": "auto",
     "range_m": [30.0, 90.0],
     "speed_mps": [5.0, 25.0],
     "max_speed_mps": 25.72,
@@ -172,6 +175,8 @@ def validate_receiver_params(params: Params) -> None:
         _number(key, p[key], 1e-9)
     if not isinstance(p["receiver_options"], dict):
         raise ConfigError("receiver_options", p["receiver_options"], "a table {receiver = {...}}")
+    if p["reverb_speed_mps"] != "auto":
+        _number("reverb_speed_mps", p["reverb_speed_mps"], 0.0)
     for name, opts in p["receiver_options"].items():
         if name not in RECEIVERS or not isinstance(opts, dict):
             raise ConfigError(
@@ -196,7 +201,7 @@ def validate_receiver_params(params: Params) -> None:
 #: The parameters that decide how the receiver is built (not the scene or the noise).
 _RECEIVER_KEYS = (
     "receiver", "preset", "family", "bandwidth_hz", "code_seed", "m_hops", "coherent", "n_s",
-    "receiver_options", "max_speed_mps", "max_range_m",
+    "receiver_options", "reverb_speed_mps", "max_speed_mps", "max_range_m",
 )  # fmt: skip
 
 
@@ -275,6 +280,7 @@ def _make_receiver(p: dict[str, Any], schedule: HopSchedule, c: float, **more: A
     extra: dict[str, Any] = dict(p["receiver_options"].get(name, {}))
     if name == "gcas":
         extra.setdefault("coherent", bool(p["coherent"]))
+        extra.setdefault("reverb_speed_mps", p["reverb_speed_mps"])
     if name == "stft":
         extra.setdefault("n_s", p["n_s"])
     extra.update(more)

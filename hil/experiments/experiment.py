@@ -14,6 +14,7 @@ positions are in ``[-travel, 0]`` (0 at the homing switch): the towed target sit
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -21,7 +22,8 @@ from typing import Any
 import numpy as np
 
 from hil.errors import ConfigError
-from hil.estimation.reverb_band import AUTO, doppler_resolution_mps
+from hil.estimation.first_arrival import RANGE_READOUTS
+from hil.estimation.reverb_band import AUTO, doppler_resolution_mps, resolve_reverb_speed
 from hil.paths import resolve_calibration_dir, resolve_runs_dir
 from hil.signals.presets import check_design, get_preset
 from hil.signals.schedule import HopSchedule
@@ -429,6 +431,23 @@ def tank_receiver_options(
     if receiver != "gcas":
         return options
     out = dict(options)
+    if "reverb_speed_mps" in out:
+        try:
+            # Checked here, so a bad value is refused before the run starts anything.
+            resolve_reverb_speed(
+                out["reverb_speed_mps"], schedule.tones_hz, schedule.hop_s, c, math.inf
+            )
+        except ConfigError as exc:
+            raise ConfigError(
+                "receiver.options.reverb_speed_mps", exc.value, exc.allowed, exc.hint
+            ) from None
+    if out.get("range_readout", "peak") not in RANGE_READOUTS:
+        raise ConfigError(
+            "receiver.options.range_readout",
+            out["range_readout"],
+            f"one of {', '.join(RANGE_READOUTS)}",
+            "first-arrival times the direct path in a tank; peak is the accumulated sums' peak",
+        )
     if "reverb_speed_mps" not in out:
         v_res = doppler_resolution_mps(schedule.tones_hz, schedule.hop_s, c)
         out["reverb_speed_mps"] = AUTO if plan.speed_mps >= 2.0 * v_res else 0.0

@@ -116,11 +116,14 @@ def _experiment(tmp_path: Path, old: str, new: str) -> Path:
 def test_receiver_option_text_for_a_speed(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    path = _experiment(tmp_path, "reverb_speed_mps = 0.8", 'reverb_speed_mps = "fast"')
+    path = _experiment(
+        tmp_path, "[calibration]", 'options = { reverb_speed_mps = "fast" }\n\n[calibration]'
+    )
     line = _error(capsys, ["tank-run", str(path)])
     assert line == (
         "hil tank-run: error: receiver.options.reverb_speed_mps = 'fast' is not allowed: must "
-        "be a finite number (a gcas option); e.g. reverb_speed_mps=0.0"
+        "be 'auto' or a speed >= 0 m/s; give a number such as 0.8, 0 to turn the band off, "
+        "or 'auto'"
     )
 
 

@@ -155,3 +155,22 @@ def test_tank_run_derives_the_band_from_the_tow() -> None:
         )
     )
     assert peak.receiver_options == {"range_readout": "peak", "reverb_speed_mps": 0.0}
+
+
+@pytest.mark.parametrize(
+    ("option", "message"),
+    [
+        ('reverb_speed_mps = "fast"', "receiver.options.reverb_speed_mps = 'fast' is not allowed"),
+        ("reverb_speed_mps = -1.0", "receiver.options.reverb_speed_mps = -1.0 is not allowed"),
+        (
+            'range_readout = "centre"',
+            "receiver.options.range_readout = 'centre' is not allowed: must be one of peak, "
+            "first-arrival",
+        ),
+    ],
+)
+def test_tank_receiver_options_refused_when_the_file_is_read(option: str, message: str) -> None:
+    text = DEFAULT_EXPERIMENT.replace("[calibration]", f"options = {{ {option} }}\n\n[calibration]")
+    with pytest.raises(ConfigError) as info:
+        parse_experiment(text)
+    assert str(info.value).startswith(message)
