@@ -375,7 +375,8 @@ def sim_tank(truth: SimTruth) -> Iterator[tuple[MechanicalStage, EchoTank, list[
     clock = ManualClock(0.0)
     config = GrblSimConfig(
         homing=False, soft_limits=False, hard_limits=False, power_up_position_mm=0.0,
-        max_rate_mm_min=6000.0, acceleration_mm_s2=500.0,
+        max_rate_mm_min=6000.0, acceleration_mm_s2=500.0, steps_per_mm=80.0,
+        max_travel_mm=500.0, status_mask=3,
     )  # fmt: skip
     with (
         SimulatedGrblOnPty(config, clock=clock) as sim,
