@@ -14,9 +14,14 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from sim_devices.stage import GrblSimConfig, GrblState, ManualClock, SimulatedGrbl
+from sim_devices.stage.motion import Path, Piece, plan_move
+from sim_devices.stage.planner import plan_blocks
 
 STOCK = GrblSimConfig()
 BANNER = ["", "Grbl 1.1h ['$' for help]"]
@@ -128,9 +133,7 @@ def test_critical_alarm_ignores_status_queries_until_reset() -> None:
 
 def test_lines_sent_during_a_feed_hold_wait_for_the_resume() -> None:
     conv = Conversation()
-    got = conv.play(
-        [(0.0, b"G1 X-20 F300\n"), (1.0, b"!"), (1.5, b"G1 X-1\n?"), (2.0, b"~")], 2.1
-    )
+    got = conv.play([(0.0, b"G1 X-20 F300\n"), (1.0, b"!"), (1.5, b"G1 X-1\n?"), (2.0, b"~")], 2.1)
     assert got[0] == (0.0025, "ok")
     assert got[1][1].startswith("<Hold:0|MPos:-4.988,")  # the line is not answered while held
     assert got[2] == (2.0025, "ok")
@@ -266,9 +269,7 @@ def test_unlock_while_moving_is_ok_and_a_jog_after_a_cancel_waits() -> None:
     assert got[2] == (0.2025, "error:8")  # $J= is refused while a G1 runs (state Run)
     assert got[3] == (0.503, "error:8")  # 0x85 cancels jogs only: the G1 still runs
     jog = Conversation()
-    got = jog.play(
-        [(0.0, b"$J=G91 X-5 F300\n"), (0.5, b"\x85"), (0.501, b"$J=G91 X1 F300\n")], 1.2
-    )
+    got = jog.play([(0.0, b"$J=G91 X-5 F300\n"), (0.5, b"\x85"), (0.501, b"$J=G91 X1 F300\n")], 1.2)
     # The cancel at 0.5 s decelerates from 4.976 mm/s at 10 mm/s²; the new jog waits for it.
     assert got == [(0.0025, "ok"), (pytest.approx(0.5 + 0.4976 + 0.0024, abs=STEP), "ok")]
 
@@ -279,3 +280,83 @@ def test_sync_commands_wait_for_the_planner() -> None:
     assert lines(got) == ["ok", "ok"]
     # M8 is parsed while the move runs; its ok comes as the planner empties.
     assert got[1][0] == pytest.approx(0.0024 + 2 / 10**0.5, abs=STEP)
+
+
+def test_reset_while_homing_is_alarm_6_and_a_stuck_pull_off_alarm_8() -> None:
+    homing = replace(STOCK, homing=True, homing_cycles=("X",), switch_axes="X")
+    got = Conversation(homing).play([(0.0, b"$H\n"), (1.0, b"\x18")], 2.0)
+    assert got == [
+        (1.0, "ALARM:6"), (1.5, "ok"), (1.5, ""), (1.5, "Grbl 1.1h ['$' for help]"), (1.5, LOCK),
+    ]  # fmt: skip
+    # Resting on the far switch (one pin per axis): the approach locks at once, the pull-off
+    # moves further onto the switch, which stays engaged.
+    stuck = Conversation(replace(homing, power_up_position_mm=-201.5))
+    got = stuck.play([(0.0, b"$H\n")], 2.0)
+    assert lines(got) == ["ALARM:8", "ok", *BANNER, LOCK]
+    # Locked at once, the $26 debounce (0.25 s), then the 1 mm pull-off.
+    assert at(got, "ALARM:8") == pytest.approx(0.0024 + 0.25 + move_time(1, 500 / 60), abs=STEP)
+
+
+def test_soft_limit_while_running_stops_then_alarms() -> None:
+    conv = Conversation(replace(STOCK, homing=True, soft_limits=True, power_up_position_mm=0))
+    got = conv.play([(0.0, b"$X\nG1 X-20 F300\n"), (1.0, b"G1 X-300\n")], 3.0)
+    # The offending line is parsed at 1.0024 s; the cycle decelerates (0.5 s) first.
+    assert lines(got) == ["[MSG:Caution: Unlocked]", "ok", "ok", "ALARM:2",
+                          "[MSG:Reset to continue]"]  # fmt: skip
+    assert at(got, "ALARM:2") == pytest.approx(1.0024 + 0.5, abs=STEP)
+    assert at(got, "[MSG:Reset to continue]") == pytest.approx(1.0024 + 1.0, abs=STEP)
+    assert conv.sim.status().velocity_mm_s == 0.0
+
+
+def test_a_full_planner_holds_the_line_until_a_block_ends() -> None:
+    conv = Conversation()
+    script = [(0.003 * k, f"G1 X{-1 - (k % 2)} F300\n".encode()) for k in range(17)]
+    got = conv.play(script, 0.3)
+    # 16 lines are not all answered: after the first 15 blocks the planner is full (the
+    # first runs, 14 wait); the 16th line waits for room (the first 1 mm takes 0.63 s).
+    assert len(got) == 15
+    got = lines(conv.play([(0.31, b"\x18")], 1.0))
+    assert got[:2] == ["ALARM:3", "ok"]  # the line blocked in the planner, answered at reset
+
+
+def test_inches_check_mode_sleep_and_restore() -> None:
+    conv = Conversation()
+    got = lines(conv.play([(0.0, b"G20 G1 X-0.1 F10\nG4 P0\n")], 2.0))
+    assert got == ["ok", "ok"]  # 2.54 mm at 254 mm/min
+    assert conv.sim.status().machine_mm == -2.54  # reported in mm
+    check = lines(conv.play([(2.0, b"$C\n"), (2.1, b"G1 X-50 F100\n"), (2.2, b"$C\n")], 2.3))
+    assert check == ["[MSG:Enabled]", "ok", "ok", "[MSG:Disabled]", "ok", *BANNER]
+    assert conv.sim.status().machine_mm == -2.54  # checked, not moved
+    sleep = lines(conv.play([(2.4, b"$SLP\n"), (2.5, b"?"), (2.6, b"\x18")], 2.7))
+    assert sleep[:2] == ["ok", "[MSG:Sleeping]"]
+    assert sleep[2].startswith("<Sleep|")
+    assert sleep[3:] == [*BANNER, LOCK]
+    restored = lines(conv.play([(2.8, b"$110=900\n"), (2.9, b"$RST=$\n"), (3.0, b"$$\n")], 3.1))
+    assert restored[:3] == ["ok", "[MSG:Restoring defaults]", "ok"]
+    assert "$110=500.000" in restored
+
+
+@given(
+    lengths=st.lists(st.floats(0.05, 20.0), min_size=1, max_size=15),
+    rate=st.floats(0.5, 50.0),
+)
+@settings(max_examples=60, deadline=None)
+def test_collinear_blocks_at_one_rate_run_as_one_move(lengths: list[float], rate: float) -> None:
+    """Chunks == whole: blocks along one direction at one rate take as long as one move."""
+    targets = list(np.cumsum(lengths))
+    _, ends = plan_blocks(0.0, 0.0, 0.0, targets, [rate] * len(targets), 10.0, 0.01)
+    whole = plan_move(0.0, 0.0, targets[-1], rate, 10.0)[-1].t
+    assert ends[-1] == pytest.approx(whole, rel=1e-7)
+    assert all(b > a for a, b in zip([0.0, *ends], ends, strict=False))
+
+
+def test_a_reversal_stops_at_the_junction() -> None:
+    pieces, ends = plan_blocks(0.0, 0.0, 0.0, [10.0, 0.0], [5.0, 5.0], 10.0, 0.01)
+    assert ends == pytest.approx([2.5, 5.0])
+    assert path_state(pieces, 2.5) == pytest.approx((10.0, 0.0))
+
+
+def path_state(pieces: list[Piece], t: float) -> tuple[float, float]:
+    path = Path(pieces[0].t, pieces[0].x)
+    path.replace_from(pieces[0].t, pieces)
+    return path.state_at(t)
