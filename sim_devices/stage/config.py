@@ -13,6 +13,7 @@ that have limit switches wired (all three by default).
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 
 from hil.errors import ConfigError
@@ -161,3 +162,44 @@ def format_setting(number: int, value: float) -> str:
     """One ``$$`` line, as GRBL prints it (integers bare, others with 3 decimals)."""
     shown = str(int(value)) if number in INTEGER_SETTINGS else f"{value:.3f}"
     return f"${number}={shown}"
+
+
+_FLOAT = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)")
+
+
+def store_setting(settings: dict[int, float], text: str) -> int | None:
+    """Apply a ``$x=val`` line to ``settings``; return GRBL's error code, ``None`` if stored.
+
+    As ``system_execute_line`` and ``settings_store_global_setting``: a number that does not
+    read is ``error:2``, a missing ``=``, trailing text or an unknown setting ``error:3``, a
+    negative value ``error:4``, ``$0`` under 3 µs ``error:6``, soft limits without homing
+    ``error:10``; ``$22=0`` turns soft limits off too.
+
+    >>> table = GrblSimConfig().settings()
+    >>> store_setting(table, "$110=900"), table[110], store_setting(table, "$Q")
+    (None, 900.0, 2)
+    """
+    head = _FLOAT.match(text, 1)
+    if head is None:
+        return 2
+    if text[head.end() : head.end() + 1] != "=":
+        return 3
+    tail = _FLOAT.match(text, head.end() + 1)
+    if tail is None:
+        return 2
+    number, value = float(head.group()), float(tail.group())
+    if tail.end() != len(text) or number > 255:
+        return 3
+    key = int(number)
+    if value < 0:
+        return 4
+    if key not in settings:
+        return 3
+    if key == 0 and value < 3:
+        return 6
+    if key == 20 and value and not settings[22]:
+        return 10
+    settings[key] = float(int(value)) if key in INTEGER_SETTINGS else value
+    if key == 22 and not value:
+        settings[20] = 0
+    return None

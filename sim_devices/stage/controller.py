@@ -61,22 +61,20 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from sim_devices.stage.config import AXES, INTEGER_SETTINGS, GrblSimConfig, format_setting
-from sim_devices.stage.gcode import Block, GcodeError, parse_block
+from sim_devices.stage.config import AXES, GrblSimConfig, format_setting, store_setting
+from sim_devices.stage.gcode import GcodeError, parse_block
 from sim_devices.stage.homing import AxisSwitches, run_homing
 from sim_devices.stage.motion import Path, plan_stop
+from sim_devices.stage.parser_state import ParserState, axes_text
 from sim_devices.stage.planner import plan_blocks
+from sim_devices.stage.reports import ReportRefresh
 
 PLANNER_BLOCKS = 15
 RX_BUFFER_SIZE = 128
 LINE_BUFFER_SIZE = 80
 ALARM_DELAY_S = 0.5
 CRITICAL_ALARMS = frozenset({1, 2})
-WCO_REFRESH = (10, 30)  # idle, busy (REPORT_WCO_REFRESH_*_COUNT)
-OVR_REFRESH = (10, 20)  # idle, busy (REPORT_OVR_REFRESH_*_COUNT)
 HELP = "[HLP:$$ $# $G $I $N $x=val $Nx=line $J=line $SLP $C $X $H ~ ! ? ctrl-x]"
-_FLOAT = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)")
-_COORD_NAMES = ("G54", "G55", "G56", "G57", "G58", "G59")
 
 __all__ = ["GrblSimConfig", "GrblState", "SimStatus", "SimulatedGrbl"]
 
@@ -168,7 +166,7 @@ class SimulatedGrbl:
         self._offsets = list(physical)  # physical - machine, per axis
         self._offset_times: list[float] = [self._t]
         self._offset_values: list[float] = [physical[0]]
-        self._coords = [[0.0, 0.0, 0.0] for _ in _COORD_NAMES]
+        self._gc = ParserState()
         self._startup_lines = ["", ""]
         self._out = bytearray()
         self._partial = bytearray()
@@ -325,18 +323,8 @@ class SimulatedGrbl:
         self._line_in_progress = False
         self._critical = False
         self._alarm_until = None
-        self._distance = 90
-        self._motion_mode = 0
-        self._units = 210
-        self._coord = 0
-        self._feed: float | None = None
-        self._spindle = 5
-        self._spindle_speed = 0.0
-        self._coolant = 9
-        self._g92 = [0.0, 0.0, 0.0]
-        self._parser = [self._machine(i) for i in range(3)]
-        self._wco_counter = 0
-        self._ovr_counter = 0
+        self._gc.reset([self._machine(i) for i in range(3)])
+        self._refresh = ReportRefresh()
         self._state = (
             GrblState.ALARM if prior in (GrblState.ALARM, GrblState.SLEEP) else (GrblState.IDLE)
         )
@@ -680,12 +668,7 @@ class SimulatedGrbl:
             self._emit(format_setting(number, value))
 
     def _cmd_modes(self) -> None:
-        feed = 0 if self._feed is None else self._feed
-        self._emit(
-            f"[GC:G{self._motion_mode} {_COORD_NAMES[self._coord]} G17 G{self._units // 10} "
-            f"G{self._distance} G94 M{self._spindle} M{self._coolant} T0 F{feed:g} "
-            f"S{self._spindle_speed:g}]"
-        )
+        self._emit(self._gc.modes_report())
         self._finish_line("ok")
 
     def _cmd_check(self) -> None:
@@ -709,13 +692,8 @@ class SimulatedGrbl:
         self._finish_line("ok")
 
     def _cmd_parameters(self) -> None:
-        for name, values in zip(_COORD_NAMES, self._coords, strict=True):
-            self._emit(f"[{name}:{_axes(values)}]")
-        self._emit("[G28:0.000,0.000,0.000]")
-        self._emit("[G30:0.000,0.000,0.000]")
-        self._emit(f"[G92:{_axes(self._g92)}]")
-        self._emit("[TLO:0.000]")
-        self._emit("[PRB:0.000,0.000,0.000:0]")
+        for line in self._gc.parameters_report():
+            self._emit(line)
         self._finish_line("ok")
 
     def _cmd_restore(self, text: str) -> None:
@@ -724,7 +702,7 @@ class SimulatedGrbl:
         if text[-1] in "$*":
             self.settings = self.config.settings()
         if text[-1] in "#*":
-            self._coords = [[0.0, 0.0, 0.0] for _ in _COORD_NAMES]
+            self._gc.coords = ParserState().coords
         self._emit("[MSG:Restoring defaults]")
         self._finish_line("ok")
         self._restart(self._state)
@@ -746,169 +724,65 @@ class SimulatedGrbl:
         return self._finish_line("ok")
 
     def _write_setting(self, text: str) -> None:
-        """``$x=val`` as ``system_execute_line`` and ``settings_store_global_setting``."""
-        head = _FLOAT.match(text, 1)
-        if head is None:
-            return self._error(2)
-        if text[head.end() : head.end() + 1] != "=":
-            return self._error(3)
-        tail = _FLOAT.match(text, head.end() + 1)
-        if tail is None:
-            return self._error(2)
-        number, value = float(head.group()), float(tail.group())
-        if tail.end() != len(text) or number > 255:
-            return self._error(3)
-        key = int(number)
-        if value < 0:
-            return self._error(4)
-        if key not in self.settings:
-            return self._error(3)
-        if key == 0 and value < 3:
-            return self._error(6)
-        if key == 20 and value and not self.settings[22]:
-            return self._error(10)
-        self.settings[key] = float(int(value)) if key in INTEGER_SETTINGS else value
-        if key == 22 and not value:
-            self.settings[20] = 0  # GRBL forces soft limits off with homing
-        self._finish_line("ok")
+        error = store_setting(self.settings, text)
+        self._finish_line("ok" if error is None else f"error:{error}")
 
     # ---------------------------------------------------------------- g-code
     def _jog(self, body: str) -> None:
         block = parse_block(body, jog=True)
         if isinstance(block, GcodeError):
             return self._error(block.code)
-        units = block.g.get("units", self._units)
-        scale = 25.4 if units == 200 else 1.0
-        target = self._targets(block, block.g.get("distance", self._distance), scale)
-        if target is None:
-            return self._error(20)
+        target, feed = self._gc.jog_target(block)
+        if any(abs(target[i] - self._gc.position[i]) > 1e-9 for i in (1, 2)):
+            return self._error(20)  # the simulated machine drives X only
         if self.settings[20] and not self._within_travel(target):
             return self._error(15)
-        moved = target[0] != self._parser[0]
-        self._parser = list(target)
+        moved = target[0] != self._gc.position[0]
+        self._gc.position = target
         if moved:
-            rate = min(block.words["F"] * scale, self.settings[110]) / 60.0
-            self._queue_block(_Motion(target[0], rate, True))
+            self._queue_block(_Motion(target[0], min(feed, self.settings[110]) / 60.0, True))
         self._finish_line("ok")
 
     def _gcode(self, text: str) -> None:
         block = parse_block(text)
         if isinstance(block, GcodeError):
             return self._error(block.code)
-        motion = block.g.get("motion", self._motion_mode)
-        non_modal = block.g.get("non_modal")
-        units = block.g.get("units", self._units)
-        scale = 25.4 if units == 200 else 1.0
-        feed = self._feed if "F" not in block.words else block.words["F"] * scale
-        axis_command = block.axis_words and non_modal not in (100, 920)
-        if non_modal == 530 and motion not in (0, 10):
-            return self._error(30)
-        if axis_command and motion == 800:
-            return self._error(31)
-        if axis_command and motion == 10 and not feed:
-            return self._error(22)
-        distance = block.g.get("distance", self._distance)
-        coord = block.g.get("coord", self._coord * 10 + 540)
-        target = None
-        if axis_command:
-            saved = self._coord
-            self._coord = (coord - 540) // 10
-            target = self._targets(block, distance, scale)
-            self._coord = saved
-            if target is None:
-                return self._error(20)
-        syncs = self._modal_changes(block)
-        # Apply in gcode.c's order: feed, spindle, coolant, dwell, units, coords, distance,
-        # G10/G92, motion, program flow.
-        self._feed, self._units, self._distance, self._motion_mode = feed, units, distance, motion
-        if "coord" in block.g:
-            new = (block.g["coord"] - 540) // 10
-            if new != self._coord:
-                self._coord, self._wco_counter = new, 0
-        if non_modal == 100:
-            self._set_coordinate_system(block, scale)
-        elif non_modal == 920:
-            wco = self._coords[self._coord]
-            for i, letter in enumerate(AXES):
-                if letter in block.words:
-                    self._g92[i] = self._parser[i] - wco[i] - block.words[letter] * scale
-            self._wco_counter = 0
-        elif non_modal == 921:
-            self._g92 = [0.0, 0.0, 0.0]
-            self._wco_counter = 0
-        if target is not None and motion in (0, 10):
-            if self.settings[20] and not self._within_travel(target):
+        checking = self._state is GrblState.CHECK
+        done = self._gc.execute(block, spindle_syncs=not checking)
+        if isinstance(done, GcodeError):
+            return self._error(done.code)
+        if done.wco_changed:
+            self._refresh.offset_changed()
+        if done.target is not None:
+            if self.settings[20] and not self._within_travel(done.target):
                 return self._soft_limit_violation()
-            moved = target[0] != self._parser[0]
-            self._parser = list(target)
-            if moved and self._state is not GrblState.CHECK:
-                rate = self.settings[110] if motion == 0 else min(feed or 0.0, self.settings[110])
-                motion_block = _Motion(target[0], rate / 60.0, False)
+            moved = done.target[0] != self._gc.position[0]
+            self._gc.position = done.target
+            if moved and not checking:
+                rate = (
+                    self.settings[110] if done.rapid else min(done.feed_mm_min, self.settings[110])
+                )
+                motion = _Motion(done.target[0], rate / 60.0, False)
                 if len(self._blocks) >= PLANNER_BLOCKS:
-                    self._blocked_motion = motion_block
+                    self._blocked_motion = motion
                     return None  # ``ok`` when the planner has room
-                self._queue_block(motion_block)
-        program = block.m.get("stopping")
-        if non_modal == 40 or syncs or program is not None:
-            if self._state is GrblState.CHECK:
-                return self._finish_line("ok")
-            dwell = block.words.get("P", 0.0) if non_modal == 40 else 0.0
-            self._sync = _Sync(dwell, None if program is None else lambda: self._program(program))
+                self._queue_block(motion)
+        if done.sync and not checking:
+            program = done.program
+            self._sync = _Sync(
+                done.dwell_s, None if program is None else lambda: self._program(program)
+            )
             self._start_sync_dwell()
             return None  # ``ok`` when the planner is empty and the dwell is over
         return self._finish_line("ok")
 
-    def _modal_changes(self, block: Block) -> bool:
-        """Apply M3/M4/M5 and M8/M9 (and S); True if one changed (GRBL syncs then)."""
-        changed = False
-        if "S" in block.words:
-            self._spindle_speed = block.words["S"]
-        if "spindle" in block.m and block.m["spindle"] != self._spindle:
-            self._spindle, changed = block.m["spindle"], True
-        if "coolant" in block.m and block.m["coolant"] != self._coolant:
-            self._coolant, changed = block.m["coolant"], True
-        return changed and self._state is not GrblState.CHECK
-
     def _program(self, code: int) -> None:
+        """After the sync: M0/M1 pause (a feed hold), M2/M30 end the program."""
         if code in (0, 1):
             self._state, self._hold = GrblState.HOLD, "complete"
             return
-        self._motion_mode, self._distance, self._coord, self._units = 10, 90, 0, 210
-        self._spindle, self._coolant = 5, 9
+        self._gc.end_program()
         self._emit("[MSG:Pgm End]")
-
-    def _set_coordinate_system(self, block: Block, scale: float) -> None:
-        """``G10 L2 Pn`` (offsets given) or ``G10 L20 Pn`` (offsets making the present
-        position the values given); ``P0`` is the active system."""
-        p = int(block.words["P"])
-        index = self._coord if p == 0 else p - 1
-        for i, letter in enumerate(AXES):
-            if letter in block.words:
-                value = block.words[letter] * scale
-                if block.words["L"] == 20:
-                    value = self._parser[i] - self._g92[i] - value
-                self._coords[index][i] = value
-        if index == self._coord:
-            self._wco_counter = 0
-
-    def _targets(self, block: Block, distance: int, scale: float) -> list[float] | None:
-        """Machine targets (mm) of the block's axis words; ``None`` if Y or Z would move
-        (the simulated machine drives X only)."""
-        wco = self._wco()
-        target = list(self._parser)
-        for i, letter in enumerate(AXES):
-            if letter not in block.words:
-                continue
-            value = block.words[letter] * scale
-            if block.g.get("non_modal") == 530:
-                target[i] = value
-            elif distance == 90:
-                target[i] = value + wco[i]
-            else:
-                target[i] = self._parser[i] + value
-        if any(abs(target[i] - self._parser[i]) > 1e-9 for i in (1, 2)):
-            return None
-        return target
 
     def _soft_limit_violation(self) -> None:
         # limits_soft_check: a running cycle decelerates to a stop first, then ALARM:2;
@@ -934,34 +808,25 @@ class SimulatedGrbl:
             state += f":{self._substate()}"
         mask = int(self.settings[10])
         machine = [self._machine(i) for i in range(3)]
-        wco = self._wco()
+        wco = self._gc.wco()
         shown = machine if mask & 1 else [m - w for m, w in zip(machine, wco, strict=True)]
-        fields = [state, f"{'MPos' if mask & 1 else 'WPos'}:{_axes(shown)}"]
+        fields = [state, f"{'MPos' if mask & 1 else 'WPos'}:{axes_text(shown)}"]
         if mask & 2:
             free = PLANNER_BLOCKS - len(self._blocks)
             fields.append(f"Bf:{free},{RX_BUFFER_SIZE - self._rx_used()}")
         _, v = self._path.state_at(self._t)
-        speed = self._spindle_speed if self._spindle != 5 else 0.0
+        speed = self._gc.spindle_speed if self._gc.spindle != 5 else 0.0
         fields.append(f"FS:{abs(v) * 60.0:.0f},{speed:.0f}")
         pins = self._engaged_axes()
         if pins:
             fields.append(f"Pn:{pins}")
-        busy = 1 if self._state in _BUSY else 0
-        if self._wco_counter > 0:
-            self._wco_counter -= 1
-        else:
-            self._wco_counter = WCO_REFRESH[busy] - 1
-            if self._ovr_counter == 0:
-                self._ovr_counter = 1
-            fields.append(f"WCO:{_axes(wco)}")
-        if self._ovr_counter > 0:
-            self._ovr_counter -= 1
-        else:
-            self._ovr_counter = OVR_REFRESH[busy] - 1
+        show_wco, show_ov = self._refresh.next(busy=self._state in _BUSY)
+        if show_wco:
+            fields.append(f"WCO:{axes_text(wco)}")
+        if show_ov:
             fields.append("Ov:100,100,100")
-            accessories = ("S" if self._spindle == 3 else "C" if self._spindle == 4 else "") + (
-                "F" if self._coolant == 8 else ""
-            )
+            spindle = {3: "S", 4: "C"}.get(self._gc.spindle, "")
+            accessories = spindle + ("F" if self._gc.coolant == 8 else "")
             if accessories:
                 fields.append(f"A:{accessories}")
         return "<" + "|".join(fields) + ">"
@@ -979,10 +844,6 @@ class SimulatedGrbl:
         found = [h for h in hits if h is not None]
         return min(found) if found else None
 
-    def _wco(self) -> list[float]:
-        coords = self._coords[self._coord]
-        return [c + g for c, g in zip(coords, self._g92, strict=True)]
-
     def _set_offset(self, axis: int, offset: float) -> None:
         self._offsets[axis] = offset
         if axis == 0:
@@ -995,14 +856,10 @@ class SimulatedGrbl:
         return float(np.round((x - self._offsets[axis]) * spm) / spm)
 
     def _parser_sync(self) -> None:
-        self._parser = [self._machine(i) for i in range(3)]
+        self._gc.position = [self._machine(i) for i in range(3)]
 
     def _emit(self, line: str) -> None:
         self._out += line.encode("ascii") + b"\r\n"
-
-
-def _axes(values: list[float]) -> str:
-    return ",".join(f"{v:.3f}" for v in values)
 
 
 def _preparse(raw: bytes) -> tuple[str, bool]:
