@@ -740,8 +740,9 @@ class SimulatedGrbl:
         moved = target[0] != self._gc.position[0]
         self._gc.position = target
         if moved:
-            self._queue_block(_Motion(target[0], min(feed, self.settings[110]) / 60.0, True))
-        self._finish_line("ok")
+            self._plan_or_wait(_Motion(target[0], min(feed, self.settings[110]) / 60.0, True))
+        else:
+            self._finish_line("ok")
 
     def _gcode(self, text: str) -> None:
         block = parse_block(text)
@@ -765,7 +766,7 @@ class SimulatedGrbl:
                 motion = _Motion(done.target[0], rate / 60.0, False)
                 if len(self._blocks) >= PLANNER_BLOCKS:
                     self._blocked_motion = motion
-                    return None  # ``ok`` when the planner has room
+                    return None  # ``ok`` when a block ends
                 self._queue_block(motion)
         if done.sync and not checking:
             program = done.program
@@ -775,6 +776,15 @@ class SimulatedGrbl:
             self._start_sync_dwell()
             return None  # ``ok`` when the planner is empty and the dwell is over
         return self._finish_line("ok")
+
+    def _plan_or_wait(self, motion: _Motion) -> None:
+        """``mc_line``: plan the block and answer ``ok``, or wait (the line unanswered)
+        until a block ends and the planner has room."""
+        if len(self._blocks) >= PLANNER_BLOCKS:
+            self._blocked_motion = motion
+            return
+        self._queue_block(motion)
+        self._finish_line("ok")
 
     def _program(self, code: int) -> None:
         """After the sync: M0/M1 pause (a feed hold), M2/M30 end the program."""

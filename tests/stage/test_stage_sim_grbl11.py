@@ -360,3 +360,10 @@ def path_state(pieces: list[Piece], t: float) -> tuple[float, float]:
     path = Path(pieces[0].t, pieces[0].x)
     path.replace_from(pieces[0].t, pieces)
     return path.state_at(t)
+
+
+def test_jogs_wait_for_planner_room_too() -> None:
+    conv = Conversation()
+    script = [(0.003 * k, f"$J=G90 X{-1 - (k % 2)} F300\n".encode()) for k in range(16)]
+    assert len(conv.play(script, 0.3)) == 15
+    assert lines(conv.play([], 1.0)) == ["ok"]  # when the first 1 mm jog block ends
