@@ -296,15 +296,8 @@ class SimulatedGrbl:
         return self._homing_end is not None or self._hold == "decel" or self._running()
 
     def _running(self) -> bool:
-        return (
-            bool(self._blocks)
-            and self._hold is None
-            and self._state
-            in (
-                GrblState.RUN,
-                GrblState.JOG,
-            )
-        )
+        moving_states = (GrblState.RUN, GrblState.JOG)
+        return bool(self._blocks) and self._hold is None and self._state in moving_states
 
     def _watchdog_applies(self) -> bool:
         return (
@@ -325,9 +318,8 @@ class SimulatedGrbl:
         self._alarm_until = None
         self._gc.reset([self._machine(i) for i in range(3)])
         self._refresh = ReportRefresh()
-        self._state = (
-            GrblState.ALARM if prior in (GrblState.ALARM, GrblState.SLEEP) else (GrblState.IDLE)
-        )
+        locked = prior in (GrblState.ALARM, GrblState.SLEEP)
+        self._state = GrblState.ALARM if locked else GrblState.IDLE
         self._out += f"\r\nGrbl {self.config.version} ['$' for help]\r\n".encode()
         if self.settings[21] and self._engaged_axes():
             self._state = GrblState.ALARM
