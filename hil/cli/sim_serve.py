@@ -2,7 +2,8 @@
 
 Prints the pty path on the first line of stdout (open it like a serial port), then serves in
 real time until Ctrl-C (or SIGTERM). The board is a loopback cable (``--delay`` samples,
-``--gain``); the stage is the simulated GRBL 1.1 controller.
+``--gain``); the stage is the simulated GRBL 1.1h controller with stock settings
+(``docs/simulated-grbl.md``).
 """
 
 from __future__ import annotations

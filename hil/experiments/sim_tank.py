@@ -94,9 +94,10 @@ class SimulatedTank:
 
 
 def tank_stage_config() -> Any:
-    """The simulated tank's GRBL controller (a ``sim_devices.stage.controller.GrblSimConfig``):
-    a fast 10 m axis, powered up in ALARM 20 mm from home, so a run homes it first."""
-    from sim_devices.stage.controller import GrblSimConfig
+    """The simulated tank's GRBL controller (a ``sim_devices.stage.config.GrblSimConfig``):
+    a fast 10 m axis with homing, soft and hard limits on, powered up in ALARM 20 mm from
+    home, so a run homes it first."""
+    from sim_devices.stage.config import GrblSimConfig
 
     return GrblSimConfig(
         steps_per_mm=80.0,
@@ -104,8 +105,14 @@ def tank_stage_config() -> Any:
         acceleration_mm_s2=STAGE_ACCEL_MM_S2,
         max_travel_mm=STAGE_TRAVEL_MM,
         homing=True,
+        soft_limits=True,
+        hard_limits=True,
+        status_mask=3,  # MPos and Bf
         homing_seek_mm_min=6000.0,
         homing_feed_mm_min=600.0,
+        homing_debounce_ms=0,  # optical switches: no bounce to wait out
+        homing_cycles=("X",),  # one carriage axis: GRBL built with HOMING_CYCLE_0 = X
+        switch_axes="X",
         power_up_position_mm=-20.0,
         host_silence_timeout_s=5.0,
     )

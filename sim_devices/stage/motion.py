@@ -170,9 +170,10 @@ def _first_root(p: Piece, xs: float, direction: float, lo: float, hi: float) -> 
     ay = direction * p.a
     y_lo = y0 + vy * lo + 0.5 * ay * lo * lo
     if y_lo >= 0.0:
-        # Already at or beyond the switch: only moving further in counts (moving back out
-        # after a reset and unlock must not trip it again).
-        return lo if (vy + ay * lo) > 0.0 else None
+        # Already at or beyond the level: it counts at once if moving (or starting to move)
+        # further on in ``direction``.
+        v_lo = vy + ay * lo
+        return lo if v_lo > 0.0 or (v_lo == 0.0 and ay > 0.0) else None
     if ay == 0.0:
         if vy <= 0.0:
             return None

@@ -1,7 +1,7 @@
 """The simulated GRBL controller behind a real raw pseudo-terminal.
 
 >>> import serial
->>> with SimulatedGrblOnPty(GrblSimConfig(homing=False, soft_limits=False)) as sim:
+>>> with SimulatedGrblOnPty(GrblSimConfig()) as sim:
 ...     port = serial.serial_for_url(sim.port_name, timeout=2)
 ...     _ = port.write(b"$I\\n")
 ...     port.read_until(b"ok\\r\\n").splitlines()[-3:]
@@ -17,7 +17,8 @@ from types import TracebackType
 from typing import TypeVar
 
 from sim_devices.pty_endpoint import PtyEndpoint
-from sim_devices.stage.controller import GrblSimConfig, SimStatus, SimulatedGrbl
+from sim_devices.stage.config import GrblSimConfig
+from sim_devices.stage.controller import SimStatus, SimulatedGrbl
 
 R = TypeVar("R")
 

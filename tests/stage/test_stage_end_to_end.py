@@ -13,6 +13,7 @@ import subprocess
 import sys
 import textwrap
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +23,8 @@ from hil.devices.grbl import GrblStage
 from hil.devices.stage import Stage, StageState
 from hil.devices.stage_errors import StageLimitError
 from sim_devices.pty_endpoint import PtyEndpoint, tick_wait_s
-from sim_devices.stage import GrblSimConfig, GrblState, ManualClock, SimulatedGrblOnPty
+from sim_devices.stage import GrblState, ManualClock, SimulatedGrblOnPty
+from tests.stage.conftest import INSTANT, LAB
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -39,7 +41,9 @@ def wait_until(predicate: object, timeout: float = 10.0) -> bool:
 
 def test_home_move_and_profile_on_simulated_time() -> None:
     clock = ManualClock(1000.0)
-    config = GrblSimConfig(power_up_position_mm=-120.0)
+    # The driver reads in 0.2 s steps of the manual clock: a reply latency would be read a
+    # step late and date the profile 0.2 s late, so the lines here are answered at once.
+    config = replace(INSTANT, power_up_position_mm=-120.0)
     with (
         SimulatedGrblOnPty(config, clock=clock) as sim,
         GrblStage(sim.port_name, clock=clock, wait_step=0.2) as stage,
@@ -65,7 +69,9 @@ def test_home_move_and_profile_on_simulated_time() -> None:
 
 def test_soft_limit_refused_over_pty_sends_nothing() -> None:
     clock = ManualClock(0.0)
-    config = GrblSimConfig(homing=False, soft_limits=False, power_up_position_mm=0.0)
+    config = replace(
+        LAB, homing=False, soft_limits=False, hard_limits=False, power_up_position_mm=0.0
+    )
     with (
         SimulatedGrblOnPty(config, clock=clock) as sim,
         GrblStage(sim.port_name, clock=clock, wait_step=0.2) as stage,
@@ -87,7 +93,8 @@ def test_soft_limit_refused_over_pty_sends_nothing() -> None:
 
 
 def test_short_move_in_real_time() -> None:
-    config = GrblSimConfig(homing=False, soft_limits=False, power_up_position_mm=0.0,
+    config = replace(LAB, homing=False, soft_limits=False, hard_limits=False,
+                     power_up_position_mm=0.0,
                            acceleration_mm_s2=500.0)  # fmt: skip
     with SimulatedGrblOnPty(config) as sim, GrblStage(sim.port_name) as stage:
         status = stage.move_to(-0.002, 0.02)  # 2 mm at 20 mm/s: about 0.14 s
@@ -97,7 +104,9 @@ def test_short_move_in_real_time() -> None:
 
 def test_exception_inside_with_block_holds_the_simulated_stage() -> None:
     clock = ManualClock(0.0)
-    config = GrblSimConfig(homing=False, soft_limits=False, power_up_position_mm=0.0)
+    config = replace(
+        LAB, homing=False, soft_limits=False, hard_limits=False, power_up_position_mm=0.0
+    )
     with SimulatedGrblOnPty(config, clock=clock) as sim:
         with pytest.raises(KeyboardInterrupt), GrblStage(sim.port_name, clock=clock) as stage:
             stage.move_to(-0.3, 0.01, wait=False)
@@ -124,7 +133,8 @@ HOST_SCRIPT = textwrap.dedent(
 
 @pytest.mark.slow
 def test_killed_host_leaves_the_stage_held() -> None:
-    config = GrblSimConfig(homing=False, soft_limits=False, power_up_position_mm=0.0,
+    config = replace(LAB, homing=False, soft_limits=False, hard_limits=False,
+                     power_up_position_mm=0.0,
                            host_silence_timeout_s=0.5)  # fmt: skip
     with SimulatedGrblOnPty(config) as sim:
         env = dict(os.environ, PYTHONPATH=str(ROOT))

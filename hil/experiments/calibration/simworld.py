@@ -378,7 +378,11 @@ def sim_tank(truth: SimTruth) -> Iterator[tuple[MechanicalStage, EchoTank, list[
     clock = ManualClock(0.0)
     config = GrblSimConfig(
         homing=True, soft_limits=False, hard_limits=False, power_up_position_mm=-5.0,
-        max_rate_mm_min=6000.0, acceleration_mm_s2=500.0,
+        max_rate_mm_min=6000.0, acceleration_mm_s2=500.0, steps_per_mm=80.0,
+        max_travel_mm=500.0, status_mask=3,
+        # The driver steps this manual clock by 0.5 s while it waits: a 2.4 ms reply would
+        # cost it a whole step per line, so the lines are answered at once.
+        line_latency_s=0.0,
     )  # fmt: skip
     # In memory, in this thread: the controller answers at once on the manual clock, so no
     # wait depends on how fast another thread is scheduled.
