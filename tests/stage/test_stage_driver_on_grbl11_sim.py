@@ -55,3 +55,44 @@ def test_reset_straight_after_a_hard_limit_within_a_second(
     stage.reset()
     assert clock.now() - t0 < 1.0
     assert not sim.status().critical
+
+
+def test_hard_limit_mid_pass_stops_the_run_within_a_second() -> None:
+    # Not homed: powered up 490 mm from the homing switch, GRBL counts from 0 there, so the
+    # far switch (501 mm) sits at machine -11 mm, inside the travel the driver allows. The
+    # pass: 1 mm to the run-up start at the max rate (0.2 s), then from -1 mm at 10 mm/s
+    # (0.05 s to speed at 100 mm/s²): the switch 10 mm on, about 1.25 s after the start.
+    from hil.experiments.tank_run import _safe_stop
+
+    clock = ManualClock(100.0)
+    config = replace(INSTANT, soft_limits=False, homing=False, power_up_position_mm=-490.0)
+    with SimulatedGrblOnPty(config, clock=clock) as sim:
+        stage = GrblStage(sim.port_name, clock=clock, wait_step=0.01, read_timeout=0.005).open()
+        stage.status()
+        t0 = clock.now()
+        with pytest.raises(StageAlarmError, match=r"ALARM:1 \(Hard limit"):
+            stage.run_profile(-0.002, -0.015, 0.010, 0.001, 0.003)
+        assert sim.status().alarm == 1
+        assert sim.status().physical_mm == pytest.approx(-501.0, abs=0.1)
+        assert clock.now() - (t0 + 1.25) < 1.0
+        t1 = clock.now()
+        _safe_stop(None, stage, None, hold=True)
+        assert clock.now() - t1 < 1.0
+
+
+def test_homing_a_three_axis_stage() -> None:
+    # Stock GRBL homes Z, then X and Y together, and needs every switch.
+    clock = ManualClock(0.0)
+    config = replace(
+        INSTANT, homing_cycles=("Z", "XY"), switch_axes="XYZ", power_up_position_mm=-120.0,
+        power_up_yz_mm=(-80.0, -40.0),
+    )  # fmt: skip
+    with SimulatedGrblOnPty(config, clock=clock) as sim:
+        stage = GrblStage(sim.port_name, clock=clock, wait_step=0.05, read_timeout=0.005).open()
+        status = stage.home()
+        assert status.state is StageState.IDLE
+        assert sim.status().machine_mm == pytest.approx(-config.homing_pulloff_mm, abs=0.01)
+        # Z (40 mm) then X (120 mm, Y 80 mm alongside) at the seek rate, each with its
+        # locate and pull-off: the driver waited that long and no longer than its timeout.
+        assert 160.0 / (config.homing_seek_mm_min / 60.0) < clock.now() < 1000.0
+        stage.close()
