@@ -2,7 +2,8 @@
 
 - ``range_speed.png``: estimated range and speed against receive time, with the truth from
   the stage telemetry (and the exact simulated truth for simulated runs);
-- ``time_codeword_map.png``: the GCAS time–codeword map (seed Fig 5.17 style);
+- ``time_codeword_map.png``: the GCAS time–codeword map (seed Fig 5.17 style) with the true
+  hop boundaries from the telemetry;
 - ``errors.png``: histograms of range and speed errors against the truth, of every estimate
   with a known truth and of the scored ones that are not wrong (inside the constant-speed
   segments), titled with the counts, RMSEs and biases of ``summary.json``.
@@ -15,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from hil.experiments.codeword_map import save_time_codeword_map
-from hil.experiments.run_scoring import score_run, telemetry_truth
+from hil.experiments.run_scoring import score_run, telemetry_truth, true_boundaries
 from hil.experiments.tank_run import RunOutcome
 from hil.figures import new_figure
 
@@ -57,7 +58,9 @@ def write_report(outcome: RunOutcome) -> list[Path]:
 
     if outcome.map_times:
         paths.append(folder / "time_codeword_map.png")
-        save_time_codeword_map(paths[-1], outcome.map_times, outcome.map_power)
+        save_time_codeword_map(
+            paths[-1], outcome.map_times, outcome.map_power, true_boundaries(outcome, truth)
+        )
 
     # Every estimate with a known truth; the scored ones (constant-speed segments) on top.
     fig, (a1, a2) = new_figure(1, 2, figsize=(10, 4.2), dpi=110)

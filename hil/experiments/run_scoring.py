@@ -223,6 +223,37 @@ def summarize(outcome: RunOutcome) -> dict[str, Any]:
     return summary
 
 
+def true_boundaries(
+    outcome: RunOutcome, truth: dict[str, np.ndarray] | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The hop boundaries the truth says reached the receiver over the estimates' span:
+    receive times (s, receiver time base) and codewords, shape ``(b,)`` each.
+
+    A boundary transmitted at ``T`` (the end of its hop) arrives at ``T + 2R/c``, ``R`` the
+    telemetry range at the bounce instant ``T + R/c`` (interpolated between the estimates'
+    bounce instants; one fixed-point step, ``R`` changes by millimetres meanwhile).
+    """
+    truth = telemetry_truth(outcome) if truth is None else truth
+    est = outcome.estimates
+    r = truth["range_m"]
+    ok = np.isfinite(r)
+    if len(est) == 0 or ok.sum() < 2:
+        return np.zeros(0), np.zeros(0, dtype=np.int64)
+    hop = np.array([e.hop_index for e in est], dtype=np.int64)
+    t_b = np.array([(e.t_s + e.t_tx_s) / 2.0 for e in est])[ok]
+    order = np.argsort(t_b)
+    t_b, r_ok = t_b[order], r[ok][order]
+    sch = outcome.experiment.schedule
+    k0, k1 = int(hop.min()), int(hop.max())
+    table = sch.hops(k0, k1 - k0 + 1)
+    t_end = sch.t0_s + table.start_s + table.duration_s
+    c = outcome.experiment.sound_speed_mps
+    rng = np.interp(t_end + np.interp(t_end, t_b, r_ok) / c, t_b, r_ok)
+    inside = (t_end >= t_b[0]) & (t_end <= t_b[-1])
+    codeword = np.arange(k0, k1 + 1) % sch.period_hops
+    return (t_end + 2.0 * rng / c)[inside], codeword[inside]
+
+
 def write_summary(outcome: RunOutcome, summary: dict[str, Any]) -> Path:
     """``summary.json`` and ``estimates.csv`` in the run folder."""
     path = outcome.folder / "summary.json"

@@ -17,6 +17,7 @@ from hil.experiments.run_scoring import (
     scored_mask,
     summarize,
     telemetry_truth,
+    true_boundaries,
 )
 from hil.experiments.tank_run import TELEMETRY_MAX_REPLY_S, RunOutcome, Telemetry
 
@@ -241,3 +242,23 @@ def test_wrong_estimates_outside_the_scored_window_are_counted() -> None:
     score = score_run(out)
     assert np.array_equal(np.flatnonzero(score.wrong), ghosts)
     assert not (score.good_scored & score.wrong).any()
+
+
+def test_true_boundaries_golden() -> None:
+    # The target held at 7 m: every boundary arrives 2·7/c after its hop ends, with the hop's
+    # codeword (hop index mod the 17-hop period).
+    out = _outcome(T_TEL, T_EST)
+    n = len(out.estimates)
+    truth = {k: np.full(n, v) for k, v in (("range_m", 7.0), ("speed_mps", 0.0))}
+    t_rx, word = true_boundaries(out, truth)
+    sch = EXP.schedule
+    hops = np.array([e.hop_index for e in out.estimates])
+    k = np.arange(hops.min(), hops.max() + 1)
+    table = sch.hops(int(k[0]), k.size)
+    t_end = sch.t0_s + table.start_s + table.duration_s
+    t_b = np.array([(e.t_s + e.t_tx_s) / 2 for e in out.estimates])
+    inside = (t_end >= t_b.min()) & (t_end <= t_b.max())
+    np.testing.assert_allclose(t_rx, t_end[inside] + 2 * 7.0 / EXP.sound_speed_mps, atol=1e-12)
+    assert word.tolist() == (k[inside] % 17).tolist()
+    out.estimates = []
+    assert true_boundaries(out)[0].size == 0
