@@ -44,6 +44,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hil.errors import ConfigError
+from hil.estimation.detection import parabolic_offset
 from hil.estimation.reverb_band import doppler_resolution_mps
 from hil.estimation.row_buffer import RowBuffer
 from hil.signals.schedule import HopSchedule, HopTable
@@ -58,9 +59,14 @@ MAX_SPREAD_HOPS = 0.3
 BASELINE_S = 0.4e-3
 #: After the peak, the ramp's top is searched this long, s.
 TOP_S = 1.0e-3
-#: Fractions of the ramp's top between which the line is fitted.
+#: Fractions of the ramp's top between which the line is fitted (its zero crossing starts the
+#: ramp fit; lower levels let noise at 0 dB per-sample SNR walk the line into the baseline).
 LO_FRACTION = 0.03
 HI_FRACTION = 0.12
+#: The ramp's model is fitted up to this fraction of the top: the first arrival alone.
+#: Measured on the built-in tank: up to 0.08 the bias stays +0.015 m; 0.12 gave +0.022 m and
+#: 0.2 +0.068 m (the surface image, 0.27 ms after the direct path, enters the fit).
+FIT_HI_FRACTION = 0.08
 #: The fit's lower level stays this many standard deviations of the noise's amplitude above
 #: the baseline (noise crossing a level set by the top alone gave onsets 0.2-0.7 m early at
 #: 0 dB per-sample SNR).
@@ -68,6 +74,11 @@ NOISE_MARGIN = 4.0
 #: The direct path's phase is read this far into its ramp, s: before the first image in a
 #: tank 2.5 m deep (the surface image of a target 1.2 m down comes 0.27 ms after it).
 DIRECT_S = 0.2e-3
+#: Samples before the line's lower point that the ramp fit also uses (the leak before it).
+FIT_LEAD = 24
+#: The ramp fit searches onsets this many samples around the line's, in steps of FIT_STEP.
+FIT_SPAN = 16
+FIT_STEP = 0.25
 #: Speed step of the direct path's Doppler search, m/s.
 DIRECT_SPEED_STEP = 0.002
 
@@ -165,6 +176,7 @@ class FirstArrivalReadout:
         fs = self.fs_hz
         sch = self.schedule
         hops = sch.hops(hop_index - self.m_hops + 2, self.m_hops)  # hops h-M+2 .. h+1
+        prev_hop = sch.hops(hop_index - self.m_hops + 1, 1)  # before the oldest boundary
         f_next = hops.freq_hz[::-1]  # tone after boundary m (m = 0: after hop h)
         # Receive times of the boundaries, from their transmit spacing compressed by α.
         ends = hops.start_s[::-1]  # start of the hop after boundary m = its transmit time
@@ -207,21 +219,91 @@ class FirstArrivalReadout:
         slope, icept = np.polyfit(tt, amp[j_lo : j_hi + 1], 1)
         if not slope > 0:
             return None
-        rel = -icept / slope  # s after boundary 0's sample
-        if not -self.max_spread_s - BASELINE_S < rel < TOP_S:
+        # The line is the start; the ramp's exact shape (the previous tone's partial window
+        # leaks into the channel while the window straddles the switch) moves its zero
+        # crossing by some 30 µs: fit that shape instead.
+        frac = t_b * fs - n_b  # each boundary's predicted switch, samples past its n_b
+        prev_f = np.concatenate([f_next[1:], prev_hop.freq_hz])
+        jump = self._phase_jumps(hops, prev_hop)
+        excess = power - power[self._base].mean()
+        lo_fit = max(k0, j_lo - FIT_LEAD)
+        above = np.flatnonzero(amp[j_lo : j_hi + 1] >= FIT_HI_FRACTION * top)
+        j_fit = j_lo + int(above[0]) if above.size else j_hi
+        j_fit = max(j_fit, j_lo + 2)
+        guess = -icept / slope
+        if not -self.max_spread_s - BASELINE_S < guess < TOP_S:
             return None
+        rel = self._fit_ramp(
+            excess[lo_fit : j_fit + 1], lo_fit, guess, frac, alpha * (prev_f - f_next), jump
+        )
         onset = float(n_b[0] / fs + rel)
         # The canceller's copy of an opening target (δ < 0) arrives |δ| earlier.
         delta = sch.period_s * (alpha - 1.0) / alpha
         # The direct path alone, DIRECT_S into its ramp (before the first image).
         j_direct = self._pre + int(round((rel + DIRECT_S) * fs))
         direct_alpha = None
-        if j_direct < box.shape[1]:
+        if 0 <= j_direct < box.shape[1]:
             p = np.asarray(box[:, j_direct], dtype=np.complex128) / w
             direct_alpha = self._direct_alpha(p, hops, n_b, alpha)
         return FirstArrival(
             onset - min(0.0, delta), alpha if direct_alpha is None else direct_alpha
         )
+
+    @staticmethod
+    def _phase_jumps(hops: HopTable, prev_hop: HopTable) -> NDArray[np.float64]:
+        """Phase step of the transmit signal at each boundary (rad, shape ``(M,)``): the next
+        hop's start phase less the previous hop's end phase (0 for phase-continuous codes)."""
+        start = hops.phase_rad[::-1]  # next hop of boundary m
+        prev_start = np.concatenate([start[1:], prev_hop.phase_rad])
+        prev_end = prev_start + 2.0 * np.pi * np.concatenate(
+            [hops.freq_hz[::-1][1:], prev_hop.freq_hz]
+        ) * np.concatenate([hops.duration_s[::-1][1:], prev_hop.duration_s])
+        return np.asarray(start - prev_end, dtype=np.float64)
+
+    def _fit_ramp(
+        self,
+        excess: NDArray[np.float64],
+        first: int,
+        guess_s: float,
+        frac: NDArray[np.float64],
+        beat_hz: NDArray[np.float64],
+        jump: NDArray[np.float64],
+    ) -> float:
+        """The onset (s after boundary 0's sample) whose model ramp fits ``excess`` best.
+
+        ``excess`` (shape ``(L,)``): the mean next-tone power less the noise, at window
+        indices ``first …``; ``frac`` (samples), ``beat_hz`` (``α(f_prev − f_next)``) and
+        ``jump`` (rad) per boundary. The model for one arrival of unit amplitude at onset
+        ``o`` (window index): the boxcar of ``1`` after ``o`` and of the previous tone,
+        ``e^{j(2π beat (i − o)/fs − jump)}``, before it; its mean power over the boundaries,
+        scaled by least squares, is compared with ``excess`` over a grid of onsets within
+        ``±FIT_SPAN`` samples of ``guess_s`` (step ``FIT_STEP``), refined by a parabola
+        (``guess_s`` itself where the best is on the span's edge).
+        """
+        fs, w = self.fs_hz, self.boxcar
+        grid = guess_s * fs + np.arange(-FIT_SPAN, FIT_SPAN + FIT_STEP / 2, FIT_STEP)  # (C,)
+        n = first + np.arange(excess.size)  # window indices (L,)
+        o = (self._pre + grid)[:, None, None] + frac[None, :, None]  # (C, M, 1)
+        a = (n - w + 1)[None, None, :]  # window start (1, 1, L)
+        n_next = np.clip(n[None, None, :] - np.ceil(o) + 1, 0, w)  # samples at/after o
+        n_prev = w - n_next
+        theta = (2.0 * np.pi * beat_hz / fs)[None, :, None]  # (1, M, 1)
+        ratio = np.exp(1j * theta)
+        # Σ_{i=a}^{a+n_prev−1} e^{jθ(i−o)}: a geometric sum (n_prev terms where θ = 0).
+        steady = np.abs(1.0 - ratio) < 1e-12
+        geometric = (1.0 - ratio**n_prev) / np.where(steady, 1.0, 1.0 - ratio)
+        prev = np.exp(1j * (theta * (a - o) - jump[None, :, None])) * np.where(
+            steady, n_prev, geometric
+        )
+        model = np.mean(np.abs((n_next + prev) / w) ** 2, axis=1)  # (C, L)
+        mm = np.sum(model * model, axis=1)
+        scale = np.sum(model * excess[None, :], axis=1) / np.maximum(mm, 1e-300)
+        resid = np.sum((excess[None, :] - scale[:, None] * model) ** 2, axis=1)
+        k = int(np.argmin(resid))
+        if k in (0, grid.size - 1):
+            return guess_s  # no minimum inside the span: the line stands
+        best = float(grid[k]) + FIT_STEP * parabolic_offset(-resid[k - 1], -resid[k], -resid[k + 1])
+        return best / fs
 
     def _direct_alpha(
         self, p: NDArray[np.complexfloating], hops: HopTable, n_b: NDArray[np.int64], alpha: float
