@@ -171,7 +171,7 @@ def test_exact_stage_two_correlators_equal_the_full_bank(rc_schedule: HopSchedul
     stop = u_ring.next_index
     first = np.array([stop - 900, stop - 500, stop - 40])
     dd = np.array([3, 31, 60])
-    got = two.strategy._exact_windows(first, dd, 30)  # (3, 30, K)
+    got = two.strategy.exact.windows(first, dd, 30)  # (3, 30, K)
     ref = np.stack(
         [
             u_ring.array[u_ring.position(f + np.arange(30)), d]

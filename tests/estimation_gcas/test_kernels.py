@@ -92,8 +92,8 @@ def test_pruned_sums_keep_every_maximum_of_the_full_sums() -> None:
     rx, centres, pair = _stage_two_receiver()
     search = two_stage(rx)
     w = search.fine_half
-    full = search._fine_sums(centres, pair, w)
-    pruned = search._fine_sums(centres, pair, w, prune=True)
+    full = search.exact.sums(centres, pair, w)
+    pruned = search.exact.sums(centres, pair, w, prune=True)
     assert np.all(np.isfinite(full))
     assert np.count_nonzero(np.isinf(pruned)) > pruned.size // 2  # most rows were skipped
     evaluated = np.isfinite(pruned)
@@ -113,13 +113,13 @@ def test_cached_sums_equal_sums_from_an_empty_cache() -> None:
     rx, centres, pair = _stage_two_receiver(m_hops=15)
     search = two_stage(rx)
     w = search.fine_half
-    search._cache_n.fill(NO_SAMPLE)
-    cold = search._fine_sums(centres, pair, w)
-    warm = search._fine_sums(centres, pair, w)  # every value now from the cache
+    search.exact._cache_n.fill(NO_SAMPLE)
+    cold = search.exact.sums(centres, pair, w)
+    warm = search.exact.sums(centres, pair, w)  # every value now from the cache
     one_by_one = []
-    search._cache_n.fill(NO_SAMPLE)
+    search.exact._cache_n.fill(NO_SAMPLE)
     for c in range(centres.shape[0] - 1, -1, -1):  # another order: other fills
-        one_by_one.append(search._fine_sums(centres[c : c + 1], pair[c : c + 1], w))
+        one_by_one.append(search.exact.sums(centres[c : c + 1], pair[c : c + 1], w))
     assert np.array_equal(cold, warm)
     assert np.array_equal(cold, np.concatenate(one_by_one[::-1]))
 
@@ -127,19 +127,19 @@ def test_cached_sums_equal_sums_from_an_empty_cache() -> None:
 def test_samples_not_yet_received_are_never_cached() -> None:
     rx, _, _ = _stage_two_receiver()
     search = two_stage(rx)
-    newest = search._y_ring.next_index
+    newest = search.exact.next_index
     w = search.fine_half
     centre = np.array([newest - 3, newest - 40])  # windows running past the newest sample
     dset = np.array([[5, 9], [5, 9]])
-    late = search._fine_sums(centre, dset, w)
-    stamped = search._cache_n[search._cache_n != NO_SAMPLE]
+    late = search.exact.sums(centre, dset, w)
+    stamped = search.exact._cache_n[search.exact._cache_n != NO_SAMPLE]
     assert stamped.size > 0 and stamped.max() < newest
     # Rows whose samples had all arrived equal those of a receiver that has seen more.
     more, _, _ = _stage_two_receiver()
     ahead_search = two_stage(more)
     more.process(np.zeros(2000))
-    ahead_search._cache_n.fill(NO_SAMPLE)
-    ahead = ahead_search._fine_sums(centre, dset, w)
+    ahead_search.exact._cache_n.fill(NO_SAMPLE)
+    ahead = ahead_search.exact.sums(centre, dset, w)
     arrived = centre[:, None] - w + np.arange(2 * w + 1)[None, :] < newest  # (2, 2w + 1)
     for c in range(2):
         assert np.array_equal(late[c][:, arrived[c]], ahead[c][:, arrived[c]])

@@ -75,6 +75,7 @@ Latency: a boundary is reported once ``N_min/2`` baseband samples past it have a
 the filter delay), within one hop.
 """
 
+from hil.estimation.gcas.exact import EXACT_ANCHOR, NO_SAMPLE
 from hil.estimation.gcas.front_end import REVERB_GUARD_LOBES
 from hil.estimation.gcas.options import (
     CFAR_MODES,
@@ -89,7 +90,7 @@ from hil.estimation.gcas.options import (
 from hil.estimation.gcas.readout import DetectionInfo
 from hil.estimation.gcas.receiver import GcasReceiver, MapCallback
 from hil.estimation.gcas.search import SearchStrategy
-from hil.estimation.gcas.search_two_stage import EXACT_ANCHOR, NO_SAMPLE, RECENTRE_STEPS
+from hil.estimation.gcas.search_two_stage import RECENTRE_STEPS
 from hil.estimation.gcas.threshold import NOISE_STRIDE, Peak
 
 __all__ = [

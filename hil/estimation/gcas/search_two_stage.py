@@ -6,8 +6,8 @@ the comb on blocks of ``B`` baseband samples (windows of ``Q_d = round(L_d/B)`` 
 comb's lags rounded per term for a shortlist of hypotheses) and gives the candidate blocks
 (local maxima of the coarse statistic over ``±N_min/2``), ``d̂``, a runner-up hypothesis more
 than one step from ``d̂`` and the noise floor. Stage 2
-(:func:`~hil.estimation.kernels.codeword_sums`, straight from the baseband history, ``w·|u|²``
-cached per sample) evaluates the exact sums ``A`` within ``±(W + 6)`` samples of each
+(:class:`~hil.estimation.gcas.exact.ExactHistory`, straight from the baseband history,
+``w·|u|²`` cached per sample) evaluates the exact sums ``A`` within ``±(W + 6)`` samples of each
 candidate for ``d̂`` and the runner-up (only the samples that can hold a maximum), keeps the
 one with the larger weighted maximum (the group statistic cannot tell a hypothesis from its
 ghost, every tone seen as its neighbour at another speed; the codeword sums can), moves the
@@ -17,13 +17,13 @@ interpolation. The hot loops of both stages are compiled (:mod:`hil.estimation.k
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from hil.estimation.coarse_search import CoarseSearch
+from hil.estimation.gcas.exact import ExactHistory
 from hil.estimation.gcas.front_end import FrontEnd
 from hil.estimation.gcas.options import check_coarse_step
 from hil.estimation.gcas.threshold import (
@@ -37,8 +37,6 @@ from hil.estimation.gcas.threshold import (
     window_means,
 )
 from hil.estimation.kernels import (
-    codeword_sums,
-    exact_windows,
     fine_doppler,
     fine_keep,
     fine_pick,
@@ -47,13 +45,7 @@ from hil.estimation.kernels import (
     peak_indices,
 )
 from hil.estimation.row_buffer import RowBuffer
-from hil.resident_arrays import resident_zeros
 
-#: Anchor grid of the stage-2 prefix sums, baseband samples (values cached per sample).
-EXACT_ANCHOR = 16
-#: Stamp of an empty stage-2 cache slot (no sample index can equal it; −1 can, before a
-#: stream's first sample).
-NO_SAMPLE = np.iinfo(np.int64).min
 #: Times the two-stage search moves its fine window onto an edge peak, at most.
 RECENTRE_STEPS = 4
 #: A hypothesis and its two neighbours on the Doppler grid (offsets, shape (1, 3)).
@@ -100,11 +92,9 @@ class TwoStageSearch:
             int(fe.lags.max()) + fe.n_max + 2 * self.fine_half + (self._c_lookahead + 2) * b
             + abs(int(np.min(self._c_shift))) + RECENTRE_STEPS * self.fine_half + 8
         )  # fmt: skip
-        self._y_ring = RowBuffer(y_keep, (), np.complex128)
-        self._nu_fs = fe.nu / fe.fs_bb  # (D, K)
-        self._table: NDArray[np.float64] | None = None
-        self._phasor_table(max(2 * self.fine_half + 1, EXACT_ANCHOR))
-        self._init_cache()
+        #: The baseband history and its exact correlators (stage 2).
+        self.exact = ExactHistory(fe, keep=y_keep, block=b, widest=2 * self.fine_half + 1)
+        self._hyp_w = self.exact.hyp_w
         self.reset(0)
 
     def _coarse_shift(self) -> NDArray[np.int64]:
@@ -125,30 +115,12 @@ class TwoStageSearch:
         ).astype(np.int64)
         return shift
 
-    def _init_cache(self) -> None:
-        """The stage-2 cache of ``w·|u|²`` by absolute sample (slot ``n mod cap``, stamped
-        with ``n``) and the weights the sums apply."""
-        fe = self._fe
-        reach = int(fe.lags.max()) + fe.n_max + 2 * self.fine_half + 2 * EXACT_ANCHOR + 2 * self._B
-        cap = 1 << int(math.ceil(math.log2(2 * reach)))
-        # Mapped at construction, so that no live block faults them in page by page
-        # (hil.resident_arrays).
-        self._cache_p = resident_zeros((fe.grid.size, fe.n_tones, cap))
-        self._cache_max = resident_zeros((fe.grid.size, cap))
-        self._hyp_w = np.ascontiguousarray(fe.grid.weights, dtype=np.float64)
-        self._cache_n = np.full((fe.grid.size, cap), NO_SAMPLE, dtype=np.int64)
-        code, m_idx = fe.code, np.arange(fe.m_hops)
-        self._term_tone = code[(np.arange(fe.n_codewords)[None, :] - m_idx[:, None]) % code.size]
-        tone_w = fe.tone_w if fe.tone_w is not None else np.ones((fe.grid.size, fe.n_tones))
-        self._cell_w = np.ascontiguousarray(tone_w, dtype=np.float64)
-
     def reset(self, b0: int) -> None:
         self.coarse.reset(b0)
         c0 = self.coarse.next_block
         for ring in (self._cs_ring, self._cd_ring, self._cn_ring):
             ring.reset(c0)
-        self._y_ring.reset(b0)
-        self._cache_n.fill(NO_SAMPLE)
+        self.exact.reset(b0)
         self._origin = b0
         self._c_origin = c0
         self._c_valid_from = -(-(b0 + self._fe.settle) // self._B) + 1
@@ -157,7 +129,7 @@ class TwoStageSearch:
     # ------------------------------------------------------------------ streaming
     def process(self, y: NDArray[np.complex128]) -> list[Peak]:
         """Stage 1 on the new baseband samples ``y``; stage 2 at the decided candidates."""
-        self._y_ring.append(y, self._y_ring.next_index)
+        self.exact.append(y)
         stat, d_hat, noise, c0 = self.coarse.process(y)
         if stat.shape[0]:
             self._cs_ring.append(stat, c0)
@@ -211,7 +183,7 @@ class TwoStageSearch:
         # A candidate waits until its fine window has arrived (its shift depends on d̂).
         shift = self._c_shift[self._hypotheses(cand_b)].max(axis=1)  # of d̂ and runner-up
         late = cand_b * self._B + shift + 2 * self.fine_half
-        wait = np.flatnonzero(late >= self._y_ring.next_index)
+        wait = np.flatnonzero(late >= self.exact.next_index)
         if wait.size:
             stop = int(cand_b[wait[0]])
             cand_b = cand_b[: wait[0]]
@@ -244,14 +216,14 @@ class TwoStageSearch:
         pair = np.ascontiguousarray(self._hypotheses(cand_b), dtype=np.int64)
         centres = np.empty(pair.shape, dtype=np.int64)
         np.add(cand_b[:, None] * self._B, self._c_shift[pair], out=centres)
-        a2 = self._fine_sums(centres, pair, w, prune=True)
+        a2 = self.exact.sums(centres, pair, w, prune=True)
         d0, centre, a, s_win, i_pk, edges = fine_pick(
             a2, pair, centres, self._hyp_w, w, RECENTRE_STEPS > 0
         )
         for it in range(RECENTRE_STEPS):
             if edges.size == 0:
                 break
-            sums = self._fine_sums(centre[edges], d0[edges, None], w)
+            sums = self.exact.sums(centre[edges], d0[edges, None], w)
             edges = fine_recentre(a, sums, edges, s_win, i_pk, centre, w, it + 1 < RECENTRE_STEPS)
         n_pk = centre - w + i_pk
         stat = self._cs_ring.rows(cand_b) if self._cfar.mode == "statistic" else None
@@ -265,7 +237,7 @@ class TwoStageSearch:
         if keep.size == 0:
             return []
         kept = hit[keep]
-        side = self._fine_sums(n_pk[kept], sides, 0)
+        side = self.exact.sums(n_pk[kept], sides, 0)
         dd = fine_doppler(side, a, kept, i_pk, word, d0, sides)
         return peaks_of(n_pk[kept], peak, word, ratio, dn, d0[kept], dd, mean[kept], thr[kept])
 
@@ -278,7 +250,7 @@ class TwoStageSearch:
         # The hypothesis is the better of the two by the exact sums: the group statistic
         # cannot tell a hypothesis from its ghost (every tone seen as its neighbour at another
         # speed), the codeword sums can.
-        a2 = self._fine_sums(centres, pair, w, prune=True)  # (C, 2, 2w + 1, J)
+        a2 = self.exact.sums(centres, pair, w, prune=True)  # (C, 2, 2w + 1, J)
         # Weighted as stage 1 ranks them (the reverberation band's weights); a hypothesis
         # pruned whole (−inf) cannot win, even at weight 0.
         best = a2.max(axis=(2, 3))
@@ -295,11 +267,11 @@ class TwoStageSearch:
             if edge.size == 0:
                 break
             centre[edge] += ip[edge] - w
-            a[edge] = self._fine_sums(centre[edge], d0[edge, None], w)[:, 0]
+            a[edge] = self.exact.sums(centre[edge], d0[edge, None], w)[:, 0]
         dset = np.minimum(np.maximum(d0[:, None] + _NEIGHBOURS, 0), self._fe.grid.size - 1)
 
         def sides(hit: NDArray[np.int64], n_pk: NDArray[np.int64]) -> NDArray[np.float64]:
-            return self._fine_sums(n_pk, dset[hit][:, [0, 2]], 0)[:, :, 0]
+            return self.exact.sums(n_pk, dset[hit][:, [0, 2]], 0)[:, :, 0]
 
         tested = self._cs_ring.rows(cand_b) if self._cfar.mode == "statistic" else None
 
@@ -309,30 +281,6 @@ class TwoStageSearch:
             return self._cfar.test(n_pk, peak, tested, self)
 
         return threshold_peaks(centre, w, dset, a, sides, test, self._runner_up_ratio)
-
-    def _fine_sums(
-        self, centre: NDArray[np.int64], dset: NDArray[np.int64], half: int, prune: bool = False
-    ) -> NDArray[np.float64]:
-        """Exact noncoherent ``A[n, d, j]`` for ``n`` within ``±half`` of ``centre`` (shape
-        ``(C,)``, or ``(C, nd)``: one per hypothesis) at the hypotheses ``dset`` (shape
-        ``(C, nd)``): shape ``(C, nd, 2·half + 1, J)``
-        (:func:`hil.estimation.kernels.codeword_sums`; with ``prune``, rows that cannot hold a
-        maximum are −inf)."""
-        fe, ring = self._fe, self._y_ring
-        width = 2 * half + 1
-        out = np.empty((centre.shape[0], dset.shape[1], width, fe.n_codewords))
-        # A fresh writable array every time: a read-only view (what broadcasting gives when
-        # no copy is needed) is another numba signature, loaded mid-stream on first use.
-        centres = np.empty(dset.shape, dtype=np.int64)
-        centres[...] = centre.reshape(dset.shape[0], -1)
-        codeword_sums(
-            ring.array[: ring.available], ring.next_index - ring.available, ring.next_index,
-            centres,
-            np.ascontiguousarray(dset, dtype=np.int64), half, fe.lags, fe.grid.lengths,
-            self._phasor_table(EXACT_ANCHOR), self._term_tone, self._cell_w, EXACT_ANCHOR,
-            self._cache_p, self._cache_max, self._cache_n, self._B, self._hyp_w, prune, out,
-        )  # fmt: skip
-        return out
 
     # ------------------------------------------------------------------ CFAR history
     def noise_floor(self, n_pk: NDArray[np.int64]) -> NDArray[np.float64]:
@@ -352,55 +300,15 @@ class TwoStageSearch:
         lo = max(n_star - guard - w, self._c_valid_from)
         return median_spread(self._cs_ring, lo, n_star - guard)
 
-    # ------------------------------------------------------------------ exact correlators
-    def _phasor_table(self, width: int) -> NDArray[np.float64]:
-        """``e^{−j2πν[d, k] i/fs}`` for offsets ``i < N_max + width − 1``, shape
-        ``(D, ·, K, 2)`` (re, im), grown on demand."""
-        need = self._fe.n_max + width - 1
-        if self._table is None or self._table.shape[1] < need:
-            i = np.arange(need, dtype=np.float64)
-            ph = np.exp(-2j * np.pi * np.mod(i[None, :, None] * self._nu_fs[:, None, :], 1.0))
-            self._table = np.ascontiguousarray(np.stack((ph.real, ph.imag), axis=-1))
-        return self._table
-
-    def _exact_windows(
-        self, first: NDArray[np.int64], dd: NDArray[np.int64], width: int
-    ) -> NDArray[np.complex128]:
-        """Exact unit correlators ``u[first_r + t, dd_r, k]`` for ``t < width`` (shape
-        ``(R, width, K)``; ``first`` and ``dd`` of shape ``(R,)``) from the baseband history
-        (:func:`hil.estimation.kernels.exact_windows`: every row is a function of its own
-        ``first``, ``dd`` and ``width``, so batching and chunking cannot change a bit)."""
-        ring = self._y_ring
-        out = np.empty((first.shape[0], width, self._fe.n_tones, 2))
-        exact_windows(
-            ring.array[: ring.available], ring.next_index - ring.available,
-            np.ascontiguousarray(first, dtype=np.int64), np.ascontiguousarray(dd, dtype=np.int64),
-            width, self._fe.grid.lengths, self._nu_fs, self._phasor_table(width), out,
-        )  # fmt: skip
-        return out[..., 0] + 1j * out[..., 1]
-
+    # ------------------------------------------------------------------ sums
     def terms(self, idx: NDArray[np.int64], dcol: NDArray[np.int64]) -> NDArray[Any]:
-        n, m, tone_w = idx.shape[0], self._fe.m_hops, self._fe.tone_w
-        first = (idx[:, None] - self._fe.lags[dcol]).reshape(-1)
-        u = self._exact_windows(first, np.repeat(dcol, m), 1)[:, 0, :].reshape(n, m, -1)
-        w = None if tone_w is None else tone_w[dcol][:, None, :]
-        if self._coherent:
-            uc = u.astype(np.complex64)
-            return uc if w is None else uc * w
-        p = (np.square(u.real) + np.square(u.imag)).astype(np.float32)
-        return p if w is None else p * w
+        return self.exact.terms(idx, dcol, self._coherent)
 
     def unit_values(self, n_star: int, d0: int, tone: NDArray[np.int64]) -> NDArray[np.complex128]:
-        m = self._fe.m_hops
-        first = n_star - self._fe.lags[d0]
-        u = self._exact_windows(first, np.full(m, d0, dtype=np.int64), 1)[:, 0, :]
-        v: NDArray[np.complex128] = u[np.arange(m), tone]
-        if self._fe.tone_w is not None:
-            v = v * self._fe.tone_w[d0, tone]
-        return v
+        return self.exact.unit_values(n_star, d0, tone)
 
     def map_hypotheses(self, count: int) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-        stop = self._y_ring.next_index
+        stop = self.exact.next_index
         idx = np.arange(stop - count, stop, dtype=np.int64)
         if self._cd_ring.next_index > self._c_origin:
             blk = np.clip(idx // self._B, self._c_origin, self._cd_ring.next_index - 1)
@@ -410,11 +318,7 @@ class TwoStageSearch:
         return idx, d_map
 
     def retained(self, count: int) -> NDArray[np.int64]:
-        # The exact windows of the oldest terms reach N_max samples further back.
-        fe, ring = self._fe, self._y_ring
-        stop = ring.next_index
-        count = int(min(count, stop - self._origin, ring.available - fe.lags.max() - 1 - fe.n_max))
-        return np.arange(stop - count, stop, dtype=np.int64)
+        return self.exact.retained(count, self._origin)
 
     # ------------------------------------------------------------------ warm-up
     def warm_up(self) -> None:
@@ -423,13 +327,13 @@ class TwoStageSearch:
         peak_indices(np.zeros(3), 1, 0, 3)
         one = np.zeros((1, 1), dtype=np.int64)
         w = self.fine_half
-        self._fine_sums(one[:, 0], one, w, prune=True)
+        self.exact.sums(one[:, 0], one, w, prune=True)
         two = np.zeros((1, 2), dtype=np.int64)
-        a2 = self._fine_sums(two, two, w, prune=True)
+        a2 = self.exact.sums(two, two, w, prune=True)
         d0, centre, a, s_win, i_pk, edges = fine_pick(a2, two, two, self._hyp_w, w, True)
-        sums = self._fine_sums(centre[edges], d0[edges, None], w)
+        sums = self.exact.sums(centre[edges], d0[edges, None], w)
         fine_recentre(a, sums, edges, s_win, i_pk, centre, w, True)
         _, _, word, _, _, sides = fine_keep(one[0], a, s_win, i_pk, d0, self._fe.grid.size, w, 1.0)
-        side = self._fine_sums(one[0], sides, 0)
+        side = self.exact.sums(one[0], sides, 0)
         fine_doppler(side, a, one[0], i_pk, word, d0, sides)
-        self._exact_windows(one[:, 0], one[:, 0], 1)
+        self.exact.windows(one[:, 0], one[:, 0], 1)
