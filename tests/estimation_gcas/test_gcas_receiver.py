@@ -123,8 +123,8 @@ def test_coherent_sum_is_closer_to_the_crlb(
 
 
 def test_coherent_phase_model_matches_the_unit_correlators(rc_schedule: HopSchedule) -> None:
-    # The phase of u for a window covering echo hop i of a·s(α(t − τ0)) (GcasReceiver.
-    # _coherent_refine): φ_i − 2π f (α τ0 + t_i) − 2π ν_d g + 2π (α − α_d) f c_i.
+    # The phase of u for a window covering echo hop i of a·s(α(t − τ0)) (gcas.readout.
+    # Readout._coherent_refine): φ_i − 2π f (α τ0 + t_i) − 2π ν_d g + 2π (α − α_d) f c_i.
     r0 = 40.0
     for v, dv in ((12.0, 0.0), (-8.0, 0.0), (12.0, 0.5), (-8.0, -0.4)):
         alpha, tau0 = (C + v) / (C - v), 2 * r0 / (C + v)
@@ -275,23 +275,23 @@ def test_reverberation_band_excludes_stationary_clutter(
     # The clutter's sidelobes and the masked cells cost accuracy (0.03 m rms without clutter).
     assert np.sqrt(np.mean(dr**2)) < 0.15 and np.max(np.abs(dr)) < 0.35
     # The band removes every cell whose frequency holds the clutter of some tone.
-    assert rx._tone_w is not None and 0.3 < float(np.mean(rx._tone_w == 0)) < 0.6
+    assert rx.front_end.tone_w is not None and 0.3 < float(np.mean(rx.front_end.tone_w == 0)) < 0.6
 
 
 def test_reverberation_tone_mask_covers_every_tones_zero_doppler_frequency(
     rc_schedule: HopSchedule,
 ) -> None:
     rx = _receiver(rc_schedule, reverb_speed_mps=5.0)
-    assert rx._tone_w is not None
+    assert rx.front_end.tone_w is not None
     f = rx.grid.alphas[:, None] * rx.tones_hz[None, :]
     for f_clutter in rc_schedule.tones_hz:
         # Every correlator listening within half a main lobe of a stationary tone is off.
         near = np.abs(f - f_clutter) < 0.5 / rc_schedule.hop_s
-        assert near.any() and np.all(rx._tone_w[near] == 0)
+        assert near.any() and np.all(rx.front_end.tone_w[near] == 0)
     # A hypothesis far from every clutter frequency keeps all its tones.
     # (The band ±5 m/s is ±0.67 % of a tone, < 215 Hz, plus the 50 Hz guard.)
     far = np.all(np.abs(f[:, :, None] - rc_schedule.tones_hz).min(axis=2) > 300.0, axis=1)
-    assert far.any() and np.all(rx._tone_w[far] == 1)
+    assert far.any() and np.all(rx.front_end.tone_w[far] == 1)
 
 
 def test_time_codeword_map_and_full_accumulated_sum(rc_schedule: HopSchedule) -> None:

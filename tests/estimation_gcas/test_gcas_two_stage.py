@@ -13,6 +13,8 @@ from hil.errors import ConfigError
 from hil.estimation.base import Estimate
 from hil.estimation.coarse_search import CoarseSearch
 from hil.estimation.gcas import GcasReceiver
+from hil.estimation.gcas.search_full import FullSearch
+from hil.estimation.gcas.search_two_stage import TwoStageSearch
 from hil.estimation.unit_correlators import UnitCorrelatorBank
 from hil.signals.schedule import HopSchedule
 
@@ -164,13 +166,15 @@ def test_exact_stage_two_correlators_equal_the_full_bank(rc_schedule: HopSchedul
     two = _receiver(rc_schedule, "two-stage", reverb_speed_mps=0.0)
     full.process(x)
     two.process(x)
-    stop = full._u_ring.next_index
+    assert isinstance(full.strategy, FullSearch) and isinstance(two.strategy, TwoStageSearch)
+    u_ring = full.strategy._u_ring
+    stop = u_ring.next_index
     first = np.array([stop - 900, stop - 500, stop - 40])
     dd = np.array([3, 31, 60])
-    got = two._exact_windows(first, dd, 30)  # (3, 30, K)
+    got = two.strategy.exact.windows(first, dd, 30)  # (3, 30, K)
     ref = np.stack(
         [
-            full._u_ring.array[full._u_ring.position(f + np.arange(30)), d]
+            u_ring.array[u_ring.position(f + np.arange(30)), d]
             for f, d in zip(first, dd, strict=True)
         ]
     )
@@ -332,7 +336,7 @@ def test_two_stage_loads_no_compiled_kernel_once_built(with_map: bool) -> None:
     # Loading a kernel specialisation takes ~10 ms (compiling one, seconds): in a live run
     # that lands inside one block. A fresh interpreter shows what the first stream adds.
     # The time–codeword map (the tank run's report) reads exact windows even when
-    # noncoherent: before the warm-up covered it, its first call compiled 0.23 s mid-stream.
+    # noncoherent, so the warm-up covers them too (a first call compiles for about 0.2 s).
     import json
     import subprocess
     import sys
@@ -352,7 +356,8 @@ def test_two_stage_loads_no_compiled_kernel_once_built(with_map: bool) -> None:
 
 def _with_reference_fine_stage(rx: GcasReceiver) -> GcasReceiver:
     """``rx`` deciding its candidates with the NumPy formulation of stage 2."""
-    rx._fine_stage = rx._fine_stage_reference  # type: ignore[method-assign]
+    assert isinstance(rx.strategy, TwoStageSearch)
+    rx.strategy._fine_stage = rx.strategy._fine_stage_reference  # type: ignore[method-assign]
     return rx
 
 

@@ -8,6 +8,7 @@ from hypothesis import strategies as st
 from scipy import ndimage
 
 from hil.estimation.gcas import NO_SAMPLE, GcasReceiver
+from hil.estimation.gcas.search_two_stage import TwoStageSearch
 from hil.estimation.kernels import first_possible_peak, peak_indices
 
 from .conftest import FS, C, att_schedule, echo_samples
@@ -65,6 +66,12 @@ def test_first_possible_peak_is_the_earliest_peak_any_continuation_can_make(
         assert first in peak_indices(low, h, lo, hi).tolist()
 
 
+def two_stage(rx: GcasReceiver) -> TwoStageSearch:
+    """The two-stage search that ``rx`` holds."""
+    assert isinstance(rx.strategy, TwoStageSearch)
+    return rx.strategy
+
+
 def _stage_two_receiver(m_hops: int = 10) -> tuple[GcasReceiver, np.ndarray, np.ndarray]:
     """A receiver fed an echo, with candidate centres and hypotheses of its recent blocks."""
     schedule = att_schedule()
@@ -72,19 +79,21 @@ def _stage_two_receiver(m_hops: int = 10) -> tuple[GcasReceiver, np.ndarray, np.
         schedule, FS, sound_speed_mps=C, max_speed_mps=30.0, max_range_m=100.0, m_hops=m_hops
     )
     rx.process(echo_samples(schedule, 55.0, 9.0, 0.6, snr_db=-12.0, seed=4))
-    stop = rx._cs_ring.next_index - 20
+    search = two_stage(rx)
+    stop = search._cs_ring.next_index - 20
     cand_b = np.arange(stop - 300, stop, 10)
-    pair = rx._cd_ring.rows(cand_b)
+    pair = search._cd_ring.rows(cand_b)
     pair[:, 1] = np.where(pair[:, 1] < 0, pair[:, 0], pair[:, 1])
-    centres = cand_b[:, None] * rx._B + rx._c_shift[pair]
+    centres = cand_b[:, None] * search._B + search._c_shift[pair]
     return rx, centres, pair
 
 
 def test_pruned_sums_keep_every_maximum_of_the_full_sums() -> None:
     rx, centres, pair = _stage_two_receiver()
-    w = rx.fine_half
-    full = rx._fine_sums(centres, pair, w)
-    pruned = rx._fine_sums(centres, pair, w, prune=True)
+    search = two_stage(rx)
+    w = search.fine_half
+    full = search.exact.sums(centres, pair, w)
+    pruned = search.exact.sums(centres, pair, w, prune=True)
     assert np.all(np.isfinite(full))
     assert np.count_nonzero(np.isinf(pruned)) > pruned.size // 2  # most rows were skipped
     evaluated = np.isfinite(pruned)
@@ -102,32 +111,35 @@ def test_pruned_sums_keep_every_maximum_of_the_full_sums() -> None:
 
 def test_cached_sums_equal_sums_from_an_empty_cache() -> None:
     rx, centres, pair = _stage_two_receiver(m_hops=15)
-    w = rx.fine_half
-    rx._cache_n.fill(NO_SAMPLE)
-    cold = rx._fine_sums(centres, pair, w)
-    warm = rx._fine_sums(centres, pair, w)  # every value now from the cache
+    search = two_stage(rx)
+    w = search.fine_half
+    search.exact._cache_n.fill(NO_SAMPLE)
+    cold = search.exact.sums(centres, pair, w)
+    warm = search.exact.sums(centres, pair, w)  # every value now from the cache
     one_by_one = []
-    rx._cache_n.fill(NO_SAMPLE)
+    search.exact._cache_n.fill(NO_SAMPLE)
     for c in range(centres.shape[0] - 1, -1, -1):  # another order: other fills
-        one_by_one.append(rx._fine_sums(centres[c : c + 1], pair[c : c + 1], w))
+        one_by_one.append(search.exact.sums(centres[c : c + 1], pair[c : c + 1], w))
     assert np.array_equal(cold, warm)
     assert np.array_equal(cold, np.concatenate(one_by_one[::-1]))
 
 
 def test_samples_not_yet_received_are_never_cached() -> None:
     rx, _, _ = _stage_two_receiver()
-    newest = rx._y_ring.next_index
-    w = rx.fine_half
+    search = two_stage(rx)
+    newest = search.exact.next_index
+    w = search.fine_half
     centre = np.array([newest - 3, newest - 40])  # windows running past the newest sample
     dset = np.array([[5, 9], [5, 9]])
-    late = rx._fine_sums(centre, dset, w)
-    stamped = rx._cache_n[rx._cache_n != NO_SAMPLE]
+    late = search.exact.sums(centre, dset, w)
+    stamped = search.exact._cache_n[search.exact._cache_n != NO_SAMPLE]
     assert stamped.size > 0 and stamped.max() < newest
     # Rows whose samples had all arrived equal those of a receiver that has seen more.
     more, _, _ = _stage_two_receiver()
+    ahead_search = two_stage(more)
     more.process(np.zeros(2000))
-    more._cache_n.fill(NO_SAMPLE)
-    ahead = more._fine_sums(centre, dset, w)
+    ahead_search.exact._cache_n.fill(NO_SAMPLE)
+    ahead = ahead_search.exact.sums(centre, dset, w)
     arrived = centre[:, None] - w + np.arange(2 * w + 1)[None, :] < newest  # (2, 2w + 1)
     for c in range(2):
         assert np.array_equal(late[c][:, arrived[c]], ahead[c][:, arrived[c]])

@@ -1,0 +1,268 @@
+"""GCAS readout (SPEC §3 step 7): a detected peak becomes an :class:`Estimate`.
+
+Parabolic offsets of the peak in time and across ``d`` give the boundary receive time
+``t_rx`` (window centred on the hop, group delay removed) and ``α̂``; ``t_tx`` is the transmit
+end of hop ``ĵ`` plus the multiple of the code period that puts the delay in ``[0, τ_max]``,
+``τ_max = 2 max_range/c`` (a longer delay is refused and counted); ``R = c (t_rx − t_tx)/2``,
+``v = c (α̂ − 1)/(α̂ + 1)``. A peak on a refused hypothesis (the edge of the reverberation
+band, :mod:`hil.estimation.reverb_band`) is the leak of an echo inside the band, not a
+detection. The coherent sum refines ``t_rx`` and ``α̂``; the first-arrival readout
+(:mod:`hil.estimation.first_arrival`) replaces ``t_rx`` by the direct path's. Hop-index
+consistency is a soft flag.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hil.estimation.base import Estimate
+from hil.estimation.detection import parabolic_offset
+from hil.estimation.doppler_grid import alpha_to_speed, speed_to_alpha
+from hil.estimation.first_arrival import FirstArrivalReadout
+from hil.estimation.gcas.front_end import FrontEnd
+from hil.estimation.gcas.threshold import Peak
+
+#: ``unit_values(n_star, d0, tone)``: the M terms' unit correlators of the peak at sample
+#: ``n_star``, hypothesis ``d0``, tone index per term (shape ``(M,)``), weighted, complex.
+UnitValues = Callable[[int, int, NDArray[np.int64]], NDArray[np.complex128]]
+
+
+@dataclass(frozen=True)
+class DetectionInfo:
+    """Diagnostics of one detection, beside its :class:`Estimate`.
+
+    ``sample`` (baseband index of the peak), ``threshold`` and ``noise_mean`` (statistic
+    units), ``runner_up_ratio`` (best / second-best codeword), ``consistent`` (hop index
+    advanced as the elapsed time predicts since the previous detection; None for the first).
+    """
+
+    sample: int
+    threshold: float
+    noise_mean: float
+    runner_up_ratio: float
+    consistent: bool | None
+
+
+@dataclass(frozen=True)
+class _ReadoutConstants:
+    """Per-receiver constants of :meth:`Readout.decide` as Python numbers (the readout runs
+    once per detection; NumPy scalars there cost more than the arithmetic)."""
+
+    speeds: list[float]
+    speed_step: float
+    lengths: list[int]
+    hop_samples: float
+    decimation: int
+    group_delay: float
+    fs_in: float
+    period: float
+    hop_end: list[float]
+
+    @classmethod
+    def of(cls, fe: FrontEnd) -> _ReadoutConstants:
+        sch = fe.schedule
+        return cls(
+            speeds=fe.grid.speeds_mps.tolist(),
+            speed_step=fe.grid.speed_step_mps,
+            lengths=fe.grid.lengths.tolist(),
+            hop_samples=fe.hop_s * fe.fs_bb,
+            decimation=fe.baseband.decimation,
+            group_delay=fe.baseband.group_delay,
+            fs_in=fe.baseband.fs_hz,
+            period=sch.period_s,
+            hop_end=(sch.t0_s + (sch.start_s + sch.duration_s)).astype(np.float64).tolist(),
+        )
+
+
+class Readout:
+    """Turns peaks into estimates and keeps the counts of those it refuses.
+
+    ``unit_values`` reads the unit correlators of the search in use (coherent refinement);
+    ``first_arrival`` is the multipath readout, or None for the peak.
+    """
+
+    def __init__(
+        self,
+        fe: FrontEnd,
+        *,
+        max_range_m: float,
+        coherent: bool,
+        first_arrival: FirstArrivalReadout | None,
+        unit_values: UnitValues,
+        receiver: str,
+    ) -> None:
+        self._fe = fe
+        self._k = _ReadoutConstants.of(fe)
+        self._max_delay = 2.0 * max_range_m / fe.sound_speed_mps
+        self._coherent = coherent
+        self._first_arrival = first_arrival
+        self._unit_values = unit_values
+        self._receiver = receiver
+        self.reset()
+
+    def reset(self) -> None:
+        """Zero the counts and forget the previous detection."""
+        self.restart()
+        self.inconsistent_count = 0
+        self.refused_count = 0
+        #: Detections refused as the edge leak of an echo inside the reverberation band.
+        self.in_band_count = 0
+        self.last_detection: DetectionInfo | None = None
+
+    def restart(self) -> None:
+        """Forget the previous hop (a gap: consistency restarts with the next detection)."""
+        self._last_hop: int | None = None
+        self._last_t = 0.0
+
+    def decide_all(self, peaks: Iterable[Peak]) -> list[Estimate]:
+        """:meth:`decide` on each peak, in order; the estimates it accepts."""
+        out: list[Estimate] = []
+        for p in peaks:
+            est = self.decide(p)
+            if est is not None:
+                out.append(est)
+        return out
+
+    def decide(self, p: Peak) -> Estimate | None:
+        """The estimate of one peak, or None where it is refused (band edge, too far)."""
+        fe, k = self._fe, self._k
+        if fe.refused_hypotheses[p.d0]:
+            self.in_band_count += 1
+            return None
+        c, fs_bb = fe.sound_speed_mps, fe.fs_bb
+        speed = k.speeds[p.d0] + p.dd * k.speed_step
+        alpha = (c + speed) / (c - speed)  # speed_to_alpha, on Python floats
+        exact_len = k.hop_samples / alpha
+        t_rx = ((p.n_star + p.dn) * k.decimation - k.group_delay) / k.fs_in + (
+            exact_len - k.lengths[p.d0] + 1
+        ) / (2.0 * fs_bb)
+        # Transmit time: end of hop ĵ, folded by whole code periods into [0, τ_max].
+        end_j = k.hop_end[p.codeword]
+        tol = 2.0 / fs_bb
+        q = math.floor((t_rx - end_j + tol) / k.period)
+        t_tx = end_j + q * k.period
+        hop_index = p.codeword + q * fe.n_codewords
+        if self._coherent:
+            t_rx, alpha = self._coherent_refine(p.n_star, p.d0, hop_index, t_rx, alpha)
+        if self._first_arrival is not None:
+            first = self._first_arrival.first_arrival(t_rx, alpha, hop_index)
+            if first is not None:
+                t_rx, alpha = first.t_s, first.alpha
+        delay = t_rx - t_tx
+        if delay > self._max_delay + tol:
+            self.refused_count += 1
+            return None
+        consistent = self._consistent(hop_index, t_rx, alpha)
+        self.last_detection = DetectionInfo(p.n_star, p.threshold, p.mean, p.ratio, consistent)
+        mean, thr = p.mean, p.threshold
+        snr = (p.peak - mean) / mean if mean > 0 and math.isfinite(mean) else math.inf
+        return Estimate(
+            t_s=t_rx,
+            range_m=c * delay / 2.0,
+            speed_mps=c * (alpha - 1.0) / (alpha + 1.0),  # alpha_to_speed, on Python floats
+            hop_index=int(hop_index),
+            score=p.peak / thr if thr > 0 else math.inf,
+            snr_db=10.0 * math.log10(snr) if snr > 0 else -math.inf,
+            alpha=alpha,
+            t_tx_s=t_tx,
+            codeword=p.codeword,
+            receiver=self._receiver,
+        )
+
+    def _consistent(self, hop_index: int, t_rx: float, alpha: float) -> bool | None:
+        """Did the hop index advance as the time since the previous detection predicts?
+        None for the first detection after a (re)start."""
+        consistent: bool | None = None
+        if self._last_hop is not None:
+            expected = round((t_rx - self._last_t) * alpha / self._fe.hop_s)
+            consistent = hop_index - self._last_hop == expected
+            if not consistent:
+                self.inconsistent_count += 1
+        self._last_hop, self._last_t = hop_index, t_rx
+        return consistent
+
+    def _coherent_refine(
+        self, n_star: int, d0: int, hop_end: int, t_guess: float, alpha_guess: float
+    ) -> tuple[float, float]:
+        """Coherent readout: the boundary time (s) and α maximising the coherent sum.
+
+        ``hop_end`` is the global index of the hop whose end boundary was detected; the M
+        terms are hops ``hop_end − m``, their unit-correlator values those of the detected
+        sample ``n*`` at hypothesis ``d0`` (lags ``ℓ_{d0,m}``). A window that covers echo hop
+        ``i`` (tone ``f``, start ``t_i``, start phase ``φ_i``) of ``a·s(α(t − τ0))`` gives
+
+            arg u_i = φ_i − 2π f (α τ0 + t_i) − 2π ν_d g + 2π (α − α_d) f c_i,
+
+        ``ν_d = α_d f − f_c``, ``g`` the filter group delay (s), ``c_i = τ0 + (t_i + T_h/2)/α``
+        the centre of the received hop (the last term is the residual rotation of a
+        correlator listening at ``α_d ≠ α``; the phase does not depend on where the window
+        sits within ±a few samples of the hop, only its magnitude does). The sum
+        ``|Σ_m u_m e^{−j arg u_m(τ0, α)}|²`` is evaluated on a fine grid of candidate
+        ``(τ0, α)`` around the noncoherent estimate (±½ grating lobe ``1/(α Δf)`` in time,
+        ±1 Doppler grid step) and refined by parabolas; its time resolution is ``~1/B_w``.
+        """
+        fe = self._fe
+        power = _coherent_power(fe, d0, hop_end, lambda tone: self._unit_values(n_star, d0, tone))
+        c, step = fe.sound_speed_mps, fe.grid.speed_step_mps
+        df = float(np.min(np.diff(np.sort(fe.tones_hz)))) if fe.n_tones > 1 else 1 / fe.hop_s
+        # Pass 1: ±½ grating lobe in time, ±1 Doppler step; pass 2: a finer grid around the
+        # best cell (the range–Doppler ridge is tilted, so one coarse pass leaves a bias).
+        speed = float(alpha_to_speed(alpha_guess, c))
+        t_rx = t_guess
+        for half_t, half_v, nb in (
+            (0.5 / (df * alpha_guess), step, 81),
+            (0.1 / (df * alpha_guess), 0.25 * step, 41),
+        ):
+            speeds = speed + np.linspace(-half_v, half_v, 9)
+            b = t_rx + np.linspace(-half_t, half_t, nb)
+            z = power(speeds, b)
+            ia, ib = np.unravel_index(int(np.argmax(z)), z.shape)
+            ob = oa = 0.0
+            if 0 < ib < nb - 1:
+                ob = parabolic_offset(float(z[ia, ib - 1]), float(z[ia, ib]), float(z[ia, ib + 1]))
+            if 0 < ia < 8:
+                oa = parabolic_offset(float(z[ia - 1, ib]), float(z[ia, ib]), float(z[ia + 1, ib]))
+            t_rx = float(b[ib]) + ob * float(b[1] - b[0])
+            speed = float(speeds[ia]) + oa * float(speeds[1] - speeds[0])
+        return float(t_rx), float(speed_to_alpha(speed, c))
+
+
+def _coherent_power(
+    fe: FrontEnd,
+    d0: int,
+    hop_end: int,
+    unit_values: Callable[[NDArray[np.int64]], NDArray[np.complex128]],
+) -> Callable[[NDArray[np.float64], NDArray[np.float64]], NDArray[np.float64]]:
+    """``power(speeds, b)``: the coherent sum ``|Σ_m u_m e^{−j arg u_m(τ0, α)}|²`` of the M
+    hops ending with ``hop_end`` at hypothesis ``d0``, on speeds (m/s) × boundary times
+    ``b`` (s); ``unit_values(tone)`` gives the terms' unit correlators (phase model:
+    :meth:`Readout._coherent_refine`)."""
+    m = fe.m_hops
+    hops = fe.schedule.hops(hop_end - m + 1, m)
+    order = np.arange(m - 1, -1, -1)  # term m is hop hop_end − m
+    tone = hops.tone_index[order]
+    f = fe.tones_hz[tone]
+    t_i = hops.start_s[order]
+    phi = hops.phase_rad[order]
+    v = unit_values(tone)
+    a_d = float(fe.grid.alphas[d0])
+    g = fe.baseband.group_delay / fe.fs_hz
+    nu = a_d * f - fe.center_hz
+    c = fe.sound_speed_mps
+    t_end = float(hops.start_s[-1]) + fe.hop_s
+    base = phi / (2.0 * np.pi) - np.mod(f * t_i, 1.0) - nu * g  # cycles, (M,)
+    mid = t_i + 0.5 * fe.hop_s
+
+    def power(speeds: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+        al = np.asarray(speed_to_alpha(speeds, c))[:, None, None]
+        tau0 = b[None, :, None] - t_end / al
+        cyc = base - f * al * tau0 + (al - a_d) * f * (tau0 + mid / al)
+        result: NDArray[np.float64] = np.abs(np.exp(-2j * np.pi * cyc) @ v) ** 2
+        return result
+
+    return power

@@ -1,0 +1,345 @@
+"""The streaming GCAS receiver: input checks, the front end, one search strategy and the
+readout, in that order (the algorithm: :mod:`hil.estimation.gcas`)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from hil.errors import ConfigError
+from hil.estimation.base import Estimate
+from hil.estimation.first_arrival import FirstArrivalReadout
+from hil.estimation.gcas.front_end import FrontEnd
+from hil.estimation.gcas.options import (
+    COARSE_STEP,
+    check_geometry,
+    check_modes,
+    check_option_names,
+    resolve_cfar_lambda,
+)
+from hil.estimation.gcas.readout import DetectionInfo, Readout
+from hil.estimation.gcas.search import SearchStrategy
+from hil.estimation.gcas.search_full import FullSearch
+from hil.estimation.gcas.search_two_stage import TwoStageSearch
+from hil.estimation.gcas.sums import CodewordSums
+from hil.estimation.gcas.threshold import Cfar
+from hil.estimation.reverb_band import AUTO
+from hil.signals.schedule import HopSchedule
+
+MapCallback = Callable[[NDArray[np.float64], NDArray[np.float32], NDArray[np.float64]], None]
+
+
+class GcasReceiver:
+    """Streaming GCAS receiver; the algorithm is described in :mod:`hil.estimation.gcas`.
+
+    Parameters
+    ----------
+    schedule:
+        The transmit schedule (``random-cyclic`` or ``three-state``); the first input sample
+        is at the schedule's t = 0.
+    fs_hz:
+        Input sample rate, Hz.
+    sound_speed_mps, max_speed_mps, max_range_m:
+        c (m/s), the Doppler search span ± (m/s) and the largest range reported (m).
+    m_hops:
+        Correlator length M, from the code's minimum (all M-hop codewords distinct) to
+        :data:`M_MAX`.
+    n_doppler:
+        Number of Doppler hypotheses D.
+    coherent:
+        Coherent accumulated sum (phases restored) instead of the noncoherent default [R].
+    pfa:
+        False-alarm probability per update used to set λ when ``cfar_lambda`` is None.
+    cfar_lambda:
+        λ of the threshold ``μ̂ + λσ̂`` (overrides ``pfa``).
+    runner_up_ratio:
+        ρ: best codeword over the runner-up, >= 1.
+    cfar_window_hops:
+        Length of the trailing CFAR window, hops.
+    cfar_mode:
+        ``"bank"`` or ``"statistic"`` (module docstring, step 6).
+    reverb_speed_mps, reverb_weight:
+        Reverberation band: Doppler cells that stationary clutter of speed ``|v| <``
+        ``reverb_speed_mps`` (m/s) fills get ``reverb_weight`` in the Doppler decision (0
+        excludes them). Default ``"auto"``: the waveform's clutter main lobe
+        (:mod:`hil.estimation.reverb_band`: targets slower than the Doppler resolution
+        ``c/(2 f T_h)`` are not reported); 0 turns the band off (a stationary or slow target).
+        Detections on the band's edge are refused (:attr:`in_band_count`).
+    decimation:
+        Baseband decimation R; default the largest that keeps the Doppler-scaled band.
+    attenuation_db:
+        Stop-band attenuation of the baseband low-pass, dB.
+    search:
+        ``"two-stage"`` (default: coarse correlators every ``coarse_step`` samples choose the
+        hypothesis and the candidate times; exact sums only around each candidate) or
+        ``"full"`` (every unit correlator at every baseband sample; the reference).
+    coarse_step:
+        Coarse step B of the two-stage search, baseband samples.
+    range_readout, max_spread_s:
+        ``"peak"`` (default): the boundary time is the peak of the accumulated sums (in
+        multipath, the centroid of the arrivals); ``"first-arrival"``: the onset of the next
+        tone, the direct path in a tank (:mod:`hil.estimation.first_arrival`; arrivals up to
+        ``max_spread_s`` s before the peak; default 0.3 hop).
+    on_map:
+        Called as ``on_map(t_s, P, speed_mps)`` with the time–codeword map of each new stretch
+        of baseband samples: times (s, shape ``(n,)``), ``P`` (shape ``(n, J)``) and the chosen
+        Doppler hypothesis as a speed (m/s, shape ``(n,)``).
+    """
+
+    name = "gcas"
+
+    def __init__(
+        self,
+        schedule: HopSchedule,
+        fs_hz: float,
+        *,
+        sound_speed_mps: float,
+        max_speed_mps: float,
+        max_range_m: float,
+        m_hops: int,
+        n_doppler: int = 64,
+        coherent: bool = False,
+        pfa: float = 1e-3,
+        cfar_lambda: float | None = None,
+        runner_up_ratio: float = 1.05,
+        cfar_window_hops: float = 8.0,
+        cfar_mode: str = "bank",
+        reverb_speed_mps: float | str | None = AUTO,
+        reverb_weight: float = 0.0,
+        decimation: int | None = None,
+        attenuation_db: float = 70.0,
+        on_map: MapCallback | None = None,
+        search: str = "two-stage",
+        coarse_step: int = COARSE_STEP,
+        range_readout: str = "peak",
+        max_spread_s: float | None = None,
+    ) -> None:
+        check_geometry(schedule, fs_hz, sound_speed_mps, max_speed_mps, max_range_m, m_hops)
+        check_modes(cfar_mode, runner_up_ratio, cfar_window_hops, search, range_readout)
+        self.search, self.range_readout, self.cfar_mode = search, range_readout, cfar_mode
+        self._first_arrival = (
+            FirstArrivalReadout(
+                schedule, float(fs_hz), int(m_hops), float(sound_speed_mps), max_spread_s
+            )
+            if range_readout == "first-arrival"
+            else None
+        )
+        self.schedule, self.fs_hz, self.on_map = schedule, float(fs_hz), on_map
+        self.sound_speed_mps, self.max_speed_mps = float(sound_speed_mps), float(max_speed_mps)
+        self.max_range_m, self.m_hops = float(max_range_m), int(m_hops)
+        self.coherent, self.runner_up_ratio = bool(coherent), float(runner_up_ratio)
+        fe = self.front_end = FrontEnd(
+            schedule, self.fs_hz, sound_speed_mps=self.sound_speed_mps,
+            max_speed_mps=self.max_speed_mps, m_hops=self.m_hops, n_doppler=n_doppler,
+            reverb_speed_mps=reverb_speed_mps, reverb_weight=reverb_weight,
+            decimation=decimation, attenuation_db=attenuation_db,
+            cfar_window_hops=cfar_window_hops,
+        )  # fmt: skip
+        self.baseband, self.grid, self.fs_bb = fe.baseband, fe.grid, fe.fs_bb
+        self.tones_hz, self.hop_s, self.n_codewords = fe.tones_hz, fe.hop_s, fe.n_codewords
+        self.lags = fe.lags
+        #: The band's clutter speed in use, m/s (0: no band).
+        self.reverb_speed_mps = fe.reverb_speed_mps
+        #: Hypotheses whose detections are refused (the band's edge), shape ``(D,)``.
+        self.refused_hypotheses = fe.refused_hypotheses
+        self.cfar_lambda = resolve_cfar_lambda(
+            cfar_lambda, pfa, self.m_hops, fe.n_codewords, cfar_mode
+        )
+        cfar = Cfar(cfar_mode, self.cfar_lambda, self.m_hops)
+        self._sums = CodewordSums(fe)
+        self.strategy = self._make_search(search, cfar, coarse_step)
+        self.readout = Readout(
+            fe, max_range_m=self.max_range_m, coherent=self.coherent,
+            first_arrival=self._first_arrival, unit_values=self.strategy.unit_values,
+            receiver=self.name,
+        )  # fmt: skip
+        self.reset()
+        self._warm_up()
+
+    def _make_search(self, search: str, cfar: Cfar, coarse_step: int) -> SearchStrategy:
+        """The strategy object of the ``search`` option (the only place it is read)."""
+        if search == "full":
+            return FullSearch(
+                self.front_end, self._sums, cfar, coherent=self.coherent,
+                runner_up_ratio=self.runner_up_ratio,
+            )  # fmt: skip
+        return TwoStageSearch(
+            self.front_end, cfar, coherent=self.coherent, runner_up_ratio=self.runner_up_ratio,
+            coarse_step=coarse_step,
+        )  # fmt: skip
+
+    def _warm_up(self) -> None:
+        """Run every compiled kernel once on a few zeros, then forget it: the first call in a
+        process loads the machine code from numba's cache (or compiles it, seconds), which must
+        not happen inside the first live block. The map callback is not called."""
+        on_map, self.on_map = self.on_map, None
+        try:
+            self.process(np.zeros(self.baseband.decimation * 64))
+            self.strategy.warm_up()
+        finally:
+            self.on_map = on_map
+        self.reset()
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_options(
+        cls,
+        schedule: HopSchedule,
+        fs_hz: float,
+        *,
+        sound_speed_mps: float,
+        max_speed_mps: float,
+        max_range_m: float,
+        m_hops: int,
+        **extra: Any,
+    ) -> GcasReceiver:
+        """The registry's common constructor (:mod:`hil.estimation.registry`)."""
+        check_option_names(set(extra))
+        return cls(
+            schedule,
+            fs_hz,
+            sound_speed_mps=sound_speed_mps,
+            max_speed_mps=max_speed_mps,
+            max_range_m=max_range_m,
+            m_hops=m_hops,
+            **extra,
+        )
+
+    # ------------------------------------------------------------------ counts
+    @property
+    def n_tones(self) -> int:
+        """Number of tones K."""
+        return self.front_end.n_tones
+
+    @property
+    def inconsistent_count(self) -> int:
+        """Detections whose hop index did not advance as the elapsed time predicts."""
+        return self.readout.inconsistent_count
+
+    @property
+    def refused_count(self) -> int:
+        """Detections refused for a delay beyond ``max_range_m``."""
+        return self.readout.refused_count
+
+    @property
+    def in_band_count(self) -> int:
+        """Detections refused as the edge leak of an echo inside the reverberation band."""
+        return self.readout.in_band_count
+
+    @property
+    def last_detection(self) -> DetectionInfo | None:
+        """Diagnostics of the latest accepted detection."""
+        return self.readout.last_detection
+
+    # ------------------------------------------------------------------ state
+    def reset(self) -> None:
+        """Forget all state; the next sample is sample 0 again."""
+        self._samples_seen = 0
+        self._restart(0)
+        self.readout.reset()
+
+    @property
+    def samples_seen(self) -> int:
+        """Input samples consumed so far (gaps included)."""
+        return self._samples_seen
+
+    def _restart(self, input_index: int) -> None:
+        """Restart every accumulation at absolute input sample ``input_index``."""
+        self.baseband.reset(input_index)
+        if self._first_arrival is not None:
+            self._first_arrival.reset(input_index)
+        self.strategy.reset(self.baseband.next_output_index)
+        self.readout.restart()
+
+    # ------------------------------------------------------------------ streaming
+    def process(self, block: ArrayLike, *, gap_before: int = 0) -> list[Estimate]:
+        """Consume real samples (shape ``(n,)``); return the estimates completed by them.
+
+        ``gap_before`` samples are missing before this block: estimates still pending are
+        finalised, the time base advances and every accumulation restarts.
+        """
+        x = self._checked(block, gap_before)
+        out: list[Estimate] = []
+        if gap_before:
+            out += self.flush()
+            self._samples_seen += int(gap_before)
+            self._restart(self._samples_seen)
+        if self._first_arrival is not None:
+            self._first_arrival.push(x, self._samples_seen)
+        self._samples_seen += x.shape[0]
+        y = self.baseband.process(x)
+        if y.shape[0]:
+            peaks = self.strategy.process(y)
+            if self.on_map is not None:
+                self._emit_map(self.on_map, y.shape[0])
+            out += self.readout.decide_all(peaks)
+        return out
+
+    def _checked(self, block: ArrayLike, gap_before: int) -> NDArray[np.float64]:
+        """``block`` as a 1-D float array of finite samples; ``gap_before`` a count."""
+        x = np.asarray(block, dtype=np.float64)
+        if x.ndim != 1:
+            raise ConfigError("block", f"shape {x.shape}", "a 1-D array of real samples")
+        if int(gap_before) != gap_before or gap_before < 0:
+            raise ConfigError("gap_before", gap_before, "an integer >= 0 (samples)")
+        bad = ~np.isfinite(x)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise ConfigError(
+                "block",
+                f"{x[i]} at sample index {self._samples_seen + gap_before + i}",
+                "finite samples (no NaN or inf)",
+                "check the acquisition; mark missing samples with gap_before instead",
+            )
+        return x
+
+    def flush(self) -> list[Estimate]:
+        """End of input: decide the candidates still waiting for their look-ahead."""
+        return self.readout.decide_all(self.strategy.flush())
+
+    @property
+    def next_decision_index(self) -> int:
+        """Input sample count (as :attr:`samples_seen`) the stream must reach before the next
+        estimate can come out: :meth:`process` returns nothing while ``samples_seen`` stays
+        below it (an unbroken stream; a gap flushes). A live loop may wait for that many
+        samples instead of calling once per block: fewer, larger calls, the same estimates,
+        emitted no later. The full search gives no such bound (``samples_seen``)."""
+        return self.strategy.next_decision_index(self._samples_seen)
+
+    # ------------------------------------------------------------------ diagnostics
+    def _emit_map(self, on_map: MapCallback, count: int) -> None:
+        """The time–codeword map of the last ``count`` baseband samples to ``on_map``. It
+        costs ``J·M·K`` per sample, so it is computed only for a callback (detection
+        evaluates the codeword sums only around candidate peaks)."""
+        idx, d_map = self.strategy.map_hypotheses(count)
+        on_map(
+            self.baseband.time_of(idx),
+            self._codeword_sums(idx, d_map, self.coherent),
+            self.grid.speeds_mps[d_map].astype(np.float64),
+        )
+
+    def _codeword_sums(
+        self, idx: NDArray[np.int64], dcol: NDArray[np.int64], coherent: bool
+    ) -> NDArray[np.float32]:
+        """``A[n, d_n, j]`` for samples ``idx`` (shape ``(n,)``) at hypotheses ``dcol``."""
+        return self._sums.reduce(self.strategy.terms(idx, dcol), idx, dcol, coherent)
+
+    def accumulated_sums(self, count: int) -> tuple[NDArray[np.float64], NDArray[np.float32]]:
+        """The full ``A[n, d, j]`` for the last ``count`` baseband samples (diagnostics).
+
+        Returns times (s, shape ``(count,)``) and ``A`` (shape ``(count, D, J)``), computed
+        from the retained unit-correlator history; ``count`` is limited to the samples since
+        the last restart.
+        """
+        idx = self.strategy.retained(count)
+        full = np.stack(
+            [
+                self._codeword_sums(idx, np.full(idx.shape[0], d, dtype=np.int64), self.coherent)
+                for d in range(self.grid.size)
+            ],
+            axis=1,
+        )
+        return self.baseband.time_of(idx), full
