@@ -42,6 +42,7 @@ from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from hil.estimation.cost import gcas_mults_per_sample  # noqa: E402
 from hil.estimation.gcas import GcasReceiver  # noqa: E402
 from hil.estimation.mfbank import MatchedFilterBank  # noqa: E402
 from hil.signals.presets import check_design, get_preset  # noqa: E402
@@ -235,6 +236,7 @@ def main() -> None:
     gcas_xrt = {r["m_hops"]: r["xrt"] for r in gcas_rows}
     gcas_cpu = {r["m_hops"]: r["xrt_cpu"] for r in gcas_rows}
     for r in bank_rows:
+        r["mults_per_sample"] = round(bank(sch, r["m_hops"]).mults_per_sample, 1)
         r["gcas_over_bank"] = round(gcas_xrt[r["m_hops"]] / r["xrt"], 2)
         r["gcas_over_bank_cpu"] = round(gcas_cpu[r["m_hops"]] / r["xrt_cpu"], 2)
     bank10 = next(r["xrt"] for r in bank_rows if r["m_hops"] == 10)
@@ -275,6 +277,7 @@ def main() -> None:
                 "target_m_flatness": TARGET_FLAT,
                 "m_flatness_ratio": round(TARGET_FLAT / flat, 3),
                 "bank_by_m": bank_rows,
+                "gcas_mults_per_sample": gcas_mults_per_sample(len(sch.tones_hz), N_DOPPLER),
                 "bank_xrt_m10": bank10,
                 "gcas_over_bank_m10": round(bank_ratio, 2),
                 "gcas_over_bank_by_m": {r["m_hops"]: r["gcas_over_bank"] for r in bank_rows},

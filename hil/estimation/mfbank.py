@@ -80,6 +80,7 @@ from hil.estimation._baseline_common import (
 )
 from hil.estimation.base import Estimate
 from hil.estimation.baseband import ComplexBaseband
+from hil.estimation.cost import fft_mults
 from hil.signals.schedule import HopSchedule
 
 FloatArray = NDArray[np.float64]
@@ -319,6 +320,18 @@ class MatchedFilterBank(RegistryConstructor):
         self._d_j = np.zeros((0, j_count), dtype=np.int64)  # its Doppler index
         self._s0 = 0  # segment-local lag of self._scores[0]
         self._q_next = 0  # first segment-local lag not yet decided
+
+    @property
+    def mults_per_sample(self) -> float:
+        """Complex multiplies per input sample of the bank (no refinement): the front end's
+        ``T/R`` complex taps, then per frame (``S_b·R`` input samples) one ``N_b``-point FFT
+        and, per correlator, ``N_b`` spectral products and one inverse FFT
+        (:func:`~hil.estimation.cost.fft_mults`); the |c|² pass adds one per lag and
+        correlator."""
+        n_b, s_b, r = self._n_fft, self._step, self._dec
+        jd = self._lengths.size
+        per_frame = fft_mults(n_b) + jd * (n_b + fft_mults(n_b) + s_b)
+        return self.baseband.n_taps / r + per_frame / (s_b * r)
 
     @property
     def samples_seen(self) -> int:

@@ -13,6 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from hil.errors import ConfigError
+from hil.estimation.cost import fft_bank_mults_per_sample, fft_mults
 from hil.estimation.crlb import sampled_e_over_n0, schedule_crlb
 from hil.estimation.mfbank import MatchedFilterBank
 from hil.estimation.registry import make_receiver
@@ -241,3 +242,17 @@ def test_chunks_equal_whole_across_a_gap(kit: Any) -> None:
         assert rx.samples_seen == x.shape[0]
 
     check()
+
+
+def test_multiplies_per_sample_are_the_baseband_count() -> None:
+    # att, M = 10, D = 64 over ±30 m/s (bench_gcas): R = 11, a 169-tap front end, 4096-sample
+    # frames advancing 3151 lags. About 13x fewer than the same bank at the input rate.
+    rx = MatchedFilterBank(
+        SCH, FS, sound_speed_mps=1500.0, max_speed_mps=30.0, max_range_m=100.0, m_hops=10,
+        n_doppler=64, refine=False,
+    )  # fmt: skip
+    assert rx.baseband.decimation == 11 and rx.baseband.n_taps == 169
+    per_frame = fft_mults(4096) + 17 * 64 * (4096 + fft_mults(4096) + 3151)
+    assert rx.mults_per_sample == pytest.approx(169 / 11 + per_frame / (3151 * 11), rel=1e-12)
+    assert rx.mults_per_sample == pytest.approx(1015.0, abs=0.1)
+    assert fft_bank_mults_per_sample(17, 64, 10, 1000) / rx.mults_per_sample > 13.0
