@@ -113,6 +113,7 @@ def test_registry_builds_it_and_samples_seen_counts_gaps() -> None:
         ({"max_range_m": 500.0}, "max_range_m = 500.0 is not allowed: must be <= the unambiguous"),
         ({"bogus": 1}, "extra = ['bogus'] is not allowed"),
         ({"max_speed_mps": 2000.0}, "max_speed_mps = 2000.0 is not allowed"),
+        ({"fft_workers": 0}, "fft_workers = 0 is not allowed: must be an integer >= 1"),
     ],
 )
 def test_bad_options(kwargs: dict[str, Any], text: str) -> None:
@@ -256,3 +257,15 @@ def test_multiplies_per_sample_are_the_baseband_count() -> None:
     assert rx.mults_per_sample == pytest.approx(169 / 11 + per_frame / (3151 * 11), rel=1e-12)
     assert rx.mults_per_sample == pytest.approx(1015.0, abs=0.1)
     assert fft_bank_mults_per_sample(17, 64, 10, 1000) / rx.mults_per_sample > 13.0
+
+
+def test_a_sample_rate_below_the_stretched_band_is_refused() -> None:
+    # att tops out at 31.65 kHz, 32.51 kHz closing at 20 m/s, plus a 400 Hz margin.
+    with pytest.raises(
+        ConfigError,
+        match=re.escape("fs_hz = 60000.0 is not allowed: must be > 2 × 32905.4 Hz"),
+    ):
+        MatchedFilterBank(
+            SCH, 60_000.0, sound_speed_mps=1500.0, max_speed_mps=20.0, max_range_m=50.0,
+            m_hops=2, n_doppler=3,
+        )  # fmt: skip
