@@ -11,11 +11,14 @@ codeword, N_h samples per hop.
   does not grow with M.
 - **Direct matched-filter bank**: J·D correlators of length M·N_h, each a full dot product per
   output sample: ``J·D·M·N_h`` complex multiplies, linear in M.
-- **FFT overlap-save bank** (:mod:`hil.estimation.mfbank`): per block of ``S = N − L + 1``
-  outputs (``L = M·N_h``, ``N`` the power of two >= 2L): one N-point FFT of the input, then
-  per correlator N spectral products and one N-point inverse FFT (``N/2·log2 N`` complex
-  multiplies for a radix-2 FFT). Per output sample:
-  ``[N/2·log2 N + J·D·(N + N/2·log2 N)] / S``, growing like log M.
+- **FFT overlap-save bank** at the input rate (the seed's Fig 5.15 anchor): per block of
+  ``S = N − L + 1`` outputs (``L = M·N_h``, ``N`` the power of two >= 2L): one N-point FFT of
+  the input, then per correlator N spectral products and one N-point inverse FFT
+  (``N/2·log2 N`` complex multiplies for a radix-2 FFT). Per output sample:
+  ``[N/2·log2 N + J·D·(N + N/2·log2 N)] / S``, growing like log M. The ``mfbank`` receiver
+  (:mod:`hil.estimation.mfbank`) mixes and decimates to baseband first, which divides this by
+  about the decimation; its own count is
+  :attr:`~hil.estimation.mfbank.MatchedFilterBank.mults_per_sample`.
 """
 
 from __future__ import annotations

@@ -8,41 +8,60 @@ the time-scaled emission times,
     h_{j,d}[i] = s_a(t_end_j + α_d (i − L_{j,d}) / fs),    i = 0 … L_{j,d} − 1,
 
 with ``t_end_j`` the transmit end time of hop ``j`` and ``L_{j,d} = round(T_w fs / α_d)`` the
-received length of the ``T_w``-long window. Correlating the *real* input with the *analytic*
-replica keeps only the positive-frequency half of the input, so ``|c|`` is the envelope of the
-matched-filter output (no carrier ripple).
+received length of the ``T_w``-long window. Correlating the *real* input ``x`` with the
+*analytic* replica keeps only the positive-frequency half of the input, so ``|c|`` is the
+envelope of the matched-filter output (no carrier ripple):
 
-Implementation (overlap-save, streaming, state carried):
+    c(n) = Σ_i x[n + i] · conj(h_{j,d}[i]),    n the input sample where the replica starts.
 
-- Fixed frames of ``N`` samples (``N`` the power of two >= 2·L_max) advancing by ``S`` samples,
-  placed on a grid fixed by the first sample, so the arithmetic does not depend on how the
-  caller cuts the input: chunks and one whole block give bit-identical estimates.
-- Only the FFT bins of the Doppler-stretched band are kept (``K`` bins, a power of two), and
-  the inverse FFT of those ``K`` bins gives the correlation at every ``R = N/K``-th lag
-  (band-limited decimation, exact for the in-band part). All ``J·D`` correlators of a frame are
-  one batched inverse FFT.
-- Detection score: the normalised correlation ``ρ = √2 |c| / (‖h‖ ‖x_window‖)`` (1 for a
-  noise-free exact match, about √(2/L) for noise). A hop boundary is declared where the best
-  ``ρ`` over all ``(j, d)`` is a local maximum over ±half a hop and at least ``threshold``.
-- Refinement (``refine=True``, default): the exact correlation ``c(t_c, α)`` is evaluated
-  directly around the detection (``t_c`` the receive time of the window centre, which
-  decouples delay and Doppler): a sweep of ``α`` across the Doppler cell at the coherent
-  resolution ``1/(f0 T_w)``, then alternating parabolic fits in time and ``α``. This reaches
-  the Cramér–Rao bound at high SNR; it is not counted in :mod:`hil.estimation.cost`.
+Implementation: a baseband overlap-save bank, the way a sonar receiver is built.
+
+- **Front end, once for all replicas**: the real input is mixed by the centre ``f_c`` of the
+  Doppler-stretched band (by absolute sample index), low-passed and decimated by ``R`` to a
+  complex baseband ``z`` at ``fs_b = fs/R`` that holds the band
+  (:class:`~hil.estimation.baseband.ComplexBaseband`, sample ``k`` at time
+  ``t_k = (kR − δ)/fs``, ``δ`` the low-pass group delay in input samples). With
+  ``z(t) = ½ x_a(t) e^{−j2πf_c t}`` and the replica envelope
+  ``g_{j,d}(τ) = h_{j,d}(τ) e^{−j2πf_c τ}`` (``τ`` from the replica start),
+  ``|c(qR)| ≈ R |Σ_m z[q + m0 + m] conj(g_{j,d}(τ_m))|`` with ``τ_m = ((m0 + m)R − δ)/fs`` and
+  ``m0 = ⌈δ/R⌉``: the correlation at every ``R``-th input lag (the lag grid), exact up to the
+  band-limiting of the input and the sampling of the window edges (relative error ~R/L).
+- **Correlators**: fixed frames of ``N_b`` baseband samples (the power of two >= twice the
+  longest baseband replica, at least 4096) advancing by ``S_b = N_b − L_b,max + 1`` lags; one
+  FFT of the frame, products with the precomputed conjugate replica spectra (complex64,
+  scaled by ``R/‖h‖``) and batched inverse FFTs (:func:`scipy.fft.ifft`, ``fft_workers``
+  threads) over all ``J·D`` correlators; a compiled pass keeps the best Doppler per codeword
+  and lag. The frame grid is fixed by absolute sample index, so the arithmetic does not depend
+  on how the caller cuts the input: chunks and one whole block give bit-identical estimates.
+- **Detection score**: the normalised correlation ``ρ = √2 |c| / (‖h‖ ‖x_window‖)`` (1 for a
+  noise-free exact match, about √(2/L) for noise), with ``‖x_window‖²`` the energy of the
+  full-rate real input over the replica's ``L_{j,d}`` samples (a running sum of ``x²``). A hop
+  boundary is declared where the best ``ρ`` over all ``(j, d)`` is a local maximum over ±half
+  a hop and at least ``threshold``.
+- **Refinement** (``refine=True``, default), on the full-rate input: the exact correlation
+  ``c(t_c, α)`` is evaluated directly around the detection (``t_c`` the receive time of the
+  window centre, which decouples delay and Doppler): a sweep of ``α`` across the Doppler cell
+  at the coherent resolution ``1/(f0 T_w)``, then alternating parabolic fits in time and
+  ``α``. This reaches the Cramér–Rao bound at high SNR; it is not counted in
+  :mod:`hil.estimation.cost`.
 
 Readout: ``t_s`` is the receive time of the END boundary of the codeword's last hop,
 ``hop_index`` the global index of that hop, the transmit time is resolved with the code period
 so that the delay is in ``[0, 2 R_max / c]`` (detections beyond ``max_range_m`` are dropped),
-``range_m = c (t_s − t_tx)/2``, ``speed_mps`` from ``α``. ``snr_db`` is the E/N0 implied by
-``ρ``: ``10 log10(ρ²/(1 − ρ²) · L/2)``.
+``range_m = c (t_s − t_tx)/2``, ``speed_mps`` from ``α``. ``score`` is ``ρ`` at the reported
+``(t_s, α)``: the exact full-rate value when refined, the bank's grid value otherwise; ``snr_db``
+is the E/N0 it implies, ``10 log10(ρ²/(1 − ρ²) · L/2)``.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
+import numba
 import numpy as np
+import scipy.fft
 from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import NDArray
 from scipy.signal import correlate
@@ -60,23 +79,68 @@ from hil.estimation._baseline_common import (
     speed_of_alpha,
 )
 from hil.estimation.base import Estimate
-from hil.estimation.cost import overlap_save_size
+from hil.estimation.baseband import ComplexBaseband
+from hil.estimation.cost import fft_mults
 from hil.signals.schedule import HopSchedule
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
 
-_OPTIONS = ("n_doppler", "threshold", "refine", "n_candidates")
-# Doppler-grid chunk per batched inverse FFT (bounds the working memory to J·chunk·K values).
+_OPTIONS = ("n_doppler", "threshold", "refine", "n_candidates", "fft_workers")
+# Doppler-grid chunk per batched inverse FFT (bounds the working memory to J·chunk·N_b values).
 _D_CHUNK = 16
+# Shortest baseband frame: the frame is the power of two >= twice the longest baseband replica
+# and at least this long. Shorter frames spend most of each inverse FFT on the overlap; longer
+# ones push the J·D replica spectra (8·N_b bytes each) out of the cache.
+_MIN_FRAME = 4096
+# Band kept around the Doppler-stretched tones: this many hop main-lobe half-widths (1/T_h).
+_BAND_MARGIN_HOPS = 4.0
+# Baseband rate >= this factor times the two-sided passband: room for the low-pass transition.
+_TRANSITION_FACTOR = 1.3
 # Parabolic refinement rounds (each halves the steps).
 _REFINE_ROUNDS = 3
 # Runner-up codewords are refined only when their grid score is this close to the best.
 _CANDIDATE_RATIO = 0.75
 
 
+@numba.njit(cache=True, nogil=True)
+def _best_over_doppler(corr: Any, inv: Any, d0: int, best: Any, best_d: Any) -> None:
+    """Fold a chunk of correlators into the best ρ² over Doppler, in place.
+
+    ``corr`` (shape ``(J_g, D_c, N_b)``, complex) holds the correlations of Doppler indices
+    ``d0 … d0 + D_c − 1``; lag ``k < S`` of ``(j, d)`` scores ``|corr|² · inv[d0 + d, k]``
+    (``inv`` shape ``(D, S)``). ``best`` (shape ``(J_g, S)``) and ``best_d`` (its Doppler
+    index) are raised where a hypothesis beats them (ties keep the lower index).
+    """
+    jg, dc, _ = corr.shape
+    s = best.shape[1]
+    for j in range(jg):
+        for d in range(dc):
+            for k in range(s):
+                v = corr[j, d, k]
+                p = (v.real * v.real + v.imag * v.imag) * inv[d0 + d, k]
+                if p > best[j, k]:
+                    best[j, k] = p
+                    best_d[j, k] = d0 + d
+
+
+@dataclass(frozen=True)
+class _LengthGroup:
+    """Codewords sharing one replica length per Doppler (one window duration ``T_w``).
+
+    ``first`` .. ``first + count`` index the codewords in group order; ``full`` (shape
+    ``(D,)``) are the full-rate lengths ``L_d``; ``spectra`` (shape ``(count, D, N_b)``,
+    complex64) the conjugate baseband replica spectra scaled by ``R/‖h‖``.
+    """
+
+    first: int
+    count: int
+    full: NDArray[np.int64]
+    spectra: NDArray[np.complex64]
+
+
 class MatchedFilterBank(RegistryConstructor):
-    """Streaming overlap-save matched-filter bank over all codewords and Doppler hypotheses.
+    """Streaming baseband overlap-save matched-filter bank over all codewords and Dopplers.
 
     Parameters
     ----------
@@ -98,6 +162,9 @@ class MatchedFilterBank(RegistryConstructor):
     n_candidates:
         Codewords refined per detection (the strongest on the grid); the best refined one
         is reported.
+    fft_workers:
+        Threads of each batched FFT (:mod:`scipy.fft` ``workers``); 1 keeps the bank on one
+        core.
     """
 
     name = "mfbank"
@@ -116,6 +183,7 @@ class MatchedFilterBank(RegistryConstructor):
         threshold: float = 0.2,
         refine: bool = True,
         n_candidates: int = 3,
+        fft_workers: int = 1,
     ) -> None:
         fs, c, vmax, rmax, m = common_options(
             fs_hz, sound_speed_mps, max_speed_mps, max_range_m, m_hops
@@ -144,10 +212,12 @@ class MatchedFilterBank(RegistryConstructor):
         self.threshold = thr
         self.refine = refine
         self.n_candidates = positive_int("n_candidates", n_candidates)
+        self.fft_workers = positive_int("fft_workers", fft_workers)
         self.speeds_mps: FloatArray = np.zeros(1) if n_dop == 1 else np.linspace(-vmax, vmax, n_dop)
         self.alphas: FloatArray = np.asarray(alpha_of_speed(self.speeds_mps, c), dtype=float)
         self._max_delay_s = 2.0 * rmax / c
         self._build_codewords()
+        self._build_front_end()
         self._build_bank()
         self.reset()
 
@@ -165,48 +235,68 @@ class MatchedFilterBank(RegistryConstructor):
         self._t_win: FloatArray = spans  # codeword duration T_w (s)
         self.n_codewords = p
 
+    def _build_front_end(self) -> None:
+        """Centre, passband and decimation of the baseband holding every stretched replica."""
+        sch, fs = self.schedule, self.fs_hz
+        margin_hz = _BAND_MARGIN_HOPS / float(np.min(sch.duration_s))
+        f_lo = max(0.0, sch.min_frequency_hz() * float(self.alphas.min()) - margin_hz)
+        f_hi = sch.max_frequency_hz() * float(self.alphas.max()) + margin_hz
+        passband = 0.5 * (f_hi - f_lo)
+        centre = 0.5 * (f_lo + f_hi)
+        if not f_hi < fs / 2:
+            raise ConfigError(
+                "fs_hz",
+                fs,
+                f"> 2 × {f_hi:.1f} Hz (the highest Doppler-stretched frequency)",
+                "raise the sample rate or lower max_speed_mps",
+            )
+        decimation = max(1, int(fs / (2.0 * _TRANSITION_FACTOR * passband)))
+        self.baseband = ComplexBaseband(fs, centre, decimation=decimation, passband_hz=passband)
+        self._dec = decimation  # R: input samples per lag of the grid
+        self._gd = self.baseband.group_delay  # input samples
+        self._m0 = int(math.ceil(self._gd / decimation))
+
     def _build_bank(self) -> None:
-        fs = self.fs_hz
+        fs, r = self.fs_hz, self._dec
         lengths = np.rint(self._t_win[:, None] * fs / self.alphas[None, :]).astype(np.int64)
         if int(lengths.min()) < 2:
             raise ConfigError("m_hops", self.m_hops, "codewords of at least 2 samples")
-        self._lengths = lengths  # (J, D)
-        l_max = int(lengths.max())
-        n = overlap_save_size(l_max)
-        self._n_fft = n
-        # The band the stretched replicas occupy, with a margin for the hop sidelobes.
-        margin_hz = 8.0 / float(np.min(self.schedule.duration_s))
-        f_lo = max(0.0, self.schedule.min_frequency_hz() * float(self.alphas.min()) - margin_hz)
-        f_hi = min(fs / 2, self.schedule.max_frequency_hz() * float(self.alphas.max()) + margin_hz)
-        bin_hz = fs / n
-        k_lo = int(math.floor(f_lo / bin_hz))
-        band = int(math.ceil(f_hi / bin_hz)) - k_lo + 1
-        k = 1 << int(math.ceil(math.log2(max(2, int(1.5 * band)))))
-        k = min(k, n // 2)
-        k_lo = max(0, min(k_lo, n // 2 + 1 - k))
-        self._k_lo, self._k = k_lo, k
-        self._dec = n // k  # R: lag decimation of the band-limited correlation
-        step = n - l_max + 1
-        self._step = (step // self._dec) * self._dec
-        self._q_per_frame = self._step // self._dec
-        j_count, d_count = lengths.shape
-        self._hconj = np.empty((j_count, d_count, k), dtype=np.complex128)
-        self._hnorm2 = np.empty((j_count, d_count))
-        for d, a in enumerate(self.alphas):
-            for j in range(j_count):
-                h = self._replica(j, float(a), int(lengths[j, d]))
-                spec = np.fft.fft(h, n)[k_lo : k_lo + k]
-                self._hconj[j, d] = np.conj(spec)
-                self._hnorm2[j, d] = float(np.vdot(h, h).real)
-        # Half a (received, fastest) hop in decimated lags: the local-maximum neighbourhood.
+        self._lengths = lengths  # (J, D) full-rate replica lengths
+        # Baseband replica m covers τ_m = ((m0 + m)R − g)/fs < L/fs.
+        lb = np.ceil((lengths + self._gd) / r).astype(np.int64) - self._m0
+        lb_max = int(lb.max())
+        n_b = max(_MIN_FRAME, 1 << int(math.ceil(math.log2(2 * lb_max))))
+        self._n_fft = n_b
+        self._step = n_b - lb_max + 1  # lags per frame
+        centre = self.baseband.center_hz
+        # Codewords with the same replica lengths share one energy normalisation: group them.
+        _, first_of, group_of = np.unique(lengths, axis=0, return_index=True, return_inverse=True)
+        self._order = np.argsort(group_of.reshape(-1), kind="stable")
+        counts = np.bincount(group_of.reshape(-1))
+        groups = []
+        first = 0
+        for g_no, count in enumerate(counts):
+            spectra = np.empty((int(count), self.alphas.shape[0], n_b), dtype=np.complex64)
+            for g_i, j in enumerate(self._order[first : first + count]):
+                for d, a in enumerate(self.alphas):
+                    tau = ((self._m0 + np.arange(int(lb[j, d]))) * r - self._gd) / fs
+                    tau = tau[tau < lengths[j, d] / fs]
+                    t = self._t_end[j] + float(a) * (tau - lengths[j, d] / fs)
+                    env = self.schedule.evaluate_analytic(t) * np.exp(-2j * np.pi * centre * tau)
+                    norm = math.sqrt(float(np.vdot(env, env).real) * r)  # ‖h‖ (Riemann)
+                    spectra[g_i, d] = np.conj(scipy.fft.fft(env, n_b)) * (r / norm)
+            full = lengths[int(first_of[g_no])]
+            groups.append(_LengthGroup(first, int(count), full, spectra))
+            first += int(count)
+        self._groups = tuple(groups)
+        # Reused product/inverse-FFT buffer: a fresh multi-megabyte temporary per chunk would
+        # be page-faulted in again every time.
+        chunk = min(_D_CHUNK, self.alphas.shape[0])
+        self._work = np.empty((int(counts.max()), chunk, n_b), dtype=np.complex64)
+        # Half a (received, fastest) hop in lags: the local-maximum neighbourhood.
         hop_min = float(np.min(self.schedule.duration_s))
-        self._half = max(1, int(0.5 * hop_min * fs / float(self.alphas.max()) / self._dec))
-        self._pad = 2 * self._dec + 64
-
-    def _replica(self, j: int, alpha: float, length: int) -> ComplexArray:
-        i = np.arange(length, dtype=np.float64)
-        t = self._t_end[j] + alpha * (i - length) / self.fs_hz
-        return np.asarray(self.schedule.evaluate_analytic(t), dtype=np.complex128)
+        self._half = max(1, int(0.5 * hop_min * fs / float(self.alphas.max()) / r))
+        self._pad = 2 * r + 64
 
     # ------------------------------------------------------------------ state
     def reset(self) -> None:
@@ -215,16 +305,33 @@ class MatchedFilterBank(RegistryConstructor):
         self._restart(0)
 
     def _restart(self, origin: int) -> None:
+        r = self._dec
         self._origin = origin  # global index of the first sample of this segment
         self._x = np.zeros(0)
         self._x0 = origin  # global index of self._x[0]
-        self._frame_pos = origin  # global index of the next frame start
+        self.baseband.reset(origin)
+        self._q_first = -(-origin // r)  # absolute lag (in R samples) of the first grid lag
+        self._z = np.zeros(0, dtype=np.complex64)
+        self._z0 = self.baseband.next_output_index  # absolute baseband index of self._z[0]
+        self._frame_q = self._q_first  # absolute lag of the next frame's first lag
         j_count = self.n_codewords
-        self._scores = np.zeros(0)  # best ρ over (j, d) per decimated lag
+        self._scores = np.zeros(0)  # best ρ over (j, d) per lag
         self._rho_j = np.zeros((0, j_count))  # best ρ over d per lag and codeword
         self._d_j = np.zeros((0, j_count), dtype=np.int64)  # its Doppler index
-        self._s0 = 0  # segment-local decimated lag of self._scores[0]
-        self._q_next = 0  # first segment-local decimated lag not yet decided
+        self._s0 = 0  # segment-local lag of self._scores[0]
+        self._q_next = 0  # first segment-local lag not yet decided
+
+    @property
+    def mults_per_sample(self) -> float:
+        """Complex multiplies per input sample of the bank (no refinement): the front end's
+        ``T/R`` complex taps, then per frame (``S_b·R`` input samples) one ``N_b``-point FFT
+        and, per correlator, ``N_b`` spectral products and one inverse FFT
+        (:func:`~hil.estimation.cost.fft_mults`); the |c|² pass adds one per lag and
+        correlator."""
+        n_b, s_b, r = self._n_fft, self._step, self._dec
+        jd = self._lengths.size
+        per_frame = fft_mults(n_b) + jd * (n_b + fft_mults(n_b) + s_b)
+        return self.baseband.n_taps / r + per_frame / (s_b * r)
 
     @property
     def samples_seen(self) -> int:
@@ -241,8 +348,9 @@ class MatchedFilterBank(RegistryConstructor):
             self._seen += int(gap_before)
             self._restart(self._seen)
         self._x = np.concatenate((self._x, x))
+        self._z = np.concatenate((self._z, self.baseband.process(x).astype(np.complex64)))
         self._seen += x.shape[0]
-        while self._frame_pos + self._n_fft <= self._seen:
+        while self._frame_ready():
             self._run_frame(final=False)
         out.extend(self._decide(final=False))
         self._trim()
@@ -254,48 +362,60 @@ class MatchedFilterBank(RegistryConstructor):
         self._restart(self._seen)
         return out
 
+    def _frame_ready(self) -> bool:
+        """Baseband and full-rate input both reach the end of the next frame."""
+        f = self._frame_q + self._m0
+        x_end = (self._frame_q + self._step - 1) * self._dec + int(self._lengths.max())
+        return f + self._n_fft <= self._z0 + self._z.shape[0] and x_end <= self._seen
+
     def _finish(self) -> list[Estimate]:
+        # Samples after the input count as zero: push the low-pass tail out.
+        tail = self.baseband.process(np.zeros(self.baseband.n_taps + self._dec))
+        self._z = np.concatenate((self._z, tail.astype(np.complex64)))
         l_max = int(self._lengths.max())
-        while self._frame_pos + l_max <= self._seen:
+        while self._frame_q * self._dec + l_max <= self._seen:
             self._run_frame(final=True)
         return self._decide(final=True)
 
     def _run_frame(self, *, final: bool) -> None:
-        n = self._n_fft
-        a = self._frame_pos - self._x0
-        frame = self._x[a : a + n]
-        if frame.shape[0] < n:
-            frame = np.concatenate((frame, np.zeros(n - frame.shape[0])))
-        spec = np.fft.rfft(frame)[self._k_lo : self._k_lo + self._k]
-        qn = self._q_per_frame
-        lags = np.arange(qn) * self._dec  # frame-relative lags
-        cs = np.concatenate(([0.0], np.cumsum(frame * frame)))
-        scale2 = (self._k / n) ** 2
+        n_b, step, r = self._n_fft, self._step, self._dec
+        a = self._frame_q + self._m0 - self._z0
+        frame = self._z[a : a + n_b]
+        if frame.shape[0] < n_b:
+            frame = np.concatenate((frame, np.zeros(n_b - frame.shape[0], dtype=np.complex64)))
+        spec = scipy.fft.fft(frame, workers=self.fft_workers)
+        # Full-rate energy of every window: a running sum of x² from the frame's first lag.
+        n0 = self._frame_q * r - self._x0
+        xs = self._x[n0 : n0 + (step - 1) * r + int(self._lengths.max())]
+        cs = np.concatenate(([0.0], np.cumsum(xs * xs)))
+        starts = np.arange(step) * r
+        valid_len = self._seen - self._frame_q * r  # samples of real input from the first lag
         j_count, d_count = self._lengths.shape
-        best = np.zeros((j_count, qn))  # best ρ² over Doppler, per codeword and lag
-        best_d = np.zeros((j_count, qn), dtype=np.int64)
-        valid_len = self._seen - self._frame_pos  # samples of real input in this frame
-        for d0 in range(0, d_count, _D_CHUNK):
-            d1 = min(d_count, d0 + _D_CHUNK)
-            corr = np.fft.ifft(spec[None, None, :] * self._hconj[:, d0:d1, :], axis=-1)
-            p2 = (corr.real**2 + corr.imag**2)[:, :, :qn] * scale2
-            lens = self._lengths[:, d0:d1]
-            ends = lags[None, None, :] + lens[:, :, None]
-            energy = cs[np.minimum(ends, n)] - cs[lags][None, None, :]
-            denom = self._hnorm2[:, d0:d1, None] * energy
-            rho2 = np.where(denom > 0, 2.0 * p2 / np.where(denom > 0, denom, 1.0), 0.0)
+        best = np.zeros((j_count, step), dtype=np.float32)  # best ρ² over Doppler
+        best_d = np.zeros((j_count, step), dtype=np.int64)
+        work = self._work
+        for grp in self._groups:
+            ends = starts[None, :] + grp.full[:, None]  # (D, S)
+            energy = cs[np.minimum(ends, xs.shape[0])] - cs[np.minimum(starts, xs.shape[0])]
+            inv = np.where(energy > 0, 2.0 / np.where(energy > 0, energy, 1.0), 0.0)
             if final:
-                rho2 = np.where(ends <= valid_len, rho2, 0.0)
-            idx = np.argmax(rho2, axis=1)  # (J, qn)
-            val = np.take_along_axis(rho2, idx[:, None, :], axis=1)[:, 0, :]
-            better = val > best
-            best = np.where(better, val, best)
-            best_d = np.where(better, idx + d0, best_d)
-        rho_j = np.sqrt(np.minimum(best, 1.0))
+                inv = np.where(ends <= valid_len, inv, 0.0)
+            inv32 = inv.astype(np.float32)
+            rows = slice(grp.first, grp.first + grp.count)
+            for d0 in range(0, d_count, _D_CHUNK):
+                d1 = min(d_count, d0 + _D_CHUNK)
+                prod = np.multiply(grp.spectra[:, d0:d1, :], spec, out=work[: grp.count, : d1 - d0])
+                corr = scipy.fft.ifft(prod, axis=-1, overwrite_x=True, workers=self.fft_workers)
+                _best_over_doppler(corr, inv32, d0, best[rows], best_d[rows])
+        # Back from group order to codeword order.
+        rho_j = np.empty((j_count, step))
+        rho_j[self._order] = np.sqrt(np.minimum(best, 1.0))
+        d_j = np.empty((j_count, step), dtype=np.int64)
+        d_j[self._order] = best_d
         self._rho_j = np.concatenate((self._rho_j, rho_j.T))
-        self._d_j = np.concatenate((self._d_j, best_d.T))
+        self._d_j = np.concatenate((self._d_j, d_j.T))
         self._scores = np.concatenate((self._scores, rho_j.max(axis=0)))
-        self._frame_pos += self._step
+        self._frame_q += step
 
     def _decide(self, *, final: bool) -> list[Estimate]:
         h = self._half
@@ -333,10 +453,16 @@ class MatchedFilterBank(RegistryConstructor):
             self._rho_j = self._rho_j[cut:]
             self._d_j = self._d_j[cut:]
             self._s0 = keep_q
-        keep_x = min(self._frame_pos, self._origin + keep_q * self._dec - self._pad)
+        r = self._dec
+        # Never past the samples held: the next block's first sample keeps its index.
+        keep_x = min(self._frame_q * r, (self._q_first + keep_q) * r - self._pad, self._seen)
         if keep_x > self._x0:
             self._x = self._x[keep_x - self._x0 :]
             self._x0 = keep_x
+        keep_z = min(self._frame_q + self._m0, self._z0 + self._z.shape[0])
+        if keep_z > self._z0:
+            self._z = self._z[keep_z - self._z0 :]
+            self._z0 = keep_z
 
     # ------------------------------------------------------------------ readout
     def _corr(self, j: int, t_c: float, alpha: float) -> tuple[float, float, int]:
@@ -431,7 +557,7 @@ class MatchedFilterBank(RegistryConstructor):
 
     def _readout(self, q: int) -> Estimate | None:
         row = self._rho_j[q - self._s0]
-        n = self._origin + q * self._dec  # global lag of the replica start
+        n = (self._q_first + q) * self._dec  # global sample of the replica start
         if self.refine and n + int(self._lengths.max()) + self._pad > self._seen:
             return None  # the refinement would run off the end of the input
         # Grid scalloping can let a codeword sharing most hops win on the grid: refine the
@@ -444,11 +570,12 @@ class MatchedFilterBank(RegistryConstructor):
             d = int(self._d_j[q - self._s0, j])
             alpha = float(self.alphas[d])
             t_c = (n + int(self._lengths[j, d])) / self.fs_hz - 0.5 * self._t_win[j] / alpha
+            rho, count = float(row[j]), int(self._lengths[j, d])
             if self.refine:
                 t_c, alpha = self._refine(j, d, t_c)
-            _, rho, count = self._corr(j, t_c, alpha)
-            if count == 0:
-                rho, count = float(row[j]), int(self._lengths[j, d])
+                _, rho_exact, count_exact = self._corr(j, t_c, alpha)
+                if count_exact:
+                    rho, count = rho_exact, count_exact
             if best is None or rho > best[0]:
                 best = (rho, j, t_c, alpha, count)
         assert best is not None
