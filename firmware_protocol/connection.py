@@ -351,7 +351,8 @@ class Connection:
         kind = message_kind(message, self._pending)
         if next_state(self.state, sender, kind) is None:
             return illegal_message(self.state, sender, kind, local=local)
-        if isinstance(message, Ack | Nak) and message.ref_type in COMMAND_NAMES:
+        if isinstance(message, Ack) and message.ref_type in COMMAND_NAMES:
+            # A NAK quoting anything but the awaited command is a refusal (NAK:OTHER).
             pending = self._pending.get(message.ref_type)
             if pending != message.ref_seq:
                 name = COMMAND_NAMES[message.ref_type]

@@ -29,7 +29,6 @@ import numpy as np
 import numpy.typing as npt
 
 from firmware_protocol import (
-    MAX_FRAME_LEN,
     NEED_DATA,
     Ack,
     AdcData,
@@ -199,7 +198,7 @@ class SimulatedBoard:
         if config is None:
             return 1
         size = channel_count(config.adc_channel_mask) * SampleFormat(config.adc_format).size
-        return (MAX_FRAME_LEN - _FRAME_OVERHEAD) // size
+        return (self.spec.max_frame_len - _FRAME_OVERHEAD) // size
 
     def snapshot(self) -> BoardSnapshot:
         """The board's state now."""
@@ -276,6 +275,9 @@ class SimulatedBoard:
             return
         self._last_host = self._now_ns()
         self._send(Nak(error.ref_seq, error.ref_type, NakCode(error.code), _detail(str(error))))
+        if self.conn.configuration is None:  # a refused CONFIGURE unconfigures (SPEC 5.2)
+            self._stop_output()
+            self._fifo = None
 
     def _handle(self, message: Message) -> None:
         if isinstance(message, Hello):
