@@ -129,6 +129,7 @@ typedef struct {
     int wd_armed;
     uint64_t wd_ns;
     casfw_ns last_host;
+    casfw_ns last_now; /* board time never goes back, whatever the HAL's clock does */
     int periodic;
     casfw_ns next_sync, next_status;
     /* receiver */

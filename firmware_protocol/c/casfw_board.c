@@ -40,7 +40,12 @@ static unsigned popcount16(uint32_t m) { unsigned n = 0; for (; m; m &= m - 1) n
 static unsigned format_size(uint8_t fmt) { return fmt == 1 ? 2u : fmt == 2 ? 3u : 4u; }
 static int format_known(uint8_t fmt) { return fmt >= 1 && fmt <= 3; }
 
-static casfw_ns now(casfw_board *b) { return b->hal.now_ns(b->hal.ctx); }
+static casfw_ns now(casfw_board *b) {
+    casfw_ns t = b->hal.now_ns(b->hal.ctx);
+    if (t < b->last_now) t = b->last_now;
+    b->last_now = t;
+    return t;
+}
 
 /* --- SPEC 5.3: the sample clock in integer nanoseconds ----------------------------------- */
 uint64_t casfw_index_at(const casfw_board *b, casfw_ns t) {
@@ -670,6 +675,7 @@ void casfw_init(casfw_board *b, const casfw_config *cfg, const casfw_hal *hal) {
     memset(&b->setup, 0, sizeof b->setup);
     b->rate = b->cfg.sample_rates_hz[0];
     b->base_index = 0;
+    b->last_now = 0;
     b->base_ns = now(b);
     b->dac_underruns = b->adc_overruns = 0;
     b->frame_errors = b->frames_ok = 0;

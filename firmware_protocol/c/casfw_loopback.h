@@ -5,7 +5,9 @@
 
 #include "casfw.h"
 
+#ifndef CASFW_LOOPBACK_MAX_DELAY
 #define CASFW_LOOPBACK_MAX_DELAY 4096u
+#endif
 
 typedef struct {
     uint32_t delay;

@@ -72,9 +72,9 @@ def test_sim_serve_board_impl_c_prints_a_port_speaking_the_protocol() -> None:
 
 
 def test_impl_c_refuses_options_it_cannot_honour() -> None:
-    with pytest.raises(ConfigError, match="via = 'memory'.*pty"):
+    with pytest.raises(ConfigError, match=r"via = 'memory'.*pty"):
         open_transport("sim://board?impl=c&via=memory")
-    with pytest.raises(ConfigError, match="impl = 'rust'.*one of python, c"):
+    with pytest.raises(ConfigError, match=r"impl = 'rust'.*one of python, c"):
         open_transport("sim://board?impl=rust")
 
 
