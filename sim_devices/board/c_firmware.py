@@ -182,7 +182,7 @@ class CBoardStepper:
     def _take(self) -> bytes:
         parts = []
         while n := self._lib.casfw_sim_take(self._mem, self._out, len(self._out)):
-            parts.append(self._out.raw[:n])
+            parts.append(ctypes.string_at(self._out, n))
         return b"".join(parts)
 
     @property
