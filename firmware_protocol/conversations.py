@@ -7,16 +7,16 @@ runs one service pass (SPEC 5), then receives ``host_hex``; ``device_hex`` is ev
 sent during the step. Every implementation is run through them (``tests/board``); a NAK's
 detail text is free (SPEC section 3), so it is the only part compared loosely.
 
-Regenerate after a deliberate change with::
+This package imports no board (DESIGN.md's import direction), so the file is recorded by
+the reference board's module; regenerate after a deliberate change with::
 
-    python -m firmware_protocol.conversations --write
+    python -m sim_devices.board.stepper --write
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import sys
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -347,44 +347,36 @@ def same_output(expected: bytes, got: bytes) -> bool:
     )
 
 
-def generate() -> dict[str, Any]:
-    """The whole document, recorded on the reference Python board."""
-    from sim_devices.board.stepper import PythonBoardStepper
-
+def generate(make_device: Callable[[], Device]) -> dict[str, Any]:
+    """The whole document, recorded on the boards ``make_device`` makes (the reference)."""
     return {
         "about": __doc__.split("\n\n")[0].replace("\n", " ") if __doc__ else "",
         "protocol_version": f"{PROTOCOL_MAJOR}.{PROTOCOL_MINOR}",
         "schema_hash": f"0x{SCHEMA_HASH:08x}",
         "board": BOARD,
-        "conversations": record(PythonBoardStepper),
+        "conversations": record(make_device),
     }
 
 
-def render() -> str:
+def render(make_device: Callable[[], Device]) -> str:
     """The JSON text written to ``golden_conversations.json``."""
-    return json.dumps(generate(), indent=1) + "\n"
+    return json.dumps(generate(make_device), indent=1) + "\n"
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(make_device: Callable[[], Device], argv: list[str] | None = None) -> int:
     """``--write`` regenerates the file; ``--check`` exits 1 if it is stale."""
-    parser = argparse.ArgumentParser(prog="python -m firmware_protocol.conversations")
+    parser = argparse.ArgumentParser(prog="python -m sim_devices.board.stepper")
     group = parser.add_mutually_exclusive_group(required=True)
     group.add_argument("--write", action="store_true", help=f"write {CONVERSATIONS_PATH.name}")
     group.add_argument("--check", action="store_true", help="fail if the file is stale")
     args = parser.parse_args(argv)
-    text = render()
+    text = render(make_device)
     if args.write:
         CONVERSATIONS_PATH.write_text(text, encoding="utf-8")
         print(f"wrote {CONVERSATIONS_PATH} ({len(text)} bytes)")
         return 0
     if CONVERSATIONS_PATH.read_text(encoding="utf-8") != text:
-        print(
-            f"{CONVERSATIONS_PATH} is stale: run python -m firmware_protocol.conversations --write"
-        )
+        print(f"{CONVERSATIONS_PATH} is stale: run python -m sim_devices.board.stepper --write")
         return 1
     print(f"{CONVERSATIONS_PATH} is up to date")
     return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -4,13 +4,18 @@
 the host bytes, and returns every byte the board sent: the contract of
 :class:`firmware_protocol.conversations.Device`, which the C reference firmware's stepper
 (:mod:`sim_devices.board.c_firmware`) offers too.
+
+This board is the reference of the golden conversations: ``python -m
+sim_devices.board.stepper --write`` records ``firmware_protocol/golden_conversations.json``
+(``--check`` exits 1 if the file differs from what the board says now).
 """
 
 from __future__ import annotations
 
+import sys
 from typing import Any
 
-from firmware_protocol import SampleFormat
+from firmware_protocol import SampleFormat, conversations
 from firmware_protocol.conversations import BOARD
 from sim_devices.board.core import SimulatedBoard
 from sim_devices.board.spec import BoardSpec
@@ -55,3 +60,7 @@ class PythonBoardStepper:
         if host:
             self.board.receive_data(host)
         return self.board.data_to_send()
+
+
+if __name__ == "__main__":
+    sys.exit(conversations.main(PythonBoardStepper))

@@ -80,7 +80,7 @@ def diff(expected: bytes, got: bytes) -> str:
 
 
 def test_conversations_file_is_what_the_reference_board_says() -> None:
-    assert conversations.main(["--check"]) == 0
+    assert conversations.main(PythonBoardStepper, ["--check"]) == 0
 
 
 def test_conversations_cover_every_refusal_a_reference_board_sends() -> None:
