@@ -36,8 +36,8 @@
 #ifndef CASFW_TX_BYTES /* encoded bytes waiting for the link */
 #define CASFW_TX_BYTES (1u << 20)
 #endif
-#ifndef CASFW_IO_FRAMES /* sample frames per call of the HAL's sample_io */
-#define CASFW_IO_FRAMES 256u
+#ifndef CASFW_IO_FRAMES /* most sample frames per call of the HAL's sample_io */
+#define CASFW_IO_FRAMES 16384u
 #endif
 
 /* Board time in nanoseconds since power-up. */

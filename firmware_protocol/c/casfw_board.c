@@ -282,11 +282,26 @@ static void put_adc_sample(casfw_board *b, uint8_t *p, double v) {
     else { put16(p, (uint32_t)count); p[2] = (uint8_t)((uint32_t)count >> 16); }
 }
 
-/* Plays and captures every index up to end, sending ADC_DATA frames (SPEC 5.4). */
+/* Plays the DAC and runs the HAL's sample I/O for up to CASFW_IO_FRAMES indices from first
+ * (at most up to end), leaving the ADC values in adc_scratch. */
+static uint32_t convert(casfw_board *b, uint64_t first, uint64_t end) {
+    const casfw_setup *s = &b->setup;
+    uint32_t m = end - first < CASFW_IO_FRAMES ? (uint32_t)(end - first) : CASFW_IO_FRAMES;
+    for (uint32_t i = 0; i < m; i++)
+        count_underrun(b, fifo_play(b, first + i, b->dac_scratch + (size_t)i * s->n_dac));
+    b->hal.sample_io(b->hal.ctx, first, m, b->dac_scratch, s->n_dac, b->adc_scratch, s->n_adc);
+    return m;
+}
+
+/* Plays and captures every index up to end, sending ADC_DATA frames (SPEC 5.4): frames of
+ * `step` sample frames from the first index produced; the HAL converts in spans of up to
+ * CASFW_IO_FRAMES, independent of the frame cuts. */
 static void capture_until(casfw_board *b, uint64_t end) {
     const casfw_setup *s = &b->setup;
-    unsigned frame_bytes = s->n_adc * format_size(s->adc_format);
+    unsigned size = format_size(s->adc_format);
+    unsigned frame_bytes = s->n_adc * size;
     uint32_t step = (b->cfg.max_frame_len - OVERHEAD - DATA_FIXED) / frame_bytes;
+    uint32_t io_len = 0, io_pos = 0;
     while (b->produced < end) {
         uint64_t first = b->produced;
         uint32_t n = end - first < step ? (uint32_t)(end - first) : step;
@@ -297,16 +312,16 @@ static void capture_until(casfw_board *b, uint64_t end) {
         p[12] = s->adc_format;
         p[13] = 0;
         uint8_t *q = p + DATA_FIXED;
-        unsigned size = format_size(s->adc_format);
         for (uint32_t done = 0; done < n;) {
-            uint32_t m = n - done < CASFW_IO_FRAMES ? n - done : CASFW_IO_FRAMES;
-            for (uint32_t i = 0; i < m; i++)
-                count_underrun(b, fifo_play(b, first + done + i, b->dac_scratch + (size_t)i * s->n_dac));
-            b->hal.sample_io(b->hal.ctx, first + done, m, b->dac_scratch, s->n_dac, b->adc_scratch,
-                             s->n_adc);
-            for (uint32_t i = 0; i < m * s->n_adc; i++, q += size)
-                put_adc_sample(b, q, b->adc_scratch[i]);
-            done += m;
+            if (io_pos == io_len) {
+                io_len = convert(b, first + done, end);
+                io_pos = 0;
+            }
+            uint32_t k = n - done < io_len - io_pos ? n - done : io_len - io_pos;
+            const double *v = b->adc_scratch + (size_t)io_pos * s->n_adc;
+            for (uint32_t i = 0; i < k * s->n_adc; i++, q += size) put_adc_sample(b, q, v[i]);
+            io_pos += k;
+            done += k;
         }
         b->produced = first + n;
         if (!send_built(b, T_ADC_DATA, DATA_FIXED + (size_t)n * frame_bytes, 0)) {

@@ -61,3 +61,54 @@ uint32_t casfw_sim_counter(const casfw_sim *s, int which) {
     default: return (uint32_t)s->board.state;
     }
 }
+
+/*
+ * The firmware with its HAL in the caller's hands (callbacks): the host simulation puts an
+ * injected clock and any analog world (the acoustic tank) behind the same firmware.
+ */
+typedef casfw_ns (*casfw_ext_now)(void);
+typedef void (*casfw_ext_io)(uint64_t first, uint32_t n, const double *dac, unsigned n_dac,
+                             double *adc, unsigned n_adc);
+typedef void (*casfw_ext_start)(void);
+
+typedef struct {
+    casfw_board board;
+    casfw_ext_now now;
+    casfw_ext_io io;
+    casfw_ext_start start;
+} casfw_ext;
+
+static casfw_ns ext_now(void *ctx) { return ((casfw_ext *)ctx)->now(); }
+
+static void ext_io(void *ctx, uint64_t first, uint32_t n, const double *dac, unsigned n_dac,
+                   double *adc, unsigned n_adc) {
+    ((casfw_ext *)ctx)->io(first, n, dac, n_dac, adc, n_adc);
+}
+
+static void ext_start(void *ctx) { ((casfw_ext *)ctx)->start(); }
+
+size_t casfw_ext_size(void) { return sizeof(casfw_ext); }
+
+void casfw_ext_init(casfw_ext *e, const casfw_config *cfg, casfw_ext_now now, casfw_ext_io io,
+                    casfw_ext_start start) {
+    casfw_hal hal = {e, ext_now, ext_io, ext_start};
+    e->now = now;
+    e->io = io;
+    e->start = start;
+    casfw_init(&e->board, cfg, &hal);
+}
+
+void casfw_ext_receive(casfw_ext *e, const uint8_t *data, size_t n) {
+    casfw_receive(&e->board, data, n);
+}
+void casfw_ext_service(casfw_ext *e) { casfw_service(&e->board); }
+size_t casfw_ext_take(casfw_ext *e, uint8_t *out, size_t cap) {
+    return casfw_take_output(&e->board, out, cap);
+}
+void casfw_ext_link_lost(casfw_ext *e) { casfw_link_lost(&e->board); }
+uint64_t casfw_ext_index_at(const casfw_ext *e, uint64_t t_ns) {
+    return casfw_index_at(&e->board, t_ns);
+}
+uint32_t casfw_ext_counter(const casfw_ext *e, int which) {
+    return which == 0 ? e->board.dac_underruns : e->board.adc_overruns;
+}
