@@ -33,8 +33,9 @@
 #ifndef CASFW_DAC_SEGMENTS /* runs of consecutive DAC indices held (gaps + 1) */
 #define CASFW_DAC_SEGMENTS 64u
 #endif
-#ifndef CASFW_TX_BYTES /* encoded bytes waiting for the link */
-#define CASFW_TX_BYTES (1u << 20)
+#ifndef CASFW_TX_BYTES /* encoded bytes waiting for the link: the board's ADC buffer; a host
+                          build holds 2 s at 1 MS/s x 2 int16 (a stalled simulation host) */
+#define CASFW_TX_BYTES (1u << 23)
 #endif
 #ifndef CASFW_IO_FRAMES /* most sample frames per call of the HAL's sample_io */
 #define CASFW_IO_FRAMES 16384u
@@ -134,6 +135,7 @@ typedef struct {
     casfw_ns next_sync, next_status;
     /* receiver */
     uint8_t rx[CASFW_MAX_ENCODED + 1];
+    uint8_t decoded[CASFW_MAX_ENCODED]; /* COBS-decoded frame being handled */
     size_t rx_len;
     int rx_discarding;
     uint32_t frame_errors, frames_ok;

@@ -601,7 +601,7 @@ static void handle_frame(casfw_board *b, const uint8_t *f, size_t len) {
 
 /* Section 1.3: COBS, length, CRC with its seed, payload_length; damaged frames are dropped. */
 static void handle_encoded(casfw_board *b, const uint8_t *enc, size_t n) {
-    static uint8_t raw[CASFW_MAX_ENCODED];
+    uint8_t *raw = b->decoded;
     size_t len = casfw_cobs_decode(enc, n, raw);
     if (len == (size_t)-1 || len > b->cfg.max_frame_len || len < OVERHEAD) {
         b->frame_errors++;
