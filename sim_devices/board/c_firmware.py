@@ -216,6 +216,11 @@ class CBoardStepper:
         return b"".join(parts)
 
     @property
+    def frames_ok(self) -> int:
+        """Intact frames the firmware's receiver handled."""
+        return int(self._lib.casfw_sim_counter(self._mem, 0))
+
+    @property
     def frame_errors(self) -> int:
         """Damaged frames dropped by the firmware's receiver."""
         return int(self._lib.casfw_sim_counter(self._mem, 1))

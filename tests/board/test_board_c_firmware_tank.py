@@ -36,7 +36,8 @@ def test_tank_run_completes_with_the_c_firmware_as_the_board(
     assert main(["tank-run", str(exp_file), "--out", str(folder), "--no-live", "--json"]) == 0
     summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert summary["error"] == "" and not summary["interrupted"]
-    assert summary["dropped_samples"] == 0 and summary["adc_overruns"] == 0
+    assert summary["adc_overruns"] == 0  # the firmware's link buffer never overflowed
+    assert summary["dropped_samples"] == 0
     assert summary["loopback_latency_samples"] == 64  # the simulated converters, as in Python
     assert summary["scored_estimates"] >= 50
     assert summary["speed_rmse_mps"] < 0.1 and summary["range_rmse_m"] < 0.6
