@@ -15,6 +15,12 @@ and the simulated board firmware, which runs in a separate process (``hil sim-se
 board``) so that only the host's CPU is counted (``resource.getrusage`` of this process).
 Targets: zero lost samples, loopback content equal to the DAC content delayed, host CPU
 under half a core. Run ``--quick`` for a smoke run (2 s of streaming).
+
+Both board implementations are measured side by side: the Python simulated board and the C
+reference firmware (``firmware_protocol/c``, built with ``make host``): over the pty as above
+(``hil sim-serve board`` vs ``hil sim-serve board --impl c``; the board process's own CPU is
+read from ``/proc``), and sans-IO on an injected clock (how many seconds of 1 MS/s x 2
+streaming, with DAC data in and ADC data out, one board simulates per second of CPU).
 """
 
 from __future__ import annotations
@@ -123,27 +129,39 @@ def _host_cpu_s() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
-def bench_pty_streaming(seconds: float) -> dict[str, float | int | bool]:
-    """Stream ``seconds`` over a pty to a simulated board in another process."""
+def _process_cpu_s(pid: int) -> float:
+    """CPU seconds (user + system) used so far by process ``pid`` (Linux /proc)."""
+    import os
+
+    with open(f"/proc/{pid}/stat", encoding="ascii") as stat:
+        fields = stat.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _board_server(impl: str) -> subprocess.Popen[str]:
+    """The board behind a pty in its own process: first stdout line is the pty path."""
+    if impl == "c":
+        from sim_devices.board.c_firmware import PTY_SERVER, build
+
+        build()
+        command = [str(PTY_SERVER), "--delay", str(LOOPBACK_DELAY)]
+    else:
+        command = [sys.executable, "-m", "hil.cli.main", "sim-serve", "board"]
+        command += ["--delay", str(LOOPBACK_DELAY)]
+    return subprocess.Popen(command, stdout=subprocess.PIPE, text=True)
+
+
+def bench_pty_streaming(
+    seconds: float, impl: str = "python"
+) -> dict[str, float | int | bool | str]:
+    """Stream ``seconds`` over a pty to a board (``impl`` python or c) in another process."""
     from hil.devices.board import Board
     from hil.devices.board_settings import BoardSettings, to_wire_samples
     from hil.signals.presets import get_preset
     from hil.signals.synthesis import BlockSynthesizer
     from hil.signals.waveforms import build_schedule
 
-    server = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "hil.cli.main",
-            "sim-serve",
-            "board",
-            "--delay",
-            str(LOOPBACK_DELAY),
-        ],
-        stdout=subprocess.PIPE,
-        text=True,
-    )
+    server = _board_server(impl)
     try:
         assert server.stdout is not None
         port = server.stdout.readline().strip()
@@ -152,11 +170,13 @@ def bench_pty_streaming(seconds: float) -> dict[str, float | int | bool]:
         synth = BlockSynthesizer(schedule, spec.fs_hz, amplitude=0.5)
         n_total = int(seconds * RATE_HZ)
         wall0, cpu0 = time.perf_counter(), _host_cpu_s()
+        board_cpu0 = _process_cpu_s(server.pid)
         with Board(port, settings=BoardSettings(sample_rate_hz=RATE_HZ)) as board:
             board.configure()
             first = board.start(synth.blocks(4096))
             complete = board.wait_for_samples(first + n_total, timeout_s=seconds + 30.0)
             wall, cpu = time.perf_counter() - wall0, _host_cpu_s() - cpu0
+            board_cpu = _process_cpu_s(server.pid) - board_cpu0
             # Loopback check on the last second held in the ring: ADC(i) = DAC(i - delay).
             end = first + n_total
             n_check = min(n_total - LOOPBACK_DELAY, RATE_HZ)
@@ -173,6 +193,7 @@ def bench_pty_streaming(seconds: float) -> dict[str, float | int | bool]:
         server.wait(timeout=10)
     lost = n_total - min(received, n_total) + gaps
     return {
+        "board": impl,
         "seconds": seconds,
         "complete": bool(complete),
         "lost_samples": int(lost),
@@ -180,8 +201,49 @@ def bench_pty_streaming(seconds: float) -> dict[str, float | int | bool]:
         "dac_underruns": int(underruns),
         "loopback_equal": loopback_ok,
         "host_cpu_cores": round(cpu / wall, 3),
+        "board_cpu_cores": round(board_cpu / wall, 3),
         "target_cpu_cores": PTY_TARGET_CPU_CORES,
         "cpu_ratio": round(PTY_TARGET_CPU_CORES / max(cpu / wall, 1e-9), 2),
+    }
+
+
+def bench_board_step(impl: str, board_seconds: float) -> dict[str, float | str]:
+    """Sans-IO: a board (python or c) on an injected clock streaming 1 MS/s x 2 int16.
+
+    Each 1 ms step delivers one DAC_DATA frame of 1000 sample frames and runs one service
+    pass (1000 ADC sample frames out). Returns board seconds simulated per CPU second.
+    """
+    from firmware_protocol.conversations import BOARD, Host
+    from firmware_protocol.messages import Configure, DacData, Hello, Start
+    from firmware_protocol.schema import SCHEMA_HASH
+    from sim_devices.board.c_firmware import CBoardStepper
+    from sim_devices.board.stepper import PythonBoardStepper, conversation_spec
+
+    board = dict(BOARD, dac_buffer_samples=1 << 18, formats=["INT16"])
+    device = CBoardStepper(board) if impl == "c" else PythonBoardStepper(conversation_spec(board))
+    h = Host()
+    ms = 1_000_000
+    device.step(0, h.frame(Hello(2, 0, SCHEMA_HASH)))
+    fmt = SampleFormat.INT16
+    device.step(ms, h.frame(Configure(RATE_HZ, 0b11, 0b11, fmt, fmt)))
+    start = 1000 + 5000  # 5 ms after CONFIGURE
+    rng = np.random.default_rng(3)
+    block = rng.integers(-20000, 20000, (1000, 2)).astype(np.int16)
+    frames = [
+        h.frame(DacData.from_array(start + 1000 * k, 0b11, fmt, block))
+        for k in range(int(board_seconds * 1000) + 10)
+    ]
+    device.step(2 * ms, b"".join(frames[:8]) + h.frame(Start(start)))
+    out_bytes = 0
+    cpu0 = time.process_time()
+    for k in range(int(board_seconds * 1000)):
+        out_bytes += len(device.step((3 + k) * ms, frames[8 + k]))
+    cpu = time.process_time() - cpu0
+    return {
+        "board": impl,
+        "board_seconds": board_seconds,
+        "x_realtime": round(board_seconds / cpu, 2),
+        "output_MB": round(out_bytes / 1e6, 2),
     }
 
 
@@ -217,18 +279,30 @@ def main() -> None:
     print(
         f"realistic decode {headline:.1f} MB/s vs target {TARGET_MB_S:.0f} MB/s: ratio {ratio:.2f}"
     )
-    pty = bench_pty_streaming(2.0 if quick else 60.0)
-    print(
-        f"pty streaming {pty['seconds']:.0f} s at 1 MS/s x 2 ch int16: lost {pty['lost_samples']}"
-        f" samples, loopback equal {pty['loopback_equal']}, host CPU {pty['host_cpu_cores']:.3f}"
-        f" cores vs target < {PTY_TARGET_CPU_CORES} (ratio {pty['cpu_ratio']:.2f})"
-    )
+    steps = {impl: bench_board_step(impl, 0.2 if quick else 2.0) for impl in ("python", "c")}
+    for impl, step in steps.items():
+        print(
+            f"{impl:>6} board sans-IO at 1 MS/s x 2 ch: {step['x_realtime']:.2f} x realtime"
+            f" ({step['output_MB']} MB of ADC frames out)"
+        )
+    ptys = {}
+    for impl in ("python", "c"):
+        pty = bench_pty_streaming(2.0 if quick else 60.0, impl)
+        ptys[impl] = pty
+        print(
+            f"{impl:>6} board pty {pty['seconds']:.0f} s at 1 MS/s x 2 ch int16: lost"
+            f" {pty['lost_samples']} samples, loopback equal {pty['loopback_equal']}, host CPU"
+            f" {pty['host_cpu_cores']:.3f} cores vs target < {PTY_TARGET_CPU_CORES} (ratio"
+            f" {pty['cpu_ratio']:.2f}), board CPU {pty['board_cpu_cores']:.3f} cores"
+        )
     summary = {
         "benchmark": "bench_protocol",
         "decode_MB_s": headline,
         "target_MB_s": TARGET_MB_S,
         "ratio": round(ratio, 2),
-        "pty_streaming": pty,
+        "pty_streaming": ptys["python"],
+        "pty_streaming_c": ptys["c"],
+        "board_step": steps,
         **results,
     }
     print(json.dumps(summary))

@@ -21,6 +21,7 @@ and go on, or close). Damaged bytes are not errors: they come out as
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 
 from firmware_protocol.constants import (
     FLAG_OPTIONAL,
@@ -29,10 +30,11 @@ from firmware_protocol.constants import (
     PROTOCOL_MINOR,
     SEQ_MODULO,
 )
-from firmware_protocol.enums import Role
+from firmware_protocol.enums import NakCode, Role
 from firmware_protocol.errors import (
     IncompatiblePeerError,
     LocalProtocolError,
+    RefusedFrame,
     RemoteProtocolError,
 )
 from firmware_protocol.events import (
@@ -101,15 +103,15 @@ class Connection:
     peer_version, peer_hello, capabilities:
         What the handshake told this side (device VERSION / host HELLO / CAPABILITIES).
     refusal:
-        On the DEVICE, why the host's HELLO is incompatible (after sending VERSION the session
-        closes), else None.
+        On the DEVICE, why the host's HELLO is incompatible (after sending VERSION the device
+        returns to IDLE and waits for another HELLO), else None.
 
     Examples
     --------
     >>> host, board = Connection(Role.HOST), Connection(Role.DEVICE)
-    >>> board.receive_data(host.send(Hello(1, 0, SCHEMA_HASH)))
+    >>> board.receive_data(host.send(Hello(2, 0, SCHEMA_HASH)))
     >>> board.next_event()
-    Hello(protocol_major=1, protocol_minor=0, schema_hash=...)
+    Hello(protocol_major=2, protocol_minor=0, schema_hash=...)
     >>> host.state, board.state
     (<State.HELLO_SENT: 'HELLO_SENT'>, <State.HELLO_SENT: 'HELLO_SENT'>)
     >>> board.next_event()
@@ -233,6 +235,8 @@ class Connection:
             return NEED_DATA
         if isinstance(item, FrameError):
             return item
+        if self.role is Role.DEVICE and item.type_id == Hello.TYPE_ID:
+            self._rx_expected = None  # a HELLO numbers a new session from its own seq
         gap = self._check_sequence(item.seq)
         try:
             event = self._handle(item)
@@ -261,25 +265,63 @@ class Connection:
         if cls is None:
             self.stats.unknown_messages += 1
             return UnknownMessage(frame.type_id, frame.seq, frame.flags, frame.payload)
+        refuse = self._refusal_for(frame)
         if not cls.HANDSHAKE and frame.protocol_major != self.protocol_version[0]:
-            raise RemoteProtocolError(
+            raise refuse(
+                NakCode.BAD_PAYLOAD,
                 f"{self.peer_role.name} sent {cls.NAME} in a protocol"
                 f" {frame.protocol_major}.x frame, this side speaks"
-                f" {self.protocol_version[0]}.x; redo the handshake"
+                f" {self.protocol_version[0]}.x; redo the handshake",
             )
         if cls.SENDER is not self.peer_role:
-            raise RemoteProtocolError(
+            raise refuse(
+                NakCode.BAD_STATE,
                 f"{self.peer_role.name} sent {cls.NAME}, which only the {cls.SENDER.name}"
-                " sends; the peer is misconfigured (both ends playing the same role?)"
+                " sends; the peer is misconfigured (both ends playing the same role?)",
             )
-        message = cls.decode_payload(frame.payload)
+        if cls.SENDER is Role.HOST and next_state(self.state, Role.HOST, cls.NAME) is None:
+            # The state decides before the payload (SPEC 2.2): a command legal here is
+            # answered as that command even when its payload is bad.
+            raise refuse(
+                NakCode.BAD_STATE, illegal_message(self.state, Role.HOST, cls.NAME, local=False)
+            )
+        try:
+            message = cls.decode_payload(frame.payload)
+        except RemoteProtocolError as error:
+            if cls in (Configure, Start):
+                self._enter_command(cls, frame.seq)
+            raise refuse(NakCode.BAD_PAYLOAD, str(error)) from None
         problem = self._violation(message, self.peer_role)
         if problem:
-            raise RemoteProtocolError(problem)
+            over_credit = isinstance(message, DacData) and self._credit_problem(message, False)
+            code = NakCode.CREDIT_EXCEEDED if over_credit == problem else NakCode.BAD_PAYLOAD
+            raise refuse(code, problem)
         if isinstance(message, Version):
             self._check_board_version(message)
         self._apply(message, self.peer_role, frame.seq)
         return message
+
+    def _refusal_for(self, frame: Frame) -> Callable[[NakCode, str], RemoteProtocolError]:
+        """A maker of the error for a refused ``frame``: on the DEVICE a :class:`RefusedFrame`
+        (the NAK to send), on the HOST a plain RemoteProtocolError (hosts send no NAK)."""
+
+        def make(code: NakCode, text: str) -> RemoteProtocolError:
+            if self.role is Role.DEVICE:
+                return RefusedFrame(text, code=code, ref_seq=frame.seq, ref_type=frame.type_id)
+            return RemoteProtocolError(text)
+
+        return make
+
+    def _enter_command(self, cls: type[Message], seq: int) -> None:
+        """Move into the state of a command whose payload is bad, so its NAK answers it."""
+        target = next_state(self.state, self.peer_role, cls.NAME)
+        assert target is not None  # the state was checked first
+        self._pending[cls.TYPE_ID] = seq
+        if cls is Configure:
+            self._configuring = None
+            self.configuration = None
+            self.dac_credit = 0
+        self.state = target
 
     def _check_board_version(self, version: Version) -> None:
         """HOST side: refuse a board of another major version or schema."""
@@ -306,10 +348,11 @@ class Connection:
     def _violation(self, message: Message, sender: Role) -> str | None:
         """Why ``sender`` may not emit ``message`` now, or None. Same rules both ways."""
         local = sender is self.role
-        kind = message_kind(message)
+        kind = message_kind(message, self._pending)
         if next_state(self.state, sender, kind) is None:
             return illegal_message(self.state, sender, kind, local=local)
-        if isinstance(message, Ack | Nak) and message.ref_type in COMMAND_NAMES:
+        if isinstance(message, Ack) and message.ref_type in COMMAND_NAMES:
+            # A NAK quoting anything but the awaited command is a refusal (NAK:OTHER).
             pending = self._pending.get(message.ref_type)
             if pending != message.ref_seq:
                 name = COMMAND_NAMES[message.ref_type]
@@ -361,8 +404,10 @@ class Connection:
 
     def _apply(self, message: Message, sender: Role, seq: int) -> None:
         """Move the state and the bookkeeping after a legal message (sent or received)."""
-        target = next_state(self.state, sender, message_kind(message))
+        target = next_state(self.state, sender, message_kind(message, self._pending))
         assert target is not None  # checked by _violation
+        if isinstance(message, Hello):
+            self._restart_session(sender)
         if isinstance(message, Configure | Start | Stop):
             self._pending[message.TYPE_ID] = seq
         if isinstance(message, Configure):
@@ -394,5 +439,18 @@ class Connection:
             self.dac_credit = 0
         self.state = target
         if isinstance(message, Version) and sender is self.role and self.refusal:
-            # The board told an incompatible host its version; now it stops talking.
-            self.state = State.CLOSED
+            # The board told an incompatible host its version; it waits for another HELLO.
+            self.state = State.IDLE
+
+    def _restart_session(self, sender: Role) -> None:
+        """A HELLO opens a new session: commands, configuration and credit are forgotten,
+        and the device numbers its frames from 0 again (SPEC 2.6)."""
+        self._pending.clear()
+        self._configuring = None
+        self.configuration = None
+        self.dac_credit = 0
+        self.refusal = None
+        if sender is self.role:
+            self._rx_expected = None  # the host hears the device's seq from 0 again
+        else:
+            self._tx_seq = 0

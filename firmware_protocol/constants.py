@@ -1,4 +1,4 @@
-"""Wire constants of protocol 1.0: version, header and CRC sizes, frame limits, flag bits.
+"""Wire constants of protocol 2.0: version, header and CRC sizes, frame limits, flag bits.
 
 Every size is in bytes. ``SPEC.md`` states the same numbers for firmware authors.
 """
@@ -7,8 +7,10 @@ from __future__ import annotations
 
 from typing import Final
 
-PROTOCOL_MAJOR: Final = 1
-"""Major version: peers must agree on it exactly."""
+PROTOCOL_MAJOR: Final = 2
+"""Major version: peers must agree on it exactly. 2 = SPEC v2 (device behaviour and timing:
+refusal rules, HELLO restarts a session, DAC data by index, latched alarms).
+"""
 PROTOCOL_MINOR: Final = 0
 """Minor version: may differ between peers (later minors only add optional things)."""
 

@@ -28,6 +28,22 @@ class RemoteProtocolError(ProtocolError):
     """The peer sent an intact frame whose content breaks the protocol."""
 
 
+class RefusedFrame(RemoteProtocolError):
+    """An intact host frame the device must refuse with NAK ``code`` (SPEC section 2.2).
+
+    ``ref_seq`` and ``ref_type`` are the refused frame's seq and message type, quoted by the
+    NAK. ``code`` is a :class:`~firmware_protocol.enums.NakCode` value: BAD_STATE (not legal in
+    this state), BAD_PAYLOAD (short payload, value out of range, data that does not match the
+    configuration) or CREDIT_EXCEEDED.
+    """
+
+    def __init__(self, message: str, *, code: int, ref_seq: int, ref_type: int) -> None:
+        super().__init__(message)
+        self.code = code
+        self.ref_seq = ref_seq
+        self.ref_type = ref_type
+
+
 class FieldValueError(LocalProtocolError, ValueError):
     """A message field value is out of its allowed range; raised before anything is encoded.
 

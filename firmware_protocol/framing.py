@@ -75,7 +75,7 @@ def encode_frame(
     """Build the wire bytes of one frame: COBS(header + payload + CRC) + b"\\x00".
 
     >>> encode_frame(0x12, b"", 0).hex(" ")  # STOP, seq 0
-    '02 01 02 12 01 01 01 01 05 ec a5 6c 31 00'
+    '02 02 02 12 01 01 01 01 05 5d 4b 6b 35 00'
     """
     limit = max_frame_len - _OVERHEAD
     if len(payload) > limit:

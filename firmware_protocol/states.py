@@ -8,8 +8,10 @@ when this sender emits this kind of message, the session moves to this state (or
 raises ``RemoteProtocolError``).
 
 Message kinds are message names, refined for replies and alarms: ``ACK:CONFIGURE``,
-``NAK:START``, ... for replies to the three commands, ``ACK:OTHER``/``NAK:OTHER`` for replies
-to anything else (e.g. NAK UNKNOWN_MESSAGE), ``STATUS:WATCHDOG`` for a STATUS with the
+``NAK:START``, ... for the answer to a command the receiver accepted in its state (the
+command awaiting a reply, quoted by its seq), ``ACK:OTHER``/``NAK:OTHER`` for replies to
+anything else (a NAK UNKNOWN_MESSAGE, a NAK BAD_STATE refusing a command that was illegal in
+the device's state, a NAK of DAC data), ``STATUS:WATCHDOG`` for a STATUS with the
 WATCHDOG_EXPIRED alarm, and ``CLOSE`` for :class:`~firmware_protocol.events.ConnectionClosed`.
 """
 
@@ -65,8 +67,8 @@ STAY = None
 
 # (states it is legal in, sender, kind, next state or STAY)
 _ROWS: tuple[tuple[tuple[State, ...], Role, str, State | None], ...] = (
-    # handshake
-    ((S.IDLE,), HOST, "HELLO", S.HELLO_SENT),
+    # handshake; a HELLO in a session starts a new one (reconnect on a UART, SPEC 2.6)
+    ((S.IDLE, *_SESSION), HOST, "HELLO", S.HELLO_SENT),
     ((S.HELLO_SENT,), DEVICE, "VERSION", S.VERSION_SENT),
     ((S.VERSION_SENT,), DEVICE, "CAPABILITIES", S.READY),
     # configuration (a NAK leaves the device unconfigured)
@@ -92,7 +94,7 @@ _ROWS: tuple[tuple[tuple[State, ...], Role, str, State | None], ...] = (
     ((S.STREAMING,), DEVICE, "STATUS:WATCHDOG", S.STOPPED),
     (tuple(s for s in _SESSION if s is not S.STREAMING), DEVICE, "STATUS:WATCHDOG", STAY),
     (_ALL_OPEN, DEVICE, "LOG", STAY),
-    (_ALL_OPEN, DEVICE, "NAK:OTHER", STAY),
+    (_SESSION, DEVICE, "NAK:OTHER", STAY),
     # either side may end the session at any time
     ((*_ALL_OPEN, S.CLOSED), HOST, "CLOSE", S.CLOSED),
     ((*_ALL_OPEN, S.CLOSED), DEVICE, "CLOSE", S.CLOSED),
@@ -115,12 +117,15 @@ _HINTS = {
     "STOP": "nothing is running before CONFIGURE is acknowledged",
     "DAC_DATA": "configure first; DAC data is accepted from CONFIGURED until STOP",
     "KEEPALIVE": "finish the handshake first",
-    "HELLO": "HELLO opens a session only once; make a new Connection to start over",
+    "HELLO": "wait for VERSION and CAPABILITIES before starting the session over",
 }
 
 
-def message_kind(message: Message) -> str:
+def message_kind(message: Message, pending: dict[int, int] | None = None) -> str:
     """The kind under which a message is looked up in :data:`TRANSITIONS`.
+
+    ``pending`` maps a command type id to the seq of that command awaiting its reply; with
+    it, a NAK that quotes anything else is ``NAK:OTHER`` (a refusal that moves no state).
 
     >>> from firmware_protocol.messages import Ack, Configure, Status
     >>> message_kind(Ack(ref_seq=4, ref_type=Configure.TYPE_ID))
@@ -129,6 +134,9 @@ def message_kind(message: Message) -> str:
     'STATUS:WATCHDOG'
     """
     if isinstance(message, Ack | Nak):
+        answers = pending is None or pending.get(message.ref_type) == message.ref_seq
+        if isinstance(message, Nak) and not answers:
+            return "NAK:OTHER"
         return f"{message.NAME}:{COMMAND_NAMES.get(message.ref_type, 'OTHER')}"
     if isinstance(message, Status) and message.alarms & Alarm.WATCHDOG_EXPIRED:
         return "STATUS:WATCHDOG"

@@ -2,7 +2,9 @@
 
 Prints the pty path on the first line of stdout (open it like a serial port), then serves in
 real time until Ctrl-C (or SIGTERM). The board is a loopback cable (``--delay`` samples,
-``--gain``); the stage is the simulated GRBL 1.1h controller with stock settings
+``--gain``) behind the Python simulated board, or with ``--impl c`` behind the C reference
+firmware of ``firmware_protocol/c`` (built with ``cc`` and ``make`` if needed); the stage is
+the simulated GRBL 1.1h controller with stock settings
 (``docs/simulated-grbl.md``).
 """
 
@@ -58,6 +60,12 @@ def register(subparsers: Any) -> None:
     parser.add_argument(
         "--gain", type=float, default=1.0, help="board loopback gain, linear (default 1)"
     )
+    parser.add_argument(
+        "--impl",
+        choices=("python", "c"),
+        default="python",
+        help="board implementation: the Python simulation (default) or the C reference firmware",
+    )
     parser.set_defaults(func=run)
 
 
@@ -79,7 +87,18 @@ def _serve(port_name: str, stop: threading.Event) -> None:
 def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
     """Serve until Ctrl-C / SIGTERM (or ``stop`` is set, for tests); exit status 0."""
     stop = stop or threading.Event()
-    if args.device == "board":
+    if args.device == "board" and args.impl == "c":
+        from sim_devices.board.c_firmware import CFirmwareOnPty, CFirmwareUnavailable
+
+        if not 0 <= args.delay <= 4096:
+            raise ConfigError("--delay", args.delay, "0 .. 4096 samples with --impl c")
+        try:
+            firmware = CFirmwareOnPty(delay_samples=args.delay, gain=args.gain)
+        except CFirmwareUnavailable as error:
+            raise ConfigError("--impl", "c", "a C firmware that builds here", str(error)) from None
+        with firmware:
+            _serve(firmware.port_name, stop)
+    elif args.device == "board":
         from sim_devices.board import LoopbackWorld, SimulatedBoardOnPty
 
         if args.delay < 0:

@@ -19,6 +19,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+from urllib.parse import parse_qs, urlsplit
 
 import numpy as np
 
@@ -202,7 +203,14 @@ def start_simulated_tank(exp: Experiment, wall0: float | None = None) -> Simulat
     )
     world = ScheduleWorld(channel, converter_delay_samples=delay, adc_channels=2)
     # Ticks of 100 ms wall: the world computes whole frames, not a few samples per call.
-    board_sim = SimulatedBoardOnPty(clock=clock, world=world, poll_interval=0.1).start()
+    # ``sim://board?impl=c`` puts the C reference firmware in the Python board's place.
+    if parse_qs(urlsplit(exp.board_url).query).get("impl", ["python"])[0] == "c":
+        from sim_devices.board.c_firmware import CFirmwareBoardOnPty
+
+        board_sim: Any = CFirmwareBoardOnPty(clock=clock, world=world, poll_interval=0.1)
+    else:
+        board_sim = SimulatedBoardOnPty(clock=clock, world=world, poll_interval=0.1)
+    board_sim.start()
     tank = SimulatedTank(
         board_sim.port_name, stage_sim.port_name, clock, board_sim, stage_sim, world
     )

@@ -11,6 +11,7 @@ URL                                         transport
                                             ``?backend=libusb1|libusb0|openusb`` or the
                                             ``usb_backend=`` keyword (a backend object)
 ``sim://board?via=memory|pty|usb``          a simulated board started now (:mod:`.sim`)
+``sim://board?impl=c``                      the C reference firmware on a pty (:mod:`.sim`)
 ``sim://stage?via=pty|memory``              the simulated GRBL stage on a pty, or in the
                                             reader's thread
 ``hwgrep://REGEXP[&n=N][&baud=B]``          the N-th serial port (0-based) whose name,
@@ -179,7 +180,7 @@ def _open_sim(rest: str, query: dict[str, str], options: dict[str, Any], timeout
     from hil.transports.sim import open_sim_board, open_sim_stage
 
     if rest == "board":
-        _check_keys("sim://board", query, ("via", "delay", "gain"))
+        _check_keys("sim://board", query, ("via", "delay", "gain", "impl"))
         return open_sim_board(query, options, timeout)
     if rest == "stage":
         return open_sim_stage(query, options, timeout)

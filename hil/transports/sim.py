@@ -6,7 +6,10 @@ depends on the simulators at import time (DESIGN.md import rules).
 ``sim://board`` query options: ``via=memory`` (default; the board runs in the reader's
 thread), ``via=pty`` (behind a raw pseudo-terminal, served by a thread) or ``via=usb``
 (behind the pyusb backend object, opened as ``usb://1209:ca50``); ``delay`` (loopback
-delay, samples) and ``gain`` (loopback gain, linear). Keyword options: ``clock`` (an
+delay, samples) and ``gain`` (loopback gain, linear); ``impl=python`` (default: the Python
+simulated board) or ``impl=c`` (the C reference firmware of ``firmware_protocol/c``, built if
+needed and served on a pty by its own process in real time: ``via`` must be ``pty`` or
+absent, and the keyword options below do not apply). Keyword options: ``clock`` (an
 injected ``now()``; default real time), ``world``, ``spec``, ``faults``. The returned
 transport has a ``simulator`` attribute: what serves it (for fault injection in tests).
 
@@ -27,6 +30,7 @@ from hil.transports.base import Transport
 from hil.transports.serial_transport import open_serial
 
 _VIAS = ("memory", "pty", "usb")
+_IMPLS = ("python", "c")
 
 
 def _int_option(query: dict[str, str], name: str, default: int) -> int:
@@ -49,6 +53,11 @@ def open_sim_board(query: dict[str, str], options: dict[str, Any], timeout: floa
         SimulatedBoardOnPty,
     )
 
+    impl = query.get("impl", "python")
+    if impl not in _IMPLS:
+        raise ConfigError("impl", impl, f"one of {', '.join(_IMPLS)}", "e.g. sim://board?impl=c")
+    if impl == "c":
+        return _open_c_board(query, options, timeout)
     via = query.get("via", "memory")
     if via not in _VIAS:
         raise ConfigError("via", via, f"one of {', '.join(_VIAS)}", "e.g. sim://board?via=pty")
@@ -84,6 +93,32 @@ def open_sim_board(query: dict[str, str], options: dict[str, Any], timeout: floa
     link = MemoryBoardLink(BoardPort(board), timeout=timeout, url=url)
     link.simulator = link.port  # type: ignore[attr-defined]
     return link
+
+
+def _open_c_board(query: dict[str, str], options: dict[str, Any], timeout: float) -> Transport:
+    """The C reference firmware's pty server, opened as a serial port."""
+    from sim_devices.board.c_firmware import CFirmwareOnPty
+
+    if query.get("via", "pty") != "pty":
+        raise ConfigError("via", query["via"], "pty (or absent) with impl=c", "sim://board?impl=c")
+    given = sorted(k for k in ("clock", "world", "spec", "faults") if options.get(k) is not None)
+    if given:
+        raise ConfigError(
+            "options",
+            ", ".join(given),
+            "none with impl=c",
+            "the C firmware runs in real time with a loopback cable; use impl=python for"
+            " an injected clock, another world, spec or faults",
+        )
+    try:
+        gain = float(query.get("gain", "1.0"))
+    except ValueError:
+        raise ConfigError("gain", query["gain"], "a number (linear)") from None
+    sim = CFirmwareOnPty(delay_samples=_int_option(query, "delay", 0), gain=gain)
+    transport = open_serial(sim.port_name, timeout=timeout, on_close=sim.close)
+    transport.url = "sim://board?" + "&".join(f"{k}={v}" for k, v in sorted(query.items()))
+    transport.simulator = sim  # type: ignore[attr-defined]
+    return transport
 
 
 class MemoryStageLink:

@@ -6,8 +6,10 @@
 :mod:`firmware_protocol`, so every byte it sends is what real firmware must send.
 
 Sample clock: ``index = base_index + floor((now - base_time) * rate)``, with ``now`` from the
-injected clock (s). The clock runs from power-up and never goes back: a CONFIGURE with a new
-rate re-bases it at the current index, a new session (host reconnect) keeps it.
+injected clock (s), computed in integer nanoseconds as SPEC 5.3 states. The clock runs from
+power-up and never goes back: a CONFIGURE with a new rate re-bases it at the current index,
+a new session (HELLO, host reconnect) keeps it. The board follows SPEC section 5 exactly; the
+golden conversations (``firmware_protocol/golden_conversations.json``) pin its output.
 
 While STREAMING, each :meth:`tick` plays the DAC FIFO over the samples elapsed since the last
 tick, passes the DAC output through the *world* (:mod:`.worlds`) and sends what the ADC
@@ -18,16 +20,15 @@ out periodically; the watchdog stops the stream when host frames stop after a KE
 
 from __future__ import annotations
 
-import contextlib
 import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from firmware_protocol import (
-    MAX_FRAME_LEN,
     NEED_DATA,
     Ack,
     AdcData,
@@ -39,10 +40,10 @@ from firmware_protocol import (
     DacData,
     Hello,
     Keepalive,
-    LocalProtocolError,
     Message,
     Nak,
     NakCode,
+    RefusedFrame,
     RemoteProtocolError,
     Role,
     SampleFormat,
@@ -56,19 +57,20 @@ from firmware_protocol import (
 )
 from sim_devices.board.dac_fifo import DacFifo
 from sim_devices.board.faults import FaultPlan
-from sim_devices.board.scaling import from_full_scale, to_full_scale
+from sim_devices.board.scaling import from_full_scale_clipped, to_full_scale
 from sim_devices.board.spec import BoardSpec
 from sim_devices.board.worlds import LoopbackWorld, World
 
 _FRAME_OVERHEAD = 12 + 14  # header + CRC, then the fixed part of ADC_DATA (bytes)
-_CREDIT_STATES = (
-    State.CONFIGURED,
+_CREDIT_STATES = (State.CONFIGURED, State.STREAMING, State.STOPPED)
+_SESSION_STATES = (
+    *_CREDIT_STATES,
+    State.READY,
+    State.CONFIGURING,
     State.STARTING,
-    State.STREAMING,
-    State.STOPPED,
     State.STOPPING,
 )
-_SESSION_STATES = (*_CREDIT_STATES, State.READY, State.CONFIGURING)
+_NS = 1_000_000_000
 
 
 @dataclass(frozen=True)
@@ -110,7 +112,9 @@ class SimulatedBoard:
     """
 
     _next_sync: float
+    """Board time of the next SYNC, ns (inf before a handshake)."""
     _next_status: float
+    """Board time of the next STATUS, ns (inf before a handshake)."""
 
     def __init__(
         self,
@@ -132,7 +136,7 @@ class SimulatedBoard:
         self.sessions = 0
         self._rate = self.spec.sample_rates_hz[0]
         self._base_index = 0
-        self._base_time = self.clock()
+        self._base_ns = self._now_ns()
         self._out = bytearray()
         self._new_session()
 
@@ -154,16 +158,15 @@ class SimulatedBoard:
         """Bring the board up to its clock's present: capture, watchdog, sync, status, credit."""
         if self.faults.unplugged or self.conn.state not in _SESSION_STATES:
             return
-        now = self.clock()
+        now = self._now_ns()
         self._check_watchdog(now)
         if self._capturing:
-            self._capture_until(self.sample_index(now))
+            self._capture_until(self._index_at(now))
         if now >= self._next_sync:
-            self._send(Sync(self.sample_index(now), max(0, int(now * 1e9))))
-            self._next_sync = now + self.spec.sync_interval_s
+            self._send_sync(now)
         if now >= self._next_status:
             self._send_status(now, Alarm.NONE)
-            self._next_status = now + self.spec.status_interval_s
+            self._next_status = now + round(self.spec.status_interval_s * _NS)
         self._grant_credit()
 
     def connection_made(self) -> None:
@@ -176,9 +179,17 @@ class SimulatedBoard:
 
     # --- inspection ----------------------------------------------------------------------
     def sample_index(self, now: float | None = None) -> int:
-        """The board sample clock at ``now`` (default: the clock's present), samples."""
-        t = self.clock() if now is None else now
-        return self._base_index + math.floor((t - self._base_time) * self._rate)
+        """The board sample clock at ``now`` (s; default: the clock's present), samples."""
+        return self._index_at(self._now_ns() if now is None else round(now * _NS))
+
+    def _now_ns(self) -> int:
+        """The clock's present as integer nanoseconds (board time)."""
+        return round(self.clock() * _NS)
+
+    def _index_at(self, t_ns: int) -> int:
+        """SPEC 5.3: the sample index at board time ``t_ns``, exact integer arithmetic."""
+        whole, part = divmod(t_ns - self._base_ns, _NS)
+        return self._base_index + whole * self._rate + (part * self._rate) // _NS
 
     @property
     def adc_frame_samples(self) -> int:
@@ -187,7 +198,7 @@ class SimulatedBoard:
         if config is None:
             return 1
         size = channel_count(config.adc_channel_mask) * SampleFormat(config.adc_format).size
-        return (MAX_FRAME_LEN - _FRAME_OVERHEAD) // size
+        return (self.spec.max_frame_len - _FRAME_OVERHEAD) // size
 
     def snapshot(self) -> BoardSnapshot:
         """The board's state now."""
@@ -198,7 +209,7 @@ class SimulatedBoard:
             dac_buffer_level=self._fifo.level if self._fifo else 0,
             dac_underruns=self.dac_underruns,
             adc_overruns=self.adc_overruns,
-            watchdog_armed=self._watchdog_s is not None,
+            watchdog_armed=self._watchdog_ns is not None,
             host_frames=self.host_frames,
             dac_samples_received=self.dac_samples_received,
             adc_samples_sent=self.adc_samples_sent,
@@ -216,13 +227,14 @@ class SimulatedBoard:
         self.sessions += 1
         self._out.clear()
         self._fifo: DacFifo | None = None
+        self._dac_end: int | None = None
         self._produced = 0
         self._capturing = False
         self._in_underrun = False
+        self._latched = Alarm.NONE
         self._overrun_left = 0
-        self._overrun_alarm = False
-        self._watchdog_s: float | None = None
-        self._last_host = self.clock()
+        self._watchdog_ns: int | None = None
+        self._last_host = self._now_ns()
         self._next_sync = math.inf
         self._next_status = math.inf
         self._dac_gain = 1.0
@@ -245,30 +257,31 @@ class SimulatedBoard:
                 return
             if isinstance(event, Message):
                 self.host_frames += 1
-                self._last_host = self.clock()
+                self._last_host = self._now_ns()
                 self._handle(event)
-            elif isinstance(event, UnknownMessage) and not event.optional:
-                self._send(event.nak())
+            elif isinstance(event, UnknownMessage) and self._in_session():
+                self._last_host = self._now_ns()
+                if not event.optional:
+                    self._send(event.nak())
             # FrameError / SequenceGap: counted in conn.stats; a board just goes on.
 
+    def _in_session(self) -> bool:
+        return self.conn.state in _SESSION_STATES
+
     def _refuse(self, error: RemoteProtocolError) -> None:
-        """Answer an intact but illegal host frame with NAK (never fatal for the board)."""
-        seq = self.conn.last_received_seq or 0
-        credit = "credit" in str(error)
-        code = NakCode.CREDIT_EXCEEDED if credit else NakCode.BAD_STATE
-        ref_type = DacData.TYPE_ID if credit else 0
-        # Outside a session (e.g. before HELLO) there is nobody to answer: stay silent.
-        with contextlib.suppress(LocalProtocolError):
-            self._send(Nak(seq, ref_type, code, str(error)[:255]))
+        """SPEC 5.2: answer an intact but refused host frame with one NAK quoting it; in
+        IDLE (before a handshake) stay silent."""
+        if not isinstance(error, RefusedFrame) or not self._in_session():
+            return
+        self._last_host = self._now_ns()
+        self._send(Nak(error.ref_seq, error.ref_type, NakCode(error.code), _detail(str(error))))
+        if self.conn.configuration is None:  # a refused CONFIGURE unconfigures (SPEC 5.2)
+            self._stop_output()
+            self._fifo = None
 
     def _handle(self, message: Message) -> None:
         if isinstance(message, Hello):
-            self._send(self.conn.make_version(self.spec.firmware, self.spec.board_serial))
-            if self.conn.refusal is None:
-                self._send(self.spec.capabilities())
-                now = self.clock()
-                self._next_sync = now
-                self._next_status = now
+            self._hello()
         elif isinstance(message, Configure):
             self._configure(message)
         elif isinstance(message, Start):
@@ -278,10 +291,30 @@ class SimulatedBoard:
                 self._capture_until(self.sample_index())
             self._send(Ack(self.conn.last_received_seq or 0, Stop.TYPE_ID))
             self._stop_output()
+            self._grant_credit()
         elif isinstance(message, Keepalive):
-            self._watchdog_s = message.watchdog_timeout_ms / 1000.0
+            self._watchdog_ns = message.watchdog_timeout_ms * 1_000_000
         elif isinstance(message, DacData):
             self._queue_dac(message)
+
+    def _hello(self) -> None:
+        """SPEC 5.1: (re)start the session: output off, buffer empty, watchdog disarmed."""
+        self._stop_output()
+        self._fifo = None
+        self._watchdog_ns = None
+        self._latched = Alarm.NONE
+        self._send(self.conn.make_version(self.spec.firmware, self.spec.board_serial))
+        if self.conn.refusal is None:
+            self._send(self.spec.capabilities())
+            now = self._now_ns()
+            self._next_sync = now
+            self._next_status = now
+        else:
+            self._next_sync = self._next_status = math.inf
+
+    def _send_sync(self, now: int) -> None:
+        self._send(Sync(self._index_at(now), max(0, now)))
+        self._next_sync = now + round(self.spec.sync_interval_s * _NS)
 
     def _configure(self, config: Configure) -> None:
         spec = self.spec
@@ -310,19 +343,19 @@ class SimulatedBoard:
                 f"{spec.gain_min_cdb} .. {spec.gain_max_cdb} cdB",
             )
         self._stop_output()
+        self._fifo = None
         if problem:
             self._send(Nak(seq, Configure.TYPE_ID, *problem))
             return
-        now = self.clock()
-        self._base_index = self.sample_index(now)
-        self._base_time = now
+        now = self._now_ns()
+        self._base_index = self._index_at(now)
+        self._base_ns = now
         self._rate = config.sample_rate_hz
         self._dac_gain = 10.0 ** (config.dac_gain_cdb / 2000.0)
         self._adc_gain = 10.0 ** (config.adc_gain_cdb / 2000.0)
         self._send(Ack(seq, Configure.TYPE_ID))
         self._fifo = DacFifo(channel_count(config.dac_channel_mask))
-        self._send(Sync(self.sample_index(now), max(0, int(now * 1e9))))
-        self._next_sync = now + self.spec.sync_interval_s
+        self._send_sync(now)
         self._grant_credit()
 
     def _start(self, start: Start) -> None:
@@ -335,6 +368,8 @@ class SimulatedBoard:
         self._produced = start.start_sample_index
         self._capturing = True
         self._in_underrun = False
+        if self._fifo is not None:
+            self._fifo.drop_before(start.start_sample_index)
         reset = getattr(self.world, "reset", None)
         if callable(reset):
             reset()
@@ -342,18 +377,36 @@ class SimulatedBoard:
 
     def _stop_output(self) -> None:
         self._capturing = False
+        self._in_underrun = False
+        self._dac_end = None
         if self._fifo is not None:
             self._fifo.clear()
 
     def _queue_dac(self, data: DacData) -> None:
+        """SPEC 5.4: refuse an overlap; drop samples already played; queue the rest."""
         config = self.conn.configuration
         if self._fifo is None or config is None:
             return
+        first, n = data.first_sample_index, data.sample_count
+        if self._dac_end is not None and first < self._dac_end:
+            detail = (
+                f"DAC_DATA at {first} overlaps data accepted up to {self._dac_end};"
+                " send each index once"
+            )
+            seq = self.conn.last_received_seq or 0
+            self._send(Nak(seq, DacData.TYPE_ID, NakCode.BAD_PAYLOAD, _detail(detail)))
+            return
+        self._dac_end = first + n
         block = to_full_scale(data.samples(), SampleFormat(config.dac_format))
         if self._dac_gain != 1.0:
             block *= self._dac_gain
-        self._fifo.push(data.first_sample_index, block)
-        self.dac_samples_received += block.shape[0]
+        late = min(n, self._produced - first) if self._capturing else 0
+        if late > 0:
+            self._fifo.late_samples += late
+            block, first = block[late:], first + late
+        if block.shape[0]:
+            self._fifo.push(first, block)
+        self.dac_samples_received += n
 
     def _grant_credit(self) -> None:
         fifo = self._fifo
@@ -382,19 +435,18 @@ class SimulatedBoard:
                 self.faults.dac_underrun_samples = 0
                 self.faults.counters.dac_underruns += 1
             dac, covered = fifo.play(first, span)
-            underrun = covered < span
-            if underrun and not self._in_underrun:
-                self.dac_underruns += 1
-            self._in_underrun = underrun
+            self._count_underruns(covered)
             world_out = np.asarray(self.world(dac, first), dtype=np.float64)
             adc_all = np.zeros((span, n_adc))
             k = min(world_out.shape[1], n_adc)
             adc_all[:, :k] = world_out[:, :k]
             if self._adc_gain != 1.0:
                 adc_all *= self._adc_gain
+            counts, clipped = from_full_scale_clipped(adc_all, fmt)
+            if clipped:
+                self._latched |= Alarm.ADC_CLIPPING
             for offset in range(0, span, step):
                 n = min(step, span - offset)
-                adc = adc_all[offset : offset + n]
                 lost = self._take_overrun(n)
                 self._produced = first + offset + n
                 if lost < n:
@@ -403,10 +455,22 @@ class SimulatedBoard:
                             first + offset + lost,
                             config.adc_channel_mask,
                             fmt,
-                            from_full_scale(adc[lost:], fmt),
+                            counts[offset + lost : offset + n],
                         )
                     )
                     self.adc_samples_sent += n - lost
+
+    def _count_underruns(self, covered: npt.NDArray[np.bool_]) -> None:
+        """SPEC 5.4: each maximal run of indices with no DAC sample is one underrun."""
+        if covered.size == 0:
+            return
+        missing = ~covered
+        before = np.concatenate(([not self._in_underrun], covered[:-1]))
+        starts = int(np.count_nonzero(missing & before))
+        if starts:
+            self.dac_underruns += starts
+            self._latched |= Alarm.DAC_UNDERRUN
+        self._in_underrun = bool(missing[-1])
 
     def _take_overrun(self, n: int) -> int:
         if self._overrun_left == 0 and self.faults.adc_overrun_samples:
@@ -414,20 +478,20 @@ class SimulatedBoard:
             self.faults.adc_overrun_samples = 0
             self.faults.counters.adc_overruns += 1
             self.adc_overruns += 1
-            self._overrun_alarm = True
+            self._latched |= Alarm.ADC_OVERRUN
         lost = min(n, self._overrun_left)
         self._overrun_left -= lost
         return lost
 
-    def _send_status(self, now: float, alarms: Alarm) -> None:
-        if self._in_underrun:
+    def _send_status(self, now: int, alarms: Alarm) -> None:
+        """STATUS at board time ``now`` (ns); latched alarms are reported and cleared."""
+        alarms |= self._latched
+        if self._capturing and self._in_underrun:
             alarms |= Alarm.DAC_UNDERRUN
-        if self._overrun_alarm:
-            alarms |= Alarm.ADC_OVERRUN
-            self._overrun_alarm = False
+        self._latched = Alarm.NONE
         self._send(
             Status(
-                sample_index=self.sample_index(now),
+                sample_index=self._index_at(now),
                 dac_buffer_level=self._fifo.level if self._fifo else 0,
                 adc_buffer_level=0,
                 dac_underruns=self.dac_underruns % (1 << 32),
@@ -437,10 +501,11 @@ class SimulatedBoard:
             )
         )
 
-    def _check_watchdog(self, now: float) -> None:
-        if self._watchdog_s is None:
+    def _check_watchdog(self, now: int) -> None:
+        """SPEC 5.7: fire at the first service after the deadline (or a forced fault)."""
+        if self._watchdog_ns is None:
             return
-        deadline = self._last_host + self._watchdog_s
+        deadline = self._last_host + self._watchdog_ns
         forced = self.faults.watchdog_now
         if not forced and now <= deadline:
             return
@@ -448,7 +513,12 @@ class SimulatedBoard:
         self.faults.counters.watchdog_expiries += 1
         expiry = now if forced else deadline
         if self._capturing:
-            self._capture_until(self.sample_index(expiry))
-        self._watchdog_s = None
+            self._capture_until(self._index_at(expiry))
+        self._watchdog_ns = None
         self._stop_output()
         self._send_status(expiry, Alarm.WATCHDOG_EXPIRED)
+
+
+def _detail(text: str) -> str:
+    """A NAK detail: the text cut to at most 255 UTF-8 bytes at a character boundary."""
+    return text.encode("utf-8")[:255].decode("utf-8", "ignore")

@@ -20,8 +20,8 @@ class DacFifo:
     >>> fifo = DacFifo(channels=1)
     >>> fifo.push(2, np.array([[1.0], [2.0], [3.0]]))
     >>> out, covered = fifo.play(0, 4)
-    >>> out[:, 0].tolist(), covered, fifo.level
-    ([0.0, 0.0, 1.0, 2.0], 2, 1)
+    >>> out[:, 0].tolist(), covered.tolist(), fifo.level
+    ([0.0, 0.0, 1.0, 2.0], [False, False, True, True], 1)
     """
 
     def __init__(self, channels: int) -> None:
@@ -64,11 +64,25 @@ class DacFifo:
         self.level -= gone
         return gone
 
-    def play(self, first: int, n: int) -> tuple[FloatArray, int]:
-        """Output for indices ``first .. first+n-1`` and how many of them were queued."""
+    def drop_before(self, index: int) -> None:
+        """Drop every queued sample whose index is below ``index`` (counted as late)."""
+        while self._blocks:
+            b_first, block = self._blocks[0]
+            if b_first >= index:
+                return
+            late = min(index - b_first, block.shape[0])
+            self.late_samples += late
+            self.level -= late
+            if late == block.shape[0]:
+                self._blocks.popleft()
+            else:
+                self._blocks[0] = (b_first + late, block[late:])
+
+    def play(self, first: int, n: int) -> tuple[FloatArray, npt.NDArray[np.bool_]]:
+        """Output for indices ``first .. first+n-1`` and which of them were queued (n,)."""
         out = np.zeros((n, self.channels))
         end = first + n
-        covered = 0
+        covered = np.zeros(n, dtype=bool)
         while self._blocks:
             b_first, block = self._blocks[0]
             b_end = b_first + block.shape[0]
@@ -83,7 +97,7 @@ class DacFifo:
             if lo > b_first:  # the head of this block is late
                 self.late_samples += lo - b_first
             out[lo - first : hi - first] = block[lo - b_first : hi - b_first]
-            covered += hi - lo
+            covered[lo - first : hi - first] = True
             used = hi - b_first
             self.level -= used
             if hi == b_end:

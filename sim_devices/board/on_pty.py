@@ -9,7 +9,7 @@
 ...     host.receive_data(port.read_until(b"\\x00"))
 ...     host.next_event().protocol_major
 ...     port.close()
-1
+2
 """
 
 from __future__ import annotations

@@ -77,7 +77,7 @@ class ScriptedTransport:
 class Script:
     """Builds the expected host bytes and the device's answers with two real Connections."""
 
-    def __init__(self, caps: Capabilities = CAPS, *, version: tuple[int, int] = (1, 0)) -> None:
+    def __init__(self, caps: Capabilities = CAPS, *, version: tuple[int, int] = (2, 0)) -> None:
         self.host = Connection(Role.HOST)
         self.device = Connection(Role.DEVICE, protocol_version=version)
         self.caps = caps
@@ -157,11 +157,11 @@ def test_keepalive_follows_the_handshake() -> None:
 @pytest.mark.parametrize(
     ("version", "schema", "words"),
     [
-        ((2, 1), None, "board speaks protocol 2.1 .* the major versions differ; update the host"),
+        ((3, 1), None, "board speaks protocol 3.1 .* the major versions differ; update the host"),
         (
-            (1, 0),
+            (2, 0),
             0x12345678,
-            r"board speaks protocol 1.0 \(schema 0x12345678\).*\(schema hash mismatch\)",
+            r"board speaks protocol 2.0 \(schema 0x12345678\).*\(schema hash mismatch\)",
         ),
     ],
 )

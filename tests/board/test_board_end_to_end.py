@@ -4,7 +4,6 @@ injected clock that the test advances (no wall-clock pacing, no timed assertions
 
 from __future__ import annotations
 
-import math
 import threading
 import time
 from collections.abc import Callable
@@ -60,7 +59,7 @@ def stream_for(
             need = 2 * round(step_s * RATE_HZ)
             wait_until(lambda f=dac_level, k=need: f() >= k, "the DAC feeder")  # type: ignore[misc]
         clock.advance(step_s)
-        index = math.floor(clock.now() * RATE_HZ)
+        index = round(clock.now() * 1e9) * RATE_HZ // 10**9  # the board clock, SPEC 5.3
         if board.start_index is not None and index > board.start_index:
             assert board.wait_for_samples(index, WAIT_S), f"ADC samples up to {index}"
     return index

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from firmware_protocol import (
+    PROTOCOL_MAJOR,
     SCHEMA_HASH,
     Frame,
     FrameDecoder,
@@ -58,7 +59,7 @@ def test_crc_matches_the_spec_routine_and_a_known_value() -> None:
 
 def test_header_bytes_are_little_endian_at_the_stated_offsets() -> None:
     frame = cobs.decode(encode_frame(0x22, b"\x10\x00\x00\x00", 0x1234, flags=1)[:-1])
-    assert frame[:8] == bytes([1, 0, 0x22, 1, 0x34, 0x12, 4, 0])
+    assert frame[:8] == bytes([PROTOCOL_MAJOR, 0, 0x22, 1, 0x34, 0x12, 4, 0])
     assert len(frame) == 8 + 4 + 4
 
 

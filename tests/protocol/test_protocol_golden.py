@@ -11,6 +11,7 @@ import pytest
 
 from firmware_protocol import (
     NEED_DATA,
+    PROTOCOL_MAJOR,
     SCHEMA_HASH,
     Connection,
     Frame,
@@ -51,9 +52,9 @@ def test_vector_encodes_to_its_bytes_and_decodes_back(vector: dict[str, Any]) ->
     # The parts a firmware author checks one by one: COBS, header, CRC with its seed.
     assert wire[-1] == 0 and 0 not in wire[:-1] and cobs.decode(wire[:-1]) == frame
     seed = int(vector["crc_seed"], 16)
-    assert frame[:8] == bytes([1, 0, vector["type_id"], vector["flags"]]) + vector["seq"].to_bytes(
-        2, "little"
-    ) + len(payload).to_bytes(2, "little")
+    assert frame[:8] == bytes([PROTOCOL_MAJOR, 0, vector["type_id"], vector["flags"]]) + vector[
+        "seq"
+    ].to_bytes(2, "little") + len(payload).to_bytes(2, "little")
     assert frame[8:-4] == payload
     assert (
         frame[-4:]

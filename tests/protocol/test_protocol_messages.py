@@ -217,7 +217,7 @@ def test_schema_hash_is_the_crc_of_the_canonical_text() -> None:
 
     text = schema.canonical_text()
     assert zlib.crc32(text.encode("ascii")) == schema.SCHEMA_HASH
-    assert text.startswith("cas-hil firmware protocol 1\nheader: protocol_major u8,")
+    assert text.startswith("cas-hil firmware protocol 2\nheader: protocol_major u8,")
     assert (
         "0x21 ADC_DATA device: first_sample_index u64, sample_count u16, channel_mask u16" in text
     )
@@ -243,3 +243,18 @@ def test_spec_offsets_add_up_to_the_struct_sizes() -> None:
         rows = re.findall(r"^\| (\d+) \| (\d+) \| \w+ \|", schema.layout_table(cls), re.M)
         end = max((int(o) + int(s) for o, s in rows), default=0)
         assert end == cls._STRUCT.size
+
+
+def test_spec_generated_sections_equal_what_the_code_generates() -> None:
+    from firmware_protocol import spec_tables
+
+    assert spec_tables.render(SPEC) == SPEC, (
+        "SPEC.md is stale: run python -m firmware_protocol.spec_tables --write"
+    )
+    assert spec_tables.main(["--check"]) == 0
+    # The refusal table answers every host message in every state a device rests in.
+    table = spec_tables.refusal_table()
+    assert "| STREAMING | VERSION (+ CAPABILITIES) | NAK BAD_STATE | NAK BAD_STATE | ACK |" in table
+    assert (
+        "| READY | VERSION (+ CAPABILITIES) | ACK or NAK | NAK BAD_STATE | NAK BAD_STATE |" in table
+    )

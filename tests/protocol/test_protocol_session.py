@@ -176,9 +176,9 @@ def test_illegal_sends_raise_local_errors_with_clear_messages() -> None:
     with pytest.raises(LocalProtocolError, match="HOST cannot send CONFIGURE in state IDLE"):
         fresh.send(CONFIG)
     with pytest.raises(
-        LocalProtocolError, match=r"HELLO states protocol 2\.0 .* build it with make_hello"
+        LocalProtocolError, match=r"HELLO states protocol 3\.0 .* build it with make_hello"
     ):
-        fresh.send(Hello(2, 0, SCHEMA_HASH))
+        fresh.send(Hello(3, 0, SCHEMA_HASH))
     assert fresh.state is State.IDLE and fresh._tx_seq == 0  # nothing was encoded
 
 
@@ -250,18 +250,18 @@ def test_remote_violations_raise_remote_errors_and_reading_goes_on() -> None:
 
 def test_board_of_another_major_version_is_refused() -> None:
     host = Connection(Role.HOST)
-    board = Connection(Role.DEVICE, protocol_version=(2, 1), schema_hash=0x12345678)
+    board = Connection(Role.DEVICE, protocol_version=(3, 1), schema_hash=0x12345678)
     board.receive_data(host.send(host.make_hello()))
     assert board.next_event() == host.make_hello()
-    assert board.refusal is not None and "host speaks 1.0" in board.refusal
+    assert board.refusal is not None and "host speaks 2.0" in board.refusal
     host.receive_data(board.send(board.make_version()))
-    assert board.state is State.CLOSED
+    assert board.state is State.IDLE  # it waits for a compatible HELLO
     with pytest.raises(
         IncompatiblePeerError,
-        match=r"board speaks protocol 2.1 \(schema 0x12345678\), host speaks 1.0 \(schema 0x[0-9a-f]{8}\): the major versions differ; update the host software to one that speaks protocol 2.x, or flash firmware built for protocol 1.x",  # noqa: E501
+        match=r"board speaks protocol 3.1 \(schema 0x12345678\), host speaks 2.0 \(schema 0x[0-9a-f]{8}\): the major versions differ; update the host software to one that speaks protocol 3.x, or flash firmware built for protocol 2.x",  # noqa: E501
     ) as info:
         host.next_event()
-    assert info.value.peer_version == (2, 1) and info.value.peer_schema == 0x12345678
+    assert info.value.peer_version == (3, 1) and info.value.peer_schema == 0x12345678
     assert host.state is State.CLOSED
     with pytest.raises(LocalProtocolError, match="in state CLOSED"):
         host.send(CONFIG)
@@ -280,12 +280,12 @@ def test_board_built_from_other_definitions_is_refused() -> None:
 
 def test_board_of_another_minor_version_is_accepted() -> None:
     host = Connection(Role.HOST)
-    board = Connection(Role.DEVICE, protocol_version=(1, 4))
+    board = Connection(Role.DEVICE, protocol_version=(2, 4))
     deliver(host, board, host.make_hello())
     assert board.refusal is None
     deliver(board, host, board.make_version())
     deliver(board, host, CAPS)
-    assert host.state is State.READY and host.peer_version == Version(1, 4, SCHEMA_HASH, 0, 0, 0, 0)
+    assert host.state is State.READY and host.peer_version == Version(2, 4, SCHEMA_HASH, 0, 0, 0, 0)
 
 
 # --- unknown messages, gaps, noise, end of stream ------------------------------------------
