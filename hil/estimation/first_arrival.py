@@ -26,8 +26,8 @@ For each of the ``M`` boundaries the GCAS detection used (receive times from its
 
 The range then comes from the first arrival instead of the centroid. Measured on the built-in
 simulated tank (12 × 4 × 2.5 m, first-order images, reverberation, direct blast; 1.5 m/s
-tow): range bias +0.022 m, RMSE 0.027 m, against +0.46 m for the peak; with the images off,
-+0.021 m against −0.009 m (docs/tank-run.md has the table).
+tow): range bias +0.012 m, RMSE 0.018 m, against +0.46 m for the peak; with the images off,
+−0.000 m against −0.009 m (docs/tank-run.md has the table).
 
 Limits: a target slower than about one carrier wavelength per code period is mostly cancelled
 with the clutter (no onset found: the peak readout is kept); the readout needs the samples of
