@@ -16,13 +16,18 @@ For each of the ``M`` boundaries the GCAS detection used (receive times from its
    does not, it leaves a copy of itself shifted by ``δ = P (α − 1)/α`` (later for a closing
    target, earlier for an opening one, whose first onset is then corrected by ``−δ``).
 2. **Next-tone channel**: ``z(t) = boxcar_w(d(t) e^{−j2π α f_next t})`` with a causal boxcar
-   of ``w = 1/Δf`` (``Δf`` the tone spacing): it nulls every other tone of the echo exactly, so
-   ``|z|`` stays at the noise floor until the first arrival switches, then ramps up linearly
-   over ``w``.
+   of ``w = 1/Δf`` (``Δf`` the tone spacing): it nulls every other tone of the echo while the
+   window holds one tone only, so ``|z|`` stays at the noise floor until the first arrival
+   switches, then ramps up over ``w``.
 3. **Onset**: the noncoherent mean of ``|z|²`` over the ``M`` boundaries, less its level in a
-   window before any arrival, as an amplitude; walking back from its maximum after ``t_c`` to
-   where it falls below ``hi`` and then ``lo`` of that maximum, a line through that stretch of
-   the ramp meets zero at the first arrival.
+   window before any arrival. Walking back from its maximum after ``t_c`` to where it falls
+   below ``hi`` and then ``lo`` of that maximum, a line through that stretch of the ramp
+   gives a first onset; the ramp's exact shape (the previous tone's partial window leaks
+   while the window straddles the switch) is then fitted over the first arrival's own part
+   of the ramp (:meth:`FirstArrivalReadout._fit_ramp`).
+4. **Doppler**: the direct path's phase a little into its ramp, at the ``M`` boundaries,
+   gives its own time scale (:meth:`FirstArrivalReadout._direct_alpha`): GCAS's weighs the
+   images in, each at its path's slower radial speed.
 
 The range then comes from the first arrival instead of the centroid. Measured on the built-in
 simulated tank (12 × 4 × 2.5 m, first-order images, reverberation, direct blast; 1.5 m/s
