@@ -15,8 +15,8 @@ receiver's half-lobe guard puts the band's edge at each tone's first null.
 Trade-off: with the band on, a target slower than ``v_res`` gives no estimate (it is where the
 clutter is), and so does one within about a Doppler grid step past it, whose peak falls on the
 refused edge (``att`` with 64 hypotheses over ±25.7 m/s: the cut measured in the chapter-6
-run is about 3.3 m/s for ``v_res`` = 2.65 m/s); with it off (``reverb_speed_mps = 0``) such a target is estimated, and so is any
-stationary clutter stronger than the noise (a stationary target's echo, a tank wall, the direct
+run is about 3.3 m/s for ``v_res`` = 2.65 m/s); with it off (``reverb_speed_mps = 0``) such
+a target is estimated, and so is any stationary clutter stronger than the noise (a stationary target's echo, a tank wall, the direct
 blast) as a zero-speed estimate. Turn it off for a stationary or slow target in a quiet tank.
 
 A target inside the band is not reported at the band's edge: its Doppler response leaks into
