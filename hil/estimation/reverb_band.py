@@ -17,7 +17,8 @@ clutter is), and so does one within about a Doppler grid step past it, whose pea
 refused edge (``att`` with 64 hypotheses over ±25.7 m/s: the cut measured in the chapter-6
 run is about 3.3 m/s for ``v_res`` = 2.65 m/s); with it off (``reverb_speed_mps = 0``) such
 a target is estimated, and so is any stationary clutter stronger than the noise (a stationary
-target's echo, a tank wall, the direct blast) as a zero-speed estimate. Turn it off for a stationary or slow target in a quiet tank.
+target's echo, a tank wall, the direct blast) as a zero-speed estimate. Turn it off for a
+stationary or slow target in a quiet tank.
 
 A target inside the band is not reported at the band's edge: its Doppler response leaks into
 the first allowed cells, whose weighted maximum is then a ghost at the edge speed. Detections
