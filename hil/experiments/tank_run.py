@@ -31,6 +31,7 @@ from hil.errors import ConfigError
 from hil.estimation.base import Estimate
 from hil.estimation.registry import make_receiver
 from hil.experiments.experiment import Experiment
+from hil.experiments.live.plan import StageLimits, check_tow, new_run_folder
 from hil.experiments.run_calibrations import RunCalibrations, load_run_calibrations
 from hil.signals.schedule_file import schedule_document
 from hil.signals.synthesis import BlockSynthesizer
@@ -256,6 +257,13 @@ def _loopback_latency(lat: int, rho: float, cals: RunCalibrations) -> tuple[int,
     )
 
 
+def stage_limits(stage: Any) -> StageLimits:
+    """The limits an open :class:`~hil.devices.grbl.GrblStage` reported (its ``$$``)."""
+    low, high = stage.limits
+    settings = stage.settings
+    return StageLimits(low, high, settings.max_rate, settings.acceleration)
+
+
 @dataclass
 class Telemetry:
     """Stage telemetry mapped onto sample time."""
@@ -357,9 +365,8 @@ def run_experiment(
     cals = load_run_calibrations(exp, fs)
     calibration_ids = list(cals.ids)
     exp = cals.apply(exp)
-    stamp = dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-    folder = folder or exp.output_dir / f"{exp.name}-{stamp}"
-    folder.mkdir(parents=True, exist_ok=True)
+    # Never overwrite a run, never leave output_dir: refused before any device is opened.
+    folder = new_run_folder(exp.output_dir, exp.name, folder, dt.datetime.now())
     view = view or LiveView()
 
     tank: Any = None
@@ -430,31 +437,14 @@ def run_experiment(
         )
         wall0 = time.monotonic()  # the run's wall time, without that set-up
 
-        # ---- stage: open, home, check the plan against its limits (nothing moves yet)
+        # ---- plan: the stage's limits as it reports them ($$, read on connecting, before
+        # homing), the whole tow checked against them; nothing has moved yet.
         stage = GrblStage(stage_url, clock=clock).open()
-        status = stage.status()
-        if status.state.name == "ALARM" or status.alarm is not None:
-            view.update("stage: homing", force=True)
-            stage.home()
-        lo, hi = stage.limits
-        plan = exp.tow
-        d = 1.0 if plan.end_m > plan.start_m else -1.0
-        for name, x in (
-            ("tow.start_m - tow.run_up_m", plan.start_m - d * plan.run_up_m),
-            ("tow.end_m + tow.run_down_m", plan.end_m + d * plan.run_down_m),
-        ):
-            if not lo <= x <= hi:
-                raise ConfigError(name, x, f"within the stage's soft limits [{lo}, {hi}] m")
-        v_max = stage.settings.max_rate
-        if plan.speed_mps > v_max:
-            raise ConfigError(
-                "tow.speed_mps", plan.speed_mps, f"<= the stage max rate {v_max:.3f} m/s"
-            )
-        # Position for the first pass before anything is transmitted.
-        view.update("stage: positioning for the first pass", force=True)
-        stage.move_to(plan.start_m - d * plan.run_up_m, v_max)
+        tow = check_tow(exp.tow, stage_limits(stage))
+        plan = tow.plan
 
-        # ---- board: open, configure (refused before sending if it cannot)
+        # ---- board: open, configure (refused before sending if it cannot); nothing
+        # transmits until start().
         settings = BoardSettings(sample_rate_hz=int(fs), dac_channels=1, adc_channels=2)
         if board_url.startswith("audio://"):
             from hil.devices.audio.daq import AudioDaq
@@ -471,6 +461,14 @@ def run_experiment(
         board.configure()
         if tank is not None:
             tank.align(fs)
+
+        # ---- act: home if needed, position for the first pass, then transmit.
+        status = stage.status()
+        if status.state.name == "ALARM" or status.alarm is not None:
+            view.update("stage: homing", force=True)
+            stage.home()
+        view.update("stage: positioning for the first pass", force=True)
+        stage.move_to(tow.ready_m, stage.settings.max_rate)
 
         # ---- transmission: the schedule from the first transmitted sample
         synth = BlockSynthesizer(exp.schedule, fs, amplitude=exp.amplitude)

@@ -7,6 +7,7 @@ the recording exactly, and the xruns the board counted before the run must not."
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -29,6 +30,7 @@ from sim_devices.stage.on_pty import SimulatedGrblOnPty
 LOST_AT_START = 500  # ADC samples lost to an overrun as the stream starts
 LATENCY = 64  # converters and cable, samples
 ECHO_DELAY = 2000  # a fixed echo: 2000 samples at 192 kHz, about 7.7 m
+POWER_UP_MM = tank_stage_config().power_up_position_mm  # the carriage before any move
 
 
 class WiredTank:
@@ -38,10 +40,12 @@ class WiredTank:
 
     def __init__(self) -> None:
         self.monitor = True
+        self.starts = 0  # STARTs the board accepted (it resets its world on each)
         self._cable = LoopbackWorld(delay_samples=LATENCY, gain=0.5)
         self._echo = LoopbackWorld(delay_samples=LATENCY + ECHO_DELAY, gain=0.05)
 
     def reset(self) -> None:
+        self.starts += 1
         self._cable.reset()
         self._echo.reset()
 
@@ -59,6 +63,27 @@ class PtyDevices:
     stage: SimulatedGrblOnPty
     faults: FaultPlan
     world: WiredTank
+    stage_received: bytearray  # every byte the simulated controller received
+
+    def stage_lines(self) -> list[str]:
+        """The lines the controller received, without GRBL's realtime bytes (``?`` status,
+        ``!`` feed hold, ``~`` cycle start, 0x18 reset, 0x80 and up), which are no lines."""
+        realtime = set(b"?!~\x18") | set(range(0x80, 0x100))
+        text = bytes(b for b in self.stage_received if b not in realtime).decode("ascii")
+        return [line.strip() for line in text.split("\n") if line.strip()]
+
+    def assert_nothing_moved_or_transmitted(self) -> None:
+        """The carriage is where it powered up and got no motion or homing line; the board
+        accepted no START, received no DAC sample and sent no ADC sample."""
+        status = self.stage.status()
+        assert status.physical_mm == pytest.approx(POWER_UP_MM)
+        assert status.velocity_mm_s == 0.0 and status.queued_blocks == 0
+        moving = [ln for ln in self.stage_lines() if ln.upper().startswith(("G", "$H", "$J"))]
+        assert moving == [], moving
+        snap = self.board.call(lambda b: b.snapshot())
+        assert self.world.starts == 0
+        assert (snap.dac_samples_received, snap.adc_samples_sent) == (0, 0)
+        assert snap.state.name != "STREAMING"
 
     def experiment(self, out: Path, calibration: str = "") -> Experiment:
         """The short built-in pass with the devices given by their pty paths, the receiver
@@ -84,12 +109,22 @@ def devices(monkeypatch: pytest.MonkeyPatch) -> Iterator[PtyDevices]:
     # The simulated devices share this process with the host: a loaded CI machine may stall
     # it for more than the hardware watchdog's 1 s, which would stop the board mid-run.
     monkeypatch.setattr(tank_run, "_WATCHDOG_MS", 10_000)
-    stage_sim = SimulatedGrblOnPty(tank_stage_config()).start()  # paced by the wall clock
+    stage_sim = SimulatedGrblOnPty(tank_stage_config())  # paced by the wall clock
+    received = bytearray()
+    grbl = stage_sim.grbl
+    original_receive = grbl.receive_data
+
+    def spy(data: bytes) -> None:  # records, then the real controller handles it
+        received.extend(data)
+        original_receive(data)
+
+    grbl.receive_data = spy  # type: ignore[method-assign]
+    stage_sim.start()
     faults = FaultPlan(seed=3)
     world = WiredTank()
     board_sim = SimulatedBoardOnPty(world=world, faults=faults).start()
     try:
-        yield PtyDevices(board_sim, stage_sim, faults, world)
+        yield PtyDevices(board_sim, stage_sim, faults, world, received)
     finally:
         board_sim.close()
         stage_sim.close()
@@ -244,3 +279,74 @@ def test_required_calibrations_are_applied_in_the_run(tmp_path: Path, devices: P
             f"loopback latency {LATENCY} samples from calibration {ids['latency']} (the DAC"
             " monitor input carried no loopback: correlation 0.00)"
         )
+
+
+# ---- refusals: each before anything moves or transmits
+
+
+def test_a_tow_refused_for_its_run_up_neither_moves_nor_transmits(
+    tmp_path: Path, devices: PtyDevices
+) -> None:
+    # 2.5 m/s is the stage's max rate ($110), but at its 2 m/s² ($120) the carriage needs
+    # 1.5625 m to reach it: the file's 0.6 m run-up is refused from the stage's own $$,
+    # before homing, positioning or a single sample out.
+    exp = devices.experiment(tmp_path)
+    exp = dataclasses.replace(exp, tow=dataclasses.replace(exp.tow, speed_mps=2.5))
+    with pytest.raises(ConfigError) as info:
+        run_experiment(exp, folder=tmp_path / "run", view=LiveView(enabled=False))
+    assert str(info.value).startswith(
+        "tow.run_up_m = 0.6 is not allowed: must be >= 1.562 m, the distance to reach"
+        " tow.speed_mps = 2.5 m/s at the stage's acceleration 2 m/s² ($120)"
+    )
+    devices.assert_nothing_moved_or_transmitted()
+    assert "$$" in devices.stage_lines()  # the limits came from the stage itself
+    assert not (tmp_path / "run" / "run.h5").exists()
+
+
+def test_a_tow_beyond_the_stage_soft_limits_neither_moves_nor_transmits(
+    tmp_path: Path, devices: PtyDevices
+) -> None:
+    # The file's tank is 12 m long; the stage's travel ($130) is 10 m: -9.6 - 0.6 is past it.
+    exp = devices.experiment(tmp_path)
+    tow = dataclasses.replace(exp.tow, start_m=-8.0, end_m=-9.6)
+    with pytest.raises(ConfigError) as info:
+        run_experiment(dataclasses.replace(exp, tow=tow), folder=tmp_path / "run")
+    assert str(info.value) == (
+        "tow.end_m + tow.run_down_m = -10.2 is not allowed: must be within the stage's soft"
+        " limits [-10, 0] m; move the tow inside the stage's travel ($130)"
+    )
+    devices.assert_nothing_moved_or_transmitted()
+
+
+def test_out_naming_an_existing_run_is_refused_and_left_untouched(
+    tmp_path: Path, devices: PtyDevices
+) -> None:
+    folder = tmp_path / "earlier-run"
+    folder.mkdir()
+    (folder / "summary.json").write_text('{"earlier": true}\n')
+    with pytest.raises(ConfigError) as info:
+        run_experiment(devices.experiment(tmp_path), folder=folder)
+    assert str(info.value) == (
+        f"--out = '{folder}' is not allowed: must be a new or empty folder; it holds a run"
+        " already, which is never overwritten; choose another folder"
+    )
+    assert [p.name for p in folder.iterdir()] == ["summary.json"]
+    assert (folder / "summary.json").read_text() == '{"earlier": true}\n'
+    devices.assert_nothing_moved_or_transmitted()
+    assert devices.stage_received == b""  # the stage was not even opened
+
+
+@pytest.mark.parametrize("name", ["../../x", "/tmp/x", "a/b", "..", ".hidden", "a\\b"])
+def test_a_run_name_cannot_leave_output_dir(tmp_path: Path, devices: PtyDevices, name: str) -> None:
+    exp = devices.experiment(tmp_path / "runs")
+    with pytest.raises(ConfigError) as info:
+        run_experiment(dataclasses.replace(exp, name=name))
+    assert str(info.value).startswith(f"run.name = {name!r} is not allowed: must be a plain")
+    assert "must stay inside run.output_dir" in str(info.value)
+    assert sorted(p.name for p in tmp_path.iterdir()) == []  # nothing created anywhere
+    devices.assert_nothing_moved_or_transmitted()
+    assert devices.stage_received == b""
+    # The file itself is refused on reading, with the same message.
+    text = DEFAULT_EXPERIMENT.replace('name = "sim-towed-pass"', f"name = {json.dumps(name)}")
+    with pytest.raises(ConfigError, match=r"run\.name = .* is not allowed: must be a plain"):
+        parse_experiment(text)
