@@ -17,6 +17,7 @@ from hil.cli import (
     calibrate,
     estimate,
     replay,
+    report,
     reproduce,
     sim_serve,
     simulate,
@@ -37,6 +38,7 @@ _COMMANDS = (
     sweep,
     reproduce,
     replay,
+    report,
     calibrate,
     sim_serve,
 )

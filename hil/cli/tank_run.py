@@ -54,19 +54,24 @@ def run(args: argparse.Namespace) -> int:
     figures = write_report(outcome)
     summary["figures"] = [str(p) for p in figures]
     (outcome.folder / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
-    if args.json:
-        print(json.dumps(summary))
-    else:
-        width = max(len(k) for k in summary)
-        for key, value in summary.items():
-            if key == "figures":
-                continue
-            if isinstance(value, float):
-                shown = f"{value:.4g}"
-            elif isinstance(value, list):
-                shown = ", ".join(str(v) for v in value) or "none"
-            else:
-                shown = value
-            print(f"{key:<{width}}  {shown}")
-        print(f"run folder: {outcome.folder}")
+    print_summary(summary, outcome.folder, as_json=args.json)
     return 1 if outcome.error else 0
+
+
+def print_summary(summary: dict[str, Any], folder: Path, *, as_json: bool) -> None:
+    """Print a run's summary: one JSON line, or one ``key  value`` line per entry."""
+    if as_json:
+        print(json.dumps(summary))
+        return
+    width = max(len(k) for k in summary)
+    for key, value in summary.items():
+        if key == "figures":
+            continue
+        if isinstance(value, float):
+            shown = f"{value:.4g}"
+        elif isinstance(value, list):
+            shown = ", ".join(str(v) for v in value) or "none"
+        else:
+            shown = value
+        print(f"{key:<{width}}  {shown}")
+    print(f"run folder: {folder}")

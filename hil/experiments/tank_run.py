@@ -32,6 +32,13 @@ from hil.estimation.base import Estimate
 from hil.estimation.registry import make_receiver
 from hil.experiments.experiment import Experiment
 from hil.experiments.live.plan import StageLimits, check_tow, new_run_folder
+from hil.experiments.live.stops import (
+    DeviceLostError,
+    LinkWatch,
+    RunInterrupted,
+    StopSignals,
+    stop_text,
+)
 from hil.experiments.run_calibrations import RunCalibrations, load_run_calibrations
 from hil.signals.schedule_file import schedule_document
 from hil.signals.synthesis import BlockSynthesizer
@@ -354,6 +361,7 @@ def run_experiment(
     from hil.devices.board import Board
     from hil.devices.board_settings import BoardSettings
     from hil.devices.grbl import GrblStage
+    from hil.devices.stage_errors import StageTimeoutError
     from hil.recording.records import ReceiverSetup, RunEvent, StageTelemetry
     from hil.recording.replay import ReceiverFeed
     from hil.recording.writer import RunWriter
@@ -409,6 +417,7 @@ def run_experiment(
     xruns_before: tuple[int, int] | None = None
     transmitting = False
     heap = HeapFreeze()
+    signals = StopSignals().__enter__()
     try:
         # ---- receiver first: building it loads its compiled kernels (on a fresh install it
         # compiles them, tens of seconds). Later, with the board streaming, a stall that long
@@ -463,12 +472,15 @@ def run_experiment(
             tank.align(fs)
 
         # ---- act: home if needed, position for the first pass, then transmit.
-        status = stage.status()
-        if status.state.name == "ALARM" or status.alarm is not None:
-            view.update("stage: homing", force=True)
-            stage.home()
-        view.update("stage: positioning for the first pass", force=True)
-        stage.move_to(tow.ready_m, stage.settings.max_rate)
+        try:
+            status = stage.status()
+            if status.state.name == "ALARM" or status.alarm is not None:
+                view.update("stage: homing", force=True)
+                stage.home()
+            view.update("stage: positioning for the first pass", force=True)
+            stage.move_to(tow.ready_m, stage.settings.max_rate)
+        except (OSError, StageTimeoutError) as exc:
+            raise lost_stage(tank, exp.stage_url, exc) from exc
 
         # ---- transmission: the schedule from the first transmitted sample
         synth = BlockSynthesizer(exp.schedule, fs, amplitude=exp.amplitude)
@@ -525,12 +537,19 @@ def run_experiment(
         moving = False
         tail_until: float | None = None
         deadline = now() + exp.max_duration_s
+        board_watch = LinkWatch(board.annotations, now)
         heap.start()  # setup done: its objects stay out of the collector's full passes
         while True:
             # Stage: start the next pass when idle, poll at most 5 Hz, record telemetry.
             t_now = now()
+            lost = lost_device(tank, board_watch, exp.board_url)
+            if lost is not None:
+                raise lost
             if t_now - last_poll >= STAGE_POLL_S:
-                st = stage.status()
+                try:
+                    st = stage.status()
+                except (OSError, StageTimeoutError) as exc:
+                    raise lost_stage(tank, exp.stage_url, exc) from exc
                 # Timed from the reply: status() paces itself at 5 Hz from its own last
                 # query, so timing from before the call made it sleep out a whole interval
                 # at every poll, and the capture in between got one block per 0.2 s.
@@ -568,9 +587,12 @@ def run_experiment(
                         if pass_no % 2 == 0
                         else (plan.end_m, plan.start_m)
                     )
-                    w = stage.run_profile(
-                        first, last, plan.speed_mps, plan.run_up_m, plan.run_down_m, wait=False
-                    )
+                    try:
+                        w = stage.run_profile(
+                            first, last, plan.speed_mps, plan.run_up_m, plan.run_down_m, wait=False
+                        )
+                    except (OSError, StageTimeoutError) as exc:
+                        raise lost_stage(tank, exp.stage_url, exc) from exc
                     windows.append((w.t_start, w.t_end))
                     pass_no += 1
                     moving = True
@@ -680,9 +702,10 @@ def run_experiment(
             tail = feed.finish()
             writer.append_estimates(tail)
             estimates.extend(tail)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
         interrupted = True
-        outcome_error = "interrupted (Ctrl-C)"
+        how = exc.signal_name if isinstance(exc, RunInterrupted) else "Ctrl-C"
+        outcome_error = f"interrupted ({how})"
     except ConfigError as exc:
         if not transmitting:
             raise  # found before anything transmits: the file or the set-up is wrong
@@ -692,6 +715,7 @@ def run_experiment(
     except Exception as exc:  # any failure: stop safely below, report it
         outcome_error = f"{type(exc).__name__}: {exc}"
     finally:
+        signals.stopping()
         heap.stop()
         view.close()
         refused = sys.exc_info()[0] is not None  # a refusal before transmitting, raised
@@ -699,6 +723,8 @@ def run_experiment(
         _safe_stop(board, stage, writer, hold=failing)
         if refused and tank is not None:
             tank.close()  # no outcome follows: stop the simulated tank's process here
+        if refused:
+            signals.__exit__(None, None, None)
     # Telemetry onto sample time after the run, by minimum-delay filtering of the SYNC pairs:
     # a SYNC is stamped when the host reads it, which during streaming is after the ADC
     # frames queued before it, so every pair is late by a varying backlog. With the known
@@ -723,6 +749,8 @@ def run_experiment(
                 exact = _exact_truth(tank, exp, fs, start_index, estimates)
     elif board is not None:
         dac_underruns, adc_overruns = xruns_since(xruns_before or (0, 0), board.last_status)
+    stop_kind, stop_reason = stop_text(interrupted=interrupted, error=outcome_error)
+    events.append((stop_kind, next_index, 0, stop_reason))
     with contextlib.suppress(Exception):
         if writer is not None:
             for kind, index, length, text in events:
@@ -730,6 +758,7 @@ def run_experiment(
             for index, host_t in run_pairs[sync_seen:]:  # those that came after the loop
                 writer.append_sync(index, host_t)
     _close(writer)
+    signals.__exit__(None, None, None)
     return RunOutcome(
         folder=folder,
         experiment=exp,
@@ -753,6 +782,42 @@ def run_experiment(
         latency_samples=latency[0] if latency else None,
         capture_backlog_max_s=backlog_max / fs,
         calibrations=cals,
+    )
+
+
+def lost_device(tank: Any, board_watch: LinkWatch, board_url: str) -> DeviceLostError | None:
+    """The device found lost since the last look: the simulated tank's process (it serves
+    both simulated devices), else the board (its link down past
+    :data:`~hil.experiments.live.stops.LOST_AFTER_S`); None while all are there."""
+    if tank is not None and tank.exit_code() is not None:
+        return tank_lost(tank)
+    why = board_watch.lost()
+    if why is None:
+        return None
+    return DeviceLostError(
+        "board", board_url, why, "its USB cable and power (and that no other program holds it)"
+    )
+
+
+def tank_lost(tank: Any) -> DeviceLostError:
+    """The simulated tank's process ended under the run."""
+    return DeviceLostError(
+        "the built-in simulated tank",
+        f"(process {tank.pid})",
+        f"its process exited with code {tank.exit_code()}",
+        "that nothing killed it (its errors are printed above)",
+    )
+
+
+def lost_stage(tank: Any, url: str, exc: BaseException) -> DeviceLostError:
+    """The stage stopped answering (``exc``: what the driver raised)."""
+    if tank is not None and tank.exit_code() is not None:
+        return tank_lost(tank)
+    return DeviceLostError(
+        "stage",
+        url,
+        f"{type(exc).__name__}: {exc}",
+        "the controller's USB cable and power, and that no other program holds its port",
     )
 
 

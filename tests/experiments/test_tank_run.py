@@ -340,13 +340,26 @@ def test_simulated_run_end_to_end_and_replay_equals_live(
     assert events[0].kind == "note" and len(events) == summary["events"] + 1
     live = rec.estimates()
     assert len(live) == summary["estimates"]
+    assert events[-1].text == "stop: completed" and events[-1].kind == "note"
     again = replay(rec)
     agreement, words = compare_estimates(live, again)
     assert agreement == "equal", words
+    rec.close()
+    # hil report rebuilds the same summary from the recording (into another folder): what a
+    # recording holds is what the run scored with; the wall time is not recorded.
+    assert main(["report", str(folder / "run.h5"), "--out", str(tmp_path / "re"), "--json"]) == 0
+    rebuilt = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    same = ("estimates", "events", "dropped_samples", "error", "interrupted", "signal_s",
+            "loopback_latency_samples", "false_alarms", "scored_estimates")  # fmt: skip
+    assert {k: rebuilt[k] for k in same} == {k: summary[k] for k in same}
+    assert rebuilt["range_rmse_m"] == pytest.approx(summary["range_rmse_m"], rel=0.05)
+    assert rebuilt["wall_s"] == 0.0 and rebuilt["real_time_factor"] is None
 
 
 @pytest.mark.slow
-def test_kill_9_during_a_run_leaves_a_readable_recording(tmp_path: Path) -> None:
+def test_kill_9_during_a_run_leaves_a_recording_hil_report_rebuilds(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     from hil.recording.reader import RunRecording
 
     exp_file = tmp_path / "short.toml"
@@ -369,6 +382,20 @@ def test_kill_9_during_a_run_leaves_a_readable_recording(tmp_path: Path) -> None
     assert blocks and sum(b.data.shape[0] for b in blocks) > 10_000
     assert rec.schedule().period_hops == 17
     assert rec.telemetry()
+    estimates = len(rec.estimates())
+    rec.close()
+    # The summary and figures it never wrote, rebuilt from the recording alone.
+    assert not (folder / "summary.json").exists()
+    assert main(["report", str(h5), "--json"]) == 1  # the run did not stop on its own
+    from hil.experiments.run_from_recording import KILLED
+
+    summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert summary["error"] == KILLED and summary["interrupted"] is True
+    assert summary["estimates"] == estimates and summary["rebuilt_from"] == str(h5)
+    assert summary["loopback_latency_samples"] == 64
+    assert json.loads((folder / "summary.json").read_text()) == summary
+    for name in ("estimates.csv", "range_speed.png", "errors.png"):
+        assert (folder / name).exists(), name
 
 
 def _carriage_moving(h5: Path) -> bool:
@@ -388,9 +415,17 @@ def _carriage_moving(h5: Path) -> bool:
 
 
 @pytest.mark.slow
-def test_ctrl_c_stops_cleanly_and_keeps_the_recording(tmp_path: Path) -> None:
-    """SIGINT mid-run: transmission stopped, stage held, files closed, a summary written
-    that says the run was interrupted, and the recording readable."""
+@pytest.mark.parametrize(
+    ("sig", "how"),
+    [(signal.SIGINT, "Ctrl-C"), (signal.SIGTERM, "SIGTERM"), (signal.SIGHUP, "SIGHUP")],
+)
+def test_ctrl_c_sigterm_and_sighup_stop_cleanly_and_keep_the_recording(
+    tmp_path: Path, sig: signal.Signals, how: str
+) -> None:
+    """SIGINT (a terminal's Ctrl-C), SIGTERM (kill, a service manager) or SIGHUP (the
+    terminal closed) mid-run: transmission stopped, stage held, files closed, a summary
+    written that says the run was interrupted and how, the recording readable and ending
+    with the stop's event."""
     from hil.recording.reader import RunRecording
 
     exp_file = tmp_path / "slow.toml"
@@ -412,7 +447,7 @@ def test_ctrl_c_stops_cleanly_and_keeps_the_recording(tmp_path: Path) -> None:
         # fixed delay after the capture starts may land after the pass on a loaded machine).
         while time.monotonic() < deadline and not _carriage_moving(h5):
             time.sleep(0.1)
-        os.killpg(proc.pid, signal.SIGINT)  # as a terminal's Ctrl-C: the whole process group
+        os.killpg(proc.pid, sig)  # as a terminal does: the whole process group
         out, _ = proc.communicate(timeout=60)
     finally:
         if proc.poll() is None:  # the test failed first: leave nothing running
@@ -420,9 +455,11 @@ def test_ctrl_c_stops_cleanly_and_keeps_the_recording(tmp_path: Path) -> None:
             proc.communicate()
     assert proc.returncode == 1  # the run stopped before its end
     summary = json.loads(out.strip().splitlines()[-1])
-    assert summary["interrupted"] is True and "interrupted" in summary["error"]
+    assert summary["interrupted"] is True and summary["error"] == f"interrupted ({how})"
     rec = RunRecording.open(h5)
     assert sum(b.data.shape[0] for b in rec.samples()) > 10_000
+    stop = rec.events()[-1]
+    assert (stop.kind, stop.text) == ("alarm", f"stop: interrupted ({how})")
     # The stage was held: the simulated carriage (its true trajectory, written by the
     # simulated tank at stop) is at rest at the end and stopped short of the end of the pass
     # (end_m - run_down_m = -4.1 m).
@@ -489,3 +526,53 @@ def test_a_board_stopped_by_its_watchdog_ends_the_run_with_the_reason() -> None:
     assert why.startswith("the board stopped streaming at sample ")
     assert "board watchdog expired: transmission stopped" in why
     assert "the host sent it nothing for its watchdog timeout" in why
+
+
+@pytest.mark.slow
+def test_the_built_in_tank_lost_mid_run_stops_the_run_naming_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The simulated tank's process killed under the run: the run stops, naming it (not a
+    bare ``OSError: [Errno 5]`` from whichever pty noticed first)."""
+    import threading
+
+    from hil.experiments import sim_tank
+    from hil.experiments.tank_run import LiveView
+    from hil.recording.reader import RunRecording
+
+    started: list[sim_tank.SimulatedTankProcess] = []
+    original = sim_tank.SimulatedTankProcess.__init__
+
+    def keep(self: sim_tank.SimulatedTankProcess, *args: object) -> None:
+        original(self, *args)  # type: ignore[arg-type]
+        started.append(self)
+
+    monkeypatch.setattr(sim_tank.SimulatedTankProcess, "__init__", keep)
+    folder = tmp_path / "run"
+    h5 = folder / "run.h5"
+    done = threading.Event()
+
+    def kill_once_recording() -> None:
+        while not done.wait(0.05):
+            if started and h5.exists() and h5.stat().st_size > 400_000:
+                os.kill(started[0].pid, signal.SIGKILL)
+                return
+
+    killer = threading.Thread(target=kill_once_recording, daemon=True)
+    killer.start()
+    try:
+        outcome = run_experiment(
+            parse_experiment(SHORT.replace("speed_mps = 1.5", "speed_mps = 0.5")),
+            folder=folder,
+            view=LiveView(enabled=False),
+        )
+    finally:
+        done.set()
+        killer.join(10)
+    pid = started[0].pid
+    assert outcome.error == (
+        f"DeviceLostError: the built-in simulated tank (process {pid}) lost: its process exited"
+        " with code -9; check that nothing killed it (its errors are printed above)"
+    )
+    with RunRecording.open(h5) as rec:
+        assert rec.events()[-1].text == f"stop: error: {outcome.error}"

@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import dataclasses
 import json
-from collections.abc import Iterator
+import threading
+import time
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -350,3 +352,67 @@ def test_a_run_name_cannot_leave_output_dir(tmp_path: Path, devices: PtyDevices,
     text = DEFAULT_EXPERIMENT.replace('name = "sim-towed-pass"', f"name = {json.dumps(name)}")
     with pytest.raises(ConfigError, match=r"run\.name = .* is not allowed: must be a plain"):
         parse_experiment(text)
+
+
+# ---- faults: a device lost mid-pass stops the run, named
+
+
+def _on_the_pass(devices: PtyDevices, act: Callable[[], None]) -> threading.Thread:
+    """A thread that runs ``act`` once the simulated carriage is on its pass (moving, past
+    the pass's start at -2 m: positioning ends at -1.4 m), as the controller reports it."""
+    done = threading.Event()
+
+    def watch() -> None:
+        deadline = time.monotonic() + 120.0
+        while time.monotonic() < deadline and not done.wait(0.02):
+            status = devices.stage.status()
+            if status.velocity_mm_s != 0.0 and status.physical_mm < -2000.0:
+                act()
+                return
+
+    thread = threading.Thread(target=watch, daemon=True)
+    thread.start()
+    return thread
+
+
+def _slow(exp: Experiment) -> Experiment:
+    """The pass at 0.5 m/s: 2.7 m of pass and run-down take 5.4 s."""
+    return dataclasses.replace(exp, tow=dataclasses.replace(exp.tow, speed_mps=0.5))
+
+
+@pytest.mark.slow
+def test_a_board_lost_mid_pass_stops_the_run_naming_it(tmp_path: Path, devices: PtyDevices) -> None:
+    port = devices.board.port_name
+    killer = _on_the_pass(devices, devices.board.close)  # its pty gone, as a killed process
+    folder = tmp_path / "run"
+    outcome = run_experiment(
+        _slow(devices.experiment(tmp_path)), folder=folder, view=LiveView(enabled=False)
+    )
+    killer.join(10)
+    assert outcome.error.startswith(f"DeviceLostError: board {port} lost: its link dropped at")
+    assert "check its USB cable and power" in outcome.error
+    assert not outcome.interrupted
+    # Stopped within its grace, not at the end of the pass or run.max_duration_s: the stage
+    # was held short of the pass's end (-4.1 m) and is at rest.
+    status = devices.stage.status()
+    assert status.velocity_mm_s == 0.0 and status.physical_mm > -4100.0 + 250.0
+    with RunRecording.open(folder / "run.h5") as rec:
+        stop = rec.events()[-1]
+    assert (stop.kind, stop.text) == ("alarm", f"stop: error: {outcome.error}")
+
+
+@pytest.mark.slow
+def test_a_stage_lost_mid_pass_stops_the_run_naming_it(tmp_path: Path, devices: PtyDevices) -> None:
+    port = devices.stage.port_name
+    killer = _on_the_pass(devices, devices.stage.close)
+    folder = tmp_path / "run"
+    outcome = run_experiment(
+        _slow(devices.experiment(tmp_path)), folder=folder, view=LiveView(enabled=False)
+    )
+    killer.join(10)
+    assert outcome.error.startswith(f"DeviceLostError: stage {port} lost: ")
+    assert "check the controller's USB cable and power" in outcome.error
+    # Transmission is off: the board is not left streaming.
+    assert devices.board.call(lambda b: b.conn.state.name) != "STREAMING"
+    with RunRecording.open(folder / "run.h5") as rec:
+        assert rec.events()[-1].text == f"stop: error: {outcome.error}"
