@@ -261,11 +261,11 @@ def run_live(
 ) -> dict[str, Any]:
     """Stream ``seconds`` through Board + capture loop + GCAS; the figures (module docstring)."""
     from hil.acquisition import HeapFreeze, StallProbes
+    from hil.acquisition.feed import ReceiverFeed
     from hil.acquisition.machine_stalls import overlapping, steal_s
     from hil.devices.board import Board
     from hil.devices.board_settings import BoardSettings
     from hil.estimation.registry import make_receiver
-    from hil.recording.replay import ReceiverFeed
     from hil.signals.presets import check_design, get_preset
     from hil.signals.synthesis import BlockSynthesizer
 

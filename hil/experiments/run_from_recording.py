@@ -18,8 +18,9 @@ import numpy as np
 
 from hil.errors import ConfigError
 from hil.experiments.experiment import Experiment, parse_experiment
+from hil.experiments.live.board_state import sample_zero_time_s
 from hil.experiments.run_calibrations import RunCalibrations, load_run_calibrations
-from hil.experiments.tank_run import RunOutcome, Telemetry, sample_zero_time_s
+from hil.experiments.tank_run import RunOutcome, Telemetry
 from hil.recording.reader import RunRecording
 
 #: The error of a rebuilt run whose recording has no stop event.

@@ -18,14 +18,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from hil.acquisition.feed import ReceiverFeed
 from hil.errors import ConfigError
 from hil.experiments import tank_run
 from hil.experiments.experiment import DEFAULT_EXPERIMENT, Experiment, parse_experiment
+from hil.experiments.live import devices as live_devices
 from hil.experiments.run_scoring import summarize, write_summary
 from hil.experiments.sim_tank import tank_stage_config
 from hil.experiments.tank_run import LiveView, run_experiment
 from hil.recording.reader import RunRecording
-from hil.recording.replay import ReceiverFeed
 from sim_devices.board import FaultPlan, LoopbackWorld, SimulatedBoardOnPty
 from sim_devices.stage.on_pty import SimulatedGrblOnPty
 
@@ -110,7 +111,7 @@ class PtyDevices:
 def devices(monkeypatch: pytest.MonkeyPatch) -> Iterator[PtyDevices]:
     # The simulated devices share this process with the host: a loaded CI machine may stall
     # it for more than the hardware watchdog's 1 s, which would stop the board mid-run.
-    monkeypatch.setattr(tank_run, "_WATCHDOG_MS", 10_000)
+    monkeypatch.setattr(live_devices, "WATCHDOG_MS", 10_000)
     stage_sim = SimulatedGrblOnPty(tank_stage_config())  # paced by the wall clock
     received = bytearray()
     grbl = stage_sim.grbl
@@ -215,7 +216,7 @@ def test_a_refusal_once_transmitting_ends_the_run_safely_with_the_reason(
     with RunRecording.open(folder / "run.h5") as rec:
         # Up to the refused block, which was recorded before the receiver refused it (at
         # most one block: the loop reads what the board holds, up to a block at a time).
-        block = round(tank_run._BLOCK_S * 192_000)
+        block = round(tank_run.TIMING_BLOCK_S * 192_000)
         assert outcome.samples > 0 and 0 <= rec.n_samples - outcome.samples <= block
 
 
@@ -276,7 +277,8 @@ def test_required_calibrations_are_applied_in_the_run(tmp_path: Path, devices: P
     with RunRecording.open(folder / "run.h5") as rec:
         assert rec.metadata.calibration_ids == tuple(summary["calibrations"])
         assert rec.origin_sample == outcome.start_index + LATENCY
-        (note,) = [e for e in rec.events() if e.kind == "note"]
+        note, stop = [e for e in rec.events() if e.kind == "note"]
+        assert stop.text == "stop: completed"
         assert note.text == (
             f"loopback latency {LATENCY} samples from calibration {ids['latency']} (the DAC"
             " monitor input carried no loopback: correlation 0.00)"

@@ -14,12 +14,12 @@ import h5py
 import numpy as np
 import pytest
 
+from hil.acquisition.feed import ReceiverFeed
 from hil.cli.main import main
 from hil.errors import ConfigError
 from hil.estimation.base import Estimate
 from hil.estimation.registry import make_receiver
 from hil.recording import (
-    ReceiverFeed,
     ReceiverSetup,
     RunRecording,
     RunWriter,
@@ -310,8 +310,8 @@ def test_cli_needs_a_receiver_name_when_none_ran_live(
 def test_feed_drops_samples_before_its_origin() -> None:
     """Samples captured before the receiver's sample 0 (e.g. while the loopback latency was
     measured) are dropped; the first fed sample is the origin; repeats are still refused."""
+    from hil.acquisition.feed import ReceiverFeed
     from hil.errors import ConfigError
-    from hil.recording.replay import ReceiverFeed
 
     seen: list[tuple[int, int]] = []
 
@@ -348,7 +348,7 @@ class Bounded(Plain):
 
 
 def test_receiver_feed_says_how_far_the_stream_must_go_before_an_estimate() -> None:
-    from hil.recording.replay import ReceiverFeed
+    from hil.acquisition.feed import ReceiverFeed
 
     plain = ReceiverFeed(Plain(), origin=100)  # type: ignore[arg-type]
     plain.feed(100, np.zeros((50, 1)))
@@ -363,7 +363,7 @@ def test_receiver_feed_says_how_far_the_stream_must_go_before_an_estimate() -> N
 
 
 def test_live_loop_waits_for_the_next_decision_or_one_block() -> None:
-    from hil.recording.replay import ReceiverFeed
+    from hil.acquisition.feed import ReceiverFeed
 
     plain = ReceiverFeed(Plain(), origin=100)  # type: ignore[arg-type]
     plain.feed(100, np.zeros((50, 1)))

@@ -1,0 +1,157 @@
+"""The devices of a run, opened in the order that lets every check refuse before anything
+moves or transmits: the simulated tank's process (for ``sim://``), the stage (its ``$$``
+limits read on connecting, the whole tow checked against them, before homing), the board
+(configured: refused before sending if it cannot), then the stage homed and positioned.
+
+:class:`RunDevices` holds what is open so far, so a failure at any step stops and closes
+exactly that (:meth:`RunDevices.safe_stop`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from hil.devices.stage_errors import StageTimeoutError
+from hil.errors import ConfigError
+from hil.experiments.experiment import Experiment
+from hil.experiments.live.plan import CheckedTow, StageLimits, check_tow
+from hil.experiments.live.stops import DeviceLostError
+
+#: The board's watchdog (ms of its clock): it stops when the host has sent nothing for this
+#: long (a crashed or stalled host), so a run never leaves it streaming unattended.
+WATCHDOG_MS = 1000
+#: The simulated board's: the simulated tank is a child process on the same CPUs, scaled in
+#: time, so a stall of the machine (seconds on a loaded CI host) must not stop it.
+SIM_WATCHDOG_MS = 10_000
+#: Seconds of capture the board's ring holds.
+RING_S = 8.0
+
+
+def stage_limits(stage: Any) -> StageLimits:
+    """The limits an open :class:`~hil.devices.grbl.GrblStage` reported (its ``$$``)."""
+    low, high = stage.limits
+    settings = stage.settings
+    return StageLimits(low, high, settings.max_rate, settings.acceleration)
+
+
+@dataclass
+class RunDevices:
+    """The run's devices as far as they are open (None: not yet)."""
+
+    tank: Any = None
+    stage: Any = None
+    board: Any = None
+    #: The driver clock of the stage, the board and the run (``now()``, ``sleep()``, s):
+    #: the simulated tank's scaled clock, else the wall clock.
+    clock: Any = None
+
+    def open(self, exp: Experiment, folder: Path, fs: float, view: Any) -> CheckedTow:
+        """Open everything (see the module docstring); the checked tow."""
+        from hil.devices.clock import MonotonicClock
+        from hil.devices.grbl import GrblStage
+
+        board_url, stage_url = self._start_simulation(exp, folder)
+        if self.clock is None:
+            self.clock = MonotonicClock()  # one driver clock for stage, board and the run
+        self.stage = GrblStage(stage_url, clock=self.clock).open()
+        tow = check_tow(exp.tow, stage_limits(self.stage))
+        self.board = self._open_board(board_url, fs)
+        if self.tank is not None:
+            self.tank.align(fs)
+        try:
+            status = self.stage.status()
+            if status.state.name == "ALARM" or status.alarm is not None:
+                view.update("stage: homing", force=True)
+                self.stage.home()
+            view.update("stage: positioning for the first pass", force=True)
+            self.stage.move_to(tow.ready_m, self.stage.settings.max_rate)
+        except (OSError, StageTimeoutError) as exc:
+            raise self.stage_lost(stage_url, exc) from exc
+        return tow
+
+    def _start_simulation(self, exp: Experiment, folder: Path) -> tuple[str, str]:
+        """The simulated tank started for ``sim://`` devices: the ports to open instead."""
+        if exp.simulated:
+            from hil.experiments.sim_tank import SimulatedTankProcess
+
+            experiment_file = folder / "experiment.toml"
+            experiment_file.write_text(exp.text, encoding="utf-8")
+            self.tank = SimulatedTankProcess(exp, experiment_file, folder)
+            self.clock = self.tank.clock
+            return self.tank.board_port, self.tank.stage_port
+        if exp.board_url.startswith("sim://") or exp.stage_url.startswith("sim://"):
+            raise ConfigError(
+                "devices",
+                f"board {exp.board_url}, stage {exp.stage_url}",
+                "both simulated (sim://) or both real",
+                "the simulated target follows the simulated stage",
+            )
+        return exp.board_url, exp.stage_url
+
+    def _open_board(self, url: str, fs: float) -> Any:
+        """The board (or audio interface) open and configured; nothing transmits yet."""
+        from hil.devices.board import Board
+        from hil.devices.board_settings import BoardSettings
+
+        if url.startswith("audio://"):
+            from hil.devices.audio.daq import AudioDaq
+
+            board: Any = AudioDaq.from_url(url, sample_rate_hz=int(fs), ring_seconds=RING_S)
+        else:
+            settings = BoardSettings(sample_rate_hz=int(fs), dac_channels=1, adc_channels=2)
+            board = Board(
+                url,
+                settings=settings,
+                clock=self.clock,
+                ring_seconds=RING_S,
+                keepalive_ms=SIM_WATCHDOG_MS if self.tank is not None else WATCHDOG_MS,
+            )
+        board.open()
+        board.configure()
+        return board
+
+    def tank_lost(self) -> DeviceLostError | None:
+        """The simulated tank's process, if it ended under the run."""
+        if self.tank is None or self.tank.exit_code() is None:
+            return None
+        return DeviceLostError(
+            "the built-in simulated tank",
+            f"(process {self.tank.pid})",
+            f"its process exited with code {self.tank.exit_code()}",
+            "that nothing killed it (its errors are printed above)",
+        )
+
+    def stage_lost(self, url: str, exc: BaseException) -> DeviceLostError:
+        """The stage stopped answering (``exc``: what its driver raised)."""
+        return self.tank_lost() or DeviceLostError(
+            "stage",
+            url,
+            f"{type(exc).__name__}: {exc}",
+            "the controller's USB cable and power, and that no other program holds its port",
+        )
+
+    def safe_stop(self, *, hold: bool) -> None:
+        """Transmission off, stage held, both closed: each step even if another fails.
+
+        ``hold`` (an interrupted or failed run) sends the feed hold unconditionally: the
+        interruption may have landed inside a status query, so a fresh query cannot be
+        trusted to tell whether the queued move is still running.
+        """
+        board, stage = self.board, self.stage
+        if board is not None:
+            with contextlib.suppress(Exception):
+                board.stop()
+        if stage is not None:
+            with contextlib.suppress(Exception):
+                # Short-circuit: with hold, no status query at all.
+                if hold or stage.status().state.name in ("RUN", "JOG"):
+                    stage.stop()
+        if board is not None:
+            with contextlib.suppress(Exception):
+                board.close()
+        if stage is not None:
+            with contextlib.suppress(Exception):
+                stage.close()
