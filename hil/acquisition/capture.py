@@ -74,13 +74,18 @@ class CaptureLoop:
     feed: ReceiverFeed | None = None
     on_block: Observer | None = None
     on_fed: Observer | None = None
+    #: Wait for this many samples per step instead of the receiver's next decision (more
+    #: receiver calls, the same estimates); None: the decision rule.
+    every: int | None = None
     #: Most samples held but not yet read at a step (how far the loop fell behind).
     backlog_max: int = field(default=0)
 
     def wanted_index(self, limit: int | None = None) -> int:
         """The board index the next step waits for (see the module docstring), at most
         ``limit``."""
-        if self.feed is not None:
+        if self.every is not None:
+            wanted = self.next_index + self.every
+        elif self.feed is not None:
             wanted = max(self.next_index + 1, self.feed.wait_index(self.max_block))
         else:
             wanted = self.next_index + self.max_block
