@@ -24,15 +24,15 @@ from hil.estimation.base import Estimate
 
 
 class SampleSource(Protocol):
-    """What the loop reads: :class:`~hil.devices.board.Board` and
-    :class:`~hil.devices.audio.daq.AudioDaq` both are one."""
+    """What the loop reads: the capture side of a
+    :class:`~hil.acquisition.device.StreamingDevice` (a board, an audio interface)."""
 
     @property
     def ring(self) -> SampleRing | None: ...
 
-    def wait_for_samples(self, end_index: int, timeout_s: float = 5.0) -> bool: ...
+    def wait_for_samples(self, end_index: int, /, timeout_s: float) -> bool: ...
 
-    def read(self, first: int, n: int) -> npt.NDArray[Any]: ...
+    def read(self, first: int, n: int, /) -> npt.NDArray[Any]: ...
 
 
 @dataclass(frozen=True)

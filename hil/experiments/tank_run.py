@@ -104,7 +104,7 @@ class LiveView:
     def __init__(self, stream: TextIO | None = None, enabled: bool = True) -> None:
         self.stream = stream or sys.stderr
         self.enabled = enabled
-        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        self.tty = self.stream.isatty()
         self._last = 0.0
 
     def update(self, text: str, *, force: bool = False) -> None:
@@ -257,7 +257,7 @@ def run_experiment(
 
 def _transmit_and_tow(session: LiveSession, max_duration_s: float) -> None:
     """Transmission on, then capture and tow until done; raises what stops the run."""
-    board = session.devices.board
+    board = session.board
     # The xrun counters before transmission (a board counts since it powered up); without a
     # status before the start, the first one is the baseline.
     if board.last_status is not None:
@@ -303,7 +303,8 @@ def _outcome(
     the xruns, the exact truth of a simulated run; the recording closed."""
     board, tank = devices.board, devices.tank
     with contextlib.suppress(Exception):
-        recorder.sync(lambda pairs: collect_sync_pairs(board, pairs))
+        fit = board.clock_fit if board is not None else None
+        recorder.sync(lambda pairs: collect_sync_pairs(fit, pairs))
     start = session.start_index if session is not None else 0
     samples = session.next_index - start if session is not None else 0
     estimates = session.estimates if session is not None else []

@@ -274,22 +274,19 @@ def test_sample_zero_time_survives_a_stall_where_most_syncs_are_late() -> None:
 
 
 def test_the_run_keeps_every_sync_pair_beyond_the_fits_window() -> None:
-    from types import SimpleNamespace
-
     from hil.acquisition.clock_fit import SampleClockFit
     from hil.experiments.live.board_state import collect_sync_pairs
 
     # The board's fit keeps its latest 256 pairs; the run collects as they come.
     fit = SampleClockFit(100_000.0, max_pairs=256)
-    board = SimpleNamespace(clock_fit=fit)  # what the run reads of a Board or AudioDaq
     run_pairs: list[tuple[int, float]] = []
     for k in range(1000):
         fit.add(1000 * k, 5.0 + k / 100 + (0.0 if k == 3 else 0.002))
         if k % 7 == 0:
-            collect_sync_pairs(board, run_pairs)
-    collect_sync_pairs(board, run_pairs)
+            collect_sync_pairs(fit, run_pairs)
+    collect_sync_pairs(fit, run_pairs)
     assert [p[0] for p in run_pairs] == [1000 * k for k in range(1000)]
-    collect_sync_pairs(board, run_pairs)  # nothing new: nothing added
+    collect_sync_pairs(fit, run_pairs)  # nothing new: nothing added
     assert len(run_pairs) == 1000
     from hil.experiments.live.board_state import sample_zero_time_s
 
@@ -297,7 +294,7 @@ def test_the_run_keeps_every_sync_pair_beyond_the_fits_window() -> None:
     assert sample_zero_time_s(run_pairs, 100_000.0) == pytest.approx(5.0)
     assert len(fit.pair_list()) == 256
     assert sample_zero_time_s(fit.pair_list(), 100_000.0) == pytest.approx(5.002)
-    collect_sync_pairs(None, run_pairs)  # no board (it failed to open): nothing to add
+    collect_sync_pairs(None, run_pairs)  # no fit (no board, or not configured): nothing to add
     assert len(run_pairs) == 1000
 
 

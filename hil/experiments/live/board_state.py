@@ -4,9 +4,9 @@ put host times (the stage's reports) onto sample time."""
 
 from __future__ import annotations
 
-from typing import Any, Protocol
-
 from hil.acquisition import Annotation, AnnotationKind
+from hil.acquisition.clock_fit import SampleClockFit
+from hil.acquisition.device import StreamingDevice, XrunStatus
 from hil.recording.records import RunEvent
 
 # Board annotations as recording events: the recording's kinds are coarser (schema
@@ -43,7 +43,7 @@ def run_event(annotation: Annotation) -> RunEvent:
     )
 
 
-def board_stopped(board: Any) -> str | None:
+def board_stopped(board: StreamingDevice) -> str | None:
     """Why the board stopped streaming on its own (its watchdog expired: the host sent it
     nothing for the watchdog timeout), as an error message; None while it streams. A run
     stops at once on it: no more samples will come.
@@ -59,19 +59,6 @@ def board_stopped(board: Any) -> str | None:
         " sent it nothing for its watchdog timeout, so the host stalled (a loaded machine, a"
         " slow disk); the recording holds everything before it"
     )
-
-
-class XrunStatus(Protocol):
-    """A device status with xrun counters: the board's
-    :class:`~firmware_protocol.messages.Status` (counted since the board powered up) or the
-    audio interface's :class:`~hil.devices.audio.daq.AudioDaqStatus` (since the stream
-    started)."""
-
-    @property
-    def dac_underruns(self) -> int: ...
-
-    @property
-    def adc_overruns(self) -> int: ...
 
 
 def xrun_counts(status: XrunStatus | None) -> tuple[int, int]:
@@ -116,12 +103,11 @@ def sample_zero_time_s(pairs: list[tuple[int, float]], fs: float) -> float | Non
     return float(min(host_t - index / fs for index, host_t in pairs))
 
 
-def collect_sync_pairs(board: Any, run_pairs: list[tuple[int, float]]) -> None:
-    """Append to ``run_pairs`` the board's SYNC pairs ``(sample_index, host_time_s)`` it does
-    not hold yet. The board's clock fit keeps only its latest pairs (a sliding window), so
-    the run keeps its own list: every pair is recorded, and the least-delayed one of the
-    whole run is never forgotten."""
-    fit = board.clock_fit if board is not None else None
+def collect_sync_pairs(fit: SampleClockFit | None, run_pairs: list[tuple[int, float]]) -> None:
+    """Append to ``run_pairs`` the SYNC pairs ``(sample_index, host_time_s)`` of a device's
+    clock fit (None: no device, or not configured) that it does not hold yet. The fit keeps
+    only its latest pairs (a sliding window), so the run keeps its own list: every pair is
+    recorded, and the least-delayed one of the whole run is never forgotten."""
     pairs = fit.pair_list() if fit is not None else []
     last = run_pairs[-1][0] if run_pairs else None
     run_pairs.extend(p for p in pairs if last is None or p[0] > last)

@@ -10,10 +10,12 @@ exactly that (:meth:`RunDevices.safe_stop`).
 from __future__ import annotations
 
 import contextlib
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from hil.acquisition.device import StreamingDevice
 from hil.devices.stage_errors import StageTimeoutError
 from hil.errors import ConfigError
 from hil.experiments.experiment import Experiment
@@ -30,6 +32,40 @@ SIM_WATCHDOG_MS = 10_000
 RING_S = 8.0
 
 
+def _open_board(url: str, fs: float, clock: Any, keepalive_ms: int) -> StreamingDevice:
+    from hil.devices.board import Board
+    from hil.devices.board_settings import BoardSettings
+
+    settings = BoardSettings(sample_rate_hz=int(fs), dac_channels=1, adc_channels=2)
+    board = Board(
+        url, settings=settings, clock=clock, ring_seconds=RING_S, keepalive_ms=keepalive_ms
+    )
+    return board.open()
+
+
+def _open_audio(url: str, fs: float, clock: Any, keepalive_ms: int) -> StreamingDevice:
+    from hil.devices.audio.daq import AudioDaq
+
+    return AudioDaq.from_url(url, sample_rate_hz=int(fs), ring_seconds=RING_S).open()
+
+
+#: How each URL scheme of ``devices.board`` opens its device; any other URL is a board
+#: transport (``serial://``, ``usb://``, a port path; :func:`hil.transports.open_transport`).
+STREAMING_DEVICES: dict[str, Callable[[str, float, Any, int], StreamingDevice]] = {
+    "audio": _open_audio,
+}
+
+
+def open_streaming_device(url: str, fs: float, clock: Any, keepalive_ms: int) -> StreamingDevice:
+    """The DAC/ADC at ``url`` open and configured at ``fs`` Hz (2 ADC channels: the
+    hydrophone and the DAC monitor), on the driver ``clock``; nothing transmits yet.
+    ``keepalive_ms``: the board's watchdog (an audio interface has none)."""
+    scheme = url.split("://", 1)[0] if "://" in url else ""
+    device = STREAMING_DEVICES.get(scheme, _open_board)(url, fs, clock, keepalive_ms)
+    device.configure()
+    return device
+
+
 def stage_limits(stage: Any) -> StageLimits:
     """The limits an open :class:`~hil.devices.grbl.GrblStage` reported (its ``$$``)."""
     low, high = stage.limits
@@ -43,7 +79,7 @@ class RunDevices:
 
     tank: Any = None
     stage: Any = None
-    board: Any = None
+    board: StreamingDevice | None = None
     #: The driver clock of the stage, the board and the run (``now()``, ``sleep()``, s):
     #: the simulated tank's scaled clock, else the wall clock.
     clock: Any = None
@@ -58,7 +94,12 @@ class RunDevices:
             self.clock = MonotonicClock()  # one driver clock for stage, board and the run
         self.stage = GrblStage(stage_url, clock=self.clock).open()
         tow = check_tow(exp.tow, stage_limits(self.stage))
-        self.board = self._open_board(board_url, fs)
+        self.board = open_streaming_device(
+            board_url,
+            fs,
+            self.clock,
+            SIM_WATCHDOG_MS if self.tank is not None else WATCHDOG_MS,
+        )
         if self.tank is not None:
             self.tank.align(fs)
         try:
@@ -91,27 +132,11 @@ class RunDevices:
             )
         return exp.board_url, exp.stage_url
 
-    def _open_board(self, url: str, fs: float) -> Any:
-        """The board (or audio interface) open and configured; nothing transmits yet."""
-        from hil.devices.board import Board
-        from hil.devices.board_settings import BoardSettings
-
-        if url.startswith("audio://"):
-            from hil.devices.audio.daq import AudioDaq
-
-            board: Any = AudioDaq.from_url(url, sample_rate_hz=int(fs), ring_seconds=RING_S)
-        else:
-            settings = BoardSettings(sample_rate_hz=int(fs), dac_channels=1, adc_channels=2)
-            board = Board(
-                url,
-                settings=settings,
-                clock=self.clock,
-                ring_seconds=RING_S,
-                keepalive_ms=SIM_WATCHDOG_MS if self.tank is not None else WATCHDOG_MS,
-            )
-        board.open()
-        board.configure()
-        return board
+    def opened_board(self) -> StreamingDevice:
+        """The board (or audio interface), once :meth:`open` opened it."""
+        if self.board is None:
+            raise RuntimeError("the run's devices are not open: call RunDevices.open first")
+        return self.board
 
     def tank_lost(self) -> DeviceLostError | None:
         """The simulated tank's process, if it ended under the run."""

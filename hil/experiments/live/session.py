@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from functools import partial
 
 from hil.acquisition.capture import CapturedBlock, CaptureLoop
+from hil.acquisition.device import StreamingDevice
 from hil.acquisition.feed import ReceiverFeed
 from hil.estimation.base import Estimate, Receiver
 from hil.experiments.experiment import Experiment
@@ -75,6 +76,7 @@ class LiveSession:
         status: Callable[[str], None],
     ) -> None:
         self.exp, self.devices, self.receiver = exp, devices, receiver
+        self.board: StreamingDevice = devices.opened_board()
         self.recorder, self.cals, self.timing, self.status = recorder, cals, timing, status
         self.fs = float(exp.waveform.fs_hz)
         self.now: Callable[[], float] = devices.clock.now
@@ -88,7 +90,7 @@ class LiveSession:
         self.transmitting = False
         #: The device's xrun counters before transmission, once it reported a status.
         self.xruns_before: tuple[int, int] | None = None
-        self.board_watch = LinkWatch(devices.board.annotations, self.now)
+        self.board_watch = LinkWatch(self.board.annotations, self.now)
 
     @property
     def next_index(self) -> int:
@@ -98,7 +100,7 @@ class LiveSession:
     # ---------------------------------------------------------------- transmission
     def transmit(self) -> None:
         """Start transmission: schedule sample k plays at board index ``start_index + k``."""
-        exp, board = self.exp, self.devices.board
+        exp, board = self.exp, self.board
         synth = BlockSynthesizer(exp.schedule, self.fs, amplitude=exp.amplitude)
         self.start_index = board.start(synth.render)
         self.transmitting = True
@@ -169,13 +171,13 @@ class LiveSession:
         return self.now() < t
 
     def _collect_sync(self, pairs: list[tuple[int, float]]) -> None:
-        collect_sync_pairs(self.devices.board, pairs)
+        collect_sync_pairs(self.board.clock_fit, pairs)
 
     def _poll_stage(self) -> None:
         """One stage report: into the telemetry and the recording, then to the tow."""
         from hil.devices.stage_errors import StageTimeoutError
 
-        stage, board = self.devices.stage, self.devices.board
+        stage, board = self.devices.stage, self.board
         try:
             st = stage.status()
             fit = board.clock_fit
@@ -210,7 +212,7 @@ class LiveSession:
     def _status_line(self) -> str:
         signal_s = (self.next_index - self.start_index) / self.fs
         est = self.estimates[-1] if self.estimates else None
-        ring = self.devices.board.ring
+        ring = self.board.ring
         x = self.telemetry.position_m[-1] if self.telemetry.position_m else float("nan")
         return (
             f"t {signal_s:6.2f} s | pass {self.tow.passes_started}/{len(self.tow.tow.passes)}"

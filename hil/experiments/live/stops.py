@@ -17,7 +17,8 @@ from collections.abc import Callable
 from types import FrameType, TracebackType
 from typing import Any
 
-from hil.acquisition.annotations import AnnotationKind, AnnotationLog
+from hil.acquisition.annotations import AnnotationKind
+from hil.acquisition.device import Annotations
 
 #: Driver-clock seconds a board's link may stay down (its driver reconnecting: a USB glitch
 #: comes back within a few hundred ms) before the run counts the board as lost.
@@ -89,7 +90,7 @@ class LinkWatch:
     """Whether a device's link is lost, from its annotations (DISCONNECT, RECONNECT) and a
     clock (driver seconds): down for :data:`LOST_AFTER_S` without a reconnect is lost.
 
-    >>> from hil.acquisition.annotations import Annotation
+    >>> from hil.acquisition.annotations import Annotation, AnnotationLog
     >>> log, t = AnnotationLog(), [0.0]
     >>> watch = LinkWatch(log, lambda: t[0])
     >>> log.add(Annotation(500, AnnotationKind.DISCONNECT, 0, "read failed: EIO"))
@@ -100,7 +101,7 @@ class LinkWatch:
     'its link dropped at sample 500 (read failed: EIO) and has not come back for 0.51 s'
     """
 
-    def __init__(self, annotations: AnnotationLog, now: Callable[[], float]) -> None:
+    def __init__(self, annotations: Annotations, now: Callable[[], float]) -> None:
         self._annotations = annotations
         self._now = now
         self._down_since: float | None = None
