@@ -23,7 +23,9 @@ from __future__ import annotations
 import contextlib
 import datetime as dt
 import sys
+import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
@@ -196,12 +198,17 @@ def run_experiment(
     *,
     folder: Path | None = None,
     view: LiveView | None = None,
+    on_estimates: Callable[[list[Estimate]], None] | None = None,
+    stop: threading.Event | None = None,
 ) -> RunOutcome:
     """Run ``exp`` end to end (see the module docstring) and return what it produced.
 
     Raises ConfigError for problems found before anything transmits. Once transmission
     has started, every failure (a ConfigError too) stops the run safely and is reported in
     :attr:`RunOutcome.error`, with what was recorded until then.
+
+    ``on_estimates`` gets the receiver's estimates as they come (on the run's thread);
+    setting ``stop`` (from any thread) stops the run as Ctrl-C does.
     """
     fs = float(exp.waveform.fs_hz)
     if fs != int(fs):
@@ -232,7 +239,8 @@ def run_experiment(
                 _INT16_SCALE,
             )
             session = LiveSession(exp, devices, tow, receiver, recorder, cals, timing, view.update)
-            _transmit_and_tow(session, exp.max_duration_s)
+            session.on_estimates = on_estimates
+            _transmit_and_tow(session, exp.max_duration_s, stop)
         except KeyboardInterrupt as exc:
             how = exc.signal_name if isinstance(exc, RunInterrupted) else "Ctrl-C"
             ending = _Ending(True, f"interrupted ({how})")
@@ -255,7 +263,9 @@ def run_experiment(
         return _outcome(exp, folder, fs, cals, devices, recorder, session, maps, ending, wall0)
 
 
-def _transmit_and_tow(session: LiveSession, max_duration_s: float) -> None:
+def _transmit_and_tow(
+    session: LiveSession, max_duration_s: float, stop: threading.Event | None
+) -> None:
     """Transmission on, then capture and tow until done; raises what stops the run."""
     board = session.board
     # The xrun counters before transmission (a board counts since it powered up); without a
@@ -267,6 +277,8 @@ def _transmit_and_tow(session: LiveSession, max_duration_s: float) -> None:
     heap.start()  # set-up done: its objects stay out of the collector's full passes
 
     def checks() -> None:
+        if stop is not None and stop.is_set():
+            raise RunInterrupted("stopped by the caller")
         if session.xruns_before is None and board.last_status is not None:
             session.xruns_before = xrun_counts(board.last_status)
         lost = session.lost()

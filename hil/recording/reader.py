@@ -304,6 +304,17 @@ class RunRecording:
         ]
         return out if receiver is None else [e for e in out if e.receiver == receiver]
 
+    def table(self, name: str) -> dict[str, NDArray[Any]]:
+        """One recorded table as columns of arrays (for notebooks and numpy): ``"estimates"``,
+        ``"telemetry"``, ``"events"`` or ``"sync"``; column names as in
+        ``docs/recording-format.md``, each of shape ``(n_rows,)``.
+
+        >>> # rec.table("estimates")["range_m"] is every recorded range estimate, m
+        """
+        if name not in ("estimates", "telemetry", "events", "sync"):
+            raise ConfigError("table", name, "one of estimates, telemetry, events, sync")
+        return {key: np.asarray(col) for key, col in self._table(name).items()}
+
     def sync_pairs(self) -> SyncPairs:
         """The board sample index ↔ host time pairs."""
         t = self._table("sync")

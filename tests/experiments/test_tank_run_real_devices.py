@@ -418,3 +418,51 @@ def test_a_stage_lost_mid_pass_stops_the_run_naming_it(tmp_path: Path, devices: 
     assert devices.board.call(lambda b: b.conn.state.name) != "STREAMING"
     with RunRecording.open(folder / "run.h5") as rec:
         assert rec.events()[-1].text == f"stop: error: {outcome.error}"
+
+
+# ---- the Python API
+
+
+@pytest.mark.slow
+def test_the_python_api_yields_the_runs_estimates_status_and_summary(
+    tmp_path: Path, devices: PtyDevices
+) -> None:
+    from hil.estimation.base import Estimate
+    from hil.experiments import api
+
+    items = list(api.iterate(devices.experiment(tmp_path), folder=tmp_path / "run"))
+    finished = items[-1]
+    assert isinstance(finished, api.Finished)
+    estimates = [i for i in items if isinstance(i, Estimate)]
+    statuses = [i.text for i in items if isinstance(i, api.Status)]
+    # Every estimate of the run, in order, as it came; the status line as the CLI shows it.
+    assert estimates == finished.outcome.estimates and len(estimates) > 50
+    assert any(s.startswith("t ") and "estimates | dropped" in s for s in statuses)
+    assert finished.summary["error"] == "" and finished.summary["estimates"] == len(estimates)
+    assert json.loads((tmp_path / "run" / "summary.json").read_text()) == finished.summary
+    # The recording reads back as arrays.
+    with RunRecording.open(tmp_path / "run" / "run.h5") as rec:
+        table = rec.table("estimates")
+    np.testing.assert_array_equal(table["range_m"], [e.range_m for e in estimates])
+
+
+@pytest.mark.slow
+def test_leaving_the_python_api_loop_early_stops_the_run_safely(
+    tmp_path: Path, devices: PtyDevices
+) -> None:
+    from hil.estimation.base import Estimate
+    from hil.experiments import api
+
+    seen = 0
+    for item in api.iterate(_slow(devices.experiment(tmp_path)), folder=tmp_path / "run"):
+        seen += isinstance(item, Estimate)
+        if seen == 5:
+            break  # closes the iterator: the run stops as on Ctrl-C, and is waited for
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert summary["interrupted"] is True
+    assert summary["error"] == "interrupted (stopped by the caller)"
+    assert devices.board.call(lambda b: b.conn.state.name) != "STREAMING"
+    status = devices.stage.status()
+    assert status.velocity_mm_s == 0.0 and status.physical_mm > -4100.0 + 250.0
+    with RunRecording.open(tmp_path / "run" / "run.h5") as rec:
+        assert rec.events()[-1].text == "stop: interrupted (stopped by the caller)"

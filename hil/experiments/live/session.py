@@ -88,6 +88,8 @@ class LiveSession:
         self.capture: CaptureLoop | None = None
         self.probe: LatencyProbe | None = None
         self.transmitting = False
+        #: Called with each new batch of estimates (on the run's thread).
+        self.on_estimates: Callable[[list[Estimate]], None] | None = None
         #: The device's xrun counters before transmission, once it reported a status.
         self.xruns_before: tuple[int, int] | None = None
         self.board_watch = LinkWatch(self.board.annotations, self.now)
@@ -120,8 +122,16 @@ class LiveSession:
             self.probe = None
 
     def _on_fed(self, block: CapturedBlock) -> None:
-        self.recorder.estimates(block.estimates)
-        self.estimates.extend(block.estimates)
+        self._emit(block.estimates)
+
+    def _emit(self, estimates: list[Estimate]) -> None:
+        """New estimates: recorded, kept, and given to :attr:`on_estimates`."""
+        if not estimates:
+            return
+        self.recorder.estimates(estimates)
+        self.estimates.extend(estimates)
+        if self.on_estimates is not None:
+            self.on_estimates(estimates)
 
     def _attach_receiver(self, probe: LatencyProbe) -> None:
         """The latency measured: the recording opens with the receiver's sample 0 as its
@@ -137,9 +147,7 @@ class LiveSession:
         for first, data in probe.blocks:
             self.recorder.samples(first, data)
         for first, data in probe.blocks:
-            new = feed.feed(first, data)  # drops what comes before the origin
-            self.recorder.estimates(new)
-            self.estimates.extend(new)
+            self._emit(feed.feed(first, data))  # drops what comes before the origin
         self.capture.feed = feed
 
     # ---------------------------------------------------------------- the loop
@@ -162,9 +170,7 @@ class LiveSession:
             if self.now() > deadline:
                 raise RuntimeError(f"run.max_duration_s = {self.exp.max_duration_s} s exceeded")
         if self.capture.feed is not None:
-            tail = self.capture.feed.finish()
-            self.recorder.estimates(tail)
-            self.estimates.extend(tail)
+            self._emit(self.capture.feed.finish())
 
     def _before(self, t: float) -> bool:
         """Whether the driver clock is before ``t`` (s)."""
