@@ -93,7 +93,10 @@ class CaptureLoop:
 
     def step(self, timeout_s: float, limit: int | None = None) -> CapturedBlock | None:
         """Wait up to ``timeout_s`` (real s) for samples, then read, observe and feed one
-        block (not past index ``limit``); None when nothing came in time."""
+        block (not past index ``limit``); None when nothing came in time, or the capture
+        has reached ``limit``."""
+        if limit is not None and self.next_index >= limit:
+            return None
         wanted = self.wanted_index(limit)
         began = time.monotonic()
         if not self.source.wait_for_samples(wanted, timeout_s=timeout_s):
