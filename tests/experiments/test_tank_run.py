@@ -578,3 +578,32 @@ def test_the_built_in_tank_lost_mid_run_stops_the_run_naming_it(
     )
     with RunRecording.open(h5) as rec:
         assert rec.events()[-1].text == f"stop: error: {outcome.error}"
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc")
+def test_the_cli_refuses_an_existing_run_folder_before_starting_anything(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    earlier = tmp_path / "earlier"
+    earlier.mkdir()
+    (earlier / "run.h5").write_bytes(b"an earlier run")
+    assert main(["tank-run", "--out", str(earlier), "--no-live"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"hil tank-run: error: --out = '{earlier}' is not allowed: must be")
+    assert "never overwritten" in err
+    assert (earlier / "run.h5").read_bytes() == b"an earlier run"
+    assert sorted(p.name for p in earlier.iterdir()) == ["run.h5"]
+    assert not [c for c in _child_commands() if "hil.experiments.sim_tank" in c]
+
+
+def test_hil_report_refuses_what_is_not_a_run_recording(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    missing = tmp_path / "none.h5"
+    assert main(["report", str(missing)]) == 2
+    assert "RUN (recording) = " in capsys.readouterr().err
+    cut = tmp_path / "cut.h5"
+    cut.write_bytes(b"\x89HDF\r\n\x1a\n" + bytes(40))
+    assert main(["report", str(cut)]) == 2
+    err = capsys.readouterr().err
+    assert "is not allowed: must be an HDF5 run recording written by hil" in err
