@@ -28,7 +28,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 import numpy as np
 
@@ -50,9 +50,12 @@ from hil.experiments.live.recorder import RunRecorder
 from hil.experiments.live.session import LiveSession, SessionTiming, Telemetry
 from hil.experiments.live.stops import RunInterrupted, StopSignals, stop_text
 from hil.experiments.run_calibrations import RunCalibrations, load_run_calibrations
-from hil.recording.records import ReceiverSetup
+from hil.recording.records import ReceiverSetup, RunEvent
 from hil.recording.replay import build_receiver
 from hil.signals.schedule_file import schedule_document
+
+if TYPE_CHECKING:
+    from hil.experiments.sim_tank import SimulatedTankProcess
 
 #: Stage status polled every this many seconds of the driver clock (GRBL's 5 Hz).
 STAGE_POLL_S = 0.2
@@ -87,7 +90,7 @@ class RunOutcome:
     #: Constant-speed windows the stage driver predicted for each pass (driver clock, s): they
     #: tell the run when a pass is over; scoring uses what the telemetry saw (scored_mask).
     windows: list[tuple[float, float]]
-    exact_truth: Any = None
+    exact_truth: dict[str, np.ndarray] | None = None
     map_times: list[np.ndarray] = field(default_factory=list)
     map_power: list[np.ndarray] = field(default_factory=list)
     interrupted: bool = False
@@ -294,7 +297,7 @@ def _transmit_and_tow(
         heap.stop()
 
 
-def _event_tuple(event: Any) -> tuple[str, int, int, str]:
+def _event_tuple(event: RunEvent) -> tuple[str, int, int, str]:
     return (event.kind, event.sample_index, event.length, event.text)
 
 
@@ -367,7 +370,11 @@ def _outcome(
 
 
 def _exact_truth(
-    tank: Any, exp: Experiment, fs: float, start_index: int, estimates: list[Estimate]
+    tank: SimulatedTankProcess,
+    exp: Experiment,
+    fs: float,
+    start_index: int,
+    estimates: list[Estimate],
 ) -> dict[str, np.ndarray]:
     """Simulation only: the exact target range and closing speed at each estimate's bounce
     instant, from the simulated stage's true position (a check of the telemetry truth)."""

@@ -13,7 +13,7 @@ import contextlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Protocol
 
 from hil.acquisition.device import StreamingDevice
 from hil.devices.stage_errors import StageTimeoutError
@@ -21,6 +21,18 @@ from hil.errors import ConfigError
 from hil.experiments.experiment import Experiment
 from hil.experiments.live.plan import CheckedTow, StageLimits, check_tow
 from hil.experiments.live.stops import DeviceLostError
+
+if TYPE_CHECKING:
+    from hil.devices.clock import Clock
+    from hil.devices.grbl import GrblStage
+    from hil.experiments.sim_tank import SimulatedTankProcess
+
+
+class StatusLine(Protocol):
+    """Where the run says what it is doing (the live view)."""
+
+    def update(self, text: str, *, force: bool = False) -> None: ...
+
 
 #: The board's watchdog (ms of its clock): it stops when the host has sent nothing for this
 #: long (a crashed or stalled host), so a run never leaves it streaming unattended.
@@ -32,7 +44,7 @@ SIM_WATCHDOG_MS = 10_000
 RING_S = 8.0
 
 
-def _open_board(url: str, fs: float, clock: Any, keepalive_ms: int) -> StreamingDevice:
+def _open_board(url: str, fs: float, clock: Clock, keepalive_ms: int) -> StreamingDevice:
     from hil.devices.board import Board
     from hil.devices.board_settings import BoardSettings
 
@@ -43,7 +55,7 @@ def _open_board(url: str, fs: float, clock: Any, keepalive_ms: int) -> Streaming
     return board.open()
 
 
-def _open_audio(url: str, fs: float, clock: Any, keepalive_ms: int) -> StreamingDevice:
+def _open_audio(url: str, fs: float, clock: Clock, keepalive_ms: int) -> StreamingDevice:
     from hil.devices.audio.daq import AudioDaq
 
     return AudioDaq.from_url(url, sample_rate_hz=int(fs), ring_seconds=RING_S).open()
@@ -51,12 +63,12 @@ def _open_audio(url: str, fs: float, clock: Any, keepalive_ms: int) -> Streaming
 
 #: How each URL scheme of ``devices.board`` opens its device; any other URL is a board
 #: transport (``serial://``, ``usb://``, a port path; :func:`hil.transports.open_transport`).
-STREAMING_DEVICES: dict[str, Callable[[str, float, Any, int], StreamingDevice]] = {
+STREAMING_DEVICES: dict[str, Callable[[str, float, Clock, int], StreamingDevice]] = {
     "audio": _open_audio,
 }
 
 
-def open_streaming_device(url: str, fs: float, clock: Any, keepalive_ms: int) -> StreamingDevice:
+def open_streaming_device(url: str, fs: float, clock: Clock, keepalive_ms: int) -> StreamingDevice:
     """The DAC/ADC at ``url`` open and configured at ``fs`` Hz (2 ADC channels: the
     hydrophone and the DAC monitor), on the driver ``clock``; nothing transmits yet.
     ``keepalive_ms``: the board's watchdog (an audio interface has none)."""
@@ -66,7 +78,7 @@ def open_streaming_device(url: str, fs: float, clock: Any, keepalive_ms: int) ->
     return device
 
 
-def stage_limits(stage: Any) -> StageLimits:
+def stage_limits(stage: GrblStage) -> StageLimits:
     """The limits an open :class:`~hil.devices.grbl.GrblStage` reported (its ``$$``)."""
     low, high = stage.limits
     settings = stage.settings
@@ -77,38 +89,34 @@ def stage_limits(stage: Any) -> StageLimits:
 class RunDevices:
     """The run's devices as far as they are open (None: not yet)."""
 
-    tank: Any = None
-    stage: Any = None
+    tank: SimulatedTankProcess | None = None
+    stage: GrblStage | None = None
     board: StreamingDevice | None = None
     #: The driver clock of the stage, the board and the run (``now()``, ``sleep()``, s):
     #: the simulated tank's scaled clock, else the wall clock.
-    clock: Any = None
+    clock: Clock | None = None
 
-    def open(self, exp: Experiment, folder: Path, fs: float, view: Any) -> CheckedTow:
+    def open(self, exp: Experiment, folder: Path, fs: float, view: StatusLine) -> CheckedTow:
         """Open everything (see the module docstring); the checked tow."""
         from hil.devices.clock import MonotonicClock
         from hil.devices.grbl import GrblStage
 
         board_url, stage_url = self._start_simulation(exp, folder)
-        if self.clock is None:
-            self.clock = MonotonicClock()  # one driver clock for stage, board and the run
-        self.stage = GrblStage(stage_url, clock=self.clock).open()
-        tow = check_tow(exp.tow, stage_limits(self.stage))
+        clock = self.clock = self.clock or MonotonicClock()  # one for stage, board and run
+        stage = self.stage = GrblStage(stage_url, clock=clock).open()
+        tow = check_tow(exp.tow, stage_limits(stage))
         self.board = open_streaming_device(
-            board_url,
-            fs,
-            self.clock,
-            SIM_WATCHDOG_MS if self.tank is not None else WATCHDOG_MS,
+            board_url, fs, clock, SIM_WATCHDOG_MS if self.tank is not None else WATCHDOG_MS
         )
         if self.tank is not None:
             self.tank.align(fs)
         try:
-            status = self.stage.status()
+            status = stage.status()
             if status.state.name == "ALARM" or status.alarm is not None:
                 view.update("stage: homing", force=True)
-                self.stage.home()
+                stage.home()
             view.update("stage: positioning for the first pass", force=True)
-            self.stage.move_to(tow.ready_m, self.stage.settings.max_rate)
+            stage.move_to(tow.ready_m, stage.settings.max_rate)
         except (OSError, StageTimeoutError) as exc:
             raise self.stage_lost(stage_url, exc) from exc
         return tow
@@ -120,9 +128,9 @@ class RunDevices:
 
             experiment_file = folder / "experiment.toml"
             experiment_file.write_text(exp.text, encoding="utf-8")
-            self.tank = SimulatedTankProcess(exp, experiment_file, folder)
-            self.clock = self.tank.clock
-            return self.tank.board_port, self.tank.stage_port
+            tank = self.tank = SimulatedTankProcess(exp, experiment_file, folder)
+            self.clock = tank.clock
+            return tank.board_port, tank.stage_port
         if exp.board_url.startswith("sim://") or exp.stage_url.startswith("sim://"):
             raise ConfigError(
                 "devices",
@@ -132,20 +140,22 @@ class RunDevices:
             )
         return exp.board_url, exp.stage_url
 
-    def opened_board(self) -> StreamingDevice:
-        """The board (or audio interface), once :meth:`open` opened it."""
-        if self.board is None:
+    def opened(self) -> tuple[StreamingDevice, GrblStage, Clock]:
+        """The board (or audio interface), the stage and the driver clock, once :meth:`open`
+        opened them."""
+        if self.board is None or self.stage is None or self.clock is None:
             raise RuntimeError("the run's devices are not open: call RunDevices.open first")
-        return self.board
+        return self.board, self.stage, self.clock
 
     def tank_lost(self) -> DeviceLostError | None:
         """The simulated tank's process, if it ended under the run."""
-        if self.tank is None or self.tank.exit_code() is None:
+        code = self.tank.exit_code() if self.tank is not None else None
+        if self.tank is None or code is None:
             return None
         return DeviceLostError(
             "the built-in simulated tank",
             f"(process {self.tank.pid})",
-            f"its process exited with code {self.tank.exit_code()}",
+            f"its process exited with code {code}",
             "that nothing killed it (its errors are printed above)",
         )
 

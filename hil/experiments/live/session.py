@@ -15,7 +15,6 @@ from dataclasses import dataclass, field
 from functools import partial
 
 from hil.acquisition.capture import CapturedBlock, CaptureLoop
-from hil.acquisition.device import StreamingDevice
 from hil.acquisition.feed import ReceiverFeed
 from hil.estimation.base import Estimate, Receiver
 from hil.experiments.experiment import Experiment
@@ -76,11 +75,11 @@ class LiveSession:
         status: Callable[[str], None],
     ) -> None:
         self.exp, self.devices, self.receiver = exp, devices, receiver
-        self.board: StreamingDevice = devices.opened_board()
+        self.board, self.stage, clock = devices.opened()
         self.recorder, self.cals, self.timing, self.status = recorder, cals, timing, status
         self.fs = float(exp.waveform.fs_hz)
-        self.now: Callable[[], float] = devices.clock.now
-        self.tow = TowController(tow, devices.stage, timing.tail_s)
+        self.now: Callable[[], float] = clock.now
+        self.tow = TowController(tow, self.stage, timing.tail_s)
         self.telemetry = Telemetry()
         self.estimates: list[Estimate] = []
         self.start_index = 0
@@ -183,7 +182,7 @@ class LiveSession:
         """One stage report: into the telemetry and the recording, then to the tow."""
         from hil.devices.stage_errors import StageTimeoutError
 
-        stage, board = self.devices.stage, self.board
+        stage, board = self.stage, self.board
         try:
             st = stage.status()
             fit = board.clock_fit
