@@ -30,6 +30,11 @@ def register(sub: Any) -> None:
     p.add_argument("run", type=Path, metavar="RUN", help="run recording (run.h5)")
     p.add_argument("--out", type=Path, help="folder for the files (default: the recording's)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.add_argument(
+        "--no-map",
+        action="store_true",
+        help="skip the GCAS time-codeword map (it replays the receiver over the recording)",
+    )
     p.set_defaults(func=run)
 
 
@@ -44,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
         if args.out.exists() and not args.out.is_dir():
             raise ConfigError("--out", str(args.out), "a folder")
         args.out.mkdir(parents=True, exist_ok=True)
-    outcome = outcome_from_recording(args.run, args.out)
+    outcome = outcome_from_recording(args.run, args.out, codeword_map=not args.no_map)
     summary = summarize(outcome)
     summary["rebuilt_from"] = str(args.run)
     write_summary(outcome, summary)

@@ -3,10 +3,12 @@ when it could not write its summary (``kill -9``, power loss), or a summary to w
 
 What a recording holds is what the live run scored with: the experiment file, the estimates,
 the stage telemetry, the SYNC pairs that map it onto sample time, the events (gaps, xruns,
-how the run stopped). Not recorded, so not in a rebuilt summary: the host's wall time (its
-real-time factor is left out), the time-codeword map of the GCAS receiver (its figure is not
-drawn), the simulated tank's exact truth, and how late each stage report came (every report
-is used). Xruns are counted from the recorded events.
+how the run stopped). The GCAS receiver's time-codeword map is rebuilt by replaying the live
+receiver over the samples (the same cells; the power of a few differs from live, as GCAS's
+map depends on where its input was cut into calls, its estimates do not). Not recorded, so not in
+a rebuilt summary: the host's wall time (its real-time factor is left out), the simulated
+tank's exact truth, and how late each stage report came (every report is used). Xruns are
+counted from the recorded events.
 """
 
 from __future__ import annotations
@@ -20,8 +22,9 @@ from hil.errors import ConfigError
 from hil.experiments.experiment import Experiment, parse_experiment
 from hil.experiments.live.board_state import sample_zero_time_s
 from hil.experiments.run_calibrations import RunCalibrations, load_run_calibrations
-from hil.experiments.tank_run import RunOutcome, Telemetry
+from hil.experiments.tank_run import CodewordMaps, RunOutcome, Telemetry
 from hil.recording.reader import RunRecording
+from hil.recording.replay import replay
 
 #: The error of a rebuilt run whose recording has no stop event.
 KILLED = (
@@ -30,12 +33,16 @@ KILLED = (
 )
 
 
-def outcome_from_recording(path: Path, folder: Path | None = None) -> RunOutcome:
+def outcome_from_recording(
+    path: Path, folder: Path | None = None, *, codeword_map: bool = True
+) -> RunOutcome:
     """The :class:`~hil.experiments.tank_run.RunOutcome` of the run recorded at ``path``, its
     folder ``folder`` (default: the recording's own), for
     :func:`~hil.experiments.run_scoring.summarize` and
     :func:`~hil.experiments.run_report.write_report` (see the module docstring for what a
-    recording cannot give back)."""
+    recording cannot give back). ``codeword_map``: replay a live GCAS receiver for its map
+    (seconds of CPU per minute of recording)."""
+    maps = CodewordMaps()
     with RunRecording.open(path) as rec:
         meta = rec.metadata
         if not meta.experiment_toml.strip():
@@ -58,6 +65,9 @@ def outcome_from_recording(path: Path, folder: Path | None = None) -> RunOutcome
         telemetry = _telemetry(rec, rec.fs_hz)
         fs = rec.fs_hz
         origin = rec.origin_sample
+        live = rec.metadata.receiver
+        if codeword_map and live is not None and live.name == "gcas":
+            replay(rec, hooks=maps.hooks(live.name))
     stops = [text for _, _, _, text in events if text.startswith("stop: ")]
     if stops:
         stop = stops[-1].removeprefix("stop: ")
@@ -84,6 +94,8 @@ def outcome_from_recording(path: Path, folder: Path | None = None) -> RunOutcome
         interrupted=interrupted,
         error=error,
         latency_samples=origin - start,
+        map_times=maps.times,
+        map_power=maps.power,
         calibrations=_calibrations(exp, fs, meta.calibration_ids),
     )
 

@@ -89,22 +89,29 @@ def replay(
     *,
     channel: int | None = None,
     block_frames: int = REPLAY_BLOCK_FRAMES,
+    hooks: dict[str, Any] | None = None,
     **overrides: Any,
 ) -> list[Estimate]:
     """Run a receiver over the recorded samples and return its estimates.
 
     Default receiver and settings: those of the live run (see :func:`replay_setup`); with
     them the result equals the live estimates exactly. ``overrides`` are receiver settings
-    (``m_hops=12``, ``n_doppler=64``, ...).
+    (``m_hops=12``, ``n_doppler=64``, ...); ``hooks`` are callbacks given to the receiver
+    (GCAS's ``on_map``: its time-codeword map, as live).
     """
     if not isinstance(recording, RunRecording):
         with RunRecording.open(recording) as rec:
             return replay(
-                rec, receiver_name, channel=channel, block_frames=block_frames, **overrides
+                rec,
+                receiver_name,
+                channel=channel,
+                block_frames=block_frames,
+                hooks=hooks,
+                **overrides,
             )
     setup = replay_setup(recording, receiver_name, channel, **overrides)
     feed = ReceiverFeed(
-        build_receiver(setup, recording.schedule(), recording.fs_hz),
+        build_receiver(setup, recording.schedule(), recording.fs_hz, **(hooks or {})),
         origin=recording.origin_sample,
         channel=setup.channel,
         scale=setup.scale,

@@ -356,6 +356,10 @@ def test_simulated_run_end_to_end_and_replay_equals_live(
     assert abs(rebuilt["scored_estimates"] - summary["scored_estimates"]) <= 3
     assert rebuilt["range_rmse_m"] == pytest.approx(summary["range_rmse_m"], rel=0.05)
     assert rebuilt["wall_s"] == 0.0 and rebuilt["real_time_factor"] is None
+    # The GCAS map, replayed: the same figure set as live.
+    assert sorted(Path(f).name for f in rebuilt["figures"]) == sorted(
+        Path(f).name for f in summary["figures"]
+    )
 
 
 @pytest.mark.slow
@@ -396,7 +400,7 @@ def test_kill_9_during_a_run_leaves_a_recording_hil_report_rebuilds(
     assert summary["estimates"] == estimates and summary["rebuilt_from"] == str(h5)
     assert summary["loopback_latency_samples"] == 64
     assert json.loads((folder / "summary.json").read_text()) == summary
-    for name in ("estimates.csv", "range_speed.png", "errors.png"):
+    for name in ("estimates.csv", "range_speed.png", "errors.png", "time_codeword_map.png"):
         assert (folder / name).exists(), name
 
 

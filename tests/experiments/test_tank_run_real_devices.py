@@ -444,6 +444,20 @@ def test_the_python_api_yields_the_runs_estimates_status_and_summary(
     with RunRecording.open(tmp_path / "run" / "run.h5") as rec:
         table = rec.table("estimates")
     np.testing.assert_array_equal(table["range_m"], [e.range_m for e in estimates])
+    # hil report's rebuild replays the receiver for its GCAS map: the same cells (times) as
+    # far as both kept them (each keeps its first CodewordMaps.MAX_POINTS points), and the
+    # same power in nearly all: GCAS's map callback, unlike its estimates, depends on where
+    # the input was cut into calls (live: as samples arrived; replay: 65536-frame blocks).
+    from hil.experiments.run_from_recording import outcome_from_recording
+
+    rebuilt = outcome_from_recording(tmp_path / "run" / "run.h5")
+    live_t, again_t = (np.concatenate(o.map_times) for o in (finished.outcome, rebuilt))
+    live_p, again_p = (np.concatenate(o.map_power) for o in (finished.outcome, rebuilt))
+    n = min(live_t.size, again_t.size)
+    assert n > 10_000
+    np.testing.assert_array_equal(again_t[:n], live_t[:n])
+    assert np.mean(again_p[:n] == live_p[:n]) > 0.9
+    assert rebuilt.estimates == finished.outcome.estimates
 
 
 @pytest.mark.slow
