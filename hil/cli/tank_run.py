@@ -39,6 +39,7 @@ def run(args: argparse.Namespace) -> int:
     if args.print_default:
         print(DEFAULT_EXPERIMENT, end="")
         return 0
+    from hil.experiments.live.stops import StopSignals
     from hil.experiments.run_report import write_report
     from hil.experiments.run_scoring import summarize, write_summary
     from hil.experiments.tank_run import LiveView, run_experiment
@@ -49,12 +50,14 @@ def run(args: argparse.Namespace) -> int:
         else load_experiment(args.experiment)
     )
     outcome = run_experiment(exp, folder=args.out, view=LiveView(enabled=not args.no_live))
-    summary = summarize(outcome)
-    write_summary(outcome, summary)
-    figures = write_report(outcome)
-    summary["figures"] = [str(p) for p in figures]
-    (outcome.folder / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
-    print_summary(summary, outcome.folder, as_json=args.json)
+    with StopSignals() as signals:
+        signals.stopping()  # the run is over: SIGTERM/SIGHUP wait for its summary
+        summary = summarize(outcome)
+        write_summary(outcome, summary)
+        figures = write_report(outcome)
+        summary["figures"] = [str(p) for p in figures]
+        (outcome.folder / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
+        print_summary(summary, outcome.folder, as_json=args.json)
     return 1 if outcome.error else 0
 
 
