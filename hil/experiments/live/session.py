@@ -57,10 +57,9 @@ class SessionTiming:
 
 
 class LiveSession:
-    """Transmission, capture and tow of one run (see the module docstring).
-
-    ``checks``: called every loop turn, raising what stops the run (a lost device, a board
-    stopped by its watchdog); ``status``: the live status line's text is given to it.
+    """Transmission (:meth:`transmit`), then capture and tow (:meth:`run`) of one run with
+    its open ``devices`` (see the module docstring); ``status`` is given the live status
+    line's text.
     """
 
     def __init__(
@@ -109,9 +108,8 @@ class LiveSession:
             exp.schedule, self.fs, exp.amplitude, self.start_index, self.timing.scale, self.cals
         )
         self.capture = CaptureLoop(
-            board, self.start_index, self.timing.block, on_block=self._on_block
+            board, self.start_index, self.timing.block, on_block=self._on_block, on_fed=self._on_fed
         )
-        self.capture.on_fed = self._on_fed
 
     def _on_block(self, block: CapturedBlock) -> None:
         if self.probe is None:
@@ -151,7 +149,9 @@ class LiveSession:
 
     # ---------------------------------------------------------------- the loop
     def run(self, deadline: float, checks: Callable[[], None]) -> None:
-        """Capture and tow until the tow's tail is captured; raises what stops the run."""
+        """Capture and tow until the tow's tail is captured (or driver-clock time
+        ``deadline``: an error); ``checks`` is called every loop turn and raises what stops
+        the run (a lost device, a board stopped by its watchdog)."""
         assert self.capture is not None
         next_poll = -1.0
         while True:
