@@ -8,8 +8,8 @@ Its world returns a real echo: ADC channel 0 is the DAC output delayed by
 fed by :class:`~hil.signals.synthesis.BlockSynthesizer` from the ``tank-board`` preset
 (random cyclic code, 1 MS/s, 2 ADC channels int16). The host process runs the
 :class:`~hil.devices.board.Board` driver (reader and writer threads), the capture loop and
-:class:`~hil.recording.replay.ReceiverFeed` with GCAS on channel 0. The loop waits, by the
-same rule as ``hil tank-run`` (:meth:`~hil.recording.replay.ReceiverFeed.wait_index`), until
+:class:`~hil.acquisition.feed.ReceiverFeed` with GCAS on channel 0. The loop is the one of
+``hil tank-run`` (:class:`~hil.acquisition.capture.CaptureLoop`): it waits until
 the ring holds the receiver's next decision index (no estimate can come out earlier) or one
 block, then feeds everything the ring holds up to one block; with ``--every-block`` it feeds every
 ``--min-block-ms`` instead (more calls, the same estimates). The setup's objects are kept
@@ -44,7 +44,7 @@ Figures (over the ``--seconds`` of streaming, default 30):
 - estimates per second and how many are at the echo's range;
 - the host's resident-set growth while streaming (a page fault in the live path shows here);
 - what else held the CPUs: the machine's stalls, seen by one real-time stall probe per CPU
-  (:class:`hil.acquisition.StallProbes`; count, longest, steal time), and the
+  (``benchmarks/machine_stalls.py``; count, longest, steal time), and the
   stand-in board's stalls (gaps over :data:`STANDIN_STALL_S` between its 1 ms captures);
   how many estimates each touched (the stall overlaps the time from the boundary's arrival
   to the estimate), and the latency over the estimates that neither touched.
@@ -260,12 +260,15 @@ def run_live(
     dump: str | None = None,
 ) -> dict[str, Any]:
     """Stream ``seconds`` through Board + capture loop + GCAS; the figures (module docstring)."""
-    from hil.acquisition import HeapFreeze, StallProbes
-    from hil.acquisition.machine_stalls import overlapping, steal_s
+    from machine_stalls import StallProbes, overlapping, steal_s
+
+    from hil.acquisition import HeapFreeze
+    from hil.acquisition.capture import CapturedBlock, CaptureLoop
+    from hil.acquisition.feed import ReceiverFeed
     from hil.devices.board import Board
     from hil.devices.board_settings import BoardSettings
-    from hil.estimation.registry import make_receiver
-    from hil.recording.replay import ReceiverFeed
+    from hil.recording.records import ReceiverSetup
+    from hil.recording.replay import build_receiver
     from hil.signals.presets import check_design, get_preset
     from hil.signals.synthesis import BlockSynthesizer
 
@@ -274,15 +277,18 @@ def run_live(
     assert spec.fs_hz == FS_HZ
     c = spec.sound_speed_mps
     echo_range_m = c * ECHO_DELAY_SAMPLES / FS_HZ / 2.0
-    receiver = make_receiver(
+    setup = ReceiverSetup(
         "gcas",
-        schedule,
-        FS_HZ,
-        sound_speed_mps=c,
-        max_speed_mps=MAX_SPEED_MPS,
-        max_range_m=MAX_RANGE_M,
-        m_hops=M_HOPS,
+        {
+            "sound_speed_mps": c,
+            "max_speed_mps": MAX_SPEED_MPS,
+            "max_range_m": MAX_RANGE_M,
+            "m_hops": M_HOPS,
+        },
+        channel=0,
+        scale=INT16_SCALE,
     )
+    receiver = build_receiver(setup, schedule, FS_HZ)  # as hil tank-run builds its own
     synth = BlockSynthesizer(schedule, FS_HZ, amplitude=DAC_AMPLITUDE)
     probes = StallProbes() if stall_probes else None
     machine = None
@@ -318,15 +324,8 @@ def run_live(
             ring = board.ring
             assert ring is not None
             arrivals = Arrivals()
-            store = ring.write
-
-            def stamped_write(first: int, block: npt.NDArray[Any]) -> bool:
-                stored = store(first, block)
-                if stored:
-                    arrivals.add(first + block.shape[0], time.monotonic())
-                return stored
-
-            setattr(ring, "write", stamped_write)  # noqa: B010 - the reader thread calls it
+            # Stamped by the board's reader thread as each block is stored.
+            ring.on_write = lambda end: arrivals.add(end, time.monotonic())
             start = board.start(synth.blocks(1 << 15))
             # The DAC plays schedule sample 0 at board index `start`, so that is the
             # receiver's sample 0 (the echo delay is the target's range, not latency).
@@ -342,14 +341,34 @@ def run_live(
             est_cpu: list[float] = []  # main-thread CPU time of the emitting feed call
             est_range: list[float] = []
             est_speed: list[float] = []
-            blocks = 0
-            max_backlog = 0
-            next_index = start
-            gcas_cpu = 0.0
             feed_wall: list[float] = []
             feed_cpu: list[float] = []
             block_times: list[tuple[float, float]] = []  # (wait began, samples seen)
-            wait_max = 0.0
+
+            def observe(block: CapturedBlock) -> None:
+                feed_cpu.append(block.feed_cpu_s)
+                feed_wall.append(block.fed_at - block.seen_at)
+                block_times.append((block.wait_began, block.seen_at))
+                for e in block.estimates:
+                    est_boundary.append(start + round(e.t_s * FS_HZ))
+                    est_emit.append(block.fed_at)
+                    est_seen.append(block.seen_at)
+                    est_wanted.append(block.wanted_index)
+                    est_cpu.append(block.feed_cpu_s)
+                    est_range.append(e.range_m)
+                    est_speed.append(e.speed_mps)
+
+            # The capture loop of hil tank-run: it waits, as the run does, for the receiver's
+            # next decision (nothing can come out before it) or one block when no decision
+            # comes within it; with --every-block for every min_block samples instead.
+            capture = CaptureLoop(
+                board,
+                start,
+                max_block,
+                feed=feed,
+                on_fed=observe,
+                every=min_block if every_block else None,
+            )
             heap = HeapFreeze()
             heap.start()  # as the tank run does: no 75 ms full collection mid-stream
             if profiler is not None:
@@ -360,43 +379,19 @@ def run_live(
             steal0 = steal_s(probes.cpus) if probes is not None else float("nan")
             wall0, cpu0, main0 = time.monotonic(), _host_cpu_s(), time.thread_time()
             server_cpu0 = _process_cpu_s(server.pid)
-            while next_index < end_target:
-                waited = time.monotonic()
-                # As `hil tank-run` waits: nothing can come out before the receiver's next
-                # decision, so wait for exactly that (it may come out then), or one block
-                # when no decision comes within it.
-                wanted = next_index + min_block if every_block else feed.wait_index(max_block)
-                wanted = min(wanted, end_target)
-                if not board.wait_for_samples(wanted, timeout_s=2.0):
+            while capture.next_index < end_target:
+                if capture.step(2.0, limit=end_target) is None:
                     raise RuntimeError(
-                        f"no samples past board index {next_index} for 2 s: the board stalled"
+                        f"no samples past board index {capture.next_index} for 2 s: the board"
+                        " stalled"
                     )
-                now = time.monotonic()
-                # A long wait means the samples came late (board process or reader thread
-                # starved), not that the receiver was slow.
-                wait_max = max(wait_max, now - waited)
-                held = ring.end_index
-                assert held is not None
-                max_backlog = max(max_backlog, held - next_index)
-                n = min(held, end_target, next_index + max_block) - next_index
-                data = board.read(next_index, n)
-                t0 = time.thread_time()
-                new = feed.feed(next_index, data)
-                feed_cpu.append(time.thread_time() - t0)
-                gcas_cpu += feed_cpu[-1]
-                emitted = time.monotonic()
-                feed_wall.append(emitted - now)
-                block_times.append((waited, now))
-                for e in new:
-                    est_boundary.append(start + round(e.t_s * FS_HZ))
-                    est_emit.append(emitted)
-                    est_seen.append(now)
-                    est_wanted.append(wanted)
-                    est_cpu.append(feed_cpu[-1])
-                    est_range.append(e.range_m)
-                    est_speed.append(e.speed_mps)
-                next_index += n
-                blocks += 1
+            next_index = capture.next_index
+            blocks = len(block_times)
+            gcas_cpu = float(sum(feed_cpu))
+            max_backlog = capture.backlog_max
+            # A long wait means the samples came late (board process or reader thread
+            # starved), not that the receiver was slow.
+            wait_max = max((seen - began for began, seen in block_times), default=0.0)
             wall = time.monotonic() - wall0
             steal = (steal_s(probes.cpus) if probes is not None else float("nan")) - steal0
             rss_growth = _rss_bytes() - rss0
@@ -760,7 +755,7 @@ def print_table(r: dict[str, Any]) -> None:
 def run_machine_only(seconds: float) -> dict[str, Any]:
     """Only the stall probes, for ``seconds``, on a machine left otherwise idle: what any
     live pipeline on it would lose."""
-    from hil.acquisition import StallProbes
+    from machine_stalls import StallProbes
 
     with StallProbes() as probes:
         time.sleep(seconds)

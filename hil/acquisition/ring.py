@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -61,6 +62,9 @@ class SampleRing:
         self.missing = 0
         """Sample frames skipped (zero-filled)."""
         self._targets: list[int] = []  # end indices the threads in wait_for are waiting for
+        self.on_write: Callable[[int], None] | None = None
+        """Observer called by the writing thread with the new :attr:`end_index` after each
+        block stored (outside the ring's lock): when samples arrived, for benchmarks."""
 
     def write(self, first: int, block: npt.NDArray[Any]) -> bool:
         """Store ``block`` from index ``first``; False (nothing stored) if it repeats data."""
@@ -87,6 +91,9 @@ class SampleRing:
             # (and take the GIL) for each one.
             if self._targets and self.end_index >= min(self._targets):
                 self._cond.notify_all()
+            end_index = self.end_index
+        if self.on_write is not None:
+            self.on_write(end_index)
         return True
 
     def expect(self, first: int) -> None:

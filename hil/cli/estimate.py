@@ -28,7 +28,9 @@ from numpy.typing import NDArray
 
 from hil.errors import ConfigError
 from hil.estimation.base import ESTIMATE_FIELDS, Estimate
-from hil.estimation.registry import RECEIVERS, make_receiver
+from hil.estimation.registry import RECEIVERS
+from hil.recording.records import ReceiverSetup
+from hil.recording.replay import build_receiver
 from hil.signals.schedule_file import read_schedule_file
 
 _LOG = logging.getLogger(__name__)
@@ -222,16 +224,15 @@ def run(args: argparse.Namespace) -> int:
                 "--map", str(args.map), "used with --receiver gcas (it keeps the map)"
             )
         extra["on_map"] = collector
-    receiver = make_receiver(
-        args.receiver,
-        schedule,
-        fs,
-        sound_speed_mps=c,
-        max_speed_mps=args.max_speed,
-        max_range_m=args.max_range,
-        m_hops=args.m_hops,
+    hooks = {"on_map": extra.pop("on_map")} if "on_map" in extra else {}
+    settings = {
+        "sound_speed_mps": c,
+        "max_speed_mps": args.max_speed,
+        "max_range_m": args.max_range,
+        "m_hops": args.m_hops,
         **extra,
-    )
+    }
+    receiver = build_receiver(ReceiverSetup(args.receiver, settings), schedule, fs, **hooks)
     blocks = _check_schedule(args, blocks, schedule, fs, c)
     sink = _Sink(args)
     try:

@@ -40,6 +40,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "run the seed's chapter-6 evaluation and write figures, tables and report.md",
     ),
     "replay": ("hil.cli.replay", "re-run a receiver over a run recording"),
+    "report": (
+        "hil.cli.report",
+        "rebuild a tank run's summary and figures from its recording",
+    ),
     "calibrate": (
         "hil.cli.calibrate",
         "calibrate latency, response, level, sound speed or the stage",

@@ -9,6 +9,7 @@ following the simulated carriage). Writes the run folder (recording ``run.h5``, 
 from __future__ import annotations
 
 import argparse
+import datetime as dt
 import json
 import logging
 from pathlib import Path
@@ -45,6 +46,8 @@ def run(args: argparse.Namespace) -> int:
     if args.print_default:
         print(DEFAULT_EXPERIMENT, end="")
         return 0
+    from hil.experiments.live.plan import new_run_folder
+    from hil.experiments.live.stops import StopSignals
     from hil.experiments.run_log import log_outcome
     from hil.experiments.run_report import write_report
     from hil.experiments.run_scoring import summarize, write_summary
@@ -56,29 +59,37 @@ def run(args: argparse.Namespace) -> int:
         if args.experiment is None
         else load_experiment(args.experiment)
     )
-    folder = args.out or exp.new_run_folder()
+    # The folder first (refused when it holds a run), then its log around the whole run.
+    folder = new_run_folder(exp.output_dir, exp.name, args.out, dt.datetime.now())
     with run_log(folder):
         _LOG.info("tank run %r into %s", exp.name, folder)
         outcome = run_experiment(exp, folder=folder, view=LiveView(enabled=not args.no_live))
-        summary = summarize(outcome)
-        write_summary(outcome, summary)
-        figures = write_report(outcome)
-        summary["figures"] = [str(p) for p in figures]
-        (outcome.folder / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
-        log_outcome(outcome, summary)
-    if args.json:
-        print(json.dumps(summary))
-    else:
-        width = max(len(k) for k in summary)
-        for key, value in summary.items():
-            if key == "figures":
-                continue
-            if isinstance(value, float):
-                shown = f"{value:.4g}"
-            elif isinstance(value, list):
-                shown = ", ".join(str(v) for v in value) or "none"
-            else:
-                shown = value
-            print(f"{key:<{width}}  {shown}")
-        print(f"run folder: {outcome.folder}")
+        with StopSignals() as signals:
+            signals.stopping()  # the run is over: SIGTERM/SIGHUP wait for its summary
+            summary = summarize(outcome)
+            write_summary(outcome, summary)
+            figures = write_report(outcome)
+            summary["figures"] = [str(p) for p in figures]
+            (outcome.folder / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
+            log_outcome(outcome, summary)
+    print_summary(summary, outcome.folder, as_json=args.json)
     return 1 if outcome.error else 0
+
+
+def print_summary(summary: dict[str, Any], folder: Path, *, as_json: bool) -> None:
+    """Print a run's summary: one JSON line, or one ``key  value`` line per entry."""
+    if as_json:
+        print(json.dumps(summary))
+        return
+    width = max(len(k) for k in summary)
+    for key, value in summary.items():
+        if key == "figures":
+            continue
+        if isinstance(value, float):
+            shown = f"{value:.4g}"
+        elif isinstance(value, list):
+            shown = ", ".join(str(v) for v in value) or "none"
+        else:
+            shown = value
+        print(f"{key:<{width}}  {shown}")
+    print(f"run folder: {folder}")

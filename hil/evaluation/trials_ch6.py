@@ -224,17 +224,7 @@ def validate_fmcw_params(params: Params) -> None:
     _interval("range_m", p["range_m"], 1.0, 1e4)
     _number("duration_s", p["duration_s"], 0.05, 60.0)
     schedule, spec = _fmcw_schedule(p)
-    from hil.estimation.registry import make_receiver
-
-    make_receiver(
-        "fmcw",
-        schedule,
-        spec.fs_hz,
-        sound_speed_mps=spec.sound_speed_mps,
-        max_speed_mps=float(p["max_speed_mps"]),
-        max_range_m=float(p["max_range_m"]),
-        m_hops=1,
-    )
+    _fmcw_receiver(p, schedule, float(spec.fs_hz), float(spec.sound_speed_mps))
 
 
 def validate_cost_params(params: Params) -> None:
@@ -273,8 +263,12 @@ def _window_moments(
     return b, rms_duration(x, fs), f0
 
 
-def _make_receiver(p: dict[str, Any], schedule: HopSchedule, c: float, **more: Any) -> Any:
-    from hil.estimation.registry import make_receiver
+def _make_receiver(p: dict[str, Any], schedule: HopSchedule, c: float, **hooks: Any) -> Any:
+    """The grid point's receiver, built as every caller builds one
+    (:func:`hil.recording.replay.build_receiver` from a :class:`ReceiverSetup`); ``hooks``
+    are callbacks such as GCAS's ``on_map``."""
+    from hil.recording.records import ReceiverSetup
+    from hil.recording.replay import build_receiver
 
     name = p["receiver"]
     extra: dict[str, Any] = dict(p["receiver_options"].get(name, {}))
@@ -283,17 +277,29 @@ def _make_receiver(p: dict[str, Any], schedule: HopSchedule, c: float, **more: A
         extra.setdefault("reverb_speed_mps", p["reverb_speed_mps"])
     if name == "stft":
         extra.setdefault("n_s", p["n_s"])
-    extra.update(more)
-    return make_receiver(
-        name,
-        schedule,
-        float(schedule.params["fs_hz"]),
-        sound_speed_mps=c,
-        max_speed_mps=float(p["max_speed_mps"]),
-        max_range_m=float(p["max_range_m"]),
-        m_hops=int(p["m_hops"]),
+    settings = {
+        "sound_speed_mps": c,
+        "max_speed_mps": float(p["max_speed_mps"]),
+        "max_range_m": float(p["max_range_m"]),
+        "m_hops": int(p["m_hops"]),
         **extra,
-    )
+    }
+    fs = float(schedule.params["fs_hz"])
+    return build_receiver(ReceiverSetup(name, settings), schedule, fs, **hooks)
+
+
+def _fmcw_receiver(p: dict[str, Any], schedule: HopSchedule, fs: float, c: float) -> Any:
+    """The FMCW trial's receiver (one sweep per decision: M = 1)."""
+    from hil.recording.records import ReceiverSetup
+    from hil.recording.replay import build_receiver
+
+    settings = {
+        "sound_speed_mps": c,
+        "max_speed_mps": float(p["max_speed_mps"]),
+        "max_range_m": float(p["max_range_m"]),
+        "m_hops": 1,
+    }
+    return build_receiver(ReceiverSetup("fmcw", settings), schedule, fs)
 
 
 def _fmcw_schedule(p: dict[str, Any]) -> tuple[HopSchedule, Any]:
@@ -547,7 +553,6 @@ def ch6_fmcw_trial(params: Params, seed: np.random.SeedSequence) -> dict[str, An
     sums), ``n_estimates``, ``predicted_saw_bias_m`` (``−T v f0/B``, SPEC §4, sawtooth only)
     and the CRLB of one sweep at its E/N0.
     """
-    from hil.estimation.registry import make_receiver
 
     p = {**FMCW_DEFAULTS, **params}
     schedule, spec = _fmcw_schedule(p)
@@ -559,10 +564,7 @@ def ch6_fmcw_trial(params: Params, seed: np.random.SeedSequence) -> dict[str, An
     snr = float(p["snr_db"])
     x, path, _ = _echo(schedule, fs, c, r0, v, n)
     x = x + rng.normal(0.0, noise_sigma(snr), n)
-    rx = make_receiver(
-        "fmcw", schedule, fs, sound_speed_mps=c, max_speed_mps=float(p["max_speed_mps"]),
-        max_range_m=float(p["max_range_m"]), m_hops=1,
-    )  # fmt: skip
+    rx = _fmcw_receiver(p, schedule, fs, c)
     est = list(rx.process(x)) + list(rx.flush())
     r_err = np.zeros(0)
     v_err = np.zeros(0)

@@ -179,13 +179,6 @@ class Experiment:
     simulation: SimulationSettings
     text: str = field(default="", compare=False)
 
-    def new_run_folder(self) -> Path:
-        """``output_dir/name-YYYYmmdd-HHMMSS`` (local time) for a run starting now."""
-        import datetime as dt
-
-        stamp = dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-        return self.output_dir / f"{self.name}-{stamp}"
-
     @property
     def simulated(self) -> bool:
         """True when both devices are simulated (``sim://``)."""
@@ -227,7 +220,7 @@ def parse_experiment(text: str, source: str = "<text>") -> Experiment:
     }
 
     run, dev, wav, tank, tow, rec, cal, sim = (t[k] for k in _SECTIONS)
-    name = run.text("name", "tank-run")
+    name = check_run_name(run.text("name", "tank-run"))
     output_dir = resolve_runs_dir(run.text("output_dir", "runs"))
     max_duration = run.number("max_duration_s", 120.0, lo=0.0, lo_open=True, unit="s")
     board_url, stage_url = dev.text("board"), dev.text("stage")
@@ -378,6 +371,36 @@ def parse_experiment(text: str, source: str = "<text>") -> Experiment:
         simulation=simulation,
         text=text,
     )
+
+
+def check_run_name(name: str) -> str:
+    """``name`` if it is a plain folder name (``run.name``): the run folder is
+    ``output_dir/name-timestamp``, so a name with a path separator, ``..``, a leading ``.``,
+    or an absolute path would put it elsewhere.
+
+    >>> check_run_name("towed-pass")
+    'towed-pass'
+    >>> check_run_name("../../x")
+    Traceback (most recent call last):
+    ...
+    hil.errors.ConfigError: run.name = '../../x' is not allowed: must be a plain folder name \
+(letters, digits, '-', '_', '.', not starting with '.'); the run folder is \
+run.output_dir/name-timestamp and must stay inside run.output_dir
+    """
+    plain = (
+        bool(name)
+        and not name.startswith(".")
+        and all(ch.isalnum() or ch in "-_." for ch in name)
+        and len(name) <= 100
+    )
+    if not plain:
+        raise ConfigError(
+            "run.name",
+            name,
+            "a plain folder name (letters, digits, '-', '_', '.', not starting with '.')",
+            "the run folder is run.output_dir/name-timestamp and must stay inside run.output_dir",
+        )
+    return name
 
 
 def _inside_tank(name: str, p: tuple[float, ...], size: tuple[float, float, float]) -> None:

@@ -258,6 +258,15 @@ class SimulatedTankProcess:
         self._proc.stdin.flush()
         return self._proc.stdout.readline().strip()
 
+    @property
+    def pid(self) -> int:
+        """The child process's id."""
+        return self._proc.pid
+
+    def exit_code(self) -> int | None:
+        """The child's exit code once it ended (negative: killed by that signal), else None."""
+        return self._proc.poll()
+
     def align(self, rate_hz: float) -> None:
         """Tie world time to the shared clock (after CONFIGURE)."""
         self._offset = float(self._ask(f"align {rate_hz!r}"))
@@ -307,7 +316,10 @@ def _serve(argv: list[str]) -> int:
 
     # Ctrl-C in the terminal reaches the whole process group: the host decides when the
     # simulated tank stops (it sends "stop" after holding the stage and stopping the board).
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # So do SIGTERM and SIGHUP sent to the group: the host stops safely on them, then stops
+    # the tank; a host that dies closes this process's stdin, which ends it too.
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(sig, signal.SIG_IGN)
     exp = load_experiment(Path(argv[0]))
     wall0 = float(argv[1])
     folder = Path(argv[2])

@@ -31,7 +31,6 @@ from hil.recording.records import (
     SyncPairs,
 )
 from hil.recording.replay import (
-    ReceiverFeed,
     build_receiver,
     compare_estimates,
     replay,
@@ -44,7 +43,6 @@ __all__ = [
     "EVENT_KINDS",
     "FORMAT_NAME",
     "FORMAT_VERSION",
-    "ReceiverFeed",
     "ReceiverSetup",
     "RunEvent",
     "RunMetadata",

@@ -53,12 +53,65 @@ class Segments:
         return self.sample_index + self.n_rows
 
 
+_HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+
+
+def hdf5_damage(path: Path) -> str | None:
+    """What is wrong with the HDF5 file at ``path`` as its superblock tells (a missing
+    signature, a file shorter than the end-of-file address its last flush wrote), or None
+    when it looks whole. Read from the first bytes, without HDF5: the library can wait for
+    ever on a file cut short, so a damaged recording is refused before it is opened.
+
+    Only the start of the file is checked (the superblock at offset 0, where hil's writer
+    puts it); a recording whose writer was killed keeps the end address of its last flush
+    and reads up to there.
+    """
+    size = path.stat().st_size
+    with path.open("rb") as f:
+        head = f.read(128)
+    if not head.startswith(_HDF5_SIGNATURE):
+        return f"it does not start with the HDF5 signature ({size} bytes)"
+    if len(head) < 12:
+        return f"its superblock is cut short ({size} bytes)"
+    version = head[8]
+    if version in (0, 1):
+        offsets = head[13]
+        eof_at = 24 + (4 if version == 1 else 0) + 2 * offsets  # base, free-space, then EOF
+    elif version in (2, 3):
+        offsets = head[9]
+        eof_at = 12 + 2 * offsets  # base, superblock extension, then EOF
+    else:
+        return f"its superblock version {version} is unknown"
+    if offsets not in (2, 4, 8, 16) or len(head) < eof_at + offsets:
+        return f"its superblock is damaged or cut short ({size} bytes)"
+    # Both layouts: the base address two fields before the end-of-file address.
+    base = int.from_bytes(head[eof_at - 2 * offsets : eof_at - offsets], "little")
+    eof = int.from_bytes(head[eof_at : eof_at + offsets], "little")
+    if eof == (1 << (8 * offsets)) - 1:
+        return None  # undefined address: nothing to compare
+    if base + eof > size:
+        return (
+            f"it is truncated: {size} bytes, but its last flush wrote {base + eof}"
+            " (an interrupted copy or a full disk?)"
+        )
+    return None
+
+
 def _open_h5(path: Path) -> h5py.File:
-    """Open as an SWMR reader; files of other HDF5 formats fall back to a plain read."""
+    """Open as an SWMR reader; files of other HDF5 formats fall back to a plain read. A
+    file that is damaged as :func:`hdf5_damage` finds is refused without opening it."""
     if not path.exists():
         raise ConfigError("recording", str(path), "an existing run recording (.h5)")
     if path.is_dir():
         raise ConfigError("recording", str(path), "a file, not a folder")
+    damage = hdf5_damage(path)
+    if damage is not None:
+        raise ConfigError(
+            "recording",
+            str(path),
+            "an HDF5 run recording written by hil",
+            f"{damage}; copy it again from where the run wrote it",
+        )
     try:
         return h5py.File(path, "r", libver="latest", swmr=True)
     except OSError:
@@ -250,6 +303,17 @@ class RunRecording:
             for i in range(t["t_s"].shape[0])
         ]
         return out if receiver is None else [e for e in out if e.receiver == receiver]
+
+    def table(self, name: str) -> dict[str, NDArray[Any]]:
+        """One recorded table as columns of arrays (for notebooks and numpy): ``"estimates"``,
+        ``"telemetry"``, ``"events"`` or ``"sync"``; column names as in
+        ``docs/recording-format.md``, each of shape ``(n_rows,)``.
+
+        >>> # rec.table("estimates")["range_m"] is every recorded range estimate, m
+        """
+        if name not in ("estimates", "telemetry", "events", "sync"):
+            raise ConfigError("table", name, "one of estimates, telemetry, events, sync")
+        return {key: np.asarray(col) for key, col in self._table(name).items()}
 
     def sync_pairs(self) -> SyncPairs:
         """The board sample index ↔ host time pairs."""

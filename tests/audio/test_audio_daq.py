@@ -25,7 +25,7 @@ from hil.devices.audio import (
 from hil.devices.audio.daq import AudioDaq, parse_audio_url
 from hil.devices.audio.jack_ports import wire_portaudio_loopback
 from hil.errors import ConfigError
-from hil.experiments.tank_run import measure_latency
+from hil.experiments.live.latency import measure_latency
 
 FS = 48000
 T0 = 100.0

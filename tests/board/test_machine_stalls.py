@@ -17,15 +17,21 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hil.acquisition.machine_stalls import (
+# The stall probes are benchmark tools (benchmarks/), imported as the benchmarks import them.
+BENCHMARKS = Path(__file__).resolve().parents[2] / "benchmarks"
+sys.path.insert(0, str(BENCHMARKS))
+PROBE = str(BENCHMARKS / "stall_probe.py")
+
+from machine_stalls import (  # noqa: E402
     MachineStalls,
     StallProbes,
     _merge,
     overlapping,
     steal_s,
 )
-from hil.errors import ConfigError
-from hil.stall_probe import run_probe
+from stall_probe import run_probe  # noqa: E402
+
+from hil.errors import ConfigError  # noqa: E402
 
 CPU = min(os.sched_getaffinity(0))
 
@@ -211,7 +217,7 @@ def test_steal_time_per_cpu(tmp_path: Path) -> None:
 def test_a_stopped_probe_reports_the_stall() -> None:
     """SIGSTOP holds the probe off its CPU for 0.3 s: it must report one stall covering it."""
     proc = subprocess.Popen(
-        [sys.executable, "-m", "hil.stall_probe", "--cpu", str(CPU), "--ready"],
+        [sys.executable, PROBE, "--cpu", str(CPU), "--ready"],
         stdout=subprocess.PIPE,
         text=True,
     )
@@ -253,7 +259,7 @@ def test_probes_on_every_cpu() -> None:
 
 
 def _probe_pids() -> set[int]:
-    """Pids of the processes running ``hil.stall_probe``."""
+    """Pids of the processes running ``benchmarks/stall_probe.py``."""
     pids = set()
     for entry in Path("/proc").iterdir():
         if not entry.name.isdigit():
@@ -263,7 +269,7 @@ def _probe_pids() -> set[int]:
             state = (entry / "stat").read_text().rsplit(")", 1)[1].split()[0]
         except OSError:
             continue
-        if b"hil.stall_probe" in cmdline and state != "Z":
+        if b"stall_probe.py" in cmdline and state != "Z":
             pids.add(int(entry.name))
     return pids
 
@@ -274,7 +280,8 @@ def test_probes_stop_when_their_caller_is_killed() -> None:
     before = _probe_pids()
     code = (
         "import sys, time\n"
-        "from hil.acquisition import StallProbes\n"
+        f"sys.path.insert(0, {str(BENCHMARKS)!r})\n"
+        "from machine_stalls import StallProbes\n"
         f"p = StallProbes(cpus=({CPU},)).start()\n"
         "print('started', flush=True)\n"
         "time.sleep(60)\n"
@@ -354,7 +361,7 @@ def test_bad_settings(kwargs: dict[str, object], message: str) -> None:
 )
 def test_probe_command_rejects_bad_arguments(args: list[str], message: str) -> None:
     proc = subprocess.run(
-        [sys.executable, "-m", "hil.stall_probe", "--no-realtime", *args],
+        [sys.executable, PROBE, "--no-realtime", *args],
         capture_output=True,
         text=True,
         check=False,

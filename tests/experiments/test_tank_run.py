@@ -20,7 +20,9 @@ from hil.cli.main import main
 from hil.devices.audio.daq import AudioDaqStatus
 from hil.errors import ConfigError
 from hil.experiments.experiment import DEFAULT_EXPERIMENT, parse_experiment
-from hil.experiments.tank_run import measure_latency, run_experiment, xrun_counts, xruns_since
+from hil.experiments.live.board_state import xrun_counts, xruns_since
+from hil.experiments.live.latency import measure_latency
+from hil.experiments.tank_run import run_experiment
 
 # A shorter pass than the built-in run keeps the suite quick.
 SHORT = DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -3.5").replace(
@@ -177,7 +179,7 @@ def test_mixed_simulated_and_real_devices_are_refused(tmp_path: Path) -> None:
 
 def test_every_board_annotation_becomes_a_recordable_event() -> None:
     from hil.acquisition import Annotation, AnnotationKind
-    from hil.experiments.tank_run import run_event
+    from hil.experiments.live.board_state import run_event
     from hil.recording.schema import EVENT_KINDS
 
     for kind in AnnotationKind:
@@ -234,7 +236,7 @@ def test_loopback_latency_between_two_samples_rounds_to_a_neighbour(
     # The built-in run's four tones 2 kHz apart: the raw cross-correlation's carrier peaks
     # repeat every 0.5 ms, and a delay between two samples put a neighbouring one (about 96
     # samples off) on top. The envelope's peak is the nearest sample to the delay.
-    from hil.experiments.tank_run import measure_loopback
+    from hil.experiments.live.latency import measure_loopback
     from hil.signals.synthesis import BlockSynthesizer
 
     exp = parse_experiment(DEFAULT_EXPERIMENT)
@@ -248,7 +250,7 @@ def test_loopback_latency_between_two_samples_rounds_to_a_neighbour(
 
 
 def test_sample_zero_time_survives_a_stall_where_most_syncs_are_late() -> None:
-    from hil.experiments.tank_run import sample_zero_time_s
+    from hil.experiments.live.board_state import sample_zero_time_s
 
     fs = 192_000.0
     # The SYNC pairs recorded by a CI run whose simulated board stalled for 4.3 s of clock
@@ -273,30 +275,27 @@ def test_sample_zero_time_survives_a_stall_where_most_syncs_are_late() -> None:
 
 
 def test_the_run_keeps_every_sync_pair_beyond_the_fits_window() -> None:
-    from types import SimpleNamespace
-
     from hil.acquisition.clock_fit import SampleClockFit
-    from hil.experiments.tank_run import collect_sync_pairs
+    from hil.experiments.live.board_state import collect_sync_pairs
 
     # The board's fit keeps its latest 256 pairs; the run collects as they come.
     fit = SampleClockFit(100_000.0, max_pairs=256)
-    board = SimpleNamespace(clock_fit=fit)  # what the run reads of a Board or AudioDaq
     run_pairs: list[tuple[int, float]] = []
     for k in range(1000):
         fit.add(1000 * k, 5.0 + k / 100 + (0.0 if k == 3 else 0.002))
         if k % 7 == 0:
-            collect_sync_pairs(board, run_pairs)
-    collect_sync_pairs(board, run_pairs)
+            collect_sync_pairs(fit, run_pairs)
+    collect_sync_pairs(fit, run_pairs)
     assert [p[0] for p in run_pairs] == [1000 * k for k in range(1000)]
-    collect_sync_pairs(board, run_pairs)  # nothing new: nothing added
+    collect_sync_pairs(fit, run_pairs)  # nothing new: nothing added
     assert len(run_pairs) == 1000
-    from hil.experiments.tank_run import sample_zero_time_s
+    from hil.experiments.live.board_state import sample_zero_time_s
 
     # The least-delayed pair (k = 3) left the fit's window long ago; the run still has it.
     assert sample_zero_time_s(run_pairs, 100_000.0) == pytest.approx(5.0)
     assert len(fit.pair_list()) == 256
     assert sample_zero_time_s(fit.pair_list(), 100_000.0) == pytest.approx(5.002)
-    collect_sync_pairs(None, run_pairs)  # no board (it failed to open): nothing to add
+    collect_sync_pairs(None, run_pairs)  # no fit (no board, or not configured): nothing to add
     assert len(run_pairs) == 1000
 
 
@@ -345,13 +344,33 @@ def test_simulated_run_end_to_end_and_replay_equals_live(
     assert events[0].kind == "note" and len(events) == summary["events"] + 1
     live = rec.estimates()
     assert len(live) == summary["estimates"]
+    assert events[-1].text == "stop: completed" and events[-1].kind == "note"
     again = replay(rec)
     agreement, words = compare_estimates(live, again)
     assert agreement == "equal", words
+    rec.close()
+    # hil report rebuilds the same summary from the recording (into another folder): what a
+    # recording holds is what the run scored with; the wall time is not recorded.
+    assert main(["report", str(folder / "run.h5"), "--out", str(tmp_path / "re"), "--json"]) == 0
+    rebuilt = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    same = ("estimates", "events", "dropped_samples", "error", "interrupted", "signal_s",
+            "loopback_latency_samples", "false_alarms")  # fmt: skip
+    assert {k: rebuilt[k] for k in same} == {k: summary[k] for k in same}
+    # How late each stage report came is not recorded: the rebuild uses the few the live
+    # run left out (answered > 80 ms late), which moves the scored set's edges a little.
+    assert abs(rebuilt["scored_estimates"] - summary["scored_estimates"]) <= 3
+    assert rebuilt["range_rmse_m"] == pytest.approx(summary["range_rmse_m"], rel=0.05)
+    assert rebuilt["wall_s"] == 0.0 and rebuilt["real_time_factor"] is None
+    # The GCAS map, replayed: the same figure set as live.
+    assert sorted(Path(f).name for f in rebuilt["figures"]) == sorted(
+        Path(f).name for f in summary["figures"]
+    )
 
 
 @pytest.mark.slow
-def test_kill_9_during_a_run_leaves_a_readable_recording(tmp_path: Path) -> None:
+def test_kill_9_during_a_run_leaves_a_recording_hil_report_rebuilds(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     from hil.recording.reader import RunRecording
 
     exp_file = tmp_path / "short.toml"
@@ -374,6 +393,20 @@ def test_kill_9_during_a_run_leaves_a_readable_recording(tmp_path: Path) -> None
     assert blocks and sum(b.data.shape[0] for b in blocks) > 10_000
     assert rec.schedule().period_hops == 17
     assert rec.telemetry()
+    estimates = len(rec.estimates())
+    rec.close()
+    # The summary and figures it never wrote, rebuilt from the recording alone.
+    assert not (folder / "summary.json").exists()
+    assert main(["report", str(h5), "--json"]) == 1  # the run did not stop on its own
+    from hil.experiments.run_from_recording import KILLED
+
+    summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert summary["error"] == KILLED and summary["interrupted"] is True
+    assert summary["estimates"] == estimates and summary["rebuilt_from"] == str(h5)
+    assert summary["loopback_latency_samples"] == 64
+    assert json.loads((folder / "summary.json").read_text()) == summary
+    for name in ("estimates.csv", "range_speed.png", "errors.png", "time_codeword_map.png"):
+        assert (folder / name).exists(), name
 
 
 def _carriage_moving(h5: Path) -> bool:
@@ -393,9 +426,17 @@ def _carriage_moving(h5: Path) -> bool:
 
 
 @pytest.mark.slow
-def test_ctrl_c_stops_cleanly_and_keeps_the_recording(tmp_path: Path) -> None:
-    """SIGINT mid-run: transmission stopped, stage held, files closed, a summary written
-    that says the run was interrupted, and the recording readable."""
+@pytest.mark.parametrize(
+    ("sig", "how"),
+    [(signal.SIGINT, "Ctrl-C"), (signal.SIGTERM, "SIGTERM"), (signal.SIGHUP, "SIGHUP")],
+)
+def test_ctrl_c_sigterm_and_sighup_stop_cleanly_and_keep_the_recording(
+    tmp_path: Path, sig: signal.Signals, how: str
+) -> None:
+    """SIGINT (a terminal's Ctrl-C), SIGTERM (kill, a service manager) or SIGHUP (the
+    terminal closed) mid-run: transmission stopped, stage held, files closed, a summary
+    written that says the run was interrupted and how, the recording readable and ending
+    with the stop's event."""
     from hil.recording.reader import RunRecording
 
     exp_file = tmp_path / "slow.toml"
@@ -417,7 +458,7 @@ def test_ctrl_c_stops_cleanly_and_keeps_the_recording(tmp_path: Path) -> None:
         # fixed delay after the capture starts may land after the pass on a loaded machine).
         while time.monotonic() < deadline and not _carriage_moving(h5):
             time.sleep(0.1)
-        os.killpg(proc.pid, signal.SIGINT)  # as a terminal's Ctrl-C: the whole process group
+        os.killpg(proc.pid, sig)  # as a terminal does: the whole process group
         out, _ = proc.communicate(timeout=60)
     finally:
         if proc.poll() is None:  # the test failed first: leave nothing running
@@ -425,9 +466,11 @@ def test_ctrl_c_stops_cleanly_and_keeps_the_recording(tmp_path: Path) -> None:
             proc.communicate()
     assert proc.returncode == 1  # the run stopped before its end
     summary = json.loads(out.strip().splitlines()[-1])
-    assert summary["interrupted"] is True and "interrupted" in summary["error"]
+    assert summary["interrupted"] is True and summary["error"] == f"interrupted ({how})"
     rec = RunRecording.open(h5)
     assert sum(b.data.shape[0] for b in rec.samples()) > 10_000
+    stop = rec.events()[-1]
+    assert (stop.kind, stop.text) == ("alarm", f"stop: interrupted ({how})")
     # The stage was held: the simulated carriage (its true trajectory, written by the
     # simulated tank at stop) is at rest at the end and stopped short of the end of the pass
     # (end_m - run_down_m = -4.1 m).
@@ -447,7 +490,7 @@ def test_the_receiver_is_built_before_anything_moves_or_transmits(
     from hil.devices.grbl import GrblStage
 
     order: list[str] = []
-    make = tank_run.make_receiver
+    make = tank_run.build_receiver
 
     def recording_make(*args: object, **kwargs: object) -> object:
         order.append("receiver")
@@ -457,7 +500,7 @@ def test_the_receiver_is_built_before_anything_moves_or_transmits(
         order.append("stage")
         raise RuntimeError("the test stops the run at the stage")
 
-    monkeypatch.setattr(tank_run, "make_receiver", recording_make)
+    monkeypatch.setattr(tank_run, "build_receiver", recording_make)
     monkeypatch.setattr(GrblStage, "open", stop_at_stage)
     exp_file = tmp_path / "short.toml"
     exp_file.write_text(SHORT)
@@ -472,7 +515,7 @@ def test_a_board_stopped_by_its_watchdog_ends_the_run_with_the_reason() -> None:
     """The board stops streaming when its watchdog expires; the run must stop at once with
     that reason, not wait for samples until run.max_duration_s."""
     from hil.devices.board import Board
-    from hil.experiments.tank_run import board_stopped
+    from hil.experiments.live.board_state import board_stopped
     from sim_devices.board import BoardPort, LoopbackWorld, MemoryBoardLink, SimulatedBoard
     from sim_devices.stage.clock import ManualClock
 
@@ -494,3 +537,82 @@ def test_a_board_stopped_by_its_watchdog_ends_the_run_with_the_reason() -> None:
     assert why.startswith("the board stopped streaming at sample ")
     assert "board watchdog expired: transmission stopped" in why
     assert "the host sent it nothing for its watchdog timeout" in why
+
+
+@pytest.mark.slow
+def test_the_built_in_tank_lost_mid_run_stops_the_run_naming_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The simulated tank's process killed under the run: the run stops, naming it (not a
+    bare ``OSError: [Errno 5]`` from whichever pty noticed first)."""
+    import threading
+
+    from hil.experiments import sim_tank
+    from hil.experiments.tank_run import LiveView
+    from hil.recording.reader import RunRecording
+
+    started: list[sim_tank.SimulatedTankProcess] = []
+    original = sim_tank.SimulatedTankProcess.__init__
+
+    def keep(self: sim_tank.SimulatedTankProcess, *args: object) -> None:
+        original(self, *args)  # type: ignore[arg-type]
+        started.append(self)
+
+    monkeypatch.setattr(sim_tank.SimulatedTankProcess, "__init__", keep)
+    folder = tmp_path / "run"
+    h5 = folder / "run.h5"
+    done = threading.Event()
+
+    def kill_once_recording() -> None:
+        while not done.wait(0.05):
+            if started and h5.exists() and h5.stat().st_size > 400_000:
+                os.kill(started[0].pid, signal.SIGKILL)
+                return
+
+    killer = threading.Thread(target=kill_once_recording, daemon=True)
+    killer.start()
+    try:
+        outcome = run_experiment(
+            parse_experiment(SHORT.replace("speed_mps = 1.5", "speed_mps = 0.5")),
+            folder=folder,
+            view=LiveView(enabled=False),
+        )
+    finally:
+        done.set()
+        killer.join(10)
+    pid = started[0].pid
+    assert outcome.error == (
+        f"DeviceLostError: the built-in simulated tank (process {pid}) lost: its process exited"
+        " with code -9; check that nothing killed it (its errors are printed above)"
+    )
+    with RunRecording.open(h5) as rec:
+        assert rec.events()[-1].text == f"stop: error: {outcome.error}"
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc")
+def test_the_cli_refuses_an_existing_run_folder_before_starting_anything(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    earlier = tmp_path / "earlier"
+    earlier.mkdir()
+    (earlier / "run.h5").write_bytes(b"an earlier run")
+    assert main(["tank-run", "--out", str(earlier), "--no-live"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"hil tank-run: error: --out = '{earlier}' is not allowed: must be")
+    assert "never overwritten" in err
+    assert (earlier / "run.h5").read_bytes() == b"an earlier run"
+    assert sorted(p.name for p in earlier.iterdir()) == ["run.h5"]
+    assert not [c for c in _child_commands() if "hil.experiments.sim_tank" in c]
+
+
+def test_hil_report_refuses_what_is_not_a_run_recording(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    missing = tmp_path / "none.h5"
+    assert main(["report", str(missing)]) == 2
+    assert "RUN (recording) = " in capsys.readouterr().err
+    cut = tmp_path / "cut.h5"
+    cut.write_bytes(b"\x89HDF\r\n\x1a\n" + bytes(40))
+    assert main(["report", str(cut)]) == 2
+    err = capsys.readouterr().err
+    assert "is not allowed: must be an HDF5 run recording written by hil" in err

@@ -14,12 +14,12 @@ import h5py
 import numpy as np
 import pytest
 
+from hil.acquisition.feed import ReceiverFeed
 from hil.cli.main import main
 from hil.errors import ConfigError
 from hil.estimation.base import Estimate
 from hil.estimation.registry import make_receiver
 from hil.recording import (
-    ReceiverFeed,
     ReceiverSetup,
     RunRecording,
     RunWriter,
@@ -236,6 +236,8 @@ def test_cli_reports_a_replay_that_differs_from_live(
         ("copy", ["--option", "novalue"], "--option = 'novalue' is not allowed: must be KEY=VALUE"),
         ("copy", ["--channel", "5"], "--channel (channel) = 5 is not allowed: must be 0..1"),
         ("missing", [], "RUN (recording) = '{path}' is not allowed: must be an existing run"),
+        ("cut", [], "an HDF5 run recording written by hil; it is truncated: "),
+        ("empty", [], "it does not start with the HDF5 signature (0 bytes)"),
     ],
 )
 def test_cli_bad_input_exits_2(
@@ -249,6 +251,11 @@ def test_cli_bad_input_exits_2(
     path = tmp_path / "in.h5"
     if make == "text":
         path.write_text("not a recording")
+    elif make == "cut":  # an interrupted copy: HDF5 would wait for the missing end
+        whole = Path(live_run[0]).read_bytes()
+        path.write_bytes(whole[: len(whole) * 2 // 3])
+    elif make == "empty":
+        path.write_bytes(b"")
     elif make in ("version", "copy"):
         shutil.copy(live_run[0], path)
         if make == "version":
@@ -259,6 +266,30 @@ def test_cli_bad_input_exits_2(
     assert err.startswith("hil replay: error: ")
     assert message.format(path=path) in err
     assert len(err.splitlines()) == 1
+
+
+def test_a_recording_cut_anywhere_is_refused_before_hdf5_opens_it(
+    live_run: Any, tmp_path: Path
+) -> None:
+    from hil.recording.reader import hdf5_damage
+
+    whole = Path(live_run[0]).read_bytes()
+    path = tmp_path / "cut.h5"
+    path.write_bytes(whole)
+    assert hdf5_damage(path) is None
+    rng = np.random.default_rng(5)
+    for keep in [0, 7, 8, 11, 40, 95, *rng.integers(96, len(whole), 20).tolist()]:
+        path.write_bytes(whole[:keep])
+        damage = hdf5_damage(path)
+        assert damage is not None, keep
+        with pytest.raises(ConfigError) as info:
+            RunRecording.open(path)
+        assert str(info.value).startswith(f"recording = '{path}' is not allowed: must be an HDF5")
+        assert damage in str(info.value)
+        assert f"({keep} bytes" in damage or f"{keep} bytes, but its last flush wrote" in damage
+    # A flipped signature byte is refused as not HDF5.
+    path.write_bytes(b"\x00" + whole[1:])
+    assert hdf5_damage(path) == f"it does not start with the HDF5 signature ({len(whole)} bytes)"
 
 
 def test_cli_needs_a_receiver_name_when_none_ran_live(
@@ -279,8 +310,8 @@ def test_cli_needs_a_receiver_name_when_none_ran_live(
 def test_feed_drops_samples_before_its_origin() -> None:
     """Samples captured before the receiver's sample 0 (e.g. while the loopback latency was
     measured) are dropped; the first fed sample is the origin; repeats are still refused."""
+    from hil.acquisition.feed import ReceiverFeed
     from hil.errors import ConfigError
-    from hil.recording.replay import ReceiverFeed
 
     seen: list[tuple[int, int]] = []
 
@@ -317,7 +348,7 @@ class Bounded(Plain):
 
 
 def test_receiver_feed_says_how_far_the_stream_must_go_before_an_estimate() -> None:
-    from hil.recording.replay import ReceiverFeed
+    from hil.acquisition.feed import ReceiverFeed
 
     plain = ReceiverFeed(Plain(), origin=100)  # type: ignore[arg-type]
     plain.feed(100, np.zeros((50, 1)))
@@ -332,7 +363,7 @@ def test_receiver_feed_says_how_far_the_stream_must_go_before_an_estimate() -> N
 
 
 def test_live_loop_waits_for_the_next_decision_or_one_block() -> None:
-    from hil.recording.replay import ReceiverFeed
+    from hil.acquisition.feed import ReceiverFeed
 
     plain = ReceiverFeed(Plain(), origin=100)  # type: ignore[arg-type]
     plain.feed(100, np.zeros((50, 1)))

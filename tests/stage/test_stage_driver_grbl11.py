@@ -243,7 +243,7 @@ def test_hard_limit_mid_profile_stops_the_run_within_a_second() -> None:
 
 def test_the_tank_runs_stop_sequence_after_a_hard_limit_takes_under_a_second() -> None:
     # hil tank-run's stop on an error: feed hold unconditionally (hold=True), flush, close.
-    from hil.experiments.tank_run import _safe_stop
+    from hil.experiments.live.devices import RunDevices
 
     stage, peer, clock = open_stage(
         [(b"G53 G1 X-310.000 F300.000\n", b"ok\r\n"), (b"G4 P0.000\n", b"")]
@@ -252,7 +252,7 @@ def test_the_tank_runs_stop_sequence_after_a_hard_limit_takes_under_a_second() -
     peer.critical_alarm(at=3.0, code=1)
     with pytest.raises(StageAlarmError):
         stage.run_profile(-0.11, -0.3, 0.005, 0.01, 0.01)
-    _safe_stop(None, stage, None, hold=True)
+    RunDevices(stage=stage).safe_stop(hold=True)
     assert clock.now() - 3.0 < 1.0
     assert stage.last_status is not None and stage.critical
     with pytest.raises(StageError, match="the stage is not open"):

@@ -62,7 +62,7 @@ def test_hard_limit_mid_pass_stops_the_run_within_a_second() -> None:
     # far switch (501 mm) sits at machine -11 mm, inside the travel the driver allows. The
     # pass: 1 mm to the run-up start at the max rate (0.2 s), then from -1 mm at 10 mm/s
     # (0.05 s to speed at 100 mm/s²): the switch 10 mm on, about 1.25 s after the start.
-    from hil.experiments.tank_run import _safe_stop
+    from hil.experiments.live.devices import RunDevices
 
     clock = ManualClock(100.0)
     config = replace(INSTANT, soft_limits=False, homing=False, power_up_position_mm=-490.0)
@@ -76,7 +76,7 @@ def test_hard_limit_mid_pass_stops_the_run_within_a_second() -> None:
         assert sim.status().physical_mm == pytest.approx(-501.0, abs=0.1)
         assert clock.now() - (t0 + 1.25) < 1.0
         t1 = clock.now()
-        _safe_stop(None, stage, None, hold=True)
+        RunDevices(stage=stage).safe_stop(hold=True)
         assert clock.now() - t1 < 1.0
 
 

@@ -3,7 +3,7 @@
 A live run has a deadline per hop (an estimate at most one hop after its boundary). Whether a
 machine can meet it is not only a question of the pipeline's work: a virtual machine's
 hypervisor may take a virtual CPU away for milliseconds (steal time), and a loaded host may
-leave a woken thread waiting for a core. A *stall probe* (:mod:`hil.stall_probe`) measures
+leave a woken thread waiting for a core. A *stall probe* (``benchmarks/stall_probe.py``) measures
 that directly: a small process pinned to one CPU that sleeps ``period_s`` again and again;
 when a wake-up comes more than ``threshold_s`` late, the interval it was kept away is a
 *stall* on that CPU. With real-time priority (``SCHED_FIFO``, when the process may use it)
@@ -36,9 +36,13 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+from stall_probe import PERIOD_S, THRESHOLD_S, check_settings
 
 from hil.errors import ConfigError
-from hil.stall_probe import PERIOD_S, THRESHOLD_S, check_settings
+
+#: The probe process's script (beside this module: both are benchmark tools, imported with
+#: ``benchmarks/`` on ``sys.path`` as a script there has it).
+PROBE_SCRIPT = Path(__file__).with_name("stall_probe.py")
 
 #: Most probes started when the CPUs are not named (one process per CPU).
 MAX_DEFAULT_CPUS = 8
@@ -233,7 +237,7 @@ class StallProbes:
 
     def _command(self, cpu: int, out: Path) -> list[str]:
         """The probe process for ``cpu`` writing its record to ``out``."""
-        cmd = [sys.executable, "-m", "hil.stall_probe", "--cpu", str(cpu), "--ready"]
+        cmd = [sys.executable, str(PROBE_SCRIPT), "--cpu", str(cpu), "--ready"]
         cmd += ["--period", repr(self.period_s), "--threshold", repr(self.threshold_s)]
         cmd += ["--out", str(out)]
         if not self.realtime:

@@ -1,14 +1,14 @@
 """One stall probe: a process that sleeps again and again and notes each late wake-up.
 
 Standard library only, so a probe process starts in tens of milliseconds and holds a few MB
-(one runs per CPU; :class:`hil.acquisition.machine_stalls.StallProbes` starts them and reads
+(one runs per CPU; ``machine_stalls.StallProbes`` (benchmarks) starts them and reads
 their records). A wake-up more than ``threshold_s`` after it was due is a *stall*: the
 interval from the due time to the wake-up, on :func:`time.monotonic` (``CLOCK_MONOTONIC``,
 shared by every process on the machine). With real-time priority (``SCHED_FIFO``, when the
 process may have it) a woken probe preempts every ordinary thread, so what it still sees is
 the machine itself: hypervisor, interrupts, kernel sections.
 
-By hand: ``python -m hil.stall_probe --cpu 0 --seconds 10`` prints the record as JSON.
+By hand: ``python benchmarks/stall_probe.py --cpu 0 --seconds 10`` prints the record as JSON.
 """
 
 from __future__ import annotations
@@ -120,7 +120,7 @@ def run_probe(
 def main(argv: list[str] | None = None) -> None:
     """Command line: probe one CPU until ``--seconds`` pass, SIGTERM comes or the parent
     process is gone; the record as JSON to ``--out`` or stdout."""
-    parser = argparse.ArgumentParser(prog="python -m hil.stall_probe", description=__doc__)
+    parser = argparse.ArgumentParser(prog="stall_probe.py", description=__doc__)
     parser.add_argument("--cpu", type=int, default=None, help="CPU to pin to (default: any)")
     parser.add_argument(
         "--seconds", type=float, default=None, help="probe time (default: to SIGTERM)"

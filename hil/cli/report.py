@@ -1,0 +1,60 @@
+"""``hil report RUN.h5``: the summary and figures of a tank run, rebuilt from its recording.
+
+For a run that could not write them (``kill -9``, a crash, power loss: its recording still
+reads up to its last flush) or to write them again. Writes ``summary.json``,
+``estimates.csv`` and the figures next to the recording (or into ``--out``) and prints the
+summary as ``hil tank-run`` does. What a recording cannot give back is listed in
+:mod:`hil.experiments.run_from_recording`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from hil.errors import ConfigError
+
+OPTION_NAMES = {"recording": "RUN"}
+
+
+def register(sub: Any) -> None:
+    """Add the ``report`` sub-command."""
+    p: argparse.ArgumentParser = sub.add_parser(
+        "report",
+        help="rebuild a tank run's summary and figures from its recording",
+        description="Rebuild summary.json, estimates.csv and the figures of a tank run from "
+        "its recording run.h5 (also one left by a killed run).",
+    )
+    p.add_argument("run", type=Path, metavar="RUN", help="run recording (run.h5)")
+    p.add_argument("--out", type=Path, help="folder for the files (default: the recording's)")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.add_argument(
+        "--no-map",
+        action="store_true",
+        help="skip the GCAS time-codeword map (it replays the receiver over the recording)",
+    )
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Execute ``hil report``; 0, or 1 when the recorded run stopped on an error."""
+    from hil.cli.tank_run import print_summary
+    from hil.experiments.run_from_recording import outcome_from_recording
+    from hil.experiments.run_report import write_report
+    from hil.experiments.run_scoring import summarize, write_summary
+
+    if args.out is not None:
+        if args.out.exists() and not args.out.is_dir():
+            raise ConfigError("--out", str(args.out), "a folder")
+        args.out.mkdir(parents=True, exist_ok=True)
+    outcome = outcome_from_recording(args.run, args.out, codeword_map=not args.no_map)
+    summary = summarize(outcome)
+    summary["rebuilt_from"] = str(args.run)
+    write_summary(outcome, summary)
+    figures = write_report(outcome)
+    summary["figures"] = [str(p) for p in figures]
+    (outcome.folder / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
+    print_summary(summary, outcome.folder, as_json=args.json)
+    return 1 if outcome.error else 0

@@ -1,0 +1,194 @@
+"""The devices of a run, opened in the order that lets every check refuse before anything
+moves or transmits: the simulated tank's process (for ``sim://``), the stage (its ``$$``
+limits read on connecting, the whole tow checked against them, before homing), the board
+(configured: refused before sending if it cannot), then the stage homed and positioned.
+
+:class:`RunDevices` holds what is open so far, so a failure at any step stops and closes
+exactly that (:meth:`RunDevices.safe_stop`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Protocol
+
+from hil.acquisition.device import StreamingDevice
+from hil.devices.stage_errors import StageTimeoutError
+from hil.errors import ConfigError
+from hil.experiments.experiment import Experiment
+from hil.experiments.live.plan import CheckedTow, StageLimits, check_tow
+from hil.experiments.live.stops import DeviceLostError
+from hil.experiments.stage_checks import raise_first_failure, tow_checks
+
+if TYPE_CHECKING:
+    from hil.devices.clock import Clock
+    from hil.devices.grbl import GrblStage
+    from hil.experiments.sim_tank import SimulatedTankProcess
+
+
+class StatusLine(Protocol):
+    """Where the run says what it is doing (the live view)."""
+
+    def update(self, text: str, *, force: bool = False) -> None: ...
+
+
+#: The board's watchdog (ms of its clock): it stops when the host has sent nothing for this
+#: long (a crashed or stalled host), so a run never leaves it streaming unattended.
+WATCHDOG_MS = 1000
+#: The simulated board's: the simulated tank is a child process on the same CPUs, scaled in
+#: time, so a stall of the machine (seconds on a loaded CI host) must not stop it.
+SIM_WATCHDOG_MS = 10_000
+#: Seconds of capture the board's ring holds.
+RING_S = 8.0
+
+
+def _open_board(url: str, fs: float, clock: Clock, keepalive_ms: int) -> StreamingDevice:
+    from hil.devices.board import Board
+    from hil.devices.board_settings import BoardSettings
+
+    settings = BoardSettings(sample_rate_hz=int(fs), dac_channels=1, adc_channels=2)
+    board = Board(
+        url, settings=settings, clock=clock, ring_seconds=RING_S, keepalive_ms=keepalive_ms
+    )
+    return board.open()
+
+
+def _open_audio(url: str, fs: float, clock: Clock, keepalive_ms: int) -> StreamingDevice:
+    from hil.devices.audio.daq import AudioDaq
+
+    return AudioDaq.from_url(url, sample_rate_hz=int(fs), ring_seconds=RING_S).open()
+
+
+#: How each URL scheme of ``devices.board`` opens its device; any other URL is a board
+#: transport (``serial://``, ``usb://``, a port path; :func:`hil.transports.open_transport`).
+STREAMING_DEVICES: dict[str, Callable[[str, float, Clock, int], StreamingDevice]] = {
+    "audio": _open_audio,
+}
+
+
+def open_streaming_device(url: str, fs: float, clock: Clock, keepalive_ms: int) -> StreamingDevice:
+    """The DAC/ADC at ``url`` open and configured at ``fs`` Hz (2 ADC channels: the
+    hydrophone and the DAC monitor), on the driver ``clock``; nothing transmits yet.
+    ``keepalive_ms``: the board's watchdog (an audio interface has none)."""
+    scheme = url.split("://", 1)[0] if "://" in url else ""
+    device = STREAMING_DEVICES.get(scheme, _open_board)(url, fs, clock, keepalive_ms)
+    device.configure()
+    return device
+
+
+def stage_limits(stage: GrblStage) -> StageLimits:
+    """The limits an open :class:`~hil.devices.grbl.GrblStage` reported (its ``$$``)."""
+    low, high = stage.limits
+    settings = stage.settings
+    return StageLimits(low, high, settings.max_rate, settings.acceleration)
+
+
+@dataclass
+class RunDevices:
+    """The run's devices as far as they are open (None: not yet)."""
+
+    tank: SimulatedTankProcess | None = None
+    stage: GrblStage | None = None
+    board: StreamingDevice | None = None
+    #: The driver clock of the stage, the board and the run (``now()``, ``sleep()``, s):
+    #: the simulated tank's scaled clock, else the wall clock.
+    clock: Clock | None = None
+
+    def open(self, exp: Experiment, folder: Path, fs: float, view: StatusLine) -> CheckedTow:
+        """Open everything (see the module docstring); the checked tow."""
+        from hil.devices.clock import MonotonicClock
+        from hil.devices.grbl import GrblStage
+
+        board_url, stage_url = self._start_simulation(exp, folder)
+        clock = self.clock = self.clock or MonotonicClock()  # one for stage, board and run
+        stage = self.stage = GrblStage(stage_url, clock=clock).open()
+        # The controller's settings and the tow against what it reported (its $$), before
+        # anything moves: the checks `hil stage settings --check` shows, then the plan.
+        raise_first_failure(tow_checks(exp.tow, stage.settings, stage.limits))
+        tow = check_tow(exp.tow, stage_limits(stage))
+        self.board = open_streaming_device(
+            board_url, fs, clock, SIM_WATCHDOG_MS if self.tank is not None else WATCHDOG_MS
+        )
+        if self.tank is not None:
+            self.tank.align(fs)
+        try:
+            # Out of any alarm: reset a critical one, then home ($22=1) or unlock ($22=0).
+            stage.make_ready(lambda step: view.update(f"stage: {step}", force=True))
+            view.update("stage: positioning for the first pass", force=True)
+            stage.move_to(tow.ready_m, stage.settings.max_rate)
+        except (OSError, StageTimeoutError) as exc:
+            raise self.stage_lost(stage_url, exc) from exc
+        return tow
+
+    def _start_simulation(self, exp: Experiment, folder: Path) -> tuple[str, str]:
+        """The simulated tank started for ``sim://`` devices: the ports to open instead."""
+        if exp.simulated:
+            from hil.experiments.sim_tank import SimulatedTankProcess
+
+            experiment_file = folder / "experiment.toml"
+            experiment_file.write_text(exp.text, encoding="utf-8")
+            tank = self.tank = SimulatedTankProcess(exp, experiment_file, folder)
+            self.clock = tank.clock
+            return tank.board_port, tank.stage_port
+        if exp.board_url.startswith("sim://") or exp.stage_url.startswith("sim://"):
+            raise ConfigError(
+                "devices",
+                f"board {exp.board_url}, stage {exp.stage_url}",
+                "both simulated (sim://) or both real",
+                "the simulated target follows the simulated stage",
+            )
+        return exp.board_url, exp.stage_url
+
+    def opened(self) -> tuple[StreamingDevice, GrblStage, Clock]:
+        """The board (or audio interface), the stage and the driver clock, once :meth:`open`
+        opened them."""
+        if self.board is None or self.stage is None or self.clock is None:
+            raise RuntimeError("the run's devices are not open: call RunDevices.open first")
+        return self.board, self.stage, self.clock
+
+    def tank_lost(self) -> DeviceLostError | None:
+        """The simulated tank's process, if it ended under the run."""
+        code = self.tank.exit_code() if self.tank is not None else None
+        if self.tank is None or code is None:
+            return None
+        return DeviceLostError(
+            "the built-in simulated tank",
+            f"(process {self.tank.pid})",
+            f"its process exited with code {code}",
+            "that nothing killed it (its errors are printed above)",
+        )
+
+    def stage_lost(self, url: str, exc: BaseException) -> DeviceLostError:
+        """The stage stopped answering (``exc``: what its driver raised)."""
+        return self.tank_lost() or DeviceLostError(
+            "stage",
+            url,
+            f"{type(exc).__name__}: {exc}",
+            "the controller's USB cable and power, and that no other program holds its port",
+        )
+
+    def safe_stop(self, *, hold: bool) -> None:
+        """Transmission off, stage held, both closed: each step even if another fails.
+
+        ``hold`` (an interrupted or failed run) sends the feed hold unconditionally: the
+        interruption may have landed inside a status query, so a fresh query cannot be
+        trusted to tell whether the queued move is still running.
+        """
+        board, stage = self.board, self.stage
+        if board is not None:
+            with contextlib.suppress(Exception):
+                board.stop()
+        if stage is not None:
+            with contextlib.suppress(Exception):
+                # Short-circuit: with hold, no status query at all.
+                if hold or stage.status().state.name in ("RUN", "JOG"):
+                    stage.stop()
+        if board is not None:
+            with contextlib.suppress(Exception):
+                board.close()
+        if stage is not None:
+            with contextlib.suppress(Exception):
+                stage.close()

@@ -1,0 +1,248 @@
+"""The live run's parts on their own, scripted: the tow controller against a sequence of
+stage reports, the capture loop against a ring filled by the test (chunks == whole), the
+latency probe, and the recorder holding telemetry until the recording exists."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hil.acquisition.capture import CapturedBlock, CaptureLoop
+from hil.acquisition.feed import ReceiverFeed
+from hil.acquisition.ring import SampleRing
+from hil.devices.stage import ProfileWindow, StageState, StageStatus
+from hil.estimation.base import Estimate
+from hil.experiments.experiment import DEFAULT_EXPERIMENT, TowPlan, parse_experiment
+from hil.experiments.live.latency import LatencyProbe
+from hil.experiments.live.plan import StageLimits, check_tow
+from hil.experiments.live.tow import StageAlarmDuringRun, TowController, TowPhase
+from hil.experiments.run_calibrations import RunCalibrations
+
+# ---- the tow controller
+
+
+@dataclass
+class ScriptedStage:
+    """Records the passes asked for; each one's constant-speed window is [t, t + 2] s."""
+
+    t: float = 0.0
+    passes: list[tuple[float, float, float]] = field(default_factory=list)
+
+    def run_profile(
+        self,
+        start: float,
+        end: float,
+        speed: float,
+        run_up: float,
+        run_down: float,
+        *,
+        wait: bool = True,
+    ) -> ProfileWindow:
+        assert not wait
+        self.passes.append((start, end, speed))
+        return ProfileWindow(self.t, self.t + 2.0, start, end)
+
+
+def _report(state: StageState, alarm: int | None = None) -> StageStatus:
+    return StageStatus(state, None, -2.0, 0.0, False, alarm, None, None, 0.0)
+
+
+IDLE, RUN = _report(StageState.IDLE), _report(StageState.RUN)
+
+
+def test_the_tow_controller_runs_every_pass_then_the_tail() -> None:
+    tow = check_tow(
+        TowPlan(-2.0, -5.0, 1.5, repeats=2, run_up_m=0.6, run_down_m=0.6),
+        StageLimits(-10.0, 0.0, 2.5, 2.0),
+    )
+    stage = ScriptedStage()
+    ctl = TowController(tow, stage, tail_s=0.3)
+    ctl.on_report(IDLE, 0.0, capturing=False)  # not recording yet: no pass
+    assert (ctl.phase, stage.passes) == (TowPhase.READY, [])
+    ctl.on_report(IDLE, 0.2, capturing=True)
+    assert ctl.phase is TowPhase.PASS and stage.passes == [(-2.0, -5.0, 1.5)]
+    ctl.on_report(RUN, 1.0, capturing=True)
+    ctl.on_report(IDLE, 1.5, capturing=True)  # idle inside the window: a stale report
+    assert ctl.phase is TowPhase.PASS and len(stage.passes) == 1
+    ctl.on_report(IDLE, 2.5, capturing=True)  # past the window: the pass is over
+    assert ctl.phase is TowPhase.READY
+    stage.t = 3.0
+    ctl.on_report(IDLE, 3.0, capturing=True)  # the second pass runs back
+    assert stage.passes[-1] == (-5.0, -2.0, 1.5) and ctl.passes_started == 2
+    ctl.on_report(IDLE, 5.5, capturing=True)
+    assert ctl.phase is TowPhase.TAIL and ctl.tail_until == pytest.approx(5.8)
+    ctl.on_report(IDLE, 6.0, capturing=True)  # nothing more is asked of the stage
+    assert len(stage.passes) == 2 and ctl.windows == [(0.0, 2.0), (3.0, 5.0)]
+
+
+def test_a_stage_alarm_during_the_tow_stops_the_run_with_what_to_do() -> None:
+    tow = check_tow(
+        TowPlan(-2.0, -5.0, 1.5, run_up_m=0.6, run_down_m=0.6), StageLimits(-10, 0, 2.5, 2)
+    )
+    ctl = TowController(tow, ScriptedStage(), tail_s=0.3)
+    ctl.on_report(IDLE, 0.0, capturing=True)
+    with pytest.raises(StageAlarmDuringRun) as info:
+        ctl.on_report(_report(StageState.ALARM, alarm=1), 0.4, capturing=True)
+    assert str(info.value) == (
+        "stage alarm 1 during pass 1 of 1; the stage is held: check for an obstacle or a limit"
+        " switch, then home it"
+    )
+
+
+# ---- the capture loop
+
+
+class Source:
+    """A ring the test fills: what the loop reads of a board."""
+
+    def __init__(self, channels: int = 2) -> None:
+        self.ring: SampleRing | None = SampleRing(1 << 16, channels)
+
+    def wait_for_samples(self, end_index: int, /, timeout_s: float) -> bool:
+        assert self.ring is not None
+        return self.ring.end_index is not None and self.ring.end_index >= end_index
+
+    def read(self, first: int, n: int, /) -> np.ndarray:
+        assert self.ring is not None
+        return self.ring.read(first, n)
+
+
+class Summing:
+    """A receiver that emits one estimate per 1000 input samples: their sum (range_m) and the
+    gaps it was told about (speed_mps)."""
+
+    def __init__(self) -> None:
+        self.buf = np.zeros(0)
+        self.gaps = 0
+
+    def process(self, x: np.ndarray, gap_before: int = 0) -> list[Estimate]:
+        self.gaps += gap_before
+        self.buf = np.concatenate([self.buf, np.zeros(gap_before), x])
+        out = []
+        while self.buf.size >= 1000:
+            chunk, self.buf = self.buf[:1000], self.buf[1000:]
+            out.append(
+                Estimate(0.0, float(chunk.sum()), float(self.gaps), 0, 0.0, 0.0, 0.0, 0.0, 0, "sum")
+            )
+        return out
+
+    def flush(self) -> list[Estimate]:
+        return []
+
+
+def _fill(source: Source, blocks: list[tuple[int, int]], data: np.ndarray, first: int) -> None:
+    assert source.ring is not None
+    for a, b in blocks:
+        source.ring.write(first + a, data[a:b])
+
+
+@pytest.mark.parametrize("max_block", [1, 97, 1000, 4096])
+def test_the_capture_loop_gives_the_receiver_the_same_as_one_whole_block(max_block: int) -> None:
+    rng = np.random.default_rng(7)
+    data = rng.integers(-1000, 1000, size=(9000, 2)).astype(np.int16)
+    first = 50_000
+    source = Source()
+    # Arrivals in uneven pieces, with 300 samples lost (zero-filled by the ring).
+    _fill(source, [(0, 1234), (1234, 4000), (4300, 9000)], data, first)
+    expected = data.copy()
+    expected[4000:4300] = 0
+    seen: list[CapturedBlock] = []
+    feed = ReceiverFeed(Summing(), origin=first, channel=1)  # type: ignore[arg-type]
+    loop = CaptureLoop(source, first, max_block, feed=feed, on_block=seen.append)
+    got: list[Estimate] = []
+    loop.on_fed = lambda b: got.extend(b.estimates)
+    while loop.step(0.0, limit=first + 9000) is not None:  # the last block is short
+        pass
+    assert loop.next_index == first + 9000
+    assert all(b.data.shape[0] <= max_block for b in seen)
+    np.testing.assert_array_equal(np.concatenate([b.data for b in seen]), expected)
+    whole = Summing()
+    want = whole.process(expected[:, 1].astype(float))
+    assert [e.range_m for e in got] == [e.range_m for e in want] and len(got) == 9
+
+
+def test_the_capture_loop_waits_for_the_receivers_next_decision() -> None:
+    class Deciding(Summing):
+        next_decision_index = 700
+
+    source = Source()
+    data = np.ones((2000, 2), dtype=np.int16)
+    _fill(source, [(0, 600)], data, 0)
+    loop = CaptureLoop(source, 0, 1920, feed=ReceiverFeed(Deciding(), origin=0))  # type: ignore[arg-type]
+    assert loop.wanted_index() == 700  # the decision comes before one block
+    assert loop.step(0.0) is None  # 600 held: nothing worth reading yet
+    _fill(source, [(600, 800)], data, 0)
+    block = loop.step(0.0)
+    assert block is not None and (block.first_index, block.data.shape[0]) == (0, 800)
+    assert loop.backlog_max == 800
+    every = CaptureLoop(source, 0, 1920, every=100)
+    assert every.wanted_index() == 100 and every.wanted_index(limit=50) == 50
+
+
+def test_a_feed_attached_by_the_observer_takes_the_blocks_after() -> None:
+    source = Source()
+    _fill(source, [(0, 3000)], np.ones((3000, 2), dtype=np.int16), 0)
+    fed: list[int] = []
+    loop = CaptureLoop(source, 0, 1000)
+
+    class Recorder(Summing):
+        def process(self, x: np.ndarray, gap_before: int = 0) -> list[Estimate]:
+            fed.append(x.size)
+            return []
+
+    def attach(block: CapturedBlock) -> None:
+        if loop.feed is None:
+            loop.feed = ReceiverFeed(Recorder(), origin=block.first_index + 1000)  # type: ignore[arg-type]
+
+    loop.on_block = attach
+    while loop.step(0.0) is not None:
+        pass
+    assert fed == [1000, 1000]  # not the block that attached it
+
+
+# ---- the latency probe and the recorder
+
+
+def test_the_latency_probe_measures_the_loopback_on_the_first_50_ms() -> None:
+    from hil.signals.synthesis import BlockSynthesizer
+
+    exp = parse_experiment(DEFAULT_EXPERIMENT)
+    fs = exp.waveform.fs_hz
+    sent = BlockSynthesizer(exp.schedule, fs, amplitude=0.5).render(0, 20_000)
+    monitor = np.concatenate([np.zeros(64), sent])[:20_000]
+    codes = np.stack([np.zeros(20_000), monitor * 16384], axis=1).astype(np.int16)
+    probe = LatencyProbe(exp.schedule, fs, 0.5, 1000, 1.0 / 32768.0, RunCalibrations())
+    assert not probe.add(1000, codes[:5000])
+    assert probe.add(6000, codes[5000:9600])  # 9600 samples = 50 ms at 192 kHz
+    lat, note = probe.measure()
+    assert (lat, note) == (64, "loopback latency 64 samples")
+
+
+def test_the_recorder_holds_telemetry_until_the_recording_exists(tmp_path: Path) -> None:
+    from hil.experiments.live.recorder import RunRecorder
+    from hil.recording.reader import RunRecording
+    from hil.recording.records import RunEvent, StageTelemetry
+    from hil.signals.schedule_file import schedule_document
+
+    exp = parse_experiment(DEFAULT_EXPERIMENT)
+    fs = exp.waveform.fs_hz
+    doc = schedule_document(exp.schedule, fs, 0.0, sound_speed_mps=exp.sound_speed_mps)
+    options = {"fs_hz": fs, "n_channels": 2, "dtype": "int16", "schedule_document": doc}
+    recorder = RunRecorder(tmp_path / "run.h5", options)
+    recorder.telemetry(StageTelemetry(1.0, -1, -1.4, 0.0, "Idle"))
+    recorder.samples(0, np.zeros((10, 2), np.int16))  # before the origin is known: dropped
+    assert not recorder.open_ and not (tmp_path / "run.h5").exists()
+    recorder.open(1064, RunEvent("note", 1000, 64, "loopback latency 64 samples"))
+    recorder.telemetry(StageTelemetry(1.2, 100, -1.5, 0.5, "Run"))
+    recorder.samples(1000, np.ones((100, 2), np.int16))
+    recorder.sync(lambda pairs: pairs.extend([(1000, 0.5), (2000, 0.51)]))
+    recorder.events([("note", 1100, 0, "stop: completed")])
+    recorder.close()
+    with RunRecording.open(tmp_path / "run.h5") as rec:
+        assert [t.position_m for t in rec.telemetry()] == [-1.4, -1.5]
+        assert rec.origin_sample == 1064 and rec.n_samples == 100
+        assert [e.text for e in rec.events()] == ["loopback latency 64 samples", "stop: completed"]
+        assert rec.sync_pairs().sample_index.tolist() == [1000, 2000]
