@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
+from firmware_protocol.errors import TransportError
 from hil.acquisition.device import StreamingDevice
 from hil.devices.stage_errors import StageTimeoutError
 from hil.errors import ConfigError
@@ -106,9 +107,9 @@ class RunDevices:
         clock = self.clock = self.clock or MonotonicClock()  # one for stage, board and run
         stage = self.stage = GrblStage(stage_url, clock=clock).open()
         # The controller's settings and the tow against what it reported (its $$), before
-        # anything moves: the checks `hil stage settings --check` shows, then the plan.
-        raise_first_failure(tow_checks(exp.tow, stage.settings, stage.limits))
+        # anything moves: the plan, then the checks `hil stage settings --check` shows.
         tow = check_tow(exp.tow, stage_limits(stage))
+        raise_first_failure(tow_checks(exp.tow, stage.settings, stage.limits))
         self.board = open_streaming_device(
             board_url, fs, clock, SIM_WATCHDOG_MS if self.tank is not None else WATCHDOG_MS
         )
@@ -119,7 +120,7 @@ class RunDevices:
             stage.make_ready(lambda step: view.update(f"stage: {step}", force=True))
             view.update("stage: positioning for the first pass", force=True)
             stage.move_to(tow.ready_m, stage.settings.max_rate)
-        except (OSError, StageTimeoutError) as exc:
+        except (OSError, TransportError, StageTimeoutError) as exc:
             raise self.stage_lost(stage_url, exc) from exc
         return tow
 

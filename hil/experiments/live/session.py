@@ -14,6 +14,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import partial
 
+from firmware_protocol.errors import TransportError
 from hil.acquisition.capture import CapturedBlock, CaptureLoop
 from hil.acquisition.feed import ReceiverFeed
 from hil.estimation.base import Estimate, Receiver
@@ -198,7 +199,7 @@ class LiveSession:
                 StageTelemetry(st.host_time, idx, st.position, st.velocity, st.state.name)
             )
             self.tow.on_report(st, self.now(), capturing=self.recorder.open_)
-        except (OSError, StageTimeoutError) as exc:
+        except (OSError, TransportError, StageTimeoutError) as exc:
             raise self.devices.stage_lost(self.exp.stage_url, exc) from exc
 
     def _tail_captured(self) -> bool:
