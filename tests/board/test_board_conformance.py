@@ -231,6 +231,27 @@ def test_float32_dac_data_converts_to_adc_counts_as_spec_6_3_states(
     assert adc.samples()[6:, 0].tolist() == [0] * (adc.sample_count - 6)
 
 
+@pytest.mark.parametrize(
+    ("dac_mask", "adc_mask", "expected"),
+    [(0b10, 0b01, [[1000]]), (0b01, 0b11, [[1000, 0]]), (0b11, 0b10, [[1000]])],
+)
+def test_the_loopback_world_matches_channels_by_position(
+    make_device: Callable[[], Device], dac_mask: int, adc_mask: int, expected: list[list[int]]
+) -> None:
+    """SPEC 6.3: the j-th enabled ADC channel reads the j-th enabled DAC channel, else 0;
+    an INT16 DAC count c reads c * 256 on an INT24 ADC."""
+    device, h = make_device(), Host()
+    device.step(0, h.frame(Hello(2, 0, SCHEMA_HASH)))
+    int16, int24 = SampleFormat.INT16, SampleFormat.INT24
+    device.step(1 * MS, h.frame(Configure(48_000, dac_mask, adc_mask, int16, int24)))
+    n_dac = bin(dac_mask).count("1")
+    samples = np.tile(np.array([1000, -7][:n_dac], dtype=np.int16), (4, 1))
+    device.step(2 * MS, h.frame(DacData.from_array(idx(5), dac_mask, int16, samples)))
+    device.step(3 * MS, h.frame(Start(idx(5))))
+    [adc] = [m for m in messages(device.step(6 * MS, b"")) if isinstance(m, AdcData)]
+    assert adc.samples()[:4].tolist() == [[256 * v for v in expected[0]]] * 4
+
+
 def _nak_frame(code: int, detail: bytes, seq: int = 7) -> bytes:
     payload = bytes([3, 0, Stop.TYPE_ID, code, len(detail)]) + detail
     return encode_frame(Nak.TYPE_ID, payload, seq)
