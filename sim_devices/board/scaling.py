@@ -23,6 +23,17 @@ def to_full_scale(samples: npt.NDArray[Any], fmt: SampleFormat) -> npt.NDArray[n
     return samples * (1.0 / _FULL_SCALE[fmt])
 
 
+def _rounded_counts(values: npt.NDArray[np.floating], scale: float) -> npt.NDArray[np.float64]:
+    """``values * scale`` rounded half to even (SPEC 6.3), NaN (a FLOAT32 DAC stream) as 0.
+
+    >>> _rounded_counts(np.array([0.5, 1.5, -2.5, np.nan]), 1.0).tolist()
+    [0.0, 2.0, -2.0, 0.0]
+    """
+    counts = np.rint(np.asarray(values, dtype=np.float64) * scale)
+    counts[np.isnan(counts)] = 0.0
+    return counts
+
+
 def from_full_scale(values: npt.NDArray[np.floating], fmt: SampleFormat) -> npt.NDArray[Any]:
     """Full-scale floats as wire samples of ``fmt``, rounded and clipped (ADC clipping).
 
@@ -32,7 +43,7 @@ def from_full_scale(values: npt.NDArray[np.floating], fmt: SampleFormat) -> npt.
     if fmt is SampleFormat.FLOAT32:
         return values.astype(np.float32)
     scale = _FULL_SCALE[fmt]
-    counts = np.rint(values * scale)
+    counts = _rounded_counts(values, scale)
     np.clip(counts, -scale, scale - 1, out=counts)
     return counts.astype(np.int16 if fmt is SampleFormat.INT16 else np.int32)
 
@@ -49,7 +60,7 @@ def from_full_scale_clipped(
     if fmt is SampleFormat.FLOAT32:
         return values.astype(np.float32), False
     scale = _FULL_SCALE[fmt]
-    counts = np.rint(values * scale)
+    counts = _rounded_counts(values, scale)
     clipped = bool(np.any(counts > scale - 1) or np.any(counts < -scale))
     np.clip(counts, -scale, scale - 1, out=counts)
     return counts.astype(np.int16 if fmt is SampleFormat.INT16 else np.int32), clipped

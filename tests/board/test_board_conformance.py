@@ -23,6 +23,7 @@ import pytest
 from firmware_protocol import (
     NEED_DATA,
     SCHEMA_HASH,
+    AdcData,
     Configure,
     Connection,
     Credit,
@@ -37,6 +38,8 @@ from firmware_protocol import (
     State,
     Status,
     Stop,
+    Sync,
+    cobs,
     conversations,
 )
 from firmware_protocol.conversations import (
@@ -49,8 +52,9 @@ from firmware_protocol.conversations import (
     idx,
     same_output,
 )
+from firmware_protocol.framing import encode_frame
 from sim_devices.board import c_firmware
-from sim_devices.board.stepper import PythonBoardStepper
+from sim_devices.board.stepper import PythonBoardStepper, conversation_spec
 
 DOC: dict[str, Any] = json.loads(CONVERSATIONS_PATH.read_text(encoding="utf-8"))
 IMPLS = ("python", "c")
@@ -165,6 +169,113 @@ def test_watchdog_fires_once_then_waits_for_a_keepalive(
     out = [m for t in range(3, 40) for m in messages(device.step(t * MS, b""))]
     fired = [m for m in out if isinstance(m, Status) and m.alarms & 0x2]
     assert len(fired) == 1 and fired[0].sample_index == idx(12)
+
+
+def test_a_short_hello_in_a_session_is_refused_and_the_session_goes_on(
+    make_device: Callable[[], Device],
+) -> None:
+    device, h = configured(make_device)
+    [nak] = messages(device.step(2 * MS, h.frame(Hello(2, 0, SCHEMA_HASH), payload=b"\x02\x00")))
+    assert (nak.ref_seq, nak.ref_type, nak.code) == (2, Hello.TYPE_ID, NakCode.BAD_PAYLOAD)
+    assert messages(device.step(3 * MS, h.dac(idx(10), 10))) == []  # still configured
+
+
+def test_a_refused_configure_keeps_the_clock_at_the_acknowledged_rate(
+    make_device: Callable[[], Device],
+) -> None:
+    device, h = configured(make_device)  # 48 kHz from 1 ms; SYNC sent with the ACK
+    device.step(
+        2 * MS, h.frame(Configure(12345, 0b11, 0b11, SampleFormat.INT16, SampleFormat.INT16))
+    )
+    [sync] = [m for m in messages(device.step(150 * MS, b"")) if isinstance(m, Sync)]
+    assert (sync.sample_index, sync.board_time_ns) == (idx(150), 150 * MS)
+
+
+def test_the_watchdog_status_leaves_the_status_timer_alone(
+    make_device: Callable[[], Device],
+) -> None:
+    device, h = configured(make_device)  # periodic STATUS at 1 ms, next due at 251 ms
+    device.step(2 * MS, h.frame(Keepalive(10)))
+    [fired] = [m for m in messages(device.step(13 * MS, b"")) if isinstance(m, Status)]
+    assert (fired.alarms, fired.sample_index) == (0x2, idx(12))
+    assert [m for m in messages(device.step(250 * MS, b"")) if isinstance(m, Status)] == []
+    [periodic] = [m for m in messages(device.step(251 * MS, b"")) if isinstance(m, Status)]
+    assert (periodic.alarms, periodic.sample_index) == (0, idx(251))
+
+
+@pytest.mark.parametrize(
+    ("adc_format", "full_scale"), [(SampleFormat.INT16, 32768), (SampleFormat.INT24, 8388608)]
+)
+def test_float32_dac_data_converts_to_adc_counts_as_spec_6_3_states(
+    make_device: Callable[[], Device], adc_format: SampleFormat, full_scale: int
+) -> None:
+    """NaN reads 0 unclipped, +-inf and +1.0 clip, halves round to even (both boards)."""
+    board = dict(conversations.BOARD, formats=["INT16", "INT24", "FLOAT32"])
+    maker = (
+        (lambda: PythonBoardStepper(conversation_spec(board)))
+        if make_device is PythonBoardStepper
+        else (lambda: c_firmware.CBoardStepper(board))
+    )
+    device, h = maker(), Host()
+    device.step(0, h.frame(Hello(2, 0, SCHEMA_HASH)))
+    device.step(1 * MS, h.frame(Configure(48_000, 0b01, 0b01, SampleFormat.FLOAT32, adc_format)))
+    values = [np.nan, 1.0, -np.inf, -1.0, 2.5 / full_scale, -2.5 / full_scale]
+    samples = np.array(values, dtype=np.float32).reshape(-1, 1)
+    device.step(2 * MS, h.frame(DacData.from_array(idx(5), 0b01, SampleFormat.FLOAT32, samples)))
+    device.step(3 * MS, h.frame(Start(idx(5))))
+    out = messages(device.step(6 * MS, b""))
+    [adc] = [m for m in out if isinstance(m, AdcData)]
+    assert adc.first_sample_index == idx(5)
+    expected = [0, full_scale - 1, -full_scale, -full_scale, 2, -2]
+    assert adc.samples()[:6, 0].tolist() == expected
+    assert adc.samples()[6:, 0].tolist() == [0] * (adc.sample_count - 6)
+
+
+@pytest.mark.parametrize(
+    ("dac_mask", "adc_mask", "expected"),
+    [(0b10, 0b01, [[1000]]), (0b01, 0b11, [[1000, 0]]), (0b11, 0b10, [[1000]])],
+)
+def test_the_loopback_world_matches_channels_by_position(
+    make_device: Callable[[], Device], dac_mask: int, adc_mask: int, expected: list[list[int]]
+) -> None:
+    """SPEC 6.3: the j-th enabled ADC channel reads the j-th enabled DAC channel, else 0;
+    an INT16 DAC count c reads c * 256 on an INT24 ADC."""
+    device, h = make_device(), Host()
+    device.step(0, h.frame(Hello(2, 0, SCHEMA_HASH)))
+    int16, int24 = SampleFormat.INT16, SampleFormat.INT24
+    device.step(1 * MS, h.frame(Configure(48_000, dac_mask, adc_mask, int16, int24)))
+    n_dac = bin(dac_mask).count("1")
+    samples = np.tile(np.array([1000, -7][:n_dac], dtype=np.int16), (4, 1))
+    device.step(2 * MS, h.frame(DacData.from_array(idx(5), dac_mask, int16, samples)))
+    device.step(3 * MS, h.frame(Start(idx(5))))
+    [adc] = [m for m in messages(device.step(6 * MS, b"")) if isinstance(m, AdcData)]
+    assert adc.samples()[:4].tolist() == [[256 * v for v in expected[0]]] * 4
+
+
+def _nak_frame(code: int, detail: bytes, seq: int = 7) -> bytes:
+    payload = bytes([3, 0, Stop.TYPE_ID, code, len(detail)]) + detail
+    return encode_frame(Nak.TYPE_ID, payload, seq)
+
+
+def test_nak_frames_are_compared_by_fields_and_the_detail_is_free() -> None:
+    expected = _nak_frame(3, b"a Python board's long explanation")
+    assert same_output(expected, _nak_frame(3, b"short"))
+    assert same_output(expected, _nak_frame(3, b""))
+    assert not same_output(expected, _nak_frame(2, b"short"))  # another code
+    assert not same_output(expected, _nak_frame(3, b"short", seq=8))  # another seq
+    assert not same_output(expected, _nak_frame(3, b"\xff\xfe"))  # not UTF-8
+    damaged = bytearray(cobs.decode(_nak_frame(3, b"short")[:-1]))
+    damaged[-1] ^= 1  # a wrong CRC
+    assert not same_output(expected, cobs.encode(bytes(damaged)) + b"\0")
+    too_long = _nak_frame(3, b"short")
+    assert not same_output(expected, too_long + too_long)  # one frame more
+
+
+def test_frames_other_than_nak_are_compared_byte_for_byte() -> None:
+    a = encode_frame(Stop.TYPE_ID + 0x2E, bytes([7, 0, Stop.TYPE_ID]), 4)  # ACK of STOP
+    b = encode_frame(Stop.TYPE_ID + 0x2E, bytes([8, 0, Stop.TYPE_ID]), 4)
+    assert same_output(a, b"\0" + a)  # an extra delimiter is an empty frame
+    assert not same_output(a, b)
 
 
 # --- differential fuzz ----------------------------------------------------------------------
