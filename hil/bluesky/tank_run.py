@@ -8,9 +8,10 @@ and report figures, as ``hil tank-run`` does. Its reading is the run's data:
 - ``recording``: the path of the run's ``run.h5`` (the samples, telemetry, estimates);
 - summary figures: estimates, scored estimates, range and speed RMSE (m, m/s), detection
   rate, dropped samples, loopback latency (samples);
-- the stage telemetry the run recorded (``stage_time_s``, ``stage_position_m``: the towed
-  pass as the stage reported it) and the estimates (``estimate_time_s``,
-  ``estimate_range_m``, ``estimate_speed_mps``), as 1-D arrays.
+- the stage telemetry the run recorded (``stage_time_s`` on the driver's clock,
+  ``stage_position_m``, ``stage_velocity_mps``: the towed pass as the stage reported it)
+  and the estimates (``estimate_time_s``, ``estimate_range_m``, ``estimate_speed_mps``),
+  as 1-D arrays.
 
 A run that fails after it started (an alarm, a stalled board) still reports what it
 recorded, and its status fails with the run's error, so the RunEngine ends the bluesky run
@@ -94,6 +95,7 @@ class TankRunDetector(StandardReadable, Triggerable):
             for signal, units in (
                 ("stage_time_s", "s"),
                 ("stage_position_m", "m"),
+                ("stage_velocity_mps", "m/s"),
                 ("estimate_time_s", "s"),
                 ("estimate_range_m", "m"),
                 ("estimate_speed_mps", "m/s"),
@@ -162,6 +164,7 @@ class TankRunDetector(StandardReadable, Triggerable):
         tel, est = outcome.telemetry, outcome.estimates
         put["stage_time_s"](np.asarray(tel.host_time_s, dtype=np.float64))
         put["stage_position_m"](np.asarray(tel.position_m, dtype=np.float64))
+        put["stage_velocity_mps"](np.asarray(tel.velocity_mps, dtype=np.float64))
         put["estimate_time_s"](np.array([e.t_s for e in est], dtype=np.float64))
         put["estimate_range_m"](np.array([e.range_m for e in est], dtype=np.float64))
         put["estimate_speed_mps"](np.array([e.speed_mps for e in est], dtype=np.float64))
