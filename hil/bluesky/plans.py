@@ -4,7 +4,10 @@
 and the devices in its metadata, a descriptor and an event with the run's data (the
 :class:`~hil.bluesky.tank_run.TankRunDetector` reading: the recording, its summary figures,
 the stage telemetry of the pass and the estimates), and a stop document whose
-``exit_status`` is ``"fail"`` with the run's error when the tank run failed.
+``exit_status`` is ``"fail"`` with the run's error when the tank run failed. A run that
+stopped after it started (an alarm, the board's watchdog, ``run.max_duration_s``) still has
+its event, with what it recorded and its ``error``; one refused before it started (a missing
+calibration, a tow outside the stage's limits) has none.
 """
 
 from __future__ import annotations
@@ -14,9 +17,9 @@ from typing import Any
 
 import bluesky.plan_stubs as bps
 import bluesky.preprocessors as bpp
-from bluesky.utils import Msg
+from bluesky.utils import FailedStatus, Msg
 
-from hil.bluesky.tank_run import TankRunDetector
+from hil.bluesky.tank_run import TankRunDetector, TankRunError
 
 
 def towed_pass(
@@ -54,6 +57,18 @@ def towed_pass(
     @bpp.stage_decorator([run])
     @bpp.run_decorator(md=metadata)
     def inner() -> Generator[Msg, Any, None]:
-        yield from bps.trigger_and_read([run])
+        failure: FailedStatus | None = None
+        try:
+            yield from bps.trigger(run, wait=True)
+        except FailedStatus as exc:
+            if not isinstance(exc.__cause__, TankRunError):
+                raise  # refused before it started: nothing was recorded
+            failure = exc
+        # A run that stopped after it started still recorded: its event is saved first.
+        yield from bps.create("primary")
+        yield from bps.read(run)
+        yield from bps.save()
+        if failure is not None:
+            raise failure
 
     yield from inner()

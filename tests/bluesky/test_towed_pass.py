@@ -105,3 +105,30 @@ def test_a_run_refused_before_it_starts_fails_the_bluesky_run_with_the_reason(
     assert docs[-1][1]["exit_status"] == "fail"
     assert "latency" in docs[-1][1]["reason"]
     assert run.outcome is None  # nothing ran
+
+
+@pytest.mark.slow
+def test_a_run_that_stops_after_it_started_keeps_its_event_and_fails_the_bluesky_run(
+    run_engine: Any, tmp_path: Path
+) -> None:
+    from bluesky.run_engine import call_in_bluesky_event_loop
+    from bluesky.utils import FailedStatus
+
+    from hil.bluesky import TankRunDetector, towed_pass
+    from hil.bluesky.tank_run import TankRunError
+
+    # The run stops with an error 1.5 s (simulated) into its capture, before the pass ends
+    # (about 2.5 s): late enough that the recording has started (0.05 s of capture).
+    text = SHORT.replace('output_dir = "runs"', 'output_dir = "runs"\nmax_duration_s = 1.5')
+    run = TankRunDetector(parse_experiment(text), runs_dir=tmp_path, report=False, name="tank")
+    call_in_bluesky_event_loop(run.connect())
+    docs: list[tuple[str, dict[str, Any]]] = []
+    with pytest.raises(FailedStatus) as err:
+        run_engine(towed_pass(run), _collect(docs))
+    assert isinstance(err.value.__cause__, TankRunError)
+    assert [n for n, _ in docs] == ["start", "descriptor", "event", "stop"]
+    data, stop = docs[2][1]["data"], docs[3][1]
+    assert data["tank-error"] == "RuntimeError: run.max_duration_s = 1.5 s exceeded"
+    assert Path(data["tank-recording"]).exists()  # what was recorded until the error
+    assert stop["exit_status"] == "fail"
+    assert "run.max_duration_s = 1.5 s exceeded" in stop["reason"]
