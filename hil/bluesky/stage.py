@@ -86,6 +86,7 @@ class GrblStageDevice(StandardReadable, Movable[float], Stoppable):
             url, clock=clock, soft_limits=soft_limits, transport_options=transport_options
         )
         self._opened = False
+        self._mock_mode = False
         self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"grbl-{url}")
         with self.add_children_as_readables(Format.HINTED_SIGNAL):
             self.position, self._set_position = soft_signal_r_and_setter(float, math.nan, units="m")
@@ -109,6 +110,7 @@ class GrblStageDevice(StandardReadable, Movable[float], Stoppable):
         """Connect the signals, then (not in mock mode) open the controller: reset, ``$$``
         settings, a status report."""
         await super().connect(mock=mock, timeout=timeout, force_reconnect=force_reconnect)
+        self._mock_mode = bool(mock)
         if mock or (self._opened and not force_reconnect):
             return
         if self._opened:
@@ -191,6 +193,12 @@ class GrblStageDevice(StandardReadable, Movable[float], Stoppable):
         return await asyncio.get_running_loop().run_in_executor(self._executor, func)
 
     def _require_open(self) -> None:
+        if self._mock_mode:
+            raise StageError(
+                f"{self.name or 'the stage'} ({self.url}) is connected in mock mode: it has no"
+                " controller to move; for a simulated stage connect it for real to"
+                " sim://stage (or sim://stage?via=memory)"
+            )
         if not self._opened:
             raise StageError(
                 f"{self.name or 'the stage'} ({self.url}) is not connected: await"

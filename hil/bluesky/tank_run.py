@@ -49,6 +49,23 @@ _FIGURES: tuple[tuple[str, str, type, str], ...] = (
 )
 
 
+def unused_folder(base: Path) -> Path:
+    """``base`` if it does not exist, else the first of ``base-2``, ``base-3``, ... that
+    does not.
+
+    >>> import tempfile
+    >>> root = Path(tempfile.mkdtemp())
+    >>> (root / "run").mkdir(); (root / "run-2").mkdir()
+    >>> unused_folder(root / "run").name, unused_folder(root / "other").name
+    ('run-3', 'other')
+    """
+    folder, k = base, 1
+    while folder.exists():
+        k += 1
+        folder = base.with_name(f"{base.name}-{k}")
+    return folder
+
+
 class TankRunError(RuntimeError):
     """A tank run that stopped with an error or was interrupted (the message says which);
     what it recorded until then is in the detector's reading."""
@@ -123,11 +140,7 @@ class TankRunDetector(StandardReadable, Triggerable):
         base = self.experiment.new_run_folder()
         if self._runs_dir is not None:
             base = self._runs_dir / base.name
-        folder, k = base, 1
-        while folder.exists():
-            k += 1
-            folder = base.with_name(f"{base.name}-{k}")
-        return folder
+        return unused_folder(base)
 
     @AsyncStatus.wrap
     async def trigger(self) -> None:

@@ -137,3 +137,20 @@ def test_a_move_before_connect_says_to_connect(run_engine: Any) -> None:
 
     with pytest.raises(StageError, match=r"sim://stage\?via=memory\) is not connected"):
         call_in_bluesky_event_loop(move())
+
+
+def test_a_stage_connected_in_mock_mode_refuses_to_move_and_says_what_to_use(
+    run_engine: Any,
+) -> None:
+    from bluesky.run_engine import call_in_bluesky_event_loop
+
+    from hil.devices.stage_errors import StageError
+
+    stage = _stage(ManualClock())
+
+    async def move() -> None:
+        await stage.connect(mock=True)
+        await stage.set(-0.01)
+
+    with pytest.raises(StageError, match=r"mock mode: .* connect it for real to sim://stage"):
+        call_in_bluesky_event_loop(move())
