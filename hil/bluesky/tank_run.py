@@ -49,23 +49,6 @@ _FIGURES: tuple[tuple[str, str, type, str], ...] = (
 )
 
 
-def unused_folder(base: Path) -> Path:
-    """``base`` if it does not exist, else the first of ``base-2``, ``base-3``, ... that
-    does not.
-
-    >>> import tempfile
-    >>> root = Path(tempfile.mkdtemp())
-    >>> (root / "run").mkdir(); (root / "run-2").mkdir()
-    >>> unused_folder(root / "run").name, unused_folder(root / "other").name
-    ('run-3', 'other')
-    """
-    folder, k = base, 1
-    while folder.exists():
-        k += 1
-        folder = base.with_name(f"{base.name}-{k}")
-    return folder
-
-
 class TankRunError(RuntimeError):
     """A tank run that stopped with an error or was interrupted (the message says which);
     what it recorded until then is in the detector's reading."""
@@ -135,12 +118,15 @@ class TankRunDetector(StandardReadable, Triggerable):
         return signal
 
     def new_run_folder(self) -> Path:
-        """A folder for the next run that does not exist yet (two runs in one second get
-        ``-2``, ``-3``, ... suffixes)."""
-        base = self.experiment.new_run_folder()
-        if self._runs_dir is not None:
-            base = self._runs_dir / base.name
-        return unused_folder(base)
+        """A new, empty folder for the next run (two runs in one second get ``-2``, ``-3``,
+        ... suffixes; :func:`hil.experiments.live.plan.new_run_folder`)."""
+        import datetime as dt
+
+        from hil.experiments.live.plan import new_run_folder
+
+        exp = self.experiment
+        out_dir = self._runs_dir if self._runs_dir is not None else exp.output_dir
+        return new_run_folder(out_dir, exp.name, None, dt.datetime.now())
 
     @AsyncStatus.wrap
     async def trigger(self) -> None:

@@ -136,14 +136,11 @@ def test_a_run_that_stops_after_it_started_keeps_its_event_and_fails_the_bluesky
 
 def test_each_trigger_gets_a_new_run_folder_under_runs_dir(tmp_path: Path) -> None:
     from hil.bluesky import TankRunDetector
-    from hil.bluesky.tank_run import unused_folder
 
     run = TankRunDetector(parse_experiment(SHORT), runs_dir=tmp_path, name="tank")
-    folder = run.new_run_folder()
-    assert folder.parent == tmp_path and folder.name.startswith("bluesky-pass-")
-    assert not folder.exists()
-    # Two runs stamped in the same second: the second gets a suffix.
-    (tmp_path / "pass").mkdir()
-    assert unused_folder(tmp_path / "pass") == tmp_path / "pass-2"
-    (tmp_path / "pass-2").mkdir()
-    assert unused_folder(tmp_path / "pass") == tmp_path / "pass-3"
+    first = run.new_run_folder()
+    second = run.new_run_folder()
+    # New and empty, under runs_dir; two stamped in the same second get a suffix.
+    assert first.parent == tmp_path and first.name.startswith("bluesky-pass-")
+    assert first.is_dir() and not any(first.iterdir())
+    assert second != first and second.parent == tmp_path
