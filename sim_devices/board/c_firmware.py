@@ -368,6 +368,21 @@ class CFirmwareBoardOnPty:
         self.endpoint.close()
 
 
+def stop_process(process: subprocess.Popen[str]) -> None:
+    """Terminate a child (killed if it has not ended 5 s later) and close its pipes;
+    idempotent."""
+    if process.poll() is None:
+        process.terminate()
+        try:
+            process.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+    for stream in (process.stdout, process.stderr):
+        if stream is not None:
+            stream.close()
+
+
 class CFirmwareOnPty:
     """The C firmware's pty server (``casfw-pty``) in a child process, in real time.
 
@@ -392,16 +407,7 @@ class CFirmwareOnPty:
 
     def close(self) -> None:
         """Stop the server (idempotent)."""
-        if self.process.poll() is None:
-            self.process.terminate()
-            try:
-                self.process.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                self.process.kill()
-                self.process.wait()
-        for stream in (self.process.stdout, self.process.stderr):
-            if stream is not None:
-                stream.close()
+        stop_process(self.process)
 
     def __enter__(self) -> CFirmwareOnPty:
         return self

@@ -15,7 +15,12 @@ import shutil
 import subprocess
 from types import TracebackType
 
-from sim_devices.board.c_firmware import BUILD_DIR, FIRMWARE_DIR, CFirmwareUnavailable
+from sim_devices.board.c_firmware import (
+    BUILD_DIR,
+    FIRMWARE_DIR,
+    CFirmwareUnavailable,
+    stop_process,
+)
 
 IMAGE = BUILD_DIR / "arm" / "casfw-mps2-an386.elf"
 """The Cortex-M4 image."""
@@ -85,16 +90,7 @@ class QemuBoard:
 
     def close(self) -> None:
         """Stop QEMU (idempotent)."""
-        if self.process.poll() is None:
-            self.process.terminate()
-            try:
-                self.process.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                self.process.kill()
-                self.process.wait()
-        for stream in (self.process.stdout, self.process.stderr):
-            if stream is not None:
-                stream.close()
+        stop_process(self.process)
 
     def __enter__(self) -> QemuBoard:
         return self
