@@ -15,9 +15,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from hil.errors import ConfigError
 from hil.recording import RunRecording
+from hil.recording.records import StageTelemetry, SyncPairs
 from hil.watch.truth import Geometry, TruthCurve, true_boundaries, truth_curve
 
 SEVERITY: dict[str, str] = {
@@ -48,6 +50,28 @@ def json_floats(values: Iterable[float]) -> list[float | None]:
 
 def _thin(n: int) -> slice:
     return slice(None, None, max(1, -(-n // MAX_CURVE_POINTS)))
+
+
+def telemetry_sample_index(
+    telemetry: list[StageTelemetry], sync: SyncPairs, fs_hz: float
+) -> NDArray[np.float64]:
+    """Board sample index (float) of every stage report, shape ``(n,)``; -1 where unknown.
+
+    With SYNC pairs recorded, the reports' host times are mapped by the least-delayed pair
+    (:func:`hil.experiments.tank_run.sample_zero_time_s`, as ``hil tank-run`` maps them for
+    its truth when the run ends): the sample index the run recorded beside each report comes
+    from the live clock fit, which every late SYNC drags late, so the truth would lead the
+    estimates by the host's backlog. Without pairs, the recorded index is used.
+    """
+    from hil.experiments.tank_run import sample_zero_time_s
+
+    recorded = np.array([r.sample_index for r in telemetry], dtype=np.float64)
+    pairs = list(zip(sync.sample_index.tolist(), sync.host_time_s.tolist(), strict=True))
+    offset = sample_zero_time_s(pairs, fs_hz)
+    if offset is None:
+        return np.where(recorded >= 0, recorded, -1.0)
+    host = np.array([r.host_time_s for r in telemetry], dtype=np.float64)
+    return (host - offset) * fs_hz
 
 
 def _geometry(experiment_toml: str) -> tuple[Geometry | None, str, str]:
@@ -203,14 +227,16 @@ class WatchData:
             return None
         with self._lock:
             telemetry = self._rec.telemetry()
+            sync = self._rec.sync_pairs()
             origin = self._rec.origin_sample
             fs = self._rec.fs_hz
-        mapped = [t for t in telemetry if t.sample_index >= 0]
-        if len(mapped) < 2:
+        index = telemetry_sample_index(telemetry, sync, fs)
+        mapped = index >= 0
+        if mapped.sum() < 2:
             return None
-        t = (np.array([r.sample_index for r in mapped], dtype=np.float64) - origin) / fs
-        x = np.array([r.position_m for r in mapped], dtype=np.float64)
-        v = np.array([r.velocity_mps for r in mapped], dtype=np.float64)
+        t = (index[mapped] - origin) / fs
+        x = np.array([r.position_m for r in telemetry], dtype=np.float64)[mapped]
+        v = np.array([r.velocity_mps for r in telemetry], dtype=np.float64)[mapped]
         return truth_curve(self._geometry, t, x, v)
 
     def truth(self) -> dict[str, Any]:

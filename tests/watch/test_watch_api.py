@@ -219,3 +219,25 @@ def test_serves_the_saved_map_beside_the_recording(recorder: Any) -> None:
 def test_the_page_fetches_nothing_from_outside() -> None:
     html = page_html().decode()
     assert "http://" not in html and "https://" not in html and "src=" not in html
+
+
+def test_truth_times_from_the_least_delayed_sync_pair(recorder: Any) -> None:
+    # SYNC pairs late by 30, 2 and 50 ms after board sample 0 at host time 10 s: the
+    # least-delayed one puts sample 0 at 10.002 s. The reports' recorded indices (from a
+    # live fit) are ignored once pairs exist: a report at host time h is at board sample
+    # (h - 10.002) * fs.
+    w = recorder.writer
+    for index, late in ((100_000, 0.030), (200_000, 0.002), (300_000, 0.050)):
+        w.append_sync(index, 10.0 + index / FS + late)
+    for host_t, x in ((11.0, -2.0), (12.0, -3.0)):
+        w.append_telemetry(StageTelemetry(host_t, 0, x, -1.0, "Run"))
+    w.flush()
+    data = WatchData.open(recorder.path)
+    try:
+        t = data.truth()
+    finally:
+        data.close()
+    # Host 11 s: board sample 99 800, receiver time (99 800 - ORIGIN) / FS = 0.988 s.
+    assert t["t_s"] == pytest.approx([0.988, 1.988])
+    assert t["range_m"] == pytest.approx([8.5, 7.5])
+    assert t["speed_mps"] == pytest.approx([1.0, 1.0])

@@ -2,11 +2,21 @@
 
 from __future__ import annotations
 
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import urllib.request
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from hil.cli.main import main
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_help_says_defaults_and_units(capsys: pytest.CaptureFixture[str]) -> None:
@@ -71,3 +81,29 @@ def test_a_damaged_recording(tmp_path: Path, capsys: pytest.CaptureFixture[str])
         f"hil watch: error: RUN (recording) = {str(path)!r} is not allowed: must be a readable "
         "hil run recording; it is damaged or incomplete ("
     )
+
+
+def test_the_command_serves_a_recording_until_interrupted(recorder: Any) -> None:
+    recorder.writer.append_estimates([recorder.estimate(i) for i in range(4)])
+    recorder.writer.flush()
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    cmd = [sys.executable, "-m", "hil.cli.main", "watch", str(recorder.path), "--port", "0"]
+    with subprocess.Popen(
+        cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    ) as proc:
+        try:
+            assert proc.stdout is not None and proc.stderr is not None
+            line = proc.stdout.readline()
+            match = re.fullmatch(
+                r"watching (.+) at (http://127\.0\.0\.1:\d+/)  \(Ctrl-C to stop\)\n", line
+            )
+            assert match is not None, line
+            assert match.group(1) == str(recorder.path)
+            with urllib.request.urlopen(match.group(2) + "api/state", timeout=60) as r:
+                assert json.loads(r.read())["counts"]["estimates"] == 4
+            proc.send_signal(signal.SIGINT)
+            assert proc.wait(timeout=60) == 0
+            assert proc.stderr.read() == "stopped\n"
+        finally:
+            if proc.poll() is None:
+                proc.kill()

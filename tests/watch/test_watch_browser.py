@@ -1,0 +1,103 @@
+"""The watch page in a real headless browser (chromium through chromedriver and selenium):
+it loads, follows a recording while the test's writer appends to it, and highlights an
+alarm. Each step waits on a DOM condition (WebDriverWait), never on the wall clock.
+
+Skipped when chromium, chromedriver or selenium is missing; with HIL_REQUIRE_SYSTEM_DEPS=1
+(.ci/run) that fails instead.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import shutil
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import numpy as np
+import pytest
+
+from hil.recording.records import RunEvent, StageTelemetry
+from hil.watch import WatchData, WatchServer
+
+WAIT_S = 60.0
+"""Longest wait for a DOM condition (generous: both cores may be busy)."""
+
+
+def _chromium() -> str | None:
+    return shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+@pytest.fixture
+def browser(require_system: Callable[[bool, str], None]) -> Iterator[Any]:
+    """A headless chromium driven by selenium."""
+    require_system(
+        importlib.util.find_spec("selenium") is not None,
+        "selenium is not installed (pip install '.[test]')",
+    )
+    require_system(_chromium() is not None, "chromium is not installed (apt-get install chromium)")
+    require_system(
+        shutil.which("chromedriver") is not None,
+        "chromedriver is not installed (apt-get install chromium-driver)",
+    )
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    options = webdriver.ChromeOptions()
+    options.binary_location = str(_chromium())
+    for arg in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage", "--disable-gpu"):
+        options.add_argument(arg)
+    options.add_argument("--window-size=1400,1000")
+    driver = webdriver.Chrome(service=Service(str(shutil.which("chromedriver"))), options=options)
+    driver.set_page_load_timeout(WAIT_S)
+    try:
+        yield driver
+    finally:
+        driver.quit()
+
+
+def _text(driver: Any, element_id: str) -> str:
+    from selenium.webdriver.common.by import By
+
+    return str(driver.find_element(By.ID, element_id).text)
+
+
+def test_page_follows_a_recording_and_highlights_an_alarm(browser: Any, recorder: Any) -> None:
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    wait = WebDriverWait(browser, WAIT_S)
+    writer, origin = recorder.writer, recorder.origin
+    writer.append_samples(origin, np.zeros(50_000, np.int16))
+    for k in range(3):
+        writer.append_telemetry(StageTelemetry(0.2 * k, origin + 20_000 * k, -2.0, -1.5, "Run"))
+    writer.append_estimates([recorder.estimate(i) for i in range(5)])
+    writer.flush()
+
+    server = WatchServer(WatchData.open(recorder.path)).start()
+    try:
+        browser.get(server.url)
+        assert browser.title == "hil watch"
+        wait.until(lambda d: _text(d, "estimate-count") == "5")
+        assert _text(browser, "file") == "run.h5"
+        assert _text(browser, "stage-state") == "Run"
+        assert _text(browser, "alarm-count") == "0"
+        assert browser.find_elements(By.CSS_SELECTOR, "#events li.alarm") == []
+        assert not browser.find_element(By.ID, "error").is_displayed()
+
+        # The run goes on: more samples, estimates and an alarm, flushed as the writer does.
+        writer.append_samples(origin + 50_000, np.zeros(50_000, np.int16))
+        writer.append_estimates([recorder.estimate(i) for i in range(5, 12)])
+        writer.append_event(RunEvent("alarm", origin + 80_000, 0, "watchdog: host silent"))
+        writer.flush()
+        wait.until(lambda d: _text(d, "estimate-count") == "12")
+        wait.until(lambda d: d.find_elements(By.CSS_SELECTOR, "#events li.alarm"))
+        alarm = browser.find_element(By.CSS_SELECTOR, "#events li.alarm")
+        assert "ALARM" in alarm.text and "watchdog: host silent" in alarm.text
+        assert alarm.value_of_css_property("background-color") == "rgba(255, 221, 221, 1)"
+        assert _text(browser, "alarm-count") == "1"
+        assert _text(browser, "board-recorded") == "1.00 s (100000 samples)"
+        # The page's own copy of the estimates: every row once, in order.
+        times = browser.execute_script("return est.t;")
+        assert times == pytest.approx([0.5 + 0.01 * i for i in range(12)])
+    finally:
+        server.close()
