@@ -9,13 +9,21 @@ Skipped when chromium, chromedriver or selenium is missing; with HIL_REQUIRE_SYS
 from __future__ import annotations
 
 import importlib.util
+import os
 import shutil
+import signal
+import subprocess
+import sys
+import time
 from collections.abc import Callable, Iterator
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 
+from hil.errors import ConfigError
+from hil.experiments.experiment import DEFAULT_EXPERIMENT
 from hil.recording.records import RunEvent, StageTelemetry
 from hil.watch import WatchData, WatchServer
 
@@ -101,3 +109,56 @@ def test_page_follows_a_recording_and_highlights_an_alarm(browser: Any, recorder
         assert times == pytest.approx([0.5 + 0.01 * i for i in range(12)])
     finally:
         server.close()
+
+
+def _watchable(h5: Path) -> WatchData | None:
+    """The live recording opened for watching, or None while ``hil tank-run`` has not yet
+    created it in SWMR mode (the file appears before its groups are written)."""
+    if not h5.exists():
+        return None
+    try:
+        return WatchData.open(h5)
+    except ConfigError:
+        return None
+
+
+@pytest.mark.slow
+def test_page_follows_a_simulated_tank_run(browser: Any, tmp_path: Path) -> None:
+    """``hil tank-run`` on the built-in simulated tank (a short, slow pass: seconds of
+    estimates to watch) while the page polls its run.h5: the count grows during the run and
+    ends equal to the finished recording's."""
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    exp_file = tmp_path / "slow.toml"
+    text = DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -3.5")
+    exp_file.write_text(text.replace("speed_mps = 1.5", "speed_mps = 0.5"))
+    folder = tmp_path / "run"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "hil.cli.main", "tank-run", str(exp_file), "--out", str(folder),
+         "--no-live"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+    )  # fmt: skip
+    server = None
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and (data := _watchable(folder / "run.h5")) is None:
+            time.sleep(0.2)
+        assert data is not None, "hil tank-run wrote no readable run.h5 within 120 s"
+        server = WatchServer(data).start()
+        browser.get(server.url)
+        wait = WebDriverWait(browser, WAIT_S)
+        wait.until(lambda d: _text(d, "file") == "run.h5")
+        first = int(_text(browser, "estimate-count"))
+        wait.until(lambda d: int(_text(d, "estimate-count")) > first)
+        assert proc.wait(timeout=300) == 0
+        final = data.estimates(0)["total"]
+        wait.until(lambda d: _text(d, "estimate-count") == str(final))
+        assert final > first
+        assert _text(browser, "experiment") == "experiment sim-towed-pass"
+        assert _text(browser, "stage-state") == "IDLE"
+    finally:
+        if server is not None:
+            server.close()
+        if proc.poll() is None:  # the test failed first: leave nothing running
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
