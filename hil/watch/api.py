@@ -18,8 +18,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hil.errors import ConfigError
-from hil.recording import RunRecording
-from hil.recording.records import StageTelemetry, SyncPairs
+from hil.recording import RunRecording, schema
+from hil.recording.records import SyncPairs
 from hil.watch.truth import Geometry, TruthCurve, true_boundaries, truth_curve
 
 SEVERITY: dict[str, str] = {
@@ -31,6 +31,11 @@ SEVERITY: dict[str, str] = {
     "note": "note",
 }
 """Event kind -> how the page shows it: ``alarm`` (red), ``warning`` (amber), ``note``."""
+
+ESTIMATE_COLUMNS = ("t_s", "range_m", "speed_mps", "codeword", "score", "snr_db")
+"""The estimate columns the page gets (times s, range m, speed m/s, codeword, score, dB)."""
+
+TELEMETRY_COLUMNS = ("host_time_s", "sample_index", "position_m", "velocity_mps")
 
 MAX_CURVE_POINTS = 4000
 """Truth and boundary arrays longer than this are thinned evenly before they are sent."""
@@ -53,25 +58,28 @@ def _thin(n: int) -> slice:
 
 
 def telemetry_sample_index(
-    telemetry: list[StageTelemetry], sync: SyncPairs, fs_hz: float
+    host_time_s: NDArray[np.float64],
+    recorded_index: NDArray[np.int64],
+    sync: SyncPairs,
+    fs_hz: float,
 ) -> NDArray[np.float64]:
     """Board sample index (float) of every stage report, shape ``(n,)``; -1 where unknown.
 
-    With SYNC pairs recorded, the reports' host times are mapped by the least-delayed pair
+    ``host_time_s`` (s) and ``recorded_index`` are the reports' columns as recorded. With
+    SYNC pairs recorded, the host times are mapped by the least-delayed pair
     (:func:`hil.experiments.tank_run.sample_zero_time_s`, as ``hil tank-run`` maps them for
-    its truth when the run ends): the sample index the run recorded beside each report comes
-    from the live clock fit, which every late SYNC drags late, so the truth would lead the
-    estimates by the host's backlog. Without pairs, the recorded index is used.
+    its truth when the run ends): the index recorded beside each report comes from the live
+    clock fit, which every late SYNC drags late, so the truth would lead the estimates by
+    the host's backlog. Without pairs, the recorded index is used (-1: not mapped).
     """
     from hil.experiments.tank_run import sample_zero_time_s
 
-    recorded = np.array([r.sample_index for r in telemetry], dtype=np.float64)
     pairs = list(zip(sync.sample_index.tolist(), sync.host_time_s.tolist(), strict=True))
     offset = sample_zero_time_s(pairs, fs_hz)
     if offset is None:
+        recorded = np.asarray(recorded_index, dtype=np.float64)
         return np.where(recorded >= 0, recorded, -1.0)
-    host = np.array([r.host_time_s for r in telemetry], dtype=np.float64)
-    return (host - offset) * fs_hz
+    return (np.asarray(host_time_s, dtype=np.float64) - offset) * fs_hz
 
 
 def _geometry(experiment_toml: str) -> tuple[Geometry | None, str, str]:
@@ -148,7 +156,7 @@ class WatchData:
             gaps = rec.gaps()
             events = rec.events()
             telemetry = rec.telemetry()
-            n_estimates = len(rec.estimates())
+            n_estimates = int(rec.table_columns("estimates", 0, ("t_s",))["t_s"].shape[0])
         n_samples = int(segments.n_rows.sum())
         end = int(segments.stop_index[-1]) if len(segments) else origin
         event_rows = [
@@ -209,34 +217,36 @@ class WatchData:
         if since < 0:
             raise ConfigError("since", since, ">= 0 (an estimate row number)")
         with self._lock:
-            rows = self._rec.estimates()
-        new = rows[since:]
-        return {
-            "since": since,
-            "total": len(rows),
-            "t_s": json_floats(e.t_s for e in new),
-            "range_m": json_floats(e.range_m for e in new),
-            "speed_mps": json_floats(e.speed_mps for e in new),
-            "codeword": [e.codeword for e in new],
-            "score": json_floats(e.score for e in new),
-            "snr_db": json_floats(e.snr_db for e in new),
-        }
+            cols = self._rec.table_columns("estimates", since, ESTIMATE_COLUMNS)
+        new = cols["t_s"].shape[0]
+        total = since + new if new else self._count("estimates")
+        out: dict[str, Any] = {"since": since, "total": total}
+        for name in ESTIMATE_COLUMNS:
+            values = cols[name]
+            out[name] = values.tolist() if name == "codeword" else json_floats(values.tolist())
+        return out
+
+    def _count(self, table: str) -> int:
+        """Rows of ``table`` up to the last flush."""
+        with self._lock:
+            first = next(c for c, _ in schema.TABLES[table])
+            return int(self._rec.table_columns(table, 0, (first,))[first].shape[0])
 
     def _truth(self) -> TruthCurve | None:
         if self._geometry is None:
             return None
         with self._lock:
-            telemetry = self._rec.telemetry()
+            tel = self._rec.table_columns("telemetry", 0, TELEMETRY_COLUMNS)
             sync = self._rec.sync_pairs()
             origin = self._rec.origin_sample
             fs = self._rec.fs_hz
-        index = telemetry_sample_index(telemetry, sync, fs)
+        index = telemetry_sample_index(tel["host_time_s"], tel["sample_index"], sync, fs)
         mapped = index >= 0
         if mapped.sum() < 2:
             return None
         t = (index[mapped] - origin) / fs
-        x = np.array([r.position_m for r in telemetry], dtype=np.float64)[mapped]
-        v = np.array([r.velocity_mps for r in telemetry], dtype=np.float64)[mapped]
+        x = tel["position_m"][mapped]
+        v = tel["velocity_mps"][mapped]
         return truth_curve(self._geometry, t, x, v)
 
     def truth(self) -> dict[str, Any]:
