@@ -156,6 +156,13 @@ def test_page_follows_a_simulated_tank_run(browser: Any, tmp_path: Path) -> None
         assert final > first
         assert _text(browser, "experiment") == "experiment sim-towed-pass"
         assert _text(browser, "stage-state") == "IDLE"
+        # The finished run's saved time–codeword map, shown once hil tank-run wrote it.
+        wait.until(
+            lambda d: d.execute_script(
+                "const i = document.getElementById('map-img');"
+                "return i.complete && i.naturalWidth > 0 && i.offsetParent !== null;"
+            )
+        )
     finally:
         if server is not None:
             server.close()
