@@ -241,3 +241,20 @@ def test_truth_times_from_the_least_delayed_sync_pair(recorder: Any) -> None:
     assert t["t_s"] == pytest.approx([0.988, 1.988])
     assert t["range_m"] == pytest.approx([8.5, 7.5])
     assert t["speed_mps"] == pytest.approx([1.0, 1.0])
+
+
+def test_an_unreadable_recording_is_a_503_naming_the_file(recorder: Any) -> None:
+    _fill(recorder)
+    data = WatchData.open(recorder.path)
+    server = WatchServer(data).start()
+    try:
+        data.close()  # the file handle is gone, as when a disk is lost under a running server
+        status, body = _get(server.url + "api/state")
+        assert status == 503
+        error = json.loads(body)["error"]
+        assert error.startswith(f"{recorder.path} cannot be read: ")
+        status, body = _get(server.url)
+        assert status == 200  # the page itself still loads and shows the error banner
+    finally:
+        server.shutdown()
+        server.server_close()

@@ -107,6 +107,11 @@ def test_page_follows_a_recording_and_highlights_an_alarm(browser: Any, recorder
         # The page's own copy of the estimates: every row once, in order.
         times = browser.execute_script("return est.t;")
         assert times == pytest.approx([0.5 + 0.01 * i for i in range(12)])
+
+        # The recording lost under the running server: the page says so in its banner.
+        server.data.close()
+        wait.until(lambda d: d.find_element(By.ID, "error").is_displayed())
+        assert _text(browser, "error").startswith(f"{recorder.path} cannot be read: ")
     finally:
         server.close()
 
