@@ -1,4 +1,5 @@
-"""Make ``docs/watch.png``: ``hil watch`` in headless chromium during a simulated tank run.
+"""Make ``docs/watch.png``: ``hil watch --map`` in headless chromium during a simulated tank
+run.
 
 Runs ``hil tank-run`` (the built-in simulated tank) into a temporary folder, serves its
 ``run.h5`` with :class:`hil.watch.WatchServer` as soon as it is readable, opens the page in
@@ -44,7 +45,7 @@ def main() -> int:
         data = None
         while data is None and run.poll() is None:
             try:
-                data = WatchData.open(folder / "run.h5")
+                data = WatchData.open(folder / "run.h5", live_map=True)
             except ConfigError:
                 time.sleep(0.2)  # not created yet, or not yet in SWMR mode
         if data is None:

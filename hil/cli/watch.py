@@ -32,8 +32,9 @@ def register(sub: Any) -> None:
         "stage status, events with alarms highlighted, and counts. The page polls every "
         "0.5 s, so it follows a recording that hil tank-run is still writing (read as an "
         "SWMR reader: what the writer last flushed, at most 1 s old) and shows a finished "
-        "one the same way. Prints the page's URL; stop with Ctrl-C. The page loads nothing "
-        "from the internet.",
+        "one the same way. run.h5 holds no codeword sums: --map computes the time–codeword "
+        "map in the server from the recorded samples. Prints the page's URL; stop with "
+        "Ctrl-C. The page loads nothing from the internet.",
     )
     p.add_argument("recording", type=Path, metavar="RUN", help="run recording (run.h5)")
     p.add_argument(
@@ -48,6 +49,13 @@ def register(sub: Any) -> None:
         help="address to listen on; 0.0.0.0 serves other machines too (default: 127.0.0.1)",
     )
     p.add_argument("--open", action="store_true", help="open the page in the default browser")
+    p.add_argument(
+        "--map",
+        action="store_true",
+        help="also compute the time–codeword map from the recorded samples (the live GCAS "
+        "receiver with its recorded settings, run in the server; about half a core for a "
+        "tank-audio run, so off by default)",
+    )
     p.set_defaults(func=run)
 
 
@@ -58,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
 
     if not 0 <= args.port <= 65535:
         raise ConfigError("port", args.port, "0..65535 (0: a free port)")
-    data = WatchData.open(args.recording)
+    data = WatchData.open(args.recording, live_map=args.map)
     try:
         server = WatchServer(data, args.host, args.port)
     except OSError as exc:
@@ -74,6 +82,5 @@ def run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         print("stopped", file=sys.stderr)
     finally:
-        server.server_close()
-        data.close()
+        server.close()
     return 0

@@ -154,15 +154,18 @@ def replay_setup(
     return ReceiverSetup(name, settings, ch, base.scale)
 
 
-def build_receiver(setup: ReceiverSetup, schedule: HopSchedule, fs_hz: float) -> Receiver:
+def build_receiver(
+    setup: ReceiverSetup, schedule: HopSchedule, fs_hz: float, **callbacks: Any
+) -> Receiver:
     """The receiver ``setup`` describes (live and on replay): ``setup.settings`` must hold
-    the registry's common options and may hold the receiver's own."""
+    the registry's common options and may hold the receiver's own; ``callbacks`` are options
+    a recording cannot hold (GCAS's ``on_map``)."""
     s = dict(setup.settings)
     missing = [k for k in _COMMON if k not in s]
     if missing:
         raise ConfigError("receiver.settings", sorted(s), f"settings including {missing}")
     common = {k: s.pop(k) for k in _COMMON}
-    return make_receiver(setup.name, schedule, fs_hz, **common, **s)
+    return make_receiver(setup.name, schedule, fs_hz, **common, **s, **callbacks)
 
 
 def replay(

@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 from hil.errors import ConfigError
 from hil.recording import RunRecording, schema
 from hil.recording.records import SyncPairs
+from hil.watch.live_map import LiveCodewordMap
 from hil.watch.truth import Geometry, TruthCurve, true_boundaries, truth_curve
 
 SEVERITY: dict[str, str] = {
@@ -102,9 +103,11 @@ class WatchData:
     Thread-safe: one lock serialises the reads (the server answers requests on threads).
     """
 
-    def __init__(self, recording: RunRecording) -> None:
+    def __init__(self, recording: RunRecording, live_map: bool = False) -> None:
         self._rec = recording
         self._lock = threading.Lock()
+        self.live_map = LiveCodewordMap(recording, self._lock) if live_map else None
+        """The map computed from the samples (``live_map=True``), else None."""
         meta = recording.metadata
         self._schedule = recording.schedule()
         self._geometry, self._no_truth, self._experiment = _geometry(meta.experiment_toml)
@@ -115,13 +118,15 @@ class WatchData:
         """Sound speed of the truth's boundary arrival times, m/s (the experiment's)."""
 
     @classmethod
-    def open(cls, path: str | Path) -> WatchData:
+    def open(cls, path: str | Path, live_map: bool = False) -> WatchData:
         """Open the recording at ``path``; :class:`ConfigError` (one line) when it is
-        missing, not HDF5 or not a hil run recording."""
+        missing, not HDF5 or not a hil run recording. ``live_map``: also compute the
+        time–codeword map from the samples (:class:`~hil.watch.live_map.LiveCodewordMap`;
+        the caller runs its updates)."""
         rec: RunRecording | None = None
         try:
             rec = RunRecording.open(path)
-            return cls(rec)
+            return cls(rec, live_map)
         except ConfigError:
             raise
         except (KeyError, ValueError, OSError) as exc:
@@ -269,10 +274,11 @@ class WatchData:
         """What the page draws as the time–codeword map.
 
         ``run.h5`` stores no codeword sums (the receiver hands them to ``hil tank-run``,
-        which saves ``time_codeword_map.png`` when the run ends), so the live map is the
-        decoded codeword of every estimate (from :meth:`estimates`) against the hop
-        boundaries the truth says arrived (``boundary_t_s``, ``boundary_codeword``); ``png``
-        names the saved map beside the recording once it exists.
+        which saves ``time_codeword_map.png`` when the run ends). Always: the hop boundaries
+        the truth says arrived (``boundary_t_s``, ``boundary_codeword``), drawn over the
+        decoded codeword of every estimate (from :meth:`estimates`); ``png`` names the saved
+        map beside the recording once it exists. With ``live_map``, ``map`` holds the map
+        computed from the samples so far (:meth:`LiveCodewordMap.snapshot`), else None.
         """
         curve = self._truth()
         if curve is None:
@@ -282,7 +288,7 @@ class WatchData:
         keep = _thin(t_b.size)
         png = self.path.parent / MAP_PNG
         return {
-            "stored_map": False,
+            "map": None if self.live_map is None else self.live_map.snapshot(),
             "n_codewords": self._schedule.period_hops,
             "boundary_t_s": json_floats(t_b[keep]),
             "boundary_codeword": [int(j) for j in j_b[keep]],

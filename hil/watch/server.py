@@ -88,7 +88,8 @@ class WatchServer(ThreadingHTTPServer):
     """Serves the watch page of one recording at ``host:port`` (port 0: a free one).
 
     Use :meth:`start` to serve on a background thread (tests, the CLI's browser) or
-    ``serve_forever()``; :meth:`close` stops serving and closes the recording.
+    ``serve_forever()``; :meth:`close` stops serving and closes the recording. With
+    ``data.live_map`` a thread keeps the map up with the recording from the start.
     """
 
     daemon_threads = True
@@ -97,6 +98,14 @@ class WatchServer(ThreadingHTTPServer):
         self.data = data
         super().__init__((host, port), _Handler)
         self._thread: threading.Thread | None = None
+        self._stop_map = threading.Event()
+        self._map_thread: threading.Thread | None = None
+        if data.live_map is not None:
+            self._map_thread = threading.Thread(
+                target=data.live_map.follow, args=(self._stop_map,), name="hil-watch-map",
+                daemon=True,
+            )  # fmt: skip
+            self._map_thread.start()
 
     @property
     def url(self) -> str:
@@ -114,11 +123,16 @@ class WatchServer(ThreadingHTTPServer):
         return self
 
     def close(self) -> None:
-        """Stop serving (if started), close the socket and the recording."""
+        """Stop serving (if started) and the map's updates, close the socket and the
+        recording."""
         if self._thread is not None:
             self.shutdown()
             self._thread.join()
             self._thread = None
+        self._stop_map.set()
+        if self._map_thread is not None:
+            self._map_thread.join()
+            self._map_thread = None
         self.server_close()
         self.data.close()
 

@@ -109,7 +109,7 @@ def test_truth_boundaries_arrive_two_ranges_late(recorder: Any) -> None:
     finally:
         data.close()
     assert 1400 < c < 1550
-    assert m["stored_map"] is False and m["png"] is None and m["n_codewords"] == 17
+    assert m["map"] is None and m["png"] is None and m["n_codewords"] == 17
     # Hops of 10 ms from t = 0 within [0, 1] s: ends at 10 ms .. 1 s (the last one inside).
     t_end = 0.01 * np.arange(1, 101)
     assert m["boundary_t_s"] == pytest.approx(t_end + 2 * 8.5 / c)

@@ -122,7 +122,7 @@ def _watchable(h5: Path) -> WatchData | None:
     if not h5.exists():
         return None
     try:
-        return WatchData.open(h5)
+        return WatchData.open(h5, live_map=True)
     except ConfigError:
         return None
 
@@ -131,7 +131,8 @@ def _watchable(h5: Path) -> WatchData | None:
 def test_page_follows_a_simulated_tank_run(browser: Any, tmp_path: Path) -> None:
     """``hil tank-run`` on the built-in simulated tank (a short, slow pass: seconds of
     estimates to watch) while the page polls its run.h5: the count grows during the run and
-    ends equal to the finished recording's."""
+    ends equal to the finished recording's; the server's time–codeword map follows the
+    samples and peaks at the true codeword where the truth says each boundary arrives."""
     from selenium.webdriver.support.ui import WebDriverWait
 
     exp_file = tmp_path / "slow.toml"
@@ -161,6 +162,17 @@ def test_page_follows_a_simulated_tank_run(browser: Any, tmp_path: Path) -> None
         assert final > first
         assert _text(browser, "experiment") == "experiment sim-towed-pass"
         assert _text(browser, "stage-state") == "IDLE"
+        # The map computed in the server, drawn on the page, covers the whole recording.
+        assert data.live_map is not None
+        end_s = data.state()["board"]["end_t_s"]
+        wait.until(lambda d: data.live_map.computed_to_s == pytest.approx(end_s))
+        wait.until(lambda d: _text(d, "map-note").startswith("map computed from the samples"))
+        m = data.codeword_map()
+        t, db = np.asarray(m["map"]["t_s"]), np.asarray(m["map"]["db"])
+        arrival, codeword = np.asarray(m["boundary_t_s"]), np.asarray(m["boundary_codeword"])
+        inside = (arrival > t[0] + 0.2) & (arrival < t[-1])  # after M = 10 hops of 10 ms
+        col = np.searchsorted(t, arrival[inside], side="right") - 1
+        assert np.mean(db[col].argmax(axis=1) == codeword[inside]) >= 0.8
         # The finished run's saved time–codeword map, shown once hil tank-run wrote it.
         wait.until(
             lambda d: d.execute_script(

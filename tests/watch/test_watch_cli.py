@@ -24,11 +24,12 @@ def test_help_says_defaults_and_units(capsys: pytest.CaptureFixture[str]) -> Non
         main(["watch", "--help"])
     assert stop.value.code == 0
     text = " ".join(capsys.readouterr().out.split())
-    assert "usage: hil watch [-h] [--port PORT] [--host HOST] [--open] RUN" in text
+    assert "usage: hil watch [-h] [--port PORT] [--host HOST] [--open] [--map] RUN" in text
     assert "0 picks a free one (default: 0)" in text
     assert "(default: 127.0.0.1)" in text
     assert "(m, m/s vs receive time in s)" in text
     assert "polls every 0.5 s" in text
+    assert "about half a core for a tank-audio run, so off by default" in text
 
 
 @pytest.mark.parametrize(
