@@ -128,6 +128,8 @@ class WatchData:
             rec = RunRecording.open(path)
             return cls(rec, live_map)
         except ConfigError:
+            if rec is not None:
+                rec.close()
             raise
         except (KeyError, ValueError, OSError) as exc:
             if rec is not None:

@@ -51,13 +51,15 @@ class LiveCodewordMap:
     def __init__(self, recording: RunRecording, lock: threading.Lock) -> None:
         self._rec = recording
         self._lock = lock
-        setup = replay_setup(recording)
-        if setup.name != "gcas":
+        live = recording.metadata.receiver
+        if live is None or live.name != "gcas":
             raise ConfigError(
                 "--map",
-                setup.name,
+                None if live is None else live.name,
                 "a recording whose live receiver is gcas (the one with a time–codeword map)",
+                "watch it without --map",
             )
+        setup = replay_setup(recording)
         schedule = recording.schedule()
         self.bin_s = schedule.hop_s / 2.0
         """Width of a map column, s (half a hop)."""

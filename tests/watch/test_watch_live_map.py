@@ -107,6 +107,17 @@ def test_only_gcas_has_a_map(tmp_path: Path) -> None:
         pass
     with pytest.raises(ConfigError, match=r"^--map = 'stft' is not allowed: must be a recording"):
         WatchData.open(path, live_map=True)
+    bare = tmp_path / "bare.h5"
+    schedule = check_design(get_preset("att").spec("random-cyclic"))
+    doc = schedule_document(schedule, FS, 0.0, sound_speed_mps=C)
+    with RunWriter.create(bare, fs_hz=FS, n_channels=1, dtype="int16", schedule_document=doc):
+        pass
+    with pytest.raises(ConfigError) as err:
+        WatchData.open(bare, live_map=True)
+    assert str(err.value) == (
+        "--map = None is not allowed: must be a recording whose live receiver is gcas (the "
+        "one with a time–codeword map); watch it without --map"
+    )
 
 
 def test_a_long_map_is_max_pooled_to_the_columns_sent(
