@@ -54,6 +54,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     ),
     "sim-serve": ("hil.cli.sim_serve", "serve a simulated board or stage on a pty"),
     "devices": ("hil.cli.devices", "list serial ports, USB devices, PortAudio and JACK devices"),
+    "watch": (
+        "hil.cli.watch",
+        "live view of a run recording in the browser (range, speed, alarms)",
+    ),
 }
 """Sub-command name -> (module with ``register``, one-line summary for ``hil --help``).
 

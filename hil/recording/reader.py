@@ -10,7 +10,7 @@ version-1 files (variable-length table strings, outside SWMR) read once their wr
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -219,6 +219,39 @@ class RunRecording:
     # ------------------------------------------------------------------ tables
     def _table(self, name: str) -> dict[str, NDArray[Any]]:
         return read_table(self._file[name], refresh=self._file.swmr_mode)
+
+    def table_columns(
+        self, name: str, start: int = 0, columns: Sequence[str] | None = None
+    ) -> dict[str, NDArray[Any]]:
+        """Rows ``start ..`` (up to the last flush) of the table ``name`` (one of
+        ``schema.TABLES``: ``estimates``, ``telemetry``, ``events``, ``sync``, ...) as one
+        array per column (default: every column), without building a record per row: for
+        readers following a growing recording. :class:`ConfigError` for an unknown table or
+        column.
+
+        >>> import tempfile, pathlib
+        >>> from hil.recording.writer import RunWriter
+        >>> from hil.signals.presets import check_design, get_preset
+        >>> from hil.signals.schedule_file import schedule_document
+        >>> doc = schedule_document(check_design(get_preset("att").spec("random-cyclic")),
+        ...                         100e3, 0.0, sound_speed_mps=1500.0)
+        >>> path = pathlib.Path(tempfile.mkdtemp()) / "run.h5"
+        >>> with RunWriter.create(path, fs_hz=100e3, n_channels=1, dtype="int16",
+        ...                       schedule_document=doc) as w:
+        ...     for k in range(3):
+        ...         w.append_sync(100 * k, 0.5 * k)
+        >>> with RunRecording.open(path) as rec:
+        ...     rec.table_columns("sync", start=1)["host_time_s"].tolist()
+        [0.5, 1.0]
+        """
+        if name not in schema.TABLES:
+            raise ConfigError("table", name, f"one of {', '.join(schema.TABLES)}")
+        known = [c for c, _ in schema.TABLES[name]]
+        for c in columns or ():
+            if c not in known:
+                raise ConfigError(f"{name} column", c, f"one of {', '.join(known)}")
+        group = self._file[name]
+        return read_table(group, refresh=self._file.swmr_mode, start=start, columns=columns)
 
     def _flushed_rows(self) -> int:
         """Sample rows covered by the writer's last flush."""

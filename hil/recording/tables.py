@@ -122,15 +122,20 @@ def table_rows(group: h5py.Group, *, refresh: bool) -> int:
     return min(group[c].shape[0] for c in names)
 
 
-def read_table(group: h5py.Group, *, refresh: bool) -> dict[str, NDArray[Any]]:
-    """Every column as an array of the table's whole rows (strings, fixed- or variable-length,
-    as ``str`` objects; fixed-length values lose their NUL padding)."""
+def read_table(
+    group: h5py.Group, *, refresh: bool, start: int = 0, columns: Sequence[str] | None = None
+) -> dict[str, NDArray[Any]]:
+    """Columns (default: every one) as arrays of the table's whole rows from row ``start``
+    on (strings, fixed- or variable-length, as ``str`` objects; fixed-length values lose
+    their NUL padding)."""
     n = table_rows(group, refresh=refresh)
+    start = min(max(int(start), 0), n)
     out: dict[str, NDArray[Any]] = {}
-    for c in (str(c) for c in group.attrs["columns"]):
+    names = [str(c) for c in group.attrs["columns"]] if columns is None else list(columns)
+    for c in names:
         ds = group[c]
         if h5py.check_string_dtype(ds.dtype) is not None:
-            out[c] = np.asarray(ds.asstr()[:n], dtype=object)
+            out[c] = np.asarray(ds.asstr()[start:n], dtype=object)
         else:
-            out[c] = ds[:n]
+            out[c] = ds[start:n]
     return out

@@ -1,5 +1,5 @@
 """The wheel carries every data file a command needs (sweep files, scenarios, protocol SPEC
-and golden vectors) and the ``hil`` entry point."""
+and golden vectors, the watch page) and the ``hil`` entry point."""
 
 from __future__ import annotations
 
@@ -29,7 +29,7 @@ def _data_files() -> set[str]:
     out = set()
     for package in PACKAGES:
         for path in (ROOT / package).rglob("*"):
-            if path.is_file() and path.suffix in (".toml", ".json", ".md"):
+            if path.is_file() and path.suffix in (".toml", ".json", ".md", ".html"):
                 out.add(path.relative_to(ROOT).as_posix())
     return out
 

@@ -1,0 +1,81 @@
+"""Shared fixtures of the watch tests: a recording writer on an injected clock, with the
+built-in simulated tank's experiment file (its geometry gives the truth)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from hil.estimation.base import Estimate
+from hil.experiments.experiment import DEFAULT_EXPERIMENT
+from hil.recording.records import ReceiverSetup
+from hil.recording.writer import RunWriter
+from hil.signals.presets import check_design, get_preset
+from hil.signals.schedule_file import schedule_document
+
+FS = 100_000.0
+ORIGIN = 1000
+"""Board sample index of the receiver's t = 0 in the test recordings."""
+
+
+class FakeClock:
+    """A monotonic clock the test advances (the writer flushes only when told)."""
+
+    def __init__(self) -> None:
+        self.t = 0.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def estimate(i: int, range_m: float = 8.5, speed_mps: float = 1.5) -> Estimate:
+    """The ``i``-th test estimate: one per 10 ms hop, t = 0.5 s + i·10 ms."""
+    t = 0.5 + 0.01 * i
+    return Estimate(
+        t_s=t,
+        range_m=range_m,
+        speed_mps=speed_mps,
+        hop_index=i,
+        score=0.9,
+        snr_db=12.0,
+        alpha=1.0,
+        t_tx_s=t - 2 * range_m / 1482.0,
+        codeword=i % 7,
+        receiver="gcas",
+    )
+
+
+@dataclass
+class Recorder:
+    """A recording being written: its ``writer``, ``path``, sample rate ``fs`` (Hz), the
+    receiver's origin board sample ``origin`` and the test estimates' factory."""
+
+    writer: RunWriter
+    path: Path
+    fs: float
+    origin: int
+    estimate: Callable[..., Estimate]
+
+
+@pytest.fixture
+def recorder(tmp_path: Path) -> Iterator[Recorder]:
+    """A fresh writer of ``tmp_path/run.h5`` (closed after the test)."""
+    spec = get_preset("att").spec("random-cyclic")
+    doc = schedule_document(check_design(spec), FS, 0.0, sound_speed_mps=1500.0)
+    path = tmp_path / "run.h5"
+    writer = RunWriter.create(
+        path,
+        fs_hz=FS,
+        n_channels=1,
+        dtype="int16",
+        schedule_document=doc,
+        receiver=ReceiverSetup("gcas", {"m_hops": 10}),
+        experiment_toml=DEFAULT_EXPERIMENT,
+        origin_sample=ORIGIN,
+        clock=FakeClock(),
+    )
+    yield Recorder(writer, path, FS, ORIGIN, estimate)
+    writer.close()
