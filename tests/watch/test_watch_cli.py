@@ -43,7 +43,7 @@ def test_help_says_defaults_and_units(capsys: pytest.CaptureFixture[str]) -> Non
         (
             b"\x00\xffgarbage" * 100,
             "hil watch: error: RUN (recording) = '{p}' is not allowed: must be an HDF5 run "
-            "recording written by hil; it is not readable as HDF5",
+            "recording written by hil; it does not start with the HDF5 signature (900 bytes)",
         ),
     ],
     ids=["missing", "garbage"],
