@@ -81,9 +81,10 @@ NOISE_MARGIN = 4.0
 DIRECT_S = 0.2e-3
 #: Samples before the line's lower point that the ramp fit also uses (the leak before it).
 FIT_LEAD = 24
-#: The ramp fit searches onsets this many samples around the line's, in steps of FIT_STEP.
+#: The ramp fit searches onsets this many samples around the line's (whole samples), then
+#: within a sample of the best in steps of FIT_STEP.
 FIT_SPAN = 16
-FIT_STEP = 0.25
+FIT_STEP = 0.125
 #: Speed step of the direct path's Doppler search, m/s.
 DIRECT_SPEED_STEP = 0.002
 
@@ -278,37 +279,64 @@ class FirstArrivalReadout:
 
         ``excess`` (shape ``(L,)``): the mean next-tone power less the noise, at window
         indices ``first …``; ``frac`` (samples), ``beat_hz`` (``α(f_prev − f_next)``) and
-        ``jump`` (rad) per boundary. The model for one arrival of unit amplitude at onset
-        ``o`` (window index): the boxcar of ``1`` after ``o`` and of the previous tone,
-        ``e^{j(2π beat (i − o)/fs − jump)}``, before it; its mean power over the boundaries,
-        scaled by least squares, is compared with ``excess`` over a grid of onsets within
-        ``±FIT_SPAN`` samples of ``guess_s`` (step ``FIT_STEP``), refined by a parabola
-        (``guess_s`` itself where the best is on the span's edge).
+        ``jump`` (rad) per boundary. The model's residual (:meth:`_ramp_residuals`) is
+        searched on whole samples within ``±FIT_SPAN`` of ``guess_s``, then in steps of
+        ``FIT_STEP`` within a sample of the best, and refined by a parabola (``guess_s``
+        itself where the best is on the span's edge).
         """
-        fs, w = self.fs_hz, self.boxcar
-        grid = guess_s * fs + np.arange(-FIT_SPAN, FIT_SPAN + FIT_STEP / 2, FIT_STEP)  # (C,)
+        fs = self.fs_hz
+        coarse = guess_s * fs + np.arange(-FIT_SPAN, FIT_SPAN + 1, dtype=np.float64)
+        resid = self._ramp_residuals(coarse, excess, first, frac, beat_hz, jump)
+        k = int(np.argmin(resid))
+        if k in (0, coarse.size - 1):
+            return guess_s  # no minimum inside the span: the line stands
+        fine = coarse[k] + np.arange(-1.0, 1.0 + FIT_STEP / 2, FIT_STEP)
+        resid = self._ramp_residuals(fine, excess, first, frac, beat_hz, jump)
+        k = int(np.argmin(resid))
+        best = float(fine[k])
+        if 0 < k < fine.size - 1:
+            best += FIT_STEP * parabolic_offset(-resid[k - 1], -resid[k], -resid[k + 1])
+        return best / fs
+
+    def _ramp_residuals(
+        self,
+        grid: NDArray[np.float64],
+        excess: NDArray[np.float64],
+        first: int,
+        frac: NDArray[np.float64],
+        beat_hz: NDArray[np.float64],
+        jump: NDArray[np.float64],
+    ) -> NDArray[np.float64]:
+        """Least-squares residual of the model ramp for each onset of ``grid`` (samples after
+        boundary 0's sample, shape ``(C,)``).
+
+        The model for one arrival of unit amplitude at onset ``o`` (window index): the boxcar
+        of ``1`` after ``o`` and of the previous tone, ``e^{j(2π beat (i − o)/fs − jump)}``,
+        before it; its mean power over the boundaries, scaled by least squares.
+        """
+        w = self.boxcar
         n = first + np.arange(excess.size)  # window indices (L,)
         o = (self._pre + grid)[:, None, None] + frac[None, :, None]  # (C, M, 1)
-        a = (n - w + 1)[None, None, :]  # window start (1, 1, L)
-        n_next = np.clip(n[None, None, :] - np.ceil(o) + 1, 0, w)  # samples at/after o
-        n_prev = w - n_next
-        theta = (2.0 * np.pi * beat_hz / fs)[None, :, None]  # (1, M, 1)
+        n_next = np.clip(n[None, None, :] - np.ceil(o) + 1, 0, w).astype(np.int64)
+        n_prev = w - n_next  # (C, M, L) samples before o in the window
+        theta = 2.0 * np.pi * beat_hz / self.fs_hz  # (M,)
         ratio = np.exp(1j * theta)
-        # Σ_{i=a}^{a+n_prev−1} e^{jθ(i−o)}: a geometric sum (n_prev terms where θ = 0).
+        # Σ_{i=a}^{a+n_prev−1} e^{jθ(i−o)} = e^{jθa} e^{−jθo} (1 − r^n_prev)/(1 − r), r = e^{jθ}
+        # (n_prev terms where θ = 0); r^k from a table, the phasors factored by axis.
         steady = np.abs(1.0 - ratio) < 1e-12
-        geometric = (1.0 - ratio**n_prev) / np.where(steady, 1.0, 1.0 - ratio)
-        prev = np.exp(1j * (theta * (a - o) - jump[None, :, None])) * np.where(
-            steady, n_prev, geometric
-        )
+        powers = ratio[:, None] ** np.arange(w + 1)[None, :]  # (M, w + 1)
+        gathered = powers[np.arange(theta.size)[None, :, None], n_prev]  # (C, M, L)
+        denom = np.where(steady, 1.0, 1.0 - ratio)[None, :, None]
+        sums = np.where(steady[None, :, None], n_prev, (1.0 - gathered) / denom)
+        start = np.exp(1j * np.outer(theta, n - w + 1))[None, :, :]  # e^{jθa}, (1, M, L)
+        at_o = np.exp(-1j * (theta[None, :, None] * o + jump[None, :, None]))  # (C, M, 1)
+        prev = start * at_o * sums
         model = np.mean(np.abs((n_next + prev) / w) ** 2, axis=1)  # (C, L)
         mm = np.sum(model * model, axis=1)
         scale = np.sum(model * excess[None, :], axis=1) / np.maximum(mm, 1e-300)
-        resid = np.sum((excess[None, :] - scale[:, None] * model) ** 2, axis=1)
-        k = int(np.argmin(resid))
-        if k in (0, grid.size - 1):
-            return guess_s  # no minimum inside the span: the line stands
-        best = float(grid[k]) + FIT_STEP * parabolic_offset(-resid[k - 1], -resid[k], -resid[k + 1])
-        return best / fs
+        return np.asarray(
+            np.sum((excess[None, :] - scale[:, None] * model) ** 2, axis=1), dtype=np.float64
+        )
 
     def _direct_alpha(
         self, p: NDArray[np.complexfloating], hops: HopTable, n_b: NDArray[np.int64], alpha: float
