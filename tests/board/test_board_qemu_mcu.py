@@ -47,7 +47,10 @@ def test_board_driver_completes_a_session_on_the_emulated_mcu() -> None:
     dac = rng.integers(-20000, 20000, (2 * RATE_HZ, 2)).astype(np.int16)
     with qemu_mcu.QemuBoard() as mcu:
         transport = open_serial(mcu.port_name, timeout=0.05)
-        board = Board(transport, keepalive_ms=1000, ring_seconds=4.0)
+        # The start lead covers the DAC preload over the emulated UART (about 64 kB/s: 0.5 s
+        # for the firmware's 16 k-sample buffer, several times that when QEMU shares a busy
+        # machine); a START refused as passed is retried with the lead doubled (4, 8 s).
+        board = Board(transport, keepalive_ms=1000, ring_seconds=4.0, start_lead_s=2.0)
         try:
             board.open()
             assert board.version is not None and board.version.board_serial == 0x4D500386
