@@ -2,8 +2,10 @@
 
 Without a file it runs the built-in simulated tank (simulated board and GRBL stage over
 ptys, the acoustic world with tank walls, surface, noise, reverberation and the towed target
-following the simulated carriage). Writes the run folder (recording ``run.h5``, estimates,
-``summary.json``, figures) and prints the summary. Ctrl-C stops safely.
+following the simulated carriage); ``--virtual-time`` runs that tank in this process on
+virtual time instead (deterministic, faster than real time). Writes the run folder
+(recording ``run.h5``, estimates, ``summary.json``, figures) and prints the summary. Ctrl-C
+stops safely.
 """
 
 from __future__ import annotations
@@ -36,6 +38,13 @@ def register(sub: Any) -> None:
     p.add_argument("--no-live", action="store_true", help="no live status line")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument(
+        "--virtual-time",
+        action="store_true",
+        help="run the built-in simulated tank in this process on virtual time: deterministic "
+        "(the same seed gives the same estimates and recording), as fast as the CPU allows "
+        "(sim:// devices only)",
+    )
+    p.add_argument(
         "--print-default", action="store_true", help="print the built-in experiment file and exit"
     )
     p.set_defaults(func=run)
@@ -63,7 +72,12 @@ def run(args: argparse.Namespace) -> int:
     folder = new_run_folder(exp.output_dir, exp.name, args.out, dt.datetime.now())
     with run_log(folder):
         _LOG.info("tank run %r into %s", exp.name, folder)
-        outcome = run_experiment(exp, folder=folder, view=LiveView(enabled=not args.no_live))
+        outcome = run_experiment(
+            exp,
+            folder=folder,
+            view=LiveView(enabled=not args.no_live),
+            virtual_time=args.virtual_time,
+        )
         with StopSignals() as signals:
             signals.stopping()  # the run is over: SIGTERM/SIGHUP wait for its summary
             summary = summarize(outcome)

@@ -80,7 +80,7 @@ from hil.acquisition import (
     SampleRing,
 )
 from hil.devices.board_settings import BoardSettings, to_wire_samples
-from hil.devices.clock import Clock, MonotonicClock
+from hil.devices.clock import Clock, MonotonicClock, VirtualClock
 from hil.errors import ConfigError
 from hil.transports import (
     Transport,
@@ -274,6 +274,11 @@ class Board:
         refuses START because its index has passed (1 .. 10).
     command_timeout_s:
         Clock seconds to wait for a reply.
+    virtual_time:
+        Run on this virtual clock (an in-process simulated board on virtual time) instead of
+        the wall clock: no reader and writer threads; at every tick of the clock the link is
+        read and handled, the DAC fed and a keepalive sent if due, and the driver's waits
+        sleep on it. A link lost on virtual time stays lost (a DISCONNECT annotation).
     """
 
     def __init__(
@@ -290,7 +295,12 @@ class Board:
         start_lead_s: float = 0.2,
         start_attempts: int = 3,
         command_timeout_s: float = 5.0,
+        virtual_time: VirtualClock | None = None,
     ) -> None:
+        if virtual_time is not None and clock is not None and clock is not virtual_time:
+            raise ConfigError(
+                "clock", clock, "the virtual_time clock or None", "give only virtual_time"
+            )
         if keepalive_ms is not None and not 1 <= keepalive_ms <= 65535:
             raise ConfigError("keepalive_ms", keepalive_ms, "1 .. 65535 ms, or None")
         if not ring_seconds > 0:
@@ -304,7 +314,9 @@ class Board:
         self._injected = None if isinstance(transport, str) else transport
         self._factory = transport_factory
         self._transport_options = transport_options or {}
-        self._clock: Clock = clock or MonotonicClock()
+        self._clock: Clock = virtual_time or clock or MonotonicClock()
+        self._virtual = virtual_time
+        self._detach_service: Callable[[], None] | None = None
         self.ring_seconds = ring_seconds
         self.keepalive_ms = keepalive_ms
         self.reconnect_policy = reconnect if reconnect is not None else ReconnectPolicy()
@@ -371,15 +383,21 @@ class Board:
         return self._transport
 
     def open(self) -> Board:
-        """Open the transport, handshake, and start the reader and writer threads."""
+        """Open the transport, handshake, and start the reader and writer threads (on
+        virtual time: attach their work to the clock)."""
         self._thread_error = None
         cobs.warm_up()  # not inside the first ADC frame
+        if self._virtual is not None:
+            self._detach_service = self._virtual.attach(self._service)
         try:
             self._handshake(self._open_transport(first=True))
         except BaseException:
             self._close_transport()
+            self._detach()
             raise
         self._stop_threads.clear()
+        if self._virtual is not None:
+            return self
         self._reader = threading.Thread(target=self._guard(self._read_loop), daemon=True)
         self._writer = threading.Thread(target=self._guard(self._write_loop), daemon=True)
         self._reader.name, self._writer.name = "board-reader", "board-writer"
@@ -399,7 +417,26 @@ class Board:
             if thread is not None and thread is not threading.current_thread():
                 thread.join(timeout=5.0)
         self._reader = self._writer = None
+        self._detach()
         self._close_transport()
+
+    def _detach(self) -> None:
+        if self._detach_service is not None:
+            self._detach_service()
+            self._detach_service = None
+
+    def _service(self) -> None:
+        """One turn of the reader's and the writer's work on virtual time (see
+        ``virtual_time``): what the link holds read and handled, the DAC fed within the
+        credit, a keepalive sent if due."""
+        if not self._link_up or not self._pump_once():
+            return
+        try:
+            while self._feed_dac():
+                pass
+            self._keepalive_if_due()
+        except TransportError as error:
+            self._link_lost(str(error))
 
     def __enter__(self) -> Board:
         return self.open()
@@ -492,8 +529,12 @@ class Board:
         """Wait until ``done()``; pump the link ourselves if no reader thread runs.
 
         Timeouts are real seconds: waiting for bytes is waiting for I/O, which an injected
-        clock cannot speed up.
+        clock cannot speed up; on virtual time they are virtual seconds, slept on the clock
+        (which services the link meanwhile).
         """
+        if self._virtual is not None:
+            self._wait_virtual(self._virtual, done, timeout_s, what)
+            return
         deadline = time.monotonic() + timeout_s
         pumping = self._reader is None or threading.current_thread() is self._reader
         while True:
@@ -513,6 +554,22 @@ class Board:
                     self._cond.wait(0.01)
             if pumping and not self._pump_once():
                 raise TransportClosedError(f"{self.url}: link lost while waiting for {what}")
+
+    def _wait_virtual(
+        self, clock: VirtualClock, done: Callable[[], bool], timeout_s: float, what: str
+    ) -> None:
+        def settled() -> bool:
+            if self._refusal is not None:
+                raise self._refusal
+            return done() or not self._link_up
+
+        if not clock.wait_until(settled, timeout_s):
+            raise TransportTimeoutError(
+                f"{self.url}: no {what} within {timeout_s} s of virtual time; the simulated"
+                " board did not answer"
+            )
+        if not done():
+            raise TransportClosedError(f"{self.url}: link lost while waiting for {what}")
 
     def _command(self, message: Configure | Start | Stop) -> Ack:
         with self._cond:
@@ -680,10 +737,16 @@ class Board:
 
     # ------------------------------------------------------------------ data access
     def wait_for_samples(self, end_index: int, timeout_s: float = 5.0) -> bool:
-        """Block until the ring holds samples up to ``end_index`` (real seconds)."""
-        if self.ring is None:
+        """Block until the ring holds samples up to ``end_index`` (real seconds; on
+        virtual time, virtual seconds)."""
+        ring = self.ring
+        if ring is None:
             raise BoardError("configure() the board first")
-        return self.ring.wait_for(end_index, timeout_s)
+        if self._virtual is not None:
+            return self._virtual.wait_until(
+                lambda: ring.end_index is not None and ring.end_index >= end_index, timeout_s
+            )
+        return ring.wait_for(end_index, timeout_s)
 
     def read(self, first: int, n: int) -> npt.NDArray[Any]:
         """ADC samples ``first .. first+n-1`` (n, adc_channels) from the ring."""

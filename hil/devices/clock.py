@@ -8,6 +8,7 @@ whose ``sleep`` advances ``now`` instantly (for example
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import Protocol
 
 
@@ -37,3 +38,86 @@ class MonotonicClock:
     def sleep(self, seconds: float) -> None:
         if seconds > 0:
             time.sleep(seconds)
+
+
+class VirtualClock:
+    """Simulated seconds for a whole run held in one thread: time passes only in
+    :meth:`sleep`, and every attached service runs at each :attr:`tick_s` of it.
+
+    A service is the background work a real device and its driver's threads do while the
+    host waits (a board's link read, its DAC feed and keepalives): on virtual time nothing
+    runs beside the host, so whoever sleeps lets the services run in its place. Time is kept
+    in integer nanoseconds on a grid of ticks, so two runs of the same work see the same
+    instants and give identical results, however loaded the machine. A service must not
+    sleep (that would nest time).
+
+    >>> clock = VirtualClock(tick_s=0.01)
+    >>> seen = []
+    >>> detach = clock.attach(lambda: seen.append(round(clock.now(), 3)))
+    >>> clock.sleep(0.025); seen
+    [0.01, 0.02, 0.025]
+    >>> clock.wait_until(lambda: len(seen) >= 5, timeout_s=1.0), clock.now()
+    (True, 0.04)
+    >>> detach(); clock.sleep(1.0); len(seen)
+    5
+    """
+
+    def __init__(self, tick_s: float = 0.001, start_s: float = 0.0) -> None:
+        if not 1e-6 <= tick_s <= 1.0:
+            from hil.errors import ConfigError
+
+            raise ConfigError("tick_s", tick_s, "1 µs .. 1 s", "e.g. 0.001")
+        self._tick_ns = round(tick_s * 1e9)
+        self._ns = round(start_s * 1e9)
+        self._services: dict[int, Callable[[], None]] = {}
+        self._next_id = 0
+        self._in_service = False
+
+    @property
+    def tick_s(self) -> float:
+        """Spacing of the instants the services run at, s."""
+        return self._tick_ns / 1e9
+
+    def now(self) -> float:
+        """Current virtual time, s."""
+        return self._ns / 1e9
+
+    def __call__(self) -> float:
+        return self._ns / 1e9
+
+    def attach(self, service: Callable[[], None]) -> Callable[[], None]:
+        """Run ``service()`` at every tick from now on; returns the call that detaches it."""
+        key = self._next_id
+        self._next_id += 1
+        self._services[key] = service
+
+        def detach() -> None:
+            self._services.pop(key, None)
+
+        return detach
+
+    def sleep(self, seconds: float) -> None:
+        """Let ``seconds`` of virtual time pass, tick by tick, running the services at each
+        tick and at the end."""
+        if self._in_service:
+            raise RuntimeError("a VirtualClock service slept: services must return at once")
+        end = self._ns + round(max(0.0, seconds) * 1e9)
+        while self._ns < end:
+            self._ns = min(end, (self._ns // self._tick_ns + 1) * self._tick_ns)
+            self._in_service = True
+            try:
+                for service in list(self._services.values()):
+                    service()
+            finally:
+                self._in_service = False
+
+    def wait_until(self, done: Callable[[], bool], timeout_s: float) -> bool:
+        """Sleep to the next tick until ``done()`` (True) or ``timeout_s`` virtual s pass
+        (False)."""
+        deadline = self._ns + round(max(0.0, timeout_s) * 1e9)
+        while not done():
+            if self._ns >= deadline:
+                return False
+            next_tick = (self._ns // self._tick_ns + 1) * self._tick_ns
+            self.sleep((min(next_tick, deadline) - self._ns) / 1e9)
+        return True

@@ -87,11 +87,14 @@ def run(
     on_status: Callable[[str], None] | None = None,
     stop: threading.Event | None = None,
     figures: bool = True,
+    virtual_time: bool = False,
 ) -> tuple[RunOutcome, dict[str, Any]]:
     """Run an experiment (see :func:`experiment_of`) and write its folder; the outcome and
     summary. ``on_estimates``/``on_status`` are called on this thread as the run goes;
-    setting ``stop`` stops it as Ctrl-C does. Refusals before anything moves or transmits
-    raise :class:`~hil.errors.ConfigError`; later failures are in ``summary["error"]``."""
+    setting ``stop`` stops it as Ctrl-C does; ``virtual_time`` runs the built-in simulated
+    tank in this process on virtual time (deterministic, faster than real time). Refusals
+    before anything moves or transmits raise :class:`~hil.errors.ConfigError`; later
+    failures are in ``summary["error"]``."""
     from hil.experiments.run_report import write_report
     from hil.experiments.run_scoring import summarize, write_summary
 
@@ -101,6 +104,7 @@ def run(
         view=_CallbackView(on_status),
         on_estimates=on_estimates,
         stop=stop,
+        virtual_time=virtual_time,
     )
     summary = summarize(outcome)
     write_summary(outcome, summary)
@@ -114,10 +118,12 @@ def iterate(
     *,
     folder: Path | None = None,
     figures: bool = True,
+    virtual_time: bool = False,
 ) -> Iterator[Estimate | Status | Finished]:
     """Run in a thread, yielding estimates and status lines as they come and a
     :class:`Finished` last; closing the iterator early stops the run (safely, as Ctrl-C)
-    and waits for it. A refusal or error of the run is raised here."""
+    and waits for it. A refusal or error of the run is raised here. ``virtual_time`` as for
+    :func:`run`."""
     items: queue.Queue[Any] = queue.Queue()
     stop = threading.Event()
     done = object()
@@ -135,6 +141,7 @@ def iterate(
                 on_status=lambda text: items.put(Status(text)),
                 stop=stop,
                 figures=figures,
+                virtual_time=virtual_time,
             )
             items.put(Finished(outcome, summary))
         except BaseException as exc:  # handed to the caller's thread

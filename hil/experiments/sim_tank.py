@@ -16,15 +16,22 @@ from __future__ import annotations
 import contextlib
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol
 from urllib.parse import parse_qs, urlsplit
 
 import numpy as np
 
 from hil.errors import ConfigError
 from hil.experiments.experiment import Experiment
+
+if TYPE_CHECKING:
+    from hil.devices.clock import Clock, VirtualClock
+    from hil.devices.grbl import ByteLink
+    from hil.experiments.live.stops import DeviceLostError
+    from hil.transports.base import Transport
 
 # Simulated GRBL machine for the tank: 2.5 m/s, 2 m/s², 10 m of travel, 80 steps/mm.
 STAGE_MAX_RATE_MM_MIN = 150_000.0
@@ -57,6 +64,48 @@ class ScaledClock:
         """Let ``seconds`` of simulated time pass (``seconds / scale`` of wall time)."""
         if seconds > 0:
             time.sleep(seconds / self.scale)
+
+
+class TankSimulation(Protocol):
+    """The built-in simulated tank as a run uses it: in a child process on real time
+    (:class:`SimulatedTankProcess`) or in this process on virtual time
+    (:class:`~hil.experiments.virtual_tank.VirtualTank`)."""
+
+    @property
+    def clock(self) -> Clock:
+        """The clock of the stage, the board and the run."""
+        ...
+
+    @property
+    def virtual_time(self) -> VirtualClock | None:
+        """The virtual clock the board driver runs on, or None (real time: threads)."""
+        ...
+
+    @property
+    def stage_target(self) -> str | ByteLink:
+        """What the stage driver opens (a pty path, or an in-memory link)."""
+        ...
+
+    @property
+    def board_target(self) -> str | Transport:
+        """What the board driver opens (a pty path, or an in-memory link)."""
+        ...
+
+    @property
+    def dac_underruns(self) -> int: ...
+
+    @property
+    def adc_overruns(self) -> int: ...
+
+    def align(self, rate_hz: float) -> None: ...
+
+    def stage_time(self, world_t: np.ndarray) -> np.ndarray: ...
+
+    def true_stage_position(self, clock_t: np.ndarray) -> np.ndarray: ...
+
+    def lost(self) -> DeviceLostError | None: ...
+
+    def close(self) -> None: ...
 
 
 @dataclass
@@ -119,43 +168,47 @@ def tank_stage_config() -> Any:
     )
 
 
-def start_simulated_tank(exp: Experiment, wall0: float | None = None) -> SimulatedTank:
-    """Start the simulated stage and board for ``exp`` (in this process) and return them."""
+def build_tank_world(
+    exp: Experiment, carriage_motion: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+) -> Any:
+    """The acoustic tank of ``exp`` behind the simulated board (a
+    ``sim_devices.acoustics.dac_world.ScheduleWorld``: DAC block in, 2 ADC channels out).
+
+    ``carriage_motion(t)``: the simulated carriage's position (m, stage coordinates) and
+    velocity (m/s) at world times ``t`` (s: device sample / rate, from the world's first
+    block); the towed target follows it through :meth:`Experiment.target_position`.
+    """
     from sim_devices.acoustics.channel import Channel, DirectBlast, Receiver, Target
     from sim_devices.acoustics.dac_world import ScheduleWorld
     from sim_devices.acoustics.scenario import build_channel, parse_scenario
     from sim_devices.acoustics.tank import Tank
     from sim_devices.acoustics.trajectory import Fixed, Live
-    from sim_devices.board import SimulatedBoardOnPty
-    from sim_devices.stage.on_pty import SimulatedGrblOnPty
 
     sim = exp.simulation
-    clock = ScaledClock(sim.time_scale, wall0)
-    stage_sim = SimulatedGrblOnPty(tank_stage_config(), clock=clock).start()
-
     fs = float(exp.waveform.fs_hz)
     c = exp.sound_speed_mps
     size = exp.tank_size_m
-    holder: dict[str, SimulatedTank] = {}
-
-    grid_s = 1e-3  # stage positions on a 1 ms grid: error a·dt²/8 ≈ 0.25 µm at 2 m/s²
+    holder: dict[str, Any] = {}
+    grid_s = 1e-3
     cache: dict[str, np.ndarray] = {}
 
     def target_position(t: np.ndarray) -> np.ndarray:
         # Every echo path and every fixed-point iteration asks for positions over the same
-        # block: sample the stage once per block on a grid and interpolate.
-        tank = holder["tank"]
+        # block: the carriage is sampled once per block on a 1 ms grid, with its velocity,
+        # and the cubic Hermite between the nodes is exact for its constant-speed and
+        # constant-acceleration phases (a piecewise-linear fill would put a corner every
+        # millisecond, and the echo's delay grid solves every interval with a corner
+        # sample by sample).
         # The channel counts time from its first block: convert to device sample time.
-        origin = tank.world.origin_index or 0
+        origin = holder["world"].origin_index or 0
         tq = np.asarray(t, dtype=np.float64) + origin / fs
         lo, hi = float(np.min(tq)), float(np.max(tq))
         g = cache.get("t")
         if g is None or lo < g[0] or hi > g[-1]:
             g = np.arange(np.floor(lo / grid_s) - 2, np.ceil(hi / grid_s) + 3) * grid_s
             cache["t"] = g
-            cache["x"] = tank.true_stage_position(tank.stage_time(g))
-        x = np.interp(tq, cache["t"], cache["x"])
-        return exp.target_position(x)
+            cache["x"], cache["v"] = carriage_motion(g)
+        return exp.target_position(_hermite(tq, cache["t"], cache["x"], cache["v"], grid_s))
 
     live = Live(target_position, max_speed_mps=STAGE_MAX_RATE_MM_MIN / 60_000.0)
     receiver = Receiver(sensitivity_db=sim.sensitivity_db, gain_db=sim.gain_db, full_scale_v=1.0)
@@ -201,7 +254,39 @@ def start_simulated_tank(exp: Experiment, wall0: float | None = None) -> Simulat
         noise=ambient.noise,
         noise_scale=ambient.noise_scale,
     )
-    world = ScheduleWorld(channel, converter_delay_samples=delay, adc_channels=2)
+    world = holder["world"] = ScheduleWorld(channel, converter_delay_samples=delay, adc_channels=2)
+    return world
+
+
+def _hermite(t: np.ndarray, grid: np.ndarray, x: np.ndarray, v: np.ndarray, h: float) -> np.ndarray:
+    """Cubic Hermite through positions ``x`` and velocities ``v`` on the uniform ``grid``
+    (spacing ``h`` s), at times ``t`` inside it."""
+    k = np.clip(((t - grid[0]) / h).astype(np.int64), 0, grid.size - 2)
+    s = (t - grid[k]) / h
+    s2 = s * s
+    s3 = s2 * s
+    return (
+        (2 * s3 - 3 * s2 + 1) * x[k]
+        + (s3 - 2 * s2 + s) * h * v[k]
+        + (-2 * s3 + 3 * s2) * x[k + 1]
+        + (s3 - s2) * h * v[k + 1]
+    )
+
+
+def start_simulated_tank(exp: Experiment, wall0: float | None = None) -> SimulatedTank:
+    """Start the simulated stage and board for ``exp`` (in this process) and return them."""
+    from sim_devices.board import SimulatedBoardOnPty
+    from sim_devices.stage.on_pty import SimulatedGrblOnPty
+
+    clock = ScaledClock(exp.simulation.time_scale, wall0)
+    stage_sim = SimulatedGrblOnPty(tank_stage_config(), clock=clock).start()
+    holder: dict[str, SimulatedTank] = {}
+
+    def carriage_motion(world_t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        t = holder["tank"].stage_time(world_t)
+        return stage_sim.call(lambda g: g.carriage_motion(t))
+
+    world = build_tank_world(exp, carriage_motion)
     # Ticks of 100 ms wall: the world computes whole frames, not a few samples per call.
     # ``sim://board?impl=c`` puts the C reference firmware in the Python board's place.
     if parse_qs(urlsplit(exp.board_url).query).get("impl", ["python"])[0] == "c":
@@ -248,6 +333,9 @@ class SimulatedTankProcess:
         ports = json.loads(line)
         self.board_port: str = ports["board"]
         self.stage_port: str = ports["stage"]
+        self.board_target: str | Transport = self.board_port
+        self.stage_target: str | ByteLink = self.stage_port
+        self.virtual_time: VirtualClock | None = None
         self._trajectory: tuple[np.ndarray, np.ndarray] | None = None
         self.dac_underruns = 0
         self.adc_overruns = 0
@@ -266,6 +354,20 @@ class SimulatedTankProcess:
     def exit_code(self) -> int | None:
         """The child's exit code once it ended (negative: killed by that signal), else None."""
         return self._proc.poll()
+
+    def lost(self) -> DeviceLostError | None:
+        """The child process, if it ended under the run."""
+        from hil.experiments.live.stops import DeviceLostError
+
+        code = self.exit_code()
+        if code is None:
+            return None
+        return DeviceLostError(
+            "the built-in simulated tank",
+            f"(process {self.pid})",
+            f"its process exited with code {code}",
+            "that nothing killed it (its errors are printed above)",
+        )
 
     def align(self, rate_hz: float) -> None:
         """Tie world time to the shared clock (after CONFIGURE)."""

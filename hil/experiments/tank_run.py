@@ -55,7 +55,7 @@ from hil.recording.replay import build_receiver
 from hil.signals.schedule_file import schedule_document
 
 if TYPE_CHECKING:
-    from hil.experiments.sim_tank import SimulatedTankProcess
+    from hil.experiments.sim_tank import TankSimulation
 
 #: Stage status polled every this many seconds of the driver clock (GRBL's 5 Hz).
 STAGE_POLL_S = 0.2
@@ -203,6 +203,7 @@ def run_experiment(
     view: LiveView | None = None,
     on_estimates: Callable[[list[Estimate]], None] | None = None,
     stop: threading.Event | None = None,
+    virtual_time: bool = False,
 ) -> RunOutcome:
     """Run ``exp`` end to end (see the module docstring) and return what it produced.
 
@@ -211,7 +212,9 @@ def run_experiment(
     :attr:`RunOutcome.error`, with what was recorded until then.
 
     ``on_estimates`` gets the receiver's estimates as they come (on the run's thread);
-    setting ``stop`` (from any thread) stops the run as Ctrl-C does.
+    setting ``stop`` (from any thread) stops the run as Ctrl-C does. ``virtual_time`` runs
+    the built-in simulated tank in this process on virtual time
+    (:mod:`hil.experiments.virtual_tank`: deterministic, as fast as the CPU allows).
     """
     fs = float(exp.waveform.fs_hz)
     if fs != int(fs):
@@ -227,7 +230,7 @@ def run_experiment(
     setup = receiver_setup(exp)
     receiver = build_receiver(setup, exp.schedule, fs, **maps.hooks(exp.receiver))
     wall0 = time.monotonic()  # the run's wall time, without that set-up
-    devices = RunDevices()
+    devices = RunDevices(virtual_time=virtual_time)
     recorder = RunRecorder(folder / "run.h5", _recording_options(exp, fs, setup, cals))
     ending = _Ending()
     session: LiveSession | None = None
@@ -370,7 +373,7 @@ def _outcome(
 
 
 def _exact_truth(
-    tank: SimulatedTankProcess,
+    tank: TankSimulation,
     exp: Experiment,
     fs: float,
     start_index: int,

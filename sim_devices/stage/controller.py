@@ -249,6 +249,13 @@ class SimulatedGrbl:
         spm = self.settings[100]
         return np.asarray((off + np.round((x - off) * spm) / spm) / 1000.0, dtype=np.float64)
 
+    def carriage_motion(self, times: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The carriage's motion as planned, not step-quantised (the mechanics smooth the
+        microsteps): position (m) and velocity (m/s) at ``times`` (s), any shape. Within
+        :meth:`true_position`'s step (``1/$100`` mm) of it; later times as there."""
+        t = np.asarray(times, dtype=np.float64)
+        return self._path.position(t) / 1000.0, self._path.velocity(t) / 1000.0
+
     def true_velocity(self, times: ArrayLike) -> NDArray[np.float64]:
         """Carriage velocity (m/s) at ``times`` (s), any shape (not quantised)."""
         return self._path.velocity(times) / 1000.0

@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
@@ -25,9 +26,10 @@ from hil.experiments.live.stops import DeviceLostError
 from hil.experiments.stage_checks import raise_first_failure, tow_checks
 
 if TYPE_CHECKING:
-    from hil.devices.clock import Clock
-    from hil.devices.grbl import GrblStage
-    from hil.experiments.sim_tank import SimulatedTankProcess
+    from hil.devices.clock import Clock, VirtualClock
+    from hil.devices.grbl import ByteLink, GrblStage
+    from hil.experiments.sim_tank import TankSimulation
+    from hil.transports.base import Transport
 
 
 class StatusLine(Protocol):
@@ -46,13 +48,27 @@ SIM_WATCHDOG_MS = 10_000
 RING_S = 8.0
 
 
-def _open_board(url: str, fs: float, clock: Clock, keepalive_ms: int) -> StreamingDevice:
+def open_board(
+    target: str | Transport,
+    fs: float,
+    clock: Clock,
+    keepalive_ms: int,
+    virtual_time: VirtualClock | None = None,
+) -> StreamingDevice:
+    """The transducer board at ``target`` (a URL or an open link) opened for a run at ``fs``
+    Hz: 1 DAC channel, 2 ADC channels, :data:`RING_S` of ring; on ``virtual_time`` when
+    given (an in-process simulated board)."""
     from hil.devices.board import Board
     from hil.devices.board_settings import BoardSettings
 
     settings = BoardSettings(sample_rate_hz=int(fs), dac_channels=1, adc_channels=2)
     board = Board(
-        url, settings=settings, clock=clock, ring_seconds=RING_S, keepalive_ms=keepalive_ms
+        target,
+        settings=settings,
+        clock=None if virtual_time is not None else clock,
+        virtual_time=virtual_time,
+        ring_seconds=RING_S,
+        keepalive_ms=keepalive_ms,
     )
     return board.open()
 
@@ -61,6 +77,10 @@ def _open_audio(url: str, fs: float, clock: Clock, keepalive_ms: int) -> Streami
     from hil.devices.audio.daq import AudioDaq
 
     return AudioDaq.from_url(url, sample_rate_hz=int(fs), ring_seconds=RING_S).open()
+
+
+def _open_board_url(url: str, fs: float, clock: Clock, keepalive_ms: int) -> StreamingDevice:
+    return open_board(url, fs, clock, keepalive_ms)
 
 
 #: How each URL scheme of ``devices.board`` opens its device; any other URL is a board
@@ -75,9 +95,26 @@ def open_streaming_device(url: str, fs: float, clock: Clock, keepalive_ms: int) 
     hydrophone and the DAC monitor), on the driver ``clock``; nothing transmits yet.
     ``keepalive_ms``: the board's watchdog (an audio interface has none)."""
     scheme = url.split("://", 1)[0] if "://" in url else ""
-    device = STREAMING_DEVICES.get(scheme, _open_board)(url, fs, clock, keepalive_ms)
+    device = STREAMING_DEVICES.get(scheme, _open_board_url)(url, fs, clock, keepalive_ms)
     device.configure()
     return device
+
+
+def _configured_board(
+    target: str | Transport,
+    fs: float,
+    clock: Clock,
+    *,
+    keepalive_ms: int,
+    virtual_time: VirtualClock | None,
+) -> StreamingDevice:
+    device = open_board(target, fs, clock, keepalive_ms, virtual_time)
+    device.configure()
+    return device
+
+
+def _streaming_device_at(url: str, keepalive_ms: int, fs: float, clock: Clock) -> StreamingDevice:
+    return open_streaming_device(url, fs, clock, keepalive_ms)
 
 
 def stage_limits(stage: GrblStage) -> StageLimits:
@@ -91,28 +128,29 @@ def stage_limits(stage: GrblStage) -> StageLimits:
 class RunDevices:
     """The run's devices as far as they are open (None: not yet)."""
 
-    tank: SimulatedTankProcess | None = None
+    tank: TankSimulation | None = None
     stage: GrblStage | None = None
     board: StreamingDevice | None = None
     #: The driver clock of the stage, the board and the run (``now()``, ``sleep()``, s):
-    #: the simulated tank's scaled clock, else the wall clock.
+    #: the simulated tank's (scaled, or virtual), else the wall clock.
     clock: Clock | None = None
+    #: Run the built-in simulated tank in this process on virtual time
+    #: (:class:`~hil.experiments.virtual_tank.VirtualTank`) instead of a real-time child.
+    virtual_time: bool = False
 
     def open(self, exp: Experiment, folder: Path, fs: float, view: StatusLine) -> CheckedTow:
         """Open everything (see the module docstring); the checked tow."""
         from hil.devices.clock import MonotonicClock
         from hil.devices.grbl import GrblStage
 
-        board_url, stage_url = self._start_simulation(exp, folder)
+        stage_target, open_device = self._start_simulation(exp, folder)
         clock = self.clock = self.clock or MonotonicClock()  # one for stage, board and run
-        stage = self.stage = GrblStage(stage_url, clock=clock).open()
+        stage = self.stage = GrblStage(stage_target, clock=clock).open()
         # The controller's settings and the tow against what it reported (its $$), before
         # anything moves: the plan, then the checks `hil stage settings --check` shows.
         tow = check_tow(exp.tow, stage_limits(stage))
         raise_first_failure(tow_checks(exp.tow, stage.settings, stage.limits))
-        self.board = open_streaming_device(
-            board_url, fs, clock, SIM_WATCHDOG_MS if self.tank is not None else WATCHDOG_MS
-        )
+        self.board = open_device(fs, clock)
         if self.tank is not None:
             self.tank.align(fs)
         try:
@@ -121,19 +159,22 @@ class RunDevices:
             view.update("stage: positioning for the first pass", force=True)
             stage.move_to(tow.ready_m, stage.settings.max_rate)
         except (OSError, TransportError, StageTimeoutError) as exc:
-            raise self.stage_lost(stage_url, exc) from exc
+            raise self.stage_lost(exp.stage_url, exc) from exc
         return tow
 
-    def _start_simulation(self, exp: Experiment, folder: Path) -> tuple[str, str]:
-        """The simulated tank started for ``sim://`` devices: the ports to open instead."""
+    def _start_simulation(
+        self, exp: Experiment, folder: Path
+    ) -> tuple[str | ByteLink, Callable[[float, Clock], StreamingDevice]]:
+        """The stage to open and how to open the DAC/ADC (at a rate, on a clock): the
+        simulated tank's, started here for ``sim://`` devices, else the experiment's URLs."""
         if exp.simulated:
-            from hil.experiments.sim_tank import SimulatedTankProcess
-
-            experiment_file = folder / "experiment.toml"
-            experiment_file.write_text(exp.text, encoding="utf-8")
-            tank = self.tank = SimulatedTankProcess(exp, experiment_file, folder)
+            tank = self.tank = self._simulated_tank(exp, folder)
             self.clock = tank.clock
-            return tank.board_port, tank.stage_port
+            board, virtual = tank.board_target, tank.virtual_time
+            watchdog = WATCHDOG_MS if virtual is not None else SIM_WATCHDOG_MS
+            return tank.stage_target, partial(
+                _configured_board, board, keepalive_ms=watchdog, virtual_time=virtual
+            )
         if exp.board_url.startswith("sim://") or exp.stage_url.startswith("sim://"):
             raise ConfigError(
                 "devices",
@@ -141,7 +182,25 @@ class RunDevices:
                 "both simulated (sim://) or both real",
                 "the simulated target follows the simulated stage",
             )
-        return exp.board_url, exp.stage_url
+        if self.virtual_time:
+            raise ConfigError(
+                "virtual time",
+                f"board {exp.board_url}, stage {exp.stage_url}",
+                "simulated devices (sim://) only",
+                "real devices run on real time: drop --virtual-time",
+            )
+        return exp.stage_url, partial(_streaming_device_at, exp.board_url, WATCHDOG_MS)
+
+    def _simulated_tank(self, exp: Experiment, folder: Path) -> TankSimulation:
+        if self.virtual_time:
+            from hil.experiments.virtual_tank import VirtualTank
+
+            return VirtualTank(exp)
+        from hil.experiments.sim_tank import SimulatedTankProcess
+
+        experiment_file = folder / "experiment.toml"
+        experiment_file.write_text(exp.text, encoding="utf-8")
+        return SimulatedTankProcess(exp, experiment_file, folder)
 
     def opened(self) -> tuple[StreamingDevice, GrblStage, Clock]:
         """The board (or audio interface), the stage and the driver clock, once :meth:`open`
@@ -151,16 +210,8 @@ class RunDevices:
         return self.board, self.stage, self.clock
 
     def tank_lost(self) -> DeviceLostError | None:
-        """The simulated tank's process, if it ended under the run."""
-        code = self.tank.exit_code() if self.tank is not None else None
-        if self.tank is None or code is None:
-            return None
-        return DeviceLostError(
-            "the built-in simulated tank",
-            f"(process {self.tank.pid})",
-            f"its process exited with code {code}",
-            "that nothing killed it (its errors are printed above)",
-        )
+        """The simulated tank, if it ended under the run."""
+        return self.tank.lost() if self.tank is not None else None
 
     def stage_lost(self, url: str, exc: BaseException) -> DeviceLostError:
         """The stage stopped answering (``exc``: what its driver raised)."""

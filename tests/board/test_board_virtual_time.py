@@ -1,0 +1,100 @@
+"""The Board driver on virtual time: no threads, the simulated board in memory on one
+:class:`~hil.devices.clock.VirtualClock`, every wait slept on that clock. Values, not timing:
+what the loopback returns is what was transmitted, two runs give identical bytes, a silent
+board times out after the virtual timeout without any wall-clock wait."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+
+from firmware_protocol import TransportClosedError, TransportTimeoutError
+from hil.acquisition import AnnotationKind
+from hil.devices.board import Board
+from hil.devices.board_settings import BoardSettings
+from hil.devices.clock import MonotonicClock, VirtualClock
+from hil.errors import ConfigError
+from sim_devices.board import BoardPort, FaultPlan, LoopbackWorld, MemoryBoardLink, SimulatedBoard
+
+RATE_HZ = 192_000
+DELAY = 53  # loopback cable, samples
+
+
+def source(k: int, n: int) -> np.ndarray:
+    """A deterministic transmission: a 5 kHz tone with a slow ramp, full scale 0.5."""
+    t = (k + np.arange(n)) / RATE_HZ
+    return 0.5 * np.sin(2 * np.pi * 5000.0 * t) * np.minimum(1.0, t / 0.05)
+
+
+def streamed(seconds: float, faults: FaultPlan | None = None) -> tuple[Board, np.ndarray, int]:
+    """Open, configure and start a board on virtual time, capture ``seconds`` of loopback."""
+    clock = VirtualClock(tick_s=0.001)
+    sim = SimulatedBoard(clock=clock, world=LoopbackWorld(DELAY), faults=faults)
+    link = MemoryBoardLink(BoardPort(sim), timeout=0.0)
+    settings = BoardSettings(sample_rate_hz=RATE_HZ, dac_channels=1, adc_channels=2)
+    board = Board(link, settings=settings, virtual_time=clock, ring_seconds=4.0).open()
+    board.configure()
+    first = board.start(source)
+    end = first + round(seconds * RATE_HZ)
+    assert board.wait_for_samples(end, timeout_s=seconds + 1.0)
+    data = board.read(first, end - first)
+    return board, data, first
+
+
+def test_no_thread_runs_beside_the_host_on_virtual_time() -> None:
+    before = threading.active_count()
+    board, _, _ = streamed(0.05)
+    assert threading.active_count() == before
+    board.close()
+
+
+def test_the_loopback_returns_the_transmission_delayed_by_the_cable() -> None:
+    board, data, _ = streamed(0.5)
+    expected = np.round(source(0, data.shape[0] - DELAY) * 32767.0)
+    got = data[DELAY:, 0].astype(float)
+    np.testing.assert_allclose(got, expected, atol=1.0)
+    assert not np.any(data[:DELAY, 0])
+    assert board.ring is not None and board.ring.missing == 0
+    assert board.annotations.of_kind(AnnotationKind.DAC_UNDERRUN) == []
+    board.close()
+
+
+def test_two_runs_on_virtual_time_are_identical() -> None:
+    runs = [streamed(0.3) for _ in range(2)]
+    (a, da, fa), (b, db, fb) = runs
+    assert fa == fb
+    np.testing.assert_array_equal(da, db)
+    assert a.clock_fit is not None and b.clock_fit is not None
+    assert a.clock_fit.pairs == b.clock_fit.pairs
+    for board in (a, b):
+        board.close()
+
+
+def test_a_silent_board_times_out_after_the_virtual_timeout() -> None:
+    clock = VirtualClock(tick_s=0.001)
+    sim = SimulatedBoard(clock=clock, world=LoopbackWorld(0))
+    link = MemoryBoardLink(BoardPort(sim), timeout=0.0)
+    sim.receive_data = lambda data: None  # type: ignore[method-assign]  # hears nothing
+    board = Board(link, virtual_time=clock, command_timeout_s=2.5)
+    with pytest.raises(TransportTimeoutError, match=r"no VERSION within 2\.5 s of virtual time"):
+        board.open()
+    assert clock.now() == pytest.approx(2.5, abs=0.0011)
+
+
+def test_an_unplugged_board_is_a_disconnect_and_the_next_command_fails() -> None:
+    faults = FaultPlan()
+    board, _, _ = streamed(0.1, faults)
+    faults.disconnect()
+    assert board.wait_for_samples(10**9, timeout_s=0.5) is False
+    assert [a.kind for a in board.annotations.of_kind(AnnotationKind.DISCONNECT)] == [
+        AnnotationKind.DISCONNECT
+    ]
+    with pytest.raises(TransportClosedError):
+        board.stop()
+
+
+def test_virtual_time_and_another_clock_are_refused() -> None:
+    with pytest.raises(ConfigError, match=r"clock = .* give only virtual_time"):
+        Board("sim://board", clock=MonotonicClock(), virtual_time=VirtualClock())
