@@ -42,14 +42,11 @@ class ReceiverFeed:
     @property
     def next_useful_index(self) -> int:
         """Board index the stream must reach before the receiver can emit its next estimate
-        (receivers with a ``next_decision_index``, such as the two-stage GCAS); otherwise
-        :attr:`next_index`. A live loop that waits for it calls the receiver less often and
-        gets every estimate as early (see :attr:`GcasReceiver.next_decision_index
-        <hil.estimation.gcas.GcasReceiver.next_decision_index>`)."""
-        hint = getattr(self.receiver, "next_decision_index", None)
-        if hint is None:
-            return self._next
-        return max(self._next, self.origin + int(hint))
+        (:attr:`Receiver.next_decision_index <hil.estimation.base.Receiver.next_decision_index>`
+        on board indices; for the two-stage GCAS, its next decision after the look-ahead). A
+        live loop that waits for it calls the receiver less often and gets every estimate as
+        early."""
+        return max(self._next, self.origin + int(self.receiver.next_decision_index))
 
     def wait_index(self, max_block: int) -> int:
         """Board index a live loop waits for before it feeds again: the receiver's next

@@ -95,6 +95,14 @@ class Receiver(Protocol):
         """Samples consumed so far."""
         ...
 
+    @property
+    def next_decision_index(self) -> int:
+        """Input sample index (counted as :attr:`samples_seen`) the stream must reach before
+        the receiver can emit its next estimate: a live loop waits for it rather than calling
+        the receiver on every block (no estimate comes out earlier). A receiver that may emit
+        on any block gives :attr:`samples_seen`."""
+        ...
+
     def process(self, block: NDArray[np.floating], *, gap_before: int = 0) -> list[Estimate]:
         """Consume ``block`` (shape ``(n,)``, real samples) and return new estimates.
 

@@ -141,11 +141,13 @@ class CodewordMaps:
     def __init__(self) -> None:
         self.times: list[np.ndarray] = []
         self.power: list[np.ndarray] = []
+        self._points = 0
 
     def on_map(self, t_s: np.ndarray, p: np.ndarray, speed: Any) -> None:
-        if sum(len(a) for a in self.times) < self.MAX_POINTS:
+        if self._points < self.MAX_POINTS:
             self.times.append(np.asarray(t_s, dtype=float).copy())
             self.power.append(np.asarray(p, dtype=np.float32).copy())
+            self._points += len(self.times[-1])
 
     def hooks(self, receiver: str) -> dict[str, Any]:
         """The receiver options that feed it (GCAS only)."""

@@ -318,6 +318,7 @@ def test_feed_drops_samples_before_its_origin() -> None:
     class Recorder:
         name = "recorder"
         fs_hz = 1.0
+        next_decision_index = 0  # may emit on any block
 
         def process(self, x: np.ndarray, *, gap_before: int = 0) -> list:
             seen.append((len(x), gap_before))
@@ -333,18 +334,23 @@ def test_feed_drops_samples_before_its_origin() -> None:
 
 
 class Plain:
-    """A receiver with no decision index (it may emit after any sample)."""
+    """A receiver that may emit after any sample: its decision index is what it has seen."""
 
     name, fs_hz = "plain", 1.0
 
+    def __init__(self) -> None:
+        self.next_decision_index = 0
+
     def process(self, x: np.ndarray, *, gap_before: int = 0) -> list:
+        self.next_decision_index += gap_before + x.shape[0]
         return []
 
 
 class Bounded(Plain):
     """A receiver that says before which input sample no estimate can come out."""
 
-    next_decision_index = 0
+    def process(self, x: np.ndarray, *, gap_before: int = 0) -> list:
+        return []
 
 
 def test_receiver_feed_says_how_far_the_stream_must_go_before_an_estimate() -> None:

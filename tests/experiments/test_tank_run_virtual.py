@@ -1,0 +1,116 @@
+"""The built-in tank run on virtual time (:mod:`hil.experiments.virtual_tank`): the whole run
+in this process on one clock, so the same seed gives the same run, bit for bit, whatever else
+the machine is doing."""
+
+from __future__ import annotations
+
+import dataclasses
+import subprocess
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from hil.errors import ConfigError
+from hil.experiments.experiment import DEFAULT_EXPERIMENT, parse_experiment
+from hil.experiments.tank_run import LiveView, RunOutcome, run_experiment
+from hil.recording.reader import RunRecording
+
+# A shorter pass than the built-in run keeps the suite quick.
+SHORT = DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -3.5")
+#: The recording's tables that a run on virtual time fixes completely. Not ``flushes``: the
+#: writer flushes by the wall clock, so that a reader following the file (hil watch) sees the
+#: run at least once a wall second.
+TABLES = ("estimates", "telemetry", "events", "sync")
+
+
+@contextmanager
+def busy_cores(n: int) -> Iterator[None]:
+    """``n`` CPU-bound processes running beside the block."""
+    burners = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(n)]
+    try:
+        yield
+    finally:
+        for p in burners:
+            p.kill()
+            p.wait()
+
+
+def virtual_run(folder: Path, text: str = SHORT) -> RunOutcome:
+    return run_experiment(
+        parse_experiment(text), folder=folder, view=LiveView(enabled=False), virtual_time=True
+    )
+
+
+def recorded(path: Path) -> dict[str, Any]:
+    """Every deterministic table of a recording, and its samples as one array."""
+    with RunRecording.open(path) as rec:
+        out: dict[str, Any] = {name: rec.table(name) for name in TABLES}
+        out["segments"] = rec.table_columns("segments")
+        out["samples"] = np.concatenate([b.data for b in rec.samples()])
+        out["origin"] = rec.origin_sample
+    return out
+
+
+@pytest.fixture(scope="module")
+def first_run(tmp_path_factory: pytest.TempPathFactory) -> RunOutcome:
+    return virtual_run(tmp_path_factory.mktemp("virtual") / "a")
+
+
+def test_a_virtual_run_tracks_the_towed_target(first_run: RunOutcome) -> None:
+    from hil.experiments.run_scoring import summarize
+
+    summary = summarize(first_run)
+    assert summary["error"] == "" and not summary["interrupted"]
+    assert summary["dropped_samples"] == 0
+    assert summary["dac_underruns"] == 0 and summary["adc_overruns"] == 0
+    assert summary["loopback_latency_samples"] == 64  # the simulated converters
+    assert summary["wrong_estimates"] == 0
+    assert summary["detection_rate"] == 1.0
+    assert abs(summary["range_bias_m"]) < 0.03 and summary["range_rmse_m"] < 0.03
+    assert summary["speed_rmse_mps"] < 0.05
+    assert summary["telemetry_truth_error_max_m"] < 0.02
+    assert first_run.events[-1][3] == "stop: completed"
+
+
+def test_the_same_seed_gives_the_same_run_bit_for_bit_under_load(
+    first_run: RunOutcome, tmp_path: Path
+) -> None:
+    with busy_cores(2):
+        again = virtual_run(tmp_path / "b")
+    assert [dataclasses.astuple(e) for e in again.estimates] == [
+        dataclasses.astuple(e) for e in first_run.estimates
+    ]
+    assert again.telemetry == first_run.telemetry
+    assert (again.start_index, again.samples) == (first_run.start_index, first_run.samples)
+    a, b = recorded(first_run.folder / "run.h5"), recorded(again.folder / "run.h5")
+    assert a.keys() == b.keys()
+    for name in a:
+        if isinstance(a[name], dict):
+            assert a[name].keys() == b[name].keys(), name
+            for col in a[name]:
+                np.testing.assert_array_equal(a[name][col], b[name][col], err_msg=name)
+        else:
+            np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+    assert a["samples"].shape == (first_run.samples, 2)
+
+
+def test_another_seed_gives_another_run(first_run: RunOutcome, tmp_path: Path) -> None:
+    other = virtual_run(tmp_path / "c", SHORT.replace("seed = 1", "seed = 2"))
+    assert len(other.estimates) > 0
+    a = np.array([e.range_m for e in first_run.estimates[:50]])
+    b = np.array([e.range_m for e in other.estimates[:50]])
+    assert not np.array_equal(a, b)
+
+
+def test_virtual_time_is_refused_for_real_devices(tmp_path: Path) -> None:
+    text = SHORT.replace('board = "sim://board"', 'board = "serial:///dev/ttyACM0"').replace(
+        'stage = "sim://stage"', 'stage = "serial:///dev/ttyUSB0"'
+    )
+    with pytest.raises(ConfigError, match=r"virtual time.*simulated devices \(sim://\) only"):
+        virtual_run(tmp_path / "run", text)
+    assert not (tmp_path / "run" / "run.h5").exists()
