@@ -309,21 +309,18 @@ def test_simulated_run_end_to_end_and_replay_equals_live(
     exp_file = tmp_path / "short.toml"
     exp_file.write_text(SHORT)
     folder = tmp_path / "run"
-    assert main(["tank-run", str(exp_file), "--out", str(folder), "--no-live", "--json"]) == 0
+    command = ["tank-run", str(exp_file), "--out", str(folder), "--no-live", "--json"]
+    assert main([*command, "--virtual-time"]) == 0
     summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     for name in ("run.h5", "summary.json", "estimates.csv", "range_speed.png", "errors.png",
                  "time_codeword_map.png"):  # fmt: skip
         assert (folder / name).exists(), name
     assert summary["error"] == "" and not summary["interrupted"]
     assert summary["dropped_samples"] == 0
-    # The capture loop keeps up with the board: it fell 1.5 s behind in this short run (4-5 s
-    # in the default one) when every stage poll slept out a whole 0.2 s interval and let one
-    # 10 ms block through. Now 0.09-0.18 s, measured with another tank run loading the CPUs.
-    assert 0 < summary["capture_backlog_max_s"] < 1.0, summary["capture_backlog_max_s"]
-    # A DAC underrun is a real-time hiccup of the simulated board on a busy machine; it gaps
-    # only the DAC monitor channel here (the hydrophone hears the analytic schedule), so a few
-    # are tolerated and reported rather than failing the run.
-    assert summary["dac_underruns"] <= 3
+    # On virtual time the capture loop waits for each receiver decision (one 10 ms block
+    # behind at most) and the board's DAC never runs dry.
+    assert summary["capture_backlog_max_s"] <= 0.02, summary["capture_backlog_max_s"]
+    assert summary["dac_underruns"] == 0 and summary["adc_overruns"] == 0
     assert summary["loopback_latency_samples"] == 64  # the simulated converters
     assert summary["scored_estimates"] >= 50
     # The towed target is tracked: the first-arrival readout ranges the direct path despite
@@ -365,6 +362,27 @@ def test_simulated_run_end_to_end_and_replay_equals_live(
     assert sorted(Path(f).name for f in rebuilt["figures"]) == sorted(
         Path(f).name for f in summary["figures"]
     )
+
+
+@pytest.mark.slow
+def test_the_default_demo_runs_on_ptys_in_real_time(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The real-time smoke test: the simulated devices on ptys in a child process, driven as
+    hardware is. Limits are generous: on a machine busy with other work the capture may lag
+    seconds behind (the board's ring holds 8 s) and the simulated board may underrun."""
+    exp_file = tmp_path / "short.toml"
+    exp_file.write_text(SHORT)
+    folder = tmp_path / "run"
+    assert main(["tank-run", str(exp_file), "--out", str(folder), "--no-live", "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert summary["error"] == "" and not summary["interrupted"]
+    assert summary["dropped_samples"] == 0
+    assert summary["capture_backlog_max_s"] < 6.0
+    assert summary["loopback_latency_samples"] == 64
+    assert summary["scored_estimates"] >= 50 and summary["detection_rate"] > 0.8
+    assert abs(summary["range_bias_m"]) < 0.1 and summary["range_rmse_m"] < 0.15
+    assert summary["wrong_fraction"] <= 0.1
 
 
 @pytest.mark.slow
