@@ -145,11 +145,11 @@ class FmcwReceiver(RegistryConstructor):
         """Samples consumed so far, gaps included."""
         return self._seen
 
-
     @property
     def next_decision_index(self) -> int:
         """It may emit on any block: :attr:`samples_seen`."""
         return self.samples_seen
+
     # ------------------------------------------------------------------ streaming
     def process(self, block: NDArray[np.floating], *, gap_before: int = 0) -> list[Estimate]:
         """Consume ``block`` (shape ``(n,)``, real samples) and return new estimates."""
