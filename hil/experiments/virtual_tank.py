@@ -47,7 +47,7 @@ class VirtualTank:
 
     def __init__(self, exp: Experiment, *, tick_s: float = SERVICE_TICK_S) -> None:
         from hil.transports.sim import MemoryStageLink
-        from sim_devices.board import BoardPort, MemoryBoardLink, SimulatedBoard
+        from sim_devices.board import BoardPort, FaultPlan, MemoryBoardLink, SimulatedBoard
         from sim_devices.stage import SimulatedGrbl
 
         clock = VirtualClock(tick_s)
@@ -57,7 +57,11 @@ class VirtualTank:
         self.stage_target: MemoryStageLink = MemoryStageLink(
             self._grbl, timeout=0.0, url="sim://stage (in process, virtual time)"
         )
-        self._board = SimulatedBoard(clock=clock, world=build_tank_world(exp, self._carriage))
+        #: The simulated board's faults on demand (``faults.disconnect()``: unplugged).
+        self.board_faults = FaultPlan()
+        self._board = SimulatedBoard(
+            clock=clock, world=build_tank_world(exp, self._carriage), faults=self.board_faults
+        )
         self.board_target: Transport = MemoryBoardLink(
             BoardPort(self._board), timeout=0.0, url="sim://board (in process, virtual time)"
         )

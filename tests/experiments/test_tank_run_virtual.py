@@ -114,3 +114,51 @@ def test_virtual_time_is_refused_for_real_devices(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match=r"virtual time.*simulated devices \(sim://\) only"):
         virtual_run(tmp_path / "run", text)
     assert not (tmp_path / "run" / "run.h5").exists()
+
+
+def test_a_board_unplugged_mid_pass_stops_the_run_within_a_second_and_holds_the_stage(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from hil.experiments import virtual_tank
+
+    tanks: list[virtual_tank.VirtualTank] = []
+    original = virtual_tank.VirtualTank.__init__
+
+    def keep(self: virtual_tank.VirtualTank, *args: Any, **kwargs: Any) -> None:
+        original(self, *args, **kwargs)
+        tanks.append(self)
+
+    monkeypatch.setattr(virtual_tank.VirtualTank, "__init__", keep)
+    unplugged_at: list[float] = []
+
+    def unplug_after_30(estimates: list[Any]) -> None:
+        tank = tanks[0]
+        if not unplugged_at and len(outcome_estimates) >= 30:
+            unplugged_at.append(tank.clock.now())
+            tank.board_faults.disconnect()
+        outcome_estimates.extend(estimates)
+
+    outcome_estimates: list[Any] = []
+    exp = parse_experiment(SHORT)
+    outcome = run_experiment(
+        exp,
+        folder=tmp_path / "run",
+        view=LiveView(enabled=False),
+        on_estimates=unplug_after_30,
+        virtual_time=True,
+    )
+    assert unplugged_at
+    assert outcome.error.startswith("DeviceLostError: board sim://board lost: its link dropped")
+    assert "has not come back for 0.5" in outcome.error  # noticed after LOST_AFTER_S = 0.5 s
+    assert "check its USB cable and power" in outcome.error
+    stop = outcome.events[-1]
+    assert stop[0] == "alarm" and stop[3] == f"stop: error: {outcome.error}"
+    disconnect = outcome.events[-2]
+    assert disconnect[0] == "alarm" and disconnect[3].startswith("disconnect: simulated board")
+    # The stage was held where it was: short of the pass's end, at rest.
+    tank = tanks[0]
+    now = tank.clock.now()
+    x_end, x_later = tank.true_stage_position(np.array([now, now + 1.0]))
+    assert exp.tow.end_m < x_end < exp.tow.start_m and x_later == x_end
+    with RunRecording.open(outcome.folder / "run.h5") as rec:
+        assert rec.events()[-1].text == stop[3]
