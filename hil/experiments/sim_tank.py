@@ -168,6 +168,73 @@ def tank_stage_config() -> Any:
     )
 
 
+class _TowedTarget:
+    """The towed target's position (m, tank frame, shape ``(n, 3)``) at channel times ``t``
+    (s from the world's first block), following the carriage.
+
+    Every echo path and every fixed-point iteration asks for positions over the same block:
+    the carriage is sampled once per block on a 1 ms grid, with its velocity, and filled in
+    by a cubic Hermite, exact in its constant-speed and constant-acceleration phases (a
+    piecewise-linear fill would put a corner every millisecond, and the echo's delay grid
+    solves every interval holding a corner sample by sample).
+    """
+
+    GRID_S = 1e-3
+
+    def __init__(
+        self,
+        exp: Experiment,
+        carriage_motion: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
+    ) -> None:
+        self.exp = exp
+        self.motion = carriage_motion
+        self.fs = float(exp.waveform.fs_hz)
+        #: The world whose first block is channel time 0 (set once it exists).
+        self.world: Any = None
+        self._grid = np.zeros(0)
+        self._x = self._v = np.zeros(0)
+
+    def __call__(self, t: np.ndarray) -> np.ndarray:
+        origin = self.world.origin_index or 0
+        tq = np.asarray(t, dtype=np.float64) + origin / self.fs  # device sample time
+        lo, hi = float(np.min(tq)), float(np.max(tq))
+        h = self.GRID_S
+        if self._grid.size == 0 or lo < self._grid[0] or hi > self._grid[-1]:
+            self._grid = np.arange(np.floor(lo / h) - 2, np.ceil(hi / h) + 3) * h
+            self._x, self._v = self.motion(self._grid)
+        return self.exp.target_position(_hermite(tq, self._grid, self._x, self._v, h))
+
+
+def _ambient(exp: Experiment, source_level_db: float) -> Any:
+    """The noise and volume reverberation of the tank (a ``sim_devices`` channel built from
+    a scenario: its ``reverberation``, ``noise`` and ``noise_scale``)."""
+    from sim_devices.acoustics.scenario import build_channel, parse_scenario
+
+    sim = exp.simulation
+    scenario: dict[str, Any] = {
+        "preset": exp.preset,
+        "family": exp.waveform.family,
+        "fs_hz": float(exp.waveform.fs_hz),
+        "seed": sim.seed,
+        "environment": {"sound_speed_mps": exp.sound_speed_mps},
+        "sonar": {
+            "position_m": list(exp.transducer_m),
+            "source_level_db": source_level_db,
+            "sensitivity_db": sim.sensitivity_db,
+            "gain_db": sim.gain_db,
+        },
+        "noise": {"self_noise_db": sim.noise_level_db},
+    }
+    if sim.reverberation:
+        scenario["reverberation"] = {
+            "scattering_strength_db": sim.scattering_strength_db,
+            "density_per_m3": 20.0,
+            "min_range_m": 0.3,
+            "max_range_m": float(np.sqrt(sum(s * s for s in exp.tank_size_m))),
+        }
+    return build_channel(parse_scenario(scenario))
+
+
 def build_tank_world(
     exp: Experiment, carriage_motion: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 ) -> Any:
@@ -180,63 +247,17 @@ def build_tank_world(
     """
     from sim_devices.acoustics.channel import Channel, DirectBlast, Receiver, Target
     from sim_devices.acoustics.dac_world import ScheduleWorld
-    from sim_devices.acoustics.scenario import build_channel, parse_scenario
     from sim_devices.acoustics.tank import Tank
     from sim_devices.acoustics.trajectory import Fixed, Live
 
     sim = exp.simulation
     fs = float(exp.waveform.fs_hz)
-    c = exp.sound_speed_mps
-    size = exp.tank_size_m
-    holder: dict[str, Any] = {}
-    grid_s = 1e-3
-    cache: dict[str, np.ndarray] = {}
-
-    def target_position(t: np.ndarray) -> np.ndarray:
-        # Every echo path and every fixed-point iteration asks for positions over the same
-        # block: the carriage is sampled once per block on a 1 ms grid, with its velocity,
-        # and the cubic Hermite between the nodes is exact for its constant-speed and
-        # constant-acceleration phases (a piecewise-linear fill would put a corner every
-        # millisecond, and the echo's delay grid solves every interval with a corner
-        # sample by sample).
-        # The channel counts time from its first block: convert to device sample time.
-        origin = holder["world"].origin_index or 0
-        tq = np.asarray(t, dtype=np.float64) + origin / fs
-        lo, hi = float(np.min(tq)), float(np.max(tq))
-        g = cache.get("t")
-        if g is None or lo < g[0] or hi > g[-1]:
-            g = np.arange(np.floor(lo / grid_s) - 2, np.ceil(hi / grid_s) + 3) * grid_s
-            cache["t"] = g
-            cache["x"], cache["v"] = carriage_motion(g)
-        return exp.target_position(_hermite(tq, cache["t"], cache["x"], cache["v"], grid_s))
-
-    live = Live(target_position, max_speed_mps=STAGE_MAX_RATE_MM_MIN / 60_000.0)
+    target = _TowedTarget(exp, carriage_motion)
+    live = Live(target, max_speed_mps=STAGE_MAX_RATE_MM_MIN / 60_000.0)
     receiver = Receiver(sensitivity_db=sim.sensitivity_db, gain_db=sim.gain_db, full_scale_v=1.0)
     # The DAC plays the schedule at ``amplitude`` of full scale: that sets the source level.
     source_level = sim.source_level_db + 20.0 * float(np.log10(exp.amplitude))
-    diag = float(np.sqrt(sum(s * s for s in size)))
-    scenario: dict[str, Any] = {
-        "preset": exp.preset,
-        "family": exp.waveform.family,
-        "fs_hz": fs,
-        "seed": sim.seed,
-        "environment": {"sound_speed_mps": c},
-        "sonar": {
-            "position_m": list(exp.transducer_m),
-            "source_level_db": source_level,
-            "sensitivity_db": sim.sensitivity_db,
-            "gain_db": sim.gain_db,
-        },
-        "noise": {"self_noise_db": sim.noise_level_db},
-    }
-    if sim.reverberation:
-        scenario["reverberation"] = {
-            "scattering_strength_db": sim.scattering_strength_db,
-            "density_per_m3": 20.0,
-            "min_range_m": 0.3,
-            "max_range_m": diag,
-        }
-    ambient = build_channel(parse_scenario(scenario))
+    ambient = _ambient(exp, source_level)
     delay = CONVERTER_DELAY_SAMPLES
     # Exact echoes of the transmitted schedule; the converter latency delays everything.
     channel = Channel(
@@ -244,18 +265,18 @@ def build_tank_world(
         fs,
         Fixed(exp.transducer_m),
         source_level,
-        c,
+        exp.sound_speed_mps,
         targets=[Target(live, sim.target_strength_db)],
         receiver=receiver,
-        tank=Tank(*size),
+        tank=Tank(*exp.tank_size_m),
         image_order=sim.image_order,
         direct_blast=DirectBlast(coupling_db=-80.0, separation_m=0.05),
         reverberation=ambient.reverberation,
         noise=ambient.noise,
         noise_scale=ambient.noise_scale,
     )
-    world = holder["world"] = ScheduleWorld(channel, converter_delay_samples=delay, adc_channels=2)
-    return world
+    target.world = ScheduleWorld(channel, converter_delay_samples=delay, adc_channels=2)
+    return target.world
 
 
 def _hermite(t: np.ndarray, grid: np.ndarray, x: np.ndarray, v: np.ndarray, h: float) -> np.ndarray:
