@@ -533,23 +533,20 @@ def test_a_board_stopped_by_its_watchdog_ends_the_run_with_the_reason() -> None:
     """The board stops streaming when its watchdog expires; the run must stop at once with
     that reason, not wait for samples until run.max_duration_s."""
     from hil.devices.board import Board
+    from hil.devices.clock import VirtualClock
     from hil.experiments.live.board_state import board_stopped
     from sim_devices.board import BoardPort, LoopbackWorld, MemoryBoardLink, SimulatedBoard
-    from sim_devices.stage.clock import ManualClock
 
-    clock = ManualClock()
-    port = BoardPort(SimulatedBoard(clock=clock, world=LoopbackWorld(5)), poll_s=0.0002)
-    with Board(MemoryBoardLink(port, timeout=0.005), clock=clock, keepalive_ms=60000) as board:
+    clock = VirtualClock()
+    sim = SimulatedBoard(clock=clock, world=LoopbackWorld(5))
+    link = MemoryBoardLink(BoardPort(sim), timeout=0.0)
+    with Board(link, virtual_time=clock, keepalive_ms=60000) as board:
         board.configure()
         first = board.start()
-        clock.advance(0.25)  # past the start lead (0.2 s)
-        assert board.wait_for_samples(first + 100, 10.0)
+        assert board.wait_for_samples(first + 100, timeout_s=1.0)
         assert board_stopped(board) is None
-        port.call(lambda b: b.faults.expire_watchdog())
-        clock.advance(0.001)
-        deadline = time.monotonic() + 10.0
-        while board_stopped(board) is None and time.monotonic() < deadline:
-            time.sleep(0.001)
+        sim.faults.expire_watchdog()
+        assert clock.wait_until(lambda: board_stopped(board) is not None, timeout_s=1.0)
         why = board_stopped(board)
     assert why is not None
     assert why.startswith("the board stopped streaming at sample ")
