@@ -73,10 +73,15 @@ import tempfile
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
+
+if TYPE_CHECKING:
+    from hil.estimation.base import Receiver
+    from hil.signals.schedule import HopSchedule
+    from hil.signals.synthesis import BlockSynthesizer
 
 FS_HZ = 1_000_000
 ADC_CHANNELS = 2
@@ -251,6 +256,113 @@ class Arrivals:
         return out
 
 
+@dataclass(frozen=True)
+class LiveDesign:
+    """The signal and the receiver of the live run: the ``tank-board`` preset, random cyclic.
+
+    ``schedule``: the hop schedule (``schedule.hop_s``, s); ``receiver``: GCAS on ADC channel
+    0, fed int16 counts scaled by :data:`INT16_SCALE` to full scale; ``synth``: the DAC's
+    blocks at :data:`DAC_AMPLITUDE` full scale; ``echo_range_m``: the range of the stand-in's
+    echo (:data:`ECHO_DELAY_SAMPLES`), m.
+    """
+
+    schedule: HopSchedule
+    receiver: Receiver
+    synth: BlockSynthesizer
+    echo_range_m: float
+
+
+def tank_board_design() -> LiveDesign:
+    """Build the run's signal and receiver as ``hil tank-run`` builds its own."""
+    from hil.recording.records import ReceiverSetup
+    from hil.recording.replay import build_receiver
+    from hil.signals.presets import check_design, get_preset
+    from hil.signals.synthesis import BlockSynthesizer
+
+    spec = get_preset("tank-board").spec("random-cyclic")
+    schedule = check_design(spec)
+    assert spec.fs_hz == FS_HZ
+    c = spec.sound_speed_mps
+    setup = ReceiverSetup(
+        "gcas",
+        {
+            "sound_speed_mps": c,
+            "max_speed_mps": MAX_SPEED_MPS,
+            "max_range_m": MAX_RANGE_M,
+            "m_hops": M_HOPS,
+        },
+        channel=0,
+        scale=INT16_SCALE,
+    )
+    return LiveDesign(
+        schedule=schedule,
+        receiver=build_receiver(setup, schedule, FS_HZ),
+        synth=BlockSynthesizer(schedule, FS_HZ, amplitude=DAC_AMPLITUDE),
+        echo_range_m=c * ECHO_DELAY_SAMPLES / FS_HZ / 2.0,
+    )
+
+
+class StandinBoard:
+    """The simulated board in its own process (this file with ``--serve-board``), real-time
+    paced on a pseudo-terminal, so the host's CPU figures hold the host alone.
+
+    A context manager: inside it the process runs and :attr:`port` names its pty; on exit the
+    process is stopped (SIGTERM; killed if it has not ended within 10 s) and :attr:`stalls`
+    holds its pump's stalls (:class:`EchoWorld`), shape (n, 2), (start, end) monotonic s.
+    """
+
+    def __init__(self) -> None:
+        self.port = ""
+        self.stalls: npt.NDArray[np.float64] = np.zeros((0, 2))
+        self._server: subprocess.Popen[str] | None = None
+        self._stalls_path = ""
+
+    def __enter__(self) -> StandinBoard:
+        fd, self._stalls_path = tempfile.mkstemp(prefix="standin-stalls-", suffix=".json")
+        os.close(fd)
+        try:
+            self._server = subprocess.Popen(
+                [
+                    sys.executable,
+                    __file__,
+                    "--serve-board",
+                    str(ECHO_DELAY_SAMPLES),
+                    str(ECHO_GAIN),
+                    str(NOISE_RMS),
+                    self._stalls_path,
+                ],
+                stdout=subprocess.PIPE,
+                text=True,
+            )
+            assert self._server.stdout is not None
+            self.port = self._server.stdout.readline().strip()
+        except BaseException:
+            self._stop()
+            raise
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop()
+
+    def cpu_s(self) -> float:
+        """The process's user+system CPU time so far, s (NaN once stopped or off Linux)."""
+        return _process_cpu_s(self._server.pid) if self._server is not None else float("nan")
+
+    def _stop(self) -> None:
+        server, self._server = self._server, None
+        if server is not None:
+            server.terminate()
+            try:
+                server.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                server.kill()
+                server.wait()
+            if server.stdout is not None:
+                server.stdout.close()
+        self.stalls = _standin_stalls(self._stalls_path)
+        os.unlink(self._stalls_path)
+
+
 def run_live(
     seconds: float,
     min_block_s: float,
@@ -267,34 +379,11 @@ def run_live(
     from hil.acquisition.feed import ReceiverFeed
     from hil.devices.board import Board
     from hil.devices.board_settings import BoardSettings
-    from hil.recording.records import ReceiverSetup
-    from hil.recording.replay import build_receiver
-    from hil.signals.presets import check_design, get_preset
-    from hil.signals.synthesis import BlockSynthesizer
 
-    spec = get_preset("tank-board").spec("random-cyclic")
-    schedule = check_design(spec)
-    assert spec.fs_hz == FS_HZ
-    c = spec.sound_speed_mps
-    echo_range_m = c * ECHO_DELAY_SAMPLES / FS_HZ / 2.0
-    setup = ReceiverSetup(
-        "gcas",
-        {
-            "sound_speed_mps": c,
-            "max_speed_mps": MAX_SPEED_MPS,
-            "max_range_m": MAX_RANGE_M,
-            "m_hops": M_HOPS,
-        },
-        channel=0,
-        scale=INT16_SCALE,
-    )
-    receiver = build_receiver(setup, schedule, FS_HZ)  # as hil tank-run builds its own
-    synth = BlockSynthesizer(schedule, FS_HZ, amplitude=DAC_AMPLITUDE)
+    design = tank_board_design()
+    schedule, echo_range_m = design.schedule, design.echo_range_m
     probes = StallProbes() if stall_probes else None
     machine = None
-    fd, standin_path = tempfile.mkstemp(prefix="standin-stalls-", suffix=".json")
-    os.close(fd)
-    server: subprocess.Popen[str] | None = None
     profiler: Any = None
     if profile:
         import cProfile
@@ -303,131 +392,111 @@ def run_live(
     try:
         if probes is not None:
             probes.start()  # before the board: their start-up must not land in the stream
-        server = subprocess.Popen(
-            [
-                sys.executable,
-                __file__,
-                "--serve-board",
-                str(ECHO_DELAY_SAMPLES),
-                str(ECHO_GAIN),
-                str(NOISE_RMS),
-                standin_path,
-            ],
-            stdout=subprocess.PIPE,
-            text=True,
-        )
-        assert server.stdout is not None
-        port = server.stdout.readline().strip()
-        settings = BoardSettings(sample_rate_hz=FS_HZ, dac_channels=1, adc_channels=ADC_CHANNELS)
-        with Board(port, settings=settings, ring_seconds=RING_SECONDS) as board:
-            board.configure()
-            ring = board.ring
-            assert ring is not None
-            arrivals = Arrivals()
-            # Stamped by the board's reader thread as each block is stored.
-            ring.on_write = lambda end: arrivals.add(end, time.monotonic())
-            start = board.start(synth.blocks(1 << 15))
-            # The DAC plays schedule sample 0 at board index `start`, so that is the
-            # receiver's sample 0 (the echo delay is the target's range, not latency).
-            feed = ReceiverFeed(receiver, origin=start, channel=0, scale=INT16_SCALE)
-            n_total = int(round(seconds * FS_HZ))
-            end_target = start + n_total
-            min_block = max(1, int(round(min_block_s * FS_HZ)))
-            max_block = int(round(MAX_BLOCK_S * FS_HZ))
-            est_boundary: list[int] = []
-            est_emit: list[float] = []
-            est_seen: list[float] = []  # when the samples of the emitting block were seen
-            est_wanted: list[int] = []  # the board index the loop waited for before it
-            est_cpu: list[float] = []  # main-thread CPU time of the emitting feed call
-            est_range: list[float] = []
-            est_speed: list[float] = []
-            feed_wall: list[float] = []
-            feed_cpu: list[float] = []
-            block_times: list[tuple[float, float]] = []  # (wait began, samples seen)
-
-            def observe(block: CapturedBlock) -> None:
-                feed_cpu.append(block.feed_cpu_s)
-                feed_wall.append(block.fed_at - block.seen_at)
-                block_times.append((block.wait_began, block.seen_at))
-                for e in block.estimates:
-                    est_boundary.append(start + round(e.t_s * FS_HZ))
-                    est_emit.append(block.fed_at)
-                    est_seen.append(block.seen_at)
-                    est_wanted.append(block.wanted_index)
-                    est_cpu.append(block.feed_cpu_s)
-                    est_range.append(e.range_m)
-                    est_speed.append(e.speed_mps)
-
-            # The capture loop of hil tank-run: it waits, as the run does, for the receiver's
-            # next decision (nothing can come out before it) or one block when no decision
-            # comes within it; with --every-block for every min_block samples instead.
-            capture = CaptureLoop(
-                board,
-                start,
-                max_block,
-                feed=feed,
-                on_fed=observe,
-                every=min_block if every_block else None,
+        with StandinBoard() as standin:
+            settings = BoardSettings(
+                sample_rate_hz=FS_HZ, dac_channels=1, adc_channels=ADC_CHANNELS
             )
-            heap = HeapFreeze()
-            heap.start()  # as the tank run does: no 75 ms full collection mid-stream
-            if profiler is not None:
-                profiler.enable()
-            threads = _board_thread_ids(board)
-            thread0 = {name: _thread_cpu_s(tid) for name, tid in threads.items()}
-            rss0 = _rss_bytes()
-            steal0 = steal_s(probes.cpus) if probes is not None else float("nan")
-            wall0, cpu0, main0 = time.monotonic(), _host_cpu_s(), time.thread_time()
-            server_cpu0 = _process_cpu_s(server.pid)
-            while capture.next_index < end_target:
-                if capture.step(2.0, limit=end_target) is None:
-                    raise RuntimeError(
-                        f"no samples past board index {capture.next_index} for 2 s: the board"
-                        " stalled"
-                    )
-            next_index = capture.next_index
-            blocks = len(block_times)
-            gcas_cpu = float(sum(feed_cpu))
-            max_backlog = capture.backlog_max
-            # A long wait means the samples came late (board process or reader thread
-            # starved), not that the receiver was slow.
-            wait_max = max((seen - began for began, seen in block_times), default=0.0)
-            wall = time.monotonic() - wall0
-            steal = (steal_s(probes.cpus) if probes is not None else float("nan")) - steal0
-            rss_growth = _rss_bytes() - rss0
-            held_end = ring.end_index or start
-            cpu = _host_cpu_s() - cpu0
-            main_cpu = time.thread_time() - main0
-            server_cpu = _process_cpu_s(server.pid) - server_cpu0
-            thread_cpu = {name: _thread_cpu_s(tid) - thread0[name] for name, tid in threads.items()}
-            heap.stop()
-            if probes is not None:
-                # The machine while streaming (not while the board and probes started).
-                machine = probes.stop().between(wall0, wall0 + wall, steal)
-            if profiler is not None:
-                profiler.disable()
-            board_now = board.board_index_now()
-            missing = ring.missing
-            gap_samples = board.gaps.gap_samples
-            underruns = board.last_status.dac_underruns if board.last_status else -1
-            overruns = board.last_status.adc_overruns if board.last_status else -1
-            annotations = len(board.annotations.all())
-            stream_late_s = _stream_lateness_s(board, arrivals)
-        flushed = len(feed.finish())
+            with Board(standin.port, settings=settings, ring_seconds=RING_SECONDS) as board:
+                board.configure()
+                ring = board.ring
+                assert ring is not None
+                arrivals = Arrivals()
+                # Stamped by the board's reader thread as each block is stored.
+                ring.on_write = lambda end: arrivals.add(end, time.monotonic())
+                start = board.start(design.synth.blocks(1 << 15))
+                # The DAC plays schedule sample 0 at board index `start`, so that is the
+                # receiver's sample 0 (the echo delay is the target's range, not latency).
+                feed = ReceiverFeed(design.receiver, origin=start, channel=0, scale=INT16_SCALE)
+                n_total = int(round(seconds * FS_HZ))
+                end_target = start + n_total
+                min_block = max(1, int(round(min_block_s * FS_HZ)))
+                max_block = int(round(MAX_BLOCK_S * FS_HZ))
+                est_boundary: list[int] = []
+                est_emit: list[float] = []
+                est_seen: list[float] = []  # when the samples of the emitting block were seen
+                est_wanted: list[int] = []  # the board index the loop waited for before it
+                est_cpu: list[float] = []  # main-thread CPU time of the emitting feed call
+                est_range: list[float] = []
+                est_speed: list[float] = []
+                feed_wall: list[float] = []
+                feed_cpu: list[float] = []
+                block_times: list[tuple[float, float]] = []  # (wait began, samples seen)
+
+                def observe(block: CapturedBlock) -> None:
+                    feed_cpu.append(block.feed_cpu_s)
+                    feed_wall.append(block.fed_at - block.seen_at)
+                    block_times.append((block.wait_began, block.seen_at))
+                    for e in block.estimates:
+                        est_boundary.append(start + round(e.t_s * FS_HZ))
+                        est_emit.append(block.fed_at)
+                        est_seen.append(block.seen_at)
+                        est_wanted.append(block.wanted_index)
+                        est_cpu.append(block.feed_cpu_s)
+                        est_range.append(e.range_m)
+                        est_speed.append(e.speed_mps)
+
+                # The capture loop of hil tank-run: it waits, as the run does, for the receiver's
+                # next decision (nothing can come out before it) or one block when no decision
+                # comes within it; with --every-block for every min_block samples instead.
+                capture = CaptureLoop(
+                    board,
+                    start,
+                    max_block,
+                    feed=feed,
+                    on_fed=observe,
+                    every=min_block if every_block else None,
+                )
+                heap = HeapFreeze()
+                heap.start()  # as the tank run does: no 75 ms full collection mid-stream
+                if profiler is not None:
+                    profiler.enable()
+                threads = _board_thread_ids(board)
+                thread0 = {name: _thread_cpu_s(tid) for name, tid in threads.items()}
+                rss0 = _rss_bytes()
+                steal0 = steal_s(probes.cpus) if probes is not None else float("nan")
+                wall0, cpu0, main0 = time.monotonic(), _host_cpu_s(), time.thread_time()
+                server_cpu0 = standin.cpu_s()
+                while capture.next_index < end_target:
+                    if capture.step(2.0, limit=end_target) is None:
+                        raise RuntimeError(
+                            f"no samples past board index {capture.next_index} for 2 s: the board"
+                            " stalled"
+                        )
+                next_index = capture.next_index
+                blocks = len(block_times)
+                gcas_cpu = float(sum(feed_cpu))
+                max_backlog = capture.backlog_max
+                # A long wait means the samples came late (board process or reader thread
+                # starved), not that the receiver was slow.
+                wait_max = max((seen - began for began, seen in block_times), default=0.0)
+                wall = time.monotonic() - wall0
+                steal = (steal_s(probes.cpus) if probes is not None else float("nan")) - steal0
+                rss_growth = _rss_bytes() - rss0
+                held_end = ring.end_index or start
+                cpu = _host_cpu_s() - cpu0
+                main_cpu = time.thread_time() - main0
+                server_cpu = standin.cpu_s() - server_cpu0
+                thread_cpu = {
+                    name: _thread_cpu_s(tid) - thread0[name] for name, tid in threads.items()
+                }
+                heap.stop()
+                if probes is not None:
+                    # The machine while streaming (not while the board and probes started).
+                    machine = probes.stop().between(wall0, wall0 + wall, steal)
+                if profiler is not None:
+                    profiler.disable()
+                board_now = board.board_index_now()
+                missing = ring.missing
+                gap_samples = board.gaps.gap_samples
+                underruns = board.last_status.dac_underruns if board.last_status else -1
+                overruns = board.last_status.adc_overruns if board.last_status else -1
+                annotations = len(board.annotations.all())
+                stream_late_s = _stream_lateness_s(board, arrivals)
+            flushed = len(feed.finish())
     finally:
-        if server is not None:
-            server.terminate()
-            try:
-                server.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                server.kill()
-                server.wait()
-            if server.stdout is not None:
-                server.stdout.close()
         if probes is not None:
             probes.close()  # after stop() nothing is left; on an error, kill them
-        standin = _standin_stalls(standin_path)
-        os.unlink(standin_path)
+    standin_stalls = standin.stalls
 
     boundary = np.asarray(est_boundary, dtype=np.int64)
     emit = np.asarray(est_emit)
@@ -455,8 +524,10 @@ def run_live(
         in_stall = np.zeros(lat_s.shape, dtype=bool)
     # ... and those during which the stand-in board's pump stalled (it shares the host's
     # CPUs; hardware would not).
-    in_standin = overlapping(standin[:, 0], standin[:, 1], boundary_seen, emit)
-    standin_run = standin[(standin[:, 1] >= wall0) & (standin[:, 0] <= wall0 + wall)]
+    in_standin = overlapping(standin_stalls[:, 0], standin_stalls[:, 1], boundary_seen, emit)
+    standin_run = standin_stalls[
+        (standin_stalls[:, 1] >= wall0) & (standin_stalls[:, 0] <= wall0 + wall)
+    ]
     standin_d = np.minimum(standin_run[:, 1], wall0 + wall) - np.maximum(standin_run[:, 0], wall0)
     clear = ~in_stall & ~in_standin
     if dump is not None:
