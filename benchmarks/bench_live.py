@@ -369,6 +369,16 @@ class StandinBoard:
         os.unlink(self._stalls_path)
 
 
+def _standin_stalls(path: str) -> npt.NDArray[np.float64]:
+    """The stand-in board's stalls, shape (n, 2) (start, end monotonic s), from the file
+    its process wrote at exit; none if it wrote nothing (it failed: its error is above)."""
+    try:
+        with open(path) as fh:
+            return np.array(json.load(fh), dtype=np.float64).reshape(-1, 2)
+    except (OSError, ValueError):
+        return np.zeros((0, 2))
+
+
 # --------------------------------------------------------------------------- the measured loop
 @dataclass
 class EstimateLog:
@@ -1019,16 +1029,6 @@ def live_figures(
     return result
 
 
-def _standin_stalls(path: str) -> npt.NDArray[np.float64]:
-    """The stand-in board's stalls, shape (n, 2) (start, end monotonic s), from the file
-    its process wrote at exit; none if it wrote nothing (it failed: its error is above)."""
-    try:
-        with open(path) as fh:
-            return np.array(json.load(fh), dtype=np.float64).reshape(-1, 2)
-    except (OSError, ValueError):
-        return np.zeros((0, 2))
-
-
 def machine_figures(machine: Any) -> dict[str, Any]:
     """The stall probes' summary, keys prefixed ``machine_`` (empty without probes)."""
     if machine is None:
@@ -1036,7 +1036,12 @@ def machine_figures(machine: Any) -> dict[str, Any]:
     return {f"machine_{k}": v for k, v in machine.summary().items()}
 
 
-def machine_rows(r: dict[str, Any]) -> list[tuple[str, str]]:
+# --------------------------------------------------------------------------- the table
+#: Table rows: (name, text).
+Rows = list[tuple[str, str]]
+
+
+def machine_rows(r: dict[str, Any]) -> Rows:
     """Table rows for the stall probes' figures (none without probes)."""
     if "machine_stalls" not in r:
         return []
@@ -1053,10 +1058,9 @@ def machine_rows(r: dict[str, Any]) -> list[tuple[str, str]]:
     ]
 
 
-def print_table(r: dict[str, Any]) -> None:
-    """The figures as a table on stdout."""
-    hop_ms = r["hop_s"] * 1e3
-    rows = [
+def _cpu_rows(r: dict[str, Any]) -> Rows:
+    """The table's first section: what was streamed, the host's CPU by part, its memory."""
+    return [
         ("streamed", f"{r['seconds']:.1f} s at 1 MS/s x 2 ch int16 (wall {r['wall_s']:.2f} s)"),
         ("blocks", f"{r['blocks']} (mean {r['mean_block_samples']:.0f} samples)"),
         (
@@ -1078,6 +1082,13 @@ def print_table(r: dict[str, Any]) -> None:
         ),
         ("  (sim board)", f"{r['sim_board_process_cores']:.3f} cores, other process, not counted"),
         ("host memory", f"resident set grew {r['host_rss_growth_mib']} MiB while streaming"),
+    ]
+
+
+def _keep_up_rows(r: dict[str, Any]) -> Rows:
+    """The feed call's times, keeping up (samples, losses, backlog, board counters) and the
+    estimates."""
+    return [
         (
             "feed call",
             f"median {r['feed_call_median_ms']:.2f} ms, p99 {r['feed_call_p99_ms']:.2f} ms,"
@@ -1103,14 +1114,18 @@ def print_table(r: dict[str, Any]) -> None:
             f" the echo range {r['echo_range_m']:.3f} m (median {r['median_range_m']} m,"
             f" {r['median_speed_mps']} m/s)",
         ),
+    ]
+
+
+def _latency_rows(r: dict[str, Any]) -> Rows:
+    """The estimate latency (hops), its parts (ms) and the stream's lateness (ms)."""
+    return [
         (
             "latency",
             f"median {r['latency_median_hops']:.3f}, p99 {r['latency_p99_hops']:.3f},"
-            f" max {r['latency_max_hops']:.3f} hops (hop {hop_ms:.1f} ms; target <="
+            f" max {r['latency_max_hops']:.3f} hops (hop {r['hop_s'] * 1e3:.1f} ms; target <="
             f" {TARGET_LATENCY_HOPS}); {r['estimates_over_1_hop']} estimates over 1 hop",
         ),
-    ]
-    rows += [
         (
             "  its parts",
             f"waiting for the look-ahead samples: median {r['latency_wait_median_ms']} ms, max"
@@ -1139,7 +1154,12 @@ def print_table(r: dict[str, Any]) -> None:
             " against the fastest delivery)",
         ),
     ]
-    rows += machine_rows(r)
+
+
+def _stall_rows(r: dict[str, Any]) -> Rows:
+    """The machine's and the stand-in's stalls, the estimates they touched, and the latency
+    over the estimates neither touched."""
+    rows = machine_rows(r)
     if "estimates_in_machine_stall" in r:
         rows.append(
             (
@@ -1166,8 +1186,18 @@ def print_table(r: dict[str, Any]) -> None:
             f" {r['latency_max_outside_stalls_hops']} hops",
         )
     )
+    return rows
+
+
+def print_rows(rows: Rows) -> None:
+    """Table rows on stdout: the name in 18 columns, then the text."""
     for name, text in rows:
         print(f"{name:<18} {text}")
+
+
+def print_table(r: dict[str, Any]) -> None:
+    """The figures of :func:`run_live` as a table on stdout."""
+    print_rows(_cpu_rows(r) + _keep_up_rows(r) + _latency_rows(r) + _stall_rows(r))
 
 
 def run_machine_only(seconds: float) -> dict[str, Any]:
@@ -1181,7 +1211,8 @@ def run_machine_only(seconds: float) -> dict[str, Any]:
     return {"seconds": seconds, "machine_only": True, **machine_figures(probes.result)}
 
 
-def main() -> None:
+def build_parser() -> argparse.ArgumentParser:
+    """The command line (module docstring); ``--serve-board`` runs the stand-in board."""
     parser = argparse.ArgumentParser(description="live capture + GCAS at the tank-board rate")
     parser.add_argument("--seconds", type=float, default=30.0, help="streaming time, s")
     parser.add_argument("--quick", action="store_true", help="smoke run (1.5 s of streaming)")
@@ -1213,7 +1244,11 @@ def main() -> None:
         help="also save the per-estimate and per-block times (NumPy .npz) for analysis",
     )
     parser.add_argument("--serve-board", nargs=4, metavar=("DELAY", "GAIN", "NOISE", "OUT"))
-    args = parser.parse_args()
+    return parser
+
+
+def main() -> None:
+    args = build_parser().parse_args()
     if args.serve_board:
         delay, gain, noise, out = args.serve_board
         serve_board(int(delay), float(gain), float(noise), out)
@@ -1221,8 +1256,7 @@ def main() -> None:
     seconds = 1.5 if args.quick else args.seconds
     if args.machine_only:
         result = run_machine_only(seconds)
-        for name, text in machine_rows(result):
-            print(f"{name:<18} {text}")
+        print_rows(machine_rows(result))
         print(json.dumps({"benchmark": "bench_live", **result}))
         return
     result = run_live(
