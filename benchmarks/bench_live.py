@@ -8,10 +8,11 @@ Its world returns a real echo: ADC channel 0 is the DAC output delayed by
 fed by :class:`~hil.signals.synthesis.BlockSynthesizer` from the ``tank-board`` preset
 (random cyclic code, 1 MS/s, 2 ADC channels int16). The host process runs the
 :class:`~hil.devices.board.Board` driver (reader and writer threads), the capture loop and
-:class:`~hil.acquisition.feed.ReceiverFeed` with GCAS on channel 0. The loop is the one of
-``hil tank-run`` (:class:`~hil.acquisition.capture.CaptureLoop`): it waits until
-the ring holds the receiver's next decision index (no estimate can come out earlier) or one
-block, then feeds everything the ring holds up to one block; with ``--every-block`` it feeds every
+:class:`~hil.acquisition.feed.ReceiverFeed` with GCAS on channel 0 (reverberation band off:
+the echo is stationary). The loop is the one of ``hil tank-run``
+(:class:`~hil.acquisition.capture.CaptureLoop`): it waits until the ring holds the
+receiver's next decision index (no estimate can come out earlier) or one block, then feeds
+everything the ring holds up to one block; with ``--every-block`` it feeds every
 ``--min-block-ms`` instead (more calls, the same estimates). The setup's objects are kept
 out of the garbage collector's full passes (:class:`~hil.acquisition.HeapFreeze`), as in
 ``hil tank-run``.
@@ -296,6 +297,10 @@ def tank_board_design() -> LiveDesign:
             "max_speed_mps": MAX_SPEED_MPS,
             "max_range_m": MAX_RANGE_M,
             "m_hops": M_HOPS,
+            # The stand-in's echo is stationary: the default reverberation band ("auto")
+            # hides targets slower than the Doppler resolution, so it is off here (README,
+            # "The GCAS receiver's defaults"); with it on, no estimate comes out at all.
+            "reverb_speed_mps": 0.0,
         },
         channel=0,
         scale=INT16_SCALE,
