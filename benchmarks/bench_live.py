@@ -8,10 +8,11 @@ Its world returns a real echo: ADC channel 0 is the DAC output delayed by
 fed by :class:`~hil.signals.synthesis.BlockSynthesizer` from the ``tank-board`` preset
 (random cyclic code, 1 MS/s, 2 ADC channels int16). The host process runs the
 :class:`~hil.devices.board.Board` driver (reader and writer threads), the capture loop and
-:class:`~hil.acquisition.feed.ReceiverFeed` with GCAS on channel 0. The loop is the one of
-``hil tank-run`` (:class:`~hil.acquisition.capture.CaptureLoop`): it waits until
-the ring holds the receiver's next decision index (no estimate can come out earlier) or one
-block, then feeds everything the ring holds up to one block; with ``--every-block`` it feeds every
+:class:`~hil.acquisition.feed.ReceiverFeed` with GCAS on channel 0 (reverberation band off:
+the echo is stationary). The loop is the one of ``hil tank-run``
+(:class:`~hil.acquisition.capture.CaptureLoop`): it waits until the ring holds the
+receiver's next decision index (no estimate can come out earlier) or one block, then feeds
+everything the ring holds up to one block; with ``--every-block`` it feeds every
 ``--min-block-ms`` instead (more calls, the same estimates). The setup's objects are kept
 out of the garbage collector's full passes (:class:`~hil.acquisition.HeapFreeze`), as in
 ``hil tank-run``.
@@ -73,10 +74,21 @@ import tempfile
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
+
+if TYPE_CHECKING:
+    import cProfile
+
+    from machine_stalls import MachineStalls, StallProbes
+
+    from hil.acquisition.capture import CapturedBlock, CaptureLoop
+    from hil.devices.board import Board
+    from hil.estimation.base import Receiver
+    from hil.signals.schedule import HopSchedule
+    from hil.signals.synthesis import BlockSynthesizer
 
 FS_HZ = 1_000_000
 ADC_CHANNELS = 2
@@ -251,22 +263,24 @@ class Arrivals:
         return out
 
 
-def run_live(
-    seconds: float,
-    min_block_s: float,
-    profile: bool = False,
-    every_block: bool = False,
-    stall_probes: bool = True,
-    dump: str | None = None,
-) -> dict[str, Any]:
-    """Stream ``seconds`` through Board + capture loop + GCAS; the figures (module docstring)."""
-    from machine_stalls import StallProbes, overlapping, steal_s
+@dataclass(frozen=True)
+class LiveDesign:
+    """The signal and the receiver of the live run: the ``tank-board`` preset, random cyclic.
 
-    from hil.acquisition import HeapFreeze
-    from hil.acquisition.capture import CapturedBlock, CaptureLoop
-    from hil.acquisition.feed import ReceiverFeed
-    from hil.devices.board import Board
-    from hil.devices.board_settings import BoardSettings
+    ``schedule``: the hop schedule (``schedule.hop_s``, s); ``receiver``: GCAS on ADC channel
+    0, fed int16 counts scaled by :data:`INT16_SCALE` to full scale; ``synth``: the DAC's
+    blocks at :data:`DAC_AMPLITUDE` full scale; ``echo_range_m``: the range of the stand-in's
+    echo (:data:`ECHO_DELAY_SAMPLES`), m.
+    """
+
+    schedule: HopSchedule
+    receiver: Receiver
+    synth: BlockSynthesizer
+    echo_range_m: float
+
+
+def tank_board_design() -> LiveDesign:
+    """Build the run's signal and receiver as ``hil tank-run`` builds its own."""
     from hil.recording.records import ReceiverSetup
     from hil.recording.replay import build_receiver
     from hil.signals.presets import check_design, get_preset
@@ -276,7 +290,6 @@ def run_live(
     schedule = check_design(spec)
     assert spec.fs_hz == FS_HZ
     c = spec.sound_speed_mps
-    echo_range_m = c * ECHO_DELAY_SAMPLES / FS_HZ / 2.0
     setup = ReceiverSetup(
         "gcas",
         {
@@ -284,137 +297,70 @@ def run_live(
             "max_speed_mps": MAX_SPEED_MPS,
             "max_range_m": MAX_RANGE_M,
             "m_hops": M_HOPS,
+            # The stand-in's echo is stationary: the default reverberation band ("auto")
+            # hides targets slower than the Doppler resolution, so it is off here (README,
+            # "The GCAS receiver's defaults"); with it on, no estimate comes out at all.
+            "reverb_speed_mps": 0.0,
         },
         channel=0,
         scale=INT16_SCALE,
     )
-    receiver = build_receiver(setup, schedule, FS_HZ)  # as hil tank-run builds its own
-    synth = BlockSynthesizer(schedule, FS_HZ, amplitude=DAC_AMPLITUDE)
-    probes = StallProbes() if stall_probes else None
-    machine = None
-    fd, standin_path = tempfile.mkstemp(prefix="standin-stalls-", suffix=".json")
-    os.close(fd)
-    server: subprocess.Popen[str] | None = None
-    profiler: Any = None
-    if profile:
-        import cProfile
+    return LiveDesign(
+        schedule=schedule,
+        receiver=build_receiver(setup, schedule, FS_HZ),
+        synth=BlockSynthesizer(schedule, FS_HZ, amplitude=DAC_AMPLITUDE),
+        echo_range_m=c * ECHO_DELAY_SAMPLES / FS_HZ / 2.0,
+    )
 
-        profiler = cProfile.Profile()
-    try:
-        if probes is not None:
-            probes.start()  # before the board: their start-up must not land in the stream
-        server = subprocess.Popen(
-            [
-                sys.executable,
-                __file__,
-                "--serve-board",
-                str(ECHO_DELAY_SAMPLES),
-                str(ECHO_GAIN),
-                str(NOISE_RMS),
-                standin_path,
-            ],
-            stdout=subprocess.PIPE,
-            text=True,
-        )
-        assert server.stdout is not None
-        port = server.stdout.readline().strip()
-        settings = BoardSettings(sample_rate_hz=FS_HZ, dac_channels=1, adc_channels=ADC_CHANNELS)
-        with Board(port, settings=settings, ring_seconds=RING_SECONDS) as board:
-            board.configure()
-            ring = board.ring
-            assert ring is not None
-            arrivals = Arrivals()
-            # Stamped by the board's reader thread as each block is stored.
-            ring.on_write = lambda end: arrivals.add(end, time.monotonic())
-            start = board.start(synth.blocks(1 << 15))
-            # The DAC plays schedule sample 0 at board index `start`, so that is the
-            # receiver's sample 0 (the echo delay is the target's range, not latency).
-            feed = ReceiverFeed(receiver, origin=start, channel=0, scale=INT16_SCALE)
-            n_total = int(round(seconds * FS_HZ))
-            end_target = start + n_total
-            min_block = max(1, int(round(min_block_s * FS_HZ)))
-            max_block = int(round(MAX_BLOCK_S * FS_HZ))
-            est_boundary: list[int] = []
-            est_emit: list[float] = []
-            est_seen: list[float] = []  # when the samples of the emitting block were seen
-            est_wanted: list[int] = []  # the board index the loop waited for before it
-            est_cpu: list[float] = []  # main-thread CPU time of the emitting feed call
-            est_range: list[float] = []
-            est_speed: list[float] = []
-            feed_wall: list[float] = []
-            feed_cpu: list[float] = []
-            block_times: list[tuple[float, float]] = []  # (wait began, samples seen)
 
-            def observe(block: CapturedBlock) -> None:
-                feed_cpu.append(block.feed_cpu_s)
-                feed_wall.append(block.fed_at - block.seen_at)
-                block_times.append((block.wait_began, block.seen_at))
-                for e in block.estimates:
-                    est_boundary.append(start + round(e.t_s * FS_HZ))
-                    est_emit.append(block.fed_at)
-                    est_seen.append(block.seen_at)
-                    est_wanted.append(block.wanted_index)
-                    est_cpu.append(block.feed_cpu_s)
-                    est_range.append(e.range_m)
-                    est_speed.append(e.speed_mps)
+class StandinBoard:
+    """The simulated board in its own process (this file with ``--serve-board``), real-time
+    paced on a pseudo-terminal, so the host's CPU figures hold the host alone.
 
-            # The capture loop of hil tank-run: it waits, as the run does, for the receiver's
-            # next decision (nothing can come out before it) or one block when no decision
-            # comes within it; with --every-block for every min_block samples instead.
-            capture = CaptureLoop(
-                board,
-                start,
-                max_block,
-                feed=feed,
-                on_fed=observe,
-                every=min_block if every_block else None,
+    A context manager: inside it the process runs and :attr:`port` names its pty; on exit the
+    process is stopped (SIGTERM; killed if it has not ended within 10 s) and :attr:`stalls`
+    holds its pump's stalls (:class:`EchoWorld`), shape (n, 2), (start, end) monotonic s.
+    """
+
+    def __init__(self) -> None:
+        self.port = ""
+        self.stalls: npt.NDArray[np.float64] = np.zeros((0, 2))
+        self._server: subprocess.Popen[str] | None = None
+        self._stalls_path = ""
+
+    def __enter__(self) -> StandinBoard:
+        fd, self._stalls_path = tempfile.mkstemp(prefix="standin-stalls-", suffix=".json")
+        os.close(fd)
+        try:
+            self._server = subprocess.Popen(
+                [
+                    sys.executable,
+                    __file__,
+                    "--serve-board",
+                    str(ECHO_DELAY_SAMPLES),
+                    str(ECHO_GAIN),
+                    str(NOISE_RMS),
+                    self._stalls_path,
+                ],
+                stdout=subprocess.PIPE,
+                text=True,
             )
-            heap = HeapFreeze()
-            heap.start()  # as the tank run does: no 75 ms full collection mid-stream
-            if profiler is not None:
-                profiler.enable()
-            threads = _board_thread_ids(board)
-            thread0 = {name: _thread_cpu_s(tid) for name, tid in threads.items()}
-            rss0 = _rss_bytes()
-            steal0 = steal_s(probes.cpus) if probes is not None else float("nan")
-            wall0, cpu0, main0 = time.monotonic(), _host_cpu_s(), time.thread_time()
-            server_cpu0 = _process_cpu_s(server.pid)
-            while capture.next_index < end_target:
-                if capture.step(2.0, limit=end_target) is None:
-                    raise RuntimeError(
-                        f"no samples past board index {capture.next_index} for 2 s: the board"
-                        " stalled"
-                    )
-            next_index = capture.next_index
-            blocks = len(block_times)
-            gcas_cpu = float(sum(feed_cpu))
-            max_backlog = capture.backlog_max
-            # A long wait means the samples came late (board process or reader thread
-            # starved), not that the receiver was slow.
-            wait_max = max((seen - began for began, seen in block_times), default=0.0)
-            wall = time.monotonic() - wall0
-            steal = (steal_s(probes.cpus) if probes is not None else float("nan")) - steal0
-            rss_growth = _rss_bytes() - rss0
-            held_end = ring.end_index or start
-            cpu = _host_cpu_s() - cpu0
-            main_cpu = time.thread_time() - main0
-            server_cpu = _process_cpu_s(server.pid) - server_cpu0
-            thread_cpu = {name: _thread_cpu_s(tid) - thread0[name] for name, tid in threads.items()}
-            heap.stop()
-            if probes is not None:
-                # The machine while streaming (not while the board and probes started).
-                machine = probes.stop().between(wall0, wall0 + wall, steal)
-            if profiler is not None:
-                profiler.disable()
-            board_now = board.board_index_now()
-            missing = ring.missing
-            gap_samples = board.gaps.gap_samples
-            underruns = board.last_status.dac_underruns if board.last_status else -1
-            overruns = board.last_status.adc_overruns if board.last_status else -1
-            annotations = len(board.annotations.all())
-            stream_late_s = _stream_lateness_s(board, arrivals)
-        flushed = len(feed.finish())
-    finally:
+            assert self._server.stdout is not None
+            self.port = self._server.stdout.readline().strip()
+        except BaseException:
+            self._stop()
+            raise
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop()
+
+    def cpu_s(self) -> float:
+        """The process's user+system CPU time so far, s (NaN once stopped or off Linux)."""
+        return _process_cpu_s(self._server.pid) if self._server is not None else float("nan")
+
+    def _stop(self) -> None:
+        server, self._server = self._server, None
         if server is not None:
             server.terminate()
             try:
@@ -424,181 +370,8 @@ def run_live(
                 server.wait()
             if server.stdout is not None:
                 server.stdout.close()
-        if probes is not None:
-            probes.close()  # after stop() nothing is left; on an error, kill them
-        standin = _standin_stalls(standin_path)
-        os.unlink(standin_path)
-
-    boundary = np.asarray(est_boundary, dtype=np.int64)
-    emit = np.asarray(est_emit)
-    boundary_seen = arrivals.time_of(boundary)
-    lat_s = emit - boundary_seen
-    # The two parts of each latency: waiting for the samples past the boundary that the
-    # receiver needs (its look-ahead, plus any stall of the stream), then the feed call.
-    wait_s = np.asarray(est_seen) - boundary_seen
-    proc_s = emit - np.asarray(est_seen)
-    # Finer: the wait is the stream delivering the look-ahead (the arrival of the last sample
-    # the loop waited for) plus the loop waking up; the feed call is CPU plus time off the
-    # CPU (waiting for a core or the GIL).
-    wanted = np.asarray(est_wanted, dtype=np.int64)
-    wanted_seen = arrivals.time_of(wanted - 1)
-    stream_s = wanted_seen - boundary_seen
-    wake_s = np.asarray(est_seen) - wanted_seen
-    off_cpu_s = proc_s - np.asarray(est_cpu)
-    over = lat_s > schedule.hop_s
-    hop_s = schedule.hop_s
-    # Estimates whose time from boundary to estimate overlapped a machine stall: the
-    # machine (hypervisor, kernel) held a CPU away from every thread meanwhile.
-    if machine is not None:
-        in_stall = machine.overlapping(boundary_seen, emit)
-    else:
-        in_stall = np.zeros(lat_s.shape, dtype=bool)
-    # ... and those during which the stand-in board's pump stalled (it shares the host's
-    # CPUs; hardware would not).
-    in_standin = overlapping(standin[:, 0], standin[:, 1], boundary_seen, emit)
-    standin_run = standin[(standin[:, 1] >= wall0) & (standin[:, 0] <= wall0 + wall)]
-    standin_d = np.minimum(standin_run[:, 1], wall0 + wall) - np.maximum(standin_run[:, 0], wall0)
-    clear = ~in_stall & ~in_standin
-    if dump is not None:
-        arr_index, arr_time = arrivals.arrays()
-        np.savez(
-            dump,
-            boundary=boundary,
-            boundary_seen=boundary_seen,
-            wanted=wanted,
-            wanted_seen=wanted_seen,
-            feed_cpu_of_estimate=np.asarray(est_cpu),
-            seen=np.asarray(est_seen),
-            emit=emit,
-            in_machine_stall=in_stall,
-            in_standin_stall=in_standin,
-            arrival_end_index=arr_index,
-            arrival_time=arr_time,
-            feed_wall=np.asarray(feed_wall),
-            block_times=np.asarray(block_times),
-            feed_cpu=np.asarray(feed_cpu),
-            start=start,
-            wall0=wall0,
-        )
-
-    def hops(x: npt.NDArray[np.float64], percentile: float) -> float:
-        x = x[np.isfinite(x)]
-        if x.size == 0:
-            return float("nan")
-        return round(float(np.percentile(x, percentile)) / hop_s, 3)
-
-    ranges = np.asarray(est_range)
-    on_target = int(np.count_nonzero(np.abs(ranges - echo_range_m) < 0.1))
-    board_elapsed = board_now - start
-    processed = next_index - start
-    final_backlog = held_end - next_index
-    # Kept up: nothing lost, and when the last block was done the receiver was behind the
-    # capture by less than KEEP_UP_BACKLOG_S (a transient stall may leave a backlog, a
-    # receiver slower than real time leaves one that grows with the run).
-    keeps_up = bool(
-        missing == 0
-        and gap_samples == 0
-        and overruns <= 0
-        and underruns == 0  # the transmitter was fed in time too
-        and processed == n_total
-        and final_backlog <= KEEP_UP_BACKLOG_S * FS_HZ
-    )
-    cores = cpu / wall
-    result: dict[str, Any] = {
-        "seconds": seconds,
-        "wall_s": round(wall, 3),
-        "blocks": blocks,
-        "mean_block_samples": round(processed / max(blocks, 1), 1),
-        "host_cpu_cores": round(cores, 3),
-        "main_thread_cores": round(main_cpu / wall, 3),
-        "gcas_cores": round(gcas_cpu / wall, 3),
-        "board_threads_cores": round((cpu - main_cpu) / wall, 3),
-        "reader_thread_cores": round(thread_cpu["reader"] / wall, 3),
-        # What the CPU target names, capture plus GCAS: the reader thread and the
-        # main thread (capture loop + GCAS); the host figure, which the target is checked
-        # on, also holds the DAC writer (transmission) and everything else in the process.
-        "capture_gcas_cores": round((thread_cpu["reader"] + main_cpu) / wall, 3),
-        "writer_thread_cores": round(thread_cpu["writer"] / wall, 3),
-        "sim_board_process_cores": round(server_cpu / wall, 3),
-        "host_rss_growth_mib": round(rss_growth / 2**20, 2),
-        "feed_call_median_ms": round(float(np.median(feed_wall)) * 1e3, 3),
-        "feed_call_p99_ms": round(float(np.percentile(feed_wall, 99)) * 1e3, 3),
-        "feed_call_max_ms": round(float(np.max(feed_wall)) * 1e3, 3),
-        "feed_call_cpu_p99_ms": round(float(np.percentile(feed_cpu, 99)) * 1e3, 3),
-        "feed_call_cpu_max_ms": round(float(np.max(feed_cpu)) * 1e3, 3),
-        "wait_for_samples_max_ms": round(wait_max * 1e3, 3),
-        "board_samples_elapsed": int(board_elapsed),
-        "samples_processed": int(processed),
-        "samples_captured": int(held_end - start),
-        "ring_missing_samples": int(missing),
-        "gap_samples": int(gap_samples),
-        "dac_underruns": int(underruns),
-        "adc_overruns": int(overruns),
-        "annotations": annotations,
-        "final_backlog_samples": int(final_backlog),
-        "max_backlog_samples": int(max_backlog),
-        "keeps_up": keeps_up,
-        "estimates": len(est_boundary),
-        "estimates_flushed": flushed,
-        "estimates_per_s": round(len(est_boundary) / wall, 1),
-        "estimates_on_target": on_target,
-        "echo_range_m": round(echo_range_m, 4),
-        "median_range_m": round(float(np.median(ranges)), 4) if ranges.size else None,
-        "median_speed_mps": round(float(np.median(est_speed)), 4) if est_speed else None,
-        "hop_s": hop_s,
-        "latency_median_hops": hops(lat_s, 50),
-        "latency_p99_hops": hops(lat_s, 99),
-        "latency_max_hops": hops(lat_s, 100),
-        "estimates_over_1_hop": int(np.count_nonzero(over)),
-        "latency_wait_median_ms": _ms(wait_s, 50),
-        "latency_wait_max_ms": _ms(wait_s, 100),
-        "latency_processing_median_ms": _ms(proc_s, 50),
-        "latency_processing_max_ms": _ms(proc_s, 100),
-        # Estimates already a hop late when the feed call began: the look-ahead and the
-        # stream alone took longer, so GCAS could not have met the target however fast it ran.
-        "wait_over_1_hop": int(np.count_nonzero(wait_s > hop_s)),
-        "over_1_hop_wait_median_ms": _ms(wait_s[over], 50),
-        "over_1_hop_processing_median_ms": _ms(proc_s[over], 50),
-        "lookahead_median_ms": _ms((wanted - boundary) / FS_HZ, 50),
-        "stream_median_ms": _ms(stream_s, 50),
-        "over_1_hop_stream_median_ms": _ms(stream_s[over], 50),
-        "wake_median_ms": _ms(wake_s, 50),
-        "over_1_hop_wake_median_ms": _ms(wake_s[over], 50),
-        "feed_off_cpu_median_ms": _ms(off_cpu_s, 50),
-        "over_1_hop_feed_off_cpu_median_ms": _ms(off_cpu_s[over], 50),
-        "stream_lateness_median_ms": _ms(stream_late_s, 50),
-        "stream_lateness_p99_ms": _ms(stream_late_s, 99),
-        "stream_lateness_max_ms": _ms(stream_late_s, 100),
-        **machine_figures(machine),
-        **(
-            {
-                "estimates_in_machine_stall": int(np.count_nonzero(in_stall)),
-                "over_1_hop_in_machine_stall": int(np.count_nonzero(over & in_stall)),
-            }
-            if machine is not None
-            else {}
-        ),
-        "standin_stalls": int(standin_d.size),
-        "standin_stall_max_ms": round(float(standin_d.max()) * 1e3, 3) if standin_d.size else 0.0,
-        "estimates_in_standin_stall": int(np.count_nonzero(in_standin)),
-        "over_1_hop_in_standin_stall": int(np.count_nonzero(over & in_standin)),
-        "over_1_hop_outside_stalls": int(np.count_nonzero(over & clear)),
-        "latency_p99_outside_stalls_hops": hops(lat_s[clear], 99),
-        "latency_max_outside_stalls_hops": hops(lat_s[clear], 100),
-        "target_cpu_cores": TARGET_CPU_CORES,
-        "cpu_ratio": round(TARGET_CPU_CORES / max(cores, 1e-9), 2),
-        "target_latency_hops": TARGET_LATENCY_HOPS,
-    }
-    max_lat = result["latency_max_hops"]
-    result["latency_ratio"] = round(TARGET_LATENCY_HOPS / max_lat, 2) if max_lat > 0 else None
-    result["meets_targets"] = bool(
-        keeps_up and cores < TARGET_CPU_CORES and max_lat <= TARGET_LATENCY_HOPS
-    )
-    if profiler is not None:
-        import pstats
-
-        pstats.Stats(profiler, stream=sys.stderr).sort_stats("cumulative").print_stats(30)
-    return result
+        self.stalls = _standin_stalls(self._stalls_path)
+        os.unlink(self._stalls_path)
 
 
 def _standin_stalls(path: str) -> npt.NDArray[np.float64]:
@@ -611,6 +384,656 @@ def _standin_stalls(path: str) -> npt.NDArray[np.float64]:
         return np.zeros((0, 2))
 
 
+# --------------------------------------------------------------------------- the measured loop
+@dataclass
+class EstimateLog:
+    """What the measured loop saw: the capture loop's ``on_fed`` observer, one call per fed
+    block.
+
+    Per estimate: ``boundary`` (board index of its hop boundary, ``start + t_s·fs``),
+    ``emit`` (monotonic s when the feed call returned it), ``seen`` (monotonic s when the
+    samples of the emitting block were seen), ``wanted`` (the board index the loop waited for
+    before that call), ``cpu`` (main-thread CPU time of the emitting feed call, s),
+    ``range_m`` (m) and ``speed_mps`` (m/s). Per block: ``feed_wall`` and ``feed_cpu`` (wall
+    and main-thread CPU time of the feed call, s) and ``block_times`` ((wait began, samples
+    seen), monotonic s).
+    """
+
+    start: int
+    boundary: list[int] = field(default_factory=list)
+    emit: list[float] = field(default_factory=list)
+    seen: list[float] = field(default_factory=list)
+    wanted: list[int] = field(default_factory=list)
+    cpu: list[float] = field(default_factory=list)
+    range_m: list[float] = field(default_factory=list)
+    speed_mps: list[float] = field(default_factory=list)
+    feed_wall: list[float] = field(default_factory=list)
+    feed_cpu: list[float] = field(default_factory=list)
+    block_times: list[tuple[float, float]] = field(default_factory=list)
+
+    def __call__(self, block: CapturedBlock) -> None:
+        self.feed_cpu.append(block.feed_cpu_s)
+        self.feed_wall.append(block.fed_at - block.seen_at)
+        self.block_times.append((block.wait_began, block.seen_at))
+        for e in block.estimates:
+            self.boundary.append(self.start + round(e.t_s * FS_HZ))
+            self.emit.append(block.fed_at)
+            self.seen.append(block.seen_at)
+            self.wanted.append(block.wanted_index)
+            self.cpu.append(block.feed_cpu_s)
+            self.range_m.append(e.range_m)
+            self.speed_mps.append(e.speed_mps)
+
+    def wait_max_s(self) -> float:
+        """The longest wait for new samples, s. A long wait means the samples came late
+        (board process or reader thread starved), not that the receiver was slow."""
+        return max((seen - began for began, seen in self.block_times), default=0.0)
+
+
+@dataclass(frozen=True)
+class HostUse:
+    """What the host spent over the measured loop.
+
+    ``wall0``: monotonic s at its start; ``wall_s``: its length, s; CPU time, s: the whole
+    process (``cpu_s``), its main thread (``main_cpu_s``), the board driver's threads
+    (``thread_cpu_s``, keys ``reader`` and ``writer``), the stand-in board's process
+    (``standin_cpu_s``); ``rss_growth_bytes``: resident-set growth, bytes; ``steal_s``:
+    hypervisor steal over the probes' CPUs, s (NaN without probes).
+    """
+
+    wall0: float
+    wall_s: float
+    cpu_s: float
+    main_cpu_s: float
+    thread_cpu_s: dict[str, float]
+    standin_cpu_s: float
+    rss_growth_bytes: float
+    steal_s: float
+
+
+class HostMeter:
+    """Reads the host's CPU, memory and steal counters at the start (:meth:`start`) and at
+    the end (:meth:`stop`) of the measured loop: the process, its main thread, the board
+    driver's reader and writer threads, the stand-in board's process."""
+
+    def __init__(self, board: Board, standin: StandinBoard, probes: StallProbes | None) -> None:
+        self._standin = standin
+        self._probes = probes
+        self._threads = _board_thread_ids(board)
+        self._thread0: dict[str, float] = {}
+        self._rss0 = self._steal0 = self._wall0 = self._cpu0 = self._main0 = float("nan")
+        self._standin0 = float("nan")
+
+    def _steal_s(self) -> float:
+        from machine_stalls import steal_s
+
+        return steal_s(self._probes.cpus) if self._probes is not None else float("nan")
+
+    def start(self) -> None:
+        """Read the counters as the measured loop begins."""
+        self._thread0 = {name: _thread_cpu_s(tid) for name, tid in self._threads.items()}
+        self._rss0 = _rss_bytes()
+        self._steal0 = self._steal_s()
+        self._wall0, self._cpu0, self._main0 = time.monotonic(), _host_cpu_s(), time.thread_time()
+        self._standin0 = self._standin.cpu_s()
+
+    def stop(self) -> HostUse:
+        """Read the counters as the measured loop ends; what was spent since :meth:`start`."""
+        wall = time.monotonic() - self._wall0
+        steal = self._steal_s() - self._steal0
+        rss_growth = _rss_bytes() - self._rss0
+        cpu = _host_cpu_s() - self._cpu0
+        main_cpu = time.thread_time() - self._main0
+        standin_cpu = self._standin.cpu_s() - self._standin0
+        thread_cpu = {
+            name: _thread_cpu_s(tid) - self._thread0[name] for name, tid in self._threads.items()
+        }
+        return HostUse(
+            wall0=self._wall0,
+            wall_s=wall,
+            cpu_s=cpu,
+            main_cpu_s=main_cpu,
+            thread_cpu_s=thread_cpu,
+            standin_cpu_s=standin_cpu,
+            rss_growth_bytes=rss_growth,
+            steal_s=steal,
+        )
+
+
+@dataclass(frozen=True)
+class BoardTally:
+    """The board's counters once the measured loop has ended.
+
+    ``board_now``: the board index now (SYNC fit); ``missing``: the ring's zero-filled
+    samples; ``gap_samples``: the gap detector's lost samples; ``dac_underruns`` and
+    ``adc_overruns`` (-1 without a status report); ``annotations``: how many;
+    ``stream_late_s``: each block's lateness against the board clock, s
+    (:func:`_stream_lateness_s`).
+    """
+
+    board_now: int
+    missing: int
+    gap_samples: int
+    dac_underruns: int
+    adc_overruns: int
+    annotations: int
+    stream_late_s: npt.NDArray[np.float64]
+
+    @classmethod
+    def read(cls, board: Board, arrivals: Arrivals) -> BoardTally:
+        """The counters of ``board`` now; ``arrivals`` times its blocks."""
+        ring = board.ring
+        assert ring is not None
+        status = board.last_status
+        return cls(
+            board_now=board.board_index_now(),
+            missing=ring.missing,
+            gap_samples=board.gaps.gap_samples,
+            dac_underruns=status.dac_underruns if status else -1,
+            adc_overruns=status.adc_overruns if status else -1,
+            annotations=len(board.annotations.all()),
+            stream_late_s=_stream_lateness_s(board, arrivals),
+        )
+
+
+@dataclass(frozen=True)
+class LiveRun:
+    """Everything one live run recorded, the input of its figures.
+
+    Board indices: ``start`` (the receiver's sample 0), ``n_total`` (samples to process),
+    ``next_index`` (the capture loop's next index at the end), ``held_end`` (the ring's end
+    index at the end), ``backlog_max`` (samples, the capture loop's largest backlog).
+    ``machine``: the probes' stalls while streaming (None without probes); ``flushed``:
+    estimates the receiver still held at the end of input.
+    """
+
+    seconds: float
+    start: int
+    n_total: int
+    next_index: int
+    held_end: int
+    backlog_max: int
+    use: HostUse
+    machine: MachineStalls | None
+    board: BoardTally
+    log: EstimateLog
+    arrivals: Arrivals
+    flushed: int = 0
+
+
+def measure_loop(
+    capture: CaptureLoop,
+    end_target: int,
+    meter: HostMeter,
+    probes: StallProbes | None,
+    profiler: cProfile.Profile | None,
+) -> tuple[HostUse, MachineStalls | None, int | None]:
+    """Run ``capture`` up to board index ``end_target`` with the heap frozen, as the tank run
+    does (no 75 ms full collection mid-stream); the host's use, the machine's stalls over
+    that time (None without probes) and the ring's end index right after the loop (None if
+    the ring is empty)."""
+    from hil.acquisition import HeapFreeze
+
+    heap = HeapFreeze()
+    heap.start()
+    if profiler is not None:
+        profiler.enable()
+    meter.start()
+    while capture.next_index < end_target:
+        if capture.step(2.0, limit=end_target) is None:
+            raise RuntimeError(
+                f"no samples past board index {capture.next_index} for 2 s: the board stalled"
+            )
+    use = meter.stop()
+    ring = capture.source.ring
+    held_end = ring.end_index if ring is not None else None
+    heap.stop()
+    machine = None
+    if probes is not None:
+        # The machine while streaming (not while the board and probes started).
+        machine = probes.stop().between(use.wall0, use.wall0 + use.wall_s, use.steal_s)
+    if profiler is not None:
+        profiler.disable()
+    return use, machine, held_end
+
+
+def stream_live(
+    standin: StandinBoard,
+    design: LiveDesign,
+    seconds: float,
+    min_block_s: float,
+    every_block: bool,
+    probes: StallProbes | None,
+    profiler: cProfile.Profile | None,
+) -> LiveRun:
+    """Open the Board driver on the stand-in's pty and stream ``seconds`` (s) through the
+    capture loop of ``hil tank-run`` and GCAS; ``min_block_s`` (s) is the feed period with
+    ``every_block``."""
+    from hil.acquisition.capture import CaptureLoop
+    from hil.acquisition.feed import ReceiverFeed
+    from hil.devices.board import Board
+    from hil.devices.board_settings import BoardSettings
+
+    settings = BoardSettings(sample_rate_hz=FS_HZ, dac_channels=1, adc_channels=ADC_CHANNELS)
+    with Board(standin.port, settings=settings, ring_seconds=RING_SECONDS) as board:
+        board.configure()
+        ring = board.ring
+        assert ring is not None
+        arrivals = Arrivals()
+        # Stamped by the board's reader thread as each block is stored.
+        ring.on_write = lambda end: arrivals.add(end, time.monotonic())
+        start = board.start(design.synth.blocks(1 << 15))
+        # The DAC plays schedule sample 0 at board index `start`, so that is the
+        # receiver's sample 0 (the echo delay is the target's range, not latency).
+        feed = ReceiverFeed(design.receiver, origin=start, channel=0, scale=INT16_SCALE)
+        log = EstimateLog(start)
+        # The capture loop of hil tank-run: it waits, as the run does, for the receiver's
+        # next decision (nothing can come out before it) or one block when no decision
+        # comes within it; with --every-block for every min_block samples instead.
+        min_block = max(1, int(round(min_block_s * FS_HZ)))
+        capture = CaptureLoop(
+            board,
+            start,
+            int(round(MAX_BLOCK_S * FS_HZ)),
+            feed=feed,
+            on_fed=log,
+            every=min_block if every_block else None,
+        )
+        n_total = int(round(seconds * FS_HZ))
+        meter = HostMeter(board, standin, probes)
+        use, machine, held_end = measure_loop(capture, start + n_total, meter, probes, profiler)
+        tally = BoardTally.read(board, arrivals)
+    return LiveRun(
+        seconds=seconds,
+        start=start,
+        n_total=n_total,
+        next_index=capture.next_index,
+        held_end=held_end or start,
+        backlog_max=capture.backlog_max,
+        use=use,
+        machine=machine,
+        board=tally,
+        log=log,
+        arrivals=arrivals,
+        flushed=len(feed.finish()),
+    )
+
+
+def run_live(
+    seconds: float,
+    min_block_s: float,
+    profile: bool = False,
+    every_block: bool = False,
+    stall_probes: bool = True,
+    dump: str | None = None,
+) -> dict[str, Any]:
+    """Stream ``seconds`` (s) through Board + capture loop + GCAS; the figures (module
+    docstring). ``min_block_s`` (s): the feed period with ``every_block``; ``profile``:
+    cProfile the host to stderr; ``dump``: an .npz path for the per-estimate and per-block
+    times."""
+    from machine_stalls import StallProbes
+
+    design = tank_board_design()
+    probes = StallProbes() if stall_probes else None
+    profiler = None
+    if profile:
+        import cProfile
+
+        profiler = cProfile.Profile()
+    try:
+        if probes is not None:
+            probes.start()  # before the board: their start-up must not land in the stream
+        with StandinBoard() as standin:
+            run = stream_live(standin, design, seconds, min_block_s, every_block, probes, profiler)
+    finally:
+        if probes is not None:
+            probes.close()  # after stop() nothing is left; on an error, kill them
+    timing = EstimateTiming.of(run.log, run.arrivals)
+    stalls = StallOverlap.of(run.machine, standin.stalls, timing, run.use)
+    if dump is not None:
+        dump_times(dump, run, timing, stalls)
+    result = live_figures(run, design, timing, stalls)
+    if profiler is not None:
+        import pstats
+
+        pstats.Stats(profiler, stream=sys.stderr).sort_stats("cumulative").print_stats(30)
+    return result
+
+
+# --------------------------------------------------------------------------- accounting
+@dataclass(frozen=True)
+class EstimateTiming:
+    """When each estimate's boundary and samples arrived, shape (n_estimates,) each.
+
+    Board indices: ``boundary`` (the estimate's hop boundary) and ``wanted`` (the index the
+    loop waited for before the emitting feed call). Monotonic s: ``boundary_seen`` and
+    ``wanted_seen`` (when the ring first held that sample, NaN if never), ``seen`` (when the
+    emitting block's samples were seen), ``emit`` (when the feed call returned the estimate).
+    ``cpu``: the emitting feed call's main-thread CPU time, s.
+    """
+
+    boundary: npt.NDArray[np.int64]
+    wanted: npt.NDArray[np.int64]
+    boundary_seen: npt.NDArray[np.float64]
+    wanted_seen: npt.NDArray[np.float64]
+    seen: npt.NDArray[np.float64]
+    emit: npt.NDArray[np.float64]
+    cpu: npt.NDArray[np.float64]
+
+    @classmethod
+    def of(cls, log: EstimateLog, arrivals: Arrivals) -> EstimateTiming:
+        """The timing of the estimates in ``log``, their samples' arrivals from ``arrivals``."""
+        boundary = np.asarray(log.boundary, dtype=np.int64)
+        wanted = np.asarray(log.wanted, dtype=np.int64)
+        return cls(
+            boundary=boundary,
+            wanted=wanted,
+            boundary_seen=arrivals.time_of(boundary),
+            wanted_seen=arrivals.time_of(wanted - 1),  # the last sample the loop waited for
+            seen=np.asarray(log.seen),
+            emit=np.asarray(log.emit),
+            cpu=np.asarray(log.cpu),
+        )
+
+    @property
+    def latency_s(self) -> npt.NDArray[np.float64]:
+        """From the boundary's arrival to the estimate, s."""
+        return self.emit - self.boundary_seen
+
+    @property
+    def wait_s(self) -> npt.NDArray[np.float64]:
+        """The first part of the latency: waiting for the samples past the boundary that the
+        receiver needs (its look-ahead, plus any stall of the stream), s."""
+        return self.seen - self.boundary_seen
+
+    @property
+    def processing_s(self) -> npt.NDArray[np.float64]:
+        """The second part: the feed call, s."""
+        return self.emit - self.seen
+
+    @property
+    def stream_s(self) -> npt.NDArray[np.float64]:
+        """The wait, finer: the stream delivering the look-ahead, s."""
+        return self.wanted_seen - self.boundary_seen
+
+    @property
+    def wake_s(self) -> npt.NDArray[np.float64]:
+        """The wait, finer: the loop waking up once the look-ahead was there, s."""
+        return self.seen - self.wanted_seen
+
+    @property
+    def off_cpu_s(self) -> npt.NDArray[np.float64]:
+        """The feed call's time off the CPU (waiting for a core or the GIL), s."""
+        return self.processing_s - self.cpu
+
+
+@dataclass(frozen=True)
+class StallOverlap:
+    """Which estimates a stall touched (the stall overlaps the time from the boundary's
+    arrival to the estimate), bool shape (n_estimates,): ``in_machine`` (a machine stall: the
+    hypervisor or kernel held a CPU away from every thread) and ``in_standin`` (a stall of
+    the stand-in board's pump: it shares the host's CPUs, hardware would not);
+    ``standin_s``: the stand-in's stalls within the measured loop, clipped to it, s.
+    """
+
+    in_machine: npt.NDArray[np.bool_]
+    in_standin: npt.NDArray[np.bool_]
+    standin_s: npt.NDArray[np.float64]
+
+    @property
+    def clear(self) -> npt.NDArray[np.bool_]:
+        """The estimates that neither kind of stall touched."""
+        return ~self.in_machine & ~self.in_standin
+
+    @classmethod
+    def of(
+        cls,
+        machine: MachineStalls | None,
+        standin: npt.NDArray[np.float64],
+        timing: EstimateTiming,
+        use: HostUse,
+    ) -> StallOverlap:
+        """The overlaps of ``machine``'s stalls and the stand-in's ``standin`` (shape (n, 2),
+        start and end monotonic s) with the estimates of ``timing``, over ``use``'s loop."""
+        from machine_stalls import overlapping
+
+        seen, emit = timing.boundary_seen, timing.emit
+        if machine is not None:
+            in_machine = machine.overlapping(seen, emit)
+        else:
+            in_machine = np.zeros(emit.shape, dtype=bool)
+        t0, t1 = use.wall0, use.wall0 + use.wall_s
+        run = standin[(standin[:, 1] >= t0) & (standin[:, 0] <= t1)]
+        return cls(
+            in_machine=in_machine,
+            in_standin=overlapping(standin[:, 0], standin[:, 1], seen, emit),
+            standin_s=np.minimum(run[:, 1], t1) - np.maximum(run[:, 0], t0),
+        )
+
+
+def dump_times(path: str, run: LiveRun, timing: EstimateTiming, stalls: StallOverlap) -> None:
+    """Save the per-estimate and per-block times of ``run`` to ``path`` (NumPy .npz), for
+    analysis: board indices, monotonic s and CPU s as in :class:`EstimateTiming`,
+    :class:`EstimateLog` and :class:`Arrivals`."""
+    arr_index, arr_time = run.arrivals.arrays()
+    np.savez(
+        path,
+        boundary=timing.boundary,
+        boundary_seen=timing.boundary_seen,
+        wanted=timing.wanted,
+        wanted_seen=timing.wanted_seen,
+        feed_cpu_of_estimate=timing.cpu,
+        seen=timing.seen,
+        emit=timing.emit,
+        in_machine_stall=stalls.in_machine,
+        in_standin_stall=stalls.in_standin,
+        arrival_end_index=arr_index,
+        arrival_time=arr_time,
+        feed_wall=np.asarray(run.log.feed_wall),
+        block_times=np.asarray(run.log.block_times),
+        feed_cpu=np.asarray(run.log.feed_cpu),
+        start=run.start,
+        wall0=run.use.wall0,
+    )
+
+
+# --------------------------------------------------------------------------- the figures
+def _hops(x: npt.NDArray[np.float64], percentile: float, hop_s: float) -> float:
+    """A percentile of ``x`` (s) in hops of ``hop_s`` s, rounded; NaN when ``x`` holds no
+    finite value."""
+    x = x[np.isfinite(x)]
+    if x.size == 0:
+        return float("nan")
+    return round(float(np.percentile(x, percentile)) / hop_s, 3)
+
+
+def _cpu_figures(run: LiveRun) -> dict[str, Any]:
+    """Host CPU in cores (CPU s over wall s), by part, and the resident-set growth, MiB."""
+    use = run.use
+    wall, cpu, main_cpu, thread_cpu = use.wall_s, use.cpu_s, use.main_cpu_s, use.thread_cpu_s
+    return {
+        "host_cpu_cores": round(cpu / wall, 3),
+        "main_thread_cores": round(main_cpu / wall, 3),
+        "gcas_cores": round(float(sum(run.log.feed_cpu)) / wall, 3),
+        "board_threads_cores": round((cpu - main_cpu) / wall, 3),
+        "reader_thread_cores": round(thread_cpu["reader"] / wall, 3),
+        # What the CPU target names, capture plus GCAS: the reader thread and the
+        # main thread (capture loop + GCAS); the host figure, which the target is checked
+        # on, also holds the DAC writer (transmission) and everything else in the process.
+        "capture_gcas_cores": round((thread_cpu["reader"] + main_cpu) / wall, 3),
+        "writer_thread_cores": round(thread_cpu["writer"] / wall, 3),
+        "sim_board_process_cores": round(use.standin_cpu_s / wall, 3),
+        "host_rss_growth_mib": round(use.rss_growth_bytes / 2**20, 2),
+    }
+
+
+def _feed_call_figures(log: EstimateLog) -> dict[str, Any]:
+    """The feed call per block, wall and main-thread CPU time, ms; the longest wait, ms."""
+    feed_wall, feed_cpu = log.feed_wall, log.feed_cpu
+    return {
+        "feed_call_median_ms": round(float(np.median(feed_wall)) * 1e3, 3),
+        "feed_call_p99_ms": round(float(np.percentile(feed_wall, 99)) * 1e3, 3),
+        "feed_call_max_ms": round(float(np.max(feed_wall)) * 1e3, 3),
+        "feed_call_cpu_p99_ms": round(float(np.percentile(feed_cpu, 99)) * 1e3, 3),
+        "feed_call_cpu_max_ms": round(float(np.max(feed_cpu)) * 1e3, 3),
+        "wait_for_samples_max_ms": round(log.wait_max_s() * 1e3, 3),
+    }
+
+
+def _keep_up_figures(run: LiveRun) -> dict[str, Any]:
+    """Samples (board elapsed, processed, captured, missing, lost, backlog), the board's
+    underruns/overruns and annotations, and whether the host kept up."""
+    board = run.board
+    processed = run.next_index - run.start
+    final_backlog = run.held_end - run.next_index
+    # Kept up: nothing lost, and when the last block was done the receiver was behind the
+    # capture by less than KEEP_UP_BACKLOG_S (a transient stall may leave a backlog, a
+    # receiver slower than real time leaves one that grows with the run).
+    keeps_up = bool(
+        board.missing == 0
+        and board.gap_samples == 0
+        and board.adc_overruns <= 0
+        and board.dac_underruns == 0  # the transmitter was fed in time too
+        and processed == run.n_total
+        and final_backlog <= KEEP_UP_BACKLOG_S * FS_HZ
+    )
+    return {
+        "board_samples_elapsed": int(board.board_now - run.start),
+        "samples_processed": int(processed),
+        "samples_captured": int(run.held_end - run.start),
+        "ring_missing_samples": int(board.missing),
+        "gap_samples": int(board.gap_samples),
+        "dac_underruns": int(board.dac_underruns),
+        "adc_overruns": int(board.adc_overruns),
+        "annotations": board.annotations,
+        "final_backlog_samples": int(final_backlog),
+        "max_backlog_samples": int(run.backlog_max),
+        "keeps_up": keeps_up,
+    }
+
+
+def _estimate_figures(run: LiveRun, design: LiveDesign) -> dict[str, Any]:
+    """How many estimates, per s, how many at the echo's range (within 0.1 m); their median
+    range (m) and speed (m/s); the hop, s."""
+    ranges = np.asarray(run.log.range_m)
+    speeds = np.asarray(run.log.speed_mps)
+    n = len(run.log.boundary)
+    return {
+        "estimates": n,
+        "estimates_flushed": run.flushed,
+        "estimates_per_s": round(n / run.use.wall_s, 1),
+        "estimates_on_target": int(np.count_nonzero(np.abs(ranges - design.echo_range_m) < 0.1)),
+        "echo_range_m": round(design.echo_range_m, 4),
+        "median_range_m": round(float(np.median(ranges)), 4) if ranges.size else None,
+        "median_speed_mps": round(float(np.median(speeds)), 4) if speeds.size else None,
+        "hop_s": design.schedule.hop_s,
+    }
+
+
+def _latency_figures(timing: EstimateTiming, hop_s: float) -> dict[str, Any]:
+    """Estimate latency in hops of ``hop_s`` s, its parts in ms, all and over one hop."""
+    lat_s, wait_s, proc_s = timing.latency_s, timing.wait_s, timing.processing_s
+    stream_s, wake_s, off_cpu_s = timing.stream_s, timing.wake_s, timing.off_cpu_s
+    over = lat_s > hop_s
+    return {
+        "latency_median_hops": _hops(lat_s, 50, hop_s),
+        "latency_p99_hops": _hops(lat_s, 99, hop_s),
+        "latency_max_hops": _hops(lat_s, 100, hop_s),
+        "estimates_over_1_hop": int(np.count_nonzero(over)),
+        "latency_wait_median_ms": _ms(wait_s, 50),
+        "latency_wait_max_ms": _ms(wait_s, 100),
+        "latency_processing_median_ms": _ms(proc_s, 50),
+        "latency_processing_max_ms": _ms(proc_s, 100),
+        # Estimates already a hop late when the feed call began: the look-ahead and the
+        # stream alone took longer, so GCAS could not have met the target however fast it ran.
+        "wait_over_1_hop": int(np.count_nonzero(wait_s > hop_s)),
+        "over_1_hop_wait_median_ms": _ms(wait_s[over], 50),
+        "over_1_hop_processing_median_ms": _ms(proc_s[over], 50),
+        "lookahead_median_ms": _ms((timing.wanted - timing.boundary) / FS_HZ, 50),
+        "stream_median_ms": _ms(stream_s, 50),
+        "over_1_hop_stream_median_ms": _ms(stream_s[over], 50),
+        "wake_median_ms": _ms(wake_s, 50),
+        "over_1_hop_wake_median_ms": _ms(wake_s[over], 50),
+        "feed_off_cpu_median_ms": _ms(off_cpu_s, 50),
+        "over_1_hop_feed_off_cpu_median_ms": _ms(off_cpu_s[over], 50),
+    }
+
+
+def _stream_lateness_figures(board: BoardTally) -> dict[str, Any]:
+    """The blocks' lateness against the board clock, ms (median, p99, max)."""
+    late_s = board.stream_late_s
+    return {
+        "stream_lateness_median_ms": _ms(late_s, 50),
+        "stream_lateness_p99_ms": _ms(late_s, 99),
+        "stream_lateness_max_ms": _ms(late_s, 100),
+    }
+
+
+def _stall_figures(
+    run: LiveRun, timing: EstimateTiming, stalls: StallOverlap, hop_s: float
+) -> dict[str, Any]:
+    """The machine's and the stand-in's stalls, the estimates each touched, and the latency
+    (hops of ``hop_s`` s) over the estimates neither touched."""
+    lat_s, clear = timing.latency_s, stalls.clear
+    over = lat_s > hop_s
+    standin_s = stalls.standin_s
+    in_machine: dict[str, Any] = {}
+    if run.machine is not None:
+        in_machine = {
+            "estimates_in_machine_stall": int(np.count_nonzero(stalls.in_machine)),
+            "over_1_hop_in_machine_stall": int(np.count_nonzero(over & stalls.in_machine)),
+        }
+    return {
+        **machine_figures(run.machine),
+        **in_machine,
+        "standin_stalls": int(standin_s.size),
+        "standin_stall_max_ms": round(float(standin_s.max()) * 1e3, 3) if standin_s.size else 0.0,
+        "estimates_in_standin_stall": int(np.count_nonzero(stalls.in_standin)),
+        "over_1_hop_in_standin_stall": int(np.count_nonzero(over & stalls.in_standin)),
+        "over_1_hop_outside_stalls": int(np.count_nonzero(over & clear)),
+        "latency_p99_outside_stalls_hops": _hops(lat_s[clear], 99, hop_s),
+        "latency_max_outside_stalls_hops": _hops(lat_s[clear], 100, hop_s),
+    }
+
+
+def _target_figures(cores: float, keeps_up: bool, max_lat_hops: float) -> dict[str, Any]:
+    """The targets, the ratios target/measured (host CPU ``cores``, the maximum latency
+    ``max_lat_hops``) and whether all targets are met."""
+    return {
+        "target_cpu_cores": TARGET_CPU_CORES,
+        "cpu_ratio": round(TARGET_CPU_CORES / max(cores, 1e-9), 2),
+        "target_latency_hops": TARGET_LATENCY_HOPS,
+        "latency_ratio": round(TARGET_LATENCY_HOPS / max_lat_hops, 2) if max_lat_hops > 0 else None,
+        "meets_targets": bool(
+            keeps_up and cores < TARGET_CPU_CORES and max_lat_hops <= TARGET_LATENCY_HOPS
+        ),
+    }
+
+
+def live_figures(
+    run: LiveRun, design: LiveDesign, timing: EstimateTiming, stalls: StallOverlap
+) -> dict[str, Any]:
+    """The run's figures, one flat dict in the order of the table (module docstring)."""
+    hop_s = design.schedule.hop_s
+    blocks = len(run.log.block_times)
+    result: dict[str, Any] = {
+        "seconds": run.seconds,
+        "wall_s": round(run.use.wall_s, 3),
+        "blocks": blocks,
+        "mean_block_samples": round((run.next_index - run.start) / max(blocks, 1), 1),
+        **_cpu_figures(run),
+        **_feed_call_figures(run.log),
+        **_keep_up_figures(run),
+        **_estimate_figures(run, design),
+        **_latency_figures(timing, hop_s),
+        **_stream_lateness_figures(run.board),
+        **_stall_figures(run, timing, stalls, hop_s),
+    }
+    cores = run.use.cpu_s / run.use.wall_s
+    result.update(_target_figures(cores, result["keeps_up"], result["latency_max_hops"]))
+    return result
+
+
 def machine_figures(machine: Any) -> dict[str, Any]:
     """The stall probes' summary, keys prefixed ``machine_`` (empty without probes)."""
     if machine is None:
@@ -618,7 +1041,12 @@ def machine_figures(machine: Any) -> dict[str, Any]:
     return {f"machine_{k}": v for k, v in machine.summary().items()}
 
 
-def machine_rows(r: dict[str, Any]) -> list[tuple[str, str]]:
+# --------------------------------------------------------------------------- the table
+#: Table rows: (name, text).
+Rows = list[tuple[str, str]]
+
+
+def machine_rows(r: dict[str, Any]) -> Rows:
     """Table rows for the stall probes' figures (none without probes)."""
     if "machine_stalls" not in r:
         return []
@@ -635,10 +1063,9 @@ def machine_rows(r: dict[str, Any]) -> list[tuple[str, str]]:
     ]
 
 
-def print_table(r: dict[str, Any]) -> None:
-    """The figures as a table on stdout."""
-    hop_ms = r["hop_s"] * 1e3
-    rows = [
+def _cpu_rows(r: dict[str, Any]) -> Rows:
+    """The table's first section: what was streamed, the host's CPU by part, its memory."""
+    return [
         ("streamed", f"{r['seconds']:.1f} s at 1 MS/s x 2 ch int16 (wall {r['wall_s']:.2f} s)"),
         ("blocks", f"{r['blocks']} (mean {r['mean_block_samples']:.0f} samples)"),
         (
@@ -660,6 +1087,13 @@ def print_table(r: dict[str, Any]) -> None:
         ),
         ("  (sim board)", f"{r['sim_board_process_cores']:.3f} cores, other process, not counted"),
         ("host memory", f"resident set grew {r['host_rss_growth_mib']} MiB while streaming"),
+    ]
+
+
+def _keep_up_rows(r: dict[str, Any]) -> Rows:
+    """The feed call's times, keeping up (samples, losses, backlog, board counters) and the
+    estimates."""
+    return [
         (
             "feed call",
             f"median {r['feed_call_median_ms']:.2f} ms, p99 {r['feed_call_p99_ms']:.2f} ms,"
@@ -685,14 +1119,18 @@ def print_table(r: dict[str, Any]) -> None:
             f" the echo range {r['echo_range_m']:.3f} m (median {r['median_range_m']} m,"
             f" {r['median_speed_mps']} m/s)",
         ),
+    ]
+
+
+def _latency_rows(r: dict[str, Any]) -> Rows:
+    """The estimate latency (hops), its parts (ms) and the stream's lateness (ms)."""
+    return [
         (
             "latency",
             f"median {r['latency_median_hops']:.3f}, p99 {r['latency_p99_hops']:.3f},"
-            f" max {r['latency_max_hops']:.3f} hops (hop {hop_ms:.1f} ms; target <="
+            f" max {r['latency_max_hops']:.3f} hops (hop {r['hop_s'] * 1e3:.1f} ms; target <="
             f" {TARGET_LATENCY_HOPS}); {r['estimates_over_1_hop']} estimates over 1 hop",
         ),
-    ]
-    rows += [
         (
             "  its parts",
             f"waiting for the look-ahead samples: median {r['latency_wait_median_ms']} ms, max"
@@ -721,7 +1159,12 @@ def print_table(r: dict[str, Any]) -> None:
             " against the fastest delivery)",
         ),
     ]
-    rows += machine_rows(r)
+
+
+def _stall_rows(r: dict[str, Any]) -> Rows:
+    """The machine's and the stand-in's stalls, the estimates they touched, and the latency
+    over the estimates neither touched."""
+    rows = machine_rows(r)
     if "estimates_in_machine_stall" in r:
         rows.append(
             (
@@ -748,8 +1191,18 @@ def print_table(r: dict[str, Any]) -> None:
             f" {r['latency_max_outside_stalls_hops']} hops",
         )
     )
+    return rows
+
+
+def print_rows(rows: Rows) -> None:
+    """Table rows on stdout: the name in 18 columns, then the text."""
     for name, text in rows:
         print(f"{name:<18} {text}")
+
+
+def print_table(r: dict[str, Any]) -> None:
+    """The figures of :func:`run_live` as a table on stdout."""
+    print_rows(_cpu_rows(r) + _keep_up_rows(r) + _latency_rows(r) + _stall_rows(r))
 
 
 def run_machine_only(seconds: float) -> dict[str, Any]:
@@ -763,7 +1216,8 @@ def run_machine_only(seconds: float) -> dict[str, Any]:
     return {"seconds": seconds, "machine_only": True, **machine_figures(probes.result)}
 
 
-def main() -> None:
+def build_parser() -> argparse.ArgumentParser:
+    """The command line (module docstring); ``--serve-board`` runs the stand-in board."""
     parser = argparse.ArgumentParser(description="live capture + GCAS at the tank-board rate")
     parser.add_argument("--seconds", type=float, default=30.0, help="streaming time, s")
     parser.add_argument("--quick", action="store_true", help="smoke run (1.5 s of streaming)")
@@ -795,7 +1249,11 @@ def main() -> None:
         help="also save the per-estimate and per-block times (NumPy .npz) for analysis",
     )
     parser.add_argument("--serve-board", nargs=4, metavar=("DELAY", "GAIN", "NOISE", "OUT"))
-    args = parser.parse_args()
+    return parser
+
+
+def main() -> None:
+    args = build_parser().parse_args()
     if args.serve_board:
         delay, gain, noise, out = args.serve_board
         serve_board(int(delay), float(gain), float(noise), out)
@@ -803,8 +1261,7 @@ def main() -> None:
     seconds = 1.5 if args.quick else args.seconds
     if args.machine_only:
         result = run_machine_only(seconds)
-        for name, text in machine_rows(result):
-            print(f"{name:<18} {text}")
+        print_rows(machine_rows(result))
         print(json.dumps({"benchmark": "bench_live", **result}))
         return
     result = run_live(
