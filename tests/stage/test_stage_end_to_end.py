@@ -39,6 +39,7 @@ def wait_until(predicate: object, timeout: float = 10.0) -> bool:
     return False
 
 
+@pytest.mark.slow
 def test_home_move_and_profile_on_simulated_time() -> None:
     clock = ManualClock(1000.0)
     # The driver reads in 0.2 s steps of the manual clock: a reply latency would be read a

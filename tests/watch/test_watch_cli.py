@@ -87,7 +87,8 @@ def test_a_damaged_recording(tmp_path: Path, capsys: pytest.CaptureFixture[str])
 def test_the_command_serves_a_recording_until_interrupted(recorder: Any) -> None:
     recorder.writer.append_estimates([recorder.estimate(i) for i in range(4)])
     recorder.writer.flush()
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    # PYTHONFAULTHANDLER: a server that does not stop is asked for its threads' stacks.
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONFAULTHANDLER": "1"}
     cmd = [sys.executable, "-m", "hil.cli.main", "watch", str(recorder.path), "--port", "0"]
     with subprocess.Popen(
         cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
@@ -103,7 +104,13 @@ def test_the_command_serves_a_recording_until_interrupted(recorder: Any) -> None
             with urllib.request.urlopen(match.group(2) + "api/state", timeout=60) as r:
                 assert json.loads(r.read())["counts"]["estimates"] == 4
             proc.send_signal(signal.SIGINT)
-            assert proc.wait(timeout=60) == 0
+            try:
+                code = proc.wait(timeout=60)
+            except subprocess.TimeoutExpired:
+                proc.send_signal(signal.SIGABRT)  # the fault handler prints every stack
+                _, err = proc.communicate(timeout=30)
+                pytest.fail(f"hil watch still ran 60 s after SIGINT; its threads:\n{err}")
+            assert code == 0
             assert proc.stderr.read() == "stopped\n"
         finally:
             if proc.poll() is None:
