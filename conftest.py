@@ -18,6 +18,9 @@ from pathlib import Path
 
 import pytest
 
+# pytester: tests/test_tiers.py runs this file's tier selection in a scratch project.
+pytest_plugins = ["pytester"]
+
 collect_ignore_glob: list[str] = []
 if importlib.util.find_spec("bluesky") is None or importlib.util.find_spec("ophyd_async") is None:
     collect_ignore_glob.append("hil/bluesky/*")
