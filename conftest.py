@@ -1,5 +1,11 @@
 """Collection rules for the whole suite (pyproject's testpaths run doctests over the packages).
 
+Two tiers: plain ``pytest`` is the fast tier for development (under 2 minutes on a 2-core
+machine): it deselects the tests marked ``slow``. ``pytest --all`` runs the whole suite, slow
+tests included; that is what ``.ci/run`` runs. A marker expression (``-m slow``, ``-m "not
+hardware"``) replaces the default selection, and a test named by its node id
+(``pytest path/test_x.py::test_y``) runs even when it is slow.
+
 ``hil.bluesky`` needs the optional ``bluesky`` extra: without it, its modules are not imported
 for their doctests (``tests/bluesky`` says why it skips, or fails under
 ``HIL_REQUIRE_SYSTEM_DEPS=1``).
@@ -8,7 +14,67 @@ for their doctests (``tests/bluesky`` says why it skips, or fails under
 from __future__ import annotations
 
 import importlib.util
+from pathlib import Path
+
+import pytest
+
+# pytester: tests/test_tiers.py runs this file's tier selection in a scratch project.
+pytest_plugins = ["pytester"]
 
 collect_ignore_glob: list[str] = []
 if importlib.util.find_spec("bluesky") is None or importlib.util.find_spec("ophyd_async") is None:
     collect_ignore_glob.append("hil/bluesky/*")
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption(
+        "--all",
+        action="store_true",
+        dest="run_all",
+        help="run the whole suite, tests marked slow included (what .ci/run runs); "
+        "without it the slow tests are deselected",
+    )
+
+
+def _fast_tier(config: pytest.Config) -> bool:
+    """True when the slow tests are left out: no ``--all`` and no ``-m`` expression."""
+    return not config.getoption("run_all") and not config.option.markexpr
+
+
+def _named_node_ids(config: pytest.Config) -> list[str]:
+    """Node-id prefixes of the command-line arguments that name a test (``path::name``)."""
+    named = []
+    for arg in config.args:
+        path, sep, rest = arg.partition("::")
+        if not sep:
+            continue
+        full = Path(path).resolve()
+        try:
+            rel = full.relative_to(config.rootpath).as_posix()
+        except ValueError:
+            rel = path
+        named.append(f"{rel}::{rest}")
+    return named
+
+
+def pytest_report_header(config: pytest.Config) -> str | None:
+    if _fast_tier(config):
+        return "fast tier: tests marked slow are deselected (pytest --all runs the whole suite)"
+    return None
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    if not _fast_tier(config):
+        return
+    named = _named_node_ids(config)
+    keep: list[pytest.Item] = []
+    slow: list[pytest.Item] = []
+    for item in items:
+        is_slow = item.get_closest_marker("slow") is not None
+        if is_slow and not any(item.nodeid.startswith(prefix) for prefix in named):
+            slow.append(item)
+        else:
+            keep.append(item)
+    if slow:
+        config.hook.pytest_deselected(items=slow)
+        items[:] = keep

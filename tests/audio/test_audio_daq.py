@@ -206,6 +206,7 @@ def test_a_stream_that_ended_early_is_reported_by_wait_for_samples() -> None:
             daq.wait_for_samples(10_000, timeout_s=0.5)
 
 
+@pytest.mark.slow
 def test_a_source_error_is_raised_in_the_host_thread() -> None:
     daq, _ = _sim_daq()
 

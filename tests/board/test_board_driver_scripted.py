@@ -49,6 +49,7 @@ class ScriptedTransport:
         self.url = "scripted://"
         self._rx = bytearray()
         self._lock = threading.Lock()
+        self._wrote = threading.Condition(self._lock)
 
     def write(self, data: bytes) -> int:
         with self._lock:
@@ -60,7 +61,14 @@ class ScriptedTransport:
             if bytes(data) != expected:
                 self.mismatches.append(f"wrote {bytes(data).hex()}, expected {expected.hex()}")
             self._rx += response
+            self._wrote.notify_all()
         return len(data)
+
+    def wait_for_writes(self, n: int, timeout_s: float = 30.0) -> bool:
+        """Block until ``n`` writes have come (True) or ``timeout_s`` real seconds, a
+        deadlock guard, have passed (False)."""
+        with self._wrote:
+            return self._wrote.wait_for(lambda: len(self.writes) >= n, timeout_s)
 
     def read(self, size: int) -> bytes:
         with self._lock:
@@ -148,8 +156,10 @@ def test_keepalive_follows_the_handshake() -> None:
     transport = ScriptedTransport(script.steps)
     board = Board(transport, clock=ManualClock(), keepalive_ms=500)
     board.open()
-    time.sleep(0.05)
-    board.close()
+    try:
+        assert transport.wait_for_writes(2), f"no KEEPALIVE after the HELLO: {transport.writes}"
+    finally:
+        board.close()
     # The writer repeats the keepalive every 125 ms of (manual, frozen) clock: only once here.
     assert transport.mismatches == [] and transport.script == []
 

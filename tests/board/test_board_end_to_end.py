@@ -80,6 +80,7 @@ def expected_loopback(first: int, n: int, delay: int = DELAY) -> np.ndarray:
     return out
 
 
+@pytest.mark.slow
 def test_pty_stream_at_tank_board_rate_loses_nothing() -> None:
     clock = ManualClock()
     transport = open_transport(f"sim://board?via=pty&delay={DELAY}", clock=clock)

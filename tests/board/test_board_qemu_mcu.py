@@ -42,6 +42,7 @@ def test_cortex_m4_image_fits_a_small_mcu() -> None:
     assert data + bss < 256_000  # RAM without the stack: fixed buffers only, no heap
 
 
+@pytest.mark.slow
 def test_board_driver_completes_a_session_on_the_emulated_mcu() -> None:
     rng = np.random.default_rng(7)
     dac = rng.integers(-20000, 20000, (2 * RATE_HZ, 2)).astype(np.int16)

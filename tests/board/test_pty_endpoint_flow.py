@@ -90,6 +90,7 @@ def read_all(port: serial.Serial, n: int, sink: bytearray) -> None:
         sink += chunk
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("compute", [False, True], ids=["sleeping-tick", "computing-tick"])
 def test_output_leaves_while_the_device_ticks(compute: bool) -> None:
     ticks = 8
@@ -113,6 +114,7 @@ def test_output_leaves_while_the_device_ticks(compute: bool) -> None:
     assert max(behind) < CHUNK // 2, behind
 
 
+@pytest.mark.slow
 def test_host_bytes_arrive_while_the_device_ticks() -> None:
     # 192 KB written at once while ticks of 0.15 s run: the I/O thread takes them in as the
     # host writes, so the device has all of them by its third tick after the write. The
@@ -166,6 +168,7 @@ class SlowWorld:
         return np.zeros((dac_block.shape[0], 2))
 
 
+@pytest.mark.slow
 def test_board_keeps_its_dac_fed_through_slow_world_ticks() -> None:
     # 48 kHz, 2 ADC channels int16: 192 KB/s of ADC data, 29 KB per slow tick. A 32768-sample
     # DAC FIFO holds 0.68 s. With the old pump the CREDIT messages fell 80 ms further behind

@@ -38,6 +38,7 @@ def run(rx: MatchedFilterBank, x: np.ndarray) -> list[Any]:
     return rx.process(x) + rx.flush()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("speed", [9.3, -6.1])
 def test_closing_and_opening_targets_are_recovered(
     bank: MatchedFilterBank, speed: float, kit: Any
@@ -54,6 +55,7 @@ def test_closing_and_opening_targets_are_recovered(
         assert e.t_s == pytest.approx(scene.true_t_rx(e.t_tx_s), abs=2e-5)
 
 
+@pytest.mark.slow
 def test_errors_shrink_with_snr_and_reach_the_crlb(bank: MatchedFilterBank, kit: Any) -> None:
     scene = kit.Scene(30.0, 7.7)
     rmse = {}
@@ -69,6 +71,7 @@ def test_errors_shrink_with_snr_and_reach_the_crlb(bank: MatchedFilterBank, kit:
     assert rmse[0.0] < 3.0 * bound.sigma_range_m
 
 
+@pytest.mark.slow
 def test_chunks_equal_whole(kit: Any) -> None:
     sch = check_design(get_preset("att").spec("random-cyclic"))
     rx = MatchedFilterBank(
@@ -154,6 +157,7 @@ FULL_RATE_GOLDEN = [
 ]
 
 
+@pytest.mark.slow
 def test_refined_estimates_match_the_full_rate_bank(bank: MatchedFilterBank, kit: Any) -> None:
     est = run(bank, kit.echo(SCH, FS, kit.Scene(40.0, 9.3), 0.3))
     assert [e.hop_index for e in est] == list(range(-1, 24))

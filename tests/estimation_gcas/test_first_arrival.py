@@ -65,6 +65,7 @@ def _speed_errors(est: list[Estimate], v: float) -> np.ndarray:
     return np.array([e.speed_mps - v for e in _moving(est, v)])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("speed", [1.5, -1.5, 1.0])
 def test_first_arrival_removes_the_multipath_bias(speed: float) -> None:
     r0 = 7.0

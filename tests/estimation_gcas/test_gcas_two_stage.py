@@ -331,6 +331,7 @@ print(json.dumps({{"before": before, "after": counts(), "estimates": n, "maps": 
 """
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("with_map", [False, True])
 def test_two_stage_loads_no_compiled_kernel_once_built(with_map: bool) -> None:
     # Loading a kernel specialisation takes ~10 ms (compiling one, seconds): in a live run

@@ -26,6 +26,7 @@ def quick_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[int, Path, str]
     return status, out, buf.getvalue()
 
 
+@pytest.mark.slow
 def test_quick_subset_writes_figures_tables_and_report(quick_run: tuple[int, Path, str]) -> None:
     status, out, printed = quick_run
     assert status == 0
@@ -49,6 +50,7 @@ def test_quick_subset_writes_figures_tables_and_report(quick_run: tuple[int, Pat
         assert (out / link).is_file(), link
 
 
+@pytest.mark.slow  # shares the quick reproduce run above
 def test_tables_hold_pooled_values(quick_run: tuple[int, Path, str]) -> None:
     _, out, _ = quick_run
     with (out / "tables" / "fig5_15_cost.csv").open(encoding="utf-8") as fh:

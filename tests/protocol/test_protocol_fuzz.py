@@ -7,6 +7,7 @@ truncations), fed in random chunks. Seeded, so any failure reproduces.
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from firmware_protocol import (
     NEED_DATA,
@@ -63,6 +64,7 @@ def _build_stream(rng: np.random.Generator) -> tuple[bytes, np.ndarray]:
     return b"".join(parts), mutated
 
 
+@pytest.mark.slow
 def test_fuzz_mutated_streams() -> None:
     rng = np.random.default_rng(20240601)
     stream, mutated = _build_stream(rng)

@@ -80,6 +80,7 @@ def test_hard_limit_mid_pass_stops_the_run_within_a_second() -> None:
         assert clock.now() - t1 < 1.0
 
 
+@pytest.mark.slow
 def test_homing_a_three_axis_stage() -> None:
     # Stock GRBL homes Z, then X and Y together, and needs every switch.
     clock = ManualClock(0.0)

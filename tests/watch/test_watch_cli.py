@@ -84,13 +84,27 @@ def test_a_damaged_recording(tmp_path: Path, capsys: pytest.CaptureFixture[str])
     )
 
 
+def _default_sigint() -> None:
+    """In the child before exec: SIGINT raises KeyboardInterrupt again, as in a terminal
+    (a suite started as a background job hands its children SIGINT ignored, and Python
+    keeps an inherited ignore)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def test_the_command_serves_a_recording_until_interrupted(recorder: Any) -> None:
     recorder.writer.append_estimates([recorder.estimate(i) for i in range(4)])
     recorder.writer.flush()
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    # PYTHONFAULTHANDLER: a server that does not stop is asked for its threads' stacks.
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONFAULTHANDLER": "1"}
     cmd = [sys.executable, "-m", "hil.cli.main", "watch", str(recorder.path), "--port", "0"]
     with subprocess.Popen(
-        cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        cmd,
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=_default_sigint,
     ) as proc:
         try:
             assert proc.stdout is not None and proc.stderr is not None
@@ -103,7 +117,13 @@ def test_the_command_serves_a_recording_until_interrupted(recorder: Any) -> None
             with urllib.request.urlopen(match.group(2) + "api/state", timeout=60) as r:
                 assert json.loads(r.read())["counts"]["estimates"] == 4
             proc.send_signal(signal.SIGINT)
-            assert proc.wait(timeout=60) == 0
+            try:
+                code = proc.wait(timeout=60)
+            except subprocess.TimeoutExpired:
+                proc.send_signal(signal.SIGABRT)  # the fault handler prints every stack
+                _, err = proc.communicate(timeout=30)
+                pytest.fail(f"hil watch still ran 60 s after SIGINT; its threads:\n{err}")
+            assert code == 0
             assert proc.stderr.read() == "stopped\n"
         finally:
             if proc.poll() is None:

@@ -1,0 +1,85 @@
+"""The two test tiers of the root conftest: plain ``pytest`` leaves out the tests marked
+``slow``, ``--all`` runs everything, a ``-m`` expression or a test named by its node id
+overrides the default selection. Run in a scratch project with the repository's conftest."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+ROOT_CONFTEST = Path(__file__).resolve().parents[1] / "conftest.py"
+
+TESTS = """
+import pytest
+
+def test_fast():
+    pass
+
+@pytest.mark.slow
+def test_slow():
+    pass
+
+@pytest.mark.slow
+@pytest.mark.parametrize("k", [1, 2])
+def test_slow_cases(k):
+    pass
+"""
+
+
+@pytest.fixture
+def project(pytester: pytest.Pytester) -> pytest.Pytester:
+    pytester.makeconftest(ROOT_CONFTEST.read_text())
+    pytester.makepyprojecttoml(
+        """
+[tool.pytest.ini_options]
+addopts = "--strict-markers"
+markers = ["slow: long-running test"]
+"""
+    )
+    pytester.makepyfile(test_tiers_sample=TESTS)
+    return pytester
+
+
+QUIET = ("-p", "no:hypothesispytest")  # its summary hook costs ~0.5 s a run, unused here
+
+
+def _passed(run: pytest.HookRecorder) -> list[str]:
+    """Names of the tests that passed in an inline run, sorted."""
+    passed, skipped, failed = run.listoutcomes()
+    assert not skipped and not failed
+    return sorted(report.nodeid.split("::", 1)[1] for report in passed)
+
+
+def test_plain_pytest_is_the_fast_tier(project: pytest.Pytester) -> None:
+    run = project.inline_run(*QUIET)
+    assert _passed(run) == ["test_fast"]
+    deselected = [item.name for call in run.getcalls("pytest_deselected") for item in call.items]
+    assert sorted(deselected) == ["test_slow", "test_slow_cases[1]", "test_slow_cases[2]"]
+
+
+def test_all_runs_the_slow_tests_too(project: pytest.Pytester) -> None:
+    run = project.inline_run(*QUIET, "--all")
+    assert _passed(run) == ["test_fast", "test_slow", "test_slow_cases[1]", "test_slow_cases[2]"]
+
+
+def test_a_marker_expression_replaces_the_default_selection(project: pytest.Pytester) -> None:
+    assert _passed(project.inline_run(*QUIET, "-m", "slow")) == [
+        "test_slow",
+        "test_slow_cases[1]",
+        "test_slow_cases[2]",
+    ]
+    assert _passed(project.inline_run(*QUIET, "-m", "not slow")) == ["test_fast"]
+
+
+def test_a_slow_test_named_by_its_node_id_runs(project: pytest.Pytester) -> None:
+    assert _passed(project.inline_run(*QUIET, "test_tiers_sample.py::test_slow")) == ["test_slow"]
+    named = project.inline_run(*QUIET, "test_tiers_sample.py::test_slow_cases")
+    assert _passed(named) == ["test_slow_cases[1]", "test_slow_cases[2]"]
+
+
+def test_the_header_says_how_to_run_everything(project: pytest.Pytester) -> None:
+    fast = project.runpytest(*QUIET)
+    fast.stdout.fnmatch_lines(["fast tier: tests marked slow are deselected (pytest --all *"])
+    fast.stdout.fnmatch_lines(["*1 passed, 3 deselected*"])
+    assert "fast tier" not in project.runpytest(*QUIET, "--all").stdout.str()
