@@ -364,6 +364,13 @@ def test_simulated_run_end_to_end_and_replay_equals_live(
     )
 
 
+def _default_sigint() -> None:
+    """In the child before exec: SIGINT raises KeyboardInterrupt again, as in a terminal (a
+    suite started as a background job hands its children SIGINT ignored, and Python keeps
+    an inherited ignore)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 @pytest.mark.slow
 def test_the_default_demo_runs_on_ptys_in_real_time(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
@@ -468,6 +475,7 @@ def test_ctrl_c_sigterm_and_sighup_stop_cleanly_and_keep_the_recording(
         [sys.executable, "-m", "hil.cli.main", "tank-run", str(exp_file), "--out", str(folder),
          "--no-live", "--json"],
         stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, start_new_session=True,
+        preexec_fn=_default_sigint,
     )  # fmt: skip
     h5 = folder / "run.h5"
     try:

@@ -281,12 +281,16 @@ def test_required_calibrations_are_applied_in_the_run(tmp_path: Path, devices: P
     with RunRecording.open(folder / "run.h5") as rec:
         assert rec.metadata.calibration_ids == tuple(summary["calibrations"])
         assert rec.origin_sample == outcome.start_index + LATENCY
-        note, stop = [e for e in rec.events() if e.kind == "note"]
-        assert stop.text == "stop: completed"
-        assert note.text == (
-            f"loopback latency {LATENCY} samples from calibration {ids['latency']} (the DAC"
-            " monitor input carried no loopback: correlation 0.00)"
-        )
+        # Notes by their text: a board that refused START once on a busy machine (its lead
+        # had passed) adds a START_RETRY note.
+        notes = [e.text for e in rec.events() if e.kind == "note"]
+        assert [t for t in notes if t.startswith("stop: ")] == ["stop: completed"]
+        assert [t for t in notes if t.startswith("loopback latency")] == [
+            (
+                f"loopback latency {LATENCY} samples from calibration {ids['latency']} (the DAC"
+                " monitor input carried no loopback: correlation 0.00)"
+            )
+        ]
 
 
 # ---- refusals: each before anything moves or transmits
