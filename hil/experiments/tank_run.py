@@ -143,7 +143,7 @@ class CodewordMaps:
         self.power: list[np.ndarray] = []
         self._points = 0
 
-    def on_map(self, t_s: np.ndarray, p: np.ndarray, speed: Any) -> None:
+    def on_map(self, t_s: np.ndarray, p: np.ndarray, speed: np.ndarray) -> None:
         if self._points < self.MAX_POINTS:
             self.times.append(np.asarray(t_s, dtype=float).copy())
             self.power.append(np.asarray(p, dtype=np.float32).copy())
