@@ -13,8 +13,8 @@ as its threads would on real time. A run is therefore
 - held in one thread: no pseudo-terminals, no child process.
 
 It is what the tests of the run logic use (``hil tank-run --virtual-time``); the default
-demo runs the same devices on ptys in real time (:class:`~hil.experiments.sim_tank.
-SimulatedTankProcess`), as real hardware would be driven.
+demo runs the same devices on ptys in real time
+(:class:`~hil.experiments.sim_tank.SimulatedTankProcess`), as real hardware is driven.
 
 Everything from :mod:`sim_devices` is imported inside the functions (DESIGN: the host never
 imports simulated devices at module level).
