@@ -9,6 +9,7 @@ whole signal.
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 from typing import Any, Protocol, runtime_checkable
 
@@ -26,6 +27,8 @@ ESTIMATE_FIELDS: tuple[str, ...] = (
     "t_tx_s",
     "codeword",
     "receiver",
+    "crlb_range_m",
+    "crlb_speed_mps",
 )
 
 
@@ -60,6 +63,10 @@ class Estimate:
     receiver:
         Name of the receiver that produced it (``"gcas"``, ``"jifs"``, ``"stft"``,
         ``"mfbank"``, ``"fmcw"``).
+    crlb_range_m, crlb_speed_mps:
+        Cramér–Rao bounds (standard deviations, m and m/s) of this estimate's range and speed
+        at the E/N0 its own echo had (:mod:`hil.estimation.crlb`), where the receiver
+        measured it (GCAS's coherent refinement); NaN otherwise.
     """
 
     t_s: float
@@ -72,6 +79,8 @@ class Estimate:
     t_tx_s: float
     codeword: int
     receiver: str
+    crlb_range_m: float = math.nan
+    crlb_speed_mps: float = math.nan
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary with the fields in :data:`ESTIMATE_FIELDS` order."""

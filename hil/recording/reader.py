@@ -320,6 +320,9 @@ class RunRecording:
     def estimates(self, receiver: str | None = None) -> list[Estimate]:
         """The recorded estimates (of one receiver by name, or all) in the order recorded."""
         t = self._table("estimates")
+        n = t["t_s"].shape[0]
+        nan = np.full(n, np.nan)  # recordings made before the bounds were columns
+        crlb_r, crlb_v = t.get("crlb_range_m", nan), t.get("crlb_speed_mps", nan)
         out = [
             Estimate(
                 t_s=float(t["t_s"][i]),
@@ -332,8 +335,10 @@ class RunRecording:
                 t_tx_s=float(t["t_tx_s"][i]),
                 codeword=int(t["codeword"][i]),
                 receiver=str(t["receiver"][i]),
+                crlb_range_m=float(crlb_r[i]),
+                crlb_speed_mps=float(crlb_v[i]),
             )
-            for i in range(t["t_s"].shape[0])
+            for i in range(n)
         ]
         return out if receiver is None else [e for e in out if e.receiver == receiver]
 

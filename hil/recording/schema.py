@@ -128,6 +128,8 @@ TABLES: dict[str, tuple[tuple[str, Any], ...]] = {
                 hint="a cut name would not find the receiver on replay; register a shorter name",
             ),
         ),
+        ("crlb_range_m", np.float64),
+        ("crlb_speed_mps", np.float64),
     ),
 }
 

@@ -26,6 +26,7 @@ from hil.estimation.doppler_grid import alpha_to_speed, speed_to_alpha
 from hil.estimation.first_arrival import FirstArrivalReadout
 from hil.estimation.gcas.front_end import FrontEnd
 from hil.estimation.gcas.threshold import Peak
+from hil.estimation.refine import CoherentRefiner
 
 #: ``unit_values(n_star, d0, tone)``: the M terms' unit correlators of the peak at sample
 #: ``n_star``, hypothesis ``d0``, tone index per term (shape ``(M,)``), weighted, complex.
@@ -94,6 +95,7 @@ class Readout:
         coherent: bool,
         first_arrival: FirstArrivalReadout | None,
         unit_values: UnitValues,
+        refiner: CoherentRefiner | None,
         receiver: str,
     ) -> None:
         self._fe = fe
@@ -102,6 +104,7 @@ class Readout:
         self._coherent = coherent
         self._first_arrival = first_arrival
         self._unit_values = unit_values
+        self._refiner = refiner
         self._receiver = receiver
         self.reset()
 
@@ -147,7 +150,12 @@ class Readout:
         q = math.floor((t_rx - end_j + tol) / k.period)
         t_tx = end_j + q * k.period
         hop_index = p.codeword + q * fe.n_codewords
-        if self._coherent:
+        bound = None
+        if self._refiner is not None:
+            refined = self._refiner.refine(t_rx, alpha, hop_index)
+            if refined is not None:
+                t_rx, alpha, bound = refined.t_s, refined.alpha, refined.bound
+        elif self._coherent:
             t_rx, alpha = self._coherent_refine(p.n_star, p.d0, hop_index, t_rx, alpha)
         if self._first_arrival is not None:
             first = self._first_arrival.first_arrival(t_rx, alpha, hop_index)
@@ -172,6 +180,8 @@ class Readout:
             t_tx_s=t_tx,
             codeword=p.codeword,
             receiver=self._receiver,
+            crlb_range_m=math.nan if bound is None else bound.sigma_range_m,
+            crlb_speed_mps=math.nan if bound is None else bound.sigma_speed_mps,
         )
 
     def _consistent(self, hop_index: int, t_rx: float, alpha: float) -> bool | None:

@@ -1,0 +1,346 @@
+"""Coherent refinement of a detection: local maximum likelihood of delay and Doppler at the
+input rate over the detection's ``M`` hops (detect with GCAS, then measure like the bank).
+
+A detector hands over a boundary receive time ``t̂`` (s) and a time scale ``α̂``, good to a
+fraction of a grating lobe; this module finds the ``(t_rx, α)`` that maximise the likelihood
+of one echo of the exact transmitted schedule in white noise,
+
+    L(t_rx, α) = |Σ_n x[n] s*(α (t_n − t_rx) + T_b)|²,
+
+over the ``M`` hops ending at the detected boundary (transmit time ``T_b``): the ambiguity
+function of the exact waveform, whose maximum is the estimator that reaches the Cramér–Rao
+bound above the threshold SNR (:mod:`hil.estimation.crlb`). The matched-filter bank
+(:mod:`hil.estimation.mfbank`) computes the same function everywhere; here it is computed
+around one cell only.
+
+How it is computed cheaply. Hop ``i`` of the ``M`` (tone ``f_i``, start ``T_i``, length
+``D_i``, start phase ``φ_i``, amplitude ``a_i``) is heard over
+``[t_rx + (T_i − T_b)/α, t_rx + (T_i + D_i − T_b)/α)``, as
+``a_i exp(j(φ_i + 2π f_i (α (t − t_rx) + T_b − T_i)))``. With ``α = α̂ + ε`` and ``t = m_i + u``
+(``m_i`` the hop's centre at ``(t̂, α̂)``),
+
+    H_i = K_i e^{−j2π f_i α (m_i − t_rx)} Σ_p (−j2π f_i ε D)^p / p! · Z_i^p,
+    Z_i^p = Σ_{n in window} x[n] e^{−j2π f_i α̂ u_n} (u_n / D)^p,
+
+``K_i = a_i e^{−j(φ_i + 2π f_i (T_b − T_i))}``, ``D`` the hop length. The moments ``Z_i^p``
+are prefix sums over a window widened by the search's reach, so a candidate's window edges
+(which move with ``t_rx`` and ``α``) cost two look-ups per hop and moment; a sample on an edge
+counts with the fraction of its interval inside (a continuous likelihood, no sample-grid
+steps). Over the search ``|2π f ε D/2| ≤ 1`` (``ε`` up to 0.75 m/s as a time scale on the
+``att`` tones), so the :data:`N_MOMENTS` terms leave a relative error below 2e-4 at a
+window's edge. ``L = |Σ_i H_i|²``.
+
+Search: a grid over ±½ grating lobe in time (``1/(α Δf)``, ``Δf`` the tone spacing: the
+detector's error is far smaller, so the lobe is the detector's) and ±``speed_span`` in speed,
+then a 2-D quadratic fit on a 3 × 3 stencil around the best point, repeated with the stencil
+shrinking, until the step is below a thousandth of the main lobe.
+
+SNR: at the maximum, ``Â = 2|C|/E_s`` (``E_s = Σ a_i² N_i``, ``N_i`` the window's samples) and
+the noise variance is what the echo leaves of the window's energy; ``E/N0 = Â² N / (4 σ²)``
+(:func:`hil.estimation.crlb.sampled_e_over_n0`), from which the estimate's own Cramér–Rao
+bounds follow.
+
+Limits: one echo. Two echoes within a main lobe (tank multipath a fraction of a millisecond
+apart) pull the maximum toward their weighted mean; an accelerating target is fitted with
+its mean time scale over the ``M`` hops (the boundary time stays unbiased for a constant
+acceleration to first order). Tone schedules only (no chirps).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hil.errors import ConfigError
+from hil.estimation.crlb import Crlb, crlb, rms_bandwidth, rms_duration
+from hil.estimation.refine_kernels import (
+    FOUND,
+    RECENTRE,
+    candidate_sums,
+    find_slots,
+    hop_moments,
+    maximise,
+)
+from hil.estimation.row_buffer import RowBuffer
+from hil.signals.schedule import HopSchedule
+
+#: Taylor terms of the in-hop Doppler rotation (module docstring).
+N_MOMENTS = 7
+#: Points of the search's lines: over ±½ grating lobe in time, over ± the speed span.
+TIME_POINTS = 9
+SPEED_POINTS = 5
+#: Stencil passes of the quadratic fit (the stencil halves each pass).
+FIT_PASSES = 5
+#: Searches re-centred where the speed line's maximum is at its end (each moves the tables
+#: by one speed span: a detector's speed off by up to this many spans is still refined).
+MAX_RECENTRES = 4
+#: A hop's tables are reused by a later detection whose predicted window edges are within
+#: this many samples of the ones they were made for (and whose time scale is within half the
+#: speed span): consecutive detections of one target share ``M − 1`` hops.
+REUSE_SLACK = 16
+#: Table slots per hop of a detection (least recently used slots are refilled).
+SLOTS_PER_HOP = 4
+
+
+@dataclass(frozen=True)
+class Refinement:
+    """A refined detection: boundary receive time ``t_s`` (s), time scale ``alpha``, the
+    E/N0 collected over the ``M`` hops (dB) and its Cramér–Rao bounds (:class:`Crlb`)."""
+
+    t_s: float
+    alpha: float
+    e_over_n0_db: float
+    bound: Crlb
+
+
+class CoherentRefiner:
+    """Local maximum-likelihood delay and Doppler of detections (module docstring).
+
+    Parameters
+    ----------
+    schedule:
+        The transmit schedule (tones: no chirp; equal hop lengths); the first input sample is
+        at its t = 0.
+    fs_hz:
+        Input sample rate, Hz.
+    m_hops:
+        Hops per detection (the detector's M).
+    sound_speed_mps:
+        c, m/s.
+    speed_span_mps:
+        Half-width of the speed search around the detector's speed, m/s (several times the
+        detector's speed error).
+    max_speed_mps:
+        The largest speed a detection can have, m/s (sets the widest window kept).
+    """
+
+    def __init__(
+        self,
+        schedule: HopSchedule,
+        fs_hz: float,
+        m_hops: int,
+        sound_speed_mps: float,
+        speed_span_mps: float,
+        max_speed_mps: float,
+    ) -> None:
+        if np.any(schedule.chirp_hz_per_s != 0):
+            raise ConfigError("refine", True, "a schedule of tones (no chirps)", "refine=False")
+        if np.ptp(schedule.duration_s) > 1e-12:
+            raise ConfigError("refine", True, "a schedule of equal hop lengths", "refine=False")
+        if not (math.isfinite(speed_span_mps) and speed_span_mps > 0):
+            raise ConfigError("speed_span_mps", speed_span_mps, "a finite speed > 0 m/s")
+        self.schedule = schedule
+        self.fs_hz = float(fs_hz)
+        self.m_hops = int(m_hops)
+        self.c = float(sound_speed_mps)
+        self.speed_span_mps = float(speed_span_mps)
+        tones = np.unique(np.asarray(schedule.tones_hz, dtype=np.float64))
+        self.spacing_hz = float(np.min(np.diff(tones))) if tones.size > 1 else 1 / schedule.hop_s
+        self.hop_len_s = float(schedule.duration_s[0])
+        v_max = abs(float(max_speed_mps)) + self.speed_span_mps
+        alpha_lo = (self.c - v_max) / (self.c + v_max)
+        # How far a candidate's window edge can move from the detection's: the time grid's
+        # reach (±½ lobe and the fit's two steps), the edges' drift over M hops as α moves
+        # by up to twice the speed span (a reused table's own α may be a quarter span away,
+        # the fit may step past the grid), and the reuse slack.
+        lobe = 1.0 / (alpha_lo * self.spacing_hz)
+        reach = 0.5 * lobe * (1.0 + 4.0 / (TIME_POINTS - 1))
+        drift = (self.m_hops + 1) * self.hop_len_s * 4.0 * self.speed_span_mps / self.c
+        self._half = int(math.ceil((reach + drift) * self.fs_hz)) + REUSE_SLACK + 2
+        self._alpha_tol = 0.5 * self.speed_span_mps / self.c  # a quarter span, as a time scale
+        self.history = int(math.ceil((self.m_hops + 1) * self.hop_len_s / alpha_lo * fs_hz))
+        self.history += 2 * self._half + 8
+        self._ring = RowBuffer(self.history, (), np.float64)
+        self._valid_from = 0
+        n_slots = SLOTS_PER_HOP * self.m_hops
+        rows = 2 * self._half + 2
+        self._prefix = np.zeros((n_slots, 2, rows + 1, N_MOMENTS), dtype=np.complex128)
+        self._energy = np.zeros((n_slots, 2, rows + 1))
+        self._first = np.zeros(n_slots, dtype=np.int64)
+        self._tail = np.zeros(n_slots, dtype=np.int64)
+        self._alpha0 = np.zeros(n_slots)
+        self._centre = np.zeros(n_slots)
+        self._edge = np.zeros(n_slots)  # the lower window edge the slot was made for, samples
+        self._hop = np.full(n_slots, np.iinfo(np.int64).min, dtype=np.int64)
+        self._used = np.zeros(n_slots, dtype=np.int64)
+        self._clock = 0
+        self._codewords: dict[int, _Codeword] = {}
+
+    # ------------------------------------------------------------------ stream
+    def reset(self, input_index: int) -> None:
+        """Forget the history; the next sample is ``input_index`` (after a gap)."""
+        self._ring.reset(input_index)
+        self._valid_from = int(input_index)
+        self._hop[:] = np.iinfo(np.int64).min
+
+    def push(self, x: NDArray[np.float64], first_index: int) -> None:
+        """Append input samples (shape ``(n,)``) starting at absolute index ``first_index``."""
+        self._ring.append(x, first_index)
+
+    # ------------------------------------------------------------------ refinement
+    def refine(self, t_s: float, alpha: float, hop_index: int) -> Refinement | None:
+        """The maximum-likelihood boundary time and time scale near ``(t_s, alpha)`` for the
+        boundary that ends hop ``hop_index``; None where the input does not cover the ``M``
+        hops (start, gaps) or no maximum lies inside the search."""
+        word = self._codeword(hop_index)
+        hop_ids = np.arange(hop_index - self.m_hops + 1, hop_index + 1, dtype=np.int64)
+        lobe = 1.0 / (alpha * self.spacing_hz)
+        best_t, best_v = t_s, self.c * (alpha - 1.0) / (alpha + 1.0)
+        outcome = RECENTRE
+        for _ in range(MAX_RECENTRES + 1):
+            slots = self._slots(hop_ids, word, best_t, (self.c + best_v) / (self.c - best_v))
+            if slots is None:
+                return None
+            args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
+            best_t, best_v, outcome = maximise(
+                *args, self.c, best_t, best_v, 0.5 * lobe, self.speed_span_mps,
+                TIME_POINTS, SPEED_POINTS, FIT_PASSES,
+            )  # fmt: skip
+            if outcome != RECENTRE:
+                break
+        if outcome != FOUND:
+            return None
+        a_best = (self.c + best_v) / (self.c - best_v)
+        en0 = _e_over_n0(args, best_t, a_best)
+        if not en0 > 0:
+            return None
+        en0_db = 10.0 * math.log10(en0)
+        return Refinement(
+            best_t, a_best, en0_db, crlb(word.b_rms, word.t_rms, word.f0, en0_db, self.c)
+        )
+
+    def correlation(
+        self,
+        t_s: float,
+        alpha: float,
+        hop_index: int,
+        t_rx: NDArray[np.float64],
+        alphas: NDArray[np.float64],
+    ) -> NDArray[np.complex128] | None:
+        """The correlation ``C(t_rx, α)`` of candidates near a detection ``(t_s, alpha)`` of
+        the boundary ending hop ``hop_index`` (the function :meth:`refine` maximises as
+        ``|C|²``): ``t_rx`` (s) and ``alphas`` of one shape, within ±½ grating lobe and ± the
+        speed span of the detection. None where the input does not cover the hops. For plots
+        of the local ambiguity and for checks against a direct correlation."""
+        word = self._codeword(hop_index)
+        hop_ids = np.arange(hop_index - self.m_hops + 1, hop_index + 1, dtype=np.int64)
+        slots = self._slots(hop_ids, word, t_s, alpha)
+        if slots is None:
+            return None
+        t = np.ascontiguousarray(np.asarray(t_rx, dtype=np.float64).ravel())
+        a = np.ascontiguousarray(np.asarray(alphas, dtype=np.float64).ravel())
+        if t.shape != a.shape:
+            raise ConfigError(
+                "alphas", f"shape {np.shape(alphas)}", f"the shape of t_rx, {np.shape(t_rx)}"
+            )
+        c = np.empty(t.size, dtype=np.complex128)
+        model, energy = np.empty(t.size), np.empty(t.size)
+        args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
+        candidate_sums(*args, t, a, c, model, energy)
+        return c.reshape(np.shape(t_rx))
+
+    @property
+    def _tables(self) -> tuple[NDArray[Any], ...]:
+        return (self._prefix, self._energy, self._first, self._tail, self._alpha0, self._centre)
+
+    def _slots(
+        self, hop_ids: NDArray[np.int64], word: _Codeword, t_s: float, alpha: float
+    ) -> NDArray[np.int64] | None:
+        """The table slot of each hop (shape ``(M,)``): a kept one made for this window, or
+        one filled now; None where the input does not cover a hop's window."""
+        fs = self.fs_hz
+        dt_lo = word.hops[2]
+        edge = (t_s + dt_lo / alpha) * fs  # lower window edges, absolute samples
+        slots = np.empty(hop_ids.shape[0], dtype=np.int64)
+        missing = find_slots(
+            self._hop, self._edge, self._alpha0, hop_ids, edge, alpha, REUSE_SLACK,
+            self._alpha_tol, slots,
+        )  # fmt: skip
+        self._clock += 1
+        if missing:
+            need = np.flatnonzero(slots < 0)
+            used = self._used.copy()
+            used[slots[slots >= 0]] = np.iinfo(np.int64).max  # keep this detection's own
+            new = np.argsort(used, kind="stable")[: need.size].astype(np.int64)
+            first = np.floor(edge[need]).astype(np.int64) - self._half
+            span = int(math.ceil(self.hop_len_s / alpha * fs)) + 2 * self._half + 2
+            if first.min() < self._valid_from or first.max() + span > self._ring.next_index:
+                return None
+            centre = t_s + 0.5 * (dt_lo[need] + word.hops[3][need]) / alpha
+            hop_moments(
+                self._ring.array, self._ring.position(first), new, first - centre * fs, span,
+                word.hops[1][need] * alpha / fs, self.hop_len_s * fs, self._prefix,
+                self._energy,
+            )  # fmt: skip
+            self._first[new] = first
+            self._tail[new] = span - (self._prefix.shape[2] - 1)
+            self._alpha0[new] = alpha
+            self._centre[new] = centre
+            self._edge[new] = edge[need]
+            self._hop[new] = hop_ids[need]
+            slots[need] = new
+        self._used[slots] = self._clock
+        return slots
+
+    def _codeword(self, hop_index: int) -> _Codeword:
+        """The ``M`` hops ending with ``hop_index`` relative to their end boundary, kept per
+        codeword: made from the first code period (the same hops a period later differ by a
+        common phase only, which ``|C|`` does not see), so the figures never depend on which
+        period a codeword was first met in."""
+        key = int(hop_index) % self.schedule.period_hops
+        word = self._codewords.get(key)
+        if word is None:
+            word = _Codeword.of(self.schedule, key, self.m_hops, self.fs_hz)
+            self._codewords[key] = word
+        return word
+
+
+@dataclass(frozen=True)
+class _Codeword:
+    """The ``M`` hops ending at a boundary ``T_b``, as :func:`~hil.estimation.refine_kernels.
+    candidate_sums` takes them: ``hops = (k, f, dt_lo, dt_hi, amp2)`` (shape ``(M,)`` each;
+    the transmit phasor ``a_i e^{−j(φ_i + 2π f_i (T_b − T_i))}``, tones in Hz, the hops'
+    edges relative to ``T_b`` in s, squared amplitudes), and the window's ``B_rms`` (Hz),
+    ``T_rms`` (s) and mean frequency (Hz) measured from the waveform
+    (:mod:`hil.estimation.crlb`)."""
+
+    hops: tuple[NDArray[np.complex128], NDArray[np.float64], NDArray[np.float64],
+                NDArray[np.float64], NDArray[np.float64]]  # fmt: skip
+    b_rms: float
+    t_rms: float
+    f0: float
+
+    @classmethod
+    def of(cls, schedule: HopSchedule, hop_index: int, m_hops: int, fs_hz: float) -> _Codeword:
+        hops = schedule.hops(hop_index - m_hops + 1, m_hops)
+        t_b = float(hops.start_s[-1] + hops.duration_s[-1])
+        dt_lo = hops.start_s - t_b
+        f = hops.freq_hz
+        k = hops.amplitude * np.exp(-1j * (hops.phase_rad - 2 * np.pi * f * dt_lo))
+        t = float(hops.start_s[0]) + np.arange(int(round(-dt_lo[0] * fs_hz))) / fs_hz
+        s = schedule.evaluate_analytic(t)
+        b_rms, f0 = rms_bandwidth(s, fs_hz)
+        return cls(
+            (k, f, dt_lo, dt_lo + hops.duration_s, hops.amplitude**2),
+            b_rms, rms_duration(s, fs_hz), abs(f0),
+        )  # fmt: skip
+
+
+def _e_over_n0(args: tuple[object, ...], t_rx: float, alpha: float) -> float:
+    """E/N0 (linear) of the echo at a candidate: ``Â = 2|C|/E_s``, the noise variance what
+    the echo leaves of the windows' energy, ``E/N0 = Â² N / (4 σ²)`` (module docstring)."""
+    c = np.empty(1, dtype=np.complex128)
+    es = np.empty(1)
+    energy = np.empty(1)
+    candidate_sums(*args, np.array([t_rx]), np.array([alpha]), c, es, energy)
+    n = float(es[0])  # Σ a_i² N_i: the windows' samples for unit amplitudes
+    mag = float(np.abs(c[0]))
+    a_hat = 2.0 * mag / float(es[0])
+    noise = (float(energy[0]) - 2.0 * mag * mag / float(es[0])) / n
+    if not noise > 0:
+        return math.inf
+    return a_hat * a_hat * n / (4.0 * noise)

@@ -1,0 +1,264 @@
+"""Compiled loops of the coherent refinement (:mod:`hil.estimation.refine`): the hops' moment
+prefix sums and the likelihood of candidate ``(t_rx, α)`` with its maximisation.
+
+Arrays are C-contiguous, ``float64`` / ``complex128`` unless stated, indices ``int64``.
+Compiled with ``cache=True`` like :mod:`hil.estimation.kernels`.
+
+Hop tables (one slot ``s`` per hop, shapes with ``S`` slots, ``R + 1`` edge rows, ``P``
+moments): ``prefix[s, side, j, p]`` and ``energy[s, side, j]`` are the prefix sums of the
+demodulated moments and of ``x²`` at prefix position ``j`` (side 0, from the slot's first
+sample) or ``tail[s] + j`` (side 1), written by :func:`hop_moments`; ``first[s]`` is the
+absolute sample index of prefix position 0, ``alpha0[s]`` and ``centre[s]`` (s) the time scale
+and centre of the demodulation.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numba
+import numpy as np
+
+_JIT: dict[str, Any] = {"cache": True, "nogil": True}
+
+
+@numba.njit(**_JIT)
+def hop_moments(
+    x: Any, pos: Any, slots: Any, u0: Any, span: int, cycles_per_sample: Any,
+    hop_samples: float, prefix: Any, energy: Any,
+) -> None:  # fmt: skip
+    """Fill the tables of ``slots`` (shape ``(H,)``) from the real input ``x``.
+
+    Hop ``h`` reads ``x[pos[h] + k]``, ``k < span``; ``u = u0[h] + k`` (samples from the
+    hop's centre), ``y = x e^{−j2π cycles_per_sample[h] u}``,
+    ``S[j, p] = Σ_{k < j} y (u/hop_samples)^p`` and ``E[j] = Σ_{k < j} x²`` for
+    ``0 ≤ j ≤ span``. Side 0 keeps ``j ≤ R``, side 1 ``j ≥ span − R`` (the module's tables,
+    ``tail = span − R``). The rotation runs as a recurrence renewed every 256 samples
+    (rounding below 1e-13).
+    """
+    n_mom = prefix.shape[3]
+    r = prefix.shape[2] - 1
+    tail = span - r
+    acc = np.zeros(n_mom, dtype=np.complex128)
+    for h in range(slots.shape[0]):
+        s = slots[h]
+        acc[:] = 0.0
+        e = 0.0
+        w = -2.0 * math.pi * cycles_per_sample[h]
+        step = complex(math.cos(w), math.sin(w))
+        rot = complex(1.0, 0.0)
+        for j in range(span + 1):
+            if j <= r:
+                for p in range(n_mom):
+                    prefix[s, 0, j, p] = acc[p]
+                energy[s, 0, j] = e
+            if j >= tail:
+                for p in range(n_mom):
+                    prefix[s, 1, j - tail, p] = acc[p]
+                energy[s, 1, j - tail] = e
+            if j == span:
+                break
+            u = u0[h] + j
+            if j % 256 == 0:
+                rot = complex(math.cos(w * u), math.sin(w * u))
+            v = x[pos[h] + j]
+            y = v * rot
+            q = u / hop_samples
+            pw = 1.0
+            for p in range(n_mom):
+                acc[p] += y * pw
+                pw *= q
+            e += v * v
+            rot *= step
+
+
+@numba.njit(**_JIT)
+def _edge_sums(
+    prefix: Any, energy: Any, s: int, side: int, pos: float, out: Any
+) -> float:  # fmt: skip
+    """Slot ``s``'s side-``side`` prefix sums at fractional position ``pos`` (linear between
+    rows, clipped to the table) into ``out`` (shape ``(P,)``); returns the energy's."""
+    last = prefix.shape[2] - 2
+    j = int(math.floor(pos))
+    w = pos - j
+    if j < 0:
+        j, w = 0, 0.0
+    elif j > last:
+        j, w = last, 1.0
+    for p in range(out.shape[0]):
+        a = prefix[s, side, j, p]
+        out[p] = a + w * (prefix[s, side, j + 1, p] - a)
+    b = energy[s, side, j]
+    return b + w * (energy[s, side, j + 1] - b)
+
+
+@numba.njit(**_JIT)
+def _candidate(
+    prefix: Any, energy: Any, first: Any, tail: Any, alpha0: Any, centre: Any, slots: Any,
+    k: Any, f: Any, dt_lo: Any, dt_hi: Any, amp2: Any, fs: float, hop_s: float,
+    t_rx: float, alpha: float, lo_sums: Any, hi_sums: Any,
+) -> tuple[complex, float, float]:  # fmt: skip
+    """``(C, Σ a_i² N_i, input energy in the windows)`` of one candidate.
+
+    Per hop ``i`` (shape ``(M,)``): ``slots`` its table slot, ``k`` the transmit phasor
+    ``a_i e^{−j(φ_i + 2π f_i (T_b − T_i))}``, ``f`` the tone (Hz), ``dt_lo``/``dt_hi`` the
+    transmit times of its start and end relative to the boundary (s, ``T_i − T_b`` and
+    ``T_i + D_i − T_b``), ``amp2`` its squared amplitude. ``lo_sums``/``hi_sums``: scratch,
+    shape ``(P,)``.
+    """
+    total = complex(0.0, 0.0)
+    model = 0.0
+    signal = 0.0
+    n_mom = lo_sums.shape[0]
+    for i in range(slots.shape[0]):
+        s = slots[i]
+        lo = (t_rx + dt_lo[i] / alpha) * fs - first[s] + 0.5
+        hi = (t_rx + dt_hi[i] / alpha) * fs - first[s] + 0.5
+        e_lo = _edge_sums(prefix, energy, s, 0, lo, lo_sums)
+        e_hi = _edge_sums(prefix, energy, s, 1, hi - tail[s], hi_sums)
+        # Σ_p (jθ)^p / p! (hi − lo), θ = −2π (α − α0) D f: the term's real recurrence.
+        theta = -2.0 * math.pi * (alpha - alpha0[s]) * hop_s * f[i]
+        z = complex(0.0, 0.0)
+        tr = 1.0
+        ti = 0.0
+        for p in range(n_mom):
+            z += complex(tr, ti) * (hi_sums[p] - lo_sums[p])
+            g = theta / (p + 1)
+            tr, ti = -ti * g, tr * g
+        ph = -2.0 * math.pi * f[i] * alpha * (centre[s] - t_rx)
+        total += k[i] * complex(math.cos(ph), math.sin(ph)) * z
+        model += amp2[i] * (hi - lo)
+        signal += e_hi - e_lo
+    return total, model, signal
+
+
+@numba.njit(**_JIT)
+def candidate_sums(
+    prefix: Any, energy: Any, first: Any, tail: Any, alpha0: Any, centre: Any, slots: Any,
+    k: Any, f: Any, dt_lo: Any, dt_hi: Any, amp2: Any, fs: float, hop_s: float,
+    t_rx: Any, alpha: Any, out_c: Any, out_model: Any, out_signal: Any,
+) -> None:  # fmt: skip
+    """:func:`_candidate` for candidates ``(t_rx[c], alpha[c])`` (shape ``(C,)``) into the
+    outputs (shape ``(C,)``: ``C`` complex, the model's energy, the input's energy)."""
+    n_mom = prefix.shape[3]
+    lo_sums = np.empty(n_mom, dtype=np.complex128)
+    hi_sums = np.empty(n_mom, dtype=np.complex128)
+    for c in range(t_rx.shape[0]):
+        out_c[c], out_model[c], out_signal[c] = _candidate(
+            prefix, energy, first, tail, alpha0, centre, slots, k, f, dt_lo, dt_hi, amp2,
+            fs, hop_s, t_rx[c], alpha[c], lo_sums, hi_sums,
+        )  # fmt: skip
+
+
+#: :func:`maximise` outcomes.
+FOUND, NO_LOBE, RECENTRE = 0, 1, 2
+
+
+@numba.njit(**_JIT)
+def maximise(
+    prefix: Any, energy: Any, first: Any, tail: Any, alpha0: Any, centre: Any, slots: Any,
+    k: Any, f: Any, dt_lo: Any, dt_hi: Any, amp2: Any, fs: float, hop_s: float,
+    c_mps: float, t0: float, v0: float, half_t: float, half_v: float, n_t: int, n_v: int,
+    passes: int,
+) -> tuple[float, float, int]:  # fmt: skip
+    """The ``(t_rx, v)`` (s, m/s) maximising ``|C|²`` (tables and hops as
+    :func:`candidate_sums`; ``c_mps`` the sound speed) and an outcome.
+
+    A grid of ``n_t × n_v`` points over ``t0 ± half_t`` and ``v0 ± half_v`` picks the main
+    lobe: :data:`NO_LOBE` where its maximum is at either end in time, :data:`RECENTRE` with
+    that point where it is at either end in speed (the caller makes tables there and
+    searches again: the grid follows the tilted range–Doppler ridge toward the peak); then
+    ``passes`` 2-D quadratic fits on a 3 × 3 stencil (half the grid's steps) around the best
+    point, the stencil halving each pass (:data:`FOUND`).
+    """
+    n_mom = prefix.shape[3]
+    lo_sums = np.empty(n_mom, dtype=np.complex128)
+    hi_sums = np.empty(n_mom, dtype=np.complex128)
+    step_t = 2.0 * half_t / (n_t - 1)
+    step_v = 2.0 * half_v / (n_v - 1)
+    best = -1.0
+    bi = 0
+    bj = 0
+    for i in range(n_v):
+        vv = v0 - half_v + i * step_v
+        a = (c_mps + vv) / (c_mps - vv)
+        for j in range(n_t):
+            cc, _, _ = _candidate(
+                prefix, energy, first, tail, alpha0, centre, slots, k, f, dt_lo, dt_hi,
+                amp2, fs, hop_s, t0 - half_t + j * step_t, a, lo_sums, hi_sums,
+            )  # fmt: skip
+            pw = cc.real * cc.real + cc.imag * cc.imag
+            if pw > best:
+                best, bi, bj = pw, i, j
+    t = t0 - half_t + bj * step_t
+    if bj == 0 or bj == n_t - 1:
+        return t0, v0, NO_LOBE
+    v = v0 - half_v + bi * step_v
+    if bi == 0 or bi == n_v - 1:
+        return t, v, RECENTRE
+    step_t *= 0.5
+    step_v *= 0.5
+    z = np.empty((3, 3))
+    for _ in range(passes):
+        for i in range(3):
+            vv = v + (i - 1) * step_v
+            a = (c_mps + vv) / (c_mps - vv)
+            for j in range(3):
+                cc, _, _ = _candidate(
+                    prefix, energy, first, tail, alpha0, centre, slots, k, f, dt_lo, dt_hi,
+                    amp2, fs, hop_s, t + (j - 1) * step_t, a, lo_sums, hi_sums,
+                )  # fmt: skip
+                z[i, j] = cc.real * cc.real + cc.imag * cc.imag
+        # z[i, j] ≈ z0 + gt x + gv y + ½ (htt x² + 2 htv x y + hvv y²); x, y in steps.
+        gt = 0.5 * (z[1, 2] - z[1, 0])
+        gv = 0.5 * (z[2, 1] - z[0, 1])
+        htt = z[1, 2] - 2.0 * z[1, 1] + z[1, 0]
+        hvv = z[2, 1] - 2.0 * z[1, 1] + z[0, 1]
+        htv = 0.25 * (z[2, 2] - z[2, 0] - z[0, 2] + z[0, 0])
+        det = htt * hvv - htv * htv
+        moved = False
+        if htt < 0.0 and hvv < 0.0 and det > 0.0:
+            x = (-hvv * gt + htv * gv) / det
+            y = (htv * gt - htt * gv) / det
+            if abs(x) <= 1.0 and abs(y) <= 1.0:
+                t += x * step_t
+                v += y * step_v
+                moved = True
+        if not moved:
+            bi = 1
+            bj = 1
+            for i in range(3):
+                for j in range(3):
+                    if z[i, j] > z[bi, bj]:
+                        bi, bj = i, j
+            t += (bj - 1) * step_t
+            v += (bi - 1) * step_v
+        step_t *= 0.5
+        step_v *= 0.5
+    return t, v, FOUND
+
+
+@numba.njit(**_JIT)
+def find_slots(
+    slot_hop: Any, slot_edge: Any, slot_alpha: Any, hop_ids: Any, edge: Any, alpha: float,
+    slack: float, alpha_tol: float, out: Any,
+) -> int:  # fmt: skip
+    """For each hop of ``hop_ids`` (shape ``(M,)``, lower window edges ``edge`` in absolute
+    samples), a slot holding that hop made for an edge within ``slack`` samples and a time
+    scale within ``alpha_tol`` of ``alpha``, else −1, into ``out`` (shape ``(M,)``); returns
+    how many are missing. Slot arrays shape ``(S,)``."""
+    missing = 0
+    for i in range(hop_ids.shape[0]):
+        out[i] = -1
+        for s in range(slot_hop.shape[0]):
+            if (
+                slot_hop[s] == hop_ids[i]
+                and abs(slot_edge[s] - edge[i]) <= slack
+                and abs(slot_alpha[s] - alpha) <= alpha_tol
+            ):
+                out[i] = s
+                break
+        if out[i] < 0:
+            missing += 1
+    return missing

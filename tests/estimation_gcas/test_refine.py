@@ -1,0 +1,228 @@
+"""GCAS's coherent refinement (hil.estimation.refine): the likelihood it maximises is the direct
+correlation with the exact schedule, its errors sit on the Cramér–Rao bound for both HFC-CW
+families, with no bias and no dependence on where the speed falls on the Doppler grid.
+
+Statistics: consecutive estimates share M − 1 of their M hops, so their errors are strongly
+correlated; the number of independent errors in a trial is about its estimates over M (a few
+per trial). The RMSE of N independent errors has a relative standard error of about
+1/sqrt(2N); with six 0.8 s trials (~24 independent errors) that is ~15 %, so an RMSE measured
+at 1.0x the bound is asserted below 1.5x (over three standard errors of margin), and a bias
+below a third of the bound is far inside the noise of the mean (σ/sqrt(24) ≈ 0.2 σ).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from hil.errors import ConfigError
+from hil.estimation.base import Estimate
+from hil.estimation.gcas import GcasReceiver
+from hil.estimation.refine import CoherentRefiner
+from hil.evaluation.trials_ch6 import _crlb_fields, ch6_receiver_trial
+
+from .conftest import FS, C, att_schedule, echo_samples, make_gcas, run_blocks, true_range
+
+R0, V0 = 70.0, 12.0  # the target of the issue's table: 70 m, closing at 12 m/s
+
+
+def _pooled(family: str, snr_db: float, trials: int, speed: float = V0) -> dict[str, float]:
+    """RMSE and bias of every detected boundary over ``trials`` seeded ch6 trials (att, M = 10,
+    the default receiver: GCAS with refinement), in units of the window's CRLB."""
+    r_sse = r_sum = v_sse = v_sum = 0.0
+    n = n_truth = false = 0
+    for k in range(trials):
+        out = ch6_receiver_trial(
+            {"snr_db": snr_db, "family": family, "range_m": [R0, R0],
+             "speed_mps": [speed, speed], "max_speed_mps": 30.0},
+            np.random.SeedSequence(100 + k),
+        )  # fmt: skip
+        r_sse += out["range_sse_m2"]
+        r_sum += out["range_err_sum_m"]
+        v_sse += out["speed_sse"]
+        v_sum += out["speed_err_sum"]
+        n += out["n_detected"]
+        n_truth += out["n_truth"]
+        false += out["n_false"]
+    bounds = _crlb_fields({"preset": "att", "family": family, "bandwidth_hz": 4400.0,
+                           "code_seed": 1, "m_hops": 10}, snr_db, FS, C)  # fmt: skip
+    return {
+        "pd": n / n_truth,
+        "false": false,
+        "range_x": math.sqrt(r_sse / n) / bounds["crlb_range_m"],
+        "speed_x": math.sqrt(v_sse / n) / bounds["crlb_speed_mps"],
+        "range_bias_x": (r_sum / n) / bounds["crlb_range_m"],
+        "speed_bias_x": (v_sum / n) / bounds["crlb_speed_mps"],
+        "range_rmse_m": math.sqrt(r_sse / n),
+        "speed_rmse_mps": math.sqrt(v_sse / n),
+        "range_bias_m": r_sum / n,
+        "speed_bias_mps": v_sum / n,
+    }
+
+
+def _check_at_the_bound(got: dict[str, float]) -> None:
+    assert got["pd"] == 1.0 and got["false"] == 0
+    assert got["range_x"] < 1.5 and got["speed_x"] < 1.5
+    assert abs(got["range_bias_x"]) < 0.4 and abs(got["speed_bias_x"]) < 0.4
+
+
+@pytest.mark.parametrize("family", ["random-cyclic", "three-state"])
+def test_at_the_bound_at_0_db(family: str) -> None:
+    # Measured (6 trials): random-cyclic 0.95x range / 1.1x speed; three-state 1.5x / 1.1x
+    # with two trials (its CRLB is the first window's, the code's windows differ).
+    got = _pooled(family, 0.0, 6)
+    _check_at_the_bound(got)
+    # The issue's goals in absolute terms: speed RMSE <= 0.01 m/s from 0 dB up, no bias.
+    assert got["speed_rmse_mps"] < 0.01
+    assert abs(got["range_bias_m"]) < 1e-3 and abs(got["speed_bias_mps"]) < 5e-3
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("family", ["random-cyclic", "three-state"])
+@pytest.mark.parametrize("snr_db", [-10.0, 10.0])
+def test_at_the_bound_from_minus_10_to_plus_10_db(family: str, snr_db: float) -> None:
+    # Measured (random-cyclic, 4 trials): 0.91x / 1.02x the range bound at -10 / +10 dB.
+    got = _pooled(family, snr_db, 6)
+    _check_at_the_bound(got)
+    if snr_db >= 0:
+        assert got["speed_rmse_mps"] < 0.01
+        assert abs(got["range_bias_m"]) < 1e-3 and abs(got["speed_bias_mps"]) < 5e-3
+
+
+@pytest.mark.slow
+def test_no_scalloping_between_doppler_hypotheses() -> None:
+    # The detector's error grows midway between two of its Doppler hypotheses; the refined
+    # estimate does not depend on the grid. Same noise seeds on and midway (common random
+    # numbers), -10 dB per-sample SNR.
+    grid = make_gcas(att_schedule()).grid.speeds_mps
+    d = int(np.argmin(np.abs(grid - V0)))
+    on, mid = float(grid[d]), float(0.5 * (grid[d] + grid[d + 1]))
+    got_on = _pooled("random-cyclic", -10.0, 8, speed=on)
+    got_mid = _pooled("random-cyclic", -10.0, 8, speed=mid)
+    # Measured over 16 trials each: midway/on-grid 1.13 (range), 0.93 (speed), both within
+    # 1.25x the bound; the detector alone: 1.35 and 2.3 (0.065 against 0.048 m). The ratio of
+    # two RMSEs of ~30 independent errors each has a standard error of ~0.13: asserted
+    # below 1.3, and each against the bound.
+    assert got_mid["range_rmse_m"] < 1.3 * got_on["range_rmse_m"]
+    assert got_mid["speed_rmse_mps"] < 1.3 * got_on["speed_rmse_mps"]
+    assert got_on["range_x"] < 1.5 and got_mid["range_x"] < 1.5
+
+
+def test_the_design_speed_next_to_the_masked_cells_reads_without_bias() -> None:
+    # +25 m/s on att: the default reverberation band masks the ghost cells next to it and the
+    # detector's Doppler interpolation reads 0.33 m/s low; the refinement's search re-centres
+    # onto the peak.
+    schedule = att_schedule()
+    x = echo_samples(schedule, 60.0, 25.0, 0.8, snr_db=0.0, seed=1)
+    raw = run_blocks(make_gcas(schedule, refine=False), x)
+    est = run_blocks(make_gcas(schedule), x)
+    assert len(est) == len(raw) >= 60
+    assert np.mean([e.speed_mps for e in raw]) - 25.0 < -0.25
+    dv = np.array([e.speed_mps - 25.0 for e in est])
+    dr = np.array([e.range_m - true_range(60.0, 25.0, e.t_tx_s, e.t_s) for e in est])
+    assert abs(dv.mean()) < 0.01 and np.sqrt(np.mean(dv**2)) < 0.01
+    assert np.sqrt(np.mean(dr**2)) < 0.005
+
+
+def test_the_likelihood_is_the_direct_correlation_with_the_schedule() -> None:
+    # C(t_rx, α) from the moment tables against Σ_n x[n] s*(α (t_n − t_rx) + T_b) summed
+    # directly over the M hops' receive windows (edge samples whole, hence the tolerance).
+    schedule = att_schedule()
+    x = echo_samples(schedule, R0, V0, 0.5, snr_db=-5.0, seed=3)
+    refiner = CoherentRefiner(schedule, FS, 10, C, 0.5, 30.0)
+    refiner.push(x, 0)
+    est = [e for e in run_blocks(make_gcas(schedule, refine=False), x) if e.t_s > 0.2][0]
+    alpha0 = est.alpha
+    cand_t = est.t_s + np.array([-2e-4, -3e-5, 0.0, 4e-5, 1.5e-4])
+    cand_a = alpha0 + np.array([-3e-4, 2e-4, 0.0, -1e-4, 4e-4])
+    got = refiner.correlation(est.t_s, alpha0, est.hop_index, cand_t, cand_a)
+    assert got is not None
+    hops = schedule.hops(est.hop_index - 9, 10)
+    t_b = float(hops.start_s[-1] + hops.duration_s[-1])
+    t_n = np.arange(x.size) / FS
+    for c_got, t_rx, a in zip(got, cand_t, cand_a, strict=True):
+        direct = 0j
+        for i in range(10):
+            lo = t_rx + (hops.start_s[i] - t_b) / a
+            hi = t_rx + (hops.start_s[i] + hops.duration_s[i] - t_b) / a
+            sel = (t_n >= lo) & (t_n < hi)
+            phase = hops.phase_rad[i] + 2 * np.pi * hops.freq_hz[i] * (
+                a * (t_n[sel] - t_rx) + t_b - hops.start_s[i]
+            )
+            direct += np.sum(x[sel] * np.exp(-1j * phase))
+        assert abs(c_got - direct) < 2e-3 * abs(direct)
+
+
+def test_chunks_equal_whole() -> None:
+    schedule = att_schedule()
+    x = echo_samples(schedule, 50.0, -9.0, 0.6, snr_db=-5.0, seed=9)
+    whole = run_blocks(make_gcas(schedule), x, x.size)
+    chunks = run_blocks(make_gcas(schedule), x, 3_917)
+    assert len(whole) >= 40 and repr(whole) == repr(chunks)
+    assert all(math.isfinite(e.crlb_range_m) and e.crlb_range_m > 0 for e in whole)
+
+
+def test_every_estimate_carries_its_own_bound() -> None:
+    # The bound follows the echo's own E/N0: 10 dB more SNR, sqrt(10) smaller bounds.
+    schedule = att_schedule()
+    lo = run_blocks(make_gcas(schedule), echo_samples(schedule, R0, V0, 0.6, snr_db=-5.0, seed=2))
+    hi = run_blocks(make_gcas(schedule), echo_samples(schedule, R0, V0, 0.6, snr_db=5.0, seed=2))
+    ratio = np.median([e.crlb_range_m for e in lo]) / np.median([e.crlb_range_m for e in hi])
+    assert 2.8 < ratio < 3.5
+    speed = np.median([e.crlb_speed_mps for e in hi])
+    assert 0.0 < speed < 0.002
+
+
+def test_refinement_off_keeps_the_detectors_readout() -> None:
+    schedule = att_schedule()
+    x = echo_samples(schedule, R0, V0, 0.5, snr_db=0.0, seed=4)
+    off = run_blocks(make_gcas(schedule, refine=False), x)
+    on = run_blocks(make_gcas(schedule), x)
+    assert [e.hop_index for e in off] == [e.hop_index for e in on]
+    assert all(math.isnan(e.crlb_range_m) for e in off)
+    err = [abs(e.range_m - true_range(R0, V0, e.t_tx_s, e.t_s)) for e in (off, on)[1]]
+    err_off = [abs(e.range_m - true_range(R0, V0, e.t_tx_s, e.t_s)) for e in off]
+    assert np.sqrt(np.mean(np.square(err))) < 0.3 * np.sqrt(np.mean(np.square(err_off)))
+
+
+def test_after_a_gap_every_estimate_is_refined_on_samples_after_it() -> None:
+    schedule = att_schedule()
+    x = echo_samples(schedule, R0, V0, 0.8, snr_db=0.0, seed=5)
+    rx = make_gcas(schedule)
+    cut, gap = 30_000, 700
+    out: list[Estimate] = rx.process(x[:cut]) + rx.process(x[cut + gap :], gap_before=gap)
+    out += rx.flush()
+    after = [e for e in out if e.t_s > (cut + gap) / FS]
+    assert len(after) >= 30 and all(math.isfinite(e.crlb_range_m) for e in after)
+    err = [e.range_m - true_range(R0, V0, e.t_tx_s, e.t_s) for e in after]
+    assert np.sqrt(np.mean(np.square(err))) < 0.005
+    # The refiner itself: a detection whose hops reach back before the gap is not refined.
+    refiner = CoherentRefiner(schedule, FS, 10, C, 0.5, 30.0)
+    refiner.reset(cut + gap)
+    refiner.push(x[cut + gap :], cut + gap)
+    first = after[0]
+    assert refiner.refine(first.t_s, first.alpha, first.hop_index) is not None
+    assert refiner.refine(first.t_s - 0.05, first.alpha, first.hop_index - 5) is None
+
+
+def test_refine_must_be_a_bool() -> None:
+    with pytest.raises(ConfigError, match=r"refine = 'yes' is not allowed: must be true or false"):
+        GcasReceiver(
+            att_schedule(), FS, sound_speed_mps=C, max_speed_mps=30.0, max_range_m=100.0,
+            m_hops=10, refine="yes",  # type: ignore[arg-type]
+        )  # fmt: skip
+
+
+def test_the_refiner_refuses_a_speed_span_that_is_not_a_speed() -> None:
+    with pytest.raises(ConfigError, match="speed_span_mps.*finite speed > 0"):
+        CoherentRefiner(att_schedule(), FS, 10, C, float("nan"), 30.0)
+
+
+def test_candidates_of_two_shapes_are_refused() -> None:
+    schedule = att_schedule()
+    refiner = CoherentRefiner(schedule, FS, 10, C, 0.5, 30.0)
+    refiner.push(echo_samples(schedule, R0, V0, 0.3, snr_db=0.0, seed=1), 0)
+    with pytest.raises(ConfigError, match="alphas"):
+        refiner.correlation(0.25, 1.016, 20, np.zeros(3), np.ones(2))
