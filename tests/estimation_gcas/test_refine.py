@@ -133,7 +133,7 @@ def test_the_likelihood_is_the_direct_correlation_with_the_schedule() -> None:
     x = echo_samples(schedule, R0, V0, 0.5, snr_db=-5.0, seed=3)
     refiner = CoherentRefiner(schedule, FS, 10, C, 0.5, 30.0)
     refiner.push(x, 0)
-    est = [e for e in run_blocks(make_gcas(schedule, refine=False), x) if e.t_s > 0.2][0]
+    est = next(e for e in run_blocks(make_gcas(schedule, refine=False), x) if e.t_s > 0.2)
     alpha0 = est.alpha
     cand_t = est.t_s + np.array([-2e-4, -3e-5, 0.0, 4e-5, 1.5e-4])
     cand_a = alpha0 + np.array([-3e-4, 2e-4, 0.0, -1e-4, 4e-4])
@@ -216,7 +216,8 @@ def test_refine_must_be_a_bool() -> None:
 
 
 def test_the_refiner_refuses_a_speed_span_that_is_not_a_speed() -> None:
-    with pytest.raises(ConfigError, match="speed_span_mps.*finite speed > 0"):
+    msg = r"speed_span_mps = nan is not allowed: must be a finite speed > 0 m/s"
+    with pytest.raises(ConfigError, match=msg):
         CoherentRefiner(att_schedule(), FS, 10, C, float("nan"), 30.0)
 
 
