@@ -32,6 +32,9 @@ ESTIMATE_FIELDS: tuple[str, ...] = (
 )
 
 
+_NAN = object()
+
+
 @dataclass(frozen=True)
 class Estimate:
     """One range/speed estimate.
@@ -81,6 +84,23 @@ class Estimate:
     receiver: str
     crlb_range_m: float = math.nan
     crlb_speed_mps: float = math.nan
+
+    def __eq__(self, other: object) -> bool:
+        """Field-by-field equality where NaN equals NaN: an estimate without a bound (or
+        with a NaN SNR) read back from a recording is the same result."""
+        if not isinstance(other, Estimate):
+            return NotImplemented
+        return self._key() == other._key()
+
+    def __hash__(self) -> int:
+        return hash(self._key())
+
+    def _key(self) -> tuple[Any, ...]:
+        """The fields, each NaN as one marker (so NaN matches NaN)."""
+        return tuple(
+            _NAN if isinstance(v, float) and math.isnan(v) else v
+            for v in (getattr(self, name) for name in ESTIMATE_FIELDS)
+        )
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary with the fields in :data:`ESTIMATE_FIELDS` order."""

@@ -9,9 +9,7 @@ board sample indices.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
-from dataclasses import astuple
 from pathlib import Path
 from typing import Any, Literal
 
@@ -123,15 +121,6 @@ def replay(
     return out
 
 
-def _same(a: Estimate, b: Estimate) -> bool:
-    """Field-by-field equality where NaN equals NaN (a NaN SNR is still the same result)."""
-    for x, y in zip(astuple(a), astuple(b), strict=True):
-        both_nan = isinstance(x, float) and isinstance(y, float) and math.isnan(x) and math.isnan(y)
-        if not (both_nan or x == y):
-            return False
-    return True
-
-
 Agreement = Literal["equal", "prefix", "differ"]
 
 
@@ -145,7 +134,7 @@ def compare_estimates(
     estimates up to its last flush only. ``"differ"``: some pair differs (the first named).
     """
     for i, (a, b) in enumerate(zip(live, replayed, strict=False)):
-        if not _same(a, b):
+        if a != b:  # NaN-aware: Estimate.__eq__
             return "differ", f"estimate {i} differs: recorded {a}, replayed {b}"
     if len(live) != len(replayed):
         return "prefix", (
