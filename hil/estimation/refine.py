@@ -87,14 +87,43 @@ SLOTS_PER_HOP = 4
 
 
 @dataclass(frozen=True)
+class Coherence:
+    """The hops' coherence at a fit (``measured``) and what one echo of the fit's SNR would
+    give (``expected``), both in ``(0, 1]`` (:func:`_fit_quality`)."""
+
+    measured: float
+    expected: float
+
+    @property
+    def fraction(self) -> float:
+        """``measured / expected``: about 1 for one echo of the schedule."""
+        return self.measured / self.expected if self.expected > 0 else 0.0
+
+
+@dataclass(frozen=True)
 class Refinement:
     """A refined detection: boundary receive time ``t_s`` (s), time scale ``alpha``, the
-    E/N0 collected over the ``M`` hops (dB) and its Cramér–Rao bounds (:class:`Crlb`)."""
+    E/N0 collected over the ``M`` hops (dB), its Cramér–Rao bounds (:class:`Crlb`), the
+    coherence of the hops' terms over all hops and within each tone (:func:`_fit_quality`),
+    and whether the search found its maximum inside (else ``t_s`` and ``alpha`` are the
+    detection's own)."""
 
     t_s: float
     alpha: float
     e_over_n0_db: float
     bound: Crlb
+    coherence: Coherence
+    tone_coherence: Coherence
+    found: bool
+
+    def is_echo(self, fraction: float, tone_fraction: float) -> bool:
+        """Whether the fit is an echo of the schedule: a maximum inside the search whose
+        coherence over all hops is at least ``fraction`` of one echo's at its SNR, or whose
+        coherence within each tone is at least ``tone_fraction`` of it (one echo through
+        multipath)."""
+        return self.found and (
+            self.coherence.fraction >= fraction or self.tone_coherence.fraction >= tone_fraction
+        )
 
 
 class CoherentRefiner:
@@ -185,7 +214,8 @@ class CoherentRefiner:
     def refine(self, t_s: float, alpha: float, hop_index: int) -> Refinement | None:
         """The maximum-likelihood boundary time and time scale near ``(t_s, alpha)`` for the
         boundary that ends hop ``hop_index``; None where the input does not cover the ``M``
-        hops (start, gaps) or no maximum lies inside the search."""
+        hops (start, gaps). Where no maximum lies inside the search (``found`` False) the
+        detection's own point is kept and its fit reported."""
         word = self._codeword(hop_index)
         hop_ids = np.arange(hop_index - self.m_hops + 1, hop_index + 1, dtype=np.int64)
         lobe = 1.0 / (alpha * self.spacing_hz)
@@ -203,15 +233,15 @@ class CoherentRefiner:
             if outcome != RECENTRE:
                 break
         if outcome != FOUND:
-            return None
+            best_t, best_v = t_s, self.c * (alpha - 1.0) / (alpha + 1.0)
         a_best = (self.c + best_v) / (self.c - best_v)
-        en0 = _e_over_n0(args, best_t, a_best)
-        if not en0 > 0:
-            return None
-        en0_db = 10.0 * math.log10(en0)
+        en0, coherence, tone_coherence = _fit_quality(args, best_t, a_best)
+        en0_db = 10.0 * math.log10(en0) if en0 > 0 else -math.inf
         return Refinement(
-            best_t, a_best, en0_db, crlb(word.b_rms, word.t_rms, word.f0, en0_db, self.c)
-        )
+            best_t, a_best, en0_db, crlb(word.b_rms, word.t_rms, word.f0, max(en0_db, -300.0),
+                                         self.c),
+            coherence, tone_coherence, outcome == FOUND,
+        )  # fmt: skip
 
     def correlation(
         self,
@@ -240,7 +270,7 @@ class CoherentRefiner:
         c = np.empty(t.size, dtype=np.complex128)
         model, energy = np.empty(t.size), np.empty(t.size)
         args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
-        candidate_sums(*args, t, a, c, model, energy)
+        candidate_sums(*args, t, a, c, model, energy, np.empty((t.size, 0), np.complex128))
         return c.reshape(np.shape(t_rx))
 
     @property
@@ -330,17 +360,47 @@ class _Codeword:
         )  # fmt: skip
 
 
-def _e_over_n0(args: tuple[object, ...], t_rx: float, alpha: float) -> float:
-    """E/N0 (linear) of the echo at a candidate: ``Â = 2|C|/E_s``, the noise variance what
-    the echo leaves of the windows' energy, ``E/N0 = Â² N / (4 σ²)`` (module docstring)."""
+def _fit_quality(
+    args: tuple[Any, ...], t_rx: float, alpha: float
+) -> tuple[float, Coherence, Coherence]:
+    """E/N0 (linear) of the echo at a candidate and its coherence across all hops and
+    within each tone.
+
+    ``Â = 2|C|/E_s``, the noise variance ``σ²`` what the echo leaves of the windows' energy,
+    ``E/N0 = Â² N / (4 σ²)`` (module docstring). Coherence ``ρ = |Σ_i H_i|² / (M Σ_i |H_i|²)``:
+    1 when every hop's term has the phase the one-echo model predicts, about ``1/M`` for
+    noise. One echo of per-hop SNR ``s = mean |H_i|² / (N_i σ²) − 1`` gives
+    ``E[ρ] ≈ (M s + 1) / (M (s + 1))``; an echo of another schedule or speed whose tones
+    match some hops (a still echo read at the tone spacing's speed, a target beyond the
+    span) has strong hops of unrelated phases: ``ρ`` far below that. Multipath a fraction of
+    a millisecond long (a tank) multiplies each tone by its own complex gain: ``ρ`` falls,
+    the coherence within each tone (the same ratio over the hops of one tone,
+    ``Σ_k |Σ_{i∈k} H_i|² / Σ_k n_k Σ_{i∈k} |H_i|²``, expected
+    ``Σ_k (n_k² s + n_k) / Σ_k n_k² (s + 1)``) does not.
+    """
     c = np.empty(1, dtype=np.complex128)
     es = np.empty(1)
     energy = np.empty(1)
-    candidate_sums(*args, np.array([t_rx]), np.array([alpha]), c, es, energy)
+    m_hops = len(args[6])
+    per_hop = np.empty((1, m_hops), dtype=np.complex128)
+    candidate_sums(*args, np.array([t_rx]), np.array([alpha]), c, es, energy, per_hop)
     n = float(es[0])  # Σ a_i² N_i: the windows' samples for unit amplitudes
     mag = float(np.abs(c[0]))
+    spread = float(np.sum(np.abs(per_hop) ** 2))
+    coherence = mag * mag / (m_hops * spread) if spread > 0 else 0.0
     a_hat = 2.0 * mag / float(es[0])
     noise = (float(energy[0]) - 2.0 * mag * mag / float(es[0])) / n
     if not noise > 0:
-        return math.inf
-    return a_hat * a_hat * n / (4.0 * noise)
+        return math.inf, Coherence(coherence, 1.0), Coherence(1.0, 1.0)
+    s_hop = max(spread / (n * noise) - 1.0, 0.0)  # Σ|H_i|² / (Σ N_i σ²) − 1
+    full = Coherence(coherence, (m_hops * s_hop + 1.0) / (m_hops * (s_hop + 1.0)))
+    _, g = np.unique(args[8], return_inverse=True)  # the hops' tones
+    h = per_hop[0]
+    sk = np.bincount(g, h.real) + 1j * np.bincount(g, h.imag)
+    nk = np.bincount(g).astype(np.float64)
+    pk = np.bincount(g, np.abs(h) ** 2)
+    per_tone = Coherence(
+        float(np.sum(np.abs(sk) ** 2) / np.sum(nk * pk)),
+        float(np.sum(nk**2 * s_hop + nk) / np.sum(nk**2 * (s_hop + 1.0))),
+    )
+    return a_hat * a_hat * n / (4.0 * noise), full, per_tone

@@ -97,7 +97,7 @@ def _edge_sums(
 def _candidate(
     prefix: Any, energy: Any, first: Any, tail: Any, alpha0: Any, centre: Any, slots: Any,
     k: Any, f: Any, dt_lo: Any, dt_hi: Any, amp2: Any, fs: float, hop_s: float,
-    t_rx: float, alpha: float, lo_sums: Any, hi_sums: Any,
+    t_rx: float, alpha: float, lo_sums: Any, hi_sums: Any, per_hop: Any,
 ) -> tuple[complex, float, float]:  # fmt: skip
     """``(C, Σ a_i² N_i, input energy in the windows)`` of one candidate.
 
@@ -105,7 +105,8 @@ def _candidate(
     ``a_i e^{−j(φ_i + 2π f_i (T_b − T_i))}``, ``f`` the tone (Hz), ``dt_lo``/``dt_hi`` the
     transmit times of its start and end relative to the boundary (s, ``T_i − T_b`` and
     ``T_i + D_i − T_b``), ``amp2`` its squared amplitude. ``lo_sums``/``hi_sums``: scratch,
-    shape ``(P,)``.
+    shape ``(P,)``; ``per_hop`` receives each hop's term of ``C`` (shape ``(M,)``, or
+    ``(0,)`` for none).
     """
     total = complex(0.0, 0.0)
     model = 0.0
@@ -127,7 +128,10 @@ def _candidate(
             g = theta / (p + 1)
             tr, ti = -ti * g, tr * g
         ph = -2.0 * math.pi * f[i] * alpha * (centre[s] - t_rx)
-        total += k[i] * complex(math.cos(ph), math.sin(ph)) * z
+        term_i = k[i] * complex(math.cos(ph), math.sin(ph)) * z
+        total += term_i
+        if per_hop.shape[0]:
+            per_hop[i] = term_i
         model += amp2[i] * (hi - lo)
         signal += e_hi - e_lo
     return total, model, signal
@@ -137,17 +141,18 @@ def _candidate(
 def candidate_sums(
     prefix: Any, energy: Any, first: Any, tail: Any, alpha0: Any, centre: Any, slots: Any,
     k: Any, f: Any, dt_lo: Any, dt_hi: Any, amp2: Any, fs: float, hop_s: float,
-    t_rx: Any, alpha: Any, out_c: Any, out_model: Any, out_signal: Any,
+    t_rx: Any, alpha: Any, out_c: Any, out_model: Any, out_signal: Any, per_hop: Any,
 ) -> None:  # fmt: skip
     """:func:`_candidate` for candidates ``(t_rx[c], alpha[c])`` (shape ``(C,)``) into the
-    outputs (shape ``(C,)``: ``C`` complex, the model's energy, the input's energy)."""
+    outputs (shape ``(C,)``: ``C`` complex, the model's energy, the input's energy) and each
+    hop's term (``per_hop``, complex, shape ``(C, M)`` or ``(C, 0)`` for none)."""
     n_mom = prefix.shape[3]
     lo_sums = np.empty(n_mom, dtype=np.complex128)
     hi_sums = np.empty(n_mom, dtype=np.complex128)
     for c in range(t_rx.shape[0]):
         out_c[c], out_model[c], out_signal[c] = _candidate(
             prefix, energy, first, tail, alpha0, centre, slots, k, f, dt_lo, dt_hi, amp2,
-            fs, hop_s, t_rx[c], alpha[c], lo_sums, hi_sums,
+            fs, hop_s, t_rx[c], alpha[c], lo_sums, hi_sums, per_hop[c],
         )  # fmt: skip
 
 
@@ -175,6 +180,7 @@ def maximise(
     n_mom = prefix.shape[3]
     lo_sums = np.empty(n_mom, dtype=np.complex128)
     hi_sums = np.empty(n_mom, dtype=np.complex128)
+    none = np.empty(0, dtype=np.complex128)
     step_t = 2.0 * half_t / (n_t - 1)
     step_v = 2.0 * half_v / (n_v - 1)
     best = -1.0
@@ -186,7 +192,7 @@ def maximise(
         for j in range(n_t):
             cc, _, _ = _candidate(
                 prefix, energy, first, tail, alpha0, centre, slots, k, f, dt_lo, dt_hi,
-                amp2, fs, hop_s, t0 - half_t + j * step_t, a, lo_sums, hi_sums,
+                amp2, fs, hop_s, t0 - half_t + j * step_t, a, lo_sums, hi_sums, none,
             )  # fmt: skip
             pw = cc.real * cc.real + cc.imag * cc.imag
             if pw > best:
@@ -207,7 +213,7 @@ def maximise(
             for j in range(3):
                 cc, _, _ = _candidate(
                     prefix, energy, first, tail, alpha0, centre, slots, k, f, dt_lo, dt_hi,
-                    amp2, fs, hop_s, t + (j - 1) * step_t, a, lo_sums, hi_sums,
+                    amp2, fs, hop_s, t + (j - 1) * step_t, a, lo_sums, hi_sums, none,
                 )  # fmt: skip
                 z[i, j] = cc.real * cc.real + cc.imag * cc.imag
         # z[i, j] ≈ z0 + gt x + gv y + ½ (htt x² + 2 htv x y + hvv y²); x, y in steps.

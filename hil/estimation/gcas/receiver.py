@@ -255,6 +255,12 @@ class GcasReceiver:
         return self.readout.in_band_count
 
     @property
+    def incoherent_count(self) -> int:
+        """Detections the refinement refused as no one echo of the schedule: a still echo
+        read at the tone spacing's speed, an echo beyond the Doppler span, noise."""
+        return self.readout.incoherent_count
+
+    @property
     def last_detection(self) -> DetectionInfo | None:
         """Diagnostics of the latest accepted detection."""
         return self.readout.last_detection
