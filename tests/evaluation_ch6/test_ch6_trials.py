@@ -49,7 +49,8 @@ def test_gcas_high_snr_is_accurate_and_complete() -> None:
     assert out["range_rmse_m"] < 0.05
     assert out["speed_rmse_mps"] < 0.05
     assert 30.0 <= out["start_range_m"] <= 90.0 and 5.0 <= out["true_speed_mps"] <= 25.0
-    assert out["range_rmse_m"] > out["crlb_range_m"] > 0
+    # GCAS's refinement measures at the bound (one trial's RMSE scatters around it).
+    assert 0 < out["range_rmse_m"] < 3 * out["crlb_range_m"]
     assert math.isclose(out["snr_band_db"], 10.0 + 10 * math.log10(50_000 / 4400))
     # E/N0 over M = 10 hops of 10 ms at 100 kHz: SNR + 10 log10(50 000 · 0.1).
     assert math.isclose(out["e_over_n0_db"], 10.0 + 10 * math.log10(5000.0))
