@@ -103,7 +103,8 @@ class Coherence:
 @dataclass(frozen=True)
 class Refinement:
     """A refined detection: boundary receive time ``t_s`` (s), time scale ``alpha``, the
-    E/N0 collected over the ``M`` hops (dB), its Cramér–Rao bounds (:class:`Crlb`), the
+    E/N0 collected over the ``M`` hops (dB), its Cramér–Rao bounds (:class:`Crlb`; None
+    where the E/N0 is not finite: no noise, or no echo), the
     coherence of the hops' terms over all hops and within each tone (:func:`_fit_quality`),
     and whether the search found its maximum inside (else ``t_s`` and ``alpha`` are the
     detection's own)."""
@@ -111,7 +112,7 @@ class Refinement:
     t_s: float
     alpha: float
     e_over_n0_db: float
-    bound: Crlb
+    bound: Crlb | None
     coherence: Coherence
     tone_coherence: Coherence
     found: bool
@@ -206,6 +207,18 @@ class CoherentRefiner:
         self._valid_from = int(input_index)
         self._hop[:] = np.iinfo(np.int64).min
 
+    def warm_up(self) -> None:
+        """Run every compiled kernel once on a made-up detection in silence, then forget it:
+        the first call in a process loads the machine code from numba's cache (or compiles
+        it, seconds), which must not happen at the first live detection."""
+        hop = 2 * self.m_hops + 1
+        t_b = float(self.schedule.hops(hop + 1, 1).start_s[0])
+        self.reset(0)
+        self.push(np.zeros(int(math.ceil(t_b * self.fs_hz)) + 2 * self.history), 0)
+        self.refine(t_b, 1.0, hop)
+        self.correlation(t_b, 1.0, hop, np.array([t_b]), np.array([1.0]))
+        self.reset(0)
+
     def push(self, x: NDArray[np.float64], first_index: int) -> None:
         """Append input samples (shape ``(n,)``) starting at absolute index ``first_index``."""
         self._ring.append(x, first_index)
@@ -237,11 +250,12 @@ class CoherentRefiner:
         a_best = (self.c + best_v) / (self.c - best_v)
         en0, coherence, tone_coherence = _fit_quality(args, best_t, a_best)
         en0_db = 10.0 * math.log10(en0) if en0 > 0 else -math.inf
+        bound = (
+            crlb(word.b_rms, word.t_rms, word.f0, en0_db, self.c) if math.isfinite(en0_db) else None
+        )
         return Refinement(
-            best_t, a_best, en0_db, crlb(word.b_rms, word.t_rms, word.f0, max(en0_db, -300.0),
-                                         self.c),
-            coherence, tone_coherence, outcome == FOUND,
-        )  # fmt: skip
+            best_t, a_best, en0_db, bound, coherence, tone_coherence, outcome == FOUND
+        )
 
     def correlation(
         self,

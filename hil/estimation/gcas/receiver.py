@@ -204,6 +204,8 @@ class GcasReceiver:
         try:
             self.process(np.zeros(self.baseband.decimation * 64))
             self.strategy.warm_up()
+            if self._refiner is not None:
+                self._refiner.warm_up()
         finally:
             self.on_map = on_map
         self.reset()
