@@ -6,8 +6,11 @@ Example::
 
 One JSON object per line (``--json``) or CSV (``--csv FILE``, ``-`` for stdout) with at least
 ``t_s`` (receive time of the detected hop boundary, s from the start of the input),
-``range_m``, ``speed_mps`` (closing positive), ``hop_index`` and ``score``. ``--map PNG``
-draws the time–codeword map (receivers that keep one: GCAS).
+``range_m``, ``speed_mps`` (closing positive), ``hop_index`` and ``score``, and each estimate's
+Cramér–Rao bounds at its own SNR, ``crlb_range_m`` and ``crlb_speed_mps`` (GCAS with its
+default refinement; null in JSON, empty in CSV, where a receiver does not measure them:
+``--option refine=false``). ``--map PNG`` draws the time–codeword map (receivers that keep
+one: GCAS).
 """
 
 from __future__ import annotations
@@ -254,6 +257,13 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _json_value(value: Any) -> Any:
+    """``value`` for strict JSON: None for a NaN or an infinity."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
 class _Sink:
     """Writes estimates as JSON lines and/or CSV as they arrive."""
 
@@ -275,7 +285,9 @@ class _Sink:
         for e in estimates:
             row = e.to_dict()
             if self.json:
-                print(json.dumps(row), flush=False)
+                # Strict JSON: a NaN (no bound, no SNR) is null.
+                finite = {k: _json_value(v) for k, v in row.items()}
+                print(json.dumps(finite, allow_nan=False), flush=False)
             if self._writer is not None:
                 self._writer.writerow(row)
             self.count += 1

@@ -66,6 +66,22 @@ def test_json_lines_track_the_target(recording: Path, capsys: pytest.CaptureFixt
     assert np.all(np.diff(hops) == 1)
 
 
+def test_json_lines_carry_each_estimates_bound(
+    recording: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    base = ["estimate", "--schedule", str(recording / "x.json"), "--input",
+            str(recording / "rx.wav"), "--json"]  # fmt: skip
+    assert main(base) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    bounds = np.array([r["crlb_range_m"] for r in rows])
+    # 0.5-scaled echo at about -3 dB per-sample SNR: bounds of about a millimetre.
+    assert len(rows) >= 40 and np.all((bounds > 1e-4) & (bounds < 5e-3))
+    assert all(0 < r["crlb_speed_mps"] < 0.01 for r in rows)
+    assert main([*base, "--option", "refine=false"]) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert rows and all(r["crlb_range_m"] is None and r["crlb_speed_mps"] is None for r in rows)
+
+
 def test_csv_output_and_map(recording: Path, tmp_path: Path) -> None:
     out = tmp_path / "est.csv"
     png = tmp_path / "map.png"
