@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -250,6 +251,11 @@ def _as_version_1(path: Path) -> None:
                     dtype=h5py.string_dtype("utf-8"),
                     chunks=(schema.TABLE_CHUNK_ROWS,),
                 )
+        # Nor had its estimates the bound columns.
+        for column in ("crlb_range_m", "crlb_speed_mps"):
+            del f[f"estimates/{column}"]
+        kept = [str(c) for c in f["estimates"].attrs["columns"] if not str(c).startswith("crlb")]
+        f["estimates"].attrs["columns"] = kept
         f.attrs["format_version"] = 1
 
 
@@ -275,9 +281,21 @@ def test_a_version_1_recording_still_reads(tmp_path: Path, schedule_doc: dict[st
     with RunRecording.open(path) as rec:
         assert rec.telemetry() == telemetry
         assert rec.events() == [RunEvent("gap", 150, 10, "samples 150 .. 159 missing"), *events]
-        assert rec.estimates() == estimates
+        assert rec.estimates() == estimates  # the bounds read NaN, as they were written
+        assert all(math.isnan(e.crlb_range_m) for e in rec.estimates())
         assert rec.gaps() == [(150, 10)]
         assert math.isclose(rec.fs_hz, FS)
+
+
+def test_the_estimates_bounds_round_trip(tmp_path: Path, schedule_doc: dict[str, Any]) -> None:
+    path = tmp_path / "run.h5"
+    estimates = [replace(_estimate(i, "gcas"), crlb_range_m=1e-3 * (i + 1), crlb_speed_mps=2e-3)
+                 for i in range(3)]  # fmt: skip
+    with _writer(path, schedule_doc) as w:
+        w.append_estimates(estimates)
+    with RunRecording.open(path) as rec:
+        assert rec.estimates() == estimates
+        assert rec.table("estimates")["crlb_range_m"].tolist() == [1e-3, 2e-3, 3e-3]
 
 
 # ---------------------------------------------------------------------------- live (SWMR)
