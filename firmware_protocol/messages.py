@@ -676,13 +676,3 @@ MESSAGE_TYPES: dict[int, type[Message]] = {
 
 HANDSHAKE_TYPE_IDS: frozenset[int] = frozenset(t for t, c in MESSAGE_TYPES.items() if c.HANDSHAKE)
 """Type ids whose frames use the handshake CRC seed (HELLO, VERSION)."""
-
-
-def message_name(type_id: int) -> str:
-    """The wire name of a type id, or ``"0x7f (unknown)"``.
-
-    >>> message_name(0x21), message_name(0x7F)
-    ('ADC_DATA', '0x7f (unknown)')
-    """
-    cls = MESSAGE_TYPES.get(type_id)
-    return cls.NAME if cls else f"0x{type_id:02x} (unknown)"
