@@ -119,13 +119,13 @@ class Message:
         self._check_tail()
 
     def _checked(self, spec: Field, value: Any) -> Any:
-        where = f"{type(self).__name__}.{spec.name}"
+        # Every frame is checked on both sides: the field is named only in an error.
         if isinstance(value, bool) or not isinstance(value, int | np.integer):
-            raise FieldValueError(where, value, f"an integer, {spec.allowed_text()}")
+            raise FieldValueError(self._where(spec), value, f"an integer, {spec.allowed_text()}")
         low, high = spec.bounds
         value = int(value)
         if not low <= value <= high:
-            raise FieldValueError(where, value, spec.allowed_text(), spec.doc)
+            raise FieldValueError(self._where(spec), value, spec.allowed_text(), spec.doc)
         if spec.enum is Alarm:
             return Alarm(value)
         if spec.enum is not None:
@@ -134,8 +134,14 @@ class Message:
             except ValueError:
                 if spec.enum is NakCode:
                     return value  # a code from a later minor version: kept as a number
-                raise FieldValueError(where, value, spec.allowed_text(), spec.doc) from None
+                raise FieldValueError(
+                    self._where(spec), value, spec.allowed_text(), spec.doc
+                ) from None
         return value
+
+    def _where(self, spec: Field) -> str:
+        """``Message.field``, as errors name a field."""
+        return f"{type(self).__name__}.{spec.name}"
 
     def _check_tail(self) -> None:
         """Subclasses with a tail check its length here."""
