@@ -16,6 +16,7 @@ so a later minor version may append fields.
 
 from __future__ import annotations
 
+import functools
 import struct
 from dataclasses import dataclass, fields
 from enum import IntEnum, IntFlag
@@ -63,9 +64,9 @@ class Field:
         """Size on the wire, bytes."""
         return _WIRE_SIZES[self.wire]
 
-    @property
+    @functools.cached_property
     def bounds(self) -> tuple[int, int]:
-        """Inclusive (low, high) allowed range."""
+        """Inclusive (low, high) allowed range (read for every field of every frame)."""
         wire_low, wire_high = _WIRE_RANGES[self.wire]
         return (
             wire_low if self.low is None else self.low,
@@ -122,6 +123,7 @@ class Message:
         # Every frame is checked on both sides: the field is named only in an error.
         if isinstance(value, bool) or not isinstance(value, int | np.integer):
             raise FieldValueError(self._where(spec), value, f"an integer, {spec.allowed_text()}")
+        given = value
         low, high = spec.bounds
         value = int(value)
         if not low <= value <= high:
@@ -129,6 +131,8 @@ class Message:
         if spec.enum is Alarm:
             return Alarm(value)
         if spec.enum is not None:
+            if type(given) is spec.enum:
+                return given  # already one of its members
             try:
                 return spec.enum(value)
             except ValueError:
