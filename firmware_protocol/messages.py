@@ -16,6 +16,7 @@ so a later minor version may append fields.
 
 from __future__ import annotations
 
+import functools
 import struct
 from dataclasses import dataclass, fields
 from enum import IntEnum, IntFlag
@@ -63,9 +64,9 @@ class Field:
         """Size on the wire, bytes."""
         return _WIRE_SIZES[self.wire]
 
-    @property
+    @functools.cached_property
     def bounds(self) -> tuple[int, int]:
-        """Inclusive (low, high) allowed range."""
+        """Inclusive (low, high) allowed range (read for every field of every frame)."""
         wire_low, wire_high = _WIRE_RANGES[self.wire]
         return (
             wire_low if self.low is None else self.low,
@@ -119,23 +120,32 @@ class Message:
         self._check_tail()
 
     def _checked(self, spec: Field, value: Any) -> Any:
-        where = f"{type(self).__name__}.{spec.name}"
+        # Every frame is checked on both sides: the field is named only in an error.
         if isinstance(value, bool) or not isinstance(value, int | np.integer):
-            raise FieldValueError(where, value, f"an integer, {spec.allowed_text()}")
+            raise FieldValueError(self._where(spec), value, f"an integer, {spec.allowed_text()}")
+        given = value
         low, high = spec.bounds
         value = int(value)
         if not low <= value <= high:
-            raise FieldValueError(where, value, spec.allowed_text(), spec.doc)
+            raise FieldValueError(self._where(spec), value, spec.allowed_text(), spec.doc)
         if spec.enum is Alarm:
             return Alarm(value)
         if spec.enum is not None:
+            if type(given) is spec.enum:
+                return given  # already one of its members
             try:
                 return spec.enum(value)
             except ValueError:
                 if spec.enum is NakCode:
                     return value  # a code from a later minor version: kept as a number
-                raise FieldValueError(where, value, spec.allowed_text(), spec.doc) from None
+                raise FieldValueError(
+                    self._where(spec), value, spec.allowed_text(), spec.doc
+                ) from None
         return value
+
+    def _where(self, spec: Field) -> str:
+        """``Message.field``, as errors name a field."""
+        return f"{type(self).__name__}.{spec.name}"
 
     def _check_tail(self) -> None:
         """Subclasses with a tail check its length here."""
@@ -676,13 +686,3 @@ MESSAGE_TYPES: dict[int, type[Message]] = {
 
 HANDSHAKE_TYPE_IDS: frozenset[int] = frozenset(t for t, c in MESSAGE_TYPES.items() if c.HANDSHAKE)
 """Type ids whose frames use the handshake CRC seed (HELLO, VERSION)."""
-
-
-def message_name(type_id: int) -> str:
-    """The wire name of a type id, or ``"0x7f (unknown)"``.
-
-    >>> message_name(0x21), message_name(0x7F)
-    ('ADC_DATA', '0x7f (unknown)')
-    """
-    cls = MESSAGE_TYPES.get(type_id)
-    return cls.NAME if cls else f"0x{type_id:02x} (unknown)"

@@ -4,6 +4,7 @@ overrides the default selection. Run in a scratch project with the repository's 
 
 from __future__ import annotations
 
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -83,3 +84,12 @@ def test_the_header_says_how_to_run_everything(project: pytest.Pytester) -> None
     fast.stdout.fnmatch_lines(["fast tier: tests marked slow are deselected (pytest --all *"])
     fast.stdout.fnmatch_lines(["*1 passed, 3 deselected*"])
     assert "fast tier" not in project.runpytest(*QUIET, "--all").stdout.str()
+
+
+def test_every_run_ends_with_its_20_slowest_tests(project: pytest.Pytester) -> None:
+    pyproject = tomllib.loads((ROOT_CONFTEST.parent / "pyproject.toml").read_text())
+    addopts = pyproject["tool"]["pytest"]["ini_options"]["addopts"].split()
+    durations = [opt for opt in addopts if opt.startswith("--durations")]
+    assert durations == ["--durations=20"]
+    result = project.runpytest_inprocess(*QUIET, "--all", *durations)
+    result.stdout.fnmatch_lines(["*slowest 20 durations*"])

@@ -1,4 +1,4 @@
-"""GRBL 1.1 stage driver: :class:`GrblStage`, the :class:`~hil.devices.stage.Stage` over serial.
+"""GRBL 1.1 stage driver: :class:`GrblStage`, a one-axis motion stage in SI units over serial.
 
 The link is opened by URL through the transport registry the board uses
 (:mod:`hil.transports.registry`: ``serial:///dev/ttyUSB0?dtr=0``, a plain device path,

@@ -1,20 +1,16 @@
-"""The motion-stage interface, in SI units, shared by every stage driver.
+"""What a motion-stage driver reports, in SI units: machine state, status, profile window.
 
 A stage tows the target along one axis (X). Positions are metres in the controller's machine
 frame, speeds m/s, accelerations m/s², times seconds on the driver's clock (see
-:mod:`hil.devices.clock`). Drivers convert to the controller's units at the boundary (GRBL:
-mm, mm/min, mm/s²).
-
-Every motion method checks its arguments against the soft limits and the machine's rate and
-acceleration limits *before* anything is sent, and raises
-:class:`~hil.devices.stage_errors.StageLimitError` naming the axis, the value and the limit.
+:mod:`hil.devices.clock`). The driver (:class:`~hil.devices.grbl.GrblStage`) converts to the
+controller's units at the boundary (GRBL: mm, mm/min, mm/s²).
 """
 
 from __future__ import annotations
 
 import enum
 from dataclasses import dataclass
-from typing import NamedTuple, Protocol, runtime_checkable
+from typing import NamedTuple
 
 
 class StageState(enum.Enum):
@@ -94,55 +90,3 @@ class ProfileWindow(NamedTuple):
     t_end: float
     x_start: float
     x_end: float
-
-
-@runtime_checkable
-class Stage(Protocol):
-    """A one-axis motion stage in SI units."""
-
-    @property
-    def limits(self) -> tuple[float, float]:
-        """Soft limits (low, high) of the X axis, m."""
-        ...
-
-    def home(self) -> None:
-        """Run the homing cycle; afterwards the position is known and alarms are cleared."""
-        ...
-
-    def move_to(
-        self, x: float, v: float, a: float | None = None, *, wait: bool = True
-    ) -> StageStatus:
-        """Move to ``x`` (m) at up to ``v`` (m/s) with acceleration ``a`` (m/s², ``None``:
-        the machine's setting); with ``wait`` return when the move is complete."""
-        ...
-
-    def jog(self, dx: float, v: float, *, wait: bool = True) -> StageStatus:
-        """Jog by ``dx`` (m) at ``v`` (m/s); a jog can be cancelled at any time."""
-        ...
-
-    def run_profile(
-        self,
-        start: float,
-        end: float,
-        speed: float,
-        run_up: float,
-        run_down: float,
-        *,
-        wait: bool = True,
-    ) -> ProfileWindow:
-        """Tow from ``start`` to ``end`` (m) at constant ``speed`` (m/s), accelerating over
-        ``run_up`` (m) before ``start`` and stopping within ``run_down`` (m) after ``end``;
-        return when (driver clock) the carriage is at constant speed in the window."""
-        ...
-
-    def stop(self) -> StageStatus:
-        """Controlled stop: feed hold (decelerate at the machine acceleration)."""
-        ...
-
-    def estop(self) -> StageStatus:
-        """Emergency stop: immediate halt; latched until :meth:`home` or an unlock."""
-        ...
-
-    def status(self) -> StageStatus:
-        """Current status (polled no faster than the driver's poll interval)."""
-        ...

@@ -6,7 +6,6 @@
 - :class:`StageAlarmError`: the controller is in (or just entered) an alarm; the message says
   how to recover.
 - :class:`StageHeldError`: motion was feed-held (by :meth:`stop`, a watchdog or a button).
-- :class:`StageProtocolError`: the controller sent something that is not GRBL.
 - :class:`StageTimeoutError`: no answer in time (cable, port, power).
 """
 
@@ -53,10 +52,6 @@ class StageAlarmError(StageError):
 
 class StageHeldError(StageError):
     """Motion stopped in a feed hold before reaching its target."""
-
-
-class StageProtocolError(StageError):
-    """The controller sent bytes that are not a GRBL 1.1 message where one was required."""
 
 
 class StageTimeoutError(StageError):

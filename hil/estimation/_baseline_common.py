@@ -163,6 +163,23 @@ def unique_window(code: NDArray[np.int64]) -> int:
     return p
 
 
+class EmitsOnAnyBlock:
+    """Mixin: the sample count of a receiver that may emit an estimate on any block; the
+    receiver keeps ``_seen``, the samples it consumed, gaps included."""
+
+    _seen: int
+
+    @property
+    def samples_seen(self) -> int:
+        """Samples consumed so far, gaps included."""
+        return self._seen
+
+    @property
+    def next_decision_index(self) -> int:
+        """It may emit on any block: :attr:`samples_seen`."""
+        return self.samples_seen
+
+
 class RegistryConstructor:
     """Mixin: the registry's common ``from_options`` for receivers whose constructor takes
     the common options as keywords plus the receiver-specific ``OPTIONS``."""

@@ -25,7 +25,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from hil.errors import ConfigError
 from hil.signals.schedule import HopSchedule
@@ -220,20 +220,3 @@ def schedule_crlb(
         raise ConfigError("duration_s", duration_s, f">= 2 samples at fs = {fs} Hz")
     t = float(t_start_s) + np.arange(n) / fs
     return crlb_from_samples(schedule.evaluate_analytic(t), fs, e_over_n0_db, sound_speed_mps)
-
-
-def crlb_table(
-    b_rms_hz: float,
-    t_rms_s: float,
-    f0_hz: float,
-    e_over_n0_db: NDArray[np.float64] | list[float],
-    sound_speed_mps: float,
-) -> dict[str, NDArray[np.float64]]:
-    """σ_R (m) and σ_v (m/s) against E/N0 (dB, shape ``(k,)``) for RMSE plots."""
-    snr = np.asarray(e_over_n0_db, dtype=float)
-    rows = [crlb(b_rms_hz, t_rms_s, f0_hz, float(s), sound_speed_mps) for s in snr]
-    return {
-        "e_over_n0_db": snr,
-        "sigma_range_m": np.array([r.sigma_range_m for r in rows]),
-        "sigma_speed_mps": np.array([r.sigma_speed_mps for r in rows]),
-    }

@@ -40,6 +40,7 @@ from numpy.typing import NDArray
 
 from hil.errors import ConfigError
 from hil.estimation._baseline_common import (
+    EmitsOnAnyBlock,
     RegistryConstructor,
     alpha_of_speed,
     check_block,
@@ -58,7 +59,7 @@ FAMILIES = ("fmcw-saw", "fmcw-tri")
 _OPTIONS = ("speed_mode", "edge_fraction")
 
 
-class FmcwReceiver(RegistryConstructor):
+class FmcwReceiver(EmitsOnAnyBlock, RegistryConstructor):
     """Streaming FMCW receiver (see the module docstring).
 
     Parameters
@@ -139,16 +140,6 @@ class FmcwReceiver(RegistryConstructor):
         t_first = (origin + self._margin) / self.fs_hz
         self._next_sweep = int(self.schedule.locate(np.array([t_first]))[0]) + 1
         self._pending_up: tuple[int, float, float, float] | None = None
-
-    @property
-    def samples_seen(self) -> int:
-        """Samples consumed so far, gaps included."""
-        return self._seen
-
-    @property
-    def next_decision_index(self) -> int:
-        """It may emit on any block: :attr:`samples_seen`."""
-        return self.samples_seen
 
     # ------------------------------------------------------------------ streaming
     def process(self, block: NDArray[np.floating], *, gap_before: int = 0) -> list[Estimate]:

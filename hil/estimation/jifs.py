@@ -38,6 +38,7 @@ from numpy.typing import NDArray
 
 from hil.errors import ConfigError
 from hil.estimation._baseline_common import (
+    EmitsOnAnyBlock,
     RegistryConstructor,
     alpha_of_speed,
     check_block,
@@ -74,7 +75,7 @@ def _moving_sum(x: FloatArray, n: int) -> FloatArray:
     return sliding_window_view(x, n, axis=0).sum(axis=-1)
 
 
-class JifsReceiver(RegistryConstructor):
+class JifsReceiver(EmitsOnAnyBlock, RegistryConstructor):
     """Streaming edge-detecting HFC-CW receiver (see the module docstring).
 
     Parameters
@@ -213,16 +214,6 @@ class JifsReceiver(RegistryConstructor):
         self._decided = first  # first baseband index whose edges are not yet decided
         self._events: list[tuple[float, int, int]] = []  # (time in samples, tone, ±1)
         self._seq: list[tuple[float, int, int]] = []  # decoded boundaries (t, from, to)
-
-    @property
-    def samples_seen(self) -> int:
-        """Samples consumed so far, gaps included."""
-        return self._seen
-
-    @property
-    def next_decision_index(self) -> int:
-        """It may emit on any block: :attr:`samples_seen`."""
-        return self.samples_seen
 
     # ------------------------------------------------------------------ streaming
     def process(self, block: NDArray[np.floating], *, gap_before: int = 0) -> list[Estimate]:

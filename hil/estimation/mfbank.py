@@ -68,6 +68,7 @@ from scipy.signal import correlate
 
 from hil.errors import ConfigError
 from hil.estimation._baseline_common import (
+    EmitsOnAnyBlock,
     RegistryConstructor,
     alpha_of_speed,
     check_block,
@@ -139,7 +140,7 @@ class _LengthGroup:
     spectra: NDArray[np.complex64]
 
 
-class MatchedFilterBank(RegistryConstructor):
+class MatchedFilterBank(EmitsOnAnyBlock, RegistryConstructor):
     """Streaming baseband overlap-save matched-filter bank over all codewords and Dopplers.
 
     Parameters
@@ -332,16 +333,6 @@ class MatchedFilterBank(RegistryConstructor):
         jd = self._lengths.size
         per_frame = fft_mults(n_b) + jd * (n_b + fft_mults(n_b) + s_b)
         return self.baseband.n_taps / r + per_frame / (s_b * r)
-
-    @property
-    def samples_seen(self) -> int:
-        """Samples consumed so far, gaps included."""
-        return self._seen
-
-    @property
-    def next_decision_index(self) -> int:
-        """It may emit on any block: :attr:`samples_seen`."""
-        return self.samples_seen
 
     # ------------------------------------------------------------------ streaming
     def process(self, block: NDArray[np.floating], *, gap_before: int = 0) -> list[Estimate]:

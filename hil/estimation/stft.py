@@ -37,6 +37,7 @@ from numpy.typing import NDArray
 
 from hil.errors import ConfigError
 from hil.estimation._baseline_common import (
+    EmitsOnAnyBlock,
     RegistryConstructor,
     alpha_of_speed,
     check_block,
@@ -66,7 +67,7 @@ class _Segment:
     power_db: float
 
 
-class StftReceiver(RegistryConstructor):
+class StftReceiver(EmitsOnAnyBlock, RegistryConstructor):
     """Streaming STFT receiver for tone-hopping schedules (see the module docstring).
 
     Parameters
@@ -191,16 +192,6 @@ class StftReceiver(RegistryConstructor):
         self._pend_first = 0  # frame index of _pend_f[0]
         self._cur: list[tuple[int, float, float]] | None = None  # (frame, freq, power_db)
         self._segments: list[_Segment] = []
-
-    @property
-    def samples_seen(self) -> int:
-        """Samples consumed so far, gaps included."""
-        return self._seen
-
-    @property
-    def next_decision_index(self) -> int:
-        """It may emit on any block: :attr:`samples_seen`."""
-        return self.samples_seen
 
     # ------------------------------------------------------------------ streaming
     def process(self, block: NDArray[np.floating], *, gap_before: int = 0) -> list[Estimate]:

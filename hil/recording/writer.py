@@ -10,7 +10,8 @@ writer was killed.
 Flushing: every append checks the injected ``clock`` and flushes when ``flush_interval_s``
 (default 1 s) has passed since the last flush; :meth:`RunWriter.flush` flushes at once.
 Small-table rows wait in memory until the next flush (one HDF5 write per column per flush,
-not per row); samples go to the file as they arrive.
+not per row); sample blocks wait until the next flush or until they fill an HDF5 chunk (one
+write per chunk, not per captured block). A reader sees neither before a flush either way.
 """
 
 from __future__ import annotations
@@ -101,6 +102,12 @@ class RunWriter:
     ) -> None:
         self._file = file
         self._samples: h5py.Dataset = file[schema.SAMPLES]
+        self._sample_rows = int(self._samples.shape[0])
+        """Sample rows appended: those in the file and those waiting."""
+        self._waiting_samples: list[np.ndarray[Any, Any]] = []
+        self._waiting_rows = 0
+        chunks = self._samples.chunks
+        self._write_rows = int(chunks[0]) if chunks else DEFAULT_CHUNK_FRAMES
         self._n_channels = n_channels
         self._dtype = dtype
         self._flush_interval_s = flush_interval_s
@@ -276,7 +283,7 @@ class RunWriter:
         n = data.shape[0]
         if n == 0:
             return
-        row = self._samples.shape[0]
+        row = self._sample_rows
         if expected is None or first_index > expected:
             # The segment row goes to the file before its samples, so a reader never sees
             # rows of a new segment attributed to the previous one.
@@ -287,10 +294,24 @@ class RunWriter:
                 self._pending["events"].append(
                     ("gap", expected, missing, f"samples {expected} .. {first_index - 1} missing")
                 )
-        self._samples.resize((row + n, self._n_channels))
-        self._samples[row:] = data
+        # A copy: the caller may reuse its buffer before the block is written.
+        self._waiting_samples.append(np.array(data, copy=True))
+        self._waiting_rows += n
+        self._sample_rows = row + n
         self._next_index = first_index + n
+        if self._waiting_rows >= self._write_rows:
+            self._write_samples()
         self._maybe_flush()
+
+    def _write_samples(self) -> None:
+        """Write the waiting sample blocks to the file in one slab."""
+        if not self._waiting_samples:
+            return
+        row = int(self._samples.shape[0])
+        self._samples.resize((self._sample_rows, self._n_channels))
+        self._samples[row:] = np.concatenate(self._waiting_samples)
+        self._waiting_samples.clear()
+        self._waiting_rows = 0
 
     def append_sync(self, sample_index: int, host_time_s: float) -> None:
         """Append one sync pair: board sample ``sample_index`` seen at host time (s)."""
@@ -346,7 +367,9 @@ class RunWriter:
             self.flush()
 
     def flush(self) -> None:
-        """Write the waiting table rows and flush the file: readers now see everything."""
+        """Write the waiting samples and table rows and flush the file: readers now see
+        everything."""
+        self._write_samples()
         for name, rows in self._pending.items():
             if not rows:
                 continue
@@ -354,9 +377,7 @@ class RunWriter:
             append_rows(self._file[name], dict(zip(columns, zip(*rows, strict=True), strict=True)))
             rows.clear()
         now = self._clock()
-        append_rows(
-            self._file["flushes"], {"sample_rows": [self._samples.shape[0]], "clock_s": [now]}
-        )
+        append_rows(self._file["flushes"], {"sample_rows": [self._sample_rows], "clock_s": [now]})
         self._file.flush()
         self._last_flush = now
         self.flush_count += 1

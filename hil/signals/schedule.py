@@ -18,7 +18,6 @@ truth for what was transmitted.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -506,8 +505,3 @@ def tone_grid(center_hz: float, bandwidth_hz: float, n_tones: int) -> FloatArray
             "bandwidth_hz", bandwidth_hz, "< 2·f_c·N_F/(N_F−1) so that every tone is > 0 Hz"
         )
     return tones
-
-
-def sequence_to_list(values: Sequence[int] | NDArray[Any]) -> list[int]:
-    """A code as a plain list of ints (for JSON and messages)."""
-    return [int(v) for v in np.asarray(values).reshape(-1)]

@@ -249,11 +249,6 @@ def doppler_scale(speed_mps: float, sound_speed_mps: float) -> float:
     return (sound_speed_mps + speed_mps) / (sound_speed_mps - speed_mps)
 
 
-def hop_count_for(schedule: HopSchedule, duration_s: float) -> int:
-    """Number of hops that overlap ``[0, duration_s)``."""
-    return len(schedule.hops_in_span(0.0, duration_s))
-
-
 def design_summary(schedule: HopSchedule, sound_speed_mps: float) -> dict[str, Any]:
     """Key numbers of a schedule for printing and for the schedule file."""
     out: dict[str, Any] = {

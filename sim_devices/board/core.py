@@ -464,6 +464,9 @@ class SimulatedBoard:
         """SPEC 5.4: each maximal run of indices with no DAC sample is one underrun."""
         if covered.size == 0:
             return
+        if covered.all():  # the usual block: every index had its DAC sample
+            self._in_underrun = False
+            return
         missing = ~covered
         before = np.concatenate(([not self._in_underrun], covered[:-1]))
         starts = int(np.count_nonzero(missing & before))

@@ -61,6 +61,6 @@ def from_full_scale_clipped(
         return values.astype(np.float32), False
     scale = _FULL_SCALE[fmt]
     counts = _rounded_counts(values, scale)
-    clipped = bool(np.any(counts > scale - 1) or np.any(counts < -scale))
+    clipped = bool(counts.size and (counts.max() > scale - 1 or counts.min() < -scale))
     np.clip(counts, -scale, scale - 1, out=counts)
     return counts.astype(np.int16 if fmt is SampleFormat.INT16 else np.int32), clipped

@@ -16,7 +16,6 @@ from sim_devices.acoustics.channel import Channel, DirectBlast, Target, source_a
 from sim_devices.acoustics.noise_generator import ShapedNoiseGenerator
 from sim_devices.acoustics.propagation import spherical_transmission_loss
 from sim_devices.acoustics.scenario import build_channel, parse_scenario
-from sim_devices.acoustics.sonar_equation import active_snr_noise_limited, band_noise_level
 from sim_devices.acoustics.trajectory import ConstantVelocity, Fixed, Live
 from sim_devices.acoustics.truth import hop_truth
 
@@ -40,10 +39,9 @@ def test_simulated_snr_matches_the_sonar_equation() -> None:
     )  # fmt: skip
     parts = ch.read_components(int(0.5 * FS))
     snr_sim = 10 * np.log10(np.mean(parts["echo"][10000:] ** 2) / np.var(parts["noise"]))
-    snr_eq = active_snr_noise_limited(
-        200.0, spherical_transmission_loss(r, absorption), -5.0,
-        band_noise_level(nsl, band[1] - band[0]),
-    )  # fmt: skip
+    # Active, noise-limited: SNR = SL - 2 TL + TS - NL, NL = spectrum level + 10 log10(B / 1 Hz).
+    noise_level = nsl + 10 * np.log10(band[1] - band[0])
+    snr_eq = 200.0 - 2 * spherical_transmission_loss(r, absorption) - 5.0 - noise_level
     assert abs(snr_sim - snr_eq) < 0.5
 
 

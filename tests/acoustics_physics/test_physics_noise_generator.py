@@ -16,7 +16,6 @@ from sim_devices.acoustics.noise_generator import (
     design_shaping_filter,
     filter_level_db,
 )
-from sim_devices.acoustics.radiated_noise import TARGET_PRESETS
 
 FS = 96_000.0
 BAND = (2_000.0, 40_000.0)
@@ -53,8 +52,13 @@ def test_designed_filter_response_matches_the_model_away_from_edges() -> None:
     assert np.max(np.abs(filter_level_db(taps, FS, f) - np.asarray(SEA(f)))) < 0.05
 
 
-def test_radiated_noise_preset_drives_the_generator() -> None:
-    torpedo = TARGET_PRESETS["torpedo"]
+def torpedo(frequency_hz: np.ndarray) -> np.ndarray:
+    """A target's radiated noise, dB re 1 µPa²/Hz: 150 dB at 1 kHz, flat below a 500 Hz
+    knee, falling 20 dB a decade above it."""
+    return 150.0 - 20.0 * np.log10(np.maximum(frequency_hz, 500.0) / 1000.0)
+
+
+def test_a_sloped_radiated_noise_spectrum_drives_the_generator() -> None:
     x = ShapedNoiseGenerator(torpedo, FS, BAND, seed=9).generate(2**18)
     f, p = welch(x, FS, nperseg=1024)
     inside = (f > 4000.0) & (f < 38000.0)

@@ -19,8 +19,10 @@ def test_tank_run_writes_run_log(tmp_path: Path, capsys: pytest.CaptureFixture[s
     exp_file = tmp_path / "short.toml"
     exp_file.write_text(SHORT)
     folder, log_file = tmp_path / "run", tmp_path / "hil.log"
+    # On virtual time: what is logged is the same as on ptys, in a few seconds.
     argv = ["--log-level", "warning", "--log-file", str(log_file),
-            "tank-run", str(exp_file), "--out", str(folder), "--no-live", "--json"]  # fmt: skip
+            "tank-run", str(exp_file), "--out", str(folder), "--no-live", "--json",
+            "--virtual-time"]  # fmt: skip
     assert main(argv) == 0
     summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     run_log = (folder / "run.log").read_text()

@@ -530,7 +530,10 @@ def test_the_receiver_is_built_before_anything_moves_or_transmits(
     monkeypatch.setattr(GrblStage, "open", stop_at_stage)
     exp_file = tmp_path / "short.toml"
     exp_file.write_text(SHORT)
-    code = main(["tank-run", str(exp_file), "--out", str(tmp_path / "run"), "--no-live", "--json"])
+    # On virtual time: the order is the same as on ptys (run_experiment builds the receiver
+    # before it opens any device) without starting the simulated tank's process.
+    argv = ["tank-run", str(exp_file), "--out", str(tmp_path / "run"), "--no-live", "--json"]
+    code = main([*argv, "--virtual-time"])
     summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert code != 0
     assert "the test stops the run at the stage" in summary["error"]

@@ -243,6 +243,31 @@ def test_rows_wait_for_the_flush(tmp_path: Path, schedule_doc: dict[str, Any]) -
         assert (w.flush_count, w._file["events/kind"].shape[0]) == (1, 3)
 
 
+def test_samples_wait_for_the_flush_or_a_full_chunk(
+    tmp_path: Path, schedule_doc: dict[str, Any]
+) -> None:
+    clock = FakeClock()
+    block = np.arange(10, dtype=np.int16).reshape(5, 2)
+    with _writer(tmp_path / "s.h5", schedule_doc, clock=clock, chunk_frames=8) as w:
+        w.append_samples(100, block)
+        block[:] = -1  # the caller reuses its buffer: the waiting copy keeps the samples
+        assert w._file["samples"].shape[0] == 0
+        w.append_samples(105, np.full((5, 2), 7, dtype=np.int16))  # 10 rows >= one chunk
+        assert w._file["samples"].shape[0] == 10
+        w.append_samples(112, np.full((3, 2), 9, dtype=np.int16))  # a gap: a new segment
+        assert (w._file["samples"].shape[0], w.next_sample_index) == (10, 115)
+        w.flush()
+        assert w._file["samples"].shape[0] == 13
+        assert w._file["flushes/sample_rows"][-1] == 13
+    with RunRecording.open(tmp_path / "s.h5") as rec:
+        first, second = rec.samples()
+        assert (first.first_index, second.first_index) == (100, 112)
+        expected = np.concatenate([np.arange(10).reshape(5, 2), np.full((5, 2), 7)])
+        assert np.array_equal(first.data, expected)
+        assert np.array_equal(second.data, np.full((3, 2), 9))
+        assert rec.segments().row.tolist() == [0, 10]
+
+
 # ---------------------------------------------------------------------- refused input
 @pytest.mark.parametrize(
     ("kw", "message"),

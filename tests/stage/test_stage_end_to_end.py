@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from hil.devices.grbl import GrblStage
-from hil.devices.stage import Stage, StageState
+from hil.devices.stage import StageState
 from hil.devices.stage_errors import StageLimitError
 from sim_devices.pty_endpoint import PtyEndpoint, tick_wait_s
 from sim_devices.stage import GrblState, ManualClock, SimulatedGrblOnPty
@@ -49,7 +49,6 @@ def test_home_move_and_profile_on_simulated_time() -> None:
         SimulatedGrblOnPty(config, clock=clock) as sim,
         GrblStage(sim.port_name, clock=clock, wait_step=0.2) as stage,
     ):
-        assert isinstance(stage, Stage)
         assert stage.status().state is StageState.ALARM
         homed = stage.home()
         assert (homed.state, homed.position) == (StageState.IDLE, pytest.approx(-0.001))

@@ -14,7 +14,7 @@ from hil.experiments.calibration.device import FloatArray
 
 
 class PositioningStage(Protocol):
-    """What the routines need of a stage (:class:`~hil.devices.stage.Stage` has it).
+    """What the routines need of a stage (:class:`~hil.devices.grbl.GrblStage` has it).
 
     Positions are metres in the controller's machine frame (GRBL: ``[-travel, 0]``).
     """
