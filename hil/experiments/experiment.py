@@ -440,7 +440,10 @@ def tank_receiver_options(
     the surface, bottom and wall images follow the direct echo by a few tenths of a
     millisecond and pull the peak of the accumulated sums to their centroid (+0.45 m in the
     built-in tank); the peak readout only where the code period is not a whole number of
-    samples (the first-arrival readout's clutter canceller needs one).
+    samples (the first-arrival readout's clutter canceller needs one). With the peak readout
+    ``refine`` is False unless the file sets it: the refinement fits one echo
+    (:mod:`hil.estimation.refine`), and through the tank's images its fit is not one echo, so
+    it would refuse the target's detections; the peak then reads the images' centroid.
 
     ``reverb_speed_mps``, the reverberation band (m/s):
 
@@ -478,4 +481,6 @@ def tank_receiver_options(
         period = schedule.period_s * fs_hz
         whole = abs(period - round(period)) <= 1e-6 * period
         out["range_readout"] = "first-arrival" if whole else "peak"
+    if out["range_readout"] == "peak" and "refine" not in out:
+        out["refine"] = False
     return out

@@ -40,7 +40,7 @@ from hil.estimation.refine import CoherentRefiner
 #: (5 of 55 kept); a 35 m/s target with a 30 m/s span 0.03-0.58 / 0.29-0.95 (1 of 79 kept);
 #: a tank echo with two images 0.16-0.64 / 0.94-1.00 (all kept).
 COHERENCE_FRACTION = 0.8
-TONE_COHERENCE_FRACTION = 0.93
+TONE_COHERENCE_FRACTION = 0.96
 
 #: ``unit_values(n_star, d0, tone)``: the M terms' unit correlators of the peak at sample
 #: ``n_star``, hypothesis ``d0``, tone index per term (shape ``(M,)``), weighted, complex.
