@@ -37,8 +37,9 @@ from hil.estimation.refine import CoherentRefiner
 #: is_echo <hil.estimation.refine.Refinement.is_echo>`). Measured on att (0.8-1 s, 55-90
 #: detections each): echoes 0.99-1.01 / 0.99-1.01 at -10 dB per-sample SNR; a still echo at
 #: the tone spacing's speed 0.03-0.49 / 0.32-0.90 at 0 dB and up to 0.86 / 1.05 at -10 dB
-#: (5 of 55 kept); a 35 m/s target with a 30 m/s span 0.03-0.58 / 0.29-0.95 (1 of 79 kept);
-#: a tank echo with two images 0.16-0.64 / 0.94-1.00 (all kept).
+#: (3 of 55 kept at 0.96); a 35 m/s target with a 30 m/s span 0.03-0.58 / 0.29-0.95 (none
+#: kept); a tank echo with two close images 0.16-0.64 / 0.94-1.00, and with a tank's full
+#: set of images 0.0-0.7 / 0.1-0.9: not one echo (a tank reads the first arrival instead).
 COHERENCE_FRACTION = 0.8
 TONE_COHERENCE_FRACTION = 0.96
 
