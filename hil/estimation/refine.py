@@ -49,6 +49,7 @@ acceleration to first order). Tone schedules only (no chirps).
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass
 from typing import Any
 
@@ -62,6 +63,7 @@ from hil.estimation.refine_kernels import (
     RECENTRE,
     candidate_sums,
     find_slots,
+    fit_quality,
     hop_moments,
     maximise,
 )
@@ -84,6 +86,14 @@ MAX_RECENTRES = 4
 REUSE_SLACK = 16
 #: Table slots per hop of a detection (least recently used slots are refilled).
 SLOTS_PER_HOP = 4
+#: A detection that agrees with a fit of the last WARM_HOPS hops starts from that fit's
+#: prediction: a 3 × 3 grid of ±WARM_HALF_LOBES grating lobes and ±WARM_HALF_SPANS speed
+#: spans, then the quadratic fit; the full search where its maximum is on that grid's edge.
+WARM_HOPS = 3
+WARM_HALF_LOBES = 1.0 / 16.0
+WARM_HALF_SPANS = 0.125
+#: Recent fits kept for that (several echoes at once each keep theirs).
+RECENT_FITS = 16
 
 
 @dataclass(frozen=True)
@@ -170,6 +180,7 @@ class CoherentRefiner:
         self.speed_span_mps = float(speed_span_mps)
         tones = np.unique(np.asarray(schedule.tones_hz, dtype=np.float64))
         self.spacing_hz = float(np.min(np.diff(tones))) if tones.size > 1 else 1 / schedule.hop_s
+        self.n_tones = int(np.asarray(schedule.tones_hz).shape[0])
         self.hop_len_s = float(schedule.duration_s[0])
         v_max = abs(float(max_speed_mps)) + self.speed_span_mps
         alpha_lo = (self.c - v_max) / (self.c + v_max)
@@ -199,6 +210,7 @@ class CoherentRefiner:
         self._used = np.zeros(n_slots, dtype=np.int64)
         self._clock = 0
         self._codewords: dict[int, _Codeword] = {}
+        self._recent: deque[tuple[int, float, float]] = deque(maxlen=RECENT_FITS)
 
     # ------------------------------------------------------------------ stream
     def reset(self, input_index: int) -> None:
@@ -206,6 +218,7 @@ class CoherentRefiner:
         self._ring.reset(input_index)
         self._valid_from = int(input_index)
         self._hop[:] = np.iinfo(np.int64).min
+        self._recent.clear()
 
     def warm_up(self) -> None:
         """Run every compiled kernel once on a made-up detection in silence, then forget it:
@@ -232,9 +245,23 @@ class CoherentRefiner:
         word = self._codeword(hop_index)
         hop_ids = np.arange(hop_index - self.m_hops + 1, hop_index + 1, dtype=np.int64)
         lobe = 1.0 / (alpha * self.spacing_hz)
-        best_t, best_v = t_s, self.c * (alpha - 1.0) / (alpha + 1.0)
+        speed0 = self.c * (alpha - 1.0) / (alpha + 1.0)
         outcome = RECENTRE
-        for _ in range(MAX_RECENTRES + 1):
+        start = self._predicted(hop_index, t_s, speed0, lobe)
+        if start is not None:
+            # Near a recent fit's prediction: a 3 × 3 grid of the fit's first steps.
+            best_t, best_v = start
+            slots = self._slots(hop_ids, word, best_t, (self.c + best_v) / (self.c - best_v))
+            if slots is None:
+                return None
+            args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
+            best_t, best_v, outcome = maximise(
+                *args, self.c, best_t, best_v, WARM_HALF_LOBES * lobe,
+                WARM_HALF_SPANS * self.speed_span_mps, 3, 3, FIT_PASSES,
+            )  # fmt: skip
+        if outcome != FOUND:
+            best_t, best_v, outcome = t_s, speed0, RECENTRE
+        for _ in range(MAX_RECENTRES + 1 if outcome != FOUND else 0):
             slots = self._slots(hop_ids, word, best_t, (self.c + best_v) / (self.c - best_v))
             if slots is None:
                 return None
@@ -245,10 +272,12 @@ class CoherentRefiner:
             )  # fmt: skip
             if outcome != RECENTRE:
                 break
-        if outcome != FOUND:
-            best_t, best_v = t_s, self.c * (alpha - 1.0) / (alpha + 1.0)
+        if outcome == FOUND:
+            self._recent.append((hop_index, best_t, best_v))
+        else:
+            best_t, best_v = t_s, speed0
         a_best = (self.c + best_v) / (self.c - best_v)
-        en0, coherence, tone_coherence = _fit_quality(args, best_t, a_best)
+        en0, coherence, tone_coherence = _fit_quality(args, word, self.n_tones, best_t, a_best)
         en0_db = 10.0 * math.log10(en0) if en0 > 0 else -math.inf
         bound = (
             crlb(word.b_rms, word.t_rms, word.f0, en0_db, self.c) if math.isfinite(en0_db) else None
@@ -256,6 +285,20 @@ class CoherentRefiner:
         return Refinement(
             best_t, a_best, en0_db, bound, coherence, tone_coherence, outcome == FOUND
         )
+
+    def _predicted(
+        self, hop_index: int, t_s: float, speed: float, lobe: float
+    ) -> tuple[float, float] | None:
+        """Where a recent fit of the same echo puts this boundary (s, m/s): a fit up to
+        :data:`WARM_HOPS` hops earlier, moved on by those hops received at its time scale,
+        if the detection agrees with it (within an eighth of a lobe and the speed span)."""
+        for hop, t_fit, v_fit in reversed(self._recent):
+            k = hop_index - hop
+            if 1 <= k <= WARM_HOPS:
+                t_pred = t_fit + k * self.hop_len_s * (self.c - v_fit) / (self.c + v_fit)
+                if abs(t_pred - t_s) <= 0.125 * lobe and abs(v_fit - speed) <= self.speed_span_mps:
+                    return t_pred, v_fit
+        return None
 
     def correlation(
         self,
@@ -357,6 +400,7 @@ class _Codeword:
     b_rms: float
     t_rms: float
     f0: float
+    tones: NDArray[np.int64]  # each hop's tone index in the schedule, shape (M,)
 
     @classmethod
     def of(cls, schedule: HopSchedule, hop_index: int, m_hops: int, fs_hz: float) -> _Codeword:
@@ -370,15 +414,15 @@ class _Codeword:
         b_rms, f0 = rms_bandwidth(s, fs_hz)
         return cls(
             (k, f, dt_lo, dt_lo + hops.duration_s, hops.amplitude**2),
-            b_rms, rms_duration(s, fs_hz), abs(f0),
+            b_rms, rms_duration(s, fs_hz), abs(f0), hops.tone_index.astype(np.int64),
         )  # fmt: skip
 
 
 def _fit_quality(
-    args: tuple[Any, ...], t_rx: float, alpha: float
+    args: tuple[Any, ...], word: _Codeword, n_tones: int, t_rx: float, alpha: float
 ) -> tuple[float, Coherence, Coherence]:
     """E/N0 (linear) of the echo at a candidate and its coherence across all hops and
-    within each tone.
+    within each tone (:func:`~hil.estimation.refine_kernels.fit_quality`).
 
     ``Â = 2|C|/E_s``, the noise variance ``σ²`` what the echo leaves of the windows' energy,
     ``E/N0 = Â² N / (4 σ²)`` (module docstring). Coherence ``ρ = |Σ_i H_i|² / (M Σ_i |H_i|²)``:
@@ -387,34 +431,12 @@ def _fit_quality(
     ``E[ρ] ≈ (M s + 1) / (M (s + 1))``; an echo of another schedule or speed whose tones
     match some hops (a still echo read at the tone spacing's speed, a target beyond the
     span) has strong hops of unrelated phases: ``ρ`` far below that. Multipath a fraction of
-    a millisecond long (a tank) multiplies each tone by its own complex gain: ``ρ`` falls,
-    the coherence within each tone (the same ratio over the hops of one tone,
+    a millisecond long multiplies each tone by its own complex gain: ``ρ`` falls, the
+    coherence within each tone (the same ratio over the hops of one tone,
     ``Σ_k |Σ_{i∈k} H_i|² / Σ_k n_k Σ_{i∈k} |H_i|²``, expected
     ``Σ_k (n_k² s + n_k) / Σ_k n_k² (s + 1)``) does not.
     """
-    c = np.empty(1, dtype=np.complex128)
-    es = np.empty(1)
-    energy = np.empty(1)
-    m_hops = len(args[6])
-    per_hop = np.empty((1, m_hops), dtype=np.complex128)
-    candidate_sums(*args, np.array([t_rx]), np.array([alpha]), c, es, energy, per_hop)
-    n = float(es[0])  # Σ a_i² N_i: the windows' samples for unit amplitudes
-    mag = float(np.abs(c[0]))
-    spread = float(np.sum(np.abs(per_hop) ** 2))
-    coherence = mag * mag / (m_hops * spread) if spread > 0 else 0.0
-    a_hat = 2.0 * mag / float(es[0])
-    noise = (float(energy[0]) - 2.0 * mag * mag / float(es[0])) / n
-    if not noise > 0:
-        return math.inf, Coherence(coherence, 1.0), Coherence(1.0, 1.0)
-    s_hop = max(spread / (n * noise) - 1.0, 0.0)  # Σ|H_i|² / (Σ N_i σ²) − 1
-    full = Coherence(coherence, (m_hops * s_hop + 1.0) / (m_hops * (s_hop + 1.0)))
-    _, g = np.unique(args[8], return_inverse=True)  # the hops' tones
-    h = per_hop[0]
-    sk = np.bincount(g, h.real) + 1j * np.bincount(g, h.imag)
-    nk = np.bincount(g).astype(np.float64)
-    pk = np.bincount(g, np.abs(h) ** 2)
-    per_tone = Coherence(
-        float(np.sum(np.abs(sk) ** 2) / np.sum(nk * pk)),
-        float(np.sum(nk**2 * s_hop + nk) / np.sum(nk**2 * (s_hop + 1.0))),
+    en0, rho, expected, rho_tone, expected_tone = fit_quality(
+        *args, word.tones, n_tones, t_rx, alpha
     )
-    return a_hat * a_hat * n / (4.0 * noise), full, per_tone
+    return en0, Coherence(rho, expected), Coherence(rho_tone, expected_tone)

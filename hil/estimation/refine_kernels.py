@@ -268,3 +268,53 @@ def find_slots(
         if out[i] < 0:
             missing += 1
     return missing
+
+
+@numba.njit(**_JIT)
+def fit_quality(
+    prefix: Any, energy: Any, first: Any, tail: Any, alpha0: Any, centre: Any, slots: Any,
+    k: Any, f: Any, dt_lo: Any, dt_hi: Any, amp2: Any, fs: float, hop_s: float,
+    tones: Any, n_tones: int, t_rx: float, alpha: float,
+) -> tuple[float, float, float, float, float]:  # fmt: skip
+    """``(E/N0, ρ, E[ρ], ρ_tone, E[ρ_tone])`` of one candidate (:func:`hil.estimation.refine.
+    _fit_quality` states them); ``tones`` each hop's tone index (shape ``(M,)``, below
+    ``n_tones``). E/N0 is ``inf`` where the windows hold no noise."""
+    m_hops = slots.shape[0]
+    n_mom = prefix.shape[3]
+    lo_sums = np.empty(n_mom, dtype=np.complex128)
+    hi_sums = np.empty(n_mom, dtype=np.complex128)
+    h = np.empty(m_hops, dtype=np.complex128)
+    c, es, signal = _candidate(
+        prefix, energy, first, tail, alpha0, centre, slots, k, f, dt_lo, dt_hi, amp2, fs,
+        hop_s, t_rx, alpha, lo_sums, hi_sums, h,
+    )  # fmt: skip
+    mag2 = c.real * c.real + c.imag * c.imag
+    spread = 0.0
+    for i in range(m_hops):
+        spread += h[i].real * h[i].real + h[i].imag * h[i].imag
+    rho = mag2 / (m_hops * spread) if spread > 0.0 else 0.0
+    noise = (signal - 2.0 * mag2 / es) / es  # es = Σ a_i² N_i: the windows' samples
+    if not noise > 0.0:
+        return math.inf, rho, 1.0, 1.0, 1.0
+    s_hop = max(spread / (es * noise) - 1.0, 0.0)
+    expected = (m_hops * s_hop + 1.0) / (m_hops * (s_hop + 1.0))
+    sk = np.zeros(n_tones, dtype=np.complex128)
+    nk = np.zeros(n_tones)
+    pk = np.zeros(n_tones)
+    for i in range(m_hops):
+        g = tones[i]
+        sk[g] += h[i]
+        nk[g] += 1.0
+        pk[g] += h[i].real * h[i].real + h[i].imag * h[i].imag
+    num = 0.0
+    den = 0.0
+    e_num = 0.0
+    e_den = 0.0
+    for g in range(n_tones):
+        num += sk[g].real * sk[g].real + sk[g].imag * sk[g].imag
+        den += nk[g] * pk[g]
+        e_num += nk[g] * nk[g] * s_hop + nk[g]
+        e_den += nk[g] * nk[g] * (s_hop + 1.0)
+    a_hat = 2.0 * math.sqrt(mag2) / es
+    en0 = a_hat * a_hat * es / (4.0 * noise)
+    return en0, rho, expected, num / den if den > 0.0 else 0.0, e_num / e_den
