@@ -115,7 +115,8 @@ class Refinement:
     """A refined detection: boundary receive time ``t_s`` (s), time scale ``alpha``, the
     E/N0 collected over the ``M`` hops (dB), its Cramér–Rao bounds (:class:`Crlb`; None
     where the E/N0 is not finite: no noise, or no echo), the
-    coherence of the hops' terms over all hops and within each tone (:func:`_fit_quality`),
+    coherence of the hops' terms over all hops, within each tone and over runs of consecutive
+    hops (:func:`_fit_quality`),
     and whether the search found its maximum inside (else ``t_s`` and ``alpha`` are the
     detection's own)."""
 
@@ -125,15 +126,19 @@ class Refinement:
     bound: Crlb | None
     coherence: Coherence
     tone_coherence: Coherence
+    run_coherence: Coherence
     found: bool
 
-    def is_echo(self, fraction: float, tone_fraction: float) -> bool:
+    def is_echo(self, fraction: float, tone_fraction: float, run_fraction: float) -> bool:
         """Whether the fit is an echo of the schedule: a maximum inside the search whose
         coherence over all hops is at least ``fraction`` of one echo's at its SNR, or whose
         coherence within each tone is at least ``tone_fraction`` of it (one echo through
-        multipath)."""
+        multipath), or over runs of consecutive hops at least ``run_fraction`` of it (an
+        accelerating echo)."""
         return self.found and (
-            self.coherence.fraction >= fraction or self.tone_coherence.fraction >= tone_fraction
+            self.coherence.fraction >= fraction
+            or self.tone_coherence.fraction >= tone_fraction
+            or self.run_coherence.fraction >= run_fraction
         )
 
 
@@ -277,14 +282,17 @@ class CoherentRefiner:
         else:
             best_t, best_v = t_s, speed0
         a_best = (self.c + best_v) / (self.c - best_v)
-        en0, coherence, tone_coherence = _fit_quality(args, word, self.n_tones, best_t, a_best)
+        en0, coherence, tone_coherence, run_coherence = _fit_quality(
+            args, word, self.n_tones, best_t, a_best
+        )
         en0_db = 10.0 * math.log10(en0) if en0 > 0 else -math.inf
         bound = (
             crlb(word.b_rms, word.t_rms, word.f0, en0_db, self.c) if math.isfinite(en0_db) else None
         )
         return Refinement(
-            best_t, a_best, en0_db, bound, coherence, tone_coherence, outcome == FOUND
-        )
+            best_t, a_best, en0_db, bound, coherence, tone_coherence, run_coherence,
+            outcome == FOUND,
+        )  # fmt: skip
 
     def _predicted(
         self, hop_index: int, t_s: float, speed: float, lobe: float
@@ -420,9 +428,10 @@ class _Codeword:
 
 def _fit_quality(
     args: tuple[Any, ...], word: _Codeword, n_tones: int, t_rx: float, alpha: float
-) -> tuple[float, Coherence, Coherence]:
-    """E/N0 (linear) of the echo at a candidate and its coherence across all hops and
-    within each tone (:func:`~hil.estimation.refine_kernels.fit_quality`).
+) -> tuple[float, Coherence, Coherence, Coherence]:
+    """E/N0 (linear) of the echo at a candidate and its coherence across all hops, within
+    each tone and over runs of consecutive hops (:func:`~hil.estimation.refine_kernels.
+    fit_quality`).
 
     ``Â = 2|C|/E_s``, the noise variance ``σ²`` what the echo leaves of the windows' energy,
     ``E/N0 = Â² N / (4 σ²)`` (module docstring). Coherence ``ρ = |Σ_i H_i|² / (M Σ_i |H_i|²)``:
@@ -434,9 +443,17 @@ def _fit_quality(
     a millisecond long multiplies each tone by its own complex gain: ``ρ`` falls, the
     coherence within each tone (the same ratio over the hops of one tone,
     ``Σ_k |Σ_{i∈k} H_i|² / Σ_k n_k Σ_{i∈k} |H_i|²``, expected
-    ``Σ_k (n_k² s + n_k) / Σ_k n_k² (s + 1)``) does not.
+    ``Σ_k (n_k² s + n_k) / Σ_k n_k² (s + 1)``) does not. An accelerating echo drifts in
+    phase against the constant-speed model: ``ρ`` falls, the coherence over runs of
+    :data:`~hil.estimation.refine_kernels.RUN_HOPS` consecutive hops (the same ratio summed
+    over every run, expected ``(R s + 1) / (R (s + 1))``) holds up to about 7 m/s² on ``att``.
     """
-    en0, rho, expected, rho_tone, expected_tone = fit_quality(
+    en0, rho, expected, rho_tone, expected_tone, rho_run, expected_run = fit_quality(
         *args, word.tones, n_tones, t_rx, alpha
     )
-    return en0, Coherence(rho, expected), Coherence(rho_tone, expected_tone)
+    return (
+        en0,
+        Coherence(rho, expected),
+        Coherence(rho_tone, expected_tone),
+        Coherence(rho_run, expected_run),
+    )

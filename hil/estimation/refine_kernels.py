@@ -21,6 +21,8 @@ import numba
 import numpy as np
 
 _JIT: dict[str, Any] = {"cache": True, "nogil": True}
+#: Hops of the runs over which :func:`fit_quality`'s third coherence is taken.
+RUN_HOPS = 3
 
 
 @numba.njit(**_JIT)
@@ -275,10 +277,10 @@ def fit_quality(
     prefix: Any, energy: Any, first: Any, tail: Any, alpha0: Any, centre: Any, slots: Any,
     k: Any, f: Any, dt_lo: Any, dt_hi: Any, amp2: Any, fs: float, hop_s: float,
     tones: Any, n_tones: int, t_rx: float, alpha: float,
-) -> tuple[float, float, float, float, float]:  # fmt: skip
-    """``(E/N0, ρ, E[ρ], ρ_tone, E[ρ_tone])`` of one candidate (:func:`hil.estimation.refine.
-    _fit_quality` states them); ``tones`` each hop's tone index (shape ``(M,)``, below
-    ``n_tones``). E/N0 is ``inf`` where the windows hold no noise."""
+) -> tuple[float, float, float, float, float, float, float]:  # fmt: skip
+    """``(E/N0, ρ, E[ρ], ρ_tone, E[ρ_tone], ρ_run, E[ρ_run])`` of one candidate
+    (:func:`hil.estimation.refine._fit_quality` states them); ``tones`` each hop's tone index
+    (shape ``(M,)``, below ``n_tones``). E/N0 is ``inf`` where the windows hold no noise."""
     m_hops = slots.shape[0]
     n_mom = prefix.shape[3]
     lo_sums = np.empty(n_mom, dtype=np.complex128)
@@ -295,7 +297,7 @@ def fit_quality(
     rho = mag2 / (m_hops * spread) if spread > 0.0 else 0.0
     noise = (signal - 2.0 * mag2 / es) / es  # es = Σ a_i² N_i: the windows' samples
     if not noise > 0.0:
-        return math.inf, rho, 1.0, 1.0, 1.0
+        return math.inf, rho, 1.0, 1.0, 1.0, 1.0, 1.0
     s_hop = max(spread / (es * noise) - 1.0, 0.0)
     expected = (m_hops * s_hop + 1.0) / (m_hops * (s_hop + 1.0))
     sk = np.zeros(n_tones, dtype=np.complex128)
@@ -317,4 +319,24 @@ def fit_quality(
         e_den += nk[g] * nk[g] * (s_hop + 1.0)
     a_hat = 2.0 * math.sqrt(mag2) / es
     en0 = a_hat * a_hat * es / (4.0 * noise)
-    return en0, rho, expected, num / den if den > 0.0 else 0.0, e_num / e_den
+    # Over runs of RUN_HOPS consecutive hops (a drifting phase: an accelerating echo).
+    sub = RUN_HOPS
+    s_num = 0.0
+    s_den = 0.0
+    e_snum = 0.0
+    e_sden = 0.0
+    for b in range(m_hops - sub + 1):
+        z = complex(0.0, 0.0)
+        p = 0.0
+        for i in range(b, b + sub):
+            z += h[i]
+            p += h[i].real * h[i].real + h[i].imag * h[i].imag
+        s_num += z.real * z.real + z.imag * z.imag
+        s_den += sub * p
+        e_snum += sub * sub * s_hop + sub
+        e_sden += sub * sub * (s_hop + 1.0)
+    rho_run = s_num / s_den if s_den > 0.0 else 0.0
+    return (
+        en0, rho, expected, num / den if den > 0.0 else 0.0, e_num / e_den, rho_run,
+        e_snum / e_sden,
+    )  # fmt: skip

@@ -40,8 +40,13 @@ from hil.estimation.refine import CoherentRefiner
 #: (3 of 55 kept at 0.96); a 35 m/s target with a 30 m/s span 0.03-0.58 / 0.29-0.95 (none
 #: kept); a tank echo with two close images 0.16-0.64 / 0.94-1.00, and with a tank's full
 #: set of images 0.0-0.7 / 0.1-0.9: not one echo (a tank reads the first arrival instead).
+#: RUN_COHERENCE_FRACTION: the coherence over runs of 3 consecutive hops (an accelerating
+#: echo drifts in phase against the constant-speed fit): 0.93-0.95 for a target braking at
+#: 5 m/s², 0.85+ at 7 m/s² (all kept), 0.62-0.81 at 10 m/s² (refused: the constant-speed fit
+#: over M hops no longer holds); still-echo ghosts and aliases p90 0.55-0.69.
 COHERENCE_FRACTION = 0.8
 TONE_COHERENCE_FRACTION = 0.96
+RUN_COHERENCE_FRACTION = 0.85
 
 #: ``unit_values(n_star, d0, tone)``: the M terms' unit correlators of the peak at sample
 #: ``n_star``, hypothesis ``d0``, tone index per term (shape ``(M,)``), weighted, complex.
@@ -172,7 +177,9 @@ class Readout:
         if self._refiner is not None:
             refined = self._refiner.refine(t_rx, alpha, hop_index)
             if refined is not None:
-                if not refined.is_echo(COHERENCE_FRACTION, TONE_COHERENCE_FRACTION):
+                if not refined.is_echo(
+                    COHERENCE_FRACTION, TONE_COHERENCE_FRACTION, RUN_COHERENCE_FRACTION
+                ):
                     self.incoherent_count += 1
                     return None
                 t_rx, alpha, bound = refined.t_s, refined.alpha, refined.bound
