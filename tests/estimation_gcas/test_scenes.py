@@ -15,6 +15,10 @@ import pytest
 
 from hil.estimation.base import Estimate
 from hil.estimation.gcas import GcasReceiver
+from sim_devices.acoustics.delay import TwoWayPath
+from sim_devices.acoustics.echo import AnalyticEcho
+from sim_devices.acoustics.trajectory import Fixed, Live
+from sim_devices.acoustics.truth import HopTruth, hop_truth
 
 from .conftest import FS, C, att_schedule, echo_samples, run_blocks, true_range
 
@@ -81,13 +85,8 @@ def test_a_target_inside_the_span_keeps_every_boundary(v: float, snr_db: float) 
     assert len(good) >= 85 and len(_wrong(est, 70.0, v)) == 0
 
 
-def _braking(decel_mps2: float) -> tuple[list[Estimate], dict[int, object]]:
+def _braking(decel_mps2: float) -> tuple[list[Estimate], dict[int, HopTruth]]:
     """A target closing at 15 m/s from 60 m and braking at ``decel_mps2``, 0 dB, 1 s."""
-    from sim_devices.acoustics.delay import TwoWayPath
-    from sim_devices.acoustics.echo import AnalyticEcho
-    from sim_devices.acoustics.trajectory import Fixed, Live
-    from sim_devices.acoustics.truth import hop_truth
-
     schedule = att_schedule()
 
     def position(t: np.ndarray) -> np.ndarray:
@@ -116,7 +115,7 @@ def test_a_braking_target_is_kept_and_ranged(decel: float) -> None:
     # of three keeps every detection.
     est, truth = _braking(decel)
     assert len(est) >= 85
-    dr = np.array([e.range_m - truth[e.hop_index + 1].range_m for e in est])  # type: ignore[attr-defined]
-    dv = np.array([e.speed_mps - truth[e.hop_index + 1].radial_speed_mps for e in est])  # type: ignore[attr-defined]
+    dr = np.array([e.range_m - truth[e.hop_index + 1].range_m for e in est])
+    dv = np.array([e.speed_mps - truth[e.hop_index + 1].radial_speed_mps for e in est])
     assert np.sqrt(np.mean(dr**2)) < 0.025
     assert abs(np.mean(dv) - decel * 0.05) < 0.01 * decel
