@@ -96,6 +96,10 @@ class RunOutcome:
     interrupted: bool = False
     error: str = ""
     latency_samples: int | None = None
+    #: ADC values the simulated board clipped (None: a real device, or not counted).
+    adc_clipped_samples: int | None = None
+    #: Peak ADC input (full scale) the simulated world predicts before the run; > 1 clips.
+    planned_adc_peak_fs: float | None = None
     #: Most the capture loop fell behind the board (samples held but not yet recorded and
     #: estimated), s of signal. The board's ring holds 8 s: past that, samples are lost.
     capture_backlog_max_s: float = 0.0
@@ -335,10 +339,11 @@ def _outcome(
     events = [] if board is None else [_event_tuple(run_event(a)) for a in board.annotations.all()]
     kind, text = stop_text(interrupted=ending.interrupted, error=ending.error)
     events.append((kind, start + samples, 0, text))
-    exact, xruns = None, (0, 0)
+    exact, xruns, clipped = None, (0, 0), None
     if tank is not None:
         tank.close()
         xruns = tank.dac_underruns, tank.adc_overruns
+        clipped = tank.adc_clipped_samples
         if samples > 0:
             with contextlib.suppress(Exception):
                 exact = _exact_truth(tank, exp, fs, start, estimates)
@@ -359,6 +364,7 @@ def _outcome(
         dropped_samples=int(board.ring.missing) if board is not None and board.ring else 0,
         dac_underruns=xruns[0],
         adc_overruns=xruns[1],
+        adc_clipped_samples=clipped,
         events=events,
         wall_s=time.monotonic() - wall0,
         signal_s=samples / fs,
