@@ -296,6 +296,33 @@ def build_tank_world(
     return target.world
 
 
+#: Stretch of the simulated ADC input rendered to plan the levels, s (past the tank's longest
+#: echo delay; the own echoes and tail are steady from the first sample).
+PLAN_SPAN_S = 0.05
+
+
+def planned_adc_peak_fs(exp: Experiment) -> float:
+    """The largest ADC input (full-scale units, 1 = the converter's full scale) the built-in
+    tank of ``exp`` produces with the target at the tow's closest point: echoes, the tank's
+    own echoes and tail, direct blast, reverberation and noise over :data:`PLAN_SPAN_S`
+    after the longest echo delay. Above 1 the run's ADC clips."""
+    x_near = max(exp.tow.start_m, exp.tow.end_m, key=lambda x: -float(
+        np.linalg.norm(exp.target_position(np.array([x]))[0] - np.asarray(exp.transducer_m))
+    ))  # fmt: skip
+
+    def parked(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return np.full(t.shape, float(x_near)), np.zeros(t.shape)
+
+    world = build_tank_world(exp, parked)
+    world.origin_index = 0
+    fs = float(exp.waveform.fs_hz)
+    settle = int(np.ceil(2.0 * np.sqrt(sum(s * s for s in exp.tank_size_m)) * 2 / 1400.0 * fs))
+    channel = world.channel
+    channel.read_components(settle)
+    peak = float(np.max(np.abs(channel.read_components(int(PLAN_SPAN_S * fs))["input_fs"])))
+    return peak
+
+
 def beam_axis(exp: Experiment) -> np.ndarray:
     """The simulated transducers' axis (unit vector): from the transducer towards the towed
     target's position at stage x = 0 (``tank.stage_origin_m``), along the tow line."""

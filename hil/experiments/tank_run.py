@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import contextlib
 import datetime as dt
+import logging
+import math
 import sys
 import threading
 import time
@@ -68,6 +70,9 @@ TELEMETRY_MAX_REPLY_S = 0.08
 #: after the stage stops (the last echoes still arrive), 50 ms waits for samples.
 TIMING_BLOCK_S, TIMING_TAIL_S, TIMING_WAIT_S = 0.01, 0.3, 0.05
 _INT16_SCALE = 1.0 / 32768.0
+
+
+_LOG = logging.getLogger("hil.run")
 
 
 @dataclass
@@ -235,6 +240,7 @@ def run_experiment(
     maps = CodewordMaps()
     setup = receiver_setup(exp)
     receiver = build_receiver(setup, exp.schedule, fs, **maps.hooks(exp.receiver))
+    planned = _planned_levels(exp, view)
     wall0 = time.monotonic()  # the run's wall time, without that set-up
     devices = RunDevices(virtual_time=virtual_time)
     recorder = RunRecorder(folder / "run.h5", _recording_options(exp, fs, setup, cals))
@@ -272,7 +278,29 @@ def run_experiment(
                 recorder.flush()
             if refused and devices.tank is not None:
                 devices.tank.close()  # no outcome follows: stop the simulated tank here
-        return _outcome(exp, folder, fs, cals, devices, recorder, session, maps, ending, wall0)
+        outcome = _outcome(exp, folder, fs, cals, devices, recorder, session, maps, ending, wall0)
+        outcome.planned_adc_peak_fs = planned
+        return outcome
+
+
+def _planned_levels(exp: Experiment, view: LiveView) -> float | None:
+    """The simulated tank's peak ADC input (full scale) planned before the run, with a
+    warning when it would clip; None for real devices (no model of their water)."""
+    if not (exp.board_url.startswith("sim://") and exp.stage_url.startswith("sim://")):
+        return None
+    from hil.experiments.sim_tank import planned_adc_peak_fs
+
+    peak = planned_adc_peak_fs(exp)
+    if peak > 1.0:
+        text = (
+            f"warning: the planned levels clip the ADC: peak input {peak:.2f} × full scale at"
+            " the tow's closest point (simulation.source_level_db, waveform.amplitude,"
+            " simulation.gain_db): lower one by "
+            f"{20.0 * math.log10(peak):.1f} dB or more"
+        )
+        _LOG.warning("%s", text)
+        view.update(text, force=True)
+    return peak
 
 
 def _transmit_and_tow(

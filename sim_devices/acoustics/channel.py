@@ -15,8 +15,8 @@ Components, each a pressure stream (µPa), summed per sample:
   (:class:`~sim_devices.acoustics.grid_echo.GridEcho`: the path solved exactly on a 4 ms grid
   and interpolated, delay error below 1e-11 s, transmit to float32 precision), with gain
   ``A · 10^(TS/20) · R · D_tx(u_out) D_rx(u_back) / (r1 r2) · 10^(−α_abs (r1 + r2)/20000)``:
-  target strength TS (dB re 1 m²), reflection ``R`` of the image pair (per leg, to
-  ``image_order`` reflections on each leg), the projector's pressure response ``D_tx`` in the
+  target strength TS (dB re 1 m²), reflection ``R`` of the image pair (to
+  ``image_order`` reflections per round trip), the projector's pressure response ``D_tx`` in the
   direction the path leaves it and the hydrophone's ``D_rx`` in the direction it arrives from
   (:mod:`~sim_devices.acoustics.directivity`), spherical spreading and absorption (dB/km) on
   each leg;
@@ -176,7 +176,7 @@ class Channel:
 
     ``sonar`` is the monostatic transducer's trajectory; ``tx_beam`` / ``rx_beam`` the
     projector's and the hydrophone's directivity (``None`` = omni), applied per path
-    direction; ``tank``/``image_order`` add the image paths (per leg, see
+    direction; ``tank``/``image_order`` add the image paths (per round trip, see
     :mod:`~sim_devices.acoustics.tank`); ``tank_echoes`` adds the tank's own echoes and
     late tail (:mod:`~sim_devices.acoustics.tank_response`, needs a sonar at rest);
     ``components`` (filled by :meth:`read_components`) are pressure streams in µPa.

@@ -56,7 +56,7 @@ def check_order(order: int, field: str = "tank.image_order") -> int:
         raise ConfigError(
             field,
             order,
-            f"an integer from 0 to {MAX_IMAGE_ORDER} (reflections per leg)",
+            f"an integer from 0 to {MAX_IMAGE_ORDER} (reflections)",
             "0 is the direct path only, 1 adds every single-bounce image",
         )
     return int(order)

@@ -58,9 +58,9 @@ from sim_devices.acoustics.trajectory import (
 OUTPUT_CHANNELS = (
     "received", "pressure", "echo", "reverberation", "noise", "direct", "tank",
 )  # fmt: skip
-#: Highest per-leg image order of the target's echoes: (2N+1)²(2N²+2N+3)²/9 echo paths, each
-#: solved and rendered per sample (49 at N = 1, 625 at 2, 3969 at 3).
-MAX_TARGET_IMAGE_ORDER = 3
+#: Highest image order of the target's echoes (reflections per round trip): 1, 13, 85, 377,
+#: 1289 echo paths for N = 0 … 4, each solved and rendered per sample.
+MAX_TARGET_IMAGE_ORDER = 4
 TRAJECTORIES = ("fixed", "constant-velocity", "radial", "piecewise")
 
 _TOP = ("preset", "family", "fs_hz", "duration_s", "seed", "waveform", "environment", "sonar",

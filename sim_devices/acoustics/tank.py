@@ -3,21 +3,21 @@
 The tank occupies ``0 <= x <= L``, ``0 <= y <= W``, ``-D <= z <= 0``: four walls, the bottom
 ``z = -D`` and the water surface ``z = 0`` (pressure release, reflection coefficient −1).
 
-Echo paths, per leg (:func:`echo_paths`). The target is a point scatterer: the field that
-reaches it from the transmitter is the tank's Green's function, the sum over the images of
-the transmitter (:mod:`sim_devices.acoustics.images`), and what it scatters reaches the
-receiver through the same sum over the images of the receiver. ``image_order = N`` keeps
-the images with at most N reflections *on each leg*, so the echo paths are every pair
-(outgoing image ``i``, returning image ``j``) with ``order(i) <= N`` and ``order(j) <= N``:
-``K²`` paths for ``K = (2N+1)(2N²+2N+3)/3`` images per leg (1, 49, 625 for N = 0, 1, 2),
-with gain ``R_i · R_j`` (each the product of the boundaries' coefficients it meets). Per leg
-and not per round trip, because each leg is a one-way propagation in its own right: the
-truncation is then the same Green's function truncation on both legs (reciprocal: the path
-``(i, j)`` of a monostatic sonar has the same length as ``(j, i)``), and the echo is the
-product of two truncated sums, so every bounce pattern of the outgoing wave meets every
-bounce pattern of the returning one. A round-trip cut (``order(i) + order(j) <= N``) would
-keep the wall-out/direct-back echo but drop the wall-out/wall-back one of the same wall,
-which is about as strong.
+Echo paths, per round trip (:func:`echo_paths`). The target is a point scatterer: the field
+that reaches it from the transmitter is the tank's Green's function, the sum over the images
+of the transmitter (:mod:`sim_devices.acoustics.images`), and what it scatters reaches the
+receiver through the same sum over the images of the receiver. The echo is the product of
+the two sums: every pair (outgoing image ``i``, returning image ``j``), with gain
+``R_i · R_j``, a product of ``order(i) + order(j)`` reflection coefficients.
+``image_order = N`` keeps the pairs with at most N reflections *in all*
+(``order(i) + order(j) <= N``): 1, 13, 85, 377, 1289 paths for N = 0 … 4.
+
+Per round trip and not per leg, because the order is then the expansion order in the
+reflection coefficients: a truncation at N keeps every term with N factors and none with
+more, as pyroomacoustics' ``max_order`` does for a one-way path and as the tank's own echoes
+(:mod:`~sim_devices.acoustics.tank_response`) do. A per-leg cut (N on each leg) would keep
+the wall-out/wall-back echo (two reflections) but drop out-direct/back-via-two-walls, of the
+same order and about as strong.
 
 Each path is a :class:`~sim_devices.acoustics.delay.TwoWayPath` from an image of the
 transmitter through the (real, moving) target to an image of the receiver; the images are
@@ -135,7 +135,8 @@ class EchoPath:
     ``tx_sign`` / ``rx_sign`` (shape ``(3,)``, ±1): the sign vectors of the transmitter's and
     receiver's images; the path leaves the transmitter along ``tx_sign ⊙ (target − tx)`` and
     reaches the receiver from ``rx_sign ⊙ (target − rx)`` (``tx``, ``rx`` the image
-    positions). ``orders``: reflections on the outgoing and on the returning leg.
+    positions). ``orders``: reflections on the outgoing and on the returning leg (their sum
+    is at most the image order).
     """
 
     name: str
@@ -148,19 +149,31 @@ class EchoPath:
     orders: tuple[int, int] = (0, 0)
 
 
+def echo_path_count(order: int) -> int:
+    """Number of echo paths of :func:`echo_paths` in a tank at ``order``.
+
+    >>> [echo_path_count(n) for n in range(5)]
+    [1, 13, 85, 377, 1289]
+    """
+    n = check_order(order)
+    per_order = [1] + [4 * k * k + 2 for k in range(1, n + 1)]  # images with k reflections
+    return sum(per_order[a] * per_order[b] for a in range(n + 1) for b in range(n + 1 - a))
+
+
 def echo_paths(
     sonar: Trajectory, target: Trajectory, tank: Tank | None, order: int
 ) -> Iterator[EchoPath]:
-    """The direct echo first, then in a tank every per-leg image pair up to ``order``
-    reflections on each leg (see the module docstring), outgoing image major.
+    """The direct echo first, then in a tank every image pair with at most ``order``
+    reflections in all (see the module docstring), outgoing image major.
 
     >>> from sim_devices.acoustics.trajectory import Fixed
     >>> t = Tank(10.0, 4.0, 3.0)
     >>> paths = list(echo_paths(Fixed((1, 2, -1)), Fixed((5, 2, -1)), t, 1))
     >>> len(paths), [p.name for p in paths][:3]
-    (49, ['direct', 'out direct / back wall x=0', 'out direct / back wall x=L'])
-    >>> paths[8].name, paths[8].gain, paths[8].orders
-    ('out wall x=0 / back wall x=0', 0.81, (1, 1))
+    (13, ['direct', 'out direct / back wall x=0', 'out direct / back wall x=L'])
+    >>> two = list(echo_paths(Fixed((1, 2, -1)), Fixed((5, 2, -1)), t, 2))
+    >>> len(two), [(p.gain, p.orders) for p in two if p.name == "out surface / back surface"]
+    (85, [(1.0, (1, 1))])
     """
     n = check_order(order)
     if tank is None or n == 0:
@@ -173,6 +186,8 @@ def echo_paths(
     ]
     for i in range(len(images)):
         for j in range(len(images)):
+            if images.order[i] + images.order[j] > n:
+                continue
             name = "direct" if i == j == 0 else f"out {images.label(i)} / back {images.label(j)}"
             yield EchoPath(
                 name,

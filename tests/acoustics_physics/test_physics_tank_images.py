@@ -14,7 +14,7 @@ from sim_devices.acoustics.beam import OmniBeam, PistonBeam
 from sim_devices.acoustics.delay import TwoWayPath
 from sim_devices.acoustics.directivity import TableBeam, Transducer
 from sim_devices.acoustics.images import box_images, check_order, image_count
-from sim_devices.acoustics.tank import Tank, echo_paths
+from sim_devices.acoustics.tank import Tank, echo_path_count, echo_paths
 from sim_devices.acoustics.tank_response import (
     TankEchoes,
     TankEchoSettings,
@@ -93,28 +93,54 @@ def test_surface_flips_the_sign_once_per_bounce() -> None:
     assert im.label(int(np.flatnonzero(im.counts[:, 5] == 2)[0])).endswith("surface×2")
 
 
-def test_per_leg_echo_paths_are_every_image_pair() -> None:
-    tank = Tank(*SIZE, wall_reflection=WALL, bottom_reflection=BOTTOM)
+@pytest.mark.parametrize("order", [1, 2])
+def test_echo_paths_are_the_image_pairs_up_to_the_order_per_round_trip(order: int) -> None:
+    tank = Tank(*SIZE, wall_reflection=WALL, bottom_reflection=BOTTOM, surface_reflection=TOP)
     sonar, target = (0.5, 2.0, -1.2), (6.0, 2.3, -0.9)
-    paths = list(echo_paths(Fixed(sonar), Fixed(target), tank, 1))
-    im = box_images(tank, 1)
-    assert len(paths) == 49 and paths[0].name == "direct"
-    # Each path (i, j): out from image i of the sonar, back to image j, gain R_i R_j, and the
-    # delay of the solved two-way path equals the image distances over c.
-    room = _room(1, sonar, target)
-    img = room.sources[0].images.T.copy()
+    paths = list(echo_paths(Fixed(sonar), Fixed(target), tank, order))
+    assert len(paths) == echo_path_count(order) == (13, 85)[order - 1]
+    assert paths[0].name == "direct"
+    # Every (out image i, back image j) with order(i) + order(j) <= N, each once: the images
+    # are pyroomacoustics' (sonar as the source), the gain R_i R_j, and the solved two-way
+    # delay the two image distances over c.
+    room = _room(order, sonar, target)
+    img = room.sources[0].images.T.astype(np.float64)
     img[:, 2] -= SIZE[2]
-    for k, p in enumerate(paths):
-        i, j = divmod(k, len(im))
-        assert p.gain == pytest.approx(im.gain[i] * im.gain[j], abs=1e-15)
-        assert p.orders == (im.order[i], im.order[j])
-        r_out = np.linalg.norm(np.asarray(target) - im.positions(sonar)[i])
-        r_back = np.linalg.norm(np.asarray(target) - im.positions(sonar)[j])
-        assert np.min(np.linalg.norm(img - im.positions(sonar)[i], axis=1)) < POS_TOL_M
+    img_gain = room.sources[0].damping[0].astype(np.float64)
+    img_order = room.sources[0].orders
+    pairs = set()
+    for p in paths:
+        out = p.tx.position(np.zeros(1))[0]
+        back = p.rx.position(np.zeros(1))[0]
+        i = int(np.argmin(np.linalg.norm(img - out, axis=1)))
+        j = int(np.argmin(np.linalg.norm(img - back, axis=1)))
+        assert (
+            np.linalg.norm(img[i] - out) < POS_TOL_M and np.linalg.norm(img[j] - back) < POS_TOL_M
+        )
+        assert p.orders == (img_order[i], img_order[j]) and sum(p.orders) <= order
+        assert p.gain == pytest.approx(img_gain[i] * img_gain[j], rel=1e-6)
+        r_out, r_back = (np.linalg.norm(np.asarray(target) - x) for x in (out, back))
         sol = TwoWayPath(p.tx, p.target, p.rx, C).solve(np.array([1.0]))
-        assert sol.delay_s[0] == pytest.approx((r_out + r_back) / C, abs=1e-13)
-    # a monostatic pair and its reverse have the same length (reciprocity)
-    assert paths[1 * 7 + 6].gain == paths[6 * 7 + 1].gain
+        assert sol.delay_s[0] == pytest.approx((r_out + r_back) / C, abs=1e-11)
+        pairs.add((i, j))
+    expected = {
+        (i, j)
+        for i in range(len(img))
+        for j in range(len(img))
+        if img_order[i] + img_order[j] <= order
+    }
+    assert pairs == expected
+
+
+def test_surface_out_and_back_is_second_order_with_a_positive_sign() -> None:
+    tank = Tank(*SIZE, wall_reflection=WALL, bottom_reflection=BOTTOM)
+    paths = {p.name: p for p in echo_paths(Fixed((0.5, 2, -1)), Fixed((8, 2, -1)), tank, 2)}
+    assert "out surface / back surface" not in {
+        p.name for p in echo_paths(Fixed((0.5, 2, -1)), Fixed((8, 2, -1)), tank, 1)
+    }
+    assert paths["out surface / back surface"].gain == 1.0
+    assert paths["out surface / back bottom"].gain == pytest.approx(-BOTTOM)
+    assert paths["out direct / back bottom+surface"].gain == pytest.approx(-BOTTOM)
 
 
 def test_sabine_matches_pyroomacoustics_and_eyring_with_uniform_absorption() -> None:
