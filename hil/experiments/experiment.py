@@ -62,7 +62,9 @@ run_up_m = 0.6
 run_down_m = 0.6
 
 [receiver]
-name = "gcas"
+# GCAS behind a one-code-period clutter canceller: the tank's own echoes and tail do not move,
+# and outshine the target (docs/tank-run.md, "The receiver in the tank").
+name = "gcas-mti"
 m_hops = 10
 max_speed_mps = 3.0
 max_range_m = 12.0
@@ -79,9 +81,7 @@ target_strength_db = -12.0
 sensitivity_db = -200.0
 gain_db = 10.0
 image_order = 1
-# The tank's own echoes are off: GCAS detects the strongest return before its first-arrival
-# readout cancels stationary clutter, and the walls outshine the target (docs/tank-run.md).
-tank_echoes = false
+tank_echoes = true
 tank_echo_order = 3
 late_tail = true
 transducer_beam = "piston"
@@ -499,7 +499,7 @@ def tank_receiver_options(
     (``>= 2 v_res``), and is off (0) otherwise, where it would remove the tow itself
     (tank-audio: ``v_res`` = 1.30 m/s, so tows below 2.6 m/s run without it).
     """
-    if receiver != "gcas":
+    if receiver not in ("gcas", "gcas-mti"):
         return options
     out = dict(options)
     if "reverb_speed_mps" in out:
