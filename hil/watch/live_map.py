@@ -56,7 +56,8 @@ class LiveCodewordMap:
             raise ConfigError(
                 "--map",
                 None if live is None else live.name,
-                "a recording whose live receiver is gcas or gcas-mti (those with a time–codeword map)",
+                "a recording whose live receiver is gcas or gcas-mti"
+                " (those with a time–codeword map)",
                 "watch it without --map",
             )
         setup = replay_setup(recording)
