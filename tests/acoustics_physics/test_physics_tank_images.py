@@ -4,6 +4,7 @@ method (``ShoeBox``) and the Sabine/Eyring formulas."""
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -34,7 +35,7 @@ POS_TOL_M = 4e-6
 WALL, BOTTOM, TOP = 0.8, 0.7, 0.95
 
 
-def _room(order: int, source: tuple[float, float, float], mic: tuple[float, float, float]):
+def _room(order: int, source: tuple[float, float, float], mic: tuple[float, float, float]) -> Any:
     """A ShoeBox of the tank in pyroomacoustics' frame (z up from the bottom)."""
     r = {"west": WALL, "east": WALL, "south": WALL, "north": WALL, "floor": BOTTOM,
          "ceiling": TOP}  # fmt: skip

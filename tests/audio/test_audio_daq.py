@@ -136,6 +136,7 @@ def test_full_scale_clips_to_int16_range() -> None:
     # Counted, not silent: the converter's 2.0s (64 per input, 2 inputs), and on the host
     # every value at a rail (+1.0, -1.0 and the clipped 2.0: 3 of 4 values) in the 256 - 64
     # captured samples after the 64-sample io delay.
+    assert isinstance(daq.backend, SimulatedDuplex)
     assert daq.backend.adc_clipped_samples == 2 * 64
     assert daq.adc_clipped_samples == 2 * 3 * (256 - 64) // 4
     assert alarms and all(a.kind is AnnotationKind.ALARM for a in alarms)
