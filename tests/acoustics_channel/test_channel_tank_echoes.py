@@ -112,3 +112,19 @@ def test_the_built_in_tank_plans_its_levels_and_warns_before_a_run_that_clips(
     assert peak is not None and peak > 1.0
     assert peak == pytest.approx(planned_adc_peak_fs(quiet) * 1000.0, rel=1e-6)
     assert "the planned levels clip the ADC" in caplog.text
+
+
+def test_the_experiment_file_refuses_bad_tank_physics_naming_the_key() -> None:
+    cases = [
+        ("image_order = 1", "image_order = 5", r"simulation\.image_order = 5 .*<= 4"),
+        ("tank_echo_order = 3", "tank_echo_order = 41", r"simulation\.tank_echo_order = 41"),
+        ('transducer_beam = "piston"', 'transducer_beam = "cardioid"',
+         r"simulation\.transducer_beam = 'cardioid' .*omni, piston"),
+        ("transducer_radius_m = 0.015", "transducer_radius_m = 0.0",
+         r"simulation\.transducer_radius_m = 0\.0 .*> 0"),
+        ("tank_echoes = true", 'tank_echoes = "yes"', r"simulation\.tank_echoes = 'yes'"),
+    ]  # fmt: skip
+    for old, new, message in cases:
+        assert old in DEFAULT_EXPERIMENT
+        with pytest.raises(ConfigError, match=message):
+            parse_experiment(DEFAULT_EXPERIMENT.replace(old, new))
