@@ -43,6 +43,7 @@ from sim_devices.acoustics.channel import (
     source_amplitude,
 )
 from sim_devices.acoustics.delay import OneWayPath, TwoWayPath
+from sim_devices.acoustics.directivity import Transducer
 from sim_devices.acoustics.echo import SampledEcho, TransmitHistory, history_capacity
 from sim_devices.acoustics.noise_generator import ShapedNoiseGenerator
 from sim_devices.acoustics.tank import Offset, Tank, echo_paths
@@ -72,7 +73,11 @@ class AcousticWorld:
     max_range_m:
         Longest echo path considered (sets the transmit history kept), m.
     tank, image_order:
-        Tank walls/bottom/surface image paths (order 0 or 1).
+        Tank walls/bottom/surface image paths, to ``image_order`` reflections per round trip
+        (:mod:`~sim_devices.acoustics.tank`). The tank's own echoes are not synthesised here
+        (they need the transmit ahead of each block: :class:`ScheduleWorld` has them).
+    tx_beam, rx_beam:
+        Projector and hydrophone directivity per path direction, or None (omni).
     absorption_db_per_km:
         Absorption applied on each leg, dB/km.
     direct_blast:
@@ -103,6 +108,8 @@ class AcousticWorld:
         max_range_m: float = 30.0,
         tank: Tank | None = None,
         image_order: int = 0,
+        tx_beam: Transducer | None = None,
+        rx_beam: Transducer | None = None,
         absorption_db_per_km: float = 0.0,
         direct_blast: DirectBlast | None = None,
         noise: ShapedNoiseGenerator | None = None,
@@ -144,7 +151,7 @@ class AcousticWorld:
         for tgt in targets:
             a = amp * 10.0 ** (tgt.target_strength_db / 20.0)
             for path in echo_paths(sonar, tgt.trajectory, tank, image_order):
-                gain = _EchoGain(a * path.gain, path, None, None, absorption_db_per_km)
+                gain = _EchoGain(a * path.gain, path, tx_beam, rx_beam, absorption_db_per_km)
                 solved = TwoWayPath(path.tx, path.target, path.rx, sound_speed_mps)
                 self._echoes.append(SampledEcho(self._history, solved, self.fs_hz, gain=gain))
         if direct_blast is not None:
