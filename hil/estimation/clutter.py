@@ -53,12 +53,14 @@ class PeriodCanceller:
         if period_samples < 1:
             raise ConfigError("period_samples", period_samples, ">= 1 sample")
         self.period = int(period_samples)
-        self._history = np.zeros(self.period)  # the last P input samples, oldest first
-        self._valid = 0  # how many of them are real (not before the start or a gap)
+        # The last P input samples as a ring: sample n sits at n mod P.
+        self._ring = np.zeros(self.period)
+        self._pos = 0  # ring slot of the next sample
+        self._valid = 0  # how many held samples are real (not before the start or a gap)
 
     def reset(self) -> None:
         """Forget the history: the next ``P`` outputs are zeros."""
-        self._history[:] = 0.0
+        self._ring[:] = 0.0
         self._valid = 0
 
     def process(self, block: ArrayLike, *, gap_before: int = 0) -> NDArray[np.float64]:
@@ -68,13 +70,20 @@ class PeriodCanceller:
         if gap_before:
             self.reset()
         p = self.period
-        joined = np.concatenate([self._history, x])
-        y = x - joined[: x.size]
+        y = np.empty_like(x)
+        done = 0
+        while done < x.size:  # at most ceil(n / P) + 1 slices: no per-sample loop
+            take = min(x.size - done, p - self._pos)
+            now = x[done : done + take]
+            before = self._ring[self._pos : self._pos + take]  # a view: P samples earlier
+            np.subtract(now, before, out=y[done : done + take])
+            before[:] = now
+            self._pos = (self._pos + take) % p
+            done += take
         # Outputs whose sample one period earlier is not real input are blanked.
         blank = max(0, min(x.size, p - self._valid))
         y[:blank] = 0.0
         self._valid = min(p, self._valid + x.size)
-        self._history = joined[-p:].copy()
         return y
 
 

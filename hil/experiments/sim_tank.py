@@ -318,8 +318,9 @@ def planned_adc_peak_fs(exp: Experiment) -> float:
     fs = float(exp.waveform.fs_hz)
     settle = int(np.ceil(2.0 * np.sqrt(sum(s * s for s in exp.tank_size_m)) * 2 / 1400.0 * fs))
     channel = world.channel
-    channel.read_components(settle)
-    peak = float(np.max(np.abs(channel.read_components(int(PLAN_SPAN_S * fs))["input_fs"])))
+    channel.read_components(settle, clip=False)
+    span = channel.read_components(int(PLAN_SPAN_S * fs), clip=False)["input_fs"]
+    peak = float(np.max(np.abs(span)))
     return peak
 
 

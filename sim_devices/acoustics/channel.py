@@ -252,8 +252,10 @@ class Channel:
 
         return TankEchoes(h, source, self.amplitude)
 
-    def read_components(self, n_samples: int) -> dict[str, FloatArray]:
-        """The next ``n_samples``: pressure of every component (µPa) and ``received`` counts."""
+    def read_components(self, n_samples: int, *, clip: bool = True) -> dict[str, FloatArray]:
+        """The next ``n_samples``: pressure of every component (µPa), the ADC input
+        ``input_fs`` (full scale) and, with ``clip``, the ``received`` samples (clipped and
+        counted). A simulated ADC that clips and counts itself reads with ``clip=False``."""
         if int(n_samples) != n_samples or n_samples < 0:
             raise ConfigError("n_samples", n_samples, "an integer >= 0")
         n, n0 = int(n_samples), int(self.position)
@@ -272,8 +274,9 @@ class Channel:
         )  # fmt: skip
         parts["pressure"] = total
         parts["input_fs"] = self.receiver.to_full_scale(total)
-        parts["received"], clipped = clip_full_scale(parts["input_fs"])
-        self.clipped_samples += clipped
+        if clip:
+            parts["received"], clipped = clip_full_scale(parts["input_fs"])
+            self.clipped_samples += clipped
         self.position += n
         return parts
 

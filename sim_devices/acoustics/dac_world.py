@@ -299,7 +299,7 @@ class ScheduleWorld:
         self._expected_first = first_sample + n
         out = np.zeros((n, self.adc_channels))
         # The converter's input, not clipped: the device's ADC clips and counts it.
-        out[:, 0] = self.channel.read_components(n)["input_fs"]
+        out[:, 0] = self.channel.read_components(n, clip=False)["input_fs"]
         if self.adc_channels > 1:
             drive = np.concatenate([self._monitor_tail, dac[:, 0]])
             out[:, 1] = drive[:n]
