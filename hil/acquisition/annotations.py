@@ -6,6 +6,9 @@ import threading
 from dataclasses import dataclass
 from enum import Enum
 
+#: Text of the alarm annotation a device raises when its ADC clipped (the run counts them).
+ADC_CLIPPING_TEXT = "ADC clipping"
+
 
 class AnnotationKind(Enum):
     """What an annotation records."""

@@ -95,6 +95,13 @@ def run(args: argparse.Namespace) -> int:
                 print(f"\rsimulate: {100.0 * done / n_total:5.1f} %", end="", file=sys.stderr)
     if not args.quiet:
         print(file=sys.stderr)
+    if channel.clipped_samples:
+        # Never silent: the ADC clipped (received.wav holds the clipped samples).
+        print(
+            f"simulate: warning: {channel.clipped_samples} received samples clipped at full"
+            " scale; lower sonar.source_level_db or sonar.gain_db",
+            file=sys.stderr,
+        )
     doc = schedule_document(sc.schedule, sc.fs_hz, sc.duration_s,
                             sound_speed_mps=sc.sound_speed_mps, spec=sc.spec.to_dict())  # fmt: skip
     write_schedule_file(args.out / "schedule.json", doc)
@@ -108,6 +115,7 @@ def run(args: argparse.Namespace) -> int:
         written += _plots(args.out, first, sc.fs_hz, rows)
     print(json.dumps({"out": str(args.out), "samples": n_total, "fs": sc.fs_hz,
                       "channels": list(sc.output_channels), "hop_boundaries": len(rows),
+                      "clipped_samples": channel.clipped_samples,
                       "files": written}))  # fmt: skip
     return 0
 

@@ -79,6 +79,7 @@ from hil.acquisition import (
     SampleGapDetector,
     SampleRing,
 )
+from hil.acquisition.annotations import ADC_CLIPPING_TEXT
 from hil.devices.board_settings import BoardSettings, to_wire_samples
 from hil.devices.clock import Clock, MonotonicClock, VirtualClock
 from hil.errors import ConfigError
@@ -349,6 +350,8 @@ class Board:
         self.ring: SampleRing | None = None
         self.clock_fit: SampleClockFit | None = None
         self.last_status: Status | None = None
+        #: STATUS reports with ADC_CLIPPING set (each: >= 1 clipped sample since the last).
+        self.adc_clipping_reports = 0
         self.version: Version | None = None
         self.capabilities: Capabilities | None = None
         self.log_lines: list[str] = []
@@ -870,6 +873,16 @@ class Board:
             count = (status.adc_overruns - before.adc_overruns) % (1 << 32)
             self._annotate(
                 AnnotationKind.ADC_OVERRUN, 0, f"{count} ADC overrun(s)", status.sample_index
+            )
+        if status.alarms & Alarm.ADC_CLIPPING:
+            # SPEC 5.8: the board latched it since the last STATUS; each report is an alarm.
+            self.adc_clipping_reports += 1
+            self._annotate(
+                AnnotationKind.ALARM,
+                0,
+                f"{ADC_CLIPPING_TEXT} since the last STATUS: the hydrophone input reached full"
+                " scale; lower the drive amplitude or the receive gain",
+                status.sample_index,
             )
         if status.alarms & Alarm.WATCHDOG_EXPIRED:
             self._streaming = False

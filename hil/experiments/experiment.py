@@ -62,7 +62,9 @@ run_up_m = 0.6
 run_down_m = 0.6
 
 [receiver]
-name = "gcas"
+# GCAS behind a one-code-period clutter canceller: the tank's own echoes and tail do not move,
+# and outshine the target (docs/tank-run.md, "The receiver in the tank").
+name = "gcas-mti"
 m_hops = 10
 max_speed_mps = 3.0
 max_range_m = 12.0
@@ -79,12 +81,27 @@ target_strength_db = -12.0
 sensitivity_db = -200.0
 gain_db = 10.0
 image_order = 1
+tank_echoes = true
+tank_echo_order = 3
+late_tail = true
+transducer_beam = "piston"
+transducer_radius_m = 0.015
+hydrophone_beam = "omni"
 noise_level_db = 55.0
 reverberation = true
 scattering_strength_db = -70.0
 time_scale = 0.4
 seed = 1
 """
+
+#: Image order limit (reflections per round trip) of the simulated target's echoes (1, 13,
+#: 85, 377, 1289 paths for 0 … 4, each rendered per sample) and of the tank's own echoes
+#: (one convolution, any order).
+MAX_TARGET_IMAGE_ORDER = 4
+MAX_TANK_ECHO_ORDER = 40
+#: Directivity of the simulated projector and hydrophone: omni, or a baffled circular
+#: piston of the given radius at the waveform's centre frequency.
+BEAM_KINDS = ("omni", "piston")
 
 _SECTIONS: dict[str, tuple[str, ...]] = {
     "run": ("name", "output_dir", "max_duration_s"),
@@ -108,6 +125,15 @@ _SECTIONS: dict[str, tuple[str, ...]] = {
         "sensitivity_db",
         "gain_db",
         "image_order",
+        "tank_echoes",
+        "tank_echo_order",
+        "late_tail",
+        "wall_reflection",
+        "bottom_reflection",
+        "transducer_beam",
+        "transducer_radius_m",
+        "hydrophone_beam",
+        "hydrophone_radius_m",
         "noise_level_db",
         "reverberation",
         "scattering_strength_db",
@@ -139,6 +165,15 @@ class SimulationSettings:
     sensitivity_db: float = -200.0
     gain_db: float = 30.0
     image_order: int = 1
+    tank_echoes: bool = False
+    tank_echo_order: int = 3
+    late_tail: bool = True
+    wall_reflection: float = 0.9
+    bottom_reflection: float = 0.9
+    transducer_beam: str = "piston"
+    transducer_radius_m: float = 0.015
+    hydrophone_beam: str = "omni"
+    hydrophone_radius_m: float = 0.015
     noise_level_db: float = 40.0
     reverberation: bool = True
     scattering_strength_db: float = -70.0
@@ -328,7 +363,20 @@ def parse_experiment(text: str, source: str = "<text>") -> Experiment:
             "sensitivity_db", -200.0, lo=-260.0, hi=-100.0, unit="dB re 1 V/µPa"
         ),
         gain_db=sim.number("gain_db", 30.0, lo=-20.0, hi=80.0, unit="dB"),
-        image_order=sim.integer("image_order", 1, lo=0, hi=1),
+        image_order=sim.integer("image_order", 1, lo=0, hi=MAX_TARGET_IMAGE_ORDER),
+        tank_echoes=sim.flag("tank_echoes", False),
+        tank_echo_order=sim.integer("tank_echo_order", 3, lo=0, hi=MAX_TANK_ECHO_ORDER),
+        late_tail=sim.flag("late_tail", True),
+        wall_reflection=sim.number("wall_reflection", 0.9, lo=-1.0, hi=1.0),
+        bottom_reflection=sim.number("bottom_reflection", 0.9, lo=-1.0, hi=1.0),
+        transducer_beam=sim.text("transducer_beam", "piston", BEAM_KINDS),
+        transducer_radius_m=sim.number(
+            "transducer_radius_m", 0.015, lo=0.0, lo_open=True, hi=1.0, unit="m"
+        ),
+        hydrophone_beam=sim.text("hydrophone_beam", "omni", BEAM_KINDS),
+        hydrophone_radius_m=sim.number(
+            "hydrophone_radius_m", 0.015, lo=0.0, lo_open=True, hi=1.0, unit="m"
+        ),
         noise_level_db=sim.number(
             "noise_level_db", 40.0, lo=-20.0, hi=120.0, unit="dB re 1 µPa²/Hz"
         ),
@@ -454,7 +502,7 @@ def tank_receiver_options(
     (``>= 2 v_res``), and is off (0) otherwise, where it would remove the tow itself
     (tank-audio: ``v_res`` = 1.30 m/s, so tows below 2.6 m/s run without it).
     """
-    if receiver != "gcas":
+    if receiver not in ("gcas", "gcas-mti"):
         return options
     out = dict(options)
     if "reverb_speed_mps" in out:

@@ -66,7 +66,7 @@ def outcome_from_recording(
         fs = rec.fs_hz
         origin = rec.origin_sample
         live = rec.metadata.receiver
-        if codeword_map and live is not None and live.name == "gcas":
+        if codeword_map and live is not None and live.name in ("gcas", "gcas-mti"):
             replay(rec, hooks=maps.hooks(live.name))
     stops = [text for _, _, _, text in events if text.startswith("stop: ")]
     if stops:

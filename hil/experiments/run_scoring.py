@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from hil.acquisition.annotations import ADC_CLIPPING_TEXT
 from hil.experiments.run_calibrations import true_stage_motion
 from hil.experiments.tank_run import STAGE_POLL_S, TELEMETRY_MAX_REPLY_S, RunOutcome
 
@@ -208,6 +209,13 @@ def summarize(outcome: RunOutcome) -> dict[str, Any]:
         "capture_backlog_max_s": round(outcome.capture_backlog_max_s, 3),
         "dac_underruns": outcome.dac_underruns,
         "adc_overruns": outcome.adc_overruns,
+        # Clipping is never silent: STATUS reports with ADC_CLIPPING (each an alarm event),
+        # the simulated board's exact count, and the level the simulation planned.
+        "adc_clipping_alarms": sum(
+            1 for _, _, _, text in outcome.events if ADC_CLIPPING_TEXT in text
+        ),
+        "adc_clipped_samples": outcome.adc_clipped_samples,
+        "planned_adc_peak_fs": outcome.planned_adc_peak_fs,
         "events": len(outcome.events),
         "interrupted": outcome.interrupted,
         "error": outcome.error,

@@ -97,6 +97,11 @@ class TankSimulation(Protocol):
     @property
     def adc_overruns(self) -> int: ...
 
+    @property
+    def adc_clipped_samples(self) -> int | None:
+        """ADC values the simulated board clipped (None: the board does not count them)."""
+        ...
+
     def align(self, rate_hz: float) -> None: ...
 
     def stage_time(self, world_t: np.ndarray) -> np.ndarray: ...
@@ -248,6 +253,7 @@ def build_tank_world(
     from sim_devices.acoustics.channel import Channel, DirectBlast, Receiver, Target
     from sim_devices.acoustics.dac_world import ScheduleWorld
     from sim_devices.acoustics.tank import Tank
+    from sim_devices.acoustics.tank_response import TankEchoSettings
     from sim_devices.acoustics.trajectory import Fixed, Live
 
     sim = exp.simulation
@@ -268,8 +274,19 @@ def build_tank_world(
         exp.sound_speed_mps,
         targets=[Target(live, sim.target_strength_db)],
         receiver=receiver,
-        tank=Tank(*exp.tank_size_m),
+        tank=Tank(
+            *exp.tank_size_m,
+            wall_reflection=sim.wall_reflection,
+            bottom_reflection=sim.bottom_reflection,
+        ),
         image_order=sim.image_order,
+        tank_echoes=(
+            TankEchoSettings(order=sim.tank_echo_order, tail=sim.late_tail, seed=sim.seed + 7)
+            if sim.tank_echoes
+            else None
+        ),
+        tx_beam=_transducer(exp, sim.transducer_beam, sim.transducer_radius_m),
+        rx_beam=_transducer(exp, sim.hydrophone_beam, sim.hydrophone_radius_m),
         direct_blast=DirectBlast(coupling_db=-80.0, separation_m=0.05),
         reverberation=ambient.reverberation,
         noise=ambient.noise,
@@ -277,6 +294,56 @@ def build_tank_world(
     )
     target.world = ScheduleWorld(channel, converter_delay_samples=delay, adc_channels=2)
     return target.world
+
+
+#: Stretch of the simulated ADC input rendered to plan the levels, s (past the tank's longest
+#: echo delay; the own echoes and tail are steady from the first sample).
+PLAN_SPAN_S = 0.05
+
+
+def planned_adc_peak_fs(exp: Experiment) -> float:
+    """The largest ADC input (full-scale units, 1 = the converter's full scale) the built-in
+    tank of ``exp`` produces with the target at the tow's closest point: echoes, the tank's
+    own echoes and tail, direct blast, reverberation and noise over :data:`PLAN_SPAN_S`
+    after the longest echo delay. Above 1 the run's ADC clips."""
+    x_near = max(exp.tow.start_m, exp.tow.end_m, key=lambda x: -float(
+        np.linalg.norm(exp.target_position(np.array([x]))[0] - np.asarray(exp.transducer_m))
+    ))  # fmt: skip
+
+    def parked(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return np.full(t.shape, float(x_near)), np.zeros(t.shape)
+
+    world = build_tank_world(exp, parked)
+    world.origin_index = 0
+    fs = float(exp.waveform.fs_hz)
+    settle = int(np.ceil(2.0 * np.sqrt(sum(s * s for s in exp.tank_size_m)) * 2 / 1400.0 * fs))
+    channel = world.channel
+    channel.read_components(settle, clip=False)
+    span = channel.read_components(int(PLAN_SPAN_S * fs), clip=False)["input_fs"]
+    peak = float(np.max(np.abs(span)))
+    return peak
+
+
+def beam_axis(exp: Experiment) -> np.ndarray:
+    """The simulated transducers' axis (unit vector): from the transducer towards the towed
+    target's position at stage x = 0 (``tank.stage_origin_m``), along the tow line."""
+    d = np.asarray(exp.stage_origin_m, dtype=float) - np.asarray(exp.transducer_m, dtype=float)
+    norm = float(np.sqrt(d @ d))
+    return d / norm if norm > 0 else np.asarray(exp.stage_axis, dtype=float)
+
+
+def _transducer(exp: Experiment, kind: str, radius_m: float) -> Any:
+    """A ``sim_devices`` transducer of ``kind`` (omni, or a piston of ``radius_m`` at the
+    waveform's centre frequency) on :func:`beam_axis`."""
+    from sim_devices.acoustics.beam import OmniBeam, PistonBeam
+    from sim_devices.acoustics.directivity import Transducer
+
+    pattern: Any = OmniBeam()
+    if kind == "piston":
+        pattern = PistonBeam.from_radius(
+            radius_m, float(exp.waveform.center_hz), float(exp.sound_speed_mps)
+        )
+    return Transducer(pattern, beam_axis(exp))
 
 
 def _hermite(t: np.ndarray, grid: np.ndarray, x: np.ndarray, v: np.ndarray, h: float) -> np.ndarray:
@@ -360,6 +427,7 @@ class SimulatedTankProcess:
         self._trajectory: tuple[np.ndarray, np.ndarray] | None = None
         self.dac_underruns = 0
         self.adc_overruns = 0
+        self.adc_clipped_samples: int | None = None
 
     def _ask(self, text: str) -> str:
         assert self._proc.stdin is not None and self._proc.stdout is not None
@@ -407,6 +475,8 @@ class SimulatedTankProcess:
                 counters = json.loads(self._ask("stop"))
                 self.dac_underruns = int(counters.get("dac_underruns", 0))
                 self.adc_overruns = int(counters.get("adc_overruns", 0))
+                clipped = counters.get("adc_clipped_samples")
+                self.adc_clipped_samples = None if clipped is None else int(clipped)
             with contextlib.suppress(Exception):
                 self._proc.wait(timeout=10)
             if self._proc.poll() is None:
@@ -458,6 +528,10 @@ def _serve(argv: list[str]) -> int:
             counters = {
                 "dac_underruns": int(tank.board_sim.call(lambda b: b.dac_underruns)),
                 "adc_overruns": int(tank.board_sim.call(lambda b: b.adc_overruns)),
+                # The C firmware's board counts clipping in C and reports only the alarm.
+                "adc_clipped_samples": tank.board_sim.call(
+                    lambda b: getattr(b, "adc_clipped_samples", None)
+                ),
             }
             t_end = tank.clock()
             grid = np.arange(t_first, t_end + 1e-3, 1e-3)

@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import contextlib
 import datetime as dt
+import logging
+import math
 import sys
 import threading
 import time
@@ -70,6 +72,9 @@ TIMING_BLOCK_S, TIMING_TAIL_S, TIMING_WAIT_S = 0.01, 0.3, 0.05
 _INT16_SCALE = 1.0 / 32768.0
 
 
+_LOG = logging.getLogger("hil.run")
+
+
 @dataclass
 class RunOutcome:
     """What a run produced (the report is built from it)."""
@@ -96,6 +101,10 @@ class RunOutcome:
     interrupted: bool = False
     error: str = ""
     latency_samples: int | None = None
+    #: ADC values the simulated board clipped (None: a real device, or not counted).
+    adc_clipped_samples: int | None = None
+    #: Peak ADC input (full scale) the simulated world predicts before the run; > 1 clips.
+    planned_adc_peak_fs: float | None = None
     #: Most the capture loop fell behind the board (samples held but not yet recorded and
     #: estimated), s of signal. The board's ring holds 8 s: past that, samples are lost.
     capture_backlog_max_s: float = 0.0
@@ -151,7 +160,7 @@ class CodewordMaps:
 
     def hooks(self, receiver: str) -> dict[str, Any]:
         """The receiver options that feed it (GCAS only)."""
-        return {"on_map": self.on_map} if receiver == "gcas" else {}
+        return {"on_map": self.on_map} if receiver in ("gcas", "gcas-mti") else {}
 
 
 def receiver_setup(exp: Experiment) -> ReceiverSetup:
@@ -231,6 +240,7 @@ def run_experiment(
     maps = CodewordMaps()
     setup = receiver_setup(exp)
     receiver = build_receiver(setup, exp.schedule, fs, **maps.hooks(exp.receiver))
+    planned = _planned_levels(exp, view)
     wall0 = time.monotonic()  # the run's wall time, without that set-up
     devices = RunDevices(virtual_time=virtual_time)
     recorder = RunRecorder(folder / "run.h5", _recording_options(exp, fs, setup, cals))
@@ -268,7 +278,29 @@ def run_experiment(
                 recorder.flush()
             if refused and devices.tank is not None:
                 devices.tank.close()  # no outcome follows: stop the simulated tank here
-        return _outcome(exp, folder, fs, cals, devices, recorder, session, maps, ending, wall0)
+        outcome = _outcome(exp, folder, fs, cals, devices, recorder, session, maps, ending, wall0)
+        outcome.planned_adc_peak_fs = planned
+        return outcome
+
+
+def _planned_levels(exp: Experiment, view: LiveView) -> float | None:
+    """The simulated tank's peak ADC input (full scale) planned before the run, with a
+    warning when it would clip; None for real devices (no model of their water)."""
+    if not (exp.board_url.startswith("sim://") and exp.stage_url.startswith("sim://")):
+        return None
+    from hil.experiments.sim_tank import planned_adc_peak_fs
+
+    peak = planned_adc_peak_fs(exp)
+    if peak > 1.0:
+        text = (
+            f"warning: the planned levels clip the ADC: peak input {peak:.2f} × full scale at"
+            " the tow's closest point (simulation.source_level_db, waveform.amplitude,"
+            " simulation.gain_db): lower one by "
+            f"{20.0 * math.log10(peak):.1f} dB or more"
+        )
+        _LOG.warning("%s", text)
+        view.update(text, force=True)
+    return peak
 
 
 def _transmit_and_tow(
@@ -335,10 +367,11 @@ def _outcome(
     events = [] if board is None else [_event_tuple(run_event(a)) for a in board.annotations.all()]
     kind, text = stop_text(interrupted=ending.interrupted, error=ending.error)
     events.append((kind, start + samples, 0, text))
-    exact, xruns = None, (0, 0)
+    exact, xruns, clipped = None, (0, 0), None
     if tank is not None:
         tank.close()
         xruns = tank.dac_underruns, tank.adc_overruns
+        clipped = tank.adc_clipped_samples
         if samples > 0:
             with contextlib.suppress(Exception):
                 exact = _exact_truth(tank, exp, fs, start, estimates)
@@ -359,6 +392,7 @@ def _outcome(
         dropped_samples=int(board.ring.missing) if board is not None and board.ring else 0,
         dac_underruns=xruns[0],
         adc_overruns=xruns[1],
+        adc_clipped_samples=clipped,
         events=events,
         wall_s=time.monotonic() - wall0,
         signal_s=samples / fs,

@@ -94,6 +94,11 @@ class VirtualTank:
         """ADC overruns the simulated board counted."""
         return int(self._board.adc_overruns)
 
+    @property
+    def adc_clipped_samples(self) -> int:
+        """ADC values the simulated board clipped at conversion."""
+        return int(self._board.adc_clipped_samples)
+
     def lost(self) -> DeviceLostError | None:
         """Never: the simulation is this process."""
         return None

@@ -52,11 +52,12 @@ class LiveCodewordMap:
         self._rec = recording
         self._lock = lock
         live = recording.metadata.receiver
-        if live is None or live.name != "gcas":
+        if live is None or live.name not in ("gcas", "gcas-mti"):
             raise ConfigError(
                 "--map",
                 None if live is None else live.name,
-                "a recording whose live receiver is gcas (the one with a time–codeword map)",
+                "a recording whose live receiver is gcas or gcas-mti"
+                " (those with a time–codeword map)",
                 "watch it without --map",
             )
         setup = replay_setup(recording)

@@ -4,17 +4,25 @@ Everything is in calibrated units. The transmit ``s(t)`` is the unit-amplitude s
 the source level ``SL`` (dB re 1 µPa @ 1 m, RMS) sets its pressure amplitude at 1 m,
 ``A = √2 · 10^(SL/20)`` µPa·m. Received pressures are in µPa. The receiver turns pressure into
 volts with its sensitivity (dB re 1 V/µPa) and gain (dB) and into ADC counts, float samples in
-``[-1, 1)`` with ``full_scale_v`` volts at 1 (clipped beyond).
+``[-1, 1)`` with ``full_scale_v`` volts at 1. Beyond that the ADC clips, as a converter does,
+and the clipped samples are counted (:attr:`Channel.clipped_samples`): a simulation never
+clips silently. ``input_fs`` is the converter's input before clipping, for a simulated ADC
+(board, audio interface) that clips and counts itself.
 
 Components, each a pressure stream (µPa), summed per sample:
 
 - target echoes: every target over every :func:`~sim_devices.acoustics.tank.echo_paths` path
   (:class:`~sim_devices.acoustics.grid_echo.GridEcho`: the path solved exactly on a 4 ms grid
   and interpolated, delay error below 1e-11 s, transmit to float32 precision), with gain
-  ``A · 10^(TS/20) · R · B(θ) / (r1 r2) · 10^(−α_abs (r1 + r2)/20000)``: target strength TS
-  (dB re 1 m²), reflection ``R`` of image paths, two-way beam response ``B`` of the direction
-  to the target, spherical spreading and absorption (dB/km) on each leg;
+  ``A · 10^(TS/20) · R · D_tx(u_out) D_rx(u_back) / (r1 r2) · 10^(−α_abs (r1 + r2)/20000)``:
+  target strength TS (dB re 1 m²), reflection ``R`` of the image pair (to
+  ``image_order`` reflections per round trip), the projector's pressure response ``D_tx`` in the
+  direction the path leaves it and the hydrophone's ``D_rx`` in the direction it arrives from
+  (:mod:`~sim_devices.acoustics.directivity`), spherical spreading and absorption (dB/km) on
+  each leg;
 - the direct blast (:class:`DirectBlast`);
+- the tank's own echoes, transmitter → boundaries → hydrophone, and its diffuse late tail
+  (:class:`~sim_devices.acoustics.tank_response.TankEchoes`, ``tank``);
 - volume reverberation (:class:`~sim_devices.acoustics.reverberation.VolumeReverberation`);
 - noise (:class:`~sim_devices.acoustics.noise_generator.ShapedNoiseGenerator`).
 
@@ -38,13 +46,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hil.errors import ConfigError
-from sim_devices.acoustics.beam import TwoWayAmplitudeTable
 from sim_devices.acoustics.delay import OneWayPath, PathSolution, TwoWayPath
+from sim_devices.acoustics.directivity import Transducer
 from sim_devices.acoustics.echo import TransmitWaveform
 from sim_devices.acoustics.grid_echo import EchoBank, GridEcho
 from sim_devices.acoustics.noise_generator import ShapedNoiseGenerator
 from sim_devices.acoustics.reverberation import VolumeReverberation
-from sim_devices.acoustics.tank import Offset, Tank, echo_paths
+from sim_devices.acoustics.tank import EchoPath, Offset, Tank, echo_paths
+from sim_devices.acoustics.tank_response import TankEchoes, TankEchoSettings, tank_impulse_response
 from sim_devices.acoustics.trajectory import FloatArray, Trajectory
 
 #: Echo samples rendered at a time (the stream is cut into frames of this many samples).
@@ -81,10 +90,28 @@ class Receiver:
         """V per µPa of the hydrophone and amplifier."""
         return 10.0 ** ((self.sensitivity_db + self.gain_db) / 20.0)
 
+    def to_full_scale(self, pressure_upa: FloatArray) -> FloatArray:
+        """The ADC input in full-scale units (1 = ``full_scale_v``), not clipped."""
+        return pressure_upa * (self.volts_per_upa / self.full_scale_v)
+
     def to_counts(self, pressure_upa: FloatArray) -> FloatArray:
         """Float ADC samples in ``[-1, 1)`` (clipped) for pressures in µPa."""
-        x = pressure_upa * (self.volts_per_upa / self.full_scale_v)
-        return np.clip(x, -1.0, 1.0 - 2.0**-23)
+        return clip_full_scale(self.to_full_scale(pressure_upa))[0]
+
+
+#: Largest float ADC sample (a 24-bit converter's top code).
+TOP_CODE = 1.0 - 2.0**-23
+
+
+def clip_full_scale(x: FloatArray) -> tuple[FloatArray, int]:
+    """``x`` (full-scale units) clipped to ``[-1, TOP_CODE]`` as an ADC does, and the number
+    of samples that were beyond.
+
+    >>> clip_full_scale(np.array([0.5, 1.5, -2.0]))
+    (array([ 0.5       ,  0.99999988, -1.        ]), 2)
+    """
+    over = int(np.count_nonzero((x > TOP_CODE) | (x < -1.0)))
+    return np.clip(x, -1.0, TOP_CODE), over
 
 
 @dataclass(frozen=True)
@@ -96,19 +123,22 @@ class Target:
 
 
 class _EchoGain:
-    """Path gain hook (see the module docstring) for one echo path."""
+    """Path gain hook (see the module docstring) for one echo path: spreading and
+    absorption on both legs, the projector's response in the direction the path leaves it
+    and the hydrophone's in the direction it arrives from."""
 
     def __init__(
         self,
         amplitude: float,
-        rx: Trajectory,
-        beam: TwoWayAmplitudeTable | None,
-        axis: FloatArray,
+        path: EchoPath,
+        tx: Transducer | None,
+        rx: Transducer | None,
         absorption_db_per_km: float,
-        target: Trajectory,
     ) -> None:
-        self.amplitude, self.rx, self.beam, self.axis = amplitude, rx, beam, axis
-        self.absorption, self.target = absorption_db_per_km, target
+        self.amplitude, self.path = amplitude, path
+        self.tx = None if tx is None or tx.omni else tx
+        self.rx = None if rx is None or rx.omni else rx
+        self.absorption = absorption_db_per_km
 
     def __call__(self, sol: PathSolution) -> FloatArray:
         r1, r2 = sol.leg_lengths_m
@@ -117,14 +147,13 @@ class _EchoGain:
         g = self.amplitude / (r1 * r2)
         if self.absorption > 0:
             g = g * 10.0 ** (-self.absorption * (r1 + r2) / 20000.0)
-        if self.beam is not None and sol.t_bounce_s is not None:
-            d = self.target.position(sol.t_bounce_s) - self.rx.position(sol.t_rx_s)
-            # Per coordinate, not d @ axis: a BLAS product may round differently for
-            # different array lengths, and the grid solves nodes in batches.
-            dx, dy, dz = d[:, 0], d[:, 1], d[:, 2]
-            ax = self.axis
-            cos_t = (dx * ax[0] + dy * ax[1] + dz * ax[2]) / np.sqrt(dx * dx + dy * dy + dz * dz)
-            g = g * self.beam(cos_t)
+        if (self.tx is not None or self.rx is not None) and sol.t_bounce_s is not None:
+            p = self.path
+            at = p.target.position(sol.t_bounce_s)
+            if self.tx is not None:
+                g = g * self.tx.response((at - p.tx.position(sol.t_emit_s)) * p.tx_sign)
+            if self.rx is not None:
+                g = g * self.rx.response((at - p.rx.position(sol.t_rx_s)) * p.rx_sign)
         return np.asarray(g, dtype=np.float64)
 
 
@@ -145,8 +174,11 @@ class DirectBlast:
 class Channel:
     """The composed channel; see the module docstring.
 
-    ``sonar`` is the monostatic transducer's trajectory; ``beam``/``beam_axis`` its two-way
-    pattern (``None`` = omni); ``tank``/``image_order`` add image paths;
+    ``sonar`` is the monostatic transducer's trajectory; ``tx_beam`` / ``rx_beam`` the
+    projector's and the hydrophone's directivity (``None`` = omni), applied per path
+    direction; ``tank``/``image_order`` add the image paths (per round trip, see
+    :mod:`~sim_devices.acoustics.tank`); ``tank_echoes`` adds the tank's own echoes and
+    late tail (:mod:`~sim_devices.acoustics.tank_response`, needs a sonar at rest);
     ``components`` (filled by :meth:`read_components`) are pressure streams in µPa.
     """
 
@@ -157,29 +189,29 @@ class Channel:
     sound_speed_mps: float
     targets: Sequence[Target] = ()
     receiver: Receiver = field(default_factory=Receiver)
-    beam: TwoWayAmplitudeTable | None = None
-    beam_axis: FloatArray = field(default_factory=lambda: np.array([1.0, 0.0, 0.0]))
+    tx_beam: Transducer | None = None
+    rx_beam: Transducer | None = None
     absorption_db_per_km: float = 0.0
     tank: Tank | None = None
     image_order: int = 0
+    tank_echoes: TankEchoSettings | None = None
     direct_blast: DirectBlast | None = None
     reverberation: VolumeReverberation | None = None
     noise: ShapedNoiseGenerator | None = None
     noise_scale: float = 1.0
     position: int = 0
+    #: Received samples clipped so far (the ADC's input beyond full scale).
+    clipped_samples: int = 0
 
     def __post_init__(self) -> None:
         self.amplitude = source_amplitude(self.source_level_db)
-        axis = np.asarray(self.beam_axis, dtype=np.float64)
-        self.beam_axis = axis / np.sqrt(axis @ axis)
         self._echoes: list[GridEcho] = []
         for tgt in self.targets:
             a = self.amplitude * 10.0 ** (tgt.target_strength_db / 20.0)
             for path in echo_paths(self.sonar, tgt.trajectory, self.tank, self.image_order):
                 gain = _EchoGain(
-                    a * path.gain, path.rx, self.beam, self.beam_axis,
-                    self.absorption_db_per_km, path.target,
-                )  # fmt: skip
+                    a * path.gain, path, self.tx_beam, self.rx_beam, self.absorption_db_per_km
+                )
                 solved = TwoWayPath(path.tx, path.target, path.rx, self.sound_speed_mps)
                 self._echoes.append(GridEcho(self.waveform, solved, self.fs_hz, gain=gain))
         self._blast: GridEcho | None = None
@@ -191,25 +223,60 @@ class Channel:
                 self.waveform, OneWayPath(tx, self.sonar, self.sound_speed_mps), self.fs_hz,
                 amplitude=a,
             )  # fmt: skip
+        self._tank: TankEchoes | None = None
+        if self.tank_echoes is not None:
+            self._tank = self._build_tank_echoes(self.tank_echoes)
         self._echo_frames = _Frames(EchoBank(self._echoes).block)
         self._blast_frames = _Frames(EchoBank([self._blast] if self._blast else []).block)
 
-    def read_components(self, n_samples: int) -> dict[str, FloatArray]:
-        """The next ``n_samples``: pressure of every component (µPa) and ``received`` counts."""
+    def _build_tank_echoes(self, settings: TankEchoSettings) -> TankEchoes:
+        if self.tank is None:
+            raise ConfigError("tank.own_echoes", True, "a [tank] to echo in", "give tank.size_m")
+        if self.sonar.max_speed_mps != 0.0:
+            raise ConfigError(
+                "tank.own_echoes",
+                True,
+                "a sonar at rest (its tank response is one fixed impulse response)",
+                "set sonar.velocity_mps to zero or turn tank.own_echoes off",
+            )
+        at = self.sonar.position(np.zeros(1))[0]
+        h = tank_impulse_response(
+            self.tank, at, at, self.sound_speed_mps, self.fs_hz, settings,
+            tx=self.tx_beam, rx=self.rx_beam, absorption_db_per_km=self.absorption_db_per_km,
+        )  # fmt: skip
+        fs, waveform = self.fs_hz, self.waveform
+
+        def source(n0: int, count: int) -> FloatArray:
+            n = np.arange(n0, n0 + count, dtype=np.int64)
+            return np.asarray(waveform.evaluate(n / fs), dtype=np.float64)
+
+        return TankEchoes(h, source, self.amplitude)
+
+    def read_components(self, n_samples: int, *, clip: bool = True) -> dict[str, FloatArray]:
+        """The next ``n_samples``: pressure of every component (µPa), the ADC input
+        ``input_fs`` (full scale) and, with ``clip``, the ``received`` samples (clipped and
+        counted). A simulated ADC that clips and counts itself reads with ``clip=False``."""
         if int(n_samples) != n_samples or n_samples < 0:
             raise ConfigError("n_samples", n_samples, "an integer >= 0")
         n, n0 = int(n_samples), int(self.position)
         parts = {"echo": self._echo_frames.read(n0, n) if self._echoes else np.zeros(n)}
         parts["direct"] = self._blast_frames.read(n0, n) if self._blast else np.zeros(n)
+        parts["tank"] = self._tank.generate(n) if self._tank is not None else np.zeros(n)
         parts["reverberation"] = (
             self.reverberation.generate(n) if self.reverberation is not None else np.zeros(n)
         )
         parts["noise"] = (
             self.noise_scale * self.noise.generate(n) if self.noise is not None else np.zeros(n)
         )
-        total = parts["echo"] + parts["direct"] + parts["reverberation"] + parts["noise"]
+        total = (
+            parts["echo"] + parts["direct"] + parts["tank"] + parts["reverberation"]
+            + parts["noise"]
+        )  # fmt: skip
         parts["pressure"] = total
-        parts["received"] = self.receiver.to_counts(total)
+        parts["input_fs"] = self.receiver.to_full_scale(total)
+        if clip:
+            parts["received"], clipped = clip_full_scale(parts["input_fs"])
+            self.clipped_samples += clipped
         self.position += n
         return parts
 

@@ -17,8 +17,10 @@ real converters have tens of samples): ADC sample ``n`` holds the pressure at
 ``t = (n − converter_delay_samples) / fs``. That latency also keeps the world causal: an echo
 never needs DAC samples later than those already emitted, even for the direct blast.
 
-ADC channels: channel 0 is the hydrophone (counts in ``[-1, 1)`` through the
-:class:`~sim_devices.acoustics.channel.Receiver`); further channels monitor the DAC drive
+ADC channels: channel 0 is the hydrophone, in full-scale units through the
+:class:`~sim_devices.acoustics.channel.Receiver` and *not clipped*: the device (simulated
+board, simulated audio interface) converts it as its ADC does, clipping beyond full scale
+and counting the clipped samples; further channels monitor the DAC drive
 (channel ``k`` = DAC channel ``k − 1``, delayed by the converter latency), the reference a lab
 records next to the hydrophone for latency and level calibration.
 """
@@ -41,6 +43,7 @@ from sim_devices.acoustics.channel import (
     source_amplitude,
 )
 from sim_devices.acoustics.delay import OneWayPath, TwoWayPath
+from sim_devices.acoustics.directivity import Transducer
 from sim_devices.acoustics.echo import SampledEcho, TransmitHistory, history_capacity
 from sim_devices.acoustics.noise_generator import ShapedNoiseGenerator
 from sim_devices.acoustics.tank import Offset, Tank, echo_paths
@@ -70,7 +73,11 @@ class AcousticWorld:
     max_range_m:
         Longest echo path considered (sets the transmit history kept), m.
     tank, image_order:
-        Tank walls/bottom/surface image paths (order 0 or 1).
+        Tank walls/bottom/surface image paths, to ``image_order`` reflections per round trip
+        (:mod:`~sim_devices.acoustics.tank`). The tank's own echoes are not synthesised here
+        (they need the transmit ahead of each block: :class:`ScheduleWorld` has them).
+    tx_beam, rx_beam:
+        Projector and hydrophone directivity per path direction, or None (omni).
     absorption_db_per_km:
         Absorption applied on each leg, dB/km.
     direct_blast:
@@ -101,6 +108,8 @@ class AcousticWorld:
         max_range_m: float = 30.0,
         tank: Tank | None = None,
         image_order: int = 0,
+        tx_beam: Transducer | None = None,
+        rx_beam: Transducer | None = None,
         absorption_db_per_km: float = 0.0,
         direct_blast: DirectBlast | None = None,
         noise: ShapedNoiseGenerator | None = None,
@@ -138,14 +147,11 @@ class AcousticWorld:
         self._expected_first: int | None = None
         self._origin = 0
         amp = source_amplitude(source_level_db)
-        axis = np.array([1.0, 0.0, 0.0])
         self._echoes: list[SampledEcho] = []
         for tgt in targets:
             a = amp * 10.0 ** (tgt.target_strength_db / 20.0)
             for path in echo_paths(sonar, tgt.trajectory, tank, image_order):
-                gain = _EchoGain(
-                    a * path.gain, path.rx, None, axis, absorption_db_per_km, path.target
-                )
+                gain = _EchoGain(a * path.gain, path, tx_beam, rx_beam, absorption_db_per_km)
                 solved = TwoWayPath(path.tx, path.target, path.rx, sound_speed_mps)
                 self._echoes.append(SampledEcho(self._history, solved, self.fs_hz, gain=gain))
         if direct_blast is not None:
@@ -207,7 +213,8 @@ class AcousticWorld:
             pressure += self.noise.generate(n)
         if self.extra_pressure is not None:
             pressure += self.extra_pressure(first_sample, n)
-        out[:, 0] = self.receiver.to_counts(pressure)
+        # The converter's input, not clipped: the device's ADC clips and counts it.
+        out[:, 0] = self.receiver.to_full_scale(pressure)
         if self.adc_channels > 1:
             # DAC monitor channels: the drive, delayed by the converter latency.
             idx = np.arange(n) + (first_sample - self._origin) - self.converter_delay
@@ -291,7 +298,8 @@ class ScheduleWorld:
             )
         self._expected_first = first_sample + n
         out = np.zeros((n, self.adc_channels))
-        out[:, 0] = self.channel.read(n)
+        # The converter's input, not clipped: the device's ADC clips and counts it.
+        out[:, 0] = self.channel.read_components(n, clip=False)["input_fs"]
         if self.adc_channels > 1:
             drive = np.concatenate([self._monitor_tail, dac[:, 0]])
             out[:, 1] = drive[:n]

@@ -40,10 +40,13 @@ from sim_devices.acoustics.beam import (
     TwoWayAmplitudeTable,
 )
 from sim_devices.acoustics.channel import Channel, DirectBlast, Receiver, Target
+from sim_devices.acoustics.directivity import TableBeam, Transducer
+from sim_devices.acoustics.images import MAX_IMAGE_ORDER
 from sim_devices.acoustics.noise_generator import ShapedNoiseGenerator
 from sim_devices.acoustics.reverberation import ReverberationSettings, VolumeReverberation
 from sim_devices.acoustics.sound_speed import tank_sound_speed, unesco_sound_speed
 from sim_devices.acoustics.tank import Tank
+from sim_devices.acoustics.tank_response import T60_FORMULAS, TankEchoSettings
 from sim_devices.acoustics.trajectory import (
     ConstantVelocity,
     Fixed,
@@ -52,7 +55,12 @@ from sim_devices.acoustics.trajectory import (
     Trajectory,
 )
 
-OUTPUT_CHANNELS = ("received", "pressure", "echo", "reverberation", "noise", "direct")
+OUTPUT_CHANNELS = (
+    "received", "pressure", "echo", "reverberation", "noise", "direct", "tank",
+)  # fmt: skip
+#: Highest image order of the target's echoes (reflections per round trip): 1, 13, 85, 377,
+#: 1289 echo paths for N = 0 … 4, each solved and rendered per sample.
+MAX_TARGET_IMAGE_ORDER = 4
 TRAJECTORIES = ("fixed", "constant-velocity", "radial", "piecewise")
 
 _TOP = ("preset", "family", "fs_hz", "duration_s", "seed", "waveform", "environment", "sonar",
@@ -88,11 +96,14 @@ class Scenario:
     receiver: Receiver
     beam: BeamPattern
     beam_axis: FloatArray
+    hydrophone_beam: BeamPattern
+    hydrophone_axis: FloatArray
     targets: list[TargetSpec]
     noise: dict[str, Any] | None
     reverberation: dict[str, Any] | None
     tank: Tank | None
     image_order: int
+    tank_echoes: TankEchoSettings | None
     direct_blast: DirectBlast | None
     output_channels: tuple[str, ...]
     plots: bool
@@ -201,7 +212,7 @@ def parse_scenario(data: dict[str, Any]) -> Scenario:
     absorption = env.number("absorption_db_per_km", 0.0, lo=0.0, hi=1000.0, unit="dB/km")
 
     sonar = top.sub("sonar", ("position_m", "velocity_mps", "source_level_db", "sensitivity_db",
-                              "gain_db", "full_scale_v", "beam"))  # fmt: skip
+                              "gain_db", "full_scale_v", "beam", "hydrophone_beam"))  # fmt: skip
     sonar_p = sonar.vector("position_m", (0.0, 0.0, 0.0))
     sonar_v = sonar.vector("velocity_mps", (0.0, 0.0, 0.0))
     sonar_speed = float(np.linalg.norm(sonar_v))
@@ -213,11 +224,19 @@ def parse_scenario(data: dict[str, Any]) -> Scenario:
         sonar.number("gain_db", 0.0, lo=-60.0, hi=120.0, unit="dB"),
         sonar.number("full_scale_v", 1.0, lo=0.0, lo_open=True, unit="V"),
     )
-    bt = sonar.sub("beam", ("type", "ka", "radius_m", "axis"))
-    beam_kind = bt.text("type", "omni", ("omni", "piston"))
-    axis = bt.vector("axis", (1.0, 0.0, 0.0))
-    if not np.any(axis):
-        raise ConfigError(bt.name("axis"), axis.tolist(), "a non-zero vector")
+    beam_tables = [
+        sonar.sub(key, ("type", "ka", "radius_m", "frequency_hz", "axis", "angles_deg",
+                        "levels_db"))
+        for key in ("beam", "hydrophone_beam")
+    ]  # fmt: skip
+    if not sonar.has("hydrophone_beam"):
+        beam_tables[1] = beam_tables[0]  # one transducer sends and receives
+    axes = []
+    for bt in beam_tables:
+        axis = bt.vector("axis", (1.0, 0.0, 0.0))
+        if not np.any(axis):
+            raise ConfigError(bt.name("axis"), axis.tolist(), "a non-zero vector")
+        axes.append(axis / np.linalg.norm(axis))
 
     raw_targets = top.data.get("targets", [])
     if not isinstance(raw_targets, list):
@@ -267,20 +286,15 @@ def parse_scenario(data: dict[str, Any]) -> Scenario:
         elif where in wtab.data or where in WaveformSpec.__dataclass_fields__:
             where = f"waveform.{where}"
         raise ConfigError(where, exc.value, exc.allowed, exc.hint) from None
-    if beam_kind == "piston":
-        if bt.has("ka"):
-            beam: BeamPattern = PistonBeam(bt.number("ka", lo=0.0, lo_open=True))
-        else:
-            radius = bt.number("radius_m", lo=0.0, lo_open=True, unit="m")
-            beam = PistonBeam.from_radius(radius, spec.center_hz, c)
-    else:
-        beam = OmniBeam()
+    beam, hydrophone_beam = (_beam(bt, spec.center_hz, c) for bt in beam_tables)
 
     tank: Tank | None = None
     image_order = 0
+    tank_echoes: TankEchoSettings | None = None
     if top.has("tank"):
         tt = top.sub("tank", ("size_m", "image_order", "surface_reflection", "wall_reflection",
-                              "bottom_reflection"))  # fmt: skip
+                              "bottom_reflection", "own_echoes", "own_echo_order", "late_tail",
+                              "t60_formula"))  # fmt: skip
         size = tt.vector("size_m")
         for i, v in enumerate(size):
             if not v > 0:
@@ -291,7 +305,19 @@ def parse_scenario(data: dict[str, Any]) -> Scenario:
             bottom_reflection=tt.number("bottom_reflection", 0.9, lo=-1.0, hi=1.0),
             surface_reflection=tt.number("surface_reflection", -1.0, lo=-1.0, hi=1.0),
         )  # fmt: skip
-        image_order = tt.integer("image_order", 1, 0, 1)
+        image_order = tt.integer("image_order", 1, 0, MAX_TARGET_IMAGE_ORDER)
+        if tt.flag("own_echoes", False):
+            tank_echoes = TankEchoSettings(
+                order=tt.integer("own_echo_order", 3, 0, MAX_IMAGE_ORDER),
+                tail=tt.flag("late_tail", True),
+                t60_formula=tt.text("t60_formula", "eyring", T60_FORMULAS),
+                seed=seed + 7,
+            )
+            if float(np.linalg.norm(sonar_v)) != 0.0:
+                raise ConfigError(
+                    tt.name("own_echoes"), True, "a sonar at rest (sonar.velocity_mps = 0)",
+                    "turn own_echoes off for a moving sonar",
+                )  # fmt: skip
         tank.check_inside(sonar_p, "sonar.position_m")
         tank.check_inside(
             sonar_p + sonar_v * duration, "sonar.position_m + velocity_mps·duration_s"
@@ -380,8 +406,10 @@ def parse_scenario(data: dict[str, Any]) -> Scenario:
         preset=preset.name, family=family, fs_hz=spec.fs_hz, duration_s=duration, seed=seed,
         spec=spec, schedule=schedule, sound_speed_mps=c, absorption_db_per_km=absorption,
         sonar_position_m=sonar_p, sonar_velocity_mps=sonar_v, source_level_db=sl,
-        receiver=receiver, beam=beam, beam_axis=axis / np.linalg.norm(axis), targets=targets,
+        receiver=receiver, beam=beam, beam_axis=axes[0], hydrophone_beam=hydrophone_beam,
+        hydrophone_axis=axes[1], targets=targets,
         noise=noise, reverberation=reverb, tank=tank, image_order=image_order,
+        tank_echoes=tank_echoes,
         direct_blast=direct, output_channels=tuple(channels),
         plots=ot.flag("plots", True), block_s=ot.number("block_s", 0.5, lo=0.0, lo_open=True, unit="s"),  # noqa: E501
         raw=data,
@@ -390,14 +418,15 @@ def parse_scenario(data: dict[str, Any]) -> Scenario:
 
 def build_channel(sc: Scenario) -> Channel:
     """The :class:`Channel` of a validated scenario (noise and reverberation scaled)."""
-    table = TwoWayAmplitudeTable(sc.beam, sc.beam)
+    table = TwoWayAmplitudeTable(sc.beam, sc.hydrophone_beam)
     channel = Channel(
         waveform=sc.schedule, fs_hz=sc.fs_hz, sonar=sc.sonar, source_level_db=sc.source_level_db,
         sound_speed_mps=sc.sound_speed_mps,
         targets=[Target(t.trajectory, t.target_strength_db) for t in sc.targets],
-        receiver=sc.receiver, beam=table, beam_axis=sc.beam_axis,
+        receiver=sc.receiver, tx_beam=Transducer(sc.beam, sc.beam_axis),
+        rx_beam=Transducer(sc.hydrophone_beam, sc.hydrophone_axis),
         absorption_db_per_km=sc.absorption_db_per_km, tank=sc.tank, image_order=sc.image_order,
-        direct_blast=sc.direct_blast,
+        tank_echoes=sc.tank_echoes, direct_blast=sc.direct_blast,
     )  # fmt: skip
     if sc.reverberation is not None:
         f_ref = 0.5 * (sc.schedule.min_frequency_hz() + sc.schedule.max_frequency_hz())
@@ -433,6 +462,24 @@ def build_channel(sc: Scenario) -> Channel:
             model = AmbientNoiseModel(nz["wind_speed_mps"], nz["shipping"], nz["self_noise_db"])
         channel.noise = ShapedNoiseGenerator(model, sc.fs_hz, band, seed=nz["seed"], n_taps=2049)
     return channel
+
+
+def _beam(bt: Table, center_hz: float, c: float) -> BeamPattern:
+    """The pattern of a ``beam`` table: omni, piston (``ka``, or ``radius_m`` at
+    ``frequency_hz``, default the waveform's centre) or a table (``angles_deg``, ``levels_db``)."""
+    kind = bt.text("type", "omni", ("omni", "piston", "table"))
+    if kind == "piston":
+        if bt.has("ka"):
+            return PistonBeam(bt.number("ka", lo=0.0, lo_open=True))
+        radius = bt.number("radius_m", lo=0.0, lo_open=True, unit="m")
+        f = bt.number("frequency_hz", center_hz, lo=0.0, lo_open=True, unit="Hz")
+        return PistonBeam.from_radius(radius, f, c)
+    if kind == "table":
+        for key in ("angles_deg", "levels_db"):
+            if not isinstance(bt.data.get(key), list):
+                raise ConfigError(bt.name(key), bt.data.get(key), "a list of numbers")
+        return TableBeam(bt.data["angles_deg"], bt.data["levels_db"])
+    return OmniBeam()
 
 
 class _FlatSpectrum:

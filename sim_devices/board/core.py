@@ -130,6 +130,9 @@ class SimulatedBoard:
         self.faults = faults or FaultPlan()
         self.dac_underruns = 0
         self.adc_overruns = 0
+        #: ADC values clipped at conversion since power-up (every channel), the count behind
+        #: the ADC_CLIPPING alarm that STATUS reports.
+        self.adc_clipped_samples = 0
         self.dac_samples_received = 0
         self.adc_samples_sent = 0
         self.host_frames = 0
@@ -444,6 +447,7 @@ class SimulatedBoard:
                 adc_all *= self._adc_gain
             counts, clipped = from_full_scale_clipped(adc_all, fmt)
             if clipped:
+                self.adc_clipped_samples += clipped
                 self._latched |= Alarm.ADC_CLIPPING
             for offset in range(0, span, step):
                 n = min(step, span - offset)

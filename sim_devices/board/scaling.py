@@ -50,17 +50,18 @@ def from_full_scale(values: npt.NDArray[np.floating], fmt: SampleFormat) -> npt.
 
 def from_full_scale_clipped(
     values: npt.NDArray[np.floating], fmt: SampleFormat
-) -> tuple[npt.NDArray[Any], bool]:
-    """:func:`from_full_scale`, and whether any sample was clipped (INT16/INT24 only).
+) -> tuple[npt.NDArray[Any], int]:
+    """:func:`from_full_scale`, and how many values were clipped (INT16/INT24 only; a float
+    ADC format does not clip).
 
     >>> counts, clipped = from_full_scale_clipped(np.array([[0.5], [1.0]]), SampleFormat.INT16)
     >>> counts[:, 0].tolist(), clipped
-    ([16384, 32767], True)
+    ([16384, 32767], 1)
     """
     if fmt is SampleFormat.FLOAT32:
-        return values.astype(np.float32), False
+        return values.astype(np.float32), 0
     scale = _FULL_SCALE[fmt]
     counts = _rounded_counts(values, scale)
-    clipped = bool(counts.size and (counts.max() > scale - 1 or counts.min() < -scale))
+    clipped = int(np.count_nonzero((counts > scale - 1) | (counts < -scale)))
     np.clip(counts, -scale, scale - 1, out=counts)
     return counts.astype(np.int16 if fmt is SampleFormat.INT16 else np.int32), clipped

@@ -8,6 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.signal import hilbert, resample
+from scipy.special import j1
 
 from hil.devices.audio.latency import measure_loopback_latency
 from hil.devices.audio.playrec import play_record
@@ -16,8 +17,10 @@ from hil.devices.audio.simulated import SimulatedDuplex
 from hil.errors import ConfigError
 from hil.signals.presets import check_design, get_preset
 from hil.signals.synthesis import BlockSynthesizer
+from sim_devices.acoustics.beam import PistonBeam
 from sim_devices.acoustics.channel import Channel, DirectBlast, Receiver, Target
 from sim_devices.acoustics.dac_world import AcousticWorld, InPlaceWorld
+from sim_devices.acoustics.directivity import Transducer
 from sim_devices.acoustics.trajectory import ConstantVelocity, Fixed, Live
 
 FS = 192_000.0
@@ -139,3 +142,19 @@ def test_stream_starting_at_any_index_gives_the_same_samples() -> None:
     b = _world([target], adc_channels=2)(dac, 7_654_321)
     # Same physics; only the float rounding of absolute sample times differs.
     np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-12)
+
+
+def test_the_sampled_world_applies_the_projector_and_hydrophone_directivity() -> None:
+    piston = Transducer(PistonBeam(ka=4.0), (1.0, 0.0, 0.0))
+    dac = 0.5 * np.cos(2 * np.pi * 60e3 * np.arange(8192) / FS)
+    on_axis = [Target(Fixed([4.5, 1.0, -1.0]), 0.0)]
+    off_axis = [Target(Fixed([0.5 + 4.0 * np.cos(0.6), 1.0 + 4.0 * np.sin(0.6), -1.0]), 0.0)]
+    responses = {}
+    for name, targets in (("on", on_axis), ("off", off_axis)):
+        omni = _world(targets)(dac, 0)[:, 0]
+        beamed = _world(targets, tx_beam=piston, rx_beam=piston)(dac, 0)[:, 0]
+        responses[name] = float(np.max(np.abs(beamed)) / np.max(np.abs(omni)))
+    # on the axis unchanged; 0.6 rad off it the two-way response of the piston, (2 J1(x)/x)²
+    x = 4.0 * np.sin(0.6)
+    assert responses["on"] == pytest.approx(1.0, abs=1e-12)
+    assert responses["off"] == pytest.approx((2 * j1(x) / x) ** 2, rel=1e-3)

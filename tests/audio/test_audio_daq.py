@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hil.acquisition.annotations import AnnotationKind
+from hil.acquisition.annotations import ADC_CLIPPING_TEXT, AnnotationKind
 from hil.devices.audio import (
     AudioSettings,
     CallbackStop,
@@ -130,8 +130,16 @@ def test_full_scale_clips_to_int16_range() -> None:
         daq.start(source)
         assert daq.wait_for_samples(256, timeout_s=5.0)
         got = daq.read(64, 8)[:, 0].tolist()
-    # The digital cable passes 2.0 through; the int16 conversion clips it to full scale.
+        alarms = [a for a in daq.annotations.all() if a.detail.startswith(ADC_CLIPPING_TEXT)]
+    # The simulated converter clips 2.0 to full scale, as an interface delivers it.
     assert got == [32767, -32768, 16384, 32767, 32767, -32768, 16384, 32767]
+    # Counted, not silent: the converter's 2.0s (64 per input, 2 inputs), and on the host
+    # every value at a rail (+1.0, -1.0 and the clipped 2.0: 3 of 4 values) in the 256 - 64
+    # captured samples after the 64-sample io delay.
+    assert isinstance(daq.backend, SimulatedDuplex)
+    assert daq.backend.adc_clipped_samples == 2 * 64
+    assert daq.adc_clipped_samples == 2 * 3 * (256 - 64) // 4
+    assert alarms and all(a.kind is AnnotationKind.ALARM for a in alarms)
 
 
 def test_sync_pairs_map_host_time_to_the_capture_index() -> None:

@@ -71,6 +71,9 @@ def test_a_virtual_run_tracks_the_towed_target(first_run: RunOutcome) -> None:
     assert summary["dropped_samples"] == 0
     assert summary["dac_underruns"] == 0 and summary["adc_overruns"] == 0
     assert summary["loopback_latency_samples"] == 64  # the simulated converters
+    # the built-in levels stay below full scale, as planned before the run
+    assert summary["adc_clipping_alarms"] == 0 and summary["adc_clipped_samples"] == 0
+    assert 0.0 < summary["planned_adc_peak_fs"] < 1.0
     assert summary["wrong_estimates"] == 0
     assert summary["detection_rate"] == 1.0
     assert abs(summary["range_bias_m"]) < 0.03 and summary["range_rmse_m"] < 0.03

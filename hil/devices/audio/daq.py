@@ -46,7 +46,12 @@ from urllib.parse import parse_qsl, unquote, urlsplit
 import numpy as np
 import numpy.typing as npt
 
-from hil.acquisition.annotations import Annotation, AnnotationKind, AnnotationLog
+from hil.acquisition.annotations import (
+    ADC_CLIPPING_TEXT,
+    Annotation,
+    AnnotationKind,
+    AnnotationLog,
+)
 from hil.acquisition.clock_fit import SampleClockFit
 from hil.acquisition.ring import SampleRing
 from hil.devices.audio.contract import BlockTime, DuplexBackend, FloatArray, StatusFlags
@@ -224,6 +229,10 @@ class AudioDaq:
         self._source: DacSource | None = None
         self._xruns_seen = 0
         self._overruns = 0
+        #: Input values at or beyond full scale since start (every channel): clipping.
+        self.adc_clipped_samples = 0
+        self._clipped_blocks: list[tuple[int, int]] = []
+        self._clipped_seen = 0
         self._underruns = 0
         self._opened = False
         self._started = False
@@ -389,6 +398,14 @@ class AudioDaq:
         scaled, counts = self._scaled[:frames], self._counts[:frames]
         np.multiply(indata, _INT16_FULL_SCALE, out=scaled)
         np.rint(scaled, out=scaled)
+        # An input at either rail (±1.0 full scale) is clipping: the interface's converter
+        # delivers floats it already limited to ±1. Counted, and raised as an alarm when the
+        # annotations are next read (nothing is allocated unless it clipped).
+        over = int(np.count_nonzero(scaled > _INT16_FULL_SCALE - 1.0))
+        over += int(np.count_nonzero(scaled <= -_INT16_FULL_SCALE))
+        if over:
+            self.adc_clipped_samples += over
+            self._clipped_blocks.append((j, over))
         np.clip(scaled, -_INT16_FULL_SCALE, _INT16_FULL_SCALE - 1.0, out=scaled)
         counts[:] = scaled
         self.ring.write(j, counts)
@@ -421,6 +438,12 @@ class AudioDaq:
             for kind in kinds:
                 self.annotations.log.add(Annotation(index, kind, 0, f"audio xrun {flags!r}"))
         self._xruns_seen = len(events)
+        blocks = self._clipped_blocks
+        for index, count in blocks[self._clipped_seen :]:
+            self.annotations.log.add(
+                Annotation(index, AnnotationKind.ALARM, 0, f"{ADC_CLIPPING_TEXT}: {count} values")
+            )
+        self._clipped_seen = len(blocks)
 
 
 class _XrunAnnotations:

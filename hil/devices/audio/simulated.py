@@ -238,6 +238,8 @@ class SimulatedDuplex(SettingsView):
         self._runner: CallbackRunner | None = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
+        #: Captured values the simulated converter clipped at ±1.0 full scale.
+        self.adc_clipped_samples = 0
 
     @property
     def active(self) -> bool:
@@ -338,6 +340,11 @@ class SimulatedDuplex(SettingsView):
             except BaseException as exc:  # same rule as the callback: re-raised in wait()
                 runner.error = exc
                 return
+            # The converter: inputs beyond full scale clip at ±1.0, and are counted.
+            over = int(np.count_nonzero(np.abs(captured_block) > 1.0))
+            if over:
+                self.adc_clipped_samples += over
+                np.clip(captured_block, -1.0, 1.0, out=captured_block)
             ring_write(captured, j, captured_block)
             if outcome is BlockOutcome.COMPLETE:
                 return

@@ -1,0 +1,165 @@
+"""A one-code-period clutter canceller in front of GCAS: the tank's still returns removed
+before detection (receiver ``"gcas-mti"``).
+
+In a tank the loudest returns do not move: the walls, the surface and bottom around the
+transducer, the late reverberant tail, the direct blast. With a continuous transmission that
+repeats every code period ``P`` (samples, an integer), every time-invariant return repeats
+too, so
+
+    y[n] = x[n] − x[n − P]
+
+removes them all (a moving-target indicator). GCAS then detects on ``y``. A moving echo does
+not cancel: it leaves itself and, one period later in range (``P · v`` farther for a closing
+target), a sign-flipped copy of itself. GCAS's first-arrival readout
+(:mod:`hil.estimation.first_arrival`) times the earliest arrival, which for a closing target
+is the echo itself; its own canceller then sees ``y − y(t − P)``, the same echo first.
+
+The first period after the start, and after every gap, has no period to cancel with: the
+canceller outputs zeros there (no detection, rather than detections of the walls), and GCAS
+restarts its accumulation after them as after a gap. A target at rest cancels with the
+clutter. The noise power doubles (+3 dB).
+
+:class:`ClutterCancelledGcas` is a :class:`~hil.estimation.gcas.GcasReceiver` with the
+canceller in front; it takes GCAS's options and delegates everything else to it.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from hil.errors import ConfigError
+from hil.estimation.base import Estimate
+from hil.estimation.option_types import check_option_types
+from hil.signals.schedule import HopSchedule
+
+
+class PeriodCanceller:
+    """``y[n] = x[n] − x[n − P]`` on a stream, with zeros for the ``P`` samples after the
+    start and after each gap (shape ``(n,)`` in and out; any chunking gives the same output).
+
+    >>> c = PeriodCanceller(3)
+    >>> c.process(np.array([1.0, 2, 3, 1, 2, 4])).tolist()
+    [0.0, 0.0, 0.0, 0.0, 0.0, 1.0]
+    >>> c.process(np.array([5.0]), gap_before=2).tolist()
+    [0.0]
+    """
+
+    def __init__(self, period_samples: int) -> None:
+        if isinstance(period_samples, bool) or int(period_samples) != period_samples:
+            raise ConfigError("period_samples", period_samples, "an integer number of samples")
+        if period_samples < 1:
+            raise ConfigError("period_samples", period_samples, ">= 1 sample")
+        self.period = int(period_samples)
+        # The last P input samples as a ring: sample n sits at n mod P.
+        self._ring = np.zeros(self.period)
+        self._pos = 0  # ring slot of the next sample
+        self._valid = 0  # how many held samples are real (not before the start or a gap)
+
+    def reset(self) -> None:
+        """Forget the history: the next ``P`` outputs are zeros."""
+        self._ring[:] = 0.0
+        self._valid = 0
+
+    def process(self, block: ArrayLike, *, gap_before: int = 0) -> NDArray[np.float64]:
+        """The cancelled samples of ``block`` (``gap_before`` samples went missing before
+        it: the history restarts)."""
+        x = np.asarray(block, dtype=np.float64).reshape(-1)
+        if gap_before:
+            self.reset()
+        p = self.period
+        y = np.empty_like(x)
+        done = 0
+        while done < x.size:  # at most ceil(n / P) + 1 slices: no per-sample loop
+            take = min(x.size - done, p - self._pos)
+            now = x[done : done + take]
+            before = self._ring[self._pos : self._pos + take]  # a view: P samples earlier
+            np.subtract(now, before, out=y[done : done + take])
+            before[:] = now
+            self._pos = (self._pos + take) % p
+            done += take
+        # Outputs whose sample one period earlier is not real input are blanked.
+        blank = max(0, min(x.size, p - self._valid))
+        y[:blank] = 0.0
+        self._valid = min(p, self._valid + x.size)
+        return y
+
+
+class ClutterCancelledGcas:
+    """GCAS behind a :class:`PeriodCanceller` of the schedule's code period (see the module
+    docstring). Options: GCAS's (``range_readout``, ``reverb_speed_mps``, ...)."""
+
+    name = "gcas-mti"
+
+    def __init__(self, inner: Any, period_samples: int) -> None:
+        self.inner = inner
+        self.canceller = PeriodCanceller(period_samples)
+        self.fs_hz = float(inner.fs_hz)
+
+    @classmethod
+    def from_options(
+        cls,
+        schedule: HopSchedule,
+        fs_hz: float,
+        *,
+        sound_speed_mps: float,
+        max_speed_mps: float,
+        max_range_m: float,
+        m_hops: int,
+        **extra: Any,
+    ) -> ClutterCancelledGcas:
+        """The registry's common constructor (:mod:`hil.estimation.registry`)."""
+        from hil.estimation.gcas import GcasReceiver
+
+        check_option_types(GcasReceiver, extra, "gcas-mti")
+        period = schedule.period_s * fs_hz
+        if abs(period - round(period)) > 1e-6 * period:
+            raise ConfigError(
+                "receiver",
+                "gcas-mti",
+                "a code period of a whole number of samples",
+                f"period {schedule.period_s} s × {fs_hz} Hz = {period:.4f} samples: "
+                "the canceller subtracts the period before; use gcas",
+            )
+        inner = GcasReceiver.from_options(
+            schedule,
+            fs_hz,
+            sound_speed_mps=sound_speed_mps,
+            max_speed_mps=max_speed_mps,
+            max_range_m=max_range_m,
+            m_hops=m_hops,
+            **extra,
+        )
+        return cls(inner, round(period))
+
+    def process(self, block: ArrayLike, *, gap_before: int = 0) -> list[Estimate]:
+        """Cancel, then GCAS (shape ``(n,)`` real samples)."""
+        y = self.canceller.process(block, gap_before=gap_before)
+        result: list[Estimate] = self.inner.process(y, gap_before=gap_before)
+        return result
+
+    def flush(self) -> list[Estimate]:
+        """GCAS's held estimates."""
+        result: list[Estimate] = self.inner.flush()
+        return result
+
+    def reset(self) -> None:
+        """Forget all state (canceller and GCAS)."""
+        self.canceller.reset()
+        self.inner.reset()
+
+    @property
+    def samples_seen(self) -> int:
+        """Samples consumed so far (GCAS's count)."""
+        return int(self.inner.samples_seen)
+
+    @property
+    def next_decision_index(self) -> int:
+        """GCAS's next decision index (the canceller adds no delay)."""
+        return int(self.inner.next_decision_index)
+
+    def __getattr__(self, name: str) -> Any:
+        # Everything else (counts, maps, settings) is GCAS's.
+        return getattr(self.inner, name)
