@@ -89,7 +89,8 @@ class PeriodCanceller:
 
 class ClutterCancelledGcas:
     """GCAS behind a :class:`PeriodCanceller` of the schedule's code period (see the module
-    docstring). Options: GCAS's (``range_readout``, ``reverb_speed_mps``, ...)."""
+    docstring). Options: GCAS's (``range_readout``, ``reverb_speed_mps``, ...); ``refine``
+    is False unless given (the canceller leaves two copies of a moving echo)."""
 
     name = "gcas-mti"
 
@@ -123,6 +124,9 @@ class ClutterCancelledGcas:
                 f"period {schedule.period_s} s × {fs_hz} Hz = {period:.4f} samples: "
                 "the canceller subtracts the period before; use gcas",
             )
+        # After the canceller a moving echo is two (itself and its sign-flipped copy a
+        # period later, P·2v/c apart): not the one echo GCAS's refinement fits, so it is off
+        # unless asked for (the tank reads the first arrival).
         inner = GcasReceiver.from_options(
             schedule,
             fs_hz,
@@ -130,7 +134,7 @@ class ClutterCancelledGcas:
             max_speed_mps=max_speed_mps,
             max_range_m=max_range_m,
             m_hops=m_hops,
-            **extra,
+            **{"refine": False, **extra},
         )
         return cls(inner, round(period))
 
