@@ -61,10 +61,9 @@ from hil.estimation.crlb import Crlb, crlb, rms_bandwidth, rms_duration
 from hil.estimation.refine_kernels import (
     FOUND,
     RECENTRE,
+    assign_slots,
     candidate_sums,
-    find_slots,
     fit_quality,
-    hop_moments,
     maximise,
 )
 from hil.estimation.row_buffer import RowBuffer
@@ -228,7 +227,10 @@ class CoherentRefiner:
     def warm_up(self) -> None:
         """Run every compiled kernel once on a made-up detection in silence, then forget it:
         the first call in a process loads the machine code from numba's cache (or compiles
-        it, seconds), which must not happen at the first live detection."""
+        it, seconds), which must not happen at the first live detection. Every codeword's
+        window moments (one FFT each, for the bounds) are made now for the same reason."""
+        for key in range(self.schedule.period_hops):
+            self._codeword(key)
         hop = 2 * self.m_hops + 1
         t_b = float(self.schedule.hops(hop + 1, 1).start_s[0])
         self.reset(0)
@@ -346,40 +348,24 @@ class CoherentRefiner:
         self, hop_ids: NDArray[np.int64], word: _Codeword, t_s: float, alpha: float
     ) -> NDArray[np.int64] | None:
         """The table slot of each hop (shape ``(M,)``): a kept one made for this window, or
-        one filled now; None where the input does not cover a hop's window."""
+        one filled now (:func:`~hil.estimation.refine_kernels.assign_slots`); None where the
+        input does not cover a hop's window."""
         fs = self.fs_hz
-        dt_lo = word.hops[2]
+        _, _, dt_lo, dt_hi, _ = word.hops
         edge = (t_s + dt_lo / alpha) * fs  # lower window edges, absolute samples
+        centre = t_s + 0.5 * (dt_lo + dt_hi) / alpha  # the hops' centres, s
+        span = int(math.ceil(self.hop_len_s / alpha * fs)) + 2 * self._half + 2
         slots = np.empty(hop_ids.shape[0], dtype=np.int64)
-        missing = find_slots(
-            self._hop, self._edge, self._alpha0, hop_ids, edge, alpha, REUSE_SLACK,
-            self._alpha_tol, slots,
-        )  # fmt: skip
         self._clock += 1
-        if missing:
-            need = np.flatnonzero(slots < 0)
-            used = self._used.copy()
-            used[slots[slots >= 0]] = np.iinfo(np.int64).max  # keep this detection's own
-            new = np.argsort(used, kind="stable")[: need.size].astype(np.int64)
-            first = np.floor(edge[need]).astype(np.int64) - self._half
-            span = int(math.ceil(self.hop_len_s / alpha * fs)) + 2 * self._half + 2
-            if first.min() < self._valid_from or first.max() + span > self._ring.next_index:
-                return None
-            centre = t_s + 0.5 * (dt_lo[need] + word.hops[3][need]) / alpha
-            hop_moments(
-                self._ring.array, self._ring.position(first), new, first - centre * fs, span,
-                word.hops[1][need] * alpha / fs, self.hop_len_s * fs, self._prefix,
-                self._energy,
-            )  # fmt: skip
-            self._first[new] = first
-            self._tail[new] = span - (self._prefix.shape[2] - 1)
-            self._alpha0[new] = alpha
-            self._centre[new] = centre
-            self._edge[new] = edge[need]
-            self._hop[new] = hop_ids[need]
-            slots[need] = new
-        self._used[slots] = self._clock
-        return slots
+        ring = self._ring
+        covered = assign_slots(
+            self._hop, self._edge, self._alpha0, self._used, self._first, self._tail,
+            self._centre, self._clock, hop_ids, edge, centre, word.hops[1], alpha,
+            REUSE_SLACK, self._alpha_tol, self._half, span, self._valid_from, ring.next_index,
+            ring.array, ring.next_index - ring.available, fs, self.hop_len_s * fs,
+            self._prefix, self._energy, slots,
+        )  # fmt: skip
+        return slots if covered else None
 
     def _codeword(self, hop_index: int) -> _Codeword:
         """The ``M`` hops ending with ``hop_index`` relative to their end boundary, kept per

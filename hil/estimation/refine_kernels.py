@@ -7,7 +7,7 @@ Compiled with ``cache=True`` like :mod:`hil.estimation.kernels`.
 Hop tables (one slot ``s`` per hop, shapes with ``S`` slots, ``R + 1`` edge rows, ``P``
 moments): ``prefix[s, side, j, p]`` and ``energy[s, side, j]`` are the prefix sums of the
 demodulated moments and of ``x²`` at prefix position ``j`` (side 0, from the slot's first
-sample) or ``tail[s] + j`` (side 1), written by :func:`hop_moments`; ``first[s]`` is the
+sample) or ``tail[s] + j`` (side 1), written by :func:`assign_slots`; ``first[s]`` is the
 absolute sample index of prefix position 0, ``alpha0[s]`` and ``centre[s]`` (s) the time scale
 and centre of the demodulation.
 """
@@ -26,53 +26,104 @@ RUN_HOPS = 3
 
 
 @numba.njit(**_JIT)
-def hop_moments(
-    x: Any, pos: Any, slots: Any, u0: Any, span: int, cycles_per_sample: Any,
+def _fill_slot(
+    x: Any, pos: int, s: int, u0: float, span: int, cycles_per_sample: float,
     hop_samples: float, prefix: Any, energy: Any,
 ) -> None:  # fmt: skip
-    """Fill the tables of ``slots`` (shape ``(H,)``) from the real input ``x``.
+    """Slot ``s``'s tables from the real input ``x``.
 
-    Hop ``h`` reads ``x[pos[h] + k]``, ``k < span``; ``u = u0[h] + k`` (samples from the
-    hop's centre), ``y = x e^{−j2π cycles_per_sample[h] u}``,
-    ``S[j, p] = Σ_{k < j} y (u/hop_samples)^p`` and ``E[j] = Σ_{k < j} x²`` for
-    ``0 ≤ j ≤ span``. Side 0 keeps ``j ≤ R``, side 1 ``j ≥ span − R`` (the module's tables,
-    ``tail = span − R``). The rotation runs as a recurrence renewed every 256 samples
-    (rounding below 1e-13).
+    The hop reads ``x[pos + k]``, ``k < span``; ``u = u0 + k`` (samples from the hop's
+    centre), ``y = x e^{−j2π cycles_per_sample u}``, ``S[j, p] = Σ_{k < j} y (u/hop_samples)^p``
+    and ``E[j] = Σ_{k < j} x²`` for ``0 ≤ j ≤ span``. Side 0 keeps ``j ≤ R``, side 1
+    ``j ≥ span − R`` (the module's tables, ``tail = span − R``). The rotation runs as a
+    recurrence renewed every 256 samples (rounding below 1e-13).
     """
     n_mom = prefix.shape[3]
     r = prefix.shape[2] - 1
     tail = span - r
     acc = np.zeros(n_mom, dtype=np.complex128)
-    for h in range(slots.shape[0]):
-        s = slots[h]
-        acc[:] = 0.0
-        e = 0.0
-        w = -2.0 * math.pi * cycles_per_sample[h]
-        step = complex(math.cos(w), math.sin(w))
-        rot = complex(1.0, 0.0)
-        for j in range(span + 1):
-            if j <= r:
-                for p in range(n_mom):
-                    prefix[s, 0, j, p] = acc[p]
-                energy[s, 0, j] = e
-            if j >= tail:
-                for p in range(n_mom):
-                    prefix[s, 1, j - tail, p] = acc[p]
-                energy[s, 1, j - tail] = e
-            if j == span:
-                break
-            u = u0[h] + j
-            if j % 256 == 0:
-                rot = complex(math.cos(w * u), math.sin(w * u))
-            v = x[pos[h] + j]
-            y = v * rot
-            q = u / hop_samples
-            pw = 1.0
+    e = 0.0
+    w = -2.0 * math.pi * cycles_per_sample
+    step = complex(math.cos(w), math.sin(w))
+    rot = complex(1.0, 0.0)
+    for j in range(span + 1):
+        if j <= r:
             for p in range(n_mom):
-                acc[p] += y * pw
-                pw *= q
-            e += v * v
-            rot *= step
+                prefix[s, 0, j, p] = acc[p]
+            energy[s, 0, j] = e
+        if j >= tail:
+            for p in range(n_mom):
+                prefix[s, 1, j - tail, p] = acc[p]
+            energy[s, 1, j - tail] = e
+        if j == span:
+            break
+        u = u0 + j
+        if j % 256 == 0:
+            rot = complex(math.cos(w * u), math.sin(w * u))
+        v = x[pos + j]
+        y = v * rot
+        q = u / hop_samples
+        pw = 1.0
+        for p in range(n_mom):
+            acc[p] += y * pw
+            pw *= q
+        e += v * v
+        rot *= step
+
+
+@numba.njit(**_JIT)
+def assign_slots(
+    slot_hop: Any, slot_edge: Any, slot_alpha: Any, slot_used: Any, slot_first: Any,
+    slot_tail: Any, slot_centre: Any, clock: int, hop_ids: Any, edge: Any, centre: Any,
+    f: Any, alpha: float, slack: float, alpha_tol: float, half: int, span: int,
+    valid_from: int, next_index: int, x: Any, x_origin: int, fs: float, hop_samples: float,
+    prefix: Any, energy: Any, out: Any,
+) -> bool:  # fmt: skip
+    """The table slot of each hop of a detection into ``out`` (shape ``(M,)``): a kept slot
+    of that hop made for a lower window edge within ``slack`` samples of ``edge`` (absolute
+    samples, shape ``(M,)``) and a time scale within ``alpha_tol`` of ``alpha``, else the
+    least recently used slot not taken by this detection, filled now (:func:`_fill_slot`,
+    from ``edge − half`` for ``span`` samples, demodulated at ``f·alpha`` about ``centre``,
+    s). ``x`` holds absolute sample ``x_origin + i`` at ``i``; samples from ``valid_from``
+    to ``next_index`` are real input. Slot arrays shape ``(S,)`` are updated; ``clock`` marks
+    the use. False where a hop to fill is not covered by the input."""
+    m_hops = hop_ids.shape[0]
+    n_slots = slot_hop.shape[0]
+    for i in range(m_hops):
+        out[i] = -1
+        for s in range(n_slots):
+            if (
+                slot_hop[s] == hop_ids[i]
+                and abs(slot_edge[s] - edge[i]) <= slack
+                and abs(slot_alpha[s] - alpha) <= alpha_tol
+            ):
+                out[i] = s
+                slot_used[s] = clock
+                break
+    r = prefix.shape[2] - 1
+    for i in range(m_hops):
+        if out[i] >= 0:
+            continue
+        first = int(math.floor(edge[i])) - half
+        if first < valid_from or first + span > next_index:
+            return False
+        best = -1
+        for s in range(n_slots):  # the least recently used, not this detection's
+            if slot_used[s] != clock and (best < 0 or slot_used[s] < slot_used[best]):
+                best = s
+        _fill_slot(
+            x, first - x_origin, best, first - centre[i] * fs, span, f[i] * alpha / fs,
+            hop_samples, prefix, energy,
+        )  # fmt: skip
+        slot_hop[best] = hop_ids[i]
+        slot_edge[best] = edge[i]
+        slot_alpha[best] = alpha
+        slot_first[best] = first
+        slot_tail[best] = span - r
+        slot_centre[best] = centre[i]
+        slot_used[best] = clock
+        out[i] = best
+    return True
 
 
 @numba.njit(**_JIT)
@@ -245,31 +296,6 @@ def maximise(
         step_t *= 0.5
         step_v *= 0.5
     return t, v, FOUND
-
-
-@numba.njit(**_JIT)
-def find_slots(
-    slot_hop: Any, slot_edge: Any, slot_alpha: Any, hop_ids: Any, edge: Any, alpha: float,
-    slack: float, alpha_tol: float, out: Any,
-) -> int:  # fmt: skip
-    """For each hop of ``hop_ids`` (shape ``(M,)``, lower window edges ``edge`` in absolute
-    samples), a slot holding that hop made for an edge within ``slack`` samples and a time
-    scale within ``alpha_tol`` of ``alpha``, else −1, into ``out`` (shape ``(M,)``); returns
-    how many are missing. Slot arrays shape ``(S,)``."""
-    missing = 0
-    for i in range(hop_ids.shape[0]):
-        out[i] = -1
-        for s in range(slot_hop.shape[0]):
-            if (
-                slot_hop[s] == hop_ids[i]
-                and abs(slot_edge[s] - edge[i]) <= slack
-                and abs(slot_alpha[s] - alpha) <= alpha_tol
-            ):
-                out[i] = s
-                break
-        if out[i] < 0:
-            missing += 1
-    return missing
 
 
 @numba.njit(**_JIT)
