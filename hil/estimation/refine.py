@@ -91,6 +91,9 @@ SLOTS_PER_HOP = 4
 WARM_HOPS = 3
 WARM_HALF_LOBES = 1.0 / 16.0
 WARM_HALF_SPANS = 0.125
+#: Quadratic-fit passes from a warm start (its grid's steps are already a quarter of the
+#: full search's).
+WARM_FIT_PASSES = 3
 #: Recent fits kept for that (several echoes at once each keep theirs).
 RECENT_FITS = 16
 
@@ -264,7 +267,7 @@ class CoherentRefiner:
             args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
             best_t, best_v, outcome = maximise(
                 *args, self.c, best_t, best_v, WARM_HALF_LOBES * lobe,
-                WARM_HALF_SPANS * self.speed_span_mps, 3, 3, FIT_PASSES,
+                WARM_HALF_SPANS * self.speed_span_mps, 3, 3, WARM_FIT_PASSES,
             )  # fmt: skip
         if outcome != FOUND:
             best_t, best_v, outcome = t_s, speed0, RECENTRE
