@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from hil.acquisition.device import check_daq_url
 from hil.errors import ConfigError
 from hil.estimation.first_arrival import RANGE_READOUTS
 from hil.estimation.reverb_band import AUTO, doppler_resolution_mps, resolve_reverb_speed
@@ -224,7 +225,7 @@ def parse_experiment(text: str, source: str = "<text>") -> Experiment:
     output_dir = resolve_runs_dir(run.text("output_dir", "runs"))
     max_duration = run.number("max_duration_s", 120.0, lo=0.0, lo_open=True, unit="s")
     board_url, stage_url = dev.text("board"), dev.text("stage")
-    check_url(board_url, "devices.board", "board")
+    board_url = check_daq_url(board_url, "devices.board")
     check_url(stage_url, "devices.stage", "stage")
     board_channel = dev.integer("board_channel", 0, lo=0, hi=15)
 

@@ -225,7 +225,7 @@ def test_a_source_error_is_raised_in_the_host_thread() -> None:
 
 
 def test_wait_for_samples_times_out_on_a_running_stream_and_stop_ends_it() -> None:
-    daq = AudioDaq.from_url("audio://sim?rate=48000&blocksize=256&delay=7", sample_rate_hz=48000)
+    daq = AudioDaq.from_url("sim://audio?rate=48000&blocksize=256&delay=7", sample_rate_hz=48000)
     daq.open()
     source = _Source(4800, stop_at=10**12)
     daq.start(source)
@@ -256,7 +256,7 @@ def test_read_and_wait_refuse_before_start() -> None:
 
 
 def test_parse_audio_url_golden() -> None:
-    url = parse_audio_url("audio://sim?rate=192000&blocksize=512&delay=64&latency=high")
+    url = parse_audio_url("sim://audio?rate=192000&blocksize=512&delay=64&latency=high")
     assert (url.device, url.samplerate_hz, url.blocksize, url.delay_samples, url.latency) == (
         "sim",
         192000,
@@ -274,16 +274,16 @@ def test_parse_audio_url_golden() -> None:
     ("url", "rate", "fragment"),
     [
         ("serial:///dev/ttyACM0", 48000, "devices.board = 'serial:///dev/ttyACM0' is not allowed"),
-        ("audio://sim/extra", 48000, "must be audio://DEVICE?rate=192000&blocksize=256"),
-        ("audio://sim?rate=48k", 48000, "devices.board rate = '48k' is not allowed"),
-        ("audio://sim?rate=48000&bloksize=64", 48000, "devices.board query key = 'bloksize'"),
-        ("audio://sim?blocksize=-4", 48000, "devices.board blocksize = '-4'"),
-        ("audio://sim?blocksize=8", 48000, "blocksize = 8 is not allowed: must be an integer in"),
+        ("sim://audio/extra", 48000, "must be audio://DEVICE?rate=192000&blocksize=256"),
+        ("sim://audio?rate=48k", 48000, "devices.board rate = '48k' is not allowed"),
+        ("sim://audio?rate=48000&bloksize=64", 48000, "devices.board query key = 'bloksize'"),
+        ("sim://audio?blocksize=-4", 48000, "devices.board blocksize = '-4'"),
+        ("sim://audio?blocksize=8", 48000, "blocksize = 8 is not allowed: must be an integer in"),
         ("audio://JACK?delay=3", 48000, "devices.board delay = '3' is not allowed: must be only"),
-        ("audio://sim?latency=fast", 48000, "devices.board latency = 'fast'"),
-        ("audio://sim?rate=44100", 48000, "rate = 44100 is not allowed: must be the waveform's"),
-        ("audio://sim", None, "devices.board rate = None is not allowed"),
-        ("audio://sim?rate=1000000", 1000000, "samplerate = 1000000 is not allowed"),
+        ("sim://audio?latency=fast", 48000, "devices.board latency = 'fast'"),
+        ("sim://audio?rate=44100", 48000, "rate = 44100 is not allowed: must be the waveform's"),
+        ("sim://audio", None, "devices.board rate = None is not allowed"),
+        ("sim://audio?rate=1000000", 1000000, "samplerate = 1000000 is not allowed"),
     ],
 )
 def test_bad_urls_are_refused_with_the_field(url: str, rate: int | None, fragment: str) -> None:

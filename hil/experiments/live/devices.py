@@ -100,19 +100,6 @@ def open_streaming_device(url: str, fs: float, clock: Clock, keepalive_ms: int) 
     return device
 
 
-def _configured_board(
-    target: str | Transport,
-    fs: float,
-    clock: Clock,
-    *,
-    keepalive_ms: int,
-    virtual_time: VirtualClock | None,
-) -> StreamingDevice:
-    device = open_board(target, fs, clock, keepalive_ms, virtual_time)
-    device.configure()
-    return device
-
-
 def _streaming_device_at(url: str, keepalive_ms: int, fs: float, clock: Clock) -> StreamingDevice:
     return open_streaming_device(url, fs, clock, keepalive_ms)
 
@@ -170,11 +157,7 @@ class RunDevices:
         if exp.simulated:
             tank = self.tank = self._simulated_tank(exp, folder)
             self.clock = tank.clock
-            board, virtual = tank.board_target, tank.virtual_time
-            watchdog = WATCHDOG_MS if virtual is not None else SIM_WATCHDOG_MS
-            return tank.stage_target, partial(
-                _configured_board, board, keepalive_ms=watchdog, virtual_time=virtual
-            )
+            return tank.stage_target, lambda fs, _clock: tank.open_daq(fs)
         if exp.board_url.startswith("sim://") or exp.stage_url.startswith("sim://"):
             raise ConfigError(
                 "devices",
@@ -192,6 +175,12 @@ class RunDevices:
         return exp.stage_url, partial(_streaming_device_at, exp.board_url, WATCHDOG_MS)
 
     def _simulated_tank(self, exp: Experiment, folder: Path) -> TankSimulation:
+        from hil.devices.audio.daq import is_audio_url
+
+        if is_audio_url(exp.board_url):  # sim://audio: the simulated audio interface
+            from hil.experiments.audio_tank import AudioTank
+
+            return AudioTank(exp, virtual=self.virtual_time)
         if self.virtual_time:
             from hil.experiments.virtual_tank import VirtualTank
 
