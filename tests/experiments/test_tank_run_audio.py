@@ -54,6 +54,9 @@ def test_hil_tank_run_with_the_simulated_audio_interface_on_virtual_time(
     summary = _tank_run(tmp_path, AUDIO, capsys, "--virtual-time")
     _assert_tracked_as_on_the_board(summary)
     assert summary["simulated"] is True
+    # The stage's conversation is in the run's log (the interface has no frames to log).
+    log = (tmp_path / "run" / "run.log").read_text(encoding="utf-8")
+    assert "DEBUG   hil.devices.grbl: stage sim://stage (in process, virtual time) -> $$" in log
 
 
 @pytest.mark.slow
