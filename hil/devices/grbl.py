@@ -561,6 +561,15 @@ polling at no more than 5 Hz); use the default 0.2
         self._soft_reset_and_wait(self.response_timeout)
         return self.status()
 
+    def build_info(self) -> tuple[str, ...]:
+        """GRBL's answer to ``$I``: its ``[VER:...]`` and ``[OPT:...]`` lines, as received
+        (firmware version and build date, compile options); allowed in any state."""
+        before = len(self.connection.messages)
+        self._command("$I")
+        return tuple(
+            m for m in self.connection.messages[before:] if m.startswith(("[VER:", "[OPT:"))
+        )
+
     def write_setting(self, name: str, value: Any) -> None:
         """Validate and write one ``$`` setting (by its attribute name, e.g.
         ``"max_rate_x"``); a bad value raises before anything is sent."""

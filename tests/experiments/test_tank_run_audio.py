@@ -10,12 +10,14 @@ import logging
 from pathlib import Path
 from typing import Any
 
+import h5py
 import pytest
 
 from hil.cli.main import main
 from hil.errors import ConfigError
 from hil.experiments.experiment import DEFAULT_EXPERIMENT, parse_experiment
 from hil.experiments.tank_run import LiveView, run_experiment
+from hil.recording.instrument import read_entry
 
 SHORT = DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -3.5")
 #: The board line as docs/tank-run.md writes it.
@@ -57,6 +59,20 @@ def test_hil_tank_run_with_the_simulated_audio_interface_on_virtual_time(
     # The stage's conversation is in the run's log (the interface has no frames to log).
     log = (tmp_path / "run" / "run.log").read_text(encoding="utf-8")
     assert "DEBUG   hil.devices.grbl: stage sim://stage (in process, virtual time) -> $$" in log
+    # The recording names the interface it ran on.
+    with h5py.File(tmp_path / "run" / "run.h5", "r") as f:
+        entry = read_entry(f)
+    assert entry is not None
+    assert entry["instrument"]["audio"] == {
+        "url": "sim://audio?blocksize=256",
+        "sample_rate_hz": 192_000,
+        "blocksize": 256,
+        "latency_setting": "low",
+        "device": "simulated audio interface",
+        "host_api": "simulated",
+        "io_delay_samples": 512,
+        "input_latency_s": 512 / 192_000,
+    }
 
 
 @pytest.mark.slow
