@@ -134,19 +134,19 @@ def test_full_scale_clips_to_int16_range() -> None:
     assert got == [32767, -32768, 16384, 32767, 32767, -32768, 16384, 32767]
 
 
-def test_sync_pairs_map_host_time_to_the_capture_index() -> None:
+def test_sync_pairs_map_host_time_to_the_index_the_dac_plays() -> None:
     daq, _ = _sim_daq(sync_interval_s=0.0)
     with daq:
         daq.start(_Source(1000, stop_at=6400))
         assert daq.wait_for_samples(6400, timeout_s=5.0)
     fit = daq.clock_fit
     pairs = list(fit._pairs)
-    # One pair per block, stamped with the capture time of the block's first input sample:
-    # input index j was captured (io_delay - block) samples before its callback.
+    # One pair per block, stamped with the time the block's first output sample leaves the
+    # DAC: one block (64 samples) of output buffering after its callback.
     assert [j for j, _ in pairs] == list(range(6400 - 64 * 100, 6400, 64))
-    np.testing.assert_allclose([t for _, t in pairs], [T0 + (j - 64) / FS for j, _ in pairs])
+    np.testing.assert_allclose([t for _, t in pairs], [T0 + (j + 64) / FS for j, _ in pairs])
     assert fit.rate_hz == pytest.approx(FS, rel=1e-9)
-    assert fit.sample_index(T0 + 0.1) == 4800 + 64
+    assert fit.sample_index(T0 + 0.1) == 4800 - 64
     assert fit.sample_index(fit.host_time(5000)) == 5000
 
 
@@ -173,7 +173,8 @@ def test_sync_pairs_are_decimated_to_the_least_delayed_stamp_per_interval() -> N
     pairs = list(daq.clock_fit._pairs)
     # 50 blocks, 5 per interval: one pair each, the on-time block (k % 5 == 0).
     assert [j for j, _ in pairs] == list(range(0, 3200, 320))
-    np.testing.assert_allclose([t for _, t in pairs], [T0 + j / FS for j, _ in pairs])
+    # Stamped with the output lead: one block (64 samples) after the on-time callback.
+    np.testing.assert_allclose([t for _, t in pairs], [T0 + (j + 64) / FS for j, _ in pairs])
 
 
 def test_xruns_become_annotations_and_status_counts() -> None:

@@ -18,8 +18,14 @@ In the audio callback, for the block of ``frames`` samples starting at stream in
   shape (frames,), written to every output channel;
 - the captured block, converted to int16 counts (``round(x * 32768)``, clipped), goes into a
   :class:`~hil.acquisition.SampleRing` at indices ``j ... j + frames - 1``;
-- a sync stamp pairs input index ``j`` with its capture time on the host clock: the host
-  clock now, minus the driver's age of the block (``current_time_s - input_adc_time_s``).
+- a sync stamp pairs index ``j`` with the host-clock time output sample ``j`` leaves the
+  DAC: the host clock now, plus the driver's lead of the block (``output_dac_time_s -
+  current_time_s``). A run's sample time is the transmit time, as on the board, whose DAC and
+  ADC share one index and one clock: the receiver refers every echo to transmit time by the
+  measured loopback latency, which holds the interface's input and output buffering, so the
+  stage telemetry, mapped to sample indices by these pairs, lines up with the estimates
+  whatever the block size (stamped with the capture time of input ``j`` instead, it would
+  lag them by the interface's two blocks of buffering).
   Per ``sync_interval_s`` the least-delayed stamp is kept (the same minimum-delay rule the
   runner applies afterwards) and handed to :attr:`AudioDaq.clock_fit` on the host side.
 
@@ -466,10 +472,10 @@ class AudioDaq:
         np.clip(scaled, -_INT16_FULL_SCALE, _INT16_FULL_SCALE - 1.0, out=scaled)
         counts[:] = scaled
         self.ring.write(j, counts)
-        age = time.current_time_s - time.input_adc_time_s
-        if not 0.0 <= age <= 1.0:
-            age = 0.0  # a driver without usable timestamps: stamp on arrival
-        host_t = self._host_clock() - age
+        lead = time.output_dac_time_s - time.current_time_s
+        if not 0.0 <= lead <= 1.0:
+            lead = 0.0  # a driver without usable timestamps: stamp on arrival
+        host_t = self._host_clock() + lead
         if j >= self._window_end:
             self._flush_sync()
             self._window_end = j + self._sync_frames
