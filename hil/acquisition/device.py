@@ -80,35 +80,6 @@ class StreamingDevice(Protocol):
     def close(self) -> None: ...
 
 
-def check_daq_url(url: str, field: str = "devices.board") -> str:
-    """``url`` checked as the setting ``field`` naming a run's DAC/ADC, without opening
-    anything; returns its canonical spelling.
-
-    An audio interface (``audio://DEVICE?...``, or the simulated one ``sim://audio?...``;
-    the former spelling ``audio://sim`` is rewritten, with a deprecation warning) is read by
-    :func:`~hil.devices.audio.daq.parse_audio_url`; anything else names the board's
-    transport (:func:`~hil.transports.registry.check_url`: a port, ``serial://``, ``usb://``,
-    ``sim://board``, ...).
-
-    >>> check_daq_url("audio://sim?rate=192000")
-    'sim://audio?rate=192000'
-    >>> check_daq_url("sim://bord")
-    Traceback (most recent call last):
-    ...
-    hil.errors.ConfigError: devices.board = 'sim://bord' is not allowed: must be sim://board \
-(a simulated board); did you mean sim://board?
-    """
-    from hil.devices.audio.daq import canonical_audio_url, is_audio_url, parse_audio_url
-    from hil.transports.registry import check_url
-
-    if isinstance(url, str) and is_audio_url(url):
-        canonical = canonical_audio_url(url)
-        parse_audio_url(canonical)
-        return canonical
-    check_url(url, field, "board")
-    return url
-
-
 def _both_conform(board: Board, audio: AudioDaq) -> tuple[StreamingDevice, StreamingDevice]:
     """Never called: mypy checks here that both devices implement the seam."""
     return board, audio

@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from hil.devices.clock import VirtualClock
+from hil.devices.table import RING_S
 from hil.errors import ConfigError
 from hil.experiments.experiment import Experiment
 from hil.experiments.sim_tank import (
@@ -50,8 +51,6 @@ if TYPE_CHECKING:
 #: Spacing of the instants the interface's blocks are run on virtual time, s (as for the
 #: simulated board: a block runs at most this late).
 SERVICE_TICK_S = 0.001
-#: Seconds of capture the interface's ring holds (as the board's).
-RING_S = 8.0
 
 
 class _PacedClock:

@@ -390,7 +390,8 @@ class SimulatedTankProcess:
         """The simulated board on its pty, open and configured at ``fs`` Hz; its watchdog
         is long (:data:`~hil.experiments.live.devices.SIM_WATCHDOG_MS`): the tank is a
         child process on the same CPUs, scaled in time."""
-        from hil.experiments.live.devices import SIM_WATCHDOG_MS, open_board
+        from hil.devices.table import open_board
+        from hil.experiments.live.devices import SIM_WATCHDOG_MS
 
         board = open_board(self.board_target, fs, self.clock, SIM_WATCHDOG_MS)
         board.configure()

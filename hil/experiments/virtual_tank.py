@@ -71,7 +71,8 @@ class VirtualTank:
     def open_daq(self, fs: float) -> StreamingDevice:
         """The simulated board behind its in-memory link, open and configured at ``fs`` Hz
         on :attr:`virtual_time`."""
-        from hil.experiments.live.devices import WATCHDOG_MS, open_board
+        from hil.devices.table import open_board
+        from hil.experiments.live.devices import WATCHDOG_MS
 
         board = open_board(self.board_target, fs, self.clock, WATCHDOG_MS, self.virtual_time)
         board.configure()
