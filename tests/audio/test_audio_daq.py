@@ -150,6 +150,30 @@ def test_sync_pairs_map_host_time_to_the_index_the_dac_plays() -> None:
     assert fit.sample_index(fit.host_time(5000)) == 5000
 
 
+def test_sync_pairs_stay_exact_when_the_callbacks_run_late() -> None:
+    # Each callback runs 3 blocks after its time (a thread behind, catching up): its output
+    # is already due, the lead negative, and the pair still dates the DAC time exactly.
+    late_s = 3 * 64 / FS
+
+    class LateClock(ManualClock):
+        def sleep_until(self, t_s: float) -> None:
+            super().sleep_until(t_s + late_s)
+
+    clock = LateClock(T0)
+    backend = SimulatedDuplex(
+        AudioSettings(samplerate=FS, channels_in=2, channels_out=2, blocksize=64),
+        io_delay_samples=128,
+        clock=clock,
+    )
+    daq = AudioDaq(backend, host_clock=clock.now, sync_interval_s=0.0)
+    with daq:
+        daq.start(_Source(100, stop_at=3200))
+        assert daq.wait_for_samples(3200, timeout_s=5.0)
+    pairs = list(daq.clock_fit._pairs)
+    assert [j for j, _ in pairs] == list(range(0, 3200, 64))
+    np.testing.assert_allclose([t for _, t in pairs], [T0 + (j + 64) / FS for j, _ in pairs])
+
+
 def test_sync_pairs_are_decimated_to_the_least_delayed_stamp_per_interval() -> None:
     clock_calls: list[float] = []
 

@@ -472,8 +472,9 @@ class AudioDaq:
         np.clip(scaled, -_INT16_FULL_SCALE, _INT16_FULL_SCALE - 1.0, out=scaled)
         counts[:] = scaled
         self.ring.write(j, counts)
+        # Negative when the callback runs late (its output is already due): still exact.
         lead = time.output_dac_time_s - time.current_time_s
-        if not 0.0 <= lead <= 1.0:
+        if not -1.0 <= lead <= 1.0:
             lead = 0.0  # a driver without usable timestamps: stamp on arrival
         host_t = self._host_clock() + lead
         if j >= self._window_end:
