@@ -228,6 +228,9 @@ class Connection:
         if self.state is State.CLOSED:
             return ConnectionClosed()
         item = self._decoder.next_frame()
+        while self._stale(item):
+            self.stats.stale_frames += 1
+            item = self._decoder.next_frame()
         if item is None:
             if self._eof:
                 self.state = State.CLOSED
@@ -249,6 +252,17 @@ class Connection:
             self._queued.append(event)
             return gap
         return event
+
+    def _stale(self, item: Frame | FrameError | None) -> bool:
+        """HOST side, between its HELLO and the VERSION answering it: an intact frame of
+        another type is of the old session, sent before the device read the HELLO (SPEC
+        5.1); it is dropped unseen, without an error and without a sequence check."""
+        return (
+            self.role is Role.HOST
+            and self.state is State.HELLO_SENT
+            and isinstance(item, Frame)
+            and item.type_id != Version.TYPE_ID
+        )
 
     def _check_sequence(self, seq: int) -> SequenceGap | None:
         expected = self._rx_expected
@@ -333,7 +347,9 @@ class Connection:
             board_schema=version.schema_hash,
         )
         if reason:
-            self.state = State.CLOSED
+            # The board went back to IDLE after telling its version (SPEC 5.1); so does the
+            # host, from where a HELLO (to a board flashed meanwhile) is legal again.
+            self.state = State.IDLE
             self.peer_version = version
             raise IncompatiblePeerError(
                 reason,
@@ -404,7 +420,8 @@ class Connection:
 
     def _apply(self, message: Message, sender: Role, seq: int) -> None:
         """Move the state and the bookkeeping after a legal message (sent or received)."""
-        target = next_state(self.state, sender, message_kind(message, self._pending))
+        kind = message_kind(message, self._pending)
+        target = next_state(self.state, sender, kind)
         assert target is not None  # checked by _violation
         if isinstance(message, Hello):
             self._restart_session(sender)
@@ -413,7 +430,9 @@ class Connection:
         if isinstance(message, Configure):
             self._configuring = message
             self.configuration = None
-        elif isinstance(message, Ack | Nak) and message.ref_type in COMMAND_NAMES:
+        elif isinstance(message, Ack | Nak) and kind != "NAK:OTHER":
+            # Only the reply to the awaited command settles it: a NAK:OTHER (a CONFIGURE
+            # refused BAD_STATE while STREAMING) changes nothing (SPEC 5.2 check 4).
             self._pending.pop(message.ref_type, None)
             if message.ref_type == Configure.TYPE_ID:
                 self.configuration = self._configuring if isinstance(message, Ack) else None

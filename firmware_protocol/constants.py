@@ -28,6 +28,11 @@ SEQ_MODULO: Final = 1 << 16
 FLAG_OPTIONAL: Final = 0x01
 """Flags bit 0: a receiver that does not know this message type ignores it without a NAK."""
 
+DAC_RUNS: Final = 64
+"""Runs of consecutive queued DAC indices (gaps + 1) a device with a bounded gap queue holds
+at least: a host that keeps at most this many runs queued never gets NAK BUSY (SPEC 5.2
+check 6(d)). The reference boards (C and Python) hold exactly this many."""
+
 HANDSHAKE_CRC_SEED: Final = 0
 """CRC seed of HELLO and VERSION frames (plain CRC-32), so peers built from other definitions
 can still tell each other their versions."""

@@ -30,7 +30,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from firmware_protocol import cobs
-from firmware_protocol.constants import FLAG_OPTIONAL, PROTOCOL_MAJOR, PROTOCOL_MINOR
+from firmware_protocol.constants import DAC_RUNS, FLAG_OPTIONAL, PROTOCOL_MAJOR, PROTOCOL_MINOR
 from firmware_protocol.enums import SampleFormat
 from firmware_protocol.errors import RemoteProtocolError
 from firmware_protocol.framing import HEADER, crc_seed, encode_frame
@@ -288,6 +288,41 @@ def _scenarios() -> Iterator[tuple[str, str, Host]]:
     yield (
         "hello_restarts",
         "HELLO while STREAMING: output stops, VERSION seq 0, no watchdog, no credit",
+        h,
+    )
+
+    h = Host()
+    _handshake_and_configure(h)
+    start = idx(5)
+    h.at(2, h.dac(start, 480))
+    h.at(3, h.frame(Start(start)))
+    h.at(10)
+    h.at(11, h.frame(Configure(96_000, 0b01, 0b01, INT16, INT16, 0, 0)))
+    h.at(12, h.dac(start + 480, 240))
+    h.at(20)
+    h.at(21, h.frame(Stop()))
+    h.at(22, h.dac(idx(40), 100), h.frame(Start(idx(40))))
+    h.at(45)
+    yield (
+        "configure_while_streaming",
+        "CONFIGURE in STREAMING: NAK BAD_STATE and nothing changes: ADC data and credit go on,"
+        " DAC data is accepted, STOP is followed by CREDIT, a later START streams",
+        h,
+    )
+
+    h = Host()
+    _handshake_and_configure(h)
+    s0 = idx(10)
+    runs = [h.dac(s0 + 2 * k, 1) for k in range(DAC_RUNS)]
+    h.at(2, *runs, h.dac(s0 + 2 * DAC_RUNS, 1), h.dac(s0 + 2 * DAC_RUNS - 1, 1))
+    h.at(3, h.frame(Start(s0)))
+    h.at(13)
+    h.at(14, h.dac(idx(20), 1), h.dac(idx(20) + 2, 1))
+    h.at(21, h.frame(Stop()))
+    yield (
+        "dac_runs_busy",
+        f"{DAC_RUNS} runs of DAC indices held, one more is NAK BUSY (its indices still count"
+        " as accepted: the next is an overlap), runs played free room",
         h,
     )
 

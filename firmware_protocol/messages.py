@@ -549,8 +549,18 @@ class Status(Message):
         Field("sample_index", "u64", "samples", doc="board sample clock when measured"),
         Field("dac_buffer_level", "u32", "sample frames"),
         Field("adc_buffer_level", "u32", "sample frames"),
-        Field("dac_underruns", "u32", "count", doc="cumulative since power-up"),
-        Field("adc_overruns", "u32", "count", doc="cumulative since power-up"),
+        Field(
+            "dac_underruns",
+            "u32",
+            "count",
+            doc="runs of consecutive unplayed DAC indices, cumulative since power-up (5.4)",
+        ),
+        Field(
+            "adc_overruns",
+            "u32",
+            "count",
+            doc="runs of consecutive lost ADC indices, cumulative since power-up (5.4)",
+        ),
         Field("temperature_cdeg", "i16", "0.01 degC"),
         Field("alarms", "u16", "bit mask", enum=Alarm),
     )
@@ -568,7 +578,12 @@ class Sync(Message):
     SENDER = Role.DEVICE
     LAYOUT = (
         Field("sample_index", "u64", "samples"),
-        Field("board_time_ns", "u64", "ns", doc="board monotonic time at that sample"),
+        Field(
+            "board_time_ns",
+            "u64",
+            "ns",
+            doc="board time at that sample: ns since the board powered up (5.3)",
+        ),
     )
 
 

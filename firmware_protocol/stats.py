@@ -31,6 +31,8 @@ class ProtocolStats:
     unknown_messages: int = 0
     remote_errors: int = 0
     """Intact frames whose content broke the protocol (RemoteProtocolError raised)."""
+    stale_frames: int = 0
+    """HOST: intact frames of the old session dropped between its HELLO and the VERSION."""
 
     @property
     def frame_errors(self) -> int:

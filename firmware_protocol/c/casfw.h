@@ -124,6 +124,7 @@ typedef struct {
     int capturing;
     uint64_t produced; /* next index to play and capture */
     int in_underrun;
+    int in_overrun; /* the last ADC_DATA frame was lost: a run of lost indices goes on */
     uint32_t dac_underruns, adc_overruns;
     uint16_t latched;
     /* watchdog and periodic messages */

@@ -325,8 +325,13 @@ static void capture_until(casfw_board *b, uint64_t end) {
         }
         b->produced = first + n;
         if (!send_built(b, T_ADC_DATA, DATA_FIXED + (size_t)n * frame_bytes, 0)) {
-            b->adc_overruns++; /* the link buffer is full: these samples are lost */
+            /* The link buffer is full: these samples are lost. SPEC 5.4: one overrun per
+               run of consecutive lost indices, however many frames it spans. */
+            if (!b->in_overrun) b->adc_overruns++;
+            b->in_overrun = 1;
             b->latched |= ALARM_ADC_OVERRUN;
+        } else {
+            b->in_overrun = 0;
         }
     }
 }
@@ -335,6 +340,7 @@ static void capture_until(casfw_board *b, uint64_t end) {
 static void stop_output(casfw_board *b) {
     b->capturing = 0;
     b->in_underrun = 0;
+    b->in_overrun = 0;
     b->have_dac_end = 0;
     fifo_clear(b);
 }
@@ -450,6 +456,7 @@ static void on_start(casfw_board *b, uint16_t seq, const uint8_t *p) {
     b->produced = start;
     b->capturing = 1;
     b->in_underrun = 0;
+    b->in_overrun = 0;
     fifo_drop_before(b, start);
     if (b->hal.stream_start) b->hal.stream_start(b->hal.ctx);
     send_ack(b, seq, T_START);
@@ -693,6 +700,7 @@ void casfw_init(casfw_board *b, const casfw_config *cfg, const casfw_hal *hal) {
     b->last_now = 0;
     b->base_ns = now(b);
     b->dac_underruns = b->adc_overruns = 0;
+    b->in_overrun = 0;
     b->frame_errors = b->frames_ok = 0;
     b->tx_len = 0;
     b->rx_len = 0;

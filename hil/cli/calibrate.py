@@ -410,6 +410,10 @@ def _stage(
 
 def run(args: argparse.Namespace) -> int:
     """Run the chosen calibration, print it and store it."""
+    if getattr(args, "device", None) is not None:
+        from hil.devices.audio.daq import canonical_audio_url
+
+        args.device = canonical_audio_url(args.device)  # audio://sim: read as sim://audio
     truth = _truth(args)
     root = resolve_calibration_dir(args.store)
     kind: str = args.kind

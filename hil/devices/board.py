@@ -80,6 +80,7 @@ from hil.acquisition import (
     SampleRing,
 )
 from hil.acquisition.annotations import ADC_CLIPPING_TEXT
+from hil.devices.board_log import LOG, log_frame, log_state
 from hil.devices.board_settings import BoardSettings, to_wire_samples
 from hil.devices.clock import Clock, MonotonicClock, VirtualClock
 from hil.errors import ConfigError
@@ -497,7 +498,10 @@ class Board:
         with self._lock:
             if self._transport is None:
                 raise TransportClosedError(f"{self.url}: not connected")
+            before = self._conn.state
             self._outgoing += self._conn.send(message)
+            log_frame(self.url, "->", message)
+            log_state(self.url, before, self._conn.state)
         self._flush()
 
     def _flush(self) -> None:
@@ -549,6 +553,9 @@ class Board:
                 if self._thread_error is not None:
                     raise BoardError(f"{self.url}: reader failed") from self._thread_error
                 if time.monotonic() >= deadline:
+                    LOG.debug(
+                        "board %s: timed out after %s s waiting for %s", self.url, timeout_s, what
+                    )
                     raise TransportTimeoutError(
                         f"{self.url}: no {what} within {timeout_s} s; check that the board is"
                         " powered, the URL is right, and nothing else holds the port"
@@ -567,6 +574,12 @@ class Board:
             return done() or not self._link_up
 
         if not clock.wait_until(settled, timeout_s):
+            LOG.debug(
+                "board %s: timed out after %s s of virtual time waiting for %s",
+                self.url,
+                timeout_s,
+                what,
+            )
             raise TransportTimeoutError(
                 f"{self.url}: no {what} within {timeout_s} s of virtual time; the simulated"
                 " board did not answer"
@@ -788,6 +801,7 @@ class Board:
             # the data itself.
             wake = False
             while True:
+                before = self._conn.state
                 try:
                     event = self._conn.next_event()
                 except IncompatiblePeerError as error:
@@ -806,6 +820,8 @@ class Board:
                 if isinstance(event, AdcData):
                     self._on_adc(event)
                     continue
+                log_frame(self.url, "<-", event)
+                log_state(self.url, before, self._conn.state)
                 wake = True
                 self._handle(event)
             if wake:
@@ -1011,6 +1027,7 @@ class Board:
         if not self._link_up:
             return
         self._link_up = False
+        LOG.debug("board %s: link lost: %s", self.url, why)
         self._annotate(AnnotationKind.DISCONNECT, 0, why)
 
     def _reconnect(self) -> None:
@@ -1035,9 +1052,11 @@ class Board:
                         self._resume(feeder)
             except (TransportError, BoardError) as error:
                 last = error
+                LOG.debug("board %s: reconnect attempt %d failed: %s", self.url, attempt, error)
                 self._close_transport()
                 continue
             self.reconnects += 1
+            LOG.debug("board %s: reconnected after %d attempt(s)", self.url, attempt)
             self._annotate(
                 AnnotationKind.RECONNECT, attempt, f"reconnected after {attempt} attempt(s)"
             )

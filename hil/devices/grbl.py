@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import logging
 import math
 from collections.abc import Callable, Mapping, Sequence
 from types import TracebackType
@@ -66,6 +67,9 @@ from hil.devices.stage_errors import (
     StageTimeoutError,
 )
 from hil.errors import ConfigError
+
+#: Every line to and from GRBL, state changes and timeouts, at DEBUG (a run's run.log).
+_LOG = logging.getLogger(__name__)
 
 #: The fastest status polling GRBL's documentation recommends (5 Hz).
 MIN_POLL_INTERVAL_S = 0.2
@@ -557,6 +561,15 @@ polling at no more than 5 Hz); use the default 0.2
         self._soft_reset_and_wait(self.response_timeout)
         return self.status()
 
+    def build_info(self) -> tuple[str, ...]:
+        """GRBL's answer to ``$I``: its ``[VER:...]`` and ``[OPT:...]`` lines, as received
+        (firmware version and build date, compile options); allowed in any state."""
+        before = len(self.connection.messages)
+        self._command("$I")
+        return tuple(
+            m for m in self.connection.messages[before:] if m.startswith(("[VER:", "[OPT:"))
+        )
+
     def write_setting(self, name: str, value: Any) -> None:
         """Validate and write one ``$`` setting (by its attribute name, e.g.
         ``"max_rate_x"``); a bad value raises before anything is sent."""
@@ -654,7 +667,16 @@ polling at no more than 5 Hz); use the default 0.2
         return alarm_text(code)
 
     # ------------------------------------------------------------------ I/O
+    @property
+    def _name(self) -> str:
+        """The stage as logs name it: its URL or port."""
+        port = self._port
+        return port if isinstance(port, str) else str(getattr(port, "url", type(port).__name__))
+
     def _write(self, data: bytes) -> None:
+        if _LOG.isEnabledFor(logging.DEBUG):
+            text = data.decode("ascii", "backslashreplace").rstrip("\n")
+            _LOG.debug("stage %s -> %s", self._name, text if text.isprintable() else repr(data))
         self._require_open().write(data)
 
     def _write_realtime(self, byte: bytes) -> None:
@@ -803,6 +825,9 @@ polling at no more than 5 Hz); use the default 0.2
                 return
             now = self._clock.now()
             if now >= deadline:
+                _LOG.debug(
+                    "stage %s: timed out after %.3g s waiting for %s", self._name, timeout, what
+                )
                 raise StageTimeoutError(
                     f"no {what} from GRBL within {timeout:.3g} s: check the cable, the port "
                     "and the controller's power"
@@ -823,9 +848,21 @@ polling at no more than 5 Hz); use the default 0.2
         data = ser.read(4096)
         if not data:
             return False
-        for event in self.connection.receive_data(data, self._clock.now()):
+        events = self.connection.receive_data(data, self._clock.now())
+        debug = _LOG.isEnabledFor(logging.DEBUG)
+        for line, event in zip(self.connection.last_lines, events, strict=True):
+            if debug:
+                _LOG.debug("stage %s <- %s", self._name, line)
             if isinstance(event, Report):
+                before = self._last_status
                 self._last_status = self._to_status(event)
+                if before is None or before.state is not self._last_status.state:
+                    _LOG.debug(
+                        "stage %s: state %s -> %s",
+                        self._name,
+                        "unknown" if before is None else before.state.name,
+                        self._last_status.state.name,
+                    )
             elif isinstance(event, Alarm):
                 self._new_alarm = event.code
         return True

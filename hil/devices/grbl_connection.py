@@ -173,10 +173,13 @@ class GrblConnection:
         ``$`` number -> value text, from the ``$$`` lines received.
     messages, noise:
         Push messages (``[MSG:...]`` as received) and unrecognised lines, oldest first.
+    last_lines:
+        The lines the last :meth:`receive_data` completed, without their line ends.
     """
 
     def __init__(self) -> None:
         self._splitter = LineSplitter()
+        self.last_lines: list[str] = []
         self.pending: deque[PendingLine] = deque()
         self.banners = 0
         self.reports = 0
@@ -252,8 +255,10 @@ class GrblConnection:
 
     # ------------------------------------------------------------------ GRBL -> host
     def receive_data(self, data: bytes, now: float) -> list[GrblEvent]:
-        """Take bytes read from GRBL at ``now`` (s); return the events they complete."""
-        return [self._handle(line, now) for line in self._splitter.feed(data)]
+        """Take bytes read from GRBL at ``now`` (s); return the events they complete, one
+        per line (the lines are in :attr:`last_lines`)."""
+        self.last_lines = list(self._splitter.feed(data))
+        return [self._handle(line, now) for line in self.last_lines]
 
     def discard_partial(self) -> None:
         """Forget a partial line (after unread input was thrown away)."""

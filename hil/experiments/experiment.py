@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from hil.devices.table import check_device_url, is_simulated
 from hil.errors import ConfigError
 from hil.estimation.first_arrival import RANGE_READOUTS
 from hil.estimation.reverb_band import AUTO, doppler_resolution_mps, resolve_reverb_speed
@@ -29,7 +30,6 @@ from hil.signals.presets import check_design, get_preset
 from hil.signals.schedule import HopSchedule
 from hil.signals.waveforms import WaveformSpec
 from hil.toml_table import Table, parse_toml, read_text_file
-from hil.transports.registry import check_url
 
 DEFAULT_EXPERIMENT = """\
 # Built-in simulated tank run: `hil tank-run` with no arguments.
@@ -217,7 +217,7 @@ class Experiment:
     @property
     def simulated(self) -> bool:
         """True when both devices are simulated (``sim://``)."""
-        return self.board_url.startswith("sim://") and self.stage_url.startswith("sim://")
+        return is_simulated(self.board_url) and is_simulated(self.stage_url)
 
     def target_position(self, x_stage_m: np.ndarray) -> np.ndarray:
         """Tank position (m, shape ``(..., 3)``) of the target at stage positions (m)."""
@@ -259,8 +259,8 @@ def parse_experiment(text: str, source: str = "<text>") -> Experiment:
     output_dir = resolve_runs_dir(run.text("output_dir", "runs"))
     max_duration = run.number("max_duration_s", 120.0, lo=0.0, lo_open=True, unit="s")
     board_url, stage_url = dev.text("board"), dev.text("stage")
-    check_url(board_url, "devices.board", "board")
-    check_url(stage_url, "devices.stage", "stage")
+    board_url = check_device_url(board_url, "daq", "devices.board")
+    stage_url = check_device_url(stage_url, "stage", "devices.stage")
     board_channel = dev.integer("board_channel", 0, lo=0, hi=15)
 
     preset_name = wav.text("preset", "tank-board")

@@ -28,6 +28,7 @@ from hil.errors import ConfigError
 from hil.experiments.experiment import Experiment
 
 if TYPE_CHECKING:
+    from hil.acquisition.device import StreamingDevice
     from hil.devices.clock import Clock, VirtualClock
     from hil.devices.grbl import ByteLink
     from hil.experiments.live.stops import DeviceLostError
@@ -77,18 +78,13 @@ class TankSimulation(Protocol):
         ...
 
     @property
-    def virtual_time(self) -> VirtualClock | None:
-        """The virtual clock the board driver runs on, or None (real time: threads)."""
-        ...
-
-    @property
     def stage_target(self) -> str | ByteLink:
         """What the stage driver opens (a pty path, or an in-memory link)."""
         ...
 
-    @property
-    def board_target(self) -> str | Transport:
-        """What the board driver opens (a pty path, or an in-memory link)."""
+    def open_daq(self, fs: float) -> StreamingDevice:
+        """The run's DAC/ADC in the tank (the simulated board or audio interface), open and
+        configured at ``fs`` Hz, on :attr:`clock`."""
         ...
 
     @property
@@ -457,6 +453,17 @@ class SimulatedTankProcess:
             f"its process exited with code {code}",
             "that nothing killed it (its errors are printed above)",
         )
+
+    def open_daq(self, fs: float) -> StreamingDevice:
+        """The simulated board on its pty, open and configured at ``fs`` Hz; its watchdog
+        is long (:data:`~hil.experiments.live.devices.SIM_WATCHDOG_MS`): the tank is a
+        child process on the same CPUs, scaled in time."""
+        from hil.devices.table import open_board
+        from hil.experiments.live.devices import SIM_WATCHDOG_MS
+
+        board = open_board(self.board_target, fs, self.clock, SIM_WATCHDOG_MS)
+        board.configure()
+        return board
 
     def align(self, rate_hz: float) -> None:
         """Tie world time to the shared clock (after CONFIGURE)."""

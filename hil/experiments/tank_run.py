@@ -50,6 +50,7 @@ from hil.experiments.live.devices import RunDevices
 from hil.experiments.live.plan import new_run_folder
 from hil.experiments.live.recorder import RunRecorder
 from hil.experiments.live.session import LiveSession, SessionTiming, Telemetry
+from hil.experiments.live.snapshot import instrument_snapshot
 from hil.experiments.live.stops import RunInterrupted, StopSignals, stop_text
 from hil.experiments.run_calibrations import RunCalibrations, load_run_calibrations
 from hil.recording.records import ReceiverSetup, RunEvent
@@ -196,6 +197,7 @@ def _recording_options(
         "receiver": setup,
         "experiment_toml": exp.text,
         "calibration_ids": list(cals.ids),
+        "title": exp.name,
     }
 
 
@@ -249,6 +251,8 @@ def run_experiment(
     with StopSignals() as signals:
         try:
             tow = devices.open(exp, folder, fs, view)
+            board, stage, _ = devices.opened()
+            recorder.describe(instrument_snapshot(board, exp.board_url, stage, exp.stage_url))
             timing = SessionTiming(
                 max(256, round(TIMING_BLOCK_S * fs)),
                 STAGE_POLL_S,

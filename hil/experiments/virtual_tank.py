@@ -31,6 +31,7 @@ from hil.experiments.experiment import Experiment
 from hil.experiments.sim_tank import build_tank_world, tank_stage_config
 
 if TYPE_CHECKING:
+    from hil.acquisition.device import StreamingDevice
     from hil.experiments.live.stops import DeviceLostError
     from hil.transports.base import Transport
     from hil.transports.sim import MemoryStageLink
@@ -66,6 +67,16 @@ class VirtualTank:
             BoardPort(self._board), timeout=0.0, url="sim://board (in process, virtual time)"
         )
         self._offset = 0.0
+
+    def open_daq(self, fs: float) -> StreamingDevice:
+        """The simulated board behind its in-memory link, open and configured at ``fs`` Hz
+        on :attr:`virtual_time`."""
+        from hil.devices.table import open_board
+        from hil.experiments.live.devices import WATCHDOG_MS
+
+        board = open_board(self.board_target, fs, self.clock, WATCHDOG_MS, self.virtual_time)
+        board.configure()
+        return board
 
     def align(self, rate_hz: float) -> None:
         """Tie world time (device sample / rate) to the clock (after CONFIGURE)."""

@@ -8,7 +8,8 @@ file's ``default`` attribute names the group to open first. Every numeric column
 
 Layout (``NX_class``):
 
-- ``/`` ``NXroot``, ``default = "estimates"``;
+- ``/`` ``NXroot``, ``default = "entry"`` (the NXentry of :mod:`hil.recording.instrument`,
+  whose ``default`` is ``estimates``);
 - ``/estimates`` ``NXdata``: ``range_m`` against ``t_s`` (``speed_mps``, ``snr_db`` as
   auxiliary signals);
 - ``/telemetry`` ``NXdata``: the stage ``position_m`` against ``host_time_s``;
@@ -54,7 +55,7 @@ def annotate(f: h5py.File, samples: str, tables: tuple[str, ...]) -> None:
     mode starts (attributes and links cannot be added afterwards).
     """
     f.attrs["NX_class"] = "NXroot"
-    f.attrs["default"] = "estimates"
+    f.attrs["default"] = "estimates"  # the entry, once written, takes over
     for table in tables:
         group = f[table]
         if table in PLOTS:

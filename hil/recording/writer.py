@@ -34,6 +34,7 @@ import hil
 from hil.errors import ConfigError
 from hil.estimation.base import ESTIMATE_FIELDS, Estimate
 from hil.recording import schema
+from hil.recording.instrument import Snapshot, attach_time_axes, write_end_time, write_entry
 from hil.recording.nexus import annotate
 from hil.recording.records import ReceiverSetup, RunEvent, StageTelemetry
 from hil.recording.tables import append_rows, check_row, create_table
@@ -133,6 +134,8 @@ class RunWriter:
         receiver: ReceiverSetup | None = None,
         experiment_toml: str = "",
         calibration_ids: Sequence[str] = (),
+        instrument: Snapshot | None = None,
+        title: str = "",
         protocol_schema_hash: int | str | None = None,
         origin_sample: int | None = None,
         chunk_frames: int = DEFAULT_CHUNK_FRAMES,
@@ -155,6 +158,9 @@ class RunWriter:
             ``origin_sample``.
         receiver:
             The receiver run live (name, settings, channel, scale), if any.
+        instrument, title:
+            What was connected (``device -> fields``, :mod:`hil.recording.instrument`)
+            and the run's name, written into the NeXus ``/entry``.
         origin_sample:
             Board sample index that is the receiver's sample 0 and the schedule's t = 0;
             None: the first sample recorded.
@@ -208,7 +214,8 @@ class RunWriter:
             attrs["sample_dtype"] = sample_dtype.name
             if origin_sample is not None:
                 attrs["origin_sample"] = int(origin_sample)
-            attrs["created_utc"] = datetime.now(UTC).isoformat(timespec="seconds")
+            created = datetime.now(UTC).isoformat(timespec="seconds")
+            attrs["created_utc"] = created
             attrs["versions"] = json.dumps(software_versions(protocol_schema_hash))
             attrs["calibration_ids"] = json.dumps([str(c) for c in calibration_ids])
             if receiver is not None:
@@ -231,6 +238,15 @@ class RunWriter:
             for name, columns in schema.TABLES.items():
                 create_table(f, name, columns)
             annotate(f, schema.SAMPLES, tuple(schema.TABLES))
+            write_entry(
+                f,
+                start_time=created,
+                version=hil.__version__,
+                title=title,
+                calibration_ids=[str(c) for c in calibration_ids],
+                instrument=instrument or {},
+            )
+            attach_time_axes(f)
             f.flush()
             # From here on only appends: readers may attach at any time.
             f.swmr_mode = True
@@ -383,8 +399,9 @@ class RunWriter:
         self.flush_count += 1
 
     def close(self) -> None:
-        """Flush and close the file (idempotent)."""
+        """Write the entry's end time, flush and close the file (idempotent)."""
         if self._file.id.valid:
+            write_end_time(self._file, datetime.now(UTC).isoformat(timespec="seconds"))
             self.flush()
             self._file.close()
 

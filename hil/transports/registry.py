@@ -35,6 +35,7 @@ hil.transports.registry
 
 from __future__ import annotations
 
+import logging
 import sys
 from collections.abc import Callable
 from typing import Any
@@ -44,6 +45,9 @@ from hil.errors import ConfigError
 from hil.transports.base import Transport
 from hil.transports.serial_transport import open_serial
 from hil.transports.spy import SpyTransport
+
+#: Transports opened, with what a URL resolved to, at DEBUG (a run's run.log).
+_LOG = logging.getLogger(__name__)
 
 Opener = Callable[[str, dict[str, str], dict[str, Any], float], Any]
 """``opener(rest, query, options, timeout)``: ``rest`` is the URL after ``scheme://`` and
@@ -256,11 +260,18 @@ def open_transport(url: str, *, timeout: float = 0.05, **options: Any) -> Transp
     """
     if not isinstance(url, str) or not url:
         raise ConfigError("url", url, "a non-empty transport URL or device path")
+    opened = _open(url, timeout, options)
+    _LOG.debug("transport %s opened (%s)", url, type(opened).__name__)
+    return opened
+
+
+def _open(url: str, timeout: float, options: dict[str, Any]) -> Transport:
     if url.startswith("spy://"):
         transport: Transport = _open_spy(url, options, timeout)
         return transport
     if url.startswith("hwgrep://"):
         device, baud = resolve_hwgrep(url)
+        _LOG.debug("transport %s resolved to %s at %d baud", url, device, baud)
         return open_serial(device, baudrate=baud, timeout=timeout)
     scheme, rest, query = split_url(url)
     if scheme == "":

@@ -139,7 +139,7 @@ class SimulatedBoard:
         self.sessions = 0
         self._rate = self.spec.sample_rates_hz[0]
         self._base_index = 0
-        self._base_ns = self._now_ns()
+        self._base_ns = self._power_up_ns = self._now_ns()
         self._out = bytearray()
         self._new_session()
 
@@ -316,7 +316,8 @@ class SimulatedBoard:
             self._next_sync = self._next_status = math.inf
 
     def _send_sync(self, now: int) -> None:
-        self._send(Sync(self._index_at(now), max(0, now)))
+        # SPEC 5.3: board time counts from power-up, whatever the injected clock's zero.
+        self._send(Sync(self._index_at(now), now - self._power_up_ns))
         self._next_sync = now + round(self.spec.sync_interval_s * _NS)
 
     def _configure(self, config: Configure) -> None:
@@ -408,6 +409,12 @@ class SimulatedBoard:
             self._fifo.late_samples += late
             block, first = block[late:], first + late
         if block.shape[0]:
+            if self._fifo.end_index != first and self._fifo.runs >= self.spec.dac_runs:
+                # SPEC 5.2 6(d): its indices count as accepted (they play zero), nothing queued.
+                detail = f"{self.spec.dac_runs} runs of DAC indices queued; close a gap first"
+                seq = self.conn.last_received_seq or 0
+                self._send(Nak(seq, DacData.TYPE_ID, NakCode.BUSY, _detail(detail)))
+                return
             self._fifo.push(first, block)
         self.dac_samples_received += n
 

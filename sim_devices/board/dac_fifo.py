@@ -22,6 +22,14 @@ class DacFifo:
     >>> out, covered = fifo.play(0, 4)
     >>> out[:, 0].tolist(), covered.tolist(), fifo.level
     ([0.0, 0.0, 1.0, 2.0], [False, False, True, True], 1)
+
+    :attr:`runs` counts the runs of consecutive queued indices (gaps + 1), what a board with
+    a bounded gap queue limits (SPEC 5.2 check 6(d)):
+
+    >>> fifo.push(5, np.ones((2, 1))); fifo.push(9, np.ones((1, 1))); fifo.runs
+    2
+    >>> _ = fifo.play(4, 4); fifo.runs  # index 4 played; 5, 6 and the gap 7, 8 with them
+    1
     """
 
     def __init__(self, channels: int) -> None:
@@ -31,6 +39,8 @@ class DacFifo:
         """Queued sample frames."""
         self.late_samples = 0
         """Samples dropped because their index had passed before they were played."""
+        self.runs = 0
+        """Runs of consecutive queued indices (a gap between two blocks starts a new one)."""
 
     @property
     def end_index(self) -> int | None:
@@ -44,11 +54,20 @@ class DacFifo:
         """Forget everything queued."""
         self._blocks.clear()
         self.level = 0
+        self.runs = 0
 
     def push(self, first: int, block: FloatArray) -> None:
         """Queue ``block`` (n, channels) to play from sample index ``first``."""
+        if self.end_index != first:
+            self.runs += 1
         self._blocks.append((first, block))
         self.level += block.shape[0]
+
+    def _pop_head(self) -> None:
+        """Drop the head block; its run ends unless the next block continues it."""
+        first, block = self._blocks.popleft()
+        if not self._blocks or self._blocks[0][0] != first + block.shape[0]:
+            self.runs -= 1
 
     def discard(self, n: int) -> int:
         """Throw away up to ``n`` samples at the play head; return how many went."""
@@ -57,7 +76,7 @@ class DacFifo:
             first, block = self._blocks[0]
             take = min(n - gone, block.shape[0])
             if take == block.shape[0]:
-                self._blocks.popleft()
+                self._pop_head()
             else:
                 self._blocks[0] = (first + take, block[take:])
             gone += take
@@ -74,7 +93,7 @@ class DacFifo:
             self.late_samples += late
             self.level -= late
             if late == block.shape[0]:
-                self._blocks.popleft()
+                self._pop_head()
             else:
                 self._blocks[0] = (b_first + late, block[late:])
 
@@ -89,7 +108,7 @@ class DacFifo:
             if b_first >= end:
                 break
             if b_end <= first:  # entirely late
-                self._blocks.popleft()
+                self._pop_head()
                 self.level -= block.shape[0]
                 self.late_samples += block.shape[0]
                 continue
@@ -101,7 +120,7 @@ class DacFifo:
             used = hi - b_first
             self.level -= used
             if hi == b_end:
-                self._blocks.popleft()
+                self._pop_head()
             else:
                 self._blocks[0] = (hi, block[used:])
                 break

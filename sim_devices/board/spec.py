@@ -12,6 +12,7 @@ from firmware_protocol import (
     Capabilities,
     SampleFormat,
 )
+from firmware_protocol.constants import DAC_RUNS
 
 
 @dataclass(frozen=True)
@@ -40,6 +41,9 @@ class BoardSpec:
         Board-clock seconds between SYNC and between STATUS messages.
     temperature_c:
         Reported board temperature, degC.
+    dac_runs:
+        Runs of consecutive queued DAC indices the board holds (gaps + 1): a DAC_DATA that
+        would start one more is refused NAK BUSY (SPEC 5.2 check 6(d)).
     """
 
     dac_channels: int = 2
@@ -62,6 +66,7 @@ class BoardSpec:
     sync_interval_s: float = 0.1
     status_interval_s: float = 0.25
     temperature_c: float = 31.5
+    dac_runs: int = DAC_RUNS
 
     def capabilities(self) -> Capabilities:
         """The CAPABILITIES message this board sends after VERSION."""

@@ -142,20 +142,44 @@ def test_full_scale_clips_to_int16_range() -> None:
     assert alarms and all(a.kind is AnnotationKind.ALARM for a in alarms)
 
 
-def test_sync_pairs_map_host_time_to_the_capture_index() -> None:
+def test_sync_pairs_map_host_time_to_the_index_the_dac_plays() -> None:
     daq, _ = _sim_daq(sync_interval_s=0.0)
     with daq:
         daq.start(_Source(1000, stop_at=6400))
         assert daq.wait_for_samples(6400, timeout_s=5.0)
     fit = daq.clock_fit
     pairs = list(fit._pairs)
-    # One pair per block, stamped with the capture time of the block's first input sample:
-    # input index j was captured (io_delay - block) samples before its callback.
+    # One pair per block, stamped with the time the block's first output sample leaves the
+    # DAC: one block (64 samples) of output buffering after its callback.
     assert [j for j, _ in pairs] == list(range(6400 - 64 * 100, 6400, 64))
-    np.testing.assert_allclose([t for _, t in pairs], [T0 + (j - 64) / FS for j, _ in pairs])
+    np.testing.assert_allclose([t for _, t in pairs], [T0 + (j + 64) / FS for j, _ in pairs])
     assert fit.rate_hz == pytest.approx(FS, rel=1e-9)
-    assert fit.sample_index(T0 + 0.1) == 4800 + 64
+    assert fit.sample_index(T0 + 0.1) == 4800 - 64
     assert fit.sample_index(fit.host_time(5000)) == 5000
+
+
+def test_sync_pairs_stay_exact_when_the_callbacks_run_late() -> None:
+    # Each callback runs 3 blocks after its time (a thread behind, catching up): its output
+    # is already due, the lead negative, and the pair still dates the DAC time exactly.
+    late_s = 3 * 64 / FS
+
+    class LateClock(ManualClock):
+        def sleep_until(self, t_s: float) -> None:
+            super().sleep_until(t_s + late_s)
+
+    clock = LateClock(T0)
+    backend = SimulatedDuplex(
+        AudioSettings(samplerate=FS, channels_in=2, channels_out=2, blocksize=64),
+        io_delay_samples=128,
+        clock=clock,
+    )
+    daq = AudioDaq(backend, host_clock=clock.now, sync_interval_s=0.0)
+    with daq:
+        daq.start(_Source(100, stop_at=3200))
+        assert daq.wait_for_samples(3200, timeout_s=5.0)
+    pairs = list(daq.clock_fit._pairs)
+    assert [j for j, _ in pairs] == list(range(0, 3200, 64))
+    np.testing.assert_allclose([t for _, t in pairs], [T0 + (j + 64) / FS for j, _ in pairs])
 
 
 def test_sync_pairs_are_decimated_to_the_least_delayed_stamp_per_interval() -> None:
@@ -181,7 +205,8 @@ def test_sync_pairs_are_decimated_to_the_least_delayed_stamp_per_interval() -> N
     pairs = list(daq.clock_fit._pairs)
     # 50 blocks, 5 per interval: one pair each, the on-time block (k % 5 == 0).
     assert [j for j, _ in pairs] == list(range(0, 3200, 320))
-    np.testing.assert_allclose([t for _, t in pairs], [T0 + j / FS for j, _ in pairs])
+    # Stamped with the output lead: one block (64 samples) after the on-time callback.
+    np.testing.assert_allclose([t for _, t in pairs], [T0 + (j + 64) / FS for j, _ in pairs])
 
 
 def test_xruns_become_annotations_and_status_counts() -> None:
@@ -233,7 +258,7 @@ def test_a_source_error_is_raised_in_the_host_thread() -> None:
 
 
 def test_wait_for_samples_times_out_on_a_running_stream_and_stop_ends_it() -> None:
-    daq = AudioDaq.from_url("audio://sim?rate=48000&blocksize=256&delay=7", sample_rate_hz=48000)
+    daq = AudioDaq.from_url("sim://audio?rate=48000&blocksize=256&delay=7", sample_rate_hz=48000)
     daq.open()
     source = _Source(4800, stop_at=10**12)
     daq.start(source)
@@ -264,7 +289,7 @@ def test_read_and_wait_refuse_before_start() -> None:
 
 
 def test_parse_audio_url_golden() -> None:
-    url = parse_audio_url("audio://sim?rate=192000&blocksize=512&delay=64&latency=high")
+    url = parse_audio_url("sim://audio?rate=192000&blocksize=512&delay=64&latency=high")
     assert (url.device, url.samplerate_hz, url.blocksize, url.delay_samples, url.latency) == (
         "sim",
         192000,
@@ -282,16 +307,16 @@ def test_parse_audio_url_golden() -> None:
     ("url", "rate", "fragment"),
     [
         ("serial:///dev/ttyACM0", 48000, "devices.board = 'serial:///dev/ttyACM0' is not allowed"),
-        ("audio://sim/extra", 48000, "must be audio://DEVICE?rate=192000&blocksize=256"),
-        ("audio://sim?rate=48k", 48000, "devices.board rate = '48k' is not allowed"),
-        ("audio://sim?rate=48000&bloksize=64", 48000, "devices.board query key = 'bloksize'"),
-        ("audio://sim?blocksize=-4", 48000, "devices.board blocksize = '-4'"),
-        ("audio://sim?blocksize=8", 48000, "blocksize = 8 is not allowed: must be an integer in"),
+        ("sim://audio/extra", 48000, "must be audio://DEVICE?rate=192000&blocksize=256"),
+        ("sim://audio?rate=48k", 48000, "devices.board rate = '48k' is not allowed"),
+        ("sim://audio?rate=48000&bloksize=64", 48000, "devices.board query key = 'bloksize'"),
+        ("sim://audio?blocksize=-4", 48000, "devices.board blocksize = '-4'"),
+        ("sim://audio?blocksize=8", 48000, "blocksize = 8 is not allowed: must be an integer in"),
         ("audio://JACK?delay=3", 48000, "devices.board delay = '3' is not allowed: must be only"),
-        ("audio://sim?latency=fast", 48000, "devices.board latency = 'fast'"),
-        ("audio://sim?rate=44100", 48000, "rate = 44100 is not allowed: must be the waveform's"),
-        ("audio://sim", None, "devices.board rate = None is not allowed"),
-        ("audio://sim?rate=1000000", 1000000, "samplerate = 1000000 is not allowed"),
+        ("sim://audio?latency=fast", 48000, "devices.board latency = 'fast'"),
+        ("sim://audio?rate=44100", 48000, "rate = 44100 is not allowed: must be the waveform's"),
+        ("sim://audio", None, "devices.board rate = None is not allowed"),
+        ("sim://audio?rate=1000000", 1000000, "samplerate = 1000000 is not allowed"),
     ],
 )
 def test_bad_urls_are_refused_with_the_field(url: str, rate: int | None, fragment: str) -> None:

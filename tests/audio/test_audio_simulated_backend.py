@@ -287,3 +287,49 @@ def test_loopback_world_chunks_equal_whole(delay: int, cuts: list[int], seed: in
     expected = np.zeros_like(signal)
     expected[delay:] = signal[: max(total - delay, 0)]
     assert np.array_equal(whole_in, expected)
+
+
+def test_on_virtual_time_the_blocks_run_only_while_the_clock_passes_time() -> None:
+    from hil.devices.clock import VirtualClock
+
+    clock = VirtualClock(tick_s=0.001, start_s=5.0)
+    settings_ = AudioSettings(samplerate=FS, channels_in=1, channels_out=1, blocksize=64)
+    sim = SimulatedDuplex(settings_, DigitalLoopbackWorld(5), virtual_time=clock)
+    pulse_at = 100
+    seen: list[tuple[int, float]] = []
+    captured = np.zeros(4800, dtype=np.float32)
+
+    def callback(
+        indata: FloatArray, outdata: FloatArray, frames: int, time: BlockTime, status: int
+    ) -> None:
+        j = time.sample_index
+        seen.append((j, time.current_time_s))
+        outdata.fill(0.0)
+        if j <= pulse_at < j + frames:
+            outdata[pulse_at - j, 0] = 1.0
+        captured[j : j + frames] = indata[:, 0]
+
+    sim.open(callback)
+    sim.start()
+    assert sim.active and sim.start_time_s == 5.0 and seen == []  # nothing runs by itself
+    clock.sleep(0.01)  # 480 samples: the blocks at 0, 64, ..., 448
+    assert [j for j, _ in seen] == list(range(0, 449, 64))
+    # Each block ran at the first tick at or after its callback time 5.0 + j / fs.
+    assert all(t >= 5.0 + j / FS - 1e-12 and t - (5.0 + j / FS) <= 0.001 + 1e-9 for j, t in seen)
+    clock.sleep(0.05)
+    sim.stop()
+    assert not sim.active and sim.wait(0.0)
+    # Default io delay (two blocks) plus the 5-sample cable.
+    assert int(np.argmax(captured)) == pulse_at + 128 + 5
+    n = len(seen)
+    clock.sleep(0.01)
+    assert len(seen) == n  # detached: stopped means stopped
+
+
+def test_virtual_time_and_a_clock_are_not_both_given() -> None:
+    from hil.devices.clock import VirtualClock
+
+    with pytest.raises(ConfigError, match=r"clock = .* is not allowed: must be None with virtual"):
+        SimulatedDuplex(
+            AudioSettings(samplerate=FS), clock=ManualClock(), virtual_time=VirtualClock()
+        )

@@ -4,6 +4,7 @@ injected clock that the test advances (no wall-clock pacing, no timed assertions
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from collections.abc import Callable
@@ -169,7 +170,10 @@ def test_adc_overrun_and_dac_underrun_are_reported_and_annotated() -> None:
         assert board.frame_errors == 0 and board.sequence_gaps == 0
 
 
-def test_disconnect_triggers_reconnect_with_backoff_and_streaming_resumes() -> None:
+def test_disconnect_triggers_reconnect_with_backoff_and_streaming_resumes(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    caplog.set_level(logging.DEBUG, logger="hil.devices.board")
     clock = ManualClock()
     faults = FaultPlan()
     port, link = _memory_board(clock, faults)
@@ -208,6 +212,15 @@ def test_disconnect_triggers_reconnect_with_backoff_and_streaming_resumes() -> N
         assert len(gaps) == 1 and gaps[0].sample_index + gaps[0].length == resumed
         assert board.ring is not None and board.ring.end_index == end
         assert board.state is State.STREAMING
+    # The loss, the failed attempts and the reconnect are in the board's debug log.
+    logged = [r.getMessage().split(": ", 1)[1] for r in caplog.records if ": " in r.getMessage()]
+    losses = [m for m in logged if m.startswith(("link lost", "reconnect"))]
+    assert losses[0].startswith("link lost: ")
+    assert [m.split(":")[0] for m in losses[1:]] == [
+        "reconnect attempt 1 failed",
+        "reconnect attempt 2 failed",
+        "reconnected after 3 attempt(s)",
+    ]
 
 
 def test_watchdog_expiry_stops_the_board_and_is_annotated() -> None:

@@ -68,3 +68,15 @@ def test_calibration_dir_from_the_environment(
     assert exp.output_dir == tmp_path / "lab-runs"
     written = DEFAULT_EXPERIMENT.replace('output_dir = "runs"', 'output_dir = "mine"')
     assert parse_experiment(written).output_dir == Path("mine")
+
+
+def test_the_former_simulated_audio_spelling_runs_the_simulated_bench(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = ["calibrate", "latency", "--store", str(tmp_path), "--repeats", "2"]
+    assert main([*argv, "--device", "audio://sim"]) == 0
+    captured = capsys.readouterr()
+    assert "hil: WARNING: audio://sim is deprecated: write sim://audio" in captured.err
+    assert "simulated: kept apart in" in captured.out
+    record = CalibrationStore(tmp_path / "simulated").current("latency")
+    assert record is not None and record.settings["simulated"] is True

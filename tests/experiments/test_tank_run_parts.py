@@ -212,19 +212,36 @@ def test_a_feed_attached_by_the_observer_takes_the_blocks_after() -> None:
 # ---- the latency probe and the recorder
 
 
-def test_the_latency_probe_measures_the_loopback_on_the_first_50_ms() -> None:
+def _probe_with_loopback(latency: int) -> LatencyProbe:
+    """A probe fed the first 100 ms of a run whose DAC monitor is the drive ``latency``
+    samples late (a board: 64; an audio interface at 192 kHz, 4096-frame blocks: 8256)."""
     from hil.signals.synthesis import BlockSynthesizer
 
     exp = parse_experiment(DEFAULT_EXPERIMENT)
     fs = exp.waveform.fs_hz
-    sent = BlockSynthesizer(exp.schedule, fs, amplitude=0.5).render(0, 20_000)
-    monitor = np.concatenate([np.zeros(64), sent])[:20_000]
-    codes = np.stack([np.zeros(20_000), monitor * 16384], axis=1).astype(np.int16)
+    sent = BlockSynthesizer(exp.schedule, fs, amplitude=0.5).render(0, 40_000)
+    monitor = np.concatenate([np.zeros(latency), sent])[:40_000]
+    codes = np.stack([np.zeros(40_000), monitor * 16384], axis=1).astype(np.int16)
     probe = LatencyProbe(exp.schedule, fs, 0.5, 1000, 1.0 / 32768.0, RunCalibrations())
-    assert not probe.add(1000, codes[:5000])
-    assert probe.add(6000, codes[5000:9600])  # 9600 samples = 50 ms at 192 kHz
-    lat, note = probe.measure()
-    assert (lat, note) == (64, "loopback latency 64 samples")
+    assert not probe.add(1000, codes[:10_000])
+    assert probe.add(11_000, codes[10_000:19_200])  # 19200 samples = 100 ms at 192 kHz
+    return probe
+
+
+@pytest.mark.parametrize("latency", [64, 4160, 8256, 14_000])
+def test_the_latency_probe_measures_the_loopback_on_the_first_100_ms(latency: int) -> None:
+    lat, note = _probe_with_loopback(latency).measure()
+    assert (lat, note) == (latency, f"loopback latency {latency} samples")
+
+
+def test_a_loopback_longer_than_the_probe_measures_is_refused() -> None:
+    with pytest.raises(RuntimeError) as err:
+        _probe_with_loopback(14_500).measure()
+    assert str(err.value) == (
+        "loopback latency of 14400 samples or more: beyond the 14400 samples (0.075 s) the"
+        " run's latency probe measures; lower the audio interface's blocksize or latency"
+        " setting"
+    )
 
 
 def test_the_recorder_holds_telemetry_until_the_recording_exists(tmp_path: Path) -> None:

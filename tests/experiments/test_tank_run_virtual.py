@@ -206,3 +206,39 @@ def test_a_board_unplugged_mid_pass_stops_the_run_within_a_second_and_holds_the_
     assert exp.tow.end_m < x_end < exp.tow.start_m and x_later == x_end
     with RunRecording.open(outcome.folder / "run.h5") as rec:
         assert rec.events()[-1].text == stop[3]
+
+
+def test_the_recording_says_what_was_connected(first_run: RunOutcome) -> None:
+    import h5py
+
+    from hil.recording.instrument import read_entry
+
+    with h5py.File(first_run.folder / "run.h5", "r") as f:
+        entry = read_entry(f)
+        classes = {k: v.attrs["NX_class"] for k, v in f["entry/instrument"].items()
+                   if isinstance(v, h5py.Group)}  # fmt: skip
+    assert entry is not None and entry["title"] == "sim-towed-pass" and entry["end_time"]
+    instrument = entry["instrument"]
+    assert classes == {"board": "NXdetector", "stage": "NXpositioner", "host": "NXcollection"}
+    board = instrument["board"]
+    # The simulated board's VERSION and CAPABILITIES replies (sim_devices.board.spec).
+    fields = ("url", "firmware_version", "board_serial", "protocol_version", "max_frame_len",
+              "dac_buffer_samples")  # fmt: skip
+    assert {k: board[k] for k in fields} == {
+        "url": "sim://board",
+        "firmware_version": "1.0.0",
+        "board_serial": 0x0B0A4D01,
+        "protocol_version": "2.0",
+        "max_frame_len": 8192,
+        "dac_buffer_samples": 1 << 18,
+    }
+    assert board["link"] == "sim://board (in process, virtual time)"
+    stage = instrument["stage"]
+    assert stage["build_info"].startswith("[VER:1.1h.") and stage["build_options"].startswith(
+        "[OPT:"
+    )
+    # $$ by number, as printed: homing on ($22), 80 steps/mm ($100), 150000 mm/min ($110).
+    assert (stage["settings"]["22"], stage["settings"]["100"], stage["settings"]["110"]) == (
+        "1", "80.000", "150000.000"
+    )  # fmt: skip
+    assert set(instrument["host"]) == {"hostname", "platform", "python"}

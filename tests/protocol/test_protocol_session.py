@@ -262,9 +262,43 @@ def test_board_of_another_major_version_is_refused() -> None:
     ) as info:
         host.next_event()
     assert info.value.peer_version == (3, 1) and info.value.peer_schema == 0x12345678
-    assert host.state is State.CLOSED
-    with pytest.raises(LocalProtocolError, match="in state CLOSED"):
+    assert host.state is State.IDLE  # as the board: only a HELLO is legal now
+    with pytest.raises(LocalProtocolError, match="in state IDLE"):
         host.send(CONFIG)
+
+
+def test_after_an_incompatible_version_a_hello_reaches_a_board_flashed_meanwhile() -> None:
+    host = Connection(Role.HOST)
+    old = Connection(Role.DEVICE, protocol_version=(3, 1))
+    deliver(host, old, host.make_hello())
+    with pytest.raises(IncompatiblePeerError):
+        deliver(old, host, old.make_version())
+    flashed = Connection(Role.DEVICE)
+    assert deliver(host, flashed, host.make_hello()) == [host.make_hello()]
+    version = flashed.make_version((1, 0, 0), 7)
+    assert deliver(flashed, host, version) == [version]
+    assert deliver(flashed, host, CAPS) == [CAPS]
+    assert host.state is flashed.state is State.READY and host.peer_version == version
+
+
+def test_old_session_frames_between_hello_and_version_are_dropped_unseen() -> None:
+    host, board = configured()
+    deliver(host, board, Start(0))
+    deliver(board, host, Ack(host._tx_seq - 1, Start.TYPE_ID))
+    hello = host.send(host.make_hello())  # the host restarts the session (SPEC 5.1) ...
+    # ... while the board, not yet reading it, still streams the old session:
+    old = AdcData.from_array(0, 0b11, SampleFormat.INT16, np.zeros((4, 2), dtype=np.int16))
+    in_flight = board.send(old) + board.send(Sync(4, 4000)) + board.send(Credit(64))
+    board.receive_data(hello)
+    assert board.next_event() == host.make_hello()
+    version = board.make_version((1, 0, 0), 7)
+    host.receive_data(in_flight + board.send(version) + board.send(CAPS))
+    events = []
+    while (event := host.next_event()) is not NEED_DATA:
+        events.append(event)
+    assert events == [version, CAPS]  # no error, and no sequence gap for the old numbering
+    assert host.stats.stale_frames == 3 and host.stats.remote_errors == 0
+    assert host.state is board.state is State.READY
 
 
 def test_board_built_from_other_definitions_is_refused() -> None:

@@ -40,7 +40,8 @@ def test_units_and_nexus_attributes(
     path = tmp_path / "run.h5"
     _write(path, schedule_doc, dtype)
     with h5py.File(path, "r") as f:
-        assert f.attrs["NX_class"] == "NXroot" and f.attrs["default"] == "estimates"
+        assert f.attrs["NX_class"] == "NXroot" and f.attrs["default"] == "entry"
+        assert f["entry"].attrs["default"] == "estimates"
         est = f["estimates"]
         assert est.attrs["NX_class"] == "NXdata" and est.attrs["signal"] == "range_m"
         assert list(est.attrs["axes"]) == ["t_s"] and est.attrs["t_s_indices"] == 0

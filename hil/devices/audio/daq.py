@@ -18,8 +18,14 @@ In the audio callback, for the block of ``frames`` samples starting at stream in
   shape (frames,), written to every output channel;
 - the captured block, converted to int16 counts (``round(x * 32768)``, clipped), goes into a
   :class:`~hil.acquisition.SampleRing` at indices ``j ... j + frames - 1``;
-- a sync stamp pairs input index ``j`` with its capture time on the host clock: the host
-  clock now, minus the driver's age of the block (``current_time_s - input_adc_time_s``).
+- a sync stamp pairs index ``j`` with the host-clock time output sample ``j`` leaves the
+  DAC: the host clock now, plus the driver's lead of the block (``output_dac_time_s -
+  current_time_s``). A run's sample time is the transmit time, as on the board, whose DAC and
+  ADC share one index and one clock: the receiver refers every echo to transmit time by the
+  measured loopback latency, which holds the interface's input and output buffering, so the
+  stage telemetry, mapped to sample indices by these pairs, lines up with the estimates
+  whatever the block size (stamped with the capture time of input ``j`` instead, it would
+  lag them by the interface's two blocks of buffering).
   Per ``sync_interval_s`` the least-delayed stamp is kept (the same minimum-delay rule the
   runner applies afterwards) and handed to :attr:`AudioDaq.clock_fit` on the host side.
 
@@ -29,19 +35,22 @@ Xruns reported by the backend become annotations (``adc_overrun`` for input flag
 
 URL form for the runner's ``devices.board``: ``audio://DEVICE?rate=192000&blocksize=256``,
 DEVICE a device index or a name substring (``python -m sounddevice`` lists them);
-``audio://sim?rate=...&delay=N`` is the simulated interface with a digital loopback ``N``
-samples long, paced in real time (see :func:`parse_audio_url`).
+``sim://audio?rate=...&delay=N`` is the simulated interface (every simulated device is
+``sim://DEVICE``), on its own a digital loopback ``N`` samples long paced in real time, in
+a simulated tank run the tank's acoustics (see :func:`parse_audio_url`). ``audio://sim`` is
+still read as ``sim://audio``, with a deprecation warning.
 """
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
-from urllib.parse import parse_qsl, unquote, urlsplit
+from typing import TYPE_CHECKING, Any
+from urllib.parse import parse_qsl, unquote, urlsplit, urlunsplit
 
 import numpy as np
 import numpy.typing as npt
@@ -58,27 +67,40 @@ from hil.devices.audio.contract import BlockTime, DuplexBackend, FloatArray, Sta
 from hil.devices.audio.settings import AudioSettings
 from hil.errors import ConfigError
 
+if TYPE_CHECKING:
+    from hil.devices.clock import VirtualClock
+
+_LOG = logging.getLogger(__name__)
+
 #: ``source(first, n)``: DAC samples for stream indices ``first ... first + n - 1``, float,
 #: full scale +-1.0, shape (n,).
 DacSource = Callable[[int, int], npt.NDArray[Any]]
 
 AUDIO_SCHEME = "audio"
 SIM_DEVICE = "sim"
+#: The simulated audio interface's URL (scheme ``sim``, as ``sim://board`` and ``sim://stage``).
+SIM_AUDIO_URL = "sim://audio"
+#: Its former spelling, still read (with a deprecation warning).
+DEPRECATED_SIM_AUDIO_URL = "audio://sim"
 CHANNELS = 2
 _INT16_FULL_SCALE = 32768.0
 _INPUT_FLAGS = StatusFlags.INPUT_OVERFLOW | StatusFlags.INPUT_UNDERFLOW
 _OUTPUT_FLAGS = StatusFlags.OUTPUT_UNDERFLOW | StatusFlags.OUTPUT_OVERFLOW
 _URL_KEYS = ("rate", "blocksize", "latency", "delay")
-_URL_FORM = "audio://DEVICE?rate=192000&blocksize=256 (DEVICE: an index, a name substring or sim)"
+_URL_FORM = (
+    "audio://DEVICE?rate=192000&blocksize=256 (DEVICE: an index or a name substring) or "
+    "sim://audio?rate=192000 (the simulated interface)"
+)
 
 
 @dataclass(frozen=True)
 class AudioUrl:
     """A parsed ``audio://`` board URL.
 
-    ``device`` is None (the default device), an index, a name substring, or ``"sim"``;
-    ``samplerate_hz`` None when the URL does not say (the experiment's rate is used);
-    ``delay_samples`` is the simulated loopback delay (``audio://sim`` only).
+    ``device`` is None (the default device), an index, a name substring, or ``"sim"`` (the
+    simulated interface, ``sim://audio``); ``samplerate_hz`` None when the URL does not say
+    (the experiment's rate is used); ``delay_samples`` is the simulated loopback delay
+    (``sim://audio`` only).
     """
 
     device: str | int | None
@@ -89,12 +111,43 @@ class AudioUrl:
 
     @property
     def simulated(self) -> bool:
-        """True for ``audio://sim``."""
+        """True for ``sim://audio``."""
         return self.device == SIM_DEVICE
 
 
+def canonical_audio_url(url: str) -> str:
+    """``url`` with the simulated interface spelled ``sim://audio``: the former spelling
+    ``audio://sim`` is rewritten (and a deprecation warning logged); any other URL is
+    returned as it is.
+
+    >>> canonical_audio_url("audio://sim?rate=48000&delay=7")
+    'sim://audio?rate=48000&delay=7'
+    >>> canonical_audio_url("audio://JACK?rate=48000")
+    'audio://JACK?rate=48000'
+    """
+    parts = urlsplit(url)
+    if parts.scheme != AUDIO_SCHEME or unquote(parts.netloc).strip() != SIM_DEVICE:
+        return url
+    canonical = urlunsplit(("sim", "audio", parts.path, parts.query, parts.fragment))
+    _LOG.warning(
+        "%s is deprecated: write %s (every simulated device is sim://DEVICE)", url, canonical
+    )
+    return canonical
+
+
+def is_audio_url(url: str) -> bool:
+    """True for a URL :func:`parse_audio_url` reads: ``audio://...``, ``sim://audio...``.
+
+    >>> is_audio_url("sim://audio?rate=48000"), is_audio_url("sim://board")
+    (True, False)
+    """
+    parts = urlsplit(url)
+    return parts.scheme == AUDIO_SCHEME or (parts.scheme == "sim" and parts.netloc == "audio")
+
+
 def parse_audio_url(url: str) -> AudioUrl:
-    """Parse ``audio://DEVICE?rate=HZ&blocksize=N[&latency=low|high|S][&delay=N]``.
+    """Parse ``audio://DEVICE?rate=HZ&blocksize=N[&latency=low|high|S]`` (a real
+    interface) or ``sim://audio?rate=HZ&blocksize=N[&delay=N]`` (the simulated one).
 
     Examples
     --------
@@ -102,17 +155,21 @@ def parse_audio_url(url: str) -> AudioUrl:
     AudioUrl(device=2, samplerate_hz=192000, blocksize=512, latency='low', delay_samples=0)
     >>> parse_audio_url("audio://Scarlett%202i2").device
     'Scarlett 2i2'
-    >>> parse_audio_url("audio://sim?rate=48k")
+    >>> parse_audio_url("sim://audio?delay=7").simulated
+    True
+    >>> parse_audio_url("sim://audio?rate=48k")
     Traceback (most recent call last):
     ...
     hil.errors.ConfigError: devices.board rate = '48k' is not allowed: must be a whole number \
 of Hz; e.g. audio://JACK?rate=192000
     """
-    parts = urlsplit(url)
-    if parts.scheme != AUDIO_SCHEME or parts.path not in ("", "/") or parts.fragment:
+    parts = urlsplit(canonical_audio_url(url))
+    if not is_audio_url(parts.geturl()) or parts.path not in ("", "/") or parts.fragment:
         raise ConfigError("devices.board", url, _URL_FORM, "check the URL's spelling")
     name = unquote(parts.netloc).strip()
     device: str | int | None = int(name) if name.isdigit() else (name or None)
+    if parts.scheme == "sim":
+        device = SIM_DEVICE
     query: dict[str, str] = {}
     for key, value in parse_qsl(parts.query, keep_blank_values=True, strict_parsing=False):
         if key not in _URL_KEYS:
@@ -125,7 +182,7 @@ of Hz; e.g. audio://JACK?rate=192000
     delay = _whole(query, "delay", 0, "of samples", "the simulated loopback delay, e.g. delay=64")
     if "delay" in query and device != SIM_DEVICE:
         raise ConfigError(
-            "devices.board delay", query["delay"], "only with audio://sim", "remove it"
+            "devices.board delay", query["delay"], "only with sim://audio", "remove it"
         )
     latency: str | float = query.get("latency", "low")
     if latency not in ("low", "high"):
@@ -145,6 +202,32 @@ def _whole(query: dict[str, str], key: str, default: int | None, unit: str, hint
     if not text.isdigit():
         raise ConfigError(f"devices.board {key}", text, f"a whole number {unit}", hint)
     return int(text)
+
+
+def audio_settings(url: str, sample_rate_hz: int | None) -> tuple[AudioUrl, AudioSettings]:
+    """The parsed ``url`` and the interface settings it asks for: 2 in, 2 out, at the URL's
+    ``rate`` or else ``sample_rate_hz`` (the rate the run needs; a URL ``rate`` that differs
+    is refused)."""
+    spec = parse_audio_url(url)
+    rate = spec.samplerate_hz if spec.samplerate_hz is not None else sample_rate_hz
+    if rate is None:
+        raise ConfigError("devices.board rate", None, "a whole number of Hz", _URL_FORM)
+    if sample_rate_hz is not None and rate != sample_rate_hz:
+        raise ConfigError(
+            "devices.board rate",
+            rate,
+            f"the waveform's rate {sample_rate_hz} Hz",
+            "the interface runs the waveform's sample rate: change one to match",
+        )
+    settings = AudioSettings(
+        samplerate=rate,
+        channels_in=CHANNELS,
+        channels_out=CHANNELS,
+        blocksize=spec.blocksize,
+        latency=spec.latency,
+        device=None if spec.simulated else spec.device,
+    )
+    return spec, settings
 
 
 @dataclass(frozen=True)
@@ -184,6 +267,10 @@ class AudioDaq:
         default; a simulated backend's clock in tests).
     sync_interval_s:
         One sync pair per interval (the least-delayed stamp in it), s; 0 keeps one per block.
+    virtual_time:
+        The virtual clock a simulated backend runs its blocks on (in the host's thread, as
+        a service of the clock): waits for samples then let virtual time pass on it
+        instead of blocking. None for a backend with its own audio thread.
 
     Sample indices are the stream's: 0 is the first sample of the first callback, and DAC
     index ``n`` comes back on the ADC at ``n + latency`` (measured, not assumed).
@@ -196,6 +283,7 @@ class AudioDaq:
         ring_seconds: float = 8.0,
         host_clock: Callable[[], float] = time.monotonic,
         sync_interval_s: float = 0.1,
+        virtual_time: VirtualClock | None = None,
     ) -> None:
         for name, n in (
             ("channels_in", backend.channels_in),
@@ -213,6 +301,7 @@ class AudioDaq:
         if not (math.isfinite(sync_interval_s) and sync_interval_s >= 0):
             raise ConfigError("sync_interval_s", sync_interval_s, ">= 0 s")
         self.backend = backend
+        self._virtual = virtual_time
         fs = backend.samplerate
         self.fs_hz = float(fs)
         self.ring: SampleRing | None = None
@@ -252,28 +341,10 @@ class AudioDaq:
         """The adapter for an ``audio://`` URL (nothing is opened yet).
 
         ``sample_rate_hz`` is the rate the run needs (the waveform's); a URL ``rate`` that
-        differs is refused. ``audio://sim`` runs a :class:`SimulatedDuplex` paced in real
+        differs is refused. ``sim://audio`` runs a :class:`SimulatedDuplex` paced in real
         time with a digital loopback of ``delay`` samples on both channels.
         """
-        spec = parse_audio_url(url)
-        rate = spec.samplerate_hz if spec.samplerate_hz is not None else sample_rate_hz
-        if rate is None:
-            raise ConfigError("devices.board rate", None, "a whole number of Hz", _URL_FORM)
-        if sample_rate_hz is not None and rate != sample_rate_hz:
-            raise ConfigError(
-                "devices.board rate",
-                rate,
-                f"the waveform's rate {sample_rate_hz} Hz",
-                "the interface runs the waveform's sample rate: change one to match",
-            )
-        settings = AudioSettings(
-            samplerate=rate,
-            channels_in=CHANNELS,
-            channels_out=CHANNELS,
-            blocksize=spec.blocksize,
-            latency=spec.latency,
-            device=None if spec.simulated else spec.device,
-        )
+        spec, settings = audio_settings(url, sample_rate_hz)
         backend: DuplexBackend
         if spec.simulated:
             from hil.devices.audio.simulated import (
@@ -328,7 +399,16 @@ class AudioDaq:
         """
         if self.ring is None:
             raise RuntimeError("start() the audio DAQ before waiting for samples")
-        if self.ring.wait_for(end, timeout_s):
+        if self._virtual is not None:
+            ring, backend = self.ring, self.backend
+            if (
+                self._virtual.wait_until(
+                    lambda: (ring.end_index or 0) >= end or not backend.active, timeout_s
+                )
+                and (ring.end_index or 0) >= end
+            ):
+                return True
+        elif self.ring.wait_for(end, timeout_s):
             return True
         if not self.backend.active:
             self.backend.wait(0.0)  # re-raises what stopped the stream, if anything did
@@ -409,10 +489,11 @@ class AudioDaq:
         np.clip(scaled, -_INT16_FULL_SCALE, _INT16_FULL_SCALE - 1.0, out=scaled)
         counts[:] = scaled
         self.ring.write(j, counts)
-        age = time.current_time_s - time.input_adc_time_s
-        if not 0.0 <= age <= 1.0:
-            age = 0.0  # a driver without usable timestamps: stamp on arrival
-        host_t = self._host_clock() - age
+        # Negative when the callback runs late (its output is already due): still exact.
+        lead = time.output_dac_time_s - time.current_time_s
+        if not -1.0 <= lead <= 1.0:
+            lead = 0.0  # a driver without usable timestamps: stamp on arrival
+        host_t = self._host_clock() + lead
         if j >= self._window_end:
             self._flush_sync()
             self._window_end = j + self._sync_frames

@@ -18,15 +18,19 @@ Timing model, all in samples of one clock (``t0`` = clock time at ``start()``):
 So a loopback world with delay ``D`` gives a measured loopback latency of exactly
 ``io_delay_samples + D`` samples, whatever the block size. The clock is injected:
 :class:`ManualClock` (the default) jumps forward instantly so tests never sleep;
-:class:`RealtimeClock` paces the blocks at the real sample rate.
+:class:`RealtimeClock` paces the blocks at the real sample rate. On a
+:class:`~hil.devices.clock.VirtualClock` (``virtual_time=``) there is no audio thread: the
+blocks whose callback time has come run as a service of the clock, in the thread that lets
+virtual time pass, so a whole run is held in one thread and is deterministic.
 """
 
 from __future__ import annotations
 
+import math
 import threading
 import time
-from collections.abc import Mapping
-from typing import Protocol
+from collections.abc import Callable, Mapping
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -41,6 +45,9 @@ from hil.devices.audio.contract import (
 from hil.devices.audio.ring import ring_read, ring_write
 from hil.devices.audio.settings import AudioSettings, SettingsView
 from hil.errors import ConfigError
+
+if TYPE_CHECKING:
+    from hil.devices.clock import VirtualClock
 
 
 class Clock(Protocol):
@@ -182,6 +189,9 @@ class SimulatedDuplex(SettingsView):
         ``settings.blocksize``; default ``2 * blocksize`` (what the JACK dummy server shows).
     clock:
         Time source; default :class:`ManualClock` (no real-time waiting).
+    virtual_time:
+        Run the blocks as a service of this virtual clock instead of an audio thread (the
+        module docstring); ``clock`` is then not given.
     xrun_schedule:
         Fault injection: ``{sample_index: flags}`` makes the block starting at that index
         report those :class:`~hil.devices.audio.contract.StatusFlags` (the data path stays
@@ -207,9 +217,14 @@ class SimulatedDuplex(SettingsView):
         *,
         io_delay_samples: int | None = None,
         clock: Clock | None = None,
+        virtual_time: VirtualClock | None = None,
         xrun_schedule: Mapping[int, int] | None = None,
         xrun_capacity: int = 4096,
     ) -> None:
+        if virtual_time is not None and clock is not None:
+            raise ConfigError(
+                "clock", clock, "None with virtual_time", "give only virtual_time: it is the clock"
+            )
         self.settings = settings
         self.world: World = world if world is not None else DigitalLoopbackWorld(0)
         block = settings.blocksize
@@ -223,6 +238,10 @@ class SimulatedDuplex(SettingsView):
             )
         self.io_delay_samples = delay
         self.clock: Clock = clock if clock is not None else ManualClock()
+        self._virtual = virtual_time
+        self._detach: Callable[[], None] | None = None
+        self._t0 = 0.0
+        self._ran = False
         schedule = dict(xrun_schedule or {})
         for index, flags in schedule.items():
             if index < 0 or index % block:
@@ -243,8 +262,17 @@ class SimulatedDuplex(SettingsView):
 
     @property
     def active(self) -> bool:
-        """True while the audio thread runs."""
+        """True while the audio thread runs (on virtual time: while the service is attached)."""
+        if self._virtual is not None:
+            return self._detach is not None
         return self._thread is not None and self._thread.is_alive()
+
+    @property
+    def start_time_s(self) -> float:
+        """Clock time of the stream's start (s): the callback of the block at index ``j``
+        runs at ``start_time_s + j / fs``, output sample ``n`` leaves the DAC at
+        ``start_time_s + (n + blocksize) / fs``."""
+        return self._t0
 
     @property
     def frames_processed(self) -> int:
@@ -272,20 +300,31 @@ class SimulatedDuplex(SettingsView):
         if callable(reset):
             reset()
         self._thread = None
+        self._ran = False
 
     def start(self) -> None:
-        """Start the audio thread."""
+        """Start the audio thread (on virtual time: attach the blocks to the clock)."""
         if self._runner is None:
             raise RuntimeError("open(callback) the stream before start()")
-        if self._thread is not None:
+        if self._ran:
             raise RuntimeError("this stream already ran: open() it again to rerun")
+        self._ran = True
         self._stop.clear()
+        if self._virtual is not None:
+            self._t0 = self._virtual.now()
+            self._detach = self._virtual.attach(self._service)
+            return
         self._thread = threading.Thread(target=self._run, name="sim-audio", daemon=True)
         self._thread.start()
 
     def wait(self, timeout_s: float | None = None) -> bool:
-        """Wait until the stream ends; True if it has. Re-raises a callback exception."""
-        if self._thread is not None:
+        """Wait until the stream ends; True if it has. Re-raises a callback exception.
+
+        On virtual time nothing runs beside the caller: True once the stream ended."""
+        if self._virtual is not None:
+            if self._detach is not None:
+                return False
+        elif self._thread is not None:
             self._thread.join(timeout_s)
             if self._thread.is_alive():
                 return False
@@ -296,6 +335,7 @@ class SimulatedDuplex(SettingsView):
     def stop(self) -> None:
         """Stop after the current block. Re-raises a callback exception."""
         self._stop.set()
+        self._end_service()
         self.wait()
 
     def close(self) -> None:
@@ -308,8 +348,33 @@ class SimulatedDuplex(SettingsView):
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    # --- audio thread ---
+    # --- audio thread (or virtual-time service) ---
     def _run(self) -> None:
+        fs = self.samplerate
+        clock = self.clock
+        t0 = self._t0 = clock.now()
+        assert self._runner is not None
+        while not self._stop.is_set():
+            clock.sleep_until(t0 + self._runner.sample_index / fs)
+            if not self._block():
+                return
+
+    def _service(self) -> None:
+        """Every block whose callback time has come, on the virtual clock."""
+        assert self._virtual is not None and self._runner is not None
+        due = math.floor((self._virtual.now() - self._t0) * self.samplerate + 1e-6)
+        while self._detach is not None and self._runner.sample_index <= due:
+            if not self._block():
+                self._end_service()
+
+    def _end_service(self) -> None:
+        if self._detach is not None:
+            self._detach()
+            self._detach = None
+
+    def _block(self) -> bool:
+        """One block: input from the captured ring, the callback, the world; False once
+        the stream ends (the callback completed or aborted, or raised)."""
         runner = self._runner
         assert runner is not None
         fs = self.samplerate
@@ -317,34 +382,30 @@ class SimulatedDuplex(SettingsView):
         delay = self.io_delay_samples
         indata, outdata = self._indata, self._outdata
         captured, captured_block = self._captured, self._captured_block
-        world, clock, schedule = self.world, self.clock, self._schedule
-        t0 = clock.now()
-        while not self._stop.is_set():
-            j = runner.sample_index
-            clock.sleep_until(t0 + j / fs)
-            ring_read(captured, j - delay, indata)
-            outdata.fill(0.0)
-            outcome = runner.run_block(
-                indata,
-                outdata,
-                block,
-                t0 + (j - delay + block) / fs,
-                t0 + (j + block) / fs,
-                clock.now(),
-                schedule.get(j, 0),
-            )
-            if outcome is BlockOutcome.ABORT:
-                return
-            try:
-                world(outdata, j, captured_block)
-            except BaseException as exc:  # same rule as the callback: re-raised in wait()
-                runner.error = exc
-                return
-            # The converter: inputs beyond full scale clip at ±1.0, and are counted.
-            over = int(np.count_nonzero(np.abs(captured_block) > 1.0))
-            if over:
-                self.adc_clipped_samples += over
-                np.clip(captured_block, -1.0, 1.0, out=captured_block)
-            ring_write(captured, j, captured_block)
-            if outcome is BlockOutcome.COMPLETE:
-                return
+        t0 = self._t0
+        j = runner.sample_index
+        ring_read(captured, j - delay, indata)
+        outdata.fill(0.0)
+        outcome = runner.run_block(
+            indata,
+            outdata,
+            block,
+            t0 + (j - delay + block) / fs,
+            t0 + (j + block) / fs,
+            self._virtual.now() if self._virtual is not None else self.clock.now(),
+            self._schedule.get(j, 0),
+        )
+        if outcome is BlockOutcome.ABORT:
+            return False
+        try:
+            self.world(outdata, j, captured_block)
+        except BaseException as exc:  # same rule as the callback: re-raised in wait()
+            runner.error = exc
+            return False
+        # The converter: inputs beyond full scale clip at ±1.0, and are counted.
+        over = int(np.count_nonzero(np.abs(captured_block) > 1.0))
+        if over:
+            self.adc_clipped_samples += over
+            np.clip(captured_block, -1.0, 1.0, out=captured_block)
+        ring_write(captured, j, captured_block)
+        return outcome is not BlockOutcome.COMPLETE

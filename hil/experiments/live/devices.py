@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Protocol
 from firmware_protocol.errors import TransportError
 from hil.acquisition.device import StreamingDevice
 from hil.devices.stage_errors import StageTimeoutError
+from hil.devices.table import SIM_AUDIO, entry_for, is_simulated, open_real_daq
 from hil.errors import ConfigError
 from hil.experiments.experiment import Experiment
 from hil.experiments.live.plan import CheckedTow, StageLimits, check_tow
@@ -26,10 +27,9 @@ from hil.experiments.live.stops import DeviceLostError
 from hil.experiments.stage_checks import raise_first_failure, tow_checks
 
 if TYPE_CHECKING:
-    from hil.devices.clock import Clock, VirtualClock
+    from hil.devices.clock import Clock
     from hil.devices.grbl import ByteLink, GrblStage
     from hil.experiments.sim_tank import TankSimulation
-    from hil.transports.base import Transport
 
 
 class StatusLine(Protocol):
@@ -44,71 +44,14 @@ WATCHDOG_MS = 1000
 #: The simulated board's: the simulated tank is a child process on the same CPUs, scaled in
 #: time, so a stall of the machine (seconds on a loaded CI host) must not stop it.
 SIM_WATCHDOG_MS = 10_000
-#: Seconds of capture the board's ring holds.
-RING_S = 8.0
-
-
-def open_board(
-    target: str | Transport,
-    fs: float,
-    clock: Clock,
-    keepalive_ms: int,
-    virtual_time: VirtualClock | None = None,
-) -> StreamingDevice:
-    """The transducer board at ``target`` (a URL or an open link) opened for a run at ``fs``
-    Hz: 1 DAC channel, 2 ADC channels, :data:`RING_S` of ring; on ``virtual_time`` when
-    given (an in-process simulated board)."""
-    from hil.devices.board import Board
-    from hil.devices.board_settings import BoardSettings
-
-    settings = BoardSettings(sample_rate_hz=int(fs), dac_channels=1, adc_channels=2)
-    board = Board(
-        target,
-        settings=settings,
-        clock=None if virtual_time is not None else clock,
-        virtual_time=virtual_time,
-        ring_seconds=RING_S,
-        keepalive_ms=keepalive_ms,
-    )
-    return board.open()
-
-
-def _open_audio(url: str, fs: float, clock: Clock, keepalive_ms: int) -> StreamingDevice:
-    from hil.devices.audio.daq import AudioDaq
-
-    return AudioDaq.from_url(url, sample_rate_hz=int(fs), ring_seconds=RING_S).open()
-
-
-def _open_board_url(url: str, fs: float, clock: Clock, keepalive_ms: int) -> StreamingDevice:
-    return open_board(url, fs, clock, keepalive_ms)
-
-
-#: How each URL scheme of ``devices.board`` opens its device; any other URL is a board
-#: transport (``serial://``, ``usb://``, a port path; :func:`hil.transports.open_transport`).
-STREAMING_DEVICES: dict[str, Callable[[str, float, Clock, int], StreamingDevice]] = {
-    "audio": _open_audio,
-}
 
 
 def open_streaming_device(url: str, fs: float, clock: Clock, keepalive_ms: int) -> StreamingDevice:
-    """The DAC/ADC at ``url`` open and configured at ``fs`` Hz (2 ADC channels: the
+    """The real DAC/ADC at ``url`` open and configured at ``fs`` Hz (2 ADC channels: the
     hydrophone and the DAC monitor), on the driver ``clock``; nothing transmits yet.
-    ``keepalive_ms``: the board's watchdog (an audio interface has none)."""
-    scheme = url.split("://", 1)[0] if "://" in url else ""
-    device = STREAMING_DEVICES.get(scheme, _open_board_url)(url, fs, clock, keepalive_ms)
-    device.configure()
-    return device
-
-
-def _configured_board(
-    target: str | Transport,
-    fs: float,
-    clock: Clock,
-    *,
-    keepalive_ms: int,
-    virtual_time: VirtualClock | None,
-) -> StreamingDevice:
-    device = open_board(target, fs, clock, keepalive_ms, virtual_time)
+    ``keepalive_ms``: the board's watchdog (an audio interface has none). The device table
+    (:mod:`hil.devices.table`) says how each kind of URL opens."""
+    device = open_real_daq(url, fs, clock, keepalive_ms)
     device.configure()
     return device
 
@@ -170,12 +113,8 @@ class RunDevices:
         if exp.simulated:
             tank = self.tank = self._simulated_tank(exp, folder)
             self.clock = tank.clock
-            board, virtual = tank.board_target, tank.virtual_time
-            watchdog = WATCHDOG_MS if virtual is not None else SIM_WATCHDOG_MS
-            return tank.stage_target, partial(
-                _configured_board, board, keepalive_ms=watchdog, virtual_time=virtual
-            )
-        if exp.board_url.startswith("sim://") or exp.stage_url.startswith("sim://"):
+            return tank.stage_target, lambda fs, _clock: tank.open_daq(fs)
+        if is_simulated(exp.board_url) or is_simulated(exp.stage_url):
             raise ConfigError(
                 "devices",
                 f"board {exp.board_url}, stage {exp.stage_url}",
@@ -192,6 +131,10 @@ class RunDevices:
         return exp.stage_url, partial(_streaming_device_at, exp.board_url, WATCHDOG_MS)
 
     def _simulated_tank(self, exp: Experiment, folder: Path) -> TankSimulation:
+        if entry_for(exp.board_url) is SIM_AUDIO:  # the simulated audio interface
+            from hil.experiments.audio_tank import AudioTank
+
+            return AudioTank(exp, virtual=self.virtual_time)
         if self.virtual_time:
             from hil.experiments.virtual_tank import VirtualTank
 

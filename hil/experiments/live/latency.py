@@ -17,11 +17,13 @@ from hil.experiments.run_calibrations import RunCalibrations
 from hil.signals.schedule import HopSchedule
 from hil.signals.synthesis import BlockSynthesizer
 
-#: Capture used to measure the loopback latency at the start of every run, s.
-PROBE_S = 0.05
+#: Capture used to measure the loopback latency at the start of every run, s: delays up to
+#: three quarters of it are measured (75 ms: an audio interface at 192 kHz buffers two blocks,
+#: so blocks of up to 7000 frames).
+PROBE_S = 0.1
 
 
-def measure_latency(monitor: np.ndarray, sent: np.ndarray, max_lag: int = 4096) -> int:
+def measure_latency(monitor: np.ndarray, sent: np.ndarray, max_lag: int | None = None) -> int:
     """Integer-sample delay of ``monitor`` (the DAC drive as captured) behind ``sent``.
 
     >>> x = np.random.default_rng(0).normal(size=2000)
@@ -37,11 +39,13 @@ LOOPBACK_MIN_CORRELATION = 0.5
 
 
 def measure_loopback(
-    monitor: np.ndarray, sent: np.ndarray, max_lag: int = 4096
+    monitor: np.ndarray, sent: np.ndarray, max_lag: int | None = None
 ) -> tuple[int, float]:
-    """``(delay, correlation)``: the integer-sample delay (0 .. ``max_lag``) of ``monitor``
-    behind ``sent`` (both shape ``(n,)``) and the normalised correlation at that delay
-    (1 for a scaled, delayed copy; about 0 when the monitor does not carry ``sent``).
+    """``(delay, correlation)``: the integer-sample delay (0 .. ``max_lag``, default
+    ``n - n // 4``, so that at least a quarter of the capture overlaps) of ``monitor``
+    behind ``sent`` (both shape ``(n,)``) and the normalised correlation at that delay (1
+    for a scaled, delayed copy; about 0 when the monitor does not carry ``sent``). The delay
+    is where the correlation normalised by the overlap's energy peaks.
 
     >>> x = np.random.default_rng(0).normal(size=2000)
     >>> lag, rho = measure_loopback(0.1 * np.concatenate([np.zeros(37), x])[:2000], x)
@@ -51,7 +55,7 @@ def measure_loopback(
     (0, 0.0)
     """
     n = min(monitor.shape[0], sent.shape[0])
-    lags = min(max_lag, n - 1)
+    lags = min(n - max(1, n // 4) if max_lag is None else max_lag, n - 1)
     nfft = 1 << (2 * n - 1).bit_length()
     m, s = np.asarray(monitor[:n], dtype=float), np.asarray(sent[:n], dtype=float)
     spectrum = np.fft.rfft(m, nfft) * np.conj(np.fft.rfft(s, nfft))
@@ -62,12 +66,16 @@ def measure_loopback(
     analytic = np.zeros(nfft, dtype=complex)
     analytic[: spectrum.size] = spectrum
     analytic[1 : spectrum.size - 1] *= 2.0
-    envelope = np.abs(np.fft.ifft(analytic))
-    lag = int(np.argmax(envelope[: lags + 1]))
-    # Over the overlap at that delay: monitor[lag:] against sent[:n - lag].
-    energy = float(np.sum(m[lag:] ** 2) * np.sum(s[: n - lag] ** 2))
-    rho = float(envelope[lag] / np.sqrt(energy)) if energy > 0 else 0.0
-    return lag, rho
+    envelope = np.abs(np.fft.ifft(analytic))[: lags + 1]
+    # Normalised by the energy of the overlap at each delay (monitor[lag:] against
+    # sent[:n - lag]): the raw correlation shrinks with the overlap, so a long true delay
+    # would lose to a shorter one where the schedule resembles itself.
+    m_tail = np.cumsum((m**2)[::-1])[::-1][: lags + 1]
+    s_head = np.cumsum(s**2)[n - 1 - np.arange(lags + 1)]
+    energy = m_tail * s_head
+    rho = np.divide(envelope, np.sqrt(energy), out=np.zeros(lags + 1), where=energy > 0)
+    lag = int(np.argmax(rho))
+    return lag, float(rho[lag])
 
 
 def loopback_latency(lat: int, rho: float, cals: RunCalibrations) -> tuple[int, str]:
@@ -130,7 +138,14 @@ class LatencyProbe:
         # Its own synthesizer: the one transmitting renders on the board's writer thread (or
         # the audio callback) and is not re-entrant.
         reference = BlockSynthesizer(self._schedule, self._fs, amplitude=self._amplitude)
-        lat, rho = measure_loopback(
-            captured[:, 1] * self._scale, reference.render(0, captured.shape[0])
-        )
+        n = captured.shape[0]
+        limit = n - n // 4
+        lat, rho = measure_loopback(captured[:, 1] * self._scale, reference.render(0, n), limit)
+        if rho >= LOOPBACK_MIN_CORRELATION and lat >= limit:
+            # The peak at the end of the search: the true delay may lie beyond it.
+            raise RuntimeError(
+                f"loopback latency of {lat} samples or more: beyond the {limit} samples"
+                f" ({limit / self._fs:g} s) the run's latency probe measures; lower the audio"
+                " interface's blocksize or latency setting"
+            )
         return loopback_latency(lat, rho, self._cals)

@@ -6,7 +6,7 @@ then. Telemetry and SYNC pairs are also kept in memory for the run's outcome.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +33,11 @@ class RunRecorder:
     def open_(self) -> bool:
         """Whether the recording exists (the latency is known)."""
         return self.writer is not None
+
+    def describe(self, instrument: Mapping[str, Mapping[str, Any]]) -> None:
+        """What was connected (``device -> fields``), for the recording's NeXus entry: set
+        before :meth:`open`."""
+        self._options["instrument"] = instrument
 
     def open(self, origin_sample: int, note: RunEvent) -> None:
         """Create the recording with the receiver's sample 0 at ``origin_sample``; ``note``

@@ -1,0 +1,164 @@
+"""The built-in tank run with the simulated audio interface as the DAC/ADC
+(``board = "sim://audio?..."``, :mod:`hil.experiments.audio_tank`): through ``hil tank-run``
+on virtual time, and in real time, with the accuracy of the simulated board; the former
+spelling ``audio://sim`` still read; the URL refusals with their messages."""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+from typing import Any
+
+import h5py
+import pytest
+
+from hil.cli.main import main
+from hil.errors import ConfigError
+from hil.experiments.experiment import DEFAULT_EXPERIMENT, parse_experiment
+from hil.experiments.tank_run import LiveView, run_experiment
+from hil.recording.instrument import read_entry
+
+SHORT = DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -3.5")
+#: The board line as docs/tank-run.md writes it.
+AUDIO_BOARD = 'board = "sim://audio?blocksize=256"'
+AUDIO = SHORT.replace('board = "sim://board"', AUDIO_BOARD)
+#: The tank's converters (64 samples) and the interface's two blocks of buffering.
+AUDIO_LATENCY = 64 + 2 * 256
+
+
+def _tank_run(tmp_path: Path, text: str, capsys: pytest.CaptureFixture[str], *extra: str) -> Any:
+    exp_file = tmp_path / "audio.toml"
+    exp_file.write_text(text)
+    folder = tmp_path / "run"
+    command = ["tank-run", str(exp_file), "--out", str(folder), "--no-live", "--json", *extra]
+    assert main(command) == 0
+    return json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+
+
+def _assert_tracked_as_on_the_board(summary: dict[str, Any], latency: int = AUDIO_LATENCY) -> None:
+    # The thresholds of the simulated board's run (test_tank_run_virtual).
+    assert summary["error"] == "" and not summary["interrupted"]
+    assert summary["dropped_samples"] == 0
+    assert summary["dac_underruns"] == 0 and summary["adc_overruns"] == 0
+    assert summary["loopback_latency_samples"] == latency
+    assert summary["wrong_estimates"] == 0
+    assert summary["detection_rate"] == 1.0
+    assert summary["scored_estimates"] >= 50
+    assert abs(summary["range_bias_m"]) < 0.03 and summary["range_rmse_m"] < 0.03
+    assert summary["speed_rmse_mps"] < 0.05
+    assert summary["telemetry_truth_error_max_m"] < 0.02
+
+
+def test_hil_tank_run_with_the_simulated_audio_interface_on_virtual_time(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    summary = _tank_run(tmp_path, AUDIO, capsys, "--virtual-time")
+    _assert_tracked_as_on_the_board(summary)
+    assert summary["simulated"] is True
+    # The stage's conversation is in the run's log (the interface has no frames to log).
+    log = (tmp_path / "run" / "run.log").read_text(encoding="utf-8")
+    assert "DEBUG   hil.devices.grbl: stage sim://stage (in process, virtual time) -> $$" in log
+    # The recording names the interface it ran on.
+    with h5py.File(tmp_path / "run" / "run.h5", "r") as f:
+        entry = read_entry(f)
+    assert entry is not None
+    assert entry["instrument"]["audio"] == {
+        "url": "sim://audio?blocksize=256",
+        "sample_rate_hz": 192_000,
+        "blocksize": 256,
+        "latency_setting": "low",
+        "device": "simulated audio interface",
+        "host_api": "simulated",
+        "io_delay_samples": 512,
+        "input_latency_s": 512 / 192_000,
+    }
+
+
+@pytest.mark.slow
+def test_large_blocks_are_measured_and_tracked_as_on_the_board(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # 2048-frame blocks (docs/tank-run.md, against xruns): 64 + 2 x 2048 samples (22 ms) of
+    # loopback, measured; the sync pairs date the transmit time, so the telemetry truth lines
+    # up with the estimates as on the board, whatever the buffering.
+    text = AUDIO.replace("blocksize=256", "blocksize=2048")
+    summary = _tank_run(tmp_path, text, capsys, "--virtual-time")
+    _assert_tracked_as_on_the_board(summary, latency=64 + 2 * 2048)
+
+
+@pytest.mark.slow
+def test_hil_tank_run_with_the_simulated_audio_interface_in_real_time(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    _assert_tracked_as_on_the_board(_tank_run(tmp_path, AUDIO, capsys))
+
+
+def test_the_former_spelling_is_read_as_sim_audio_with_a_deprecation_warning(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    text = SHORT.replace('board = "sim://board"', 'board = "audio://sim?blocksize=256"')
+    with caplog.at_level(logging.WARNING, logger="hil"):
+        exp = parse_experiment(text)
+    assert exp.board_url == "sim://audio?blocksize=256"
+    assert exp.simulated
+    assert [r.getMessage() for r in caplog.records] == [
+        "audio://sim?blocksize=256 is deprecated: write sim://audio?blocksize=256 "
+        "(every simulated device is sim://DEVICE)"
+    ]
+
+
+def test_a_real_audio_interface_url_passes_the_experiment_check() -> None:
+    text = SHORT.replace('board = "sim://board"', 'board = "audio://Scarlett%202i2?rate=192000"')
+    exp = parse_experiment(text.replace('stage = "sim://stage"', 'stage = "/dev/ttyUSB0"'))
+    assert exp.board_url == "audio://Scarlett%202i2?rate=192000" and not exp.simulated
+
+
+@pytest.mark.parametrize(
+    ("board", "message"),
+    [
+        (
+            "audio://JACK?bloksize=64",
+            "devices.board query key = 'bloksize' is not allowed: must be one of rate, "
+            "blocksize, latency, delay",
+        ),
+        (
+            "sim://audio/x",
+            "devices.board = 'sim://audio/x' is not allowed: must be audio://DEVICE?rate=192000",
+        ),
+        (
+            "sim://audio?latency=fast",
+            "devices.board latency = 'fast' is not allowed: must be low, high or seconds",
+        ),
+    ],
+)
+def test_a_bad_audio_url_is_refused_at_parse_naming_the_field(board: str, message: str) -> None:
+    text = SHORT.replace('board = "sim://board"', f'board = "{board}"')
+    with pytest.raises(ConfigError) as err:
+        parse_experiment(text)
+    assert str(err.value).startswith(message)
+
+
+def _open_run(tmp_path: Path, text: str) -> None:
+    run_experiment(
+        parse_experiment(text), folder=tmp_path / "run", view=LiveView(enabled=False),
+        virtual_time=True,
+    )  # fmt: skip
+
+
+def test_a_loopback_delay_is_refused_in_the_tank(tmp_path: Path) -> None:
+    text = SHORT.replace('board = "sim://board"', 'board = "sim://audio?delay=5"')
+    with pytest.raises(ConfigError) as err:
+        _open_run(tmp_path, text)
+    assert str(err.value) == (
+        "devices.board delay = 5 is not allowed: must be absent with sim://stage (the tank, "
+        "not a cable, is between output and input); remove it: the tank's converters delay "
+        "the monitor by 64 samples"
+    )
+    assert not (tmp_path / "run" / "run.h5").exists()
+
+
+def test_the_simulated_audio_interface_is_not_mixed_with_a_real_stage(tmp_path: Path) -> None:
+    text = AUDIO.replace('stage = "sim://stage"', 'stage = "serial:///dev/ttyUSB0"')
+    with pytest.raises(ConfigError, match=r"both simulated \(sim://\) or both real"):
+        _open_run(tmp_path, text)
