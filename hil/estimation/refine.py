@@ -30,20 +30,34 @@ steps). Over the search ``|2π f ε D/2| ≤ 1`` (``ε`` up to 0.75 m/s as a tim
 ``att`` tones), so the :data:`N_MOMENTS` terms leave a relative error below 2e-4 at a
 window's edge. ``L = |Σ_i H_i|²``.
 
-Search: a grid over ±½ grating lobe in time (``1/(α Δf)``, ``Δf`` the tone spacing: the
-detector's error is far smaller, so the lobe is the detector's) and ±``speed_span`` in speed,
-then a 2-D quadratic fit on a 3 × 3 stencil around the best point, repeated with the stencil
-shrinking, until the step is below a thousandth of the main lobe.
+Why this estimator: it is the maximum-likelihood estimate for one echo in white noise, so it
+is efficient above threshold; evaluated on the moments it costs a few hundred multiplies per
+candidate instead of an input-rate correlation, and only a small neighbourhood is searched
+because the detector has already chosen the codeword, the lobe and the speed to a fraction
+of the Doppler resolution. Interpolating a fine cross-ambiguity would need that ambiguity on
+a grid finer than its main lobe in both axes, the same evaluations without the fit.
+
+Search (:func:`~hil.estimation.refine_kernels.maximise`): a grid over ±½ grating lobe in time
+(``1/(α Δf)``, ``Δf`` the tone spacing: the detector's error is far smaller, so the lobe is
+the detector's) and ±``speed_span`` in speed, re-centred where its maximum is on the speed
+edge (a detector's speed biased next to masked Doppler cells), then 2-D quadratic fits on a
+3 × 3 stencil around the best point, the stencil halving each pass. A detection that agrees
+with a recent fit of its echo starts from that fit's prediction with a small grid instead.
+
+Is it an echo of the schedule: the fit's coherence across the hops, within each tone and
+over runs of consecutive hops, against what one echo of its SNR would give
+(:func:`_fit_quality`; the receiver refuses a detection below all three).
 
 SNR: at the maximum, ``Â = 2|C|/E_s`` (``E_s = Σ a_i² N_i``, ``N_i`` the window's samples) and
 the noise variance is what the echo leaves of the window's energy; ``E/N0 = Â² N / (4 σ²)``
 (:func:`hil.estimation.crlb.sampled_e_over_n0`), from which the estimate's own Cramér–Rao
 bounds follow.
 
-Limits: one echo. Two echoes within a main lobe (tank multipath a fraction of a millisecond
-apart) pull the maximum toward their weighted mean; an accelerating target is fitted with
-its mean time scale over the ``M`` hops (the boundary time stays unbiased for a constant
-acceleration to first order). Tone schedules only (no chirps).
+Limits: one echo. Through multipath a fraction of a millisecond long (a tank's images) the
+maximum sits between the arrivals and the fit is not one echo (tanks read the first arrival
+instead, :mod:`hil.estimation.first_arrival`). An accelerating target is fitted with the mean
+time scale of the ``M`` hops (its speed lags by the acceleration times half the window; the
+range stays within centimetres up to 7 m/s² on ``att``). Tone schedules of equal hops only.
 """
 
 from __future__ import annotations
