@@ -166,7 +166,13 @@ def test_a_snapshot_field_nexus_cannot_name_is_refused(
 
 
 def test_a_nexus_reader_finds_the_default_plot(tmp_path: Path, schedule_doc: dict) -> None:
-    nx = pytest.importorskip("nexusformat.nexus")
+    # nexusformat sets NumPy's print options for the whole process when imported: restored,
+    # so the doctests that print arrays after this test see the defaults.
+    options = np.get_printoptions()
+    try:
+        nx = pytest.importorskip("nexusformat.nexus")
+    finally:
+        np.set_printoptions(**options)
     path = tmp_path / "run.h5"
     _write(path, schedule_doc)
     root = nx.nxload(str(path), "r")
