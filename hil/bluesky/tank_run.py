@@ -221,6 +221,14 @@ class TankRunDetector(StandardReadable, Triggerable, Stoppable, Pausable):
             )
 
     def _run(self, folder: Path) -> tuple[RunOutcome, dict[str, Any]]:
+        from hil.outputs import release_output_folder
+
+        try:
+            return self._run_in(folder)
+        finally:
+            release_output_folder(folder)
+
+    def _run_in(self, folder: Path) -> tuple[RunOutcome, dict[str, Any]]:
         from hil.experiments.run_log import log_outcome
         from hil.experiments.run_report import write_report
         from hil.experiments.run_scoring import summarize, write_summary

@@ -415,6 +415,9 @@ def run(args: argparse.Namespace) -> int:
     kind: str = args.kind
     simulated = _runs_simulated(args)
     store = CalibrationStore(root / SIMULATED_SUBDIR if simulated else root)
+    from hil.outputs import writable_folder
+
+    writable_folder(store.root, "--store (or HIL_CALIBRATION_DIR)")
     try:
         if kind in ("sound-speed", "stage"):
             result, settings, lines = args.kind_func(args, truth, store)

@@ -203,8 +203,20 @@ def _check_schedule(
     return itertools.chain(head, blocks)
 
 
+def check_outputs(args: argparse.Namespace) -> None:
+    """Refuse an unwritable ``--csv`` (or ``--map``) before any work
+    (:mod:`hil.outputs`)."""
+    from hil.outputs import writable_file
+
+    for option in ("csv", "map"):
+        path = getattr(args, option, None)
+        if path is not None:
+            writable_file(path, f"--{option}")
+
+
 def run(args: argparse.Namespace) -> int:
     """Execute ``hil estimate``; return the exit status."""
+    check_outputs(args)
     schedule, doc = read_schedule_file(args.schedule)
     clip = ClipCount()
     fs, _, blocks = read_wav_blocks(args.input, args.channel, clip=clip)
@@ -266,7 +278,6 @@ class _Sink:
             if str(args.csv) == "-":
                 self._csv_file = sys.stdout
             else:
-                args.csv.parent.mkdir(parents=True, exist_ok=True)
                 self._csv_file = args.csv.open("w", newline="", encoding="utf-8")
             self._writer = csv.DictWriter(self._csv_file, fieldnames=list(ESTIMATE_FIELDS))
             self._writer.writeheader()

@@ -3,12 +3,14 @@
 Every sub-command module exposes ``register(subparsers)`` which adds its parser and sets
 ``func`` to a callable taking the parsed namespace and returning an exit status. Invalid input
 (a :class:`~hil.errors.ConfigError`, a missing file) prints one line to stderr and exits with
-status 2, never a traceback; argparse's own usage errors exit with 2 as well.
+status 2, never a traceback; argparse's own usage errors exit with 2 as well. A failure to
+read or write while working (a full disk) prints one line and exits with status 1.
 """
 
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import sys
 from collections.abc import Sequence
@@ -18,7 +20,23 @@ from hil import __version__
 from hil.errors import ConfigError
 
 EXIT_OK = 0
+EXIT_IO = 1
 EXIT_USAGE = 2
+
+#: Errors of a path as given (missing, a folder for a file, no permission, a symlink loop,
+#: too long): the input is wrong, exit status 2.
+_BAD_PATH_ERRNOS = frozenset(
+    {
+        errno.ENOENT,
+        errno.EISDIR,
+        errno.ENOTDIR,
+        errno.EACCES,
+        errno.EPERM,
+        errno.ELOOP,
+        errno.ENAMETOOLONG,
+        errno.EROFS,
+    }
+)
 
 COMMANDS: dict[str, tuple[str, str]] = {
     "tank-run": (
@@ -179,13 +197,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     from hil.logs import configure_logging, reset_logging
 
     try:
+        if args.log_file is not None:
+            from pathlib import Path
+
+            from hil.outputs import writable_file
+
+            writable_file(Path(args.log_file), "--log-file", make_folder=False)
         configure_logging(args.log_level, args.log_file)
         status: int = args.func(args)
     except ConfigError as exc:
         print(f"hil {args.command}: error: {_name_option(args, exc)}", file=sys.stderr)
-        return EXIT_USAGE
-    except (FileNotFoundError, IsADirectoryError, PermissionError, NotADirectoryError) as exc:
-        print(f"hil {args.command}: error: {exc.strerror}: {exc.filename}", file=sys.stderr)
         return EXIT_USAGE
     except BrokenPipeError:
         # Output piped into a command that stopped reading (e.g. `| head`): not an error.
@@ -194,6 +215,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return EXIT_OK
+    except OSError as exc:
+        # A path the user gave that cannot be used is bad input (2); any other failure to
+        # read or write while working (a full disk, a device gone) is an I/O failure (1).
+        bad_input = exc.errno in _BAD_PATH_ERRNOS
+        what = exc.strerror or str(exc)
+        where = f": {exc.filename}" if exc.filename is not None else ""
+        print(f"hil {args.command}: error: {what}{where}", file=sys.stderr)
+        return EXIT_USAGE if bad_input else EXIT_IO
     except KeyboardInterrupt:
         print(f"hil {args.command}: interrupted", file=sys.stderr)
         return 130

@@ -20,7 +20,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from hil.cli.estimate import _parse_option, _Sink
+from hil.cli.estimate import _parse_option, _Sink, check_outputs
 from hil.estimation.registry import RECEIVERS
 from hil.recording import RunRecording, compare_estimates, replay
 
@@ -66,6 +66,7 @@ def register(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``hil replay``; return the exit status."""
+    check_outputs(args)
     overrides = dict(_parse_option(o) for o in args.option)
     with RunRecording.open(args.run) as rec:
         live = rec.metadata.receiver

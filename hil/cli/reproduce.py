@@ -81,6 +81,9 @@ def run(args: argparse.Namespace) -> int:
     if args.trials_per_point is not None and args.trials_per_point < 1:
         raise ConfigError("--trials-per-point", args.trials_per_point, "an integer >= 1")
     items = _items(args.items)
+    from hil.outputs import writable_folder
+
+    writable_folder(args.out, "--out")
     runner = make_runner(
         workers=args.workers,
         dask_workers=args.dask_workers,

@@ -62,7 +62,10 @@ def register(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``hil sweep``; return the exit status."""
+    from hil.outputs import writable_folder
+
     spec = load_sweep_file(args.sweep_file)
+    writable_folder(args.out, "--out")
     runner = make_runner(
         workers=args.workers,
         dask_workers=args.dask_workers,

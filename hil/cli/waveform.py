@@ -120,19 +120,14 @@ def _validate_io(args: argparse.Namespace) -> None:
         raise ConfigError("--amplitude", args.amplitude, "in (0, 1] (full scale is 1)")
     if not (math.isfinite(args.max_size) and args.max_size > 0):
         raise ConfigError("--max-size", args.max_size, "> 0 GB")
+    from hil.outputs import writable_file, writable_folder
+
     for opt in ("out", "schedule"):
         path = getattr(args, opt)
-        if path is None:
-            continue
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise ConfigError(
-                f"--{opt}",
-                str(path),
-                "a file path whose folder exists or can be created",
-                f"cannot create {path.parent}: {exc.strerror}",
-            ) from None
+        if path is not None:
+            writable_file(path, f"--{opt}")
+    if args.plot is not None:
+        writable_folder(args.plot, "--plot")
 
 
 def _write_wav(path: Path, synth: BlockSynthesizer, n_samples: int, fs: float) -> None:

@@ -163,13 +163,15 @@ def test_a_run_that_stops_after_it_started_keeps_its_event_and_fails_the_bluesky
 
 def test_each_trigger_gets_a_new_run_folder_under_runs_dir(tmp_path: Path) -> None:
     from hil.bluesky import TankRunDetector
+    from hil.outputs import CLAIM
 
     run = TankRunDetector(parse_experiment(SHORT), runs_dir=tmp_path, name="tank")
     first = run.new_run_folder()
     second = run.new_run_folder()
-    # New and empty, under runs_dir; two stamped in the same second get a suffix.
+    # New and empty but its claim, under runs_dir; two stamped in the same second get a
+    # suffix.
     assert first.parent == tmp_path and first.name.startswith("bluesky-pass-")
-    assert first.is_dir() and not any(first.iterdir())
+    assert first.is_dir() and [p.name for p in first.iterdir()] == [CLAIM]
     assert second != first and second.parent == tmp_path
 
 
