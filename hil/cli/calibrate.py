@@ -332,8 +332,8 @@ def _tank(
             ranger = EchoRanger(tank.device(), gate, latency_samples=latency, averages=args.pings)
             yield stage, ranger, lines, latency
         return
-    if args.stage is None:
-        raise ConfigError("--stage", None, "a GRBL serial URL when --device is given")
+    if args.stage is None or not args.stage.strip():
+        raise ConfigError("--stage", args.stage, "a GRBL serial URL when --device is given")
     from hil.devices.grbl import GrblStage
 
     latency = args.latency
@@ -410,6 +410,9 @@ def _stage(
 
 def run(args: argparse.Namespace) -> int:
     """Run the chosen calibration, print it and store it."""
+    blocksize = getattr(args, "blocksize", None)
+    if blocksize is not None and blocksize < 1:
+        raise ConfigError("--blocksize", blocksize, "an integer >= 1 frames", "e.g. 256")
     truth = _truth(args)
     root = resolve_calibration_dir(args.store)
     kind: str = args.kind

@@ -214,12 +214,45 @@ def check_outputs(args: argparse.Namespace) -> None:
             writable_file(path, f"--{option}")
 
 
+def _check_numbers(args: argparse.Namespace) -> None:
+    """Refuse a speed, range or sound speed that is not a finite number in its range."""
+    for option, value, allowed in (
+        ("--max-speed", args.max_speed, (0.0, "a finite speed >= 0 m/s")),
+        ("--max-range", args.max_range, (0.0, "a finite range > 0 m")),
+        ("--sound-speed", args.sound_speed, (0.0, "a finite sound speed > 0 m/s")),
+    ):
+        low, words = allowed
+        if value is None:
+            continue
+        strict = option != "--max-speed"
+        if not math.isfinite(value) or value < low or (strict and value == low):
+            raise ConfigError(option, value, words, "give a number such as the default")
+
+
+def _check_length(path: Path, n_frames: int, fs: float, schedule: Any) -> None:
+    """Refuse a WAV shorter than one hop of the schedule: no hop boundary, no estimate."""
+    try:
+        hop_s = float(schedule.hop_s)
+    except ConfigError:  # unequal hops: the shortest one
+        hop_s = float(np.min(schedule.hops(0, 1).duration_s))
+    need = int(math.ceil(hop_s * fs))
+    if n_frames < need:
+        raise ConfigError(
+            "--input",
+            str(path),
+            f"at least one hop of signal ({hop_s:.4g} s = {need} samples at {fs:g} Hz)",
+            f"it holds {n_frames} sample{'s' * (n_frames != 1)}; record a longer input",
+        )
+
+
 def run(args: argparse.Namespace) -> int:
     """Execute ``hil estimate``; return the exit status."""
     check_outputs(args)
+    _check_numbers(args)
     schedule, doc = read_schedule_file(args.schedule)
     clip = ClipCount()
-    fs, _, blocks = read_wav_blocks(args.input, args.channel, clip=clip)
+    fs, n_frames, blocks = read_wav_blocks(args.input, args.channel, clip=clip)
+    _check_length(args.input, n_frames, fs, schedule)
     if not math.isclose(fs, float(doc["fs"]), rel_tol=0, abs_tol=0.5):
         raise ConfigError(
             "--input",
