@@ -127,6 +127,22 @@ def _open_h5(path: Path) -> h5py.File:
         ) from None
 
 
+#: File attributes every recording holds from its creation (``origin_sample`` and
+#: ``receiver`` are optional).
+_REQUIRED_ATTRS = ("fs_hz", "n_channels", "sample_dtype", "versions", "calibration_ids",
+                   "created_utc")  # fmt: skip
+
+
+def _missing_parts(f: h5py.File) -> list[str]:
+    """What a file in the recording format lacks of what every recording holds from its
+    creation (attributes, the samples, schedule and experiment datasets, every table):
+    refused from the structure at open, never a KeyError on the first read."""
+    missing = [f"the attribute {a}" for a in _REQUIRED_ATTRS if a not in f.attrs]
+    parts = (schema.SAMPLES, schema.SCHEDULE_DOCUMENT, schema.EXPERIMENT_TOML, *schema.TABLES)
+    missing += [f"/{name}" for name in parts if name not in f]
+    return missing
+
+
 class RunRecording:
     """An open run recording (use :meth:`open`; close it, or use it as a context manager)."""
 
@@ -161,6 +177,15 @@ class RunRecording:
                     version if version is None else int(version),
                     f"one of {readable} (the versions this hil reads)",
                     "read it with the hil release that wrote it",
+                )
+            missing = _missing_parts(f)
+            if missing:
+                raise ConfigError(
+                    "recording",
+                    str(path),
+                    "a complete hil run recording",
+                    f"it lacks {', '.join(missing)}: it was not written by hil's recorder or"
+                    " was altered since; use the run.h5 the run wrote",
                 )
             return cls(f, path)
         except BaseException:
