@@ -22,6 +22,7 @@ from hil.errors import ConfigError
 EXIT_OK = 0
 EXIT_IO = 1
 EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
 
 #: Errors of a path as given (missing, a folder for a file, no permission, a symlink loop,
 #: too long): the input is wrong, exit status 2.
@@ -190,7 +191,21 @@ def _name_option(args: argparse.Namespace, exc: ConfigError) -> ConfigError:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the ``hil`` command; return the exit status."""
+    """Run the ``hil`` command; return the exit status. SIGTERM and SIGHUP stop it as
+    Ctrl-C does from its first instruction (:mod:`hil.interrupts`)."""
+    from hil.interrupts import interruption, raise_on_stop_signals
+
+    restore = raise_on_stop_signals()
+    try:
+        return _main(argv)
+    except KeyboardInterrupt as exc:  # before the command started (parsing, its imports)
+        print(f"hil: interrupted ({interruption(exc)})", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    finally:
+        restore()
+
+
+def _main(argv: Sequence[str] | None) -> int:
     words = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(load=[name] if (name := _command_name(words)) in COMMANDS else [])
     args = parser.parse_args(words)
@@ -223,9 +238,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         where = f": {exc.filename}" if exc.filename is not None else ""
         print(f"hil {args.command}: error: {what}{where}", file=sys.stderr)
         return EXIT_USAGE if bad_input else EXIT_IO
-    except KeyboardInterrupt:
-        print(f"hil {args.command}: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        from hil.interrupts import interruption
+
+        print(f"hil {args.command}: interrupted ({interruption(exc)})", file=sys.stderr)
+        return EXIT_INTERRUPTED
     finally:
         reset_logging()
     return status

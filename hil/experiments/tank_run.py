@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import contextlib
 import datetime as dt
+import logging
 import sys
 import threading
 import time
@@ -57,6 +58,8 @@ from hil.signals.schedule_file import schedule_document
 
 if TYPE_CHECKING:
     from hil.experiments.sim_tank import TankSimulation
+
+_LOG = logging.getLogger(__name__)
 
 #: Stage status polled every this many seconds of the driver clock (GRBL's 5 Hz).
 STAGE_POLL_S = 0.2
@@ -288,7 +291,12 @@ def _run_in_folder(
                 recorder.flush()
             if refused and devices.tank is not None:
                 devices.tank.close()  # no outcome follows: stop the simulated tank here
-        return _outcome(exp, folder, fs, cals, devices, recorder, session, maps, ending, wall0)
+        outcome = _outcome(exp, folder, fs, cals, devices, recorder, session, maps, ending, wall0)
+        if signals.ignored:
+            _LOG.warning(
+                "ignored during the safe stop, which had to finish: %s", ", ".join(signals.ignored)
+            )
+        return outcome
 
 
 def _transmit_and_tow(

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from hil.estimation.base import Estimate
+from hil.interrupts import stops_deferred
 from hil.recording.records import RunEvent, StageTelemetry
 from hil.recording.writer import RunWriter
 
@@ -36,8 +37,11 @@ class RunRecorder:
 
     def open(self, origin_sample: int, note: RunEvent) -> None:
         """Create the recording with the receiver's sample 0 at ``origin_sample``; ``note``
-        (the latency's) is its first event; the telemetry held so far is written."""
-        self.writer = RunWriter.create(self.path, origin_sample=origin_sample, **self._options)
+        (the latency's) is its first event; the telemetry held so far is written. A stop
+        (Ctrl-C, SIGTERM) meanwhile acts once the file exists whole, so the stop is recorded
+        in it."""
+        with stops_deferred():
+            self.writer = RunWriter.create(self.path, origin_sample=origin_sample, **self._options)
         self.writer.append_event(note)
         for record in self._telemetry:
             self.writer.append_telemetry(record)
