@@ -146,7 +146,7 @@ def register(sub: Any) -> None:
         "calibrate",
         help="calibrate latency, response, level, sound speed or the stage",
         description="Run one calibration (in simulation when no device is given), print it "
-        "and store it as the current calibration of its kind (docs/calibration.md). "
+        "and store it as the current calibration of its kind (hil docs calibration). "
         "'hil calibrate KIND --help' describes each kind.",
     )
     kinds = parser.add_subparsers(dest="kind", metavar="KIND")

@@ -77,6 +77,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "hil.cli.watch",
         "live view of a run recording in the browser (range, speed, alarms)",
     ),
+    "docs": ("hil.cli.docs", "print the installed documentation (hil docs lists the topics)"),
 }
 """Sub-command name -> (module with ``register``, one-line summary for ``hil --help``).
 
@@ -154,7 +155,8 @@ def build_parser(load: Sequence[str] | None = None) -> argparse.ArgumentParser:
         description="Continuous active sonar (HFC-CW / GCAS) hardware-in-the-loop testbench. "
         "'hil COMMAND --help' describes a command, its options, defaults and units.",
         epilog="Environment: HIL_CALIBRATION_DIR (calibration store, default ./calibration), "
-        "HIL_RUNS_DIR (where tank runs are written, default ./runs).",
+        "HIL_RUNS_DIR (where tank runs are written, default ./runs). Documentation: "
+        "'hil docs' lists the installed documents, 'hil docs TOPIC' prints one.",
     )
     parser.add_argument("--version", action="version", version=f"hil {__version__}")
     parser.add_argument(

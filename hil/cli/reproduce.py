@@ -32,7 +32,7 @@ def register(sub: Any) -> None:
         "reproduce",
         help="run the seed's chapter-6 evaluation and write figures, tables and report.md",
         description="Run every chapter-6 item (the shipped sweep files in hil/data/sweeps/, see "
-        "docs/results.md), then write PNG figures, CSV tables and DIR/report.md. Items: "
+        "hil docs results), then write PNG figures, CSV tables and DIR/report.md. Items: "
         + ", ".join(ITEM_IDS),
     )
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")

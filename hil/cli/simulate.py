@@ -30,14 +30,14 @@ def register(sub: Any) -> None:
     p: argparse.ArgumentParser = sub.add_parser(
         "simulate",
         help="simulate the received signal of a scenario (WAV + schedule + truth + plots)",
-        description="Run a scenario TOML file (format: docs/scenarios.md) through the "
+        description="Run a scenario TOML file (format: hil docs scenarios) through the "
         "simulated acoustic channel and write the received WAV, the transmit schedule, the "
         "hop-by-hop truth and plots into --out.",
     )
     p.add_argument(
         "scenario",
         help="scenario TOML file, or the name of a shipped example "
-        "(att, tank-audio, tank-board; see docs/scenarios.md)",
+        "(att, tank-audio, tank-board; see hil docs scenarios)",
     )
     p.add_argument(
         "--out",

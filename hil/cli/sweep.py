@@ -33,7 +33,7 @@ def register(sub: Any) -> None:
     p: argparse.ArgumentParser = sub.add_parser(
         "sweep",
         help="run a Monte Carlo sweep (grid x repetitions) and summarise it",
-        description="Run every trial of a sweep file (format: docs/sweeps.md), streaming one "
+        description="Run every trial of a sweep file (format: hil docs sweeps), streaming one "
         "JSON line per trial to DIR/results.jsonl, then write DIR/summary.csv. By default on "
         "a local process pool with one worker per core.",
     )

@@ -31,7 +31,7 @@ def register(sub: Any) -> None:
         "record everything. Without EXPERIMENT the built-in simulated tank runs. Writes the "
         'run folder (--out, else run.output_dir/NAME-YYYYmmdd-HHMMSS; output_dir "runs" '
         "means $HIL_RUNS_DIR when set): run.h5 (the recording), run.log, summary.json, "
-        "estimates.csv and the report figures; prints the summary. Format: docs/tank-run.md.",
+        "estimates.csv and the report figures; prints the summary. Format: hil docs tank-run.",
     )
     p.add_argument("experiment", nargs="?", type=Path, help="experiment TOML file")
     p.add_argument("--out", type=Path, help="run folder (default: output_dir/name-timestamp)")

@@ -65,7 +65,7 @@ def register(sub: Any) -> None:
         "waveform",
         help="synthesise a transmit waveform (WAV + schedule JSON + diagnostics)",
         description="Synthesise a transmit waveform to a float32 WAV and write its hop "
-        "schedule as JSON (format: docs/schedule-format.md). Options override the preset.",
+        "schedule as JSON (format: hil docs schedule-format). Options override the preset.",
     )
     p.add_argument("--preset", default="att", help=f"one of {', '.join(PRESETS)} (default att)")
     p.add_argument(

@@ -218,7 +218,7 @@ def parse_experiment(text: str, source: str = "<text>") -> Experiment:
     # The tables first (a list of tables, a misspelt key), then what is missing: a key
     # misspelt is named as such, not as a required key that is absent.
     t = {
-        name: Table(data.get(name, {}), name, keys, "docs/tank-run.md")
+        name: Table(data.get(name, {}), name, keys, "hil docs tank-run")
         for name, keys in _SECTIONS.items()
     }
     for section, keys in _REQUIRED.items():

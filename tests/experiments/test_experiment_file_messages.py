@@ -39,7 +39,7 @@ def test_a_misspelt_required_key_is_answered_with_the_key_it_resembles() -> None
     assert str(err.value) == (
         "tow.speed_mp = 1.5 is not allowed: must be one of the keys start_m, end_m, speed_mps,"
         " repeats, run_up_m, run_down_m; remove it or fix its spelling (did you mean"
-        " speed_mps?) (docs/tank-run.md lists every key)"
+        " speed_mps?) (hil docs tank-run lists every key)"
     )
 
 
