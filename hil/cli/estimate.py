@@ -88,6 +88,29 @@ def register(sub: Any) -> None:
     p.set_defaults(func=run)
 
 
+def check_option_kinds(options: dict[str, Any], reference: dict[str, Any]) -> None:
+    """Refuse an ``--option`` whose value is not of the kind the setting holds (a number
+    where ``reference``, the settings in force, has a number; true/false for a flag)."""
+    for key, value in options.items():
+        known = reference.get(key)
+        if isinstance(known, bool):
+            ok, kind = isinstance(value, bool), "true or false"
+        elif isinstance(known, int):
+            ok, kind = isinstance(value, int) and not isinstance(value, bool), "an integer"
+        elif isinstance(known, float):
+            ok = isinstance(value, int | float) and not isinstance(value, bool)
+            kind = "a number"
+        else:
+            continue
+        if not ok:
+            raise ConfigError(
+                "--option",
+                f"{key}={json.dumps(value) if not isinstance(value, str) else value}",
+                f"{kind} for {key} (it is {json.dumps(known)} now)",
+                f"write --option {key}={json.dumps(known)}",
+            )
+
+
 def _parse_option(text: str) -> tuple[str, Any]:
     key, sep, value = text.partition("=")
     if not sep or not key:
@@ -270,13 +293,14 @@ def run(args: argparse.Namespace) -> int:
             )
         extra["on_map"] = collector
     hooks = {"on_map": extra.pop("on_map")} if "on_map" in extra else {}
-    settings = {
+    base = {
         "sound_speed_mps": c,
         "max_speed_mps": args.max_speed,
         "max_range_m": args.max_range,
         "m_hops": args.m_hops,
-        **extra,
     }
+    check_option_kinds(extra, base)
+    settings = {**base, **extra}
     receiver = build_receiver(ReceiverSetup(args.receiver, settings), schedule, fs, **hooks)
     blocks = _check_schedule(args, blocks, schedule, fs, c)
     sink = _Sink(args)

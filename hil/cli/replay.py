@@ -20,7 +20,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from hil.cli.estimate import _parse_option, _Sink, check_outputs
+from hil.cli.estimate import _parse_option, _Sink, check_option_kinds, check_outputs
 from hil.estimation.registry import RECEIVERS
 from hil.recording import RunRecording, compare_estimates, replay
 
@@ -71,6 +71,8 @@ def run(args: argparse.Namespace) -> int:
     with RunRecording.open(args.run) as rec:
         live = rec.metadata.receiver
         name = args.receiver or (live.name if live is not None else None)
+        if live is not None and args.receiver in (None, live.name):
+            check_option_kinds(overrides, dict(live.settings))
         estimates = replay(rec, args.receiver, channel=args.channel, **overrides)
         recorded = rec.estimates(live.name) if live is not None else []
     sink = _Sink(args)

@@ -114,6 +114,8 @@ def register(sub: Any) -> None:
 
 
 def _validate_io(args: argparse.Namespace) -> None:
+    if args.seed is not None and args.seed < 0:
+        raise ConfigError("--seed", args.seed, "an integer >= 0", "e.g. --seed 1")
     if not (math.isfinite(args.duration) and args.duration > 0):
         raise ConfigError("--duration", args.duration, "> 0 s")
     if not (math.isfinite(args.amplitude) and 0 < args.amplitude <= 1):
