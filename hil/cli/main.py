@@ -192,12 +192,20 @@ def _name_option(args: argparse.Namespace, exc: ConfigError) -> ConfigError:
     return ConfigError(f"{option} ({exc.field})", exc.value, exc.allowed, exc.hint)
 
 
+#: Commands that SIGTERM and SIGHUP stop as Ctrl-C does from their first instruction (a run
+#: that must end with its stop recorded). The others keep the signals' default action, which
+#: also ends a process stuck inside a C library.
+STOPPED_SAFELY = frozenset({"tank-run"})
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the ``hil`` command; return the exit status. SIGTERM and SIGHUP stop it as
-    Ctrl-C does from its first instruction (:mod:`hil.interrupts`)."""
+    """Run the ``hil`` command; return the exit status. For :data:`STOPPED_SAFELY`
+    commands SIGTERM and SIGHUP stop it as Ctrl-C does from its first instruction
+    (:mod:`hil.interrupts`)."""
     from hil.interrupts import interruption, raise_on_stop_signals
 
-    restore = raise_on_stop_signals()
+    words = sys.argv[1:] if argv is None else list(argv)
+    restore = raise_on_stop_signals() if _command_name(words) in STOPPED_SAFELY else (lambda: None)
     try:
         return _main(argv)
     except KeyboardInterrupt as exc:  # before the command started (parsing, its imports)

@@ -23,6 +23,7 @@ from typing import Any
 from hil.cli.estimate import _parse_option, _Sink, check_option_kinds, check_outputs
 from hil.estimation.registry import RECEIVERS
 from hil.recording import RunRecording, compare_estimates, replay
+from hil.recording.reader import probe_structure
 
 # Internal field names -> the options that set them (hil.cli.main names them in errors).
 OPTION_NAMES = {
@@ -68,6 +69,7 @@ def run(args: argparse.Namespace) -> int:
     """Execute ``hil replay``; return the exit status."""
     check_outputs(args)
     overrides = dict(_parse_option(o) for o in args.option)
+    probe_structure(args.run)
     with RunRecording.open(args.run) as rec:
         live = rec.metadata.receiver
         name = args.receiver or (live.name if live is not None else None)

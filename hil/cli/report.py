@@ -71,6 +71,9 @@ def run(args: argparse.Namespace) -> int:
     from hil.outputs import writable_folder
 
     out = writable_folder(report_folder(args.run, args.out), "--out")
+    from hil.recording.reader import probe_structure
+
+    probe_structure(args.run)
     outcome = outcome_from_recording(args.run, out, codeword_map=not args.no_map)
     summary = summarize(outcome)
     summary["rebuilt_from"] = str(args.run)

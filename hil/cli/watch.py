@@ -66,6 +66,9 @@ def run(args: argparse.Namespace) -> int:
 
     if not 0 <= args.port <= 65535:
         raise ConfigError("port", args.port, "0..65535 (0: a free port)")
+    from hil.recording.reader import probe_structure
+
+    probe_structure(args.recording)
     data = WatchData.open(args.recording, live_map=args.map)
     try:
         server = WatchServer(data, args.host, args.port)

@@ -143,6 +143,48 @@ def _missing_parts(f: h5py.File) -> list[str]:
     return missing
 
 
+#: Seconds a separate process may take to read a recording's structure (its attributes and
+#: top-level names: metadata only, well under a second for a whole file) before the file is
+#: called damaged: HDF5 can loop for ever on corrupted metadata.
+PROBE_TIMEOUT_S = 20.0
+
+_PROBE = """
+import sys, h5py
+with h5py.File(sys.argv[1], "r", libver="latest", swmr=True) as f:
+    dict(f.attrs)
+    list(f)
+"""
+
+
+def probe_structure(path: Path, timeout_s: float | None = None) -> None:
+    """Refuse (ConfigError) a recording whose structure a separate process cannot read
+    within ``timeout_s`` (default :data:`PROBE_TIMEOUT_S`): corrupted metadata that would
+    hang the command that opens it. The commands that open a recording given by the user
+    (report, replay, watch) probe it first; errors other than a hang are left to
+    :meth:`RunRecording.open`, which names them."""
+    import subprocess
+    import sys
+
+    if not path.is_file() or hdf5_damage(path) is not None:
+        return  # RunRecording.open refuses it, saying why
+    timeout_s = PROBE_TIMEOUT_S if timeout_s is None else timeout_s
+    try:
+        subprocess.run(
+            [sys.executable, "-c", _PROBE, str(path)],
+            capture_output=True,
+            timeout=timeout_s,
+            check=False,
+        )
+    except subprocess.TimeoutExpired:
+        raise ConfigError(
+            "recording",
+            str(path),
+            "an HDF5 run recording written by hil",
+            f"its metadata is damaged: reading its structure did not end within {timeout_s:g} s"
+            "; copy it again from where the run wrote it",
+        ) from None
+
+
 class RunRecording:
     """An open run recording (use :meth:`open`; close it, or use it as a context manager)."""
 

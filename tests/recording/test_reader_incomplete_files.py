@@ -71,3 +71,35 @@ def test_report_and_replay_refuse_it_in_one_line(
         " hil run recording; it lacks the attribute created_utc: it was not written by hil's"
         " recorder or was altered since; use the run.h5 the run wrote\n"
     )
+
+
+def _corrupted_metadata(path: Path) -> Path:
+    """A recording whose object headers after the superblock are overwritten (seeded noise):
+    the superblock is whole, and HDF5 loops for ever reading the root's attributes."""
+    import numpy as np
+
+    _recording_without(path, "created_utc")  # any small recording
+    data = bytearray(path.read_bytes())
+    data[96:4096] = np.random.default_rng(0).integers(0, 256, 4000, dtype=np.uint8).tobytes()
+    path.write_bytes(bytes(data))
+    return path
+
+
+@pytest.mark.parametrize("command", ["report", "replay"])
+def test_a_recording_whose_metadata_hangs_hdf5_is_refused_within_the_probe_time(
+    command: str,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import hil.recording.reader as reader
+
+    monkeypatch.setattr(reader, "PROBE_TIMEOUT_S", 5.0)
+    path = _corrupted_metadata(tmp_path / "run.h5")
+    assert reader.hdf5_damage(path) is None  # the superblock alone does not tell
+    assert main([command, str(path)]) == 2
+    assert capsys.readouterr().err == (
+        f"hil {command}: error: RUN (recording) = '{path}' is not allowed: must be an HDF5 run"
+        " recording written by hil; its metadata is damaged: reading its structure did not"
+        " end within 5 s; copy it again from where the run wrote it\n"
+    )
