@@ -66,3 +66,24 @@ def test_a_replay_option_of_the_wrong_kind(
     assert _error(capsys, ["replay", str(run), "--option", option]) == (
         f"hil replay: error: --option = '{option}' is not allowed: must be {allowed}"
     )
+
+
+@pytest.mark.parametrize(
+    ("host", "why"),
+    [
+        ("no.such.host.invalid", None),  # does not resolve (the resolver's words vary)
+        ("192.0.2.1", "Cannot assign requested address"),  # TEST-NET-1: not this machine's
+    ],
+)
+def test_watch_blames_an_unusable_host_not_the_port(
+    host: str, why: str | None, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    run = _recording(tmp_path / "run.h5")
+    err = _error(capsys, ["watch", str(run), "--host", host])
+    assert err.startswith(
+        f"hil watch: error: --host (host) = '{host}' is not allowed: must be a name or address"
+        " of this machine; cannot listen there: "
+    )
+    assert err.endswith("; use 127.0.0.1 (this machine only) or 0.0.0.0 (every interface)")
+    if why is not None:
+        assert why in err
