@@ -228,3 +228,23 @@ def test_a_stop_inside_a_step_done_whole_acts_at_its_end() -> None:
         assert info.value.signal_name == "SIGTERM"
         assert signals.ignored == []
     assert done == ["the whole step"]
+
+
+def test_ctrl_c_before_a_command_starts_ends_hil_in_one_line(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import hil.cli.main as cli
+
+    # As in a terminal (a suite run in the background hands its process SIGINT ignored).
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+
+        def parser_hit_by_ctrl_c(load: object = None) -> object:
+            signal.raise_signal(signal.SIGINT)
+            raise AssertionError("not reached")
+
+        monkeypatch.setattr(cli, "build_parser", parser_hit_by_ctrl_c)
+        assert cli.main(["estimate"]) == 130
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert capsys.readouterr().err == "hil: interrupted (Ctrl-C)\n"
