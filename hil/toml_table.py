@@ -28,13 +28,31 @@ from numpy.typing import NDArray
 
 from hil.errors import ConfigError
 
-__all__ = ["Table", "parse_toml", "read_text_file", "read_toml"]
+__all__ = ["Table", "did_you_mean", "parse_toml", "read_text_file", "read_toml"]
+
+#: The byte order mark some editors put first in a UTF-8 file: not part of the text.
+_BOM = "\ufeff"
+
+
+def did_you_mean(word: str, choices: tuple[str, ...] | list[str]) -> str:
+    """`` (did you mean X?)`` for the choice closest to a misspelt ``word``, else ``""``.
+
+    >>> did_you_mean("speed_mp", ("start_m", "speed_mps"))
+    ' (did you mean speed_mps?)'
+    >>> did_you_mean("colour", ("start_m",))
+    ''
+    """
+    import difflib
+
+    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
+    return f" (did you mean {close[0]}?)" if close else ""
 
 
 def parse_toml(text: str, what: str, source: str = "<text>") -> dict[str, Any]:
-    """Parse TOML ``text`` (the ``what`` file, from ``source``) or raise a one-line error."""
+    """Parse TOML ``text`` (the ``what`` file, from ``source``) or raise a one-line error. A
+    leading byte order mark (some editors write one) is not part of the TOML."""
     try:
-        return tomllib.loads(text)
+        return tomllib.loads(text.removeprefix(_BOM))
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(
             what, source, f"valid TOML ({exc})", f"fix the {what} file (or is it the right file?)"
@@ -101,13 +119,19 @@ class Table:
     """
 
     def __init__(self, data: Any, path: str, allowed: tuple[str, ...], docs: str = "") -> None:
+        if isinstance(data, list) and path and all(isinstance(x, dict) for x in data):
+            raise ConfigError(
+                path,
+                data,
+                "one table (key = value pairs)",
+                f"write [{path}] once; [[{path}]] makes a list of tables",
+            )
         if not isinstance(data, dict):
             raise ConfigError(path or "file", data, "a table (key = value pairs)")
         for key in data:
             if key not in allowed:
-                hint = "remove it or fix its spelling" + (
-                    f" ({docs} lists every key)" if docs else ""
-                )
+                hint = "remove it or fix its spelling" + did_you_mean(key, allowed)
+                hint += f" ({docs} lists every key)" if docs else ""
                 raise ConfigError(
                     _join(path, key), data[key], f"one of the keys {', '.join(allowed)}", hint
                 )

@@ -16,8 +16,8 @@ Nothing here is imported by ``hil`` itself: ``import hil.bluesky`` needs
 
 from __future__ import annotations
 
-from hil.bluesky.plans import towed_pass
+from hil.bluesky.plans import tank_shot, tank_streams, towed_pass
 from hil.bluesky.stage import GrblStageDevice
 from hil.bluesky.tank_run import TankRunDetector
 
-__all__ = ["GrblStageDevice", "TankRunDetector", "towed_pass"]
+__all__ = ["GrblStageDevice", "TankRunDetector", "tank_shot", "tank_streams", "towed_pass"]

@@ -2,51 +2,107 @@
 
 ``trigger()`` runs one tank run of an experiment (:func:`hil.experiments.tank_run.
 run_experiment`: the board transmits and captures, the stage makes its passes, the receiver
-estimates live, everything goes into ``run.h5``) and then writes the run's ``summary.json``
-and report figures, as ``hil tank-run`` does. Its reading is the run's data:
+estimates live, everything goes into ``run.h5``) and then writes the run's ``run.log``,
+``summary.json`` and report figures, as ``hil tank-run`` does. Its reading holds values of
+fixed shape only, the same for every run (so every event matches the descriptor):
 
 - ``recording``: the path of the run's ``run.h5`` (the samples, telemetry, estimates);
-- summary figures: estimates, scored estimates, range and speed RMSE (m, m/s), detection
-  rate, dropped samples, loopback latency (samples);
-- the stage telemetry the run recorded (``stage_time_s`` on the driver's clock,
-  ``stage_position_m``, ``stage_velocity_mps``: the towed pass as the stage reported it)
-  and the estimates (``estimate_time_s``, ``estimate_range_m``, ``estimate_speed_mps``),
-  as 1-D arrays.
+- summary figures (estimates, range and speed RMSE, detection rate hinted): estimates,
+  scored estimates, range and speed RMSE (m, m/s), detection rate, dropped samples, loopback
+  latency (samples), signal recorded (s); ``error`` and ``interrupted``.
+
+The estimates and the stage telemetry, whose lengths differ from run to run, go in their own
+event streams, one event per estimate or telemetry report (:func:`hil.bluesky.plans.
+tank_streams`, which :func:`~hil.bluesky.plans.towed_pass` calls).
 
 A run that fails after it started (an alarm, a stalled board) still reports what it
 recorded, and its status fails with the run's error, so the RunEngine ends the bluesky run
 with ``exit_status = "fail"``. The experiment's devices are opened by the run itself: a
 simulated experiment (``sim://board`` and ``sim://stage``) starts the built-in simulated tank.
 
-The run blocks on a worker thread; it cannot be interrupted from the RunEngine (a bluesky
-pause or abort waits for the pass to end): stop a real run at the stage's e-stop.
+Stopping: a RunEngine pause (Ctrl-C, ``RE.request_pause()``) stops the run in flight safely
+(transmission off, stage held, the recording closed with its stop event, ``summary.json``
+saying ``interrupted: true``) and waits for that; ``RE.resume()`` then repeats the trigger from
+its checkpoint as a new run. ``stop()``, an abort and ``unstage()`` stop it the same way.
 """
 
 from __future__ import annotations
 
 import asyncio
+import logging
+import threading
+import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from bluesky.protocols import Triggerable
-from ophyd_async.core import Array1D, AsyncStatus, StandardReadable, soft_signal_r_and_setter
+from bluesky.protocols import Pausable, Stoppable, Triggerable
+from ophyd_async.core import AsyncStatus, StandardReadable, soft_signal_r_and_setter
 from ophyd_async.core import StandardReadableFormat as Format
 
+from hil.estimation.base import Estimate
 from hil.experiments.experiment import Experiment
 from hil.experiments.tank_run import LiveView, RunOutcome, run_experiment
 
-#: Summary fields read as scalars: (summary key, signal name, type, units).
-_FIGURES: tuple[tuple[str, str, type, str], ...] = (
-    ("estimates", "estimates", int, ""),
-    ("scored_estimates", "scored_estimates", int, ""),
-    ("range_rmse_m", "range_rmse_m", float, "m"),
-    ("speed_rmse_mps", "speed_rmse_mps", float, "m/s"),
-    ("detection_rate", "detection_rate", float, ""),
-    ("dropped_samples", "dropped_samples", int, ""),
-    ("loopback_latency_samples", "latency_samples", int, "samples"),
-    ("signal_s", "signal_s", float, "s"),
+_LOG = logging.getLogger(__name__)
+
+#: Summary fields read as scalars: (summary key, signal name, type, units, hinted).
+_FIGURES: tuple[tuple[str, str, type, str, bool], ...] = (
+    ("estimates", "estimates", int, "", True),
+    ("scored_estimates", "scored_estimates", int, "", False),
+    ("range_rmse_m", "range_rmse_m", float, "m", True),
+    ("speed_rmse_mps", "speed_rmse_mps", float, "m/s", True),
+    ("detection_rate", "detection_rate", float, "", True),
+    ("dropped_samples", "dropped_samples", int, "", False),
+    ("loopback_latency_samples", "latency_samples", int, "samples", False),
+    ("signal_s", "signal_s", float, "s", False),
 )
+
+
+class StreamRow:
+    """One row of a table of equal-length 1-D arrays as a bluesky readable: ``read()`` gives
+    the fields at :attr:`index` (scalars, so every event has the descriptor's shape)."""
+
+    def __init__(self, name: str, columns: dict[str, tuple[str, np.ndarray]]) -> None:
+        self.name = name
+        self.parent = None
+        #: The row ``read()`` gives.
+        self.index = 0
+        self.columns = columns
+
+    def __len__(self) -> int:
+        """The number of rows."""
+        return len(next(iter(self.columns.values()))[1])
+
+    def describe(self) -> dict[str, Any]:
+        """Data keys ``<name>-<field>``: float scalars with their units."""
+        return {
+            f"{self.name}-{field}": {
+                "source": f"{self.name}:{field}",
+                "dtype": "number",
+                "shape": [],
+                "dtype_numpy": "<f8",
+                "units": units,
+            }
+            for field, (units, _) in self.columns.items()
+        }
+
+    def read(self) -> dict[str, Any]:
+        """The fields at :attr:`index`."""
+        now = time.time()
+        return {
+            f"{self.name}-{field}": {"value": float(values[self.index]), "timestamp": now}
+            for field, (_, values) in self.columns.items()
+        }
+
+    def describe_configuration(self) -> dict[str, Any]:
+        """No configuration."""
+        return {}
+
+    def read_configuration(self) -> dict[str, Any]:
+        """No configuration."""
+        return {}
 
 
 class TankRunError(RuntimeError):
@@ -54,7 +110,7 @@ class TankRunError(RuntimeError):
     what it recorded until then is in the detector's reading."""
 
 
-class TankRunDetector(StandardReadable, Triggerable):
+class TankRunDetector(StandardReadable, Triggerable, Stoppable, Pausable):
     """One towed-target tank run per trigger.
 
     Parameters
@@ -67,6 +123,13 @@ class TankRunDetector(StandardReadable, Triggerable):
         trigger makes ``<runs_dir>/<run.name>-<YYYYmmdd-HHMMSS>[-k]``.
     report:
         Also write the report figures (``range_speed.png``, ...) after ``summary.json``.
+    virtual_time:
+        Run the built-in simulated tank in this process on virtual time (deterministic,
+        as fast as the CPU allows; ``sim://`` devices only, as ``hil tank-run
+        --virtual-time``).
+    on_estimates:
+        Called with each batch of the receiver's estimates as the run makes them (on the
+        run's thread).
     name:
         The device name (prefix of its data keys).
     """
@@ -77,30 +140,35 @@ class TankRunDetector(StandardReadable, Triggerable):
         *,
         runs_dir: Path | None = None,
         report: bool = True,
+        virtual_time: bool = False,
+        on_estimates: Callable[[list[Estimate]], None] | None = None,
         name: str = "",
     ) -> None:
         self.experiment = experiment
         self._runs_dir = runs_dir
         self._report = report
+        self._virtual_time = virtual_time
+        self._on_estimates = on_estimates
+        #: Set to stop the run in flight (by stop, pause, unstage); cleared by each trigger.
+        self.stop_requested = threading.Event()
+        self._stop_success = True
+        self._running: asyncio.Future[tuple[RunOutcome, dict[str, Any]]] | None = None
         #: The outcome and summary of the last triggered run (None before one).
         self.outcome: RunOutcome | None = None
         self.summary: dict[str, Any] | None = None
         self._setters: dict[str, Any] = {}
+        self._rows: dict[str, StreamRow] = {}
         with self.add_children_as_readables(Format.HINTED_UNCACHED_SIGNAL):
-            self.recording = self._signal("recording", str, "", "")
+            for _, signal, kind, units, hinted in _FIGURES:
+                if hinted:
+                    setattr(self, signal, self._signal(signal, kind, kind(0), units))
         with self.add_children_as_readables(Format.UNCACHED_SIGNAL):
-            for _, signal, kind, units in _FIGURES:
-                setattr(self, signal, self._signal(signal, kind, kind(0), units))
+            self.recording = self._signal("recording", str, "", "")
+            for _, signal, kind, units, hinted in _FIGURES:
+                if not hinted:
+                    setattr(self, signal, self._signal(signal, kind, kind(0), units))
             self.error = self._signal("error", str, "", "")
-            for signal, units in (
-                ("stage_time_s", "s"),
-                ("stage_position_m", "m"),
-                ("stage_velocity_mps", "m/s"),
-                ("estimate_time_s", "s"),
-                ("estimate_range_m", "m"),
-                ("estimate_speed_mps", "m/s"),
-            ):
-                setattr(self, signal, self._signal(signal, Array1D[np.float64], None, units))
+            self.interrupted = self._signal("interrupted", bool, False, "")
         with self.add_children_as_readables(Format.CONFIG_SIGNAL):
             tow = experiment.tow
             self.experiment_name = self._signal("experiment_name", str, experiment.name, "")
@@ -128,42 +196,133 @@ class TankRunDetector(StandardReadable, Triggerable):
         out_dir = self._runs_dir if self._runs_dir is not None else exp.output_dir
         return new_run_folder(out_dir, exp.name, None, dt.datetime.now())
 
+    # ------------------------------------------------------------------ trigger
     @AsyncStatus.wrap
     async def trigger(self) -> None:
-        """Run the experiment once; fails with :class:`TankRunError` if the run did."""
+        """Run the experiment once. Fails with :class:`TankRunError` if the run stopped on
+        an error, or was stopped by ``stop(success=False)``, ``unstage()`` or an abort; one
+        stopped by a pause or ``stop(success=True)`` completes with what it recorded."""
+        self.stop_requested.clear()
+        self._stop_success = True
         folder = self.new_run_folder()
-        outcome, summary = await asyncio.to_thread(self._run, folder)
+        self._running = asyncio.ensure_future(asyncio.to_thread(self._run, folder))
+        try:
+            outcome, summary = await asyncio.shield(self._running)
+        finally:
+            self._running = None
         self.outcome, self.summary = outcome, summary
         self._publish(outcome, summary)
-        if outcome.error or outcome.interrupted:
+        stopped_on_request = outcome.interrupted and self.stop_requested.is_set()
+        failed = bool(outcome.error) and not stopped_on_request
+        if failed or (stopped_on_request and not self._stop_success):
             raise TankRunError(
                 f"tank run in {folder} stopped: {outcome.error or 'interrupted'}; what it"
                 " recorded is in run.h5"
             )
 
     def _run(self, folder: Path) -> tuple[RunOutcome, dict[str, Any]]:
+        from hil.outputs import release_output_folder
+
+        try:
+            return self._run_in(folder)
+        finally:
+            release_output_folder(folder)
+
+    def _run_in(self, folder: Path) -> tuple[RunOutcome, dict[str, Any]]:
+        from hil.experiments.run_log import log_outcome
         from hil.experiments.run_report import write_report
         from hil.experiments.run_scoring import summarize, write_summary
+        from hil.logs import run_log
 
-        outcome = run_experiment(self.experiment, folder=folder, view=LiveView(enabled=False))
-        summary = summarize(outcome)
-        write_summary(outcome, summary)
-        if self._report:
-            summary["figures"] = [str(p) for p in write_report(outcome)]
+        with run_log(folder):
+            _LOG.info("tank run %r into %s (a bluesky trigger)", self.experiment.name, folder)
+            outcome = run_experiment(
+                self.experiment,
+                folder=folder,
+                view=LiveView(enabled=False),
+                on_estimates=self._on_estimates,
+                stop=self.stop_requested,
+                virtual_time=self._virtual_time,
+            )
+            summary = summarize(outcome)
+            write_summary(outcome, summary)
+            if self._report:
+                summary["figures"] = [str(p) for p in write_report(outcome)]
+            log_outcome(outcome, summary)
         return outcome, summary
 
+    # ------------------------------------------------------------------ stopping
+    async def stop(self, success: bool = True) -> None:
+        """Stop the run in flight safely and wait for its end (nothing when idle): its
+        trigger completes with what it recorded (``success``) or fails."""
+        self._stop_success = success
+        await self._stop_and_wait()
+
+    async def pause(self) -> None:
+        """A RunEngine pause: the run in flight stops safely (its folder keeps what it
+        recorded, ``interrupted: true``); ``RE.resume()`` triggers a new run."""
+        await self.stop(success=True)
+
+    async def resume(self) -> None:
+        """Nothing to do: the RunEngine repeats the trigger from its checkpoint."""
+
+    def unstage(self) -> AsyncStatus:
+        """Stop a run in flight (an abort, a failed plan), then unstage the signals. The
+        stop is requested at once, before the returned status runs: the RunEngine calls
+        ``unstage`` on its way out without awaiting it."""
+        if self._running is not None:
+            self._stop_success = False
+            self.stop_requested.set()
+        return self._unstage_after_stop()
+
+    @AsyncStatus.wrap
+    async def _unstage_after_stop(self) -> None:
+        await self._stop_and_wait()
+        await super().unstage()
+
+    async def _stop_and_wait(self) -> None:
+        running = self._running
+        if running is None:
+            return
+        self.stop_requested.set()
+        await asyncio.wait({running})
+
+    # ------------------------------------------------------------------ reading
     def _publish(self, outcome: RunOutcome, summary: dict[str, Any]) -> None:
         put = self._setters
         h5 = outcome.folder / "run.h5"
         put["recording"](str(h5) if h5.exists() else "")
-        for key, signal, kind, _ in _FIGURES:
+        for key, signal, kind, _, _ in _FIGURES:
             value = summary.get(key)
             put[signal](kind(value) if value is not None else (np.nan if kind is float else -1))
         put["error"](outcome.error or ("interrupted" if outcome.interrupted else ""))
-        tel, est = outcome.telemetry, outcome.estimates
-        put["stage_time_s"](np.asarray(tel.host_time_s, dtype=np.float64))
-        put["stage_position_m"](np.asarray(tel.position_m, dtype=np.float64))
-        put["stage_velocity_mps"](np.asarray(tel.velocity_mps, dtype=np.float64))
-        put["estimate_time_s"](np.array([e.t_s for e in est], dtype=np.float64))
-        put["estimate_range_m"](np.array([e.range_m for e in est], dtype=np.float64))
-        put["estimate_speed_mps"](np.array([e.speed_mps for e in est], dtype=np.float64))
+        put["interrupted"](bool(outcome.interrupted))
+
+    def stream_rows(self) -> dict[str, StreamRow]:
+        """The last run's variable-length data as one readable per event stream:
+        ``estimates`` and ``telemetry`` (columns ``{field: (units, 1-D array)}`` of equal
+        lengths; no rows before a run). The same readables every run, so a stream keeps
+        one descriptor over several triggers."""
+        outcome = self.outcome
+        est = outcome.estimates if outcome is not None else []
+        tel = outcome.telemetry if outcome is not None else None
+
+        def column(values: Any) -> np.ndarray:
+            return np.asarray(values, dtype=np.float64).reshape(-1)
+
+        columns = {
+            "estimates": {
+                "estimate_time_s": ("s", column([e.t_s for e in est])),
+                "estimate_range_m": ("m", column([e.range_m for e in est])),
+                "estimate_speed_mps": ("m/s", column([e.speed_mps for e in est])),
+            },
+            "telemetry": {
+                "stage_time_s": ("s", column(tel.host_time_s if tel else [])),
+                "stage_position_m": ("m", column(tel.position_m if tel else [])),
+                "stage_velocity_mps": ("m/s", column(tel.velocity_mps if tel else [])),
+            },
+        }
+        for stream, table in columns.items():
+            row = self._rows.setdefault(stream, StreamRow(self.name, table))
+            row.name, row.columns, row.index = self.name, table, 0
+        return dict(self._rows)

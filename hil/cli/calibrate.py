@@ -146,7 +146,7 @@ def register(sub: Any) -> None:
         "calibrate",
         help="calibrate latency, response, level, sound speed or the stage",
         description="Run one calibration (in simulation when no device is given), print it "
-        "and store it as the current calibration of its kind (docs/calibration.md). "
+        "and store it as the current calibration of its kind (hil docs calibration). "
         "'hil calibrate KIND --help' describes each kind.",
     )
     kinds = parser.add_subparsers(dest="kind", metavar="KIND")
@@ -332,8 +332,8 @@ def _tank(
             ranger = EchoRanger(tank.device(), gate, latency_samples=latency, averages=args.pings)
             yield stage, ranger, lines, latency
         return
-    if args.stage is None:
-        raise ConfigError("--stage", None, "a GRBL serial URL when --device is given")
+    if args.stage is None or not args.stage.strip():
+        raise ConfigError("--stage", args.stage, "a GRBL serial URL when --device is given")
     from hil.devices.grbl import GrblStage
 
     latency = args.latency
@@ -414,11 +414,17 @@ def run(args: argparse.Namespace) -> int:
         from hil.devices.audio.daq import canonical_audio_url
 
         args.device = canonical_audio_url(args.device)  # audio://sim: read as sim://audio
+    blocksize = getattr(args, "blocksize", None)
+    if blocksize is not None and blocksize < 1:
+        raise ConfigError("--blocksize", blocksize, "an integer >= 1 frames", "e.g. 256")
     truth = _truth(args)
     root = resolve_calibration_dir(args.store)
     kind: str = args.kind
     simulated = _runs_simulated(args)
     store = CalibrationStore(root / SIMULATED_SUBDIR if simulated else root)
+    from hil.outputs import writable_folder
+
+    writable_folder(store.root, "--store (or HIL_CALIBRATION_DIR)")
     try:
         if kind in ("sound-speed", "stage"):
             result, settings, lines = args.kind_func(args, truth, store)

@@ -91,6 +91,29 @@ def register(sub: Any) -> None:
     p.set_defaults(func=run)
 
 
+def check_option_kinds(options: dict[str, Any], reference: dict[str, Any]) -> None:
+    """Refuse an ``--option`` whose value is not of the kind the setting holds (a number
+    where ``reference``, the settings in force, has a number; true/false for a flag)."""
+    for key, value in options.items():
+        known = reference.get(key)
+        if isinstance(known, bool):
+            ok, kind = isinstance(value, bool), "true or false"
+        elif isinstance(known, int):
+            ok, kind = isinstance(value, int) and not isinstance(value, bool), "an integer"
+        elif isinstance(known, float):
+            ok = isinstance(value, int | float) and not isinstance(value, bool)
+            kind = "a number"
+        else:
+            continue
+        if not ok:
+            raise ConfigError(
+                "--option",
+                f"{key}={json.dumps(value) if not isinstance(value, str) else value}",
+                f"{kind} for {key} (it is {json.dumps(known)} now)",
+                f"write --option {key}={json.dumps(known)}",
+            )
+
+
 def _parse_option(text: str) -> tuple[str, Any]:
     key, sep, value = text.partition("=")
     if not sep or not key:
@@ -206,11 +229,56 @@ def _check_schedule(
     return itertools.chain(head, blocks)
 
 
+def check_outputs(args: argparse.Namespace) -> None:
+    """Refuse an unwritable ``--csv`` (or ``--map``) before any work
+    (:mod:`hil.outputs`)."""
+    from hil.outputs import writable_file
+
+    for option in ("csv", "map"):
+        path = getattr(args, option, None)
+        if path is not None:
+            writable_file(path, f"--{option}")
+
+
+def _check_numbers(args: argparse.Namespace) -> None:
+    """Refuse a speed, range or sound speed that is not a finite number in its range."""
+    for option, value, allowed in (
+        ("--max-speed", args.max_speed, (0.0, "a finite speed >= 0 m/s")),
+        ("--max-range", args.max_range, (0.0, "a finite range > 0 m")),
+        ("--sound-speed", args.sound_speed, (0.0, "a finite sound speed > 0 m/s")),
+    ):
+        low, words = allowed
+        if value is None:
+            continue
+        strict = option != "--max-speed"
+        if not math.isfinite(value) or value < low or (strict and value == low):
+            raise ConfigError(option, value, words, "give a number such as the default")
+
+
+def _check_length(path: Path, n_frames: int, fs: float, schedule: Any) -> None:
+    """Refuse a WAV shorter than one hop of the schedule: no hop boundary, no estimate."""
+    try:
+        hop_s = float(schedule.hop_s)
+    except ConfigError:  # unequal hops: the shortest one
+        hop_s = float(np.min(schedule.hops(0, 1).duration_s))
+    need = int(math.ceil(hop_s * fs))
+    if n_frames < need:
+        raise ConfigError(
+            "--input",
+            str(path),
+            f"at least one hop of signal ({hop_s:.4g} s = {need} samples at {fs:g} Hz)",
+            f"it holds {n_frames} sample{'s' * (n_frames != 1)}; record a longer input",
+        )
+
+
 def run(args: argparse.Namespace) -> int:
     """Execute ``hil estimate``; return the exit status."""
+    check_outputs(args)
+    _check_numbers(args)
     schedule, doc = read_schedule_file(args.schedule)
     clip = ClipCount()
-    fs, _, blocks = read_wav_blocks(args.input, args.channel, clip=clip)
+    fs, n_frames, blocks = read_wav_blocks(args.input, args.channel, clip=clip)
+    _check_length(args.input, n_frames, fs, schedule)
     if not math.isclose(fs, float(doc["fs"]), rel_tol=0, abs_tol=0.5):
         raise ConfigError(
             "--input",
@@ -228,13 +296,14 @@ def run(args: argparse.Namespace) -> int:
             )
         extra["on_map"] = collector
     hooks = {"on_map": extra.pop("on_map")} if "on_map" in extra else {}
-    settings = {
+    base = {
         "sound_speed_mps": c,
         "max_speed_mps": args.max_speed,
         "max_range_m": args.max_range,
         "m_hops": args.m_hops,
-        **extra,
     }
+    check_option_kinds(extra, base)
+    settings = {**base, **extra}
     receiver = build_receiver(ReceiverSetup(args.receiver, settings), schedule, fs, **hooks)
     blocks = _check_schedule(args, blocks, schedule, fs, c)
     sink = _Sink(args)
@@ -276,7 +345,6 @@ class _Sink:
             if str(args.csv) == "-":
                 self._csv_file = sys.stdout
             else:
-                args.csv.parent.mkdir(parents=True, exist_ok=True)
                 self._csv_file = args.csv.open("w", newline="", encoding="utf-8")
             self._writer = csv.DictWriter(self._csv_file, fieldnames=list(ESTIMATE_FIELDS))
             self._writer.writeheader()

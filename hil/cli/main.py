@@ -3,12 +3,14 @@
 Every sub-command module exposes ``register(subparsers)`` which adds its parser and sets
 ``func`` to a callable taking the parsed namespace and returning an exit status. Invalid input
 (a :class:`~hil.errors.ConfigError`, a missing file) prints one line to stderr and exits with
-status 2, never a traceback; argparse's own usage errors exit with 2 as well.
+status 2, never a traceback; argparse's own usage errors exit with 2 as well. A failure to
+read or write while working (a full disk) prints one line and exits with status 1.
 """
 
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import sys
 from collections.abc import Sequence
@@ -18,7 +20,24 @@ from hil import __version__
 from hil.errors import ConfigError
 
 EXIT_OK = 0
+EXIT_IO = 1
 EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
+
+#: Errors of a path as given (missing, a folder for a file, no permission, a symlink loop,
+#: too long): the input is wrong, exit status 2.
+_BAD_PATH_ERRNOS = frozenset(
+    {
+        errno.ENOENT,
+        errno.EISDIR,
+        errno.ENOTDIR,
+        errno.EACCES,
+        errno.EPERM,
+        errno.ELOOP,
+        errno.ENAMETOOLONG,
+        errno.EROFS,
+    }
+)
 
 COMMANDS: dict[str, tuple[str, str]] = {
     "tank-run": (
@@ -58,6 +77,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "hil.cli.watch",
         "live view of a run recording in the browser (range, speed, alarms)",
     ),
+    "docs": ("hil.cli.docs", "print the installed documentation (hil docs lists the topics)"),
 }
 """Sub-command name -> (module with ``register``, one-line summary for ``hil --help``).
 
@@ -135,7 +155,8 @@ def build_parser(load: Sequence[str] | None = None) -> argparse.ArgumentParser:
         description="Continuous active sonar (HFC-CW / GCAS) hardware-in-the-loop testbench. "
         "'hil COMMAND --help' describes a command, its options, defaults and units.",
         epilog="Environment: HIL_CALIBRATION_DIR (calibration store, default ./calibration), "
-        "HIL_RUNS_DIR (where tank runs are written, default ./runs).",
+        "HIL_RUNS_DIR (where tank runs are written, default ./runs). Documentation: "
+        "'hil docs' lists the installed documents, 'hil docs TOPIC' prints one.",
     )
     parser.add_argument("--version", action="version", version=f"hil {__version__}")
     parser.add_argument(
@@ -171,21 +192,46 @@ def _name_option(args: argparse.Namespace, exc: ConfigError) -> ConfigError:
     return ConfigError(f"{option} ({exc.field})", exc.value, exc.allowed, exc.hint)
 
 
+#: Commands that SIGTERM and SIGHUP stop as Ctrl-C does from their first instruction (a run
+#: that must end with its stop recorded). The others keep the signals' default action, which
+#: also ends a process stuck inside a C library.
+STOPPED_SAFELY = frozenset({"tank-run"})
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the ``hil`` command; return the exit status."""
+    """Run the ``hil`` command; return the exit status. For :data:`STOPPED_SAFELY`
+    commands SIGTERM and SIGHUP stop it as Ctrl-C does from its first instruction
+    (:mod:`hil.interrupts`)."""
+    from hil.interrupts import interruption, raise_on_stop_signals
+
+    words = sys.argv[1:] if argv is None else list(argv)
+    restore = raise_on_stop_signals() if _command_name(words) in STOPPED_SAFELY else (lambda: None)
+    try:
+        return _main(argv)
+    except KeyboardInterrupt as exc:  # before the command started (parsing, its imports)
+        print(f"hil: interrupted ({interruption(exc)})", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    finally:
+        restore()
+
+
+def _main(argv: Sequence[str] | None) -> int:
     words = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(load=[name] if (name := _command_name(words)) in COMMANDS else [])
     args = parser.parse_args(words)
     from hil.logs import configure_logging, reset_logging
 
     try:
+        if args.log_file is not None:
+            from pathlib import Path
+
+            from hil.outputs import writable_file
+
+            writable_file(Path(args.log_file), "--log-file", make_folder=False)
         configure_logging(args.log_level, args.log_file)
         status: int = args.func(args)
     except ConfigError as exc:
         print(f"hil {args.command}: error: {_name_option(args, exc)}", file=sys.stderr)
-        return EXIT_USAGE
-    except (FileNotFoundError, IsADirectoryError, PermissionError, NotADirectoryError) as exc:
-        print(f"hil {args.command}: error: {exc.strerror}: {exc.filename}", file=sys.stderr)
         return EXIT_USAGE
     except BrokenPipeError:
         # Output piped into a command that stopped reading (e.g. `| head`): not an error.
@@ -194,9 +240,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return EXIT_OK
-    except KeyboardInterrupt:
-        print(f"hil {args.command}: interrupted", file=sys.stderr)
-        return 130
+    except OSError as exc:
+        # A path the user gave that cannot be used is bad input (2); any other failure to
+        # read or write while working (a full disk, a device gone) is an I/O failure (1).
+        bad_input = exc.errno in _BAD_PATH_ERRNOS
+        what = exc.strerror or str(exc)
+        where = f": {exc.filename}" if exc.filename is not None else ""
+        print(f"hil {args.command}: error: {what}{where}", file=sys.stderr)
+        return EXIT_USAGE if bad_input else EXIT_IO
+    except KeyboardInterrupt as exc:
+        from hil.interrupts import interruption
+
+        print(f"hil {args.command}: interrupted ({interruption(exc)})", file=sys.stderr)
+        return EXIT_INTERRUPTED
     finally:
         reset_logging()
     return status

@@ -20,9 +20,10 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from hil.cli.estimate import _parse_option, _Sink
+from hil.cli.estimate import _parse_option, _Sink, check_option_kinds, check_outputs
 from hil.estimation.registry import RECEIVERS
 from hil.recording import RunRecording, compare_estimates, replay
+from hil.recording.reader import probe_structure
 
 # Internal field names -> the options that set them (hil.cli.main names them in errors).
 OPTION_NAMES = {
@@ -66,10 +67,14 @@ def register(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``hil replay``; return the exit status."""
+    check_outputs(args)
     overrides = dict(_parse_option(o) for o in args.option)
+    probe_structure(args.run)
     with RunRecording.open(args.run) as rec:
         live = rec.metadata.receiver
         name = args.receiver or (live.name if live is not None else None)
+        if live is not None and args.receiver in (None, live.name):
+            check_option_kinds(overrides, dict(live.settings))
         estimates = replay(rec, args.receiver, channel=args.channel, **overrides)
         recorded = rec.estimates(live.name) if live is not None else []
     sink = _Sink(args)

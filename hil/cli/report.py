@@ -14,8 +14,6 @@ import json
 from pathlib import Path
 from typing import Any
 
-from hil.errors import ConfigError
-
 OPTION_NAMES = {"recording": "RUN"}
 
 
@@ -25,10 +23,17 @@ def register(sub: Any) -> None:
         "report",
         help="rebuild a tank run's summary and figures from its recording",
         description="Rebuild summary.json, estimates.csv and the figures of a tank run from "
-        "its recording run.h5 (also one left by a killed run).",
+        "its recording run.h5 (also one left by a killed run). Without --out they go next "
+        "to the recording, or into its folder's rebuilt/ when the run wrote its own "
+        "summary.json (the live summary is never replaced).",
     )
     p.add_argument("run", type=Path, metavar="RUN", help="run recording (run.h5)")
-    p.add_argument("--out", type=Path, help="folder for the files (default: the recording's)")
+    p.add_argument(
+        "--out",
+        type=Path,
+        help="folder for the files (default: the recording's, or its rebuilt/ beside a live "
+        "summary.json)",
+    )
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument(
         "--no-map",
@@ -38,18 +43,38 @@ def register(sub: Any) -> None:
     p.set_defaults(func=run)
 
 
+#: The folder ``hil report`` writes into, inside the run's folder, when that folder holds the
+#: live run's ``summary.json`` already (never replaced: it has the wall time, the backlog and
+#: the exact truth a recording cannot give back).
+REBUILT = "rebuilt"
+
+
+def report_folder(recording: Path, out: Path | None) -> Path:
+    """Where ``hil report`` writes: ``out`` when given; else the recording's folder for a
+    run that left no summary (killed), or ``<that folder>/rebuilt`` beside a live one.
+
+    >>> report_folder(Path("runs/a/run.h5"), Path("elsewhere")).as_posix()
+    'elsewhere'
+    """
+    if out is not None:
+        return out
+    folder = recording.parent
+    return folder / REBUILT if (folder / "summary.json").exists() else folder
+
+
 def run(args: argparse.Namespace) -> int:
     """Execute ``hil report``; 0, or 1 when the recorded run stopped on an error."""
     from hil.cli.tank_run import print_summary
     from hil.experiments.run_from_recording import outcome_from_recording
     from hil.experiments.run_report import write_report
     from hil.experiments.run_scoring import summarize, write_summary
+    from hil.outputs import writable_folder
 
-    if args.out is not None:
-        if args.out.exists() and not args.out.is_dir():
-            raise ConfigError("--out", str(args.out), "a folder")
-        args.out.mkdir(parents=True, exist_ok=True)
-    outcome = outcome_from_recording(args.run, args.out, codeword_map=not args.no_map)
+    out = writable_folder(report_folder(args.run, args.out), "--out")
+    from hil.recording.reader import probe_structure
+
+    probe_structure(args.run)
+    outcome = outcome_from_recording(args.run, out, codeword_map=not args.no_map)
     summary = summarize(outcome)
     summary["rebuilt_from"] = str(args.run)
     write_summary(outcome, summary)

@@ -32,7 +32,7 @@ def register(sub: Any) -> None:
         "reproduce",
         help="run the seed's chapter-6 evaluation and write figures, tables and report.md",
         description="Run every chapter-6 item (the shipped sweep files in hil/data/sweeps/, see "
-        "docs/results.md), then write PNG figures, CSV tables and DIR/report.md. Items: "
+        "hil docs results), then write PNG figures, CSV tables and DIR/report.md. Items: "
         + ", ".join(ITEM_IDS),
     )
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
@@ -81,6 +81,9 @@ def run(args: argparse.Namespace) -> int:
     if args.trials_per_point is not None and args.trials_per_point < 1:
         raise ConfigError("--trials-per-point", args.trials_per_point, "an integer >= 1")
     items = _items(args.items)
+    from hil.outputs import writable_folder
+
+    writable_folder(args.out, "--out")
     runner = make_runner(
         workers=args.workers,
         dask_workers=args.dask_workers,

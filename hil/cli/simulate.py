@@ -30,16 +30,22 @@ def register(sub: Any) -> None:
     p: argparse.ArgumentParser = sub.add_parser(
         "simulate",
         help="simulate the received signal of a scenario (WAV + schedule + truth + plots)",
-        description="Run a scenario TOML file (format: docs/scenarios.md) through the "
+        description="Run a scenario TOML file (format: hil docs scenarios) through the "
         "simulated acoustic channel and write the received WAV, the transmit schedule, the "
         "hop-by-hop truth and plots into --out.",
     )
     p.add_argument(
         "scenario",
         help="scenario TOML file, or the name of a shipped example "
-        "(att, tank-audio, tank-board; see docs/scenarios.md)",
+        "(att, tank-audio, tank-board; see hil docs scenarios)",
     )
-    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
+    p.add_argument(
+        "--out",
+        type=Path,
+        required=True,
+        metavar="DIR",
+        help="output folder, new or empty (an earlier simulation is never overwritten)",
+    )
     p.add_argument(
         "--duration", type=float, help="override duration_s, s (default: the scenario's)"
     )
@@ -59,20 +65,28 @@ def _scenario_file(text: str) -> Path:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``hil simulate``; return the exit status."""
-    from hil.signals.schedule_file import schedule_document, write_schedule_file
-    from sim_devices.acoustics.scenario import build_channel, load_scenario
-    from sim_devices.acoustics.truth import hop_truth, write_truth
+    from hil.outputs import claim_output_folder, release_output_folder
+    from sim_devices.acoustics.scenario import load_scenario
 
     sc = load_scenario(_scenario_file(args.scenario))
     if args.duration is not None:
         if not (np.isfinite(args.duration) and args.duration > 0):
             raise ConfigError("--duration", args.duration, "> 0 s")
         sc.duration_s = float(args.duration)
+    claim_output_folder(args.out, "--out", holds="a simulation")
     try:
-        args.out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise ConfigError("--out", str(args.out), "a folder that exists or can be created",
-                          str(exc.strerror)) from None  # fmt: skip
+        return _write_simulation(args, sc)
+    finally:
+        release_output_folder(args.out)
+
+
+def _write_simulation(args: argparse.Namespace, sc: Any) -> int:
+    """The scenario ``sc`` simulated into the claimed ``--out``: WAV, schedule, truth,
+    plots; the summary line printed."""
+    from hil.signals.schedule_file import schedule_document, write_schedule_file
+    from sim_devices.acoustics.scenario import build_channel
+    from sim_devices.acoustics.truth import hop_truth, write_truth
+
     channel = build_channel(sc)
     n_total = int(round(sc.duration_s * sc.fs_hz))
     block = max(1, int(round(sc.block_s * sc.fs_hz)))

@@ -135,11 +135,22 @@ def register(sub: Any) -> None:
 
 def resolve_url(args: argparse.Namespace) -> str:
     """``--url``, else ``$HIL_STAGE_URL``, else the checked experiment's stage, else the
-    simulated stage."""
-    if args.url:
-        return str(args.url)
-    if os.environ.get(URL_ENV):
-        return os.environ[URL_ENV]
+    simulated stage. An empty URL (either) is refused: it names no stage."""
+    from hil.errors import ConfigError
+
+    for source, url in (("--url", args.url), (URL_ENV, os.environ.get(URL_ENV))):
+        if url is None:
+            continue
+        if not str(url).strip():
+            raise ConfigError(
+                source,
+                str(url),
+                "a stage URL such as sim://stage, /dev/ttyUSB0 or serial:///dev/ttyACM0",
+                f"give the stage's URL, or leave {source} out for {DEFAULT_URL}"
+                if source == "--url"
+                else f"set it to the stage's URL, or unset it for {DEFAULT_URL}",
+            )
+        return str(url)
     if args.check:
         from pathlib import Path
 

@@ -33,7 +33,7 @@ def register(sub: Any) -> None:
     p: argparse.ArgumentParser = sub.add_parser(
         "sweep",
         help="run a Monte Carlo sweep (grid x repetitions) and summarise it",
-        description="Run every trial of a sweep file (format: docs/sweeps.md), streaming one "
+        description="Run every trial of a sweep file (format: hil docs sweeps), streaming one "
         "JSON line per trial to DIR/results.jsonl, then write DIR/summary.csv. By default on "
         "a local process pool with one worker per core.",
     )
@@ -62,7 +62,10 @@ def register(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``hil sweep``; return the exit status."""
+    from hil.outputs import writable_folder
+
     spec = load_sweep_file(args.sweep_file)
+    writable_folder(args.out, "--out")
     runner = make_runner(
         workers=args.workers,
         dask_workers=args.dask_workers,

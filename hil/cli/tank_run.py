@@ -31,7 +31,7 @@ def register(sub: Any) -> None:
         "record everything. Without EXPERIMENT the built-in simulated tank runs. Writes the "
         'run folder (--out, else run.output_dir/NAME-YYYYmmdd-HHMMSS; output_dir "runs" '
         "means $HIL_RUNS_DIR when set): run.h5 (the recording), run.log, summary.json, "
-        "estimates.csv and the report figures; prints the summary. Format: docs/tank-run.md.",
+        "estimates.csv and the report figures; prints the summary. Format: hil docs tank-run.",
     )
     p.add_argument("experiment", nargs="?", type=Path, help="experiment TOML file")
     p.add_argument("--out", type=Path, help="run folder (default: output_dir/name-timestamp)")
@@ -56,12 +56,7 @@ def run(args: argparse.Namespace) -> int:
         print(DEFAULT_EXPERIMENT, end="")
         return 0
     from hil.experiments.live.plan import new_run_folder
-    from hil.experiments.live.stops import StopSignals
-    from hil.experiments.run_log import log_outcome
-    from hil.experiments.run_report import write_report
-    from hil.experiments.run_scoring import summarize, write_summary
-    from hil.experiments.tank_run import LiveView, run_experiment
-    from hil.logs import run_log
+    from hil.outputs import release_output_folder
 
     exp = (
         parse_experiment(DEFAULT_EXPERIMENT)
@@ -70,6 +65,23 @@ def run(args: argparse.Namespace) -> int:
     )
     # The folder first (refused when it holds a run), then its log around the whole run.
     folder = new_run_folder(exp.output_dir, exp.name, args.out, dt.datetime.now())
+    try:
+        summary, outcome = _run_and_report(exp, folder, args)
+    finally:
+        release_output_folder(folder)
+    print_summary(summary, outcome.folder, as_json=args.json)
+    return 1 if outcome.error else 0
+
+
+def _run_and_report(exp: Any, folder: Path, args: argparse.Namespace) -> tuple[dict[str, Any], Any]:
+    """The run in its claimed ``folder`` with its log, then its summary and figures."""
+    from hil.experiments.live.stops import StopSignals
+    from hil.experiments.run_log import log_outcome
+    from hil.experiments.run_report import write_report
+    from hil.experiments.run_scoring import summarize, write_summary
+    from hil.experiments.tank_run import LiveView, run_experiment
+    from hil.logs import run_log
+
     with run_log(folder):
         _LOG.info("tank run %r into %s", exp.name, folder)
         outcome = run_experiment(
@@ -86,8 +98,7 @@ def run(args: argparse.Namespace) -> int:
             summary["figures"] = [str(p) for p in figures]
             (outcome.folder / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
             log_outcome(outcome, summary)
-    print_summary(summary, outcome.folder, as_json=args.json)
-    return 1 if outcome.error else 0
+    return summary, outcome
 
 
 def print_summary(summary: dict[str, Any], folder: Path, *, as_json: bool) -> None:

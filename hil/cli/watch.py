@@ -66,11 +66,26 @@ def run(args: argparse.Namespace) -> int:
 
     if not 0 <= args.port <= 65535:
         raise ConfigError("port", args.port, "0..65535 (0: a free port)")
+    from hil.recording.reader import probe_structure
+
+    probe_structure(args.recording)
     data = WatchData.open(args.recording, live_map=args.map)
     try:
         server = WatchServer(data, args.host, args.port)
     except OSError as exc:
+        import errno
+        import socket
+
         data.close()
+        if isinstance(exc, socket.gaierror) or exc.errno == errno.EADDRNOTAVAIL:
+            # The host is at fault (no such name, not an address of this machine): not the port.
+            raise ConfigError(
+                "host",
+                args.host,
+                "a name or address of this machine",
+                f"cannot listen there: {exc.strerror}; use 127.0.0.1 (this machine only) or"
+                " 0.0.0.0 (every interface)",
+            ) from None
         raise ConfigError(
             "port", args.port, "a free port on " + args.host, f"cannot listen: {exc.strerror}"
         ) from None

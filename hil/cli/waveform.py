@@ -65,7 +65,7 @@ def register(sub: Any) -> None:
         "waveform",
         help="synthesise a transmit waveform (WAV + schedule JSON + diagnostics)",
         description="Synthesise a transmit waveform to a float32 WAV and write its hop "
-        "schedule as JSON (format: docs/schedule-format.md). Options override the preset.",
+        "schedule as JSON (format: hil docs schedule-format). Options override the preset.",
     )
     p.add_argument("--preset", default="att", help=f"one of {', '.join(PRESETS)} (default att)")
     p.add_argument(
@@ -114,25 +114,22 @@ def register(sub: Any) -> None:
 
 
 def _validate_io(args: argparse.Namespace) -> None:
+    if args.seed is not None and args.seed < 0:
+        raise ConfigError("--seed", args.seed, "an integer >= 0", "e.g. --seed 1")
     if not (math.isfinite(args.duration) and args.duration > 0):
         raise ConfigError("--duration", args.duration, "> 0 s")
     if not (math.isfinite(args.amplitude) and 0 < args.amplitude <= 1):
         raise ConfigError("--amplitude", args.amplitude, "in (0, 1] (full scale is 1)")
     if not (math.isfinite(args.max_size) and args.max_size > 0):
         raise ConfigError("--max-size", args.max_size, "> 0 GB")
+    from hil.outputs import writable_file, writable_folder
+
     for opt in ("out", "schedule"):
         path = getattr(args, opt)
-        if path is None:
-            continue
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise ConfigError(
-                f"--{opt}",
-                str(path),
-                "a file path whose folder exists or can be created",
-                f"cannot create {path.parent}: {exc.strerror}",
-            ) from None
+        if path is not None:
+            writable_file(path, f"--{opt}")
+    if args.plot is not None:
+        writable_folder(args.plot, "--plot")
 
 
 def _write_wav(path: Path, synth: BlockSynthesizer, n_samples: int, fs: float) -> None:

@@ -4,7 +4,7 @@ Found through :mod:`importlib.resources`, so they are there the same way in a so
 an editable install and an installed wheel:
 
 - ``sweeps/*.toml``: the sweep files of ``hil reproduce`` (format: docs/sweeps.md);
-- ``scenarios/*.toml``: example scenarios of ``hil simulate`` (format: docs/scenarios.md).
+- ``scenarios/*.toml``: example scenarios of ``hil simulate`` (format: hil docs scenarios).
 
 The package is installed as plain files (setuptools never zips it), so each folder is a real
 directory on disk and is handed out as a :class:`~pathlib.Path`.
@@ -55,6 +55,6 @@ def scenario_path(name: str) -> Path:
     if name not in known:
         raise ConfigError(
             "scenario", name, f"a TOML file or one of {', '.join(known)}",
-            "give the path of a scenario file (format: docs/scenarios.md)",
+            "give the path of a scenario file (format: hil docs scenarios)",
         )  # fmt: skip
     return known[name]

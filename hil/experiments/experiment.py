@@ -29,7 +29,7 @@ from hil.paths import resolve_calibration_dir, resolve_runs_dir
 from hil.signals.presets import check_design, get_preset
 from hil.signals.schedule import HopSchedule
 from hil.signals.waveforms import WaveformSpec
-from hil.toml_table import Table, parse_toml, read_text_file
+from hil.toml_table import Table, did_you_mean, parse_toml, read_text_file
 
 DEFAULT_EXPERIMENT = """\
 # Built-in simulated tank run: `hil tank-run` with no arguments.
@@ -244,15 +244,22 @@ def parse_experiment(text: str, source: str = "<text>") -> Experiment:
     data = parse_toml(text, "experiment", source)
     unknown = sorted(set(data) - set(_SECTIONS))
     if unknown:
-        raise ConfigError(unknown[0], data[unknown[0]], f"one of the tables {', '.join(_SECTIONS)}")
+        raise ConfigError(
+            unknown[0],
+            data[unknown[0]],
+            f"one of the tables {', '.join(_SECTIONS)}",
+            "remove it or fix its spelling" + did_you_mean(unknown[0], tuple(_SECTIONS)),
+        )
+    # The tables first (a list of tables, a misspelt key), then what is missing: a key
+    # misspelt is named as such, not as a required key that is absent.
+    t = {
+        name: Table(data.get(name, {}), name, keys, "hil docs tank-run")
+        for name, keys in _SECTIONS.items()
+    }
     for section, keys in _REQUIRED.items():
         for key in keys:
             if key not in data.get(section, {}):
                 raise ConfigError(f"{section}.{key}", None, "a value", "it is required")
-    t = {
-        name: Table(data.get(name, {}), name, keys, "docs/tank-run.md")
-        for name, keys in _SECTIONS.items()
-    }
 
     run, dev, wav, tank, tow, rec, cal, sim = (t[k] for k in _SECTIONS)
     name = check_run_name(run.text("name", "tank-run"))

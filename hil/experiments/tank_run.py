@@ -53,12 +53,15 @@ from hil.experiments.live.session import LiveSession, SessionTiming, Telemetry
 from hil.experiments.live.snapshot import instrument_snapshot
 from hil.experiments.live.stops import RunInterrupted, StopSignals, stop_text
 from hil.experiments.run_calibrations import RunCalibrations, load_run_calibrations
+from hil.outputs import release_output_folder
 from hil.recording.records import ReceiverSetup, RunEvent
 from hil.recording.replay import build_receiver
 from hil.signals.schedule_file import schedule_document
 
 if TYPE_CHECKING:
     from hil.experiments.sim_tank import TankSimulation
+
+_LOG = logging.getLogger(__name__)
 
 #: Stage status polled every this many seconds of the driver clock (GRBL's 5 Hz).
 STAGE_POLL_S = 0.2
@@ -235,7 +238,26 @@ def run_experiment(
     cals = load_run_calibrations(exp, fs)  # checked before anything is touched
     exp = cals.apply(exp)
     folder = new_run_folder(exp.output_dir, exp.name, folder, dt.datetime.now())
-    view = view or LiveView()
+    try:
+        return _run_in_folder(
+            exp, folder, fs, cals, view or LiveView(), on_estimates, stop, virtual_time
+        )
+    finally:
+        release_output_folder(folder)
+
+
+def _run_in_folder(
+    exp: Experiment,
+    folder: Path,
+    fs: float,
+    cals: RunCalibrations,
+    view: LiveView,
+    on_estimates: Callable[[list[Estimate]], None] | None,
+    stop: threading.Event | None,
+    virtual_time: bool,
+) -> RunOutcome:
+    """:func:`run_experiment` in its claimed ``folder``: the receiver built, the devices
+    opened, the run and its safe stop; the outcome."""
     # The receiver first: building it loads (on a fresh install: compiles) its kernels, tens
     # of seconds that, with the board streaming, would overflow the capture ring.
     view.update("receiver: loading its compiled kernels (a first run compiles them)", force=True)
@@ -284,6 +306,10 @@ def run_experiment(
                 devices.tank.close()  # no outcome follows: stop the simulated tank here
         outcome = _outcome(exp, folder, fs, cals, devices, recorder, session, maps, ending, wall0)
         outcome.planned_adc_peak_fs = planned
+        if signals.ignored:
+            _LOG.warning(
+                "ignored during the safe stop, which had to finish: %s", ", ".join(signals.ignored)
+            )
         return outcome
 
 

@@ -127,6 +127,64 @@ def _open_h5(path: Path) -> h5py.File:
         ) from None
 
 
+#: File attributes every recording holds from its creation (``origin_sample`` and
+#: ``receiver`` are optional).
+_REQUIRED_ATTRS = ("fs_hz", "n_channels", "sample_dtype", "versions", "calibration_ids",
+                   "created_utc")  # fmt: skip
+
+
+def _missing_parts(f: h5py.File) -> list[str]:
+    """What a file in the recording format lacks of what every recording holds from its
+    creation (attributes, the samples, schedule and experiment datasets, every table):
+    refused from the structure at open, never a KeyError on the first read."""
+    missing = [f"the attribute {a}" for a in _REQUIRED_ATTRS if a not in f.attrs]
+    parts = (schema.SAMPLES, schema.SCHEDULE_DOCUMENT, schema.EXPERIMENT_TOML, *schema.TABLES)
+    missing += [f"/{name}" for name in parts if name not in f]
+    return missing
+
+
+#: Seconds a separate process may take to read a recording's structure (its attributes and
+#: top-level names: metadata only, well under a second for a whole file) before the file is
+#: called damaged: HDF5 can loop for ever on corrupted metadata.
+PROBE_TIMEOUT_S = 20.0
+
+_PROBE = """
+import sys, h5py
+with h5py.File(sys.argv[1], "r", libver="latest", swmr=True) as f:
+    dict(f.attrs)
+    list(f)
+"""
+
+
+def probe_structure(path: Path, timeout_s: float | None = None) -> None:
+    """Refuse (ConfigError) a recording whose structure a separate process cannot read
+    within ``timeout_s`` (default :data:`PROBE_TIMEOUT_S`): corrupted metadata that would
+    hang the command that opens it. The commands that open a recording given by the user
+    (report, replay, watch) probe it first; errors other than a hang are left to
+    :meth:`RunRecording.open`, which names them."""
+    import subprocess
+    import sys
+
+    if not path.is_file() or hdf5_damage(path) is not None:
+        return  # RunRecording.open refuses it, saying why
+    timeout_s = PROBE_TIMEOUT_S if timeout_s is None else timeout_s
+    try:
+        subprocess.run(
+            [sys.executable, "-c", _PROBE, str(path)],
+            capture_output=True,
+            timeout=timeout_s,
+            check=False,
+        )
+    except subprocess.TimeoutExpired:
+        raise ConfigError(
+            "recording",
+            str(path),
+            "an HDF5 run recording written by hil",
+            f"its metadata is damaged: reading its structure did not end within {timeout_s:g} s"
+            "; copy it again from where the run wrote it",
+        ) from None
+
+
 class RunRecording:
     """An open run recording (use :meth:`open`; close it, or use it as a context manager)."""
 
@@ -161,6 +219,15 @@ class RunRecording:
                     version if version is None else int(version),
                     f"one of {readable} (the versions this hil reads)",
                     "read it with the hil release that wrote it",
+                )
+            missing = _missing_parts(f)
+            if missing:
+                raise ConfigError(
+                    "recording",
+                    str(path),
+                    "a complete hil run recording",
+                    f"it lacks {', '.join(missing)}: it was not written by hil's recorder or"
+                    " was altered since; use the run.h5 the run wrote",
                 )
             return cls(f, path)
         except BaseException:

@@ -5,7 +5,9 @@ lost device is named."""
 from __future__ import annotations
 
 import signal
+import subprocess
 import threading
+from pathlib import Path
 
 import pytest
 
@@ -103,3 +105,146 @@ def test_every_stop_reason_has_its_event(
     interrupted: bool, error: str, event: tuple[str, str]
 ) -> None:
     assert stop_text(interrupted=interrupted, error=error) == event
+
+
+def test_a_second_ctrl_c_however_soon_is_noted_not_raised() -> None:
+    # The first Ctrl-C starts the safe stop; the handler itself stops raising before it
+    # raises, so a second one at any instant after it cannot break the safe stop off.
+    with StopSignals() as signals:
+        with pytest.raises(KeyboardInterrupt) as info:
+            signal.raise_signal(signal.SIGINT)
+        assert not isinstance(info.value, RunInterrupted)
+        signal.raise_signal(signal.SIGINT)
+        signal.raise_signal(signal.SIGTERM)
+        assert signals.ignored == ["SIGINT", "SIGTERM"]
+
+
+def test_hil_raises_on_stop_signals_from_its_first_instruction(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import hil.cli.main as cli
+
+    before = signal.getsignal(signal.SIGTERM)
+
+    def parser_hit_by_sigterm(load: object = None) -> object:
+        signal.raise_signal(signal.SIGTERM)  # would end the process by its default action
+        raise AssertionError("not reached")
+
+    monkeypatch.setattr(cli, "build_parser", parser_hit_by_sigterm)
+    assert cli.main(["tank-run"]) == 130
+    assert capsys.readouterr().err == "hil: interrupted (SIGTERM)\n"
+    assert signal.getsignal(signal.SIGTERM) is before  # restored when main returns
+
+
+def test_a_stop_signal_while_a_command_sets_up_ends_it_in_one_line(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import hil.cli.main as cli
+    import hil.cli.tank_run as tank_run
+
+    def setting_up(args: object) -> int:
+        signal.raise_signal(signal.SIGHUP)
+        raise AssertionError("not reached")
+
+    monkeypatch.setattr(tank_run, "run", setting_up)
+    assert cli.main(["tank-run"]) == 130
+    assert capsys.readouterr().err == "hil tank-run: interrupted (SIGHUP)\n"
+
+
+def _wait_for(path: Path, proc: subprocess.Popen[str]) -> None:
+    """Until ``path`` exists (the run reached that phase) or the process ended."""
+    import time
+
+    while not path.exists():
+        assert proc.poll() is None, proc.communicate()
+        time.sleep(0.01)
+
+
+def _default_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)  # a background suite hands it ignored
+
+
+@pytest.mark.slow
+def test_two_ctrl_c_in_a_row_stop_the_run_once_and_safely(tmp_path: Path) -> None:
+    import json
+    import sys
+
+    from hil.recording.reader import RunRecording
+
+    out = tmp_path / "run"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "hil.cli.main", "tank-run", "--virtual-time", "--no-live",
+         "--out", str(out)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=_default_sigint,
+    )  # fmt: skip
+    _wait_for(out / "run.h5", proc)  # recording: the board streams, the stage moves
+    proc.send_signal(signal.SIGINT)
+    proc.send_signal(signal.SIGINT)  # at once: during the safe stop the first started
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 1, err  # the run stopped early: its summary says why
+    assert "Traceback" not in err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["interrupted"] is True and summary["error"] == "interrupted (Ctrl-C)"
+    with RunRecording.open(out / "run.h5") as rec:
+        last = rec.events()[-1]
+    assert (last.kind, last.text) == ("alarm", "stop: interrupted (Ctrl-C)")
+    # One stop, whichever phase each Ctrl-C reached (a second one in the safe stop is
+    # noted in run.log as ignored; two inside the recording's creation act as one).
+    assert (out / "run.log").read_text().count("run stopped: interrupted (Ctrl-C)") == 1
+
+
+@pytest.mark.slow
+def test_sigterm_while_the_run_sets_up_ends_it_in_one_line(tmp_path: Path) -> None:
+    import sys
+
+    out = tmp_path / "run"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "hil.cli.main", "tank-run", "--virtual-time", "--no-live",
+         "--out", str(out)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    _wait_for(out / "run.log", proc)  # the folder claimed, the receiver being built
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=300)
+    assert "Traceback" not in err
+    if (out / "run.h5").exists():  # the signal came once the recording was made
+        from hil.recording.reader import RunRecording
+
+        with RunRecording.open(out / "run.h5") as rec:
+            assert rec.events()[-1].text == "stop: interrupted (SIGTERM)"
+        assert proc.returncode == 1
+    else:
+        assert proc.returncode == 130 and err.endswith("hil tank-run: interrupted (SIGTERM)\n")
+
+
+def test_a_stop_inside_a_step_done_whole_acts_at_its_end() -> None:
+    from hil.interrupts import stops_deferred
+
+    done: list[str] = []
+    with StopSignals() as signals:
+        with pytest.raises(RunInterrupted) as info, stops_deferred():
+            signal.raise_signal(signal.SIGTERM)
+            done.append("the whole step")
+        assert info.value.signal_name == "SIGTERM"
+        assert signals.ignored == []
+    assert done == ["the whole step"]
+
+
+def test_ctrl_c_before_a_command_starts_ends_hil_in_one_line(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import hil.cli.main as cli
+
+    # As in a terminal (a suite run in the background hands its process SIGINT ignored).
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+
+        def parser_hit_by_ctrl_c(load: object = None) -> object:
+            signal.raise_signal(signal.SIGINT)
+            raise AssertionError("not reached")
+
+        monkeypatch.setattr(cli, "build_parser", parser_hit_by_ctrl_c)
+        assert cli.main(["estimate"]) == 130
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert capsys.readouterr().err == "hil: interrupted (Ctrl-C)\n"

@@ -54,6 +54,10 @@ def test_wheel_holds_every_data_file_and_the_entry_point(tmp_path: Path) -> None
     assert must <= expected
     assert expected <= names, sorted(expected - names)
     assert "hil/data/__init__.py" in names
+    # The documentation (hil docs) and the typing marker travel with the package.
+    docs = {f"hil/docs/{p.name}" for p in (ROOT / "docs").glob("*.md")}
+    assert docs and docs <= names, sorted(docs - names)
+    assert {"hil/py.typed", "sim_devices/py.typed", "firmware_protocol/py.typed"} <= names
     assert not any(n.startswith(("tests/", "benchmarks/", "docs/")) for n in names)
     assert "hil = hil.cli.main:main" in scripts
 

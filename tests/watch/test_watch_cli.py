@@ -79,8 +79,8 @@ def test_a_damaged_recording(tmp_path: Path, capsys: pytest.CaptureFixture[str])
     err = capsys.readouterr().err
     assert err.count("\n") == 1
     assert err.startswith(
-        f"hil watch: error: RUN (recording) = {str(path)!r} is not allowed: must be a readable "
-        "hil run recording; it is damaged or incomplete ("
+        f"hil watch: error: RUN (recording) = {str(path)!r} is not allowed: must be a complete "
+        "hil run recording; it lacks the attribute fs_hz, "
     )
 
 

@@ -94,7 +94,7 @@ def loopback_latency(lat: int, rho: float, cals: RunCalibrations) -> tuple[int, 
             f" correlation {rho:.2f} < {LOOPBACK_MIN_CORRELATION}, so the loopback latency"
             " cannot be measured. Connect the transmit drive to ADC input 2 (on an audio"
             " interface: output 2, which plays the same signal; on the board: a tap on its"
-            " DAC output; docs/tank-run.md), or require a latency calibration:"
+            " DAC output; hil docs tank-run), or require a latency calibration:"
             ' calibration.required = ["latency"]'
         )
     return calibrated, (

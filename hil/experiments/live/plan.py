@@ -14,6 +14,7 @@ from pathlib import Path
 
 from hil.errors import ConfigError
 from hil.experiments.experiment import TowPlan, check_run_name
+from hil.outputs import claim_output_folder, writable_folder
 
 
 @dataclass(frozen=True)
@@ -120,22 +121,18 @@ def new_run_folder(output_dir: Path, name: str, out: Path | None, now: dt.dateti
 
     ``out`` (``--out``) must not exist, or be an empty folder (or hold only ``run.log``, the
     log the command line opened for this run before it started): an existing run is never
-    overwritten. Without it the folder is ``output_dir/name-YYYYmmdd-HHMMSS`` (``-2``, ``-3``
-    ... appended when a run of the same name started in the same second), and ``name`` must
-    be a plain folder name (:func:`~hil.experiments.experiment.check_run_name`).
+    overwritten. The folder is claimed atomically for this process
+    (:func:`hil.outputs.claim_output_folder`): of two runs started at once into one ``--out``,
+    the second is refused before anything moves or transmits. Without it the folder is
+    ``output_dir/name-YYYYmmdd-HHMMSS`` (``-2``, ``-3`` ... appended when a run of the same
+    name started in the same second), and ``name`` must be a plain folder name
+    (:func:`~hil.experiments.experiment.check_run_name`). The caller releases the claim
+    (:func:`hil.outputs.release_output_folder`) when the run is over.
     """
     if out is not None:
-        if out.exists() and (not out.is_dir() or any(p.name != RUN_LOG for p in out.iterdir())):
-            raise ConfigError(
-                "--out",
-                str(out),
-                "a new or empty folder",
-                "it holds a run already, which is never overwritten; choose another folder",
-            )
-        out.mkdir(parents=True, exist_ok=True)
-        return out
+        return claim_output_folder(out, "--out", frozenset({RUN_LOG}), "a run")
     check_run_name(name)
-    output_dir.mkdir(parents=True, exist_ok=True)
+    writable_folder(output_dir, "run.output_dir")
     stem = f"{name}-{now:%Y%m%d-%H%M%S}"
     for k in range(1, 1000):
         folder = output_dir / (stem if k == 1 else f"{stem}-{k}")
@@ -143,5 +140,5 @@ def new_run_folder(output_dir: Path, name: str, out: Path | None, now: dt.dateti
             folder.mkdir()
         except FileExistsError:
             continue
-        return folder
+        return claim_output_folder(folder, "run.output_dir")
     raise ConfigError("run.name", name, "a name not used by 1000 runs in the same second")

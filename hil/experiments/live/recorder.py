@@ -13,6 +13,8 @@ from typing import Any
 import numpy as np
 
 from hil.estimation.base import Estimate
+from hil.experiments.live.disk_room import check_room, reserve_bytes
+from hil.interrupts import stops_deferred
 from hil.recording.records import RunEvent, StageTelemetry
 from hil.recording.writer import RunWriter
 
@@ -28,6 +30,11 @@ class RunRecorder:
         self._telemetry: list[StageTelemetry] = []  # until the writer exists
         self.sync_pairs: list[tuple[int, float]] = []  # every SYNC pair of the run
         self._sync_written = 0
+        self._reserve = reserve_bytes(
+            float(create_options.get("fs_hz", 0.0)),
+            int(create_options.get("n_channels", 1)),
+            np.dtype(create_options.get("dtype", "int16")).itemsize,
+        )
 
     @property
     def open_(self) -> bool:
@@ -41,16 +48,23 @@ class RunRecorder:
 
     def open(self, origin_sample: int, note: RunEvent) -> None:
         """Create the recording with the receiver's sample 0 at ``origin_sample``; ``note``
-        (the latency's) is its first event; the telemetry held so far is written."""
-        self.writer = RunWriter.create(self.path, origin_sample=origin_sample, **self._options)
+        (the latency's) is its first event; the telemetry held so far is written. A stop
+        (Ctrl-C, SIGTERM) meanwhile acts once the file exists whole, so the stop is recorded
+        in it."""
+        with stops_deferred():
+            self.writer = RunWriter.create(self.path, origin_sample=origin_sample, **self._options)
         self.writer.append_event(note)
         for record in self._telemetry:
             self.writer.append_telemetry(record)
         self._telemetry.clear()
 
     def samples(self, first_index: int, data: np.ndarray[Any, Any]) -> None:
-        """A captured block (from board index ``first_index``)."""
+        """A captured block (from board index ``first_index``). Refused
+        (:class:`~hil.experiments.live.disk_room.RecordingSpaceError`) when the disk or the
+        file-size limit leaves less room than closing the recording needs: the run stops
+        while its recording can still take its stop event and close readable."""
         if self.writer is not None:
+            check_room(self.path, self._reserve)
             self.writer.append_samples(first_index, data)
 
     def estimates(self, estimates: Sequence[Estimate]) -> None:

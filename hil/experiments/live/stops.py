@@ -19,21 +19,21 @@ from typing import Any
 
 from hil.acquisition.annotations import AnnotationKind
 from hil.acquisition.device import Annotations
+from hil.interrupts import STOP_SIGNALS, RunInterrupted, deferring
 
 #: Driver-clock seconds a board's link may stay down (its driver reconnecting: a USB glitch
 #: comes back within a few hundred ms) before the run counts the board as lost.
 LOST_AFTER_S = 0.5
 
-#: The signals that stop a run safely, besides SIGINT (Ctrl-C).
-STOP_SIGNALS: tuple[signal.Signals, ...] = (signal.SIGTERM, signal.SIGHUP)
-
-
-class RunInterrupted(KeyboardInterrupt):
-    """A stop signal arrived (SIGTERM, SIGHUP): handled exactly as Ctrl-C."""
-
-    def __init__(self, signal_name: str) -> None:
-        super().__init__(signal_name)
-        self.signal_name = signal_name
+__all__ = [
+    "LOST_AFTER_S",
+    "STOP_SIGNALS",
+    "DeviceLostError",
+    "LinkWatch",
+    "RunInterrupted",
+    "StopSignals",
+    "stop_text",
+]
 
 
 class DeviceLostError(RuntimeError):
@@ -48,7 +48,10 @@ class DeviceLostError(RuntimeError):
 
 class StopSignals:
     """While active (a context manager), SIGTERM and SIGHUP raise :class:`RunInterrupted` in
-    the main thread, which a run handles as Ctrl-C; the previous handlers come back on exit.
+    the main thread and SIGINT raises KeyboardInterrupt, which a run handles as Ctrl-C; the
+    previous handlers come back on exit. The first of them switches all three to being noted
+    (:attr:`ignored`) before it raises, so a second Ctrl-C or signal, however soon, cannot
+    break off the safe stop the first one started (``kill -9`` still ends the process).
     Outside the main thread (signals cannot be set there) it does nothing."""
 
     def __init__(self) -> None:
@@ -58,7 +61,7 @@ class StopSignals:
 
     def __enter__(self) -> StopSignals:
         if threading.current_thread() is threading.main_thread():
-            for sig in STOP_SIGNALS:
+            for sig in (signal.SIGINT, *STOP_SIGNALS):
                 self._previous[sig] = signal.signal(sig, self._raise)
         return self
 
@@ -73,16 +76,20 @@ class StopSignals:
         self._previous.clear()
 
     def stopping(self) -> None:
-        """The run is stopping safely: a further stop signal is noted, not raised, so it
-        cannot break off the safe stop (``kill -9`` still ends the process at once)."""
+        """The run is stopping safely: a further stop signal or Ctrl-C is noted, not raised,
+        so it cannot break off the safe stop (``kill -9`` still ends the process at once)."""
         for sig in self._previous:
             signal.signal(sig, self._note)
 
     def _note(self, signum: int, frame: FrameType | None) -> None:
         self.ignored.append(signal.Signals(signum).name)
 
-    @staticmethod
-    def _raise(signum: int, frame: FrameType | None) -> None:
+    def _raise(self, signum: int, frame: FrameType | None) -> None:
+        if deferring(signum):
+            return  # raised again at the end of a step that must be done whole
+        self.stopping()
+        if signum == signal.SIGINT:
+            raise KeyboardInterrupt
         raise RunInterrupted(signal.Signals(signum).name)
 
 

@@ -1,0 +1,89 @@
+"""Bad values that used to end in a traceback are refused in one line naming the option or
+the file (exit status 2)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from hil.cli.main import main
+
+
+def _error(capsys: pytest.CaptureFixture[str], argv: list[str]) -> str:
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and err.count("\n") == 1, err
+    return err.rstrip("\n")
+
+
+def test_a_symlink_loop_as_the_experiment_file(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    loop = tmp_path / "loop.toml"
+    loop.symlink_to(loop)
+    assert _error(capsys, ["tank-run", str(loop)]) == (
+        f"hil tank-run: error: Too many levels of symbolic links: {loop}"
+    )
+
+
+def test_a_negative_waveform_seed(capsys: pytest.CaptureFixture[str]) -> None:
+    assert _error(capsys, ["waveform", "--duration", "0.05", "--seed", "-1"]) == (
+        "hil waveform: error: --seed = -1 is not allowed: must be an integer >= 0; e.g. --seed 1"
+    )
+
+
+def _recording(path: Path) -> Path:
+    from hil.recording.records import ReceiverSetup
+    from hil.recording.writer import RunWriter
+    from hil.signals.presets import check_design, get_preset
+    from hil.signals.schedule_file import schedule_document
+
+    doc = schedule_document(
+        check_design(get_preset("att").spec("random-cyclic")), 100e3, 0.0, sound_speed_mps=1500.0
+    )
+    setup = ReceiverSetup("gcas", {"m_hops": 10, "max_speed_mps": 30.0})
+    with RunWriter.create(
+        path, fs_hz=100e3, n_channels=1, dtype="int16", schedule_document=doc, receiver=setup
+    ):
+        pass
+    return path
+
+
+@pytest.mark.parametrize(
+    ("option", "allowed"),
+    [
+        ("m_hops=abc", "an integer for m_hops (it is 10 now); write --option m_hops=10"),
+        ("m_hops=1.5", "an integer for m_hops (it is 10 now); write --option m_hops=10"),
+        ("max_speed_mps=fast", "a number for max_speed_mps (it is 30.0 now); write --option"
+         " max_speed_mps=30.0"),
+    ],
+)  # fmt: skip
+def test_a_replay_option_of_the_wrong_kind(
+    option: str, allowed: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    run = _recording(tmp_path / "run.h5")
+    assert _error(capsys, ["replay", str(run), "--option", option]) == (
+        f"hil replay: error: --option = '{option}' is not allowed: must be {allowed}"
+    )
+
+
+@pytest.mark.parametrize(
+    ("host", "why"),
+    [
+        ("no.such.host.invalid", None),  # does not resolve (the resolver's words vary)
+        ("192.0.2.1", "Cannot assign requested address"),  # TEST-NET-1: not this machine's
+    ],
+)
+def test_watch_blames_an_unusable_host_not_the_port(
+    host: str, why: str | None, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    run = _recording(tmp_path / "run.h5")
+    err = _error(capsys, ["watch", str(run), "--host", host])
+    assert err.startswith(
+        f"hil watch: error: --host (host) = '{host}' is not allowed: must be a name or address"
+        " of this machine; cannot listen there: "
+    )
+    assert err.endswith("; use 127.0.0.1 (this machine only) or 0.0.0.0 (every interface)")
+    if why is not None:
+        assert why in err

@@ -1,0 +1,62 @@
+"""A full disk mid-run stops the run safely: the recording is closed readable with its stop
+event, the summary says why, the command exits 1 (an I/O failure at run time) in lines, never
+a traceback or a crash. Tried with a real limit: the process's file-size limit
+(``ulimit -f``, RLIMIT_FSIZE), under which writes past it fail as on a full disk."""
+
+from __future__ import annotations
+
+import json
+import resource
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from hil.experiments.live.disk_room import RecordingSpaceError, check_room
+
+LIMIT_BYTES = 5_000_000  # the default run's recording is ~4.2 MB; the reserve ~3.6 MB
+
+
+def test_less_room_than_the_reserve_is_refused_saying_how_much(tmp_path: Path) -> None:
+    path = tmp_path / "run.h5"
+    path.write_bytes(b"")
+    check_room(path, 1024)  # plenty
+    with pytest.raises(RecordingSpaceError) as err:
+        check_room(path, 10**18)
+    message = str(err.value)
+    assert message.startswith("run.h5 has ")
+    assert message.endswith(
+        "MB left to grow (free space on its disk), less than the 1e+12 MB kept to close it"
+        " readable: the run stopped there; free space (or raise the limit) and run again"
+    )
+    assert err.value.errno == 28  # ENOSPC
+
+
+def _file_size_limit() -> None:
+    resource.setrlimit(resource.RLIMIT_FSIZE, (LIMIT_BYTES, LIMIT_BYTES))
+
+
+@pytest.mark.slow
+def test_a_file_size_limit_mid_run_stops_it_with_a_readable_recording(tmp_path: Path) -> None:
+    from hil.recording.reader import RunRecording, hdf5_damage
+
+    out = tmp_path / "run"
+    done = subprocess.run(
+        [sys.executable, "-m", "hil.cli.main", "tank-run", "--virtual-time", "--no-live",
+         "--out", str(out)],
+        capture_output=True, text=True, timeout=600, preexec_fn=_file_size_limit, check=False,
+    )  # fmt: skip
+    assert done.returncode == 1, done.stderr  # an I/O failure at run time, no crash
+    assert "Traceback" not in done.stderr and "Exception ignored" not in done.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    why = summary["error"]
+    assert why.startswith("RecordingSpaceError: run.h5 has ")
+    assert "(the file-size limit (ulimit -f)), less than the" in why
+    assert summary["interrupted"] is False and summary["signal_s"] > 0.5
+    h5 = out / "run.h5"
+    assert h5.stat().st_size < LIMIT_BYTES and hdf5_damage(h5) is None
+    with RunRecording.open(h5) as rec:
+        last = rec.events()[-1]
+        assert rec.table_columns("estimates")["t_s"].size == summary["estimates"]
+    assert (last.kind, last.text) == ("alarm", f"stop: error: {why}")
