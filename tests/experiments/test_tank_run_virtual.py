@@ -90,9 +90,9 @@ def test_a_virtual_run_gives_its_golden_figures(first_run: RunOutcome) -> None:
 
     summary = summarize(first_run)
     counts = (summary["estimates"], summary["scored_estimates"], first_run.samples)
-    # The tank with its own echoes, the per-round-trip images and gcas-mti (issue 31); the
-    # start 3840 samples later than before the latency probe searched 0.1 s (issue 28). The
-    # speed RMSE holds one first-arrival outlier (-0.43 m/s at 0.97 s in the default run).
+    # The tank with its own echoes, the per-round-trip images and gcas-mti (issue 31), on the
+    # devices of issue 28 (the run starts 3840 samples later). The speed RMSE holds one
+    # first-arrival outlier (-0.43 m/s at 0.97 s in the default run).
     assert (*counts, first_run.start_index) == (269, 100, 621312, 508488)
     golden = {
         "range_bias_m": 0.007364882947666649,
