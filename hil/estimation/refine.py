@@ -85,7 +85,8 @@ from hil.signals.schedule import HopSchedule
 
 #: Taylor terms of the in-hop Doppler rotation (module docstring).
 N_MOMENTS = 7
-#: Points of the search's lines: over ±½ grating lobe in time, over ± the speed span.
+#: Points of the search's grid: over ±½ grating lobe in time, and at least SPEED_POINTS over
+#: ± the speed span (more where half the M hops' Doppler resolution is finer).
 TIME_POINTS = 9
 SPEED_POINTS = 5
 #: Stencil passes of the quadratic fit (the stencil halves each pass).
@@ -145,6 +146,10 @@ class Refinement:
     run_coherence: Coherence
     found: bool
 
+    def speed_mps(self, sound_speed_mps: float) -> float:
+        """The fit's radial speed, m/s (closing positive)."""
+        return sound_speed_mps * (self.alpha - 1.0) / (self.alpha + 1.0)
+
     def is_echo(self, fraction: float, tone_fraction: float, run_fraction: float) -> bool:
         """Whether the fit is an echo of the schedule: a maximum inside the search whose
         coherence over all hops is at least ``fraction`` of one echo's at its SNR, or whose
@@ -177,6 +182,9 @@ class CoherentRefiner:
         detector's speed error).
     max_speed_mps:
         The largest speed a detection can have, m/s (sets the widest window kept).
+    echo_fractions:
+        ``(fraction, tone_fraction, run_fraction)`` of :meth:`Refinement.is_echo`: a fit
+        that is an echo seeds the warm start of the next detections of its echo.
     """
 
     def __init__(
@@ -187,6 +195,7 @@ class CoherentRefiner:
         sound_speed_mps: float,
         speed_span_mps: float,
         max_speed_mps: float,
+        echo_fractions: tuple[float, float, float] = (0.8, 0.96, 0.85),
     ) -> None:
         if np.any(schedule.chirp_hz_per_s != 0):
             raise ConfigError("refine", True, "a schedule of tones (no chirps)", "refine=False")
@@ -199,6 +208,13 @@ class CoherentRefiner:
         self.m_hops = int(m_hops)
         self.c = float(sound_speed_mps)
         self.speed_span_mps = float(speed_span_mps)
+        #: The fractions of :meth:`Refinement.is_echo` a fit must reach to be an echo.
+        self.echo_fractions = echo_fractions
+        # The speed grid steps by half the Doppler resolution of the M hops,
+        # c / (2 f_max M T_h): coarser, its points can all miss the main lobe (long M).
+        v_res = self.c / (2.0 * float(np.max(schedule.tones_hz)) * m_hops * schedule.hop_s)
+        half_steps = int(math.ceil(self.speed_span_mps / (0.5 * v_res)))
+        self.speed_points = max(SPEED_POINTS, 2 * half_steps + 1)
         tones = np.unique(np.asarray(schedule.tones_hz, dtype=np.float64))
         self.spacing_hz = float(np.min(np.diff(tones))) if tones.size > 1 else 1 / schedule.hop_s
         self.n_tones = int(np.asarray(schedule.tones_hz).shape[0])
@@ -270,8 +286,25 @@ class CoherentRefiner:
         hop_ids = np.arange(hop_index - self.m_hops + 1, hop_index + 1, dtype=np.int64)
         lobe = 1.0 / (alpha * self.spacing_hz)
         speed0 = self.c * (alpha - 1.0) / (alpha + 1.0)
+        fit = self._fit_near(word, hop_ids, t_s, speed0, lobe, hop_index)
+        if fit is not None and fit.is_echo(*self.echo_fractions):
+            self._recent.append((hop_index, fit.t_s, fit.speed_mps(self.c)))
+        return fit
+
+    def _fit_near(
+        self,
+        word: _Codeword,
+        hop_ids: NDArray[np.int64],
+        t0: float,
+        v0: float,
+        lobe: float,
+        warm_hop: int | None,
+    ) -> Refinement | None:
+        """The fit of the search around ``(t0, v0)`` (s, m/s): from a recent fit's
+        prediction when ``warm_hop`` is given and one agrees, else the full search; None
+        where the input does not cover the hops."""
         outcome = RECENTRE
-        start = self._predicted(hop_index, t_s, speed0, lobe)
+        start = None if warm_hop is None else self._predicted(warm_hop, t0, v0, lobe)
         if start is not None:
             # Near a recent fit's prediction: a 3 × 3 grid of the fit's first steps.
             best_t, best_v = start
@@ -284,7 +317,7 @@ class CoherentRefiner:
                 WARM_HALF_SPANS * self.speed_span_mps, 3, 3, WARM_FIT_PASSES,
             )  # fmt: skip
         if outcome != FOUND:
-            best_t, best_v, outcome = t_s, speed0, RECENTRE
+            best_t, best_v, outcome = t0, v0, RECENTRE
         for _ in range(MAX_RECENTRES + 1 if outcome != FOUND else 0):
             slots = self._slots(hop_ids, word, best_t, (self.c + best_v) / (self.c - best_v))
             if slots is None:
@@ -292,14 +325,12 @@ class CoherentRefiner:
             args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
             best_t, best_v, outcome = maximise(
                 *args, self.c, best_t, best_v, 0.5 * lobe, self.speed_span_mps,
-                TIME_POINTS, SPEED_POINTS, FIT_PASSES,
+                TIME_POINTS, self.speed_points, FIT_PASSES,
             )  # fmt: skip
             if outcome != RECENTRE:
                 break
-        if outcome == FOUND:
-            self._recent.append((hop_index, best_t, best_v))
-        else:
-            best_t, best_v = t_s, speed0
+        if outcome != FOUND:
+            best_t, best_v = t0, v0
         a_best = (self.c + best_v) / (self.c - best_v)
         en0, coherence, tone_coherence, run_coherence = _fit_quality(
             args, word, self.n_tones, best_t, a_best

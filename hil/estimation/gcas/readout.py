@@ -47,6 +47,7 @@ from hil.estimation.refine import CoherentRefiner
 COHERENCE_FRACTION = 0.8
 TONE_COHERENCE_FRACTION = 0.96
 RUN_COHERENCE_FRACTION = 0.85
+ECHO_FRACTIONS = (COHERENCE_FRACTION, TONE_COHERENCE_FRACTION, RUN_COHERENCE_FRACTION)
 
 #: ``unit_values(n_star, d0, tone)``: the M terms' unit correlators of the peak at sample
 #: ``n_star``, hypothesis ``d0``, tone index per term (shape ``(M,)``), weighted, complex.
@@ -177,9 +178,7 @@ class Readout:
         if self._refiner is not None:
             refined = self._refiner.refine(t_rx, alpha, hop_index)
             if refined is not None:
-                if not refined.is_echo(
-                    COHERENCE_FRACTION, TONE_COHERENCE_FRACTION, RUN_COHERENCE_FRACTION
-                ):
+                if not refined.is_echo(*ECHO_FRACTIONS):
                     self.incoherent_count += 1
                     return None
                 t_rx, alpha, bound = refined.t_s, refined.alpha, refined.bound
