@@ -53,9 +53,9 @@ def test_a_file_size_limit_mid_run_stops_it_with_a_readable_recording(tmp_path: 
     why = summary["error"]
     assert why.startswith("RecordingSpaceError: run.h5 has ")
     assert "(the file-size limit (ulimit -f)), less than the" in why
-    # The run streamed before the limit stopped it (0.49 s of signal measured: the 5 MB hold
-    # the recording's tables and snapshot beside the samples, less the reserve kept to close).
-    assert summary["interrupted"] is False and summary["signal_s"] > 0.25
+    # The run streamed before the limit stopped it (0.39-0.49 s of signal measured: where the
+    # 5 MB run out depends on when the writer flushed, by the wall clock).
+    assert summary["interrupted"] is False and summary["signal_s"] > 0.1
     h5 = out / "run.h5"
     assert h5.stat().st_size < LIMIT_BYTES and hdf5_damage(h5) is None
     with RunRecording.open(h5) as rec:
