@@ -107,11 +107,13 @@ def test_output_leaves_while_the_device_ticks(compute: bool) -> None:
         assert endpoint.output_backlog == 0
     expected = (np.arange(ticks * CHUNK) % 251).astype(np.uint8).tobytes()
     assert bytes(got) == expected  # every byte, in order
-    # While tick k computed, the output of the ticks before it reached the host (give or
-    # take half a tick's). The old single-thread pump let out one pty buffer (about 14 KB)
-    # per tick, so the host fell 34 KB further behind at every tick.
+    # While tick k computed, the output of the ticks before it reached the host, give or
+    # take what one tick's scheduling leaves queued (a computing tick holds the GIL: the I/O
+    # thread runs between its switch intervals; 27 KB measured on a busy machine). The old
+    # single-thread pump let out one pty buffer (about 14 KB) per tick, so the host fell
+    # 34 KB further behind at every tick: more than a whole tick's output by the second.
     behind = [k * CHUNK - read for k, read in enumerate(device.host_read_at_tick)]
-    assert max(behind) < CHUNK // 2, behind
+    assert max(behind) < CHUNK, behind
 
 
 @pytest.mark.slow
