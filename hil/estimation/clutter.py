@@ -115,14 +115,15 @@ class ClutterCancelledGcas:
         from hil.estimation.gcas import GcasReceiver
 
         check_option_types(GcasReceiver, extra, "gcas-mti")
-        period = schedule.period_s * fs_hz
-        if abs(period - round(period)) > 1e-6 * period:
+        period = schedule.period_samples(fs_hz)
+        if period is None:
             raise ConfigError(
                 "receiver",
                 "gcas-mti",
                 "a code period of a whole number of samples",
-                f"period {schedule.period_s} s × {fs_hz} Hz = {period:.4f} samples: "
-                "the canceller subtracts the period before; use gcas",
+                f"period {schedule.period_s} s × {fs_hz} Hz = "
+                f"{schedule.period_s * fs_hz:.4f} samples: the canceller subtracts the period "
+                "before; use gcas",
             )
         # After the canceller a moving echo is two (itself and its sign-flipped copy a
         # period later, P·2v/c apart): not the one echo GCAS's refinement fits, so it is off
@@ -136,7 +137,7 @@ class ClutterCancelledGcas:
             m_hops=m_hops,
             **{"refine": False, **extra},
         )
-        return cls(inner, round(period))
+        return cls(inner, period)
 
     def process(self, block: ArrayLike, *, gap_before: int = 0) -> list[Estimate]:
         """Cancel, then GCAS (shape ``(n,)`` real samples)."""

@@ -126,14 +126,15 @@ class FirstArrivalReadout:
     ) -> None:
         if max_spread_s is None:
             max_spread_s = MAX_SPREAD_HOPS * schedule.hop_s
-        period = schedule.period_s * fs_hz
-        if abs(period - round(period)) > 1e-6 * period:
+        period = schedule.period_samples(fs_hz)
+        if period is None:
             raise ConfigError(
                 "range_readout",
                 "first-arrival",
                 "a code period of a whole number of samples",
-                f"period {schedule.period_s} s × {fs_hz} Hz = {period:.4f} samples: "
-                "the clutter canceller subtracts the period before; use the peak readout",
+                f"period {schedule.period_s} s × {fs_hz} Hz = "
+                f"{schedule.period_s * fs_hz:.4f} samples: the clutter canceller subtracts the "
+                "period before; use the peak readout",
             )
         if not (math.isfinite(max_spread_s) and 0 < max_spread_s < schedule.hop_s / 2):
             raise ConfigError(
@@ -144,7 +145,7 @@ class FirstArrivalReadout:
         self.schedule = schedule
         self.fs_hz = float(fs_hz)
         self.m_hops = int(m_hops)
-        self.period = int(round(period))
+        self.period = period
         self.boxcar = max(2, int(round(fs_hz / spacing)))
         self.max_spread_s = float(max_spread_s)
         self._pre = int(round((max_spread_s + BASELINE_S) * fs_hz)) + self.boxcar

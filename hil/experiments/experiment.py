@@ -533,8 +533,7 @@ def tank_receiver_options(
         v_res = doppler_resolution_mps(schedule.tones_hz, schedule.hop_s, c)
         out["reverb_speed_mps"] = AUTO if plan.speed_mps >= 2.0 * v_res else 0.0
     if "range_readout" not in out:
-        period = schedule.period_s * fs_hz
-        whole = abs(period - round(period)) <= 1e-6 * period
+        whole = schedule.period_samples(fs_hz) is not None
         out["range_readout"] = "first-arrival" if whole else "peak"
     if out["range_readout"] == "peak" and "refine" not in out:
         out["refine"] = False

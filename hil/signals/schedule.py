@@ -277,6 +277,16 @@ class HopSchedule:
             )
         return float(d[0])
 
+    def period_samples(self, fs_hz: float) -> int | None:
+        """The code period in samples at ``fs_hz`` when it is a whole number of them (to
+        1e-6 of a period), else None: what a canceller subtracting the period before needs.
+
+        >>> HopSchedule.from_segments("demo", [1000.0, 1500.0], [0, 1], 0.001).period_samples(1e4)
+        20
+        """
+        period = self.period_s * float(fs_hz)
+        return int(round(period)) if abs(period - round(period)) <= 1e-6 * period else None
+
     def unambiguous_delay_s(self) -> float:
         """The longest delay that can be told apart from a shorter one: one period, s."""
         return self.period_s
