@@ -191,7 +191,7 @@ class AudioTank:
         """Input values the simulated interface clipped at ±1.0 (None before it opened)."""
         return None if self._backend is None else self._backend.adc_clipped_samples
 
-    def lost(self) -> DeviceLostError | None:
+    def lost(self, grace_s: float = 0.0) -> DeviceLostError | None:
         """Never: the simulation is this process."""
         return None
 

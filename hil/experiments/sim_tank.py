@@ -104,7 +104,7 @@ class TankSimulation(Protocol):
 
     def true_stage_position(self, clock_t: np.ndarray) -> np.ndarray: ...
 
-    def lost(self) -> DeviceLostError | None: ...
+    def lost(self, grace_s: float = 0.0) -> DeviceLostError | None: ...
 
     def close(self) -> None: ...
 
@@ -440,11 +440,23 @@ class SimulatedTankProcess:
         """The child's exit code once it ended (negative: killed by that signal), else None."""
         return self._proc.poll()
 
-    def lost(self) -> DeviceLostError | None:
-        """The child process, if it ended under the run."""
+    def lost(self, grace_s: float = 0.0) -> DeviceLostError | None:
+        """The child process, if it ended under the run.
+
+        ``grace_s`` (s): how long to wait for its exit when a link to it already failed.
+        A killed process hangs up its ptys while the kernel tears it down, a moment before
+        it can be reaped; without the wait the run would blame the link, not the tank.
+        """
+        from subprocess import TimeoutExpired
+
         from hil.experiments.live.stops import DeviceLostError
 
         code = self.exit_code()
+        if code is None and grace_s > 0:
+            try:
+                code = self._proc.wait(timeout=grace_s)
+            except TimeoutExpired:
+                code = None
         if code is None:
             return None
         return DeviceLostError(

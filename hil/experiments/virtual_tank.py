@@ -110,7 +110,7 @@ class VirtualTank:
         """ADC values the simulated board clipped at conversion."""
         return int(self._board.adc_clipped_samples)
 
-    def lost(self) -> DeviceLostError | None:
+    def lost(self, grace_s: float = 0.0) -> DeviceLostError | None:
         """Never: the simulation is this process."""
         return None
 

@@ -44,6 +44,9 @@ WATCHDOG_MS = 1000
 #: The simulated board's: the simulated tank is a child process on the same CPUs, scaled in
 #: time, so a stall of the machine (seconds on a loaded CI host) must not stop it.
 SIM_WATCHDOG_MS = 10_000
+#: How long (s) a failed link waits for the simulated tank's process to be reaped before
+#: the link itself is blamed: a killed process hangs up its ptys a moment before it exits.
+LINK_LOST_GRACE_S = 2.0
 
 
 def open_streaming_device(url: str, fs: float, clock: Clock, keepalive_ms: int) -> StreamingDevice:
@@ -152,13 +155,14 @@ class RunDevices:
             raise RuntimeError("the run's devices are not open: call RunDevices.open first")
         return self.board, self.stage, self.clock
 
-    def tank_lost(self) -> DeviceLostError | None:
-        """The simulated tank, if it ended under the run."""
-        return self.tank.lost() if self.tank is not None else None
+    def tank_lost(self, grace_s: float = 0.0) -> DeviceLostError | None:
+        """The simulated tank, if it ended under the run (``grace_s``: seconds to wait for
+        its exit, when a link to it already failed)."""
+        return self.tank.lost(grace_s) if self.tank is not None else None
 
     def stage_lost(self, url: str, exc: BaseException) -> DeviceLostError:
         """The stage stopped answering (``exc``: what its driver raised)."""
-        return self.tank_lost() or DeviceLostError(
+        return self.tank_lost(LINK_LOST_GRACE_S) or DeviceLostError(
             "stage",
             url,
             f"{type(exc).__name__}: {exc}",

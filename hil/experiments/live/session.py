@@ -20,7 +20,7 @@ from hil.acquisition.feed import ReceiverFeed
 from hil.estimation.base import Estimate, Receiver
 from hil.experiments.experiment import Experiment
 from hil.experiments.live.board_state import collect_sync_pairs, sample_zero_time_s
-from hil.experiments.live.devices import RunDevices
+from hil.experiments.live.devices import LINK_LOST_GRACE_S, RunDevices
 from hil.experiments.live.latency import LatencyProbe
 from hil.experiments.live.plan import CheckedTow
 from hil.experiments.live.recorder import RunRecorder
@@ -240,6 +240,9 @@ class LiveSession:
         why = self.board_watch.lost()
         if why is None:
             return None
+        lost = self.devices.tank_lost(LINK_LOST_GRACE_S)
+        if lost is not None:
+            return lost
         return DeviceLostError(
             "board",
             self.exp.board_url,
