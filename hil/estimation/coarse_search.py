@@ -13,10 +13,10 @@ every Doppler hypothesis ``d`` and tone ``k``:
 comb's terms drift by ``m·|Q_d − H_d|`` blocks (for ``L_d/B`` near a half-integer it loses most
 of its later terms, and the hypothesis then loses to a ghost at low SNR); rounding each term's
 lag on its own keeps the M terms within half a block, but costs M adds. So per block the
-uniform comb ranks all hypotheses and only the :data:`COARSE_SHORTLIST` best get the rounded
-comb (cost per block nearly independent of M). Per block: the statistic
-``s[b] = max h_d Acc_d[b]`` over the shortlist, its hypothesis ``d̂[b]``, the runner-up
-``d₂[b]`` (the best shortlisted hypothesis more than one step from ``d̂``) and, on every
+uniform comb ranks all hypotheses and only the :data:`COARSE_SHORTLIST` best (and the largest
+peaks across hypotheses: other echoes' lobes) get the rounded comb (cost per block nearly
+independent of M). Per block: ``h_d Acc_d[b]`` of those, the statistic
+``s[b] = max h_d Acc_d[b]``, its hypothesis ``d̂[b]`` and, on every
 ``noise_every``-th block, the unit-correlator noise floor ``median_{d,k}(|v|² σ_d)/ln 2``
 (``σ_d`` rescales a window of ``Q_d B`` samples to the exact ``N_d``). The loops are compiled
 (:func:`hil.estimation.kernels.coarse_search`); the moving sums are differences of float64
@@ -25,7 +25,7 @@ zero, and any chunking of the input gives the same bits.
 
 >>> import numpy as np
 >>> cs = CoarseSearch(1000.0, [[100.0]], [3], block=4, m_hops=2)
->>> s, d_hat, noise, b0 = cs.process(np.exp(2j * np.pi * 100.0 * np.arange(40) / 1000.0))
+>>> s, d_hat, noise, b0, acc = cs.process(np.exp(2j * np.pi * 100.0 * np.arange(40) / 1000.0))
 >>> b0, np.round(s, 3).tolist()  # |v|² = 12² once 3 blocks are in; Acc adds 2 hops
 (0, [16.0, 64.0, 144.0, 160.0, 208.0, 288.0, 288.0, 288.0, 288.0, 288.0])
 >>> cs.comb_lags.tolist()  # H_d defaults to Q_d
@@ -35,12 +35,27 @@ zero, and any chunking of the input gives the same bits.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from hil.errors import ConfigError
 from hil.estimation.kernels import coarse_search
+
+
+class CoarseBlocks(NamedTuple):
+    """Stage 1's output for the blocks completed by one call, ``nb`` of them from absolute
+    block ``first_block``: ``stat`` (shape ``(nb,)``, ``s[b]``), ``d_hat`` (shape ``(nb,)``),
+    ``noise`` (shape ``(nb,)``, NaN off the ``noise_every`` grid) and ``acc``
+    (``h_d Acc_d[b]``, shape ``(nb, D)``, −inf off the shortlist)."""
+
+    stat: NDArray[np.float64]
+    d_hat: NDArray[np.int64]
+    noise: NDArray[np.float64]
+    first_block: int
+    acc: NDArray[np.float64]
+
 
 #: Blocks per frame of the block rotation (one set of transcendental calls per frame).
 FRAME_BLOCKS = 64
@@ -74,6 +89,10 @@ class CoarseSearch:
         Blocks between noise-floor estimates (absolute grid).
     noise_scale:
         ``σ_d`` (shape ``(D,)``; default ones).
+    peak_lobe, peak_count:
+        Beside the shortlist, the ``peak_count`` largest peaks of the uniform comb across
+        hypotheses (each greater than the ``peak_lobe`` hypotheses on either side) get the
+        rounded comb: the lobes of weaker echoes at other speeds (default none).
     """
 
     def __init__(
@@ -89,6 +108,8 @@ class CoarseSearch:
         hyp_weights: ArrayLike | None = None,
         noise_every: int = 4,
         noise_scale: ArrayLike | None = None,
+        peak_lobe: int = 1,
+        peak_count: int = 0,
     ) -> None:
         if not (math.isfinite(fs_hz) and fs_hz > 0):
             raise ConfigError("fs_hz", fs_hz, "> 0 Hz")
@@ -96,6 +117,10 @@ class CoarseSearch:
             raise ConfigError("block", block, "an integer >= 1 (samples per block)")
         if int(m_hops) != m_hops or m_hops < 1:
             raise ConfigError("m_hops", m_hops, "an integer >= 1")
+        if int(peak_lobe) != peak_lobe or peak_lobe < 1:
+            raise ConfigError("peak_lobe", peak_lobe, "an integer >= 1 (hypotheses)")
+        if int(peak_count) != peak_count or peak_count < 0:
+            raise ConfigError("peak_count", peak_count, "an integer >= 0")
         if int(noise_every) != noise_every or noise_every < 1:
             raise ConfigError("noise_every", noise_every, "an integer >= 1 (blocks)")
         nu = np.asarray(freqs_hz, dtype=np.float64)
@@ -133,6 +158,7 @@ class CoarseSearch:
         self._h_cum = 1 << q_max.bit_length()
         self._h_g = 1 << max(int(self.comb_lags.max()), self.m_hops * q_max).bit_length()
         self.shortlist = min(COARSE_SHORTLIST, n_hyp)
+        self.peak_lobe, self.peak_count = int(peak_lobe), int(peak_count)
         self.reset(0)
 
     @staticmethod
@@ -168,13 +194,9 @@ class CoarseSearch:
         """Absolute index of the next block to be completed."""
         return self._next_block
 
-    def process(
-        self, y: ArrayLike
-    ) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.float64], int]:
-        """Consume complex baseband samples ``y`` (shape ``(n,)``); for the blocks they
-        complete return ``s`` (shape ``(nb,)``), ``d̂`` and the runner-up hypothesis more than
-        one step from it (shape ``(nb, 2)``, −1 for none), the noise floor
-        (shape ``(nb,)``, NaN off the ``noise_every`` grid) and the first block's index."""
+    def process(self, y: ArrayLike) -> CoarseBlocks:
+        """Consume complex baseband samples ``y`` (shape ``(n,)``); the blocks they complete
+        (:class:`CoarseBlocks`)."""
         ys = np.asarray(y, dtype=np.complex128).reshape(-1)
         self._next += ys.shape[0]
         buf = np.concatenate((self._carry, ys)) if self._carry.size else ys
@@ -183,15 +205,16 @@ class CoarseSearch:
         self._carry = buf[used:].copy()
         b0 = self._next_block
         s = np.empty(nb)
-        d_hat = np.empty((nb, 2), dtype=np.int64)
+        d_hat = np.empty(nb, dtype=np.int64)
         noise = np.empty(nb)
+        acc = np.empty((nb, self.n_hyp))
         if nb:
             coarse_search(
                 np.ascontiguousarray(buf[:used]), b0, self.block, *self._within, *self._step,
                 self._cycles_per_block, FRAME_BLOCKS, self.block_lengths, self.n_tones,
                 self.comb_lags, self._cell_w, self._hyp_w, self.noise_every, self._noise_scale,
                 self._cum, self._cum_ring, self._g_ring, self._uacc_ring, self.shortlist,
-                self._frame_rot, s, d_hat, noise,
+                self.peak_lobe, self.peak_count, self._frame_rot, s, d_hat, noise, acc,
             )  # fmt: skip
             self._next_block += nb
-        return s, d_hat, noise, b0
+        return CoarseBlocks(s, d_hat, noise, b0, acc)

@@ -113,6 +113,74 @@ def peak_indices(s: Any, half_width: int, lo: int, hi: int) -> Any:
 
 
 @numba.njit(**_JIT)
+def _cell_peak_at(
+    s: Any, i: int, d: int, half_rows: int, half_cols: int, known: int, leak: Any
+) -> bool:  # fmt: skip
+    """Whether ``s[i, d]`` is finite, the first maximum of ``s`` over rows ``±half_rows`` and
+    columns ``±half_cols`` (greater than every cell before it in row-major order within that
+    window, not smaller than any after it in rows below ``known``), and greater than the leak
+    ``leak[|d − e|] · s[i, e]`` of every other cell ``e`` of its row."""
+    v = s[i, d]
+    if not v > -math.inf:
+        return False
+    n_cols = s.shape[1]
+    c_lo = max(0, d - half_cols)
+    c_hi = min(n_cols, d + half_cols + 1)
+    for j in range(max(0, i - half_rows), min(known, i + half_rows + 1)):
+        for e in range(c_lo, c_hi):
+            if j < i or (j == i and e < d):
+                if s[j, e] >= v:
+                    return False
+            elif s[j, e] > v:
+                return False
+    for e in range(n_cols):  # noqa: SIM110 - numba: no all(genexpr)
+        if s[i, e] * leak[abs(d - e)] >= v:
+            return False
+    return True
+
+
+@numba.njit(**_JIT)
+def peak_cells(
+    s: Any, half_rows: int, half_cols: int, lo: int, hi: int, leak: Any
+) -> Any:  # fmt: skip
+    """Cells ``(i, d)`` with ``i`` in ``[lo, hi)`` that are the first maximum of ``s`` over
+    ``±half_rows`` rows and ``±half_cols`` columns (:func:`peak_indices` in two dimensions:
+    rows are time, columns hypotheses; −inf cells are never one) and above the leak of the
+    other cells of their row (``leak`` shape ``(D,)``, by column distance; 0 for none).
+    ``s`` shape ``(n, D)``; returns row and column indices (int64, shape ``(P,)`` each),
+    row-major order."""
+    rows = np.empty((hi - lo) * s.shape[1] if hi > lo else 0, dtype=np.int64)
+    cols = np.empty_like(rows)
+    count = 0
+    for i in range(lo, hi):
+        for d in range(s.shape[1]):
+            if _cell_peak_at(s, i, d, half_rows, half_cols, s.shape[0], leak):
+                rows[count] = i
+                cols[count] = d
+                count += 1
+    return rows[:count], cols[:count]
+
+
+@numba.njit(**_JIT)
+def first_possible_cells(
+    s: Any, half_rows: int, half_cols: int, lo: int, hi: int, leak: Any
+) -> Any:  # fmt: skip
+    """The first row ``i`` in ``[lo, hi)`` holding a cell that can still become a
+    :func:`peak_cells` peak once the rows from ``hi`` on arrive, and a mask of those cells
+    (shape ``(D,)``); ``hi`` and an empty mask if none can (``s[:hi]`` is read)."""
+    mask = np.zeros(s.shape[1], dtype=np.bool_)
+    for i in range(lo, hi):
+        found = False
+        for d in range(s.shape[1]):
+            if _cell_peak_at(s, i, d, half_rows, half_cols, hi, leak):
+                mask[d] = True
+                found = True
+        if found:
+            return i, mask
+    return hi, mask
+
+
+@numba.njit(**_JIT)
 def coarse_search(
     y: Any,
     b_first: int,
@@ -135,10 +203,13 @@ def coarse_search(
     g_ring: Any,
     uacc_ring: Any,
     shortlist: int,
+    peak_lobe: int,
+    peak_count: int,
     frame_rot: Any,
     s_out: Any,
     d_out: Any,
     noise_out: Any,
+    acc_out: Any,
 ) -> None:
     """Stage 1 of the two-stage search over whole blocks of ``block`` baseband samples.
 
@@ -155,15 +226,19 @@ def coarse_search(
       ``v = cum[b] − cum[b − Q_d]`` (a window of ``Q_d`` blocks);
     - group ``G_d = Σ_k cell_w[c] |v|²``; the uniform comb ``Acc_d[b − Q_d] + G_d[b] −
       G_d[b − M Q_d]`` (O(1), history ``uacc_ring`` shape ``(D, Hu)``) picks the
-      ``shortlist`` best hypotheses, and for those only the comb with per-term rounded lags
+      ``shortlist`` best hypotheses and up to ``peak_count`` of its peaks across hypotheses
+      (the largest of those greater than the ``peak_lobe`` hypotheses on either side: the
+      lobes of other echoes, below the shortlist of the strongest one's lobe), and for
+      those only the comb with per-term rounded lags
       ``Acc_d[b] = Σ_m G_d[b − comb_lags[d, m]]`` (lags in blocks, shape ``(D, M)``; history
       ``g_ring`` shape ``(D, Hg)``, column ``b mod Hg``, ``Hg > max(M max Q, max lag)``; ring
       lengths are powers of two);
-    - outputs ``s_out[i] = max hyp_w[d] Acc_d`` over the shortlist, ``d_out[i, 0]`` its ``d`` and
-      ``d_out[i, 1]`` the best ``d`` more than one step away (−1 if none; shape ``(nb, 2)``),
-      and every
+    - outputs ``s_out[i] = max hyp_w[d] Acc_d`` over the shortlist, ``d_out[i]`` its ``d``
+      (shape ``(nb,)``), and every
       ``noise_every`` blocks (absolute) ``noise_out[i] = median_c(|v|² noise_scale[d]) / ln 2``
-      (NaN otherwise).
+      (NaN otherwise);
+    - ``acc_out[i, d] = hyp_w[d] Acc_d`` for the shortlisted hypotheses, −inf for the others
+      (shape ``(nb, D)``: the candidates of several echoes, :func:`peak_cells`).
     """
     n_cells = cum.shape[1]
     n_hyp = n_cells // n_tones
@@ -178,6 +253,9 @@ def coarse_search(
     acc_row = np.empty(n_hyp)
     short_v = np.empty(shortlist)
     short_d = np.empty(shortlist, dtype=np.int64)
+    u_all = np.empty(n_hyp)
+    peak_v = np.empty(max(peak_count, 1))
+    peak_d = np.empty(max(peak_count, 1), dtype=np.int64)
     u_mask = uacc_ring.shape[1] - 1
     ln2 = math.log(2.0)
     for i in range(nb):
@@ -232,6 +310,7 @@ def coarse_search(
             u = uacc_ring[d, (b - q[d]) & u_mask] + grp[d] - hist[(b - n_terms * q[d]) & g_mask]
             uacc_ring[d, b & u_mask] = u
             u *= hyp_w[d]
+            u_all[d] = u
             # Insert into the descending shortlist (ties keep the lower d first).
             if n_short < shortlist or u > short_v[n_short - 1]:
                 pos = min(n_short, shortlist - 1)
@@ -242,10 +321,31 @@ def coarse_search(
                 short_v[pos] = u
                 short_d[pos] = d
                 n_short = min(n_short + 1, shortlist)
+        n_peak = 0
+        for d in range(n_hyp):
+            u = u_all[d]
+            if not u > 0.0:
+                continue
+            top = True
+            for e in range(max(0, d - peak_lobe), min(n_hyp, d + peak_lobe + 1)):
+                if (e < d and u_all[e] >= u) or (e > d and u_all[e] > u):
+                    top = False
+                    break
+            if top and (n_peak < peak_count or u > peak_v[n_peak - 1]):
+                pos = min(n_peak, peak_count - 1)
+                while pos > 0 and peak_v[pos - 1] < u:
+                    peak_v[pos] = peak_v[pos - 1]
+                    peak_d[pos] = peak_d[pos - 1]
+                    pos -= 1
+                peak_v[pos] = u
+                peak_d[pos] = d
+                n_peak = min(n_peak + 1, peak_count)
         for d in range(n_hyp):
             acc_row[d] = -math.inf
-        for e in range(n_short):
-            d = short_d[e]
+        for e in range(n_short + n_peak):
+            d = short_d[e] if e < n_short else peak_d[e - n_short]
+            if acc_row[d] > -math.inf:
+                continue
             hist = g_ring[d]
             lag = comb_lags[d]
             a = 0.0
@@ -258,17 +358,9 @@ def coarse_search(
             if acc_row[d] > best:
                 best = acc_row[d]
                 best_d = d
-        # Runner-up: the best hypothesis more than one step from the best (a ghost of the
-        # group statistic, e.g. tones shifted by one at another speed, can beat the truth).
-        second = -math.inf
-        second_d = -1
-        for d in range(n_hyp):
-            if abs(d - best_d) > 1 and acc_row[d] > second:
-                second = acc_row[d]
-                second_d = d
+            acc_out[i, d] = acc_row[d]
         s_out[i] = best
-        d_out[i, 0] = best_d
-        d_out[i, 1] = second_d
+        d_out[i] = best_d
         noise_out[i] = np.median(pw) / ln2 if b % noise_every == 0 else np.nan
 
 
@@ -568,12 +660,12 @@ def _edges(
 
 @numba.njit(**_JIT)
 def fine_pick(a2: Any, pair: Any, centres: Any, hyp_w: Any, half: int, find_edges: bool) -> Any:
-    """The better hypothesis of each candidate's pair, and its peak.
+    """The best hypothesis of each candidate's set, and its peak.
 
-    ``a2``: exact codeword sums of both hypotheses ``pair`` (shape ``(C, 2)``) within
+    ``a2``: exact codeword sums of the hypotheses ``pair`` (shape ``(C, H)``) within
     ``±half`` of ``centres`` (:func:`codeword_sums` with pruning, shape
-    ``(C, 2, 2·half + 1, J)``). The hypothesis is the better of the two by its maximum
-    weighted with ``hyp_w`` (one pruned whole, −inf, cannot win). Returns ``d0``, ``centre``
+    ``(C, H, 2·half + 1, J)``). The hypothesis is the best by its maximum weighted with
+    ``hyp_w`` (one pruned whole, −inf, cannot win). Returns ``d0``, ``centre``
     (``(C,)``), its sums ``a`` (``(C, 2·half + 1, J)``), their maximum over codewords
     ``s_win``, its first maximum ``i_pk`` and, with ``find_edges``, the candidates whose
     peak lies on either edge of the window, their ``centre`` moved onto it (to be summed
@@ -585,7 +677,7 @@ def fine_pick(a2: Any, pair: Any, centres: Any, hyp_w: Any, half: int, find_edge
     for c in range(n_cand):
         pick = 0
         best = -math.inf
-        for i in range(2):
+        for i in range(a2.shape[1]):
             top = -math.inf
             for t in range(width):
                 for j in range(n_words):

@@ -111,6 +111,34 @@ WARM_HALF_SPANS = 0.125
 WARM_FIT_PASSES = 3
 #: Recent fits kept for that (several echoes at once each keep theirs).
 RECENT_FITS = 16
+#: Another echo's latest fit is taken out of a detection's input while it is at most this
+#: many hops from the detection (its echo continues at the fitted delay and time scale).
+KNOWN_HOPS = 3
+#: A detection is the echo of a fit when its boundary is within this many grating lobes of
+#: where the fit puts it (and its speed within the speed span): a detector's time can be a
+#: lobe off beside a stronger echo.
+SAME_ECHO_LOBES = 1.5
+#: Lobe checks after a search (each may move the fit by one grating lobe).
+LOBE_MOVES = 2
+#: ``known`` rows of no other echo.
+_NO_KNOWN = np.zeros((5, 0), dtype=np.complex128)
+
+
+@dataclass(frozen=True)
+class _EchoFit:
+    """A fit kept to take its echo out of other detections' input: the boundary ending hop
+    ``hop_index`` received at ``t_s`` (s), the time scale ``alpha`` and the fitted complex
+    amplitude ``amplitude`` (``β``: the input is ``Re(β s)`` for the model ``s`` of the
+    codeword's first code period)."""
+
+    hop_index: int
+    t_s: float
+    alpha: float
+    amplitude: complex
+
+    def speed(self, sound_speed_mps: float) -> float:
+        """Radial speed, m/s (closing positive)."""
+        return sound_speed_mps * (self.alpha - 1.0) / (self.alpha + 1.0)
 
 
 @dataclass(frozen=True)
@@ -150,17 +178,35 @@ class Refinement:
         """The fit's radial speed, m/s (closing positive)."""
         return sound_speed_mps * (self.alpha - 1.0) / (self.alpha + 1.0)
 
-    def is_echo(self, fraction: float, tone_fraction: float, run_fraction: float) -> bool:
-        """Whether the fit is an echo of the schedule: a maximum inside the search whose
-        coherence over all hops is at least ``fraction`` of one echo's at its SNR, or whose
-        coherence within each tone is at least ``tone_fraction`` of it (one echo through
-        multipath), or over runs of consecutive hops at least ``run_fraction`` of it (an
+    def is_echo(self, test: EchoTest) -> bool:
+        """Whether the fit is one echo of the schedule by ``test``: a maximum inside the
+        search that collects at least ``test.min_e_over_n0_db`` and whose coherence over all
+        hops is at least ``test.fraction`` of one echo's at its SNR, or whose coherence
+        within each tone is at least ``test.tone_fraction`` of it (one echo through
+        multipath), or over runs of consecutive hops at least ``test.run_fraction`` of it (an
         accelerating echo)."""
-        return self.found and (
-            self.coherence.fraction >= fraction
-            or self.tone_coherence.fraction >= tone_fraction
-            or self.run_coherence.fraction >= run_fraction
+        return (
+            self.found
+            and self.e_over_n0_db >= test.min_e_over_n0_db
+            and (
+                self.coherence.fraction >= test.fraction
+                or self.tone_coherence.fraction >= test.tone_fraction
+                or self.run_coherence.fraction >= test.run_fraction
+            )
         )
+
+
+@dataclass(frozen=True)
+class EchoTest:
+    """What a fit must reach to be one echo of the schedule (:meth:`Refinement.is_echo`):
+    coherence fractions over all hops, within each tone and over runs of consecutive hops,
+    and the E/N0 (dB) it collects once the other echoes measured lately are taken out (what
+    they leaked into a detection is not an echo of its own)."""
+
+    fraction: float
+    tone_fraction: float
+    run_fraction: float
+    min_e_over_n0_db: float
 
 
 class CoherentRefiner:
@@ -182,9 +228,9 @@ class CoherentRefiner:
         detector's speed error).
     max_speed_mps:
         The largest speed a detection can have, m/s (sets the widest window kept).
-    echo_fractions:
-        ``(fraction, tone_fraction, run_fraction)`` of :meth:`Refinement.is_echo`: a fit
-        that is an echo seeds the warm start of the next detections of its echo.
+    echo_test:
+        :meth:`Refinement.is_echo`'s thresholds: a fit that is an echo seeds the warm start
+        of the next detections of its echo.
     """
 
     def __init__(
@@ -195,7 +241,7 @@ class CoherentRefiner:
         sound_speed_mps: float,
         speed_span_mps: float,
         max_speed_mps: float,
-        echo_fractions: tuple[float, float, float] = (0.8, 0.96, 0.85),
+        echo_test: EchoTest = EchoTest(0.8, 0.96, 0.85, 12.0),
     ) -> None:
         if np.any(schedule.chirp_hz_per_s != 0):
             raise ConfigError("refine", True, "a schedule of tones (no chirps)", "refine=False")
@@ -208,8 +254,8 @@ class CoherentRefiner:
         self.m_hops = int(m_hops)
         self.c = float(sound_speed_mps)
         self.speed_span_mps = float(speed_span_mps)
-        #: The fractions of :meth:`Refinement.is_echo` a fit must reach to be an echo.
-        self.echo_fractions = echo_fractions
+        #: What a fit must reach to be an echo (:meth:`Refinement.is_echo`).
+        self.echo_test = echo_test
         # The speed grid steps by half the Doppler resolution of the M hops,
         # c / (2 f_max M T_h): coarser, its points can all miss the main lobe (long M).
         v_res = self.c / (2.0 * float(np.max(schedule.tones_hz)) * m_hops * schedule.hop_s)
@@ -248,6 +294,8 @@ class CoherentRefiner:
         self._clock = 0
         self._codewords: dict[int, _Codeword] = {}
         self._recent: deque[tuple[int, float, float]] = deque(maxlen=RECENT_FITS)
+        #: The latest fit of each echo measured lately (:meth:`_known_hops`).
+        self._echoes: list[_EchoFit] = []
 
     # ------------------------------------------------------------------ stream
     def reset(self, input_index: int) -> None:
@@ -256,6 +304,7 @@ class CoherentRefiner:
         self._valid_from = int(input_index)
         self._hop[:] = np.iinfo(np.int64).min
         self._recent.clear()
+        self._echoes.clear()
 
     def warm_up(self) -> None:
         """Run every compiled kernel once on a made-up detection in silence, then forget it:
@@ -281,15 +330,93 @@ class CoherentRefiner:
         """The maximum-likelihood boundary time and time scale near ``(t_s, alpha)`` for the
         boundary that ends hop ``hop_index``; None where the input does not cover the ``M``
         hops (start, gaps). Where no maximum lies inside the search (``found`` False) the
-        detection's own point is kept and its fit reported."""
+        detection's own point is kept and its fit reported. The other echoes measured lately
+        are taken out of the input first (module docstring, several echoes)."""
         word = self._codeword(hop_index)
         hop_ids = np.arange(hop_index - self.m_hops + 1, hop_index + 1, dtype=np.int64)
         lobe = 1.0 / (alpha * self.spacing_hz)
         speed0 = self.c * (alpha - 1.0) / (alpha + 1.0)
-        fit = self._fit_near(word, hop_ids, t_s, speed0, lobe, hop_index)
-        if fit is not None and fit.is_echo(*self.echo_fractions):
+        known = self._known_hops(hop_index, t_s, speed0, lobe)
+        fit = self._fit_near(word, hop_ids, t_s, speed0, lobe, hop_index, known)
+        if fit is not None and fit.is_echo(self.echo_test):
             self._recent.append((hop_index, fit.t_s, fit.speed_mps(self.c)))
+            self._remember(fit, hop_index, word, hop_ids, known)
         return fit
+
+    def _remember(
+        self, fit: Refinement, hop_index: int, word: _Codeword, hop_ids: NDArray[np.int64],
+        known: NDArray[np.complex128],
+    ) -> None:  # fmt: skip
+        """Keep ``fit`` as its echo's latest (with its fitted amplitude ``β = 2C/E_s``),
+        replacing that echo's earlier fit and forgetting fits :data:`KNOWN_HOPS` hops old."""
+        slots = self._slots(hop_ids, word, fit.t_s, fit.alpha)
+        if slots is None:
+            return
+        c, model, energy = np.empty(1, np.complex128), np.empty(1), np.empty(1)
+        args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
+        candidate_sums(
+            *args, np.array([fit.t_s]), np.array([fit.alpha]), c, model, energy,
+            np.empty((1, 0), np.complex128), known,
+        )  # fmt: skip
+        if not model[0] > 0:
+            return
+        new = _EchoFit(hop_index, fit.t_s, fit.alpha, 2.0 * complex(c[0]) / float(model[0]))
+        oldest = fit.t_s - KNOWN_HOPS * self.hop_len_s
+        self._echoes = [
+            e for e in self._echoes
+            if e.t_s >= oldest and not self._same_echo(e, hop_index, fit.t_s, new.speed(self.c))
+        ]  # fmt: skip
+        self._echoes.append(new)
+
+    def _same_echo(self, fit: _EchoFit, hop_index: int, t_s: float, speed: float) -> bool:
+        """Whether a detection at ``t_s`` (s) ending hop ``hop_index`` at ``speed`` (m/s) is
+        the echo of ``fit``: its boundary where the fit's echo puts that hop's (within
+        :data:`SAME_ECHO_LOBES` grating lobes) at a speed within the speed span."""
+        if abs(fit.speed(self.c) - speed) > self.speed_span_mps:
+            return False
+        t_pred = fit.t_s + (hop_index - fit.hop_index) * self.hop_len_s / fit.alpha
+        return abs(t_pred - t_s) <= SAME_ECHO_LOBES / (fit.alpha * self.spacing_hz)
+
+    def _known_hops(
+        self, hop_index: int, t_s: float, speed: float, lobe: float
+    ) -> NDArray[np.complex128]:
+        """The hops of the other echoes measured lately that a detection at ``t_s`` (s)
+        ending hop ``hop_index`` hears over its ``M`` hops, as the ``known`` rows of
+        :func:`~hil.estimation.refine_kernels.candidate_sums` (shape ``(5, Q)``): each echo
+        continues at its fitted delay, time scale and amplitude."""
+        others = [
+            e for e in self._echoes
+            if abs(e.t_s - t_s) <= KNOWN_HOPS * self.hop_len_s
+            and not self._same_echo(e, hop_index, t_s, speed)
+        ]  # fmt: skip
+        if not others:
+            return _NO_KNOWN
+        t_lo = t_s - (self.m_hops + 1) * self.hop_len_s / (1.0 - 2.0 * self.speed_span_mps / self.c)
+        t_hi = t_s + self.hop_len_s
+        columns = [self._echo_hops(e, t_lo, t_hi) for e in others]
+        return np.ascontiguousarray(np.concatenate(columns, axis=1))
+
+    def _echo_hops(self, echo: _EchoFit, t_lo: float, t_hi: float) -> NDArray[np.complex128]:
+        """The ``known`` columns of ``echo``'s hops received within ``[t_lo, t_hi]`` (s)."""
+        period = self.schedule.period_hops
+        key = echo.hop_index % period
+        t_len = self.hop_len_s / echo.alpha  # a hop's received length, s
+        # Hop key + r is received over [t_e + (r − 1) T/α, t_e + r T/α).
+        r_lo = int(math.floor((t_lo - echo.t_s) / t_len))
+        r_hi = int(math.ceil((t_hi - echo.t_s) / t_len)) + 1
+        hops = self.schedule.hops(key + r_lo, r_hi - r_lo + 1)
+        end = self.schedule.hops(key, 1)
+        t_b = float(end.start_s[0] + end.duration_s[0])
+        dt_lo = hops.start_s - t_b
+        f = hops.freq_hz
+        k = hops.amplitude * np.exp(-1j * (hops.phase_rad - 2 * np.pi * f * dt_lo))
+        out = np.empty((5, f.shape[0]), dtype=np.complex128)
+        out[0] = 0.5 * echo.amplitude * np.conj(k)
+        out[1] = f * echo.alpha
+        out[2] = echo.t_s + dt_lo / echo.alpha
+        out[3] = echo.t_s + (dt_lo + hops.duration_s) / echo.alpha
+        out[4] = echo.t_s
+        return out
 
     def _fit_near(
         self,
@@ -299,10 +426,11 @@ class CoherentRefiner:
         v0: float,
         lobe: float,
         warm_hop: int | None,
+        known: NDArray[np.complex128],
     ) -> Refinement | None:
         """The fit of the search around ``(t0, v0)`` (s, m/s): from a recent fit's
-        prediction when ``warm_hop`` is given and one agrees, else the full search; None
-        where the input does not cover the hops."""
+        prediction when ``warm_hop`` is given and one agrees, else the full search, then the
+        lobe check; None where the input does not cover the hops."""
         outcome = RECENTRE
         start = None if warm_hop is None else self._predicted(warm_hop, t0, v0, lobe)
         if start is not None:
@@ -313,27 +441,32 @@ class CoherentRefiner:
                 return None
             args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
             best_t, best_v, outcome = maximise(
-                *args, self.c, best_t, best_v, WARM_HALF_LOBES * lobe,
+                *args, known, self.c, best_t, best_v, WARM_HALF_LOBES * lobe,
                 WARM_HALF_SPANS * self.speed_span_mps, 3, 3, WARM_FIT_PASSES,
             )  # fmt: skip
         if outcome != FOUND:
-            best_t, best_v, outcome = t0, v0, RECENTRE
-        for _ in range(MAX_RECENTRES + 1 if outcome != FOUND else 0):
-            slots = self._slots(hop_ids, word, best_t, (self.c + best_v) / (self.c - best_v))
-            if slots is None:
+            searched = self._search(word, hop_ids, t0, v0, lobe, known)
+            if searched is None:
                 return None
-            args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
-            best_t, best_v, outcome = maximise(
-                *args, self.c, best_t, best_v, 0.5 * lobe, self.speed_span_mps,
-                TIME_POINTS, self.speed_points, FIT_PASSES,
-            )  # fmt: skip
-            if outcome != RECENTRE:
+            best_t, best_v, outcome, args = searched
+        for _ in range(LOBE_MOVES if outcome == FOUND else 0):
+            # The lobe: the envelope tells a grating lobe from its neighbours by ~1 dB, which
+            # a detector's time (noncoherent, beside a stronger echo) can miss; the
+            # likelihood's own neighbours decide.
+            moved = self._better_lobe(args, best_t, best_v, lobe, known)
+            if moved is None:
+                break
+            searched = self._search(word, hop_ids, moved, best_v, lobe, known)
+            if searched is None:
+                return None
+            best_t, best_v, outcome, args = searched
+            if outcome != FOUND:
                 break
         if outcome != FOUND:
             best_t, best_v = t0, v0
         a_best = (self.c + best_v) / (self.c - best_v)
         en0, coherence, tone_coherence, run_coherence = _fit_quality(
-            args, word, self.n_tones, best_t, a_best
+            args, known, word, self.n_tones, best_t, a_best
         )
         en0_db = 10.0 * math.log10(en0) if en0 > 0 else -math.inf
         bound = (
@@ -343,6 +476,47 @@ class CoherentRefiner:
             best_t, a_best, en0_db, bound, coherence, tone_coherence, run_coherence,
             outcome == FOUND,
         )  # fmt: skip
+
+    def _search(
+        self, word: _Codeword, hop_ids: NDArray[np.int64], t0: float, v0: float, lobe: float,
+        known: NDArray[np.complex128],
+    ) -> tuple[float, float, int, tuple[Any, ...]] | None:  # fmt: skip
+        """The full search around ``(t0, v0)``, re-centred up to :data:`MAX_RECENTRES`
+        times: the best point, the outcome and the kernels' arguments of its tables; None
+        where the input does not cover the hops."""
+        best_t, best_v, outcome = t0, v0, RECENTRE
+        args: tuple[Any, ...] = ()
+        for _ in range(MAX_RECENTRES + 1):
+            slots = self._slots(hop_ids, word, best_t, (self.c + best_v) / (self.c - best_v))
+            if slots is None:
+                return None
+            args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
+            best_t, best_v, outcome = maximise(
+                *args, known, self.c, best_t, best_v, 0.5 * lobe, self.speed_span_mps,
+                TIME_POINTS, self.speed_points, FIT_PASSES,
+            )  # fmt: skip
+            if outcome != RECENTRE:
+                break
+        return best_t, best_v, outcome, args
+
+    def _better_lobe(
+        self, args: tuple[Any, ...], t_s: float, speed: float, lobe: float,
+        known: NDArray[np.complex128],
+    ) -> float | None:  # fmt: skip
+        """The time (s) one grating lobe before or after ``t_s`` where the likelihood is
+        greater than at ``t_s`` (the greater of the two), or None."""
+        alpha = (self.c + speed) / (self.c - speed)
+        t = np.array([t_s - lobe, t_s, t_s + lobe])
+        c, model, energy = np.empty(3, np.complex128), np.empty(3), np.empty(3)
+        candidate_sums(
+            *args, t, np.full(3, alpha), c, model, energy, np.empty((3, 0), np.complex128),
+            known,
+        )  # fmt: skip
+        power = np.abs(c) ** 2
+        side = 0 if power[0] >= power[2] else 2
+        if power[side] > power[1]:
+            return float(t[side])
+        return None
 
     def _predicted(
         self, hop_index: int, t_s: float, speed: float, lobe: float
@@ -385,7 +559,9 @@ class CoherentRefiner:
         c = np.empty(t.size, dtype=np.complex128)
         model, energy = np.empty(t.size), np.empty(t.size)
         args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
-        candidate_sums(*args, t, a, c, model, energy, np.empty((t.size, 0), np.complex128))
+        candidate_sums(
+            *args, t, a, c, model, energy, np.empty((t.size, 0), np.complex128), _NO_KNOWN
+        )
         return c.reshape(np.shape(t_rx))
 
     @property
@@ -461,7 +637,12 @@ class _Codeword:
 
 
 def _fit_quality(
-    args: tuple[Any, ...], word: _Codeword, n_tones: int, t_rx: float, alpha: float
+    args: tuple[Any, ...],
+    known: NDArray[np.complex128],
+    word: _Codeword,
+    n_tones: int,
+    t_rx: float,
+    alpha: float,
 ) -> tuple[float, Coherence, Coherence, Coherence]:
     """E/N0 (linear) of the echo at a candidate and its coherence across all hops, within
     each tone and over runs of consecutive hops (:func:`~hil.estimation.refine_kernels.
@@ -483,7 +664,7 @@ def _fit_quality(
     over every run, expected ``(R s + 1) / (R (s + 1))``) holds up to about 7 m/s² on ``att``.
     """
     en0, rho, expected, rho_tone, expected_tone, rho_run, expected_run = fit_quality(
-        *args, word.tones, n_tones, t_rx, alpha
+        *args, known, word.tones, n_tones, t_rx, alpha
     )
     return (
         en0,

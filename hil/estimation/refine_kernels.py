@@ -150,7 +150,7 @@ def _edge_sums(
 def _candidate(
     prefix: Any, energy: Any, first: Any, tail: Any, alpha0: Any, centre: Any, slots: Any,
     k: Any, f: Any, dt_lo: Any, dt_hi: Any, amp2: Any, fs: float, hop_s: float,
-    t_rx: float, alpha: float, lo_sums: Any, hi_sums: Any, per_hop: Any,
+    t_rx: float, alpha: float, lo_sums: Any, hi_sums: Any, per_hop: Any, known: Any,
 ) -> tuple[complex, float, float]:  # fmt: skip
     """``(C, Σ a_i² N_i, input energy in the windows)`` of one candidate.
 
@@ -159,7 +159,8 @@ def _candidate(
     transmit times of its start and end relative to the boundary (s, ``T_i − T_b`` and
     ``T_i + D_i − T_b``), ``amp2`` its squared amplitude. ``lo_sums``/``hi_sums``: scratch,
     shape ``(P,)``; ``per_hop`` receives each hop's term of ``C`` (shape ``(M,)``, or
-    ``(0,)`` for none).
+    ``(0,)`` for none); ``known``: the hops of other echoes already measured, whose part of
+    each term and of the energy is taken out (:func:`_known_part`; shape ``(5, Q)``).
     """
     total = complex(0.0, 0.0)
     model = 0.0
@@ -182,6 +183,12 @@ def _candidate(
             tr, ti = -ti * g, tr * g
         ph = -2.0 * math.pi * f[i] * alpha * (centre[s] - t_rx)
         term_i = k[i] * complex(math.cos(ph), math.sin(ph)) * z
+        if known.shape[1]:
+            part, energy_part = _known_part(
+                known, t_rx, t_rx + dt_lo[i] / alpha, t_rx + dt_hi[i] / alpha, f[i] * alpha
+            )
+            term_i -= k[i] * part * fs
+            signal -= energy_part * fs
         total += term_i
         if per_hop.shape[0]:
             per_hop[i] = term_i
@@ -191,21 +198,64 @@ def _candidate(
 
 
 @numba.njit(**_JIT)
+def _known_part(
+    known: Any, t_rx: float, lo: float, hi: float, f_rx: float
+) -> tuple[complex, float]:  # fmt: skip
+    """What the hops of other echoes already measured put into one hop's term (before its
+    transmit phasor and the sample rate) and into its window's energy (per sample rate).
+
+    ``known`` rows (shape ``(5, Q)``, one column per hop of those echoes): the hop's complex
+    weight ``w = ½ β conj(k_h)`` (``β`` its echo's fitted amplitude: the input there is
+    ``Re(β Σ_h conj(k_h) e^{j2π g_h (t − t_e)})``), its received frequency ``g_h`` (Hz), the
+    start and end of its received interval (s) and its echo's boundary time ``t_e`` (s); all
+    real rows hold floats, the weight's row complex. The term's window is ``[lo, hi)`` (s),
+    demodulated at ``f_rx`` (Hz) about ``t_rx``: the part is
+    ``Σ_h w_h e^{j2π g_h (t_rx − t_e)} ∫ e^{j2π (g_h − f_rx) τ} dτ`` over the overlap
+    (``τ = t − t_rx``), the energy ``Σ_h 2|w_h|²`` times the overlap's length.
+    """
+    part = complex(0.0, 0.0)
+    energy = 0.0
+    for h in range(known.shape[1]):
+        a = max(lo, known[2, h].real)
+        b = min(hi, known[3, h].real)
+        if b <= a:
+            continue
+        g = known[1, h].real
+        w = known[0, h]
+        cyc = (g * (t_rx - known[4, h].real)) % 1.0
+        rot = complex(math.cos(2.0 * math.pi * cyc), math.sin(2.0 * math.pi * cyc))
+        x = 2.0 * math.pi * (g - f_rx)
+        ta = a - t_rx
+        tb = b - t_rx
+        if abs(x * (tb - ta)) < 1e-9:
+            integral = complex(math.cos(x * ta), math.sin(x * ta)) * (tb - ta)
+        else:
+            e_b = complex(math.cos(x * tb), math.sin(x * tb))
+            e_a = complex(math.cos(x * ta), math.sin(x * ta))
+            integral = (e_b - e_a) / complex(0.0, x)
+        part += w * rot * integral
+        energy += 2.0 * (w.real * w.real + w.imag * w.imag) * (b - a)
+    return part, energy
+
+
+@numba.njit(**_JIT)
 def candidate_sums(
     prefix: Any, energy: Any, first: Any, tail: Any, alpha0: Any, centre: Any, slots: Any,
     k: Any, f: Any, dt_lo: Any, dt_hi: Any, amp2: Any, fs: float, hop_s: float,
     t_rx: Any, alpha: Any, out_c: Any, out_model: Any, out_signal: Any, per_hop: Any,
+    known: Any,
 ) -> None:  # fmt: skip
     """:func:`_candidate` for candidates ``(t_rx[c], alpha[c])`` (shape ``(C,)``) into the
     outputs (shape ``(C,)``: ``C`` complex, the model's energy, the input's energy) and each
-    hop's term (``per_hop``, complex, shape ``(C, M)`` or ``(C, 0)`` for none)."""
+    hop's term (``per_hop``, complex, shape ``(C, M)`` or ``(C, 0)`` for none); ``known``
+    as :func:`_candidate`."""
     n_mom = prefix.shape[3]
     lo_sums = np.empty(n_mom, dtype=np.complex128)
     hi_sums = np.empty(n_mom, dtype=np.complex128)
     for c in range(t_rx.shape[0]):
         out_c[c], out_model[c], out_signal[c] = _candidate(
             prefix, energy, first, tail, alpha0, centre, slots, k, f, dt_lo, dt_hi, amp2,
-            fs, hop_s, t_rx[c], alpha[c], lo_sums, hi_sums, per_hop[c],
+            fs, hop_s, t_rx[c], alpha[c], lo_sums, hi_sums, per_hop[c], known,
         )  # fmt: skip
 
 
@@ -217,10 +267,10 @@ FOUND, NO_LOBE, RECENTRE = 0, 1, 2
 def maximise(
     prefix: Any, energy: Any, first: Any, tail: Any, alpha0: Any, centre: Any, slots: Any,
     k: Any, f: Any, dt_lo: Any, dt_hi: Any, amp2: Any, fs: float, hop_s: float,
-    c_mps: float, t0: float, v0: float, half_t: float, half_v: float, n_t: int, n_v: int,
-    passes: int,
+    known: Any, c_mps: float, t0: float, v0: float, half_t: float, half_v: float, n_t: int,
+    n_v: int, passes: int,
 ) -> tuple[float, float, int]:  # fmt: skip
-    """The ``(t_rx, v)`` (s, m/s) maximising ``|C|²`` (tables and hops as
+    """The ``(t_rx, v)`` (s, m/s) maximising ``|C|²`` (tables, hops and ``known`` as
     :func:`candidate_sums`; ``c_mps`` the sound speed) and an outcome.
 
     A grid of ``n_t × n_v`` points over ``t0 ± half_t`` and ``v0 ± half_v`` picks the main
@@ -245,7 +295,7 @@ def maximise(
         for j in range(n_t):
             cc, _, _ = _candidate(
                 prefix, energy, first, tail, alpha0, centre, slots, k, f, dt_lo, dt_hi,
-                amp2, fs, hop_s, t0 - half_t + j * step_t, a, lo_sums, hi_sums, none,
+                amp2, fs, hop_s, t0 - half_t + j * step_t, a, lo_sums, hi_sums, none, known,
             )  # fmt: skip
             pw = cc.real * cc.real + cc.imag * cc.imag
             if pw > best:
@@ -266,7 +316,7 @@ def maximise(
             for j in range(3):
                 cc, _, _ = _candidate(
                     prefix, energy, first, tail, alpha0, centre, slots, k, f, dt_lo, dt_hi,
-                    amp2, fs, hop_s, t + (j - 1) * step_t, a, lo_sums, hi_sums, none,
+                    amp2, fs, hop_s, t + (j - 1) * step_t, a, lo_sums, hi_sums, none, known,
                 )  # fmt: skip
                 z[i, j] = cc.real * cc.real + cc.imag * cc.imag
         # z[i, j] ≈ z0 + gt x + gv y + ½ (htt x² + 2 htv x y + hvv y²); x, y in steps.
@@ -302,11 +352,12 @@ def maximise(
 def fit_quality(
     prefix: Any, energy: Any, first: Any, tail: Any, alpha0: Any, centre: Any, slots: Any,
     k: Any, f: Any, dt_lo: Any, dt_hi: Any, amp2: Any, fs: float, hop_s: float,
-    tones: Any, n_tones: int, t_rx: float, alpha: float,
+    known: Any, tones: Any, n_tones: int, t_rx: float, alpha: float,
 ) -> tuple[float, float, float, float, float, float, float]:  # fmt: skip
     """``(E/N0, ρ, E[ρ], ρ_tone, E[ρ_tone], ρ_run, E[ρ_run])`` of one candidate
-    (:func:`hil.estimation.refine._fit_quality` states them); ``tones`` each hop's tone index
-    (shape ``(M,)``, below ``n_tones``). E/N0 is ``inf`` where the windows hold no noise."""
+    (:func:`hil.estimation.refine._fit_quality` states them; ``known`` as
+    :func:`candidate_sums`); ``tones`` each hop's tone index (shape ``(M,)``, below
+    ``n_tones``). E/N0 is ``inf`` where the windows hold no noise."""
     m_hops = slots.shape[0]
     n_mom = prefix.shape[3]
     lo_sums = np.empty(n_mom, dtype=np.complex128)
@@ -314,7 +365,7 @@ def fit_quality(
     h = np.empty(m_hops, dtype=np.complex128)
     c, es, signal = _candidate(
         prefix, energy, first, tail, alpha0, centre, slots, k, f, dt_lo, dt_hi, amp2, fs,
-        hop_s, t_rx, alpha, lo_sums, hi_sums, h,
+        hop_s, t_rx, alpha, lo_sums, hi_sums, h, known,
     )  # fmt: skip
     mag2 = c.real * c.real + c.imag * c.imag
     spread = 0.0

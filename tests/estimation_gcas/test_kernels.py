@@ -82,8 +82,8 @@ def _stage_two_receiver(m_hops: int = 10) -> tuple[GcasReceiver, np.ndarray, np.
     search = two_stage(rx)
     stop = search._cs_ring.next_index - 20
     cand_b = np.arange(stop - 300, stop, 10)
-    pair = search._cd_ring.rows(cand_b)
-    pair[:, 1] = np.where(pair[:, 1] < 0, pair[:, 0], pair[:, 1])
+    d_hat = search._cd_ring.rows(cand_b)
+    pair = np.stack([d_hat, np.clip(d_hat + 29, 0, rx.grid.size - 1)], axis=1)  # and a ghost's
     centres = cand_b[:, None] * search._B + search._c_shift[pair]
     return rx, centres, pair
 

@@ -88,6 +88,11 @@ class FrontEnd:
         # the comb uses the integer lag N_d, so its peak may sit up to (M − 1)|N_d − L_d|/2
         # <= (M − 1)/4 samples from the peak of the exactly lagged codeword sums.
         self.search_half = min(int(math.ceil((m - 1) / 4.0)) + 2, max(1, self.half_width - 1))
+        # One Doppler resolution cell of a hop, c/(2 f_c T_h) (m/s), in hypotheses: the main
+        # lobe's half-width of one echo across the grid.
+        cell_mps = c / (2.0 * center * self.hop_s)
+        step = self.grid.speed_step_mps
+        self.lobe_hypotheses = max(1, int(math.ceil(cell_mps / step))) if step > 0 else 1
 
     @property
     def n_tones(self) -> int:

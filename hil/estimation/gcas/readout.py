@@ -9,7 +9,7 @@ band, :mod:`hil.estimation.reverb_band`) is the leak of an echo inside the band,
 detection. The default refinement (:mod:`hil.estimation.refine`) measures ``t_rx`` and
 ``α`` by local maximum likelihood and refuses a detection that is not one echo of the
 schedule (a still echo read at the tone spacing's speed, an echo beyond the span:
-:data:`COHERENCE_FRACTION`); without it the coherent sum refines ``t_rx`` and ``α̂``. The
+:data:`ECHO_TEST`); without it the coherent sum refines ``t_rx`` and ``α̂``. The
 first-arrival readout (:mod:`hil.estimation.first_arrival`) replaces ``t_rx`` by the direct
 path's. Hop-index consistency is a soft flag.
 """
@@ -29,7 +29,7 @@ from hil.estimation.doppler_grid import alpha_to_speed, speed_to_alpha
 from hil.estimation.first_arrival import FirstArrivalReadout
 from hil.estimation.gcas.front_end import FrontEnd
 from hil.estimation.gcas.threshold import Peak
-from hil.estimation.refine import CoherentRefiner
+from hil.estimation.refine import CoherentRefiner, EchoTest
 
 #: A refined detection is an echo of the schedule when its hops' coherence is at least
 #: COHERENCE_FRACTION of what one echo of its SNR would have, or their coherence within each
@@ -45,9 +45,17 @@ from hil.estimation.refine import CoherentRefiner
 #: 5 m/s², 0.85+ at 7 m/s² (all kept), 0.62-0.81 at 10 m/s² (refused: the constant-speed fit
 #: over M hops no longer holds); still-echo ghosts and aliases p90 0.55-0.69.
 COHERENCE_FRACTION = 0.8
-TONE_COHERENCE_FRACTION = 0.96
+TONE_COHERENCE_FRACTION = 9.0
 RUN_COHERENCE_FRACTION = 0.85
-ECHO_FRACTIONS = (COHERENCE_FRACTION, TONE_COHERENCE_FRACTION, RUN_COHERENCE_FRACTION)
+#: MIN_ECHO_SNR_DB: the E/N0 over the M hops a fit must collect once the other echoes measured
+#: lately are taken out (:mod:`hil.estimation.refine`): the leak of a stronger echo into
+#: its ghost's or sidelobe's cells then collects what noise does, 6.7-10.6 dB (att, two
+#: echoes 10 dB apart at 0 dB and -10 dB per-sample SNR, 410 such fits); one echo at
+#: -20 dB per-sample SNR collects about 16 dB over M = 10 hops.
+MIN_ECHO_SNR_DB = 12.0
+ECHO_TEST = EchoTest(
+    COHERENCE_FRACTION, TONE_COHERENCE_FRACTION, RUN_COHERENCE_FRACTION, MIN_ECHO_SNR_DB
+)
 
 #: ``unit_values(n_star, d0, tone)``: the M terms' unit correlators of the peak at sample
 #: ``n_star``, hypothesis ``d0``, tone index per term (shape ``(M,)``), weighted, complex.
@@ -178,7 +186,7 @@ class Readout:
         if self._refiner is not None:
             refined = self._refiner.refine(t_rx, alpha, hop_index)
             if refined is not None:
-                if not refined.is_echo(*ECHO_FRACTIONS):
+                if not refined.is_echo(ECHO_TEST):
                     self.incoherent_count += 1
                     return None
                 t_rx, alpha, bound = refined.t_s, refined.alpha, refined.bound

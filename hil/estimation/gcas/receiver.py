@@ -20,7 +20,7 @@ from hil.estimation.gcas.options import (
     check_option_names,
     resolve_cfar_lambda,
 )
-from hil.estimation.gcas.readout import ECHO_FRACTIONS, DetectionInfo, Readout
+from hil.estimation.gcas.readout import ECHO_TEST, DetectionInfo, Readout
 from hil.estimation.gcas.search import SearchStrategy
 from hil.estimation.gcas.search_full import FullSearch
 from hil.estimation.gcas.search_two_stage import TwoStageSearch
@@ -168,7 +168,7 @@ class GcasReceiver:
         self._refiner = (
             CoherentRefiner(
                 schedule, self.fs_hz, self.m_hops, self.sound_speed_mps,
-                REFINE_SPEED_SPAN_MPS, self.max_speed_mps, ECHO_FRACTIONS,
+                REFINE_SPEED_SPAN_MPS, self.max_speed_mps, ECHO_TEST,
             )
             if refine and range_readout == "peak"
             else None

@@ -17,6 +17,7 @@ interpolation. The hot loops of both stages are compiled (:mod:`hil.estimation.k
 
 from __future__ import annotations
 
+from collections import deque
 from typing import Any
 
 import numpy as np
@@ -30,7 +31,7 @@ from hil.estimation.gcas.threshold import (
     NOISE_STRIDE,
     Cfar,
     Peak,
-    local_maxima,
+    local_peak_cells,
     median_spread,
     peaks_of,
     threshold_peaks,
@@ -41,15 +42,45 @@ from hil.estimation.kernels import (
     fine_keep,
     fine_pick,
     fine_recentre,
-    first_possible_peak,
+    first_possible_cells,
+    peak_cells,
     peak_indices,
 )
 from hil.estimation.row_buffer import RowBuffer
 
+#: Peaks remembered to drop a repeat of one (:meth:`TwoStageSearch._distinct`): more than
+#: the echoes one hop can hold.
+RECENT_PEAKS = 32
+#: Lobes of other echoes across the hypotheses that stage 1 measures beside the strongest's
+#: shortlist, per block (:class:`~hil.estimation.coarse_search.CoarseSearch`).
+COARSE_PEAKS = 8
+#: Margin over a sidelobe's envelope of the coarse statistic (:func:`doppler_leak`): the
+#: ripple of two echoes' beat and of noise.
+LEAK_MARGIN = 2.0
 #: Times the two-stage search moves its fine window onto an edge peak, at most.
 RECENTRE_STEPS = 4
 #: A hypothesis and its two neighbours on the Doppler grid (offsets, shape (1, 3)).
 _NEIGHBOURS = np.arange(-1, 2, dtype=np.int64)[None, :]
+
+
+def doppler_leak(fe: FrontEnd) -> NDArray[np.float64]:
+    """How much of one echo's coarse statistic reaches a hypothesis ``Δd`` steps from the one
+    it peaks at, at most, times :data:`LEAK_MARGIN` (shape ``(D,)``, by ``Δd``): a cell below
+    that beside a stronger one is its Doppler sidelobe, not another echo.
+
+    A tone received ``x`` Doppler cells (``c/(2 f_c T_h)``) off a correlator's gives
+    ``sinc²(x)`` of its power, at most ``1/(π x)²`` beyond the main lobe; a window across two
+    hops holds two parts, each within that envelope, while the echo's own statistic there is
+    at least half its peak: ``4/(π x)²``. ``x`` counts from half a step inside (the echo lies
+    between hypotheses); within the main lobe (``x < 1``) nothing is called a sidelobe (the
+    search's ±lobe maximum decides there).
+    """
+    step = fe.grid.speed_step_mps
+    cell = fe.sound_speed_mps / (2.0 * fe.center_hz * fe.hop_s)
+    dd = np.arange(fe.grid.size, dtype=np.float64)
+    x = np.maximum(dd - 0.5, 0.0) * step / cell
+    leak = np.where(x >= 1.0, LEAK_MARGIN / (np.pi * np.maximum(x, 1.0)) ** 2, 0.0)
+    return np.ascontiguousarray(leak)
 
 
 class TwoStageSearch:
@@ -68,8 +99,10 @@ class TwoStageSearch:
         self._q = np.maximum(1, np.round(fe.grid.exact_lengths / b)).astype(np.int64)  # (D,)
         self._c_shift = self._coarse_shift()
         self._hc = max(1, fe.half_width // b)
-        self._max_shift = int(np.max(self._c_shift))
+        self._min_shift = int(np.min(self._c_shift))
         self.fine_half = fe.search_half + 6
+        #: Peaks of one echo met from two candidates lie within this many samples.
+        self.search_half_window = fe.search_half
         reach = int(np.max(self._c_shift)) + self.fine_half  # samples past the block start
         self._c_lookahead = self._hc + max(0, -(-reach // b))
         self.coarse = CoarseSearch(
@@ -83,11 +116,16 @@ class TwoStageSearch:
             hyp_weights=fe.grid.weights,
             noise_every=max(1, NOISE_STRIDE // b),
             noise_scale=fe.grid.lengths / (self._q * b),
+            peak_lobe=fe.lobe_hypotheses,
+            peak_count=COARSE_PEAKS,
         )
         c_keep = (fe.cfar_window + 2 * fe.n_max + 4) // b + 4
         self._cs_ring = RowBuffer(c_keep, (), np.float64)
-        self._cd_ring = RowBuffer(c_keep, (2,), np.int64)  # d̂ and the runner-up
+        self._cd_ring = RowBuffer(c_keep, (), np.int64)  # d̂ (the time–codeword map)
         self._cn_ring = RowBuffer(c_keep, (), np.float64)
+        self._ca_ring = RowBuffer(c_keep, (fe.grid.size,), np.float64)  # h_d Acc_d per block
+        self._hd = fe.lobe_hypotheses
+        self._leak = doppler_leak(fe)
         y_keep = (
             int(fe.lags.max()) + fe.n_max + 2 * self.fine_half + (self._c_lookahead + 2) * b
             + abs(int(np.min(self._c_shift))) + RECENTRE_STEPS * self.fine_half + 8
@@ -118,23 +156,27 @@ class TwoStageSearch:
     def reset(self, b0: int) -> None:
         self.coarse.reset(b0)
         c0 = self.coarse.next_block
-        for ring in (self._cs_ring, self._cd_ring, self._cn_ring):
+        for ring in (self._cs_ring, self._cd_ring, self._cn_ring, self._ca_ring):
             ring.reset(c0)
         self.exact.reset(b0)
         self._origin = b0
         self._c_origin = c0
         self._c_valid_from = -(-(b0 + self._fe.settle) // self._B) + 1
         self._det_next = c0
+        #: The latest peaks given out (:meth:`_distinct`).
+        self._recent: deque[Peak] = deque(maxlen=RECENT_PEAKS)
 
     # ------------------------------------------------------------------ streaming
     def process(self, y: NDArray[np.complex128]) -> list[Peak]:
         """Stage 1 on the new baseband samples ``y``; stage 2 at the decided candidates."""
         self.exact.append(y)
-        stat, d_hat, noise, c0 = self.coarse.process(y)
-        if stat.shape[0]:
-            self._cs_ring.append(stat, c0)
-            self._cd_ring.append(d_hat, c0)
-            self._cn_ring.append(noise, c0)
+        blocks = self.coarse.process(y)
+        if blocks.stat.shape[0]:
+            c0 = blocks.first_block
+            self._cs_ring.append(blocks.stat, c0)
+            self._cd_ring.append(blocks.d_hat, c0)
+            self._cn_ring.append(blocks.noise, c0)
+            self._ca_ring.append(blocks.acc, c0)
         return self.flush()
 
     def flush(self) -> list[Peak]:
@@ -148,60 +190,84 @@ class TwoStageSearch:
     def _decision_input(self) -> int:
         """The next decision index from the coarse blocks completed so far.
 
-        A candidate is a coarse peak (greater than the ``hc`` blocks before it, not smaller
-        than the ``hc`` after), so the earliest block that can still become one is the first
-        undecided block greater than its ``hc`` predecessors and not exceeded by a block
-        already known after it (or the next block to come). It is decided once the ``hc``
-        blocks after it are complete and its fine window (which ends ``c_shift`` of its
-        hypotheses, at most ``max(c_shift)``, plus ``2·fine_half`` samples past its start)
+        A candidate is a coarse peak cell (greater than the cells in the ``hc`` blocks before
+        it and the hypotheses within one Doppler cell, not smaller than those after), so the
+        earliest block that can still hold one is the first undecided block with a cell
+        greater than its predecessors and not exceeded by a cell already known after it (or
+        the next block to come). It is decided once the ``hc`` blocks after it are complete
+        and its fine window (which ends ``c_shift`` of its hypotheses, at least the smallest
+        of the cells that can still peak there, plus ``2·fine_half`` samples past its start)
         has arrived; baseband sample ``k`` exists once input sample ``k·R`` has.
         """
         next_block = self.coarse.next_block
         h = self._hc
         lo = self._det_next
         first = max(lo - h, self._c_origin)
+        shift = self._min_shift
         if next_block > lo:
-            s = np.array(self._cs_ring.span(first, next_block), dtype=np.float64)
+            s = np.array(self._ca_ring.span(first, next_block), dtype=np.float64)
             s[: max(0, self._c_valid_from - first)] = -np.inf
-            cand = first_possible_peak(s, h, lo - first, next_block - first) + first
+            cand, cells = first_possible_cells(
+                s, h, self._hd, lo - first, next_block - first, self._leak
+            )
+            cand += first
+            if cand < next_block:  # its hypotheses are known: the earliest of their windows
+                shift = int(self._c_shift[cells].min())
         else:
             cand = max(lo, next_block)
-        b = self._B
-        # The fine window's shift depends on the block's hypotheses (known once it is seen).
-        seen = cand < next_block
-        shift = int(self._c_shift[self._hypotheses(np.array([cand]))].max()) if seen else None
-        late = cand * b + (self._max_shift if shift is None else shift) + 2 * self.fine_half
-        need_bb = max((cand + h + 1) * b - 1, late)
+        late = cand * self._B + shift + 2 * self.fine_half
+        need_bb = max((cand + h + 1) * self._B - 1, late)
         return need_bb * self._fe.baseband.decimation + 1
 
     def _decide_blocks(self, stop: int) -> list[Peak]:
-        """Stage 2 for the coarse candidates in blocks ``< stop``."""
+        """Stage 2 for the coarse candidate cells in blocks ``< stop``."""
         lo = self._det_next
         if stop <= lo:
             return []
-        cand_b = local_maxima(self._cs_ring, lo, stop, self._hc, self._c_origin, self._c_valid_from)
-        # A candidate waits until its fine window has arrived (its shift depends on d̂).
-        shift = self._c_shift[self._hypotheses(cand_b)].max(axis=1)  # of d̂ and runner-up
-        late = cand_b * self._B + shift + 2 * self.fine_half
+        cand_b, cand_d = local_peak_cells(
+            self._ca_ring,
+            lo,
+            stop,
+            self._hc,
+            self._hd,
+            self._c_origin,
+            self._c_valid_from,
+            self._leak,
+        )
+        # A candidate waits until its fine window has arrived (its shift depends on d).
+        late = cand_b * self._B + self._c_shift[cand_d] + 2 * self.fine_half
         wait = np.flatnonzero(late >= self.exact.next_index)
         if wait.size:
             stop = int(cand_b[wait[0]])
-            cand_b = cand_b[: wait[0]]
+            keep = cand_b < stop
+            cand_b, cand_d = cand_b[keep], cand_d[keep]
         self._det_next = stop
         if cand_b.size == 0:
             return []
-        return self._fine_stage(cand_b)
+        return self._distinct(self._fine_stage(cand_b, cand_d))
 
-    def _hypotheses(self, cand_b: NDArray[np.int64]) -> NDArray[np.int64]:
-        """d̂ and the runner-up of coarse blocks ``cand_b`` (shape ``(C, 2)``; d̂ twice where
-        no runner-up was found)."""
-        pair: NDArray[np.int64] = self._cd_ring.rows(cand_b)
-        pair[:, 1] = np.where(pair[:, 1] < 0, pair[:, 0], pair[:, 1])
-        return pair
+    def _distinct(self, peaks: list[Peak]) -> list[Peak]:
+        """``peaks`` without those that repeat an earlier one: two candidate cells of one echo
+        (a block's best with its runner-up, neighbours across the lobe) whose stage 2 met on
+        the same codeword within the fine window and one Doppler cell. Decided in candidate
+        order, so any chunking keeps the same peaks."""
+        out: list[Peak] = []
+        w, hd = self.search_half_window, self._hd
+        for p in peaks:
+            if any(
+                q.codeword == p.codeword and abs(q.n_star - p.n_star) <= w
+                and abs(q.d0 - p.d0) <= hd
+                for q in self._recent
+            ):  # fmt: skip
+                continue
+            out.append(p)
+            self._recent.append(p)
+        return out
 
     # ------------------------------------------------------------------ stage 2
-    def _fine_stage(self, cand_b: NDArray[np.int64]) -> list[Peak]:
-        """Stage 2: exact codeword sums around the coarse candidate blocks ``cand_b``.
+    def _fine_stage(self, cand_b: NDArray[np.int64], cand_d: NDArray[np.int64]) -> list[Peak]:
+        """Stage 2: exact codeword sums around the coarse candidate cells: blocks ``cand_b``,
+        hypotheses ``cand_d`` (shape ``(C,)`` each).
 
         The sums come from :func:`~hil.estimation.kernels.codeword_sums`, everything between
         them from small compiled kernels (:func:`~hil.estimation.kernels.fine_pick`,
@@ -213,7 +279,7 @@ class TwoStageSearch:
         the same estimates, bit for bit.
         """
         w = self.fine_half
-        pair = np.ascontiguousarray(self._hypotheses(cand_b), dtype=np.int64)
+        pair = np.ascontiguousarray(cand_d[:, None], dtype=np.int64)
         centres = np.empty(pair.shape, dtype=np.int64)
         np.add(cand_b[:, None] * self._B, self._c_shift[pair], out=centres)
         a2 = self.exact.sums(centres, pair, w, prune=True)
@@ -226,7 +292,7 @@ class TwoStageSearch:
             sums = self.exact.sums(centre[edges], d0[edges, None], w)
             edges = fine_recentre(a, sums, edges, s_win, i_pk, centre, w, it + 1 < RECENTRE_STEPS)
         n_pk = centre - w + i_pk
-        stat = self._cs_ring.rows(cand_b) if self._cfar.mode == "statistic" else None
+        stat = self._cell_statistic(cand_b, cand_d)
         peak = s_win[np.arange(cand_b.shape[0]), i_pk]
         mean, thr, hit = self._cfar.test(n_pk, peak, stat, self)
         if hit.size == 0:
@@ -241,23 +307,15 @@ class TwoStageSearch:
         dd = fine_doppler(side, a, kept, i_pk, word, d0, sides)
         return peaks_of(n_pk[kept], peak, word, ratio, dn, d0[kept], dd, mean[kept], thr[kept])
 
-    def _fine_stage_reference(self, cand_b: NDArray[np.int64]) -> list[Peak]:
+    def _fine_stage_reference(
+        self, cand_b: NDArray[np.int64], cand_d: NDArray[np.int64]
+    ) -> list[Peak]:
         """:meth:`_fine_stage` as NumPy expressions (the reference the compiled path is
         tested against)."""
-        pair = self._hypotheses(cand_b)  # (C, 2): d̂ and the runner-up
-        centres = cand_b[:, None] * self._B + self._c_shift[pair]
         w = self.fine_half
-        # The hypothesis is the better of the two by the exact sums: the group statistic
-        # cannot tell a hypothesis from its ghost (every tone seen as its neighbour at another
-        # speed), the codeword sums can.
-        a2 = self.exact.sums(centres, pair, w, prune=True)  # (C, 2, 2w + 1, J)
-        # Weighted as stage 1 ranks them (the reverberation band's weights); a hypothesis
-        # pruned whole (−inf) cannot win, even at weight 0.
-        best = a2.max(axis=(2, 3))
-        score = np.where(np.isfinite(best), best * self._hyp_w[pair], -np.inf)
-        pick = np.argmax(score, axis=1)
-        r = np.arange(cand_b.shape[0])
-        d0, centre, a = pair[r, pick], centres[r, pick], a2[r, pick]  # a: (C, 2w + 1, J)
+        d0 = cand_d.copy()
+        centre = cand_b * self._B + self._c_shift[d0]
+        a = self.exact.sums(centre, d0[:, None], w, prune=True)[:, 0]  # (C, 2w + 1, J)
         # A peak on the window's edge lies outside it (early in the stream the coarse comb
         # is not yet full): move the window onto that edge, a few times at most (later only
         # once: the look-ahead covers one window more; earlier is in the history).
@@ -273,7 +331,7 @@ class TwoStageSearch:
         def sides(hit: NDArray[np.int64], n_pk: NDArray[np.int64]) -> NDArray[np.float64]:
             return self.exact.sums(n_pk, dset[hit][:, [0, 2]], 0)[:, :, 0]
 
-        tested = self._cs_ring.rows(cand_b) if self._cfar.mode == "statistic" else None
+        tested = self._cell_statistic(cand_b, cand_d)
 
         def test(
             n_pk: NDArray[np.int64], peak: NDArray[np.float64]
@@ -281,6 +339,16 @@ class TwoStageSearch:
             return self._cfar.test(n_pk, peak, tested, self)
 
         return threshold_peaks(centre, w, dset, a, sides, test, self._runner_up_ratio)
+
+    def _cell_statistic(
+        self, cand_b: NDArray[np.int64], cand_d: NDArray[np.int64]
+    ) -> NDArray[np.float64] | None:
+        """The coarse statistic of each candidate cell (its own hypothesis, not its block's
+        best: another echo may hold that) for the ``"statistic"`` CFAR; None in bank mode."""
+        if self._cfar.mode != "statistic":
+            return None
+        stat: NDArray[np.float64] = self._ca_ring.rows(cand_b)[np.arange(cand_b.size), cand_d]
+        return stat
 
     # ------------------------------------------------------------------ CFAR history
     def noise_floor(self, n_pk: NDArray[np.int64]) -> NDArray[np.float64]:
@@ -312,7 +380,7 @@ class TwoStageSearch:
         idx = np.arange(stop - count, stop, dtype=np.int64)
         if self._cd_ring.next_index > self._c_origin:
             blk = np.clip(idx // self._B, self._c_origin, self._cd_ring.next_index - 1)
-            d_map: NDArray[np.int64] = self._cd_ring.rows(blk)[:, 0]
+            d_map: NDArray[np.int64] = self._cd_ring.rows(blk)
         else:
             d_map = np.zeros(idx.shape[0], dtype=np.int64)
         return idx, d_map
@@ -325,6 +393,8 @@ class TwoStageSearch:
         """Every stage-2 kernel on one made-up candidate, and the exact windows that the
         coherent readout and the time–codeword map read (also when noncoherent)."""
         peak_indices(np.zeros(3), 1, 0, 3)
+        peak_cells(np.zeros((3, 2)), 1, 1, 0, 3, np.zeros(2))
+        first_possible_cells(np.zeros((3, 2)), 1, 1, 0, 3, np.zeros(2))
         one = np.zeros((1, 1), dtype=np.int64)
         w = self.fine_half
         self.exact.sums(one[:, 0], one, w, prune=True)
