@@ -429,7 +429,9 @@ class RunRecording:
         """The stage status reports, in the order recorded."""
         t = self._table("telemetry")
         cols = (t["host_time_s"], t["sample_index"], t["position_m"], t["velocity_mps"], t["state"])
+        # Recordings made before the reply time was a column: every report counts as prompt.
+        reply = t.get("reply_s", np.zeros(t["host_time_s"].shape[0]))
         return [
-            StageTelemetry(float(h), int(i), float(p), float(v), str(s))
-            for h, i, p, v, s in zip(*cols, strict=True)
+            StageTelemetry(float(h), int(i), float(p), float(v), str(s), float(r))
+            for h, i, p, v, s, r in zip(*cols, reply, strict=True)
         ]

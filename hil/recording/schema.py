@@ -103,6 +103,9 @@ TABLES: dict[str, tuple[tuple[str, Any], ...]] = {
                 hint="record the controller's state word; longer text goes in an event",
             ),
         ),
+        # How long the report took to come back after its query (s): a tank run leaves the
+        # late ones out of its truth. Absent from recordings made before it (read as 0).
+        ("reply_s", np.float64),
     ),
     "events": (
         ("kind", FixedText(EVENT_KIND_BYTES, truncate=False, hint="use one of EVENT_KINDS")),

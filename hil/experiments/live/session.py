@@ -196,7 +196,9 @@ class LiveSession:
             tel.state.append(st.state.name)
             tel.reply_s.append(st.reply_s)
             self.recorder.telemetry(
-                StageTelemetry(st.host_time, idx, st.position, st.velocity, st.state.name)
+                StageTelemetry(
+                    st.host_time, idx, st.position, st.velocity, st.state.name, st.reply_s
+                )
             )
             self.tow.on_report(st, self.now(), capturing=self.recorder.open_)
         except (OSError, TransportError, StageTimeoutError) as exc:
