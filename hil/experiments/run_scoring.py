@@ -144,10 +144,10 @@ def expected_boundaries(outcome: RunOutcome) -> np.ndarray:
     (:func:`in_scored_segment`). From the truth and the schedule alone, not from the
     estimates: a boundary no estimate claims is still expected.
 
-    Boundary ``k`` (the end of hop ``k``) is transmitted at ``T`` and bounces at
-    ``T + R/c``, ``R`` the truth's range then (two fixed-point steps from ``R`` at ``T``:
-    the range changes by well under a millimetre in between at tow speeds); its echo is
-    received at ``T + 2R/c``, which must fall before the end of the captured input.
+    Boundary ``k`` (the end of hop ``k``, where the tone changes) is transmitted at ``T``
+    and bounces at ``T + R/c``, ``R`` the truth's range then (three fixed-point steps from
+    ``R`` at ``T``, each shrinking the error by ``|dR/dt|/c``, 1e-3 at 1.5 m/s); its echo
+    is received at ``T + 2R/c``, which must fall before the end of the captured input.
     """
     sch = outcome.experiment.schedule
     c = outcome.experiment.sound_speed_mps
@@ -167,12 +167,17 @@ def expected_boundaries(outcome: RunOutcome) -> np.ndarray:
     keep = switch & (t_tx <= t_end)
     t_tx, k = t_tx[keep], table.index[:-1][keep]
     r = truth_at(outcome, t_tx)["range_m"]
-    for _ in range(2):
-        r = truth_at(outcome, t_tx + np.nan_to_num(r) / c)["range_m"]
-    t_b = t_tx + np.nan_to_num(r) / c
-    truth = truth_at(outcome, t_b)
-    ok = in_scored_segment(outcome, truth) & (t_tx + 2.0 * np.nan_to_num(r) / c <= t_end)
-    return np.asarray(k[ok & np.isfinite(r)], dtype=np.int64)
+    if not np.isfinite(r).any():
+        return np.zeros(0, dtype=np.int64)
+    # Where the truth is unknown at the transmit instant (a telemetry gap ending before the
+    # bounce), start from the typical range: each step shrinks the error by |dR/dt|/c.
+    r = np.where(np.isfinite(r), r, float(np.nanmedian(r)))
+    for _ in range(3):
+        step = truth_at(outcome, t_tx + r / c)["range_m"]
+        r = np.where(np.isfinite(step), step, r)
+    truth = truth_at(outcome, t_tx + r / c)
+    ok = in_scored_segment(outcome, truth) & (t_tx + 2.0 * r / c <= t_end)
+    return np.asarray(k[ok], dtype=np.int64)
 
 
 @dataclass(frozen=True)
