@@ -145,6 +145,53 @@ def test_hil_report_of_the_recording_reproduces_the_live_summary(first_run: RunO
     assert len(first_run.telemetry.reply_s) > 10
 
 
+def test_a_late_stage_report_is_left_out_of_the_rebuilt_truth_as_live(
+    first_run: RunOutcome, tmp_path: Path
+) -> None:
+    # One report mid-pass came back 0.3 s after its query (a stalled stage) and so holds the
+    # carriage 0.45 m farther on than its date says: live leaves it out of the truth, and so
+    # does the summary rebuilt from the recording, which keeps the report and its reply time.
+    import shutil
+
+    import h5py
+
+    from hil.experiments.run_from_recording import outcome_from_recording
+    from hil.experiments.run_scoring import summarize
+
+    path = tmp_path / "run.h5"
+    shutil.copy(first_run.folder / "run.h5", path)
+    live = dataclasses.replace(
+        first_run,
+        folder=tmp_path,
+        telemetry=dataclasses.replace(
+            first_run.telemetry,
+            position_m=list(first_run.telemetry.position_m),
+            reply_s=list(first_run.telemetry.reply_s),
+        ),
+    )
+    tel = live.telemetry
+    k = int(np.argmax(np.abs(np.asarray(tel.velocity_mps)) > 1.4)) + 3  # at tow speed
+    tel.position_m[k] -= 1.5 * 0.3
+    tel.reply_s[k] = 0.3
+    with h5py.File(path, "r+") as f:
+        f["telemetry/position_m"][k] = tel.position_m[k]
+        f["telemetry/reply_s"][k] = 0.3
+    rebuilt = summarize(outcome_from_recording(path, tmp_path, codeword_map=False))
+    expected = summarize(live)
+    same = sorted(set(expected) - NOT_RECORDED)
+    assert {k: rebuilt[k] for k in same} == {k: expected[k] for k in same}
+    # Left out, the report changes nothing: the truth is the unmodified run's (interpolated
+    # over its neighbours instead, the same line at the tow speed to the last bits).
+    original = summarize(first_run)
+    for key in ("range_rmse_m", "range_bias_m", "speed_rmse_mps", "range_rmse_all_m"):
+        assert rebuilt[key] == pytest.approx(original[key], abs=1e-12), key
+    # Used as if prompt, it would pull the truth 0.45 m off around it.
+    with h5py.File(path, "r+") as f:
+        f["telemetry/reply_s"][k] = 0.0
+    kept = summarize(outcome_from_recording(path, tmp_path, codeword_map=False))
+    assert kept["wrong_estimates"] > 10 and kept["range_rmse_all_m"] > 0.05
+
+
 def test_the_same_seed_gives_the_same_run_bit_for_bit_under_load(
     first_run: RunOutcome, tmp_path: Path
 ) -> None:
