@@ -1,5 +1,7 @@
 """Scoring a tank run against the stage telemetry: the truth at every estimate, which
-estimates are scored, the run summary (``summary.json``) and ``estimates.csv``."""
+estimates are scored, the detection gate (0.5 m, or one range resolution cell when smaller),
+the hop boundaries the truth expects, the run summary (``summary.json``) and
+``estimates.csv``."""
 
 from __future__ import annotations
 

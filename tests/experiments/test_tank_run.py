@@ -299,6 +299,13 @@ def test_the_run_keeps_every_sync_pair_beyond_the_fits_window() -> None:
     assert len(run_pairs) == 1000
 
 
+#: Summary keys a recording cannot give back (docs/tank-run.md, "After a crash").
+NOT_RECORDED = frozenset(
+    {"folder", "wall_s", "real_time_factor", "capture_backlog_max_s", "adc_clipped_samples",
+     "planned_adc_peak_fs", "telemetry_truth_error_max_m", "range_rmse_vs_exact_m"}
+)  # fmt: skip
+
+
 @pytest.mark.slow
 def test_simulated_run_end_to_end_and_replay_equals_live(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
@@ -357,13 +364,6 @@ def test_simulated_run_end_to_end_and_replay_equals_live(
     assert sorted(Path(f).name for f in rebuilt["figures"]) == sorted(
         Path(f).name for f in summary["figures"]
     )
-
-
-#: Summary keys a recording cannot give back (docs/tank-run.md, "After a crash").
-NOT_RECORDED = frozenset(
-    {"folder", "wall_s", "real_time_factor", "capture_backlog_max_s", "adc_clipped_samples",
-     "planned_adc_peak_fs", "telemetry_truth_error_max_m", "range_rmse_vs_exact_m"}
-)  # fmt: skip
 
 
 def _default_sigint() -> None:
