@@ -390,6 +390,7 @@ class RunRecording:
         n = t["t_s"].shape[0]
         nan = np.full(n, np.nan)  # recordings made before the bounds were columns
         crlb_r, crlb_v = t.get("crlb_range_m", nan), t.get("crlb_speed_mps", nan)
+        track = t.get("track_id", np.full(n, -1, dtype=np.int64))  # made before tracks were kept
         out = [
             Estimate(
                 t_s=float(t["t_s"][i]),
@@ -404,6 +405,7 @@ class RunRecording:
                 receiver=str(t["receiver"][i]),
                 crlb_range_m=float(crlb_r[i]),
                 crlb_speed_mps=float(crlb_v[i]),
+                track_id=int(track[i]),
             )
             for i in range(n)
         ]

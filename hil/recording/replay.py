@@ -17,6 +17,13 @@ from hil.acquisition.feed import ReceiverFeed
 from hil.errors import ConfigError
 from hil.estimation.base import Estimate, Receiver
 from hil.estimation.registry import RECEIVERS, make_receiver
+from hil.estimation.tracking import (
+    TrackedReceiver,
+    Tracker,
+    TrackerSettings,
+    mean_hop_s,
+    split_track_options,
+)
 from hil.recording.reader import RunRecording
 from hil.recording.records import COMMON_SETTINGS, ReceiverSetup
 from hil.signals.schedule import HopSchedule
@@ -72,13 +79,19 @@ def build_receiver(
     """The receiver ``setup`` describes, the one way every caller builds one (live, replay,
     benchmarks): ``setup.settings`` must hold the registry's common options and may hold the
     receiver's own; ``hooks`` are options that are not settings and are not recorded (a
-    callback such as GCAS's ``on_map``)."""
-    s = dict(setup.settings)
+    callback such as GCAS's ``on_map``).
+
+    The receiver's estimates leave through a :class:`~hil.estimation.tracking.Tracker` (each
+    carries its ``track_id``); settings named ``track_*`` set the tracker
+    (:meth:`~hil.estimation.tracking.TrackerSettings.from_options`), the others the receiver."""
+    s, track_options = split_track_options(setup.settings)
     missing = [k for k in _COMMON if k not in s]
     if missing:
         raise ConfigError("receiver.settings", sorted(s), f"settings including {missing}")
+    tracker = Tracker(mean_hop_s(schedule), TrackerSettings.from_options(track_options))
     common = {k: s.pop(k) for k in _COMMON}
-    return make_receiver(setup.name, schedule, fs_hz, **common, **s, **hooks)
+    receiver = make_receiver(setup.name, schedule, fs_hz, **common, **s, **hooks)
+    return TrackedReceiver(receiver, tracker)
 
 
 def replay(
