@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from hil.acquisition.annotations import ADC_CLIPPING_TEXT
+from hil.estimation.track_summary import track_figures
 from hil.experiments.run_calibrations import true_stage_motion
 from hil.experiments.tank_run import STAGE_POLL_S, TELEMETRY_MAX_REPLY_S, RunOutcome
 
@@ -167,6 +168,8 @@ def summarize(outcome: RunOutcome) -> dict[str, Any]:
     (``wrong_gate_m`` off in range; ``wrong_fraction`` of ``estimates_with_truth``), and
     ``false_alarms``, the wrong ones inside the scored window. RMSEs and biases are over the
     scored estimates that are not wrong (``*_all_*``: over every known one that is not).
+    ``tracks``: every confirmed track's count, span and RMSEs against the truth
+    (:func:`hil.estimation.track_summary.track_figures`).
     """
     exp = outcome.experiment
     est = outcome.estimates
@@ -228,6 +231,8 @@ def summarize(outcome: RunOutcome) -> dict[str, Any]:
         )
         e_exact = r - outcome.exact_truth["range_m"]
         summary["range_rmse_vs_exact_m"] = _rmse(e_exact[good_est]) if good_est.any() else None
+    # Per track (hil.estimation.track_summary): its span and its errors against the truth.
+    summary["tracks"] = track_figures(est, truth["range_m"], truth["speed_mps"])
     return summary
 
 

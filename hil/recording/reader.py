@@ -384,6 +384,13 @@ class RunRecording:
             for k, i, n, x in zip(t["kind"], t["sample_index"], t["length"], t["text"], strict=True)
         ]
 
+    @property
+    def has_track_ids(self) -> bool:
+        """Whether the estimates table holds ``track_id`` (recordings made before tracks were
+        kept do not; their estimates read ``track_id = -1``)."""
+        group = self._file["estimates"]
+        return "track_id" in [str(c) for c in group.attrs["columns"]]
+
     def estimates(self, receiver: str | None = None) -> list[Estimate]:
         """The recorded estimates (of one receiver by name, or all) in the order recorded."""
         t = self._table("estimates")

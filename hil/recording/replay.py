@@ -10,6 +10,7 @@ board sample indices.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -138,14 +139,19 @@ Agreement = Literal["equal", "prefix", "differ"]
 
 
 def compare_estimates(
-    live: Sequence[Estimate], replayed: Sequence[Estimate]
+    live: Sequence[Estimate], replayed: Sequence[Estimate], *, track_ids: bool = True
 ) -> tuple[Agreement, str]:
     """How replayed estimates agree with the recorded live ones, and that in words.
 
     ``"equal"``: the same list. ``"prefix"``: fewer recorded than replayed (or the other way
     round) but equal as far as both go; a recording whose writer was killed holds the live
     estimates up to its last flush only. ``"differ"``: some pair differs (the first named).
+    ``track_ids=False`` compares without the track ids (a recording made before they were
+    kept, :attr:`~hil.recording.RunRecording.has_track_ids`).
     """
+    if not track_ids:
+        replayed = [replace(e, track_id=live[i].track_id) if i < len(live) else e
+                    for i, e in enumerate(replayed)]  # fmt: skip
     for i, (a, b) in enumerate(zip(live, replayed, strict=False)):
         if a != b:  # NaN-aware: Estimate.__eq__
             return "differ", f"estimate {i} differs: recorded {a}, replayed {b}"
