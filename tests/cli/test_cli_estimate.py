@@ -17,6 +17,7 @@ from sim_devices.acoustics.delay import TwoWayPath
 from sim_devices.acoustics.echo import AnalyticEcho
 from sim_devices.acoustics.trajectory import ConstantVelocity, Fixed
 
+ROOT = Path(__file__).resolve().parents[2]
 FS = 100_000.0
 R0, V = 40.0, 9.0  # m, m/s closing
 
@@ -184,3 +185,15 @@ def test_bad_input_exits_2(
     err = capsys.readouterr().err
     assert message in err, err
     assert "Traceback" not in err
+
+
+def test_the_tracks_doc_listing_runs_as_written(
+    recording: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    text = (ROOT / "docs" / "tracks.md").read_text(encoding="utf-8")
+    block = text.split("```\n$ ", 1)[1].split("```", 1)[0].splitlines()
+    command, expected = block[0].split(), block[1:]
+    assert command[0] == "hil"
+    monkeypatch.chdir(recording)
+    assert main(command[1:]) == 0
+    assert capsys.readouterr().out.splitlines() == expected

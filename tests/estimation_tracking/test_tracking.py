@@ -3,9 +3,12 @@ death after misses, clutter that never confirms, a braking target, chunking, bad
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
+import re
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -263,3 +266,11 @@ def test_bad_tracker_settings_name_field_value_and_range(
 def test_bad_hop_period_is_refused() -> None:
     with pytest.raises(ConfigError, match=r"hop_s = 0.0 is not allowed: must be a finite hop"):
         Tracker(0.0)
+
+
+def test_the_docs_settings_table_gives_the_code_defaults() -> None:
+    text = (Path(__file__).resolve().parents[2] / "docs" / "tracks.md").read_text("utf-8")
+    rows = re.findall(r"^\| `track_(\w+)` \| ([0-9.]+) \|", text, flags=re.MULTILINE)
+    documented = {name: float(value) for name, value in rows}
+    defaults = {f.name: float(f.default) for f in dataclasses.fields(TrackerSettings)}
+    assert documented == defaults
