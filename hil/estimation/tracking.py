@@ -44,8 +44,9 @@ Rules (each estimate, in the order the receiver emits them)
 
 Streaming: :meth:`Tracker.update` takes estimates in emission order and returns them
 stamped; any split of a sequence into chunks gives the same result as one call on the whole.
-The per-estimate work is a few NumPy operations over all live tracks at once (prediction,
-gate and distance are vectorised over tracks).
+The rules run in one compiled loop per batch (:mod:`hil.estimation.tracking_kernel`):
+each estimate is compared with every live track at a cost of a few floating-point operations
+per track (``benchmarks/bench_tracking.py``).
 
 Why not Stone Soup: it would add a runtime dependency (with its own dependencies) for a
 2-state linear filter and a gate that take a hundred lines here, and its trackers work scan
@@ -65,6 +66,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hil.errors import ConfigError
+from hil.estimation import tracking_kernel as kernel
 from hil.estimation.base import Estimate, Receiver
 
 TRACK_OPTION_PREFIX = "track_"
@@ -202,141 +204,61 @@ class Tracker:
 
     def reset(self) -> None:
         """Forget every track; the next confirmed track gets id 0."""
-        # One entry per live track. State (range m, closing speed m/s) at t_ref and its
-        # covariance, kept as its three distinct entries (prr m², prv m²/s, pvv m²/s²).
-        self._r = np.zeros(0)
-        self._v = np.zeros(0)
-        self._prr = np.zeros(0)
-        self._prv = np.zeros(0)
-        self._pvv = np.zeros(0)
-        self._t_ref = np.zeros(0)  # bounce instant of the last update, s
-        self._t_last = np.zeros(0)  # receive time of the last update, s
-        self._t_first = np.zeros(0)  # receive time of the first estimate, s
-        self._hop_last = np.zeros(0, dtype=np.int64)
-        self._hop_first = np.zeros(0, dtype=np.int64)
-        self._hits = np.zeros(0, dtype=np.int64)
-        self._id = np.zeros(0, dtype=np.int64)  # NO_TRACK while tentative
+        # Live tracks are the first _n rows (columns: hil.estimation.tracking_kernel).
+        self._table = np.zeros((16, kernel.N_COLUMNS))
+        self._n = 0
         self.next_id = 0
-
-    _COLUMNS = ("_r", "_v", "_prr", "_prv", "_pvv", "_t_ref", "_t_last", "_t_first",
-                "_hop_last", "_hop_first", "_hits", "_id")  # fmt: skip
 
     @property
     def n_tracks(self) -> int:
         """Live tracks (tentative and confirmed)."""
-        return int(self._id.size)
+        return self._n
 
     @property
     def confirmed_ids(self) -> list[int]:
         """Ids of the live confirmed tracks, ascending."""
-        return sorted(int(i) for i in self._id[self._id >= 0])
+        ids = self._table[: self._n, kernel.ID]
+        return sorted(int(i) for i in ids[ids >= 0])
 
     def update(self, estimates: Iterable[Estimate]) -> list[Estimate]:
         """Associate ``estimates`` (in emission order) and return them with ``track_id``."""
-        return [_with_track(e, self._one(e)) for e in estimates]
-
-    # ------------------------------------------------------------------ one estimate
-    def _one(self, e: Estimate) -> int:
-        """Associate one estimate; its track id."""
-        t_rx = float(e.t_s)
-        t_b = 0.5 * (t_rx + float(e.t_tx_s)) if math.isfinite(e.t_tx_s) else t_rx
-        if not (math.isfinite(t_rx) and math.isfinite(e.range_m) and math.isfinite(e.speed_mps)):
-            return NO_TRACK
-        self._prune(t_rx)
+        est = list(estimates)
+        n = len(est)
+        if n == 0:
+            return []
         s = self.settings
-        var_r = self._sigma(e.crlb_range_m, s.min_range_sigma_m, s.default_range_sigma_m) ** 2
-        var_v = self._sigma(e.crlb_speed_mps, s.min_speed_sigma_mps, s.default_speed_sigma_mps) ** 2
-        hop = int(e.hop_index)
-        if self._id.size:
-            # Every track predicted to the bounce instant (vectorised over tracks).
-            dt = t_b - self._t_ref
-            a = np.abs(dt)  # a late estimate widens the gate as an early one does
-            q = s.accel_mps2**2
-            r_pred = self._r - self._v * dt
-            prr = self._prr - 2.0 * dt * self._prv + dt * dt * self._pvv + q * a**4 / 4.0
-            prv = self._prv - dt * self._pvv - q * a**3 / 2.0
-            pvv = self._pvv + q * a * a
-            y_r, y_v = e.range_m - r_pred, e.speed_mps - self._v
-            s_rr, s_vv = prr + var_r, pvv + var_v
-            det = s_rr * s_vv - prv * prv
-            d2 = (s_vv * y_r * y_r - 2.0 * prv * y_r * y_v + s_rr * y_v * y_v) / det
-            tentative = self._id < 0
-            eligible = (
-                (d2 <= s.gate_sigmas**2)
-                & (self._hop_last < hop)
-                & (~tentative | (hop - self._hop_first < s.confirm_hops))
-            )
-            for group in (eligible & ~tentative, eligible & tentative):
-                if group.any():
-                    k = int(np.argmin(np.where(group, d2, np.inf)))
-                    self._kalman_update(
-                        k, float(y_r[k]), float(y_v[k]), float(r_pred[k]),
-                        (float(prr[k]), float(prv[k]), float(pvv[k])), var_r, var_v,
-                    )  # fmt: skip
-                    self._t_ref[k], self._t_last[k], self._hop_last[k] = t_b, t_rx, hop
-                    self._hits[k] += 1
-                    return self._confirm(k)
-        self._birth(e.range_m, e.speed_mps, var_r, var_v, t_b, t_rx, hop)
-        return self._confirm(self.n_tracks - 1)
 
-    def _kalman_update(
-        self,
-        k: int,
-        y_r: float,
-        y_v: float,
-        r_pred: float,
-        p: tuple[float, float, float],
-        var_r: float,
-        var_v: float,
-    ) -> None:
-        """Kalman step of track ``k`` from its prediction (range ``r_pred``, covariance
-        ``p`` = (prr, prv, pvv)) with innovation ``(y_r, y_v)``."""
-        prr, prv, pvv = p
-        s_rr, s_vv = prr + var_r, pvv + var_v
-        det = s_rr * s_vv - prv * prv
-        # Gain K = P S⁻¹ (2×2, S⁻¹ = [[s_vv, −prv], [−prv, s_rr]] / det).
-        k_rr = (prr * s_vv - prv * prv) / det
-        k_rv = (prv * s_rr - prr * prv) / det
-        k_vr = (prv * s_vv - pvv * prv) / det
-        k_vv = (pvv * s_rr - prv * prv) / det
-        self._r[k] = r_pred + k_rr * y_r + k_rv * y_v
-        self._v[k] = self._v[k] + k_vr * y_r + k_vv * y_v
-        # P = (I − K) P.
-        self._prr[k] = (1.0 - k_rr) * prr - k_rv * prv
-        self._prv[k] = (1.0 - k_rr) * prv - k_rv * pvv
-        self._pvv[k] = -k_vr * prv + (1.0 - k_vv) * pvv
+        def column(name: str) -> NDArray[np.float64]:
+            return np.fromiter((getattr(e, name) for e in est), dtype=np.float64, count=n)
 
-    def _confirm(self, k: int) -> int:
-        """Apply the birth rule to track ``k``; its id."""
-        if self._id[k] < 0 and self._hits[k] >= self.settings.confirm_hits:
-            self._id[k] = self.next_id
-            self.next_id += 1
-        return int(self._id[k])
-
-    @staticmethod
-    def _sigma(bound: float, floor: float, default: float) -> float:
-        return max(float(bound), floor) if math.isfinite(bound) else default
-
-    def _birth(
-        self, r: float, v: float, var_r: float, var_v: float, t_b: float, t_rx: float, hop: int
-    ) -> None:
-        """A tentative track at the estimate, with the estimate's own noise."""
-        row = (r, v, var_r, 0.0, var_v, t_b, t_rx, t_rx, hop, hop, 1, NO_TRACK)
-        for name, value in zip(self._COLUMNS, row, strict=True):
-            setattr(self, name, np.append(getattr(self, name), value))
-
-    def _prune(self, t_rx: float) -> None:
-        """Delete the tracks the death rules end by receive time ``t_rx``."""
-        s = self.settings
-        dead = np.where(
-            self._id >= 0,
-            t_rx - self._t_last > (s.max_missed_hops + 1.5) * self.hop_s,
-            t_rx - self._t_first > (s.confirm_hops - 0.5) * self.hop_s,
+        t_rx, t_tx = column("t_s"), column("t_tx_s")
+        z_r, z_v = column("range_m"), column("speed_mps")
+        hop = np.fromiter((e.hop_index for e in est), dtype=np.int64, count=n)
+        valid = np.isfinite(t_rx) & np.isfinite(z_r) & np.isfinite(z_v)
+        t_b = np.where(np.isfinite(t_tx), 0.5 * (t_rx + t_tx), t_rx)
+        var_r = _variance(column("crlb_range_m"), s.min_range_sigma_m, s.default_range_sigma_m)
+        var_v = _variance(
+            column("crlb_speed_mps"), s.min_speed_sigma_mps, s.default_speed_sigma_mps
         )
-        if dead.any():
-            keep = ~dead
-            for name in self._COLUMNS:
-                setattr(self, name, getattr(self, name)[keep])
+        if self._table.shape[0] < self._n + n:  # each estimate starts at most one track
+            grown = np.zeros((max(2 * self._table.shape[0], self._n + n), kernel.N_COLUMNS))
+            grown[: self._n] = self._table[: self._n]
+            self._table = grown
+        ids = np.empty(n, dtype=np.int64)
+        self._n, self.next_id = kernel.associate(
+            self._table, self._n, self.next_id, t_rx, t_b, z_r, z_v, var_r, var_v, hop, valid,
+            float(s.accel_mps2) ** 2, float(s.gate_sigmas) ** 2, int(s.confirm_hits),
+            int(s.confirm_hops), (s.max_missed_hops + 1.5) * self.hop_s,
+            (s.confirm_hops - 0.5) * self.hop_s, ids,
+        )  # fmt: skip
+        return [_with_track(e, int(k)) for e, k in zip(est, ids, strict=True)]
+
+
+def _variance(bound: NDArray[np.float64], floor: float, default: float) -> NDArray[np.float64]:
+    """Noise variances of estimates with Cramér–Rao bounds ``bound``: the bound raised to
+    ``floor``, ``default`` where it is NaN; squared."""
+    sigma = np.where(np.isfinite(bound), np.maximum(bound, floor), default)
+    return np.asarray(sigma * sigma, dtype=np.float64)
 
 
 def _with_track(e: Estimate, track_id: int) -> Estimate:

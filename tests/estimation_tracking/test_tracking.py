@@ -143,6 +143,9 @@ def test_clutter_never_confirms_beside_a_target() -> None:
     out = Tracker(HOP_S).update(emitted(target, clutter))
     assert set(ids_of(out, clutter)) == {-1}
     assert ids_of(out, target) == [-1, -1] + [0] * 198
+    # Fed 7 at a time (the track table grows between calls): the same ids.
+    tracker, est = Tracker(HOP_S), emitted(target, clutter)
+    assert [e for i in range(0, len(est), 7) for e in tracker.update(est[i : i + 7])] == out
 
 
 def test_a_braking_target_stays_one_track() -> None:
