@@ -162,6 +162,29 @@ def test_a_braking_target_stays_one_track() -> None:
     assert max(e.track_id for e in stiff) >= 1
 
 
+def test_a_reversing_target_through_the_blind_band_stays_one_track() -> None:
+    # +8 m/s to -8 m/s at 16 m/s² from t = 0.5 s; no estimate while |v| < 0.3 m/s (a blind
+    # band): a gap of 3 hop boundaries, fewer than the 5 misses a track survives.
+    def speed(t: float) -> float:
+        return 8.0 - 16.0 * min(max(t - 0.5, 0.0), 1.0)
+
+    hops = [k for k in range(200) if abs(speed((k + 1) * HOP_S + 30.0 / C)) >= 0.3]
+    assert len(hops) == 197
+    est = target_estimates(30.0, speed, hops, seed=19)
+    assert [e.track_id for e in Tracker(HOP_S).update(est)] == [-1, -1] + [0] * 195
+
+
+def test_an_echo_whose_range_does_not_move_as_its_speed_says_never_confirms() -> None:
+    # A still echo read at 27 m/s (a ghost): every hop at 40 m. Its range would fall 0.27 m
+    # per hop at that speed, so no second estimate enters a track's gate.
+    ghost = target_estimates(40.0, 0.0, range(100), seed=20)
+    ghost = [Estimate(**{**e.to_dict(), "speed_mps": 27.0}) for e in ghost]
+    target = target_estimates(40.0, 27.0, range(100), seed=21)  # the same at its true speed
+    out = Tracker(HOP_S).update(emitted(ghost, target))
+    assert set(ids_of(out, ghost)) == {-1}
+    assert ids_of(out, target) == [-1, -1] + [0] * 98
+
+
 def test_one_estimate_per_track_per_hop() -> None:
     # A second echo of every hop 1 mm beside the target (a multipath twin): the two are
     # never put on one track in one hop; they form two tracks.
