@@ -9,8 +9,10 @@ One JSON object per line (``--json``) or CSV (``--csv FILE``, ``-`` for stdout) 
 ``range_m``, ``speed_mps`` (closing positive), ``hop_index`` and ``score``, and each estimate's
 Cramér–Rao bounds at its own SNR, ``crlb_range_m`` and ``crlb_speed_mps`` (GCAS with its
 default refinement; null in JSON, empty in CSV, where a receiver does not measure them:
-``--option refine=false``). ``--map PNG`` draws the time–codeword map (receivers that keep
-one: GCAS).
+``--option refine=false``), and ``track_id``, the confirmed track of the estimate (−1 for
+none; :mod:`hil.estimation.tracking`, set with ``--option track_confirm_hits=4`` and the
+other ``track_*`` settings). Without ``--json``/``--csv`` it prints the count and one line
+per track. ``--map PNG`` draws the time–codeword map (receivers that keep one: GCAS).
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from numpy.typing import NDArray
 from hil.errors import ConfigError
 from hil.estimation.base import ESTIMATE_FIELDS, Estimate
 from hil.estimation.registry import RECEIVERS
+from hil.estimation.track_summary import track_figures, track_lines
 from hil.recording.records import ReceiverSetup
 from hil.recording.replay import build_receiver
 from hil.signals.schedule_file import read_schedule_file
@@ -323,6 +326,7 @@ def run(args: argparse.Namespace) -> int:
         collector.draw(args.map)
     if not args.json and args.csv is None:
         print(f"{sink.count} estimates from {args.input} ({args.receiver})")
+        print("\n".join(track_lines(track_figures(sink.kept))))
     return 0
 
 
@@ -339,6 +343,8 @@ class _Sink:
     def __init__(self, args: argparse.Namespace) -> None:
         self.json = bool(args.json)
         self.count = 0
+        self.kept: list[Estimate] = []  # for the per-track lines of the plain listing
+        self._keep = not self.json and args.csv is None
         self._csv_file: TextIO | None = None
         self._writer: Any = None
         if args.csv is not None:
@@ -359,6 +365,8 @@ class _Sink:
             if self._writer is not None:
                 self._writer.writerow(row)
             self.count += 1
+        if self._keep:
+            self.kept.extend(estimates)
         if self.json:
             sys.stdout.flush()
 

@@ -335,6 +335,7 @@ def parse_experiment(text: str, source: str = "<text>") -> Experiment:
     from hil.estimation.registry import receiver_class
 
     check_option_types(receiver_class(receiver), options, receiver, "receiver.options.")
+    _check_tracker_options(options)
 
     # The waveform: preset, family, overrides, with the tank's sound speed and tow limits.
     preset = get_preset(preset_name)
@@ -538,3 +539,16 @@ def tank_receiver_options(
     if out["range_readout"] == "peak" and "refine" not in out:
         out["refine"] = False
     return out
+
+
+def _check_tracker_options(options: dict[str, Any]) -> None:
+    """Refuse a bad ``track_*`` receiver option (docs/tracks.md) when the file is read,
+    named as the file names it."""
+    from hil.estimation.tracking import TrackerSettings
+
+    try:
+        TrackerSettings.from_options(options)
+    except ConfigError as exc:
+        raise ConfigError(
+            f"receiver.options.{exc.field}", exc.value, exc.allowed, exc.hint
+        ) from None

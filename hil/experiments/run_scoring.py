@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from hil.acquisition.annotations import ADC_CLIPPING_TEXT
+from hil.estimation.track_summary import track_figures
 from hil.experiments.run_calibrations import true_stage_motion
 from hil.experiments.tank_run import STAGE_POLL_S, TELEMETRY_MAX_REPLY_S, RunOutcome
 
@@ -271,7 +272,9 @@ def summarize(outcome: RunOutcome) -> dict[str, Any]:
     window. RMSEs and biases are over every scored estimate, whatever its error (``*_all_*``:
     over every estimate with a known truth); ``*_gated_*`` RMSEs over the scored ones inside
     the gate. The detection rate is ``detected_boundaries / expected_boundaries``
-    (:func:`detection_counts`: expected from the truth and the schedule).
+    (:func:`detection_counts`: expected from the truth and the schedule). ``tracks``: every
+    confirmed track's count, span and RMSEs against the truth
+    (:func:`hil.estimation.track_summary.track_figures`).
     """
     exp = outcome.experiment
     est = outcome.estimates
@@ -328,6 +331,8 @@ def summarize(outcome: RunOutcome) -> dict[str, Any]:
         )
         e_exact = r - outcome.exact_truth["range_m"]
         summary["range_rmse_vs_exact_m"] = _rmse(e_exact[score.scored])
+    # Per track (hil.estimation.track_summary): its span and its errors against the truth.
+    summary["tracks"] = track_figures(est, truth["range_m"], truth["speed_mps"])
     return summary
 
 

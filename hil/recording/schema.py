@@ -133,6 +133,8 @@ TABLES: dict[str, tuple[tuple[str, Any], ...]] = {
         ),
         ("crlb_range_m", np.float64),
         ("crlb_speed_mps", np.float64),
+        # Confirmed track of the estimate, -1 for none (files without the column read -1).
+        ("track_id", np.int64),
     ),
 }
 

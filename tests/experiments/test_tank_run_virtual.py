@@ -328,3 +328,30 @@ def test_the_recording_says_what_was_connected(first_run: RunOutcome) -> None:
         "1", "80.000", "150000.000"
     )  # fmt: skip
     assert set(instrument["host"]) == {"hostname", "platform", "python"}
+
+
+def test_a_virtual_run_scores_its_tracks(first_run: RunOutcome) -> None:
+    """One towed target, one track from its 3rd estimate to the end of the run; the
+    per-track RMSEs are over all of its estimates with a truth (ramps included)."""
+    from hil.experiments.run_scoring import score_run, summarize
+
+    tracks = summarize(first_run)["tracks"]
+    ids = np.array([e.track_id for e in first_run.estimates])
+    assert ids.tolist() == [-1, -1] + [0] * 267
+    assert (tracks["confirmed"], tracks["untracked_estimates"]) == (1, 2)
+    (track,) = tracks["per_track"]
+    assert (track["estimates"], track["first_hop"], track["last_hop"]) == (267, 28, 295)
+    assert track["estimates_with_truth"] == 267
+    score = score_run(first_run)
+    on = ids == 0
+    assert track["range_rmse_m"] == pytest.approx(
+        float(np.sqrt(np.mean(score.range_error_m[on] ** 2))), abs=1e-12
+    )
+    assert track["speed_rmse_mps"] == pytest.approx(
+        float(np.sqrt(np.mean(score.speed_error_mps[on] ** 2))), abs=1e-12
+    )
+    golden = {"range_rmse_m": 0.01792880696625588, "speed_rmse_mps": 0.1394865854890599,
+              "span_s": 2.6663573181110305}  # fmt: skip
+    assert {k: track[k] for k in golden} == pytest.approx(golden, abs=1e-9)
+    with RunRecording.open(first_run.folder / "run.h5") as rec:
+        assert rec.estimates() == first_run.estimates  # the ids recorded live

@@ -251,8 +251,8 @@ def _as_version_1(path: Path) -> None:
                     dtype=h5py.string_dtype("utf-8"),
                     chunks=(schema.TABLE_CHUNK_ROWS,),
                 )
-        # Nor had its estimates the bound columns, nor its telemetry the reply times.
-        for table, gone in (("estimates", ("crlb_range_m", "crlb_speed_mps")),
+        # Nor had its estimates the bound and track columns, nor its telemetry the reply times.
+        for table, gone in (("estimates", ("crlb_range_m", "crlb_speed_mps", "track_id")),
                             ("telemetry", ("reply_s",))):  # fmt: skip
             for column in gone:
                 del f[f"{table}/{column}"]
@@ -289,6 +289,8 @@ def test_a_version_1_recording_still_reads(tmp_path: Path, schedule_doc: dict[st
         assert rec.events() == [RunEvent("gap", 150, 10, "samples 150 .. 159 missing"), *events]
         assert rec.estimates() == estimates  # the bounds read NaN, as they were written
         assert all(math.isnan(e.crlb_range_m) for e in rec.estimates())
+        assert [e.track_id for e in rec.estimates()] == [-1, -1, -1]
+        assert not rec.has_track_ids
         assert rec.gaps() == [(150, 10)]
         assert math.isclose(rec.fs_hz, FS)
 

@@ -107,6 +107,10 @@ def test_page_follows_a_recording_and_highlights_an_alarm(browser: Any, recorder
         # The page's own copy of the estimates: every row once, in order.
         times = browser.execute_script("return est.t;")
         assert times == pytest.approx([0.5 + 0.01 * i for i in range(12)])
+        # Dots coloured per track: these estimates are on no confirmed track (grey).
+        assert browser.execute_script("return est.color;") == ["#999999"] * 12
+        assert browser.execute_script("return [0, 1, 9, -1].map(trackColor);") == [
+            "#1f77b4", "#2ca02c", "#2ca02c", "#999999"]  # fmt: skip
 
         # The recording lost under the running server: the page says so in its banner.
         server.data.close()
