@@ -272,7 +272,7 @@ def _across_tables(t: dict[str, Any], text: str, problems: Problems) -> Experime
     assert run and dev and wav and tank and tow and rec and cal and sim and spec and schedule
     assert output_dir is not None and store is not None and r_max is not None
     assert options is not None
-    board_url, stage_url = dev.urls()
+    board_url, stage_url = dev.urls
     return Experiment(
         name=run.name,
         output_dir=output_dir,

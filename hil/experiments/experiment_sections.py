@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -78,9 +79,11 @@ class DevicesSection(Section):
         0, "integer", "ADC channel of the hydrophone (1 is the DAC monitor)", lo=0, hi=15
     )
 
+    @cached_property
     def urls(self) -> tuple[str, str]:
-        """The board's and the stage's URLs in their canonical spelling; a ConfigError
-        saying they look swapped when each would fit the other's role."""
+        """The board's and the stage's URLs in their canonical spelling (checked once: a
+        deprecated spelling warns once); a ConfigError saying they look swapped when each
+        would fit the other's role."""
         try:
             board = check_device_url(self.board, "daq", "devices.board")
         except ConfigError as exc:
@@ -103,7 +106,7 @@ class DevicesSection(Section):
 
     def checks(self, path: str) -> Iterator[ConfigError]:
         try:
-            self.urls()
+            self.urls  # noqa: B018 (checked here, cached for the experiment)
         except ConfigError as exc:
             yield exc
         if self.board_channel == MONITOR_CHANNEL:
