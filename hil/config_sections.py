@@ -126,9 +126,7 @@ class Problems:
 
 
 def _keys(cls: type) -> dict[str, Key]:
-    return {
-        f.name: f.metadata["key"] for f in dataclasses.fields(cls) if "key" in f.metadata
-    }
+    return {f.name: f.metadata["key"] for f in dataclasses.fields(cls) if "key" in f.metadata}
 
 
 def _join(path: str, name: str) -> str:
@@ -219,9 +217,7 @@ class Section:
         return values
 
     @classmethod
-    def read(
-        cls, data: Any, path: str, problems: Problems, *, quiet: bool = False
-    ) -> Self | None:
+    def read(cls, data: Any, path: str, problems: Problems, *, quiet: bool = False) -> Self | None:
         """The table at ``path`` as this dataclass, or None when it has a problem (recorded
         in ``problems``). ``quiet``: a table the file misspelt: its missing keys are not
         reported again."""
@@ -229,7 +225,7 @@ class Section:
         values = cls.read_values(data, path, scratch)
         if values is None or values.pop("__failed__"):
             return None
-        values = {k: v for k, v in values.items() if k in cls.keys()}
+        values = {k: v for k, v in values.items() if k in cls.keys()}  # noqa: SIM118
         obj = cls(**values)
         before = len(problems.errors)
         for exc in obj.checks(path):
@@ -356,7 +352,7 @@ def _has_required(spec: Key) -> bool:
 
 def _key_schema(spec: Key, cls: type, name: str) -> dict[str, Any]:
     s: dict[str, Any] = {"description": spec.doc + _unit(spec)} if spec.doc else {}
-    number = {"type": "number"}
+    number: dict[str, Any] = {"type": "number"}
     if spec.lo is not None:
         number["exclusiveMinimum" if spec.lo_open else "minimum"] = spec.lo
     if spec.hi is not None:

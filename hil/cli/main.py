@@ -79,6 +79,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "live view of a run recording in the browser (range, speed, alarms)",
     ),
     "docs": ("hil.cli.docs", "print the installed documentation (hil docs lists the topics)"),
+    "schema": ("hil.cli.schema", "print the JSON Schema of a config file (for editor completion)"),
 }
 """Sub-command name -> (module with ``register``, one-line summary for ``hil --help``).
 

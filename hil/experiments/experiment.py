@@ -129,6 +129,7 @@ time_scale = 0.4
 seed = 1
 """
 
+
 @dataclass(frozen=True)
 class Experiment:
     """A validated experiment file; build it with :func:`parse_experiment`."""
@@ -228,20 +229,22 @@ def _across_tables(t: dict[str, Any], text: str, problems: Problems) -> Experime
     if run is not None and tow is not None and run.max_duration_s < tow.shortest_duration_s:
         problems.add(
             ConfigError(
-                "run.max_duration_s", run.max_duration_s,
+                "run.max_duration_s",
+                run.max_duration_s,
                 f">= {tow.shortest_duration_s:.3g} s, the tow's shortest duration (tow.repeats"
                 " x (|end_m - start_m| + run_up_m + run_down_m) / speed_mps)",
                 "raise it: the run is stopped as a failure when it runs out",
-            )  # fmt: skip
+            )
         )
     r_max = None
     if rec is not None and tow is not None and rec.max_speed_mps < tow.speed_mps:
         problems.add(
             ConfigError(
-                "receiver.max_speed_mps", rec.max_speed_mps,
+                "receiver.max_speed_mps",
+                rec.max_speed_mps,
                 f">= tow.speed_mps = {tow.speed_mps} m/s",
                 "the Doppler search must cover the tow speed",
-            )  # fmt: skip
+            )
         )
     if rec is not None and tank is not None:
         r_max = rec.max_range_m
@@ -331,12 +334,12 @@ def _range_covers_tow(
     name = "receiver.max_range_m" if given else "receiver.max_range_m (the tank's diagonal)"
     return [
         ConfigError(
-            name, round(r_max, 4),
-            f">= {far_r:.3f} m, the target's range at {far_key} = {x:g} m (the tow's"
-            " farthest)",
+            name,
+            round(r_max, 4),
+            f">= {far_r:.3f} m, the target's range at {far_key} = {x:g} m (the tow's farthest)",
             "raise it (or leave it out: the tank's diagonal), or shorten the tow: beyond it"
             " the receiver finds no target",
-        )  # fmt: skip
+        )
     ]
 
 

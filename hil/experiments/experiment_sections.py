@@ -171,7 +171,7 @@ class TankSection(Section):
     @property
     def transducer_m(self) -> tuple[float, float, float]:
         """Transducer position (m), the default derived from the tank's size."""
-        lx, ly, lz = self.size_m
+        _, ly, lz = self.size_m
         return self.transducer_position_m or (0.5, ly / 2, -lz / 2)
 
     @property
@@ -232,7 +232,8 @@ def outside_tank(
     if 0 < p[0] < lx and 0 < p[1] < ly and -lz < p[2] < 0:
         return None
     return ConfigError(
-        name, [round(c, 4) for c in p], f"inside the tank: 0 < x < {lx}, 0 < y < {ly}, -{lz} < z < 0 m",
+        name, [round(c, 4) for c in p],
+        f"inside the tank: 0 < x < {lx}, 0 < y < {ly}, -{lz} < z < 0 m",
         "move it, or change tank.size_m / the tow plan",
     )  # fmt: skip
 
@@ -271,9 +272,7 @@ class TowPlan(Section):
             ("tow.end_m + tow.run_down_m", self.end_m + d * self.run_down_m),
         ):
             if x > 0:
-                yield ConfigError(
-                    name, x, "<= 0 m (GRBL machine positions are in [-travel, 0])"
-                )
+                yield ConfigError(name, x, "<= 0 m (GRBL machine positions are in [-travel, 0])")
 
 
 @dataclass(frozen=True)
@@ -342,9 +341,7 @@ class SimulationSettings(Section):
     )
     late_tail: bool = key(True, "flag", "the tank's diffuse late tail")
     wall_reflection: float = key(0.9, "number", "wall reflection coefficient", lo=-1.0, hi=1.0)
-    bottom_reflection: float = key(
-        0.9, "number", "bottom reflection coefficient", lo=-1.0, hi=1.0
-    )
+    bottom_reflection: float = key(0.9, "number", "bottom reflection coefficient", lo=-1.0, hi=1.0)
     transducer_beam: str = key("piston", "text", "projector directivity", choices=BEAM_KINDS)
     transducer_radius_m: float = key(
         0.015, "number", "projector piston radius", lo=0.0, lo_open=True, hi=1.0, unit="m"

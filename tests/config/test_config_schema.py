@@ -1,0 +1,143 @@
+"""The shipped JSON Schemas and the parsers agree: the schemas are what the code generates,
+every shipped and documented config file is valid for both, and bad files are refused by
+both (the schema cannot check what spans tables; the parser does)."""
+
+from __future__ import annotations
+
+import copy
+import json
+import re
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import jsonschema
+import pytest
+
+from hil.cli.main import main
+from hil.cli.schema import SCHEMAS, schema, schema_path, schema_text
+from hil.errors import ConfigError
+from hil.experiments.experiment import DEFAULT_EXPERIMENT, parse_experiment
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _toml_blocks(path: Path) -> list[str]:
+    """The ```toml blocks of a Markdown file."""
+    return re.findall(r"```toml\n(.*?)```", path.read_text(encoding="utf-8"), flags=re.S)
+
+
+def _kind(doc: dict[str, Any]) -> str | None:
+    """Which config file a TOML document is: an experiment has [devices] or [tow]."""
+    if "devices" in doc or "tow" in doc:
+        return "experiment"
+    return None
+
+
+def _documented() -> list[tuple[str, str, str]]:
+    """(where, kind, text) of every shipped and documented config file."""
+    files = [("DEFAULT_EXPERIMENT", "experiment", DEFAULT_EXPERIMENT)]
+    for md in sorted((ROOT / "docs").glob("*.md")):
+        for i, text in enumerate(_toml_blocks(md)):
+            kind = _kind(tomllib.loads(text))
+            if kind is not None:
+                files.append((f"{md.name}[{i}]", kind, text))
+    return files
+
+
+def _parse(kind: str, text: str) -> object:
+    if kind == "experiment":
+        return parse_experiment(text)
+    raise AssertionError(kind)
+
+
+def _validator(kind: str) -> jsonschema.protocols.Validator:
+    shipped = json.loads(schema_path(kind).read_text(encoding="utf-8"))
+    cls = jsonschema.validators.validator_for(shipped)
+    cls.check_schema(shipped)
+    return cls(shipped)
+
+
+@pytest.mark.parametrize("kind", sorted(SCHEMAS))
+def test_the_shipped_schema_is_the_one_the_code_generates(kind: str) -> None:
+    assert schema_path(kind).read_text(encoding="utf-8") == schema_text(kind), (
+        "regenerate it: hil schema --write"
+    )
+
+
+def test_the_documented_files_include_a_whole_experiment() -> None:
+    assert [w for w, k, _ in _documented() if k == "experiment" and w != "DEFAULT_EXPERIMENT"]
+
+
+@pytest.mark.parametrize(("where", "kind", "text"), _documented(), ids=lambda v: str(v)[:40])
+def test_every_shipped_and_documented_file_is_valid_for_schema_and_parser(
+    where: str, kind: str, text: str
+) -> None:
+    errors = list(_validator(kind).iter_errors(tomllib.loads(text)))
+    assert errors == [], f"{where}: {[e.message for e in errors]}"
+    _parse(kind, text)
+
+
+def _edit(doc: dict[str, Any], path: str, value: Any) -> dict[str, Any]:
+    """``doc`` with the dotted ``path`` set to ``value`` (None deletes it)."""
+    out = copy.deepcopy(doc)
+    *parents, last = path.split(".")
+    node = out
+    for p in parents:
+        node = node.setdefault(p, {})
+    if value is None:
+        del node[last]
+    else:
+        node[last] = value
+    return out
+
+
+def _dumps(doc: dict[str, Any]) -> str:
+    """A TOML document of tables of scalars and lists (what these files hold)."""
+
+    def value(v: Any) -> str:
+        if isinstance(v, dict):
+            return "{ " + ", ".join(f"{k} = {value(x)}" for k, x in v.items()) + " }"
+        return json.dumps(v)
+
+    lines = [f"{k} = {value(v)}" for k, v in doc.items() if not isinstance(v, dict)]
+    for name, table in doc.items():
+        if isinstance(table, dict):
+            lines.append(f"[{name}]")
+            lines += [f"{k} = {value(v)}" for k, v in table.items()]
+    return "\n".join(lines) + "\n"
+
+
+EXPERIMENT = tomllib.loads(DEFAULT_EXPERIMENT)
+BAD_EXPERIMENTS = [
+    ("tow.speed_mp", 1.5, r"tow\.speed_mp = 1\.5 .*did you mean speed_mps\?"),
+    ("tow.speed_mps", -1.5, r"tow\.speed_mps = -1\.5 .*must be > 0 and <= 5 m/s"),
+    ("tow.start_m", None, r"tow\.start_m = None .*it is required"),
+    ("tank.size_m", [12.0, 4.0], r"tank\.size_m = \[12\.0, 4\.0\] .*a list of 3 finite"),
+    ("simulation.reverberation", "false", r"simulation\.reverberation = 'false' .*TOML boolean"),
+    ("receiver.name", "gcass", r"receiver\.name = 'gcass' .*must be one of gcas, gcas-mti"),
+    ("devices.board_channel", 16, r"devices\.board_channel = 16 .*an integer >= 0 and <= 15"),
+    ("waveform.overrides", {"hop": 0.01}, r"waveform\.overrides\.hop = 0\.01 .*did you mean"),
+    ("tank.size_m", [5000.0, 4.0, 2.5], r"tank\.size_m\[0\] = 5000\.0 .*<= 1000 m"),
+    ("colour", {"red": 1}, r"colour = \{'red': 1\} .*one of the tables run, devices"),
+]
+
+
+@pytest.mark.parametrize(("path", "value", "message"), BAD_EXPERIMENTS)
+def test_a_bad_experiment_is_refused_by_both(path: str, value: Any, message: str) -> None:
+    doc = _edit(EXPERIMENT, path, value)
+    assert list(_validator("experiment").iter_errors(doc)), "the schema accepted it"
+    with pytest.raises(ConfigError, match=message):
+        parse_experiment(_dumps(doc))
+
+
+def test_the_schema_command_prints_and_lists(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["schema", "experiment"]) == 0
+    assert json.loads(capsys.readouterr().out) == schema("experiment")
+    assert main(["schema"]) == 0
+    assert f"experiment  {schema_path('experiment')}" in capsys.readouterr().out
+    assert main(["schema", "experimnt"]) == 2
+    assert capsys.readouterr().err == (
+        f"hil schema: error: KIND = 'experimnt' is not allowed: must be one of"
+        f" {', '.join(SCHEMAS)}; hil schema lists them (did you mean experiment?)\n"
+    )
