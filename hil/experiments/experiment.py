@@ -226,7 +226,9 @@ def _across_tables(t: dict[str, Any], text: str, problems: Problems) -> Experime
             bad = outside_tank(f"target at stage x = {x:g} m ({key})", tuple(towed), tank.size_m)
             if bad is not None:
                 problems.add(bad)
-    if run is not None and tow is not None and run.max_duration_s < tow.shortest_duration_s:
+    # The tolerance: a duration written as the tow's, to its printed digits, is enough.
+    shortest = tow.shortest_duration_s * (1.0 - 1e-9) if tow is not None else 0.0
+    if run is not None and tow is not None and run.max_duration_s < shortest:
         problems.add(
             ConfigError(
                 "run.max_duration_s",
