@@ -23,6 +23,10 @@ SCHEMAS: dict[str, tuple[str, str]] = {
         "hil.experiments.experiment_sections:ExperimentFile",
         "hil tank-run experiment file",
     ),
+    "scenario": (
+        "sim_devices.acoustics.scenario_sections:ScenarioFile",
+        "hil simulate scenario file",
+    ),
 }
 #: Base of the schemas' ``$id`` (the file name is appended).
 SCHEMA_ID = "https://cas-hil.invalid/schema/"

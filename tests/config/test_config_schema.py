@@ -16,8 +16,9 @@ import pytest
 
 from hil.cli.main import main
 from hil.cli.schema import SCHEMAS, schema, schema_path, schema_text
-from hil.errors import ConfigError
+from hil.errors import ConfigError, ConfigErrors
 from hil.experiments.experiment import DEFAULT_EXPERIMENT, parse_experiment
+from sim_devices.acoustics.scenario import parse_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -31,12 +32,16 @@ def _kind(doc: dict[str, Any]) -> str | None:
     """Which config file a TOML document is: an experiment has [devices] or [tow]."""
     if "devices" in doc or "tow" in doc:
         return "experiment"
+    if "preset" in doc:
+        return "scenario"
     return None
 
 
 def _documented() -> list[tuple[str, str, str]]:
     """(where, kind, text) of every shipped and documented config file."""
     files = [("DEFAULT_EXPERIMENT", "experiment", DEFAULT_EXPERIMENT)]
+    for toml in sorted((ROOT / "hil" / "data" / "scenarios").glob("*.toml")):
+        files.append((f"hil/data/scenarios/{toml.name}", "scenario", toml.read_text("utf-8")))
     for md in sorted((ROOT / "docs").glob("*.md")):
         for i, text in enumerate(_toml_blocks(md)):
             kind = _kind(tomllib.loads(text))
@@ -48,7 +53,7 @@ def _documented() -> list[tuple[str, str, str]]:
 def _parse(kind: str, text: str) -> object:
     if kind == "experiment":
         return parse_experiment(text)
-    raise AssertionError(kind)
+    return parse_scenario(tomllib.loads(text))
 
 
 def _validator(kind: str) -> jsonschema.protocols.Validator:
@@ -65,8 +70,11 @@ def test_the_shipped_schema_is_the_one_the_code_generates(kind: str) -> None:
     )
 
 
-def test_the_documented_files_include_a_whole_experiment() -> None:
-    assert [w for w, k, _ in _documented() if k == "experiment" and w != "DEFAULT_EXPERIMENT"]
+def test_the_documented_files_include_whole_experiments_and_scenarios() -> None:
+    kinds = [(k, w.split("[")[0]) for w, k, _ in _documented()]
+    assert ("experiment", "tank-run.md") in kinds
+    assert kinds.count(("scenario", "scenarios.md")) == 3
+    assert len([w for k, w in kinds if k == "scenario" and w.startswith("hil/data")]) == 3
 
 
 @pytest.mark.parametrize(("where", "kind", "text"), _documented(), ids=lambda v: str(v)[:40])
@@ -129,6 +137,34 @@ def test_a_bad_experiment_is_refused_by_both(path: str, value: Any, message: str
     assert list(_validator("experiment").iter_errors(doc)), "the schema accepted it"
     with pytest.raises(ConfigError, match=message):
         parse_experiment(_dumps(doc))
+
+
+SCENARIO = tomllib.loads((ROOT / "hil" / "data" / "scenarios" / "tank-audio.toml").read_text())
+BAD_SCENARIOS = [
+    ("preset", None, r"^preset = None .*it is required"),
+    ("preset", "tank", r"^preset = 'tank' .*one of att, tank-audio, tank-board"),
+    ("duration_s", 0.0, r"^duration_s = 0\.0 .*> 0 and <= 86400 s"),
+    ("sonar.speed", 3.0, r"^sonar\.speed = 3\.0 .*one of the keys position_m"),
+    ("tank.image_order", 5, r"^tank\.image_order = 5 .*<= 4"),
+    ("noise.enabled", "yes", r"^noise\.enabled = 'yes' .*TOML boolean"),
+    ("output.channels", ["recieved"], r"^output\.channels = \['recieved'\] .*a list of received"),
+    ("waveform.hop", 0.01, r"^waveform\.hop = 0\.01 .*did you mean hop_s\?"),
+]
+
+
+@pytest.mark.parametrize(("path", "value", "message"), BAD_SCENARIOS)
+def test_a_bad_scenario_is_refused_by_both(path: str, value: Any, message: str) -> None:
+    doc = _edit(SCENARIO, path, value)
+    assert list(_validator("scenario").iter_errors(doc)), "the schema accepted it"
+    with pytest.raises(ConfigError, match=message):
+        parse_scenario(doc)
+
+
+def test_a_scenario_with_several_problems_names_each_once() -> None:
+    doc = _edit(_edit(_edit(SCENARIO, "seed", -1), "sonar.gain_db", 500.0), "tank.size_m", [1, 2])
+    with pytest.raises(ConfigErrors) as err:
+        parse_scenario(doc)
+    assert [e.field for e in err.value.errors] == ["seed", "sonar.gain_db", "tank.size_m"]
 
 
 def test_the_schema_command_prints_and_lists(capsys: pytest.CaptureFixture[str]) -> None:
