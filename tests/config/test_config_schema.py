@@ -73,6 +73,8 @@ def test_the_shipped_schema_is_the_one_the_code_generates(kind: str) -> None:
 def test_the_documented_files_include_whole_experiments_and_scenarios() -> None:
     kinds = [(k, w.split("[")[0]) for w, k, _ in _documented()]
     assert ("experiment", "tank-run.md") in kinds
+    # docs/tank-run.md shows the built-in file as "a whole file".
+    assert DEFAULT_EXPERIMENT in _toml_blocks(ROOT / "docs" / "tank-run.md")
     assert kinds.count(("scenario", "scenarios.md")) == 3
     assert len([w for k, w in kinds if k == "scenario" and w.startswith("hil/data")]) == 3
 
@@ -176,4 +178,23 @@ def test_the_schema_command_prints_and_lists(capsys: pytest.CaptureFixture[str])
     assert capsys.readouterr().err == (
         f"hil schema: error: KIND = 'experimnt' is not allowed: must be one of"
         f" {', '.join(SCHEMAS)}; hil schema lists them (did you mean experiment?)\n"
+    )
+
+
+def test_the_editor_recipe_a_schema_line_first_is_a_comment_the_parser_ignores(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """docs/tank-run.md: ``#:schema PATH`` as the first line, PATH from ``hil schema``."""
+    from hil.experiments.experiment import load_experiment
+
+    assert main(["schema"]) == 0
+    listed = dict(line.split(maxsplit=1) for line in capsys.readouterr().out.splitlines())
+    assert Path(listed["experiment"]).is_file() and Path(listed["scenario"]).is_file()
+    path = tmp_path / "lab.experiment.toml"
+    path.write_text(f"#:schema {listed['experiment']}\n{DEFAULT_EXPERIMENT}", encoding="utf-8")
+    exp, plain = load_experiment(path), parse_experiment(DEFAULT_EXPERIMENT)
+    assert (exp.tow, exp.simulation, exp.board_url) == (
+        plain.tow,
+        plain.simulation,
+        plain.board_url,
     )
