@@ -33,6 +33,7 @@ tow.repeats = 0 is not allowed: must be an integer >= 1
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import math
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -163,74 +164,76 @@ class Section:
 
     @classmethod
     def read_values(cls, data: Any, path: str, problems: Problems) -> dict[str, Any] | None:
-        """The keys of ``data`` (the table at dotted ``path``) that are valid, as values;
-        None when the table itself is not a table. Each problem goes to ``problems``;
-        ``values["__failed__"]`` is True when a key was refused or a required one missing."""
-        bad = _not_a_table(data, path)
-        if bad is not None:
-            problems.add(bad)
-            return None
-        keys = cls.keys()
-        names = tuple(keys)
-        suggested: set[str] = set()
-        for name in data:
-            if name not in keys:
-                close = did_you_mean(name, names)
-                hint = "remove it or fix its spelling" + close
-                hint += f" ({cls.DOCS} lists every key)" if cls.DOCS else ""
-                if close:
-                    suggested.add(close.removeprefix(" (did you mean ").removesuffix("?)"))
-                problems.add(
-                    ConfigError(_join(path, name), data[name],
-                                f"one of the {cls.KEY_WORD} {', '.join(names)}", hint)
-                )  # fmt: skip
-        table = Table({k: v for k, v in data.items() if k in keys}, path, names, cls.DOCS)
-        values: dict[str, Any] = {}
-        failed = len(table.data) < len(data)  # an unknown key
-        for name, spec in keys.items():
-            if name not in data:
-                if spec.kind == "section" and not spec.absent_none:
-                    sub = spec.section
-                    assert sub is not None
-                    obj = sub.read({}, _join(path, name), problems, quiet=name in suggested)
-                    failed |= obj is None
-                    values[name] = obj
-                elif spec.required:
-                    failed = True
-                    # A key misspelt is named as such (above), not also as missing.
-                    if name not in suggested:
-                        problems.add(
-                            ConfigError(table.name(name), None, "a value", "it is required")
-                        )
-                continue
-            try:
-                values[name] = _read(table, name, spec, problems)
-            except ConfigError as exc:
-                problems.add(exc)
-                failed = True
-            else:
-                if spec.kind == "section":
-                    failed |= values[name] is None
-                elif spec.kind == "sections":
-                    failed |= None in values[name]
-        values["__failed__"] = failed
-        return values
+        """The keys of ``data`` (the table at dotted ``path``) that are valid, as values (a
+        key left out is absent, except a sub-table, read from ``{}``); None when ``data`` is
+        not a table. Each problem goes to ``problems``."""
+        read = cls._read_table(data, path, problems)
+        return None if read is None else read[0]
 
     @classmethod
     def read(cls, data: Any, path: str, problems: Problems, *, quiet: bool = False) -> Self | None:
         """The table at ``path`` as this dataclass, or None when it has a problem (recorded
         in ``problems``). ``quiet``: a table the file misspelt: its missing keys are not
         reported again."""
-        scratch = Problems() if quiet else problems
-        values = cls.read_values(data, path, scratch)
-        if values is None or values.pop("__failed__"):
+        read = cls._read_table(data, path, Problems() if quiet else problems)
+        if read is None or not read[1]:
             return None
-        values = {k: v for k, v in values.items() if k in cls.keys()}  # noqa: SIM118
-        obj = cls(**values)
+        obj = cls(**read[0])
         before = len(problems.errors)
         for exc in obj.checks(path):
             problems.add(exc)
         return obj if len(problems.errors) == before else None
+
+    @classmethod
+    def _read_table(
+        cls, data: Any, path: str, problems: Problems
+    ) -> tuple[dict[str, Any], bool] | None:
+        """:meth:`read_values` and whether every key was valid and every required one given."""
+        bad = _not_a_table(data, path)
+        if bad is not None:
+            problems.add(bad)
+            return None
+        keys = cls.keys()
+        names = tuple(keys)
+        misspelt: set[str] = set()  # the keys that unknown ones resemble
+        for name in data:
+            if name not in keys:
+                close = difflib.get_close_matches(name, names, n=1, cutoff=0.6)
+                misspelt.update(close)
+                hint = "remove it or fix its spelling" + did_you_mean(name, names)
+                hint += f" ({cls.DOCS} lists every key)" if cls.DOCS else ""
+                problems.add(
+                    ConfigError(_join(path, name), data[name],
+                                f"one of the {cls.KEY_WORD} {', '.join(names)}", hint)
+                )  # fmt: skip
+        table = Table({k: v for k, v in data.items() if k in keys}, path, names, cls.DOCS)
+        values: dict[str, Any] = {}
+        ok = len(table.data) == len(data)
+        for name, spec in keys.items():
+            if name in data:
+                try:
+                    values[name] = _read(table, name, spec, problems)
+                except ConfigError as exc:
+                    problems.add(exc)
+                    ok = False
+                    continue
+            elif spec.kind == "section" and not spec.absent_none:
+                assert spec.section is not None
+                quiet = name in misspelt
+                values[name] = spec.section.read({}, table.name(name), problems, quiet=quiet)
+            elif spec.required:
+                ok = False
+                # A key misspelt is named as such (above), not also as missing.
+                if name not in misspelt:
+                    problems.add(ConfigError(table.name(name), None, "a value", "it is required"))
+                continue
+            else:
+                continue
+            if spec.kind == "section":
+                ok &= values[name] is not None
+            elif spec.kind == "sections":
+                ok &= None not in values[name]
+        return values, ok
 
     def checks(self, path: str) -> Iterator[ConfigError]:
         """The problems across this table's keys (none by default); ``path`` is its name."""
