@@ -366,7 +366,7 @@ class SimulationSettings(Section):
 
 @dataclass(frozen=True)
 class ExperimentFile(Section):
-    """A towed-target tank run (hil tank-run EXPERIMENT.toml): docs/tank-run.md."""
+    """A towed-target tank run (hil tank-run EXPERIMENT.toml): hil docs tank-run."""
 
     KEY_WORD = "tables"
     run: RunSection = key(None, "section", "the run", section=RunSection)

@@ -286,7 +286,7 @@ class OutputSection(Section):
 
 @dataclass(frozen=True)
 class ScenarioFile(Section):
-    """A simulated scenario (hil simulate SCENARIO.toml): docs/scenarios.md."""
+    """A simulated scenario (hil simulate SCENARIO.toml): hil docs scenarios."""
 
     preset: str = required("text", "waveform preset", choices=tuple(PRESETS))
     family: str | None = key(None, "text", "waveform family (default: the preset's)",
