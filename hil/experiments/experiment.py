@@ -1,10 +1,12 @@
 """The experiment file of a towed-target tank run (TOML), validated before any device is
 touched.
 
-Every problem is a :class:`~hil.errors.ConfigError` naming the field by its dotted path as
-written in the file (``tow.speed_mps``), the value, the allowed range and what to do. The
-format is documented in ``docs/tank-run.md``; :data:`DEFAULT_EXPERIMENT` is the built-in
-simulated run that ``hil tank-run`` uses without arguments.
+Each table is read by its dataclass (:mod:`hil.experiments.experiment_sections`), then what
+spans tables is checked here; every problem of the file is reported at once (a
+:class:`~hil.errors.ConfigErrors`), each naming the field by its dotted path as written in
+the file (``tow.speed_mps``), the value, the allowed range and what to do. The format is
+documented in ``docs/tank-run.md``; :data:`DEFAULT_EXPERIMENT` is the built-in simulated run
+that ``hil tank-run`` uses without arguments.
 
 Coordinates: the tank frame has x along the tank length, y across, z up with the water
 surface at z = 0 (so depths are negative), metres. The stage is GRBL's X axis, whose machine
@@ -15,6 +17,7 @@ positions are in ``[-travel, 0]`` (0 at the homing switch): the towed target sit
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -220,47 +223,20 @@ def _across_tables(t: dict[str, Any], text: str, problems: Problems) -> Experime
     rec: ReceiverSection | None = t.get("receiver")
     cal: CalibrationSection | None = t.get("calibration")
     sim: SimulationSettings | None = t.get("simulation")
-    if tank is not None and tow is not None:
-        for key, x in _tow_ends(tow):
-            towed = np.asarray(tank.origin_m) + x * np.asarray(tank.axis)
-            bad = outside_tank(f"target at stage x = {x:g} m ({key})", tuple(towed), tank.size_m)
-            if bad is not None:
-                problems.add(bad)
-    # The tolerance: a duration written as the tow's, to its printed digits, is enough.
-    shortest = tow.shortest_duration_s * (1.0 - 1e-9) if tow is not None else 0.0
-    if run is not None and tow is not None and run.max_duration_s < shortest:
-        problems.add(
-            ConfigError(
-                "run.max_duration_s",
-                run.max_duration_s,
-                f">= {tow.shortest_duration_s:.3g} s, the tow's shortest duration (tow.repeats"
-                " x (|end_m - start_m| + run_up_m + run_down_m) / speed_mps)",
-                "raise it: the run is stopped as a failure when it runs out",
-            )
-        )
+    for exc in _tow_fits(run, tank, tow, rec):
+        problems.add(exc)
     r_max = None
-    if rec is not None and tow is not None and rec.max_speed_mps < tow.speed_mps:
-        problems.add(
-            ConfigError(
-                "receiver.max_speed_mps",
-                rec.max_speed_mps,
-                f">= tow.speed_mps = {tow.speed_mps} m/s",
-                "the Doppler search must cover the tow speed",
-            )
-        )
     if rec is not None and tank is not None:
-        r_max = rec.max_range_m
-        if r_max is None:
-            r_max = float(np.sqrt(sum(s * s for s in tank.size_m)))
-        if tow is not None:
-            for exc in _range_covers_tow(r_max, rec.max_range_m is not None, tank, tow):
-                problems.add(exc)
+        # Left out, the range searched is the tank's diagonal.
+        r_max = rec.max_range_m or float(np.sqrt(sum(s * s for s in tank.size_m)))
     spec = schedule = None
     if wav is not None and tank is not None and r_max is not None:
         with problems.collect():
             spec, schedule = _waveform(wav, tank.sound_speed, r_max, rec)
     options = None
-    if rec is not None and tow is not None and tank is not None and spec and schedule:
+    derived = spec is not None and schedule is not None
+    if rec is not None and tow is not None and tank is not None and derived:
+        assert spec is not None and schedule is not None
         with problems.collect():
             options = tank_receiver_options(
                 rec.name, dict(rec.options), schedule, spec.fs_hz, tank.sound_speed, tow
@@ -274,9 +250,11 @@ def _across_tables(t: dict[str, Any], text: str, problems: Problems) -> Experime
             store = resolve_calibration_dir(cal.store)
     if problems or None in (run, dev, wav, tank, tow, rec, cal, sim, output_dir, store):
         return None
-    assert run and dev and wav and tank and tow and rec and cal and sim and spec and schedule
-    assert output_dir is not None and store is not None and r_max is not None
-    assert options is not None
+    # Narrowed for the type checker: every table read and every value derived.
+    assert run is not None and dev is not None and wav is not None and tank is not None
+    assert tow is not None and rec is not None and cal is not None and sim is not None
+    assert spec is not None and schedule is not None and r_max is not None
+    assert output_dir is not None and store is not None and options is not None
     board_url, stage_url = dev.urls
     return Experiment(
         name=run.name,
@@ -308,6 +286,43 @@ def _across_tables(t: dict[str, Any], text: str, problems: Problems) -> Experime
         simulation=sim,
         text=text,
     )
+
+
+def _tow_fits(
+    run: RunSection | None,
+    tank: TankSection | None,
+    tow: TowPlan | None,
+    rec: ReceiverSection | None,
+) -> Iterator[ConfigError]:
+    """The tow against the other tables: the target inside the tank at both ends (with the
+    run-up and run-down), the run's duration, the receiver's speed and range."""
+    if tow is None:
+        return
+    if tank is not None:
+        for key, x in _tow_ends(tow):
+            towed = np.asarray(tank.origin_m) + x * np.asarray(tank.axis)
+            bad = outside_tank(f"target at stage x = {x:g} m ({key})", tuple(towed), tank.size_m)
+            if bad is not None:
+                yield bad
+    # The tolerance: a duration written as the tow's, to its printed digits, is enough.
+    if run is not None and run.max_duration_s < tow.shortest_duration_s * (1.0 - 1e-9):
+        yield ConfigError(
+            "run.max_duration_s", run.max_duration_s,
+            f">= {tow.shortest_duration_s:.3g} s, the tow's shortest duration (tow.repeats"
+            " x (|end_m - start_m| + run_up_m + run_down_m) / speed_mps)",
+            "raise it: the run is stopped as a failure when it runs out",
+        )  # fmt: skip
+    if rec is None:
+        return
+    if rec.max_speed_mps < tow.speed_mps:
+        yield ConfigError(
+            "receiver.max_speed_mps", rec.max_speed_mps,
+            f">= tow.speed_mps = {tow.speed_mps} m/s",
+            "the Doppler search must cover the tow speed",
+        )  # fmt: skip
+    if tank is not None:
+        r_max = rec.max_range_m or float(np.sqrt(sum(s * s for s in tank.size_m)))
+        yield from _range_covers_tow(r_max, rec.max_range_m is not None, tank, tow)
 
 
 def _tow_ends(tow: TowPlan) -> tuple[tuple[str, float], tuple[str, float]]:
