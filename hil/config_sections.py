@@ -239,6 +239,12 @@ class Section:
         """The problems across this table's keys (none by default); ``path`` is its name."""
         return iter(())
 
+    @classmethod
+    def schema_rules(cls) -> dict[str, Any]:
+        """What of :meth:`checks` a JSON Schema can say too (``allOf`` of ``if``/``then``
+        rules, merged into the table's schema); none by default."""
+        return {}
+
 
 def _read(table: Table, name: str, spec: Key, problems: Problems) -> Any:
     """The value of key ``name`` (present in ``table``) checked against ``spec``."""
@@ -342,6 +348,7 @@ def json_schema(cls: type[Section], title: str = "", schema_id: str = "") -> dic
     out["additionalProperties"] = False
     if needed:
         out["required"] = needed
+    out.update(cls.schema_rules())
     return out
 
 

@@ -40,6 +40,11 @@ TRAJECTORY_KEYS = {
 SEED_MAX = 2**32 - 1
 
 
+def _kind(key: str, value: str) -> dict[str, Any]:
+    """A JSON Schema condition: ``key`` is given and equals ``value``."""
+    return {"required": [key], "properties": {key: {"const": value}}}
+
+
 @dataclass(frozen=True)
 class EnvironmentSection(Section):
     """[environment]: the water (sound speed given, or from temperature and salinity)."""
@@ -99,6 +104,14 @@ class BeamSection(Section):
     axis: tuple[float, float, float] = key((1.0, 0.0, 0.0), "vector", "beam axis")
     angles_deg: list[float] | None = key(None, "numbers", "table angles off axis", unit="deg")
     levels_db: list[float] | None = key(None, "numbers", "table levels", unit="dB")
+
+    @classmethod
+    def schema_rules(cls) -> dict[str, Any]:
+        piston = {"anyOf": [{"required": ["ka"]}, {"required": ["radius_m"]}]}
+        return {"allOf": [
+            {"if": _kind("type", "piston"), "then": piston},
+            {"if": _kind("type", "table"), "then": {"required": ["angles_deg", "levels_db"]}},
+        ]}  # fmt: skip
 
     def checks(self, path: str) -> Iterator[ConfigError]:
         if not any(self.axis):
@@ -166,6 +179,13 @@ class TargetSection(Section):
     dwell_s: list[float] | None = key(None, "numbers", "dwell at each waypoint (piecewise)",
                                       lo=0.0, unit="s")  # fmt: skip
     t_start_s: float = key(0.0, "number", "start time (piecewise)", unit="s")
+
+    @classmethod
+    def schema_rules(cls) -> dict[str, Any]:
+        return {"allOf": [
+            {"if": _kind("trajectory", kind), "then": {"required": list(keys)}}
+            for kind, keys in TRAJECTORY_KEYS.items()
+        ]}  # fmt: skip
 
     def checks(self, path: str) -> Iterator[ConfigError]:
         for name in TRAJECTORY_KEYS[self.trajectory]:

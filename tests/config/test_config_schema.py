@@ -151,6 +151,9 @@ BAD_SCENARIOS = [
     ("noise.enabled", "yes", r"^noise\.enabled = 'yes' .*TOML boolean"),
     ("output.channels", ["recieved"], r"^output\.channels = \['recieved'\] .*a list of received"),
     ("waveform.hop", 0.01, r"^waveform\.hop = 0\.01 .*did you mean hop_s\?"),
+    ("targets", [{"trajectory": "radial"}], r"^targets\[0\]\.range_m = None .*a radial"),
+    ("sonar.beam", {"type": "piston"}, r"^sonar\.beam\.radius_m = None .*\(or ka\)"),
+    ("sonar.beam", {"type": "table"}, r"^sonar\.beam\.angles_deg = None .*a list of numbers"),
 ]
 
 
