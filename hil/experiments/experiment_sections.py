@@ -86,15 +86,16 @@ class DevicesSection(Section):
         would fit the other's role."""
         try:
             board = check_device_url(self.board, "daq", "devices.board")
+            stage = check_device_url(self.stage, "stage", "devices.stage")
         except ConfigError as exc:
-            if self._swapped():
-                raise ConfigError(
-                    "devices.board", self.board, "a DAC/ADC URL",
-                    f"devices.board and devices.stage look swapped ({self.board} is a stage,"
-                    f" {self.stage} a DAC/ADC): exchange them",
-                ) from None  # fmt: skip
-            raise exc from None
-        return board, check_device_url(self.stage, "stage", "devices.stage")
+            if not self._swapped():
+                raise
+            hint = f"{exc.hint}; " if exc.hint else ""
+            raise ConfigError(
+                exc.field, exc.value, exc.allowed,
+                hint + "devices.board and devices.stage look swapped: exchange them",
+            ) from None  # fmt: skip
+        return board, stage
 
     def _swapped(self) -> bool:
         try:

@@ -89,17 +89,35 @@ def test_a_pulse_family_is_refused_under_waveform_family_for_gcas() -> None:
 
 
 @pytest.mark.parametrize(
-    ("board", "stage"),
-    [("sim://stage", "sim://board"), ("sim://stage", "sim://audio?blocksize=256")],
+    ("board", "stage", "message"),
+    [
+        (
+            "sim://stage",
+            "sim://board",
+            "devices.board = 'sim://stage' is not allowed: must be a DAC/ADC URL (a board's port"
+            " or transport URL, audio://DEVICE, sim://board or sim://audio); sim://stage is a"
+            " stage; devices.board and devices.stage look swapped: exchange them",
+        ),
+        (
+            "/dev/ttyUSB0",
+            "audio://Scarlett?rate=192000",
+            "devices.stage = 'audio://Scarlett?rate=192000' is not allowed: must be a stage URL"
+            " (a serial port or transport URL, or sim://stage); audio://Scarlett is a DAC/ADC;"
+            " devices.board and devices.stage look swapped: exchange them",
+        ),
+    ],
 )
-def test_board_and_stage_urls_swapped_are_named_as_swapped(board: str, stage: str) -> None:
-    text = _with(
-        'board = "sim://board"\nstage = "sim://stage"', f'board = "{board}"\nstage = "{stage}"'
-    )
-    assert _message(text) == (
-        f"devices.board = {board!r} is not allowed: must be a DAC/ADC URL; devices.board and"
-        f" devices.stage look swapped ({board} is a stage, {stage} a DAC/ADC): exchange them"
-    )
+def test_board_and_stage_urls_swapped_are_named_as_swapped(
+    board: str, stage: str, message: str
+) -> None:
+    old = 'board = "sim://board"\nstage = "sim://stage"'
+    assert _message(_with(old, f'board = "{board}"\nstage = "{stage}"')) == message
+
+
+def test_a_stage_url_as_the_board_alone_is_not_called_swapped() -> None:
+    old = 'board = "sim://board"\nstage = "sim://stage"'
+    message = _message(_with(old, 'board = "sim://stage"\nstage = "sim://stage"'))
+    assert message.endswith("sim://stage is a stage")
 
 
 def test_a_max_duration_shorter_than_the_tow_is_refused() -> None:
