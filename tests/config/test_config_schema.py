@@ -201,3 +201,23 @@ def test_the_editor_recipe_a_schema_line_first_is_a_comment_the_parser_ignores(
         plain.simulation,
         plain.board_url,
     )
+
+
+def test_hil_simulate_prints_every_problem_of_a_scenario_one_per_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    text = (ROOT / "hil" / "data" / "scenarios" / "tank-audio.toml").read_text("utf-8")
+    assert "\nseed = 2\n" in text and "\nimage_order = 1\n" in text
+    path = tmp_path / "bad.toml"
+    bad = text.replace("\nseed = 2\n", "\nseed = -1\n").replace(
+        "image_order = 1", "image_order = 5"
+    )
+    path.write_text(bad, encoding="utf-8")
+    out = tmp_path / "out"
+    assert main(["simulate", str(path), "--out", str(out)]) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        "hil simulate: error: seed = -1 is not allowed: must be an integer >= 0 and <= 4294967295",
+        "hil simulate: error: tank.image_order = 5 is not allowed: must be an integer >= 0 and"
+        " <= 4",
+    ]
+    assert not out.exists()
