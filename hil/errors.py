@@ -38,3 +38,29 @@ class ConfigError(ValueError):
         if hint:
             message += f"; {hint}"
         super().__init__(message)
+
+
+class ConfigErrors(ConfigError):
+    """Every problem of one input (a config file) at once, one line each.
+
+    ``errors`` holds them in the order found; ``field``, ``value``, ``allowed`` and ``hint``
+    are the first one's, so code that handles one :class:`ConfigError` still works.
+
+    Examples
+    --------
+    >>> both = ConfigErrors([ConfigError("tow.speed_mps", -1.0, "> 0 m/s"),
+    ...                      ConfigError("tow.repeats", 0, "an integer >= 1")])
+    >>> print(both)
+    tow.speed_mps = -1.0 is not allowed: must be > 0 m/s
+    tow.repeats = 0 is not allowed: must be an integer >= 1
+    >>> both.field, len(both.errors)
+    ('tow.speed_mps', 2)
+    """
+
+    def __init__(self, errors: list[ConfigError]) -> None:
+        if not errors:
+            raise ValueError("ConfigErrors needs at least one error")
+        first = errors[0]
+        super().__init__(first.field, first.value, first.allowed, first.hint)
+        self.errors: tuple[ConfigError, ...] = tuple(errors)
+        self.args = ("\n".join(str(e) for e in self.errors),)

@@ -2,7 +2,8 @@
 
 - ``firmware_protocol`` imports nothing from ``hil`` or ``sim_devices``.
 - ``sim_devices`` may import ``firmware_protocol`` and the host's pure code
-  (``hil.signals``, ``hil.errors``, ``hil.toml_table``: the one TOML reader), never drivers or
+  (``hil.signals``, ``hil.errors``, ``hil.toml_table``: the one TOML reader, and
+  ``hil.config_sections``: its tables as dataclasses), never drivers or
   anything else of ``hil``.
 - ``hil`` never imports ``sim_devices`` at module level (only inside functions, lazily).
 """
@@ -15,7 +16,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-SIM_ALLOWED_FROM_HIL = ("hil.signals", "hil.errors", "hil.toml_table")
+SIM_ALLOWED_FROM_HIL = ("hil.signals", "hil.errors", "hil.toml_table", "hil.config_sections")
 
 
 def _modules(package: str) -> list[Path]:
