@@ -193,9 +193,9 @@ def _name_option(args: argparse.Namespace, exc: ConfigError) -> ConfigError:
 
 
 #: Commands that SIGTERM and SIGHUP stop as Ctrl-C does from their first instruction (a run
-#: that must end with its stop recorded). The others keep the signals' default action, which
-#: also ends a process stuck inside a C library.
-STOPPED_SAFELY = frozenset({"tank-run"})
+#: that must end with its stop recorded, a sweep that saves where it stands). The others keep
+#: the signals' default action, which also ends a process stuck inside a C library.
+STOPPED_SAFELY = frozenset({"tank-run", "sweep"})
 
 
 def main(argv: Sequence[str] | None = None) -> int:
