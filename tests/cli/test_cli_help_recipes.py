@@ -63,9 +63,7 @@ def test_the_sim_serve_help_recipe_runs_a_tank_run_on_served_devices(tmp_path: P
         text = re.sub(r'(?m)^board = ".*"$', f'board = "{board}"', text, count=1)
         text = re.sub(r'(?m)^stage = ".*"$', f'stage = "{stage}"', text, count=1)
         path.write_text(text)
-        run = subprocess.run(
-            _hil(tank_run) + ["--no-live"], cwd=tmp_path, capture_output=True, text=True
-        )
+        run = subprocess.run(_hil(tank_run), cwd=tmp_path, capture_output=True, text=True)
     finally:
         for p in servers:
             p.send_signal(signal.SIGTERM)
