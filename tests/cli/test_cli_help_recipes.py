@@ -75,3 +75,44 @@ def test_the_sim_serve_help_recipe_runs_a_tank_run_on_served_devices(tmp_path: P
     assert summary["error"] == ""
     # Measured on the DAC monitor input: the served cable's delay (--delay 64).
     assert summary["loopback_latency_samples"] == 64
+
+
+def test_stage_settings_check_passes_the_built_in_experiment(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``hil tank-run --print-default > exp.toml`` then ``hil stage settings --check
+    exp.toml``: the checks of the controller the run drives, every one passed."""
+    from hil.cli.main import main
+
+    monkeypatch.delenv("HIL_STAGE_URL", raising=False)
+    assert main(["tank-run", "--print-default"]) == 0
+    experiment = tmp_path / "exp.toml"
+    experiment.write_text(capsys.readouterr().out)
+    assert main(["stage", "settings", "--check", str(experiment)]) == 0
+    out = capsys.readouterr().out
+    checks = [line for line in out.splitlines() if line.split(" ", 1)[0] in ("ok", "FAIL")]
+    tow = [line for line in checks if " tow." in line]
+    assert len(tow) == 5 and all(line.startswith("ok ") for line in checks)
+    assert "ok      tow.speed_mps = 1.5: must be <= the stage max rate 2.500 m/s ($110)" in tow
+    assert "soft limits of X: [-10, 0] m" in out
+
+
+def test_the_default_simulated_stage_powers_up_idle_and_refuses_homing_as_its_help_says(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from hil.cli import stage
+    from hil.cli.main import main
+
+    monkeypatch.delenv("HIL_STAGE_URL", raising=False)
+    # `hil stage --help` prints the module's docstring.
+    assert "it powers up Idle, moves at once, and ``home`` is refused" in " ".join(
+        (stage.__doc__ or "").split()
+    )
+    assert main(["stage", "status"]) == 0
+    assert capsys.readouterr().out.splitlines()[0] == "state      Idle"
+    assert main(["stage", "home"]) == 2
+    assert (
+        capsys.readouterr()
+        .err.splitlines()[-1]
+        .startswith("hil stage: error: homing_enabled ($22) = False is not allowed: must be True")
+    )
