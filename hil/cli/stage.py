@@ -19,8 +19,8 @@ disabled, ``$22=0``: it powers up Idle, moves at once, and ``home`` is refused).
 ``--check`` of an experiment on simulated devices (``sim://``, as the built-in one of
 ``hil tank-run --print-default``), ``sim://stage`` is the simulated tank's controller that
 the run drives (a 10 m axis at 2.5 m/s, homing enabled). The serial port opens with DTR low,
-so an Arduino GRBL is not reset. Exit status: 0 done, 1 the stage refused or failed (alarm, timeout, a failed check),
-2 bad input.
+so an Arduino GRBL is not reset. Exit status: 0 done, 1 the stage refused or failed (alarm,
+timeout, a failed check), 2 bad input.
 """
 
 from __future__ import annotations
