@@ -166,5 +166,5 @@ def test_without_json_or_csv_the_estimates_are_printed_as_a_table(
         table_row({k: float("nan") if v is None else v for k, v in r.items()}) for r in rows
     ]
     assert lines[-1] == f"{len(rows)} estimates from {recording / 'rx.wav'} (gcas)"
-    t, r, v, snr = (float(x) for x in lines[1].split())
+    _, r, v, _ = (float(x) for x in lines[1].split())
     assert r == pytest.approx(rows[0]["range_m"], abs=5e-4) and v == pytest.approx(V, abs=0.3)
