@@ -155,7 +155,8 @@ def build_parser(load: Sequence[str] | None = None) -> argparse.ArgumentParser:
         description="Continuous active sonar (HFC-CW / GCAS) hardware-in-the-loop testbench. "
         "'hil COMMAND --help' describes a command, its options, defaults and units.",
         epilog="Environment: HIL_CALIBRATION_DIR (calibration store, default ./calibration), "
-        "HIL_RUNS_DIR (where tank runs are written, default ./runs). Documentation: "
+        "HIL_RUNS_DIR (where tank runs and simulations go without --out, default ./runs; "
+        "sweep and reproduce, which --resume, require --out). Documentation: "
         "'hil docs' lists the installed documents, 'hil docs TOPIC' prints one.",
     )
     parser.add_argument("--version", action="version", version=f"hil {__version__}")

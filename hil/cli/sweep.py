@@ -43,7 +43,13 @@ def register(sub: Any) -> None:
         "a local process pool with one worker per core.",
     )
     p.add_argument("sweep_file", type=Path, metavar="SWEEP.toml", help="the sweep file")
-    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
+    p.add_argument(
+        "--out",
+        type=Path,
+        required=True,
+        metavar="DIR",
+        help="output folder (required: it is the work --resume continues)",
+    )
     where = p.add_mutually_exclusive_group()
     where.add_argument(
         "--workers", type=int, metavar="N", help="local pool processes (default: one per core)"
