@@ -95,9 +95,7 @@ def test_simulate_without_out_writes_a_new_timestamped_folder_in_the_runs_folder
     now = dt.datetime(2026, 11, 28, 21, 5, 9)
     first = simulate.new_simulation_folder("my tank.toml", now)
     assert first == tmp_path / "runs" / "simulate-my_tank-20261128-210509"
-    assert simulate.new_simulation_folder("my tank.toml", now) == first.with_name(
-        first.name + "-2"
-    )
+    assert simulate.new_simulation_folder("my tank.toml", now) == first.with_name(first.name + "-2")
     assert main(["simulate", "att", "--duration", "0.1", "--quiet"]) == 0
     made = json.loads(capsys.readouterr().out)["out"]
     assert Path(made).parent == tmp_path / "runs" and Path(made).name.startswith("simulate-att-")
