@@ -181,6 +181,7 @@ def test_ctrl_c_saves_the_finished_trials_ends_the_workers_and_resume_completes(
     _resume_matches_a_clean_run(tmp_path, sweep, out, gate)
 
 
+@pytest.mark.slow
 def test_sigterm_saves_like_ctrl_c(tmp_path: Path) -> None:
     gate, sweep, out = tmp_path / "gate", tmp_path / "sweep.toml", tmp_path / "out"
     _write_sweep(sweep, gate)
@@ -201,6 +202,7 @@ def test_sigterm_saves_like_ctrl_c(tmp_path: Path) -> None:
     _ended(pool, children, proc)
 
 
+@pytest.mark.slow
 def test_kill_9_of_the_command_leaves_no_worker(tmp_path: Path) -> None:
     gate, sweep, out = tmp_path / "gate", tmp_path / "sweep.toml", tmp_path / "out"
     _write_sweep(sweep, gate)

@@ -71,8 +71,10 @@ def test_axes_read_once_each_and_line_up(page: Any) -> None:
         assert (p["x0"], p["x1"]) == (first["x0"], first["x1"])
         assert p["xLabels"] == first["xLabels"]
     assert first["x0"] <= 0.5 and first["x1"] >= 0.5 + 0.01 * (N - 1)
+    assert [e for e in driver.get_log("browser") if e["level"] == "SEVERE"] == []
 
 
+@pytest.mark.slow
 def test_wheel_zooms_every_plot_a_double_click_follows_the_run_again(page: Any) -> None:
     from selenium.webdriver.common.action_chains import ActionChains
     from selenium.webdriver.common.actions.wheel_input import ScrollOrigin
@@ -121,9 +123,3 @@ def test_hover_names_the_estimate_under_the_mouse(page: Any) -> None:
     )
     ActionChains(driver).move_by_offset(0, 400).perform()  # off the plots
     WebDriverWait(driver, WAIT_S).until(lambda d: not tip.is_displayed())
-
-
-def test_the_page_reports_no_script_error(page: Any) -> None:
-    driver, _ = page
-    errors = [e for e in driver.get_log("browser") if e["level"] == "SEVERE"]
-    assert errors == []
