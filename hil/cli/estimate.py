@@ -4,7 +4,9 @@ Example::
 
     hil estimate --schedule x.json --input rx.wav --receiver gcas --M 10 --json
 
-One JSON object per line (``--json``) or CSV (``--csv FILE``, ``-`` for stdout) with at least
+Without ``--json`` or ``--csv``, a table of the estimates (time s, range m, speed m/s, SNR dB)
+as they come, then their count. One JSON object per line (``--json``) or CSV (``--csv FILE``,
+``-`` for stdout) with at least
 ``t_s`` (receive time of the detected hop boundary, s from the start of the input),
 ``range_m``, ``speed_mps`` (closing positive), ``hop_index`` and ``score``, and each estimate's
 Cramér–Rao bounds at its own SNR, ``crlb_range_m`` and ``crlb_speed_mps`` (GCAS with its
@@ -337,11 +339,41 @@ def _json_value(value: Any) -> Any:
     return value
 
 
+#: The table printed without --json or --csv: (header, width, format) per column.
+TABLE_COLUMNS: tuple[tuple[str, str, str], ...] = (
+    ("t (s)", "t_s", "{:10.4f}"),
+    ("range (m)", "range_m", "{:10.3f}"),
+    ("speed (m/s)", "speed_mps", "{:+12.3f}"),
+    ("SNR (dB)", "snr_db", "{:9.1f}"),
+)
+
+
+def table_header() -> str:
+    """The header line of the estimate table (right-aligned over its columns).
+
+    >>> table_header()
+    '     t (s)  range (m)  speed (m/s)  SNR (dB)'
+    """
+    widths = [len(fmt.format(0.0)) for _, _, fmt in TABLE_COLUMNS]
+    return " ".join(h.rjust(w) for (h, _, _), w in zip(TABLE_COLUMNS, widths, strict=True))
+
+
+def table_row(row: dict[str, Any]) -> str:
+    """One estimate (``Estimate.to_dict()``) as a line of the table.
+
+    >>> table_row({"t_s": 0.25, "range_m": 40.0, "speed_mps": 9.0, "snr_db": float("nan")})
+    '    0.2500     40.000       +9.000       nan'
+    """
+    return " ".join(fmt.format(float(row[key])) for _, key, fmt in TABLE_COLUMNS)
+
+
 class _Sink:
-    """Writes estimates as JSON lines and/or CSV as they arrive."""
+    """Writes estimates as they arrive: JSON lines (``--json``), CSV (``--csv``), else a
+    table on stdout (time, range, speed, SNR)."""
 
     def __init__(self, args: argparse.Namespace) -> None:
         self.json = bool(args.json)
+        self.table = not args.json and args.csv is None
         self.count = 0
         self.kept: list[Estimate] = []  # for the per-track lines of the plain listing
         self._keep = not self.json and args.csv is None
@@ -364,10 +396,14 @@ class _Sink:
                 print(json.dumps(finite, allow_nan=False), flush=False)
             if self._writer is not None:
                 self._writer.writerow(row)
+            if self.table:
+                if self.count == 0:
+                    print(table_header())
+                print(table_row(row))
             self.count += 1
         if self._keep:
             self.kept.extend(estimates)
-        if self.json:
+        if self.json or self.table:
             sys.stdout.flush()
 
     def close(self) -> None:

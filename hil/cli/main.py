@@ -157,7 +157,8 @@ def build_parser(load: Sequence[str] | None = None) -> argparse.ArgumentParser:
         description="Continuous active sonar (HFC-CW / GCAS) hardware-in-the-loop testbench. "
         "'hil COMMAND --help' describes a command, its options, defaults and units.",
         epilog="Environment: HIL_CALIBRATION_DIR (calibration store, default ./calibration), "
-        "HIL_RUNS_DIR (where tank runs are written, default ./runs). Documentation: "
+        "HIL_RUNS_DIR (where tank runs and simulations go without --out, default ./runs; "
+        "sweep and reproduce, which --resume, require --out). Documentation: "
         "'hil docs' lists the installed documents, 'hil docs TOPIC' prints one.",
     )
     parser.add_argument("--version", action="version", version=f"hil {__version__}")
@@ -195,9 +196,9 @@ def _name_option(args: argparse.Namespace, exc: ConfigError) -> ConfigError:
 
 
 #: Commands that SIGTERM and SIGHUP stop as Ctrl-C does from their first instruction (a run
-#: that must end with its stop recorded). The others keep the signals' default action, which
-#: also ends a process stuck inside a C library.
-STOPPED_SAFELY = frozenset({"tank-run"})
+#: that must end with its stop recorded, a sweep that saves where it stands). The others keep
+#: the signals' default action, which also ends a process stuck inside a C library.
+STOPPED_SAFELY = frozenset({"tank-run", "sweep"})
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -201,6 +201,12 @@ polling at no more than 5 Hz); use the default 0.2
         self._direction = 1.0
         self._settings: GrblSettings | None = None
         self._original_accel: float | None = None
+        #: Called at every step of every wait for the controller (a few times per 0.1 s, homing
+        #: and moves included); whatever it raises abandons the wait and reaches the caller.
+        #: A run sets it to check its other devices, so that one lost while the stage homes
+        #: or positions stops the run at once, not when the motion ends.
+        self.while_waiting: Callable[[], None] | None = None
+        self._homing = False
 
     # ------------------------------------------------------------------ lifecycle
     def open(self) -> GrblStage:
@@ -363,7 +369,11 @@ polling at no more than 5 Hz); use the default 0.2
         self._require_not_critical()
         # No polling while homing; the timeout covers the longest search of every cycle
         # (GRBL gives up with ALARM:9 before it), with a margin for acceleration.
+        # Until '$H' is answered GRBL may be homing: a wait abandoned meanwhile (a timeout,
+        # while_waiting) leaves the cycle running, which only a soft reset ends (stop()).
+        self._homing = True
         self._command("$H", timeout=self.homing_timeout(), poll=False)
+        self._homing = False
         self._estop_latched = False
         return self.status()
 
@@ -526,12 +536,20 @@ polling at no more than 5 Hz); use the default 0.2
     def stop(self, *, cancel: bool = True) -> StageStatus:
         """Controlled stop: feed hold ``!`` and wait until stopped; with ``cancel`` then drop
         the rest of the move (soft reset from ``Hold:0``: GRBL keeps the position, no alarm).
+        A homing cycle left unanswered (:meth:`home` abandoned) is ended by a soft reset
+        instead, the only way GRBL stops homing (ALARM:6 follows: home again).
         Without ``cancel`` the stage stays held; :meth:`resume` continues. In a critical
         alarm GRBL has halted already and answers nothing: the known status returns at once.
         """
         self._require_open()
         if self.connection.critical:
             return self._known_status()
+        if self._homing:
+            # GRBL ignores a feed hold while it homes; a soft reset ends the cycle (it then
+            # reports ALARM:6, homing reset, and needs homing again).
+            status = self.reset()
+            self._homing = False
+            return status
         self._write_realtime(FEED_HOLD)
         status = self._wait_state(
             lambda s: (
@@ -823,6 +841,8 @@ polling at no more than 5 Hz); use the default 0.2
                 raise StageAlarmError(code, alarm_text(code), self._recovery(code))
             if done():
                 return
+            if self.while_waiting is not None:
+                self.while_waiting()
             now = self._clock.now()
             if now >= deadline:
                 _LOG.debug(

@@ -196,4 +196,29 @@ def test_the_tracks_doc_listing_runs_as_written(
     assert command[0] == "hil"
     monkeypatch.chdir(recording)
     assert main(command[1:]) == 0
-    assert capsys.readouterr().out.splitlines() == expected
+    out = capsys.readouterr().out.splitlines()
+    # "…" in the listing stands for the table's rows, one per estimate.
+    skip = expected.index("…")
+    n_rows = len(out) - len(expected) + 1
+    assert out[:skip] == expected[:skip] and out[skip + n_rows :] == expected[skip + 1 :]
+    assert n_rows == int(expected[skip + 1].split()[0])
+
+
+def test_without_json_or_csv_the_estimates_are_printed_as_a_table(
+    recording: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """As the help says: one line per estimate, time, range, speed and SNR, then the count."""
+    from hil.cli.estimate import table_header, table_row
+
+    base = ["estimate", "--schedule", str(recording / "x.json"), "--input"]
+    assert main([*base, str(recording / "rx.wav"), "--json"]) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert main([*base, str(recording / "rx.wav")]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == "     t (s)  range (m)  speed (m/s)  SNR (dB)" == table_header()
+    assert lines[1 : 1 + len(rows)] == [
+        table_row({k: float("nan") if v is None else v for k, v in r.items()}) for r in rows
+    ]
+    assert lines[1 + len(rows)] == f"{len(rows)} estimates from {recording / 'rx.wav'} (gcas)"
+    _, r, v, _ = (float(x) for x in lines[1].split())
+    assert r == pytest.approx(rows[0]["range_m"], abs=5e-4) and v == pytest.approx(V, abs=0.3)

@@ -39,8 +39,13 @@ class AudioUnavailableError(RuntimeError):
 
 def import_sounddevice() -> ModuleType:
     """Import ``sounddevice``, or raise :class:`AudioUnavailableError` saying what to install."""
+    from hil.devices.audio.c_stderr import held_c_stderr
+
     try:
-        import sounddevice
+        # PortAudio initialises on import; its JACK host API prints libjack's complaints
+        # when no JACK server runs: held back (logged at debug level), not shown.
+        with held_c_stderr("PortAudio initialising"):
+            import sounddevice
     except (ImportError, OSError) as exc:  # OSError: the PortAudio shared library is missing
         raise AudioUnavailableError(f"cannot load sounddevice ({exc}); {PORTAUDIO_HINT}") from exc
     return sounddevice
@@ -61,9 +66,12 @@ def rescan_devices() -> None:
     PortAudio enumerates devices once, when ``sounddevice`` is imported: a JACK server
     started later is invisible until this is called. No stream may be open.
     """
+    from hil.devices.audio.c_stderr import held_c_stderr
+
     sd = import_sounddevice()
-    sd._terminate()
-    sd._initialize()
+    with held_c_stderr("PortAudio initialising"):
+        sd._terminate()
+        sd._initialize()
 
 
 @dataclass(frozen=True)

@@ -23,7 +23,7 @@ from hil.devices.table import SIM_AUDIO, entry_for, is_simulated, open_real_daq
 from hil.errors import ConfigError
 from hil.experiments.experiment import Experiment
 from hil.experiments.live.plan import CheckedTow, StageLimits, check_tow
-from hil.experiments.live.stops import DeviceLostError
+from hil.experiments.live.stops import DeviceLostError, LinkWatch
 from hil.experiments.stage_checks import raise_first_failure, tow_checks
 
 if TYPE_CHECKING:
@@ -92,11 +92,17 @@ class RunDevices:
         stage_target, open_device = self._start_simulation(exp, folder)
         clock = self.clock = self.clock or MonotonicClock()  # one for stage, board and run
         stage = self.stage = GrblStage(stage_target, clock=clock).open()
+        # Every wait of the stage looks at the other devices: one lost while the stage homes
+        # or positions stops the run within a wait step, not when the motion ends.
+        stage.while_waiting = partial(self.raise_if_lost, exp.board_url, None)
         # The controller's settings and the tow against what it reported (its $$), before
         # anything moves: the plan, then the checks `hil stage settings --check` shows.
         tow = check_tow(exp.tow, stage_limits(stage))
         raise_first_failure(tow_checks(exp.tow, stage.settings, stage.limits))
         self.board = open_device(fs, clock)
+        stage.while_waiting = partial(
+            self.raise_if_lost, exp.board_url, LinkWatch(self.board.annotations, clock.now)
+        )
         if self.tank is not None:
             self.tank.align(fs)
         try:
@@ -160,6 +166,29 @@ class RunDevices:
         its exit, when a link to it already failed)."""
         return self.tank.lost(grace_s) if self.tank is not None else None
 
+    def lost(self, board_url: str, board_watch: LinkWatch | None) -> DeviceLostError | None:
+        """A device found lost since the last look: the simulated tank's process first (it
+        serves both simulated devices), then the board's link (``board_watch``, None before
+        the board is open), else None."""
+        lost = self.tank_lost()
+        if lost is not None or board_watch is None:
+            return lost
+        why = board_watch.lost()
+        if why is None:
+            return None
+        return self.tank_lost(LINK_LOST_GRACE_S) or DeviceLostError(
+            "board",
+            board_url,
+            why,
+            "its USB cable and power (and that no other program holds it)",
+        )
+
+    def raise_if_lost(self, board_url: str, board_watch: LinkWatch | None) -> None:
+        """Raise :meth:`lost`'s error, if there is one (the stage's ``while_waiting``)."""
+        lost = self.lost(board_url, board_watch)
+        if lost is not None:
+            raise lost
+
     def stage_lost(self, url: str, exc: BaseException) -> DeviceLostError:
         """The stage stopped answering (``exc``: what its driver raised)."""
         return self.tank_lost(LINK_LOST_GRACE_S) or DeviceLostError(
@@ -177,6 +206,9 @@ class RunDevices:
         trusted to tell whether the queued move is still running.
         """
         board, stage = self.board, self.stage
+        if stage is not None:
+            # The stop must reach the stage whatever else is lost: no look at the others now.
+            stage.while_waiting = None
         if board is not None:
             with contextlib.suppress(Exception):
                 board.stop()

@@ -20,7 +20,7 @@ from hil.acquisition.feed import ReceiverFeed
 from hil.estimation.base import Estimate, Receiver
 from hil.experiments.experiment import Experiment
 from hil.experiments.live.board_state import collect_sync_pairs, sample_zero_time_s
-from hil.experiments.live.devices import LINK_LOST_GRACE_S, RunDevices
+from hil.experiments.live.devices import RunDevices
 from hil.experiments.live.latency import LatencyProbe
 from hil.experiments.live.plan import CheckedTow
 from hil.experiments.live.recorder import RunRecorder
@@ -234,23 +234,8 @@ class LiveSession:
         )
 
     def lost(self) -> DeviceLostError | None:
-        """A device found lost since the last look (the simulated tank's process first: it
-        serves both simulated devices), else None."""
-        lost = self.devices.tank_lost()
-        if lost is not None:
-            return lost
-        why = self.board_watch.lost()
-        if why is None:
-            return None
-        lost = self.devices.tank_lost(LINK_LOST_GRACE_S)
-        if lost is not None:
-            return lost
-        return DeviceLostError(
-            "board",
-            self.exp.board_url,
-            why,
-            "its USB cable and power (and that no other program holds it)",
-        )
+        """A device found lost since the last look (:meth:`RunDevices.lost`), else None."""
+        return self.devices.lost(self.exp.board_url, self.board_watch)
 
     def backlog_s(self) -> float:
         """Most the capture fell behind the board, s of signal."""
