@@ -78,7 +78,7 @@ def test_plain_listing_counts_and_lists_the_tracks(
     rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
     on0 = [r for r in rows if r["track_id"] == 0]
     assert main(base) == 0
-    lines = capsys.readouterr().out.splitlines()
+    lines = capsys.readouterr().out.splitlines()[1 + len(rows) :]  # after the table
     assert lines[0] == f"{len(rows)} estimates from {recording / 'rx.wav'} (gcas)"
     assert lines[1].startswith(
         f"track 0: {len(rows) - 2} estimates, t {on0[0]['t_s']:.3f}–{on0[-1]['t_s']:.3f} s, "
