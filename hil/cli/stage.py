@@ -162,14 +162,14 @@ def resolve_url(args: argparse.Namespace) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Open the stage, run the action, close; 1 if the stage refused or failed."""
-    from hil.devices.grbl import GrblStage
+    from hil.devices.table import open_stage
 
     url = resolve_url(args)
     options = dict(STAGE_OPTIONS)
     options.setdefault("response_timeout", args.timeout)
     name = f"hil stage {args.action}"
     try:
-        with GrblStage(url, **options) as stage:
+        with open_stage(url, field="--url", **options) as stage:
             opened = len(stage.messages)
             result: StageStatus | int = args.do(stage, args)
             if isinstance(result, int):

@@ -468,10 +468,9 @@ class SimulatedTankProcess:
 
     def open_daq(self, fs: float) -> StreamingDevice:
         """The simulated board on its pty, open and configured at ``fs`` Hz; its watchdog
-        is long (:data:`~hil.experiments.live.devices.SIM_WATCHDOG_MS`): the tank is a
+        is long (:data:`~hil.devices.table.SIM_WATCHDOG_MS`): the tank is a
         child process on the same CPUs, scaled in time."""
-        from hil.devices.table import open_board
-        from hil.experiments.live.devices import SIM_WATCHDOG_MS
+        from hil.devices.table import SIM_WATCHDOG_MS, open_board
 
         board = open_board(self.board_target, fs, self.clock, SIM_WATCHDOG_MS)
         board.configure()
