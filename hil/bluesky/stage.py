@@ -341,5 +341,6 @@ class GrblStageDevice(StandardReadable, StandardMovable[float]):
         if not self._opened:
             raise StageError(
                 f"{self.name or 'the stage'} ({self.url}) is not connected: await"
-                " device.connect() (or use ophyd_async.core.init_devices) first"
+                " device.connect() (or use ophyd_async.core.init_devices) first",
+                url=self.url,
             )

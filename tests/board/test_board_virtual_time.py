@@ -10,7 +10,7 @@ import threading
 import numpy as np
 import pytest
 
-from firmware_protocol import TransportClosedError, TransportTimeoutError
+from hil.errors import TransportClosedError, TransportTimeoutError
 from hil.acquisition import AnnotationKind
 from hil.devices.board import Board
 from hil.devices.board_settings import BoardSettings

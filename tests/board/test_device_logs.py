@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from firmware_protocol import TransportTimeoutError
+from hil.errors import TransportTimeoutError
 from hil.devices.board import Board
 from hil.devices.board_settings import BoardSettings
 from hil.devices.clock import VirtualClock

@@ -10,12 +10,11 @@ exactly that (:meth:`RunDevices.safe_stop`).
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
-from firmware_protocol.errors import TransportError
 from hil.acquisition.device import StreamingDevice
 from hil.devices.stage_errors import StageTimeoutError
 from hil.devices.table import (
@@ -27,7 +26,7 @@ from hil.devices.table import (
     open_stage,
 )
 from hil.devices.table import SIM_WATCHDOG_MS as SIM_WATCHDOG_MS  # re-exported
-from hil.errors import ConfigError
+from hil.errors import ConfigError, TransportError
 from hil.experiments.experiment import Experiment
 from hil.experiments.live.plan import CheckedTow, StageLimits, check_tow
 from hil.experiments.live.stops import DeviceLostError
@@ -45,6 +44,8 @@ class StatusLine(Protocol):
     def update(self, text: str, *, force: bool = False) -> None: ...
 
 
+#: What a stage's link failing raises: its port (OSError), its byte link, GRBL not answering.
+STAGE_LINK_FAILURES = (OSError, TransportError, StageTimeoutError)
 #: How long (s) a failed link waits for the simulated tank's process to be reaped before
 #: the link itself is blamed: a killed process hangs up its ptys a moment before it exits.
 LINK_LOST_GRACE_S = 2.0
@@ -85,13 +86,11 @@ class RunDevices:
         self.board = open_device(fs, clock)
         if self.tank is not None:
             self.tank.align(fs)
-        try:
+        with self.stage_link(exp.stage_url):
             # Out of any alarm: reset a critical one, then home ($22=1) or unlock ($22=0).
             stage.make_ready(lambda step: view.update(f"stage: {step}", force=True))
             view.update("stage: positioning for the first pass", force=True)
             stage.move_to(tow.ready_m, stage.settings.max_rate)
-        except (OSError, TransportError, StageTimeoutError) as exc:
-            raise self.stage_lost(exp.stage_url, exc) from exc
         return tow
 
     def _start_simulation(
@@ -154,6 +153,16 @@ class RunDevices:
         """The simulated tank, if it ended under the run (``grace_s``: seconds to wait for
         its exit, when a link to it already failed)."""
         return self.tank.lost(grace_s) if self.tank is not None else None
+
+    @contextlib.contextmanager
+    def stage_link(self, url: str) -> Iterator[None]:
+        """Inside, a failure of the stage's link (the port's OSError, a transport error, no
+        answer in time) is raised as the stage lost (:meth:`stage_lost`); a refusal (an
+        alarm, ``error:N``) is the stage answering and passes as it is."""
+        try:
+            yield
+        except STAGE_LINK_FAILURES as exc:
+            raise self.stage_lost(url, exc) from exc
 
     def stage_lost(self, url: str, exc: BaseException) -> DeviceLostError:
         """The stage stopped answering (``exc``: what its driver raised)."""
