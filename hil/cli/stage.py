@@ -33,7 +33,7 @@ from typing import Any
 from hil.devices.grbl_codes import alarm_text
 from hil.devices.stage import StageState, StageStatus
 from hil.devices.stage_errors import StageError
-from hil.transports.base import TransportError
+from hil.errors import TransportError, device_url
 
 EXIT_OK = 0
 EXIT_STAGE_FAILED = 1
@@ -179,7 +179,7 @@ def run(args: argparse.Namespace) -> int:
             _print_status(stage, result, args, messages)
             return EXIT_OK
     except (StageError, TransportError) as exc:
-        print(f"{name}: {url}: {exc}", file=sys.stderr)
+        print(f"{name}: {device_url(exc, url)}", file=sys.stderr)  # the URL once
         return EXIT_STAGE_FAILED
 
 
