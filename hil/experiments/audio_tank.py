@@ -53,20 +53,6 @@ if TYPE_CHECKING:
 SERVICE_TICK_S = 0.001
 
 
-class _PacedClock:
-    """The scaled tank clock as the simulated interface's time source (``now``,
-    ``sleep_until``), s."""
-
-    def __init__(self, clock: ScaledClock) -> None:
-        self._clock = clock
-
-    def now(self) -> float:
-        return self._clock.now()
-
-    def sleep_until(self, t_s: float) -> None:
-        self._clock.sleep(t_s - self._clock.now())
-
-
 class _TankInPlace:
     """The tank world (``world(dac_block, first) -> adc``, shapes (n, 1) -> (n, 2)) as the
     simulated interface's world (``world(output, index, input)``, input filled in place)."""
@@ -141,7 +127,7 @@ class AudioTank:
         if self.virtual_time is not None:
             backend = SimulatedDuplex(settings, world, virtual_time=self.virtual_time)
         else:
-            backend = SimulatedDuplex(settings, world, clock=_PacedClock(self._scaled))
+            backend = SimulatedDuplex(settings, world, clock=self._scaled)
         self._backend = backend
         daq = AudioDaq(
             backend,

@@ -24,6 +24,7 @@ from urllib.parse import parse_qs, urlsplit
 
 import numpy as np
 
+from hil.devices.clock import SleepUntil
 from hil.errors import ConfigError
 from hil.experiments.experiment import Experiment
 
@@ -42,7 +43,7 @@ STAGE_TRAVEL_MM = 10_000.0
 CONVERTER_DELAY_SAMPLES = 64
 
 
-class ScaledClock:
+class ScaledClock(SleepUntil):
     """Seconds that run at ``scale`` times the wall clock (:func:`time.monotonic`), counted
     from the monotonic instant ``wall0`` (default: now). ``time.monotonic`` is system-wide on
     Linux, so two processes given the same ``wall0`` and ``scale`` share one clock."""
