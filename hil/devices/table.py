@@ -256,17 +256,9 @@ def open_audio_interface(
     it runs in a simulated world (the calibration bench or the built-in tank)."""
     from hil.devices.audio.daq import parse_audio_url
     from hil.devices.audio.portaudio_backend import SoundDeviceDuplex
-    from hil.devices.audio.settings import AudioSettings
 
     url = audio_interface_url(device, field)
     if is_simulated(url):
         raise ConfigError(field, device, "a real audio interface", "sim://audio is simulated")
-    spec = parse_audio_url(url)
-    settings = AudioSettings(
-        samplerate=samplerate,
-        channels_in=channels_in,
-        blocksize=blocksize,
-        latency=spec.latency,
-        device=spec.device,
-    )
+    settings = parse_audio_url(url).settings(samplerate, channels_in, 1, blocksize)
     return SoundDeviceDuplex(settings)

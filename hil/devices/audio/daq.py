@@ -114,6 +114,24 @@ class AudioUrl:
         """True for ``sim://audio``."""
         return self.device == SIM_DEVICE
 
+    def settings(
+        self,
+        samplerate: float,
+        channels_in: int = CHANNELS,
+        channels_out: int = CHANNELS,
+        blocksize: int | None = None,
+    ) -> AudioSettings:
+        """The stream this URL asks for at ``samplerate`` Hz with these channel counts;
+        ``blocksize`` frames (default the URL's)."""
+        return AudioSettings(
+            samplerate=samplerate,
+            channels_in=channels_in,
+            channels_out=channels_out,
+            blocksize=self.blocksize if blocksize is None else blocksize,
+            latency=self.latency,
+            device=None if self.simulated else self.device,
+        )
+
 
 def canonical_audio_url(url: str) -> str:
     """``url`` with the simulated interface spelled ``sim://audio``: the former spelling
@@ -219,15 +237,7 @@ def audio_settings(url: str, sample_rate_hz: int | None) -> tuple[AudioUrl, Audi
             f"the waveform's rate {sample_rate_hz} Hz",
             "the interface runs the waveform's sample rate: change one to match",
         )
-    settings = AudioSettings(
-        samplerate=rate,
-        channels_in=CHANNELS,
-        channels_out=CHANNELS,
-        blocksize=spec.blocksize,
-        latency=spec.latency,
-        device=None if spec.simulated else spec.device,
-    )
-    return spec, settings
+    return spec, spec.settings(rate)
 
 
 @dataclass(frozen=True)
