@@ -2,7 +2,8 @@
 the simulated audio interface on virtual time (fast tier), the C reference firmware in the
 board's place in real time (slow; needs ``cc`` and ``make``). Each run starts, streams,
 tracks the towed target, stops when its tow is done, records what was connected, and
-replays to the same estimates; stopped by its caller, it stops safely and says so.
+replays to the same estimates; stopped by its caller, it stops safely and says so; its
+board lost mid-run, it stops and names it.
 
 Thresholds are those the device's own tests hold (test_tank_run_virtual,
 test_tank_run_audio, test_board_c_firmware_tank): the C firmware runs in real time against
@@ -13,9 +14,12 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
+import signal
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -148,3 +152,63 @@ def test_a_run_stopped_by_its_caller_stops_safely_and_says_so(
     with RunRecording.open(folder / "run.h5") as rec:
         assert rec.events()[-1].text == "stop: interrupted (stopped by the caller)"
         assert len(rec.estimates()) >= 5
+
+
+#: The DAC/ADCs a fault can take away mid-run. Not yet the simulated audio interface: it has
+#: no unplug fault to inject (a real interface unplugged ends its PortAudio stream).
+LOSABLE = [p for p in PARAMS if p.values[0] != "audio-interface"]
+
+
+@pytest.mark.parametrize("name", LOSABLE)
+def test_a_board_lost_mid_run_stops_the_run_naming_it(
+    name: str,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    require_system: Callable[[bool, str], None],
+) -> None:
+    """On virtual time the board's link is unplugged (its fault plan); in real time the
+    simulated tank's process, which holds the C firmware, is killed. Either after the 30th
+    estimate, mid-pass; the run stops and names what it lost."""
+    from hil.experiments import sim_tank, virtual_tank
+
+    device = DEVICES[name]
+    _require(device, require_system)
+    tanks: list[Any] = []
+    kind = virtual_tank.VirtualTank if device.virtual_time else sim_tank.SimulatedTankProcess
+    original = kind.__init__
+
+    def keep(self: Any, *args: Any, **kwargs: Any) -> None:
+        original(self, *args, **kwargs)
+        tanks.append(self)
+
+    monkeypatch.setattr(kind, "__init__", keep)
+    seen: list[Estimate] = []
+
+    def lose_after_30(estimates: list[Estimate]) -> None:
+        if len(seen) < 30 <= len(seen) + len(estimates):
+            if device.virtual_time:
+                tanks[0].board_faults.disconnect()
+            else:
+                os.kill(tanks[0].pid, signal.SIGKILL)
+        seen.extend(estimates)
+
+    outcome = run_experiment(
+        parse_experiment(device.experiment()),
+        folder=tmp_path / "run",
+        view=LiveView(enabled=False),
+        on_estimates=lose_after_30,
+        virtual_time=device.virtual_time,
+    )
+    if device.virtual_time:
+        assert outcome.error.startswith(
+            f"DeviceLostError: board {device.board} lost: its link dropped"
+        )
+    else:
+        assert outcome.error == (
+            f"DeviceLostError: the built-in simulated tank (process {tanks[0].pid}) lost: its"
+            " process exited with code -9; check that nothing killed it (its errors are"
+            " printed above)"
+        )
+    assert len(seen) >= 30 and not outcome.interrupted
+    with RunRecording.open(outcome.folder / "run.h5") as rec:
+        assert rec.events()[-1].text == f"stop: error: {outcome.error}"
