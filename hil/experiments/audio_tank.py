@@ -134,6 +134,7 @@ class AudioTank:
             ring_seconds=RING_S,
             host_clock=self.clock.now,
             virtual_time=self.virtual_time,
+            url=self.exp.board_url,
         )
         self.daq = daq.open()
         daq.configure()
@@ -176,6 +177,12 @@ class AudioTank:
     def adc_clipped_samples(self) -> int | None:
         """Input values the simulated interface clipped at ±1.0 (None before it opened)."""
         return None if self._backend is None else self._backend.adc_clipped_samples
+
+    def unplug_interface(self) -> None:
+        """Fault injection: the simulated interface pulled out mid-run (its stream ends)."""
+        if self._backend is None:
+            raise RuntimeError("the simulated interface is not open: call open_daq first")
+        self._backend.unplug()
 
     def lost(self, grace_s: float = 0.0) -> DeviceLostError | None:
         """Never: the simulation is this process."""

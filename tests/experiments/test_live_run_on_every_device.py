@@ -154,27 +154,26 @@ def test_a_run_stopped_by_its_caller_stops_safely_and_says_so(
         assert len(rec.estimates()) >= 5
 
 
-#: The DAC/ADCs a fault can take away mid-run. Not yet the simulated audio interface: it has
-#: no unplug fault to inject (a real interface unplugged ends its PortAudio stream).
-LOSABLE = [p for p in PARAMS if p.values[0] != "audio-interface"]
-
-
-@pytest.mark.parametrize("name", LOSABLE)
+@pytest.mark.parametrize("name", PARAMS)
 def test_a_board_lost_mid_run_stops_the_run_naming_it(
     name: str,
     tmp_path: Path,
     monkeypatch: pytest.MonkeyPatch,
     require_system: Callable[[bool, str], None],
 ) -> None:
-    """On virtual time the board's link is unplugged (its fault plan); in real time the
-    simulated tank's process, which holds the C firmware, is killed. Either after the 30th
-    estimate, mid-pass; the run stops and names what it lost."""
-    from hil.experiments import sim_tank, virtual_tank
+    """The Python board's link unplugged (its fault plan), the audio interface pulled out,
+    the simulated tank's process that holds the C firmware killed: each after the 30th
+    estimate, mid-pass. The run stops and names what it lost."""
+    from hil.experiments import audio_tank, sim_tank, virtual_tank
 
     device = DEVICES[name]
     _require(device, require_system)
     tanks: list[Any] = []
-    kind = virtual_tank.VirtualTank if device.virtual_time else sim_tank.SimulatedTankProcess
+    kind = {
+        "python-board": virtual_tank.VirtualTank,
+        "audio-interface": audio_tank.AudioTank,
+        "c-firmware": sim_tank.SimulatedTankProcess,
+    }[name]
     original = kind.__init__
 
     def keep(self: Any, *args: Any, **kwargs: Any) -> None:
@@ -186,8 +185,10 @@ def test_a_board_lost_mid_run_stops_the_run_naming_it(
 
     def lose_after_30(estimates: list[Estimate]) -> None:
         if len(seen) < 30 <= len(seen) + len(estimates):
-            if device.virtual_time:
+            if name == "python-board":
                 tanks[0].board_faults.disconnect()
+            elif name == "audio-interface":
+                tanks[0].unplug_interface()
             else:
                 os.kill(tanks[0].pid, signal.SIGKILL)
         seen.extend(estimates)
@@ -199,9 +200,16 @@ def test_a_board_lost_mid_run_stops_the_run_naming_it(
         on_estimates=lose_after_30,
         virtual_time=device.virtual_time,
     )
-    if device.virtual_time:
+    if name == "python-board":
         assert outcome.error.startswith(
             f"DeviceLostError: board {device.board} lost: its link dropped"
+        )
+    elif name == "audio-interface":
+        assert outcome.error.startswith(
+            f"AudioStreamLost: {device.board}: the audio stream ended at sample "
+        )
+        assert outcome.error.endswith(
+            ": check the interface's cable and power, and that no other program took it"
         )
     else:
         assert outcome.error == (

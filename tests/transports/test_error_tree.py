@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import pytest
 
+from hil.devices.audio.daq import AudioStreamLost
 from hil.devices.audio.jack_ports import JackToolError
 from hil.devices.audio.portaudio_backend import AudioUnavailableError
 from hil.devices.board import Board, BoardCommandError, BoardError
@@ -52,6 +53,7 @@ from sim_devices.stage import GrblSimConfig, ManualClock
         (StageTimeoutError, DeviceTimedOut),
         (TransportClosedError, DeviceLost),
         (DeviceLostError, DeviceLost),
+        (AudioStreamLost, DeviceLost),
     ],
 )
 def test_each_device_error_is_one_of_four_kinds(

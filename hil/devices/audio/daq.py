@@ -65,7 +65,7 @@ from hil.acquisition.clock_fit import SampleClockFit
 from hil.acquisition.ring import SampleRing
 from hil.devices.audio.contract import BlockTime, DuplexBackend, FloatArray, StatusFlags
 from hil.devices.audio.settings import AudioSettings
-from hil.errors import ConfigError
+from hil.errors import ConfigError, DeviceLost
 
 if TYPE_CHECKING:
     from hil.devices.clock import VirtualClock
@@ -91,6 +91,11 @@ _URL_FORM = (
     "audio://DEVICE?rate=192000&blocksize=256 (DEVICE: an index or a name substring) or "
     "sim://audio?rate=192000 (the simulated interface)"
 )
+
+
+class AudioStreamLost(DeviceLost, RuntimeError):
+    """The interface's stream ended while the run still needed samples (unplugged, powered
+    off, taken by another program); the message names its URL."""
 
 
 @dataclass(frozen=True)
@@ -294,6 +299,7 @@ class AudioDaq:
         host_clock: Callable[[], float] = time.monotonic,
         sync_interval_s: float = 0.1,
         virtual_time: VirtualClock | None = None,
+        url: str = "audio interface",
     ) -> None:
         for name, n in (
             ("channels_in", backend.channels_in),
@@ -311,6 +317,8 @@ class AudioDaq:
         if not (math.isfinite(sync_interval_s) and sync_interval_s >= 0):
             raise ConfigError("sync_interval_s", sync_interval_s, ">= 0 s")
         self.backend = backend
+        #: The interface's URL, as its errors name it.
+        self.url = url
         self._virtual = virtual_time
         fs = backend.samplerate
         self.fs_hz = float(fs)
@@ -372,7 +380,7 @@ class AudioDaq:
             from hil.devices.audio.portaudio_backend import SoundDeviceDuplex
 
             backend = SoundDeviceDuplex(settings)
-        return cls(backend, ring_seconds=ring_seconds, host_clock=host_clock)
+        return cls(backend, ring_seconds=ring_seconds, host_clock=host_clock, url=url)
 
     # --- the Board API the runner uses ---
     def open(self) -> AudioDaq:
@@ -405,7 +413,8 @@ class AudioDaq:
         """True once every sample before index ``end`` is captured, False after ``timeout_s``.
 
         Raises the exception that ended the stream (e.g. one from the source), or
-        RuntimeError if the stream ended before ``end``.
+        :class:`AudioStreamLost` if the stream ended before ``end`` (the interface went
+        away).
         """
         if self.ring is None:
             raise RuntimeError("start() the audio DAQ before waiting for samples")
@@ -424,8 +433,10 @@ class AudioDaq:
             self.backend.wait(0.0)  # re-raises what stopped the stream, if anything did
             if self.ring.wait_for(end, 0.0):
                 return True
-            raise RuntimeError(
-                f"the audio stream ended at sample {self.ring.end_index}, before {end}"
+            raise AudioStreamLost(
+                f"the audio stream ended at sample {self.ring.end_index}, before {end}: check"
+                " the interface's cable and power, and that no other program took it",
+                url=self.url,
             )
         return False
 

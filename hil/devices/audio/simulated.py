@@ -229,6 +229,7 @@ class SimulatedDuplex(SettingsView):
         self._stop = threading.Event()
         #: Captured values the simulated converter clipped at ±1.0 full scale.
         self.adc_clipped_samples = 0
+        self._unplugged = False
 
     @property
     def active(self) -> bool:
@@ -312,6 +313,11 @@ class SimulatedDuplex(SettingsView):
         """Stop and release the stream. Re-raises a callback exception not yet raised."""
         self.stop()
 
+    def unplug(self) -> None:
+        """Fault injection: the interface is pulled out; its stream ends before the next
+        block, with no error from the callback (as a stream ends whose device vanished)."""
+        self._unplugged = True
+
     def __enter__(self) -> SimulatedDuplex:
         return self
 
@@ -347,6 +353,8 @@ class SimulatedDuplex(SettingsView):
         the stream ends (the callback completed or aborted, or raised)."""
         runner = self._runner
         assert runner is not None
+        if self._unplugged:
+            return False
         fs = self.samplerate
         block = self.blocksize
         delay = self.io_delay_samples
