@@ -3,6 +3,8 @@ whether it is simulated, its canonical spelling, and each refusal with its messa
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from hil.devices.clock import MonotonicClock
@@ -173,3 +175,24 @@ def test_a_real_interface_opens_with_the_settings_asked_for() -> None:
     assert (s.device, s.samplerate, s.channels_in, s.channels_out, s.blocksize, s.latency) == (
         "Scarlett 2i2", 96000.0, 2, 1, 512, "low"
     )  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["stage", "status", "--url", "sim://audio"],
+         "hil stage: error: --url = 'sim://audio' is not allowed: must be a stage URL (a serial"
+         " port or transport URL, or sim://stage); sim://audio is a DAC/ADC"),
+        (["calibrate", "latency", "--device", "sim://board"],
+         "hil calibrate: error: --device = 'sim://board' is not allowed: must be an audio"
+         " interface name, index, audio://DEVICE or sim://audio"),
+    ],
+)  # fmt: skip
+def test_the_commands_refuse_a_device_of_the_wrong_kind_through_the_table(
+    argv: list[str], message: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from hil.cli.main import main
+
+    store = ["--store", str(tmp_path)] if argv[0] == "calibrate" else []
+    assert main([*argv, *store]) == 2
+    assert capsys.readouterr().err.strip().splitlines()[-1].startswith(message)
