@@ -36,7 +36,7 @@ from typing import Any
 from hil.devices.grbl_codes import alarm_text
 from hil.devices.stage import StageState, StageStatus
 from hil.devices.stage_errors import StageError
-from hil.transports.base import TransportError
+from hil.errors import TransportError, device_url
 
 EXIT_OK = 0
 EXIT_STAGE_FAILED = 1
@@ -179,7 +179,7 @@ def checked_tank_stage(args: argparse.Namespace, url: str) -> bool:
 
 def run(args: argparse.Namespace) -> int:
     """Open the stage, run the action, close; 1 if the stage refused or failed."""
-    from hil.devices.grbl import GrblStage
+    from hil.devices.table import open_stage
 
     url = resolve_url(args)
     options = dict(STAGE_OPTIONS)
@@ -192,7 +192,7 @@ def run(args: argparse.Namespace) -> int:
         options["transport_options"] = transport
     name = f"hil stage {args.action}"
     try:
-        with GrblStage(url, **options) as stage:
+        with open_stage(url, field="--url", **options) as stage:
             opened = len(stage.messages)
             result: StageStatus | int = args.do(stage, args)
             if isinstance(result, int):
@@ -202,7 +202,7 @@ def run(args: argparse.Namespace) -> int:
             _print_status(stage, result, args, messages)
             return EXIT_OK
     except (StageError, TransportError) as exc:
-        print(f"{name}: {url}: {exc}", file=sys.stderr)
+        print(f"{name}: {device_url(exc, url)}", file=sys.stderr)  # the URL once
         return EXIT_STAGE_FAILED
 
 

@@ -28,6 +28,7 @@ import numpy as np
 import firmware_protocol
 from firmware_protocol import SampleFormat
 from firmware_protocol.conversations import BOARD
+from hil.errors import DeviceUnavailable
 
 FIRMWARE_DIR = Path(firmware_protocol.__file__).with_name("c")
 """The C sources and their Makefile."""
@@ -38,7 +39,7 @@ PTY_SERVER = BUILD_DIR / "casfw-pty"
 _build_lock = threading.Lock()
 
 
-class CFirmwareUnavailable(RuntimeError):
+class CFirmwareUnavailable(DeviceUnavailable, RuntimeError):
     """The C firmware cannot be built here (no compiler or make, or the build failed)."""
 
 

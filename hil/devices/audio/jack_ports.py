@@ -12,10 +12,12 @@ import re
 import shutil
 import subprocess
 
+from hil.errors import DeviceUnavailable
+
 PORT_PATTERN = re.compile(r"^(?P<client>PortAudio[^:]*):(?P<kind>in|out)_(?P<index>\d+)$")
 
 
-class JackToolError(RuntimeError):
+class JackToolError(DeviceUnavailable, RuntimeError):
     """A JACK command-line tool is missing or failed."""
 
 

@@ -25,7 +25,7 @@ from hil.devices.audio.contract import (
     check_callback,
 )
 from hil.devices.audio.settings import AudioSettings, SettingsView
-from hil.errors import ConfigError
+from hil.errors import ConfigError, DeviceUnavailable
 
 PORTAUDIO_HINT = (
     "install the PortAudio library (Debian/Ubuntu: apt-get install libportaudio2) "
@@ -33,7 +33,7 @@ PORTAUDIO_HINT = (
 )
 
 
-class AudioUnavailableError(RuntimeError):
+class AudioUnavailableError(DeviceUnavailable, RuntimeError):
     """python-sounddevice or the system PortAudio library cannot be loaded."""
 
 

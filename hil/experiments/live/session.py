@@ -14,7 +14,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import partial
 
-from firmware_protocol.errors import TransportError
 from hil.acquisition.capture import CapturedBlock, CaptureLoop
 from hil.acquisition.feed import ReceiverFeed
 from hil.estimation.base import Estimate, Receiver
@@ -181,10 +180,8 @@ class LiveSession:
 
     def _poll_stage(self) -> None:
         """One stage report: into the telemetry and the recording, then to the tow."""
-        from hil.devices.stage_errors import StageTimeoutError
-
         stage, board = self.stage, self.board
-        try:
+        with self.devices.stage_link(self.exp.stage_url):
             st = stage.status()
             fit = board.clock_fit
             idx = int(fit.sample_index(st.host_time)) if fit is not None and fit.pairs >= 2 else -1
@@ -201,8 +198,6 @@ class LiveSession:
                 )
             )
             self.tow.on_report(st, self.now(), capturing=self.recorder.open_)
-        except (OSError, TransportError, StageTimeoutError) as exc:
-            raise self.devices.stage_lost(self.exp.stage_url, exc) from exc
 
     def _tail_captured(self) -> bool:
         """Every pass done and the capture past its tail, on captured samples, not the
