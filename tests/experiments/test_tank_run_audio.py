@@ -162,3 +162,34 @@ def test_the_simulated_audio_interface_is_not_mixed_with_a_real_stage(tmp_path: 
     text = AUDIO.replace('stage = "sim://stage"', 'stage = "serial:///dev/ttyUSB0"')
     with pytest.raises(ConfigError, match=r"both simulated \(sim://\) or both real"):
         _open_run(tmp_path, text)
+
+
+def test_the_audio_interface_hears_the_tanks_own_echoes_as_the_board_does() -> None:
+    """sim://audio's world (the tank world behind the interface's in-place adapter) holds
+    the tank's own echoes and tail of the built-in file, sample for sample as the board's."""
+    import numpy as np
+
+    from hil.experiments.audio_tank import AudioTank, _TankInPlace
+    from hil.experiments.sim_tank import build_tank_world
+
+    def parked(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return np.full(t.shape, -2.0), np.zeros(t.shape)
+
+    audio_exp, board_exp = parse_experiment(AUDIO), parse_experiment(SHORT)
+    assert audio_exp.simulation.tank_echoes and audio_exp.simulation.late_tail
+    tank = AudioTank(audio_exp, virtual=True)
+    own = tank._world.channel._tank
+    assert own is not None and own.h.size > 0.05 * audio_exp.waveform.fs_hz  # the tail too
+    audio = _TankInPlace(build_tank_world(audio_exp, parked))
+    board = build_tank_world(board_exp, parked)
+    quiet_exp = parse_experiment(AUDIO.replace("tank_echoes = true", "tank_echoes = false"))
+    quiet = _TankInPlace(build_tank_world(quiet_exp, parked))
+    dac = np.zeros((4096, 1))
+    heard, without = np.empty((4096, 2)), np.empty((4096, 2))
+    for first in (0, 4096):
+        audio(dac, first, heard)
+        np.testing.assert_array_equal(heard, board(dac, first))
+        quiet(dac, first, without)
+    # the own echoes are most of what the hydrophone hears (the wall behind the transducer)
+    own_part = heard[:, 0] - without[:, 0]
+    assert np.sum(own_part**2) > np.sum(without[:, 0] ** 2)
