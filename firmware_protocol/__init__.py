@@ -21,9 +21,6 @@ from firmware_protocol.errors import (
     ProtocolError,
     RefusedFrame,
     RemoteProtocolError,
-    TransportClosedError,
-    TransportError,
-    TransportTimeoutError,
 )
 from firmware_protocol.events import (
     NEED_DATA,
@@ -105,9 +102,6 @@ __all__ = [
     "Status",
     "Stop",
     "Sync",
-    "TransportClosedError",
-    "TransportError",
-    "TransportTimeoutError",
     "UnknownMessage",
     "Version",
     "channel_count",
@@ -115,3 +109,13 @@ __all__ = [
     "pack_samples",
     "unpack_samples",
 ]
+
+
+def __getattr__(name: str) -> object:
+    """The transport errors that moved to :mod:`hil.errors` (see
+    :mod:`firmware_protocol.errors`)."""
+    from firmware_protocol import errors
+
+    if name in errors.MOVED_TO_HOST:
+        return getattr(errors, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

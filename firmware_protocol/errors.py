@@ -6,14 +6,19 @@
   content breaks the protocol (a message illegal in the current state, a field out of range,
   an incompatible version). Line noise is *not* an error: the reader resyncs and emits a
   :class:`~firmware_protocol.events.FrameError` event instead.
-- :class:`TransportError`: the base of every I/O error raised by drivers that move the bytes
-  (serial ports, USB, sockets, pseudo-terminals). This package does no I/O and never raises
-  it; it is defined here so that drivers and simulated devices share one tree.
+
+This package does no I/O: the errors of the links that move the bytes (``TransportError``
+and its kinds) belong to the host, in :mod:`hil.errors`. Their old names here still resolve,
+with a DeprecationWarning, for code written when they were defined in this module.
 """
 
 from __future__ import annotations
 
+import warnings
 from typing import Any
+
+#: Names that moved to :mod:`hil.errors` (the I/O side).
+MOVED_TO_HOST = ("TransportError", "TransportTimeoutError", "TransportClosedError")
 
 
 class ProtocolError(Exception):
@@ -90,13 +95,15 @@ class IncompatiblePeerError(RemoteProtocolError):
         self.peer_schema = peer_schema
 
 
-class TransportError(Exception):
-    """Base class of I/O errors raised by drivers (port gone, read timeout, link closed)."""
+def __getattr__(name: str) -> Any:
+    """The moved transport errors, from the host package (see the module docstring)."""
+    if name not in MOVED_TO_HOST:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    warnings.warn(
+        f"firmware_protocol.{name} moved to hil.errors.{name}: import it from there",
+        DeprecationWarning,
+        stacklevel=2,
+    )
+    from hil import errors  # the one allowed host import: these names live there now
 
-
-class TransportTimeoutError(TransportError):
-    """No byte arrived within the driver's timeout."""
-
-
-class TransportClosedError(TransportError):
-    """The link was closed (port unplugged, socket reset, pty closed)."""
+    return getattr(errors, name)

@@ -3,7 +3,7 @@
 Signals (HFC-CW and comparison waveforms), estimators (GCAS and baselines), device drivers,
 acquisition, experiments and the ``hil`` command line. The host never imports
 :mod:`sim_devices` at module level: simulated devices are reached lazily through the
-transport URL registry (``sim://...``) and the evaluation engine.
+device table (:mod:`hil.devices.table`, ``sim://...``) and the evaluation engine.
 
 The main entry points are attributes of the package, imported on first use (PEP 562), so
 ``import hil`` stays as fast as the ``hil`` command's start::
@@ -53,11 +53,14 @@ _EXPORTS: dict[str, str] = {
     "time_codeword_map_figure": "hil.experiments.codeword_map",
     # devices, calibration, data
     "open_transport": "hil.transports.registry",
+    "open_stage": "hil.devices.table",
     "discover": "hil.devices.discovery",
     "CalibrationStore": "hil.experiments.calibration.store",
     "scenario_path": "hil.data",
     "sweeps_dir": "hil.data",
     "ConfigError": "hil.errors",
+    "HilError": "hil.errors",
+    "DeviceError": "hil.errors",
     "main": "hil.cli.main",
 }
 """Public name -> the module defining it."""

@@ -126,6 +126,9 @@ typedef struct {
     int in_underrun;
     int in_overrun; /* the last ADC_DATA frame was lost: a run of lost indices goes on */
     uint32_t dac_underruns, adc_overruns;
+    /* ADC values clipped at conversion since power-up (every channel): the count behind the
+     * latched ADC_CLIPPING alarm; not on the wire (STATUS carries the alarm bit only). */
+    uint32_t adc_clipped_samples;
     uint16_t latched;
     /* watchdog and periodic messages */
     int wd_armed;

@@ -275,6 +275,7 @@ static void put_adc_sample(casfw_board *b, uint8_t *p, double v) {
     if (r != r) r = 0.0; /* NaN from a FLOAT32 DAC stream: silence */
     if (r > scale - 1.0 || r < -scale) {
         b->latched |= ALARM_ADC_CLIPPING;
+        b->adc_clipped_samples++;
         r = r > 0 ? scale - 1.0 : -scale;
     }
     int32_t count = (int32_t)r;
@@ -700,6 +701,7 @@ void casfw_init(casfw_board *b, const casfw_config *cfg, const casfw_hal *hal) {
     b->last_now = 0;
     b->base_ns = now(b);
     b->dac_underruns = b->adc_overruns = 0;
+    b->adc_clipped_samples = 0;
     b->in_overrun = 0;
     b->frame_errors = b->frames_ok = 0;
     b->tx_len = 0;

@@ -1,10 +1,11 @@
 """The GRBL tow stage as an ophyd-async movable: :class:`GrblStageDevice`.
 
 It follows ophyd-async's movable conventions (:class:`ophyd_async.core.StandardMovable`)
-over the driver :class:`~hil.devices.grbl.GrblStage` (opened by URL through the transport
-registry: ``sim://stage``, ``serial:///dev/ttyUSB0``, ...). The driver blocks (it waits on its
-clock for GRBL's answers), so every driver call runs on one worker thread of the device, in
-order; the event loop stays free. Units are SI: position m, speed m/s.
+over the driver :class:`~hil.devices.grbl.GrblStage` (opened by URL through the device
+table, :mod:`hil.devices.table`: ``sim://stage``, ``serial:///dev/ttyUSB0``, ...). The
+driver blocks (it waits on its clock for GRBL's answers), so every driver call runs on one
+worker thread of the device, in order; the event loop stays free.
+Units are SI: position m, speed m/s.
 
 - ``connect()`` opens the port and reads GRBL's settings and status; :meth:`close` closes it.
   ``connect(mock=True)`` opens nothing: a ``set`` arrives at once (ophyd-async's instant
@@ -58,6 +59,7 @@ from hil.devices.grbl import GrblStage
 from hil.devices.grbl_protocol import FEED_HOLD
 from hil.devices.stage import StageStatus
 from hil.devices.stage_errors import StageError, StageHeldError, StageLimitError
+from hil.devices.table import open_stage
 
 #: Wall seconds between readback refreshes while a move runs (a display rate, not a poll:
 #: the driver polls GRBL at its own <= 5 Hz and the device republishes its last report).
@@ -126,7 +128,7 @@ class GrblStageDevice(StandardReadable, StandardMovable[float]):
     Parameters
     ----------
     url:
-        Transport URL of the controller (:mod:`hil.transports.registry`), e.g.
+        Stage URL of the controller (:mod:`hil.devices.table`), e.g.
         ``"sim://stage"``, ``"sim://stage?via=memory"``, ``"/dev/ttyUSB0"``.
     clock:
         The driver's clock (default the wall clock); a simulated clock runs moves in
@@ -151,8 +153,12 @@ class GrblStageDevice(StandardReadable, StandardMovable[float]):
     ) -> None:
         self.url = url
         self._soft_limits = soft_limits
-        self._driver = GrblStage(
-            url, clock=clock, soft_limits=soft_limits, transport_options=transport_options
+        self._driver = open_stage(
+            url,
+            field="url",
+            clock=clock,
+            soft_limits=soft_limits,
+            transport_options=transport_options,
         )
         self._opened = False
         self._mock_mode = False
@@ -335,5 +341,6 @@ class GrblStageDevice(StandardReadable, StandardMovable[float]):
         if not self._opened:
             raise StageError(
                 f"{self.name or 'the stage'} ({self.url}) is not connected: await"
-                " device.connect() (or use ophyd_async.core.init_devices) first"
+                " device.connect() (or use ophyd_async.core.init_devices) first",
+                url=self.url,
             )

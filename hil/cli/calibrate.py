@@ -112,7 +112,8 @@ def _common(p: argparse.ArgumentParser, audio: bool = True) -> None:
     if audio:
         p.add_argument(
             "--device", default=None,
-            help=f"audio device name or {SIM_DEVICE} (default: a simulated world)",
+            help=f"audio interface name, index or audio:// URL, or {SIM_DEVICE} (default: a "
+            "simulated world)",
         )  # fmt: skip
         p.add_argument("--samplerate", type=float, default=None,
                        help="Hz (default: the device's; simulated bench 48000)")  # fmt: skip
@@ -248,18 +249,20 @@ def _runs_simulated(args: argparse.Namespace) -> bool:
 
 
 def _simulated(args: argparse.Namespace) -> bool:
-    return args.device in (None, SIM_DEVICE)
+    from hil.devices.table import is_simulated
+
+    return args.device is None or is_simulated(args.device)
 
 
 def _audio_device(args: argparse.Namespace, channels_in: int = 1) -> PlayRecordDevice:
-    """The real audio interface named by ``--device``."""
-    from hil.devices.audio import AudioSettings, SoundDeviceDuplex
+    """The real audio interface named by ``--device`` (the device table opens it)."""
+    from hil.devices.table import open_audio_interface
 
-    settings = AudioSettings(
-        samplerate=args.samplerate or 48000.0, channels_in=channels_in,
-        blocksize=args.blocksize, device=args.device,
+    duplex = open_audio_interface(
+        args.device, samplerate=args.samplerate or 48000.0, channels_in=channels_in,
+        blocksize=args.blocksize,
     )  # fmt: skip
-    return from_duplex(SoundDeviceDuplex(settings), name=str(args.device))
+    return from_duplex(duplex, name=str(args.device))
 
 
 def _channel_kwargs(args: argparse.Namespace) -> dict[str, Any]:
@@ -334,14 +337,14 @@ def _tank(
         return
     if args.stage is None or not args.stage.strip():
         raise ConfigError("--stage", args.stage, "a GRBL serial URL when --device is given")
-    from hil.devices.grbl import GrblStage
+    from hil.devices.table import open_stage
 
     latency = args.latency
     if latency is None:
         record = store.current("latency")
         latency = 0 if record is None else record.result.latency_samples
     device = _audio_device(args)
-    with GrblStage(args.stage) as grbl:
+    with open_stage(args.stage, field="--stage") as grbl:
         # As hil tank-run does: out of any alarm (reset, then $H or $X) before moving.
         grbl.make_ready(lambda step: print(f"stage: {step}", flush=True))
         yield (
@@ -411,9 +414,10 @@ def _stage(
 def run(args: argparse.Namespace) -> int:
     """Run the chosen calibration, print it and store it."""
     if getattr(args, "device", None) is not None:
-        from hil.devices.audio.daq import canonical_audio_url
+        from hil.devices.table import audio_interface_url
 
-        args.device = canonical_audio_url(args.device)  # audio://sim: read as sim://audio
+        # One spelling: a bare name reads as audio://NAME, audio://sim as sim://audio.
+        args.device = audio_interface_url(args.device, "--device")
     blocksize = getattr(args, "blocksize", None)
     if blocksize is not None and blocksize < 1:
         raise ConfigError("--blocksize", blocksize, "an integer >= 1 frames", "e.g. 256")

@@ -4,13 +4,17 @@ Example::
 
     hil estimate --schedule x.json --input rx.wav --receiver gcas --M 10 --json
 
-One JSON object per line (``--json``) or CSV (``--csv FILE``, ``-`` for stdout) with at least
+Without ``--json`` or ``--csv``, a table of the estimates (time s, range m, speed m/s, SNR dB)
+as they come, then their count. One JSON object per line (``--json``) or CSV (``--csv FILE``,
+``-`` for stdout) with at least
 ``t_s`` (receive time of the detected hop boundary, s from the start of the input),
 ``range_m``, ``speed_mps`` (closing positive), ``hop_index`` and ``score``, and each estimate's
 Cramér–Rao bounds at its own SNR, ``crlb_range_m`` and ``crlb_speed_mps`` (GCAS with its
 default refinement; null in JSON, empty in CSV, where a receiver does not measure them:
-``--option refine=false``). ``--map PNG`` draws the time–codeword map (receivers that keep
-one: GCAS).
+``--option refine=false``), and ``track_id``, the confirmed track of the estimate (−1 for
+none; :mod:`hil.estimation.tracking`, set with ``--option track_confirm_hits=4`` and the
+other ``track_*`` settings). Without ``--json``/``--csv`` it prints the count and one line
+per track. ``--map PNG`` draws the time–codeword map (receivers that keep one: GCAS).
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ from numpy.typing import NDArray
 from hil.errors import ConfigError
 from hil.estimation.base import ESTIMATE_FIELDS, Estimate
 from hil.estimation.registry import RECEIVERS
+from hil.estimation.track_summary import track_figures, track_lines
 from hil.recording.records import ReceiverSetup
 from hil.recording.replay import build_receiver
 from hil.signals.schedule_file import read_schedule_file
@@ -323,6 +328,7 @@ def run(args: argparse.Namespace) -> int:
         collector.draw(args.map)
     if not args.json and args.csv is None:
         print(f"{sink.count} estimates from {args.input} ({args.receiver})")
+        print("\n".join(track_lines(track_figures(sink.kept))))
     return 0
 
 
@@ -333,12 +339,44 @@ def _json_value(value: Any) -> Any:
     return value
 
 
+#: The table printed without --json or --csv: (header, width, format) per column.
+TABLE_COLUMNS: tuple[tuple[str, str, str], ...] = (
+    ("t (s)", "t_s", "{:10.4f}"),
+    ("range (m)", "range_m", "{:10.3f}"),
+    ("speed (m/s)", "speed_mps", "{:+12.3f}"),
+    ("SNR (dB)", "snr_db", "{:9.1f}"),
+)
+
+
+def table_header() -> str:
+    """The header line of the estimate table (right-aligned over its columns).
+
+    >>> table_header()
+    '     t (s)  range (m)  speed (m/s)  SNR (dB)'
+    """
+    widths = [len(fmt.format(0.0)) for _, _, fmt in TABLE_COLUMNS]
+    return " ".join(h.rjust(w) for (h, _, _), w in zip(TABLE_COLUMNS, widths, strict=True))
+
+
+def table_row(row: dict[str, Any]) -> str:
+    """One estimate (``Estimate.to_dict()``) as a line of the table.
+
+    >>> table_row({"t_s": 0.25, "range_m": 40.0, "speed_mps": 9.0, "snr_db": float("nan")})
+    '    0.2500     40.000       +9.000       nan'
+    """
+    return " ".join(fmt.format(float(row[key])) for _, key, fmt in TABLE_COLUMNS)
+
+
 class _Sink:
-    """Writes estimates as JSON lines and/or CSV as they arrive."""
+    """Writes estimates as they arrive: JSON lines (``--json``), CSV (``--csv``), else a
+    table on stdout (time, range, speed, SNR)."""
 
     def __init__(self, args: argparse.Namespace) -> None:
         self.json = bool(args.json)
+        self.table = not args.json and args.csv is None
         self.count = 0
+        self.kept: list[Estimate] = []  # for the per-track lines of the plain listing
+        self._keep = not self.json and args.csv is None
         self._csv_file: TextIO | None = None
         self._writer: Any = None
         if args.csv is not None:
@@ -358,8 +396,14 @@ class _Sink:
                 print(json.dumps(finite, allow_nan=False), flush=False)
             if self._writer is not None:
                 self._writer.writerow(row)
+            if self.table:
+                if self.count == 0:
+                    print(table_header())
+                print(table_row(row))
             self.count += 1
-        if self.json:
+        if self._keep:
+            self.kept.extend(estimates)
+        if self.json or self.table:
             sys.stdout.flush()
 
     def close(self) -> None:

@@ -2,7 +2,8 @@
 
 Every sub-command module exposes ``register(subparsers)`` which adds its parser and sets
 ``func`` to a callable taking the parsed namespace and returning an exit status. Invalid input
-(a :class:`~hil.errors.ConfigError`, a missing file) prints one line to stderr and exits with
+(a :class:`~hil.errors.ConfigError`, a missing file) prints one line to stderr (one per
+problem for a :class:`~hil.errors.ConfigErrors`) and exits with
 status 2, never a traceback; argparse's own usage errors exit with 2 as well. A failure to
 read or write while working (a full disk) prints one line and exits with status 1.
 """
@@ -17,7 +18,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from hil import __version__
-from hil.errors import ConfigError
+from hil.errors import ConfigError, ConfigErrors
 
 EXIT_OK = 0
 EXIT_IO = 1
@@ -78,6 +79,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "live view of a run recording in the browser (range, speed, alarms)",
     ),
     "docs": ("hil.cli.docs", "print the installed documentation (hil docs lists the topics)"),
+    "schema": ("hil.cli.schema", "print the JSON Schema of a config file (for editor completion)"),
 }
 """Sub-command name -> (module with ``register``, one-line summary for ``hil --help``).
 
@@ -155,7 +157,8 @@ def build_parser(load: Sequence[str] | None = None) -> argparse.ArgumentParser:
         description="Continuous active sonar (HFC-CW / GCAS) hardware-in-the-loop testbench. "
         "'hil COMMAND --help' describes a command, its options, defaults and units.",
         epilog="Environment: HIL_CALIBRATION_DIR (calibration store, default ./calibration), "
-        "HIL_RUNS_DIR (where tank runs are written, default ./runs). Documentation: "
+        "HIL_RUNS_DIR (where tank runs and simulations go without --out, default ./runs; "
+        "sweep and reproduce, which --resume, require --out). Documentation: "
         "'hil docs' lists the installed documents, 'hil docs TOPIC' prints one.",
     )
     parser.add_argument("--version", action="version", version=f"hil {__version__}")
@@ -193,9 +196,9 @@ def _name_option(args: argparse.Namespace, exc: ConfigError) -> ConfigError:
 
 
 #: Commands that SIGTERM and SIGHUP stop as Ctrl-C does from their first instruction (a run
-#: that must end with its stop recorded). The others keep the signals' default action, which
-#: also ends a process stuck inside a C library.
-STOPPED_SAFELY = frozenset({"tank-run"})
+#: that must end with its stop recorded, a sweep that saves where it stands). The others keep
+#: the signals' default action, which also ends a process stuck inside a C library.
+STOPPED_SAFELY = frozenset({"tank-run", "sweep"})
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -231,7 +234,9 @@ def _main(argv: Sequence[str] | None) -> int:
         configure_logging(args.log_level, args.log_file)
         status: int = args.func(args)
     except ConfigError as exc:
-        print(f"hil {args.command}: error: {_name_option(args, exc)}", file=sys.stderr)
+        # Every problem of an input at once (a config file's), one line each.
+        for one in exc.errors if isinstance(exc, ConfigErrors) else (exc,):
+            print(f"hil {args.command}: error: {_name_option(args, one)}", file=sys.stderr)
         return EXIT_USAGE
     except BrokenPipeError:
         # Output piped into a command that stopped reading (e.g. `| head`): not an error.

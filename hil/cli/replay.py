@@ -11,6 +11,8 @@ Output as ``hil estimate``: one JSON object per line (``--json``) or CSV (``--cs
 says whether the replayed estimates equal the recorded live ones (on stderr when the
 estimates go to stdout); exit status 1 when they differ. A recording whose writer was killed
 holds the live estimates up to its last flush: equal as far as they go is not a difference.
+Each estimate carries its ``track_id`` as live; a recording made before track ids were kept
+(all −1) is compared without them.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from typing import Any
 
 from hil.cli.estimate import _parse_option, _Sink, check_option_kinds, check_outputs
 from hil.estimation.registry import RECEIVERS
+from hil.estimation.track_summary import track_figures, track_lines
 from hil.recording import RunRecording, compare_estimates, replay
 from hil.recording.reader import probe_structure
 
@@ -77,6 +80,7 @@ def run(args: argparse.Namespace) -> int:
             check_option_kinds(overrides, dict(live.settings))
         estimates = replay(rec, args.receiver, channel=args.channel, **overrides)
         recorded = rec.estimates(live.name) if live is not None else []
+        track_ids = rec.has_track_ids
     sink = _Sink(args)
     try:
         sink.emit(estimates)
@@ -88,9 +92,10 @@ def run(args: argparse.Namespace) -> int:
     )
     if to_stdout:
         print(f"{len(estimates)} estimates from {args.run} ({name})")
+        print("\n".join(track_lines(track_figures(estimates))))
     same_as_live = live is not None and args.receiver in (None, live.name)
     if same_as_live and not overrides and args.channel is None:
-        agreement, text = compare_estimates(recorded, estimates)
+        agreement, text = compare_estimates(recorded, estimates, track_ids=track_ids)
         verdict = {"equal": "replay equals live", "prefix": "replay matches live"}
         print(f"{verdict.get(agreement, 'replay DIFFERS from live')}: {text}", file=report)
         if agreement == "differ":

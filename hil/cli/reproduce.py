@@ -35,7 +35,13 @@ def register(sub: Any) -> None:
         "hil docs results), then write PNG figures, CSV tables and DIR/report.md. Items: "
         + ", ".join(ITEM_IDS),
     )
-    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
+    p.add_argument(
+        "--out",
+        type=Path,
+        required=True,
+        metavar="DIR",
+        help="output folder (required: it is the work --resume continues)",
+    )
     p.add_argument(
         "--quick", action="store_true", help="reduced grids and trial counts (a few minutes)"
     )

@@ -2,10 +2,11 @@
 
 Prints the pty path on the first line of stdout (open it like a serial port), then serves in
 real time until Ctrl-C (or SIGTERM). The board is a loopback cable (``--delay`` samples,
-``--gain``) behind the Python simulated board, or with ``--impl c`` behind the C reference
-firmware of ``firmware_protocol/c`` (built with ``cc`` and ``make`` if needed); the stage is
-the simulated GRBL 1.1h controller with stock settings
-(``docs/simulated-grbl.md``).
+``--gain``; the DAC monitor input tapped too) behind the Python simulated board, or with
+``--impl c`` behind the C reference firmware of ``firmware_protocol/c`` (built with ``cc``
+and ``make`` if needed); the stage is
+the simulated GRBL 1.1h controller with stock settings, or the simulated tank's with
+``--tank`` (``docs/simulated-grbl.md``).
 """
 
 from __future__ import annotations
@@ -24,26 +25,31 @@ printed alone on the first line of stdout; open it like a serial port (115200 ba
 in real time until Ctrl-C or SIGTERM.
 
   board  the transducer board (firmware_protocol/SPEC.md) wired as a loopback cable:
-         DAC out -> ADC in after --delay samples, times --gain
-  stage  the simulated GRBL 1.1 controller (homing, jogging, status reports)
+         DAC out -> ADC in 1 after --delay samples, times --gain, and -> ADC in 2 (the
+         DAC monitor a tank run measures its loopback latency on) after the same delay
+  stage  the simulated GRBL 1.1 controller (homing, jogging, status reports): stock
+         settings (a 200 mm axis at 500 mm/min), or with --tank the built-in simulated
+         tank's (a 10 m axis at 2.5 m/s, homing on, powered up in alarm)
 
 Point a tank run at them: start both, each in its own terminal,
 
   $ hil sim-serve board --delay 64      # prints e.g. /dev/pts/5
-  $ hil sim-serve stage                 # prints e.g. /dev/pts/6
+  $ hil sim-serve stage --tank          # prints e.g. /dev/pts/6
 
-then put the printed paths in the experiment file and run it:
+then write the built-in experiment to a file, put the printed paths in it and run it:
+
+  $ hil tank-run --print-default > my-experiment.toml
 
   [devices]
   board = "/dev/pts/5"
   stage = "/dev/pts/6"
 
-  $ hil tank-run my-experiment.toml
+  $ hil tank-run my-experiment.toml --out runs/served
 
 The run treats them as real devices: no simulated tank (the ADC hears the loopback, not an
-echo), and the rules of real runs apply (calibrations measured on the simulated bench are
-refused). For a run with the simulated tank in between, use devices sim://board and
-sim://stage (the default of 'hil tank-run')."""
+echo: expect no detection), and the rules of real runs apply (calibrations measured on the
+simulated bench are refused). For a run with the simulated tank in between, use devices
+sim://board and sim://stage (the default of 'hil tank-run')."""
 
 
 def register(subparsers: Any) -> None:
@@ -59,6 +65,11 @@ def register(subparsers: Any) -> None:
     )
     parser.add_argument(
         "--gain", type=float, default=1.0, help="board loopback gain, linear (default 1)"
+    )
+    parser.add_argument(
+        "--tank",
+        action="store_true",
+        help="stage: the simulated tank's controller settings instead of stock GRBL's",
     )
     parser.add_argument(
         "--impl",
@@ -103,12 +114,18 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
 
         if args.delay < 0:
             raise ConfigError("--delay", args.delay, ">= 0 samples")
-        with SimulatedBoardOnPty(world=LoopbackWorld(args.delay, args.gain)) as board:
+        world = LoopbackWorld(args.delay, args.gain, monitor=True)
+        with SimulatedBoardOnPty(world=world) as board:
             _serve(board.port_name, stop)
     else:
         from sim_devices.stage import SimulatedGrblOnPty
 
-        with SimulatedGrblOnPty() as stage:
+        config = None
+        if args.tank:
+            from hil.experiments.sim_tank import tank_stage_config
+
+            config = tank_stage_config()
+        with SimulatedGrblOnPty(config) as stage:
             _serve(stage.port_name, stop)
     print(f"hil sim-serve {args.device}: stopped", file=sys.stderr)
     return 0

@@ -3,7 +3,7 @@
 Example::
 
     hil simulate att --out runs/att/          # a shipped example scenario
-    hil simulate my-tank.toml --out runs/mine/
+    hil simulate my-tank.toml                 # into runs/simulate-my-tank-YYYYmmdd-HHMMSS/
 
 Writes into ``--out``: ``received.wav`` (float32, one channel per ``[output].channels``
 entry), ``schedule.json`` (the transmit schedule, ``hil.signals.schedule_file`` format),
@@ -15,10 +15,12 @@ entry), ``schedule.json`` (the transmit schedule, ``hil.signals.schedule_file`` 
 from __future__ import annotations
 
 import argparse
+import datetime as dt
 import json
+import re
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 import numpy as np
 
@@ -42,14 +44,19 @@ def register(sub: Any) -> None:
     p.add_argument(
         "--out",
         type=Path,
-        required=True,
         metavar="DIR",
-        help="output folder, new or empty (an earlier simulation is never overwritten)",
+        help="output folder, new or empty (an earlier simulation is never overwritten); "
+        "default: a new folder simulate-NAME-YYYYmmdd-HHMMSS in the runs folder "
+        "($HIL_RUNS_DIR, else ./runs)",
     )
     p.add_argument(
         "--duration", type=float, help="override duration_s, s (default: the scenario's)"
     )
-    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    p.add_argument(
+        "--quiet",
+        action="store_true",
+        help="no progress on stderr (on a terminal a redrawn percentage, else a line per 10 %%)",
+    )
     p.set_defaults(func=run)
 
 
@@ -73,11 +80,77 @@ def run(args: argparse.Namespace) -> int:
         if not (np.isfinite(args.duration) and args.duration > 0):
             raise ConfigError("--duration", args.duration, "> 0 s")
         sc.duration_s = float(args.duration)
+    if args.out is None:
+        args.out = new_simulation_folder(args.scenario, dt.datetime.now())
     claim_output_folder(args.out, "--out", holds="a simulation")
     try:
         return _write_simulation(args, sc)
     finally:
         release_output_folder(args.out)
+
+
+def new_simulation_folder(scenario: str, now: dt.datetime) -> Path:
+    """A new, empty folder ``simulate-NAME-YYYYmmdd-HHMMSS`` (``-2``, ``-3``, ... when one of
+    that second exists) in the runs folder (:func:`hil.paths.resolve_runs_dir`); ``NAME`` is
+    the scenario file's stem, or the shipped example's name."""
+    from hil.outputs import writable_folder
+    from hil.paths import RUNS_ENV, resolve_runs_dir
+
+    runs = writable_folder(resolve_runs_dir(), f"the runs folder (${RUNS_ENV}, else ./runs)")
+    name = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(scenario).stem) or "scenario"
+    stem = f"simulate-{name}-{now:%Y%m%d-%H%M%S}"
+    for k in range(1, 1000):
+        folder = runs / (stem if k == 1 else f"{stem}-{k}")
+        try:
+            folder.mkdir()
+        except FileExistsError:
+            continue
+        return folder
+    raise ConfigError(
+        "--out", None, "given: 1000 simulations of this scenario started this second", "name one"
+    )
+
+
+class PercentProgress:
+    """Progress of a simulation on ``stream``: on a terminal one percentage redrawn in place
+    (``\r``), else (a log file, a pipe) one line per 10 % step, so a log holds no control
+    characters and a few lines, not thousands.
+
+    >>> import io
+    >>> out = io.StringIO()
+    >>> p = PercentProgress(out, tty=False)
+    >>> for done in (5, 10, 55, 100):
+    ...     p.update(done, 100)
+    >>> p.close()
+    >>> print(out.getvalue(), end="")
+    simulate:  10 %
+    simulate:  50 %
+    simulate: 100 %
+    """
+
+    def __init__(self, stream: TextIO, tty: bool | None = None) -> None:
+        self.stream = stream
+        self.tty = stream.isatty() if tty is None else tty
+        self._step = 0  # the last 10 % step printed
+
+    def update(self, done: int, total: int) -> None:
+        """``done`` of ``total`` samples written."""
+        percent = 100.0 * done / total
+        if self.tty:
+            self.stream.write(f"\rsimulate: {percent:5.1f} %")
+            self.stream.flush()
+            return
+        step = int(percent // 10)
+        if step > self._step:
+            self._step = step
+            self.stream.write(f"simulate: {10 * step:3d} %\n")
+            self.stream.flush()
+
+    def close(self) -> None:
+        """End the redrawn line (on a terminal)."""
+        if self.tty:
+            self.stream.write("\n")
+            self.stream.flush()
 
 
 def _write_simulation(args: argparse.Namespace, sc: Any) -> int:
@@ -93,6 +166,7 @@ def _write_simulation(args: argparse.Namespace, sc: Any) -> int:
     wav_path = args.out / "received.wav"
     keep_for_plot = min(n_total, int(sc.fs_hz * 2.0))
     first = np.zeros(0)
+    progress = None if args.quiet else PercentProgress(sys.stderr)
     with _FloatWav(wav_path, int(round(sc.fs_hz)), len(sc.output_channels), n_total) as wav:
         done = 0
         while done < n_total:
@@ -105,10 +179,10 @@ def _write_simulation(args: argparse.Namespace, sc: Any) -> int:
             if first.size < keep_for_plot:
                 first = np.concatenate([first, parts["received"][: keep_for_plot - first.size]])
             done += count
-            if not args.quiet:
-                print(f"\rsimulate: {100.0 * done / n_total:5.1f} %", end="", file=sys.stderr)
-    if not args.quiet:
-        print(file=sys.stderr)
+            if progress is not None:
+                progress.update(done, n_total)
+    if progress is not None:
+        progress.close()
     if channel.clipped_samples:
         # Never silent: the ADC clipped (received.wav holds the clipped samples).
         print(

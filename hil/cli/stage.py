@@ -3,7 +3,7 @@
 Examples::
 
     hil stage status --url serial:///dev/ttyUSB0        # state, position, alarm, switches
-    hil stage home                                      # $H (HIL_STAGE_URL or sim://stage)
+    hil stage home                                      # $H (on HIL_STAGE_URL; needs $22=1)
     hil stage unlock                                    # $X
     hil stage jog -0.01 --speed 0.005                   # 10 mm towards -X at 5 mm/s
     hil stage move -0.2                                 # to machine X = -0.2 m
@@ -14,10 +14,13 @@ Positions are machine coordinates of the X axis in metres (GRBL's MPos: 0 at the
 switch, negative inwards), speeds m/s, accelerations m/s^2. ``--url`` is any transport URL
 (``serial:///dev/ttyUSB0?dtr=0``, a device path, ``spy://serial://...?file=log``);
 without it, ``$HIL_STAGE_URL``, else the stage of ``--check``'s experiment, else
-``sim://stage``: a simulated GRBL 1.1 started for the command (powers up locked, like a
-machine with homing enabled). The serial port opens with DTR low, so an Arduino GRBL is not
-reset. Exit status: 0 done, 1 the stage refused or failed (alarm, timeout, a failed check),
-2 bad input.
+``sim://stage``: a simulated GRBL 1.1 started for the command with stock settings (homing
+disabled, ``$22=0``: it powers up Idle, moves at once, and ``home`` is refused). With
+``--check`` of an experiment on simulated devices (``sim://``, as the built-in one of
+``hil tank-run --print-default``), ``sim://stage`` is the simulated tank's controller that
+the run drives (a 10 m axis at 2.5 m/s, homing enabled). The serial port opens with DTR low,
+so an Arduino GRBL is not reset. Exit status: 0 done, 1 the stage refused or failed (alarm,
+timeout, a failed check), 2 bad input.
 """
 
 from __future__ import annotations
@@ -33,7 +36,7 @@ from typing import Any
 from hil.devices.grbl_codes import alarm_text
 from hil.devices.stage import StageState, StageStatus
 from hil.devices.stage_errors import StageError
-from hil.transports.base import TransportError
+from hil.errors import TransportError, device_url
 
 EXIT_OK = 0
 EXIT_STAGE_FAILED = 1
@@ -160,16 +163,36 @@ def resolve_url(args: argparse.Namespace) -> str:
     return DEFAULT_URL
 
 
+def checked_tank_stage(args: argparse.Namespace, url: str) -> bool:
+    """Whether ``url`` is the simulated stage of the simulated experiment given to
+    ``--check``: then it is the simulated tank's controller, the one ``hil tank-run``
+    drives (the stock simulated GRBL would fail every check of the tow)."""
+    if not args.check or not url.startswith(DEFAULT_URL):
+        return False
+    from pathlib import Path
+
+    from hil.experiments.experiment import load_experiment
+
+    exp = load_experiment(Path(args.check))
+    return exp.simulated and exp.stage_url == url
+
+
 def run(args: argparse.Namespace) -> int:
     """Open the stage, run the action, close; 1 if the stage refused or failed."""
-    from hil.devices.grbl import GrblStage
+    from hil.devices.table import open_stage
 
     url = resolve_url(args)
     options = dict(STAGE_OPTIONS)
     options.setdefault("response_timeout", args.timeout)
+    if checked_tank_stage(args, url):
+        from hil.experiments.sim_tank import tank_stage_config
+
+        transport = dict(options.get("transport_options") or {})
+        transport.setdefault("config", tank_stage_config())
+        options["transport_options"] = transport
     name = f"hil stage {args.action}"
     try:
-        with GrblStage(url, **options) as stage:
+        with open_stage(url, field="--url", **options) as stage:
             opened = len(stage.messages)
             result: StageStatus | int = args.do(stage, args)
             if isinstance(result, int):
@@ -179,7 +202,7 @@ def run(args: argparse.Namespace) -> int:
             _print_status(stage, result, args, messages)
             return EXIT_OK
     except (StageError, TransportError) as exc:
-        print(f"{name}: {url}: {exc}", file=sys.stderr)
+        print(f"{name}: {device_url(exc, url)}", file=sys.stderr)  # the URL once
         return EXIT_STAGE_FAILED
 
 

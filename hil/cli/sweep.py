@@ -8,7 +8,9 @@ Example::
 
 Writes ``manifest.json``, ``results.jsonl`` and ``summary.csv`` in ``--out`` (docs/sweeps.md)
 and prints a summary. Exit status 0 when every trial succeeded, 1 when some failed (their
-errors are in results.jsonl), 2 for a bad sweep file or option, 130 when interrupted.
+errors are in results.jsonl), 2 for a bad sweep file or option, 130 when interrupted (Ctrl-C,
+SIGTERM or SIGHUP: the finished trials are saved and ``--resume`` continues from them; the
+pool's workers end with the command, even when it is killed with ``kill -9``).
 """
 
 from __future__ import annotations
@@ -20,9 +22,12 @@ from pathlib import Path
 from typing import Any
 
 from hil.evaluation.aggregate import STATS
-from hil.evaluation.engine import SweepOutcome, run_sweep
+from hil.evaluation.engine import SweepInterrupted, SweepOutcome, run_sweep
 from hil.evaluation.runners import make_runner
 from hil.evaluation.sweep_file import load_sweep_file
+
+#: Exit status after Ctrl-C or a stop signal (as for every hil command).
+EXIT_INTERRUPTED = 130
 
 # Numeric fields shown in the printed table (all of them are in summary.csv).
 _SHOWN_FIELDS = 4
@@ -38,7 +43,13 @@ def register(sub: Any) -> None:
         "a local process pool with one worker per core.",
     )
     p.add_argument("sweep_file", type=Path, metavar="SWEEP.toml", help="the sweep file")
-    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
+    p.add_argument(
+        "--out",
+        type=Path,
+        required=True,
+        metavar="DIR",
+        help="output folder (required: it is the work --resume continues)",
+    )
     where = p.add_mutually_exclusive_group()
     where.add_argument(
         "--workers", type=int, metavar="N", help="local pool processes (default: one per core)"
@@ -72,13 +83,24 @@ def run(args: argparse.Namespace) -> int:
         scheduler=args.scheduler,
         serial=args.serial,
     )
-    with runner:
-        for note in runner.notes:
-            print(f"hil sweep: note: {note}", file=sys.stderr)
-        outcome = run_sweep(
-            spec, args.out, runner, resume=args.resume, show_progress=not args.quiet
+    try:
+        with runner:
+            for note in runner.notes:
+                print(f"hil sweep: note: {note}", file=sys.stderr)
+            outcome = run_sweep(
+                spec, args.out, runner, resume=args.resume, show_progress=not args.quiet
+            )
+            where = f"{runner.name} ({runner.workers} worker{'s' * (runner.workers != 1)})"
+    except SweepInterrupted as stop:
+        # The runner has ended its workers by now (Runner.abort); the finished trials are saved.
+        saved = stop.outcome
+        print(
+            f"hil sweep: interrupted ({stop.signal_name}): {len(saved.records)} of "
+            f"{spec.n_trials} trials saved in {saved.store.results_path}; continue with: "
+            f"hil sweep {args.sweep_file} --out {args.out} --resume",
+            file=sys.stderr,
         )
-        where = f"{runner.name} ({runner.workers} worker{'s' * (runner.workers != 1)})"
+        return EXIT_INTERRUPTED
     if args.json:
         print(json.dumps(outcome.rows))
     else:

@@ -17,6 +17,7 @@ import logging
 from pathlib import Path
 from typing import Any
 
+from hil.estimation.track_summary import track_lines
 from hil.experiments.experiment import DEFAULT_EXPERIMENT, load_experiment, parse_experiment
 
 _LOG = logging.getLogger(__name__)
@@ -109,6 +110,9 @@ def print_summary(summary: dict[str, Any], folder: Path, *, as_json: bool) -> No
     width = max(len(k) for k in summary)
     for key, value in summary.items():
         if key == "figures":
+            continue
+        if key == "tracks":
+            print("\n".join(f"{key:<{width}}  {line}" for line in track_lines(value)))
             continue
         if isinstance(value, float):
             shown = f"{value:.4g}"

@@ -83,7 +83,7 @@ from hil.acquisition.annotations import ADC_CLIPPING_TEXT
 from hil.devices.board_log import LOG, log_frame, log_state
 from hil.devices.board_settings import BoardSettings, to_wire_samples
 from hil.devices.clock import Clock, MonotonicClock, VirtualClock
-from hil.errors import ConfigError
+from hil.errors import ConfigError, DeviceError, DeviceRefused
 from hil.transports import (
     Transport,
     TransportClosedError,
@@ -116,15 +116,15 @@ blocks. Blocks are (n,)
 counts of the DAC format. An object with ``read(n)`` (BlockSynthesizer) is accepted too."""
 
 
-class BoardError(Exception):
+class BoardError(DeviceError):
     """Base class of run-time board failures (not configuration mistakes)."""
 
 
-class BoardCommandError(BoardError):
+class BoardCommandError(BoardError, DeviceRefused):
     """The board refused a command (NAK) or did not answer it."""
 
-    def __init__(self, message: str, nak: Nak | None = None) -> None:
-        super().__init__(message)
+    def __init__(self, message: str, nak: Nak | None = None, *, url: str | None = None) -> None:
+        super().__init__(message, url=url)
         self.nak = nak
 
 
@@ -551,7 +551,9 @@ class Board:
                 if self._refusal is not None:
                     raise self._refusal
                 if self._thread_error is not None:
-                    raise BoardError(f"{self.url}: reader failed") from self._thread_error
+                    raise BoardError(
+                        f"{self.url}: reader failed", url=self.url
+                    ) from self._thread_error
                 if time.monotonic() >= deadline:
                     LOG.debug(
                         "board %s: timed out after %s s waiting for %s", self.url, timeout_s, what
@@ -599,6 +601,7 @@ class Board:
                 f" ({reply.detail or 'no detail'}); check the settings against the board's"
                 " capabilities",
                 reply,
+                url=self.url,
             )
         return reply
 
@@ -637,7 +640,9 @@ class Board:
     def _configure(self, settings: BoardSettings, *, fresh: bool) -> None:
         """CONFIGURE; ``fresh`` starts a new ring, fit and gap record (not on reconnect)."""
         if self.capabilities is None:
-            raise BoardError("the board is not open: call open() or use 'with Board(...)'")
+            raise BoardError(
+                "the board is not open: call open() or use 'with Board(...)'", url=self.url
+            )
         settings.check_against(self.capabilities)
         message = settings.to_configure()
         self._feeder = None
@@ -680,7 +685,7 @@ class Board:
         """
         config = self._configured
         if config is None:
-            raise BoardError("configure() the board before start()")
+            raise BoardError("configure() the board before start()", url=self.url)
         rate = config.sample_rate_hz
         feeder = None
         if source is not None:
@@ -728,6 +733,7 @@ class Board:
             f" had passed ({'; '.join(refusals)}): the host took longer than the start lead"
             " to preload the DAC. Raise start_lead_s, or give the host more CPU time (close"
             " other programs, use a faster source)",
+            url=self.url,
         )
 
     def _preload(self, feeder: _DacFeeder, first: int, timeout_s: float) -> None:
@@ -757,7 +763,7 @@ class Board:
         virtual time, virtual seconds)."""
         ring = self.ring
         if ring is None:
-            raise BoardError("configure() the board first")
+            raise BoardError("configure() the board first", url=self.url)
         if self._virtual is not None:
             return self._virtual.wait_until(
                 lambda: ring.end_index is not None and ring.end_index >= end_index, timeout_s
@@ -767,7 +773,7 @@ class Board:
     def read(self, first: int, n: int) -> npt.NDArray[Any]:
         """ADC samples ``first .. first+n-1`` (n, adc_channels) from the ring."""
         if self.ring is None:
-            raise BoardError("configure() the board first")
+            raise BoardError("configure() the board first", url=self.url)
         return self.ring.read(first, n)
 
     @property

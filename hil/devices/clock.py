@@ -1,8 +1,12 @@
-"""The clock a driver waits on: ``now()`` in seconds and ``sleep(seconds)``.
+"""The one clock protocol drivers and simulated devices wait on: ``now()`` in seconds,
+``sleep(seconds)`` and ``sleep_until(t_s)``.
 
 Drivers take a clock so that tests can run a simulated device on simulated time: a clock
-whose ``sleep`` advances ``now`` instantly (for example
-:class:`sim_devices.stage.clock.ManualClock`) makes a 10 s move take milliseconds.
+whose ``sleep`` advances ``now`` instantly (:class:`sim_devices.stage.clock.ManualClock`,
+for tests) makes a 10 s move take milliseconds. The implementations: :class:`MonotonicClock`
+(the wall clock), :class:`VirtualClock` (a whole run held in one thread),
+:class:`~hil.experiments.sim_tank.ScaledClock` (the real-time simulated tank's, slowed) and
+the tests' ``ManualClock``.
 """
 
 from __future__ import annotations
@@ -23,13 +27,32 @@ class Clock(Protocol):
         """Let ``seconds`` pass (a negative or zero value returns at once)."""
         ...
 
+    def sleep_until(self, t_s: float) -> None:
+        """Return at (or after) time ``t_s``, s (at once when it has passed)."""
+        ...
 
-class MonotonicClock:
+
+class SleepUntil:
+    """``sleep_until(t_s)`` for a clock with ``now()`` and ``sleep()``: sleep the rest."""
+
+    def now(self) -> float:
+        raise NotImplementedError
+
+    def sleep(self, seconds: float) -> None:
+        raise NotImplementedError
+
+    def sleep_until(self, t_s: float) -> None:
+        """Return at (or after) time ``t_s``, s (at once when it has passed)."""
+        self.sleep(t_s - self.now())
+
+
+class MonotonicClock(SleepUntil):
     """The wall clock: :func:`time.monotonic` and :func:`time.sleep`.
 
     >>> c = MonotonicClock()
     >>> c.now() <= c.now()
     True
+    >>> c.sleep_until(c.now() - 1.0)  # passed: returns at once
     """
 
     def now(self) -> float:
@@ -40,7 +63,7 @@ class MonotonicClock:
             time.sleep(seconds)
 
 
-class VirtualClock:
+class VirtualClock(SleepUntil):
     """Simulated seconds for a whole run held in one thread: time passes only in
     :meth:`sleep`, and every attached service runs at each :attr:`tick_s` of it.
 
@@ -60,6 +83,8 @@ class VirtualClock:
     (True, 0.04)
     >>> detach(); clock.sleep(1.0); len(seen)
     5
+    >>> clock.sleep_until(2.5); clock.now()
+    2.5
     """
 
     def __init__(self, tick_s: float = 0.001, start_s: float = 0.0) -> None:

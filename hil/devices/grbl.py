@@ -201,6 +201,12 @@ polling at no more than 5 Hz); use the default 0.2
         self._direction = 1.0
         self._settings: GrblSettings | None = None
         self._original_accel: float | None = None
+        #: Called at every step of every wait for the controller (a few times per 0.1 s, homing
+        #: and moves included); whatever it raises abandons the wait and reaches the caller.
+        #: A run sets it to check its other devices, so that one lost while the stage homes
+        #: or positions stops the run at once, not when the motion ends.
+        self.while_waiting: Callable[[], None] | None = None
+        self._homing = False
 
     # ------------------------------------------------------------------ lifecycle
     def open(self) -> GrblStage:
@@ -281,10 +287,20 @@ polling at no more than 5 Hz); use the default 0.2
 
     # ------------------------------------------------------------------ properties
     @property
+    def url(self) -> str:
+        """The controller's URL (or its link's), as every stage error and log line names
+        it."""
+        if isinstance(self._port, str):
+            return self._port
+        return str(getattr(self._port, "url", type(self._port).__name__))
+
+    @property
     def settings(self) -> GrblSettings:
         """The controller's settings read at open (updated by :meth:`write_setting`)."""
         if self._settings is None:
-            raise StageError("the stage is not open: call open() or use 'with GrblStage(...)'")
+            raise StageError(
+                "the stage is not open: call open() or use 'with GrblStage(...)'", url=self.url
+            )
         return self._settings
 
     @property
@@ -363,7 +379,11 @@ polling at no more than 5 Hz); use the default 0.2
         self._require_not_critical()
         # No polling while homing; the timeout covers the longest search of every cycle
         # (GRBL gives up with ALARM:9 before it), with a margin for acceleration.
+        # Until '$H' is answered GRBL may be homing: a wait abandoned meanwhile (a timeout,
+        # while_waiting) leaves the cycle running, which only a soft reset ends (stop()).
+        self._homing = True
         self._command("$H", timeout=self.homing_timeout(), poll=False)
+        self._homing = False
         self._estop_latched = False
         return self.status()
 
@@ -526,12 +546,20 @@ polling at no more than 5 Hz); use the default 0.2
     def stop(self, *, cancel: bool = True) -> StageStatus:
         """Controlled stop: feed hold ``!`` and wait until stopped; with ``cancel`` then drop
         the rest of the move (soft reset from ``Hold:0``: GRBL keeps the position, no alarm).
+        A homing cycle left unanswered (:meth:`home` abandoned) is ended by a soft reset
+        instead, the only way GRBL stops homing (ALARM:6 follows: home again).
         Without ``cancel`` the stage stays held; :meth:`resume` continues. In a critical
         alarm GRBL has halted already and answers nothing: the known status returns at once.
         """
         self._require_open()
         if self.connection.critical:
             return self._known_status()
+        if self._homing:
+            # GRBL ignores a feed hold while it homes; a soft reset ends the cycle (it then
+            # reports ALARM:6, homing reset, and needs homing again).
+            status = self.reset()
+            self._homing = False
+            return status
         self._write_realtime(FEED_HOLD)
         status = self._wait_state(
             lambda s: (
@@ -623,7 +651,9 @@ polling at no more than 5 Hz); use the default 0.2
 
     def _require_open(self) -> ByteLink:
         if self._ser is None:
-            raise StageError("the stage is not open: call open() or use 'with GrblStage(...)'")
+            raise StageError(
+                "the stage is not open: call open() or use 'with GrblStage(...)'", url=self.url
+            )
         return self._ser
 
     def _recovery(self, code: int | None) -> str:
@@ -634,7 +664,7 @@ polling at no more than 5 Hz); use the default 0.2
         self._require_open()
         if self.connection.critical:
             code = self.connection.alarm
-            raise StageAlarmError(code, self._alarm_words(), self._recovery(code))
+            raise StageAlarmError(code, self._alarm_words(), self._recovery(code), url=self.url)
 
     def _require_ready(self) -> None:
         """Refuse motion while latched, in alarm or held, with what to do about it."""
@@ -649,15 +679,17 @@ polling at no more than 5 Hz); use the default 0.2
                 text,
                 "check that the axis is clear, then home with $H (GrblStage.home()) or "
                 "unlock with $X (GrblStage.unlock())",
+                url=self.url,
             )
         status = self._last_status
         if status is not None and status.state is StageState.ALARM:
             code = self.connection.alarm
-            raise StageAlarmError(code, self._alarm_words(), self._recovery(code))
+            raise StageAlarmError(code, self._alarm_words(), self._recovery(code), url=self.url)
         if status is not None and status.state is StageState.HOLD:
             raise StageHeldError(
                 "stage is in a feed hold: call resume() to continue the held move or stop() "
-                "to cancel it"
+                "to cancel it",
+                url=self.url,
             )
 
     def _alarm_words(self) -> str:
@@ -667,16 +699,11 @@ polling at no more than 5 Hz); use the default 0.2
         return alarm_text(code)
 
     # ------------------------------------------------------------------ I/O
-    @property
-    def _name(self) -> str:
-        """The stage as logs name it: its URL or port."""
-        port = self._port
-        return port if isinstance(port, str) else str(getattr(port, "url", type(port).__name__))
 
     def _write(self, data: bytes) -> None:
         if _LOG.isEnabledFor(logging.DEBUG):
             text = data.decode("ascii", "backslashreplace").rstrip("\n")
-            _LOG.debug("stage %s -> %s", self._name, text if text.isprintable() else repr(data))
+            _LOG.debug("stage %s -> %s", self.url, text if text.isprintable() else repr(data))
         self._require_open().write(data)
 
     def _write_realtime(self, byte: bytes) -> None:
@@ -687,10 +714,12 @@ polling at no more than 5 Hz); use the default 0.2
         pending = self._send_line(line)
         self._wait_answer(pending, self.response_timeout if timeout is None else timeout, poll)
         if pending.reset:
-            raise StageError(f"GRBL reset while {line!r} was pending; it was not executed")
+            raise StageError(
+                f"GRBL reset while {line!r} was pending; it was not executed", url=self.url
+            )
         if isinstance(pending.result, ErrorResponse):
             code = pending.result.code
-            raise StageCommandError(code, error_text(code), line)
+            raise StageCommandError(code, error_text(code), line, url=self.url)
 
     def _wait_answer(self, pending: PendingLine, timeout: float, poll: bool) -> None:
         """Wait for ``pending``'s ``ok``/``error:N`` (or the reset that drops it)."""
@@ -714,7 +743,8 @@ polling at no more than 5 Hz); use the default 0.2
         if pending.result is None:
             raise StageHeldError(
                 "the move was feed-held before reaching its target: call resume() to "
-                "continue or stop() to cancel"
+                "continue or stop() to cancel",
+                url=self.url,
             )
 
     def _held(self) -> bool:
@@ -797,7 +827,8 @@ polling at no more than 5 Hz); use the default 0.2
         if isinstance(pending.result, ErrorResponse) or pending.reset:
             raise StageError(
                 f"GRBL did not answer '$$' with its settings ({pending.result or 'reset'}): "
-                "check that the firmware is GRBL 1.1 and that nothing else resets it"
+                "check that the firmware is GRBL 1.1 and that nothing else resets it",
+                url=self.url,
             )
         return GrblSettings(self.connection.settings)
 
@@ -820,17 +851,20 @@ polling at no more than 5 Hz); use the default 0.2
             got = self._receive(ser)
             if raise_alarm and self._new_alarm is not None:
                 code, self._new_alarm = self._new_alarm, None
-                raise StageAlarmError(code, alarm_text(code), self._recovery(code))
+                raise StageAlarmError(code, alarm_text(code), self._recovery(code), url=self.url)
             if done():
                 return
+            if self.while_waiting is not None:
+                self.while_waiting()
             now = self._clock.now()
             if now >= deadline:
                 _LOG.debug(
-                    "stage %s: timed out after %.3g s waiting for %s", self._name, timeout, what
+                    "stage %s: timed out after %.3g s waiting for %s", self.url, timeout, what
                 )
                 raise StageTimeoutError(
                     f"no {what} from GRBL within {timeout:.3g} s: check the cable, the port "
-                    "and the controller's power"
+                    "and the controller's power",
+                    url=self.url,
                 )
             if self.connection.reset_due(now):
                 self._write(self.connection.send_reset(now))
@@ -852,14 +886,14 @@ polling at no more than 5 Hz); use the default 0.2
         debug = _LOG.isEnabledFor(logging.DEBUG)
         for line, event in zip(self.connection.last_lines, events, strict=True):
             if debug:
-                _LOG.debug("stage %s <- %s", self._name, line)
+                _LOG.debug("stage %s <- %s", self.url, line)
             if isinstance(event, Report):
                 before = self._last_status
                 self._last_status = self._to_status(event)
                 if before is None or before.state is not self._last_status.state:
                     _LOG.debug(
                         "stage %s: state %s -> %s",
-                        self._name,
+                        self.url,
                         "unknown" if before is None else before.state.name,
                         self._last_status.state.name,
                     )

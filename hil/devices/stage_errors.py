@@ -1,20 +1,25 @@
-"""Errors of motion-stage drivers, split by who broke the rule (DESIGN principle 11).
+"""Errors of motion-stage drivers, split by who broke the rule (DESIGN principle 11), in the
+one error tree of :mod:`hil.errors` (each run-time one names the stage's URL, set by the
+driver: ``/dev/ttyUSB0: GRBL rejected ...``).
 
 - :class:`StageLimitError` (a :class:`~hil.errors.ConfigError`): the host asked for a move
   outside the soft limits or above the machine's rates; raised before anything is sent.
-- :class:`StageCommandError`: the controller rejected a line the host sent (``error:N``).
-- :class:`StageAlarmError`: the controller is in (or just entered) an alarm; the message says
-  how to recover.
-- :class:`StageHeldError`: motion was feed-held (by :meth:`stop`, a watchdog or a button).
-- :class:`StageTimeoutError`: no answer in time (cable, port, power).
+- :class:`StageCommandError` (a :class:`~hil.errors.DeviceRefused`): the controller rejected
+  a line the host sent (``error:N``).
+- :class:`StageAlarmError` (a :class:`~hil.errors.DeviceRefused`): the controller is in (or
+  just entered) an alarm; the message says how to recover.
+- :class:`StageHeldError` (a :class:`~hil.errors.DeviceRefused`): motion was feed-held (by
+  :meth:`stop`, a watchdog or a button).
+- :class:`StageTimeoutError` (a :class:`~hil.errors.DeviceTimedOut`): no answer in time
+  (cable, port, power).
 """
 
 from __future__ import annotations
 
-from hil.errors import ConfigError
+from hil.errors import ConfigError, DeviceError, DeviceRefused, DeviceTimedOut
 
 
-class StageError(Exception):
+class StageError(DeviceError):
     """Base class of run-time stage failures (not configuration mistakes)."""
 
 
@@ -26,33 +31,36 @@ class StageLimitError(ConfigError):
     """
 
 
-class StageCommandError(StageError):
+class StageCommandError(StageError, DeviceRefused):
     """The controller answered ``error:<code>`` to ``line``."""
 
-    def __init__(self, code: int, text: str, line: str) -> None:
+    def __init__(self, code: int, text: str, line: str, *, url: str | None = None) -> None:
         self.code = code
         self.text = text
         self.line = line
         super().__init__(
             f"GRBL rejected {line!r} with error:{code} ({text}); nothing from that line was "
-            "executed: fix the command or the controller state and send it again"
+            "executed: fix the command or the controller state and send it again",
+            url=url,
         )
 
 
-class StageAlarmError(StageError):
+class StageAlarmError(StageError, DeviceRefused):
     """The controller is in ALARM; ``code`` is the alarm number if one was reported."""
 
-    def __init__(self, code: int | None, text: str, recovery: str) -> None:
+    def __init__(
+        self, code: int | None, text: str, recovery: str, *, url: str | None = None
+    ) -> None:
         self.code = code
         self.text = text
         self.recovery = recovery
         what = f"ALARM:{code} ({text})" if code is not None else f"ALARM ({text})"
-        super().__init__(f"stage is in {what}; to recover: {recovery}")
+        super().__init__(f"stage is in {what}; to recover: {recovery}", url=url)
 
 
-class StageHeldError(StageError):
+class StageHeldError(StageError, DeviceRefused):
     """Motion stopped in a feed hold before reaching its target."""
 
 
-class StageTimeoutError(StageError):
+class StageTimeoutError(StageError, DeviceTimedOut):
     """The controller did not answer in time."""

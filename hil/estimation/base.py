@@ -29,6 +29,7 @@ ESTIMATE_FIELDS: tuple[str, ...] = (
     "receiver",
     "crlb_range_m",
     "crlb_speed_mps",
+    "track_id",
 )
 
 
@@ -70,6 +71,10 @@ class Estimate:
         Cramér–Rao bounds (standard deviations, m and m/s) of this estimate's range and speed
         at the E/N0 its own echo had (:mod:`hil.estimation.crlb`), where the receiver
         measured it (GCAS's coherent refinement); NaN otherwise.
+    track_id:
+        Identity of the confirmed track the estimate belongs to (0, 1, 2, … in order of
+        confirmation, :mod:`hil.estimation.tracking`); ``-1`` for none (its track not yet
+        confirmed, no tracker, or a recording made before tracks were kept).
     """
 
     t_s: float
@@ -84,6 +89,7 @@ class Estimate:
     receiver: str
     crlb_range_m: float = math.nan
     crlb_speed_mps: float = math.nan
+    track_id: int = -1
 
     def __eq__(self, other: object) -> bool:
         """Field-by-field equality where NaN equals NaN: an estimate without a bound (or

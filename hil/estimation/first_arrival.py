@@ -15,24 +15,32 @@ For each of the ``M`` boundaries the GCAS detection used (receive times from its
    (the direct blast, walls, volume reverberation of a still tank) cancels; the moving echo
    does not, it leaves a copy of itself shifted by ``δ = P (α − 1)/α`` (later for a closing
    target, earlier for an opening one, whose first onset is then corrected by ``−δ``).
-2. **Next-tone channel**: ``z(t) = boxcar_w(d(t) e^{−j2π α f_next t})`` with a causal boxcar
+2. **Next-tone channel**: ``b(t) = boxcar_w(d(t) e^{−j2π α f_next t})`` with a causal boxcar
    of ``w = 1/Δf`` (``Δf`` the tone spacing): it nulls every other tone of the echo while the
-   window holds one tone only, so ``|z|`` stays at the noise floor until the first arrival
-   switches, then ramps up over ``w``.
-3. **Onset**: the noncoherent mean of ``|z|²`` over the ``M`` boundaries, less its level in a
-   window before any arrival. Walking back from its maximum after ``t_c`` to where it falls
-   below ``hi`` and then ``lo`` of that maximum, a line through that stretch of the ramp
-   gives a first onset; the ramp's exact shape (the previous tone's partial window leaks
-   while the window straddles the switch) is then fitted over the first arrival's own part
-   of the ramp (:meth:`FirstArrivalReadout._fit_ramp`).
+   window holds one tone only. Its change over one window, ``z(t) = b(t) − b(t − w)``,
+   also removes what sounds the next tone steadily before the first arrival switches (late
+   images of earlier boundaries: at image order 2 the target's echo through both end walls
+   comes a hop late), so ``|z|`` stays at the noise floor until the first arrival switches,
+   then ramps up over ``w`` exactly as ``b`` does.
+3. **Onset**: the noncoherent mean of ``|z|²`` over the ``M`` boundaries, less the noise: its
+   level in a window of :data:`BASELINE_S` before the search, or in the quietest such window
+   before the centroid where a late image switching tones fills the first
+   (:meth:`FirstArrivalReadout._noise_window`). From its maximum after ``t_c``, back to
+   where it last rose from ``lo`` of that maximum (an image of opposite sign may pull it
+   back under ``hi`` inside the ramp), a line through the stretch from there to the first
+   ``hi`` crossing gives a first onset; the ramp's exact shape (the previous tone's partial
+   window leaks while the window straddles the switch) is then fitted over the first
+   arrival's own part of the ramp (:meth:`FirstArrivalReadout._fit_ramp`).
 4. **Doppler**: the direct path's phase a little into its ramp, at the ``M`` boundaries,
    gives its own time scale (:meth:`FirstArrivalReadout._direct_alpha`): GCAS's weighs the
-   images in, each at its path's slower radial speed.
+   images in, each at its path's slower radial speed. A direct-path speed more than
+   :data:`DIRECT_BELOW_GCAS_MPS` below GCAS's is a phase ambiguity (no image is faster than
+   the direct path) and GCAS's is kept.
 
 The range then comes from the first arrival instead of the centroid. Measured on the built-in
-simulated tank (12 × 4 × 2.5 m, first-order images, reverberation, direct blast; 1.5 m/s
-tow): range bias +0.012 m, RMSE 0.018 m, against +0.46 m for the peak; with the images off,
-−0.000 m against −0.009 m (docs/tank-run.md has the table).
+simulated tank run (12 × 4 × 2.5 m, own echoes, reverberation, direct blast, ``gcas-mti``;
+1.5 m/s tow), replayed: range bias +0.003 m, RMSE 0.004 m at image order 1; +0.022 m,
+0.036 m at order 2 (docs/tank-run.md has the table against image order, tank and beams).
 
 Limits: a target slower than about one carrier wavelength per code period is mostly cancelled
 with the clutter (no onset found: the peak readout is kept); the readout needs the samples of
@@ -87,6 +95,16 @@ FIT_SPAN = 16
 FIT_STEP = 0.125
 #: Speed step of the direct path's Doppler search, m/s.
 DIRECT_SPEED_STEP = 0.002
+#: The direct path has the largest radial speed of all arrivals (an image's is the carriage
+#: speed times the cosine of its path's elevation), so its Doppler is not below GCAS's
+#: energy-weighted one by more than this, m/s; a direct-path speed slower by more is a phase
+#: ambiguity (measured at image order 2: -0.3 m/s outliers, v_res/4) and GCAS's is kept.
+DIRECT_BELOW_GCAS_MPS = 0.05
+#: The noise is read in the stretch of :data:`BASELINE_S` before the search unless that holds
+#: more than this times the power of the quietest such stretch before the centroid (a late
+#: image switching tones there); the quietest one alone reads noise low (it is the least of
+#: several noisy means: at 0 dB per-sample SNR onsets came up to 1.2 m early).
+QUIET_RATIO = 2.0
 
 
 @dataclass(frozen=True)
@@ -158,7 +176,10 @@ class FirstArrivalReadout:
         self._after = int(np.flatnonzero(t_rel >= 0.0)[0])
         #: Input samples kept behind the newest: one period plus the M boundaries' windows.
         self.history = self.period + int(math.ceil((m_hops + 1) * schedule.hop_s * fs_hz))
-        self.history += self._pre + self._post
+        #: The change over a window needs two windows before the first offset.
+        self._lead = 2 * self.boxcar
+        self.history += self._pre + self._post + self._lead
+        self._offsets_ext = np.arange(-self._pre - self._lead, self._post)
         self._ring = RowBuffer(self.history, (), np.float64)
         self._valid_from = 0
         self.sound_speed_mps = float(sound_speed_mps)
@@ -189,33 +210,41 @@ class FirstArrivalReadout:
         ends = hops.start_s[::-1]  # start of the hop after boundary m = its transmit time
         t_b = t_c - (ends[0] - ends) / alpha
         n_b = np.round(t_b * fs).astype(np.int64)
-        first = n_b - self._pre - self.period
+        w = self.boxcar
+        first = n_b - self._pre - self._lead - self.period
         if first.min() < self._valid_from or n_b.max() + self._post > self._ring.next_index:
             return None
-        idx = n_b[:, None] + self._offsets[None, :]  # (M, L)
+        idx = n_b[:, None] + self._offsets_ext[None, :]  # (M, L + lead)
         d = self._ring.rows(idx) - self._ring.rows(idx - self.period)
         t = idx / fs
         z = d * np.exp(-2j * np.pi * alpha * f_next[:, None] * t)
         c = np.cumsum(z, axis=1)
-        w = self.boxcar
-        box = np.empty_like(c)
-        box[:, :w] = c[:, :w]
-        box[:, w:] = c[:, w:] - c[:, :-w]
+        full = c[:, w:] - c[:, :-w]  # boxcar of w ending at extended index w, w + 1, ...
+        # The boxcar's change over its own length: every steady tone on the Δf grid (the
+        # previous tones, and the next tone as sounded by late images of earlier boundaries)
+        # gives the same boxcar sum w samples apart and cancels; only switches remain.
+        box = full[:, w:] - full[:, :-w]  # (M, L)
         power = np.mean(np.abs(box / w) ** 2, axis=0)  # (L,)
-        amp = np.sqrt(np.maximum(power - power[self._base].mean(), 0.0))
+        base = self._noise_window(power)
+        amp = np.sqrt(np.maximum(power - power[base].mean(), 0.0))
         top_i = self._after + int(np.argmax(amp[self._after :]))
         top = float(amp[top_i])
-        noise = float(np.sqrt(power[self._base].mean()))
+        noise = float(np.sqrt(power[base].mean()))
         if not top > 3.0 * noise:
             return None
         # The fit's levels: fractions of the top, but clear of the noise's own fluctuation.
-        wobble = NOISE_MARGIN * float(np.std(amp[self._base]))
+        wobble = NOISE_MARGIN * float(np.std(amp[base]))
         lo_level = max(LO_FRACTION * top, wobble)
         hi_level = max(HI_FRACTION * top, lo_level + wobble)
-        j = top_i
         k0 = self._search_from
-        while j > k0 and amp[j - 1] >= hi_level:
+        # The ramp that leads to the top starts where the power last left the noise before
+        # it: an image of opposite sign can pull the sum back below ``hi`` inside the ramp,
+        # so the stretch is followed down to ``lo``, and ``hi`` is its first crossing.
+        j = top_i
+        while j > k0 and amp[j - 1] >= lo_level:
             j -= 1
+        above_hi = np.flatnonzero(amp[j : top_i + 1] >= hi_level)
+        j = j + int(above_hi[0]) if above_hi.size else top_i
         j_hi = j
         while j > k0 and amp[j - 1] >= lo_level:
             j -= 1
@@ -232,7 +261,7 @@ class FirstArrivalReadout:
         frac = t_b * fs - n_b  # each boundary's predicted switch, samples past its n_b
         prev_f = np.concatenate([f_next[1:], prev_hop.freq_hz])
         jump = self._phase_jumps(hops, prev_hop)
-        excess = power - power[self._base].mean()
+        excess = power - power[base].mean()
         lo_fit = max(k0, j_lo - FIT_LEAD)
         above = np.flatnonzero(amp[j_lo : j_hi + 1] >= FIT_HI_FRACTION * top)
         j_fit = j_lo + int(above[0]) if above.size else j_hi
@@ -255,6 +284,24 @@ class FirstArrivalReadout:
         return FirstArrival(
             onset - min(0.0, delta), alpha if direct_alpha is None else direct_alpha
         )
+
+    def _noise_window(self, power: NDArray[np.float64]) -> NDArray[np.bool_] | slice:
+        """Where the noise level is read in ``power`` (shape ``(L,)``): the stretch of
+        :data:`BASELINE_S` before the search, or the quietest such stretch before the
+        centroid where the first holds more than :data:`QUIET_RATIO` times its power. Late
+        images of earlier boundaries switch tones before the first arrival too (at image
+        order 2 the target's echo through both end walls comes a hop late): a noise level
+        read on one hides the onset."""
+        n = int(np.count_nonzero(self._base))
+        k_start = int(np.flatnonzero(self._base)[0])
+        seg = power[k_start : self._after]
+        c = np.concatenate([[0.0], np.cumsum(seg)])
+        sums = c[n:] - c[:-n]  # power summed over each stretch
+        k = int(np.argmin(sums))
+        fixed = float(np.mean(power[self._base]))
+        if fixed <= QUIET_RATIO * sums[k] / n:
+            return self._base
+        return slice(k_start + k, k_start + k + n)
 
     @staticmethod
     def _phase_jumps(hops: HopTable, prev_hop: HopTable) -> NDArray[np.float64]:
@@ -374,4 +421,6 @@ class FirstArrivalReadout:
         g = int(np.argmax(score))
         if g in (0, d_alpha.size - 1):
             return None  # the peak is outside the span: keep GCAS's
+        if np.sign(alpha - 1.0) * self._speed_grid[g] < -DIRECT_BELOW_GCAS_MPS:
+            return None  # slower than every image: an ambiguity of the phase (see the bound)
         return float(alpha + d_alpha[g])

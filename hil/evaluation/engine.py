@@ -25,6 +25,7 @@ from hil.evaluation.progress import Progress
 from hil.evaluation.runners import Runner
 from hil.evaluation.spec import SweepSpec
 from hil.evaluation.store import SweepStore
+from hil.interrupts import RunInterrupted, interruption, stops_deferred
 
 
 @dataclass(frozen=True)
@@ -114,14 +115,41 @@ def run_sweep(
                 ran += 1
                 if progress is not None:
                     progress.update(record["status"] == "ok")
+    except KeyboardInterrupt as exc:
+        # Every finished trial is already a line of results.jsonl; the summary of those
+        # is written too, so the folder says where the sweep stands and --resume goes on.
+        with stops_deferred():
+            outcome = _finish(spec, store, records, ran, len(done), start)
+        raise SweepInterrupted(outcome, interruption(exc)) from None
     finally:
         if progress is not None:
             progress.close()
+    return _finish(spec, store, records, ran, len(done), start)
+
+
+class SweepInterrupted(RunInterrupted):
+    """Ctrl-C or a stop signal ended :func:`run_sweep` early; ``outcome`` is what is saved
+    (the finished trials and their summary), ``signal_name`` what stopped it."""
+
+    def __init__(self, outcome: SweepOutcome, signal_name: str) -> None:
+        super().__init__(signal_name)
+        self.outcome = outcome
+
+
+def _finish(
+    spec: SweepSpec,
+    store: SweepStore,
+    records: list[dict[str, Any]],
+    ran: int,
+    skipped: int,
+    start: float,
+) -> SweepOutcome:
+    """Write ``summary.csv`` of the latest record of every trial and return the outcome."""
     elapsed = time.perf_counter() - start
     latest = sorted(latest_records(records).values(), key=lambda r: int(r["trial_id"]))
     rows = summarise(spec, latest)
     write_summary_csv(store.summary_path, spec, rows)
-    return SweepOutcome(spec, store, latest, rows, ran, len(done), elapsed)
+    return SweepOutcome(spec, store, latest, rows, ran, skipped, elapsed)
 
 
 def _check_records(spec: SweepSpec, store: SweepStore, records: list[dict[str, Any]]) -> None:

@@ -22,6 +22,7 @@ from __future__ import annotations
 import hashlib
 import importlib
 import importlib.util
+import re
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -43,6 +44,9 @@ TRIALS: dict[str, str] = {
     "ch6_fmcw": "hil.evaluation.trials_ch6:ch6_fmcw_trial",
     "ch6_cost": "hil.evaluation.trials_ch6:ch6_cost_trial",
 }
+
+# An importable module name: dotted identifiers, no path separators, no leading dot.
+_MODULE_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*$")
 
 # Modules loaded from a file path get this prefix plus a hash of the path as module name.
 _FILE_MODULE_PREFIX = "_hil_trial_file_"
@@ -121,6 +125,17 @@ def resolve_trial(spec: str, base_dir: Path | None = None, field: str = "sweep.t
         if not path.is_absolute():
             path = (base_dir or Path.cwd()) / path
         return f"{path.resolve()}:{attr}"
+    if not _MODULE_NAME.match(module):
+        # A path-like module ('../trials', './x', 'a/b') cannot be imported by name; the
+        # file form with its .py suffix can, relative to the sweep file's folder.
+        raise ConfigError(
+            field,
+            spec,
+            "'package.module:function' (dotted names) or 'file.py:function' (a path)",
+            f"to load a file, write its name with .py: '{module}.py:{attr}'"
+            if module.strip("./")
+            else "to load a file, write its name with .py, e.g. '../trials.py:function'",
+        )
     return spec
 
 

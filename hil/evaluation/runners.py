@@ -37,6 +37,9 @@ Record = dict[str, Any]
 #: Trials in flight per worker: enough to keep every worker busy between hand-outs.
 _IN_FLIGHT_PER_WORKER = 4
 
+#: Bound on the wait for one killed pool worker to be reaped, s.
+_ABORT_JOIN_S = 10.0
+
 
 class Runner:
     """Base class: a context manager that runs trials and yields their records."""
@@ -61,10 +64,18 @@ class Runner:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
-        self.close()
+        if exc_type is not None and issubclass(exc_type, KeyboardInterrupt):
+            self.abort()
+        else:
+            self.close()
 
     def close(self) -> None:
         """Stop the workers (idempotent)."""
+
+    def abort(self) -> None:
+        """Stop the workers now, dropping the trials they run (on Ctrl-C: a finished trial is
+        already on disk, an unfinished one runs again on resume). Idempotent."""
+        self.close()
 
     def describe(self) -> dict[str, Any]:
         """What ran the trials, for the manifest."""
@@ -134,6 +145,19 @@ class LocalPoolRunner(Runner):
         if self._pool is not None:
             self._pool.shutdown(wait=True, cancel_futures=True)
             self._pool = None
+
+    def abort(self) -> None:
+        pool, self._pool = self._pool, None
+        if pool is None:
+            return
+        # Python 3.14 has ProcessPoolExecutor.terminate_workers(); before it, the processes
+        # are only reachable through the executor's process table.
+        procs = list((getattr(pool, "_processes", None) or {}).values())
+        for proc in procs:
+            proc.kill()
+        pool.shutdown(wait=True, cancel_futures=True)
+        for proc in procs:
+            proc.join(_ABORT_JOIN_S)
 
     def run(self, target: str, tasks: Iterable[TrialTask]) -> Iterator[Record]:
         self._start()

@@ -7,8 +7,12 @@ with its type, message and traceback text, becomes the record, so the sweep goes
 
 from __future__ import annotations
 
+import multiprocessing
+import multiprocessing.connection
 import os
+import signal
 import socket
+import threading
 import time
 import traceback
 from collections.abc import Iterator, Mapping
@@ -154,11 +158,41 @@ def worker_blas_env() -> dict[str, str | None]:
 _start_barrier: Any = None
 
 
+#: Exit status of a pool worker that ends because the process that started it is gone.
+EXIT_PARENT_GONE = 70
+
+
 def init_pool_worker(barrier: Any) -> None:
-    """Process-pool initializer: pin BLAS threads and keep the start-up barrier."""
+    """Process-pool initializer: pin BLAS threads, keep the start-up barrier, leave Ctrl-C to
+    the parent and end with the parent (:func:`exit_with_parent`)."""
     global _start_barrier
     pin_blas_threads()
     _start_barrier = barrier
+    # Ctrl-C in a terminal reaches the whole process group; the parent alone decides what
+    # stops (it saves the finished trials, then ends the workers), so a worker never dies
+    # half-way through handing back a record.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    exit_with_parent()
+
+
+def exit_with_parent() -> None:
+    """End this process (status :data:`EXIT_PARENT_GONE`) as soon as the process that
+    spawned it ends, however it ends (``kill -9`` included).
+
+    A daemon thread waits on multiprocessing's parent sentinel, a pipe whose other end only
+    the parent holds: the kernel closes it when the parent dies, which wakes the thread. A
+    process not started by multiprocessing has no parent sentinel and is left alone.
+    """
+    parent = multiprocessing.parent_process()
+    if parent is None or parent.sentinel is None:
+        return
+    sentinel = parent.sentinel
+
+    def watch() -> None:
+        multiprocessing.connection.wait([sentinel])
+        os._exit(EXIT_PARENT_GONE)  # no clean-up: whatever the trial held dies with it
+
+    threading.Thread(target=watch, name="hil-parent-watch", daemon=True).start()
 
 
 def probe_pool_worker() -> dict[str, str | None]:

@@ -53,20 +53,6 @@ if TYPE_CHECKING:
 SERVICE_TICK_S = 0.001
 
 
-class _PacedClock:
-    """The scaled tank clock as the simulated interface's time source (``now``,
-    ``sleep_until``), s."""
-
-    def __init__(self, clock: ScaledClock) -> None:
-        self._clock = clock
-
-    def now(self) -> float:
-        return self._clock.now()
-
-    def sleep_until(self, t_s: float) -> None:
-        self._clock.sleep(t_s - self._clock.now())
-
-
 class _TankInPlace:
     """The tank world (``world(dac_block, first) -> adc``, shapes (n, 1) -> (n, 2)) as the
     simulated interface's world (``world(output, index, input)``, input filled in place)."""
@@ -141,13 +127,14 @@ class AudioTank:
         if self.virtual_time is not None:
             backend = SimulatedDuplex(settings, world, virtual_time=self.virtual_time)
         else:
-            backend = SimulatedDuplex(settings, world, clock=_PacedClock(self._scaled))
+            backend = SimulatedDuplex(settings, world, clock=self._scaled)
         self._backend = backend
         daq = AudioDaq(
             backend,
             ring_seconds=RING_S,
             host_clock=self.clock.now,
             virtual_time=self.virtual_time,
+            url=self.exp.board_url,
         )
         self.daq = daq.open()
         daq.configure()
@@ -190,6 +177,12 @@ class AudioTank:
     def adc_clipped_samples(self) -> int | None:
         """Input values the simulated interface clipped at ±1.0 (None before it opened)."""
         return None if self._backend is None else self._backend.adc_clipped_samples
+
+    def unplug_interface(self) -> None:
+        """Fault injection: the simulated interface pulled out mid-run (its stream ends)."""
+        if self._backend is None:
+            raise RuntimeError("the simulated interface is not open: call open_daq first")
+        self._backend.unplug()
 
     def lost(self, grace_s: float = 0.0) -> DeviceLostError | None:
         """Never: the simulation is this process."""

@@ -1,10 +1,12 @@
 """The experiment file of a towed-target tank run (TOML), validated before any device is
 touched.
 
-Every problem is a :class:`~hil.errors.ConfigError` naming the field by its dotted path as
-written in the file (``tow.speed_mps``), the value, the allowed range and what to do. The
-format is documented in ``docs/tank-run.md``; :data:`DEFAULT_EXPERIMENT` is the built-in
-simulated run that ``hil tank-run`` uses without arguments.
+Each table is read by its dataclass (:mod:`hil.experiments.experiment_sections`), then what
+spans tables is checked here; every problem of the file is reported at once (a
+:class:`~hil.errors.ConfigErrors`), each naming the field by its dotted path as written in
+the file (``tow.speed_mps``), the value, the allowed range and what to do. The format is
+documented in ``docs/tank-run.md``; :data:`DEFAULT_EXPERIMENT` is the built-in simulated run
+that ``hil tank-run`` uses without arguments.
 
 Coordinates: the tank frame has x along the tank length, y across, z up with the water
 surface at z = 0 (so depths are negative), metres. The stage is GRBL's X axis, whose machine
@@ -15,21 +17,57 @@ positions are in ``[-travel, 0]`` (0 at the homing switch): the towed target sit
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from hil.devices.table import check_device_url, is_simulated
+from hil.config_sections import Problems
+from hil.devices.table import is_simulated
 from hil.errors import ConfigError
 from hil.estimation.first_arrival import RANGE_READOUTS
 from hil.estimation.reverb_band import AUTO, doppler_resolution_mps, resolve_reverb_speed
+from hil.experiments.experiment_sections import (
+    BEAM_KINDS,
+    MAX_TANK_ECHO_ORDER,
+    MAX_TARGET_IMAGE_ORDER,
+    CalibrationSection,
+    DevicesSection,
+    ExperimentFile,
+    ReceiverSection,
+    RunSection,
+    SimulationSettings,
+    TankSection,
+    TowPlan,
+    WaveformSection,
+    check_run_name,
+    outside_tank,
+)
 from hil.paths import resolve_calibration_dir, resolve_runs_dir
 from hil.signals.presets import check_design, get_preset
 from hil.signals.schedule import HopSchedule
-from hil.signals.waveforms import WaveformSpec
-from hil.toml_table import Table, did_you_mean, parse_toml, read_text_file
+from hil.signals.waveforms import HFCCW_FAMILIES, WaveformSpec
+from hil.toml_table import parse_toml, read_text_file
+
+__all__ = [
+    "BEAM_KINDS",
+    "DEFAULT_EXPERIMENT",
+    "MAX_TANK_ECHO_ORDER",
+    "MAX_TARGET_IMAGE_ORDER",
+    "Experiment",
+    "SimulationSettings",
+    "TowPlan",
+    "check_run_name",
+    "load_experiment",
+    "parse_experiment",
+    "tank_receiver_options",
+]
+
+#: Receivers that need every hop of the code the same length (the GCAS family: its
+#: accumulated sums and Doppler resolution are per hop).
+EQUAL_HOP_RECEIVERS = ("gcas", "gcas-mti")
 
 DEFAULT_EXPERIMENT = """\
 # Built-in simulated tank run: `hil tank-run` with no arguments.
@@ -94,92 +132,6 @@ time_scale = 0.4
 seed = 1
 """
 
-#: Image order limit (reflections per round trip) of the simulated target's echoes (1, 13,
-#: 85, 377, 1289 paths for 0 … 4, each rendered per sample) and of the tank's own echoes
-#: (one convolution, any order).
-MAX_TARGET_IMAGE_ORDER = 4
-MAX_TANK_ECHO_ORDER = 40
-#: Directivity of the simulated projector and hydrophone: omni, or a baffled circular
-#: piston of the given radius at the waveform's centre frequency.
-BEAM_KINDS = ("omni", "piston")
-
-_SECTIONS: dict[str, tuple[str, ...]] = {
-    "run": ("name", "output_dir", "max_duration_s"),
-    "devices": ("board", "stage", "board_channel"),
-    "waveform": ("preset", "family", "amplitude", "overrides"),
-    "tank": (
-        "size_m",
-        "water_temperature_c",
-        "salinity_ppt",
-        "sound_speed_mps",
-        "transducer_position_m",
-        "stage_origin_m",
-        "stage_axis",
-    ),
-    "tow": ("start_m", "end_m", "speed_mps", "repeats", "run_up_m", "run_down_m"),
-    "receiver": ("name", "m_hops", "max_speed_mps", "max_range_m", "options"),
-    "calibration": ("store", "max_age_days", "required"),
-    "simulation": (
-        "source_level_db",
-        "target_strength_db",
-        "sensitivity_db",
-        "gain_db",
-        "image_order",
-        "tank_echoes",
-        "tank_echo_order",
-        "late_tail",
-        "wall_reflection",
-        "bottom_reflection",
-        "transducer_beam",
-        "transducer_radius_m",
-        "hydrophone_beam",
-        "hydrophone_radius_m",
-        "noise_level_db",
-        "reverberation",
-        "scattering_strength_db",
-        "time_scale",
-        "seed",
-    ),
-}
-_REQUIRED = {"devices": ("board", "stage"), "tow": ("start_m", "end_m", "speed_mps")}
-
-
-@dataclass(frozen=True)
-class TowPlan:
-    """A constant-speed pass of the stage, stage coordinates (m) and m/s."""
-
-    start_m: float
-    end_m: float
-    speed_mps: float
-    repeats: int = 1
-    run_up_m: float = 0.5
-    run_down_m: float = 0.5
-
-
-@dataclass(frozen=True)
-class SimulationSettings:
-    """The simulated world behind ``sim://`` devices (ignored for real hardware)."""
-
-    source_level_db: float = 185.0
-    target_strength_db: float = -12.0
-    sensitivity_db: float = -200.0
-    gain_db: float = 30.0
-    image_order: int = 1
-    tank_echoes: bool = False
-    tank_echo_order: int = 3
-    late_tail: bool = True
-    wall_reflection: float = 0.9
-    bottom_reflection: float = 0.9
-    transducer_beam: str = "piston"
-    transducer_radius_m: float = 0.015
-    hydrophone_beam: str = "omni"
-    hydrophone_radius_m: float = 0.015
-    noise_level_db: float = 40.0
-    reverberation: bool = True
-    scattering_strength_db: float = -70.0
-    time_scale: float = 0.5
-    seed: int = 1
-
 
 @dataclass(frozen=True)
 class Experiment:
@@ -240,244 +192,202 @@ def load_experiment(path: Path) -> Experiment:
 
 
 def parse_experiment(text: str, source: str = "<text>") -> Experiment:
-    """Validate experiment TOML text (see the module docstring); nothing is touched."""
+    """Validate experiment TOML text (see the module docstring); nothing is touched.
+
+    Every table is read by its dataclass (:mod:`hil.experiments.experiment_sections`), then
+    the checks across tables run (:func:`_across_tables`); every problem found is reported at
+    once, as a :class:`~hil.errors.ConfigErrors` (one line each).
+    """
     data = parse_toml(text, "experiment", source)
-    unknown = sorted(set(data) - set(_SECTIONS))
-    if unknown:
-        raise ConfigError(
-            unknown[0],
-            data[unknown[0]],
-            f"one of the tables {', '.join(_SECTIONS)}",
-            "remove it or fix its spelling" + did_you_mean(unknown[0], tuple(_SECTIONS)),
-        )
-    # The tables first (a list of tables, a misspelt key), then what is missing: a key
-    # misspelt is named as such, not as a required key that is absent.
-    t = {
-        name: Table(data.get(name, {}), name, keys, "hil docs tank-run")
-        for name, keys in _SECTIONS.items()
-    }
-    for section, keys in _REQUIRED.items():
-        for key in keys:
-            if key not in data.get(section, {}):
-                raise ConfigError(f"{section}.{key}", None, "a value", "it is required")
+    problems = Problems()
+    tables = ExperimentFile.read_values(data, "", problems)
+    exp = None if tables is None else _across_tables(tables, text, problems)
+    problems.raise_any()
+    assert exp is not None
+    return exp
 
-    run, dev, wav, tank, tow, rec, cal, sim = (t[k] for k in _SECTIONS)
-    name = check_run_name(run.text("name", "tank-run"))
-    output_dir = resolve_runs_dir(run.text("output_dir", "runs"))
-    max_duration = run.number("max_duration_s", 120.0, lo=0.0, lo_open=True, unit="s")
-    board_url, stage_url = dev.text("board"), dev.text("stage")
-    board_url = check_device_url(board_url, "daq", "devices.board")
-    stage_url = check_device_url(stage_url, "stage", "devices.stage")
-    board_channel = dev.integer("board_channel", 0, lo=0, hi=15)
 
-    preset_name = wav.text("preset", "tank-board")
-    family = wav.text("family", "random-cyclic")
-    amplitude = wav.number("amplitude", 0.5, lo=0.0, hi=1.0, lo_open=True, unit="(full scale)")
-    overrides = wav.data.get("overrides", {})
-    if not isinstance(overrides, dict):
-        raise ConfigError("waveform.overrides", overrides, "a table of waveform fields")
+def _across_tables(t: dict[str, Any], text: str, problems: Problems) -> Experiment | None:
+    """The checks that span tables, in one place, and the experiment when nothing failed.
 
-    size = tank.point("size_m", (12.0, 4.0, 2.5))
-    if min(size) <= 0:
-        raise ConfigError("tank.size_m", list(size), "three lengths > 0 m")
-    temp = tank.number("water_temperature_c", 20.0, lo=0.0, hi=95.0, unit="°C")
-    salinity = tank.number("salinity_ppt", 0.0, lo=0.0, hi=42.0, unit="ppt")
-    if "sound_speed_mps" in tank.data:
-        c = tank.number("sound_speed_mps", lo=1300.0, hi=1700.0, unit="m/s")
-    else:
-        c = _sound_speed_from_water(temp, salinity)
-    xdcr = tank.point("transducer_position_m", (0.5, size[1] / 2, -size[2] / 2))
-    origin = tank.point("stage_origin_m", (size[0] - 1.0, size[1] / 2, -size[2] / 2))
-    axis_raw = np.asarray(tank.point("stage_axis", (1.0, 0.0, 0.0)))
-    norm = float(np.sqrt(axis_raw @ axis_raw))
-    if norm == 0:
-        raise ConfigError("tank.stage_axis", axis_raw.tolist(), "a non-zero direction")
-    axis = axis_raw / norm
-    for key, p in (("transducer_position_m", xdcr), ("stage_origin_m", origin)):
-        _inside_tank(f"tank.{key}", p, size)
-
-    plan = TowPlan(
-        start_m=tow.number("start_m", unit="m"),
-        end_m=tow.number("end_m", unit="m"),
-        speed_mps=tow.number("speed_mps", lo=0.0, lo_open=True, hi=5.0, unit="m/s"),
-        repeats=tow.integer("repeats", 1, lo=1, hi=1000),
-        run_up_m=tow.number("run_up_m", 0.5, lo=0.0, unit="m"),
-        run_down_m=tow.number("run_down_m", 0.5, lo=0.0, unit="m"),
-    )
-    if plan.start_m == plan.end_m:
-        raise ConfigError("tow.end_m", plan.end_m, f"!= tow.start_m = {plan.start_m} m")
-    d = 1.0 if plan.end_m > plan.start_m else -1.0
-    for key, x in (
-        ("tow.start_m - tow.run_up_m", plan.start_m - d * plan.run_up_m),
-        ("tow.end_m + tow.run_down_m", plan.end_m + d * plan.run_down_m),
-    ):
-        if x > 0:
-            raise ConfigError(key, x, "<= 0 m (GRBL machine positions are in [-travel, 0])")
-        towed = np.asarray(origin) + x * axis
-        _inside_tank(f"target at stage x = {x:g} m ({key})", tuple(towed.tolist()), size)
-
-    receiver = rec.text("name", "gcas")
-    m_hops = rec.integer("m_hops", 10, lo=1, hi=64)
-    v_max = rec.number("max_speed_mps", 3.0, lo=0.0, lo_open=True, unit="m/s")
-    if v_max < plan.speed_mps:
-        raise ConfigError(
-            "receiver.max_speed_mps",
-            v_max,
-            f">= tow.speed_mps = {plan.speed_mps} m/s",
-            "the Doppler search must cover the tow speed",
-        )
-    diag = float(np.sqrt(sum(s * s for s in size)))
-    r_max = rec.number("max_range_m", diag, lo=0.0, lo_open=True, unit="m")
-    options = rec.data.get("options", {})
-    if not isinstance(options, dict):
-        raise ConfigError("receiver.options", options, "a table of receiver options")
-    from hil.estimation.option_types import check_option_types
-    from hil.estimation.registry import receiver_class
-
-    check_option_types(receiver_class(receiver), options, receiver, "receiver.options.")
-
-    # The waveform: preset, family, overrides, with the tank's sound speed and tow limits.
-    preset = get_preset(preset_name)
-    try:
-        spec = preset.spec(family, sound_speed_mps=c, **overrides)
-    except ConfigError as exc:
-        raise ConfigError(f"waveform.{exc.field}", exc.value, exc.allowed, exc.hint) from None
-    spec = spec.with_overrides(max_range_m=min(spec.max_range_m, r_max))
-    try:
-        schedule = check_design(spec)
-    except ConfigError as exc:
-        raise ConfigError(f"waveform.{exc.field}", exc.value, exc.allowed, exc.hint) from None
-    r_unamb = schedule.unambiguous_range_m(c)
-    if r_max > r_unamb:
-        raise ConfigError(
-            "receiver.max_range_m", r_max, f"<= the waveform's unambiguous range {r_unamb:.2f} m"
-        )
-
-    store = resolve_calibration_dir(cal.text("store", "calibration"))
-    max_age = cal.number("max_age_days", 30.0, lo=0.0, lo_open=True, unit="days")
-    required = cal.data.get("required", [])
-    if not isinstance(required, list) or not all(isinstance(r, str) for r in required):
-        raise ConfigError("calibration.required", required, "a list of calibration kinds")
-
-    simulation = SimulationSettings(
-        source_level_db=sim.number(
-            "source_level_db", 185.0, lo=100.0, hi=250.0, unit="dB re 1 µPa @ 1 m"
-        ),
-        target_strength_db=sim.number(
-            "target_strength_db", -12.0, lo=-80.0, hi=40.0, unit="dB re 1 m²"
-        ),
-        sensitivity_db=sim.number(
-            "sensitivity_db", -200.0, lo=-260.0, hi=-100.0, unit="dB re 1 V/µPa"
-        ),
-        gain_db=sim.number("gain_db", 30.0, lo=-20.0, hi=80.0, unit="dB"),
-        image_order=sim.integer("image_order", 1, lo=0, hi=MAX_TARGET_IMAGE_ORDER),
-        tank_echoes=sim.flag("tank_echoes", False),
-        tank_echo_order=sim.integer("tank_echo_order", 3, lo=0, hi=MAX_TANK_ECHO_ORDER),
-        late_tail=sim.flag("late_tail", True),
-        wall_reflection=sim.number("wall_reflection", 0.9, lo=-1.0, hi=1.0),
-        bottom_reflection=sim.number("bottom_reflection", 0.9, lo=-1.0, hi=1.0),
-        transducer_beam=sim.text("transducer_beam", "piston", BEAM_KINDS),
-        transducer_radius_m=sim.number(
-            "transducer_radius_m", 0.015, lo=0.0, lo_open=True, hi=1.0, unit="m"
-        ),
-        hydrophone_beam=sim.text("hydrophone_beam", "omni", BEAM_KINDS),
-        hydrophone_radius_m=sim.number(
-            "hydrophone_radius_m", 0.015, lo=0.0, lo_open=True, hi=1.0, unit="m"
-        ),
-        noise_level_db=sim.number(
-            "noise_level_db", 40.0, lo=-20.0, hi=120.0, unit="dB re 1 µPa²/Hz"
-        ),
-        reverberation=sim.flag("reverberation", True),
-        scattering_strength_db=sim.number(
-            "scattering_strength_db", -70.0, lo=-120.0, hi=-10.0, unit="dB"
-        ),
-        time_scale=sim.number("time_scale", 0.5, lo=0.01, hi=1.0, unit="(simulated s per wall s)"),
-        seed=sim.integer("seed", 1, lo=0),
-    )
+    A check that needs a table with a problem of its own is skipped (that problem is already
+    reported): the tow inside the tank, the receiver's speed and range against the tow, the
+    run's duration against the tow, the waveform at the tank's sound speed and within the
+    receiver's range, the receiver's options for that waveform.
+    """
+    run: RunSection | None = t.get("run")
+    dev: DevicesSection | None = t.get("devices")
+    wav: WaveformSection | None = t.get("waveform")
+    tank: TankSection | None = t.get("tank")
+    tow: TowPlan | None = t.get("tow")
+    rec: ReceiverSection | None = t.get("receiver")
+    cal: CalibrationSection | None = t.get("calibration")
+    sim: SimulationSettings | None = t.get("simulation")
+    for exc in _tow_fits(run, tank, tow, rec):
+        problems.add(exc)
+    r_max = None
+    if rec is not None and tank is not None:
+        # Left out, the range searched is the tank's diagonal.
+        r_max = rec.max_range_m or float(np.sqrt(sum(s * s for s in tank.size_m)))
+    spec = schedule = None
+    if wav is not None and tank is not None and r_max is not None:
+        with problems.collect():
+            spec, schedule = _waveform(wav, tank.sound_speed, r_max, rec)
+    options = None
+    derived = spec is not None and schedule is not None
+    if rec is not None and tow is not None and tank is not None and derived:
+        assert spec is not None and schedule is not None
+        with problems.collect():
+            options = tank_receiver_options(
+                rec.name, dict(rec.options), schedule, spec.fs_hz, tank.sound_speed, tow
+            )
+    output_dir = store = None
+    if run is not None:
+        with problems.collect():
+            output_dir = resolve_runs_dir(run.output_dir)
+    if cal is not None:
+        with problems.collect():
+            store = resolve_calibration_dir(cal.store)
+    if problems or None in (run, dev, wav, tank, tow, rec, cal, sim, output_dir, store):
+        return None
+    # Narrowed for the type checker: every table read and every value derived.
+    assert run is not None and dev is not None and wav is not None and tank is not None
+    assert tow is not None and rec is not None and cal is not None and sim is not None
+    assert spec is not None and schedule is not None and r_max is not None
+    assert output_dir is not None and store is not None and options is not None
+    board_url, stage_url = dev.urls
     return Experiment(
-        name=name,
+        name=run.name,
         output_dir=output_dir,
-        max_duration_s=max_duration,
+        max_duration_s=run.max_duration_s,
         board_url=board_url,
         stage_url=stage_url,
-        board_channel=board_channel,
+        board_channel=dev.board_channel,
         waveform=spec,
         schedule=schedule,
-        preset=preset_name,
-        amplitude=amplitude,
-        tank_size_m=size,
-        water_temperature_c=temp,
-        salinity_ppt=salinity,
-        sound_speed_mps=c,
-        transducer_m=xdcr,
-        stage_origin_m=origin,
-        stage_axis=(float(axis[0]), float(axis[1]), float(axis[2])),
-        tow=plan,
-        receiver=receiver,
-        m_hops=m_hops,
-        max_speed_mps=v_max,
+        preset=wav.preset,
+        amplitude=wav.amplitude,
+        tank_size_m=tank.size_m,
+        water_temperature_c=tank.temperature_c,
+        salinity_ppt=tank.salinity_ppt,
+        sound_speed_mps=tank.sound_speed,
+        transducer_m=tank.transducer_m,
+        stage_origin_m=tank.origin_m,
+        stage_axis=tank.axis,
+        tow=tow,
+        receiver=rec.name,
+        m_hops=rec.m_hops,
+        max_speed_mps=rec.max_speed_mps,
         max_range_m=r_max,
-        receiver_options=tank_receiver_options(
-            receiver, dict(options), schedule, spec.fs_hz, c, plan
-        ),
+        receiver_options=options,
         calibration_store=store,
-        calibration_max_age_days=max_age,
-        calibration_required=tuple(required),
-        simulation=simulation,
+        calibration_max_age_days=cal.max_age_days,
+        calibration_required=tuple(cal.required),
+        simulation=sim,
         text=text,
     )
 
 
-def check_run_name(name: str) -> str:
-    """``name`` if it is a plain folder name (``run.name``): the run folder is
-    ``output_dir/name-timestamp``, so a name with a path separator, ``..``, a leading ``.``,
-    or an absolute path would put it elsewhere.
+def _tow_fits(
+    run: RunSection | None,
+    tank: TankSection | None,
+    tow: TowPlan | None,
+    rec: ReceiverSection | None,
+) -> Iterator[ConfigError]:
+    """The tow against the other tables: the target inside the tank at both ends (with the
+    run-up and run-down), the run's duration, the receiver's speed and range."""
+    if tow is None:
+        return
+    if tank is not None:
+        for key, x in _tow_ends(tow):
+            towed = np.asarray(tank.origin_m) + x * np.asarray(tank.axis)
+            bad = outside_tank(f"target at stage x = {x:g} m ({key})", tuple(towed), tank.size_m)
+            if bad is not None:
+                yield bad
+    # The tolerance: a duration written as the tow's, to its printed digits, is enough.
+    if run is not None and run.max_duration_s < tow.shortest_duration_s * (1.0 - 1e-9):
+        yield ConfigError(
+            "run.max_duration_s", run.max_duration_s,
+            f">= {tow.shortest_duration_s:.3g} s, the tow's shortest duration (tow.repeats"
+            " x (|end_m - start_m| + run_up_m + run_down_m) / speed_mps)",
+            "raise it: the run is stopped as a failure when it runs out",
+        )  # fmt: skip
+    if rec is None:
+        return
+    if rec.max_speed_mps < tow.speed_mps:
+        yield ConfigError(
+            "receiver.max_speed_mps", rec.max_speed_mps,
+            f">= tow.speed_mps = {tow.speed_mps} m/s",
+            "the Doppler search must cover the tow speed",
+        )  # fmt: skip
+    if tank is not None:
+        r_max = rec.max_range_m or float(np.sqrt(sum(s * s for s in tank.size_m)))
+        yield from _range_covers_tow(r_max, rec.max_range_m is not None, tank, tow)
 
-    >>> check_run_name("towed-pass")
-    'towed-pass'
-    >>> check_run_name("../../x")
-    Traceback (most recent call last):
-    ...
-    hil.errors.ConfigError: run.name = '../../x' is not allowed: must be a plain folder name \
-(letters, digits, '-', '_', '.', not starting with '.'); the run folder is \
-run.output_dir/name-timestamp and must stay inside run.output_dir
-    """
-    plain = (
-        bool(name)
-        and not name.startswith(".")
-        and all(ch.isalnum() or ch in "-_." for ch in name)
-        and len(name) <= 100
+
+def _tow_ends(tow: TowPlan) -> tuple[tuple[str, float], tuple[str, float]]:
+    """Where the carriage is farthest each way (stage m): the run-up's start and the
+    run-down's end, named as the file's keys."""
+    d = tow.direction
+    return (
+        ("tow.start_m - tow.run_up_m", tow.start_m - d * tow.run_up_m),
+        ("tow.end_m + tow.run_down_m", tow.end_m + d * tow.run_down_m),
     )
-    if not plain:
-        raise ConfigError(
-            "run.name",
+
+
+def _range_covers_tow(
+    r_max: float, given: bool, tank: TankSection, tow: TowPlan
+) -> list[ConfigError]:
+    """``receiver.max_range_m`` against the target's farthest range during the passes (at
+    ``tow.start_m`` or ``tow.end_m``: the range along a straight pass is largest at an end):
+    a shorter search range finds no target there, so the run is refused before it moves."""
+    xdcr, origin, axis = (np.asarray(v) for v in (tank.transducer_m, tank.origin_m, tank.axis))
+    far_r, far_key, x = max(
+        (float(np.linalg.norm(origin + x * axis - xdcr)), key, x)
+        for key, x in (("tow.start_m", tow.start_m), ("tow.end_m", tow.end_m))
+    )
+    if r_max >= far_r:
+        return []
+    name = "receiver.max_range_m" if given else "receiver.max_range_m (the tank's diagonal)"
+    return [
+        ConfigError(
             name,
-            "a plain folder name (letters, digits, '-', '_', '.', not starting with '.')",
-            "the run folder is run.output_dir/name-timestamp and must stay inside run.output_dir",
+            round(r_max, 4),
+            f">= {far_r:.3f} m, the target's range at {far_key} = {x:g} m (the tow's farthest)",
+            "raise it (or leave it out: the tank's diagonal), or shorten the tow: beyond it"
+            " the receiver finds no target",
         )
-    return name
+    ]
 
 
-def _inside_tank(name: str, p: tuple[float, ...], size: tuple[float, float, float]) -> None:
-    lx, ly, lz = size
-    inside = 0 < p[0] < lx and 0 < p[1] < ly and -lz < p[2] < 0
-    if not inside:
+def _waveform(
+    wav: WaveformSection, c: float, r_max: float, rec: ReceiverSection | None
+) -> tuple[WaveformSpec, HopSchedule]:
+    """The waveform of ``[waveform]`` at the tank's sound speed ``c`` (m/s), searched to
+    ``r_max`` (m), checked for the receiver; errors named under ``waveform.``."""
+    preset = get_preset(wav.preset)
+    try:
+        spec = preset.spec(wav.family, sound_speed_mps=c, **wav.overrides)
+        spec = spec.with_overrides(max_range_m=min(spec.max_range_m, r_max))
+        schedule = check_design(spec)
+    except ConfigError as exc:
+        raise ConfigError(f"waveform.{exc.field}", exc.value, exc.allowed, exc.hint) from None
+    hops = np.unique(np.round(schedule.duration_s, 12))
+    if rec is not None and rec.name in EQUAL_HOP_RECEIVERS and hops.size > 1:
         raise ConfigError(
-            name,
-            [round(c, 4) for c in p],
-            f"inside the tank: 0 < x < {lx}, 0 < y < {ly}, -{lz} < z < 0 m",
-            "move it, or change tank.size_m / the tow plan",
-        )
-
-
-def _sound_speed_from_water(temperature_c: float, salinity_ppt: float) -> float:
-    """c from the logged water: fresh water (Marczak 1997) or UNESCO for salt water."""
-    # Lazy import: the formulas live with the acoustics (DESIGN: hil imports sim_devices lazily).
-    from sim_devices.acoustics.sound_speed import tank_sound_speed, unesco_sound_speed
-
-    if salinity_ppt == 0.0:
-        return float(tank_sound_speed(temperature_c))
-    return float(unesco_sound_speed(salinity_ppt, temperature_c, 0.0))
+            "waveform.family", wav.family,
+            f"a family of equal hops for receiver.name = {rec.name!r}",
+            f"{wav.family} has hops of {', '.join(f'{h * 1e3:g}' for h in hops)} ms (a pulse"
+            f" then silence); use a continuous family ({', '.join(HFCCW_FAMILIES)}), or a"
+            " receiver for pulses (stft)",
+        )  # fmt: skip
+    r_unamb = schedule.unambiguous_range_m(c)
+    if r_max > r_unamb:
+        name = "receiver.max_range_m"
+        if rec is None or rec.max_range_m is None:
+            name += " (the tank's diagonal)"
+        raise ConfigError(name, r_max, f"<= the waveform's unambiguous range {r_unamb:.2f} m")
+    return spec, schedule
 
 
 def tank_receiver_options(

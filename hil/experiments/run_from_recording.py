@@ -2,13 +2,15 @@
 when it could not write its summary (``kill -9``, power loss), or a summary to write again.
 
 What a recording holds is what the live run scored with: the experiment file, the estimates,
-the stage telemetry, the SYNC pairs that map it onto sample time, the events (gaps, xruns,
-how the run stopped). The GCAS receiver's time-codeword map is rebuilt by replaying the live
-receiver over the samples (the same cells; the power of a few differs from live, as GCAS's
-map depends on where its input was cut into calls, its estimates do not). Not recorded, so not in
-a rebuilt summary: the host's wall time (its real-time factor is left out), the simulated
-tank's exact truth, and how late each stage report came (every report is used). Xruns are
-counted from the recorded events.
+the stage telemetry (every report, with how long it took to come back: the late ones are left
+out of the truth here as live), the SYNC pairs that map it onto sample time, the events (gaps,
+xruns, how the run stopped); so the scoring keys of a rebuilt summary equal the live ones.
+The GCAS receiver's time-codeword map is rebuilt by replaying the live receiver over the
+samples (the same cells; the power of a few differs from live, as GCAS's map depends on where
+its input was cut into calls, its estimates do not). Not recorded, so not in a rebuilt
+summary: the host's wall time (its real-time factor is left out), the capture backlog and the
+simulated tank's exact truth. Recordings made before the reply time was recorded use every
+report. Xruns are counted from the recorded events.
 """
 
 from __future__ import annotations
@@ -120,7 +122,7 @@ def _telemetry(rec: RunRecording, fs: float) -> Telemetry:
         position_m=[t.position_m for t in tel],
         velocity_mps=[t.velocity_mps for t in tel],
         state=[t.state for t in tel],
-        reply_s=[0.0] * len(tel),
+        reply_s=[t.reply_s for t in tel],
     )
 
 

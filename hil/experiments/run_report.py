@@ -5,8 +5,9 @@
 - ``time_codeword_map.png``: the GCAS time–codeword map (seed Fig 5.17 style) with the true
   hop boundaries from the telemetry;
 - ``errors.png``: histograms of range and speed errors against the truth, of every estimate
-  with a known truth and of the scored ones that are not wrong (inside the constant-speed
-  segments), titled with the counts, RMSEs and biases of ``summary.json``.
+  with a known truth and of the scored ones (inside the constant-speed segments, whatever
+  their error), titled with the counts, RMSEs (also the gated ones) and biases of
+  ``summary.json``.
 """
 
 from __future__ import annotations
@@ -65,21 +66,24 @@ def write_report(outcome: RunOutcome) -> list[Path]:
     # Every estimate with a known truth; the scored ones (constant-speed segments) on top.
     fig, (a1, a2) = new_figure(1, 2, figsize=(10, 4.2), dpi=110)
     panels = (
-        (a1, score.range_error_m, "range error (m)", "range_rmse_m", "range_bias_m", "m"),
-        (a2, score.speed_error_mps, "speed error (m/s)", "speed_rmse_mps", "speed_bias_mps", "m/s"),
+        (a1, score.range_error_m, "range error (m)", "range", "m"),
+        (a2, score.speed_error_mps, "speed error (m/s)", "speed", "m/s"),
     )
-    for ax, err, label, rmse_key, bias_key, unit in panels:
+    for ax, err, label, name, unit in panels:
         e_all = err[score.known]
-        e_sc = err[score.good_scored]
+        e_sc = err[score.scored]
         if e_all.size:
             lo, hi = np.percentile(e_all, [0.5, 99.5])
             bins = np.linspace(float(lo), float(hi) + 1e-9, 41)
             ax.hist(np.clip(e_all, bins[0], bins[-1]), bins=bins, color="0.75", label="all known")
-            ax.hist(np.clip(e_sc, bins[0], bins[-1]), bins=bins, label="scored, not wrong")
-        rmse, bias = figures[rmse_key], figures[bias_key]
+            ax.hist(np.clip(e_sc, bins[0], bins[-1]), bins=bins, label="scored")
+        suffix = "m" if unit == "m" else "mps"
+        rmse, bias = figures[f"{name}_rmse_{suffix}"], figures[f"{name}_bias_{suffix}"]
+        gated = figures[f"{name}_rmse_gated_{suffix}"]
         title = "no scored estimate"
         if rmse is not None:
             title = f"scored: rmse {rmse:.3g} {unit}, bias {bias:+.3g} {unit}"
+            title += f", gated rmse {gated:.3g} {unit}" if gated is not None else ", none gated"
         ax.set_title(title, fontsize=9)
         ax.set_xlabel(label)
         ax.set_ylabel("estimates")

@@ -1,9 +1,12 @@
 """Scoring a tank run against the stage telemetry: the truth at every estimate, which
-estimates are scored, the run summary (``summary.json``) and ``estimates.csv``."""
+estimates are scored, the detection gate (0.5 m, or one range resolution cell when smaller),
+the hop boundaries the truth expects, the run summary (``summary.json``) and
+``estimates.csv``."""
 
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -11,42 +14,75 @@ from typing import Any
 import numpy as np
 
 from hil.acquisition.annotations import ADC_CLIPPING_TEXT
+from hil.estimation.track_summary import track_figures
 from hil.experiments.run_calibrations import true_stage_motion
 from hil.experiments.tank_run import STAGE_POLL_S, TELEMETRY_MAX_REPLY_S, RunOutcome
 
 #: Telemetry truth is not interpolated across reports farther apart than this (s of sample
 #: time): a stalled host or stage leaves the carriage's motion in between unknown.
 TELEMETRY_GAP_S = 3 * STAGE_POLL_S
-#: An estimate farther than this from the truth counts as a false alarm, m.
-FALSE_ALARM_GATE_M = 1.0
+#: The widest detection gate, m: an estimate farther than the gate from the truth in range is
+#: wrong (a false alarm inside the scored window). The gate is one range resolution cell of
+#: the waveform when that is smaller (:func:`detection_gate_m`).
+MAX_DETECTION_GATE_M = 0.5
 
 _TRUTH_KEYS = ("range_m", "speed_mps", "stage_x_m", "stage_v_mps")
 
 
+def range_cell_m(tones_hz: np.ndarray, sound_speed_mps: float) -> float:
+    """One range resolution cell of a waveform, ``c / (2 B)`` (m), ``B`` the band its tones
+    ``tones_hz`` (Hz) span; ``inf`` for a single tone, which resolves no range by bandwidth.
+
+    >>> round(range_cell_m(np.array([57e3, 59e3, 61e3, 63e3]), 1482.0), 4)  # tank-audio
+    0.1235
+    """
+    tones = np.asarray(tones_hz, dtype=float)
+    band = float(tones.max() - tones.min()) if tones.size else 0.0
+    return sound_speed_mps / (2.0 * band) if band > 0 else math.inf
+
+
+def detection_gate_m(outcome: RunOutcome) -> float:
+    """The detection gate (m): :data:`MAX_DETECTION_GATE_M`, or one range resolution cell
+    (:func:`range_cell_m`) when that is smaller."""
+    exp = outcome.experiment
+    return min(MAX_DETECTION_GATE_M, range_cell_m(exp.schedule.tones_hz, exp.sound_speed_mps))
+
+
+def bounce_times(outcome: RunOutcome) -> np.ndarray:
+    """Every estimate's bounce instant (s, receiver time base), shape ``(n_estimates,)``:
+    halfway between the boundary's transmit and receive times."""
+    return np.array([(e.t_s + e.t_tx_s) / 2.0 for e in outcome.estimates], dtype=float)
+
+
 def telemetry_truth(outcome: RunOutcome) -> dict[str, np.ndarray]:
-    """Range (m) and closing speed (m/s) at every estimate's bounce instant, from the stage
-    telemetry mapped onto sample time (what a lab has as ground truth): positions
-    interpolated between status reports, speed from the reported feed rate projected on the
-    line of sight (differencing 5 Hz positions would be far noisier); reports answered
-    later than :data:`TELEMETRY_MAX_REPLY_S` are not used. With a stage calibration
-    applied (:attr:`RunOutcome.calibrations`), range and speed are the carriage's true ones.
-    Also the stage's own reported position (``stage_x_m``, m) and velocity
-    (``stage_v_mps``, m/s), in the tow plan's commanded coordinates. All shape
-    ``(n_estimates,)``; NaN outside the telemetry and inside a gap between reports longer
-    than :data:`TELEMETRY_GAP_S` (the motion there is unknown)."""
+    """The truth (:func:`truth_at`) at every estimate's bounce instant."""
+    return truth_at(outcome, bounce_times(outcome))
+
+
+def truth_at(outcome: RunOutcome, t_b: np.ndarray) -> dict[str, np.ndarray]:
+    """Range (m) and closing speed (m/s) at bounce instants ``t_b`` (s, receiver time base,
+    shape ``(n,)``), from the stage telemetry mapped onto sample time (what a lab has as
+    ground truth): positions interpolated between status reports, speed from the reported
+    feed rate projected on the line of sight (differencing 5 Hz positions would be far
+    noisier); reports answered later than :data:`TELEMETRY_MAX_REPLY_S` are not used. With
+    a stage calibration applied (:attr:`RunOutcome.calibrations`), range and speed are the
+    carriage's true ones. Also the stage's own reported position (``stage_x_m``, m) and
+    velocity (``stage_v_mps``, m/s), in the tow plan's commanded coordinates. All shape
+    ``(n,)``; NaN outside the telemetry and inside a gap between reports longer than
+    :data:`TELEMETRY_GAP_S` (the motion there is unknown)."""
     tel = outcome.telemetry
     idx = np.asarray(tel.sample_index, dtype=float)
     pos = np.asarray(tel.position_m, dtype=float)
     vel = np.asarray(tel.velocity_mps, dtype=float)
     reply = np.asarray(tel.reply_s, dtype=float) if tel.reply_s else np.zeros(idx.size)
     ok = (idx >= 0) & (reply <= TELEMETRY_MAX_REPLY_S)
-    n = len(outcome.estimates)
+    t_b = np.asarray(t_b, dtype=float)
+    n = t_b.size
     if n == 0 or ok.sum() < 2:
         return {key: np.full(n, np.nan) for key in _TRUTH_KEYS}
     t_tel = (idx[ok] - outcome.start_index) / outcome.fs_hz
     order = np.argsort(t_tel)
     t_tel, x_tel, v_tel = t_tel[order], pos[ok][order], vel[ok][order]
-    t_b = np.array([(e.t_s + e.t_tx_s) / 2.0 for e in outcome.estimates])
     exp = outcome.experiment
     x = np.interp(t_b, t_tel, x_tel)
     v = np.interp(t_b, t_tel, v_tel)
@@ -74,11 +110,24 @@ def telemetry_truth(outcome: RunOutcome) -> dict[str, np.ndarray]:
 SCORED_SPEED_FRACTION = 0.95
 
 
+def in_scored_segment(outcome: RunOutcome, truth: dict[str, np.ndarray]) -> np.ndarray:
+    """Where the ``truth`` (:func:`truth_at`) puts the carriage inside a tow pass's
+    constant-speed segment: between ``tow.start_m`` and ``tow.end_m`` moving at the tow
+    speed (at least :data:`SCORED_SPEED_FRACTION` of it, either direction), with a finite
+    range. Bool, the truth's shape."""
+    plan = outcome.experiment.tow
+    lo, hi = sorted((plan.start_m, plan.end_m))
+    x, v = truth["stage_x_m"], truth["stage_v_mps"]
+    with np.errstate(invalid="ignore"):
+        in_segment = (x >= lo) & (x <= hi)
+        at_speed = np.abs(v) >= SCORED_SPEED_FRACTION * plan.speed_mps
+    return np.asarray(in_segment & at_speed & np.isfinite(truth["range_m"]), dtype=bool)
+
+
 def scored_mask(outcome: RunOutcome, truth: dict[str, np.ndarray] | None = None) -> np.ndarray:
     """Which estimates are scored (shape ``(n_estimates,)``, bool): those whose bounce
-    instant falls inside a tow pass's constant-speed segment as the stage telemetry saw it:
-    the carriage between ``tow.start_m`` and ``tow.end_m`` moving at the tow speed (at least
-    :data:`SCORED_SPEED_FRACTION` of it, either direction), with a finite truth.
+    instant falls inside a tow pass's constant-speed segment as the stage telemetry saw it
+    (:func:`in_scored_segment`), with a finite range estimate.
 
     Measured, not predicted: the segment's times are where the stage's own reports put the
     carriage, so a late ``ok`` or a stalled host or stage shifts nothing (the window predicted
@@ -87,16 +136,51 @@ def scored_mask(outcome: RunOutcome, truth: dict[str, np.ndarray] | None = None)
     truth = telemetry_truth(outcome) if truth is None else truth
     if len(outcome.estimates) == 0:
         return np.zeros(0, dtype=bool)
-    plan = outcome.experiment.tow
-    lo, hi = sorted((plan.start_m, plan.end_m))
-    x, v = truth["stage_x_m"], truth["stage_v_mps"]
-    with np.errstate(invalid="ignore"):
-        in_segment = (x >= lo) & (x <= hi)
-        at_speed = np.abs(v) >= SCORED_SPEED_FRACTION * plan.speed_mps
     ranges = np.array([e.range_m for e in outcome.estimates])
-    return np.asarray(
-        in_segment & at_speed & np.isfinite(truth["range_m"]) & np.isfinite(ranges), dtype=bool
-    )
+    return np.asarray(in_scored_segment(outcome, truth) & np.isfinite(ranges), dtype=bool)
+
+
+def expected_boundaries(outcome: RunOutcome) -> np.ndarray:
+    """The hop boundaries the truth says should be detected (global hop indices, ascending,
+    int64): every boundary of the schedule whose echo reached the receiver's input and whose
+    bounce instant the telemetry puts inside a constant-speed segment
+    (:func:`in_scored_segment`). From the truth and the schedule alone, not from the
+    estimates: a boundary no estimate claims is still expected.
+
+    Boundary ``k`` (the end of hop ``k``, where the tone changes) is transmitted at ``T``
+    and bounces at ``T + R/c``, ``R`` the truth's range then (three fixed-point steps from
+    ``R`` at ``T``, each shrinking the error by ``|dR/dt|/c``, 1e-3 at 1.5 m/s); its echo
+    is received at ``T + 2R/c``, which must fall before the end of the captured input.
+    """
+    sch = outcome.experiment.schedule
+    c = outcome.experiment.sound_speed_mps
+    latency = outcome.latency_samples or 0
+    t_end = (outcome.samples - latency) / outcome.fs_hz  # receiver time of the last sample
+    period_s = float(sch.period_s)
+    hop_s = period_s / sch.period_hops
+    n = int(max(0.0, t_end - sch.t0_s) / hop_s) + sch.period_hops
+    if n <= 0 or t_end <= 0:
+        return np.zeros(0, dtype=np.int64)
+    table = sch.hops(0, n + 1)
+    tone = table.tone_index
+    # A boundary is a change from one tone to another: none between two hops of one tone,
+    # none into or out of a silent gap (tone index -1).
+    switch = (tone[:-1] != tone[1:]) & (tone[:-1] >= 0) & (tone[1:] >= 0)
+    t_tx = (table.start_s + table.duration_s)[:-1]
+    keep = switch & (t_tx <= t_end)
+    t_tx, k = t_tx[keep], table.index[:-1][keep]
+    r = truth_at(outcome, t_tx)["range_m"]
+    if not np.isfinite(r).any():
+        return np.zeros(0, dtype=np.int64)
+    # Where the truth is unknown at the transmit instant (a telemetry gap ending before the
+    # bounce), start from the typical range: each step shrinks the error by |dR/dt|/c.
+    r = np.where(np.isfinite(r), r, float(np.nanmedian(r)))
+    for _ in range(3):
+        step = truth_at(outcome, t_tx + r / c)["range_m"]
+        r = np.where(np.isfinite(step), step, r)
+    truth = truth_at(outcome, t_tx + r / c)
+    ok = in_scored_segment(outcome, truth) & (t_tx + 2.0 * r / c <= t_end)
+    return np.asarray(k[ok], dtype=np.int64)
 
 
 @dataclass(frozen=True)
@@ -106,8 +190,8 @@ class RunScore:
 
     ``known``: the truth is known (the stage telemetry covers the bounce instant);
     ``scored``: inside a constant-speed segment (:func:`scored_mask`); ``wrong``: known and
-    more than :data:`FALSE_ALARM_GATE_M` off in range, wherever it falls in the run (the
-    ramps, the stop, between passes): no estimate is hidden from the count.
+    more than ``gate_m`` (:func:`detection_gate_m`) off in range, wherever it falls in the
+    run (the ramps, the stop, between passes): no estimate is hidden from the count.
     """
 
     range_error_m: np.ndarray
@@ -115,36 +199,44 @@ class RunScore:
     known: np.ndarray
     scored: np.ndarray
     wrong: np.ndarray
+    gate_m: float = MAX_DETECTION_GATE_M
 
     @property
     def good_scored(self) -> np.ndarray:
-        """Scored and not wrong: the estimates of the RMSEs and the bias."""
+        """Scored and inside the gate: the estimates of the gated RMSEs."""
         return np.asarray(self.scored & ~self.wrong, dtype=bool)
 
     def figures(self) -> dict[str, Any]:
         """Counts (all known, wrong, scored) and RMSEs (m, m/s), as ``summary.json`` gives
-        them and the figures print them."""
+        them and the figures print them: RMSEs and biases over every scored estimate
+        (``*_all_*``: every estimate with a known truth), whatever its error; the
+        ``*_gated_*`` RMSEs over those inside the gate only."""
         good = self.good_scored
-        known_ok = self.known & ~self.wrong
         n_known = int(self.known.sum())
         return {
             "estimates_with_truth": n_known,
             "wrong_estimates": int(self.wrong.sum()),
             "wrong_fraction": round(float(self.wrong.sum()) / n_known, 4) if n_known else None,
-            "wrong_gate_m": FALSE_ALARM_GATE_M,
+            "wrong_gate_m": self.gate_m,
             "scored_estimates": int(self.scored.sum()),
             "false_alarms": int((self.scored & self.wrong).sum()),
-            "range_rmse_m": _rmse(self.range_error_m[good]),
-            "speed_rmse_mps": _rmse(self.speed_error_mps[good]),
-            "range_bias_m": float(np.mean(self.range_error_m[good])) if good.any() else None,
-            "speed_bias_mps": float(np.mean(self.speed_error_mps[good])) if good.any() else None,
-            "range_rmse_all_m": _rmse(self.range_error_m[known_ok]),
-            "speed_rmse_all_mps": _rmse(self.speed_error_mps[known_ok]),
+            "range_rmse_m": _rmse(self.range_error_m[self.scored]),
+            "speed_rmse_mps": _rmse(self.speed_error_mps[self.scored]),
+            "range_bias_m": _mean(self.range_error_m[self.scored]),
+            "speed_bias_mps": _mean(self.speed_error_mps[self.scored]),
+            "range_rmse_gated_m": _rmse(self.range_error_m[good]),
+            "speed_rmse_gated_mps": _rmse(self.speed_error_mps[good]),
+            "range_rmse_all_m": _rmse(self.range_error_m[self.known]),
+            "speed_rmse_all_mps": _rmse(self.speed_error_mps[self.known]),
         }
 
 
 def _rmse(x: np.ndarray) -> float | None:
     return float(np.sqrt(np.mean(x * x))) if x.size else None
+
+
+def _mean(x: np.ndarray) -> float | None:
+    return float(np.mean(x)) if x.size else None
 
 
 def score_run(outcome: RunOutcome, truth: dict[str, np.ndarray] | None = None) -> RunScore:
@@ -155,18 +247,34 @@ def score_run(outcome: RunOutcome, truth: dict[str, np.ndarray] | None = None) -
     err_r = r - truth["range_m"]
     err_v = v - truth["speed_mps"]
     known = np.isfinite(err_r)
+    gate = detection_gate_m(outcome)
     with np.errstate(invalid="ignore"):
-        wrong = known & (np.abs(err_r) > FALSE_ALARM_GATE_M)
-    return RunScore(err_r, err_v, known, scored_mask(outcome, truth), wrong)
+        wrong = known & (np.abs(err_r) > gate)
+    return RunScore(err_r, err_v, known, scored_mask(outcome, truth), wrong, gate)
+
+
+def detection_counts(outcome: RunOutcome, score: RunScore | None = None) -> tuple[int, int]:
+    """``(expected, detected)`` hop boundaries: those :func:`expected_boundaries` gives, and
+    how many of them at least one estimate of that hop index detected inside the gate."""
+    score = score_run(outcome) if score is None else score
+    expected = expected_boundaries(outcome)
+    hops = np.array([e.hop_index for e in outcome.estimates], dtype=np.int64)
+    hit = hops[score.known & ~score.wrong]
+    return int(expected.size), int(np.isin(expected, hit).sum())
 
 
 def summarize(outcome: RunOutcome) -> dict[str, Any]:
     """The run summary (also written as ``summary.json``).
 
     Counts every estimate whose truth is known: ``wrong_estimates`` over the whole run
-    (``wrong_gate_m`` off in range; ``wrong_fraction`` of ``estimates_with_truth``), and
-    ``false_alarms``, the wrong ones inside the scored window. RMSEs and biases are over the
-    scored estimates that are not wrong (``*_all_*``: over every known one that is not).
+    (more than ``wrong_gate_m`` off in range, :func:`detection_gate_m`; ``wrong_fraction``
+    of ``estimates_with_truth``), and ``false_alarms``, the wrong ones inside the scored
+    window. RMSEs and biases are over every scored estimate, whatever its error (``*_all_*``:
+    over every estimate with a known truth); ``*_gated_*`` RMSEs over the scored ones inside
+    the gate. The detection rate is ``detected_boundaries / expected_boundaries``
+    (:func:`detection_counts`: expected from the truth and the schedule). ``tracks``: every
+    confirmed track's count, span and RMSEs against the truth
+    (:func:`hil.estimation.track_summary.track_figures`).
     """
     exp = outcome.experiment
     est = outcome.estimates
@@ -174,16 +282,8 @@ def summarize(outcome: RunOutcome) -> dict[str, Any]:
     score = score_run(outcome, truth)
     r = np.array([e.range_m for e in est])
     t = np.array([e.t_s for e in est])
-    scored, good_est = score.scored, score.good_scored
-    # Detection rate: distinct hop boundaries detected (and correct) over the boundaries
-    # that reached the receiver during the constant-speed segments, counted per pass (the
-    # hops between passes are not expected).
-    hops = np.array([e.hop_index for e in est], dtype=np.int64)
-    pass_id = np.cumsum(scored & ~np.concatenate([[False], scored[:-1]]))
-    expected = float(
-        sum(np.ptp(hops[scored & (pass_id == k)]) + 1 for k in np.unique(pass_id[scored]))
-    )
-    detected = float(np.unique(hops[good_est]).size)
+    expected, detected = detection_counts(outcome, score)
+    cell = range_cell_m(exp.schedule.tones_hz, exp.sound_speed_mps)
 
     summary: dict[str, Any] = {
         "run": exp.name,
@@ -203,6 +303,9 @@ def summarize(outcome: RunOutcome) -> dict[str, Any]:
         "estimates": len(est),
         **score.figures(),
         "update_period_s": float(np.median(np.diff(t))) if len(t) > 1 else None,
+        "range_cell_m": round(cell, 6) if math.isfinite(cell) else None,
+        "expected_boundaries": expected,
+        "detected_boundaries": detected,
         "detection_rate": round(detected / expected, 4) if expected else None,
         "loopback_latency_samples": outcome.latency_samples,
         "dropped_samples": outcome.dropped_samples,
@@ -227,7 +330,9 @@ def summarize(outcome: RunOutcome) -> dict[str, Any]:
             float(np.max(np.abs(diff[fin]))) if fin.any() else None
         )
         e_exact = r - outcome.exact_truth["range_m"]
-        summary["range_rmse_vs_exact_m"] = _rmse(e_exact[good_est]) if good_est.any() else None
+        summary["range_rmse_vs_exact_m"] = _rmse(e_exact[score.scored])
+    # Per track (hil.estimation.track_summary): its span and its errors against the truth.
+    summary["tracks"] = track_figures(est, truth["range_m"], truth["speed_mps"])
     return summary
 
 

@@ -24,6 +24,7 @@ from urllib.parse import parse_qs, urlsplit
 
 import numpy as np
 
+from hil.devices.clock import SleepUntil
 from hil.errors import ConfigError
 from hil.experiments.experiment import Experiment
 
@@ -42,7 +43,7 @@ STAGE_TRAVEL_MM = 10_000.0
 CONVERTER_DELAY_SAMPLES = 64
 
 
-class ScaledClock:
+class ScaledClock(SleepUntil):
     """Seconds that run at ``scale`` times the wall clock (:func:`time.monotonic`), counted
     from the monotonic instant ``wall0`` (default: now). ``time.monotonic`` is system-wide on
     Linux, so two processes given the same ``wall0`` and ``scale`` share one clock."""
@@ -468,10 +469,9 @@ class SimulatedTankProcess:
 
     def open_daq(self, fs: float) -> StreamingDevice:
         """The simulated board on its pty, open and configured at ``fs`` Hz; its watchdog
-        is long (:data:`~hil.experiments.live.devices.SIM_WATCHDOG_MS`): the tank is a
+        is long (:data:`~hil.devices.table.SIM_WATCHDOG_MS`): the tank is a
         child process on the same CPUs, scaled in time."""
-        from hil.devices.table import open_board
-        from hil.experiments.live.devices import SIM_WATCHDOG_MS
+        from hil.devices.table import SIM_WATCHDOG_MS, open_board
 
         board = open_board(self.board_target, fs, self.clock, SIM_WATCHDOG_MS)
         board.configure()

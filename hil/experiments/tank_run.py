@@ -394,6 +394,9 @@ def _outcome(
     zero = sample_zero_time_s(recorder.sync_pairs, fs)
     if zero is not None:
         telemetry.sample_index = [int(round((t - zero) * fs)) for t in telemetry.host_time_s]
+        # One time base: the recording's telemetry gets the mapping the summary uses.
+        with contextlib.suppress(Exception):
+            recorder.map_telemetry_times(telemetry.sample_index)
     events = [] if board is None else [_event_tuple(run_event(a)) for a in board.annotations.all()]
     kind, text = stop_text(interrupted=ending.interrupted, error=ending.error)
     events.append((kind, start + samples, 0, text))

@@ -71,8 +71,7 @@ class VirtualTank:
     def open_daq(self, fs: float) -> StreamingDevice:
         """The simulated board behind its in-memory link, open and configured at ``fs`` Hz
         on :attr:`virtual_time`."""
-        from hil.devices.table import open_board
-        from hil.experiments.live.devices import WATCHDOG_MS
+        from hil.devices.table import WATCHDOG_MS, open_board
 
         board = open_board(self.board_target, fs, self.clock, WATCHDOG_MS, self.virtual_time)
         board.configure()

@@ -85,7 +85,7 @@ def load_arrays(path: str | Path) -> RunArrays:
             estimates=_columns(rec.estimates(), tuple(ESTIMATE_FIELDS)),
             telemetry=_columns(
                 rec.telemetry(),
-                ("host_time_s", "sample_index", "position_m", "velocity_mps", "state"),
+                ("host_time_s", "sample_index", "position_m", "velocity_mps", "state", "reply_s"),
             ),
             events=_columns(rec.events(), ("kind", "sample_index", "length", "text")),
             gaps=rec.gaps(),

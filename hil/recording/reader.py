@@ -384,12 +384,20 @@ class RunRecording:
             for k, i, n, x in zip(t["kind"], t["sample_index"], t["length"], t["text"], strict=True)
         ]
 
+    @property
+    def has_track_ids(self) -> bool:
+        """Whether the estimates table holds ``track_id`` (recordings made before tracks were
+        kept do not; their estimates read ``track_id = -1``)."""
+        group = self._file["estimates"]
+        return "track_id" in [str(c) for c in group.attrs["columns"]]
+
     def estimates(self, receiver: str | None = None) -> list[Estimate]:
         """The recorded estimates (of one receiver by name, or all) in the order recorded."""
         t = self._table("estimates")
         n = t["t_s"].shape[0]
         nan = np.full(n, np.nan)  # recordings made before the bounds were columns
         crlb_r, crlb_v = t.get("crlb_range_m", nan), t.get("crlb_speed_mps", nan)
+        track = t.get("track_id", np.full(n, -1, dtype=np.int64))  # made before tracks were kept
         out = [
             Estimate(
                 t_s=float(t["t_s"][i]),
@@ -404,6 +412,7 @@ class RunRecording:
                 receiver=str(t["receiver"][i]),
                 crlb_range_m=float(crlb_r[i]),
                 crlb_speed_mps=float(crlb_v[i]),
+                track_id=int(track[i]),
             )
             for i in range(n)
         ]
@@ -429,7 +438,9 @@ class RunRecording:
         """The stage status reports, in the order recorded."""
         t = self._table("telemetry")
         cols = (t["host_time_s"], t["sample_index"], t["position_m"], t["velocity_mps"], t["state"])
+        # Recordings made before the reply time was a column: every report counts as prompt.
+        reply = t.get("reply_s", np.zeros(t["host_time_s"].shape[0]))
         return [
-            StageTelemetry(float(h), int(i), float(p), float(v), str(s))
-            for h, i, p, v, s in zip(*cols, strict=True)
+            StageTelemetry(float(h), int(i), float(p), float(v), str(s), float(r))
+            for h, i, p, v, s, r in zip(*cols, reply, strict=True)
         ]

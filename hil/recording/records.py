@@ -43,7 +43,9 @@ class StageTelemetry:
     report by the status query it answers, see ``StageStatus.host_time``), ``sample_index``
     that time mapped to the board's sample clock, ``position_m`` and ``velocity_mps`` the carriage's
     position (m) and velocity (m/s) along the tow axis, ``state`` the controller's state as
-    it reports it (GRBL: ``"Run"``, ``"Hold:0"``, ...).
+    it reports it (GRBL: ``"Run"``, ``"Hold:0"``, ...), ``reply_s`` how long the report took to
+    come back after its query (s; a late one is left out of a tank run's truth; 0 when not
+    measured, and in recordings made before it was a column).
     """
 
     host_time_s: float
@@ -51,6 +53,7 @@ class StageTelemetry:
     position_m: float
     velocity_mps: float
     state: str
+    reply_s: float = 0.0
 
 
 @dataclass(frozen=True)

@@ -10,6 +10,7 @@ board sample indices.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -17,6 +18,13 @@ from hil.acquisition.feed import ReceiverFeed
 from hil.errors import ConfigError
 from hil.estimation.base import Estimate, Receiver
 from hil.estimation.registry import RECEIVERS, make_receiver
+from hil.estimation.tracking import (
+    TrackedReceiver,
+    Tracker,
+    TrackerSettings,
+    mean_hop_s,
+    split_track_options,
+)
 from hil.recording.reader import RunRecording
 from hil.recording.records import COMMON_SETTINGS, ReceiverSetup
 from hil.signals.schedule import HopSchedule
@@ -72,13 +80,19 @@ def build_receiver(
     """The receiver ``setup`` describes, the one way every caller builds one (live, replay,
     benchmarks): ``setup.settings`` must hold the registry's common options and may hold the
     receiver's own; ``hooks`` are options that are not settings and are not recorded (a
-    callback such as GCAS's ``on_map``)."""
-    s = dict(setup.settings)
+    callback such as GCAS's ``on_map``).
+
+    The receiver's estimates leave through a :class:`~hil.estimation.tracking.Tracker` (each
+    carries its ``track_id``); settings named ``track_*`` set the tracker
+    (:meth:`~hil.estimation.tracking.TrackerSettings.from_options`), the others the receiver."""
+    s, track_options = split_track_options(setup.settings)
     missing = [k for k in _COMMON if k not in s]
     if missing:
         raise ConfigError("receiver.settings", sorted(s), f"settings including {missing}")
+    tracker = Tracker(mean_hop_s(schedule), TrackerSettings.from_options(track_options))
     common = {k: s.pop(k) for k in _COMMON}
-    return make_receiver(setup.name, schedule, fs_hz, **common, **s, **hooks)
+    receiver = make_receiver(setup.name, schedule, fs_hz, **common, **s, **hooks)
+    return TrackedReceiver(receiver, tracker)
 
 
 def replay(
@@ -125,14 +139,19 @@ Agreement = Literal["equal", "prefix", "differ"]
 
 
 def compare_estimates(
-    live: Sequence[Estimate], replayed: Sequence[Estimate]
+    live: Sequence[Estimate], replayed: Sequence[Estimate], *, track_ids: bool = True
 ) -> tuple[Agreement, str]:
     """How replayed estimates agree with the recorded live ones, and that in words.
 
     ``"equal"``: the same list. ``"prefix"``: fewer recorded than replayed (or the other way
     round) but equal as far as both go; a recording whose writer was killed holds the live
     estimates up to its last flush only. ``"differ"``: some pair differs (the first named).
+    ``track_ids=False`` compares without the track ids (a recording made before they were
+    kept, :attr:`~hil.recording.RunRecording.has_track_ids`).
     """
+    if not track_ids:
+        replayed = [replace(e, track_id=live[i].track_id) if i < len(live) else e
+                    for i, e in enumerate(replayed)]  # fmt: skip
     for i, (a, b) in enumerate(zip(live, replayed, strict=False)):
         if a != b:  # NaN-aware: Estimate.__eq__
             return "differ", f"estimate {i} differs: recorded {a}, replayed {b}"

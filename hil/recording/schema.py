@@ -103,6 +103,9 @@ TABLES: dict[str, tuple[tuple[str, Any], ...]] = {
                 hint="record the controller's state word; longer text goes in an event",
             ),
         ),
+        # How long the report took to come back after its query (s): a tank run leaves the
+        # late ones out of its truth. Absent from recordings made before it (read as 0).
+        ("reply_s", np.float64),
     ),
     "events": (
         ("kind", FixedText(EVENT_KIND_BYTES, truncate=False, hint="use one of EVENT_KINDS")),
@@ -130,6 +133,8 @@ TABLES: dict[str, tuple[tuple[str, Any], ...]] = {
         ),
         ("crlb_range_m", np.float64),
         ("crlb_speed_mps", np.float64),
+        # Confirmed track of the estimate, -1 for none (files without the column read -1).
+        ("track_id", np.int64),
     ),
 }
 

@@ -343,10 +343,30 @@ class RunWriter:
             float(record.position_m),
             float(record.velocity_mps),
             str(record.state),
+            float(record.reply_s),
         )
         check_row("telemetry", row)
         self._pending["telemetry"].append(row)
         self._maybe_flush()
+
+    def map_telemetry_times(self, sample_index: Sequence[int]) -> None:
+        """Write ``sample_index`` (one board sample index per stage report recorded so far,
+        in order) over the telemetry's ``sample_index`` column, and flush: the one write that
+        is not an append, for the run's end, once the SYNC pairs of the whole run give the
+        mapping the run is scored with (the live column holds the clock fit of the moment).
+        :class:`ConfigError` when the count differs from the reports recorded."""
+        self.flush()
+        ds = self._file["telemetry/sample_index"]
+        values = np.asarray(sample_index, dtype=np.int64)
+        if values.shape != (ds.shape[0],):
+            raise ConfigError(
+                "telemetry sample_index",
+                f"{values.size} values",
+                f"one per recorded stage report ({ds.shape[0]})",
+                "map every report the recording holds, in the order recorded",
+            )
+        ds[:] = values
+        self._file.flush()
 
     def append_event(self, event: RunEvent) -> None:
         """Append one sample-indexed event (gaps in the samples are recorded automatically).

@@ -14,18 +14,23 @@ A transport moves bytes and nothing else (the protocol is :mod:`firmware_protoco
 ``url``
     What it was opened from (for messages).
 
-I/O failures raise the :class:`~firmware_protocol.errors.TransportError` tree (re-exported
-here): :class:`TransportClosedError` when the link is gone (unplugged, hung up),
-:class:`TransportTimeoutError` when a write cannot complete, :class:`TransportOpenError`
-when a device cannot be opened. Bad URLs are configuration mistakes and raise
-:class:`~hil.errors.ConfigError` instead.
+I/O failures raise the :class:`~hil.errors.TransportError` tree (re-exported here; see
+:mod:`hil.errors` for the whole tree): :class:`TransportClosedError` when the link is gone
+(unplugged, hung up), :class:`TransportTimeoutError` when a write cannot complete,
+:class:`TransportOpenError` when a device cannot be opened. Bad URLs are configuration
+mistakes and raise :class:`~hil.errors.ConfigError` instead.
 """
 
 from __future__ import annotations
 
 from typing import Protocol, runtime_checkable
 
-from firmware_protocol.errors import TransportClosedError, TransportError, TransportTimeoutError
+from hil.errors import (
+    TransportClosedError,
+    TransportError,
+    TransportOpenError,
+    TransportTimeoutError,
+)
 
 __all__ = [
     "Transport",
@@ -34,10 +39,6 @@ __all__ = [
     "TransportOpenError",
     "TransportTimeoutError",
 ]
-
-
-class TransportOpenError(TransportError):
-    """The device named by a URL could not be opened (missing, busy, no permission)."""
 
 
 @runtime_checkable

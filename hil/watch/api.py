@@ -220,17 +220,22 @@ class WatchData:
 
     def estimates(self, since: int = 0) -> dict[str, Any]:
         """The estimates recorded from row ``since`` on (rows in the order recorded), as
-        columns; ``total`` is the number recorded so far (the next call's ``since``)."""
+        columns (:data:`ESTIMATE_COLUMNS` and ``track_id``, −1 for no confirmed track);
+        ``total`` is the number recorded so far (the next call's ``since``)."""
         if since < 0:
             raise ConfigError("since", since, ">= 0 (an estimate row number)")
         with self._lock:
-            cols = self._rec.table_columns("estimates", since, ESTIMATE_COLUMNS)
+            # Recordings made before track ids were kept have no such column: -1 (no track).
+            tracked = self._rec.has_track_ids
+            names = (*ESTIMATE_COLUMNS, "track_id") if tracked else ESTIMATE_COLUMNS
+            cols = self._rec.table_columns("estimates", since, names)
         new = cols["t_s"].shape[0]
         total = since + new if new else self._count("estimates")
         out: dict[str, Any] = {"since": since, "total": total}
         for name in ESTIMATE_COLUMNS:
             values = cols[name]
             out[name] = values.tolist() if name == "codeword" else json_floats(values.tolist())
+        out["track_id"] = cols["track_id"].tolist() if tracked else [-1] * new
         return out
 
     def _count(self, table: str) -> int:

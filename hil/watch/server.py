@@ -4,13 +4,15 @@ Routes: ``/`` the page; ``/api/state``, ``/api/estimates?since=N``, ``/api/truth
 ``/api/map`` JSON from :class:`~hil.watch.api.WatchData`; ``/files/time_codeword_map.png``
 the map ``hil tank-run`` saves beside the recording. A bad query is a 400 and a recording
 that cannot be read (damaged, deleted while watched) a 503, each with ``{"error": "..."}``
-so the page can say why.
+so the page can say why. A browser that drops its connection (a tab closed mid-request) is
+logged at debug level, never a traceback.
 """
 
 from __future__ import annotations
 
 import json
 import logging
+import sys
 import threading
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
@@ -37,6 +39,15 @@ def _since(query: str) -> int:
         raise ConfigError("since", values[-1], "an integer >= 0 (an estimate row number)") from None
 
 
+#: A browser that closed its tab (or reloaded) mid-request: its connection is gone, which is
+#: normal for a page that polls, so it is logged at debug level, not shown as a traceback.
+_PEER_GONE = (BrokenPipeError, ConnectionResetError, ConnectionAbortedError)
+
+
+def _peer_gone(client: Any, exc: BaseException) -> None:
+    _LOG.debug("%s closed the connection: %s", client, exc)
+
+
 class _Handler(BaseHTTPRequestHandler):
     server: WatchServer
 
@@ -50,6 +61,12 @@ class _Handler(BaseHTTPRequestHandler):
         self.send_header("Cache-Control", "no-store")
         self.end_headers()
         self.wfile.write(body)
+
+    def handle(self) -> None:
+        try:
+            super().handle()
+        except _PEER_GONE as exc:
+            _peer_gone(self.client_address, exc)
 
     def _json(self, status: int, payload: dict[str, Any]) -> None:
         body = json.dumps(payload, allow_nan=False).encode()
@@ -76,6 +93,8 @@ class _Handler(BaseHTTPRequestHandler):
                 self._json(HTTPStatus.NOT_FOUND, {"error": f"no such page: {url.path}"})
         except ConfigError as exc:
             self._json(HTTPStatus.BAD_REQUEST, {"error": str(exc)})
+        except _PEER_GONE:
+            raise  # the browser went away: nobody to answer (handle() notes it)
         except (OSError, KeyError, ValueError, RuntimeError) as exc:
             _LOG.warning("reading %s: %s", data.path, exc)
             self._json(
@@ -135,6 +154,15 @@ class WatchServer(ThreadingHTTPServer):
             self._map_thread = None
         self.server_close()
         self.data.close()
+
+    def handle_error(self, request: Any, client_address: Any) -> None:
+        """A connection the browser dropped is noted at debug level; anything else is
+        reported as ``socketserver`` does (a traceback on stderr)."""
+        exc = sys.exc_info()[1]
+        if isinstance(exc, _PEER_GONE):
+            _peer_gone(client_address, exc)
+            return
+        super().handle_error(request, client_address)
 
     def __enter__(self) -> WatchServer:
         return self

@@ -8,7 +8,8 @@ the DAC actually emits.
 :class:`~sim_devices.acoustics.channel.Channel`, which evaluates the known transmit schedule
 analytically, this world echoes the *sampled* DAC output, through the band-limited
 fractional-delay path (:class:`~sim_devices.acoustics.echo.SampledEcho`): whatever the host
-plays (HFC-CW, a calibration sweep, silence) is what comes back.
+plays (HFC-CW, a calibration sweep, silence) is what comes back, off the target, its tank
+images and, with ``tank_echoes``, the tank's own boundaries (:class:`StreamConvolver`).
 
 Time base: sample ``n`` of the device is at ``t = n / fs`` seconds of the world (the device's
 sample clock; a Live target trajectory is a function of that time). The converters add
@@ -32,6 +33,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 import numpy.typing as npt
+from scipy.signal import oaconvolve
 
 from hil.errors import ConfigError
 from sim_devices.acoustics.channel import (
@@ -47,6 +49,7 @@ from sim_devices.acoustics.directivity import Transducer
 from sim_devices.acoustics.echo import SampledEcho, TransmitHistory, history_capacity
 from sim_devices.acoustics.noise_generator import ShapedNoiseGenerator
 from sim_devices.acoustics.tank import Offset, Tank, echo_paths
+from sim_devices.acoustics.tank_response import TankEchoSettings, tank_impulse_response
 from sim_devices.acoustics.trajectory import FloatArray, Trajectory
 
 # Interpolator half-length of SampledEcho's default Kaiser-sinc kernel (32 taps).
@@ -74,8 +77,15 @@ class AcousticWorld:
         Longest echo path considered (sets the transmit history kept), m.
     tank, image_order:
         Tank walls/bottom/surface image paths, to ``image_order`` reflections per round trip
-        (:mod:`~sim_devices.acoustics.tank`). The tank's own echoes are not synthesised here
-        (they need the transmit ahead of each block: :class:`ScheduleWorld` has them).
+        (:mod:`~sim_devices.acoustics.tank`).
+    tank_echoes:
+        The tank's own echoes and late tail (transmitter → boundaries → hydrophone, no
+        target), or None: the same impulse response as the analytic channel's
+        (:func:`~sim_devices.acoustics.tank_response.tank_impulse_response`, with the beams
+        and absorption), convolved with the DAC samples emitted so far
+        (:class:`StreamConvolver`; the converter latency keeps it causal). Needs ``tank`` and
+        a sonar at rest. The DAC was silent before the first block, so the tail builds up
+        over the response's length instead of starting in the steady state.
     tx_beam, rx_beam:
         Projector and hydrophone directivity per path direction, or None (omni).
     absorption_db_per_km:
@@ -108,6 +118,7 @@ class AcousticWorld:
         max_range_m: float = 30.0,
         tank: Tank | None = None,
         image_order: int = 0,
+        tank_echoes: TankEchoSettings | None = None,
         tx_beam: Transducer | None = None,
         rx_beam: Transducer | None = None,
         absorption_db_per_km: float = 0.0,
@@ -159,6 +170,27 @@ class AcousticWorld:
             a = amp * 10.0 ** (direct_blast.coupling_db / 20.0) / direct_blast.separation_m
             one_way = OneWayPath(tx, sonar, sound_speed_mps)
             self._echoes.append(SampledEcho(self._history, one_way, self.fs_hz, amplitude=a))
+        self._tank_echoes: StreamConvolver | None = None
+        if tank_echoes is not None:
+            if tank is None:
+                raise ConfigError(
+                    "tank_echoes", tank_echoes, "a tank to echo in", "give the world a tank"
+                )
+            if sonar.max_speed_mps != 0.0:
+                raise ConfigError(
+                    "tank_echoes",
+                    tank_echoes,
+                    "a sonar at rest (its tank response is one fixed impulse response)",
+                    "use a Fixed sonar trajectory or leave tank_echoes out",
+                )
+            at = sonar.position(np.zeros(1))[0]
+            h = tank_impulse_response(
+                tank, at, at, sound_speed_mps, self.fs_hz, tank_echoes,
+                tx=tx_beam, rx=rx_beam, absorption_db_per_km=absorption_db_per_km,
+            )  # fmt: skip
+            # ADC sample n holds the pressure at (n - d) / fs: the response, d samples later.
+            delayed = np.concatenate([np.zeros(self.converter_delay), amp * h])
+            self._tank_echoes = StreamConvolver(delayed)
 
     def _capacity(self, block: int) -> int:
         return history_capacity(self.max_delay_s, block / self.fs_hz, self.fs_hz, _HALF_TAPS) + (
@@ -177,6 +209,8 @@ class AcousticWorld:
         )
         for e in self._echoes:
             e.history = self._history
+        if self._tank_echoes is not None:
+            self._tank_echoes.reset()
 
     def __call__(self, dac_block: npt.NDArray[np.floating], first_sample: int, /) -> FloatArray:
         """ADC samples ``first_sample …`` (shape ``(n, adc_channels)``) for the DAC block at
@@ -209,6 +243,8 @@ class AcousticWorld:
         pressure = np.zeros(n)
         for e in self._echoes:
             pressure += e.at_times(t)
+        if self._tank_echoes is not None:
+            pressure += self._tank_echoes.push(dac[:, 0])
         if self.noise is not None:
             pressure += self.noise.generate(n)
         if self.extra_pressure is not None:
@@ -222,6 +258,38 @@ class AcousticWorld:
             for k in range(1, self.adc_channels):
                 out[:, k] = monitor if k - 1 == 0 else 0.0
         return out
+
+
+class StreamConvolver:
+    """``y = h * x`` on a stream: each block of ``x`` (shape ``(n,)``) gives the next ``n``
+    samples of the convolution, silence before the first block; any block split gives the
+    same output (overlap-add: the part of each block's convolution past its end is carried).
+
+    >>> c = StreamConvolver(np.array([1.0, 0.5]))
+    >>> c.push(np.array([1.0, 0.0])).tolist(), c.push(np.array([2.0])).tolist()
+    ([1.0, 0.5], [2.0])
+    """
+
+    def __init__(self, h: npt.ArrayLike) -> None:
+        self.h = np.asarray(h, dtype=np.float64).reshape(-1)
+        if self.h.size < 1 or not np.all(np.isfinite(self.h)):
+            raise ConfigError("h", self.h.shape, "at least one finite tap")
+        self._carry = np.zeros(self.h.size - 1)
+
+    def reset(self) -> None:
+        """Silence before the next block."""
+        self._carry[:] = 0.0
+
+    def push(self, x: npt.ArrayLike) -> FloatArray:
+        """The next ``len(x)`` output samples."""
+        x = np.asarray(x, dtype=np.float64).reshape(-1)
+        n, m = x.size, self.h.size
+        total = np.zeros(n + m - 1)
+        total[: m - 1] += self._carry
+        if n:
+            total += oaconvolve(x, self.h)
+        self._carry = total[n:].copy()
+        return total[:n]
 
 
 class InPlaceWorld:

@@ -15,7 +15,7 @@ Examples
 >>> parse_scenario({"preset": "att", "colour": "red"})
 Traceback (most recent call last):
 ...
-hil.errors.ConfigError: colour = 'red' is not allowed: must be one of the keys ...
+hil.errors.ConfigErrors: colour = 'red' is not allowed: must be one of the keys ...
 """
 
 from __future__ import annotations
@@ -27,11 +27,12 @@ from typing import Any
 
 import numpy as np
 
+from hil.config_sections import Problems
 from hil.errors import ConfigError
 from hil.signals.presets import check_design, get_preset
 from hil.signals.schedule import HopSchedule
 from hil.signals.waveforms import WaveformSpec
-from hil.toml_table import Table, read_toml
+from hil.toml_table import read_toml
 from sim_devices.acoustics.ambient_noise import AmbientNoiseModel
 from sim_devices.acoustics.beam import (
     BeamPattern,
@@ -41,12 +42,25 @@ from sim_devices.acoustics.beam import (
 )
 from sim_devices.acoustics.channel import Channel, DirectBlast, Receiver, Target
 from sim_devices.acoustics.directivity import TableBeam, Transducer
-from sim_devices.acoustics.images import MAX_IMAGE_ORDER
 from sim_devices.acoustics.noise_generator import ShapedNoiseGenerator
 from sim_devices.acoustics.reverberation import ReverberationSettings, VolumeReverberation
-from sim_devices.acoustics.sound_speed import tank_sound_speed, unesco_sound_speed
+from sim_devices.acoustics.scenario_sections import (
+    MAX_TARGET_IMAGE_ORDER,
+    OUTPUT_CHANNELS,
+    TRAJECTORIES,
+    BeamSection,
+    DirectBlastSection,
+    EnvironmentSection,
+    NoiseSection,
+    OutputSection,
+    ReverberationSection,
+    ScenarioFile,
+    SonarSection,
+    TankSection,
+    TargetSection,
+)
 from sim_devices.acoustics.tank import Tank
-from sim_devices.acoustics.tank_response import T60_FORMULAS, TankEchoSettings
+from sim_devices.acoustics.tank_response import TankEchoSettings
 from sim_devices.acoustics.trajectory import (
     ConstantVelocity,
     Fixed,
@@ -55,16 +69,16 @@ from sim_devices.acoustics.trajectory import (
     Trajectory,
 )
 
-OUTPUT_CHANNELS = (
-    "received", "pressure", "echo", "reverberation", "noise", "direct", "tank",
-)  # fmt: skip
-#: Highest image order of the target's echoes (reflections per round trip): 1, 13, 85, 377,
-#: 1289 echo paths for N = 0 … 4, each solved and rendered per sample.
-MAX_TARGET_IMAGE_ORDER = 4
-TRAJECTORIES = ("fixed", "constant-velocity", "radial", "piecewise")
-
-_TOP = ("preset", "family", "fs_hz", "duration_s", "seed", "waveform", "environment", "sonar",
-        "targets", "noise", "reverberation", "tank", "direct_blast", "output")  # fmt: skip
+__all__ = [
+    "MAX_TARGET_IMAGE_ORDER",
+    "OUTPUT_CHANNELS",
+    "TRAJECTORIES",
+    "Scenario",
+    "TargetSpec",
+    "build_channel",
+    "load_scenario",
+    "parse_scenario",
+]
 
 
 @dataclass(frozen=True)
@@ -129,291 +143,239 @@ def load_scenario(path: Path) -> Scenario:
     return parse_scenario(read_toml(path, "scenario"))
 
 
-def _sound_speed(env: Table) -> float:
-    if env.has("sound_speed_mps"):
-        for other in ("temperature_c", "salinity_ppt"):
-            if env.has(other):
-                raise ConfigError(
-                    env.name(other), env.data[other], "absent when sound_speed_mps is given",
-                    "give either the sound speed or the water temperature/salinity",
-                )  # fmt: skip
-        return env.number("sound_speed_mps", lo=1300.0, hi=1800.0, unit="m/s")
-    if env.has("temperature_c"):
-        t = env.number("temperature_c", lo=0.0, hi=40.0, unit="°C")
-        s = env.number("salinity_ppt", 0.0, lo=0.0, hi=40.0, unit="ppt")
-        depth = env.number("depth_m", 1.0, lo=0.0, hi=10000.0, unit="m")
-        if s == 0.0:
-            return float(tank_sound_speed(t))
-        return float(unesco_sound_speed(s, 1.00024 * t, depth * 1.0))
-    return float("nan")  # the preset's
+def parse_scenario(data: dict[str, Any]) -> Scenario:
+    """Validate a scenario given as a dict (a parsed TOML document).
+
+    Every table is read by its dataclass (:mod:`sim_devices.acoustics.scenario_sections`),
+    then the checks across tables run (:func:`_across_tables`); every problem found is
+    reported at once, as a :class:`~hil.errors.ConfigErrors` (one line each).
+    """
+    problems = Problems()
+    tables = ScenarioFile.read_values(data, "", problems)
+    sc = None if tables is None else _across_tables(tables, data, problems)
+    problems.raise_any()
+    assert sc is not None
+    return sc
 
 
-def _target(tbl: Table, sonar_p: FloatArray, c: float) -> TargetSpec:
-    kind = tbl.text("trajectory", None, TRAJECTORIES)
-    ts = tbl.number("target_strength_db", 0.0, lo=-100.0, hi=60.0, unit="dB re 1 m²")
+def _across_tables(t: dict[str, Any], data: dict[str, Any], problems: Problems) -> Scenario | None:
+    """The checks that span tables, in one place, and the scenario when nothing failed.
+
+    A check that needs a table with a problem of its own is skipped (that problem is already
+    reported): speeds against the sound speed, the waveform (its Doppler span from the
+    fastest target), beams at the waveform's frequency, sonar and targets inside the tank,
+    the noise band and the levels relative to a target.
+    """
+    env: EnvironmentSection | None = t.get("environment")
+    sonar: SonarSection | None = t.get("sonar")
+    targets_in: list[TargetSection | None] = t.get("targets", [])
+    preset_name: str | None = t.get("preset")
+    if preset_name is None or env is None or sonar is None:
+        return None
+    preset = get_preset(preset_name)
+    c = env.sound_speed() or preset.base.sound_speed_mps
+    sonar_p, sonar_v = np.asarray(sonar.position_m), np.asarray(sonar.velocity_mps)
+    sonar_speed = float(np.linalg.norm(sonar_v))
+    if not sonar_speed < c:
+        problems.add(ConfigError("sonar.velocity_mps", sonar_speed, f"< c = {c:g} m/s"))
+    targets: list[TargetSpec] = []
+    for i, tgt in enumerate(targets_in):
+        if tgt is not None:
+            with problems.collect():
+                targets.append(_target(tgt, f"targets[{i}]", sonar_p, c))
+    if problems or None in targets_in:
+        return None
+    family = t.get("family") or preset.base.family
+    duration, seed = t.get("duration_s", 1.0), t.get("seed", 0)
+    spec, schedule = _waveform(t, family, c, targets, sonar_speed)
+    beam = _beam(sonar.beam, spec.center_hz, c)
+    hydrophone_beam = _beam(sonar.receive_beam, spec.center_hz, c)
+    tank, image_order, tank_echoes = _tank(t.get("tank"), sonar, targets, duration, seed)
+    noise = _noise(t.get("noise"), schedule, spec.fs_hz, targets, seed)
+    reverb = _reverberation(t.get("reverberation"), spec, env, targets, seed)
+    direct = None
+    dt: DirectBlastSection | None = t.get("direct_blast")
+    if dt is not None and dt.enabled:
+        direct = DirectBlast(dt.coupling_db, dt.separation_m)
+    out: OutputSection | None = t.get("output")
+    if out is None:
+        return None
+    return Scenario(
+        preset=preset.name, family=family, fs_hz=spec.fs_hz, duration_s=duration, seed=seed,
+        spec=spec, schedule=schedule, sound_speed_mps=c,
+        absorption_db_per_km=env.absorption_db_per_km,
+        sonar_position_m=sonar_p, sonar_velocity_mps=sonar_v,
+        source_level_db=sonar.source_level_db,
+        receiver=Receiver(sonar.sensitivity_db, sonar.gain_db, sonar.full_scale_v),
+        beam=beam, beam_axis=_unit(sonar.beam.axis), hydrophone_beam=hydrophone_beam,
+        hydrophone_axis=_unit(sonar.receive_beam.axis), targets=targets,
+        noise=noise, reverberation=reverb, tank=tank, image_order=image_order,
+        tank_echoes=tank_echoes, direct_blast=direct, output_channels=tuple(out.channels),
+        plots=out.plots, block_s=out.block_s, raw=data,
+    )  # fmt: skip
+
+
+def _unit(v: tuple[float, float, float]) -> FloatArray:
+    a = np.asarray(v, dtype=np.float64)
+    return a / np.linalg.norm(a)
+
+
+def _target(tgt: TargetSection, name: str, sonar_p: FloatArray, c: float) -> TargetSpec:
+    """The trajectory of a ``[[targets]]`` table; its speeds below the sound speed ``c``."""
 
     def speed_check(key: str, v: float) -> None:
         if not abs(v) < c:
             raise ConfigError(
-                tbl.name(key), v, f"|v| < sound speed c = {c:g} m/s", "check the units (m/s)"
+                f"{name}.{key}", v, f"|v| < sound speed c = {c:g} m/s", "check the units (m/s)"
             )
 
     traj: Trajectory
+    kind = tgt.trajectory
     if kind == "fixed":
-        p = tbl.vector("position_m")
+        assert tgt.position_m is not None
+        p = np.asarray(tgt.position_m)
         traj, speed = Fixed(p), 0.0
     elif kind == "constant-velocity":
-        p, v = tbl.vector("position_m"), tbl.vector("velocity_mps", (0.0, 0.0, 0.0))
+        assert tgt.position_m is not None
+        p, v = np.asarray(tgt.position_m), np.asarray(tgt.velocity_mps)
         speed = float(np.linalg.norm(v))
         speed_check("velocity_mps", speed)
         traj = ConstantVelocity(p, v)
     elif kind == "radial":
-        rng = tbl.number("range_m", lo=0.0, lo_open=True, unit="m")
-        speed = tbl.number("speed_mps", 0.0, unit="m/s")
-        speed_check("speed_mps", speed)
-        az = math.radians(tbl.number("azimuth_deg", 0.0, lo=-360.0, hi=360.0, unit="deg"))
-        el = math.radians(tbl.number("elevation_deg", 0.0, lo=-90.0, hi=90.0, unit="deg"))
+        assert tgt.range_m is not None
+        speed_check("speed_mps", tgt.speed_mps)
+        az, el = math.radians(tgt.azimuth_deg), math.radians(tgt.elevation_deg)
         u = np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
-        p = sonar_p + rng * u
-        traj = ConstantVelocity(p, -speed * u)
-        speed = abs(speed)
+        p = sonar_p + tgt.range_m * u
+        traj, speed = ConstantVelocity(p, -tgt.speed_mps * u), abs(tgt.speed_mps)
     else:
-        pts = tbl.data.get("waypoints_m")
-        if not isinstance(pts, list) or len(pts) < 2:
-            raise ConfigError(tbl.name("waypoints_m"), pts, "a list of >= 2 points [x, y, z]")
-        way = np.asarray(pts, dtype=np.float64)
-        spd = tbl.data.get("speeds_mps")
-        if not isinstance(spd, list) or len(spd) != len(pts) - 1:
-            raise ConfigError(tbl.name("speeds_mps"), spd, f"a list of {len(pts) - 1} speeds")
-        for i, v in enumerate(spd):
-            if isinstance(v, bool) or not isinstance(v, int | float) or not 0 < v < c:
-                raise ConfigError(f"{tbl.name('speeds_mps')}[{i}]", v, f"> 0 and < c = {c:g} m/s")
-        dwell = tbl.data.get("dwell_s")
-        traj = Piecewise(way, spd, dwell_s=dwell, t_start_s=tbl.number("t_start_s", 0.0))
-        p, speed = way[0], float(max(spd))
-    return TargetSpec(traj, ts, speed, np.asarray(p, dtype=np.float64))
+        assert tgt.waypoints_m is not None and tgt.speeds_mps is not None
+        for i, leg in enumerate(tgt.speeds_mps):
+            if not leg < c:
+                raise ConfigError(f"{name}.speeds_mps[{i}]", leg, f"> 0 and < c = {c:g} m/s")
+        way = np.asarray(tgt.waypoints_m, dtype=np.float64)
+        traj = Piecewise(way, tgt.speeds_mps, dwell_s=tgt.dwell_s, t_start_s=tgt.t_start_s)
+        p, speed = way[0], float(max(tgt.speeds_mps))
+    return TargetSpec(traj, tgt.target_strength_db, speed, np.asarray(p, dtype=np.float64))
 
 
-def parse_scenario(data: dict[str, Any]) -> Scenario:
-    """Validate a scenario given as a dict (a parsed TOML document)."""
-    top = Table(data, "", _TOP)
-    preset_name = top.data.get("preset")
-    if preset_name is None:
-        raise ConfigError("preset", None, "one of att, tank-audio, tank-board", "it is required")
-    preset = get_preset(str(preset_name))
-    family = str(top.data.get("family", preset.base.family))
-    duration = top.number("duration_s", 1.0, lo=0.0, lo_open=True, hi=86400.0, unit="s")
-    seed = top.integer("seed", 0, 0, 2**32 - 1)
-    env = top.sub("environment", ("sound_speed_mps", "temperature_c", "salinity_ppt", "depth_m",
-                                  "absorption_db_per_km"))  # fmt: skip
-    c = _sound_speed(env)
-    if math.isnan(c):
-        c = preset.base.sound_speed_mps
-    absorption = env.number("absorption_db_per_km", 0.0, lo=0.0, hi=1000.0, unit="dB/km")
-
-    sonar = top.sub("sonar", ("position_m", "velocity_mps", "source_level_db", "sensitivity_db",
-                              "gain_db", "full_scale_v", "beam", "hydrophone_beam"))  # fmt: skip
-    sonar_p = sonar.vector("position_m", (0.0, 0.0, 0.0))
-    sonar_v = sonar.vector("velocity_mps", (0.0, 0.0, 0.0))
-    sonar_speed = float(np.linalg.norm(sonar_v))
-    if not sonar_speed < c:
-        raise ConfigError(sonar.name("velocity_mps"), sonar_speed, f"< c = {c:g} m/s")
-    sl = sonar.number("source_level_db", 200.0, lo=0.0, hi=260.0, unit="dB re 1 µPa @ 1 m")
-    receiver = Receiver(
-        sonar.number("sensitivity_db", -180.0, lo=-300.0, hi=0.0, unit="dB re 1 V/µPa"),
-        sonar.number("gain_db", 0.0, lo=-60.0, hi=120.0, unit="dB"),
-        sonar.number("full_scale_v", 1.0, lo=0.0, lo_open=True, unit="V"),
-    )
-    beam_tables = [
-        sonar.sub(key, ("type", "ka", "radius_m", "frequency_hz", "axis", "angles_deg",
-                        "levels_db"))
-        for key in ("beam", "hydrophone_beam")
-    ]  # fmt: skip
-    if not sonar.has("hydrophone_beam"):
-        beam_tables[1] = beam_tables[0]  # one transducer sends and receives
-    axes = []
-    for bt in beam_tables:
-        axis = bt.vector("axis", (1.0, 0.0, 0.0))
-        if not np.any(axis):
-            raise ConfigError(bt.name("axis"), axis.tolist(), "a non-zero vector")
-        axes.append(axis / np.linalg.norm(axis))
-
-    raw_targets = top.data.get("targets", [])
-    if not isinstance(raw_targets, list):
-        raise ConfigError("targets", raw_targets, "an array of tables [[targets]]")
-    targets = [
-        _target(
-            Table(
-                t,
-                f"targets[{i}]",
-                (
-                    "trajectory",
-                    "target_strength_db",
-                    "position_m",
-                    "velocity_mps",
-                    "range_m",
-                    "speed_mps",
-                    "azimuth_deg",
-                    "elevation_deg",
-                    "waypoints_m",
-                    "speeds_mps",
-                    "dwell_s",
-                    "t_start_s",
-                ),
-            ),
-            sonar_p,
-            c,
-        )
-        for i, t in enumerate(raw_targets)
-    ]
-
-    wt = top.data.get("waveform", {})
-    wtab = Table(wt, "waveform", tuple(WaveformSpec.__dataclass_fields__))
-    fastest = max([t.max_speed_mps for t in targets] + [0.0]) + sonar_speed
-    overrides = dict(wtab.data)
+def _waveform(
+    t: dict[str, Any], family: str, c: float, targets: list[TargetSpec], sonar_speed: float
+) -> tuple[WaveformSpec, HopSchedule]:
+    """The preset's waveform with the file's overrides, at the sound speed ``c``, its
+    Doppler span covering the fastest target; errors named as the file's keys."""
+    preset = get_preset(t["preset"])
+    wt: dict[str, Any] = t.get("waveform", {})
+    fastest = max([tg.max_speed_mps for tg in targets] + [0.0]) + sonar_speed
+    overrides = dict(wt)
     overrides["sound_speed_mps"] = c
-    if top.has("fs_hz"):
-        overrides["fs_hz"] = top.number("fs_hz", lo=0.0, lo_open=True, unit="Hz")
-    base = preset.spec(family, **{k: v for k, v in overrides.items() if k != "max_speed_mps"})
-    overrides["max_speed_mps"] = max(float(wt.get("max_speed_mps", base.max_speed_mps)), fastest)
+    if t.get("fs_hz") is not None:
+        overrides["fs_hz"] = t["fs_hz"]
     try:
+        base = preset.spec(family, **{k: v for k, v in overrides.items() if k != "max_speed_mps"})
+        overrides["max_speed_mps"] = max(
+            float(wt.get("max_speed_mps", base.max_speed_mps)), fastest
+        )
         spec = preset.spec(family, **overrides)
-        schedule = check_design(spec)
+        return spec, check_design(spec)
     except ConfigError as exc:
         where = exc.field
         if where == "fs_hz":
-            where = "fs_hz" if top.has("fs_hz") or "fs_hz" not in wtab.data else "waveform.fs_hz"
-        elif where in wtab.data or where in WaveformSpec.__dataclass_fields__:
+            where = "fs_hz" if t.get("fs_hz") is not None or "fs_hz" not in wt else "waveform.fs_hz"
+        elif where in wt or where in WaveformSpec.__dataclass_fields__:
             where = f"waveform.{where}"
         raise ConfigError(where, exc.value, exc.allowed, exc.hint) from None
-    beam, hydrophone_beam = (_beam(bt, spec.center_hz, c) for bt in beam_tables)
 
-    tank: Tank | None = None
-    image_order = 0
-    tank_echoes: TankEchoSettings | None = None
-    if top.has("tank"):
-        tt = top.sub("tank", ("size_m", "image_order", "surface_reflection", "wall_reflection",
-                              "bottom_reflection", "own_echoes", "own_echo_order", "late_tail",
-                              "t60_formula"))  # fmt: skip
-        size = tt.vector("size_m")
-        for i, v in enumerate(size):
-            if not v > 0:
-                raise ConfigError(f"{tt.name('size_m')}[{i}]", float(v), "> 0 m")
-        tank = Tank(
-            float(size[0]), float(size[1]), float(size[2]),
-            wall_reflection=tt.number("wall_reflection", 0.9, lo=-1.0, hi=1.0),
-            bottom_reflection=tt.number("bottom_reflection", 0.9, lo=-1.0, hi=1.0),
-            surface_reflection=tt.number("surface_reflection", -1.0, lo=-1.0, hi=1.0),
-        )  # fmt: skip
-        image_order = tt.integer("image_order", 1, 0, MAX_TARGET_IMAGE_ORDER)
-        if tt.flag("own_echoes", False):
-            tank_echoes = TankEchoSettings(
-                order=tt.integer("own_echo_order", 3, 0, MAX_IMAGE_ORDER),
-                tail=tt.flag("late_tail", True),
-                t60_formula=tt.text("t60_formula", "eyring", T60_FORMULAS),
-                seed=seed + 7,
-            )
-            if float(np.linalg.norm(sonar_v)) != 0.0:
-                raise ConfigError(
-                    tt.name("own_echoes"), True, "a sonar at rest (sonar.velocity_mps = 0)",
-                    "turn own_echoes off for a moving sonar",
-                )  # fmt: skip
-        tank.check_inside(sonar_p, "sonar.position_m")
-        tank.check_inside(
-            sonar_p + sonar_v * duration, "sonar.position_m + velocity_mps·duration_s"
-        )
-        for i, tgt in enumerate(targets):
-            for when in (0.0, duration):
-                p = tgt.trajectory.position(np.array([when]))[0]
-                tank.check_inside(p, f"targets[{i}] position at t = {when:g} s")
 
-    noise: dict[str, Any] | None = None
-    nt = top.sub("noise", ("enabled", "sea_state", "wind_speed_mps", "shipping", "self_noise_db",
-                           "snr_db", "band_hz", "seed"))  # fmt: skip
-    if nt.flag("enabled", top.has("noise")):
-        if nt.has("sea_state") and nt.has("wind_speed_mps"):
-            raise ConfigError(nt.name("wind_speed_mps"), nt.data["wind_speed_mps"],
-                              "absent when sea_state is given", "give one of them")  # fmt: skip
-        f_lo, f_hi = schedule.min_frequency_hz(), schedule.max_frequency_hz()
-        bw = f_hi - f_lo
-        default_band = (max(1.0, f_lo - 0.25 * bw), min(0.499 * spec.fs_hz, f_hi + 0.25 * bw))
-        band = tuple(nt.vector("band_hz", default_band, n=2).tolist())
-        if not 0 <= band[0] < band[1] <= spec.fs_hz / 2:
+def _tank(
+    tt: TankSection | None,
+    sonar: SonarSection,
+    targets: list[TargetSpec],
+    duration: float,
+    seed: int,
+) -> tuple[Tank | None, int, TankEchoSettings | None]:
+    """The tank, the target's image order and the own echoes; sonar and targets inside it."""
+    if tt is None:
+        return None, 0, None
+    tank = Tank(*tt.size_m, wall_reflection=tt.wall_reflection,
+                bottom_reflection=tt.bottom_reflection, surface_reflection=tt.surface_reflection)  # fmt: skip  # noqa: E501
+    echoes = None
+    sonar_p, sonar_v = np.asarray(sonar.position_m), np.asarray(sonar.velocity_mps)
+    if tt.own_echoes:
+        if float(np.linalg.norm(sonar_v)) != 0.0:
             raise ConfigError(
-                nt.name("band_hz"), list(band), f"0 <= low < high <= fs/2 = {spec.fs_hz / 2:g} Hz"
-            )
-        if nt.has("snr_db") and not targets:
-            raise ConfigError(nt.name("snr_db"), nt.data["snr_db"], "used with at least one target",
-                              "the SNR is the first target's echo power over the noise power")  # fmt: skip  # noqa: E501
-        noise = {
-            "sea_state": nt.integer("sea_state", 3, 0, 9) if nt.has("sea_state") else None,
-            "wind_speed_mps": nt.number("wind_speed_mps", 5.0, lo=0.0, hi=80.0, unit="m/s"),
-            "shipping": nt.number("shipping", 0.5, lo=0.0, hi=1.0),
-            "self_noise_db": nt.number("self_noise_db") if nt.has("self_noise_db") else None,
-            "snr_db": nt.number("snr_db", lo=-100.0, hi=200.0, unit="dB")
-            if nt.has("snr_db")
-            else None,
-            "band_hz": band,
-            "seed": nt.integer("seed", seed, 0, 2**32 - 1),
-        }
+                "tank.own_echoes", True, "a sonar at rest (sonar.velocity_mps = 0)",
+                "turn own_echoes off for a moving sonar",
+            )  # fmt: skip
+        echoes = TankEchoSettings(order=tt.own_echo_order, tail=tt.late_tail,
+                                  t60_formula=tt.t60_formula, seed=seed + 7)  # fmt: skip
+    tank.check_inside(sonar_p, "sonar.position_m")
+    tank.check_inside(sonar_p + sonar_v * duration, "sonar.position_m + velocity_mps·duration_s")
+    for i, tgt in enumerate(targets):
+        for when in (0.0, duration):
+            p = tgt.trajectory.position(np.array([when]))[0]
+            tank.check_inside(p, f"targets[{i}] position at t = {when:g} s")
+    return tank, tt.image_order, echoes
 
-    reverb: dict[str, Any] | None = None
-    rt = top.sub("reverberation", ("enabled", "scattering_strength_db", "srr_db", "density_per_m3",
-                                   "min_range_m", "max_range_m", "beam_floor_db", "taylor_order",
-                                   "frame_samples", "seed"))  # fmt: skip
-    if rt.flag("enabled", top.has("reverberation")):
-        if rt.has("srr_db") and rt.has("scattering_strength_db"):
-            raise ConfigError(rt.name("srr_db"), rt.data["srr_db"],
-                              "absent when scattering_strength_db is given", "give one of them")  # fmt: skip  # noqa: E501
-        if rt.has("srr_db") and not targets:
-            raise ConfigError(rt.name("srr_db"), rt.data["srr_db"], "used with at least one target")
-        r_min = rt.number("min_range_m", 1.0, lo=0.0, lo_open=True, unit="m")
-        r_max = rt.number("max_range_m", spec.max_range_m, lo=r_min, lo_open=True, unit="m")
-        reverb = {
-            "settings": ReverberationSettings(
-                density_per_m3=rt.number("density_per_m3", 0.01, lo=0.0, lo_open=True, unit="m⁻³"),
-                scattering_strength_db=rt.number("scattering_strength_db", -70.0, lo=-200.0, hi=0.0, unit="dB"),  # noqa: E501
-                max_range_m=r_max,
-                min_range_m=r_min,
-                beam_floor_db=rt.number("beam_floor_db", -40.0, lo=-200.0, hi=0.0, unit="dB"),
-                taylor_order=rt.integer("taylor_order", 3, 0, 3),
-                frame_samples=rt.integer("frame_samples", 24000, 64, 1 << 22),
-                absorption_db_per_km=absorption,
-                seed=rt.integer("seed", seed, 0, 2**32 - 1),
-            ),
-            "srr_db": rt.number("srr_db", lo=-100.0, hi=200.0, unit="dB") if rt.has("srr_db") else None,  # noqa: E501
-        }  # fmt: skip
 
-    direct: DirectBlast | None = None
-    dt = top.sub("direct_blast", ("enabled", "coupling_db", "separation_m"))
-    if dt.flag("enabled", top.has("direct_blast")):
-        direct = DirectBlast(
-            dt.number("coupling_db", 0.0, lo=-300.0, hi=60.0, unit="dB"),
-            dt.number("separation_m", 0.1, lo=0.0, lo_open=True, unit="m"),
-        )
+def _noise(
+    nt: NoiseSection | None,
+    schedule: HopSchedule,
+    fs: float,
+    targets: list[TargetSpec],
+    seed: int,
+) -> dict[str, Any] | None:
+    """The noise settings :func:`build_channel` scales: band within Nyquist, an SNR only
+    with a target to set it against."""
+    if nt is None or not nt.enabled:
+        return None
+    f_lo, f_hi = schedule.min_frequency_hz(), schedule.max_frequency_hz()
+    bw = f_hi - f_lo
+    band = nt.band_hz or (max(1.0, f_lo - 0.25 * bw), min(0.499 * fs, f_hi + 0.25 * bw))
+    if not 0 <= band[0] < band[1] <= fs / 2:
+        raise ConfigError("noise.band_hz", list(band), f"0 <= low < high <= fs/2 = {fs / 2:g} Hz")
+    if nt.snr_db is not None and not targets:
+        raise ConfigError("noise.snr_db", nt.snr_db, "used with at least one target",
+                          "the SNR is the first target's echo power over the noise power")  # fmt: skip  # noqa: E501
+    return {
+        "sea_state": nt.sea_state,
+        "wind_speed_mps": 5.0 if nt.wind_speed_mps is None else nt.wind_speed_mps,
+        "shipping": nt.shipping,
+        "self_noise_db": nt.self_noise_db,
+        "snr_db": nt.snr_db,
+        "band_hz": tuple(band),
+        "seed": seed if nt.seed is None else nt.seed,
+    }
 
-    ot = top.sub("output", ("channels", "plots", "block_s"))
-    channels = ot.data.get("channels", ["received"])
-    if (
-        not isinstance(channels, list)
-        or not channels
-        or any(ch not in OUTPUT_CHANNELS for ch in channels)
-    ):
-        raise ConfigError(
-            ot.name("channels"), channels, f"a non-empty list of {', '.join(OUTPUT_CHANNELS)}"
-        )
-    return Scenario(
-        preset=preset.name, family=family, fs_hz=spec.fs_hz, duration_s=duration, seed=seed,
-        spec=spec, schedule=schedule, sound_speed_mps=c, absorption_db_per_km=absorption,
-        sonar_position_m=sonar_p, sonar_velocity_mps=sonar_v, source_level_db=sl,
-        receiver=receiver, beam=beam, beam_axis=axes[0], hydrophone_beam=hydrophone_beam,
-        hydrophone_axis=axes[1], targets=targets,
-        noise=noise, reverberation=reverb, tank=tank, image_order=image_order,
-        tank_echoes=tank_echoes,
-        direct_blast=direct, output_channels=tuple(channels),
-        plots=ot.flag("plots", True), block_s=ot.number("block_s", 0.5, lo=0.0, lo_open=True, unit="s"),  # noqa: E501
-        raw=data,
-    )  # fmt: skip
+
+def _reverberation(
+    rt: ReverberationSection | None,
+    spec: WaveformSpec,
+    env: EnvironmentSection,
+    targets: list[TargetSpec],
+    seed: int,
+) -> dict[str, Any] | None:
+    """The reverberation settings: out to the preset's range unless given; an SRR only with
+    a target to set it against."""
+    if rt is None or not rt.enabled:
+        return None
+    if rt.srr_db is not None and not targets:
+        raise ConfigError("reverberation.srr_db", rt.srr_db, "used with at least one target")
+    r_max = spec.max_range_m if rt.max_range_m is None else rt.max_range_m
+    if r_max <= rt.min_range_m:
+        raise ConfigError("reverberation.min_range_m", rt.min_range_m,
+                          f"< the preset's range {r_max:g} m", "or give max_range_m")  # fmt: skip
+    ss = -70.0 if rt.scattering_strength_db is None else rt.scattering_strength_db
+    return {
+        "settings": ReverberationSettings(
+            density_per_m3=rt.density_per_m3, scattering_strength_db=ss, max_range_m=r_max,
+            min_range_m=rt.min_range_m, beam_floor_db=rt.beam_floor_db,
+            taylor_order=rt.taylor_order, frame_samples=rt.frame_samples,
+            absorption_db_per_km=env.absorption_db_per_km,
+            seed=seed if rt.seed is None else rt.seed,
+        ),
+        "srr_db": rt.srr_db,
+    }  # fmt: skip
 
 
 def build_channel(sc: Scenario) -> Channel:
@@ -464,21 +426,18 @@ def build_channel(sc: Scenario) -> Channel:
     return channel
 
 
-def _beam(bt: Table, center_hz: float, c: float) -> BeamPattern:
+def _beam(bt: BeamSection, center_hz: float, c: float) -> BeamPattern:
     """The pattern of a ``beam`` table: omni, piston (``ka``, or ``radius_m`` at
     ``frequency_hz``, default the waveform's centre) or a table (``angles_deg``, ``levels_db``)."""
-    kind = bt.text("type", "omni", ("omni", "piston", "table"))
-    if kind == "piston":
-        if bt.has("ka"):
-            return PistonBeam(bt.number("ka", lo=0.0, lo_open=True))
-        radius = bt.number("radius_m", lo=0.0, lo_open=True, unit="m")
-        f = bt.number("frequency_hz", center_hz, lo=0.0, lo_open=True, unit="Hz")
-        return PistonBeam.from_radius(radius, f, c)
-    if kind == "table":
-        for key in ("angles_deg", "levels_db"):
-            if not isinstance(bt.data.get(key), list):
-                raise ConfigError(bt.name(key), bt.data.get(key), "a list of numbers")
-        return TableBeam(bt.data["angles_deg"], bt.data["levels_db"])
+    if bt.type == "piston":
+        if bt.ka is not None:
+            return PistonBeam(bt.ka)
+        assert bt.radius_m is not None
+        f = center_hz if bt.frequency_hz is None else bt.frequency_hz
+        return PistonBeam.from_radius(bt.radius_m, f, c)
+    if bt.type == "table":
+        assert bt.angles_deg is not None and bt.levels_db is not None
+        return TableBeam(bt.angles_deg, bt.levels_db)
     return OmniBeam()
 
 

@@ -28,6 +28,7 @@ import numpy as np
 import firmware_protocol
 from firmware_protocol import SampleFormat
 from firmware_protocol.conversations import BOARD
+from hil.errors import DeviceUnavailable
 
 FIRMWARE_DIR = Path(firmware_protocol.__file__).with_name("c")
 """The C sources and their Makefile."""
@@ -38,7 +39,7 @@ PTY_SERVER = BUILD_DIR / "casfw-pty"
 _build_lock = threading.Lock()
 
 
-class CFirmwareUnavailable(RuntimeError):
+class CFirmwareUnavailable(DeviceUnavailable, RuntimeError):
     """The C firmware cannot be built here (no compiler or make, or the build failed)."""
 
 
@@ -225,6 +226,11 @@ class CBoardStepper:
         """Damaged frames dropped by the firmware's receiver."""
         return int(self._lib.casfw_sim_counter(self._mem, 1))
 
+    @property
+    def adc_clipped_samples(self) -> int:
+        """ADC values clipped at conversion since power-up."""
+        return int(self._lib.casfw_sim_counter(self._mem, 5))
+
 
 def default_board() -> dict[str, Any]:
     """The board the C firmware plays by default: that of :class:`BoardSpec` defaults
@@ -255,7 +261,8 @@ class CFirmwareDevice:
     contract) whose HAL is Python: ``clock()`` (s) is board time and ``world(dac, first)``
     (:mod:`sim_devices.board.worlds`) is the analog path between its DAC and ADC.
 
-    Attributes ``dac_underruns`` and ``adc_overruns`` and :meth:`sample_index` mirror
+    Attributes ``dac_underruns``, ``adc_overruns``, ``adc_clipped_samples`` and
+    :meth:`sample_index` mirror
     :class:`~sim_devices.board.core.SimulatedBoard`, so a simulated tank can use either.
     """
 
@@ -330,6 +337,12 @@ class CFirmwareDevice:
     def adc_overruns(self) -> int:
         """ADC overruns since power-up."""
         return int(self._lib.casfw_ext_counter(self._mem, 1))
+
+    @property
+    def adc_clipped_samples(self) -> int:
+        """ADC values clipped at conversion since power-up (the count behind the latched
+        ADC_CLIPPING alarm, as :attr:`SimulatedBoard.adc_clipped_samples`)."""
+        return int(self._lib.casfw_ext_counter(self._mem, 2))
 
 
 R = TypeVar("R")

@@ -3,7 +3,7 @@
 A :class:`BoardPort` ticks the board whenever the host polls it, so the board runs exactly
 as fast as its clock says: real time with :func:`time.monotonic`, or as the test advances an
 injected clock. ``faults.disconnect()`` makes every call raise
-:class:`~firmware_protocol.TransportClosedError` until ``faults.replug()``.
+:class:`~hil.errors.TransportClosedError` until ``faults.replug()``.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import time
 from collections.abc import Callable
 from typing import TypeVar
 
-from firmware_protocol import TransportClosedError
+from hil.errors import TransportClosedError
 from sim_devices.board.core import SimulatedBoard
 
 R = TypeVar("R")

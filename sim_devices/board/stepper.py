@@ -53,6 +53,11 @@ class PythonBoardStepper:
             spec or conversation_spec(), clock=lambda: self._t, world=LoopbackWorld()
         )
 
+    @property
+    def adc_clipped_samples(self) -> int:
+        """ADC values clipped at conversion since power-up."""
+        return self.board.adc_clipped_samples
+
     def step(self, t_ns: int, host: bytes) -> bytes:
         """Service at ``t_ns`` (ns, not before the last step), then receive ``host``."""
         self._t = t_ns / 1e9

@@ -29,7 +29,7 @@ from typing import Any
 import usb.backend
 import usb.core
 
-from firmware_protocol import TransportClosedError
+from hil.errors import TransportClosedError
 from sim_devices.board.core import SimulatedBoard
 from sim_devices.board.port import BoardPort
 

@@ -66,6 +66,10 @@ class LoopbackWorld:
         Cable delay, samples (>= 0).
     gain:
         Linear amplitude factor (finite).
+    monitor:
+        Also tap DAC channel 0 into one more ADC input (after the DAC channels' own), at the
+        same delay and unity gain: the DAC monitor a tank run measures its loopback latency
+        on (its ADC input 2 with one DAC channel).
 
     Examples
     --------
@@ -75,9 +79,11 @@ class LoopbackWorld:
     [0.0, 0.0, 0.5, 1.0]
     >>> world(out, 4)[:, 0].tolist()
     [1.5, 2.0, 0.5, 1.0]
+    >>> LoopbackWorld(delay_samples=1, gain=0.5, monitor=True)(out, 0).tolist()
+    [[0.0, 0.0], [0.5, 1.0], [1.0, 2.0], [1.5, 3.0]]
     """
 
-    def __init__(self, delay_samples: int = 0, gain: float = 1.0) -> None:
+    def __init__(self, delay_samples: int = 0, gain: float = 1.0, *, monitor: bool = False) -> None:
         if isinstance(delay_samples, bool) or not isinstance(delay_samples, int | np.integer):
             raise ConfigError("delay_samples", delay_samples, "an integer >= 0 (samples)")
         if delay_samples < 0:
@@ -88,6 +94,7 @@ class LoopbackWorld:
             raise ConfigError("gain", gain, "a finite number (linear)")
         self.delay_samples = int(delay_samples)
         self.gain = float(gain)
+        self.monitor = bool(monitor)
         self._tail: FloatArray | None = None  # the last delay_samples DAC rows
 
     def reset(self) -> None:
@@ -102,4 +109,6 @@ class LoopbackWorld:
         joined = np.concatenate((self._tail, dac_block)) if d else dac_block
         out = joined[:n] * self.gain if self.gain != 1.0 else joined[:n].copy()
         self._tail = joined[n:].copy() if d else self._tail
+        if self.monitor:
+            out = np.concatenate((out, joined[:n, :1]), axis=1)
         return out

@@ -1,12 +1,14 @@
 """A manual clock for simulated time: ``now()`` only moves when told to.
 
-It also satisfies the driver clock protocol (:class:`hil.devices.clock.Clock`): ``sleep``
-advances the time at once, so a driver waiting on it and a simulator reading it run a 10 s
-move in milliseconds. Safe to read from one thread while another advances it.
+It also satisfies the one clock protocol (:class:`hil.devices.clock.Clock`): ``sleep`` and
+``sleep_until`` advance the time at once, so a driver waiting on it and a simulator reading
+it run a 10 s move in milliseconds. Safe to read from one thread while another advances it.
 
 >>> c = ManualClock(5.0)
 >>> c.sleep(0.25); c.advance(1.0); c.now()
 6.25
+>>> c.sleep_until(7.0); c.sleep_until(3.0); c.now()
+7.0
 """
 
 from __future__ import annotations
@@ -37,3 +39,8 @@ class ManualClock:
     def sleep(self, seconds: float) -> None:
         """Same as :meth:`advance`: simulated time passes instantly."""
         self.advance(seconds)
+
+    def sleep_until(self, t_s: float) -> None:
+        """Advance to ``t_s`` at once (never backwards)."""
+        with self._lock:
+            self._now = max(self._now, float(t_s))

@@ -19,8 +19,10 @@ from hil.signals.presets import check_design, get_preset
 from hil.signals.synthesis import BlockSynthesizer
 from sim_devices.acoustics.beam import PistonBeam
 from sim_devices.acoustics.channel import Channel, DirectBlast, Receiver, Target
-from sim_devices.acoustics.dac_world import AcousticWorld, InPlaceWorld
+from sim_devices.acoustics.dac_world import AcousticWorld, InPlaceWorld, StreamConvolver
 from sim_devices.acoustics.directivity import Transducer
+from sim_devices.acoustics.tank import Tank
+from sim_devices.acoustics.tank_response import KERNEL_HALF, TankEchoSettings
 from sim_devices.acoustics.trajectory import ConstantVelocity, Fixed, Live
 
 FS = 192_000.0
@@ -158,3 +160,62 @@ def test_the_sampled_world_applies_the_projector_and_hydrophone_directivity() ->
     x = 4.0 * np.sin(0.6)
     assert responses["on"] == pytest.approx(1.0, abs=1e-12)
     assert responses["off"] == pytest.approx((2 * j1(x) / x) ** 2, rel=1e-3)
+
+
+TANK = Tank(12.0, 4.0, 2.5, wall_reflection=0.8, bottom_reflection=0.7)
+#: Own echoes of two reflections and a 20 ms stretch of the late tail (a short response).
+OWN = TankEchoSettings(order=2, tail=True, tail_s=0.02, seed=3)
+
+
+def test_the_audio_interfaces_sampled_world_has_the_tanks_own_echoes_as_the_boards() -> None:
+    """Through the simulated audio interface, the sampled world echoes the played schedule
+    off the tank's boundaries exactly as the board's analytic channel does (once the silence
+    before the first block has left the response's length)."""
+    sch = _schedule()
+    level = 150.0  # dB re 1 µPa at 1 m: the omni near wall stays below full scale
+    world = AcousticWorld(
+        FS, SONAR, [], sound_speed_mps=C, source_level_db=level, receiver=RX, tank=TANK,
+        tank_echoes=OWN,
+    )  # fmt: skip
+    settings_ = AudioSettings(samplerate=FS, blocksize=256, channels_in=1, channels_out=1)
+    n = int(0.06 * FS)
+    played = BlockSynthesizer(sch, FS).read(n).astype(np.float32)
+    rec = play_record(SimulatedDuplex(settings_, InPlaceWorld(world)), played)
+    heard = rec.recording[:, 0].astype(float)
+    board = Channel(sch, FS, SONAR, level, C, receiver=RX, tank=TANK, tank_echoes=OWN)
+    assert board._tank is not None
+    want = RX.to_full_scale(board.read_components(n)["tank"])
+    latency = 2 * 256 + world.converter_delay  # the interface's buffering and the converters
+    steady = board._tank.h.size  # the sampled world's DAC was silent before its first block
+    got = heard[latency + steady : n]
+    ref = want[steady : n - latency]
+    assert np.max(np.abs(ref)) > 0.05  # the walls are heard
+    # float32 samples on both sides of the interface: agreement to their precision
+    np.testing.assert_allclose(got, ref, rtol=0, atol=2e-6 * np.max(np.abs(ref)))
+    # nothing before the shortest boundary path (the near wall 0.5 m behind, 1 m both ways)
+    # but the band-limited interpolator's leading taps (KERNEL_HALF = 16 samples)
+    first = int(np.flatnonzero(np.abs(heard) > 1e-6 * np.max(np.abs(heard)))[0]) - latency
+    assert 1.0 / C * FS - KERNEL_HALF <= first <= 1.0 / C * FS
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.lists(st.integers(1, 3000), min_size=1, max_size=6))
+def test_stream_convolution_is_the_same_for_any_block_split(cuts: list[int]) -> None:
+    rng = np.random.default_rng(5)
+    h, x = rng.standard_normal(700), rng.standard_normal(6000)
+    conv = StreamConvolver(h)
+    edges = np.unique(np.clip(np.cumsum(cuts), 0, x.size))
+    parts = [conv.push(p) for p in np.split(x, edges)]
+    np.testing.assert_allclose(np.concatenate(parts), np.convolve(x, h)[: x.size], atol=1e-10)
+
+
+def test_own_echoes_need_a_tank_and_a_sonar_at_rest() -> None:
+    with pytest.raises(ConfigError, match=r"tank_echoes = .* must be a tank to echo in"):
+        _world([], tank_echoes=OWN)
+    with pytest.raises(ConfigError, match="a sonar at rest"):
+        AcousticWorld(
+            FS, ConstantVelocity([0.5, 1.0, -1.0], [0.1, 0.0, 0.0]), [], sound_speed_mps=C,
+            source_level_db=180.0, tank=TANK, tank_echoes=OWN,
+        )  # fmt: skip
+    with pytest.raises(ConfigError, match="h = \\(0,\\) is not allowed: must be at least one"):
+        StreamConvolver(np.zeros(0))

@@ -17,7 +17,6 @@ from hil.devices.audio import (
     AudioSettings,
     CallbackStop,
     DigitalLoopbackWorld,
-    ManualClock,
     SimulatedDuplex,
     StatusFlags,
     portaudio_available,
@@ -26,6 +25,7 @@ from hil.devices.audio.daq import AudioDaq, parse_audio_url
 from hil.devices.audio.jack_ports import wire_portaudio_loopback
 from hil.errors import ConfigError
 from hil.experiments.live.latency import measure_latency
+from sim_devices.stage.clock import ManualClock
 
 FS = 48000
 T0 = 100.0

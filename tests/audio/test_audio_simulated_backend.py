@@ -14,15 +14,15 @@ from hil.devices.audio import (
     BlockTime,
     CallbackStop,
     DigitalLoopbackWorld,
-    ManualClock,
-    RealtimeClock,
     SimulatedDuplex,
     StatusFlags,
     measure_loopback_latency,
     play_record,
 )
 from hil.devices.audio.contract import FloatArray
+from hil.devices.clock import MonotonicClock
 from hil.errors import ConfigError
+from sim_devices.stage.clock import ManualClock
 
 FS = 48000.0
 
@@ -88,7 +88,7 @@ def test_callback_receives_the_contract_arguments() -> None:
         if len(seen) == 5:
             raise CallbackStop
 
-    clock = ManualClock(start_s=100.0)
+    clock = ManualClock(100.0)
     with SimulatedDuplex(s, io_delay_samples=160, clock=clock) as sim:
         sim.open(callback)
         sim.start()
@@ -219,7 +219,7 @@ def test_play_record_returns_the_xrun_log() -> None:
 def test_realtime_clock_runs_the_same_data_path() -> None:
     signal = _noise(480, 1, seed=3)
     sim = SimulatedDuplex(
-        AudioSettings(samplerate=FS, blocksize=48), io_delay_samples=96, clock=RealtimeClock()
+        AudioSettings(samplerate=FS, blocksize=48), io_delay_samples=96, clock=MonotonicClock()
     )
     run = play_record(sim, signal, extra_frames=96)
     assert np.array_equal(run.recording[96:], signal)

@@ -6,6 +6,7 @@ resume runs it again and an abort leaves it stopped, its recording closed with i
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 from typing import Any
@@ -142,11 +143,11 @@ def test_a_run_that_stops_after_it_started_keeps_its_event_and_fails_the_bluesky
     from hil.bluesky.tank_run import TankRunError
 
     # The run stops with an error 1.5 s (simulated) into its capture, before the pass ends
-    # (about 2.5 s): late enough that the recording has started (0.05 s of capture).
-    text = SHORT.replace('output_dir = "runs"', 'output_dir = "runs"\nmax_duration_s = 1.5')
-    run = TankRunDetector(
-        parse_experiment(text), runs_dir=tmp_path, report=False, virtual_time=True, name="tank"
-    )
+    # (about 2.5 s): late enough that the recording has started (0.05 s of capture). The file
+    # refuses a max_duration_s shorter than the tow, so the limit is set on the parsed
+    # experiment: what it stands for here is a tow that takes longer than planned.
+    exp = dataclasses.replace(parse_experiment(SHORT), max_duration_s=1.5)
+    run = TankRunDetector(exp, runs_dir=tmp_path, report=False, virtual_time=True, name="tank")
     call_in_bluesky_event_loop(run.connect())
     docs: list[tuple[str, dict[str, Any]]] = []
     with pytest.raises(FailedStatus) as err:

@@ -37,6 +37,7 @@ def test_tank_run_completes_with_the_c_firmware_as_the_board(
     summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert summary["error"] == "" and not summary["interrupted"]
     assert summary["adc_overruns"] == 0  # the firmware's link buffer never overflowed
+    assert summary["adc_clipped_samples"] == 0  # counted by the firmware, as in Python
     assert summary["dropped_samples"] == 0
     assert summary["loopback_latency_samples"] == 64  # the simulated converters, as in Python
     assert summary["scored_estimates"] >= 50

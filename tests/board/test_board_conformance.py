@@ -235,7 +235,8 @@ def test_the_watchdog_status_leaves_the_status_timer_alone(
 def test_float32_dac_data_converts_to_adc_counts_as_spec_6_3_states(
     make_device: Callable[[], Device], adc_format: SampleFormat, full_scale: int
 ) -> None:
-    """NaN reads 0 unclipped, +-inf and +1.0 clip, halves round to even (both boards)."""
+    """NaN reads 0 unclipped, +-inf and +1.0 clip, halves round to even (both boards), and
+    both boards count the two clipped values (the count is not on the wire)."""
     board = dict(conversations.BOARD, formats=["INT16", "INT24", "FLOAT32"])
     maker = (
         (lambda: PythonBoardStepper(conversation_spec(board)))
@@ -255,6 +256,7 @@ def test_float32_dac_data_converts_to_adc_counts_as_spec_6_3_states(
     expected = [0, full_scale - 1, -full_scale, -full_scale, 2, -2]
     assert adc.samples()[:6, 0].tolist() == expected
     assert adc.samples()[6:, 0].tolist() == [0] * (adc.sample_count - 6)
+    assert device.adc_clipped_samples == 2  # +1.0 and -inf; -1.0 is the bottom code
 
 
 @pytest.mark.parametrize(

@@ -226,7 +226,7 @@ def test_unknown_setting_name_is_refused() -> None:
 
 
 def test_no_answer_to_hello_times_out_with_advice() -> None:
-    from firmware_protocol import TransportTimeoutError
+    from hil.errors import TransportTimeoutError
 
     transport = ScriptedTransport(
         [(Connection(Role.HOST).send(Connection(Role.HOST).make_hello()), b"")]

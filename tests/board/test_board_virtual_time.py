@@ -10,12 +10,11 @@ import threading
 import numpy as np
 import pytest
 
-from firmware_protocol import TransportClosedError, TransportTimeoutError
 from hil.acquisition import AnnotationKind
 from hil.devices.board import Board
 from hil.devices.board_settings import BoardSettings
 from hil.devices.clock import MonotonicClock, VirtualClock
-from hil.errors import ConfigError
+from hil.errors import ConfigError, TransportClosedError, TransportTimeoutError
 from sim_devices.board import BoardPort, FaultPlan, LoopbackWorld, MemoryBoardLink, SimulatedBoard
 
 RATE_HZ = 192_000

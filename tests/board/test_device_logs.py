@@ -11,11 +11,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from firmware_protocol import TransportTimeoutError
 from hil.devices.board import Board
 from hil.devices.board_settings import BoardSettings
 from hil.devices.clock import VirtualClock
 from hil.devices.grbl import GrblStage
+from hil.errors import TransportTimeoutError
 from hil.logs import run_log
 from sim_devices.board import BoardPort, FaultPlan, LoopbackWorld, MemoryBoardLink, SimulatedBoard
 from sim_devices.stage import GrblSimConfig, ManualClock

@@ -4,6 +4,9 @@ not look at; ``hwgrep://`` URLs resolve through pyserial's port search."""
 from __future__ import annotations
 
 import json
+import os
+import sys
+from pathlib import Path
 
 import pytest
 from serial.tools import list_ports
@@ -90,3 +93,57 @@ def test_hwgrep_resolves_through_pyserials_search() -> None:
     assert device == ports[0].device and baud == 921600
     with pytest.raises(ConfigError, match="hwgrep:// option = 'speed'"):
         resolve_hwgrep(f"hwgrep://{name}&speed=3")
+
+
+JACK_NOISE = (
+    "Cannot connect to server socket err = No such file or directory\n"
+    "Cannot connect to server request channel\n"
+    "jack server is not running or cannot be started\n"
+    "JackShmReadWritePtr::~JackShmReadWritePtr - Init not done for -1, skipping unlock\n"
+)
+
+
+def test_without_a_jack_server_the_jack_line_is_one_readable_reason(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capfd: pytest.CaptureFixture[str]
+) -> None:
+    """``jack_lsp`` prints libjack's internals before its error: only the error is shown."""
+    tool = tmp_path / "jack_lsp"
+    tool.write_text(
+        "#!/bin/sh\n"
+        f"printf '{JACK_NOISE}' >&2\n"
+        "echo 'Error: cannot connect to JACK, server is not running.' >&2\n"
+        "exit 1\n"
+    )
+    tool.chmod(0o755)
+    monkeypatch.setenv("PATH", f"{tmp_path}{os.pathsep}{os.environ['PATH']}")
+    assert main(["devices", "jack"]) == 0
+    out, err = capfd.readouterr()
+    assert out == (
+        "jack: 0 found (jack_lsp failed with status 1: cannot connect to JACK, server is not "
+        "running; is the JACK server running?)\n"
+    )
+    assert err == ""
+
+
+def test_portaudio_initialising_prints_nothing_of_jacks(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capfd: pytest.CaptureFixture[str]
+) -> None:
+    """PortAudio's JACK host API has libjack write on fd 2 as sounddevice is imported (no
+    server): held back, so `hil devices audio` shows only its own lines."""
+    fake = tmp_path / "sounddevice.py"
+    fake.write_text(
+        "import os\n"
+        f"os.write(2, {JACK_NOISE.encode()!r})\n"
+        "def query_hostapis():\n    return [{'name': 'JACK Audio Connection Kit'}]\n"
+        "def query_devices():\n"
+        "    return [{'name': 'system', 'hostapi': 0, 'max_input_channels': 2,\n"
+        "             'max_output_channels': 2, 'default_samplerate': 48000.0}]\n"
+    )
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.delitem(sys.modules, "sounddevice", raising=False)
+    assert main(["devices", "audio"]) == 0
+    out, err = capfd.readouterr()
+    assert out == (
+        "audio: 1 found\n    0 'system' (JACK Audio Connection Kit): 2 in, 2 out, 48000 Hz\n"
+    )
+    assert err == ""

@@ -17,6 +17,7 @@ from sim_devices.acoustics.delay import TwoWayPath
 from sim_devices.acoustics.echo import AnalyticEcho
 from sim_devices.acoustics.trajectory import ConstantVelocity, Fixed
 
+ROOT = Path(__file__).resolve().parents[2]
 FS = 100_000.0
 R0, V = 40.0, 9.0  # m, m/s closing
 
@@ -64,6 +65,30 @@ def test_json_lines_track_the_target(recording: Path, capsys: pytest.CaptureFixt
         assert row["speed_mps"] == pytest.approx(V, abs=0.3)
     hops = [r["hop_index"] for r in rows]
     assert np.all(np.diff(hops) == 1)
+    # One target, every hop: one track, confirmed on its 3rd estimate (3 of 5).
+    assert [r["track_id"] for r in rows] == [-1, -1] + [0] * (len(rows) - 2)
+
+
+def test_plain_listing_counts_and_lists_the_tracks(
+    recording: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    base = ["estimate", "--schedule", str(recording / "x.json"), "--input",
+            str(recording / "rx.wav")]  # fmt: skip
+    assert main([*base, "--json"]) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    on0 = [r for r in rows if r["track_id"] == 0]
+    assert main(base) == 0
+    lines = capsys.readouterr().out.splitlines()[1 + len(rows) :]  # after the table
+    assert lines[0] == f"{len(rows)} estimates from {recording / 'rx.wav'} (gcas)"
+    assert lines[1].startswith(
+        f"track 0: {len(rows) - 2} estimates, t {on0[0]['t_s']:.3f}–{on0[-1]['t_s']:.3f} s, "
+        f"range {on0[0]['range_m']:.3f} → {on0[-1]['range_m']:.3f} m, speed 9.0"
+    )
+    assert lines[2:] == ["2 estimates on no confirmed track"]
+    # A tracker setting is a receiver option: two of five confirm on the 2nd estimate.
+    assert main([*base, "--json", "--option", "track_confirm_hits=2"]) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert [r["track_id"] for r in rows] == [-1] + [0] * (len(rows) - 1)
 
 
 def test_json_lines_carry_each_estimates_bound(
@@ -100,6 +125,7 @@ def test_csv_output_and_map(recording: Path, tmp_path: Path) -> None:
     with out.open() as fh:
         rows = list(csv.DictReader(fh))
     assert len(rows) >= 40 and float(rows[5]["speed_mps"]) == pytest.approx(V, abs=0.3)
+    assert [r["track_id"] for r in rows[:3]] == ["-1", "-1", "0"]
     assert png.read_bytes().startswith(b"\x89PNG")
 
 
@@ -131,6 +157,17 @@ def test_stereo_input_needs_a_channel(recording: Path, capsys: pytest.CaptureFix
         ("rx.wav", ["--receiver", "sonar9000"], "--receiver (receiver) = 'sonar9000'"),
         ("missing.wav", [], "an existing WAV file"),
         ("rx.wav", ["--option", "novalue"], "KEY=VALUE"),
+        (
+            "rx.wav",
+            ["--option", "track_confirm_hits=0"],
+            "track_confirm_hits = 0 is not allowed: must be an integer >= 1; "
+            "e.g. track_confirm_hits=3",
+        ),
+        (
+            "rx.wav",
+            ["--option", "track_gate=3"],
+            "track_gate = 3 is not allowed: must be a tracker setting: track_accel_mps2, ",
+        ),
     ],
 )
 def test_bad_input_exits_2(
@@ -148,3 +185,40 @@ def test_bad_input_exits_2(
     err = capsys.readouterr().err
     assert message in err, err
     assert "Traceback" not in err
+
+
+def test_the_tracks_doc_listing_runs_as_written(
+    recording: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    text = (ROOT / "docs" / "tracks.md").read_text(encoding="utf-8")
+    block = text.split("```\n$ ", 1)[1].split("```", 1)[0].splitlines()
+    command, expected = block[0].split(), block[1:]
+    assert command[0] == "hil"
+    monkeypatch.chdir(recording)
+    assert main(command[1:]) == 0
+    out = capsys.readouterr().out.splitlines()
+    # "…" in the listing stands for the table's rows, one per estimate.
+    skip = expected.index("…")
+    n_rows = len(out) - len(expected) + 1
+    assert out[:skip] == expected[:skip] and out[skip + n_rows :] == expected[skip + 1 :]
+    assert n_rows == int(expected[skip + 1].split()[0])
+
+
+def test_without_json_or_csv_the_estimates_are_printed_as_a_table(
+    recording: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """As the help says: one line per estimate, time, range, speed and SNR, then the count."""
+    from hil.cli.estimate import table_header, table_row
+
+    base = ["estimate", "--schedule", str(recording / "x.json"), "--input"]
+    assert main([*base, str(recording / "rx.wav"), "--json"]) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert main([*base, str(recording / "rx.wav")]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == "     t (s)  range (m)  speed (m/s)  SNR (dB)" == table_header()
+    assert lines[1 : 1 + len(rows)] == [
+        table_row({k: float("nan") if v is None else v for k, v in r.items()}) for r in rows
+    ]
+    assert lines[1 + len(rows)] == f"{len(rows)} estimates from {recording / 'rx.wav'} (gcas)"
+    _, r, v, _ = (float(x) for x in lines[1].split())
+    assert r == pytest.approx(rows[0]["range_m"], abs=5e-4) and v == pytest.approx(V, abs=0.3)

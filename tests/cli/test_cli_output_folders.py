@@ -80,3 +80,36 @@ def test_report_without_out_writes_beside_the_live_summary(
     assert json.loads((folder / "rebuilt" / "summary.json").read_text()) == rebuilt
     assert rebuilt["estimates"] == json.loads(live)["estimates"]
     assert (folder / "rebuilt" / "estimates.csv").exists()
+
+
+def test_simulate_without_out_writes_a_new_timestamped_folder_in_the_runs_folder(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The rule tank-run follows: a command whose every run is new defaults --out to a new
+    folder in $HIL_RUNS_DIR; two in the same second get -2."""
+    import datetime as dt
+
+    from hil.cli import simulate
+
+    monkeypatch.setenv("HIL_RUNS_DIR", str(tmp_path / "runs"))
+    now = dt.datetime(2026, 11, 28, 21, 5, 9)
+    first = simulate.new_simulation_folder("my tank.toml", now)
+    assert first == tmp_path / "runs" / "simulate-my_tank-20261128-210509"
+    assert simulate.new_simulation_folder("my tank.toml", now) == first.with_name(first.name + "-2")
+    assert main(["simulate", "att", "--duration", "0.1", "--quiet"]) == 0
+    made = json.loads(capsys.readouterr().out)["out"]
+    assert Path(made).parent == tmp_path / "runs" and Path(made).name.startswith("simulate-att-")
+    assert (Path(made) / "received.wav").is_file()
+
+
+def test_simulate_progress_in_a_log_is_lines_without_carriage_returns(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """stderr not a terminal (a log file, a pipe): one line per 10 % step, no ``\\r``."""
+    assert main(["simulate", "att", "--duration", "0.2", "--out", str(tmp_path / "s")]) == 0
+    err = capsys.readouterr().err
+    assert "\r" not in err
+    lines = err.splitlines()
+    steps = [int(line.removeprefix("simulate:").removesuffix("%")) for line in lines]
+    assert lines == [f"simulate: {p:3d} %" for p in steps]  # whole lines, no redraw
+    assert steps[-1] == 100 and steps == sorted(set(steps)) and all(p % 10 == 0 for p in steps)

@@ -111,6 +111,8 @@ def test_reset_answers_with_the_banner_and_the_status(capsys: pytest.CaptureFixt
 def _experiment(tmp_path: Path, tow: str) -> Path:
     head, _, tail = DEFAULT_EXPERIMENT.partition("[tow]\n")
     rest = tail.split("\n\n", 1)[1]
+    # Long enough for the slowest tow here (0.005 m/s over 0.21 m).
+    head = head.replace('output_dir = "runs"\n', 'output_dir = "runs"\nmax_duration_s = 600.0\n')
     path = tmp_path / "exp.toml"
     path.write_text(head + "[tow]\n" + tow + "\n\n" + rest, encoding="utf-8")
     return path

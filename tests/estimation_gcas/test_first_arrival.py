@@ -76,22 +76,26 @@ def test_first_arrival_removes_the_multipath_bias(speed: float) -> None:
     first = _range_errors(first_est, r0, speed)
     # The images pull the peak to their centroid, a few decimetres behind the direct path.
     assert np.mean(peak) > 0.15
-    # Measured at 0 dB per-sample SNR: median +0.02-0.03 m, 90 % within 0.06 m.
+    # Measured at 0 dB per-sample SNR: median +0.00-0.01 m, 90 % within 0.06-0.08 m.
     assert abs(np.median(first)) < 0.05 and np.percentile(np.abs(first), 90) < 0.1
     assert np.max(np.abs(first)) < 1.0
     # The speed: the images' slower paths pull GCAS's Doppler readout by several percent;
     # the direct path's phase across the boundaries does not.
     peak_v, first_v = _speed_errors(peak_est, speed), _speed_errors(first_est, speed)
     assert abs(np.mean(peak_v)) > 0.04 * abs(speed)
-    # Measured at 0 dB per-sample SNR: median 0.003-0.006 m/s, 90 % within 0.034 m/s.
-    assert abs(np.median(first_v)) < 0.01 and np.percentile(np.abs(first_v), 90) < 0.05
+    # Measured at 0 dB per-sample SNR: median 0.001-0.007 m/s, 90 % within 0.044-0.065 m/s
+    # (the phase is read on the boxcar's change over a window, twice the noise power of the
+    # boxcar alone: the price of cancelling late images that sound the next tone).
+    assert abs(np.median(first_v)) < 0.01 and np.percentile(np.abs(first_v), 90) < 0.075
 
 
 def test_single_arrival_agrees_with_the_peak() -> None:
     s = _schedule()
     x = echo_samples(s, 6.0, 1.5, 1.2, snr_db=0.0, seed=4, fs_hz=FS, c=C)
     first = _range_errors(run_blocks(_receiver("first-arrival"), x, 19_200), 6.0, 1.5)
-    assert abs(np.median(first)) < 0.04 and np.percentile(np.abs(first), 90) < 0.08
+    # Measured at 0 dB per-sample SNR: median +0.024 m, 90 % within 0.11 m (the onset is read
+    # on the boxcar's change over a window: twice the noise power of the boxcar alone).
+    assert abs(np.median(first)) < 0.04 and np.percentile(np.abs(first), 90) < 0.12
 
 
 def test_chunks_equal_whole() -> None:

@@ -60,3 +60,14 @@ def env_trial(params: dict[str, Any], seed: np.random.SeedSequence) -> dict[str,
 def bad_return_trial(params: dict[str, Any], seed: np.random.SeedSequence) -> Any:
     """Returns something that is not a result dict."""
     return [1, 2, 3]
+
+
+def gated_trial(params: dict[str, Any], seed: np.random.SeedSequence) -> dict[str, Any]:
+    """Returns a draw at once for repetitions below ``free_reps``; later ones first wait for
+    the file ``params["gate"]`` to exist: a sweep that holds its workers busy until a test
+    opens the gate (or interrupts the sweep)."""
+    if seed.spawn_key[1] >= params["free_reps"]:
+        gate = Path(params["gate"])
+        while not gate.exists():
+            time.sleep(0.01)
+    return {"v": float(np.random.default_rng(seed).standard_normal())}

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -249,3 +250,44 @@ def test_default_path_does_not_import_dask(tmp_path: Path) -> None:
     )
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.strip().splitlines()[-1] == "0 False False"
+
+
+@pytest.mark.parametrize(
+    ("trial", "hint"),
+    [
+        ("../trials:f", "to load a file, write its name with .py: '../trials.py:f'"),
+        ("./trials:f", "to load a file, write its name with .py: './trials.py:f'"),
+        ("a/b:f", "to load a file, write its name with .py: 'a/b.py:f'"),
+        ("..:f", "to load a file, write its name with .py, e.g. '../trials.py:function'"),
+    ],
+)
+def test_a_path_like_module_is_refused_in_one_line_with_exit_2(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], trial: str, hint: str
+) -> None:
+    from hil.cli.main import main
+
+    (tmp_path / "trials.py").write_text("def f(params, seed):\n    return {'y': 1.0}\n")
+    (tmp_path / "sub").mkdir()
+    sweep = tmp_path / "sub" / "s.toml"
+    sweep.write_text(f'[sweep]\nname = "a"\ntrial = "{trial}"\nseed = 1\n')
+    out = tmp_path / "out"
+    assert main(["sweep", str(sweep), "--out", str(out), "--serial", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err == (
+        f"hil sweep: error: sweep.trial = '{trial}' is not allowed: must be "
+        "'package.module:function' (dotted names) or 'file.py:function' (a path); "
+        f"{hint}\n"
+    )
+    assert not out.exists()
+
+
+def test_a_trial_file_up_a_folder_runs(tmp_path: Path) -> None:
+    from hil.cli.main import main
+
+    (tmp_path / "trials.py").write_text("def f(params, seed):\n    return {'y': 1.0}\n")
+    (tmp_path / "sub").mkdir()
+    sweep = tmp_path / "sub" / "s.toml"
+    sweep.write_text('[sweep]\nname = "a"\ntrial = "../trials.py:f"\nseed = 1\n')
+    assert main(["sweep", str(sweep), "--out", str(tmp_path / "out"), "--serial", "--quiet"]) == 0
+    record = (tmp_path / "out" / "results.jsonl").read_text().splitlines()
+    assert [json.loads(line)["result"] for line in record] == [{"y": 1.0}]

@@ -4,6 +4,8 @@ and the detection rate counted per pass. Synthetic runs with a known carriage mo
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from pathlib import Path
 
 import numpy as np
@@ -12,7 +14,11 @@ import pytest
 from hil.estimation.base import Estimate
 from hil.experiments.experiment import DEFAULT_EXPERIMENT, parse_experiment
 from hil.experiments.run_scoring import (
+    MAX_DETECTION_GATE_M,
     TELEMETRY_GAP_S,
+    detection_gate_m,
+    expected_boundaries,
+    range_cell_m,
     score_run,
     scored_mask,
     summarize,
@@ -53,17 +59,33 @@ def _motion(t: np.ndarray, passes: int = 1) -> tuple[np.ndarray, np.ndarray]:
     return x, v
 
 
+C = EXP.sound_speed_mps
+HOP_S = 0.01  # the tank-audio schedule: boundary k (the end of hop k) leaves at (k + 1) hops
+
+
+def _boundaries(ks: np.ndarray, passes: int) -> tuple[np.ndarray, np.ndarray]:
+    """Boundaries ``ks`` of the schedule as the carriage meets them: transmit times (s) and
+    the exact bounce instants (s), from ``t_b = T + R(t_b)/c`` solved to 1e-12 s."""
+    t_tx = HOP_S * (ks + 1.0)
+    t_b = t_tx.copy()
+    for _ in range(6):  # |dR/dt|/c = 1e-3: each step gains three digits
+        t_b = t_tx + EXP.range_at(_motion(t_b, passes)[0]) / C
+    return t_tx, t_b
+
+
 def _outcome(
-    t_tel: np.ndarray, t_est: np.ndarray, *, passes: int = 1, range_error_m: float = 0.0
+    t_tel: np.ndarray, ks: np.ndarray, *, passes: int = 1, range_error_m: float = 0.0
 ) -> RunOutcome:
+    """A run whose receiver detects boundaries ``ks`` (ascending), each at its true time with
+    the true range (plus ``range_error_m``); telemetry reports at ``t_tel``."""
     x_tel, v_tel = _motion(t_tel, passes)
-    x_est, _ = _motion(t_est, passes)
-    r_est = EXP.range_at(x_est) + range_error_m
+    t_tx, t_b = _boundaries(ks, passes)
+    r_est = EXP.range_at(_motion(t_b, passes)[0])
     estimates = [
-        # Bounce instant = receive time (t_tx_s = t_s), one hop boundary per 10 ms.
-        Estimate(float(t), float(r), 1.5, int(round(t / 0.01)), 10.0, 20.0, 1.0, float(t), 0, "x")
-        for t, r in zip(t_est, r_est, strict=True)
-    ]
+        Estimate(float(2 * b - tx), float(r + range_error_m), 1.5, int(k), 10.0, 20.0, 1.0,
+                 float(tx), int(k) % 17, "x")
+        for k, tx, b, r in zip(ks, t_tx, t_b, r_est, strict=True)
+    ]  # fmt: skip
     telemetry = Telemetry(
         host_time_s=list(t_tel),
         sample_index=[int(round(t * FS)) for t in t_tel],
@@ -76,7 +98,7 @@ def _outcome(
         experiment=EXP,
         fs_hz=FS,
         start_index=0,
-        samples=int(t_est[-1] * FS),
+        samples=int(12.0 * FS),  # 12 s of input: the receiver hears boundaries 0 .. 1198
         estimates=estimates,
         telemetry=telemetry,
         dropped_samples=0,
@@ -84,26 +106,30 @@ def _outcome(
         adc_overruns=0,
         events=[],
         wall_s=1.0,
-        signal_s=float(t_est[-1]),
+        signal_s=12.0,
         # Deliberately wrong: a stall made the driver's prediction late. Scoring ignores it.
         windows=[(20.0, 22.0)],
     )
 
 
 T_TEL = np.round(np.arange(0.0, 12.0, 0.2), 6)  # 5 Hz reports
-T_EST = 0.003 + 0.01 * np.arange(1200)  # off the report grid: no ties
+KS = np.arange(1190)  # every boundary whose echo is heard within the 12 s
+T_EST = _boundaries(KS, 1)[1]  # their bounce instants (one pass)
 
 
 def test_scored_segment_golden() -> None:
     # The carriage accelerates until t = 1.75 s (x = -1.9625 m) and cruises past -2 m at
     # 1.775 s and -5 m at 3.775 s. Interpolating the 1.6 s (accelerating, 1.2 m/s) and 1.8 s
-    # reports puts the -2 m crossing at 1.77297 s with |v| = 1.46 > 0.95 * 1.5 there, so the
-    # scored estimates are t = 1.773 ... 3.773 s: 201 of them.
-    out = _outcome(T_TEL, T_EST)
+    # reports puts the -2 m crossing at 1.77297 s with |v| = 1.46 > 0.95 * 1.5 there. The
+    # boundary leaving at 1.77 s bounces 8.5 m / c = 5.73 ms later, inside; the one before
+    # (1.7657 s) is not. The last, leaving at 3.77 s, bounces at 3.7737 s (5.5 m away). So the
+    # scored estimates are boundaries 176 ... 376: 201 of them.
+    out = _outcome(T_TEL, KS)
     scored = scored_mask(out)
     t = T_EST[scored]
     assert scored.sum() == 201
-    assert t[0] == pytest.approx(1.773) and t[-1] == pytest.approx(3.773)
+    assert np.flatnonzero(scored)[[0, -1]].tolist() == [176, 376]
+    assert t[0] == pytest.approx(1.7757333, abs=1e-7) and t[-1] == pytest.approx(3.7737116)
     # Contiguous, and every scored estimate really is in the segment (within the 3 mm the
     # interpolation across the end of the run-up is off by) at the tow speed.
     assert np.all(np.diff(np.flatnonzero(scored)) == 1)
@@ -114,8 +140,9 @@ def test_scored_segment_golden() -> None:
 def test_scoring_does_not_use_the_predicted_window() -> None:
     # The outcome's predicted window (20-22 s) is far from the pass; the CI run that scored
     # 48 of 100 estimates had a window shifted by a stall.
-    summary = summarize(_outcome(T_TEL, T_EST))
+    summary = summarize(_outcome(T_TEL, KS))
     assert summary["scored_estimates"] == 201
+    assert (summary["expected_boundaries"], summary["detected_boundaries"]) == (201, 201)
     assert summary["detection_rate"] == 1.0 and summary["false_alarms"] == 0
     assert summary["range_rmse_m"] == pytest.approx(0.0, abs=0.02)
 
@@ -125,59 +152,136 @@ def test_truth_is_unknown_inside_a_telemetry_gap() -> None:
     # there instead of a straight line through the missing motion.
     assert TELEMETRY_GAP_S < 1.2
     keep = (T_TEL <= 2.0) | (T_TEL >= 3.2)
-    out = _outcome(T_TEL[keep], T_EST)
+    out = _outcome(T_TEL[keep], KS)
     truth = telemetry_truth(out)
     gap = (T_EST > 2.0) & (T_EST < 3.2)
     assert np.all(np.isnan(truth["range_m"][gap])) and np.all(np.isnan(truth["stage_x_m"][gap]))
     assert np.all(np.isfinite(truth["range_m"][~gap & (T_EST < 11.8)]))
     scored = scored_mask(out, truth)
-    # 1.773 ... 1.993 s (23) and 3.203 ... 3.773 s (58).
+    # Bounces at 1.7757 ... 1.9955 s (23) and 3.2043 ... 3.7737 s (58).
     assert scored.sum() == 23 + 58
     assert not np.any(scored & gap)
+    # Nor is a boundary inside the gap expected: the truth there is unknown.
+    np.testing.assert_array_equal(expected_boundaries(out), KS[scored])
     # Outside the telemetry: unknown as well.
     assert np.isnan(truth["range_m"][-1])
 
 
 def test_detection_rate_is_counted_per_pass() -> None:
     # Two passes (out at 1 s, back at 6 s): the hops between them are not expected.
-    out = _outcome(T_TEL, T_EST, passes=2)
+    out = _outcome(T_TEL, KS, passes=2)
+    t_b = _boundaries(KS, 2)[1]
     scored = scored_mask(out)
     starts = np.flatnonzero(np.diff(scored.astype(int)) == 1) + 1
-    np.testing.assert_allclose(T_EST[starts], [1.773, 6.773])  # two runs of scored estimates
+    np.testing.assert_allclose(t_b[starts], [1.7757333, 6.7737089])  # two runs of them
     summary = summarize(out)
-    assert summary["detection_rate"] == 1.0
-    # Half the boundaries of the second pass missed: (201 + 100) / (201 + 201).
-    second = scored & (T_EST > 6.0)
+    assert (summary["expected_boundaries"], summary["detection_rate"]) == (401, 1.0)
+    # Half the boundaries of the second pass missed: (201 + 100) / (201 + 200).
+    second = scored & (t_b > 6.0)
+    assert second.sum() == 200
     drop = set(np.flatnonzero(second)[1::2].tolist())
     out.estimates = [e for i, e in enumerate(out.estimates) if i not in drop]
-    n_second = int(second.sum())
-    missed = len(drop)
     summary = summarize(out)
-    assert summary["scored_estimates"] == 201 + n_second - missed
-    assert summary["detection_rate"] == pytest.approx(
-        round((201 + n_second - missed) / (201 + n_second), 4)
-    )
+    assert summary["scored_estimates"] == 301
+    assert (summary["expected_boundaries"], summary["detected_boundaries"]) == (401, 301)
+    assert summary["detection_rate"] == round(301 / 401, 4)
 
 
-def test_false_alarms_are_scored_estimates_far_from_the_truth() -> None:
-    summary = summarize(_outcome(T_TEL, T_EST, range_error_m=1.5))
+def test_expected_boundaries_come_from_the_truth_not_the_estimates() -> None:
+    # The receiver stops detecting 0.5 s before the end of the pass and misses every other
+    # boundary before: the 201 boundaries of the pass are still expected (counting from the
+    # estimates' own hop indices expected only the 151 their span covers).
+    out = _outcome(T_TEL, KS)
+    ks = np.array([k for k in KS if k < 326 and k % 2 == 0])
+    out.estimates = [e for e in out.estimates if e.hop_index in set(ks.tolist())]
+    np.testing.assert_array_equal(expected_boundaries(out), np.arange(176, 377))
+    summary = summarize(out)
+    assert (summary["expected_boundaries"], summary["detected_boundaries"]) == (201, 75)
+    assert summary["detection_rate"] == round(75 / 201, 4)
+    # No estimate at all: still 201 expected, none detected.
+    out.estimates = []
+    summary = summarize(out)
+    assert (summary["expected_boundaries"], summary["detection_rate"]) == (201, 0.0)
+
+
+def test_a_boundary_whose_echo_was_not_captured_is_not_expected() -> None:
+    # The input ends at 3.0 s: boundary k leaves at 0.01 (k + 1) s and comes back 2R/c
+    # later (9.0 ms at 6.67 m), so the last heard is 298 (leaving at 2.99 s, back at
+    # 2.99900 s); 299 leaves at 3.00 s.
+    out = _outcome(T_TEL, KS)
+    out.samples = int(3.0 * FS)
+    expected = expected_boundaries(out)
+    assert (int(expected[0]), int(expected[-1])) == (176, 298)
+    # The loopback latency (10 ms here) shortens the receiver's input by as much: 297 is
+    # back at 2.98900 s, before 2.99 s.
+    out.latency_samples = 10
+    assert int(expected_boundaries(out)[-1]) == 297
+
+
+def test_no_boundary_is_expected_where_the_tone_does_not_change() -> None:
+    # Hops 16 and 0 of each period given the same tone: the end of hop 16 (k = 16 mod 17)
+    # switches nothing, so no echo marks it. The pass's 201 boundaries 176 ... 376 hold 12
+    # of those (186, 203, ..., 373).
+    code = EXP.schedule.code.copy()
+    code[16] = code[0]
+    out = _outcome(T_TEL, KS)
+    out.experiment = dataclasses.replace(EXP, schedule=dataclasses.replace(EXP.schedule, code=code))
+    expected = expected_boundaries(out)
+    assert expected.size == 201 - 12 and not np.any(expected % 17 == 16)
+
+
+def test_false_alarms_are_scored_estimates_outside_the_gate() -> None:
+    # The tank-audio tones span 57-63 kHz: one range resolution cell c / 2B = 0.1235 m, so
+    # that is the gate (under 0.5 m).
+    assert range_cell_m(EXP.schedule.tones_hz, C) == pytest.approx(C / 12e3, rel=1e-12)
+    out = _outcome(T_TEL, KS, range_error_m=0.2)  # inside 0.5 m, outside one cell
+    assert detection_gate_m(out) == pytest.approx(0.12353163, abs=1e-8)
+    summary = summarize(out)
+    assert summary["wrong_gate_m"] == detection_gate_m(out)
+    assert summary["range_cell_m"] == round(C / 12e3, 6)
     assert summary["scored_estimates"] == 201 and summary["false_alarms"] == 201
-    assert summary["detection_rate"] == 0.0 and summary["range_rmse_m"] is None
+    assert summary["detection_rate"] == 0.0 and summary["detected_boundaries"] == 0
+    # Every scored estimate is in the RMSE and the bias, whatever its error; the gated RMSE
+    # has none left (to the 0.26 mm the interpolated telemetry truth is off by).
+    assert summary["range_rmse_m"] == pytest.approx(0.2, abs=3e-4)
+    assert summary["range_bias_m"] == pytest.approx(0.2, abs=3e-4)
+    assert summary["range_rmse_gated_m"] is None and summary["speed_rmse_gated_mps"] is None
+    assert summary["range_rmse_all_m"] == pytest.approx(0.2, abs=1e-3)
+    # Inside the cell: detected, not wrong.
+    summary = summarize(_outcome(T_TEL, KS, range_error_m=0.1))
+    assert summary["false_alarms"] == 0 and summary["detection_rate"] == 1.0
+    assert summary["range_rmse_gated_m"] == summary["range_rmse_m"]
+    assert summary["range_rmse_m"] == pytest.approx(0.1, abs=3e-4)
+
+
+def test_the_gate_is_half_a_metre_when_the_cell_is_wider() -> None:
+    # Tones 300 Hz apart (900 Hz in all): a cell of c / 1800 Hz = 0.82 m, so the gate is 0.5 m.
+    narrow = dataclasses.replace(
+        EXP.schedule, tones_hz=np.array([57000.0, 57300.0, 57600.0, 57900.0])
+    )
+    out = _outcome(T_TEL, KS, range_error_m=0.3)
+    out.experiment = dataclasses.replace(EXP, schedule=narrow)
+    assert range_cell_m(narrow.tones_hz, C) == pytest.approx(C / 1800.0, rel=1e-12)
+    assert detection_gate_m(out) == MAX_DETECTION_GATE_M == 0.5
+    summary = summarize(out)
+    assert summary["false_alarms"] == 0 and summary["detection_rate"] == 1.0
+    # One tone resolves no range by bandwidth: the cell is infinite, the gate 0.5 m.
+    assert range_cell_m(np.array([57000.0]), C) == math.inf
 
 
 def test_no_estimates_or_no_telemetry() -> None:
-    out = _outcome(T_TEL, T_EST)
+    out = _outcome(T_TEL, KS)
     out.estimates = []
     assert scored_mask(out).shape == (0,)
-    out = _outcome(T_TEL[:1], T_EST)
+    out = _outcome(T_TEL[:1], KS)
     truth = telemetry_truth(out)
     assert set(truth) == {"range_m", "speed_mps", "stage_x_m", "stage_v_mps"}
     assert not scored_mask(out, truth).any()
 
 
 def test_reports_answered_late_are_left_out_of_the_truth() -> None:
-    clean = telemetry_truth(_outcome(T_TEL, T_EST))
-    out = _outcome(T_TEL, T_EST)
+    clean = telemetry_truth(_outcome(T_TEL, KS))
+    out = _outcome(T_TEL, KS)
     tel = out.telemetry
     k = int(np.searchsorted(T_TEL, 2.4))  # mid-pass
     # That report came back 0.3 s after its query (a stalled stage): its position is the
@@ -199,9 +303,9 @@ def test_a_stage_calibration_corrects_the_truth_not_the_scoring() -> None:
     from hil.experiments.calibration.apply import StagePositionCorrection
     from hil.experiments.run_calibrations import RunCalibrations
 
-    plain = _outcome(T_TEL, T_EST)
+    plain = _outcome(T_TEL, KS)
     corr = StagePositionCorrection(scale=1.002, backlash_m=0.001, reference_m=-3.0)
-    calibrated = _outcome(T_TEL, T_EST)
+    calibrated = _outcome(T_TEL, KS)
     calibrated.calibrations = RunCalibrations(ids=("stage-x",), stage=corr, kinds=("stage",))
     a, b = telemetry_truth(plain), telemetry_truth(calibrated)
     np.testing.assert_array_equal(scored_mask(plain), scored_mask(calibrated))
@@ -222,7 +326,7 @@ def test_a_stage_calibration_corrects_the_truth_not_the_scoring() -> None:
 def test_wrong_estimates_outside_the_scored_window_are_counted() -> None:
     # Ghosts during the ramps and after the stop (2 m off) fall outside the scored window:
     # they count as wrong over the run, not as false alarms of the scored window.
-    out = _outcome(T_TEL, T_EST)
+    out = _outcome(T_TEL, KS)
     scored = scored_mask(out)
     ghosts = np.flatnonzero(~scored & (T_EST > 1.0) & (T_EST < 6.0))
     for i in ghosts.tolist():
@@ -238,7 +342,11 @@ def test_wrong_estimates_outside_the_scored_window_are_counted() -> None:
     assert summary["wrong_fraction"] == pytest.approx(round(ghosts.size / known, 4))
     assert summary["false_alarms"] == 0 and summary["scored_estimates"] == 201
     assert summary["range_rmse_m"] < 1e-3  # the interpolated telemetry truth: 0.26 mm
-    assert summary["wrong_gate_m"] == 1.0
+    assert summary["wrong_gate_m"] == pytest.approx(C / 12e3, rel=1e-12)  # one range cell
+    # Over the whole run every estimate with a truth counts, the ghosts with their 2 m.
+    assert summary["range_rmse_all_m"] == pytest.approx(
+        2.0 * math.sqrt(ghosts.size / known), rel=1e-3
+    )
     score = score_run(out)
     assert np.array_equal(np.flatnonzero(score.wrong), ghosts)
     assert not (score.good_scored & score.wrong).any()
@@ -247,7 +355,7 @@ def test_wrong_estimates_outside_the_scored_window_are_counted() -> None:
 def test_true_boundaries_golden() -> None:
     # The target held at 7 m: every boundary arrives 2·7/c after its hop ends, with the hop's
     # codeword (hop index mod the 17-hop period).
-    out = _outcome(T_TEL, T_EST)
+    out = _outcome(T_TEL, KS)
     n = len(out.estimates)
     truth = {k: np.full(n, v) for k, v in (("range_m", 7.0), ("speed_mps", 0.0))}
     t_rx, word = true_boundaries(out, truth)

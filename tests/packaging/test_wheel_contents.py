@@ -50,6 +50,7 @@ def test_wheel_holds_every_data_file_and_the_entry_point(tmp_path: Path) -> None
         scripts = zf.read(entry_points).decode()
     expected = _data_files()
     must = {"hil/data/sweeps/sim01_codeword_map.toml", "hil/data/scenarios/att.toml",
+            "hil/data/schema/experiment.schema.json", "hil/data/schema/scenario.schema.json",
             "firmware_protocol/SPEC.md", "firmware_protocol/golden_vectors.json"}  # fmt: skip
     assert must <= expected
     assert expected <= names, sorted(expected - names)

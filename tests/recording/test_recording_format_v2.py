@@ -251,17 +251,22 @@ def _as_version_1(path: Path) -> None:
                     dtype=h5py.string_dtype("utf-8"),
                     chunks=(schema.TABLE_CHUNK_ROWS,),
                 )
-        # Nor had its estimates the bound columns.
-        for column in ("crlb_range_m", "crlb_speed_mps"):
-            del f[f"estimates/{column}"]
-        kept = [str(c) for c in f["estimates"].attrs["columns"] if not str(c).startswith("crlb")]
-        f["estimates"].attrs["columns"] = kept
+        # Nor had its estimates the bound and track columns, nor its telemetry the reply times.
+        for table, gone in (("estimates", ("crlb_range_m", "crlb_speed_mps", "track_id")),
+                            ("telemetry", ("reply_s",))):  # fmt: skip
+            for column in gone:
+                del f[f"{table}/{column}"]
+            kept = [str(c) for c in f[table].attrs["columns"] if str(c) not in gone]
+            f[table].attrs["columns"] = kept
         f.attrs["format_version"] = 1
 
 
 def test_a_version_1_recording_still_reads(tmp_path: Path, schedule_doc: dict[str, Any]) -> None:
     path = tmp_path / "v1.h5"
-    telemetry = [StageTelemetry(1.0, 1, 0.1, -0.5, "Hold:0"), StageTelemetry(2, 2, 0, 0, "停止中")]
+    telemetry = [
+        StageTelemetry(1.0, 1, 0.1, -0.5, "Hold:0", 0.3),
+        StageTelemetry(2, 2, 0, 0, "停止中"),
+    ]
     events = [RunEvent("note", 7, 0, "ümlaut–dash"), RunEvent("alarm", 9, 2, "停止中 𝄞")]
     estimates = [_estimate(0, "gcas"), _estimate(1, "ümlaut–dash"), _estimate(2, "stft")]
     with _writer(path, schedule_doc) as w:
@@ -279,10 +284,13 @@ def test_a_version_1_recording_still_reads(tmp_path: Path, schedule_doc: dict[st
             info = h5py.check_string_dtype(f[name].dtype)
             assert (info.encoding, info.length) == ("utf-8", None)
     with RunRecording.open(path) as rec:
-        assert rec.telemetry() == telemetry
+        # Its reports had no reply time: each reads as prompt (0 s), so every one is used.
+        assert rec.telemetry() == [replace(t, reply_s=0.0) for t in telemetry]
         assert rec.events() == [RunEvent("gap", 150, 10, "samples 150 .. 159 missing"), *events]
         assert rec.estimates() == estimates  # the bounds read NaN, as they were written
         assert all(math.isnan(e.crlb_range_m) for e in rec.estimates())
+        assert [e.track_id for e in rec.estimates()] == [-1, -1, -1]
+        assert not rec.has_track_ids
         assert rec.gaps() == [(150, 10)]
         assert math.isclose(rec.fs_hz, FS)
 

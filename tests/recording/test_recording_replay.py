@@ -7,6 +7,7 @@ from __future__ import annotations
 import csv
 import json
 import shutil
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -19,6 +20,7 @@ from hil.cli.main import main
 from hil.errors import ConfigError
 from hil.estimation.base import Estimate
 from hil.estimation.registry import make_receiver
+from hil.estimation.tracking import Tracker, mean_hop_s
 from hil.recording import (
     ReceiverSetup,
     RunRecording,
@@ -154,9 +156,12 @@ def test_replay_with_another_receiver_gives_its_estimates(
         expected += receiver.process(x, gap_before=int(a) - previous_stop)
         previous_stop = int(b)
     expected += receiver.flush()
+    # Replay's estimates leave through the tracker (hil.estimation.tracking), as live ones do.
+    expected = Tracker(mean_hop_s(schedule)).update(expected)
     got = replay(path, "stft")
     assert len(got) >= 10 and all(e.receiver == "stft" for e in got)
     assert got == expected
+    assert {e.track_id for e in got} >= {0}
 
 
 def test_replay_setup_errors_name_the_field(live_run: Any) -> None:
@@ -387,3 +392,64 @@ def test_live_loop_waits_for_the_next_decision_or_one_block() -> None:
     for bad in (0, -5):
         with pytest.raises(ConfigError, match=rf"max_block = {bad} is not allowed: must be >= 1"):
             bounded.wait_index(bad)
+
+
+def test_live_estimates_carry_track_ids_that_replay_repeats(live_run: Any) -> None:
+    path, live, _ = live_run
+    # Each stretch between two gaps restarts GCAS's M = 10 hop accumulation: more than the
+    # tracker's 5 missed hops, so each stretch is a new track, confirmed on its 3rd estimate.
+    assert [e.track_id for e in live] == [-1, -1, 0, 0, -1, -1, 1, -1, -1, 2, 2]
+    with RunRecording.open(path) as rec:
+        assert rec.has_track_ids
+        assert rec.table("estimates")["track_id"].tolist() == [e.track_id for e in live]
+        assert replay(rec) == live  # Estimate equality compares the ids
+
+
+def test_tracker_settings_are_receiver_settings_on_replay(live_run: Any) -> None:
+    path, live, _ = live_run
+    got = replay(path, track_confirm_hits=2)
+    assert [e.track_id for e in got] == [-1, 0, 0, 0, -1, 1, 1, -1, 2, 2, 2]
+    assert [replace(e, track_id=-1) for e in got] == [replace(e, track_id=-1) for e in live]
+    with pytest.raises(ConfigError, match="track_confirm_hits = 9 is not allowed: must be <="):
+        replay(path, track_confirm_hits=9)
+
+
+def _without_track_ids(source: Path, target: Path) -> None:
+    """A copy of ``source`` as recorded before track ids were kept (no ``track_id``)."""
+    shutil.copy(source, target)
+    with h5py.File(target, "r+") as f:
+        del f["estimates/track_id"]
+        columns = [str(c) for c in f["estimates"].attrs["columns"] if str(c) != "track_id"]
+        f["estimates"].attrs["columns"] = columns
+
+
+def test_cli_replay_of_a_recording_without_track_ids_equals_live(
+    live_run: Any, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path, live, _ = live_run
+    old = tmp_path / "old.h5"
+    _without_track_ids(path, old)
+    with RunRecording.open(old) as rec:
+        assert not rec.has_track_ids
+        assert [e.track_id for e in rec.estimates()] == [-1] * len(live)
+        assert compare_estimates(rec.estimates(), live)[0] == "differ"
+        assert compare_estimates(rec.estimates(), live, track_ids=False)[0] == "equal"
+    assert main(["replay", str(old), "--json"]) == 0
+    out, err = capsys.readouterr()
+    assert [json.loads(line)["track_id"] for line in out.splitlines()] == [e.track_id for e in live]
+    assert err.startswith("replay equals live: all 11 replayed")
+
+
+def test_cli_replay_lists_the_tracks(live_run: Any, capsys: pytest.CaptureFixture[str]) -> None:
+    path, live, _ = live_run
+    assert main(["replay", str(path)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == f"{len(live)} estimates from {path} (gcas)"
+    on0 = [e for e in live if e.track_id == 0]
+    assert lines[1] == (
+        f"track 0: 2 estimates, t {on0[0].t_s:.3f}–{on0[1].t_s:.3f} s, range "
+        f"{on0[0].range_m:.3f} → {on0[1].range_m:.3f} m, speed "
+        f"{(on0[0].speed_mps + on0[1].speed_mps) / 2:.3f} m/s (median)"
+    )
+    assert lines[2].startswith("track 1: 1 estimates") and lines[3].startswith("track 2: 2 ")
+    assert lines[4] == "6 estimates on no confirmed track"

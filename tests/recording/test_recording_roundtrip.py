@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 import tempfile
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -44,8 +45,8 @@ def test_every_record_kind_round_trips(
     a = rng.integers(-(2**31), 2**31, size=(700, 3), dtype=np.int32)
     b = rng.integers(-(2**31), 2**31, size=(300, 3), dtype=np.int32)
     telemetry = [
-        StageTelemetry(12.5, 1_000_123, 0.25, -0.5, "Run"),
-        StageTelemetry(12.6, 1_010_123, 0.20, -0.5, "Hold:0"),
+        StageTelemetry(12.5, 1_000_123, 0.25, -0.5, "Run", 0.021),
+        StageTelemetry(12.6, 1_010_123, 0.20, -0.5, "Hold:0", math.inf),  # undated reply
     ]
     estimates = [
         Estimate(0.11, 39.2, 9.0, 5, 177.8, 27.9, 1.012, 0.06, 5, "gcas"),
@@ -323,6 +324,33 @@ def test_bad_appends_are_refused(tmp_path: Path, schedule_doc: dict[str, Any]) -
         ReceiverSetup("gcas", {"on_map": print})
     with pytest.raises(ConfigError, match=r"receiver.scale = 0.0"):
         ReceiverSetup("gcas", scale=0.0)
+
+
+def test_the_run_end_maps_every_telemetry_row_once(
+    tmp_path: Path, schedule_doc: dict[str, Any]
+) -> None:
+    # Rows appended live with the clock fit of the moment (one still waiting for a flush)
+    # get the run's final mapping; the other columns stay as they were.
+    path = tmp_path / "run.h5"
+    live = [StageTelemetry(1.0 + 0.2 * i, 1000 * i - 1, 0.1 * i, -0.5, "Run", 0.01 * i)
+            for i in range(3)]  # fmt: skip
+    with _writer(path, schedule_doc) as w:
+        w.append_telemetry(live[0])
+        w.flush()
+        for t in live[1:]:
+            w.append_telemetry(t)
+        with pytest.raises(ConfigError) as err:
+            w.map_telemetry_times([5, 6])
+        assert str(err.value) == (
+            "telemetry sample_index = '2 values' is not allowed: must be one per recorded stage"
+            " report (3); map every report the recording holds, in the order recorded"
+        )
+        w.map_telemetry_times([100_000, 120_000, 140_001])
+    with RunRecording.open(path) as rec:
+        assert rec.telemetry() == [
+            replace(t, sample_index=i) for t, i in zip(live, (100_000, 120_000, 140_001),
+                                                       strict=True)
+        ]  # fmt: skip
 
 
 def test_files_that_are_not_recordings_are_refused(

@@ -227,10 +227,10 @@ def test_missing_serial_device_is_a_transport_open_error() -> None:
         open_transport("/dev/does-not-exist")
 
 
-def test_transport_errors_share_the_protocol_base_class() -> None:
-    from firmware_protocol import TransportError as ProtocolTransportError
+def test_transport_errors_are_the_host_error_tree_s() -> None:
+    from hil import errors
 
-    assert TransportError is ProtocolTransportError
+    assert TransportError is errors.TransportError
     assert issubclass(TransportOpenError, TransportError)
     assert issubclass(TransportClosedError, TransportError)
 

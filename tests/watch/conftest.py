@@ -3,9 +3,12 @@ built-in simulated tank's experiment file (its geometry gives the truth)."""
 
 from __future__ import annotations
 
+import importlib.util
+import shutil
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -15,6 +18,9 @@ from hil.recording.records import ReceiverSetup
 from hil.recording.writer import RunWriter
 from hil.signals.presets import check_design, get_preset
 from hil.signals.schedule_file import schedule_document
+
+#: Longest wait for a DOM condition in the browser tests, s (generous: both cores may be busy).
+WAIT_S = 60.0
 
 FS = 100_000.0
 ORIGIN = 1000
@@ -79,3 +85,35 @@ def recorder(tmp_path: Path) -> Iterator[Recorder]:
     )
     yield Recorder(writer, path, FS, ORIGIN, estimate)
     writer.close()
+
+
+def _chromium() -> str | None:
+    return shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+@pytest.fixture
+def browser(require_system: Callable[[bool, str], None]) -> Iterator[Any]:
+    """A headless chromium driven by selenium."""
+    require_system(
+        importlib.util.find_spec("selenium") is not None,
+        "selenium is not installed (pip install '.[test]')",
+    )
+    require_system(_chromium() is not None, "chromium is not installed (apt-get install chromium)")
+    require_system(
+        shutil.which("chromedriver") is not None,
+        "chromedriver is not installed (apt-get install chromium-driver)",
+    )
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    options = webdriver.ChromeOptions()
+    options.binary_location = str(_chromium())
+    for arg in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage", "--disable-gpu"):
+        options.add_argument(arg)
+    options.add_argument("--window-size=1400,1000")
+    driver = webdriver.Chrome(service=Service(str(shutil.which("chromedriver"))), options=options)
+    driver.set_page_load_timeout(WAIT_S)
+    try:
+        yield driver
+    finally:
+        driver.quit()

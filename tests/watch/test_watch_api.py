@@ -7,9 +7,11 @@ import json
 import math
 import urllib.error
 import urllib.request
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+import h5py
 import numpy as np
 import pytest
 
@@ -258,3 +260,32 @@ def test_an_unreadable_recording_is_a_503_naming_the_file(recorder: Any) -> None
     finally:
         server.shutdown()
         server.server_close()
+
+
+def test_estimates_carry_their_track_ids(recorder: Any) -> None:
+    ids = [-1, -1, 0, 0, 1]
+    recorder.writer.append_estimates(
+        [replace(recorder.estimate(i), track_id=k) for i, k in enumerate(ids)]
+    )
+    recorder.writer.flush()
+    data = WatchData.open(recorder.path)
+    try:
+        assert data.estimates(0)["track_id"] == ids
+        assert data.estimates(3)["track_id"] == [0, 1]
+    finally:
+        data.close()
+
+
+def test_a_recording_without_track_ids_shows_none(recorder: Any, tmp_path: Path) -> None:
+    recorder.writer.append_estimates([recorder.estimate(i) for i in range(3)])
+    recorder.writer.close()
+    with h5py.File(recorder.path, "r+") as f:  # as written before track ids were kept
+        del f["estimates/track_id"]
+        columns = [str(c) for c in f["estimates"].attrs["columns"] if str(c) != "track_id"]
+        f["estimates"].attrs["columns"] = columns
+    data = WatchData.open(recorder.path)
+    try:
+        got = data.estimates(0)
+    finally:
+        data.close()
+    assert got["track_id"] == [-1, -1, -1] and len(got["t_s"]) == 3

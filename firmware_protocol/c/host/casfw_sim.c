@@ -58,6 +58,7 @@ uint32_t casfw_sim_counter(const casfw_sim *s, int which) {
     case 1: return s->board.frame_errors;
     case 2: return s->board.dac_underruns;
     case 3: return s->board.dac_level;
+    case 5: return s->board.adc_clipped_samples;
     default: return (uint32_t)s->board.state;
     }
 }
@@ -110,5 +111,9 @@ uint64_t casfw_ext_index_at(const casfw_ext *e, uint64_t t_ns) {
     return casfw_index_at(&e->board, t_ns);
 }
 uint32_t casfw_ext_counter(const casfw_ext *e, int which) {
-    return which == 0 ? e->board.dac_underruns : e->board.adc_overruns;
+    switch (which) {
+    case 0: return e->board.dac_underruns;
+    case 2: return e->board.adc_clipped_samples;
+    default: return e->board.adc_overruns;
+    }
 }

@@ -65,7 +65,7 @@ from hil.acquisition.clock_fit import SampleClockFit
 from hil.acquisition.ring import SampleRing
 from hil.devices.audio.contract import BlockTime, DuplexBackend, FloatArray, StatusFlags
 from hil.devices.audio.settings import AudioSettings
-from hil.errors import ConfigError
+from hil.errors import ConfigError, DeviceLost
 
 if TYPE_CHECKING:
     from hil.devices.clock import VirtualClock
@@ -93,6 +93,11 @@ _URL_FORM = (
 )
 
 
+class AudioStreamLost(DeviceLost, RuntimeError):
+    """The interface's stream ended while the run still needed samples (unplugged, powered
+    off, taken by another program); the message names its URL."""
+
+
 @dataclass(frozen=True)
 class AudioUrl:
     """A parsed ``audio://`` board URL.
@@ -113,6 +118,24 @@ class AudioUrl:
     def simulated(self) -> bool:
         """True for ``sim://audio``."""
         return self.device == SIM_DEVICE
+
+    def settings(
+        self,
+        samplerate: float,
+        channels_in: int = CHANNELS,
+        channels_out: int = CHANNELS,
+        blocksize: int | None = None,
+    ) -> AudioSettings:
+        """The stream this URL asks for at ``samplerate`` Hz with these channel counts;
+        ``blocksize`` frames (default the URL's)."""
+        return AudioSettings(
+            samplerate=samplerate,
+            channels_in=channels_in,
+            channels_out=channels_out,
+            blocksize=self.blocksize if blocksize is None else blocksize,
+            latency=self.latency,
+            device=None if self.simulated else self.device,
+        )
 
 
 def canonical_audio_url(url: str) -> str:
@@ -219,15 +242,7 @@ def audio_settings(url: str, sample_rate_hz: int | None) -> tuple[AudioUrl, Audi
             f"the waveform's rate {sample_rate_hz} Hz",
             "the interface runs the waveform's sample rate: change one to match",
         )
-    settings = AudioSettings(
-        samplerate=rate,
-        channels_in=CHANNELS,
-        channels_out=CHANNELS,
-        blocksize=spec.blocksize,
-        latency=spec.latency,
-        device=None if spec.simulated else spec.device,
-    )
-    return spec, settings
+    return spec, spec.settings(rate)
 
 
 @dataclass(frozen=True)
@@ -284,6 +299,7 @@ class AudioDaq:
         host_clock: Callable[[], float] = time.monotonic,
         sync_interval_s: float = 0.1,
         virtual_time: VirtualClock | None = None,
+        url: str = "audio interface",
     ) -> None:
         for name, n in (
             ("channels_in", backend.channels_in),
@@ -301,6 +317,8 @@ class AudioDaq:
         if not (math.isfinite(sync_interval_s) and sync_interval_s >= 0):
             raise ConfigError("sync_interval_s", sync_interval_s, ">= 0 s")
         self.backend = backend
+        #: The interface's URL, as its errors name it.
+        self.url = url
         self._virtual = virtual_time
         fs = backend.samplerate
         self.fs_hz = float(fs)
@@ -362,7 +380,7 @@ class AudioDaq:
             from hil.devices.audio.portaudio_backend import SoundDeviceDuplex
 
             backend = SoundDeviceDuplex(settings)
-        return cls(backend, ring_seconds=ring_seconds, host_clock=host_clock)
+        return cls(backend, ring_seconds=ring_seconds, host_clock=host_clock, url=url)
 
     # --- the Board API the runner uses ---
     def open(self) -> AudioDaq:
@@ -395,7 +413,8 @@ class AudioDaq:
         """True once every sample before index ``end`` is captured, False after ``timeout_s``.
 
         Raises the exception that ended the stream (e.g. one from the source), or
-        RuntimeError if the stream ended before ``end``.
+        :class:`AudioStreamLost` if the stream ended before ``end`` (the interface went
+        away).
         """
         if self.ring is None:
             raise RuntimeError("start() the audio DAQ before waiting for samples")
@@ -414,8 +433,10 @@ class AudioDaq:
             self.backend.wait(0.0)  # re-raises what stopped the stream, if anything did
             if self.ring.wait_for(end, 0.0):
                 return True
-            raise RuntimeError(
-                f"the audio stream ended at sample {self.ring.end_index}, before {end}"
+            raise AudioStreamLost(
+                f"the audio stream ended at sample {self.ring.end_index}, before {end}: check"
+                " the interface's cable and power, and that no other program took it",
+                url=self.url,
             )
         return False
 

@@ -12,10 +12,12 @@ import re
 import shutil
 import subprocess
 
+from hil.errors import DeviceUnavailable
+
 PORT_PATTERN = re.compile(r"^(?P<client>PortAudio[^:]*):(?P<kind>in|out)_(?P<index>\d+)$")
 
 
-class JackToolError(RuntimeError):
+class JackToolError(DeviceUnavailable, RuntimeError):
     """A JACK command-line tool is missing or failed."""
 
 
@@ -26,9 +28,28 @@ def _run(*args: str, timeout_s: float = 10.0) -> str:
     if proc.returncode != 0:
         raise JackToolError(
             f"{' '.join(args)} failed with status {proc.returncode}: "
-            f"{(proc.stderr or proc.stdout).strip()}; is the JACK server running?"
+            f"{tool_error(proc.stderr or proc.stdout)}; is the JACK server running?"
         )
     return proc.stdout
+
+
+def tool_error(output: str) -> str:
+    r"""The line that says what went wrong in a JACK tool's output: its last ``Error:``
+    line, else its last line (libjack adds lines of internals before it).
+
+    >>> tool_error("Cannot connect to server socket err = No such file or directory\n"
+    ...            "JackShmReadWritePtr::~JackShmReadWritePtr - Init not done for -1\n"
+    ...            "Error: cannot connect to JACK, server is not running.\n")
+    'cannot connect to JACK, server is not running'
+    >>> tool_error("")
+    'no message'
+    """
+    lines = [line.strip() for line in output.splitlines() if line.strip()]
+    errors = [line for line in lines if line.lower().startswith("error:")]
+    last = (errors or lines or ["no message"])[-1]
+    if last.lower().startswith("error:"):
+        last = last[len("error:") :].strip()
+    return last.rstrip(".")
 
 
 def jack_ports() -> list[str]:

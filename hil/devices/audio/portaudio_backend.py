@@ -25,7 +25,7 @@ from hil.devices.audio.contract import (
     check_callback,
 )
 from hil.devices.audio.settings import AudioSettings, SettingsView
-from hil.errors import ConfigError
+from hil.errors import ConfigError, DeviceUnavailable
 
 PORTAUDIO_HINT = (
     "install the PortAudio library (Debian/Ubuntu: apt-get install libportaudio2) "
@@ -33,14 +33,19 @@ PORTAUDIO_HINT = (
 )
 
 
-class AudioUnavailableError(RuntimeError):
+class AudioUnavailableError(DeviceUnavailable, RuntimeError):
     """python-sounddevice or the system PortAudio library cannot be loaded."""
 
 
 def import_sounddevice() -> ModuleType:
     """Import ``sounddevice``, or raise :class:`AudioUnavailableError` saying what to install."""
+    from hil.devices.audio.c_stderr import held_c_stderr
+
     try:
-        import sounddevice
+        # PortAudio initialises on import; its JACK host API prints libjack's complaints
+        # when no JACK server runs: held back (logged at debug level), not shown.
+        with held_c_stderr("PortAudio initialising"):
+            import sounddevice
     except (ImportError, OSError) as exc:  # OSError: the PortAudio shared library is missing
         raise AudioUnavailableError(f"cannot load sounddevice ({exc}); {PORTAUDIO_HINT}") from exc
     return sounddevice
@@ -61,9 +66,12 @@ def rescan_devices() -> None:
     PortAudio enumerates devices once, when ``sounddevice`` is imported: a JACK server
     started later is invisible until this is called. No stream may be open.
     """
+    from hil.devices.audio.c_stderr import held_c_stderr
+
     sd = import_sounddevice()
-    sd._terminate()
-    sd._initialize()
+    with held_c_stderr("PortAudio initialising"):
+        sd._terminate()
+        sd._initialize()
 
 
 @dataclass(frozen=True)

@@ -16,9 +16,11 @@ Timing model, all in samples of one clock (``t0`` = clock time at ``start()``):
   as input sample index ``m + io_delay_samples``.
 
 So a loopback world with delay ``D`` gives a measured loopback latency of exactly
-``io_delay_samples + D`` samples, whatever the block size. The clock is injected:
-:class:`ManualClock` (the default) jumps forward instantly so tests never sleep;
-:class:`RealtimeClock` paces the blocks at the real sample rate. On a
+``io_delay_samples + D`` samples, whatever the block size. The clock is injected (any
+:class:`~hil.devices.clock.Clock`): a manual clock (the default,
+:class:`sim_devices.stage.clock.ManualClock`) jumps forward instantly so tests never sleep;
+:class:`~hil.devices.clock.MonotonicClock` (also named ``RealtimeClock`` here) paces the
+blocks at the real sample rate. On a
 :class:`~hil.devices.clock.VirtualClock` (``virtual_time=``) there is no audio thread: the
 blocks whose callback time has come run as a service of the clock, in the thread that lets
 virtual time pass, so a whole run is held in one thread and is deterministic.
@@ -28,9 +30,8 @@ from __future__ import annotations
 
 import math
 import threading
-import time
 from collections.abc import Callable, Mapping
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -44,60 +45,25 @@ from hil.devices.audio.contract import (
 )
 from hil.devices.audio.ring import ring_read, ring_write
 from hil.devices.audio.settings import AudioSettings, SettingsView
+from hil.devices.clock import Clock, MonotonicClock
 from hil.errors import ConfigError
 
 if TYPE_CHECKING:
     from hil.devices.clock import VirtualClock
 
 
-class Clock(Protocol):
-    """Time source of a simulated stream, in seconds."""
-
-    def now(self) -> float:
-        """Current time (s)."""
-        ...
-
-    def sleep_until(self, t_s: float) -> None:
-        """Return at (or after) time ``t_s`` (s)."""
-        ...
+#: The wall clock, by the name this module gave it: blocks paced at the real sample rate.
+RealtimeClock = MonotonicClock
 
 
-class ManualClock:
-    """Simulated time that jumps forward when waited on: a stream runs as fast as it can.
+def __getattr__(name: str) -> Any:
+    """``ManualClock``: the tests' manual clock (:class:`sim_devices.stage.clock.ManualClock`),
+    by the name this module gave it."""
+    if name == "ManualClock":
+        from sim_devices.stage.clock import ManualClock
 
-    Examples
-    --------
-    >>> clock = ManualClock(start_s=10.0)
-    >>> clock.sleep_until(10.5); clock.now()
-    10.5
-    >>> clock.sleep_until(3.0); clock.now()   # never goes backwards
-    10.5
-    """
-
-    def __init__(self, start_s: float = 0.0) -> None:
-        self._t = float(start_s)
-
-    def now(self) -> float:
-        """Current simulated time (s)."""
-        return self._t
-
-    def sleep_until(self, t_s: float) -> None:
-        """Advance to ``t_s`` (s) at once."""
-        self._t = max(self._t, t_s)
-
-
-class RealtimeClock:
-    """Wall-clock pacing (``time.monotonic``): blocks run at the real sample rate."""
-
-    def now(self) -> float:
-        """Seconds on the monotonic clock."""
-        return time.monotonic()
-
-    def sleep_until(self, t_s: float) -> None:
-        """Sleep until the monotonic clock reaches ``t_s`` (s)."""
-        delay = t_s - time.monotonic()
-        if delay > 0:
-            time.sleep(delay)
+        return ManualClock
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 class World(Protocol):
@@ -188,7 +154,7 @@ class SimulatedDuplex(SettingsView):
         Converter and buffer latency from ADC capture to the callback, in samples, at least
         ``settings.blocksize``; default ``2 * blocksize`` (what the JACK dummy server shows).
     clock:
-        Time source; default :class:`ManualClock` (no real-time waiting).
+        Time source; default a manual clock (no real-time waiting).
     virtual_time:
         Run the blocks as a service of this virtual clock instead of an audio thread (the
         module docstring); ``clock`` is then not given.
@@ -237,7 +203,11 @@ class SimulatedDuplex(SettingsView):
                 "a block's input can only hold samples captured before its callback runs",
             )
         self.io_delay_samples = delay
-        self.clock: Clock = clock if clock is not None else ManualClock()
+        if clock is None:
+            from sim_devices.stage.clock import ManualClock
+
+            clock = ManualClock()
+        self.clock: Clock = clock
         self._virtual = virtual_time
         self._detach: Callable[[], None] | None = None
         self._t0 = 0.0
@@ -259,6 +229,7 @@ class SimulatedDuplex(SettingsView):
         self._stop = threading.Event()
         #: Captured values the simulated converter clipped at ±1.0 full scale.
         self.adc_clipped_samples = 0
+        self._unplugged = False
 
     @property
     def active(self) -> bool:
@@ -342,6 +313,11 @@ class SimulatedDuplex(SettingsView):
         """Stop and release the stream. Re-raises a callback exception not yet raised."""
         self.stop()
 
+    def unplug(self) -> None:
+        """Fault injection: the interface is pulled out; its stream ends before the next
+        block, with no error from the callback (as a stream ends whose device vanished)."""
+        self._unplugged = True
+
     def __enter__(self) -> SimulatedDuplex:
         return self
 
@@ -377,6 +353,8 @@ class SimulatedDuplex(SettingsView):
         the stream ends (the callback completed or aborted, or raised)."""
         runner = self._runner
         assert runner is not None
+        if self._unplugged:
+            return False
         fs = self.samplerate
         block = self.blocksize
         delay = self.io_delay_samples

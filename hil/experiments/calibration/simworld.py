@@ -372,7 +372,7 @@ def sim_tank(truth: SimTruth) -> Iterator[tuple[MechanicalStage, EchoTank, list[
 
     The controller powers up locked, as a GRBL with homing enabled does (``$22=1``), 5 mm
     from its homing switch: the stage is made ready (homed) as ``hil tank-run`` does."""
-    from hil.devices.grbl import GrblStage
+    from hil.devices.table import open_stage
     from sim_devices.stage import GrblSimConfig, ManualClock
 
     clock = ManualClock(0.0)
@@ -386,7 +386,7 @@ def sim_tank(truth: SimTruth) -> Iterator[tuple[MechanicalStage, EchoTank, list[
     )  # fmt: skip
     # In memory, in this thread: the controller answers at once on the manual clock, so no
     # wait depends on how fast another thread is scheduled.
-    with GrblStage(
+    with open_stage(
         "sim://stage?via=memory",
         clock=clock,
         wait_step=0.5,

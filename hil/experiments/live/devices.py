@@ -10,20 +10,27 @@ exactly that (:meth:`RunDevices.safe_stop`).
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
-from firmware_protocol.errors import TransportError
 from hil.acquisition.device import StreamingDevice
 from hil.devices.stage_errors import StageTimeoutError
-from hil.devices.table import SIM_AUDIO, entry_for, is_simulated, open_real_daq
-from hil.errors import ConfigError
+from hil.devices.table import (
+    SIM_AUDIO,
+    WATCHDOG_MS,
+    entry_for,
+    is_simulated,
+    open_real_daq,
+    open_stage,
+)
+from hil.devices.table import SIM_WATCHDOG_MS as SIM_WATCHDOG_MS  # re-exported
+from hil.errors import ConfigError, TransportError
 from hil.experiments.experiment import Experiment
 from hil.experiments.live.plan import CheckedTow, StageLimits, check_tow
-from hil.experiments.live.stops import DeviceLostError
+from hil.experiments.live.stops import DeviceLostError, LinkWatch
 from hil.experiments.stage_checks import raise_first_failure, tow_checks
 
 if TYPE_CHECKING:
@@ -38,29 +45,11 @@ class StatusLine(Protocol):
     def update(self, text: str, *, force: bool = False) -> None: ...
 
 
-#: The board's watchdog (ms of its clock): it stops when the host has sent nothing for this
-#: long (a crashed or stalled host), so a run never leaves it streaming unattended.
-WATCHDOG_MS = 1000
-#: The simulated board's: the simulated tank is a child process on the same CPUs, scaled in
-#: time, so a stall of the machine (seconds on a loaded CI host) must not stop it.
-SIM_WATCHDOG_MS = 10_000
+#: What a stage's link failing raises: its port (OSError), its byte link, GRBL not answering.
+STAGE_LINK_FAILURES = (OSError, TransportError, StageTimeoutError)
 #: How long (s) a failed link waits for the simulated tank's process to be reaped before
 #: the link itself is blamed: a killed process hangs up its ptys a moment before it exits.
 LINK_LOST_GRACE_S = 2.0
-
-
-def open_streaming_device(url: str, fs: float, clock: Clock, keepalive_ms: int) -> StreamingDevice:
-    """The real DAC/ADC at ``url`` open and configured at ``fs`` Hz (2 ADC channels: the
-    hydrophone and the DAC monitor), on the driver ``clock``; nothing transmits yet.
-    ``keepalive_ms``: the board's watchdog (an audio interface has none). The device table
-    (:mod:`hil.devices.table`) says how each kind of URL opens."""
-    device = open_real_daq(url, fs, clock, keepalive_ms)
-    device.configure()
-    return device
-
-
-def _streaming_device_at(url: str, keepalive_ms: int, fs: float, clock: Clock) -> StreamingDevice:
-    return open_streaming_device(url, fs, clock, keepalive_ms)
 
 
 def stage_limits(stage: GrblStage) -> StageLimits:
@@ -87,32 +76,37 @@ class RunDevices:
     def open(self, exp: Experiment, folder: Path, fs: float, view: StatusLine) -> CheckedTow:
         """Open everything (see the module docstring); the checked tow."""
         from hil.devices.clock import MonotonicClock
-        from hil.devices.grbl import GrblStage
 
         stage_target, open_device = self._start_simulation(exp, folder)
         clock = self.clock = self.clock or MonotonicClock()  # one for stage, board and run
-        stage = self.stage = GrblStage(stage_target, clock=clock).open()
+        stage = self.stage = open_stage(stage_target, clock=clock).open()
+        # Every wait of the stage looks at the other devices: one lost while the stage homes
+        # or positions stops the run within a wait step, not when the motion ends.
+        stage.while_waiting = partial(self.raise_if_lost, exp.board_url, None)
         # The controller's settings and the tow against what it reported (its $$), before
         # anything moves: the plan, then the checks `hil stage settings --check` shows.
         tow = check_tow(exp.tow, stage_limits(stage))
         raise_first_failure(tow_checks(exp.tow, stage.settings, stage.limits))
         self.board = open_device(fs, clock)
+        stage.while_waiting = partial(
+            self.raise_if_lost, exp.board_url, LinkWatch(self.board.annotations, clock.now)
+        )
         if self.tank is not None:
             self.tank.align(fs)
-        try:
+        with self.stage_link(exp.stage_url):
             # Out of any alarm: reset a critical one, then home ($22=1) or unlock ($22=0).
             stage.make_ready(lambda step: view.update(f"stage: {step}", force=True))
             view.update("stage: positioning for the first pass", force=True)
             stage.move_to(tow.ready_m, stage.settings.max_rate)
-        except (OSError, TransportError, StageTimeoutError) as exc:
-            raise self.stage_lost(exp.stage_url, exc) from exc
         return tow
 
     def _start_simulation(
         self, exp: Experiment, folder: Path
     ) -> tuple[str | ByteLink, Callable[[float, Clock], StreamingDevice]]:
-        """The stage to open and how to open the DAC/ADC (at a rate, on a clock): the
-        simulated tank's, started here for ``sim://`` devices, else the experiment's URLs."""
+        """The stage to open and how to open the DAC/ADC (at a rate, on a clock), open and
+        configured (2 ADC channels: the hydrophone and the DAC monitor): the simulated
+        tank's, started here for ``sim://`` devices, else the experiment's URLs through the
+        device table (:mod:`hil.devices.table`)."""
         if exp.simulated:
             tank = self.tank = self._simulated_tank(exp, folder)
             self.clock = tank.clock
@@ -131,7 +125,14 @@ class RunDevices:
                 "simulated devices (sim://) only",
                 "real devices run on real time: drop --virtual-time",
             )
-        return exp.stage_url, partial(_streaming_device_at, exp.board_url, WATCHDOG_MS)
+        return exp.stage_url, lambda fs, clock: self._open_real_daq(exp.board_url, fs, clock)
+
+    @staticmethod
+    def _open_real_daq(url: str, fs: float, clock: Clock) -> StreamingDevice:
+        # The watchdog is read here, at opening, so a test can lengthen it for a slow host.
+        device = open_real_daq(url, fs, clock, WATCHDOG_MS)
+        device.configure()
+        return device
 
     def _simulated_tank(self, exp: Experiment, folder: Path) -> TankSimulation:
         if entry_for(exp.board_url) is SIM_AUDIO:  # the simulated audio interface
@@ -160,6 +161,39 @@ class RunDevices:
         its exit, when a link to it already failed)."""
         return self.tank.lost(grace_s) if self.tank is not None else None
 
+    def lost(self, board_url: str, board_watch: LinkWatch | None) -> DeviceLostError | None:
+        """A device found lost since the last look: the simulated tank's process first (it
+        serves both simulated devices), then the board's link (``board_watch``, None before
+        the board is open), else None."""
+        lost = self.tank_lost()
+        if lost is not None or board_watch is None:
+            return lost
+        why = board_watch.lost()
+        if why is None:
+            return None
+        return self.tank_lost(LINK_LOST_GRACE_S) or DeviceLostError(
+            "board",
+            board_url,
+            why,
+            "its USB cable and power (and that no other program holds it)",
+        )
+
+    def raise_if_lost(self, board_url: str, board_watch: LinkWatch | None) -> None:
+        """Raise :meth:`lost`'s error, if there is one (the stage's ``while_waiting``)."""
+        lost = self.lost(board_url, board_watch)
+        if lost is not None:
+            raise lost
+
+    @contextlib.contextmanager
+    def stage_link(self, url: str) -> Iterator[None]:
+        """Inside, a failure of the stage's link (the port's OSError, a transport error, no
+        answer in time) is raised as the stage lost (:meth:`stage_lost`); a refusal (an
+        alarm, ``error:N``) is the stage answering and passes as it is."""
+        try:
+            yield
+        except STAGE_LINK_FAILURES as exc:
+            raise self.stage_lost(url, exc) from exc
+
     def stage_lost(self, url: str, exc: BaseException) -> DeviceLostError:
         """The stage stopped answering (``exc``: what its driver raised)."""
         return self.tank_lost(LINK_LOST_GRACE_S) or DeviceLostError(
@@ -177,6 +211,9 @@ class RunDevices:
         trusted to tell whether the queued move is still running.
         """
         board, stage = self.board, self.stage
+        if stage is not None:
+            # The stop must reach the stage whatever else is lost: no look at the others now.
+            stage.while_waiting = None
         if board is not None:
             with contextlib.suppress(Exception):
                 board.stop()

@@ -88,6 +88,12 @@ class RunRecorder:
                 self.writer.append_sync(index, host_t)
             self._sync_written = len(self.sync_pairs)
 
+    def map_telemetry_times(self, sample_index: Sequence[int]) -> None:
+        """Every recorded stage report's board sample index, as the run's end maps them
+        (:meth:`RunWriter.map_telemetry_times`)."""
+        if self.writer is not None:
+            self.writer.map_telemetry_times(sample_index)
+
     def events(self, events: Sequence[tuple[str, int, int, str]]) -> None:
         """Events ``(kind, sample_index, length, text)``."""
         if self.writer is not None:

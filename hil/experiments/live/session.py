@@ -14,13 +14,12 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import partial
 
-from firmware_protocol.errors import TransportError
 from hil.acquisition.capture import CapturedBlock, CaptureLoop
 from hil.acquisition.feed import ReceiverFeed
 from hil.estimation.base import Estimate, Receiver
 from hil.experiments.experiment import Experiment
 from hil.experiments.live.board_state import collect_sync_pairs, sample_zero_time_s
-from hil.experiments.live.devices import LINK_LOST_GRACE_S, RunDevices
+from hil.experiments.live.devices import RunDevices
 from hil.experiments.live.latency import LatencyProbe
 from hil.experiments.live.plan import CheckedTow
 from hil.experiments.live.recorder import RunRecorder
@@ -181,10 +180,8 @@ class LiveSession:
 
     def _poll_stage(self) -> None:
         """One stage report: into the telemetry and the recording, then to the tow."""
-        from hil.devices.stage_errors import StageTimeoutError
-
         stage, board = self.stage, self.board
-        try:
+        with self.devices.stage_link(self.exp.stage_url):
             st = stage.status()
             fit = board.clock_fit
             idx = int(fit.sample_index(st.host_time)) if fit is not None and fit.pairs >= 2 else -1
@@ -196,11 +193,11 @@ class LiveSession:
             tel.state.append(st.state.name)
             tel.reply_s.append(st.reply_s)
             self.recorder.telemetry(
-                StageTelemetry(st.host_time, idx, st.position, st.velocity, st.state.name)
+                StageTelemetry(
+                    st.host_time, idx, st.position, st.velocity, st.state.name, st.reply_s
+                )
             )
             self.tow.on_report(st, self.now(), capturing=self.recorder.open_)
-        except (OSError, TransportError, StageTimeoutError) as exc:
-            raise self.devices.stage_lost(self.exp.stage_url, exc) from exc
 
     def _tail_captured(self) -> bool:
         """Every pass done and the capture past its tail, on captured samples, not the
@@ -232,23 +229,8 @@ class LiveSession:
         )
 
     def lost(self) -> DeviceLostError | None:
-        """A device found lost since the last look (the simulated tank's process first: it
-        serves both simulated devices), else None."""
-        lost = self.devices.tank_lost()
-        if lost is not None:
-            return lost
-        why = self.board_watch.lost()
-        if why is None:
-            return None
-        lost = self.devices.tank_lost(LINK_LOST_GRACE_S)
-        if lost is not None:
-            return lost
-        return DeviceLostError(
-            "board",
-            self.exp.board_url,
-            why,
-            "its USB cable and power (and that no other program holds it)",
-        )
+        """A device found lost since the last look (:meth:`RunDevices.lost`), else None."""
+        return self.devices.lost(self.exp.board_url, self.board_watch)
 
     def backlog_s(self) -> float:
         """Most the capture fell behind the board, s of signal."""

@@ -19,6 +19,7 @@ from typing import Any
 
 from hil.acquisition.annotations import AnnotationKind
 from hil.acquisition.device import Annotations
+from hil.errors import DeviceLost
 from hil.interrupts import STOP_SIGNALS, RunInterrupted, deferring
 
 #: Driver-clock seconds a board's link may stay down (its driver reconnecting: a USB glitch
@@ -36,14 +37,13 @@ __all__ = [
 ]
 
 
-class DeviceLostError(RuntimeError):
+class DeviceLostError(DeviceLost, RuntimeError):
     """A device of the run stopped answering (its process killed, its cable out, its
-    power off). The message names the device and says what to check."""
+    power off). The message names the device and its URL and says what to check."""
 
     def __init__(self, device: str, url: str, why: str, check: str) -> None:
-        super().__init__(f"{device} {url} lost: {why}; check {check}")
+        super().__init__(f"{device} {url} lost: {why}; check {check}", url=url)
         self.device = device
-        self.url = url
 
 
 class StopSignals:

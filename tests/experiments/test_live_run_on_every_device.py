@@ -1,0 +1,222 @@
+"""The same live-run suite on every DAC/ADC a run can name: the Python simulated board and
+the simulated audio interface on virtual time (fast tier), the C reference firmware in the
+board's place in real time (slow; needs ``cc`` and ``make``). Each run starts, streams,
+tracks the towed target, stops when its tow is done, records what was connected, and
+replays to the same estimates; stopped by its caller, it stops safely and says so; its
+board lost mid-run, it stops and names it.
+
+Thresholds are those the device's own tests hold (test_tank_run_virtual,
+test_tank_run_audio, test_board_c_firmware_tank): the C firmware runs in real time against
+the scaled tank, so its run carries the machine's scheduling in its timing.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import signal
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from hil.estimation.base import Estimate
+from hil.experiments import api
+from hil.experiments.experiment import DEFAULT_EXPERIMENT, parse_experiment
+from hil.experiments.run_scoring import summarize
+from hil.experiments.tank_run import LiveView, RunOutcome, run_experiment
+from hil.recording.reader import RunRecording
+
+SHORT = DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -3.5")
+
+
+@dataclass(frozen=True)
+class Device:
+    """One DAC/ADC of the suite: its experiment ``board`` URL and what a run on it shows."""
+
+    board: str
+    virtual_time: bool
+    #: The measured loopback, samples: the tank's converters (64) and any buffering.
+    latency_samples: int
+    range_rmse_m: float
+    speed_rmse_mps: float
+    detection_rate: float
+    #: The recording's instrument group that describes the device.
+    group: str
+    needs_c: bool = False
+
+    def experiment(self, text: str = SHORT) -> str:
+        return text.replace('board = "sim://board"', f'board = "{self.board}"')
+
+
+DEVICES = {
+    "python-board": Device("sim://board", True, 64, 0.03, 0.05, 1.0, "board"),
+    "audio-interface": Device("sim://audio?blocksize=256", True, 64 + 2 * 256, 0.03, 0.05,
+                              1.0, "audio"),
+    "c-firmware": Device("sim://board?impl=c", False, 64, 0.6, 0.1, 0.9, "board", True),
+}  # fmt: skip
+PARAMS = [
+    pytest.param(name, id=name, marks=[pytest.mark.slow] if DEVICES[name].needs_c else [])
+    for name in DEVICES
+]
+
+
+def _require(device: Device, require_system: Callable[[bool, str], None]) -> None:
+    if device.needs_c:
+        from sim_devices.board import c_firmware
+
+        missing = c_firmware.toolchain_missing()
+        require_system(missing is None, f"C firmware not buildable: {missing}")
+
+
+@pytest.fixture(scope="module", params=PARAMS)
+def completed(
+    request: pytest.FixtureRequest,
+    tmp_path_factory: pytest.TempPathFactory,
+    require_system: Callable[[bool, str], None],
+) -> tuple[Device, RunOutcome]:
+    """A whole short run on the device (one per device, shared by the tests below)."""
+    device = DEVICES[request.param]
+    _require(device, require_system)
+    folder = tmp_path_factory.mktemp(request.param) / "run"
+    outcome = run_experiment(
+        parse_experiment(device.experiment()),
+        folder=folder,
+        view=LiveView(enabled=False),
+        virtual_time=device.virtual_time,
+    )
+    return device, outcome
+
+
+def test_a_run_starts_streams_tracks_and_stops_when_its_tow_is_done(
+    completed: tuple[Device, RunOutcome],
+) -> None:
+    device, outcome = completed
+    summary = summarize(outcome)
+    assert summary["error"] == "" and not summary["interrupted"]
+    assert summary["dropped_samples"] == 0 and summary["adc_overruns"] == 0
+    assert summary["loopback_latency_samples"] == device.latency_samples
+    assert summary["scored_estimates"] >= 50
+    assert summary["detection_rate"] >= device.detection_rate
+    assert summary["range_rmse_m"] < device.range_rmse_m
+    assert summary["speed_rmse_mps"] < device.speed_rmse_mps
+    assert outcome.events[-1][3] == "stop: completed"
+
+
+def test_the_recording_replays_to_the_live_estimates(completed: tuple[Device, RunOutcome]) -> None:
+    from hil.recording.replay import compare_estimates, replay
+
+    _, outcome = completed
+    with RunRecording.open(outcome.folder / "run.h5") as rec:
+        live = rec.estimates()
+        agreement, words = compare_estimates(live, replay(rec))
+    assert len(live) == len(outcome.estimates) > 50
+    assert agreement == "equal", words
+
+
+def test_the_recording_names_the_device_it_ran_on(completed: tuple[Device, RunOutcome]) -> None:
+    import h5py
+
+    from hil.recording.instrument import read_entry
+
+    device, outcome = completed
+    with h5py.File(outcome.folder / "run.h5", "r") as f:
+        entry = read_entry(f)
+    assert entry is not None
+    assert entry["instrument"][device.group]["url"] == device.board
+    assert entry["instrument"]["stage"]["build_info"].startswith("[VER:1.1h.")
+
+
+@pytest.mark.parametrize("name", PARAMS)
+def test_a_run_stopped_by_its_caller_stops_safely_and_says_so(
+    name: str, tmp_path: Path, require_system: Callable[[bool, str], None]
+) -> None:
+    device = DEVICES[name]
+    _require(device, require_system)
+    folder = tmp_path / "run"
+    seen = 0
+    run = api.iterate(
+        parse_experiment(device.experiment()), folder=folder, virtual_time=device.virtual_time
+    )
+    with contextlib.closing(run):  # closing it stops the run as Ctrl-C does, and waits
+        for item in run:
+            seen += isinstance(item, Estimate)
+            if seen == 5:
+                break
+    summary = json.loads((folder / "summary.json").read_text())
+    assert summary["interrupted"] is True
+    assert summary["error"] == "interrupted (stopped by the caller)"
+    with RunRecording.open(folder / "run.h5") as rec:
+        assert rec.events()[-1].text == "stop: interrupted (stopped by the caller)"
+        assert len(rec.estimates()) >= 5
+
+
+@pytest.mark.parametrize("name", PARAMS)
+def test_a_board_lost_mid_run_stops_the_run_naming_it(
+    name: str,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    require_system: Callable[[bool, str], None],
+) -> None:
+    """The Python board's link unplugged (its fault plan), the audio interface pulled out,
+    the simulated tank's process that holds the C firmware killed: each after the 30th
+    estimate, mid-pass. The run stops and names what it lost."""
+    from hil.experiments import audio_tank, sim_tank, virtual_tank
+
+    device = DEVICES[name]
+    _require(device, require_system)
+    tanks: list[Any] = []
+    kind = {
+        "python-board": virtual_tank.VirtualTank,
+        "audio-interface": audio_tank.AudioTank,
+        "c-firmware": sim_tank.SimulatedTankProcess,
+    }[name]
+    original = kind.__init__
+
+    def keep(self: Any, *args: Any, **kwargs: Any) -> None:
+        original(self, *args, **kwargs)
+        tanks.append(self)
+
+    monkeypatch.setattr(kind, "__init__", keep)
+    seen: list[Estimate] = []
+
+    def lose_after_30(estimates: list[Estimate]) -> None:
+        if len(seen) < 30 <= len(seen) + len(estimates):
+            if name == "python-board":
+                tanks[0].board_faults.disconnect()
+            elif name == "audio-interface":
+                tanks[0].unplug_interface()
+            else:
+                os.kill(tanks[0].pid, signal.SIGKILL)
+        seen.extend(estimates)
+
+    outcome = run_experiment(
+        parse_experiment(device.experiment()),
+        folder=tmp_path / "run",
+        view=LiveView(enabled=False),
+        on_estimates=lose_after_30,
+        virtual_time=device.virtual_time,
+    )
+    if name == "python-board":
+        assert outcome.error.startswith(
+            f"DeviceLostError: board {device.board} lost: its link dropped"
+        )
+    elif name == "audio-interface":
+        assert outcome.error.startswith(
+            f"AudioStreamLost: {device.board}: the audio stream ended at sample "
+        )
+        assert outcome.error.endswith(
+            ": check the interface's cable and power, and that no other program took it"
+        )
+    else:
+        assert outcome.error == (
+            f"DeviceLostError: the built-in simulated tank (process {tanks[0].pid}) lost: its"
+            " process exited with code -9; check that nothing killed it (its errors are"
+            " printed above)"
+        )
+    assert len(seen) >= 30 and not outcome.interrupted
+    with RunRecording.open(outcome.folder / "run.h5") as rec:
+        assert rec.events()[-1].text == f"stop: error: {outcome.error}"
