@@ -181,16 +181,15 @@ class Refinement:
     def is_echo(self, test: EchoTest) -> bool:
         """Whether the fit is one echo of the schedule by ``test``: a maximum inside the
         search that collects at least ``test.min_e_over_n0_db`` and whose coherence over all
-        hops is at least ``test.fraction`` of one echo's at its SNR, or whose coherence
-        within each tone is at least ``test.tone_fraction`` of it (one echo through
-        multipath), or over runs of consecutive hops at least ``test.run_fraction`` of it (an
-        accelerating echo)."""
+        hops is at least ``test.fraction`` of one echo's at its SNR, or over runs of
+        consecutive hops at least ``test.run_fraction`` of it (an accelerating echo). The
+        coherence within each tone is reported, not tested: a still echo's ghost read at the
+        tone spacing's speed is as coherent within each tone as one echo."""
         return (
             self.found
             and self.e_over_n0_db >= test.min_e_over_n0_db
             and (
                 self.coherence.fraction >= test.fraction
-                or self.tone_coherence.fraction >= test.tone_fraction
                 or self.run_coherence.fraction >= test.run_fraction
             )
         )
@@ -199,12 +198,11 @@ class Refinement:
 @dataclass(frozen=True)
 class EchoTest:
     """What a fit must reach to be one echo of the schedule (:meth:`Refinement.is_echo`):
-    coherence fractions over all hops, within each tone and over runs of consecutive hops,
-    and the E/N0 (dB) it collects once the other echoes measured lately are taken out (what
-    they leaked into a detection is not an echo of its own)."""
+    coherence fractions over all hops and over runs of consecutive hops, and the E/N0 (dB)
+    it collects once the other echoes measured lately are taken out (what they leaked into
+    a detection is not an echo of its own)."""
 
     fraction: float
-    tone_fraction: float
     run_fraction: float
     min_e_over_n0_db: float
 
@@ -241,7 +239,7 @@ class CoherentRefiner:
         sound_speed_mps: float,
         speed_span_mps: float,
         max_speed_mps: float,
-        echo_test: EchoTest = EchoTest(0.8, 0.96, 0.85, 12.0),
+        echo_test: EchoTest = EchoTest(0.8, 0.85, 12.0),
     ) -> None:
         if np.any(schedule.chirp_hz_per_s != 0):
             raise ConfigError("refine", True, "a schedule of tones (no chirps)", "refine=False")

@@ -119,3 +119,63 @@ def test_a_braking_target_is_kept_and_ranged(decel: float) -> None:
     dv = np.array([e.speed_mps - truth[e.hop_index + 1].radial_speed_mps for e in est])
     assert np.sqrt(np.mean(dr**2)) < 0.025
     assert abs(np.mean(dv) - decel * 0.05) < 0.01 * decel
+
+
+# Several echoes at once (issue 26 item 1): two targets at equal level apart, crossing in
+# range, from the same range at different speeds, and a second one 10 dB weaker. Each
+# target's detections count against the hop boundaries it gives alone.
+TWO_TARGETS = {
+    "apart": ((45.0, 10.0, 1.0), (60.0, -6.0, 1.0)),
+    "crossing": ((50.0, 10.0, 1.0), (40.0, -5.0, 1.0)),
+    "same start": ((50.0, 8.0, 1.0), (50.0, 16.0, 1.0)),
+    "10 dB weaker": ((45.0, 10.0, 1.0), (60.0, -6.0, 0.316)),
+}
+SCENE_S = 1.5
+
+
+def _hits(est: list[Estimate], r0: float, v: float) -> int:
+    return sum(
+        abs(e.speed_mps - v) < 0.5 and abs(e.range_m - true_range(r0, v, e.t_tx_s, e.t_s)) < 0.5
+        for e in est
+    )
+
+
+def _scene(targets: tuple[tuple[float, float, float], ...], snr_db: float) -> list[Estimate]:
+    schedule = att_schedule()
+    x = sum(echo_samples(schedule, r, v, SCENE_S, amplitude=a) for r, v, a in targets)
+    sigma = 1.0 / np.sqrt(2.0) / 10 ** (snr_db / 20.0)
+    x = x + np.random.default_rng(11).normal(0.0, sigma, np.shape(x))
+    rx = GcasReceiver.from_options(
+        schedule, FS, sound_speed_mps=C, max_speed_mps=30.0, max_range_m=100.0, m_hops=10
+    )
+    return run_blocks(rx, x)
+
+
+def _detection_and_false(scene: str, snr_db: float) -> tuple[list[float], float]:
+    targets = TWO_TARGETS[scene]
+    est = _scene(targets, snr_db)
+    alone = [_hits(_scene((t,), snr_db), t[0], t[1]) for t in targets]
+    hits = [_hits(est, t[0], t[1]) for t in targets]
+    false = len(est) - sum(hits)
+    return [h / a for h, a in zip(hits, alone, strict=True)], false / (SCENE_S / 0.01)
+
+
+@pytest.mark.parametrize(
+    ("scene", "pd_min"),
+    [("apart", 0.99), ("crossing", 0.99), ("same start", 0.99), ("10 dB weaker", 0.9)],
+)
+def test_every_target_at_every_hop_at_0_db(scene: str, pd_min: float) -> None:
+    # Measured: 1.0 / 1.0 for the equal pairs; the weaker one 0.913 here, 0.949 with another
+    # noise seed (the stronger one's ghosts and sidelobes are taken out, but the detector's
+    # time beside it is sometimes a grating lobe off and its fit then not found); no false
+    # estimate.
+    pd, false = _detection_and_false(scene, 0.0)
+    assert min(pd) >= pd_min and max(pd) <= 1.0
+    assert false <= 0.01
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scene", ["apart", "crossing", "same start"])
+def test_two_equal_targets_at_every_hop_at_minus_10_db(scene: str) -> None:
+    pd, false = _detection_and_false(scene, -10.0)
+    assert min(pd) >= 0.95 and false <= 0.02

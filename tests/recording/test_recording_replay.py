@@ -226,7 +226,8 @@ def test_cli_reports_a_replay_that_differs_from_live(
         f["estimates/range_m"][3] = 1.0
     assert main(["replay", str(tampered)]) == 1
     out = capsys.readouterr().out
-    assert out.startswith(f"{len(live)} estimates from {tampered} (gcas)\n")
+    lines = out.splitlines()  # the table (a header, a row per estimate), then the count
+    assert lines[1 + len(live)] == f"{len(live)} estimates from {tampered} (gcas)"
     assert "replay DIFFERS from live: estimate 3 differs: recorded Estimate(" in out
     assert "range_m=1.0" in out
 
@@ -443,7 +444,7 @@ def test_cli_replay_of_a_recording_without_track_ids_equals_live(
 def test_cli_replay_lists_the_tracks(live_run: Any, capsys: pytest.CaptureFixture[str]) -> None:
     path, live, _ = live_run
     assert main(["replay", str(path)]) == 0
-    lines = capsys.readouterr().out.splitlines()
+    lines = capsys.readouterr().out.splitlines()[1 + len(live) :]  # after the table
     assert lines[0] == f"{len(live)} estimates from {path} (gcas)"
     on0 = [e for e in live if e.track_id == 0]
     assert lines[1] == (

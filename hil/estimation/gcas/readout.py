@@ -32,30 +32,25 @@ from hil.estimation.gcas.threshold import Peak
 from hil.estimation.refine import CoherentRefiner, EchoTest
 
 #: A refined detection is an echo of the schedule when its hops' coherence is at least
-#: COHERENCE_FRACTION of what one echo of its SNR would have, or their coherence within each
-#: tone at least TONE_COHERENCE_FRACTION of it (one echo through multipath: :meth:`Refinement.
-#: is_echo <hil.estimation.refine.Refinement.is_echo>`). Measured on att (0.8-1 s, 55-90
-#: detections each): echoes 0.99-1.01 / 0.99-1.01 at -10 dB per-sample SNR; a still echo at
-#: the tone spacing's speed 0.03-0.49 / 0.32-0.90 at 0 dB and up to 0.86 / 1.05 at -10 dB
-#: (3 of 55 kept at 0.96); a 35 m/s target with a 30 m/s span 0.03-0.58 / 0.29-0.95 (none
-#: kept); a tank echo with two close images 0.16-0.64 / 0.94-1.00, and with a tank's full
-#: set of images 0.0-0.7 / 0.1-0.9: not one echo (a tank reads the first arrival instead).
-#: RUN_COHERENCE_FRACTION: the coherence over runs of 3 consecutive hops (an accelerating
-#: echo drifts in phase against the constant-speed fit): 0.93-0.95 for a target braking at
-#: 5 m/s², 0.85+ at 7 m/s² (all kept), 0.62-0.81 at 10 m/s² (refused: the constant-speed fit
-#: over M hops no longer holds); still-echo ghosts and aliases p90 0.55-0.69.
+#: COHERENCE_FRACTION of what one echo of its SNR would have, or their coherence over runs of
+#: 3 consecutive hops at least RUN_COHERENCE_FRACTION of it (:meth:`Refinement.is_echo
+#: <hil.estimation.refine.Refinement.is_echo>`), and it collects MIN_ECHO_SNR_DB. Measured on
+#: att (0.8-1 s, 55-90 detections each): echoes 0.99-1.01 at -10 dB per-sample SNR; a still
+#: echo at the tone spacing's speed 0.03-0.49 at 0 dB and up to 0.86 at -10 dB; a 35 m/s
+#: target with a 30 m/s span 0.03-0.58. Over runs (an accelerating echo drifts in phase
+#: against the constant-speed fit): 0.93-0.95 for a target braking at 5 m/s², 0.85+ at
+#: 7 m/s² (kept), 0.62-0.81 at 10 m/s² (refused: the constant-speed fit over M hops no longer
+#: holds); still-echo ghosts and aliases p90 0.55-0.69. The coherence within each tone is not
+#: a test: ghosts of a still echo read 0.98-1.04 of one echo's there. MIN_ECHO_SNR_DB: the
+#: E/N0 over the M hops a fit must collect once the other echoes measured lately are taken out
+#: (:mod:`hil.estimation.refine`): the leak of a stronger echo into its ghost's or
+#: sidelobe's cells then collects what noise does, 6.7-10.6 dB (att, two echoes 10 dB apart
+#: at 0 dB and -10 dB per-sample SNR, 410 such fits); one echo at -20 dB per-sample SNR
+#: collects about 16 dB over M = 10 hops.
 COHERENCE_FRACTION = 0.8
-TONE_COHERENCE_FRACTION = 9.0
 RUN_COHERENCE_FRACTION = 0.85
-#: MIN_ECHO_SNR_DB: the E/N0 over the M hops a fit must collect once the other echoes measured
-#: lately are taken out (:mod:`hil.estimation.refine`): the leak of a stronger echo into
-#: its ghost's or sidelobe's cells then collects what noise does, 6.7-10.6 dB (att, two
-#: echoes 10 dB apart at 0 dB and -10 dB per-sample SNR, 410 such fits); one echo at
-#: -20 dB per-sample SNR collects about 16 dB over M = 10 hops.
 MIN_ECHO_SNR_DB = 12.0
-ECHO_TEST = EchoTest(
-    COHERENCE_FRACTION, TONE_COHERENCE_FRACTION, RUN_COHERENCE_FRACTION, MIN_ECHO_SNR_DB
-)
+ECHO_TEST = EchoTest(COHERENCE_FRACTION, RUN_COHERENCE_FRACTION, MIN_ECHO_SNR_DB)
 
 #: ``unit_values(n_star, d0, tone)``: the M terms' unit correlators of the peak at sample
 #: ``n_star``, hypothesis ``d0``, tone index per term (shape ``(M,)``), weighted, complex.
@@ -147,6 +142,10 @@ class Readout:
         #: Detections refused by the refinement as no one echo of the schedule
         #: (:data:`COHERENCE_FRACTION`).
         self.incoherent_count = 0
+        #: Detections the refinement could not measure: their hops reach back before the
+        #: input's start or a gap (refused: the search reports every echo's cell, ghosts
+        #: included, and only the refinement tells them apart).
+        self.unmeasured_count = 0
         self.last_detection: DetectionInfo | None = None
 
     def restart(self) -> None:
@@ -185,11 +184,13 @@ class Readout:
         bound = None
         if self._refiner is not None:
             refined = self._refiner.refine(t_rx, alpha, hop_index)
-            if refined is not None:
-                if not refined.is_echo(ECHO_TEST):
-                    self.incoherent_count += 1
-                    return None
-                t_rx, alpha, bound = refined.t_s, refined.alpha, refined.bound
+            if refined is None:
+                self.unmeasured_count += 1
+                return None
+            if not refined.is_echo(ECHO_TEST):
+                self.incoherent_count += 1
+                return None
+            t_rx, alpha, bound = refined.t_s, refined.alpha, refined.bound
         elif self._coherent:
             t_rx, alpha = self._coherent_refine(p.n_star, p.d0, hop_index, t_rx, alpha)
         if self._first_arrival is not None:

@@ -191,9 +191,11 @@ class GcasReceiver:
                 self.front_end, self._sums, cfar, coherent=self.coherent,
                 runner_up_ratio=self.runner_up_ratio,
             )  # fmt: skip
+        # Several echoes per hop where the refinement's likelihood tells an echo from the
+        # ghosts and sidelobes of another; the strongest one per hop where it does not.
         return TwoStageSearch(
             self.front_end, cfar, coherent=self.coherent, runner_up_ratio=self.runner_up_ratio,
-            coarse_step=coarse_step,
+            coarse_step=coarse_step, every_echo=self._refiner is not None,
         )  # fmt: skip
 
     def _warm_up(self) -> None:
@@ -261,6 +263,12 @@ class GcasReceiver:
         """Detections the refinement refused as no one echo of the schedule: a still echo
         read at the tone spacing's speed, an echo beyond the Doppler span, noise."""
         return self.readout.incoherent_count
+
+    @property
+    def unmeasured_count(self) -> int:
+        """Detections refused because the refinement could not measure them: their hops
+        reach back before the input's start or a gap."""
+        return self.readout.unmeasured_count
 
     @property
     def last_detection(self) -> DetectionInfo | None:

@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hil.estimation.coarse_search import CoarseSearch
+from hil.estimation.gcas.candidates import CandidateCells, EveryEcho, StrongestEcho
 from hil.estimation.gcas.exact import ExactHistory
 from hil.estimation.gcas.front_end import FrontEnd
 from hil.estimation.gcas.options import check_coarse_step
@@ -31,7 +32,6 @@ from hil.estimation.gcas.threshold import (
     NOISE_STRIDE,
     Cfar,
     Peak,
-    local_peak_cells,
     median_spread,
     peaks_of,
     threshold_peaks,
@@ -90,7 +90,7 @@ class TwoStageSearch:
 
     def __init__(
         self, fe: FrontEnd, cfar: Cfar, *, coherent: bool, runner_up_ratio: float,
-        coarse_step: int,
+        coarse_step: int, every_echo: bool,
     ) -> None:  # fmt: skip
         self._fe, self._cfar = fe, cfar
         self._coherent = coherent
@@ -124,8 +124,12 @@ class TwoStageSearch:
         self._cd_ring = RowBuffer(c_keep, (), np.int64)  # d̂ (the time–codeword map)
         self._cn_ring = RowBuffer(c_keep, (), np.float64)
         self._ca_ring = RowBuffer(c_keep, (fe.grid.size,), np.float64)  # h_d Acc_d per block
-        self._hd = fe.lobe_hypotheses
-        self._leak = doppler_leak(fe)
+        #: The candidates' rule (:mod:`hil.estimation.gcas.candidates`).
+        self.candidates: CandidateCells = (
+            EveryEcho(self._hc, fe.lobe_hypotheses, doppler_leak(fe))
+            if every_echo
+            else StrongestEcho(self._hc, fe.lobe_hypotheses, fe.grid.size)
+        )
         y_keep = (
             int(fe.lags.max()) + fe.n_max + 2 * self.fine_half + (self._c_lookahead + 2) * b
             + abs(int(np.min(self._c_shift))) + RECENTRE_STEPS * self.fine_half + 8
@@ -207,12 +211,10 @@ class TwoStageSearch:
         if next_block > lo:
             s = np.array(self._ca_ring.span(first, next_block), dtype=np.float64)
             s[: max(0, self._c_valid_from - first)] = -np.inf
-            cand, cells = first_possible_cells(
-                s, h, self._hd, lo - first, next_block - first, self._leak
-            )
+            cand, sets = self.candidates.first_possible(s, lo - first, next_block - first)
             cand += first
             if cand < next_block:  # its hypotheses are known: the earliest of their windows
-                shift = int(self._c_shift[cells].min())
+                shift = int(self._c_shift[sets].max(axis=1).min())
         else:
             cand = max(lo, next_block)
         late = cand * self._B + shift + 2 * self.fine_half
@@ -224,27 +226,22 @@ class TwoStageSearch:
         lo = self._det_next
         if stop <= lo:
             return []
-        cand_b, cand_d = local_peak_cells(
-            self._ca_ring,
-            lo,
-            stop,
-            self._hc,
-            self._hd,
-            self._c_origin,
-            self._c_valid_from,
-            self._leak,
-        )
+        first = max(lo - self._hc, self._c_origin)
+        acc = np.array(self._ca_ring.span(first, min(stop + self._hc, self._ca_ring.next_index)))
+        acc[: max(0, self._c_valid_from - first)] = -np.inf
+        rows, sets = self.candidates.cells(acc, lo - first, stop - first)
+        cand_b = rows + first
         # A candidate waits until its fine window has arrived (its shift depends on d).
-        late = cand_b * self._B + self._c_shift[cand_d] + 2 * self.fine_half
+        late = cand_b * self._B + self._c_shift[sets].max(axis=1) + 2 * self.fine_half
         wait = np.flatnonzero(late >= self.exact.next_index)
         if wait.size:
             stop = int(cand_b[wait[0]])
             keep = cand_b < stop
-            cand_b, cand_d = cand_b[keep], cand_d[keep]
+            cand_b, sets = cand_b[keep], sets[keep]
         self._det_next = stop
         if cand_b.size == 0:
             return []
-        return self._distinct(self._fine_stage(cand_b, cand_d))
+        return self._distinct(self._fine_stage(cand_b, sets))
 
     def _distinct(self, peaks: list[Peak]) -> list[Peak]:
         """``peaks`` without those that repeat an earlier one: two candidate cells of one echo
@@ -252,7 +249,7 @@ class TwoStageSearch:
         the same codeword within the fine window and one Doppler cell. Decided in candidate
         order, so any chunking keeps the same peaks."""
         out: list[Peak] = []
-        w, hd = self.search_half_window, self._hd
+        w, hd = self.search_half_window, self.candidates.lobe
         for p in peaks:
             if any(
                 q.codeword == p.codeword and abs(q.n_star - p.n_star) <= w
@@ -265,9 +262,10 @@ class TwoStageSearch:
         return out
 
     # ------------------------------------------------------------------ stage 2
-    def _fine_stage(self, cand_b: NDArray[np.int64], cand_d: NDArray[np.int64]) -> list[Peak]:
-        """Stage 2: exact codeword sums around the coarse candidate cells: blocks ``cand_b``,
-        hypotheses ``cand_d`` (shape ``(C,)`` each).
+    def _fine_stage(self, cand_b: NDArray[np.int64], sets: NDArray[np.int64]) -> list[Peak]:
+        """Stage 2: exact codeword sums around the coarse candidate cells: blocks ``cand_b``
+        (shape ``(C,)``), each with the hypotheses ``sets`` (shape ``(C, H)``, its own first)
+        of which the best by the exact sums is kept.
 
         The sums come from :func:`~hil.estimation.kernels.codeword_sums`, everything between
         them from small compiled kernels (:func:`~hil.estimation.kernels.fine_pick`,
@@ -279,7 +277,7 @@ class TwoStageSearch:
         the same estimates, bit for bit.
         """
         w = self.fine_half
-        pair = np.ascontiguousarray(cand_d[:, None], dtype=np.int64)
+        pair = np.ascontiguousarray(sets, dtype=np.int64)
         centres = np.empty(pair.shape, dtype=np.int64)
         np.add(cand_b[:, None] * self._B, self._c_shift[pair], out=centres)
         a2 = self.exact.sums(centres, pair, w, prune=True)
@@ -292,7 +290,7 @@ class TwoStageSearch:
             sums = self.exact.sums(centre[edges], d0[edges, None], w)
             edges = fine_recentre(a, sums, edges, s_win, i_pk, centre, w, it + 1 < RECENTRE_STEPS)
         n_pk = centre - w + i_pk
-        stat = self._cell_statistic(cand_b, cand_d)
+        stat = self._cell_statistic(cand_b, sets[:, 0])
         peak = s_win[np.arange(cand_b.shape[0]), i_pk]
         mean, thr, hit = self._cfar.test(n_pk, peak, stat, self)
         if hit.size == 0:
@@ -308,14 +306,21 @@ class TwoStageSearch:
         return peaks_of(n_pk[kept], peak, word, ratio, dn, d0[kept], dd, mean[kept], thr[kept])
 
     def _fine_stage_reference(
-        self, cand_b: NDArray[np.int64], cand_d: NDArray[np.int64]
+        self, cand_b: NDArray[np.int64], sets: NDArray[np.int64]
     ) -> list[Peak]:
         """:meth:`_fine_stage` as NumPy expressions (the reference the compiled path is
         tested against)."""
         w = self.fine_half
-        d0 = cand_d.copy()
-        centre = cand_b * self._B + self._c_shift[d0]
-        a = self.exact.sums(centre, d0[:, None], w, prune=True)[:, 0]  # (C, 2w + 1, J)
+        centres = cand_b[:, None] * self._B + self._c_shift[sets]
+        a2 = self.exact.sums(centres, sets, w, prune=True)  # (C, H, 2w + 1, J)
+        # Weighted as stage 1 ranks them (the reverberation band's weights); a hypothesis
+        # pruned whole (−inf) cannot win, even at weight 0.
+        best = a2.max(axis=(2, 3))
+        score = np.where(np.isfinite(best), best * self._hyp_w[sets], -np.inf)
+        pick = np.argmax(score, axis=1)
+        r = np.arange(cand_b.shape[0])
+        d0, centre, a = sets[r, pick], centres[r, pick], a2[r, pick]  # a: (C, 2w + 1, J)
+        cand_d = sets[:, 0]
         # A peak on the window's edge lies outside it (early in the stream the coarse comb
         # is not yet full): move the window onto that edge, a few times at most (later only
         # once: the look-ahead covers one window more; earlier is in the history).

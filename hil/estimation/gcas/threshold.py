@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hil.estimation.detection import noise_moments, parabolic_offsets
-from hil.estimation.kernels import peak_cells, peak_indices
+from hil.estimation.kernels import peak_indices
 from hil.estimation.row_buffer import RowBuffer
 
 #: Noise-floor estimate on every this-many baseband samples (absolute grid).
@@ -109,22 +109,6 @@ def local_maxima(
     s[: max(0, valid_from - first)] = -np.inf
     found: NDArray[np.int64] = peak_indices(s, half, lo - first, stop - first) + first
     return found
-
-
-def local_peak_cells(
-    ring: RowBuffer, lo: int, stop: int, half_rows: int, half_cols: int, origin: int,
-    valid_from: int, leak: NDArray[np.float64],
-) -> tuple[NDArray[np.int64], NDArray[np.int64]]:  # fmt: skip
-    """:func:`local_maxima` of a ring of rows of ``D`` hypotheses: the cells of rows
-    ``lo <= n < stop`` that are maxima over ``±half_rows`` rows and ``±half_cols`` hypotheses
-    and above the ``leak`` of their row's other cells
-    (:func:`~hil.estimation.kernels.peak_cells`), as absolute rows and hypotheses."""
-    first = max(lo - half_rows, origin)
-    last = min(stop + half_rows, ring.next_index)
-    s = np.array(ring.span(first, last), dtype=np.float64)
-    s[: max(0, valid_from - first)] = -np.inf
-    rows, cols = peak_cells(s, half_rows, half_cols, lo - first, stop - first, leak)
-    return rows + first, cols
 
 
 def window_means(
