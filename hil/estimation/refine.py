@@ -118,6 +118,10 @@ KNOWN_HOPS = 3
 #: where the fit puts it (and its speed within the speed span): a detector's time can be a
 #: lobe off beside a stronger echo.
 SAME_ECHO_LOBES = 1.5
+#: How far (hops) from where an echo's ghost's comb peaks a detection at its ghost's speed is
+#: taken for it (:meth:`CoherentRefiner.ghost_of_known`): measured 0.10-0.33 hop after the
+#: boundary beside an expected 0.17 (att, 10 m/s, its ghost at -17.5 m/s).
+GHOST_HOPS = 0.25
 #: Lobe checks after a search (each may move the fit by one grating lobe).
 LOBE_MOVES = 2
 #: ``known`` rows of no other echo.
@@ -294,6 +298,10 @@ class CoherentRefiner:
         self._recent: deque[tuple[int, float, float]] = deque(maxlen=RECENT_FITS)
         #: The latest fit of each echo measured lately (:meth:`_known_hops`).
         self._echoes: list[_EchoFit] = []
+        # A ghost's speed offset, c Δf / (2 f_c) (m/s), and one Doppler cell of a hop (m/s).
+        f_c = 0.5 * float(np.min(schedule.tones_hz) + np.max(schedule.tones_hz))
+        self._ghost_speed = self.c * self.spacing_hz / (2.0 * f_c)
+        self._cell_speed = self.c / (2.0 * f_c * self.hop_len_s)
 
     # ------------------------------------------------------------------ stream
     def reset(self, input_index: int) -> None:
@@ -340,6 +348,24 @@ class CoherentRefiner:
             self._recent.append((hop_index, fit.t_s, fit.speed_mps(self.c)))
             self._remember(fit, hop_index, word, hop_ids, known)
         return fit
+
+    def ghost_of_known(self, t_s: float, alpha: float) -> bool:
+        """Whether a detection at ``t_s`` (s) and time scale ``alpha`` is the ghost of an echo
+        measured lately, where that echo's every tone is read as its neighbour: one tone
+        spacing's speed away from it (within one Doppler resolution cell) and where its comb
+        peaks, ``(M − 1)/2`` hops of the two time scales' drift after one of the echo's
+        boundaries (within :data:`GHOST_HOPS`). Such a detection is refused without a fit; a
+        second echo exactly there is given up."""
+        speed = self.c * (alpha - 1.0) / (alpha + 1.0)
+        for e in self._echoes:
+            if abs(abs(speed - e.speed(self.c)) - self._ghost_speed) > self._cell_speed:
+                continue
+            period = self.hop_len_s / e.alpha
+            drift = 0.5 * (self.m_hops - 1) * (e.alpha / alpha - 1.0)  # hops
+            k = round((t_s - e.t_s) / period - drift)
+            if abs((t_s - e.t_s) / period - drift - k) <= GHOST_HOPS:
+                return True
+        return False
 
     def _remember(
         self, fit: Refinement, hop_index: int, word: _Codeword, hop_ids: NDArray[np.int64],
