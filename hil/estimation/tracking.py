@@ -200,6 +200,18 @@ class Tracker:
             raise ConfigError("hop_s", hop_s, "a finite hop period > 0 s", "pass the schedule's")
         self.hop_s = float(hop_s)
         self.settings = settings if settings is not None else TrackerSettings()
+        self._warm_up()
+
+    def _warm_up(self) -> None:
+        """Run the compiled association once on a made-up estimate, then forget it: the first
+        call in a process loads its machine code from numba's cache (or compiles it, seconds),
+        which must not happen at a live run's first estimate."""
+        self.reset()
+        made_up = Estimate(
+            t_s=0.1, range_m=1.0, speed_mps=0.0, hop_index=0, score=1.0, snr_db=0.0,
+            alpha=1.0, t_tx_s=0.099, codeword=0, receiver="warm-up",
+        )  # fmt: skip
+        self.update([made_up])
         self.reset()
 
     def reset(self) -> None:

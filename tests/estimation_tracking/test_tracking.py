@@ -300,3 +300,22 @@ def test_the_docs_settings_table_gives_the_code_defaults() -> None:
     documented = {name: float(value) for name, value in rows}
     defaults = {f.name: float(f.default) for f in dataclasses.fields(TrackerSettings)}
     assert documented == defaults
+
+
+def test_a_new_tracker_has_its_compiled_association_loaded() -> None:
+    """A live run's first estimate must not wait for numba to load (or compile) the
+    association: building the tracker does it (in a fresh process, where nothing else did)."""
+    import subprocess
+    import sys
+
+    code = (
+        "from hil.estimation import tracking_kernel as k\n"
+        "from hil.estimation.tracking import Tracker\n"
+        "before = len(k.associate.signatures)\n"
+        "Tracker(0.01)\n"
+        "print(before, len(k.associate.signatures))\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=300
+    ).stdout.split()
+    assert out == ["0", "1"]
