@@ -74,6 +74,7 @@ from hil.errors import ConfigError
 from hil.estimation.crlb import Crlb, crlb, rms_bandwidth, rms_duration
 from hil.estimation.refine_kernels import (
     FOUND,
+    NO_LOBE,
     RECENTRE,
     assign_slots,
     candidate_sums,
@@ -473,6 +474,13 @@ class CoherentRefiner:
             if searched is None:
                 return None
             best_t, best_v, outcome, args = searched
+        if outcome == NO_LOBE and known.shape[1]:
+            # Beside another echo the detector's time can be a whole lobe off: its search then
+            # rises to an edge. Start again from the better neighbouring lobe.
+            side = self._better_lobe(args, t0, v0, lobe, known, any_side=True)
+            searched = self._search(word, hop_ids, side, v0, lobe, known) if side else None
+            if searched is not None:
+                best_t, best_v, outcome, args = searched
         for _ in range(LOBE_MOVES if outcome == FOUND else 0):
             # The lobe: the envelope tells a grating lobe from its neighbours by ~1 dB, which
             # a detector's time (noncoherent, beside a stronger echo) can miss; the
@@ -525,10 +533,11 @@ class CoherentRefiner:
 
     def _better_lobe(
         self, args: tuple[Any, ...], t_s: float, speed: float, lobe: float,
-        known: NDArray[np.complex128],
+        known: NDArray[np.complex128], any_side: bool = False,
     ) -> float | None:  # fmt: skip
         """The time (s) one grating lobe before or after ``t_s`` where the likelihood is
-        greater than at ``t_s`` (the greater of the two), or None."""
+        greater than at ``t_s`` (the greater of the two; with ``any_side`` the greater of the
+        two whatever ``t_s``'s), or None."""
         alpha = (self.c + speed) / (self.c - speed)
         t = np.array([t_s - lobe, t_s, t_s + lobe])
         c, model, energy = np.empty(3, np.complex128), np.empty(3), np.empty(3)
@@ -538,7 +547,7 @@ class CoherentRefiner:
         )  # fmt: skip
         power = np.abs(c) ** 2
         side = 0 if power[0] >= power[2] else 2
-        if power[side] > power[1]:
+        if power[side] > power[1] or any_side:
             return float(t[side])
         return None
 
