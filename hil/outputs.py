@@ -21,6 +21,16 @@ from hil.errors import ConfigError
 STDOUT = "-"
 
 
+def _cannot_create(option: str, path: Path, exc: OSError) -> ConfigError:
+    """The refusal of a folder ``option`` names that this user cannot create."""
+    return ConfigError(
+        option,
+        str(path),
+        "a folder this user can create",
+        f"cannot create it ({_why(exc)}): choose a writable place",
+    )
+
+
 def _why(exc: OSError) -> str:
     return exc.strerror or type(exc).__name__
 
@@ -45,12 +55,7 @@ def writable_folder(path: Path, option: str) -> Path:
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise ConfigError(
-            option,
-            str(path),
-            "a folder this user can create",
-            f"cannot create it ({_why(exc)}): choose a writable place",
-        ) from None
+        raise _cannot_create(option, path, exc) from None
     probe = path / f".hil-write-probe-{os.getpid()}"
     try:
         fd = os.open(probe, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o600)
@@ -161,12 +166,7 @@ def claim_output_folder(
         except FileExistsError:
             pass  # made by another process just now: the claim below decides
         except OSError as exc:
-            raise ConfigError(
-                option,
-                str(path),
-                "a folder this user can create",
-                f"cannot create it ({_why(exc)}): choose a writable place",
-            ) from None
+            raise _cannot_create(option, path, exc) from None
     marker = path / CLAIM
     if any(p.name not in may_hold for p in path.iterdir()):
         raise used

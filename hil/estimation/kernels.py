@@ -86,18 +86,6 @@ def _peak_at(s: Any, i: int, half_width: int, known: int) -> bool:
 
 
 @numba.njit(**_JIT)
-def first_possible_peak(s: Any, half_width: int, lo: int, hi: int) -> int:
-    """The first ``i`` in ``[lo, hi)`` that can still become a :func:`peak_indices` peak when
-    the samples from ``hi`` on arrive: finite, greater than every sample in the
-    ``half_width`` before it and not smaller than any known one in the ``half_width`` after;
-    ``hi`` if none can. ``s`` shape ``(>= hi,)`` (only ``s[:hi]`` is read)."""
-    for i in range(lo, hi):
-        if _peak_at(s, i, half_width, hi):
-            return i
-    return hi
-
-
-@numba.njit(**_JIT)
 def peak_indices(s: Any, half_width: int, lo: int, hi: int) -> Any:
     """Indices ``i`` in ``[lo, hi)`` that are the first maximum of ``s`` over ``±half_width``:
     greater than every sample in the ``half_width`` before it and not smaller than any in the

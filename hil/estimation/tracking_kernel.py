@@ -148,11 +148,29 @@ def _distance2(
     accel_var: float,
 ) -> float:
     """Squared Mahalanobis distance of an estimate from track ``k``'s prediction."""
+    _, _, prv, _, y_r, y_v, s_rr, s_vv, det = _innovation(
+        table, k, t_b, z_r, z_v, var_r, var_v, accel_var
+    )
+    return (s_vv * y_r * y_r - 2.0 * prv * y_r * y_v + s_rr * y_v * y_v) / det
+
+
+@numba.njit(cache=True, nogil=True)
+def _innovation(
+    table: Any,
+    k: int,
+    t_b: float,
+    z_r: float,
+    z_v: float,
+    var_r: float,
+    var_v: float,
+    accel_var: float,
+) -> tuple[float, ...]:
+    """Track ``k``'s prediction (:func:`_predict`: range, prr, prv, pvv), the estimate's
+    innovation (range, speed) and its covariance's diagonal and determinant."""
     r_pred, prr, prv, pvv = _predict(table, k, t_b, accel_var)
     y_r, y_v = z_r - r_pred, z_v - table[k, V]
     s_rr, s_vv = prr + var_r, pvv + var_v
-    det = s_rr * s_vv - prv * prv
-    return (s_vv * y_r * y_r - 2.0 * prv * y_r * y_v + s_rr * y_v * y_v) / det
+    return r_pred, prr, prv, pvv, y_r, y_v, s_rr, s_vv, s_rr * s_vv - prv * prv
 
 
 @numba.njit(cache=True, nogil=True)
@@ -167,10 +185,9 @@ def _kalman_update(
     accel_var: float,
 ) -> None:
     """Kalman step of track ``k`` with the estimate (``T_REF`` becomes ``t_b``)."""
-    r_pred, prr, prv, pvv = _predict(table, k, t_b, accel_var)
-    y_r, y_v = z_r - r_pred, z_v - table[k, V]
-    s_rr, s_vv = prr + var_r, pvv + var_v
-    det = s_rr * s_vv - prv * prv
+    r_pred, prr, prv, pvv, y_r, y_v, s_rr, s_vv, det = _innovation(
+        table, k, t_b, z_r, z_v, var_r, var_v, accel_var
+    )
     # Gain K = P S⁻¹ (2×2, S⁻¹ = [[s_vv, −prv], [−prv, s_rr]] / det).
     k_rr = (prr * s_vv - prv * prv) / det
     k_rv = (prv * s_rr - prr * prv) / det

@@ -9,7 +9,7 @@ from scipy import ndimage
 
 from hil.estimation.gcas import NO_SAMPLE, GcasReceiver
 from hil.estimation.gcas.search_two_stage import TwoStageSearch
-from hil.estimation.kernels import first_possible_peak, peak_indices
+from hil.estimation.kernels import first_possible_cells, peak_cells, peak_indices
 
 from .conftest import FS, C, att_schedule, echo_samples
 
@@ -42,28 +42,74 @@ def test_peak_indices_of_a_window_are_those_of_the_whole() -> None:
 VALUES = st.sampled_from([-np.inf, 0.0, 1.0, 2.0, 3.0, 2.5])
 
 
+def _cells_reference(s: np.ndarray, hr: int, hc: int, leak: np.ndarray) -> list[tuple[int, int]]:
+    """:func:`peak_cells` written out: first maxima over ±hr rows × ±hc columns (row-major
+    ties), above the leak of every other cell of the row."""
+    n, d = s.shape
+    out = []
+    for i in range(n):
+        for j in range(d):
+            v = s[i, j]
+            if not v > -np.inf:
+                continue
+            window = [
+                (a, b) for a in range(max(0, i - hr), min(n, i + hr + 1))
+                for b in range(max(0, j - hc), min(d, j + hc + 1))
+            ]  # fmt: skip
+            earlier = all(s[a, b] < v for a, b in window if (a, b) < (i, j))
+            later = all(s[a, b] <= v for a, b in window if (a, b) > (i, j))
+            with np.errstate(invalid="ignore"):  # −inf · 0 leaks nothing (NaN compares false)
+                above = not any(s[i, b] * leak[abs(j - b)] >= v for b in range(d))
+            if earlier and later and above:
+                out.append((i, j))
+    return out
+
+
+CELL_ROWS = st.lists(st.lists(VALUES, min_size=4, max_size=4), min_size=1, max_size=14)
+
+
+@settings(max_examples=200, deadline=None)
+@given(CELL_ROWS, st.integers(1, 3), st.integers(1, 3), st.sampled_from([0.0, 0.5]))
+def test_peak_cells_equal_the_written_out_rule(
+    rows: list[list[float]], hr: int, hc: int, far_leak: float
+) -> None:
+    s = np.array(rows)
+    leak = np.array([0.0, 0.0, far_leak, far_leak])
+    got_rows, got_cols = peak_cells(s, hr, hc, 0, s.shape[0], leak)
+    assert list(zip(got_rows.tolist(), got_cols.tolist(), strict=True)) == _cells_reference(
+        s, hr, hc, leak
+    )
+
+
+def test_peak_cells_of_one_column_are_peak_indices() -> None:
+    s = np.random.default_rng(5).normal(size=300)
+    rows, cols = peak_cells(s[:, None], 6, 1, 0, 300, np.zeros(1))
+    assert rows.tolist() == peak_indices(s, 6, 0, 300).tolist() and not cols.any()
+
+
 @settings(max_examples=300, deadline=None)
-@given(
-    st.lists(VALUES, min_size=1, max_size=40),
-    st.lists(VALUES, max_size=12),
-    st.integers(1, 5),
-    st.data(),
-)
-def test_first_possible_peak_is_the_earliest_peak_any_continuation_can_make(
-    known: list[float], later: list[float], h: int, data: st.DataObject
+@given(CELL_ROWS, st.lists(st.lists(VALUES, min_size=4, max_size=4), max_size=6),
+       st.integers(1, 3), st.integers(1, 3), st.data())  # fmt: skip
+def test_first_possible_cells_are_the_earliest_any_continuation_can_make(
+    known: list[list[float]], later: list[list[float]], hr: int, hc: int, data: st.DataObject
 ) -> None:
     s = np.array(known)
     hi = s.shape[0]
     lo = data.draw(st.integers(0, hi))
-    first = first_possible_peak(s, h, lo, hi)
+    leak = np.array([0.0, 0.0, 0.5, 0.5])
+    first, mask = first_possible_cells(s, hr, hc, lo, hi, leak)
     assert lo <= first <= hi
-    # No continuation makes an earlier block a peak ...
-    ext = np.concatenate((s, later))
-    assert all(p >= first for p in peak_indices(ext, h, lo, hi).tolist())
-    # ... and one that only falls makes `first` a peak (when it is a known block).
+    # No continuation makes a cell of an earlier row (or outside the mask) a peak ...
+    ext = np.concatenate((s, np.array(later).reshape(-1, 4)))
+    rows, cols = peak_cells(ext, hr, hc, lo, hi, leak)
+    assert all(r > first or (r == first and mask[c]) for r, c in zip(rows, cols, strict=True))
+    # ... and one that only falls makes the masked cells of `first` peaks (a known row).
     if first < hi:
-        low = np.concatenate((s, np.full(h, -np.inf)))
-        assert first in peak_indices(low, h, lo, hi).tolist()
+        low = np.concatenate((s, np.full((hr, 4), -np.inf)))
+        rows, cols = peak_cells(low, hr, hc, lo, hi, leak)
+        assert {(first, int(c)) for c in np.flatnonzero(mask)} <= set(
+            zip(rows.tolist(), cols.tolist(), strict=True)
+        )
 
 
 def two_stage(rx: GcasReceiver) -> TwoStageSearch:

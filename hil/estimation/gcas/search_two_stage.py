@@ -3,15 +3,17 @@ search at a fraction of its cost.
 
 Stage 1 (:class:`~hil.estimation.coarse_search.CoarseSearch`) runs the unit correlators and
 the comb on blocks of ``B`` baseband samples (windows of ``Q_d = round(L_d/B)`` blocks, the
-comb's lags rounded per term for a shortlist of hypotheses) and gives the candidate blocks
-(local maxima of the coarse statistic over ``±N_min/2``), ``d̂``, a runner-up hypothesis more
-than one step from ``d̂`` and the noise floor. Stage 2
-(:class:`~hil.estimation.gcas.exact.ExactHistory`, straight from the baseband history,
-``w·|u|²`` cached per sample) evaluates the exact sums ``A`` within ``±(W + 6)`` samples of each
-candidate for ``d̂`` and the runner-up (only the samples that can hold a maximum), keeps the
-one with the larger weighted maximum (the group statistic cannot tell a hypothesis from its
-ghost, every tone seen as its neighbour at another speed; the codeword sums can), moves the
-window onto a peak at its edge, and evaluates ``d ± 1`` at the peak sample for the Doppler
+comb's lags rounded per term for a shortlist of hypotheses) and gives, per block, the comb of
+each shortlisted hypothesis, ``d̂`` and the noise floor. Its candidate cells (block,
+hypothesis) and the hypotheses compared for each come from a rule
+(:mod:`hil.estimation.gcas.candidates`): every echo's cell, or the strongest per hop with
+its block's runner-up. Stage 2 (:class:`~hil.estimation.gcas.exact.ExactHistory`, straight
+from the baseband history, ``w·|u|²`` cached per sample) evaluates the exact sums ``A``
+within ``±(W + 6)`` samples of each candidate for its hypotheses (only the samples that can
+hold a maximum), keeps the one with the larger weighted maximum (the group statistic cannot
+tell a hypothesis from its ghost, every tone seen as its neighbour at another speed; the
+codeword sums can), moves the window onto a peak at its edge, drops a peak that repeats an
+earlier one, and evaluates ``d ± 1`` at the peak sample for the Doppler
 interpolation. The hot loops of both stages are compiled (:mod:`hil.estimation.kernels`).
 """
 
