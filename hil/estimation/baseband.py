@@ -41,7 +41,7 @@ import math
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import signal
+from scipy import special
 
 from hil.errors import ConfigError
 from hil.estimation.kernels import fir_decimate
@@ -70,11 +70,48 @@ def design_lowpass(
             "raise the sample rate or lower the decimation",
         )
     width = (stopband_hz - passband_hz) / (fs_hz / 2)
-    numtaps, beta = signal.kaiserord(attenuation_db, width)
+    numtaps, beta = kaiser_order(attenuation_db, width)
     numtaps |= 1  # odd: an integer group delay when T − 1 is even
     cutoff = 0.5 * (passband_hz + stopband_hz)
-    taps = signal.firwin(numtaps, cutoff, window=("kaiser", beta), fs=fs_hz)
-    return np.asarray(taps, dtype=np.float64)
+    return kaiser_lowpass(numtaps, cutoff / (fs_hz / 2), beta)
+
+
+def kaiser_order(attenuation_db: float, width: float) -> tuple[int, float]:
+    """Taps and Kaiser ``β`` of a lowpass with ``attenuation_db`` (dB, at least 8) of stopband
+    attenuation and a transition ``width`` (fraction of Nyquist): Kaiser's formulas as in
+    Oppenheim & Schafer, the numbers ``scipy.signal.kaiserord`` gives (written here so a
+    receiver is built without importing ``scipy.signal``, whose import alone takes about a
+    second)."""
+    a = abs(attenuation_db)
+    if a < 8:
+        raise ConfigError("attenuation_db", attenuation_db, "at least 8 dB (Kaiser's formula)")
+    if a > 50:
+        beta = 0.1102 * (a - 8.7)
+    elif a > 21:
+        beta = 0.5842 * (a - 21) ** 0.4 + 0.07886 * (a - 21)
+    else:
+        beta = 0.0
+    return int(math.ceil((a - 7.95) / 2.285 / (np.pi * width) + 1)), beta
+
+
+def kaiser_lowpass(numtaps: int, cutoff: float, beta: float) -> NDArray[np.float64]:
+    """Windowed-sinc lowpass taps (shape ``(numtaps,)``, unit gain at DC) with its cutoff at
+    ``cutoff`` (fraction of Nyquist) and a Kaiser window of ``β``: the taps
+    ``scipy.signal.firwin(numtaps, cutoff, window=("kaiser", beta))`` gives, bit for bit
+    (same operations in the same order; tested against it)."""
+    alpha = 0.5 * (numtaps - 1)
+    m = np.arange(0, numtaps, dtype=np.float64) - alpha
+    y = np.pi * np.where(cutoff * m != 0, cutoff * m, np.finfo(np.float64).eps)
+    h = cutoff * (np.sin(y) / y)
+    if numtaps <= 1:
+        return h / np.sum(h)
+    n = np.arange(0, numtaps, dtype=np.float64)
+    half = (numtaps - 1) / 2.0
+    h *= special.i0(beta * np.sqrt(1 - ((n - half) / half) ** 2.0)) / special.i0(
+        np.asarray(beta, dtype=np.float64)
+    )
+    h /= np.sum(h * np.cos(np.pi * m * 0.0))
+    return h
 
 
 class ComplexBaseband:

@@ -23,7 +23,7 @@ import math
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
+from scipy import special
 
 from hil.errors import ConfigError
 
@@ -59,10 +59,10 @@ def lambda_for_pfa(
         raise ConfigError("pfa", pfa, "in (0, 1)", "e.g. 1e-3 false alarms per hop")
     p1 = min(pfa / (n_codewords * cells_per_update), 0.5)
     mean, std = noise_moments(m_hops, coherent)
-    if coherent:
-        thr = float(stats.expon.isf(p1, scale=m_hops))
-    else:
-        thr = float(stats.gamma.isf(p1, a=m_hops))
+    # Inverse survival functions of the statistic under noise: exponential of mean M
+    # (coherent), gamma of shape M (noncoherent) (scipy.stats' numbers; scipy.special keeps
+    # scipy.stats' import, about a second, out of a receiver's start-up).
+    thr = -math.log(p1) * m_hops if coherent else float(special.gammainccinv(m_hops, p1))
     return (thr - mean) / std
 
 

@@ -110,6 +110,12 @@ WARM_HALF_SPANS = 0.125
 #: Quadratic-fit passes from a warm start (its grid's steps are already a quarter of the
 #: full search's).
 WARM_FIT_PASSES = 3
+#: A search without a warm start over more than SUB_HOPS hops first searches the last
+#: SUB_HOPS of them (their likelihood's main lobe is wider in speed: a grid of fewer points
+#: over the speed span finds it), then fits all ``M`` hops from there as from a warm start;
+#: where that fit's maximum is on its small grid's edge, the full search over all ``M`` hops
+#: follows. The search's cost then grows with ``M`` only through the final fit.
+SUB_HOPS = 10
 #: Recent fits kept for that (several echoes at once each keep theirs).
 RECENT_FITS = 16
 #: Another echo's latest fit is taken out of a detection's input while it is at most this
@@ -121,7 +127,10 @@ KNOWN_HOPS = 3
 SAME_ECHO_LOBES = 1.5
 #: How far (hops) from where an echo's ghost's comb peaks a detection at its ghost's speed is
 #: taken for it (:meth:`CoherentRefiner.ghost_of_known`): measured 0.10-0.33 hop after the
-#: boundary beside an expected 0.17 (att, 10 m/s, its ghost at -17.5 m/s).
+#: boundary beside an expected 0.17 (att, 10 m/s, its ghost at -17.5 m/s). Widened by half
+#: of what the ``M`` terms' spread of offsets exceeds half a hop: past that the comb's terms
+#: that align with the echo's hops change along the comb and its ghost peak spreads (measured
+#: 0.02-0.50 hop at M = 15, over ±0.3 hop at M = 22, anywhere in the hop at M = 29).
 GHOST_HOPS = 0.25
 #: Lobe checks after a search (each may move the fit by one grating lobe).
 LOBE_MOVES = 2
@@ -178,6 +187,9 @@ class Refinement:
     tone_coherence: Coherence
     run_coherence: Coherence
     found: bool
+    #: The fitted complex amplitude ``β = 2C/E_s`` (the input is ``Re(β s)`` for the model
+    #: ``s`` of the codeword's first code period); 0 where the windows are empty.
+    amplitude: complex = 0j
 
     def speed_mps(self, sound_speed_mps: float) -> float:
         """The fit's radial speed, m/s (closing positive)."""
@@ -264,6 +276,11 @@ class CoherentRefiner:
         v_res = self.c / (2.0 * float(np.max(schedule.tones_hz)) * m_hops * schedule.hop_s)
         half_steps = int(math.ceil(self.speed_span_mps / (0.5 * v_res)))
         self.speed_points = max(SPEED_POINTS, 2 * half_steps + 1)
+        self._v_res = v_res
+        #: Hops of the first search (:data:`SUB_HOPS`; all ``M`` where ``M`` is not more).
+        self.sub_hops = min(SUB_HOPS, self.m_hops)
+        half_sub = int(math.ceil(self.speed_span_mps * self.sub_hops / (0.5 * v_res * m_hops)))
+        self.sub_speed_points = max(SPEED_POINTS, 2 * half_sub + 1)
         tones = np.unique(np.asarray(schedule.tones_hz, dtype=np.float64))
         self.spacing_hz = float(np.min(np.diff(tones))) if tones.size > 1 else 1 / schedule.hop_s
         self.n_tones = int(np.asarray(schedule.tones_hz).shape[0])
@@ -296,6 +313,7 @@ class CoherentRefiner:
         self._used = np.zeros(n_slots, dtype=np.int64)
         self._clock = 0
         self._codewords: dict[int, _Codeword] = {}
+        self._sub_words: dict[int, _Codeword] = {}
         self._recent: deque[tuple[int, float, float]] = deque(maxlen=RECENT_FITS)
         #: The latest fit of each echo measured lately (:meth:`_known_hops`).
         self._echoes: list[_EchoFit] = []
@@ -347,7 +365,7 @@ class CoherentRefiner:
         fit = self._fit_near(word, hop_ids, t_s, speed0, lobe, hop_index, known)
         if fit is not None and fit.is_echo(self.echo_test):
             self._recent.append((hop_index, fit.t_s, fit.speed_mps(self.c)))
-            self._remember(fit, hop_index, word, hop_ids, known)
+            self._remember(fit, hop_index)
         return fit
 
     def ghost_of_known(self, t_s: float, alpha: float) -> bool:
@@ -364,28 +382,17 @@ class CoherentRefiner:
             period = self.hop_len_s / e.alpha
             drift = 0.5 * (self.m_hops - 1) * (e.alpha / alpha - 1.0)  # hops
             k = round((t_s - e.t_s) / period - drift)
-            if abs((t_s - e.t_s) / period - drift - k) <= GHOST_HOPS:
+            spread = 2.0 * abs(drift)  # hops between the first and the last term's offsets
+            if abs((t_s - e.t_s) / period - drift - k) <= GHOST_HOPS + max(0.0, spread - 0.5) / 2:
                 return True
         return False
 
-    def _remember(
-        self, fit: Refinement, hop_index: int, word: _Codeword, hop_ids: NDArray[np.int64],
-        known: NDArray[np.complex128],
-    ) -> None:  # fmt: skip
+    def _remember(self, fit: Refinement, hop_index: int) -> None:
         """Keep ``fit`` as its echo's latest (with its fitted amplitude ``β = 2C/E_s``),
         replacing that echo's earlier fit and forgetting fits :data:`KNOWN_HOPS` hops old."""
-        slots = self._slots(hop_ids, word, fit.t_s, fit.alpha)
-        if slots is None:
+        if fit.amplitude == 0:
             return
-        c, model, energy = np.empty(1, np.complex128), np.empty(1), np.empty(1)
-        args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
-        candidate_sums(
-            *args, np.array([fit.t_s]), np.array([fit.alpha]), c, model, energy,
-            np.empty((1, 0), np.complex128), known,
-        )  # fmt: skip
-        if not model[0] > 0:
-            return
-        new = _EchoFit(hop_index, fit.t_s, fit.alpha, 2.0 * complex(c[0]) / float(model[0]))
+        new = _EchoFit(hop_index, fit.t_s, fit.alpha, fit.amplitude)
         oldest = fit.t_s - KNOWN_HOPS * self.hop_len_s
         self._echoes = [
             e for e in self._echoes
@@ -470,7 +477,7 @@ class CoherentRefiner:
                 WARM_HALF_SPANS * self.speed_span_mps, 3, 3, WARM_FIT_PASSES,
             )  # fmt: skip
         if outcome != FOUND:
-            searched = self._search(word, hop_ids, t0, v0, lobe, known)
+            searched = self._search_from_fewer_hops(word, hop_ids, t0, v0, lobe, known)
             if searched is None:
                 return None
             best_t, best_v, outcome, args = searched
@@ -488,7 +495,10 @@ class CoherentRefiner:
             moved = self._better_lobe(args, best_t, best_v, lobe, known)
             if moved is None:
                 break
-            searched = self._search(word, hop_ids, moved, best_v, lobe, known)
+            narrow = self._narrow_grid(lobe)
+            searched = self._search(word, hop_ids, moved, best_v, lobe, known, narrow)
+            if searched is not None and searched[2] != FOUND:
+                searched = self._search(word, hop_ids, moved, best_v, lobe, known)
             if searched is None:
                 return None
             best_t, best_v, outcome, args = searched
@@ -497,7 +507,7 @@ class CoherentRefiner:
         if outcome != FOUND:
             best_t, best_v = t0, v0
         a_best = (self.c + best_v) / (self.c - best_v)
-        en0, coherence, tone_coherence, run_coherence = _fit_quality(
+        en0, coherence, tone_coherence, run_coherence, amplitude = _fit_quality(
             args, known, word, self.n_tones, best_t, a_best
         )
         en0_db = 10.0 * math.log10(en0) if en0 > 0 else -math.inf
@@ -506,16 +516,20 @@ class CoherentRefiner:
         )
         return Refinement(
             best_t, a_best, en0_db, bound, coherence, tone_coherence, run_coherence,
-            outcome == FOUND,
+            outcome == FOUND, amplitude,
         )  # fmt: skip
 
     def _search(
         self, word: _Codeword, hop_ids: NDArray[np.int64], t0: float, v0: float, lobe: float,
-        known: NDArray[np.complex128],
+        known: NDArray[np.complex128], grid: tuple[float, float, int, int] | None = None,
     ) -> tuple[float, float, int, tuple[Any, ...]] | None:  # fmt: skip
-        """The full search around ``(t0, v0)``, re-centred up to :data:`MAX_RECENTRES`
-        times: the best point, the outcome and the kernels' arguments of its tables; None
-        where the input does not cover the hops."""
+        """The search around ``(t0, v0)`` over the hops ``hop_ids`` of ``word`` on ``grid``
+        (``(half_t, half_v, n_t, n_v)``: ±s, ±m/s, points; default the full search's ±½ lobe,
+        ± the speed span, :data:`TIME_POINTS` and :attr:`speed_points`), re-centred up to
+        :data:`MAX_RECENTRES` times: the best point, the outcome and the kernels' arguments
+        of its tables; None where the input does not cover the hops."""
+        if grid is None:
+            grid = (0.5 * lobe, self.speed_span_mps, TIME_POINTS, self.speed_points)
         best_t, best_v, outcome = t0, v0, RECENTRE
         args: tuple[Any, ...] = ()
         for _ in range(MAX_RECENTRES + 1):
@@ -524,12 +538,49 @@ class CoherentRefiner:
                 return None
             args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
             best_t, best_v, outcome = maximise(
-                *args, known, self.c, best_t, best_v, 0.5 * lobe, self.speed_span_mps,
-                TIME_POINTS, self.speed_points, FIT_PASSES,
-            )  # fmt: skip
+                *args, known, self.c, best_t, best_v, *grid, FIT_PASSES
+            )
             if outcome != RECENTRE:
                 break
         return best_t, best_v, outcome, args
+
+    def _search_from_fewer_hops(
+        self, word: _Codeword, hop_ids: NDArray[np.int64], t0: float, v0: float, lobe: float,
+        known: NDArray[np.complex128],
+    ) -> tuple[float, float, int, tuple[Any, ...]] | None:  # fmt: skip
+        """:meth:`_search` by way of the last :attr:`sub_hops` hops (:data:`SUB_HOPS`): their
+        search's maximum is the centre of a search of all ``M`` hops over the fewer hops'
+        main lobe (:meth:`_narrow_grid`); the full search where either finds no maximum
+        inside (NO_LOBE where the fewer hops find none within ±½ lobe). None where the input
+        does not cover the hops."""
+        if self.sub_hops == self.m_hops:
+            return self._search(word, hop_ids, t0, v0, lobe, known)
+        sub = self._sub_word(hop_ids[-1])
+        sub_grid = (0.5 * lobe, self.speed_span_mps, TIME_POINTS, self.sub_speed_points)
+        first = self._search(sub, hop_ids[-self.sub_hops :], t0, v0, lobe, known, sub_grid)
+        if first is None:
+            return None
+        t1, v1, outcome, _ = first
+        if outcome == FOUND:
+            searched = self._search(word, hop_ids, t1, v1, lobe, known, self._narrow_grid(lobe))
+            if searched is None or searched[2] == FOUND:
+                return searched
+        elif outcome == NO_LOBE:
+            # No main lobe within ±½ lobe of the detection over the fewer hops: the caller's
+            # NO_LOBE rules apply (the lobe check beside another echo), on all M hops' tables.
+            slots = self._slots(hop_ids, word, t0, (self.c + v0) / (self.c - v0))
+            if slots is None:
+                return None
+            return t0, v0, NO_LOBE, (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
+        return self._search(word, hop_ids, t0, v0, lobe, known)
+
+    def _narrow_grid(self, lobe: float) -> tuple[float, float, int, int]:
+        """A grid of all ``M`` hops around a point already near their maximum (the fewer
+        hops' maximum, or a neighbouring grating lobe's): ±⅛ grating lobe in 5 points, and
+        ±½ of the fewer hops' speed resolution in steps of about half the ``M`` hops'."""
+        n_v = 2 * int(math.ceil(0.5 * self.m_hops / self.sub_hops)) + 3
+        half_v = 0.5 * self._v_res * self.m_hops / self.sub_hops
+        return (0.125 * lobe, half_v, 5, n_v)
 
     def _better_lobe(
         self, args: tuple[Any, ...], t_s: float, speed: float, lobe: float,
@@ -624,6 +675,15 @@ class CoherentRefiner:
         )  # fmt: skip
         return slots if covered else None
 
+    def _sub_word(self, hop_index: int) -> _Codeword:
+        """The last :attr:`sub_hops` hops of :meth:`_codeword`'s (the first search's)."""
+        key = int(hop_index) % self.schedule.period_hops
+        word = self._sub_words.get(key)
+        if word is None:
+            word = self._codeword(key).last(self.sub_hops)
+            self._sub_words[key] = word
+        return word
+
     def _codeword(self, hop_index: int) -> _Codeword:
         """The ``M`` hops ending with ``hop_index`` relative to their end boundary, kept per
         codeword: made from the first code period (the same hops a period later differ by a
@@ -653,6 +713,20 @@ class _Codeword:
     f0: float
     tones: NDArray[np.int64]  # each hop's tone index in the schedule, shape (M,)
 
+    def last(self, n: int) -> _Codeword:
+        """The last ``n`` hops of this codeword, for a search over fewer hops (the window's
+        bandwidth, duration and mean frequency are the whole codeword's: a search does not
+        use them)."""
+        k, f, dt_lo, dt_hi, amp2 = self.hops
+        hops = (
+            k[-n:].copy(),
+            f[-n:].copy(),
+            dt_lo[-n:].copy(),
+            dt_hi[-n:].copy(),
+            amp2[-n:].copy(),
+        )
+        return _Codeword(hops, self.b_rms, self.t_rms, self.f0, self.tones[-n:].copy())
+
     @classmethod
     def of(cls, schedule: HopSchedule, hop_index: int, m_hops: int, fs_hz: float) -> _Codeword:
         hops = schedule.hops(hop_index - m_hops + 1, m_hops)
@@ -676,10 +750,10 @@ def _fit_quality(
     n_tones: int,
     t_rx: float,
     alpha: float,
-) -> tuple[float, Coherence, Coherence, Coherence]:
-    """E/N0 (linear) of the echo at a candidate and its coherence across all hops, within
-    each tone and over runs of consecutive hops (:func:`~hil.estimation.refine_kernels.
-    fit_quality`).
+) -> tuple[float, Coherence, Coherence, Coherence, complex]:
+    """E/N0 (linear) of the echo at a candidate, its coherence across all hops, within
+    each tone and over runs of consecutive hops, and its fitted amplitude ``β = 2C/E_s``
+    (:func:`~hil.estimation.refine_kernels.fit_quality`).
 
     ``Â = 2|C|/E_s``, the noise variance ``σ²`` what the echo leaves of the windows' energy,
     ``E/N0 = Â² N / (4 σ²)`` (module docstring). Coherence ``ρ = |Σ_i H_i|² / (M Σ_i |H_i|²)``:
@@ -696,7 +770,7 @@ def _fit_quality(
     :data:`~hil.estimation.refine_kernels.RUN_HOPS` consecutive hops (the same ratio summed
     over every run, expected ``(R s + 1) / (R (s + 1))``) holds up to about 7 m/s² on ``att``.
     """
-    en0, rho, expected, rho_tone, expected_tone, rho_run, expected_run = fit_quality(
+    en0, rho, expected, rho_tone, expected_tone, rho_run, expected_run, c, es = fit_quality(
         *args, known, word.tones, n_tones, t_rx, alpha
     )
     return (
@@ -704,4 +778,5 @@ def _fit_quality(
         Coherence(rho, expected),
         Coherence(rho_tone, expected_tone),
         Coherence(rho_run, expected_run),
+        2.0 * complex(c) / es if es > 0 else 0j,
     )

@@ -353,11 +353,12 @@ def fit_quality(
     prefix: Any, energy: Any, first: Any, tail: Any, alpha0: Any, centre: Any, slots: Any,
     k: Any, f: Any, dt_lo: Any, dt_hi: Any, amp2: Any, fs: float, hop_s: float,
     known: Any, tones: Any, n_tones: int, t_rx: float, alpha: float,
-) -> tuple[float, float, float, float, float, float, float]:  # fmt: skip
-    """``(E/N0, ρ, E[ρ], ρ_tone, E[ρ_tone], ρ_run, E[ρ_run])`` of one candidate
-    (:func:`hil.estimation.refine._fit_quality` states them; ``known`` as
-    :func:`candidate_sums`); ``tones`` each hop's tone index (shape ``(M,)``, below
-    ``n_tones``). E/N0 is ``inf`` where the windows hold no noise."""
+) -> tuple[float, float, float, float, float, float, float, complex, float]:  # fmt: skip
+    """``(E/N0, ρ, E[ρ], ρ_tone, E[ρ_tone], ρ_run, E[ρ_run], C, E_s)`` of one candidate
+    (:func:`hil.estimation.refine._fit_quality` states them; ``C`` and ``E_s = Σ a_i² N_i``
+    as :func:`candidate_sums`; ``known`` as :func:`candidate_sums`); ``tones`` each hop's
+    tone index (shape ``(M,)``, below ``n_tones``). E/N0 is ``inf`` where the windows hold no
+    noise."""
     m_hops = slots.shape[0]
     n_mom = prefix.shape[3]
     lo_sums = np.empty(n_mom, dtype=np.complex128)
@@ -374,7 +375,7 @@ def fit_quality(
     rho = mag2 / (m_hops * spread) if spread > 0.0 else 0.0
     noise = (signal - 2.0 * mag2 / es) / es  # es = Σ a_i² N_i: the windows' samples
     if not noise > 0.0:
-        return math.inf, rho, 1.0, 1.0, 1.0, 1.0, 1.0
+        return math.inf, rho, 1.0, 1.0, 1.0, 1.0, 1.0, c, es
     s_hop = max(spread / (es * noise) - 1.0, 0.0)
     expected = (m_hops * s_hop + 1.0) / (m_hops * (s_hop + 1.0))
     sk = np.zeros(n_tones, dtype=np.complex128)
@@ -415,5 +416,5 @@ def fit_quality(
     rho_run = s_num / s_den if s_den > 0.0 else 0.0
     return (
         en0, rho, expected, num / den if den > 0.0 else 0.0, e_num / e_den, rho_run,
-        e_snum / e_sden,
+        e_snum / e_sden, c, es,
     )  # fmt: skip

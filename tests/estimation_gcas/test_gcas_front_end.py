@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import itertools
+import math
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hil.estimation.baseband import ComplexBaseband
+from hil.errors import ConfigError
+from hil.estimation.baseband import ComplexBaseband, kaiser_lowpass, kaiser_order
 from hil.estimation.unit_correlators import UnitCorrelatorBank
 
 
@@ -26,6 +29,31 @@ def test_baseband_tone_has_the_envelope_and_time_of_the_input() -> None:
     t = bb.time_of(k)
     expected = 0.5 * np.exp(1j * (2 * np.pi * (f - fc) * t + 0.3))
     assert np.max(np.abs(y[k] - expected)) < 2e-3  # passband ripple and stop band < -54 dB
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    attenuation=st.floats(8.0, 120.0),
+    width=st.floats(0.005, 0.5),
+    cutoff=st.floats(0.02, 0.98),
+)
+def test_the_kaiser_design_is_scipy_signals_bit_for_bit(
+    attenuation: float, width: float, cutoff: float
+) -> None:
+    # The receiver designs its lowpass without importing scipy.signal (a second of start-up):
+    # the same numbers as kaiserord and firwin, to the last bit.
+    from scipy import signal
+
+    numtaps, beta = kaiser_order(attenuation, width)
+    assert (numtaps, beta) == signal.kaiserord(attenuation, width)
+    numtaps |= 1
+    taps = kaiser_lowpass(numtaps, cutoff, beta)
+    assert np.array_equal(taps, signal.firwin(numtaps, cutoff, window=("kaiser", beta)))
+
+
+def test_a_kaiser_design_below_8_db_is_refused_naming_the_attenuation() -> None:
+    with pytest.raises(ConfigError, match=r"attenuation_db = 5\.0.*at least 8 dB"):
+        kaiser_order(5.0, 0.1)
 
 
 def test_baseband_rejects_aliases() -> None:
@@ -90,3 +118,29 @@ def test_unit_correlators_chunks_equal_whole_bitwise(cuts: list[int]) -> None:
     bank = UnitCorrelatorBank(8000.0, nu, lengths, cell=128, anchor=512)
     parts = np.concatenate([bank.process(c) for c in _chunks(x, cuts)])
     assert np.array_equal(parts, whole)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    pfa=st.floats(1e-9, 0.9),
+    m_hops=st.integers(1, 60),
+    n_codewords=st.integers(1, 40),
+    coherent=st.booleans(),
+)
+def test_the_threshold_is_scipy_stats_bit_for_bit(
+    pfa: float, m_hops: int, n_codewords: int, coherent: bool
+) -> None:
+    # lambda_for_pfa inverts the noise statistic with scipy.special (scipy.stats would add a
+    # second of start-up): the numbers scipy.stats' exponential and gamma give.
+    from scipy import stats
+
+    from hil.estimation.detection import CELLS_PER_UPDATE, lambda_for_pfa
+
+    p1 = min(pfa / (n_codewords * CELLS_PER_UPDATE), 0.5)
+    if coherent:
+        thr = float(stats.expon.isf(p1, scale=m_hops))
+        expected = (thr - m_hops) / m_hops
+    else:
+        thr = float(stats.gamma.isf(p1, a=m_hops))
+        expected = (thr - m_hops) / math.sqrt(m_hops)
+    assert lambda_for_pfa(pfa, m_hops, n_codewords, coherent) == expected
