@@ -227,3 +227,26 @@ def test_candidates_of_two_shapes_are_refused() -> None:
     refiner.push(echo_samples(schedule, R0, V0, 0.3, snr_db=0.0, seed=1), 0)
     with pytest.raises(ConfigError, match="alphas"):
         refiner.correlation(0.25, 1.016, 20, np.zeros(3), np.ones(2))
+
+
+@pytest.mark.parametrize("snr_db", [-10.0, 0.0])
+def test_a_long_window_searched_through_fewer_hops_finds_the_full_searchs_maxima(
+    snr_db: float, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # M = 29: a detection without a warm start searches the last SUB_HOPS hops, then all M
+    # hops narrowly around that maximum. The full search over all M hops (SUB_HOPS >= M)
+    # must find the same echoes at the same maxima: the same hops, ranges within 1 mm and
+    # speeds within 5 mm/s (a quadratic fit started from another grid point).
+    import hil.estimation.refine as refine
+
+    schedule = att_schedule()
+    x = echo_samples(schedule, R0, V0, 0.8, snr_db=snr_db, seed=11)
+    fewer = run_blocks(make_gcas(schedule, m_hops=29), x)
+    monkeypatch.setattr(refine, "SUB_HOPS", 1000)
+    full = run_blocks(make_gcas(schedule, m_hops=29), x)
+    assert len(fewer) >= 40
+    assert [e.hop_index for e in fewer] == [e.hop_index for e in full]
+    assert max(abs(a.range_m - b.range_m) for a, b in zip(fewer, full, strict=True)) < 1e-3
+    assert max(abs(a.speed_mps - b.speed_mps) for a, b in zip(fewer, full, strict=True)) < 5e-3
+    err = [e.range_m - true_range(R0, V0, e.t_tx_s, e.t_s) for e in fewer]
+    assert np.sqrt(np.mean(np.square(err))) < (0.02 if snr_db < 0 else 0.005)
