@@ -28,6 +28,7 @@ never holds up the reader.
 from __future__ import annotations
 
 import contextlib
+import math
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
@@ -319,6 +320,8 @@ class Board:
         self._clock: Clock = virtual_time or clock or MonotonicClock()
         self._virtual = virtual_time
         self._detach_service: Callable[[], None] | None = None
+        #: The sample index wait_for_samples waits for on virtual time (see _quiet_until_ns).
+        self._awaited_index: int | None = None
         self.ring_seconds = ring_seconds
         self.keepalive_ms = keepalive_ms
         self.reconnect_policy = reconnect if reconnect is not None else ReconnectPolicy()
@@ -392,7 +395,7 @@ class Board:
         self._thread_error = None
         cobs.warm_up()  # not inside the first ADC frame
         if self._virtual is not None:
-            self._detach_service = self._virtual.attach(self._service)
+            self._detach_service = self._virtual.attach(self._service, self._quiet_until_ns)
         try:
             self._handshake(self._open_transport(first=True))
         except BaseException:
@@ -441,6 +444,26 @@ class Board:
             self._keepalive_if_due()
         except TransportError as error:
             self._link_lost(str(error))
+
+    def _quiet_until_ns(self) -> int | None:
+        """Virtual time (ns) before which :meth:`_service` may be skipped, or None (every
+        tick). Only while :meth:`wait_for_samples` waits on a link that says how long its
+        device has nothing but samples below the awaited index to send (the simulated
+        board's ``quiet_until_ns``): the skipped ticks' samples then arrive, the same, at
+        the next service, before the wait can end. A keepalive due, DAC samples to send
+        within credit, or frames not yet written end the quiet."""
+        transport, awaited = self._transport, self._awaited_index
+        quiet = getattr(transport, "quiet_until_ns", None)
+        if awaited is None or quiet is None or not self._link_up or self._outgoing:
+            return None
+        feeder = self._feeder
+        if feeder is not None and not feeder.exhausted and self._conn.dac_credit > 0:
+            return None
+        until = int(quiet(awaited, _READ_SIZE))
+        if self.keepalive_ms is not None:
+            # Due at the first tick whose time reaches it: never later than this.
+            until = min(until, math.floor(self._next_keepalive * 1e9) - 1)
+        return until
 
     def __enter__(self) -> Board:
         return self.open()
@@ -765,9 +788,13 @@ class Board:
         if ring is None:
             raise BoardError("configure() the board first", url=self.url)
         if self._virtual is not None:
-            return self._virtual.wait_until(
-                lambda: ring.end_index is not None and ring.end_index >= end_index, timeout_s
-            )
+            self._awaited_index = end_index
+            try:
+                return self._virtual.wait_until(
+                    lambda: ring.end_index is not None and ring.end_index >= end_index, timeout_s
+                )
+            finally:
+                self._awaited_index = None
         return ring.wait_for(end_index, timeout_s)
 
     def read(self, first: int, n: int) -> npt.NDArray[Any]:

@@ -94,7 +94,7 @@ class VirtualClock(SleepUntil):
             raise ConfigError("tick_s", tick_s, "1 µs .. 1 s", "e.g. 0.001")
         self._tick_ns = round(tick_s * 1e9)
         self._ns = round(start_s * 1e9)
-        self._services: dict[int, Callable[[], None]] = {}
+        self._services: dict[int, tuple[Callable[[], None], Callable[[], int | None] | None]] = {}
         self._next_id = 0
         self._in_service = False
 
@@ -110,39 +110,66 @@ class VirtualClock(SleepUntil):
     def __call__(self) -> float:
         return self._ns / 1e9
 
-    def attach(self, service: Callable[[], None]) -> Callable[[], None]:
-        """Run ``service()`` at every tick from now on; returns the call that detaches it."""
+    def attach(
+        self, service: Callable[[], None], quiet_until_ns: Callable[[], int | None] | None = None
+    ) -> Callable[[], None]:
+        """Run ``service()`` at every tick from now on; returns the call that detaches it.
+
+        ``quiet_until_ns()``, if given, says how long the service may be left out: the
+        virtual time (ns) before which a tick's call would only do work that its next call
+        does the same (None: no such time). Such ticks are skipped (:meth:`sleep`); the
+        call at the end of a sleep is never skipped, so whoever slept sees every service
+        brought up to the present.
+        """
         key = self._next_id
         self._next_id += 1
-        self._services[key] = service
+        self._services[key] = (service, quiet_until_ns)
 
         def detach() -> None:
             self._services.pop(key, None)
 
         return detach
 
+    def _quiet_until(self) -> int:
+        """The first virtual time (ns) at which some service must run (now when one has no
+        quiet time)."""
+        until = None
+        for _, quiet in self._services.values():
+            q = quiet() if quiet is not None else None
+            if q is None:
+                return self._ns
+            until = q if until is None else min(until, q)
+        return self._ns if until is None else until
+
+    def _next_tick_at(self, t_ns: int) -> int:
+        """The first tick after now and at or after ``t_ns``."""
+        first = (self._ns // self._tick_ns + 1) * self._tick_ns
+        return max(first, -(-t_ns // self._tick_ns) * self._tick_ns)
+
     def sleep(self, seconds: float) -> None:
         """Let ``seconds`` of virtual time pass, tick by tick, running the services at each
-        tick and at the end."""
+        tick (but those ticks every service is quiet on, see :meth:`attach`) and at the
+        end."""
         if self._in_service:
             raise RuntimeError("a VirtualClock service slept: services must return at once")
         end = self._ns + round(max(0.0, seconds) * 1e9)
         while self._ns < end:
-            self._ns = min(end, (self._ns // self._tick_ns + 1) * self._tick_ns)
+            self._ns = min(end, self._next_tick_at(self._quiet_until()))
             self._in_service = True
             try:
-                for service in list(self._services.values()):
+                for service, _ in list(self._services.values()):
                     service()
             finally:
                 self._in_service = False
 
     def wait_until(self, done: Callable[[], bool], timeout_s: float) -> bool:
-        """Sleep to the next tick until ``done()`` (True) or ``timeout_s`` virtual s pass
-        (False)."""
+        """Sleep until ``done()`` (True) or ``timeout_s`` virtual s pass (False): to the next
+        tick at a time, or past the ticks every service is quiet on (``done()`` holds on what
+        the services did, so it cannot change there)."""
         deadline = self._ns + round(max(0.0, timeout_s) * 1e9)
         while not done():
             if self._ns >= deadline:
                 return False
-            next_tick = (self._ns // self._tick_ns + 1) * self._tick_ns
-            self.sleep((min(next_tick, deadline) - self._ns) / 1e9)
+            wake = self._next_tick_at(self._quiet_until())
+            self.sleep((min(wake, deadline) - self._ns) / 1e9)
         return True

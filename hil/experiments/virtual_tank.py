@@ -4,7 +4,10 @@ The simulated GRBL controller and the simulated board run in the host's own thre
 in-memory links, with the acoustic tank (:func:`~hil.experiments.sim_tank.build_tank_world`)
 between them, all on one :class:`~hil.devices.clock.VirtualClock`: time passes only while
 the host waits, and then every simulated millisecond the board driver's link is serviced
-as its threads would on real time. A run is therefore
+as its threads would on real time, but for the milliseconds on which nothing is due while
+the host waits for samples (the simulated board then captures the skipped span at the next
+service, the same samples at the same instants: see ``Board._quiet_until_ns``). A run is
+therefore
 
 - deterministic: the same experiment and seed give identical estimates and recording tables,
   however loaded the machine;
@@ -36,8 +39,8 @@ if TYPE_CHECKING:
     from hil.transports.base import Transport
     from hil.transports.sim import MemoryStageLink
 
-#: Spacing of the instants the board's link is serviced, s of virtual time: SYNC reaches the
-#: host at most this late (1.5 mm of a 1.5 m/s tow), and the world computes 1 ms blocks.
+#: Spacing of the instants the board's link may be serviced, s of virtual time: SYNC reaches
+#: the host at most this late (1.5 mm of a 1.5 m/s tow).
 SERVICE_TICK_S = 0.001
 
 

@@ -33,6 +33,7 @@ from scipy.signal import windows
 from hil.errors import ConfigError
 from sim_devices.acoustics._physics_inputs import FloatArray, as_float_array
 from sim_devices.acoustics.alpha_stable import check_alpha, symmetric_alpha_stable
+from sim_devices.acoustics.frame_stream import FrameStream
 
 #: A spectrum model: frequencies (Hz, array) -> spectrum level (dB re 1 µPa²/Hz, same shape).
 SpectrumLevel = Callable[[FloatArray], ArrayLike]
@@ -186,7 +187,7 @@ class ShapedNoiseGenerator:
         """Restart the stream from sample 0 (same seed, same samples)."""
         self._next_index = 0
         self._tail = np.zeros(self.n_taps - 1)
-        self._pending = np.zeros(0)
+        self._stream = FrameStream(self._next_block)
         self._handed_out = 0
         self._next_block()  # prime the filter memory; block 0 itself is never output
 
@@ -212,11 +213,5 @@ class ShapedNoiseGenerator:
             raise ConfigError("n_samples", n_samples, "an integer >= 0", "a sample count")
         if n_samples < 0:
             raise ConfigError("n_samples", n_samples, "an integer >= 0", "a sample count")
-        need = int(n_samples) - self._pending.shape[0]
-        pieces = [self._pending]
-        for _ in range(max(0, -(-need // self.block_size))):
-            pieces.append(self._next_block())
-        stream = np.concatenate(pieces)
-        self._pending = stream[n_samples:].copy()
         self._handed_out += int(n_samples)
-        return np.asarray(stream[:n_samples], dtype=np.float64)
+        return self._stream.take(int(n_samples))

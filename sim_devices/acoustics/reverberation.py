@@ -74,7 +74,7 @@ from __future__ import annotations
 
 import math
 from collections import OrderedDict
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -83,6 +83,7 @@ from scipy import fft as sp_fft
 from hil.errors import ConfigError
 from sim_devices.acoustics.beam import TwoWayAmplitudeTable
 from sim_devices.acoustics.echo import TransmitWaveform
+from sim_devices.acoustics.frame_stream import FrameStream
 from sim_devices.acoustics.trajectory import FloatArray, as_point
 from sim_devices.acoustics.transmit_eval import TransmitEvaluator
 
@@ -357,7 +358,13 @@ class VolumeReverberation:
         self._coarse_from = 0.0
         self._coarse_until: float | None = None
         self._frame_index = 0
-        self._pending = np.zeros(0)
+        self._stream = FrameStream(self._render_next_frame)
+        vx, vy, vz = (float(v) for v in self.v)
+        #: The condition under which scatterer_geometry treats the sonar as at rest.
+        self._at_rest = vx * vx + vy * vy + vz * vz == 0.0
+        self._at_rest_set: tuple[FloatArray, ScattererGeometry, FloatArray, FloatArray] | None = (
+            None
+        )
         self.frames_done = 0
         self.bins_used = 0
 
@@ -454,6 +461,26 @@ class VolumeReverberation:
         fields = ("emit_s", "alpha", "r_out_m", "r_back_m", "cos_theta")
         return ScattererGeometry(*(np.concatenate([getattr(q, f) for q in parts]) for f in fields))
 
+    def _frame_geometry(
+        self, t: float, x: FloatArray, y: FloatArray, z: FloatArray
+    ) -> tuple[ScattererGeometry, FloatArray]:
+        """Geometry at time ``t`` (s) and amplitudes (µPa) of the insonified scatterers among
+        the candidates ``x, y, z`` (m).
+
+        A sonar at rest sees every scatterer at a fixed range and direction: only the
+        emission times ``t − 2 r / c`` move with ``t``, so the rest (the cull to the shell and
+        the cone, the amplitudes) is computed once per candidate set, with the same
+        arithmetic as :func:`scatterer_geometry` (``v · t`` is exactly 0 there).
+        """
+        if not self._at_rest:
+            g = self._geometry_inside(t, x, y, z)
+            return g, self.amplitudes(g)
+        if self._at_rest_set is None or self._at_rest_set[0] is not x:
+            g0 = self._geometry_inside(0.0, x, y, z)
+            self._at_rest_set = (x, g0, self.amplitudes(g0), 2.0 * g0.r_back_m / self.c)
+        _, g0, amp, two_way_s = self._at_rest_set
+        return replace(g0, emit_s=t - two_way_s), amp
+
     def _inside(self, g: ScattererGeometry) -> NDArray[np.intp]:
         s = self.settings
         return np.flatnonzero(
@@ -491,10 +518,9 @@ class VolumeReverberation:
         out = np.zeros(nf)
         if x.size == 0:
             return out
-        g = self._geometry_inside(t_c, x, y, z)
+        g, amp = self._frame_geometry(t_c, x, y, z)
         if g.alpha.size == 0:
             return out
-        amp = self.amplitudes(g)
         alpha = g.alpha
         a_lo, a_hi = float(alpha.min()), float(alpha.max())
         width_max = 2.0 * self.phi_budget * self.fs / (math.pi * self.f_ref * nf)
@@ -562,20 +588,16 @@ class VolumeReverberation:
         self.frames_done += 1
         return out
 
+    def _render_next_frame(self) -> FloatArray:
+        block = self._render_frame(self._frame_index)
+        self._frame_index += 1
+        return block
+
     def generate(self, n_samples: int) -> FloatArray:
         """The next ``n_samples`` of reverberation pressure (µPa), shape ``(n_samples,)``."""
         if int(n_samples) != n_samples or n_samples < 0:
             raise ConfigError("n_samples", n_samples, "an integer >= 0")
-        pieces = [self._pending]
-        have = self._pending.shape[0]
-        while have < n_samples:
-            block = self._render_frame(self._frame_index)
-            self._frame_index += 1
-            pieces.append(block)
-            have += block.shape[0]
-        stream = np.concatenate(pieces)
-        self._pending = stream[n_samples:].copy()
-        return np.asarray(stream[:n_samples], dtype=np.float64)
+        return self._stream.take(int(n_samples))
 
 
 def _times_j_power(re: FloatArray, im: FloatArray, p: int) -> tuple[FloatArray, FloatArray]:

@@ -172,6 +172,49 @@ class SimulatedBoard:
             self._next_status = now + round(self.spec.status_interval_s * _NS)
         self._grant_credit()
 
+    def quiet_until_ns(self, awaited_index: int, max_bytes: int) -> int:
+        """Board time (ns) before which :meth:`tick` has nothing to do but capture samples
+        below ``awaited_index`` and send them, at most ``max_bytes`` of them: a tick skipped
+        before it does its capture, identically, at the next tick (the ADC frames are cut
+        differently, the samples are the same). Now (:meth:`_now_ns`) when something is due
+        or pending: bytes to send, a fault, no capture running.
+
+        Due are: the next SYNC and STATUS, the watchdog's deadline, the first instant the
+        DAC FIFO may have freed enough to grant credit (each played index frees at most one
+        sample), the instant the sample clock reaches ``awaited_index``, and the instant the
+        capture would exceed ``max_bytes``.
+        """
+        now = self._now_ns()
+        config, fifo = self.conn.configuration, self._fifo
+        if (
+            self._out
+            or self.faults.any_pending
+            or not self._capturing
+            or config is None
+            or fifo is None
+            or self.conn.state not in _SESSION_STATES
+        ):
+            return now
+        due = [self._next_sync, self._next_status, self._ns_at_index(awaited_index)]
+        if self._watchdog_ns is not None:
+            due.append(self._last_host + self._watchdog_ns + 1)  # it fires after the deadline
+        threshold = max(1, self.spec.dac_buffer_samples // 8)
+        free = self.spec.dac_buffer_samples - fifo.level - self.conn.dac_credit
+        due.append(self._ns_at_index(self._produced + max(0, threshold - free)))
+        per_frame = self.adc_frame_samples
+        sample_bytes = channel_count(config.adc_channel_mask) * SampleFormat(config.adc_format).size
+        wire = per_frame * sample_bytes + _FRAME_OVERHEAD
+        wire += wire // 254 + 2  # COBS: a code byte per 254, the delimiters
+        frames = max_bytes // 2 // wire  # half: room for a SYNC or STATUS beside them
+        due.append(self._ns_at_index(self._produced + frames * per_frame))
+        return max(now, int(min(due)))
+
+    def _ns_at_index(self, index: int) -> int:
+        """The first board time (ns) at which the sample clock reads ``index`` or more
+        (the inverse of :meth:`_index_at`, exact in integers)."""
+        ahead = index - self._base_index
+        return self._base_ns + max(0, -(-ahead * _NS // self._rate))
+
     def connection_made(self) -> None:
         """A host opened the link: start a fresh session (the sample clock keeps running)."""
         self._new_session()

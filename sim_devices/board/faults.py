@@ -102,6 +102,17 @@ class FaultPlan:
         """Whether the next ADC frame is to be damaged."""
         return bool(self._drop or self._flips or self._garbage)
 
+    @property
+    def any_pending(self) -> bool:
+        """Whether any fault waits to be applied (or the link is unplugged)."""
+        return bool(
+            self.frame_fault_pending
+            or self.adc_overrun_samples
+            or self.dac_underrun_samples
+            or self.watchdog_now
+            or self.unplugged
+        )
+
     def damage(self, wire: bytes) -> bytes:
         """The wire bytes of one ADC frame after the pending byte faults."""
         out = bytearray(wire)

@@ -73,6 +73,14 @@ class BoardPort:
             self.board.receive_data(bytes(data))
         return len(data)
 
+    def quiet_until_ns(self, awaited_index: int, max_bytes: int) -> int:
+        """:meth:`SimulatedBoard.quiet_until_ns`; 0 (due at once) while bytes wait to be
+        read or the port is closed."""
+        with self.lock:
+            if self._rx or not self.is_open:
+                return 0
+            return self.board.quiet_until_ns(awaited_index, max_bytes)
+
     def read(self, size: int, timeout_s: float) -> bytes:
         """Up to ``size`` board bytes, as soon as any exist; ``b""`` after ``timeout_s`` s."""
         deadline = time.monotonic() + timeout_s
@@ -124,6 +132,12 @@ class MemoryBoardLink:
     def write(self, data: bytes) -> int:
         """Send bytes to the board."""
         return self.port.write(data)
+
+    def quiet_until_ns(self, awaited_index: int, max_bytes: int) -> int:
+        """Board time (ns) before which the board only captures samples below
+        ``awaited_index`` (:meth:`SimulatedBoard.quiet_until_ns`): a host on virtual time
+        need not read it before then."""
+        return self.port.quiet_until_ns(awaited_index, max_bytes)
 
     def close(self) -> None:
         """Unplug (idempotent)."""

@@ -68,6 +68,20 @@ def test_any_chunking_gives_the_same_samples() -> None:
     assert np.array_equal(whole, parts)
 
 
+def test_a_sonar_at_rest_gives_the_bits_of_the_general_geometry() -> None:
+    """At rest, the scatterers' ranges, cull and amplitudes are kept from frame to frame and
+    only the emission times move: the same samples, bit for bit, as solving each frame's
+    geometry afresh (the path a moving sonar takes)."""
+    st = ReverberationSettings(0.01, SV, 20.0, 2.0, seed=4, frame_samples=1024)
+    kept = _reverb(_att(), st)
+    afresh = _reverb(_att(), st)
+    assert kept._at_rest
+    afresh._at_rest = False
+    a = np.concatenate([kept.generate(k) for k in (700, 3000, 5300)])
+    b = afresh.generate(9000)
+    assert np.array_equal(a, b) and np.any(a != 0.0)
+
+
 def _cw_pulse() -> HopSchedule:
     return HopSchedule.from_segments(
         "cw-pulse", [30_000.0], [0, -1], [TAU, 0.05 - TAU], continuous_phase=False

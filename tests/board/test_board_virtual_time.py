@@ -97,3 +97,55 @@ def test_an_unplugged_board_is_a_disconnect_and_the_next_command_fails() -> None
 def test_virtual_time_and_another_clock_are_refused() -> None:
     with pytest.raises(ConfigError, match=r"clock = .* give only virtual_time"):
         Board("sim://board", clock=MonotonicClock(), virtual_time=VirtualClock())
+
+
+def test_skipping_the_quiet_ticks_changes_no_byte(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The driver skips the ticks on which the simulated board only captures samples short
+    of the awaited index (``Board._quiet_until_ns``): the same samples, SYNC pairs and
+    instants as a run that services the link at every tick, with far fewer board ticks."""
+    ticks = {"n": 0}
+    real_tick = SimulatedBoard.tick
+
+    def counted(self: SimulatedBoard) -> None:
+        ticks["n"] += 1
+        real_tick(self)
+
+    monkeypatch.setattr(SimulatedBoard, "tick", counted)
+    quiet = streamed(0.3)
+    quiet_ticks, ticks["n"] = ticks["n"], 0
+    monkeypatch.setattr(Board, "_quiet_until_ns", lambda self: None)
+    every = streamed(0.3)
+    (a, da, fa), (b, db, fb) = quiet, every
+    assert fa == fb
+    np.testing.assert_array_equal(da, db)
+    assert a.clock_fit is not None and b.clock_fit is not None
+    assert a.clock_fit.pairs == b.clock_fit.pairs
+    assert a._clock.now() == b._clock.now()
+    assert a.samples_received == b.samples_received
+    assert quiet_ticks < ticks["n"] / 3
+    for board in (a, b):
+        board.close()
+
+
+def test_the_simulated_board_is_quiet_only_while_it_has_nothing_else_due() -> None:
+    clock = VirtualClock(tick_s=0.001)
+    faults = FaultPlan()
+    sim = SimulatedBoard(clock=clock, world=LoopbackWorld(DELAY), faults=faults)
+    link = MemoryBoardLink(BoardPort(sim), timeout=0.0)
+    settings = BoardSettings(sample_rate_hz=RATE_HZ, dac_channels=1, adc_channels=1)
+    board = Board(link, settings=settings, virtual_time=clock, ring_seconds=4.0).open()
+    board.configure()
+    first = board.start(source)
+    assert board.wait_for_samples(first + 1000, timeout_s=1.0)
+    now = round(clock.now() * 1e9)
+    index = sim.sample_index()
+    assert now < link.quiet_until_ns(index + RATE_HZ, 1 << 16) <= now + 100_000_000  # a SYNC
+    # the awaited index bounds it: 96 samples at 192 kHz is 0.5 ms
+    assert link.quiet_until_ns(index + 96, 1 << 16) == sim._ns_at_index(index + 96)
+    # so does the read size: 8 kB hold one ADC frame of mono int16 (2035 samples)
+    frame = sim.adc_frame_samples
+    assert link.quiet_until_ns(index + RATE_HZ, 8192) <= sim._ns_at_index(index + frame)
+    assert link.quiet_until_ns(index + RATE_HZ, 4096) == now  # not even one frame fits
+    faults.adc_overrun(10)  # a pending fault is due at once
+    assert link.quiet_until_ns(first + RATE_HZ, 1 << 16) == now
+    board.close()
