@@ -27,6 +27,7 @@ from hil.estimation.base import Estimate
 from hil.estimation.detection import parabolic_offset
 from hil.estimation.doppler_grid import alpha_to_speed, speed_to_alpha
 from hil.estimation.first_arrival import FirstArrivalReadout
+from hil.estimation.gcas.beyond_span import BeyondSpanCheck
 from hil.estimation.gcas.front_end import FrontEnd
 from hil.estimation.gcas.threshold import Peak
 from hil.estimation.refine import CoherentRefiner, EchoTest
@@ -121,6 +122,7 @@ class Readout:
         unit_values: UnitValues,
         refiner: CoherentRefiner | None,
         receiver: str,
+        beyond_span: BeyondSpanCheck | None = None,
     ) -> None:
         self._fe = fe
         self._k = _ReadoutConstants.of(fe)
@@ -130,6 +132,8 @@ class Readout:
         self._unit_values = unit_values
         self._refiner = refiner
         self._receiver = receiver
+        #: The check for an echo beyond the Doppler span (with the refinement).
+        self.beyond_span = beyond_span
         self.reset()
 
     def reset(self) -> None:
@@ -147,6 +151,8 @@ class Readout:
         #: included, and only the refinement tells them apart).
         self.unmeasured_count = 0
         self.last_detection: DetectionInfo | None = None
+        if self.beyond_span is not None:
+            self.beyond_span.reset()
 
     def restart(self) -> None:
         """Forget the previous hop (a gap: consistency restarts with the next detection)."""
@@ -190,6 +196,10 @@ class Readout:
             if refined is None:
                 self.unmeasured_count += 1
                 return None
+            if self.beyond_span is not None and self.beyond_span.check(
+                t_rx, alpha, hop_index, self._edge_side(p.d0), refined
+            ):
+                return None
             if not refined.is_echo(ECHO_TEST):
                 self.incoherent_count += 1
                 return None
@@ -222,6 +232,11 @@ class Readout:
             crlb_range_m=math.nan if bound is None else bound.sigma_range_m,
             crlb_speed_mps=math.nan if bound is None else bound.sigma_speed_mps,
         )
+
+    def _edge_side(self, d0: int) -> int:
+        """+1 for the span's closing edge hypothesis, −1 for its opening one, else 0."""
+        n = self._fe.grid.size
+        return 1 if d0 == n - 1 else -1 if d0 == 0 else 0
 
     def _consistent(self, hop_index: int, t_rx: float, alpha: float) -> bool | None:
         """Did the hop index advance as the time since the previous detection predicts?
