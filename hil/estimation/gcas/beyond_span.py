@@ -47,6 +47,9 @@ SCAN_TIME_POINTS = 9
 #: holds the edge's detections (its lobes).
 INSIDE_HOPS = 3
 
+#: How every notice of an echo beyond the span begins (:meth:`BeyondSpan.text`).
+BEYOND_SPAN_TEXT = "an echo beyond the "
+
 #: The side of the span an echo is beyond: closing (positive speed) or opening.
 CLOSING, OPENING = "closing", "opening"
 
@@ -68,7 +71,7 @@ class BeyondSpan:
     def text(self) -> str:
         """One line for a person: what was seen, where, and what to do."""
         return (
-            f"an echo beyond the ±{self.max_speed_mps:g} m/s Doppler span was seen "
+            f"{BEYOND_SPAN_TEXT}±{self.max_speed_mps:g} m/s Doppler span was seen "
             f"({self.side}) at t = {self.t_s:.4f} s (hop {self.hop_index}); it is refused, "
             "not reported: raise --max-speed to measure it"
         )
