@@ -191,17 +191,16 @@ def _receiver(max_speed: float = 30.0, **extra: object) -> GcasReceiver:
 @pytest.mark.parametrize(("v", "side"), [(35.0, "closing"), (-35.0, "opening")])
 def test_an_echo_beyond_the_span_is_seen_once_on_its_side(v: float, side: str) -> None:
     # Its edge leak on the span's edge hypothesis, scanned over the guard band, fits one
-    # echo at its own speed: measured 34.996 / -34.996 m/s at hop 3, and no estimate of it
-    # (one wrong estimate at -13.5 m/s for +35, none for -35).
+    # echo at its own speed: measured 34.996 / -34.996 m/s at hop 3; then it is fitted again
+    # at each edge detection (71-82 refused) and its ghosts are taken out: no estimate.
     x = echo_samples(att_schedule(), 50.0, v, SECONDS, snr_db=0.0, seed=4)
     rx = _receiver()
     est = run_blocks(rx, x)
-    assert len(_wrong(est, 50.0, v)) / HOPS <= 0.02
+    assert len(_wrong(est, 50.0, v)) / HOPS <= 0.01 and rx.beyond_span_count >= 50
     assert [s.side for s in rx.beyond_span] == [side]
     seen = rx.beyond_span[0]
     assert seen.hop_index <= 12 and seen.max_speed_mps == 30.0
     assert seen.speed_mps == pytest.approx(v, abs=0.1)
-    assert rx.beyond_span_count >= 1
     rx.reset()
     assert rx.beyond_span == [] and rx.beyond_span_count == 0
 

@@ -50,6 +50,10 @@ INSIDE_HOPS = 3
 #: How every notice of an echo beyond the span begins (:meth:`BeyondSpan.text`).
 BEYOND_SPAN_TEXT = "an echo beyond the "
 
+#: Hops after a fit beyond the span within which an edge detection is checked by fitting
+#: that echo again where it puts the detection's boundary, before a scan.
+FOLLOW_HOPS = 3
+
 #: The side of the span an echo is beyond: closing (positive speed) or opening.
 CLOSING, OPENING = "closing", "opening"
 
@@ -124,6 +128,8 @@ class BeyondSpanCheck:
         #: Detections refused as an echo beyond the span (its edge leak, or a fit past it).
         self.count = 0
         self._inside: list[tuple[float, float]] = []  # echoes near the edge: (t_s, speed)
+        #: The latest fit beyond each edge (+1, −1): (hop index, boundary time s, α).
+        self._last: dict[int, tuple[int, float, float]] = {}
 
     def beyond(self, speed_mps: float) -> bool:
         """Whether a fitted speed (m/s) lies beyond the span (by more than half the
@@ -171,19 +177,38 @@ class BeyondSpanCheck:
                 return False
             # Once an echo beyond this edge has been seen, a fit within one Doppler cell of
             # the edge may be its leak, fitted on a sidelobe of the likelihood: scanned.
-        elif side == 0 or self._seen_on(side) or self._inside_echo_at(t_s, side):
-            # Scanned: an edge detection not fitted as an echo, until an echo beyond that
-            # edge has been seen (later ones are refused as incoherent anyway), unless an
-            # echo inside the span near that edge holds its detections.
+        elif side == 0 or self._inside_echo_at(t_s, side):
+            # An edge detection not fitted as an echo is checked unless an echo inside the
+            # span near that edge holds its detections.
             return False
-        found = self._scan(t_s, alpha, hop_index, side)
+        found = self._follow(hop_index, side)
+        if found is None:
+            found = self._scan(t_s, alpha, hop_index, side)
         if found is None:
             return False
         self._seen(found, hop_index, side)
         self.count += 1
         return True
 
+    def _follow(self, hop_index: int, side: int) -> Refinement | None:
+        """The echo beyond the ``side`` edge fitted within :data:`FOLLOW_HOPS` hops before
+        ``hop_index``, fitted again where it puts this boundary (the refinement's warm
+        start: a few evaluations, where a scan costs hundreds); None where there is none or
+        the fit is not one echo beyond the span. Each fit is one of the echoes the
+        refinement takes out of other detections (its ghosts then collect what noise
+        does)."""
+        last = self._last.get(side)
+        if last is None or not 1 <= hop_index - last[0] <= FOLLOW_HOPS:
+            return None
+        hop, t_fit, a_fit = last
+        t_pred = t_fit + (hop_index - hop) * self.hop_s / a_fit
+        fit = self.refiner.refine(t_pred, a_fit, hop_index)
+        if fit is None or not fit.is_echo(self.test) or not self.beyond(fit.speed_mps(self.c)):
+            return None
+        return fit
+
     def _seen(self, fit: Refinement, hop_index: int, side: int) -> None:
+        self._last[side] = (hop_index, fit.t_s, fit.alpha)
         name = CLOSING if side > 0 else OPENING
         if all(s.side != name for s in self.sightings):
             self.sightings.append(
