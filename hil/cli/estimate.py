@@ -71,7 +71,9 @@ def register(sub: Any) -> None:
         description="Run a receiver over a received WAV (any sample format scipy reads) "
         "and print one estimate per detected hop boundary: time (s), range (m), speed (m/s), "
         "SNR (dB). The WAV's sample 0 is the schedule's t = 0. Warns when the WAV does not "
-        "follow the schedule's hop code (a schedule of another seed) or is clipped.",
+        "follow the schedule's hop code (a schedule of another seed) or is clipped. An echo "
+        "faster than --max-speed is refused, never aliased, and said once per side (a note "
+        "line; a JSON line with a 'notice' key with --json).",
     )
     p.add_argument("--schedule", type=Path, required=True, help="transmit schedule JSON")
     p.add_argument("--input", type=Path, required=True, help="received WAV file")
