@@ -15,6 +15,13 @@ default refinement; null in JSON, empty in CSV, where a receiver does not measur
 none; :mod:`hil.estimation.tracking`, set with ``--option track_confirm_hits=4`` and the
 other ``track_*`` settings). Without ``--json``/``--csv`` it prints the count and one line
 per track. ``--map PNG`` draws the time–codeword map (receivers that keep one: GCAS).
+
+An echo faster than the Doppler span (``--max-speed``) is refused, not aliased; GCAS says so
+once per side (closing, opening) when it first sees one
+(:mod:`hil.estimation.gcas.beyond_span`): a line ``note: an echo beyond the ±30 m/s Doppler
+span was seen (closing) at t = … s (hop …)`` in the table, a JSON line
+``{"notice": "beyond_span", "t_s", "hop_index", "side", "max_speed_mps", "speed_mps"}`` with
+``--json`` (no estimate line has a ``notice`` key), a warning on stderr with ``--csv``.
 """
 
 from __future__ import annotations
@@ -64,7 +71,9 @@ def register(sub: Any) -> None:
         description="Run a receiver over a received WAV (any sample format scipy reads) "
         "and print one estimate per detected hop boundary: time (s), range (m), speed (m/s), "
         "SNR (dB). The WAV's sample 0 is the schedule's t = 0. Warns when the WAV does not "
-        "follow the schedule's hop code (a schedule of another seed) or is clipped.",
+        "follow the schedule's hop code (a schedule of another seed) or is clipped. An echo "
+        "faster than --max-speed is refused, never aliased, and said once per side (a note "
+        "line; a JSON line with a 'notice' key with --json).",
     )
     p.add_argument("--schedule", type=Path, required=True, help="transmit schedule JSON")
     p.add_argument("--input", type=Path, required=True, help="received WAV file")
@@ -315,7 +324,9 @@ def run(args: argparse.Namespace) -> int:
     try:
         for x in blocks:
             sink.emit(receiver.process(x))
+            sink.notices(getattr(receiver, "beyond_span", []))
         sink.emit(receiver.flush())
+        sink.notices(getattr(receiver, "beyond_span", []))
     finally:
         sink.close()
     if clip.count:
@@ -375,6 +386,7 @@ class _Sink:
         self.json = bool(args.json)
         self.table = not args.json and args.csv is None
         self.count = 0
+        self._said = 0  # beyond-span sightings said so far
         self.kept: list[Estimate] = []  # for the per-track lines of the plain listing
         self._keep = not self.json and args.csv is None
         self._csv_file: TextIO | None = None
@@ -405,6 +417,20 @@ class _Sink:
             self.kept.extend(estimates)
         if self.json or self.table:
             sys.stdout.flush()
+
+    def notices(self, sightings: list[Any]) -> None:
+        """Say once each echo the receiver saw beyond its Doppler span (``sightings``, all
+        so far: GCAS's ``beyond_span``, :mod:`hil.estimation.gcas.beyond_span`): a JSON line
+        ``{"notice": "beyond_span", ...}`` with ``--json``, a ``note:`` line in the table, a
+        warning on stderr with ``--csv``."""
+        for sighting in sightings[self._said :]:
+            self._said += 1
+            if self.json:
+                print(json.dumps(sighting.to_dict(), allow_nan=False), flush=True)
+            elif self.table:
+                print(f"note: {sighting.text()}", flush=True)
+            else:
+                _LOG.warning("%s", sighting.text())
 
     def close(self) -> None:
         if self._csv_file is not None and self._csv_file is not sys.stdout:

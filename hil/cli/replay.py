@@ -12,7 +12,8 @@ says whether the replayed estimates equal the recorded live ones (on stderr when
 estimates go to stdout); exit status 1 when they differ. A recording whose writer was killed
 holds the live estimates up to its last flush: equal as far as they go is not a difference.
 Each estimate carries its ``track_id`` as live; a recording made before track ids were kept
-(all −1) is compared without them.
+(all −1) is compared without them. An echo seen beyond the Doppler span is said once per
+side after the estimates, as ``hil estimate`` says it.
 """
 
 from __future__ import annotations
@@ -78,12 +79,14 @@ def run(args: argparse.Namespace) -> int:
         name = args.receiver or (live.name if live is not None else None)
         if live is not None and args.receiver in (None, live.name):
             check_option_kinds(overrides, dict(live.settings))
-        estimates = replay(rec, args.receiver, channel=args.channel, **overrides)
+        notices: list[Any] = []
+        estimates = replay(rec, args.receiver, channel=args.channel, notices=notices, **overrides)
         recorded = rec.estimates(live.name) if live is not None else []
         track_ids = rec.has_track_ids
     sink = _Sink(args)
     try:
         sink.emit(estimates)
+        sink.notices(notices)
     finally:
         sink.close()
     to_stdout = not args.json and args.csv is None

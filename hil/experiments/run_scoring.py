@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from hil.acquisition.annotations import ADC_CLIPPING_TEXT
+from hil.estimation.gcas.beyond_span import BEYOND_SPAN_TEXT
 from hil.estimation.track_summary import track_figures
 from hil.experiments.run_calibrations import true_stage_motion
 from hil.experiments.tank_run import STAGE_POLL_S, TELEMETRY_MAX_REPLY_S, RunOutcome
@@ -320,6 +321,11 @@ def summarize(outcome: RunOutcome) -> dict[str, Any]:
         "adc_clipped_samples": outcome.adc_clipped_samples,
         "planned_adc_peak_fs": outcome.planned_adc_peak_fs,
         "events": len(outcome.events),
+        # The receiver's word that an echo faster than its Doppler span was seen (refused,
+        # not reported): the recording's note of it, once per side.
+        "beyond_span_notices": [
+            text for _, _, _, text in outcome.events if text.startswith(BEYOND_SPAN_TEXT)
+        ],
         "interrupted": outcome.interrupted,
         "error": outcome.error,
     }

@@ -414,6 +414,9 @@ def _outcome(
         recorder.events(events)
     with contextlib.suppress(Exception):
         recorder.close()
+    # The receiver's notices were recorded as they came, before the events above.
+    notices = session.notices if session is not None else []
+    events = [*notices, *events]
     return RunOutcome(
         folder=folder,
         experiment=exp,

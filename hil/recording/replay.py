@@ -102,6 +102,7 @@ def replay(
     channel: int | None = None,
     block_frames: int = REPLAY_BLOCK_FRAMES,
     hooks: dict[str, Any] | None = None,
+    notices: list[Any] | None = None,
     **overrides: Any,
 ) -> list[Estimate]:
     """Run a receiver over the recorded samples and return its estimates.
@@ -109,7 +110,9 @@ def replay(
     Default receiver and settings: those of the live run (see :func:`replay_setup`); with
     them the result equals the live estimates exactly. ``overrides`` are receiver settings
     (``m_hops=12``, ``n_doppler=64``, ...); ``hooks`` are callbacks given to the receiver
-    (GCAS's ``on_map``: its time-codeword map, as live).
+    (GCAS's ``on_map``: its time-codeword map, as live). ``notices``, when given, is extended
+    with the echoes the receiver saw beyond its Doppler span (GCAS's ``beyond_span``:
+    :class:`~hil.estimation.gcas.beyond_span.BeyondSpan`, the first per side).
     """
     if not isinstance(recording, RunRecording):
         with RunRecording.open(recording) as rec:
@@ -119,19 +122,20 @@ def replay(
                 channel=channel,
                 block_frames=block_frames,
                 hooks=hooks,
+                notices=notices,
                 **overrides,
             )
     setup = replay_setup(recording, receiver_name, channel, **overrides)
+    receiver = build_receiver(setup, recording.schedule(), recording.fs_hz, **(hooks or {}))
     feed = ReceiverFeed(
-        build_receiver(setup, recording.schedule(), recording.fs_hz, **(hooks or {})),
-        origin=recording.origin_sample,
-        channel=setup.channel,
-        scale=setup.scale,
+        receiver, origin=recording.origin_sample, channel=setup.channel, scale=setup.scale
     )
     out: list[Estimate] = []
     for block in recording.iter_blocks(block_frames):
         out.extend(feed.feed(block.first_index, block.data))
     out.extend(feed.finish())
+    if notices is not None:
+        notices.extend(getattr(receiver, "beyond_span", []))
     return out
 
 

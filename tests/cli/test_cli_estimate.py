@@ -222,3 +222,49 @@ def test_without_json_or_csv_the_estimates_are_printed_as_a_table(
     assert lines[1 + len(rows)] == f"{len(rows)} estimates from {recording / 'rx.wav'} (gcas)"
     _, r, v, _ = (float(x) for x in lines[1].split())
     assert r == pytest.approx(rows[0]["range_m"], abs=5e-4) and v == pytest.approx(V, abs=0.3)
+
+
+@pytest.fixture(scope="module")
+def too_fast(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """0.6 s of a target closing at 35 m/s (faster than the default ±30 m/s span) from 50 m,
+    0 dB per-sample SNR, as WAV + schedule."""
+    folder = tmp_path_factory.mktemp("too-fast")
+    spec = get_preset("att").spec("random-cyclic")
+    sch = check_design(spec)
+    sonar = Fixed([0.0, 0.0, 0.0])
+    path = TwoWayPath(sonar, ConstantVelocity([50.0, 0.0, 0.0], [-35.0, 0.0, 0.0]), sonar, 1500.0)
+    n = int(0.6 * FS)
+    x = AnalyticEcho(sch, path, FS).block(0, n)
+    x = x + np.random.default_rng(4).normal(0.0, np.sqrt(0.5), n)
+    wavfile.write(folder / "rx.wav", int(FS), (0.2 * x).astype(np.float32))
+    doc = schedule_document(sch, FS, 0.6, sound_speed_mps=1500.0, spec=spec.to_dict())
+    write_schedule_file(folder / "x.json", doc)
+    return folder
+
+
+def test_an_echo_beyond_the_span_is_said_once_and_not_estimated(
+    too_fast: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    base = ["estimate", "--schedule", str(too_fast / "x.json"), "--input",
+            str(too_fast / "rx.wav")]  # fmt: skip
+    assert main([*base, "--json"]) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    notices = [r for r in rows if "notice" in r]
+    # Said once, on the closing side, at one of the first boundaries after M hops; the fit
+    # beyond the span found the echo's speed (a measurement for the notice, not reported).
+    assert len(notices) == 1
+    seen = notices[0]
+    assert seen["notice"] == "beyond_span" and seen["side"] == "closing"
+    assert seen["max_speed_mps"] == 30.0 and seen["hop_index"] <= 12
+    assert seen["speed_mps"] == pytest.approx(35.0, abs=0.5)
+    estimates = [r for r in rows if "notice" not in r]
+    # No estimate of it: at most 0.05 wrong per hop over 60 hops (measured: none).
+    assert len(estimates) <= 3
+    assert main(base) == 0
+    out = capsys.readouterr().out
+    notes = [line for line in out.splitlines() if line.startswith("note: ")]
+    assert notes == [
+        "note: an echo beyond the ±30 m/s Doppler span was seen (closing) at "
+        f"t = {seen['t_s']:.4f} s (hop {seen['hop_index']}); it is refused, not reported: "
+        "raise --max-speed to measure it"
+    ]

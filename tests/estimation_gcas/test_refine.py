@@ -111,15 +111,15 @@ def test_no_scalloping_between_doppler_hypotheses() -> None:
 
 
 def test_the_design_speed_next_to_the_masked_cells_reads_without_bias() -> None:
-    # +25 m/s on att: the default reverberation band masks the ghost cells next to it and the
-    # detector's Doppler interpolation reads 0.33 m/s low; the refinement's search re-centres
-    # onto the peak.
+    # +25 m/s on att: the default reverberation band masks the ghost cells next to it; the
+    # detector alone reads it on the tones its hypotheses share (0.33 m/s low on sums of
+    # unequal tones), the refinement measures the echo itself.
     schedule = att_schedule()
     x = echo_samples(schedule, 60.0, 25.0, 0.8, snr_db=0.0, seed=1)
     raw = run_blocks(make_gcas(schedule, refine=False), x)
     est = run_blocks(make_gcas(schedule), x)
     assert len(est) == len(raw) >= 60
-    assert np.mean([e.speed_mps for e in raw]) - 25.0 < -0.25
+    assert abs(np.mean([e.speed_mps for e in raw]) - 25.0) < 0.05
     dv = np.array([e.speed_mps - 25.0 for e in est])
     dr = np.array([e.range_m - true_range(60.0, 25.0, e.t_tx_s, e.t_s) for e in est])
     assert abs(dv.mean()) < 0.01 and np.sqrt(np.mean(dv**2)) < 0.01

@@ -370,3 +370,17 @@ def test_true_boundaries_golden() -> None:
     assert word.tolist() == (k[inside] % 17).tolist()
     out.estimates = []
     assert true_boundaries(out)[0].size == 0
+
+
+def test_the_summary_lists_the_receivers_notices_of_an_echo_beyond_the_span() -> None:
+    from hil.estimation.gcas.beyond_span import CLOSING, BeyondSpan
+
+    said = BeyondSpan(0.1085, 3, CLOSING, 3.0, 3.6).text()
+    events = [("note", 108, 0, said), ("alarm", 12_000, 0, "stop: completed")]
+    summary = summarize(dataclasses.replace(_outcome(T_TEL, KS), events=events))
+    assert summary["beyond_span_notices"] == [said] and summary["events"] == 2
+    assert said == (
+        "an echo beyond the ±3 m/s Doppler span was seen (closing) at t = 0.1085 s (hop 3); "
+        "it is refused, not reported: raise --max-speed to measure it"
+    )
+    assert summarize(_outcome(T_TEL, KS))["beyond_span_notices"] == []

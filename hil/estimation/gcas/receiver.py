@@ -12,6 +12,7 @@ from numpy.typing import ArrayLike, NDArray
 from hil.errors import ConfigError
 from hil.estimation.base import Estimate
 from hil.estimation.first_arrival import FirstArrivalReadout
+from hil.estimation.gcas.beyond_span import BeyondSpan, BeyondSpanCheck
 from hil.estimation.gcas.front_end import FrontEnd
 from hil.estimation.gcas.options import (
     COARSE_STEP,
@@ -165,21 +166,25 @@ class GcasReceiver:
             cfar_lambda, pfa, self.m_hops, fe.n_codewords, cfar_mode
         )
         cfar = Cfar(cfar_mode, self.cfar_lambda, self.m_hops)
-        self._refiner = (
-            CoherentRefiner(
+        self._refiner = self._beyond = None
+        if refine and range_readout == "peak":
+            # The refinement measures up to the end of the beyond-span check's guard band.
+            guard = BeyondSpanCheck.guard_width_mps(self.sound_speed_mps, fe.center_hz, self.hop_s)
+            self._refiner = CoherentRefiner(
                 schedule, self.fs_hz, self.m_hops, self.sound_speed_mps,
-                REFINE_SPEED_SPAN_MPS, self.max_speed_mps, ECHO_TEST,
-            )
-            if refine and range_readout == "peak"
-            else None
-        )  # fmt: skip
+                REFINE_SPEED_SPAN_MPS, self.max_speed_mps + guard, ECHO_TEST,
+            )  # fmt: skip
+            self._beyond = BeyondSpanCheck(
+                self._refiner, self.max_speed_mps, ECHO_TEST, hop_s=self.hop_s,
+                center_hz=fe.center_hz, f_max_hz=float(np.max(self.tones_hz)),
+            )  # fmt: skip
         self.refine = self._refiner is not None
         self._sums = CodewordSums(fe)
         self.strategy = self._make_search(search, cfar, coarse_step)
         self.readout = Readout(
             fe, max_range_m=self.max_range_m, coherent=self.coherent,
             first_arrival=self._first_arrival, unit_values=self.strategy.unit_values,
-            refiner=self._refiner, receiver=self.name,
+            refiner=self._refiner, receiver=self.name, beyond_span=self._beyond,
         )  # fmt: skip
         self.reset()
         self._warm_up()
@@ -263,6 +268,18 @@ class GcasReceiver:
         """Detections the refinement refused as no one echo of the schedule: a still echo
         read at the tone spacing's speed, an echo beyond the Doppler span, noise."""
         return self.readout.incoherent_count
+
+    @property
+    def beyond_span_count(self) -> int:
+        """Detections refused as an echo beyond the Doppler span: its edge leak, or a fit
+        past the span (:mod:`hil.estimation.gcas.beyond_span`; with the refinement only)."""
+        return 0 if self._beyond is None else self._beyond.count
+
+    @property
+    def beyond_span(self) -> list[BeyondSpan]:
+        """Echoes seen beyond the Doppler span since the last reset: the first sighting on
+        each side (closing, opening), in the order seen; empty without the refinement."""
+        return [] if self._beyond is None else list(self._beyond.sightings)
 
     @property
     def unmeasured_count(self) -> int:

@@ -81,6 +81,10 @@ class LiveSession:
         self.tow = TowController(tow, self.stage, timing.tail_s)
         self.telemetry = Telemetry()
         self.estimates: list[Estimate] = []
+        #: Events the receiver gave (an echo beyond its Doppler span, once per side), as
+        #: recorded: ``(kind, board sample index, length, text)``.
+        self.notices: list[tuple[str, int, int, str]] = []
+        self._origin = 0  # board index of the receiver's sample 0
         self.start_index = 0
         self.latency: int | None = None
         self.capture: CaptureLoop | None = None
@@ -120,6 +124,15 @@ class LiveSession:
 
     def _on_fed(self, block: CapturedBlock) -> None:
         self._emit(block.estimates)
+        self._say_notices()
+
+    def _say_notices(self) -> None:
+        """Each echo the receiver saw beyond its Doppler span, once: a ``note`` event of the
+        recording (logged as its events are) at the detection's board sample."""
+        for seen in getattr(self.receiver, "beyond_span", [])[len(self.notices) :]:
+            event = ("note", self._origin + int(round(seen.t_s * self.fs)), 0, seen.text())
+            self.notices.append(event)
+            self.recorder.events([event])
 
     def _emit(self, estimates: list[Estimate]) -> None:
         """New estimates: recorded, kept, and given to :attr:`on_estimates`."""
@@ -136,7 +149,7 @@ class LiveSession:
         assert self.capture is not None
         lat, note = probe.measure()
         self.latency = lat
-        origin = self.start_index + lat
+        origin = self._origin = self.start_index + lat
         self.recorder.open(origin, RunEvent("note", self.start_index, lat, note))
         feed = ReceiverFeed(
             self.receiver, origin=origin, channel=self.exp.board_channel, scale=self.timing.scale
@@ -145,6 +158,7 @@ class LiveSession:
             self.recorder.samples(first, data)
         for first, data in probe.blocks:
             self._emit(feed.feed(first, data))  # drops what comes before the origin
+        self._say_notices()
         self.capture.feed = feed
 
     # ---------------------------------------------------------------- the loop
