@@ -71,12 +71,29 @@ def jack_env(require_system: Any) -> dict[str, str]:
     )
 
 
+def _recipe() -> tuple[list[str], list[str]]:
+    """The JACK tank recipe of ``hil sim-serve --help`` (and docs/tank-run.md): its two
+    commands, split into words."""
+    from hil.cli.sim_serve import DESCRIPTION
+
+    lines = [
+        line.split("$ ", 1)[1].split("  #", 1)[0].split()
+        for line in DESCRIPTION.splitlines()
+        if line.strip().startswith("$ hil sim-serve tank") or "$ hil tank-run /tmp/hil-jack-tank" in line
+    ]
+    serve, run = lines
+    return serve[1:], run[1:]
+
+
 @pytest.fixture
 def served_tank(tmp_path: Path, jack_env: dict[str, str]) -> Iterator[tuple[Path, Any]]:
-    """``hil sim-serve tank --jack`` running; the experiment file it printed."""
+    """``hil sim-serve tank --jack`` running (the recipe's, on the short tow); the
+    experiment file it printed."""
     exp_in = tmp_path / "short.toml"
     exp_in.write_text(SHORT, encoding="utf-8")
-    command = _hil("sim-serve", "tank", "--jack", "--experiment", str(exp_in))
+    serve, _ = _recipe()
+    assert serve == ["sim-serve", "tank", "--jack"]
+    command = _hil(*serve, "--experiment", str(exp_in))
     proc = subprocess.Popen(
         command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=jack_env
     )
@@ -108,8 +125,10 @@ def test_tank_run_through_jack_and_portaudio_is_tracked_as_on_the_board(
     assert exp.stage_url.startswith("/dev/pts/") and not exp.simulated
     folder = tmp_path / "run"
     cpu0 = time.process_time()
+    _, run = _recipe()
+    assert run[0] == "tank-run" and run[2] == "--out"
     done = subprocess.run(
-        _hil("tank-run", str(exp_file), "--out", str(folder), "--no-live", "--json"),
+        _hil(run[0], str(exp_file), "--out", str(folder), "--no-live", "--json"),
         capture_output=True, text=True, env=jack_env, timeout=RUN_TIMEOUT_S, check=False,
     )  # fmt: skip
     assert done.returncode == 0, done.stderr[-3000:]
