@@ -31,12 +31,15 @@ from hil.experiments.jack_tank import (
     served_experiment,
 )
 from hil.experiments.sim_tank import CONVERTER_DELAY_SAMPLES
+from hil.recording.instrument import read_entry
+from hil.recording.reader import RunRecording
+from hil.recording.replay import compare_estimates, replay
 
 #: The short tow of the audio tank tests, at a time scale that leaves a loaded 2-core machine
 #: room for the world (0.7 CPU s per simulated s), the run and everything else.
 SHORT = (
     DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -3.5")
-    .replace("time_scale = 0.4", "time_scale = 0.25")
+    .replace("time_scale = 0.4", "time_scale = 0.1")
     # Wall seconds: the run is slowed 4 times, and more on a busy machine.
     .replace('output_dir = "runs"', 'output_dir = "runs"\nmax_duration_s = 1000.0')
 )
@@ -79,7 +82,7 @@ def _recipe() -> tuple[list[str], list[str]]:
     lines = [
         line.split("$ ", 1)[1].split("  #", 1)[0].split()
         for line in DESCRIPTION.splitlines()
-        if line.strip().startswith("$ hil sim-serve tank") or "$ hil tank-run /tmp/hil-jack-tank" in line
+        if line.strip().startswith(("$ hil sim-serve tank", "$ hil tank-run /tmp/hil-jack"))
     ]
     serve, run = lines
     return serve[1:], run[1:]
@@ -160,8 +163,18 @@ def test_tank_run_through_jack_and_portaudio_is_tracked_as_on_the_board(
     # Xruns the JACK server reported are counted in the summary, one per recorded event.
     with h5py.File(folder / "run.h5", "r") as f:
         kinds = [k.decode() for k in f["events/kind"][:]]
+        entry = read_entry(f)
     assert summary["adc_overruns"] == kinds.count("adc_overrun")
     assert summary["dac_underruns"] == kinds.count("dac_underrun")
+    # The recording names the interface: PortAudio's JACK host API; it replays to the live
+    # estimates.
+    assert entry is not None
+    audio = entry["instrument"]["audio"]
+    assert audio["url"] == exp.board_url and audio["host_api"] == "JACK Audio Connection Kit"
+    with RunRecording.open(folder / "run.h5") as rec:
+        live = rec.estimates()
+        agreement, words = compare_estimates(live, replay(rec))
+    assert len(live) == summary["estimates"] and agreement == "equal", words
 
 
 def test_the_served_experiment_points_at_jack_and_the_stage_pty() -> None:
