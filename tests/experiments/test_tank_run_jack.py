@@ -162,8 +162,8 @@ def test_tank_run_through_jack_and_portaudio_is_tracked_as_on_the_board(
     with h5py.File(folder / "run.h5", "r") as f:
         kinds = [k.decode() for k in f["events/kind"][:]]
         entry = read_entry(f)
-    assert summary["adc_overruns"] == kinds.count("adc_overrun")
-    assert summary["dac_underruns"] == kinds.count("dac_underrun")
+    assert summary["adc_overruns"] == kinds.count("overrun")
+    assert summary["dac_underruns"] == kinds.count("underrun")
     # The recording names the interface: PortAudio's JACK host API; it replays to the live
     # estimates.
     assert entry is not None
