@@ -114,16 +114,18 @@ class AudioPacedClock:
         self._wall = wall or wallclock.monotonic
         self.period_s = float(period_s)
         self.time_scale = float(time_scale)
-        self._audio_s = 0.0
-        self._at = self._wall()
+        # (stream time s, wall time s then): one tuple, so a reader in another thread never
+        # pairs a new stream time with an old wall time.
+        self._last = (0.0, self._wall())
 
     def advance(self, audio_s: float) -> None:
         """The stream reached ``audio_s`` (its sample index / rate) now."""
-        self._audio_s, self._at = float(audio_s), self._wall()
+        self._last = (float(audio_s), self._wall())
 
     def __call__(self) -> float:
-        ahead = (self._wall() - self._at) * self.time_scale
-        return self._audio_s + min(max(ahead, 0.0), self.period_s)
+        audio_s, at = self._last
+        ahead = (self._wall() - at) * self.time_scale
+        return audio_s + min(max(ahead, 0.0), self.period_s)
 
 
 class TankJackClient:
@@ -378,8 +380,9 @@ class TankJackClient:
 def _clients(ports: list[str]) -> dict[str, set[str]]:
     """Port short names by client, from full port names.
 
-    >>> sorted(_clients(["system:capture_1", "PortAudio:in_0", "PortAudio:out_0"]).items())
-    [('PortAudio', {'in_0', 'out_0'}), ('system', {'capture_1'})]
+    >>> found = _clients(["system:capture_1", "PortAudio:in_0", "PortAudio:out_0"])
+    >>> {client: sorted(ports) for client, ports in sorted(found.items())}
+    {'PortAudio': ['in_0', 'out_0'], 'system': ['capture_1']}
     """
     found: dict[str, set[str]] = defaultdict(set)
     for port in ports:
