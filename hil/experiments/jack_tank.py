@@ -61,7 +61,7 @@ WIRING_POLL_S = 0.1
 PIPELINE_BLOCKS = 2
 #: Longest wait of the audio callback for a block the world has not rendered yet, s (under
 #: the server's client timeout, so the server never drops the tank).
-LATE_WAIT_S = 4.0
+LATE_WAIT_S = 9.0
 #: Silent periods on the transmitter input that end a run (a run transmits without a
 #: break from its first sample to its last): the world stops, the next one is built.
 END_SILENT_BLOCKS = 8

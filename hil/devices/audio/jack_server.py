@@ -61,7 +61,7 @@ class DummyServerSettings:
     samplerate: int
     period: int
     time_scale: float = 1.0
-    client_timeout_ms: int = 10_000
+    client_timeout_ms: int = 20_000
 
     def __post_init__(self) -> None:
         if int(self.samplerate) != self.samplerate or not 1000 <= self.samplerate <= 768_000:
