@@ -4,9 +4,12 @@
   lazy import that resolves the transport errors' old names (they moved to ``hil.errors``).
 - ``sim_devices`` may import ``firmware_protocol`` and the host's pure code
   (``hil.signals``, ``hil.errors``, ``hil.toml_table``: the one TOML reader, and
-  ``hil.config_sections``: its tables as dataclasses), never drivers or
-  anything else of ``hil``.
-- ``hil`` never imports ``sim_devices`` at module level (only inside functions, lazily).
+  ``hil.config_sections``: its tables as dataclasses), and the contracts a simulated device
+  implements (the audio callback contract, its settings and ring in ``hil.devices.audio``,
+  the ``Clock`` of ``hil.devices.clock``: the simulated audio interface is one), never
+  drivers or anything else of ``hil``.
+- ``hil`` never imports ``sim_devices`` at module level (only inside functions, lazily; an
+  ``if TYPE_CHECKING:`` block, which never runs, may name its types).
 """
 
 from __future__ import annotations
@@ -17,7 +20,16 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-SIM_ALLOWED_FROM_HIL = ("hil.signals", "hil.errors", "hil.toml_table", "hil.config_sections")
+SIM_ALLOWED_FROM_HIL = (
+    "hil.signals",
+    "hil.errors",
+    "hil.toml_table",
+    "hil.config_sections",
+    "hil.devices.audio.contract",
+    "hil.devices.audio.settings",
+    "hil.devices.audio.ring",
+    "hil.devices.clock",
+)
 #: The compatibility import of the moved transport errors (inside a module ``__getattr__``).
 PROTOCOL_COMPAT_IMPORT = ("firmware_protocol/errors.py", "hil")
 
@@ -37,10 +49,18 @@ def _imports(path: Path, module_level_only: bool) -> list[tuple[int, str]]:
             found.extend((node.lineno, alias.name) for alias in node.names)
         elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
             found.append((node.lineno, node.module))
+        elif module_level_only and isinstance(node, ast.If) and _is_type_checking(node.test):
+            stack.extend(node.orelse)  # the body is for type checkers: it never runs
         elif module_level_only and isinstance(node, (ast.If, ast.Try, ast.With)):
             # Statements at module level that are not function bodies still run at import.
             stack.extend(ast.iter_child_nodes(node))
     return found
+
+
+def _is_type_checking(test: ast.expr) -> bool:
+    """``TYPE_CHECKING`` or ``typing.TYPE_CHECKING``."""
+    name = test.attr if isinstance(test, ast.Attribute) else getattr(test, "id", None)
+    return name == "TYPE_CHECKING"
 
 
 def _top(name: str) -> str:
@@ -82,3 +102,15 @@ def test_checker_sees_violations(tmp_path: Path) -> None:
     src.write_text("import sim_devices.board\n\ndef f():\n    import sim_devices.stage\n")
     assert _imports(src, True) == [(1, "sim_devices.board")]
     assert sorted(_imports(src, False)) == [(1, "sim_devices.board"), (4, "sim_devices.stage")]
+
+
+def test_checker_lets_type_checking_blocks_name_types_only(tmp_path: Path) -> None:
+    src = tmp_path / "m.py"
+    src.write_text(
+        "from typing import TYPE_CHECKING\n"
+        "if TYPE_CHECKING:\n    import sim_devices.audio\nelse:\n    import sim_devices.stage\n"
+        "if True:\n    import sim_devices.board\n"
+    )
+    assert sorted(_imports(src, True)) == [
+        (1, "typing"), (5, "sim_devices.stage"), (7, "sim_devices.board"),
+    ]  # fmt: skip

@@ -1,7 +1,8 @@
-"""``hil sim-serve board|stage``: expose a simulated device on a pty for other programs.
+"""``hil sim-serve board|stage|tank``: expose a simulated device for other programs.
 
 Prints the pty path on the first line of stdout (open it like a serial port), then serves in
-real time until Ctrl-C (or SIGTERM). The board is a loopback cable (``--delay`` samples,
+real time until Ctrl-C (or SIGTERM); ``tank --jack`` prints the experiment file of a run
+instead (:mod:`hil.experiments.jack_tank`). The board is a loopback cable (``--delay`` samples,
 ``--gain``; the DAC monitor input tapped too) behind the Python simulated board, or with
 ``--impl c`` behind the C reference firmware of ``firmware_protocol/c`` (built with ``cc``
 and ``make`` if needed); the stage is
@@ -14,10 +15,16 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
+import tempfile
 import threading
+from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 from hil.errors import ConfigError
+
+#: JACK frames per period of ``sim-serve tank --jack`` (hil.experiments.jack_tank's default).
+DEFAULT_PERIOD = 1024
 
 DESCRIPTION = """\
 Serve a simulated device on a pseudo-terminal (pty) for other programs. The pty path is
@@ -49,7 +56,21 @@ then write the built-in experiment to a file, put the printed paths in it and ru
 The run treats them as real devices: no simulated tank (the ADC hears the loopback, not an
 echo: expect no detection), and the rules of real runs apply (calibrations measured on the
 simulated bench are refused). For a run with the simulated tank in between, use devices
-sim://board and sim://stage (the default of 'hil tank-run')."""
+sim://board and sim://stage (the default of 'hil tank-run').
+
+  tank   with --jack: the whole simulated tank behind a real audio stack. Starts a JACK
+         server on the dummy driver at the waveform's rate (named by JACK_DEFAULT_SERVER,
+         else 'default'), the tank's GRBL controller on a pty, and the tank as a JACK client
+         (transmitter in, hydrophone and DAC monitor out), wired to each run that opens its
+         stream; prints the path of the experiment file to run (board = audio://JACK?...,
+         stage = the pty). Server, controller and tank run at simulation.time_scale of the
+         wall clock, so the world keeps up:
+
+  $ hil sim-serve tank --jack                 # prints e.g. /tmp/hil-jack-tank-x1/experiment.toml
+  $ hil tank-run /tmp/hil-jack-tank-x1/experiment.toml --out runs/jack
+
+The run captures through PortAudio's JACK host API, as with a USB audio interface; its
+summary counts the xruns (dac_underruns, adc_overruns)."""
 
 
 def register(subparsers: Any) -> None:
@@ -59,7 +80,7 @@ def register(subparsers: Any) -> None:
         help="serve a simulated board or stage on a pty",
         description=DESCRIPTION,
     )
-    parser.add_argument("device", choices=("board", "stage"), help="what to simulate")
+    parser.add_argument("device", choices=("board", "stage", "tank"), help="what to simulate")
     parser.add_argument(
         "--delay", type=int, default=0, help="board loopback delay, samples (default 0)"
     )
@@ -77,17 +98,43 @@ def register(subparsers: Any) -> None:
         default="python",
         help="board implementation: the Python simulation (default) or the C reference firmware",
     )
+    parser.add_argument(
+        "--jack",
+        action="store_true",
+        help="tank: serve it as a client of a JACK server this command starts (required)",
+    )
+    parser.add_argument(
+        "--experiment",
+        type=Path,
+        default=None,
+        help="tank: the experiment whose tank, waveform and tow to serve (default built-in)",
+    )
+    parser.add_argument(
+        "--period",
+        type=int,
+        default=DEFAULT_PERIOD,
+        help=f"tank: JACK frames per period, the run's block size (default {DEFAULT_PERIOD})",
+    )
+    parser.add_argument(
+        "--write",
+        type=Path,
+        default=None,
+        help="tank: where to write the run's experiment file (default: a new temporary folder)",
+    )
     parser.set_defaults(func=run)
 
 
-def _serve(port_name: str, stop: threading.Event) -> None:
+def _serve(port_name: str, stop: threading.Event, check: Callable[[], None] | None = None) -> None:
+    """Print ``port_name`` and serve until stopped; ``check()`` raises when the served
+    device failed (called every 0.2 s)."""
     print(port_name, flush=True)
     main_thread = threading.current_thread() is threading.main_thread()
     # Signal handlers can only be installed from the main thread (tests serve from others).
     previous = signal.signal(signal.SIGTERM, lambda *_: stop.set()) if main_thread else None
     try:
         while not stop.wait(0.2):
-            pass
+            if check is not None:
+                check()
     except KeyboardInterrupt:
         pass
     finally:
@@ -98,6 +145,8 @@ def _serve(port_name: str, stop: threading.Event) -> None:
 def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
     """Serve until Ctrl-C / SIGTERM (or ``stop`` is set, for tests); exit status 0."""
     stop = stop or threading.Event()
+    if args.device == "tank":
+        return _serve_tank(args, stop)
     if args.device == "board" and args.impl == "c":
         from sim_devices.board.c_firmware import CFirmwareOnPty, CFirmwareUnavailable
 
@@ -128,4 +177,35 @@ def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
         with SimulatedGrblOnPty(config) as stage:
             _serve(stage.port_name, stop)
     print(f"hil sim-serve {args.device}: stopped", file=sys.stderr)
+    return 0
+
+
+def _serve_tank(args: argparse.Namespace, stop: threading.Event) -> int:
+    from hil.experiments.experiment import DEFAULT_EXPERIMENT, load_experiment, parse_experiment
+    from hil.experiments.jack_tank import JackTankServer
+
+    if not args.jack:
+        raise ConfigError(
+            "sim-serve tank", "without --jack", "--jack", "the tank is served on JACK only"
+        )
+    if args.experiment is not None:
+        exp = load_experiment(args.experiment)
+    else:
+        exp = parse_experiment(DEFAULT_EXPERIMENT, "<built-in>")
+    path = args.write or Path(tempfile.mkdtemp(prefix="hil-jack-tank-")) / "experiment.toml"
+    with JackTankServer(exp, args.period) as served:
+        served.write(path)
+        assert served.server is not None and served.tank is not None
+        print(
+            f"hil sim-serve tank: JACK server {served.server.name!r}, stage {served.stage_port}",
+            file=sys.stderr,
+        )
+        _serve(str(path), stop, served.tank.check)
+        tank = served.tank
+    print(
+        f"hil sim-serve tank: {tank.runs_started} run(s) served, {tank.xruns} xrun(s) "
+        f"reported to the tank, blocks the world rendered late: {tank.late_blocks} waited "
+        f"for, {tank.lost_blocks} lost",
+        file=sys.stderr,
+    )
     return 0

@@ -120,7 +120,7 @@ class AudioTank:
     def open_daq(self, fs: float) -> AudioDaq:
         """The simulated interface in the tank, opened and configured at ``fs`` Hz."""
         from hil.devices.audio.daq import AudioDaq, audio_settings
-        from hil.devices.audio.simulated import SimulatedDuplex
+        from sim_devices.audio.simulated import SimulatedDuplex
 
         _, settings = audio_settings(self.exp.board_url, int(fs))
         world = _TankInPlace(self._world)

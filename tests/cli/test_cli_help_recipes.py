@@ -45,7 +45,9 @@ def _first_line(proc: subprocess.Popen[str]) -> str:
 def test_the_sim_serve_help_recipe_runs_a_tank_run_on_served_devices(tmp_path: Path) -> None:
     from hil.cli.sim_serve import DESCRIPTION
 
-    serve_board, serve_stage, print_default, tank_run = _recipe_commands(DESCRIPTION)
+    # The first four: the board and stage recipe (tests/experiments/test_tank_run_jack.py
+    # runs the JACK tank's).
+    serve_board, serve_stage, print_default, tank_run = _recipe_commands(DESCRIPTION)[:4]
     assert serve_board.startswith("hil sim-serve board") and tank_run.startswith("hil tank-run")
     servers = [
         subprocess.Popen(_hil(c), stdout=subprocess.PIPE, text=True, cwd=tmp_path)

@@ -4,11 +4,15 @@
 - :class:`SoundDeviceDuplex`: a real interface over python-sounddevice (PortAudio), imported
   lazily, so this package imports without PortAudio installed.
 - :class:`SimulatedDuplex`: the same contract, with a pluggable world (e.g.
-  :class:`DigitalLoopbackWorld`) and an injected clock.
+  :class:`DigitalLoopbackWorld`) and an injected clock; it lives in
+  :mod:`sim_devices.audio.simulated` and is resolved from there when asked for (the host
+  imports simulated devices lazily).
 - :func:`play_record`: play a signal and record the input at the same time.
 - :func:`measure_loopback_latency` / :func:`play_record_calibrated`: the loopback latency
   measured with a reference chirp at every run.
 """
+
+from typing import TYPE_CHECKING, Any
 
 from hil.devices.audio.contract import (
     DTYPE,
@@ -41,13 +45,8 @@ from hil.devices.audio.portaudio_backend import (
     rescan_devices,
 )
 from hil.devices.audio.settings import AudioSettings
-from hil.devices.audio.simulated import (
-    Clock,
-    DigitalLoopbackWorld,
-    RealtimeClock,
-    SimulatedDuplex,
-    World,
-)
+from hil.devices.clock import Clock
+from hil.devices.clock import MonotonicClock as RealtimeClock
 
 __all__ = [
     "DTYPE",
@@ -85,11 +84,23 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> object:
-    """``ManualClock``, the tests' manual clock, resolved when asked for (it lives with the
-    simulated devices, which this package does not import when it loads)."""
-    from hil.devices.audio import simulated
+if TYPE_CHECKING:
+    from sim_devices.audio.simulated import (
+        DigitalLoopbackWorld,
+        ManualClock,
+        SimulatedDuplex,
+        World,
+    )
 
-    if name == "ManualClock":
-        return simulated.ManualClock
+#: Names resolved from :mod:`sim_devices.audio.simulated` when asked for.
+_SIMULATED = ("DigitalLoopbackWorld", "ManualClock", "SimulatedDuplex", "World")
+
+
+def __getattr__(name: str) -> Any:
+    """The simulated interface's names (:data:`_SIMULATED`), resolved when asked for: they
+    live with the simulated devices, which this package does not import when it loads."""
+    if name in _SIMULATED:
+        from sim_devices.audio import simulated
+
+        return getattr(simulated, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

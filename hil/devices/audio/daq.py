@@ -365,7 +365,7 @@ class AudioDaq:
         spec, settings = audio_settings(url, sample_rate_hz)
         backend: DuplexBackend
         if spec.simulated:
-            from hil.devices.audio.simulated import (
+            from sim_devices.audio.simulated import (
                 DigitalLoopbackWorld,
                 RealtimeClock,
                 SimulatedDuplex,

@@ -24,7 +24,12 @@ class JackToolError(DeviceUnavailable, RuntimeError):
 def _run(*args: str, timeout_s: float = 10.0) -> str:
     if shutil.which(args[0]) is None:
         raise JackToolError(f"{args[0]} not found; install it (Debian: apt-get install jackd2)")
-    proc = subprocess.run(args, capture_output=True, text=True, timeout=timeout_s, check=False)
+    try:
+        proc = subprocess.run(args, capture_output=True, text=True, timeout=timeout_s, check=False)
+    except subprocess.TimeoutExpired:
+        raise JackToolError(
+            f"{' '.join(args)} did not answer within {timeout_s:g} s; is the JACK server busy?"
+        ) from None
     if proc.returncode != 0:
         raise JackToolError(
             f"{' '.join(args)} failed with status {proc.returncode}: "

@@ -1,0 +1,161 @@
+"""A private JACK server on the dummy driver (``jackd -d dummy``), started and stopped by this
+process: the audio stack a simulated device runs on when no sound card is there.
+
+The dummy driver paces its periods by waiting ``wait_us`` microseconds between them; by
+default one period's duration, so the server runs in real time. A longer wait runs the whole
+server (every client's stream) slower than the wall clock by ``time_scale`` while the clients
+still see the nominal sample rate: the JACK counterpart of ``simulation.time_scale``.
+
+The server runs synchronously (``-S``): each period waits for every client to finish (up to
+``client_timeout_ms``) instead of dropping a late client's output, and the dummy driver
+catches up on the periods after. A client that computes a simulation in Python on a busy
+machine is late now and then; with a sound card that is an xrun, here it only delays a period,
+so the samples stay continuous and the clients' streams stay in step.
+
+Clients find the server by name through ``JACK_DEFAULT_SERVER`` (``default`` when unset).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from hil.devices.audio.jack_ports import JackToolError
+from hil.errors import ConfigError
+
+#: The server name clients use when ``JACK_DEFAULT_SERVER`` is unset.
+DEFAULT_SERVER_NAME = "default"
+#: Deadlock guard for the server to answer ``jack_lsp``: it answers within a second on a
+#: quiet machine, tens of seconds on a badly overloaded one.
+STARTUP_TIMEOUT_S = 60.0
+
+
+def server_name() -> str:
+    """The JACK server clients of this process connect to (``JACK_DEFAULT_SERVER``)."""
+    return os.environ.get("JACK_DEFAULT_SERVER") or DEFAULT_SERVER_NAME
+
+
+def server_answers(name: str) -> bool:
+    """True when a JACK server called ``name`` answers ``jack_lsp``."""
+    env = dict(os.environ, JACK_DEFAULT_SERVER=name, JACK_NO_START_SERVER="1")
+    try:
+        proc = subprocess.run(
+            ["jack_lsp"], env=env, capture_output=True, text=True, timeout=30, check=False
+        )
+    except subprocess.TimeoutExpired:
+        return False  # a busy machine: the caller asks again
+    return proc.returncode == 0 and "system:" in proc.stdout
+
+
+@dataclass(frozen=True)
+class DummyServerSettings:
+    """A dummy-driver server: sample rate (Hz), period (frames), time scale (simulated
+    seconds per wall second, in (0, 1]), and how long a period waits for a late client (ms)
+    before the server gives up on it."""
+
+    samplerate: int
+    period: int
+    time_scale: float = 1.0
+    client_timeout_ms: int = 20_000
+
+    def __post_init__(self) -> None:
+        if int(self.samplerate) != self.samplerate or not 1000 <= self.samplerate <= 768_000:
+            raise ConfigError(
+                "samplerate", self.samplerate, "a whole number of Hz in [1000, 768000]"
+            )
+        if self.period not in {2**k for k in range(4, 16)}:
+            raise ConfigError("period", self.period, "a power of two from 16 to 32768 frames")
+        if not 0 < self.time_scale <= 1:
+            raise ConfigError("time_scale", self.time_scale, "in (0, 1]")
+
+    @property
+    def wait_us(self) -> int:
+        """Microseconds between periods: one period's duration divided by the time scale.
+
+        >>> DummyServerSettings(192000, 2048, 0.4).wait_us
+        26667
+        """
+        return round(self.period / self.samplerate / self.time_scale * 1e6)
+
+    def command(self, name: str) -> list[str]:
+        """The ``jackd`` command line of this server, called ``name``."""
+        return [
+            "jackd", "--no-realtime", "--sync", "-t", str(self.client_timeout_ms), "-n", name,
+            "-d", "dummy",
+            "-r", str(self.samplerate), "-p", str(self.period), "-w", str(self.wait_us),
+        ]  # fmt: skip
+
+
+class JackDummyServer:
+    """``jackd -d dummy`` under ``name`` (default: :func:`server_name`), started by
+    :meth:`start` and stopped by :meth:`close` (a context manager). Refuses to start when a
+    server of that name already answers: two servers cannot share a name."""
+
+    def __init__(self, settings: DummyServerSettings, name: str | None = None) -> None:
+        self.settings = settings
+        self.name = name or server_name()
+        self._proc: subprocess.Popen[bytes] | None = None
+        self._log: Path | None = None
+
+    def start(self, timeout_s: float = STARTUP_TIMEOUT_S) -> JackDummyServer:
+        """Start the server and wait until it answers; raises :class:`JackToolError` naming
+        what is missing or what went wrong (with the server's last output)."""
+        missing = [t for t in ("jackd", "jack_lsp", "jack_connect") if shutil.which(t) is None]
+        if missing:
+            raise JackToolError(
+                f"{', '.join(missing)} not found; install JACK (Debian: apt-get install jackd2)"
+            )
+        if server_answers(self.name):
+            raise JackToolError(
+                f"a JACK server named {self.name!r} already runs; stop it, or set "
+                "JACK_DEFAULT_SERVER to another name for this server and its clients"
+            )
+        fd, log = tempfile.mkstemp(prefix="jackd-", suffix=".log")
+        os.close(fd)
+        self._log = Path(log)
+        env = dict(os.environ, JACK_NO_AUDIO_RESERVATION="1")
+        with self._log.open("wb") as out:
+            self._proc = subprocess.Popen(
+                self.settings.command(self.name), stdout=out, stderr=subprocess.STDOUT, env=env
+            )
+        deadline = time.monotonic() + timeout_s
+        while not server_answers(self.name):
+            if self._proc.poll() is not None or time.monotonic() > deadline:
+                tail = self.log_tail()
+                self.close()
+                raise JackToolError(
+                    f"jackd {self.name!r} did not start within {timeout_s:g} s: {tail}"
+                )
+            time.sleep(0.05)  # polling a child process's readiness, not a test's timing
+        return self
+
+    def log_tail(self, chars: int = 2000) -> str:
+        """The end of the server's output (empty once closed)."""
+        if self._log is None or not self._log.exists():
+            return ""
+        return self._log.read_text(errors="replace")[-chars:]
+
+    def close(self) -> None:
+        """Stop the server (SIGTERM, then SIGKILL after 5 s)."""
+        proc, self._proc = self._proc, None
+        if proc is not None and proc.poll() is None:
+            proc.terminate()
+            try:
+                proc.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+        if self._log is not None:
+            self._log.unlink(missing_ok=True)
+            self._log = None
+
+    def __enter__(self) -> JackDummyServer:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
