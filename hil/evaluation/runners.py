@@ -105,14 +105,15 @@ class Runner:
 
 class BatchSizer:
     """How many trials the next task carries: 1 until trials have finished, then
-    ``BATCH_TARGET_S`` over the mean wall time per trial seen so far, within 1..``MAX_BATCH``.
+    ``BATCH_TARGET_S`` over the mean wall time per trial seen so far (rounded), within
+    1..``MAX_BATCH``.
 
     >>> sizer = BatchSizer()
     >>> sizer.size
     1
-    >>> sizer.observe([{"elapsed_s": 0.01}, {"elapsed_s": 0.03}])
+    >>> sizer.observe([{"elapsed_s": 0.01}, {"elapsed_s": 0.04}])
     >>> sizer.size
-    12
+    10
     >>> sizer.observe([{"elapsed_s": 2.0}])
     >>> sizer.size
     1
@@ -137,7 +138,7 @@ class BatchSizer:
         mean = self._seconds / self._trials
         if mean <= 0.0:
             return self.most
-        return max(1, min(self.most, int(self.target_s / mean)))
+        return max(1, min(self.most, round(self.target_s / mean)))
 
 
 def _take(todo: Iterator[TrialTask], n: int) -> list[TrialTask]:
