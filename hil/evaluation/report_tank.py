@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from hil.evaluation.aggregate import records_by_point
 from hil.evaluation.report import write_table
 from hil.evaluation.spec import SweepSpec
 from hil.figures import new_figure, save_figure
@@ -69,11 +70,8 @@ def tank_rows(spec: SweepSpec, records: list[dict[str, Any]]) -> list[dict[str, 
     >>> row["detection_rate"], row["false_alarm_rate"], round(row["range_rmse_m"], 6)
     (0.9, 0.1, 0.014142)
     """
-    by_point: list[list[dict[str, Any]]] = [[] for _ in range(spec.n_points)]
-    for rec in records:
-        by_point[int(rec["point"])].append(rec)
     rows = []
-    for point, recs in enumerate(by_point):
+    for point, recs in enumerate(records_by_point(spec, records)):
         ok = [r for r in recs if r.get("status") == "ok"]
         expected = sum(int(r["result"].get("expected_boundaries") or 0) for r in ok)
         detected = sum(int(r["result"].get("detected_boundaries") or 0) for r in ok)
@@ -116,10 +114,9 @@ def plot_errors(
     spec: SweepSpec, records: list[dict[str, Any]], key: str, ylabel: str, path: Path
 ) -> Path:
     """Box plot of the error ``key`` per grid point (whiskers at the 5th and 95th percentiles)."""
-    ok = [r for r in records if r.get("status") == "ok"]
     data, labels = [], []
-    for point in range(spec.n_points):
-        err = point_errors([r for r in ok if int(r["point"]) == point], key)
+    for point, recs in enumerate(records_by_point(spec, records)):
+        err = point_errors([r for r in recs if r.get("status") == "ok"], key)
         data.append(err[np.isfinite(err)])
         labels.append(point_label(spec, point))
     fig, ax = new_figure(figsize=(max(6.0, 0.35 * spec.n_points + 2.0), 4.5))
