@@ -307,8 +307,9 @@ class DaskRunner(Runner):
     ``LocalCluster`` of that many single-threaded worker processes) or ``client`` (an existing
     ``distributed.Client``, left open on close). Local workers are spawned with the BLAS
     variables at 1 (Dask's ``pre-spawn-environ``, with this process's own variables pinned while
-    they start, since Dask lets those win); on a remote cluster the variables are set on
-    connection and workers that started unpinned are reported in :attr:`notes`.
+    they start, since Dask lets those win) and Dask's settings of :data:`LOCAL_WORKER_CONFIG`;
+    on a remote cluster the variables are set on connection and workers that started unpinned
+    are reported in :attr:`notes`.
     """
 
     name = "dask"
@@ -387,10 +388,9 @@ class DaskRunner(Runner):
             self._client.run(pin_blas_threads)
             self.notes.extend(_unpinned_notes(list(self._client.run(worker_blas_env).values())))
             return
-        pinned = {f"distributed.nanny.pre-spawn-environ.{v}": "1" for v in BLAS_THREAD_VARS}
         # Dask's pre-spawn-environ gives way to variables already set in this process, so they
         # are pinned here too while the nannies are made and spawn their workers.
-        with dask.config.set(pinned), pinned_blas_env():
+        with dask.config.set(LOCAL_WORKER_CONFIG), pinned_blas_env():
             self._cluster = distributed.LocalCluster(
                 n_workers=self.n_workers,
                 threads_per_worker=1,
@@ -440,6 +440,21 @@ class DaskRunner(Runner):
         finally:
             for future in pending:
                 future.cancel()
+
+
+#: Dask settings of the local cluster's workers, so that a trial costs there what it costs in
+#: a pool process:
+#:
+#: - the environment a worker starts with is the BLAS variables at 1 and nothing else. Dask's
+#:   default adds ``MALLOC_TRIM_THRESHOLD_=65536``, which also fixes glibc's mmap threshold:
+#:   every numpy array over 128 KiB is then mapped and unmapped afresh, page faults included
+#:   (a ch6_receiver trial: 10x the page faults, 1.45-1.7x the CPU time);
+#: - no statistical profiler (it samples the task thread every 10 ms, GIL held: about 10 %
+#:   more CPU per trial).
+LOCAL_WORKER_CONFIG: dict[str, Any] = {
+    "distributed.nanny.pre-spawn-environ": dict.fromkeys(BLAS_THREAD_VARS, "1"),
+    "distributed.worker.profile.enabled": False,
+}
 
 
 def _looks_like_address(address: str) -> bool:
