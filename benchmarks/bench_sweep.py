@@ -4,10 +4,10 @@ A sweep of real trials runs through the full engine (results streamed to disk, s
 written) on the local process pool and on a local Dask cluster, each with 1 worker, 2 workers
 and one worker per core (``os.cpu_count()``; the counts are deduplicated). Two trial sizes:
 
-- ``small``: ``waveform_af_sidelobe`` with L = 17, W = 3, 100 candidate codes (a few ms of
+- ``small``: ``waveform_af_sidelobe`` with L = 17, W = 3, 5 candidate codes (about 0.03 s of
   CPU each): the hand-out cost per trial shows here, and batching is what hides it;
 - ``ch6``: ``ch6_receiver``, GCAS on 0.8 s of the ``att`` preset at −10 dB (the chapter-6
-  trial, about 0.1–0.3 s of CPU each).
+  trial, about 0.35 s of CPU each).
 
 Workers start, and every worker runs a short warm-up sweep of the same trial, before the clock
 starts (imports, compiled kernels loaded): a long sweep's steady state is what is timed. Per
@@ -44,16 +44,16 @@ KINDS: dict[str, dict[str, Any]] = {
     "small": {
         "trial": "waveform_af_sidelobe",
         "grid": {"n_tones": [4, 5]},
-        "fixed": {"code_length": 17, "window": 3, "candidates": 100, "doppler_bins": 2},
+        "fixed": {"code_length": 17, "window": 3, "candidates": 5, "doppler_bins": 2},
         "trials": 400,
-        "quick_trials": 40,
+        "quick_trials": 20,
     },
     "ch6": {
         "trial": "ch6_receiver",
         "grid": {"snr_db": [-10.0]},
         "fixed": {"receiver": "gcas", "m_hops": 10},
-        "trials": 60,
-        "quick_trials": 6,
+        "trials": 40,
+        "quick_trials": 4,
     },
 }
 

@@ -445,14 +445,15 @@ class DaskRunner(Runner):
 #: Dask settings of the local cluster's workers, so that a trial costs there what it costs in
 #: a pool process:
 #:
-#: - the environment a worker starts with is the BLAS variables at 1 and nothing else. Dask's
-#:   default adds ``MALLOC_TRIM_THRESHOLD_=65536``, which also fixes glibc's mmap threshold:
-#:   every numpy array over 128 KiB is then mapped and unmapped afresh, page faults included
-#:   (a ch6_receiver trial: 10x the page faults, 1.45-1.7x the CPU time);
+#: - the BLAS variables at 1, and not Dask's ``MALLOC_TRIM_THRESHOLD_=65536`` (None unsets
+#:   it): that value also fixes glibc's mmap threshold, so every numpy array over 128 KiB is
+#:   mapped and unmapped afresh, page faults included (a ch6_receiver trial: 10x the page
+#:   faults, 1.45-1.7x the CPU time);
 #: - no statistical profiler (it samples the task thread every 10 ms, GIL held: about 10 %
 #:   more CPU per trial).
 LOCAL_WORKER_CONFIG: dict[str, Any] = {
-    "distributed.nanny.pre-spawn-environ": dict.fromkeys(BLAS_THREAD_VARS, "1"),
+    **{f"distributed.nanny.pre-spawn-environ.{v}": "1" for v in BLAS_THREAD_VARS},
+    "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
     "distributed.worker.profile.enabled": False,
 }
 
