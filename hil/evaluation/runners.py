@@ -6,8 +6,8 @@ yields each trial's record as soon as its batch finishes, in completion order.
 
 The pool and Dask runners hand trials out in *batches* (:class:`BatchSizer`): one trial per
 task until a trial's time is known, then as many as fill :data:`BATCH_TARGET_S` of work, so a
-hand-out (a pickle each way; on Dask also a scheduler round trip, about a millisecond) is a
-small share of what it carries, whatever the trial costs. At most
+hand-out (a pickle each way; on Dask also a scheduler round trip) is a small share of what it
+carries, whatever the trial costs. At most
 :data:`IN_FLIGHT_PER_WORKER` tasks per worker are out at a time, so a sweep of a million
 trials holds a few futures, not a million. Before a trial's first task every worker imports it
 (:func:`~hil.evaluation.worker.warm_trial`), side by side. Every worker has its BLAS thread
@@ -47,9 +47,11 @@ Record = dict[str, Any]
 #: Tasks in flight per worker: enough to keep every worker busy between hand-outs.
 IN_FLIGHT_PER_WORKER = 4
 
-#: Work one task aims to carry, s of a worker's wall time: hand-out costs (~1 ms on Dask) stay
-#: under 1 % of it, and the last tasks of a sweep leave workers idle for at most about this.
-BATCH_TARGET_S = 0.25
+#: Work one task aims to carry, s of a worker's wall time: each hand-out wakes the client, the
+#: scheduler and the worker (on a loaded machine, each wake-up waits for a core), so at 0.25 s
+#: Dask ran small trials at 0.5-0.8x the pool's rate and at 1 s at 0.8-1.0x; the last tasks
+#: of a sweep leave workers idle for at most about this.
+BATCH_TARGET_S = 1.0
 
 #: Most trials in one task.
 MAX_BATCH = 256
@@ -113,7 +115,7 @@ class BatchSizer:
     1
     >>> sizer.observe([{"elapsed_s": 0.01}, {"elapsed_s": 0.04}])
     >>> sizer.size
-    10
+    40
     >>> sizer.observe([{"elapsed_s": 2.0}])
     >>> sizer.size
     1
@@ -450,11 +452,17 @@ class DaskRunner(Runner):
 #:   mapped and unmapped afresh, page faults included (a ch6_receiver trial: 10x the page
 #:   faults, 1.45-1.7x the CPU time);
 #: - no statistical profiler (it samples the task thread every 10 ms, GIL held: about 10 %
-#:   more CPU per trial).
+#:   more CPU per trial);
+#: - the scheduler's, nannies' and workers' housekeeping once a second instead of every 20 ms
+#:   (event-loop health tick) and 100 ms (memory monitor): on a loaded 2-core machine the
+#:   cluster's own processes took 3 s of CPU over a 30 s sweep of small trials, 0.4-1.2 s so.
 LOCAL_WORKER_CONFIG: dict[str, Any] = {
     **{f"distributed.nanny.pre-spawn-environ.{v}": "1" for v in BLAS_THREAD_VARS},
     "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
     "distributed.worker.profile.enabled": False,
+    "distributed.admin.tick.interval": "1000ms",
+    "distributed.worker.memory.monitor-interval": "1000ms",
+    "distributed.admin.system-monitor.interval": "2000ms",
 }
 
 

@@ -255,11 +255,13 @@ def test_the_report_writes_its_table_figures_and_markdown(tmp_path: Path) -> Non
 
 
 # ----------------------------------------------------------------------------- batches
-def test_batches_start_at_one_trial_then_fill_a_quarter_second() -> None:
+def test_batches_start_at_one_trial_then_fill_a_second() -> None:
     sizer = BatchSizer()
     assert sizer.size == 1
-    sizer.observe([{"elapsed_s": 0.001}] * 10)
+    sizer.observe([{"elapsed_s": 0.004}] * 10)
     assert sizer.size == 250
+    sizer.observe([{"elapsed_s": 0.0001}] * 1000)
+    assert sizer.size == 256  # at most MAX_BATCH
     sizer.observe([{"elapsed_s": 10.0}])
     assert sizer.size == 1
     tiny = BatchSizer(most=8)
