@@ -262,8 +262,9 @@ def test_batches_start_at_one_trial_then_fill_a_second() -> None:
     assert sizer.size == 250
     sizer.observe([{"elapsed_s": 0.0001}] * 1000)
     assert sizer.size == 256  # at most MAX_BATCH
-    sizer.observe([{"elapsed_s": 10.0}])
-    assert sizer.size == 1
+    slow = BatchSizer()
+    slow.observe([{"elapsed_s": 10.0}])
+    assert slow.size == 1
     tiny = BatchSizer(most=8)
     tiny.observe([{"elapsed_s": 0.0}])
     assert tiny.size == 8
