@@ -34,3 +34,23 @@ def test_benchmark_quick_run_ends_with_json(script: Path) -> None:
     last = proc.stdout.strip().splitlines()[-1]
     figures = json.loads(last)
     assert isinstance(figures, dict) and figures, last
+    if script.name == "bench_sweep.py":
+        _check_sweep_scaling(figures)
+
+
+def _check_sweep_scaling(figures: dict[str, object]) -> None:
+    """bench_sweep's quick form: both runners at 1 and 2 workers for both trial sizes, each
+    row's efficiency and Dask/pool ratio derived from its own rates."""
+    rows = figures["rows"]
+    assert isinstance(rows, list)
+    assert {(r["kind"], r["runner"], r["workers"]) for r in rows} == {
+        (k, runner, n) for k in ("small", "ch6") for runner in ("pool", "dask") for n in (1, 2)
+    }
+    rate = {(r["kind"], r["runner"], r["workers"]): r["trials_per_s"] for r in rows}
+    for r in rows:
+        one = rate[(r["kind"], r["runner"], 1)]
+        assert r["efficiency"] == pytest.approx(r["trials_per_s"] / (r["workers"] * one), rel=1e-2)
+        pool = rate[(r["kind"], "pool", r["workers"])]
+        assert r["dask_over_pool"] == pytest.approx(r["trials_per_s"] / pool, rel=1e-2)
+    worst = min(r["dask_over_pool"] for r in rows if r["runner"] == "dask")
+    assert figures["worst_dask_over_pool"] == pytest.approx(worst, abs=1e-3)

@@ -93,3 +93,14 @@ def test_every_run_ends_with_its_20_slowest_tests(project: pytest.Pytester) -> N
     assert durations == ["--durations=20"]
     result = project.runpytest_inprocess(*QUIET, "--all", *durations)
     result.stdout.fnmatch_lines(["*slowest 20 durations*"])
+
+
+def test_ci_runs_the_readme_test_command_verbatim() -> None:
+    """The README's test command is the last line of ``.ci/run``, durations included."""
+    repo = ROOT_CONFTEST.parent
+    readme = (repo / "README.md").read_text().splitlines()
+    commands = [line for line in readme if "pytest --all" in line and "pip install" in line]
+    assert len(commands) == 1, commands
+    ci_lines = [line for line in (repo / ".ci/run").read_text().splitlines() if line.strip()]
+    assert ci_lines[-1] == commands[0]
+    assert commands[0].endswith("pytest --all --durations=20")

@@ -21,9 +21,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from hil.cli.sweep import add_runner_options, runner_of
 from hil.errors import ConfigError
 from hil.evaluation.reproduce import ITEM_IDS, reproduce
-from hil.evaluation.runners import make_runner
 
 
 def register(sub: Any) -> None:
@@ -57,17 +57,7 @@ def register(sub: Any) -> None:
         metavar="DIR",
         help="folder of the sweep files (default: the shipped ones, hil/data/sweeps/)",
     )
-    where = p.add_mutually_exclusive_group()
-    where.add_argument(
-        "--workers", type=int, metavar="N", help="local pool processes (default: one per core)"
-    )
-    where.add_argument("--serial", action="store_true", help="run trials in this process (debug)")
-    where.add_argument(
-        "--dask-workers", type=int, metavar="N", help="start a local Dask cluster of N workers"
-    )
-    where.add_argument(
-        "--scheduler", metavar="tcp://HOST:PORT", help="run on the Dask scheduler at this address"
-    )
+    add_runner_options(p)
     p.add_argument("--resume", action="store_true", help="continue the sweeps already in DIR")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=run)
@@ -90,12 +80,7 @@ def run(args: argparse.Namespace) -> int:
     from hil.outputs import writable_folder
 
     writable_folder(args.out, "--out")
-    runner = make_runner(
-        workers=args.workers,
-        dask_workers=args.dask_workers,
-        scheduler=args.scheduler,
-        serial=args.serial,
-    )
+    runner = runner_of(args)
     command = "hil " + shlex.join(sys.argv[1:]) if sys.argv[1:] else "hil reproduce"
     with runner:
         for note in runner.notes:

@@ -5,12 +5,16 @@ Example::
     hil sweep sweeps/psl.toml --out runs/psl --workers 2
     hil sweep sweeps/psl.toml --out runs/psl --resume          # after an interruption
     hil sweep sweeps/psl.toml --out runs/psl --scheduler tcp://10.0.0.5:8786
+    hil sweep tank-mc --out runs/tank --quick                  # a shipped sweep, reduced
 
-Writes ``manifest.json``, ``results.jsonl`` and ``summary.csv`` in ``--out`` (docs/sweeps.md)
-and prints a summary. Exit status 0 when every trial succeeded, 1 when some failed (their
-errors are in results.jsonl), 2 for a bad sweep file or option, 130 when interrupted (Ctrl-C,
-SIGTERM or SIGHUP: the finished trials are saved and ``--resume`` continues from them; the
-pool's workers end with the command, even when it is killed with ``kill -9``).
+SWEEP is a sweep file or the name of a shipped one (``hil/data/sweeps/``: ``tank-mc`` and the
+chapter-6 items). Writes ``manifest.json``, ``results.jsonl`` and ``summary.csv`` in ``--out``
+(docs/sweeps.md), and the trial's report when it has one (``tank_run``: ``report.md``,
+``tank_points.csv``, ``figures/``), and prints a summary. Exit status 0 when every trial
+succeeded, 1 when some failed (their errors are in results.jsonl), 2 for a bad sweep file or
+option, 130 when interrupted (Ctrl-C, SIGTERM or SIGHUP: the finished trials are saved and
+``--resume`` continues from them; the pool's workers end with the command, even when it is
+killed with ``kill -9``).
 """
 
 from __future__ import annotations
@@ -23,8 +27,8 @@ from typing import Any
 
 from hil.evaluation.aggregate import STATS
 from hil.evaluation.engine import SweepInterrupted, SweepOutcome, run_sweep
-from hil.evaluation.runners import make_runner
-from hil.evaluation.sweep_file import load_sweep_file
+from hil.evaluation.runners import Runner, make_runner
+from hil.evaluation.sweep_file import load_sweep_file, shipped_sweeps
 
 #: Exit status after Ctrl-C or a stop signal (as for every hil command).
 EXIT_INTERRUPTED = 130
@@ -39,10 +43,14 @@ def register(sub: Any) -> None:
         "sweep",
         help="run a Monte Carlo sweep (grid x repetitions) and summarise it",
         description="Run every trial of a sweep file (format: hil docs sweeps), streaming one "
-        "JSON line per trial to DIR/results.jsonl, then write DIR/summary.csv. By default on "
-        "a local process pool with one worker per core.",
+        "JSON line per trial to DIR/results.jsonl, then write DIR/summary.csv (and the trial's "
+        "report, if it has one). By default on a local process pool with one worker per core.",
     )
-    p.add_argument("sweep_file", type=Path, metavar="SWEEP.toml", help="the sweep file")
+    p.add_argument(
+        "sweep_file",
+        metavar="SWEEP",
+        help="a sweep file (.toml) or a shipped sweep's name: " + ", ".join(shipped_sweeps()),
+    )
     p.add_argument(
         "--out",
         type=Path,
@@ -50,6 +58,21 @@ def register(sub: Any) -> None:
         metavar="DIR",
         help="output folder (required: it is the work --resume continues)",
     )
+    p.add_argument(
+        "--quick", action="store_true", help="the file's [quick] grid and trial count (a smoke run)"
+    )
+    add_runner_options(p)
+    p.add_argument(
+        "--resume", action="store_true", help="continue the sweep in DIR, skipping finished trials"
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--json", action="store_true", help="print the summary rows as JSON")
+    p.set_defaults(func=run)
+
+
+def add_runner_options(p: argparse.ArgumentParser) -> None:
+    """Where the trials run: ``--workers``, ``--serial``, ``--dask-workers``, ``--scheduler``
+    (one of them; :func:`runner_of` makes the runner)."""
     where = p.add_mutually_exclusive_group()
     where.add_argument(
         "--workers", type=int, metavar="N", help="local pool processes (default: one per core)"
@@ -63,26 +86,25 @@ def register(sub: Any) -> None:
     where.add_argument(
         "--scheduler", metavar="tcp://HOST:PORT", help="run on the Dask scheduler at this address"
     )
-    p.add_argument(
-        "--resume", action="store_true", help="continue the sweep in DIR, skipping finished trials"
+
+
+def runner_of(args: argparse.Namespace) -> Runner:
+    """The runner the options of :func:`add_runner_options` ask for."""
+    return make_runner(
+        workers=args.workers,
+        dask_workers=args.dask_workers,
+        scheduler=args.scheduler,
+        serial=args.serial,
     )
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.add_argument("--json", action="store_true", help="print the summary rows as JSON")
-    p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``hil sweep``; return the exit status."""
     from hil.outputs import writable_folder
 
-    spec = load_sweep_file(args.sweep_file)
+    spec = load_sweep_file(args.sweep_file, quick=args.quick)
     writable_folder(args.out, "--out")
-    runner = make_runner(
-        workers=args.workers,
-        dask_workers=args.dask_workers,
-        scheduler=args.scheduler,
-        serial=args.serial,
-    )
+    runner = runner_of(args)
     try:
         with runner:
             for note in runner.notes:
@@ -97,7 +119,7 @@ def run(args: argparse.Namespace) -> int:
         print(
             f"hil sweep: interrupted ({stop.signal_name}): {len(saved.records)} of "
             f"{spec.n_trials} trials saved in {saved.store.results_path}; continue with: "
-            f"hil sweep {args.sweep_file} --out {args.out} --resume",
+            f"hil sweep {args.sweep_file} --out {args.out}{' --quick' * args.quick} --resume",
             file=sys.stderr,
         )
         return EXIT_INTERRUPTED
@@ -128,6 +150,8 @@ def _report(outcome: SweepOutcome, where: str) -> str:
             f"{first['rep']}): {err['type']}: {err['message']} (details in {store.results_path})"
         )
     lines.append(f"wrote {store.manifest_path}, {store.results_path}, {store.summary_path}")
+    if outcome.reports:
+        lines.append("report: " + ", ".join(str(p) for p in outcome.reports))
     return "\n".join(lines)
 
 

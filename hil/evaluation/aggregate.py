@@ -41,6 +41,20 @@ def numeric_fields(records: list[dict[str, Any]]) -> list[str]:
     return list(fields)
 
 
+def records_by_point(spec: SweepSpec, records: list[dict[str, Any]]) -> list[list[dict[str, Any]]]:
+    """The records of every grid point, in point order (a point without records: empty).
+
+    >>> spec = SweepSpec("d", "t", "m:t", 1, 0, {"a": [1, 2, 3]})
+    >>> [[r["trial_id"] for r in recs] for recs in records_by_point(
+    ...     spec, [{"trial_id": 2, "point": 2}, {"trial_id": 0, "point": 0}])]
+    [[0], [], [2]]
+    """
+    by_point: list[list[dict[str, Any]]] = [[] for _ in range(spec.n_points)]
+    for rec in records:
+        by_point[int(rec["point"])].append(rec)
+    return by_point
+
+
 def summarise(spec: SweepSpec, records: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """One row per grid point: point index, grid values, counts and statistics.
 
@@ -54,11 +68,8 @@ def summarise(spec: SweepSpec, records: list[dict[str, Any]]) -> list[dict[str, 
     """
     latest = list(latest_records(records).values())
     fields = numeric_fields(latest)
-    by_point: list[list[dict[str, Any]]] = [[] for _ in range(spec.n_points)]
-    for rec in latest:
-        by_point[int(rec["point"])].append(rec)
     rows = []
-    for point, recs in enumerate(by_point):
+    for point, recs in enumerate(records_by_point(spec, latest)):
         ok = [r for r in recs if r.get("status") == "ok"]
         row: dict[str, Any] = {"point": point, **spec.point_values(point)}
         row.update(

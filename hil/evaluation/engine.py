@@ -15,13 +15,14 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, TextIO
 
 from hil.errors import ConfigError
 from hil.evaluation.aggregate import latest_records, summarise, write_summary_csv
 from hil.evaluation.progress import Progress
+from hil.evaluation.registry import load_trial, trial_reporter
 from hil.evaluation.runners import Runner
 from hil.evaluation.spec import SweepSpec
 from hil.evaluation.store import SweepStore
@@ -34,7 +35,8 @@ class SweepOutcome:
 
     ``records``: the latest record of every finished trial, by trial id; ``rows``: the
     summary per grid point; ``ran``: trials run by this call; ``skipped``: trials found
-    finished on disk; ``elapsed_s``: wall time of this call's trials, s.
+    finished on disk; ``elapsed_s``: wall time of this call's trials, s; ``reports``: the
+    files the trial's report wrote (none for a trial without one, or an incomplete sweep).
     """
 
     spec: SweepSpec
@@ -44,6 +46,7 @@ class SweepOutcome:
     ran: int
     skipped: int
     elapsed_s: float
+    reports: tuple[Path, ...] = ()
 
     @property
     def n_ok(self) -> int:
@@ -80,8 +83,10 @@ def run_sweep(
     A folder that already holds a sweep is refused unless ``resume`` is set; with ``resume``
     its manifest must match ``spec`` and the trials already recorded (finished or failed) are
     not run again. A trial that raises is recorded with its error and the sweep goes on.
-    ``summary.csv`` is written at the end. The runner's lifetime is the caller's (use it as a
-    context manager to reuse its workers across sweeps).
+    ``summary.csv`` is written at the end, then the trial's report (if it has one:
+    :func:`~hil.evaluation.registry.trial_reporter`) once every trial has a record. The
+    runner's lifetime is the caller's (use it as a context manager to reuse its workers
+    across sweeps).
     """
     store = SweepStore(out_dir)
     if store.has_sweep():
@@ -124,7 +129,11 @@ def run_sweep(
     finally:
         if progress is not None:
             progress.close()
-    return _finish(spec, store, records, ran, len(done), start)
+    outcome = _finish(spec, store, records, ran, len(done), start)
+    reporter = trial_reporter(load_trial(spec.target))
+    if reporter is None or not outcome.complete:
+        return outcome
+    return replace(outcome, reports=tuple(reporter(spec, outcome.records, store.out_dir)))
 
 
 class SweepInterrupted(RunInterrupted):

@@ -14,7 +14,9 @@ import without the parent's state:
 
 A trial may carry a parameter check, ``validate_params(params) -> None`` raising
 :class:`~hil.errors.ConfigError` named after the parameter; the sweep loader calls it for every
-grid point before any trial runs (:func:`register_trial` ``validate=`` attaches it).
+grid point before any trial runs (:func:`register_trial` ``validate=`` attaches it). It may
+also carry a report, ``write_report(spec, records, out_dir) -> list[Path]``, which
+:func:`~hil.evaluation.engine.run_sweep` calls once every trial has a record (``report=``).
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ Params = dict[str, Any]
 TrialResult = dict[str, Any]
 Trial = Callable[..., TrialResult]
 Validator = Callable[[Params], None]
+Reporter = Callable[..., list[Path]]
 
 #: Built-in trials: name -> ``"module:function"``, imported on first use so that adding a trial
 #: that needs the simulator or a receiver costs nothing until a sweep uses it.
@@ -43,6 +46,7 @@ TRIALS: dict[str, str] = {
     "ch6_receiver": "hil.evaluation.trials_ch6:ch6_receiver_trial",
     "ch6_fmcw": "hil.evaluation.trials_ch6:ch6_fmcw_trial",
     "ch6_cost": "hil.evaluation.trials_ch6:ch6_cost_trial",
+    "tank_run": "hil.evaluation.trials_tank:tank_run_trial",
 }
 
 # An importable module name: dotted identifiers, no path separators, no leading dot.
@@ -55,12 +59,14 @@ _file_modules: dict[str, Path] = {}
 F = TypeVar("F", bound=Callable[..., Any])
 
 
-def register_trial(name: str, *, validate: Validator | None = None) -> Callable[[F], F]:
+def register_trial(
+    name: str, *, validate: Validator | None = None, report: Reporter | None = None
+) -> Callable[[F], F]:
     """Decorator: make ``fn`` available to sweeps as ``name``.
 
     The registration stores the function's import target, not the function, so worker
     processes load it from its module. ``validate`` (optional) checks one grid point's
-    parameters before any trial runs.
+    parameters before any trial runs; ``report`` (optional) writes the sweep's report.
 
     >>> @register_trial("doc_example_square")
     ... def square(params, seed):
@@ -82,6 +88,8 @@ def register_trial(name: str, *, validate: Validator | None = None) -> Callable[
             )
         if validate is not None:
             fn.validate_params = validate  # type: ignore[attr-defined]
+        if report is not None:
+            fn.write_report = report  # type: ignore[attr-defined]
         TRIALS[name] = target
         return fn
 
@@ -201,3 +209,9 @@ def trial_validator(trial: Trial) -> Validator | None:
     """The trial's parameter check, if it has one."""
     validate: Validator | None = getattr(trial, "validate_params", None)
     return validate
+
+
+def trial_reporter(trial: Trial) -> Reporter | None:
+    """The trial's report writer, if it has one."""
+    report: Reporter | None = getattr(trial, "write_report", None)
+    return report

@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from hil.evaluation.aggregate import records_by_point
 from hil.evaluation.spec import SweepSpec
 from hil.figures import new_figure
 
@@ -80,11 +81,8 @@ def pool_rows(spec: SweepSpec, records: list[dict[str, Any]], kind: str) -> list
     >>> row["pd"], row["range_rmse_m"], row["false_per_s"]
     (0.75, 0.4, 2.0)
     """
-    by_point: list[list[dict[str, Any]]] = [[] for _ in range(spec.n_points)]
-    for rec in records:
-        by_point[int(rec["point"])].append(rec)
     rows = []
-    for point, recs in enumerate(by_point):
+    for point, recs in enumerate(records_by_point(spec, records)):
         ok = _ok(recs)
         row: dict[str, Any] = {**spec.point_values(point), "n_ok": len(ok)}
         row["n_failed"] = len(recs) - len(ok)

@@ -2,16 +2,23 @@
 
 All runners share one interface (:class:`Runner`): used as a context manager (workers start
 on entry and stop on exit, so one runner can serve several sweeps), ``run(target, tasks)``
-yields each trial's record as soon as it finishes, in completion order. At most
-``window`` trials are handed out at a time, so a sweep of a million trials holds a few
-futures, not a million. Every worker has its BLAS thread pools pinned to one thread
-(:data:`~hil.evaluation.worker.BLAS_THREAD_VARS`).
+yields each trial's record as soon as its batch finishes, in completion order.
+
+The pool and Dask runners hand trials out in *batches* (:class:`BatchSizer`): one trial per
+task until a trial's time is known, then as many as fill :data:`BATCH_TARGET_S` of work, so a
+hand-out (a pickle each way; on Dask also a scheduler round trip) is a small share of what it
+carries, whatever the trial costs. At most
+:data:`IN_FLIGHT_PER_WORKER` tasks per worker are out at a time, so a sweep of a million
+trials holds a few futures, not a million. Before a trial's first task every worker imports it
+(:func:`~hil.evaluation.worker.warm_trial`), side by side. Every worker has its BLAS thread
+pools pinned to one thread (:data:`~hil.evaluation.worker.BLAS_THREAD_VARS`).
 
 Dask is imported only by :class:`DaskRunner`; everything else needs no extra package.
 """
 
 from __future__ import annotations
 
+import itertools
 import logging
 import multiprocessing
 import os
@@ -25,17 +32,29 @@ from hil.evaluation.worker import (
     BLAS_THREAD_VARS,
     TrialTask,
     execute_trial,
+    execute_trials,
     init_pool_worker,
     pin_blas_threads,
     pinned_blas_env,
     probe_pool_worker,
+    warm_pool_worker,
+    warm_trial,
     worker_blas_env,
 )
 
 Record = dict[str, Any]
 
-#: Trials in flight per worker: enough to keep every worker busy between hand-outs.
-_IN_FLIGHT_PER_WORKER = 4
+#: Tasks in flight per worker: enough to keep every worker busy between hand-outs.
+IN_FLIGHT_PER_WORKER = 4
+
+#: Work one task aims to carry, s of a worker's wall time: each hand-out wakes the client, the
+#: scheduler and the worker (on a loaded machine, each wake-up waits for a core), so at 0.25 s
+#: Dask ran small trials at 0.5-0.8x the pool's rate and at 1 s at 0.8-1.0x; the last tasks
+#: of a sweep leave workers idle for at most about this.
+BATCH_TARGET_S = 1.0
+
+#: Most trials in one task.
+MAX_BATCH = 256
 
 #: Bound on the wait for one killed pool worker to be reaped, s.
 _ABORT_JOIN_S = 10.0
@@ -86,6 +105,48 @@ class Runner:
         raise NotImplementedError
 
 
+class BatchSizer:
+    """How many trials the next task carries: 1 until trials have finished, then
+    ``BATCH_TARGET_S`` over the mean wall time per trial seen so far (rounded), within
+    1..``MAX_BATCH``.
+
+    >>> sizer = BatchSizer()
+    >>> sizer.size
+    1
+    >>> sizer.observe([{"elapsed_s": 0.01}, {"elapsed_s": 0.04}])
+    >>> sizer.size
+    40
+    >>> sizer.observe([{"elapsed_s": 2.0}])
+    >>> sizer.size
+    1
+    """
+
+    def __init__(self, target_s: float = BATCH_TARGET_S, most: int = MAX_BATCH) -> None:
+        self.target_s = target_s
+        self.most = most
+        self._seconds = 0.0
+        self._trials = 0
+
+    def observe(self, records: list[Record]) -> None:
+        """Count the wall time of finished trials."""
+        self._seconds += sum(float(r.get("elapsed_s") or 0.0) for r in records)
+        self._trials += len(records)
+
+    @property
+    def size(self) -> int:
+        """Trials for the next task."""
+        if self._trials == 0:
+            return 1
+        mean = self._seconds / self._trials
+        if mean <= 0.0:
+            return self.most
+        return max(1, min(self.most, round(self.target_s / mean)))
+
+
+def _take(todo: Iterator[TrialTask], n: int) -> list[TrialTask]:
+    return list(itertools.islice(todo, n))
+
+
 class SerialRunner(Runner):
     """Runs every trial in this process, in order: for debugging (breakpoints work)."""
 
@@ -113,6 +174,8 @@ class LocalPoolRunner(Runner):
             raise ConfigError("--workers", workers, "an integer >= 1")
         self._workers = n
         self._pool: ProcessPoolExecutor | None = None
+        self._barrier: Any = None
+        self._warm: set[str] = set()
 
     @property
     def workers(self) -> int:
@@ -127,6 +190,7 @@ class LocalPoolRunner(Runner):
             return
         context = multiprocessing.get_context("spawn")
         barrier = context.Barrier(self._workers)
+        self._barrier = barrier
         with pinned_blas_env():
             pool = ProcessPoolExecutor(
                 self._workers,
@@ -139,6 +203,7 @@ class LocalPoolRunner(Runner):
             probes = [pool.submit(probe_pool_worker) for _ in range(self._workers)]
             reports = [f.result() for f in probes]
         self._pool = pool
+        self._warm = set()
         self.notes.extend(_unpinned_notes(reports))
 
     def close(self) -> None:
@@ -159,34 +224,56 @@ class LocalPoolRunner(Runner):
         for proc in procs:
             proc.join(_ABORT_JOIN_S)
 
+    def _warm_up(self, target: str) -> None:
+        """Every worker imports ``target`` once (one call each, met at the barrier)."""
+        pool = self._pool
+        if pool is None or target in self._warm:
+            return
+        calls = [pool.submit(warm_pool_worker, target) for _ in range(self._workers)]
+        for call in calls:
+            call.exception()  # a worker that cannot load it records why with every trial
+        self._warm.add(target)
+
     def run(self, target: str, tasks: Iterable[TrialTask]) -> Iterator[Record]:
         self._start()
         pool = self._pool
         assert pool is not None
-        pending: set[Future[Record]] = set()
+        self._warm_up(target)
+        pending: set[Future[list[Record]]] = set()
         todo = iter(tasks)
-        window = _IN_FLIGHT_PER_WORKER * self._workers
+        sizer = BatchSizer()
+        window = IN_FLIGHT_PER_WORKER * self._workers
+
+        def submit(batch: list[TrialTask]) -> Future[list[Record]]:
+            return pool.submit(execute_trials, target, batch)
+
         try:
-            _refill(pending, todo, window, lambda t: pool.submit(execute_trial, target, t))
+            _refill(pending, todo, window, sizer, submit)
             while pending:
                 done, _ = wait(pending, return_when=FIRST_COMPLETED)
                 for future in done:
                     pending.discard(future)
-                    yield future.result()
-                _refill(pending, todo, window, lambda t: pool.submit(execute_trial, target, t))
+                    records = future.result()
+                    sizer.observe(records)
+                    yield from records
+                _refill(pending, todo, window, sizer, submit)
         finally:
             for future in pending:
                 future.cancel()
 
 
 def _refill(
-    pending: set[Any], todo: Iterator[TrialTask], window: int, submit: Callable[[TrialTask], Any]
+    pending: set[Any],
+    todo: Iterator[TrialTask],
+    window: int,
+    sizer: BatchSizer,
+    submit: Callable[[list[TrialTask]], Any],
 ) -> None:
     while len(pending) < window:
-        task = next(todo, None)
-        if task is None:
+        batch = _take(todo, sizer.size)
+        if not batch:
             return
-        pending.add(submit(task))
+        pending.add(submit(batch))
 
 
 def _unpinned_notes(reports: list[dict[str, str | None]]) -> list[str]:
@@ -222,8 +309,9 @@ class DaskRunner(Runner):
     ``LocalCluster`` of that many single-threaded worker processes) or ``client`` (an existing
     ``distributed.Client``, left open on close). Local workers are spawned with the BLAS
     variables at 1 (Dask's ``pre-spawn-environ``, with this process's own variables pinned while
-    they start, since Dask lets those win); on a remote cluster the variables are set on
-    connection and workers that started unpinned are reported in :attr:`notes`.
+    they start, since Dask lets those win) and Dask's settings of :data:`LOCAL_WORKER_CONFIG`;
+    on a remote cluster the variables are set on connection and workers that started unpinned
+    are reported in :attr:`notes`.
     """
 
     name = "dask"
@@ -258,6 +346,7 @@ class DaskRunner(Runner):
         self._client: Any = client
         self._owns_client = client is None
         self._cluster: Any = None
+        self._warm: set[str] = set()
 
     @property
     def client(self) -> Any:
@@ -301,10 +390,9 @@ class DaskRunner(Runner):
             self._client.run(pin_blas_threads)
             self.notes.extend(_unpinned_notes(list(self._client.run(worker_blas_env).values())))
             return
-        pinned = {f"distributed.nanny.pre-spawn-environ.{v}": "1" for v in BLAS_THREAD_VARS}
         # Dask's pre-spawn-environ gives way to variables already set in this process, so they
         # are pinned here too while the nannies are made and spawn their workers.
-        with dask.config.set(pinned), pinned_blas_env():
+        with dask.config.set(LOCAL_WORKER_CONFIG), pinned_blas_env():
             self._cluster = distributed.LocalCluster(
                 n_workers=self.n_workers,
                 threads_per_worker=1,
@@ -328,27 +416,54 @@ class DaskRunner(Runner):
     def run(self, target: str, tasks: Iterable[TrialTask]) -> Iterator[Record]:
         distributed = _import_distributed()
         client = self.client
-        window = _IN_FLIGHT_PER_WORKER * max(self.workers, 1)
+        if target not in self._warm:
+            client.run(warm_trial, target)
+            self._warm.add(target)
+        window = IN_FLIGHT_PER_WORKER * max(self.workers, 1)
         completed = distributed.as_completed(loop=client.loop)
         todo = iter(tasks)
+        sizer = BatchSizer()
 
-        def submit(task: TrialTask) -> Any:
-            future = client.submit(execute_trial, target, task, pure=False)
+        def submit(batch: list[TrialTask]) -> Any:
+            future = client.submit(execute_trials, target, batch, pure=False)
             completed.add(future)
             return future
 
         pending: set[Any] = set()
         try:
-            _refill(pending, todo, window, submit)
+            _refill(pending, todo, window, sizer, submit)
             for future in completed:
                 pending.discard(future)
-                record: Record = future.result()
+                records: list[Record] = future.result()
                 future.release()
-                yield record
-                _refill(pending, todo, window, submit)
+                sizer.observe(records)
+                yield from records
+                _refill(pending, todo, window, sizer, submit)
         finally:
             for future in pending:
                 future.cancel()
+
+
+#: Dask settings of the local cluster's workers, so that a trial costs there what it costs in
+#: a pool process:
+#:
+#: - the BLAS variables at 1, and not Dask's ``MALLOC_TRIM_THRESHOLD_=65536`` (None unsets
+#:   it): that value also fixes glibc's mmap threshold, so every numpy array over 128 KiB is
+#:   mapped and unmapped afresh, page faults included (a ch6_receiver trial: 10x the page
+#:   faults, 1.45-1.7x the CPU time);
+#: - no statistical profiler (it samples the task thread every 10 ms, GIL held: about 10 %
+#:   more CPU per trial);
+#: - the scheduler's, nannies' and workers' housekeeping once a second instead of every 20 ms
+#:   (event-loop health tick) and 100 ms (memory monitor): on a loaded 2-core machine the
+#:   cluster's own processes took 3 s of CPU over a 30 s sweep of small trials, 0.4-1.2 s so.
+LOCAL_WORKER_CONFIG: dict[str, Any] = {
+    **{f"distributed.nanny.pre-spawn-environ.{v}": "1" for v in BLAS_THREAD_VARS},
+    "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
+    "distributed.worker.profile.enabled": False,
+    "distributed.admin.tick.interval": "1000ms",
+    "distributed.worker.memory.monitor-interval": "1000ms",
+    "distributed.admin.system-monitor.interval": "2000ms",
+}
 
 
 def _looks_like_address(address: str) -> bool:

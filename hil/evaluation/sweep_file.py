@@ -16,6 +16,11 @@ Layout (docs/sweeps.md)::
     [fixed]                            # the same for every point
     n_tones = 4
 
+    [quick]                            # optional: what --quick runs instead
+    trials_per_point = 1               # integer >= 1
+    [quick.grid]                       # replaces these parameters' values in [grid]
+    code_length = [17]
+
 Every error is a :class:`~hil.errors.ConfigError` naming the field by its dotted path
 (``grid.window``, ``sweep.trials_per_point``) and what is allowed.
 """
@@ -28,23 +33,98 @@ import re
 from pathlib import Path
 from typing import Any
 
+from hil.data import sweeps_dir
 from hil.errors import ConfigError
 from hil.evaluation.registry import load_trial, resolve_trial, trial_validator
 from hil.evaluation.seeds import check_entropy
 from hil.evaluation.spec import SweepSpec
 from hil.toml_table import read_toml
 
-_SECTIONS = ("sweep", "grid", "fixed")
+_SECTIONS = ("sweep", "grid", "fixed", "quick")
+_QUICK_KEYS = ("trials_per_point", "grid")
 _SWEEP_KEYS = ("name", "trial", "trials_per_point", "seed", "description")
 _PARAM_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 _VALUE_KINDS = "numbers, strings, booleans, or arrays/tables of them (no dates, no NaN)"
 
 
-def load_sweep_file(path: str | Path) -> SweepSpec:
-    """Read and validate the sweep file ``path`` (relative trial files are found next to it)."""
-    path = Path(path)
+def shipped_sweeps() -> dict[str, Path]:
+    """The sweep files shipped with the package (``hil/data/sweeps/``): name -> path.
+
+    >>> "tank-mc" in shipped_sweeps()
+    True
+    """
+    return {p.stem: p for p in sorted(sweeps_dir().glob("*.toml"))}
+
+
+def find_sweep_file(name: str | Path) -> Path:
+    """``name`` itself when it is a file, else the shipped sweep file of that name.
+
+    >>> find_sweep_file("tank-mc").name
+    'tank-mc.toml'
+    """
+    path = Path(name)
+    if path.is_file():
+        return path
+    shipped = shipped_sweeps()
+    if str(name) in shipped:
+        return shipped[str(name)]
+    raise ConfigError(
+        "SWEEP",
+        str(name),
+        f"a sweep file, or a shipped sweep: one of {', '.join(shipped)}",
+        f"{path.resolve()} is not a file",
+    )
+
+
+def load_sweep_file(path: str | Path, *, quick: bool = False) -> SweepSpec:
+    """Read and validate the sweep file ``path`` (a file, or a shipped sweep's name:
+    :func:`find_sweep_file`; relative trial files are found next to it). ``quick`` applies
+    its ``[quick]`` table."""
+    path = find_sweep_file(path)
     doc = read_toml(path, "sweep")
+    if quick:
+        doc = quick_document(doc)
     return sweep_from_dict(doc, base_dir=path.resolve().parent)
+
+
+def quick_document(doc: dict[str, Any]) -> dict[str, Any]:
+    """``doc`` with its ``[quick]`` table applied: its ``trials_per_point`` and its grid values
+    in place of the full ones (the table itself removed).
+
+    >>> quick_document({"sweep": {"trials_per_point": 5}, "grid": {"a": [1, 2], "b": [3]},
+    ...                 "quick": {"trials_per_point": 1, "grid": {"a": [2]}}})
+    {'sweep': {'trials_per_point': 1}, 'grid': {'a': [2], 'b': [3]}}
+    """
+    quick = doc.get("quick")
+    if not isinstance(quick, dict):
+        raise ConfigError(
+            "--quick", True, "a sweep file with a [quick] table",
+            "add [quick] (trials_per_point, [quick.grid]) to the file, or leave --quick out",
+        )  # fmt: skip
+    _check_quick(quick, doc.get("grid", {}))
+    out = {key: value for key, value in doc.items() if key != "quick"}
+    head = dict(out.get("sweep", {}))
+    if "trials_per_point" in quick:
+        head["trials_per_point"] = quick["trials_per_point"]
+    out["sweep"] = head
+    out["grid"] = {**out.get("grid", {}), **quick.get("grid", {})}
+    return out
+
+
+def _check_quick(quick: dict[str, Any], grid: Any) -> None:
+    _check_keys(quick, _QUICK_KEYS, "quick.")
+    reps = quick.get("trials_per_point", 1)
+    if isinstance(reps, bool) or not isinstance(reps, int) or reps < 1:
+        raise ConfigError("quick.trials_per_point", reps, "an integer >= 1")
+    table = quick.get("grid", {})
+    if not isinstance(table, dict):
+        raise ConfigError("quick.grid", table, "a table: write [quick.grid]")
+    for key, values in table.items():
+        if not isinstance(grid, dict) or key not in grid:
+            raise ConfigError(
+                f"quick.grid.{key}", values, "a parameter swept in [grid]",
+                "quick mode replaces values of the grid; it adds no parameter",
+            )  # fmt: skip
 
 
 def sweep_from_dict(doc: dict[str, Any], base_dir: Path | None = None) -> SweepSpec:
@@ -85,6 +165,8 @@ def sweep_from_dict(doc: dict[str, Any], base_dir: Path | None = None) -> SweepS
 
     grid = _grid(doc.get("grid", {}))
     fixed = _fixed(doc.get("fixed", {}), grid)
+    if "quick" in doc:
+        _check_quick(doc["quick"], grid)
 
     target = resolve_trial(trial_name, base_dir, "sweep.trial")
     trial = load_trial(target, "sweep.trial")

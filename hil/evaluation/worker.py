@@ -90,6 +90,36 @@ def execute_trial(target: str, task: TrialTask) -> dict[str, Any]:
     return record
 
 
+def execute_trials(target: str, tasks: list[TrialTask]) -> list[dict[str, Any]]:
+    """:func:`execute_trial` for each of ``tasks`` in turn: one hand-out to a worker for a
+    batch of short trials (the runners size the batches).
+
+    >>> recs = execute_trials("hil.evaluation.worker:_example_trial",
+    ...                       [TrialTask(0, 0, 0, {"x": 2}, 5), TrialTask(1, 0, 1, {"x": 3}, 5)])
+    >>> [r["result"]["y"] for r in recs]
+    [4, 9]
+    """
+    return [execute_trial(target, task) for task in tasks]
+
+
+def warm_trial(target: str) -> None:
+    """Import the trial ``target`` in this worker ahead of its first task, so the workers
+    load it side by side, not one task at a time; a trial that cannot load is left to
+    :func:`execute_trial`, which records why."""
+    try:
+        load_trial(target)
+    except Exception:  # every trial's own record says why
+        return
+
+
+def warm_pool_worker(target: str) -> None:
+    """:func:`warm_trial`, then wait until every pool worker has done it (one call per
+    worker then reaches each of them, as :func:`probe_pool_worker` does)."""
+    warm_trial(target)
+    if _start_barrier is not None:
+        _start_barrier.wait(timeout=300)
+
+
 def _example_trial(params: dict[str, Any], seed: np.random.SeedSequence) -> dict[str, Any]:
     """A trivial trial for the doctest above."""
     return {"y": params["x"] ** 2}

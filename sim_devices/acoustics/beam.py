@@ -89,17 +89,6 @@ class PistonBeam:
         return np.where(np.cos(theta) > 0, d * d, 0.0)
 
 
-def make_beam(kind: str, ka: float | None = None) -> BeamPattern:
-    """``"omni"`` or ``"piston"`` (needs ``ka``)."""
-    if kind == "omni":
-        return OmniBeam()
-    if kind == "piston":
-        if ka is None:
-            raise ConfigError("beam.ka", None, "> 0 for a piston beam", "give ka or radius_m")
-        return PistonBeam(ka)
-    raise ConfigError("beam.type", kind, "one of omni, piston")
-
-
 def equivalent_two_way_beam_angle(tx: BeamPattern, rx: BeamPattern) -> float:
     """``Ψ = 2π ∫₀^π b_tx(θ) b_rx(θ) sinθ dθ`` in steradians (adaptive quadrature)."""
 

@@ -45,14 +45,16 @@ marker_trial.validate_params = _check_marker  # type: ignore[attr-defined]
 
 
 def env_trial(params: dict[str, Any], seed: np.random.SeedSequence) -> dict[str, Any]:
-    """Reports the BLAS thread variables the worker process *started* with (from
-    /proc/self/environ, untouched by later os.environ changes) and its process id."""
+    """Reports the BLAS thread variables and glibc's trim threshold the worker process
+    *started* with (from /proc/self/environ, untouched by later os.environ changes) and its
+    process id."""
     raw = Path("/proc/self/environ").read_bytes().split(b"\0")
     env = dict(item.decode().split("=", 1) for item in raw if b"=" in item)
     return {
         "omp": str(env.get("OMP_NUM_THREADS")),
         "openblas": str(env.get("OPENBLAS_NUM_THREADS")),
         "mkl": str(env.get("MKL_NUM_THREADS")),
+        "malloc_trim": str(env.get("MALLOC_TRIM_THRESHOLD_")),
         "pid": os.getpid(),
     }
 

@@ -164,10 +164,18 @@ def test_workers_start_with_blas_pinned_to_one_thread(
     with runner:
         outcome = run_sweep(spec, tmp_path, runner, show_progress=False)
         assert runner.notes == []
+        if isinstance(runner, DaskRunner):  # no statistical profiler in the local workers
+            profiling = runner.client.run(
+                lambda: __import__("dask").config.get("distributed.worker.profile.enabled")
+            )
+            assert set(profiling.values()) == {False}
     started = {
         (r["result"]["omp"], r["result"]["openblas"], r["result"]["mkl"]) for r in outcome.records
     }
     assert started == {("1", "1", "1")}
+    # Dask's default MALLOC_TRIM_THRESHOLD_ (fixed mmap threshold, numpy trials 1.5x CPU) is not
+    # given to the local workers, as the pool's never have it.
+    assert {r["result"]["malloc_trim"] for r in outcome.records} == {"None"}
     assert len({r["result"]["pid"] for r in outcome.records}) == 2
     assert os.environ["OMP_NUM_THREADS"] == "4"  # the parent's own setting is back
 

@@ -12,6 +12,7 @@ import pytest
 
 from hil.cli.main import main
 from hil.evaluation.progress import Progress
+from hil.evaluation.sweep_file import shipped_sweeps
 
 HELPERS = Path(__file__).with_name("evaluation_trials_for_tests.py")
 
@@ -169,4 +170,8 @@ def test_cli_refuses_two_ways_to_run(capsys: pytest.CaptureFixture[str]) -> None
 def test_cli_missing_sweep_file_exits_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     missing = tmp_path / "nope.toml"
     assert main(["sweep", str(missing), "--out", str(tmp_path / "o")]) == 2
-    assert capsys.readouterr().err == f"hil sweep: error: No such file or directory: {missing}\n"
+    shipped = ", ".join(shipped_sweeps())
+    assert capsys.readouterr().err == (
+        f"hil sweep: error: SWEEP = '{missing}' is not allowed: must be a sweep file, or a "
+        f"shipped sweep: one of {shipped}; {missing} is not a file\n"
+    )

@@ -77,7 +77,7 @@ BAD = [
     (
         _edit("[fixed]", "[fixd]"),
         "fixd = {'doppler_bins': 2} is not allowed: must be a known key of the top level: "
-        "one of sweep, grid, fixed; check the spelling",
+        "one of sweep, grid, fixed, quick; check the spelling",
     ),
     (
         _edit("seed = 12345", "seed = 12345\nrepeats = 4"),
@@ -87,8 +87,8 @@ BAD = [
     (
         _edit('"waveform_af_sidelobe"', '"waveform_sidelobes"'),
         "sweep.trial = 'waveform_sidelobes' is not allowed: must be a registered trial (one of "
-        "ch6_cost, ch6_fmcw, ch6_receiver, waveform_af_sidelobe), 'package.module:function' or "
-        "'file.py:function'; register the "
+        "ch6_cost, ch6_fmcw, ch6_receiver, tank_run, waveform_af_sidelobe), "
+        "'package.module:function' or 'file.py:function'; register the "
         "trial with @register_trial or name its module and function",
     ),
     (
@@ -155,7 +155,7 @@ BAD = [
     (
         _edit("[grid]", "grid = 3\n[grod]"),
         "grod = {'code_length': [17, 19, 23], 'n_tones': [4, 5]} is not allowed: must be a known "
-        "key of the top level: one of sweep, grid, fixed; check the spelling",
+        "key of the top level: one of sweep, grid, fixed, quick; check the spelling",
     ),
     # The trial's own parameter check, on every grid point, named by where the value is.
     (

@@ -49,7 +49,8 @@ def test_wheel_holds_every_data_file_and_the_entry_point(tmp_path: Path) -> None
         entry_points = next(n for n in names if n.endswith(".dist-info/entry_points.txt"))
         scripts = zf.read(entry_points).decode()
     expected = _data_files()
-    must = {"hil/data/sweeps/sim01_codeword_map.toml", "hil/data/scenarios/att.toml",
+    must = {"hil/data/sweeps/sim01_codeword_map.toml", "hil/data/sweeps/tank-mc.toml",
+            "hil/data/scenarios/att.toml",
             "hil/data/schema/experiment.schema.json", "hil/data/schema/scenario.schema.json",
             "firmware_protocol/SPEC.md", "firmware_protocol/golden_vectors.json"}  # fmt: skip
     assert must <= expected
@@ -68,7 +69,8 @@ def test_shipped_data_is_found_through_importlib_resources() -> None:
     from hil.evaluation.reproduce import ITEM_IDS, default_sweeps_dir
 
     assert default_sweeps_dir() == sweeps_dir()
-    assert sorted(p.stem for p in sweeps_dir().glob("*.toml")) == sorted(ITEM_IDS)
+    # The chapter-6 items and the tank study of `hil sweep tank-mc`.
+    assert sorted(p.stem for p in sweeps_dir().glob("*.toml")) == sorted([*ITEM_IDS, "tank-mc"])
     assert set(shipped_scenarios()) == {"att", "tank-audio", "tank-board"}
     assert scenario_path("tank-board").read_text().startswith(("preset", "#", "["))
 

@@ -75,41 +75,7 @@ Latency: a boundary is reported once ``N_min/2`` baseband samples past it have a
 the filter delay), within one hop.
 """
 
-from hil.estimation.gcas.exact import EXACT_ANCHOR, NO_SAMPLE
-from hil.estimation.gcas.front_end import REVERB_GUARD_LOBES
-from hil.estimation.gcas.options import (
-    CFAR_MODES,
-    COARSE_STEP,
-    HFCCW_FAMILIES,
-    M_MAX,
-    RANGE_READOUTS,
-    SEARCH_MODES,
-    TRANSITION_FACTOR,
-    minimum_m_hops,
-)
-from hil.estimation.gcas.readout import DetectionInfo
-from hil.estimation.gcas.receiver import GcasReceiver, MapCallback
-from hil.estimation.gcas.search import SearchStrategy
-from hil.estimation.gcas.search_two_stage import RECENTRE_STEPS
-from hil.estimation.gcas.threshold import NOISE_STRIDE, Peak
+from hil.estimation.gcas.exact import NO_SAMPLE
+from hil.estimation.gcas.receiver import GcasReceiver
 
-__all__ = [
-    "CFAR_MODES",
-    "COARSE_STEP",
-    "EXACT_ANCHOR",
-    "HFCCW_FAMILIES",
-    "M_MAX",
-    "NOISE_STRIDE",
-    "NO_SAMPLE",
-    "RANGE_READOUTS",
-    "RECENTRE_STEPS",
-    "REVERB_GUARD_LOBES",
-    "SEARCH_MODES",
-    "TRANSITION_FACTOR",
-    "DetectionInfo",
-    "GcasReceiver",
-    "MapCallback",
-    "Peak",
-    "SearchStrategy",
-    "minimum_m_hops",
-]
+__all__ = ["NO_SAMPLE", "GcasReceiver"]
