@@ -272,14 +272,26 @@ class FirstArrivalReadout:
         rel = self._fit_ramp(
             excess[lo_fit : j_fit + 1], lo_fit, guess, frac, alpha * (prev_f - f_next), jump
         )
-        onset = float(n_b[0] / fs + rel)
+        # ``rel`` is the onset after each boundary's predicted switch ``t_b`` (the model
+        # places boundary m's switch at ``t_b[m] fs + rel fs``).
+        onset = float(t_b[0] + rel)
         # The canceller's copy of an opening target (δ < 0) arrives |δ| earlier.
         delta = sch.period_s * (alpha - 1.0) / alpha
-        # The direct path alone, DIRECT_S into its ramp (before the first image).
-        j_direct = self._pre + int(round((rel + DIRECT_S) * fs))
+        # The direct path alone: its first DIRECT_S (before the first image).
         direct_alpha = None
-        if 0 <= j_direct < box.shape[1]:
-            p = np.asarray(box[:, j_direct], dtype=np.complex128) / w
+        j0 = self._pre + int(math.ceil(rel * fs))
+        j1 = self._pre + int(round((rel + DIRECT_S) * fs))
+        if 0 <= j0 < j1 < box.shape[1]:
+            n = np.arange(j0, j1 + 1)
+            shape = self._ramp_shape(
+                np.array([rel * fs]), n, frac, alpha * (prev_f - f_next), jump
+            )[0]  # (M, J)
+            seen = np.asarray(box[:, j0 : j1 + 1], dtype=np.complex128) / w
+            # Each boundary's complex amplitude by least squares on the model's shape: the
+            # previous tone's leak, different at each boundary, is divided out.
+            p = np.sum(np.conj(shape) * seen, axis=1) / np.maximum(
+                np.sum(np.abs(shape) ** 2, axis=1), 1e-300
+            )
             direct_alpha = self._direct_alpha(p, hops, n_b, alpha)
         return FirstArrival(
             onset - min(0.0, delta), alpha if direct_alpha is None else direct_alpha
@@ -362,8 +374,32 @@ class FirstArrivalReadout:
         of ``1`` after ``o`` and of the previous tone, ``e^{j(2π beat (i − o)/fs − jump)}``,
         before it; its mean power over the boundaries, scaled by least squares.
         """
-        w = self.boxcar
         n = first + np.arange(excess.size)  # window indices (L,)
+        shape = self._ramp_shape(grid, n, frac, beat_hz, jump)  # (C, M, L)
+        model = np.mean(np.abs(shape) ** 2, axis=1)  # (C, L)
+        mm = np.sum(model * model, axis=1)
+        scale = np.sum(model * excess[None, :], axis=1) / np.maximum(mm, 1e-300)
+        return np.asarray(
+            np.sum((excess[None, :] - scale[:, None] * model) ** 2, axis=1), dtype=np.float64
+        )
+
+    def _ramp_shape(
+        self,
+        grid: NDArray[np.float64],
+        n: NDArray[np.int64],
+        frac: NDArray[np.float64],
+        beat_hz: NDArray[np.float64],
+        jump: NDArray[np.float64],
+    ) -> NDArray[np.complex128]:
+        """The next-tone channel of one arrival of unit amplitude switching at each onset of
+        ``grid`` (samples after each boundary's predicted switch, shape ``(C,)``), at window
+        indices ``n`` (shape ``(L,)``): shape ``(C, M, L)``, complex.
+
+        At onset ``o`` (window index) the boxcar holds ``1`` for each sample after ``o`` and
+        the previous tone, ``e^{j(2π beat (i − o)/fs − jump)}``, for each one before it; over
+        the window's ``w`` samples, divided by ``w``.
+        """
+        w = self.boxcar
         o = (self._pre + grid)[:, None, None] + frac[None, :, None]  # (C, M, 1)
         n_next = np.clip(n[None, None, :] - np.ceil(o) + 1, 0, w).astype(np.int64)
         n_prev = w - n_next  # (C, M, L) samples before o in the window
@@ -378,13 +414,7 @@ class FirstArrivalReadout:
         sums = np.where(steady[None, :, None], n_prev, (1.0 - gathered) / denom)
         start = np.exp(1j * np.outer(theta, n - w + 1))[None, :, :]  # e^{jθa}, (1, M, L)
         at_o = np.exp(-1j * (theta[None, :, None] * o + jump[None, :, None]))  # (C, M, 1)
-        prev = start * at_o * sums
-        model = np.mean(np.abs((n_next + prev) / w) ** 2, axis=1)  # (C, L)
-        mm = np.sum(model * model, axis=1)
-        scale = np.sum(model * excess[None, :], axis=1) / np.maximum(mm, 1e-300)
-        return np.asarray(
-            np.sum((excess[None, :] - scale[:, None] * model) ** 2, axis=1), dtype=np.float64
-        )
+        return np.asarray((n_next + start * at_o * sums) / w, dtype=np.complex128)
 
     def _direct_alpha(
         self, p: NDArray[np.complexfloating], hops: HopTable, n_b: NDArray[np.int64], alpha: float
