@@ -132,6 +132,12 @@ class FirstArrivalReadout:
     max_spread_s:
         How far before the centroid the first arrival may be, s (default
         :data:`MAX_SPREAD_HOPS` hops).
+    cancel_period:
+        True (default): the readout's own clutter canceller ``x(t) − x(t − P)`` (step 1).
+        False: the input is read as it comes, for an input whose still returns are already
+        removed without leaving a copy of the moving echo (an empty-tank background
+        subtracted: :mod:`hil.estimation.background`); the code period need not be a whole
+        number of samples then.
     """
 
     def __init__(
@@ -141,10 +147,12 @@ class FirstArrivalReadout:
         m_hops: int,
         sound_speed_mps: float,
         max_spread_s: float | None = None,
+        *,
+        cancel_period: bool = True,
     ) -> None:
         if max_spread_s is None:
             max_spread_s = MAX_SPREAD_HOPS * schedule.hop_s
-        period = schedule.period_samples(fs_hz)
+        period = schedule.period_samples(fs_hz) if cancel_period else 0
         if period is None:
             raise ConfigError(
                 "range_readout",
@@ -163,7 +171,8 @@ class FirstArrivalReadout:
         self.schedule = schedule
         self.fs_hz = float(fs_hz)
         self.m_hops = int(m_hops)
-        self.period = period
+        #: The canceller's period, samples (0: no canceller).
+        self.period = int(period)
         self.boxcar = max(2, int(round(fs_hz / spacing)))
         self.max_spread_s = float(max_spread_s)
         self._pre = int(round((max_spread_s + BASELINE_S) * fs_hz)) + self.boxcar
@@ -215,7 +224,9 @@ class FirstArrivalReadout:
         if first.min() < self._valid_from or n_b.max() + self._post > self._ring.next_index:
             return None
         idx = n_b[:, None] + self._offsets_ext[None, :]  # (M, L + lead)
-        d = self._ring.rows(idx) - self._ring.rows(idx - self.period)
+        d = self._ring.rows(idx)
+        if self.period:
+            d = d - self._ring.rows(idx - self.period)
         t = idx / fs
         z = d * np.exp(-2j * np.pi * alpha * f_next[:, None] * t)
         c = np.cumsum(z, axis=1)
@@ -276,7 +287,7 @@ class FirstArrivalReadout:
         # places boundary m's switch at ``t_b[m] fs + rel fs``).
         onset = float(t_b[0] + rel)
         # The canceller's copy of an opening target (δ < 0) arrives |δ| earlier.
-        delta = sch.period_s * (alpha - 1.0) / alpha
+        delta = sch.period_s * (alpha - 1.0) / alpha if self.period else 0.0
         # The direct path alone: its first DIRECT_S (before the first image).
         direct_alpha = None
         j0 = self._pre + int(math.ceil(rel * fs))

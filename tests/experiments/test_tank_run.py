@@ -302,7 +302,8 @@ def test_the_run_keeps_every_sync_pair_beyond_the_fits_window() -> None:
 #: Summary keys a recording cannot give back (docs/tank-run.md, "After a crash").
 NOT_RECORDED = frozenset(
     {"folder", "wall_s", "real_time_factor", "capture_backlog_max_s", "adc_clipped_samples",
-     "planned_adc_peak_fs", "telemetry_truth_error_max_m", "range_rmse_vs_exact_m"}
+     "planned_adc_peak_fs", "telemetry_truth_error_max_m", "range_rmse_vs_exact_m",
+     "speed_rmse_vs_exact_mps"}
 )  # fmt: skip
 
 
