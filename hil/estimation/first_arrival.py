@@ -100,6 +100,12 @@ DIRECT_SPEED_STEP = 0.002
 #: energy-weighted one by more than this, m/s; a direct-path speed slower by more is a phase
 #: ambiguity (measured at image order 2: -0.3 m/s outliers, v_res/4) and GCAS's is kept.
 DIRECT_BELOW_GCAS_MPS = 0.05
+#: Hops before the previous one whose tones a boundary's next tone must differ from to be read
+#: (:meth:`FirstArrivalReadout._clean_boundaries`): late images up to this many hops behind
+#: their direct path leave no early switch on the boundaries that are read.
+LATE_HOPS = 2
+#: Fewest boundaries the onset is read on; with fewer clean ones, every boundary is read.
+MIN_CLEAN = 3
 #: The noise is read in the stretch of :data:`BASELINE_S` before the search unless that holds
 #: more than this times the power of the quietest such stretch before the centroid (a late
 #: image switching tones there); the quietest one alone reads noise low (it is the least of
@@ -235,7 +241,8 @@ class FirstArrivalReadout:
         # previous tones, and the next tone as sounded by late images of earlier boundaries)
         # gives the same boxcar sum w samples apart and cancels; only switches remain.
         box = full[:, w:] - full[:, :-w]  # (M, L)
-        power = np.mean(np.abs(box / w) ** 2, axis=0)  # (L,)
+        clean = self._clean_boundaries(hop_index)
+        power = np.mean(np.abs(box[clean] / w) ** 2, axis=0)  # (L,)
         base = self._noise_window(power)
         amp = np.sqrt(np.maximum(power - power[base].mean(), 0.0))
         top_i = self._after + int(np.argmax(amp[self._after :]))
@@ -280,8 +287,9 @@ class FirstArrivalReadout:
         guess = -icept / slope
         if not -self.max_spread_s - BASELINE_S < guess < TOP_S:
             return None
+        beat = alpha * (prev_f - f_next)
         rel = self._fit_ramp(
-            excess[lo_fit : j_fit + 1], lo_fit, guess, frac, alpha * (prev_f - f_next), jump
+            excess[lo_fit : j_fit + 1], lo_fit, guess, frac[clean], beat[clean], jump[clean]
         )
         # ``rel`` is the onset after each boundary's predicted switch ``t_b`` (the model
         # places boundary m's switch at ``t_b[m] fs + rel fs``).
@@ -294,9 +302,7 @@ class FirstArrivalReadout:
         j1 = self._pre + int(round((rel + DIRECT_S) * fs))
         if 0 <= j0 < j1 < box.shape[1]:
             n = np.arange(j0, j1 + 1)
-            shape = self._ramp_shape(
-                np.array([rel * fs]), n, frac, alpha * (prev_f - f_next), jump
-            )[0]  # (M, J)
+            shape = self._ramp_shape(np.array([rel * fs]), n, frac, beat, jump)[0]  # (M, J)
             seen = np.asarray(box[:, j0 : j1 + 1], dtype=np.complex128) / w
             # Each boundary's complex amplitude by least squares on the model's shape: the
             # previous tone's leak, different at each boundary, is divided out.
@@ -307,6 +313,26 @@ class FirstArrivalReadout:
         return FirstArrival(
             onset - min(0.0, delta), alpha if direct_alpha is None else direct_alpha
         )
+
+    def _clean_boundaries(self, hop_index: int) -> NDArray[np.bool_]:
+        """Which of the ``M`` boundaries (newest first) the onset is read on: those whose next
+        tone was sounded neither in the hop it follows nor in the :data:`LATE_HOPS` before (all of
+        them where fewer than :data:`MIN_CLEAN` are left). Shape ``(M,)``.
+
+        A tank's late images (the far end wall on one leg comes 0.9 hop after the direct path
+        in the built-in tank at 5 m) switch tones a fraction of a hop before a later
+        boundary's direct path: where the tone they leave is that boundary's next tone, the
+        next-tone channel changes there too, and an onset read on it is up to a hop early.
+        """
+        m, k = self.m_hops, LATE_HOPS
+        tones = self.schedule.hops(hop_index - m - k + 1, m + k + 1).freq_hz  # oldest first
+        nxt = tones[k + 1 :][::-1]  # next tone of boundary j (j = 0: after hop h)
+        # Tone of hop h − j − i for boundary j, i = 0 (the hop it follows) .. K: (K + 1, M).
+        before = np.stack([tones[k - i : k - i + m][::-1] for i in range(k + 1)])
+        clean = np.all(np.abs(before - nxt[None, :]) > 0.5, axis=0)
+        if np.count_nonzero(clean) < MIN_CLEAN:
+            return np.ones(m, dtype=bool)
+        return np.asarray(clean, dtype=bool)
 
     def _noise_window(self, power: NDArray[np.float64]) -> NDArray[np.bool_] | slice:
         """Where the noise level is read in ``power`` (shape ``(L,)``): the stretch of
