@@ -25,11 +25,11 @@ from hil.signals.schedule import HopSchedule
 RECEIVERS: dict[str, str] = {
     "gcas": "hil.estimation.gcas:GcasReceiver",
     "gcas-mti": "hil.estimation.clutter:ClutterCancelledGcas",
-    "gcas-bg": "hil.estimation.background:BackgroundGcas",
     "jifs": "hil.estimation.jifs:JifsReceiver",
     "stft": "hil.estimation.stft:StftReceiver",
     "mfbank": "hil.estimation.mfbank:MatchedFilterBank",
     "fmcw": "hil.estimation.fmcw:FmcwReceiver",
+    "gcas-bg": "hil.estimation.background:BackgroundGcas",
 }
 
 
