@@ -133,8 +133,11 @@ def test_hil_report_of_the_recording_reproduces_the_live_summary(first_run: RunO
 
     live = summarize(first_run)
     rebuilt = summarize(outcome_from_recording(first_run.folder / "run.h5", codeword_map=False))
-    assert set(rebuilt) == set(live) - {"telemetry_truth_error_max_m", "range_rmse_vs_exact_m",
-     "speed_rmse_vs_exact_mps"}
+    assert set(rebuilt) == set(live) - {
+        "telemetry_truth_error_max_m",
+        "range_rmse_vs_exact_m",
+        "speed_rmse_vs_exact_mps",
+    }
     same = sorted(set(live) - NOT_RECORDED)
     assert {k: rebuilt[k] for k in same} == {k: live[k] for k in same}
     assert live["expected_boundaries"] == rebuilt["expected_boundaries"] > 50
@@ -240,8 +243,11 @@ def test_another_seed_gives_another_run(first_run: RunOutcome, tmp_path: Path) -
 
 
 def test_virtual_time_is_refused_for_real_devices(tmp_path: Path) -> None:
-    text = SHORT.replace('board = "sim://board"', 'board = "serial:///dev/ttyACM0"').replace(
-        'stage = "sim://stage"', 'stage = "serial:///dev/ttyUSB0"'
+    text = (
+        SHORT.replace('board = "sim://board"', 'board = "serial:///dev/ttyACM0"')
+        .replace('stage = "sim://stage"', 'stage = "serial:///dev/ttyUSB0"')
+        .replace('name = "gcas-bg"', 'name = "gcas"')
+        .replace('options = { background = "simulated" }', "")
     )
     with pytest.raises(ConfigError, match=r"virtual time.*simulated devices \(sim://\) only"):
         virtual_run(tmp_path / "run", text)
