@@ -8,6 +8,8 @@ the noise averages down as ``1/√K`` over ``K`` periods. Receiver ``"gcas-bg"``
 (:mod:`hil.estimation.background`) subtracts it from the run's input.
 
 - :func:`average_periods`: the averaging, on any recording (``x`` by receiver sample index).
+- :func:`background_from_recording`: the background of a tank run recorded with the target
+  out (``run.h5``: its hydrophone channel, after the tail has settled, gaps left out).
 - :func:`simulated_background`: the built-in simulated tank's capture (its world with the
   target taken out), aligned as the run's receiver input is.
 - :func:`save_background`: the ``.npy`` file the receiver option ``background`` names.
@@ -86,6 +88,45 @@ def simulated_background(exp: Experiment, periods: int = BACKGROUND_PERIODS) -> 
     x = world.channel.read_components((SETTLE_PERIODS + periods) * p, clip=False)["input_fs"]
     lead = SETTLE_PERIODS * p
     return average_periods(x[lead:], p, first_index=lead - CONVERTER_DELAY_SAMPLES)
+
+
+def background_from_recording(
+    path: str | Path, settle_periods: int = SETTLE_PERIODS
+) -> NDArray[np.float64]:
+    """The background of the recording at ``path`` (a ``hil tank-run`` of the empty tank):
+    its receiver channel (the live receiver's, else channel 0; int16 codes as full scale)
+    from ``settle_periods`` code periods after the receiver's sample 0 on, averaged over the
+    whole periods of its longest stretch without a gap (:func:`average_periods`). Shape
+    ``(P,)``, on the receiver's sample index, as receiver ``gcas-bg`` subtracts it."""
+    from hil.recording.reader import RunRecording
+
+    with RunRecording.open(path) as rec:
+        schedule = rec.schedule()
+        fs = rec.fs_hz
+        p = schedule.period_samples(fs)
+        if p is None:
+            raise ConfigError(
+                "recording",
+                str(path),
+                "a waveform whose code period is a whole number of samples",
+                "the background repeats every period; this recording's waveform has none",
+            )
+        live = rec.metadata.receiver
+        channel = live.channel if live is not None else 0
+        scale = live.scale if live is not None else 2.0**-15
+        origin = rec.origin_sample
+        start = origin + int(settle_periods) * p
+        stretches = list(rec.iter_blocks(max_frames=None, start=start))
+        if not stretches:
+            raise ConfigError(
+                "recording",
+                str(path),
+                f"samples from {settle_periods} code periods after the transmit start on",
+                "record the empty tank for longer (BACKGROUND_PERIODS periods and more)",
+            )
+        longest = max(stretches, key=lambda b: b.data.shape[0])
+        x = np.asarray(longest.data[:, channel], dtype=np.float64) * scale
+        return average_periods(x, p, first_index=int(longest.first_index) - origin)
 
 
 def save_background(path: str | Path, background: ArrayLike) -> Path:
