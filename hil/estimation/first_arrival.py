@@ -100,6 +100,9 @@ DIRECT_SPEED_STEP = 0.002
 #: energy-weighted one by more than this, m/s; a direct-path speed slower by more is a phase
 #: ambiguity (measured at image order 2: -0.3 m/s outliers, v_res/4) and GCAS's is kept.
 DIRECT_BELOW_GCAS_MPS = 0.05
+#: An earlier rise above this fraction of the top's amplitude is an arrival of its own
+#: (:meth:`FirstArrivalReadout.first_arrival`).
+EARLY_FRACTION = 0.5
 #: Hops before the previous one whose tones a boundary's next tone must differ from to be read
 #: (:meth:`FirstArrivalReadout._clean_boundaries`): late images up to this many hops behind
 #: their direct path leave no early switch on the boundaries that are read.
@@ -252,9 +255,18 @@ class FirstArrivalReadout:
             return None
         # The fit's levels: fractions of the top, but clear of the noise's own fluctuation.
         wobble = NOISE_MARGIN * float(np.std(amp[base]))
+        # An earlier arrival of its own (the direct path more than two windows ahead of a
+        # cluster of images that sums to the top: the change over a window falls back to the
+        # noise between them) has its own ramp and top: the earliest rise above
+        # EARLY_FRACTION of the top, and its top within two windows.
+        k0 = self._search_from
+        early = np.flatnonzero(amp[k0:top_i] >= max(EARLY_FRACTION * top, 2.0 * wobble))
+        if early.size:
+            j_e = k0 + int(early[0])
+            top_i = j_e + int(np.argmax(amp[j_e : min(top_i, j_e + 2 * w) + 1]))
+            top = float(amp[top_i])
         lo_level = max(LO_FRACTION * top, wobble)
         hi_level = max(HI_FRACTION * top, lo_level + wobble)
-        k0 = self._search_from
         # The ramp that leads to the top starts where the power last left the noise before
         # it: an image of opposite sign can pull the sum back below ``hi`` inside the ramp,
         # so the stretch is followed down to ``lo``, and ``hi`` is its first crossing.
