@@ -90,19 +90,22 @@ def test_a_virtual_run_gives_its_golden_figures(first_run: RunOutcome) -> None:
 
     summary = summarize(first_run)
     counts = (summary["estimates"], summary["scored_estimates"], first_run.samples)
-    # The tank with its own echoes, the per-round-trip images and gcas-mti (issue 31), on the
-    # devices of issue 28 (the run starts 3840 samples later); the first-arrival readout on
-    # the boxcar's change over a window, which cancels late images sounding the next tone.
-    assert (*counts, first_run.start_index) == (269, 100, 621312, 508488)
+    # The tank with its own echoes and the per-round-trip images, on the devices of issue 28
+    # (the run starts 3840 samples later); gcas-bg: the input less the empty tank's
+    # background, read at the first arrival.
+    assert (*counts, first_run.start_index) == (314, 100, 621120, 508488)
     golden = {
-        "range_bias_m": 0.0031448990001431555,
-        "range_rmse_m": 0.004012382049298796,
-        "speed_bias_mps": 0.0052006275977065355,
-        "speed_rmse_mps": 0.028181872515284288,
-        "telemetry_truth_error_max_m": 0.012201698001966577,
-        # Every estimate with a truth (the ramps too: the first-arrival readout's speed there).
-        "range_rmse_all_m": 0.014822637833987804,
-        "speed_rmse_all_mps": 0.14946554903839832,
+        "range_bias_m": 0.001422359120155301,
+        "range_rmse_m": 0.0024273864225288766,
+        "speed_bias_mps": 0.004111946315125079,
+        "speed_rmse_mps": 0.011699619137519648,
+        "telemetry_truth_error_max_m": 0.012097130690222002,
+        # Every estimate with a truth (the ramps and the carriage at rest too).
+        "range_rmse_all_m": 0.006630193825975399,
+        "speed_rmse_all_mps": 0.06701837258167852,
+        # Against the simulated carriage itself.
+        "range_rmse_vs_exact_m": 0.0023932363132704165,
+        "speed_rmse_vs_exact_mps": 0.0045585311396262465,
     }
     assert {k: summary[k] for k in golden} == pytest.approx(golden, abs=1e-9)
     # Every scored estimate is within the gate (one range cell, 0.1235 m), so the gated RMSEs
@@ -113,7 +116,7 @@ def test_a_virtual_run_gives_its_golden_figures(first_run: RunOutcome) -> None:
     assert (summary["expected_boundaries"], summary["detected_boundaries"]) == (100, 100)
     first = first_run.estimates[0]
     assert (first.range_m, first.speed_mps) == pytest.approx(
-        (9.100586363049363, 0.1480676121100797), abs=1e-9
+        (9.103951486252617, -0.08437803629769758), abs=1e-9
     )
 
 
@@ -345,11 +348,11 @@ def test_a_virtual_run_scores_its_tracks(first_run: RunOutcome) -> None:
 
     tracks = summarize(first_run)["tracks"]
     ids = np.array([e.track_id for e in first_run.estimates])
-    assert ids.tolist() == [-1, -1] + [0] * 267
+    assert ids.tolist() == [-1, -1] + [0] * 312
     assert (tracks["confirmed"], tracks["untracked_estimates"]) == (1, 2)
     (track,) = tracks["per_track"]
-    assert (track["estimates"], track["first_hop"], track["last_hop"]) == (267, 28, 295)
-    assert track["estimates_with_truth"] == 267
+    assert (track["estimates"], track["first_hop"], track["last_hop"]) == (312, 10, 321)
+    assert track["estimates_with_truth"] == 293
     score = score_run(first_run)
     on = ids == 0
     assert track["range_rmse_m"] == pytest.approx(
@@ -358,8 +361,8 @@ def test_a_virtual_run_scores_its_tracks(first_run: RunOutcome) -> None:
     assert track["speed_rmse_mps"] == pytest.approx(
         float(np.sqrt(np.mean(score.speed_error_mps[on] ** 2))), abs=1e-12
     )
-    golden = {"range_rmse_m": 0.014745064529669713, "speed_rmse_mps": 0.14994104537852962,
-              "span_s": 2.666354683675434}  # fmt: skip
+    golden = {"range_rmse_m": 0.006643849496904499, "speed_rmse_mps": 0.06691959607810456,
+              "span_s": 3.106347345688873}  # fmt: skip
     assert {k: track[k] for k in golden} == pytest.approx(golden, abs=1e-9)
     with RunRecording.open(first_run.folder / "run.h5") as rec:
         assert rec.estimates() == first_run.estimates  # the ids recorded live
