@@ -91,8 +91,8 @@ class PtyDevices:
     def experiment(self, out: Path, calibration: str = "") -> Experiment:
         """The short built-in pass with the devices given by their pty paths, the receiver
         keeping stationary echoes: plain GCAS with the peak readout (the wired echo does not
-        move, and no empty-tank background of it exists for gcas-bg: the band would hide it and the
-        first-arrival readout looks for a moving echo's onset); ``calibration`` replaces the ``[calibration]`` table's keys."""
+        move, and there is no empty-tank capture for gcas-bg); ``calibration`` replaces the
+        ``[calibration]`` table's keys."""
         text = (
             DEFAULT_EXPERIMENT.replace('name = "gcas-bg"', 'name = "gcas"')
             .replace('"sim://board"', f'"{self.board.port_name}"')
