@@ -72,7 +72,7 @@ def outcome_from_recording(
             # The capture the live receiver used (a file's "simulated" names the run's own).
             options = {**exp.receiver_options, "background": live.settings["background"]}
             exp = dataclasses.replace(exp, receiver_options=options)
-        if codeword_map and live is not None and live.name in ("gcas", "gcas-mti"):
+        if codeword_map and live is not None and live.name in ("gcas", "gcas-mti", "gcas-bg"):
             replay(rec, hooks=maps.hooks(live.name))
     stops = [text for _, _, _, text in events if text.startswith("stop: ")]
     if stops:

@@ -165,7 +165,7 @@ class CodewordMaps:
 
     def hooks(self, receiver: str) -> dict[str, Any]:
         """The receiver options that feed it (GCAS only)."""
-        return {"on_map": self.on_map} if receiver in ("gcas", "gcas-mti") else {}
+        return {"on_map": self.on_map} if receiver in ("gcas", "gcas-mti", "gcas-bg") else {}
 
 
 def receiver_setup(exp: Experiment) -> ReceiverSetup:

@@ -44,7 +44,11 @@ def test_default_experiment_golden() -> None:
     # Stage x = -2 m puts the target at tank x = 9 m: 8.5 m from the transducer.
     np.testing.assert_allclose(exp.range_at(np.array([-2.0, -5.0])), [8.5, 5.5])
     # Derived from the tank and the tow (hil.experiments.experiment.tank_receiver_options).
-    assert exp.receiver_options == {"reverb_speed_mps": 0.0, "range_readout": "first-arrival"}
+    assert exp.receiver_options == {
+        "background": "simulated",
+        "reverb_speed_mps": 0.0,
+        "range_readout": "first-arrival",
+    }
 
 
 @pytest.mark.parametrize(
