@@ -25,25 +25,30 @@ For each of the ``M`` boundaries the GCAS detection used (receive times from its
 3. **Onset**: the noncoherent mean of ``|z|²`` over the ``M`` boundaries, less the noise: its
    level in a window of :data:`BASELINE_S` before the search, or in the quietest such window
    before the centroid where a late image switching tones fills the first
-   (:meth:`FirstArrivalReadout._noise_window`). From its maximum after ``t_c``, back to
+   (:meth:`FirstArrivalReadout._noise_window`). From its maximum after ``t_c`` (or from an
+   earlier rise above :data:`EARLY_FRACTION` of it: an arrival of its own), back to
    where it last rose from ``lo`` of that maximum (an image of opposite sign may pull it
    back under ``hi`` inside the ramp), a line through the stretch from there to the first
    ``hi`` crossing gives a first onset; the ramp's exact shape (the previous tone's partial
    window leaks while the window straddles the switch) is then fitted over the first
    arrival's own part of the ramp (:meth:`FirstArrivalReadout._fit_ramp`).
-4. **Doppler**: the direct path's phase a little into its ramp, at the ``M`` boundaries,
-   gives its own time scale (:meth:`FirstArrivalReadout._direct_alpha`): GCAS's weighs the
+4. **Doppler**: the direct path's complex amplitude at the ``M`` boundaries, fitted over its
+   first :data:`DIRECT_S` on the ramp's model (the previous tone's leak divided out), gives
+   its own time scale (:meth:`FirstArrivalReadout._direct_alpha`): GCAS's weighs the
    images in, each at its path's slower radial speed. A direct-path speed more than
    :data:`DIRECT_BELOW_GCAS_MPS` below GCAS's is a phase ambiguity (no image is faster than
    the direct path) and GCAS's is kept.
 
 The range then comes from the first arrival instead of the centroid. Measured on the built-in
-simulated tank run (12 × 4 × 2.5 m, own echoes, reverberation, direct blast, ``gcas-mti``;
-1.5 m/s tow), replayed: range bias +0.003 m, RMSE 0.004 m at image order 1; +0.022 m,
-0.036 m at order 2 (docs/tank-run.md has the table against image order, tank and beams).
+simulated tank run (12 × 4 × 2.5 m, own echoes, reverberation, direct blast, 1.5 m/s tow),
+replayed: with ``gcas-bg`` (:mod:`hil.estimation.background`: an empty-tank background
+subtracted, this readout without its canceller, ``cancel_period=False``) range bias RMSE_ROW
+(docs/tank-run.md has the table against image order, tank and beams).
 
-Limits: a target slower than about one carrier wavelength per code period is mostly cancelled
-with the clutter (no onset found: the peak readout is kept); the readout needs the samples of
+Limits with its canceller: a target slower than about one carrier wavelength per code period
+is mostly cancelled with the clutter (no onset found: the peak readout is kept), and an
+opening target's copy one period back arrives first (its onset is the target a period ago,
+corrected by one period's travel at the present speed); the readout needs the samples of
 one code period plus ``M`` hops behind the boundary (:attr:`FirstArrivalReadout.history`); it
 assumes first arrivals within ``max_spread_s`` before the centroid (default 0.3 hop).
 """
@@ -474,8 +479,9 @@ class FirstArrivalReadout:
     ) -> float | None:
         """The direct path's time scale from its phase at the ``M`` boundaries.
 
-        ``p`` (shape ``(M,)``) holds the next-tone channel, demodulated at ``α f``, a fixed
-        time into the first arrival's ramp, where no image has arrived yet. Once the known
+        ``p`` (shape ``(M,)``) holds the first arrival's complex amplitude in the next-tone
+        channel, demodulated at ``α f``, fitted over its first :data:`DIRECT_S` (before any
+        image arrives) on the ramp's model (:meth:`_ramp_shape`). Once the known
         transmit phase of each hop (start phase ``φ_m`` at start time ``T_m``) is removed, its
         phase is ``θ_k + 2π f_m Δα t_m``: ``θ_k`` one unknown per tone (the delay, the copy of
         the canceller, the target's reflection), ``Δα`` what GCAS's time scale lacks. GCAS's
