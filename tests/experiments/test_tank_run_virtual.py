@@ -95,17 +95,17 @@ def test_a_virtual_run_gives_its_golden_figures(first_run: RunOutcome) -> None:
     # background, read at the first arrival.
     assert (*counts, first_run.start_index) == (314, 100, 621120, 508488)
     golden = {
-        "range_bias_m": 0.001422359120155301,
-        "range_rmse_m": 0.0024273864225288766,
-        "speed_bias_mps": 0.004111946315125079,
-        "speed_rmse_mps": 0.011699619137519648,
-        "telemetry_truth_error_max_m": 0.012097130690222002,
+        "range_bias_m": 0.0015729833496289825,
+        "range_rmse_m": 0.002199077399548438,
+        "speed_bias_mps": 0.004171661798587989,
+        "speed_rmse_mps": 0.011647133997796018,
+        "telemetry_truth_error_max_m": 0.012097097731807338,
         # Every estimate with a truth (the ramps and the carriage at rest too).
-        "range_rmse_all_m": 0.006630193825975399,
-        "speed_rmse_all_mps": 0.06701837258167852,
+        "range_rmse_all_m": 0.006480301123542415,
+        "speed_rmse_all_mps": 0.06703384330690343,
         # Against the simulated carriage itself.
-        "range_rmse_vs_exact_m": 0.0023932363132704165,
-        "speed_rmse_vs_exact_mps": 0.0045585311396262465,
+        "range_rmse_vs_exact_m": 0.002062213626168284,
+        "speed_rmse_vs_exact_mps": 0.004574187176069929,
     }
     assert {k: summary[k] for k in golden} == pytest.approx(golden, abs=1e-9)
     # Every scored estimate is within the gate (one range cell, 0.1235 m), so the gated RMSEs
@@ -116,7 +116,7 @@ def test_a_virtual_run_gives_its_golden_figures(first_run: RunOutcome) -> None:
     assert (summary["expected_boundaries"], summary["detected_boundaries"]) == (100, 100)
     first = first_run.estimates[0]
     assert (first.range_m, first.speed_mps) == pytest.approx(
-        (9.103951486252617, -0.08437803629769758), abs=1e-9
+        (9.10398628359057, -0.08437803629769758), abs=1e-9
     )
 
 
@@ -361,8 +361,8 @@ def test_a_virtual_run_scores_its_tracks(first_run: RunOutcome) -> None:
     assert track["speed_rmse_mps"] == pytest.approx(
         float(np.sqrt(np.mean(score.speed_error_mps[on] ** 2))), abs=1e-12
     )
-    golden = {"range_rmse_m": 0.006643849496904499, "speed_rmse_mps": 0.06691959607810456,
-              "span_s": 3.106347345688873}  # fmt: skip
+    golden = {"range_rmse_m": 0.006494106782537269, "speed_rmse_mps": 0.06693519537930744,
+              "span_s": 3.1063475778724765}  # fmt: skip
     assert {k: track[k] for k in golden} == pytest.approx(golden, abs=1e-9)
     with RunRecording.open(first_run.folder / "run.h5") as rec:
         assert rec.estimates() == first_run.estimates  # the ids recorded live
