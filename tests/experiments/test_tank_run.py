@@ -169,7 +169,10 @@ def _child_commands() -> list[str]:
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc")
 def test_a_refusal_in_a_simulated_run_leaves_no_simulated_tank_running(tmp_path: Path) -> None:
     # The simulated tank's process starts first; the receiver then refuses its options.
-    text = _edit("[calibration]", "options = { reverb_speed_mps = -5.0 }\n\n[calibration]")
+    text = _edit(
+        'options = { background = "simulated" }',
+        'options = { background = "simulated", reverb_speed_mps = -5.0 }',
+    )
     with pytest.raises(ConfigError, match=r"reverb_speed_mps = -5\.0 is not allowed"):
         run_experiment(parse_experiment(text), folder=tmp_path / "run")
     assert not [c for c in _child_commands() if "hil.experiments.sim_tank" in c]
