@@ -29,6 +29,7 @@ RECEIVERS: dict[str, str] = {
     "stft": "hil.estimation.stft:StftReceiver",
     "mfbank": "hil.estimation.mfbank:MatchedFilterBank",
     "fmcw": "hil.estimation.fmcw:FmcwReceiver",
+    "gcas-bg": "hil.estimation.background:BackgroundGcas",
 }
 
 

@@ -67,7 +67,7 @@ __all__ = [
 
 #: Receivers that need every hop of the code the same length (the GCAS family: its
 #: accumulated sums and Doppler resolution are per hop).
-EQUAL_HOP_RECEIVERS = ("gcas", "gcas-mti")
+EQUAL_HOP_RECEIVERS = ("gcas", "gcas-mti", "gcas-bg")
 
 DEFAULT_EXPERIMENT = """\
 # Built-in simulated tank run: `hil tank-run` with no arguments.
@@ -100,13 +100,15 @@ run_up_m = 0.6
 run_down_m = 0.6
 
 [receiver]
-# GCAS behind a one-code-period clutter canceller: the tank's own echoes and tail do not move,
-# and outshine the target (docs/tank-run.md, "The receiver in the tank").
-name = "gcas-mti"
+# GCAS on the input less the empty tank: the tank's own echoes and tail do not move, and
+# outshine the target. "simulated" captures the built-in tank with the target taken out
+# before the run (docs/tank-run.md, "Empty-tank background"). The reverberation band is
+# derived from the tow (see docs/tank-run.md).
+name = "gcas-bg"
 m_hops = 10
 max_speed_mps = 3.0
 max_range_m = 12.0
-# No options: the reverberation band is derived from the tow (see docs/tank-run.md).
+options = { background = "simulated" }
 
 [calibration]
 store = "calibration"
@@ -419,7 +421,7 @@ def tank_receiver_options(
     (``>= 2 v_res``), and is off (0) otherwise, where it would remove the tow itself
     (tank-audio: ``v_res`` = 1.30 m/s, so tows below 2.6 m/s run without it).
     """
-    if receiver not in ("gcas", "gcas-mti"):
+    if receiver not in EQUAL_HOP_RECEIVERS:
         return options
     out = dict(options)
     if "reverb_speed_mps" in out:

@@ -68,7 +68,11 @@ def outcome_from_recording(
         fs = rec.fs_hz
         origin = rec.origin_sample
         live = rec.metadata.receiver
-        if codeword_map and live is not None and live.name in ("gcas", "gcas-mti"):
+        if live is not None and "background" in live.settings:
+            # The capture the live receiver used (a file's "simulated" names the run's own).
+            options = {**exp.receiver_options, "background": live.settings["background"]}
+            exp = dataclasses.replace(exp, receiver_options=options)
+        if codeword_map and live is not None and live.name in ("gcas", "gcas-mti", "gcas-bg"):
             replay(rec, hooks=maps.hooks(live.name))
     stops = [text for _, _, _, text in events if text.startswith("stop: ")]
     if stops:

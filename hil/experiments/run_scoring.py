@@ -337,6 +337,10 @@ def summarize(outcome: RunOutcome) -> dict[str, Any]:
         )
         e_exact = r - outcome.exact_truth["range_m"]
         summary["range_rmse_vs_exact_m"] = _rmse(e_exact[score.scored])
+        v = np.array([e.speed_mps for e in est], dtype=float)
+        summary["speed_rmse_vs_exact_mps"] = _rmse(
+            (v - outcome.exact_truth["speed_mps"])[score.scored]
+        )
     # Per track (hil.estimation.track_summary): its span and its errors against the truth.
     summary["tracks"] = track_figures(est, truth["range_m"], truth["speed_mps"])
     return summary

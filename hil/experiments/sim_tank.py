@@ -238,7 +238,10 @@ def _ambient(exp: Experiment, source_level_db: float) -> Any:
 
 
 def build_tank_world(
-    exp: Experiment, carriage_motion: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+    exp: Experiment,
+    carriage_motion: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
+    *,
+    with_target: bool = True,
 ) -> Any:
     """The acoustic tank of ``exp`` behind the simulated board (a
     ``sim_devices.acoustics.dac_world.ScheduleWorld``: DAC block in, 2 ADC channels out).
@@ -246,6 +249,8 @@ def build_tank_world(
     ``carriage_motion(t)``: the simulated carriage's position (m, stage coordinates) and
     velocity (m/s) at world times ``t`` (s: device sample / rate, from the world's first
     block); the towed target follows it through :meth:`Experiment.target_position`.
+    ``with_target=False``: the empty tank (the target taken out; everything else the same),
+    what a background capture records.
     """
     from sim_devices.acoustics.channel import Channel, DirectBlast, Receiver, Target
     from sim_devices.acoustics.dac_world import ScheduleWorld
@@ -269,7 +274,7 @@ def build_tank_world(
         Fixed(exp.transducer_m),
         source_level,
         exp.sound_speed_mps,
-        targets=[Target(live, sim.target_strength_db)],
+        targets=[Target(live, sim.target_strength_db)] if with_target else [],
         receiver=receiver,
         tank=Tank(
             *exp.tank_size_m,

@@ -21,6 +21,7 @@ Order of work (each step refuses with a clear message before the next touches an
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import datetime as dt
 import logging
 import math
@@ -164,7 +165,7 @@ class CodewordMaps:
 
     def hooks(self, receiver: str) -> dict[str, Any]:
         """The receiver options that feed it (GCAS only)."""
-        return {"on_map": self.on_map} if receiver in ("gcas", "gcas-mti") else {}
+        return {"on_map": self.on_map} if receiver in ("gcas", "gcas-mti", "gcas-bg") else {}
 
 
 def receiver_setup(exp: Experiment) -> ReceiverSetup:
@@ -262,6 +263,7 @@ def _run_in_folder(
     # of seconds that, with the board streaming, would overflow the capture ring.
     view.update("receiver: loading its compiled kernels (a first run compiles them)", force=True)
     maps = CodewordMaps()
+    exp = with_background(exp, folder)
     setup = receiver_setup(exp)
     receiver = build_receiver(setup, exp.schedule, fs, **maps.hooks(exp.receiver))
     planned = _planned_levels(exp, view)
@@ -311,6 +313,38 @@ def _run_in_folder(
                 "ignored during the safe stop, which had to finish: %s", ", ".join(signals.ignored)
             )
         return outcome
+
+
+#: ``[receiver] options.background`` of a ``gcas-bg`` run on the built-in simulated tank:
+#: capture the empty tank before the run (docs/tank-run.md, "Empty-tank background").
+SIMULATED_BACKGROUND = "simulated"
+
+
+def with_background(exp: Experiment, folder: Path) -> Experiment:
+    """``exp`` with its ``gcas-bg`` receiver's background ready: ``background =
+    "simulated"`` captures the built-in tank's empty tank
+    (:func:`~hil.experiments.calibration.background.simulated_background`) into the run
+    folder's ``background.npy`` and names that file instead (so the recording's receiver
+    settings, and a replay, find it); refused with real devices, whose background is a
+    capture of the real tank. Other receivers and given paths: ``exp`` unchanged."""
+    if exp.receiver != "gcas-bg":
+        return exp
+    given = exp.receiver_options.get("background")
+    if given != SIMULATED_BACKGROUND:
+        return exp
+    if not exp.simulated:
+        raise ConfigError(
+            "receiver.options.background",
+            given,
+            "the path of an empty-tank capture (.npy) with real devices",
+            "record the tank with the target out of the beam and average it: "
+            "docs/tank-run.md, 'Empty-tank background'",
+        )
+    from hil.experiments.calibration.background import save_background, simulated_background
+
+    path = save_background(folder / "background.npy", simulated_background(exp))
+    options = {**exp.receiver_options, "background": str(path.resolve())}
+    return dataclasses.replace(exp, receiver_options=options)
 
 
 def _planned_levels(exp: Experiment, view: LiveView) -> float | None:

@@ -117,7 +117,9 @@ def test_receiver_option_text_for_a_speed(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     path = _experiment(
-        tmp_path, "[calibration]", 'options = { reverb_speed_mps = "fast" }\n\n[calibration]'
+        tmp_path,
+        'options = { background = "simulated" }',
+        'options = { background = "simulated", reverb_speed_mps = "fast" }',
     )
     line = _error(capsys, ["tank-run", str(path)])
     assert line == (

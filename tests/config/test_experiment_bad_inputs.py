@@ -81,10 +81,12 @@ def test_a_pulse_family_is_refused_under_waveform_family_for_gcas() -> None:
     text = _with('family = "random-cyclic"', 'family = "cw-pulse"')
     assert _message(text) == (
         "waveform.family = 'cw-pulse' is not allowed: must be a family of equal hops for"
-        " receiver.name = 'gcas-mti'; cw-pulse has hops of 2, 48 ms (a pulse then silence);"
+        " receiver.name = 'gcas-bg'; cw-pulse has hops of 2, 48 ms (a pulse then silence);"
         " use a continuous family (random-cyclic, three-state), or a receiver for pulses (stft)"
     )
-    stft = text.replace('name = "gcas-mti"', 'name = "stft"')
+    stft = text.replace('name = "gcas-bg"', 'name = "stft"').replace(
+        'options = { background = "simulated" }', ""
+    )
     assert parse_experiment(stft).waveform.family == "cw-pulse"
 
 

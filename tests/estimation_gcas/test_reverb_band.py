@@ -137,6 +137,13 @@ def test_default_band_costs_at_ghost_speeds(rc_schedule: HopSchedule) -> None:
     assert np.sqrt(np.mean(dr**2)) < 0.07
 
 
+def _with_options(options: str) -> str:
+    """The built-in file with ``options`` (inline-table entries) added to its receiver's."""
+    line = 'options = { background = "simulated" }'
+    assert line in DEFAULT_EXPERIMENT
+    return DEFAULT_EXPERIMENT.replace(line, f'options = {{ background = "simulated", {options} }}')
+
+
 def test_tank_run_derives_the_band_from_the_tow() -> None:
     exp = parse_experiment(DEFAULT_EXPERIMENT)
     # The default tow (1.5 m/s) is within two resolution cells (2 × 1.30 m/s): no band.
@@ -145,29 +152,17 @@ def test_tank_run_derives_the_band_from_the_tow() -> None:
     assert exp.receiver_options["range_readout"] == "first-arrival"
     fast = parse_experiment(DEFAULT_EXPERIMENT.replace("speed_mps = 1.5", "speed_mps = 2.8"))
     assert fast.receiver_options["reverb_speed_mps"] == "auto"
-    given = parse_experiment(
-        DEFAULT_EXPERIMENT.replace(
-            "[calibration]", "options = { reverb_speed_mps = 0.3 }\n\n[calibration]"
-        )
-    )
+    given = parse_experiment(_with_options("reverb_speed_mps = 0.3"))
     assert given.receiver_options["reverb_speed_mps"] == 0.3
-    peak = parse_experiment(
-        DEFAULT_EXPERIMENT.replace(
-            "[calibration]", 'options = { range_readout = "peak" }\n\n[calibration]'
-        )
-    )
+    peak = parse_experiment(_with_options('range_readout = "peak"'))
     # With the peak readout in a tank the refinement is off unless the file sets it.
     assert peak.receiver_options == {
+        "background": "simulated",
         "range_readout": "peak",
         "reverb_speed_mps": 0.0,
         "refine": False,
     }
-    refined = parse_experiment(
-        DEFAULT_EXPERIMENT.replace(
-            "[calibration]",
-            'options = { range_readout = "peak", refine = true }\n\n[calibration]',
-        )
-    )
+    refined = parse_experiment(_with_options('range_readout = "peak", refine = true'))
     assert refined.receiver_options["refine"] is True
 
 
@@ -184,7 +179,7 @@ def test_tank_run_derives_the_band_from_the_tow() -> None:
     ],
 )
 def test_tank_receiver_options_refused_when_the_file_is_read(option: str, message: str) -> None:
-    text = DEFAULT_EXPERIMENT.replace("[calibration]", f"options = {{ {option} }}\n\n[calibration]")
+    text = _with_options(option)
     with pytest.raises(ConfigError) as info:
         parse_experiment(text)
     assert str(info.value).startswith(message)

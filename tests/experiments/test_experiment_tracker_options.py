@@ -11,12 +11,17 @@ from hil.experiments.experiment import DEFAULT_EXPERIMENT, parse_experiment
 from hil.experiments.tank_run import receiver_setup
 from hil.recording.replay import build_receiver
 
-MARK = "# No options: the reverberation band"
+MARK = 'options = { background = "simulated" }'
 
 
 def _with_options(lines: str) -> str:
+    """The built-in file with ``lines`` (``key = value`` each) as its receiver's options;
+    its receiver gcas-mti, which needs no empty-tank capture to be built."""
     assert MARK in DEFAULT_EXPERIMENT
-    return DEFAULT_EXPERIMENT.replace(MARK, f"[receiver.options]\n{lines}\n{MARK}")
+    inline = ", ".join(lines.split("\n"))
+    return DEFAULT_EXPERIMENT.replace(MARK, f"options = {{ {inline} }}").replace(
+        'name = "gcas-bg"', 'name = "gcas-mti"'
+    )
 
 
 def test_track_options_reach_the_runs_tracker() -> None:

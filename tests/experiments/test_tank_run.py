@@ -44,7 +44,11 @@ def test_default_experiment_golden() -> None:
     # Stage x = -2 m puts the target at tank x = 9 m: 8.5 m from the transducer.
     np.testing.assert_allclose(exp.range_at(np.array([-2.0, -5.0])), [8.5, 5.5])
     # Derived from the tank and the tow (hil.experiments.experiment.tank_receiver_options).
-    assert exp.receiver_options == {"reverb_speed_mps": 0.0, "range_readout": "first-arrival"}
+    assert exp.receiver_options == {
+        "background": "simulated",
+        "reverb_speed_mps": 0.0,
+        "range_readout": "first-arrival",
+    }
 
 
 @pytest.mark.parametrize(
@@ -165,7 +169,10 @@ def _child_commands() -> list[str]:
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc")
 def test_a_refusal_in_a_simulated_run_leaves_no_simulated_tank_running(tmp_path: Path) -> None:
     # The simulated tank's process starts first; the receiver then refuses its options.
-    text = _edit("[calibration]", "options = { reverb_speed_mps = -5.0 }\n\n[calibration]")
+    text = _edit(
+        'options = { background = "simulated" }',
+        'options = { background = "simulated", reverb_speed_mps = -5.0 }',
+    )
     with pytest.raises(ConfigError, match=r"reverb_speed_mps = -5\.0 is not allowed"):
         run_experiment(parse_experiment(text), folder=tmp_path / "run")
     assert not [c for c in _child_commands() if "hil.experiments.sim_tank" in c]
@@ -302,7 +309,8 @@ def test_the_run_keeps_every_sync_pair_beyond_the_fits_window() -> None:
 #: Summary keys a recording cannot give back (docs/tank-run.md, "After a crash").
 NOT_RECORDED = frozenset(
     {"folder", "wall_s", "real_time_factor", "capture_backlog_max_s", "adc_clipped_samples",
-     "planned_adc_peak_fs", "telemetry_truth_error_max_m", "range_rmse_vs_exact_m"}
+     "planned_adc_peak_fs", "telemetry_truth_error_max_m", "range_rmse_vs_exact_m",
+     "speed_rmse_vs_exact_mps"}
 )  # fmt: skip
 
 

@@ -91,17 +91,17 @@ class PtyDevices:
     def experiment(self, out: Path, calibration: str = "") -> Experiment:
         """The short built-in pass with the devices given by their pty paths, the receiver
         keeping stationary echoes: plain GCAS with the peak readout (the wired echo does not
-        move: gcas-mti's canceller, the band and the first-arrival readout's canceller would
-        remove it); ``calibration`` replaces the ``[calibration]`` table's keys."""
+        move, and there is no empty-tank capture for gcas-bg); ``calibration`` replaces the
+        ``[calibration]`` table's keys."""
         text = (
-            DEFAULT_EXPERIMENT.replace('name = "gcas-mti"', 'name = "gcas"')
+            DEFAULT_EXPERIMENT.replace('name = "gcas-bg"', 'name = "gcas"')
             .replace('"sim://board"', f'"{self.board.port_name}"')
             .replace('"sim://stage"', f'"{self.stage.port_name}"')
             .replace("end_m = -5.0", "end_m = -3.5")
             .replace('output_dir = "runs"', f'output_dir = "{out}"')
             .replace(
-                "[calibration]",
-                'options = { reverb_speed_mps = 0.0, range_readout = "peak" }\n\n[calibration]',
+                'options = { background = "simulated" }',
+                'options = { reverb_speed_mps = 0.0, range_readout = "peak" }',
             )
         )
         if calibration:
