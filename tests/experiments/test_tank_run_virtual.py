@@ -135,18 +135,17 @@ def _digest(arrays: dict[str, Any]) -> str:
     return h.hexdigest()
 
 
-#: Digests of the short pass's recording and exact truth, taken before the simulated tank was
-#: made faster (issue 30: per-frame world synthesis, the devices serviced per block): the
-#: speed work changes no bit of the run. A change of the physics, the devices' timeline or the
+#: Digests of the short pass's recording and exact truth: work that only makes the simulated
+#: tank faster (world synthesis, the devices serviced per block) changes no bit of the run. A change of the physics, the devices' timeline or the
 #: receiver changes them, as it changes the golden figures above; so may another CPU's vector
 #: code (last bits), which the figures' 1e-9 tolerance absorbs and these do not.
 RUN_DIGESTS = {
-    "estimates": "50e9b5d7c7d37fa2e9853a872f48e4032ffc2210258c9ef9a91581d6a00c3792",
-    "telemetry": "17efd45aff8afce583ad6de6bbe85ffb5fd3ad819c2b63b61f4ba707b53a625c",
-    "events": "a0d8545453503c872fa2056606839d171a2bbbabe3e364ece6b7868f7fd6f103",
+    "estimates": "0d4c09fd6dd5c6847beecf574ab842f9e389a58e6558f788775baff67e10e2a6",
+    "telemetry": "84a5965b4cdcedd8a0380ea9638212052ecf6e6502e6671d82c8bcedbd41d647",
+    "events": "a5498e91ecb98e6780b5f4eb98937ec8a6ad6f4cc9bc441b6d306c6762daa7b0",
     "sync": "8f543e22051ee0df530d0f20d6cecedbe731bbc1799c282f737401319b448123",
-    "samples": "ae2fd3fc20e5f91ed0ff5078e7002b485625a78cc001fc883dc836372c6cbb0f",
-    "exact_truth": "619e029d434370fccbbf0730dfa878c9cadefb108abee08a0d432d07b1600242",
+    "samples": "a70f74163165d4f1409dd6362b88e9d95404c5f2107c5e960c067a7c426f3812",
+    "exact_truth": "bc4d1fca25c1c9bb2631b527b7cbfc54846c262e31adc3c56a8f469ca93b7c8d",
 }
 
 
