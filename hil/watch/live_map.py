@@ -52,11 +52,11 @@ class LiveCodewordMap:
         self._rec = recording
         self._lock = lock
         live = recording.metadata.receiver
-        if live is None or live.name not in ("gcas", "gcas-mti"):
+        if live is None or live.name not in ("gcas", "gcas-mti", "gcas-bg"):
             raise ConfigError(
                 "--map",
                 None if live is None else live.name,
-                "a recording whose live receiver is gcas or gcas-mti"
+                "a recording whose live receiver is gcas, gcas-mti or gcas-bg"
                 " (those with a time–codeword map)",
                 "watch it without --map",
             )

@@ -115,8 +115,8 @@ def test_only_gcas_has_a_map(tmp_path: Path) -> None:
     with pytest.raises(ConfigError) as err:
         WatchData.open(bare, live_map=True)
     assert str(err.value) == (
-        "--map = None is not allowed: must be a recording whose live receiver is gcas or "
-        "gcas-mti (those with a time–codeword map); watch it without --map"
+        "--map = None is not allowed: must be a recording whose live receiver is gcas, "
+        "gcas-mti or gcas-bg (those with a time–codeword map); watch it without --map"
     )
 
 
