@@ -488,6 +488,13 @@ class CoherentRefiner:
             searched = self._search(word, hop_ids, side, v0, lobe, known) if side else None
             if searched is not None:
                 best_t, best_v, outcome, args = searched
+            if outcome == NO_LOBE:
+                # Still at an edge: the detector's time is more than a lobe off (beside a
+                # stronger echo its envelope can peak two lobes away). Search three lobes.
+                wide = (1.5 * lobe, self.speed_span_mps, 3 * TIME_POINTS - 2, self.speed_points)
+                searched = self._search(word, hop_ids, t0, v0, lobe, known, wide)
+                if searched is not None:
+                    best_t, best_v, outcome, args = searched
         for _ in range(LOBE_MOVES if outcome == FOUND else 0):
             # The lobe: the envelope tells a grating lobe from its neighbours by ~1 dB, which
             # a detector's time (noncoherent, beside a stronger echo) can miss; the

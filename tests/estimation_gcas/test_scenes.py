@@ -162,13 +162,13 @@ def _detection_and_false(scene: str, snr_db: float) -> tuple[list[float], float]
 
 @pytest.mark.parametrize(
     ("scene", "pd_min"),
-    [("apart", 0.99), ("crossing", 0.99), ("same start", 0.99), ("10 dB weaker", 0.9)],
+    [("apart", 0.99), ("crossing", 0.99), ("same start", 0.99), ("10 dB weaker", 0.95)],
 )
 def test_every_target_at_every_hop_at_0_db(scene: str, pd_min: float) -> None:
-    # Measured: 1.0 / 1.0 for the equal pairs; the weaker one 0.920 here, 0.964 with another
-    # noise seed (the stronger one's ghosts and sidelobes are taken out, and a detection a
-    # grating lobe off beside it is searched again from the better neighbouring lobe; the
-    # misses are fits still not found); no false estimate.
+    # Measured: 1.0 / 1.0 for the equal pairs and for the weaker one, here and with another
+    # noise seed (the stronger one's ghosts and sidelobes are taken out; beside it a
+    # detection up to a grating lobe and a half off is searched over three lobes); no
+    # false estimate.
     pd, false = _detection_and_false(scene, 0.0)
     assert min(pd) >= pd_min and max(pd) <= 1.0
     assert false <= 0.01
