@@ -30,7 +30,9 @@ def track_figures(
     Returns ``{"confirmed": number of tracks, "untracked_estimates": count of track_id −1,
     "per_track": [...]}``, one entry per track in id order with ``track_id``, ``estimates``,
     ``first_t_s`` / ``last_t_s`` (receive times, s), ``span_s``, ``first_hop`` /
-    ``last_hop``, ``range_first_m`` / ``range_last_m``, ``speed_median_mps``; with a truth
+    ``last_hop``, ``range_first_m`` / ``range_last_m``, ``speed_median_mps``, the median of
+    its estimates' own Cramér–Rao bounds ``crlb_range_median_m`` / ``crlb_speed_median_mps``
+    (None where no estimate carries one: a receiver without refinement); with a truth
     also ``estimates_with_truth``, ``range_rmse_m`` and ``speed_rmse_mps`` (over the track's
     estimates whose truth is known; None without any).
 
@@ -46,6 +48,8 @@ def track_figures(
     r = np.array([e.range_m for e in estimates], dtype=float)
     v = np.array([e.speed_mps for e in estimates], dtype=float)
     hop = np.array([e.hop_index for e in estimates], dtype=np.int64)
+    crlb_r = np.array([e.crlb_range_m for e in estimates], dtype=float)
+    crlb_v = np.array([e.crlb_speed_mps for e in estimates], dtype=float)
     has_truth = true_range_m is not None and true_speed_mps is not None
     err_r = r - np.asarray(true_range_m, dtype=float) if has_truth else np.full(n, np.nan)
     err_v = v - np.asarray(true_speed_mps, dtype=float) if has_truth else np.full(n, np.nan)
@@ -63,6 +67,8 @@ def track_figures(
             "range_first_m": float(r[on][0]),
             "range_last_m": float(r[on][-1]),
             "speed_median_mps": float(np.median(v[on])),
+            "crlb_range_median_m": _median(crlb_r[on]),
+            "crlb_speed_median_mps": _median(crlb_v[on]),
         }
         if has_truth:
             known = on & np.isfinite(err_r) & np.isfinite(err_v)
@@ -79,6 +85,12 @@ def track_figures(
 
 def _rmse(x: NDArray[np.float64]) -> float | None:
     return float(np.sqrt(np.mean(x * x))) if x.size else None
+
+
+def _median(x: NDArray[np.float64]) -> float | None:
+    """Median of the finite values of ``x``; None where there is none."""
+    finite = x[np.isfinite(x)]
+    return float(np.median(finite)) if finite.size else None
 
 
 def track_lines(figures: dict[str, Any]) -> list[str]:
@@ -99,6 +111,11 @@ def track_lines(figures: dict[str, Any]) -> list[str]:
             f"range {tr['range_first_m']:.3f} → {tr['range_last_m']:.3f} m, "
             f"speed {tr['speed_median_mps']:.3f} m/s (median)"
         )
+        if tr.get("crlb_range_median_m") is not None:
+            line += (
+                f", CRLB {1e3 * tr['crlb_range_median_m']:.2f} mm / "
+                f"{1e3 * tr['crlb_speed_median_mps']:.2f} mm/s (median)"
+            )
         if tr.get("range_rmse_m") is not None:
             line += (
                 f", RMSE {tr['range_rmse_m']:.4f} m / {tr['speed_rmse_mps']:.4f} m/s over "
