@@ -43,7 +43,8 @@ Point a tank run at them: start both, each in its own terminal,
   $ hil sim-serve board --delay 64      # prints e.g. /dev/pts/5
   $ hil sim-serve stage --tank          # prints e.g. /dev/pts/6
 
-then write the built-in experiment to a file, put the printed paths in it and run it:
+then write the built-in experiment to a file, put the printed paths in it, give it a
+receiver that needs no empty-tank capture, and run it:
 
   $ hil tank-run --print-default > my-experiment.toml
 
@@ -51,12 +52,16 @@ then write the built-in experiment to a file, put the printed paths in it and ru
   board = "/dev/pts/5"
   stage = "/dev/pts/6"
 
+  [receiver]
+  name = "gcas-mti"      # in place of gcas-bg and its options line
+
   $ hil tank-run my-experiment.toml --out runs/served
 
 The run treats them as real devices: no simulated tank (the ADC hears the loopback, not an
 echo: expect no detection), and the rules of real runs apply (calibrations measured on the
-simulated bench are refused). For a run with the simulated tank in between, use devices
-sim://board and sim://stage (the default of 'hil tank-run').
+simulated bench are refused, and so is the built-in receiver's simulated empty-tank
+background: a real tank's is captured, hil docs tank-run). For a run with the simulated
+tank in between, use devices sim://board and sim://stage (the default of 'hil tank-run').
 
   tank   with --jack: the whole simulated tank behind a real audio stack. Starts a JACK
          server on the dummy driver at the waveform's rate (named by JACK_DEFAULT_SERVER,

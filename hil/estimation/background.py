@@ -54,7 +54,7 @@ def load_background(path: str | Path, period_samples: int) -> NDArray[np.float64
             "receiver.options.background",
             str(path),
             "a .npy file of one code period",
-            f"it cannot be read ({exc}); capture one: docs/tank-run.md, 'Empty-tank background'",
+            f"it cannot be read ({exc}); capture one: hil docs tank-run, 'Empty-tank background'",
         ) from None
     b = np.asarray(b, dtype=np.float64)
     if b.shape != (period_samples,) or not np.all(np.isfinite(b)):
@@ -149,7 +149,7 @@ class BackgroundGcas:
                 "receiver.options.background",
                 None,
                 "the path of an empty-tank background (.npy)",
-                "capture one first: docs/tank-run.md, 'Empty-tank background'",
+                "capture one first: hil docs tank-run, 'Empty-tank background'",
             )
         if range_readout not in RANGE_READOUTS:
             raise ConfigError("range_readout", range_readout, f"one of {', '.join(RANGE_READOUTS)}")

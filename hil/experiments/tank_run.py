@@ -338,7 +338,7 @@ def with_background(exp: Experiment, folder: Path) -> Experiment:
             given,
             "the path of an empty-tank capture (.npy) with real devices",
             "record the tank with the target out of the beam and average it: "
-            "docs/tank-run.md, 'Empty-tank background'",
+            "hil docs tank-run, 'Empty-tank background'",
         )
     from hil.experiments.calibration.background import save_background, simulated_background
 

@@ -59,11 +59,14 @@ def test_the_sim_serve_help_recipe_runs_a_tank_run_on_served_devices(tmp_path: P
         command, redirect = print_default.split(" > ")
         with (tmp_path / redirect).open("w") as out:
             subprocess.run(_hil(command), stdout=out, check=True, cwd=tmp_path)
-        # "put the printed paths in it"
+        # "put the printed paths in it, give it a receiver that needs no empty-tank capture"
         path = tmp_path / redirect
         text = path.read_text()
         text = re.sub(r'(?m)^board = ".*"$', f'board = "{board}"', text, count=1)
         text = re.sub(r'(?m)^stage = ".*"$', f'stage = "{stage}"', text, count=1)
+        text, named = re.subn(r'(?m)^name = "gcas-bg"$', 'name = "gcas-mti"', text, count=1)
+        text, dropped = re.subn(r'(?m)^options = \{ background = "simulated" \}\n', "", text)
+        assert (named, dropped) == (1, 1)
         path.write_text(text)
         run = subprocess.run(_hil(tank_run), cwd=tmp_path, capture_output=True, text=True)
     finally:

@@ -158,7 +158,7 @@ def test_an_unreadable_background_is_refused(tmp_path: Path) -> None:
         f"receiver.options.background = '{path}' is not allowed: must be a .npy file of one "
         "code period; it cannot be read ("
     )
-    assert message.endswith("capture one: docs/tank-run.md, 'Empty-tank background'")
+    assert message.endswith("capture one: hil docs tank-run, 'Empty-tank background'")
 
 
 def test_gcas_bg_without_a_background_is_refused() -> None:
@@ -168,5 +168,5 @@ def test_gcas_bg_without_a_background_is_refused() -> None:
         )
     assert str(info.value) == (
         "receiver.options.background = None is not allowed: must be the path of an empty-tank "
-        "background (.npy); capture one first: docs/tank-run.md, 'Empty-tank background'"
+        "background (.npy); capture one first: hil docs tank-run, 'Empty-tank background'"
     )
