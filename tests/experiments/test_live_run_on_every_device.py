@@ -34,6 +34,7 @@ from hil.experiments.experiment import DEFAULT_EXPERIMENT, parse_experiment
 from hil.experiments.run_scoring import summarize
 from hil.experiments.tank_run import LiveView, RunOutcome, run_experiment
 from hil.recording.reader import RunRecording
+from tests.experiments.conftest import SHORT_CLI_EXPERIMENT
 
 SHORT = DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -3.5")
 
@@ -97,6 +98,12 @@ def completed(
     """A whole short run on the device (one per device, shared by the tests below)."""
     device = DEVICES[request.param]
     _require(device, require_system)
+    if request.param == "python-board":
+        # The same run as test_tank_run_virtual's (SHORT on the Python board on virtual
+        # time, no live view): the conftest runs it once for both.
+        assert device.experiment() == SHORT_CLI_EXPERIMENT and device.virtual_time
+        outcome: RunOutcome = request.getfixturevalue("short_virtual_outcome")
+        return device, outcome
     folder = tmp_path_factory.mktemp(request.param) / "run"
     outcome = run_experiment(
         parse_experiment(device.experiment()),
