@@ -139,9 +139,10 @@ def _digest(arrays: dict[str, Any]) -> str:
 
 
 #: Digests of the short pass's recording and exact truth: work that only makes the simulated
-#: tank faster (world synthesis, the devices serviced per block) changes no bit of the run. A change of the physics, the devices' timeline or the
-#: receiver changes them, as it changes the golden figures above; so may another CPU's vector
-#: code (last bits), which the figures' 1e-9 tolerance absorbs and these do not.
+#: tank faster (world synthesis, the devices serviced per block) changes no bit of the run.
+#: A change of the physics, the devices' timeline or the receiver changes them, as it changes
+#: the golden figures above; so may another CPU's vector code (last bits), which the figures'
+#: 1e-9 tolerance absorbs and these do not.
 RUN_DIGESTS = {
     "estimates": "0d4c09fd6dd5c6847beecf574ab842f9e389a58e6558f788775baff67e10e2a6",
     "telemetry": "84a5965b4cdcedd8a0380ea9638212052ecf6e6502e6671d82c8bcedbd41d647",
