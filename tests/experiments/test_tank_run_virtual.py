@@ -242,6 +242,9 @@ def test_a_late_stage_report_is_left_out_of_the_rebuilt_truth_as_live(
     assert kept["wrong_estimates"] > 10 and kept["range_rmse_all_m"] > 0.05
 
 
+# Slow: a second whole run, beside two CPU-bound processes. The fast tier keeps the run's
+# determinism through its digests (test_a_virtual_run_is_the_same_bit_for_bit).
+@pytest.mark.slow
 def test_the_same_seed_gives_the_same_run_bit_for_bit_under_load(
     first_run: RunOutcome, tmp_path: Path
 ) -> None:
