@@ -8,8 +8,11 @@ replays to the same estimates; stopped by its caller, it stops safely and says s
 board lost mid-run, it stops and names it.
 
 Thresholds are those the device's own tests hold (test_tank_run_virtual,
-test_tank_run_audio, test_board_c_firmware_tank): the C firmware runs in real time against
-the scaled tank, so its run carries the machine's scheduling in its timing.
+test_tank_run_audio): the C firmware runs in real time against the scaled tank, so its run
+carries the machine's scheduling in its timing. This module holds the suite's real-time tank
+runs with the C firmware as the board (each one costs its pass's wall time): the completed
+run here is the one that shows the firmware, behind the tank through its HAL
+(``sim_devices.board.c_firmware.CFirmwareBoardOnPty``), completes a run and tracks.
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ from hil.experiments.experiment import DEFAULT_EXPERIMENT, parse_experiment
 from hil.experiments.run_scoring import summarize
 from hil.experiments.tank_run import LiveView, RunOutcome, run_experiment
 from hil.recording.reader import RunRecording
+from tests.experiments.conftest import SHORT_CLI_EXPERIMENT
 
 SHORT = DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -3.5")
 
@@ -94,6 +98,12 @@ def completed(
     """A whole short run on the device (one per device, shared by the tests below)."""
     device = DEVICES[request.param]
     _require(device, require_system)
+    if request.param == "python-board":
+        # The same run as test_tank_run_virtual's (SHORT on the Python board on virtual
+        # time, no live view): the conftest runs it once for both.
+        assert device.experiment() == SHORT_CLI_EXPERIMENT and device.virtual_time
+        outcome: RunOutcome = request.getfixturevalue("short_virtual_outcome")
+        return device, outcome
     folder = tmp_path_factory.mktemp(request.param) / "run"
     outcome = run_experiment(
         parse_experiment(device.experiment()),
@@ -111,6 +121,8 @@ def test_a_run_starts_streams_tracks_and_stops_when_its_tow_is_done(
     summary = summarize(outcome)
     assert summary["error"] == "" and not summary["interrupted"]
     assert summary["dropped_samples"] == 0 and summary["adc_overruns"] == 0
+    # Counted by the device itself (the C firmware counts as the Python board does).
+    assert summary["adc_clipped_samples"] == 0
     assert summary["loopback_latency_samples"] == device.latency_samples
     assert summary["scored_estimates"] >= 50
     assert summary["detection_rate"] >= device.detection_rate

@@ -23,6 +23,7 @@ from hil.experiments.experiment import DEFAULT_EXPERIMENT, parse_experiment
 from hil.experiments.live.board_state import xrun_counts, xruns_since
 from hil.experiments.live.latency import measure_latency
 from hil.experiments.tank_run import run_experiment
+from tests.experiments.conftest import CliRun
 
 # A shorter pass than the built-in run keeps the suite quick.
 SHORT = DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -3.5").replace(
@@ -316,17 +317,16 @@ NOT_RECORDED = frozenset(
 
 @pytest.mark.slow
 def test_simulated_run_end_to_end_and_replay_equals_live(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    cli_virtual_run: CliRun, capsys: pytest.CaptureFixture[str]
 ) -> None:
     from hil.recording.reader import RunRecording
     from hil.recording.replay import compare_estimates, replay
 
-    exp_file = tmp_path / "short.toml"
-    exp_file.write_text(SHORT)
-    folder = tmp_path / "run"
-    command = ["tank-run", str(exp_file), "--out", str(folder), "--no-live", "--json"]
-    assert main([*command, "--virtual-time"]) == 0
-    summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    # ``hil tank-run SHORT --out FOLDER --no-live --json --virtual-time`` (the conftest's run,
+    # shared with test_run_log: its log options change nothing of the run).
+    assert cli_virtual_run.status == 0
+    folder, summary = cli_virtual_run.folder, cli_virtual_run.summary
+    tmp_path = cli_virtual_run.scratch  # where hil report writes its rebuilt summary
     for name in ("run.h5", "summary.json", "estimates.csv", "range_speed.png", "errors.png",
                  "time_codeword_map.png"):  # fmt: skip
         assert (folder / name).exists(), name

@@ -22,6 +22,7 @@ from hil.estimation.base import Estimate
 from hil.experiments.experiment import DEFAULT_EXPERIMENT, parse_experiment
 from hil.experiments.tank_run import LiveView, RunOutcome, run_experiment
 from hil.recording.reader import RunRecording
+from tests.experiments.conftest import SHORT_CLI_EXPERIMENT
 
 # A shorter pass than the built-in run keeps the suite quick.
 SHORT = DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -3.5")
@@ -60,8 +61,10 @@ def recorded(path: Path) -> dict[str, Any]:
 
 
 @pytest.fixture(scope="module")
-def first_run(tmp_path_factory: pytest.TempPathFactory) -> RunOutcome:
-    return virtual_run(tmp_path_factory.mktemp("virtual") / "a")
+def first_run(short_virtual_outcome: RunOutcome) -> RunOutcome:
+    """``virtual_run`` of SHORT (the conftest's run of the same text, shared)."""
+    assert SHORT == SHORT_CLI_EXPERIMENT
+    return short_virtual_outcome
 
 
 def test_a_virtual_run_tracks_the_towed_target(first_run: RunOutcome) -> None:
@@ -239,6 +242,9 @@ def test_a_late_stage_report_is_left_out_of_the_rebuilt_truth_as_live(
     assert kept["wrong_estimates"] > 10 and kept["range_rmse_all_m"] > 0.05
 
 
+# Slow: a second whole run, beside two CPU-bound processes. The fast tier keeps the run's
+# determinism through its digests (test_a_virtual_run_is_the_same_bit_for_bit).
+@pytest.mark.slow
 def test_the_same_seed_gives_the_same_run_bit_for_bit_under_load(
     first_run: RunOutcome, tmp_path: Path
 ) -> None:

@@ -1,0 +1,69 @@
+"""Short built-in runs on virtual time shared across modules: a ``hil tank-run`` for the tests
+that check what the command leaves behind (its summary, folder, figures, run.log, recording)
+and an in-process run for those that check the run itself. One run serves every test that
+reads it, since none changes what it left (a test that edits a recording edits a copy)."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from hil.cli.main import main
+from hil.experiments.experiment import DEFAULT_EXPERIMENT, parse_experiment
+from hil.experiments.tank_run import LiveView, RunOutcome, run_experiment
+
+#: The built-in run, its pass shortened to 2.1 m (from -1.4 to -3.5 m) to keep the suite quick.
+SHORT_CLI_EXPERIMENT = DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -3.5")
+
+
+@dataclass(frozen=True)
+class CliRun:
+    """A finished ``hil --log-level warning --log-file LOG tank-run FILE --out FOLDER
+    --no-live --json --virtual-time``: its exit status, the JSON summary it printed, its
+    run folder, its own log file and a scratch folder beside them for further outputs."""
+
+    status: int
+    summary: dict[str, Any]
+    folder: Path
+    log_file: Path
+    scratch: Path
+    experiment_name: str
+
+
+@pytest.fixture(scope="session")
+def cli_virtual_run(tmp_path_factory: pytest.TempPathFactory) -> CliRun:
+    """The short built-in pass run once through the command line on virtual time."""
+    base = tmp_path_factory.mktemp("cli-virtual-run")
+    exp_file = base / "short.toml"
+    exp_file.write_text(SHORT_CLI_EXPERIMENT)
+    folder, log_file = base / "run", base / "hil.log"
+    argv = ["--log-level", "warning", "--log-file", str(log_file),
+            "tank-run", str(exp_file), "--out", str(folder), "--no-live", "--json",
+            "--virtual-time"]  # fmt: skip
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        status = main(argv)
+    summary = json.loads(printed.getvalue().strip().splitlines()[-1])
+    scratch = base / "scratch"
+    scratch.mkdir()
+    return CliRun(status, summary, folder, log_file, scratch, "sim-towed-pass")
+
+
+@pytest.fixture(scope="session")
+def short_virtual_outcome(tmp_path_factory: pytest.TempPathFactory) -> RunOutcome:
+    """The short built-in pass (:data:`SHORT_CLI_EXPERIMENT`, the Python simulated board) run
+    once in this process on virtual time with no live view: the same run for every test that
+    only reads it (test_tank_run_virtual's ``first_run``, the every-device suite's
+    python-board run), whose digests test_tank_run_virtual pins bit for bit."""
+    return run_experiment(
+        parse_experiment(SHORT_CLI_EXPERIMENT),
+        folder=tmp_path_factory.mktemp("virtual") / "a",
+        view=LiveView(enabled=False),
+        virtual_time=True,
+    )
