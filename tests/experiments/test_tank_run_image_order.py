@@ -10,7 +10,6 @@ changes this run."""
 
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 
