@@ -61,8 +61,15 @@ def test_order_2_meets_the_tank_targets(order_2_run: RunOutcome) -> None:
     assert {k: summary[k] for k in golden} == pytest.approx(golden, abs=1e-9)
 
 
-GOLDEN_COUNTS = (0, 0, 0, 0, 0)
-GOLDEN = {"detection_rate": 0.0, "range_bias_m": 0.0, "range_rmse_m": 0.0, "speed_rmse_mps": 0.0}
+#: Estimates, those with a truth, more than 1 m off, more than the 0.124 m gate off (all in the
+#: carriage's stop, the first arrival read 0.15-0.25 m late on the pedestal), scored.
+GOLDEN_COUNTS = (399, 381, 8, 54, 200)
+GOLDEN = {
+    "detection_rate": 1.0,
+    "range_bias_m": 0.0033913506174724174,
+    "range_rmse_m": 0.008453991350902497,
+    "speed_rmse_mps": 0.011533754731056797,
+}
 
 
 def test_the_order_2_experiment_differs_from_the_built_in_one_by_its_order_only() -> None:
