@@ -134,6 +134,12 @@ QUIET_RATIO = 2.0
 PEDESTAL_RISE = 2.0
 #: Pedestals stepped over at most, one above the other.
 MAX_PEDESTALS = 2
+#: An arrival of at least a fifth of the top crosses from ``lo`` to ``hi`` in under half a
+#: window; a stretch between them longer than this many windows is a low level ahead of the
+#: ramp (in the 12 x 6 x 4 m tank at image order 2, 0.15-0.4 m of range ahead of the direct
+#: path), and the line is fitted on the ramp's steep part, from ``hi`` to twice its level.
+#: Measured: 0.25 and 0.4 also took weak first arrivals of the built-in tank for it.
+SLOW_RISE = 0.55
 #: A pedestal holds at least this many times the power on the boundaries whose next tone the
 #: previous boundary's late images leave as on the others (measured on the built-in tank at
 #: image order 2, carriage at rest: 4-5 times; a first arrival: 0.8-1.2).
@@ -317,8 +323,14 @@ class FirstArrivalReadout:
             j_lo, j_hi = self._ramp_bounds(amp, k0, top_i, top, wobble)
         if j_lo <= k0:
             return None  # the ramp runs into the baseline: no clean onset
-        tt = self._offsets[j_lo : j_hi + 1] / fs
-        slope, icept = np.polyfit(tt, amp[j_lo : j_hi + 1], 1)
+        # A slow rise from lo to hi is not the ramp itself (SLOW_RISE).
+        j_a, j_b = j_lo, j_hi
+        if j_hi - j_lo > SLOW_RISE * w:
+            up = np.flatnonzero(amp[j_hi : top_i + 1] >= 2.0 * amp[j_hi])
+            if up.size:
+                j_a, j_b = j_hi, j_hi + max(2, int(up[0]))
+        tt = self._offsets[j_a : j_b + 1] / fs
+        slope, icept = np.polyfit(tt, amp[j_a : j_b + 1], 1)
         if not slope > 0:
             return None
         # The line is the start; the ramp's exact shape (the previous tone's partial window
