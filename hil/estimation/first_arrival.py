@@ -47,7 +47,7 @@ simulated tank run (12 × 4 × 2.5 m, own echoes, reverberation, direct blast, 1
 replayed: with ``gcas-bg`` (:mod:`hil.estimation.background`: an empty-tank background
 subtracted, this readout without its canceller, ``cancel_period=False``) range bias
 +0.002 m, RMSE 0.003 m, speed RMSE 0.010 m/s; at image order 2 no estimate of the scored
-stretch wrong and 2.1 % of all more than 1 m off (docs/tank-run.md has the table against image
+stretch wrong and 0.5 % of all more than 1 m off (docs/tank-run.md has the table against image
 order, tank and beams).
 
 Limits with its canceller: a target slower than about one carrier wavelength per code period
