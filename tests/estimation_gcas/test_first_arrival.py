@@ -169,18 +169,20 @@ def _resting_target_with_late_images(late_amplitude: float) -> np.ndarray:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("max_pedestals", [2, 0])
+@pytest.mark.parametrize("rules_on", [True, False])
 def test_the_late_images_level_before_the_first_arrival_is_stepped_over(
-    max_pedestals: int, monkeypatch: pytest.MonkeyPatch
+    rules_on: bool, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """The previous boundary's late images leave a level in the next-tone channel before the
     first arrival; followed back into it, the ramp reads the target 0.82 m short. Stepped over
     (stronger on the boundaries whose next tone they leave), most estimates read the direct
-    path; with the rule off (``MAX_PEDESTALS = 0``) every one is short."""
+    path; with the rules off (``MAX_PEDESTALS = 0``, no slow rise) every one is short."""
     from hil.estimation import first_arrival
     from hil.estimation.background import BackgroundGcas, BackgroundSubtractor
 
-    monkeypatch.setattr(first_arrival, "MAX_PEDESTALS", max_pedestals)
+    if not rules_on:
+        monkeypatch.setattr(first_arrival, "MAX_PEDESTALS", 0)
+        monkeypatch.setattr(first_arrival, "SLOW_RISE", np.inf)
     s = _schedule()
     period = s.period_samples(FS)
     assert period is not None
@@ -191,7 +193,7 @@ def test_the_late_images_level_before_the_first_arrival_is_stepped_over(
     )
     err = np.array([e.range_m - 4.9 for e in run_blocks(rx, _resting_target_with_late_images(0.5))])
     assert err.size >= 80
-    if max_pedestals:
+    if rules_on:
         assert 0.0 < np.median(err) < 0.2 and np.count_nonzero(np.abs(err) > 0.5) <= 0.15 * err.size
     else:
         assert np.all(err < -0.6)
