@@ -34,7 +34,9 @@ For each of the ``M`` boundaries the GCAS detection used (receive times from its
    arrival's own part of the ramp (:meth:`FirstArrivalReadout._fit_ramp`). A flat level
    above ``hi`` that is the previous boundary's late images switching tones (stronger on the
    boundaries whose next tone they leave than on the others, where only their switch leaks
-   through the window) is stepped over: the ramp is searched again above it.
+   through the window) is stepped over: the ramp is searched again above it. A rise from
+   ``lo`` to ``hi`` slower than :data:`SLOW_RISE` windows is a low level ahead of the ramp:
+   the line is fitted on the ramp's steep part, from ``hi`` to twice its level.
 4. **Doppler**: the direct path's complex amplitude at the ``M`` boundaries, fitted over its
    first :data:`DIRECT_S` on the ramp's model (the previous tone's leak divided out), gives
    its own time scale (:meth:`FirstArrivalReadout._direct_alpha`): GCAS's weighs the
