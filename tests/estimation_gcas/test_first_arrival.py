@@ -149,3 +149,51 @@ def test_a_period_of_a_fractional_number_of_samples_is_refused() -> None:
 def test_spread_out_of_range_is_refused() -> None:
     with pytest.raises(ConfigError, match="max_spread_s"):
         FirstArrivalReadout(_schedule(), FS, 10, C, max_spread_s=0.02)
+
+
+def _resting_target_with_late_images(late_amplitude: float) -> np.ndarray:
+    """A target at rest at 4.9 m with its tank images, and three late images of the previous
+    boundary (one hop less 0.6-0.82 m of range behind it, as the far end wall's at image order
+    2 in the built-in tank): they switch tones up to 1.1 ms before each first arrival.
+    20 dB per-sample SNR."""
+    s = _schedule()
+    x = echo_samples(s, 4.9, 0.0, 1.2, snr_db=20.0, seed=3, fs_hz=FS, c=C)
+    for extra, amp, _cosine in IMAGES:
+        x += echo_samples(s, 4.9 + extra, 0.0, 1.2, fs_hz=FS, c=C, amplitude=amp)
+    hop_m = C * s.hop_s / 2
+    for short, sign in ((0.82, 1.0), (0.7, -1.0), (0.6, 1.0)):
+        x += echo_samples(
+            s, 4.9 + hop_m - short, 0.0, 1.2, fs_hz=FS, c=C, amplitude=sign * late_amplitude
+        )
+    return x
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("rules_on", [True, False])
+def test_the_late_images_level_before_the_first_arrival_is_stepped_over(
+    rules_on: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The previous boundary's late images leave a level in the next-tone channel before the
+    first arrival; followed back into it, the ramp reads the target 0.82 m short. Stepped over
+    (stronger on the boundaries whose next tone they leave), most estimates read the direct
+    path; with the rules off (``MAX_PEDESTALS = 0``, no slow rise) every one is short."""
+    from hil.estimation import first_arrival
+    from hil.estimation.background import BackgroundGcas, BackgroundSubtractor
+
+    if not rules_on:
+        monkeypatch.setattr(first_arrival, "MAX_PEDESTALS", 0)
+        monkeypatch.setattr(first_arrival, "SLOW_RISE", np.inf)
+    s = _schedule()
+    period = s.period_samples(FS)
+    assert period is not None
+    rx = BackgroundGcas(
+        _receiver("peak", refine=False),
+        BackgroundSubtractor(np.zeros(period)),
+        FirstArrivalReadout(s, FS, 10, C, cancel_period=False),
+    )
+    err = np.array([e.range_m - 4.9 for e in run_blocks(rx, _resting_target_with_late_images(0.5))])
+    assert err.size >= 80
+    if rules_on:
+        assert 0.0 < np.median(err) < 0.2 and np.count_nonzero(np.abs(err) > 0.5) <= 0.15 * err.size
+    else:
+        assert np.all(err < -0.6)
