@@ -47,7 +47,7 @@ from hil.experiments.live.board_state import (
     xrun_counts,
     xruns_since,
 )
-from hil.experiments.live.devices import RunDevices
+from hil.experiments.live.devices import RunDevices, refuse_mixed_devices
 from hil.experiments.live.plan import new_run_folder
 from hil.experiments.live.recorder import RunRecorder
 from hil.experiments.live.session import LiveSession, SessionTiming, Telemetry
@@ -332,6 +332,7 @@ def with_background(exp: Experiment, folder: Path) -> Experiment:
     given = exp.receiver_options.get("background")
     if given != SIMULATED_BACKGROUND:
         return exp
+    refuse_mixed_devices(exp)  # before the background's own rule: the pair is the error
     if not exp.simulated:
         raise ConfigError(
             "receiver.options.background",

@@ -39,6 +39,18 @@ if TYPE_CHECKING:
     from hil.experiments.sim_tank import TankSimulation
 
 
+def refuse_mixed_devices(exp: Experiment) -> None:
+    """Refuse a simulated board with a real stage or the other way round (:class:`ConfigError`
+    naming both): the simulated target follows the simulated stage."""
+    if is_simulated(exp.board_url) != is_simulated(exp.stage_url):
+        raise ConfigError(
+            "devices",
+            f"board {exp.board_url}, stage {exp.stage_url}",
+            "both simulated (sim://) or both real",
+            "the simulated target follows the simulated stage",
+        )
+
+
 class StatusLine(Protocol):
     """Where the run says what it is doing (the live view)."""
 
@@ -111,13 +123,7 @@ class RunDevices:
             tank = self.tank = self._simulated_tank(exp, folder)
             self.clock = tank.clock
             return tank.stage_target, lambda fs, _clock: tank.open_daq(fs)
-        if is_simulated(exp.board_url) or is_simulated(exp.stage_url):
-            raise ConfigError(
-                "devices",
-                f"board {exp.board_url}, stage {exp.stage_url}",
-                "both simulated (sim://) or both real",
-                "the simulated target follows the simulated stage",
-            )
+        refuse_mixed_devices(exp)
         if self.virtual_time:
             raise ConfigError(
                 "virtual time",
