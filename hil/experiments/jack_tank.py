@@ -76,12 +76,18 @@ _PORT = re.compile(r"^(?P<client>[^:]+):(?P<port>.+)$")
 def served_experiment(exp: Experiment, pty: str, period: int) -> str:
     """``exp``'s text with ``[devices]`` pointing at the served tank: the board is the JACK
     server through PortAudio at the waveform's rate and ``period`` frames a block, the stage
-    the pty ``pty``. Checked by parsing it."""
+    the pty ``pty``. Checked by parsing it. Through a real audio stack the devices are real
+    ones, which have no simulated empty-tank background: a ``gcas-bg`` receiver with
+    ``background = "simulated"`` becomes ``gcas-mti`` (the clutter canceller, which needs no
+    capture)."""
     rate = int(exp.waveform.fs_hz)
     board = f'board = "audio://{JACK_DEVICE}?rate={rate}&blocksize={period}"'
     stage = f'stage = "{pty}"'
     text, n_board = re.subn(_DEVICE_LINE.format(key="board"), board, exp.text)
     text, n_stage = re.subn(_DEVICE_LINE.format(key="stage"), stage, text)
+    if exp.receiver == "gcas-bg" and exp.receiver_options.get("background") == "simulated":
+        text = re.sub(r'(?m)^name = "gcas-bg"[ \t]*$', 'name = "gcas-mti"', text, count=1)
+        text = re.sub(r'(?m)^options = \{ background = "simulated" \}[ \t]*\n', "", text)
     if n_board != 1 or n_stage != 1:
         raise ConfigError(
             "devices",

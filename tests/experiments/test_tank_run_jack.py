@@ -208,11 +208,14 @@ def test_the_served_experiment_points_at_jack_and_the_stage_pty() -> None:
     served = parse_experiment(text)
     assert served.board_url == "audio://JACK?rate=192000&blocksize=1024"
     assert served.stage_url == "/dev/pts/7"
-    # Everything else is the experiment as given.
+    # Through a real audio stack there is no simulated empty-tank background: the built-in
+    # gcas-bg becomes the clutter canceller. Everything else is the experiment as given.
+    assert exp.receiver == "gcas-bg" and served.receiver == "gcas-mti"
+    assert "background" not in served.receiver_options
     assert served.tow == exp.tow and served.waveform == exp.waveform
-    assert (
-        text.replace(served.board_url, "sim://board").replace('"/dev/pts/7"', '"sim://stage"')
-        == SHORT
+    back = text.replace(served.board_url, "sim://board").replace('"/dev/pts/7"', '"sim://stage"')
+    assert back == SHORT.replace('name = "gcas-bg"', 'name = "gcas-mti"').replace(
+        'options = { background = "simulated" }\n', ""
     )
 
 

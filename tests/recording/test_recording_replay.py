@@ -451,7 +451,9 @@ def test_cli_replay_lists_the_tracks(live_run: Any, capsys: pytest.CaptureFixtur
     assert lines[1] == (
         f"track 0: 2 estimates, t {on0[0].t_s:.3f}–{on0[1].t_s:.3f} s, range "
         f"{on0[0].range_m:.3f} → {on0[1].range_m:.3f} m, speed "
-        f"{(on0[0].speed_mps + on0[1].speed_mps) / 2:.3f} m/s (median)"
+        f"{(on0[0].speed_mps + on0[1].speed_mps) / 2:.3f} m/s (median), CRLB "
+        f"{1e3 * (on0[0].crlb_range_m + on0[1].crlb_range_m) / 2:.2f} mm / "
+        f"{1e3 * (on0[0].crlb_speed_mps + on0[1].crlb_speed_mps) / 2:.2f} mm/s (median)"
     )
     assert lines[2].startswith("track 1: 1 estimates") and lines[3].startswith("track 2: 2 ")
     assert lines[4] == "6 estimates on no confirmed track"
