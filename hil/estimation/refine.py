@@ -53,11 +53,23 @@ the noise variance is what the echo leaves of the window's energy; ``E/N0 = Â²
 (:func:`hil.estimation.crlb.sampled_e_over_n0`), from which the estimate's own Cramér–Rao
 bounds follow.
 
+Accelerating echoes: over the ``M`` hops an echo whose speed changes drifts in phase against
+one time scale (a quadratic phase, ``π f γ u²`` at ``u`` from the window's centre, 2.5 rad at
+the ends for 8 m/s² on ``att`` at M = 10), and the constant-speed fit reads the mean speed
+of the window, half a window before the boundary. Where a fit's coherence shows that drift
+(:data:`ACCEL_TRY`), the time scale is let change at a rate ``γ`` (1/s) about the hops' centre
+(:func:`~hil.estimation.refine_kernels.candidate_sums`: each hop heard on the curve's tangent
+at its own centre), fitted from a grid of rates and kept where the likelihood rises by
+:data:`ACCEL_GAIN` (a generalised likelihood ratio test of one more parameter): the estimate
+is then the boundary's own time and speed, with the acceleration (:attr:`Refinement.
+accel_mps2`), and the next detections of that echo start from the curve. Below about
+1.5 m/s² at M = 10 on ``att`` the drift stays within the coherence of one echo and the speed
+lags by ``a M T_h / 2`` (at most 0.075 m/s); above about 12 m/s² some hops' runs lose their
+coherence too and those detections are refused.
+
 Limits: one echo. Through multipath a fraction of a millisecond long (a tank's images) the
 maximum sits between the arrivals and the fit is not one echo (tanks read the first arrival
-instead, :mod:`hil.estimation.first_arrival`). An accelerating target is fitted with the mean
-time scale of the ``M`` hops (its speed lags by the acceleration times half the window; the
-range stays within centimetres up to 7 m/s² on ``att``). Tone schedules of equal hops only.
+instead, :mod:`hil.estimation.first_arrival`). Tone schedules of equal hops only.
 """
 
 from __future__ import annotations
@@ -136,6 +148,27 @@ GHOST_HOPS = 0.25
 LOBE_MOVES = 2
 #: ``known`` rows of no other echo.
 _NO_KNOWN = np.zeros((5, 0), dtype=np.complex128)
+#: Accelerating echoes (:meth:`CoherentRefiner._with_acceleration`): a fit whose coherence
+#: over all hops is below ACCEL_TRY of one echo's at its SNR while over runs of consecutive
+#: hops it keeps ACCEL_RUN_MIN of it (an echo whose phase drifts slowly: measured 0.85-0.87
+#: at 8 m/s² and 0.55-0.72 at 12 m/s² on att, M = 10), and that collects ACCEL_MARGIN_DB more
+#: than an echo must (fits of noise collect 12-16 dB and, given a third parameter, fit it;
+#: an echo's curvature needs that margin for its gain to pass ACCEL_GAIN), is fitted again
+#: with a changing time scale: accelerations up to MAX_ACCEL_MPS2 (m/s²) on a grid that moves
+#: the phase at the window's ends by an eighth of a cycle a step (at most ACCEL_POINTS
+#: points: longer windows cover less), then from the ACCEL_STARTS best of its local maxima
+#: ACCEL_ROUNDS rounds of the delay–speed fit and a parabola in the rate. The acceleration is
+#: kept where it raises the likelihood ``ln Λ = |C|²/(σ² E_s)`` by more than ACCEL_GAIN
+#: (twice that gain is χ² with one degree of freedom for an echo of constant speed: 13.8 is
+#: a chance of 2e-4).
+ACCEL_TRY = 0.98
+ACCEL_RUN_MIN = 0.5
+ACCEL_MARGIN_DB = 6.0
+MAX_ACCEL_MPS2 = 20.0
+ACCEL_POINTS = 41
+ACCEL_ROUNDS = 2
+ACCEL_STARTS = 3
+ACCEL_GAIN = 6.9
 
 
 @dataclass(frozen=True)
@@ -149,6 +182,8 @@ class _EchoFit:
     t_s: float
     alpha: float
     amplitude: complex
+    #: The time scale's rate, 1/s (an accelerating fit's; 0 for a constant speed).
+    rate: float = 0.0
 
     def speed(self, sound_speed_mps: float) -> float:
         """Radial speed, m/s (closing positive)."""
@@ -190,10 +225,17 @@ class Refinement:
     #: The fitted complex amplitude ``β = 2C/E_s`` (the input is ``Re(β s)`` for the model
     #: ``s`` of the codeword's first code period); 0 where the windows are empty.
     amplitude: complex = 0j
+    #: The radial acceleration fitted over the ``M`` hops, m/s² (closing speed growing
+    #: positive); 0 where a constant speed explains them (``alpha`` is the boundary's).
+    accel_mps2: float = 0.0
 
     def speed_mps(self, sound_speed_mps: float) -> float:
         """The fit's radial speed, m/s (closing positive)."""
         return sound_speed_mps * (self.alpha - 1.0) / (self.alpha + 1.0)
+
+    def rate(self, sound_speed_mps: float) -> float:
+        """The time scale's rate of change, 1/s per receive second (from the acceleration)."""
+        return self.accel_mps2 * (self.alpha + 1.0) ** 2 / (2.0 * sound_speed_mps)
 
     def is_echo(self, test: EchoTest) -> bool:
         """Whether the fit is one echo of the schedule by ``test``: a maximum inside the
@@ -314,9 +356,15 @@ class CoherentRefiner:
         self._clock = 0
         self._codewords: dict[int, _Codeword] = {}
         self._sub_words: dict[int, _Codeword] = {}
-        self._recent: deque[tuple[int, float, float]] = deque(maxlen=RECENT_FITS)
+        self._recent: deque[tuple[int, float, float, float]] = deque(maxlen=RECENT_FITS)
         #: The latest fit of each echo measured lately (:meth:`_known_hops`).
         self._echoes: list[_EchoFit] = []
+        # The acceleration grid's time-scale rates (1/s): an eighth of a cycle of the highest
+        # tone at the window's ends, ±half the window from its centre, a step.
+        half_window = 0.5 * self.m_hops * self.hop_len_s
+        step = 1.0 / (4.0 * float(np.max(schedule.tones_hz)) * half_window**2)
+        n_side = min(int(math.ceil(2.0 * MAX_ACCEL_MPS2 / self.c / step)), ACCEL_POINTS // 2)
+        self._gammas = step * np.arange(-n_side, n_side + 1, dtype=np.float64)
         # A ghost's speed offset, c Δf / (2 f_c) (m/s), and one Doppler cell of a hop (m/s).
         f_c = 0.5 * float(np.min(schedule.tones_hz) + np.max(schedule.tones_hz))
         self._ghost_speed = self.c * self.spacing_hz / (2.0 * f_c)
@@ -363,8 +411,17 @@ class CoherentRefiner:
         speed0 = self.c * (alpha - 1.0) / (alpha + 1.0)
         known = self._known_hops(hop_index, t_s, speed0, lobe)
         fit = self._fit_near(word, hop_ids, t_s, speed0, lobe, hop_index, known)
+        if (
+            fit is not None
+            and fit.found
+            and fit.accel_mps2 == 0.0
+            and fit.coherence.fraction < ACCEL_TRY
+            and fit.run_coherence.fraction >= ACCEL_RUN_MIN
+            and fit.e_over_n0_db >= self.echo_test.min_e_over_n0_db + ACCEL_MARGIN_DB
+        ):
+            fit = self._with_acceleration(fit, word, hop_ids, lobe, known)
         if fit is not None and fit.is_echo(self.echo_test):
-            self._recent.append((hop_index, fit.t_s, fit.speed_mps(self.c)))
+            self._recent.append((hop_index, fit.t_s, fit.alpha, fit.rate(self.c)))
             self._remember(fit, hop_index)
         return fit
 
@@ -392,7 +449,7 @@ class CoherentRefiner:
         replacing that echo's earlier fit and forgetting fits :data:`KNOWN_HOPS` hops old."""
         if fit.amplitude == 0:
             return
-        new = _EchoFit(hop_index, fit.t_s, fit.alpha, fit.amplitude)
+        new = _EchoFit(hop_index, fit.t_s, fit.alpha, fit.amplitude, fit.rate(self.c))
         oldest = fit.t_s - KNOWN_HOPS * self.hop_len_s
         self._echoes = [
             e for e in self._echoes
@@ -442,12 +499,15 @@ class CoherentRefiner:
         dt_lo = hops.start_s - t_b
         f = hops.freq_hz
         k = hops.amplitude * np.exp(-1j * (hops.phase_rad - 2 * np.pi * f * dt_lo))
+        # Each hop heard on the tangent of the echo's curve at its centre (an accelerating
+        # fit's time scale changes at its rate; the boundary's line where it does not).
+        t_i, a_i = _hops_on_curve(echo.t_s, echo.alpha, echo.rate, dt_lo + 0.5 * hops.duration_s)
         out = np.empty((5, f.shape[0]), dtype=np.complex128)
         out[0] = 0.5 * echo.amplitude * np.conj(k)
-        out[1] = f * echo.alpha
-        out[2] = echo.t_s + dt_lo / echo.alpha
-        out[3] = echo.t_s + (dt_lo + hops.duration_s) / echo.alpha
-        out[4] = echo.t_s
+        out[1] = f * a_i
+        out[2] = t_i + dt_lo / a_i
+        out[3] = t_i + (dt_lo + hops.duration_s) / a_i
+        out[4] = t_i
         return out
 
     def _fit_near(
@@ -464,19 +524,38 @@ class CoherentRefiner:
         prediction when ``warm_hop`` is given and one agrees, else the full search, then the
         lobe check; None where the input does not cover the hops."""
         outcome = RECENTRE
+        gamma = 0.0
         start = None if warm_hop is None else self._predicted(warm_hop, t0, v0, lobe)
         if start is not None:
-            # Near a recent fit's prediction: a 3 × 3 grid of the fit's first steps.
-            best_t, best_v = start
-            slots = self._slots(hop_ids, word, best_t, (self.c + best_v) / (self.c - best_v))
+            # Near a recent fit's prediction: a 3 × 3 grid of the fit's first steps (an
+            # accelerating fit's: the rate's fit from there, at the hops' centre).
+            best_t, alpha, gamma = start
+            if gamma != 0.0:
+                best_t, alpha = _to_centre(best_t, alpha, gamma, word.centre_s)
+            best_v = self.c * (alpha - 1.0) / (alpha + 1.0)
+            slots = self._slots(hop_ids, word, best_t, alpha)
             if slots is None:
                 return None
             args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
-            best_t, best_v, outcome = maximise(
-                *args, known, self.c, best_t, best_v, WARM_HALF_LOBES * lobe,
-                WARM_HALF_SPANS * self.speed_span_mps, 3, 3, WARM_FIT_PASSES,
-            )  # fmt: skip
+            if gamma == 0.0:
+                best_t, best_v, outcome = maximise(
+                    *args, known, 0.0, self.c, best_t, best_v, WARM_HALF_LOBES * lobe,
+                    WARM_HALF_SPANS * self.speed_span_mps, 3, 3, WARM_FIT_PASSES,
+                )  # fmt: skip
+            else:
+                fitted = self._accel_fit(args, known, best_t, alpha, gamma, lobe)
+                if fitted is not None:
+                    best_t, alpha, gamma = fitted[:3]
+                    best_v, outcome = self.c * (alpha - 1.0) / (alpha + 1.0), FOUND
+                    if not self._accel_gain(args, known, word, best_t, alpha, gamma) > ACCEL_GAIN:
+                        # No longer accelerating: the constant speed's warm fit.
+                        gamma, outcome = 0.0, RECENTRE
+                        best_t, best_v, outcome = maximise(
+                            *args, known, 0.0, self.c, best_t, best_v, WARM_HALF_LOBES * lobe,
+                            WARM_HALF_SPANS * self.speed_span_mps, 3, 3, WARM_FIT_PASSES,
+                        )  # fmt: skip
         if outcome != FOUND:
+            gamma = 0.0
             searched = self._search_from_fewer_hops(word, hop_ids, t0, v0, lobe, known)
             if searched is None:
                 return None
@@ -499,36 +578,143 @@ class CoherentRefiner:
             # The lobe: the envelope tells a grating lobe from its neighbours by ~1 dB, which
             # a detector's time (noncoherent, beside a stronger echo) can miss; the
             # likelihood's own neighbours decide.
-            moved = self._better_lobe(args, best_t, best_v, lobe, known)
+            moved = self._better_lobe(args, best_t, best_v, lobe, known, gamma=gamma)
             if moved is None:
                 break
             narrow = self._narrow_grid(lobe)
-            searched = self._search(word, hop_ids, moved, best_v, lobe, known, narrow)
+            searched = self._search(word, hop_ids, moved, best_v, lobe, known, narrow, gamma)
             if searched is not None and searched[2] != FOUND:
-                searched = self._search(word, hop_ids, moved, best_v, lobe, known)
+                searched = self._search(word, hop_ids, moved, best_v, lobe, known, gamma=gamma)
             if searched is None:
                 return None
             best_t, best_v, outcome, args = searched
             if outcome != FOUND:
                 break
         if outcome != FOUND:
-            best_t, best_v = t0, v0
+            best_t, best_v, gamma = t0, v0, 0.0
         a_best = (self.c + best_v) / (self.c - best_v)
+        return self._refinement(args, known, word, best_t, a_best, gamma, outcome == FOUND)
+
+    def _refinement(
+        self, args: tuple[Any, ...], known: NDArray[np.complex128], word: _Codeword, t: float,
+        alpha: float, gamma: float, found: bool,
+    ) -> Refinement:  # fmt: skip
+        """The :class:`Refinement` of the fit ``(t, alpha, gamma)`` (the kernels' parameters:
+        with a rate, ``t`` and ``alpha`` are the hops' centre's line) with its quality, its
+        Cramér–Rao bounds and, with a rate, the boundary's time, time scale and the
+        acceleration."""
         en0, coherence, tone_coherence, run_coherence, amplitude = _fit_quality(
-            args, known, word, self.n_tones, best_t, a_best
+            args, known, word, self.n_tones, t, alpha, gamma
         )
         en0_db = 10.0 * math.log10(en0) if en0 > 0 else -math.inf
         bound = (
             crlb(word.b_rms, word.t_rms, word.f0, en0_db, self.c) if math.isfinite(en0_db) else None
         )
+        accel = 0.0
+        if gamma != 0.0:
+            t, alpha = _to_boundary(t, alpha, gamma, word.centre_s)
+            accel = 2.0 * self.c * gamma / (alpha + 1.0) ** 2
         return Refinement(
-            best_t, a_best, en0_db, bound, coherence, tone_coherence, run_coherence,
-            outcome == FOUND, amplitude,
+            t, alpha, en0_db, bound, coherence, tone_coherence, run_coherence, found,
+            amplitude, accel,
         )  # fmt: skip
+
+    def _with_acceleration(
+        self, fit: Refinement, word: _Codeword, hop_ids: NDArray[np.int64], lobe: float,
+        known: NDArray[np.complex128],
+    ) -> Refinement:  # fmt: skip
+        """``fit`` (constant speed, its maximum found) fitted again with a changing time scale
+        (:data:`ACCEL_TRY`): the rate's grid at the fit's delay and time scale (those of the
+        hops' centre: the curvature is even about it) on the fit's grating lobe and its two
+        neighbours; from each of the :data:`ACCEL_STARTS` best local maxima, the delay–speed
+        fit and a parabola in the rate, :data:`ACCEL_ROUNDS` times. The best accelerating fit
+        where it raises the likelihood by :data:`ACCEL_GAIN`, else ``fit``; its time and time
+        scale are the boundary's."""
+        slots = self._slots(hop_ids, word, fit.t_s, fit.alpha)
+        if slots is None:
+            return fit
+        args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
+        gammas = self._gammas
+        n = gammas.shape[0]
+        # Over the M hops the rate's phase (even about the centre) can alias with the
+        # delay's and time scale's (odd) at another grating lobe or rate: several starts.
+        lobes = fit.t_s + lobe * np.array([-1.0, 0.0, 1.0])
+        power = self._powers(
+            args, known, np.repeat(lobes, n), np.full(3 * n, fit.alpha), np.tile(gammas, 3)
+        ).reshape(3, n)
+        inner = power[:, 1:-1]
+        peak = (inner > power[:, :-2]) & (inner >= power[:, 2:])
+        rows, cols = np.nonzero(peak)
+        order = np.argsort(-inner[rows, cols])[:ACCEL_STARTS]
+        best: tuple[float, float, float, float] | None = None
+        for r, c in zip(rows[order], cols[order] + 1, strict=True):
+            found = self._accel_fit(args, known, float(lobes[r]), fit.alpha, float(gammas[c]), lobe)
+            if found is not None and (best is None or found[3] > best[3]):
+                best = found
+        if best is None:
+            return fit
+        t, alpha, gamma, p_best = best
+        p0 = self._powers(args, known, np.array([fit.t_s]), np.array([fit.alpha]), np.zeros(1))
+        gain = 10.0 ** (fit.e_over_n0_db / 10.0) * (p_best / p0[0] - 1.0) if p0[0] > 0 else 0.0
+        if not gain > ACCEL_GAIN:
+            return fit
+        return self._refinement(args, known, word, t, alpha, gamma, True)
+
+    def _accel_gain(
+        self, args: tuple[Any, ...], known: NDArray[np.complex128], word: _Codeword, t: float,
+        alpha: float, gamma: float,
+    ) -> float:  # fmt: skip
+        """What the rate ``gamma`` adds to ``ln Λ = |C|²/(σ² E_s)`` at ``(t, alpha)`` (the
+        hops' centre's line), ``σ²`` what the accelerating fit leaves of the windows' energy."""
+        en0 = _fit_quality(args, known, word, self.n_tones, t, alpha, gamma)[0]
+        p = self._powers(args, known, np.full(2, t), np.full(2, alpha), np.array([0.0, gamma]))
+        return en0 * (1.0 - p[0] / p[1]) if p[1] > 0 else 0.0
+
+    def _accel_fit(
+        self, args: tuple[Any, ...], known: NDArray[np.complex128], t: float, alpha: float,
+        gamma: float, lobe: float,
+    ) -> tuple[float, float, float, float] | None:  # fmt: skip
+        """From ``(t, alpha, gamma)`` (s, the centre's time scale, 1/s): the delay–speed fit at
+        the rate, then a parabola in the rate over half the grid's step (halving each
+        round), :data:`ACCEL_ROUNDS` times; ``(t, alpha, gamma, |C|²)``, None where the fit
+        finds no maximum inside."""
+        step = float(self._gammas[1] - self._gammas[0])
+        v = self.c * (alpha - 1.0) / (alpha + 1.0)
+        grid = (0.125 * lobe, 0.25 * self.speed_span_mps, 5, 5, FIT_PASSES)
+        p = np.zeros(3)
+        for r in range(ACCEL_ROUNDS):
+            for _ in range(MAX_RECENTRES + 1):
+                t, v, outcome = maximise(*args, known, gamma, self.c, t, v, *grid)
+                if outcome != RECENTRE:
+                    break
+            if outcome != FOUND:
+                return None
+            alpha = (self.c + v) / (self.c - v)
+            h = 0.5 * step / 2**r
+            rates = gamma + h * np.arange(-1.0, 2.0)
+            p = self._powers(args, known, np.full(3, t), np.full(3, alpha), rates)
+            curve = p[0] - 2.0 * p[1] + p[2]
+            if curve < 0.0:
+                gamma += h * float(np.clip(0.5 * (p[0] - p[2]) / curve, -1.0, 1.0))
+        p_end = self._powers(args, known, np.array([t]), np.array([alpha]), np.array([gamma]))
+        return t, alpha, gamma, float(p_end[0])
+
+    def _powers(
+        self, args: tuple[Any, ...], known: NDArray[np.complex128], t: NDArray[np.float64],
+        alpha: NDArray[np.float64], gamma: NDArray[np.float64],
+    ) -> NDArray[np.float64]:  # fmt: skip
+        """``|C|²`` of the candidates ``(t, alpha, gamma)`` (shape ``(C,)`` each)."""
+        n = t.shape[0]
+        c, model, energy = np.empty(n, np.complex128), np.empty(n), np.empty(n)
+        candidate_sums(
+            *args, t, alpha, gamma, c, model, energy, np.empty((n, 0), np.complex128), known
+        )
+        return np.abs(c) ** 2
 
     def _search(
         self, word: _Codeword, hop_ids: NDArray[np.int64], t0: float, v0: float, lobe: float,
         known: NDArray[np.complex128], grid: tuple[float, float, int, int] | None = None,
+        gamma: float = 0.0,
     ) -> tuple[float, float, int, tuple[Any, ...]] | None:  # fmt: skip
         """The search around ``(t0, v0)`` over the hops ``hop_ids`` of ``word`` on ``grid``
         (``(half_t, half_v, n_t, n_v)``: ±s, ±m/s, points; default the full search's ±½ lobe,
@@ -545,7 +731,7 @@ class CoherentRefiner:
                 return None
             args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
             best_t, best_v, outcome = maximise(
-                *args, known, self.c, best_t, best_v, *grid, FIT_PASSES
+                *args, known, gamma, self.c, best_t, best_v, *grid, FIT_PASSES
             )
             if outcome != RECENTRE:
                 break
@@ -591,19 +777,14 @@ class CoherentRefiner:
 
     def _better_lobe(
         self, args: tuple[Any, ...], t_s: float, speed: float, lobe: float,
-        known: NDArray[np.complex128], any_side: bool = False,
+        known: NDArray[np.complex128], any_side: bool = False, gamma: float = 0.0,
     ) -> float | None:  # fmt: skip
-        """The time (s) one grating lobe before or after ``t_s`` where the likelihood is
-        greater than at ``t_s`` (the greater of the two; with ``any_side`` the greater of the
-        two whatever ``t_s``'s), or None."""
+        """The time (s) one grating lobe before or after ``t_s`` where the likelihood (at the
+        rate ``gamma``, 1/s) is greater than at ``t_s`` (the greater of the two; with
+        ``any_side`` the greater of the two whatever ``t_s``'s), or None."""
         alpha = (self.c + speed) / (self.c - speed)
         t = np.array([t_s - lobe, t_s, t_s + lobe])
-        c, model, energy = np.empty(3, np.complex128), np.empty(3), np.empty(3)
-        candidate_sums(
-            *args, t, np.full(3, alpha), c, model, energy, np.empty((3, 0), np.complex128),
-            known,
-        )  # fmt: skip
-        power = np.abs(c) ** 2
+        power = self._powers(args, known, t, np.full(3, alpha), np.full(3, gamma))
         side = 0 if power[0] >= power[2] else 2
         if power[side] > power[1] or any_side:
             return float(t[side])
@@ -611,16 +792,22 @@ class CoherentRefiner:
 
     def _predicted(
         self, hop_index: int, t_s: float, speed: float, lobe: float
-    ) -> tuple[float, float] | None:
-        """Where a recent fit of the same echo puts this boundary (s, m/s): a fit up to
-        :data:`WARM_HOPS` hops earlier, moved on by those hops received at its time scale,
-        if the detection agrees with it (within an eighth of a lobe and the speed span)."""
-        for hop, t_fit, v_fit in reversed(self._recent):
+    ) -> tuple[float, float, float] | None:
+        """Where a recent fit of the same echo puts this boundary: its time (s), time scale
+        and rate (1/s), from a fit up to :data:`WARM_HOPS` hops earlier moved on by those hops
+        (its time scale changing at its rate), if the detection agrees with it (within an
+        eighth of a lobe, and the fit's speed, at the boundary or over the hops, within the
+        speed span)."""
+        for hop, t_fit, a_fit, gamma in reversed(self._recent):
             k = hop_index - hop
             if 1 <= k <= WARM_HOPS:
-                t_pred = t_fit + k * self.hop_len_s * (self.c - v_fit) / (self.c + v_fit)
-                if abs(t_pred - t_s) <= 0.125 * lobe and abs(v_fit - speed) <= self.speed_span_mps:
-                    return t_pred, v_fit
+                a_pred = a_fit + gamma * k * self.hop_len_s / a_fit
+                t_pred = t_fit + k * self.hop_len_s * 2.0 / (a_fit + a_pred)
+                v_fit = self.c * (a_fit - 1.0) / (a_fit + 1.0)
+                v_mean = v_fit - 0.5 * self.m_hops * self.hop_len_s * self.c * gamma / 2.0
+                near = min(abs(v_fit - speed), abs(v_mean - speed)) <= self.speed_span_mps
+                if abs(t_pred - t_s) <= 0.125 * lobe and near:
+                    return t_pred, a_pred, gamma
         return None
 
     def correlation(
@@ -630,12 +817,16 @@ class CoherentRefiner:
         hop_index: int,
         t_rx: NDArray[np.float64],
         alphas: NDArray[np.float64],
+        rates: NDArray[np.float64] | None = None,
     ) -> NDArray[np.complex128] | None:
         """The correlation ``C(t_rx, α)`` of candidates near a detection ``(t_s, alpha)`` of
         the boundary ending hop ``hop_index`` (the function :meth:`refine` maximises as
         ``|C|²``): ``t_rx`` (s) and ``alphas`` of one shape, within ±½ grating lobe and ± the
-        speed span of the detection. None where the input does not cover the hops. For plots
-        of the local ambiguity and for checks against a direct correlation."""
+        speed span of the detection; with ``rates`` (1/s, the same shape) the time scale
+        changes at that rate about the hops' centre (``alphas`` are the centre's: the
+        mapping of :func:`~hil.estimation.refine_kernels.candidate_sums`). None where the
+        input does not cover the hops. For plots of the local ambiguity and for checks
+        against a direct correlation."""
         word = self._codeword(hop_index)
         hop_ids = np.arange(hop_index - self.m_hops + 1, hop_index + 1, dtype=np.int64)
         slots = self._slots(hop_ids, word, t_s, alpha)
@@ -643,16 +834,19 @@ class CoherentRefiner:
             return None
         t = np.ascontiguousarray(np.asarray(t_rx, dtype=np.float64).ravel())
         a = np.ascontiguousarray(np.asarray(alphas, dtype=np.float64).ravel())
-        if t.shape != a.shape:
-            raise ConfigError(
-                "alphas", f"shape {np.shape(alphas)}", f"the shape of t_rx, {np.shape(t_rx)}"
-            )
-        c = np.empty(t.size, dtype=np.complex128)
-        model, energy = np.empty(t.size), np.empty(t.size)
+        g = np.zeros(t.size) if rates is None else np.asarray(rates, dtype=np.float64).ravel()
+        for name, arr, given in (("alphas", a, alphas), ("rates", g, rates)):
+            if arr.shape != t.shape:
+                raise ConfigError(
+                    name, f"shape {np.shape(given)}", f"the shape of t_rx, {np.shape(t_rx)}"
+                )
         args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
+        n = t.size
+        c, model, energy = np.empty(n, np.complex128), np.empty(n), np.empty(n)
         candidate_sums(
-            *args, t, a, c, model, energy, np.empty((t.size, 0), np.complex128), _NO_KNOWN
-        )
+            *args, t, a, np.ascontiguousarray(g), c, model, energy,
+            np.empty((n, 0), np.complex128), _NO_KNOWN,
+        )  # fmt: skip
         return c.reshape(np.shape(t_rx))
 
     @property
@@ -704,6 +898,42 @@ class CoherentRefiner:
         return word
 
 
+def _hops_on_curve(
+    t_b: float, alpha_b: float, rate: float, d: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Each hop's line ``(t_i, α_i)`` (s; shape of ``d``) on the curve through the boundary
+    ``(t_b, alpha_b)`` whose time scale changes at ``rate`` (1/s): the transmit time heard
+    ``τ`` after ``t_b`` is ``T_b + α_b τ + ½ rate τ²``; ``d`` the hops' transmit centres
+    from ``T_b`` (s). A hop's line passes through its centre's point with the curve's slope
+    there (the kernels' per-hop model); with ``rate = 0`` every hop is the boundary's line."""
+    if rate == 0.0:
+        return np.full(d.shape, t_b), np.full(d.shape, alpha_b)
+    tau = d / alpha_b
+    tau -= 0.5 * rate * tau * tau / (alpha_b + rate * tau)
+    a_i = alpha_b + rate * tau
+    return t_b + tau - d / a_i, a_i
+
+
+def _to_boundary(t: float, alpha: float, gamma: float, d_c: float) -> tuple[float, float]:
+    """The boundary's receive time (s) and time scale of the kernels' accelerating mapping
+    (:func:`~hil.estimation.refine_kernels.candidate_sums`) of parameters ``(t, alpha,
+    gamma)``, ``d_c`` (s) the hops' transmit centre from the boundary: where the curve
+    reaches ``T_b``, ``u`` after the centre (one Newton step, error ``O(γ²)``)."""
+    u = -d_c / alpha
+    u -= 0.5 * gamma * u * u / (alpha + gamma * u)
+    return t + d_c / alpha + u, alpha + gamma * u
+
+
+def _to_centre(t_b: float, alpha_b: float, gamma: float, d_c: float) -> tuple[float, float]:
+    """The inverse of :func:`_to_boundary` (two fixed-point steps: a search's start)."""
+    alpha = alpha_b + gamma * d_c / alpha_b
+    for _ in range(2):
+        t_x, a_x = _to_boundary(t_b, alpha, gamma, d_c)
+        alpha += alpha_b - a_x
+    t_x, _ = _to_boundary(t_b, alpha, gamma, d_c)
+    return t_b + (t_b - t_x), alpha
+
+
 @dataclass(frozen=True)
 class _Codeword:
     """The ``M`` hops ending at a boundary ``T_b``, as :func:`~hil.estimation.refine_kernels.
@@ -719,6 +949,11 @@ class _Codeword:
     t_rms: float
     f0: float
     tones: NDArray[np.int64]  # each hop's tone index in the schedule, shape (M,)
+
+    @property
+    def centre_s(self) -> float:
+        """The hops' transmit centre relative to their end boundary, s (negative)."""
+        return 0.5 * float(self.hops[2][0] + self.hops[3][-1])
 
     def last(self, n: int) -> _Codeword:
         """The last ``n`` hops of this codeword, for a search over fewer hops (the window's
@@ -757,10 +992,12 @@ def _fit_quality(
     n_tones: int,
     t_rx: float,
     alpha: float,
+    gamma: float = 0.0,
 ) -> tuple[float, Coherence, Coherence, Coherence, complex]:
-    """E/N0 (linear) of the echo at a candidate, its coherence across all hops, within
-    each tone and over runs of consecutive hops, and its fitted amplitude ``β = 2C/E_s``
-    (:func:`~hil.estimation.refine_kernels.fit_quality`).
+    """E/N0 (linear) of the echo at a candidate (time-scale rate ``gamma``, 1/s, as
+    :func:`~hil.estimation.refine_kernels.candidate_sums`), its coherence across all hops,
+    within each tone and over runs of consecutive hops, and its fitted amplitude
+    ``β = 2C/E_s`` (:func:`~hil.estimation.refine_kernels.fit_quality`).
 
     ``Â = 2|C|/E_s``, the noise variance ``σ²`` what the echo leaves of the windows' energy,
     ``E/N0 = Â² N / (4 σ²)`` (module docstring). Coherence ``ρ = |Σ_i H_i|² / (M Σ_i |H_i|²)``:
@@ -778,7 +1015,7 @@ def _fit_quality(
     over every run, expected ``(R s + 1) / (R (s + 1))``) holds up to about 7 m/s² on ``att``.
     """
     en0, rho, expected, rho_tone, expected_tone, rho_run, expected_run, c, es = fit_quality(
-        *args, known, word.tones, n_tones, t_rx, alpha
+        *args, known, gamma, word.tones, n_tones, t_rx, alpha
     )
     return (
         en0,

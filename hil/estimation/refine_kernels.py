@@ -147,12 +147,38 @@ def _edge_sums(
 
 
 @numba.njit(**_JIT)
+def _hop_mapping(
+    t_rx: float, alpha: float, gamma: float, d_c: float, d: float
+) -> tuple[float, float]:  # fmt: skip
+    """The constant-time-scale model ``(t_i, α_i)`` of one hop under :func:`_candidate`'s
+    accelerating mapping: ``α_i`` the time scale where the hop's transmit centre ``T_b + d``
+    (``d`` s, negative before the boundary) is heard, ``t_i`` the boundary time of the
+    straight line through that point with slope ``α_i`` (``d_c`` the hops' transmit centre,
+    s). The point's receive offset from the hops' centre is one Newton step from
+    ``(d − d_c)/α`` (error ``O(γ²)``)."""
+    u = (d - d_c) / alpha
+    u -= 0.5 * gamma * u * u / (alpha + gamma * u)
+    a_i = alpha + gamma * u
+    return t_rx + d_c / alpha + u - d / a_i, a_i
+
+
+@numba.njit(**_JIT)
 def _candidate(
     prefix: Any, energy: Any, first: Any, tail: Any, alpha0: Any, centre: Any, slots: Any,
     k: Any, f: Any, dt_lo: Any, dt_hi: Any, amp2: Any, fs: float, hop_s: float,
-    t_rx: float, alpha: float, lo_sums: Any, hi_sums: Any, per_hop: Any, known: Any,
+    t_rx: float, alpha: float, gamma: float, lo_sums: Any, hi_sums: Any, per_hop: Any,
+    known: Any,
 ) -> tuple[complex, float, float]:  # fmt: skip
     """``(C, Σ a_i² N_i, input energy in the windows)`` of one candidate.
+
+    ``gamma`` (1/s) is the rate of change of the time scale: the transmit time heard at
+    ``t`` is ``T_b + d_c + α (τ − τ_c) + ½ γ (τ − τ_c)²`` with ``τ = t − t_rx``, ``T_b + d_c``
+    the transmit centre of the ``M`` hops and ``τ_c = d_c/α`` (``α`` is the time scale where
+    that centre is heard; the curvature, even about it, leaves the delay and time scale
+    there unchanged). Each hop is heard on the curve's tangent at its own centre, with the
+    curve's mean phase over the hop about that tangent, ``π f γ D²/12``, added (what is left
+    is second order: below 1e-3 of a term at 20 m/s² on ``att``).
+    ``gamma = 0`` is the constant time scale ``T_b + α τ``, computed without that mapping.
 
     Per hop ``i`` (shape ``(M,)``): ``slots`` its table slot, ``k`` the transmit phasor
     ``a_i e^{−j(φ_i + 2π f_i (T_b − T_i))}``, ``f`` the tone (Hz), ``dt_lo``/``dt_hi`` the
@@ -166,14 +192,19 @@ def _candidate(
     model = 0.0
     signal = 0.0
     n_mom = lo_sums.shape[0]
-    for i in range(slots.shape[0]):
+    m_hops = slots.shape[0]
+    d_c = 0.5 * (dt_lo[0] + dt_hi[m_hops - 1])
+    for i in range(m_hops):
         s = slots[i]
-        lo = (t_rx + dt_lo[i] / alpha) * fs - first[s] + 0.5
-        hi = (t_rx + dt_hi[i] / alpha) * fs - first[s] + 0.5
+        t_i, a_i = t_rx, alpha
+        if gamma != 0.0:
+            t_i, a_i = _hop_mapping(t_rx, alpha, gamma, d_c, 0.5 * (dt_lo[i] + dt_hi[i]))
+        lo = (t_i + dt_lo[i] / a_i) * fs - first[s] + 0.5
+        hi = (t_i + dt_hi[i] / a_i) * fs - first[s] + 0.5
         e_lo = _edge_sums(prefix, energy, s, 0, lo, lo_sums)
         e_hi = _edge_sums(prefix, energy, s, 1, hi - tail[s], hi_sums)
         # Σ_p (jθ)^p / p! (hi − lo), θ = −2π (α − α0) D f: the term's real recurrence.
-        theta = -2.0 * math.pi * (alpha - alpha0[s]) * hop_s * f[i]
+        theta = -2.0 * math.pi * (a_i - alpha0[s]) * hop_s * f[i]
         z = complex(0.0, 0.0)
         tr = 1.0
         ti = 0.0
@@ -181,11 +212,16 @@ def _candidate(
             z += complex(tr, ti) * (hi_sums[p] - lo_sums[p])
             g = theta / (p + 1)
             tr, ti = -ti * g, tr * g
-        ph = -2.0 * math.pi * f[i] * alpha * (centre[s] - t_rx)
+        ph = -2.0 * math.pi * f[i] * a_i * (centre[s] - t_i)
+        if gamma != 0.0:
+            # The curve about the hop's tangent, ½ γ (t − m)², averaged over the hop: a phase
+            # of π f γ D²/12 (D the hop's received length), second order in D beyond it.
+            dur = (dt_hi[i] - dt_lo[i]) / a_i
+            ph -= math.pi * f[i] * gamma * dur * dur / 12.0
         term_i = k[i] * complex(math.cos(ph), math.sin(ph)) * z
         if known.shape[1]:
             part, energy_part = _known_part(
-                known, t_rx, t_rx + dt_lo[i] / alpha, t_rx + dt_hi[i] / alpha, f[i] * alpha
+                known, t_i, t_i + dt_lo[i] / a_i, t_i + dt_hi[i] / a_i, f[i] * a_i
             )
             term_i -= k[i] * part * fs
             signal -= energy_part * fs
@@ -242,20 +278,20 @@ def _known_part(
 def candidate_sums(
     prefix: Any, energy: Any, first: Any, tail: Any, alpha0: Any, centre: Any, slots: Any,
     k: Any, f: Any, dt_lo: Any, dt_hi: Any, amp2: Any, fs: float, hop_s: float,
-    t_rx: Any, alpha: Any, out_c: Any, out_model: Any, out_signal: Any, per_hop: Any,
-    known: Any,
+    t_rx: Any, alpha: Any, gamma: Any, out_c: Any, out_model: Any, out_signal: Any,
+    per_hop: Any, known: Any,
 ) -> None:  # fmt: skip
-    """:func:`_candidate` for candidates ``(t_rx[c], alpha[c])`` (shape ``(C,)``) into the
-    outputs (shape ``(C,)``: ``C`` complex, the model's energy, the input's energy) and each
-    hop's term (``per_hop``, complex, shape ``(C, M)`` or ``(C, 0)`` for none); ``known``
-    as :func:`_candidate`."""
+    """:func:`_candidate` for candidates ``(t_rx[c], alpha[c], gamma[c])`` (shape ``(C,)``;
+    ``gamma`` the time-scale rate, 1/s) into the outputs (shape ``(C,)``: ``C`` complex, the
+    model's energy, the input's energy) and each hop's term (``per_hop``, complex, shape
+    ``(C, M)`` or ``(C, 0)`` for none); ``known`` as :func:`_candidate`."""
     n_mom = prefix.shape[3]
     lo_sums = np.empty(n_mom, dtype=np.complex128)
     hi_sums = np.empty(n_mom, dtype=np.complex128)
     for c in range(t_rx.shape[0]):
         out_c[c], out_model[c], out_signal[c] = _candidate(
             prefix, energy, first, tail, alpha0, centre, slots, k, f, dt_lo, dt_hi, amp2,
-            fs, hop_s, t_rx[c], alpha[c], lo_sums, hi_sums, per_hop[c], known,
+            fs, hop_s, t_rx[c], alpha[c], gamma[c], lo_sums, hi_sums, per_hop[c], known,
         )  # fmt: skip
 
 
@@ -267,11 +303,12 @@ FOUND, NO_LOBE, RECENTRE = 0, 1, 2
 def maximise(
     prefix: Any, energy: Any, first: Any, tail: Any, alpha0: Any, centre: Any, slots: Any,
     k: Any, f: Any, dt_lo: Any, dt_hi: Any, amp2: Any, fs: float, hop_s: float,
-    known: Any, c_mps: float, t0: float, v0: float, half_t: float, half_v: float, n_t: int,
-    n_v: int, passes: int,
+    known: Any, gamma: float, c_mps: float, t0: float, v0: float, half_t: float,
+    half_v: float, n_t: int, n_v: int, passes: int,
 ) -> tuple[float, float, int]:  # fmt: skip
-    """The ``(t_rx, v)`` (s, m/s) maximising ``|C|²`` (tables, hops and ``known`` as
-    :func:`candidate_sums`; ``c_mps`` the sound speed) and an outcome.
+    """The ``(t_rx, v)`` (s, m/s) maximising ``|C|²`` (tables, hops, ``known`` and the
+    time-scale rate ``gamma`` as :func:`candidate_sums`, ``v`` the speed at the hops' centre;
+    ``c_mps`` the sound speed) and an outcome.
 
     A grid of ``n_t × n_v`` points over ``t0 ± half_t`` and ``v0 ± half_v`` picks the main
     lobe: :data:`NO_LOBE` where its maximum is at either end in time, :data:`RECENTRE` with
@@ -295,7 +332,8 @@ def maximise(
         for j in range(n_t):
             cc, _, _ = _candidate(
                 prefix, energy, first, tail, alpha0, centre, slots, k, f, dt_lo, dt_hi,
-                amp2, fs, hop_s, t0 - half_t + j * step_t, a, lo_sums, hi_sums, none, known,
+                amp2, fs, hop_s, t0 - half_t + j * step_t, a, gamma, lo_sums, hi_sums, none,
+                known,
             )  # fmt: skip
             pw = cc.real * cc.real + cc.imag * cc.imag
             if pw > best:
@@ -316,7 +354,8 @@ def maximise(
             for j in range(3):
                 cc, _, _ = _candidate(
                     prefix, energy, first, tail, alpha0, centre, slots, k, f, dt_lo, dt_hi,
-                    amp2, fs, hop_s, t + (j - 1) * step_t, a, lo_sums, hi_sums, none, known,
+                    amp2, fs, hop_s, t + (j - 1) * step_t, a, gamma, lo_sums, hi_sums, none,
+                    known,
                 )  # fmt: skip
                 z[i, j] = cc.real * cc.real + cc.imag * cc.imag
         # z[i, j] ≈ z0 + gt x + gv y + ½ (htt x² + 2 htv x y + hvv y²); x, y in steps.
@@ -352,13 +391,13 @@ def maximise(
 def fit_quality(
     prefix: Any, energy: Any, first: Any, tail: Any, alpha0: Any, centre: Any, slots: Any,
     k: Any, f: Any, dt_lo: Any, dt_hi: Any, amp2: Any, fs: float, hop_s: float,
-    known: Any, tones: Any, n_tones: int, t_rx: float, alpha: float,
+    known: Any, gamma: float, tones: Any, n_tones: int, t_rx: float, alpha: float,
 ) -> tuple[float, float, float, float, float, float, float, complex, float]:  # fmt: skip
     """``(E/N0, ρ, E[ρ], ρ_tone, E[ρ_tone], ρ_run, E[ρ_run], C, E_s)`` of one candidate
     (:func:`hil.estimation.refine._fit_quality` states them; ``C`` and ``E_s = Σ a_i² N_i``
-    as :func:`candidate_sums`; ``known`` as :func:`candidate_sums`); ``tones`` each hop's
-    tone index (shape ``(M,)``, below ``n_tones``). E/N0 is ``inf`` where the windows hold no
-    noise."""
+    as :func:`candidate_sums`; ``known`` and ``gamma`` as :func:`candidate_sums`); ``tones``
+    each hop's tone index (shape ``(M,)``, below ``n_tones``). E/N0 is ``inf`` where the
+    windows hold no noise."""
     m_hops = slots.shape[0]
     n_mom = prefix.shape[3]
     lo_sums = np.empty(n_mom, dtype=np.complex128)
@@ -366,7 +405,7 @@ def fit_quality(
     h = np.empty(m_hops, dtype=np.complex128)
     c, es, signal = _candidate(
         prefix, energy, first, tail, alpha0, centre, slots, k, f, dt_lo, dt_hi, amp2, fs,
-        hop_s, t_rx, alpha, lo_sums, hi_sums, h, known,
+        hop_s, t_rx, alpha, gamma, lo_sums, hi_sums, h, known,
     )  # fmt: skip
     mag2 = c.real * c.real + c.imag * c.imag
     spread = 0.0

@@ -16,7 +16,10 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
+import hil.estimation.refine as refine_module
 from hil.errors import ConfigError
 from hil.estimation.base import Estimate
 from hil.estimation.gcas import GcasReceiver
@@ -153,6 +156,71 @@ def test_the_likelihood_is_the_direct_correlation_with_the_schedule() -> None:
             )
             direct += np.sum(x[sel] * np.exp(-1j * phase))
         assert abs(c_got - direct) < 2e-3 * abs(direct)
+
+
+@pytest.mark.parametrize("accel", [-8.0, 3.0, 12.0])
+def test_the_accelerating_likelihood_is_the_direct_correlation_along_the_curve(
+    accel: float,
+) -> None:
+    # C(t_rx, α, γ) from the moment tables (each hop on the curve's tangent at its centre)
+    # against Σ_n x[n] s*(s(t_n)) with the exact quadratic mapping s(t) − T_b = d_c +
+    # α (τ − τ_c) + ½ γ (τ − τ_c)², τ = t − t_rx, τ_c = d_c/α, summed directly over the
+    # samples each hop's transmit interval maps to.
+    schedule = att_schedule()
+    x = echo_samples(schedule, R0, V0, 0.5, snr_db=-5.0, seed=3)
+    refiner = CoherentRefiner(schedule, FS, 10, C, 0.5, 30.0)
+    refiner.push(x, 0)
+    est = next(e for e in run_blocks(make_gcas(schedule, refine=False), x) if e.t_s > 0.2)
+    gamma = 2.0 * accel / C
+    cand_t = est.t_s + np.array([-3e-5, 0.0, 4e-5])
+    cand_a = est.alpha + np.array([2e-4, 0.0, -1e-4])
+    got = refiner.correlation(est.t_s, est.alpha, est.hop_index, cand_t, cand_a, np.full(3, gamma))
+    assert got is not None
+    hops = schedule.hops(est.hop_index - 9, 10)
+    t_b = float(hops.start_s[-1] + hops.duration_s[-1])
+    d_c = 0.5 * (hops.start_s[0] + hops.start_s[-1] + hops.duration_s[-1]) - t_b
+    t_n = np.arange(x.size) / FS
+    for c_got, t_rx, a in zip(got, cand_t, cand_a, strict=True):
+        tau, tau_c = t_n - t_rx, d_c / a
+        s_n = d_c + a * (tau - tau_c) + 0.5 * gamma * (tau - tau_c) ** 2  # from T_b
+        direct = 0j
+        for i in range(10):
+            lo = hops.start_s[i] - t_b
+            sel = (s_n >= lo) & (s_n < lo + hops.duration_s[i])
+            phase = hops.phase_rad[i] + 2 * np.pi * hops.freq_hz[i] * (s_n[sel] - lo)
+            direct += np.sum(x[sel] * np.exp(-1j * phase))
+        assert abs(c_got - direct) < 3e-3 * abs(direct)
+
+
+def test_rates_of_another_shape_are_refused() -> None:
+    schedule = att_schedule()
+    refiner = CoherentRefiner(schedule, FS, 10, C, 0.5, 30.0)
+    refiner.push(echo_samples(schedule, R0, V0, 0.3, snr_db=0.0, seed=1), 0)
+    with pytest.raises(ConfigError, match="rates"):
+        refiner.correlation(0.25, 1.016, 20, np.zeros(3), np.ones(3), np.zeros(2))
+
+
+@given(
+    t_b=st.floats(0.1, 10.0),
+    alpha_b=st.floats(0.96, 1.04),
+    accel=st.floats(-20.0, 20.0),
+    d_c=st.floats(-0.15, -0.02),  # M = 4 to 30 hops of 10 ms
+)
+def test_the_curves_centre_and_boundary_are_one_curve(
+    t_b: float, alpha_b: float, accel: float, d_c: float
+) -> None:
+    # The search's start at the hops' centre maps back onto the boundary it came from, and
+    # the known echo's hop lines (boundary-anchored) meet the same curve: the centre hop's
+    # line through (t_c + τ_c, T_b + d_c) has the centre's time scale.
+    gamma = 2.0 * accel / C
+    t_c, alpha_c = refine_module._to_centre(t_b, alpha_b, gamma, d_c)
+    t_back, a_back = refine_module._to_boundary(t_c, alpha_c, gamma, d_c)
+    assert abs(t_back - t_b) < 1e-12 and abs(a_back - alpha_b) < 1e-9
+    t_i, a_i = refine_module._hops_on_curve(t_b, alpha_b, gamma, np.array([d_c]))
+    # Each side takes one Newton step from its own anchor (error O(γ² u³)): within 5 ns, a
+    # thousandth of a radian of a 30 kHz tone.
+    assert abs(a_i[0] - alpha_c) < 1e-8
+    assert abs(t_i[0] + d_c / a_i[0] - (t_c + d_c / alpha_c)) < 5e-9
 
 
 def test_chunks_equal_whole() -> None:

@@ -107,18 +107,21 @@ def _braking(decel_mps2: float) -> tuple[list[Estimate], dict[int, HopTruth]]:
     return run_blocks(rx, x), {h.hop_index: h for h in truth}
 
 
-@pytest.mark.parametrize("decel", [2.0, 7.0])
-def test_a_braking_target_is_kept_and_ranged(decel: float) -> None:
-    # The fit holds one speed over the M hops: it reads the mean speed of the window, half
-    # a window (50 ms) before the boundary, so the speed lags by decel * 0.05 m/s; the range
-    # stays within a couple of centimetres. Up to about 7 m/s² the hops' coherence over runs
-    # of three keeps every detection.
+@pytest.mark.parametrize(("decel", "min_count"), [(2.0, 85), (7.0, 85), (12.0, 65)])
+def test_a_braking_target_is_kept_and_ranged(decel: float, min_count: int) -> None:
+    # The fit's time scale changes over the M hops where one speed leaves their phases
+    # incoherent (hil.estimation.refine, accelerating echoes): speed and range are the
+    # boundary's, without the mean speed's lag of decel * 0.05 m/s. Measured (seed 1, 91
+    # boundaries): 2 m/s² 91 estimates, range RMSE 1.1 mm, speed bias +0.1 mm/s, RMS
+    # 5.2 mm/s; 7 m/s² 90, 1.2 mm, -0.1 mm/s, 6.0 mm/s; 12 m/s² 70, 1.6 mm, +0.1 mm/s,
+    # 8.7 mm/s (the constant-speed fits' coherence over runs of hops falls to 0.55-0.72
+    # there: some are no longer tried).
     est, truth = _braking(decel)
-    assert len(est) >= 85
+    assert len(est) >= min_count
     dr = np.array([e.range_m - truth[e.hop_index + 1].range_m for e in est])
     dv = np.array([e.speed_mps - truth[e.hop_index + 1].radial_speed_mps for e in est])
-    assert np.sqrt(np.mean(dr**2)) < 0.025
-    assert abs(np.mean(dv) - decel * 0.05) < 0.01 * decel
+    assert np.sqrt(np.mean(dr**2)) < 0.005
+    assert abs(np.mean(dv)) < 0.005 and np.sqrt(np.mean(dv**2)) < 0.02
 
 
 # Several echoes at once (issue 26 item 1): two targets at equal level apart, crossing in
@@ -315,15 +318,17 @@ def test_a_target_braking_to_rest_gives_no_false_estimate() -> None:
 @pytest.mark.parametrize(
     ("kind", "snr_db", "srr_db", "pd_min"),
     # Measured false per hop / moving pd: still 0 / -, 0.010 / -, 0 / -, 0.005 / -;
-    # braking (0 dB, reverberation) 0 / 1.0, (-10 dB) 0 / 0.892, (-10 dB, reverberation)
-    # 0 / 1.0; reversing 0.005 / 0.881, 0 / 0.857, 0 / 0.833, 0 / 0.798: at 8 m/s² the
-    # constant-speed fit over M hops no longer holds near the turn (issue 26's 0.95 not met).
+    # braking (0 dB, reverberation) 0 / 1.0, (-10 dB) 0.005 / 1.0, (-10 dB, reverberation)
+    # 0 / 1.0; reversing 0.005 / 0.964, 0 / 0.917, 0 / 0.976, 0 / 0.929. The fit's time
+    # scale follows the 8 m/s² turn (hil.estimation.refine, accelerating echoes); what is
+    # missed is the detector's: near the band's edge its mean speed over the window lies in
+    # the band's edge cells (refused), and in reverberation a few hops more.
     [
         ("still", 0.0, None, 0.0), ("still", -10.0, None, 0.0), ("still", 0.0, 0.0, 0.0),
-        ("still", -10.0, 0.0, 0.0), ("braking", 0.0, 0.0, 0.99), ("braking", -10.0, None, 0.85),
-        ("braking", -10.0, 0.0, 0.99), ("reversing", 0.0, None, 0.85),
-        ("reversing", 0.0, 0.0, 0.8), ("reversing", -10.0, None, 0.8),
-        ("reversing", -10.0, 0.0, 0.75),
+        ("still", -10.0, 0.0, 0.0), ("braking", 0.0, 0.0, 0.99), ("braking", -10.0, None, 0.99),
+        ("braking", -10.0, 0.0, 0.99), ("reversing", 0.0, None, 0.95),
+        ("reversing", 0.0, 0.0, 0.9), ("reversing", -10.0, None, 0.95),
+        ("reversing", -10.0, 0.0, 0.9),
     ],
 )  # fmt: skip
 def test_still_stopping_and_reversing_echoes_give_no_false_estimate(
