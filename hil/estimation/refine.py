@@ -835,10 +835,10 @@ class CoherentRefiner:
         t = np.ascontiguousarray(np.asarray(t_rx, dtype=np.float64).ravel())
         a = np.ascontiguousarray(np.asarray(alphas, dtype=np.float64).ravel())
         g = np.zeros(t.size) if rates is None else np.asarray(rates, dtype=np.float64).ravel()
-        for name, arr, given in (("alphas", a, alphas), ("rates", g, rates)):
+        for name, arr in (("alphas", a), ("rates", g)):
             if arr.shape != t.shape:
                 raise ConfigError(
-                    name, f"shape {np.shape(given)}", f"the shape of t_rx, {np.shape(t_rx)}"
+                    name, f"shape {arr.shape}", f"the shape of t_rx, {np.shape(t_rx)}"
                 )
         args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
         n = t.size
