@@ -338,12 +338,13 @@ def test_adc_data_keeps_flowing_while_a_dac_write_blocks() -> None:
     clock = ManualClock()
     port, link = _memory_board(clock)
     gate = GatedWrites(link, 8192)
-    with Board(gate, clock=clock, keepalive_ms=None) as board:  # type: ignore[arg-type]
+    with Board(gate, clock=clock, keepalive_ms=None) as board:
         first, _ = _stream_until_a_dac_write_blocks(board, clock, port, gate)
         before = board.ring.end_index if board.ring else None
         assert before is not None
         end = stream_for(board, clock, 0.1)  # fails in wait_for_samples if the reader stalls
-        assert board.ring is not None and board.ring.end_index >= end >= before + 90_000
+        assert board.ring is not None and board.ring.end_index is not None
+        assert board.ring.end_index >= end >= before + 90_000
         sent_while_blocked = board.dac_samples_sent
         gate.release.set()
         # The queued burst and everything after it reach the board in order.
@@ -364,7 +365,7 @@ def test_a_host_that_fell_behind_skips_to_the_board_clock_and_the_waveform_stays
     clock = ManualClock()
     port, link = _memory_board(clock)
     gate = GatedWrites(link, 8192)
-    with Board(gate, clock=clock, keepalive_ms=None) as board:  # type: ignore[arg-type]
+    with Board(gate, clock=clock, keepalive_ms=None) as board:
         first, level = _stream_until_a_dac_write_blocks(board, clock, port, gate)
         stream_for(board, clock, 0.6)  # longer than the 262 ms FIFO: it runs dry
         assert port.call(lambda b: b.dac_underruns) >= 1
