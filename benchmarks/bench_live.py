@@ -204,9 +204,10 @@ def _thread_cpu_s(native_id: int | None) -> float:
 
 
 def _board_thread_ids(board: Any) -> dict[str, int | None]:
-    """Native thread ids of the board driver's reader and writer threads."""
+    """Native thread ids of the reader and writer threads of the board driver's link."""
+    link = getattr(board, "_link", None)
     return {
-        name: getattr(getattr(board, attr, None), "native_id", None)
+        name: getattr(getattr(link, attr, None), "native_id", None)
         for name, attr in (("reader", "_reader"), ("writer", "_writer"))
     }
 

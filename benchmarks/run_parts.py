@@ -38,7 +38,9 @@ PARTS: dict[str, tuple[tuple[str, str], ...]] = {
         ("sim_devices.board.core", "SimulatedBoard.tick"),
         ("sim_devices.board.core", "SimulatedBoard.receive_data"),
     ),
-    "board driver (host service)": (("hil.devices.board", "Board._service"),),
+    "board driver (host service)": (
+        ("hil.devices.board_link_virtual", "VirtualTimeBoardLink._service"),
+    ),
     "virtual clock": (("hil.devices.clock", "VirtualClock.sleep"),),
     "first-arrival readout": (
         ("hil.estimation.first_arrival", "FirstArrivalReadout.first_arrival"),

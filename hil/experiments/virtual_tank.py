@@ -6,8 +6,8 @@ between them, all on one :class:`~hil.devices.clock.VirtualClock`: time passes o
 the host waits, and then every simulated millisecond the board driver's link is serviced
 as its threads would on real time, but for the milliseconds on which nothing is due while
 the host waits for samples (the simulated board then captures the skipped span at the next
-service, the same samples at the same instants: see ``Board._quiet_until_ns``). A run is
-therefore
+service, the same samples at the same instants: see ``VirtualTimeBoardLink.quiet_until_ns``
+in :mod:`hil.devices.board_link_virtual`). A run is therefore
 
 - deterministic: the same experiment and seed give identical estimates and recording tables,
   however loaded the machine;

@@ -1,30 +1,28 @@
 """Fixtures of the audio tests: a private JACK dummy server for the real-backend tier.
 
-``jack_server`` starts ``jackd --no-realtime -d dummy -r 192000 -p 256`` under a unique
-server name (clients find it through ``JACK_DEFAULT_SERVER``), waits until ``jack_lsp``
-answers, makes PortAudio re-scan its devices, and kills the server at the end of the session.
-When jackd, the JACK tools or PortAudio are missing the tests skip with the reason, or fail
-when ``HIL_REQUIRE_SYSTEM_DEPS=1`` (set by ``.ci/run``, which installs them).
+``jack_server`` starts the product's :class:`~hil.devices.audio.jack_server.JackDummyServer`
+(``jackd --no-realtime -d dummy -r 192000 -p 256``, asynchronous: a late client is an xrun,
+as on a sound card) under a unique server name (clients find it through
+``JACK_DEFAULT_SERVER``), which waits until ``jack_lsp`` answers; the fixture then makes
+PortAudio re-scan its devices, and stops the server at the end of the session. When jackd,
+the JACK tools or PortAudio are missing the tests skip with the reason, or fail when
+``HIL_REQUIRE_SYSTEM_DEPS=1`` (set by ``.ci/run``, which installs them).
 """
 
 from __future__ import annotations
 
 import os
-import shutil
-import subprocess
-import tempfile
-import time
 import uuid
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from pathlib import Path
 
 import pytest
 
+from hil.devices.audio.jack_ports import JackToolError
+from hil.devices.audio.jack_server import DummyServerSettings, JackDummyServer, missing_tools
+
 JACK_SAMPLERATE = 192000
 JACK_PERIOD = 256
-JACK_TOOLS = ("jackd", "jack_lsp", "jack_connect")
-STARTUP_TIMEOUT_S = 60.0  # deadlock guard: jackd answers within a second on a quiet machine
 
 
 @dataclass(frozen=True)
@@ -36,20 +34,10 @@ class JackServer:
     period: int
 
 
-def _jack_answers(env: dict[str, str]) -> bool:
-    try:
-        proc = subprocess.run(
-            ["jack_lsp"], env=env, capture_output=True, text=True, timeout=30, check=False
-        )
-    except subprocess.TimeoutExpired:
-        return False  # a busy machine: ask again until STARTUP_TIMEOUT_S
-    return proc.returncode == 0 and "system:playback_1" in proc.stdout
-
-
 @pytest.fixture(scope="session")
 def jack_server(require_system: Callable[[bool, str], None]) -> Iterator[JackServer]:
-    """A private ``jackd -d dummy`` server for the whole session (killed at the end)."""
-    missing = [tool for tool in JACK_TOOLS if shutil.which(tool) is None]
+    """A private ``jackd -d dummy`` server for the whole session (stopped at the end)."""
+    missing = missing_tools()
     require_system(
         not missing, f"JACK is not installed ({', '.join(missing)} missing; apt-get install jackd2)"
     )
@@ -65,32 +53,13 @@ def jack_server(require_system: Callable[[bool, str], None]) -> Iterator[JackSer
         JACK_NO_START_SERVER="1",  # a client must never auto-start a server of its own
         JACK_NO_AUDIO_RESERVATION="1",  # no D-Bus device reservation for the dummy driver
     )
-    log = Path(tempfile.mkstemp(prefix="jackd-", suffix=".log")[1])
-    with log.open("wb") as log_file:
-        proc = subprocess.Popen(
-            [
-                "jackd",
-                "--no-realtime",
-                "-n",
-                name,
-                "-d",
-                "dummy",
-                "-r",
-                str(JACK_SAMPLERATE),
-                "-p",
-                str(JACK_PERIOD),
-            ],
-            stdout=log_file,
-            stderr=subprocess.STDOUT,
-            env=os.environ.copy(),
-        )
+    settings = DummyServerSettings(JACK_SAMPLERATE, JACK_PERIOD, synchronous=False)
+    server = JackDummyServer(settings, name=name)
     try:
-        deadline = time.monotonic() + STARTUP_TIMEOUT_S
-        while not _jack_answers(os.environ.copy()):
-            if proc.poll() is not None or time.monotonic() > deadline:
-                tail = log.read_text(errors="replace")[-2000:]
-                pytest.fail(f"jackd did not start within {STARTUP_TIMEOUT_S} s:\n{tail}")
-            time.sleep(0.05)
+        try:
+            server.start()
+        except JackToolError as error:
+            pytest.fail(str(error))
         from hil.devices.audio import list_devices, rescan_devices
 
         rescan_devices()  # PortAudio enumerated devices at import, maybe before jackd ran
@@ -103,19 +72,13 @@ def jack_server(require_system: Callable[[bool, str], None]) -> Iterator[JackSer
         # Close PortAudio's JACK client before its server goes away, then re-open PortAudio
         # so later users of sounddevice in this process still work.
         sounddevice._terminate()
-        proc.terminate()
-        try:
-            proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+        server.close()
         for key, value in saved.items():
             if value is None:
                 os.environ.pop(key, None)
             else:
                 os.environ[key] = value
         sounddevice._initialize()
-        log.unlink(missing_ok=True)
 
 
 _JACK_ENV = ("JACK_DEFAULT_SERVER", "JACK_NO_START_SERVER", "JACK_NO_AUDIO_RESERVATION")

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from firmware_protocol import SampleFormat
 from hil.acquisition import AnnotationKind, SampleClockFit, SampleGapDetector, SampleRing
-from hil.devices.board import _DacFeeder
+from hil.devices.board_dac_feeder import DacFeeder
 from hil.devices.board_settings import BoardSettings, Setting, to_wire_samples
 from hil.errors import ConfigError
 
@@ -172,7 +172,7 @@ def test_dac_feeder_chunks_equal_whole_for_generators_and_callables() -> None:
     signal = rng.uniform(-1, 1, 1000)
     whole = to_wire_samples(signal, SampleFormat.INT16, 2)
     blocks = (signal[i : i + 64] for i in range(0, 1000, 64))
-    feeder = _DacFeeder(blocks, SampleFormat.INT16, 2, first=0)
+    feeder = DacFeeder(blocks, SampleFormat.INT16, 2, first=0)
     out = []
     for n in (10, 100, 7, 300, 1000):
         while (block := feeder.take(n)) is not None and block.shape[0]:
@@ -180,7 +180,7 @@ def test_dac_feeder_chunks_equal_whole_for_generators_and_callables() -> None:
             if sum(b.shape[0] for b in out) >= 1000:
                 break
     np.testing.assert_array_equal(np.concatenate(out), whole)
-    callable_feeder = _DacFeeder(
+    callable_feeder = DacFeeder(
         lambda first, n: signal[first : first + n], SampleFormat.INT16, 2, 0
     )
     block = callable_feeder.take(100)

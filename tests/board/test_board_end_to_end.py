@@ -14,7 +14,8 @@ import pytest
 
 from firmware_protocol import SampleFormat, State
 from hil.acquisition import AnnotationKind
-from hil.devices.board import Board, ReconnectPolicy, _DacFeeder, _ResumedSource
+from hil.devices.board import Board, ReconnectPolicy
+from hil.devices.board_dac_feeder import DacFeeder, ResumedSource
 from hil.devices.board_settings import to_wire_samples
 from hil.signals.presets import get_preset
 from hil.signals.synthesis import BlockSynthesizer
@@ -337,12 +338,13 @@ def test_adc_data_keeps_flowing_while_a_dac_write_blocks() -> None:
     clock = ManualClock()
     port, link = _memory_board(clock)
     gate = GatedWrites(link, 8192)
-    with Board(gate, clock=clock, keepalive_ms=None) as board:  # type: ignore[arg-type]
+    with Board(gate, clock=clock, keepalive_ms=None) as board:
         first, _ = _stream_until_a_dac_write_blocks(board, clock, port, gate)
         before = board.ring.end_index if board.ring else None
         assert before is not None
         end = stream_for(board, clock, 0.1)  # fails in wait_for_samples if the reader stalls
-        assert board.ring is not None and board.ring.end_index >= end >= before + 90_000
+        assert board.ring is not None and board.ring.end_index is not None
+        assert board.ring.end_index >= end >= before + 90_000
         sent_while_blocked = board.dac_samples_sent
         gate.release.set()
         # The queued burst and everything after it reach the board in order.
@@ -363,7 +365,7 @@ def test_a_host_that_fell_behind_skips_to_the_board_clock_and_the_waveform_stays
     clock = ManualClock()
     port, link = _memory_board(clock)
     gate = GatedWrites(link, 8192)
-    with Board(gate, clock=clock, keepalive_ms=None) as board:  # type: ignore[arg-type]
+    with Board(gate, clock=clock, keepalive_ms=None) as board:
         first, level = _stream_until_a_dac_write_blocks(board, clock, port, gate)
         stream_for(board, clock, 0.6)  # longer than the 262 ms FIFO: it runs dry
         assert port.call(lambda b: b.dac_underruns) >= 1
@@ -396,7 +398,7 @@ def test_dac_feeder_skip_drops_exactly_the_next_samples(kind: str) -> None:
         "reader": tank_board_synth,
         "callable": lambda: synth.render,
     }
-    feeder = _DacFeeder(sources[kind](), SampleFormat.INT16, 1, 1000)
+    feeder = DacFeeder(sources[kind](), SampleFormat.INT16, 1, 1000)
     a = feeder.take(100)
     feeder.skip(9_000)
     b = feeder.take(5_000)
@@ -451,7 +453,7 @@ def test_dac_feeder_restart_sends_the_same_samples_from_sample_0(kind: str) -> N
         "reader": tank_board_synth,
         "callable": lambda: tank_board_synth().render,
     }
-    feeder = _DacFeeder(sources[kind](), SampleFormat.INT16, 1, 1000)
+    feeder = DacFeeder(sources[kind](), SampleFormat.INT16, 1, 1000)
     sent = [feeder.take(3000), feeder.take(2000)]
     assert sent[0] is not None and sent[1] is not None
     feeder.sent([sent[0], sent[1]])
@@ -470,7 +472,7 @@ def test_dac_feeder_restart_sends_the_same_samples_from_sample_0(kind: str) -> N
 
 def test_restart_of_an_ended_source_sends_what_it_gave() -> None:
     block = np.linspace(-0.5, 0.5, 500)
-    feeder = _DacFeeder([block], SampleFormat.INT16, 1, 0)
+    feeder = DacFeeder([block], SampleFormat.INT16, 1, 0)
     taken = feeder.take(1000)
     assert taken is not None and feeder.take(1000) is None and feeder.exhausted
     feeder.sent([taken])
@@ -487,10 +489,10 @@ def test_a_resumed_source_skips_by_reading_and_passes_its_end_on() -> None:
     a late-DAC skip drops exactly the next samples (each later sample keeps its place), and
     when the old source ends the new feeder is exhausted (a preload can finish)."""
     ref = to_wire_samples(tank_board_synth().render(0, 30_000), SampleFormat.INT16, 1)
-    old = _DacFeeder(tank_board_synth().blocks(4096), SampleFormat.INT16, 1, 0)
+    old = DacFeeder(tank_board_synth().blocks(4096), SampleFormat.INT16, 1, 0)
     head = old.take(2500)
     assert head is not None
-    resumed = _DacFeeder(_ResumedSource(old), SampleFormat.INT16, 1, 50_000)
+    resumed = DacFeeder(ResumedSource(old), SampleFormat.INT16, 1, 50_000)
     a = resumed.take(1000)
     resumed.skip(7000)
     b = resumed.take(3000)
@@ -499,9 +501,9 @@ def test_a_resumed_source_skips_by_reading_and_passes_its_end_on() -> None:
     start_b = 2500 + a.shape[0] + 7000
     np.testing.assert_array_equal(b, ref[start_b : start_b + b.shape[0]])
 
-    short = _DacFeeder([np.full(300, 0.25)], SampleFormat.INT16, 1, 0)
+    short = DacFeeder([np.full(300, 0.25)], SampleFormat.INT16, 1, 0)
     assert short.take(100) is not None
-    tail = _DacFeeder(_ResumedSource(short), SampleFormat.INT16, 1, 1000)
+    tail = DacFeeder(ResumedSource(short), SampleFormat.INT16, 1, 1000)
     rest = tail.take(1000)
     assert rest is not None and rest.shape[0] == 200
     assert tail.take(1000) is None and tail.exhausted

@@ -12,6 +12,7 @@ import pytest
 
 from hil.acquisition import AnnotationKind
 from hil.devices.board import Board
+from hil.devices.board_link_virtual import VirtualTimeBoardLink
 from hil.devices.board_settings import BoardSettings
 from hil.devices.clock import MonotonicClock, VirtualClock
 from hil.errors import ConfigError, TransportClosedError, TransportTimeoutError
@@ -100,9 +101,10 @@ def test_virtual_time_and_another_clock_are_refused() -> None:
 
 
 def test_skipping_the_quiet_ticks_changes_no_byte(monkeypatch: pytest.MonkeyPatch) -> None:
-    """The driver skips the ticks on which the simulated board only captures samples short
-    of the awaited index (``Board._quiet_until_ns``): the same samples, SYNC pairs and
-    instants as a run that services the link at every tick, with far fewer board ticks."""
+    """The virtual-time link skips the ticks on which the simulated board only captures
+    samples short of the awaited index (``VirtualTimeBoardLink.quiet_until_ns``): the same
+    samples, SYNC pairs and instants as a run that services the link at every tick, with far
+    fewer board ticks."""
     ticks = {"n": 0}
     real_tick = SimulatedBoard.tick
 
@@ -113,7 +115,7 @@ def test_skipping_the_quiet_ticks_changes_no_byte(monkeypatch: pytest.MonkeyPatc
     monkeypatch.setattr(SimulatedBoard, "tick", counted)
     quiet = streamed(0.3)
     quiet_ticks, ticks["n"] = ticks["n"], 0
-    monkeypatch.setattr(Board, "_quiet_until_ns", lambda self: None)
+    monkeypatch.setattr(VirtualTimeBoardLink, "quiet_until_ns", lambda self: None)
     every = streamed(0.3)
     (a, da, fa), (b, db, fb) = quiet, every
     assert fa == fb

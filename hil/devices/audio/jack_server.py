@@ -6,11 +6,12 @@ default one period's duration, so the server runs in real time. A longer wait ru
 server (every client's stream) slower than the wall clock by ``time_scale`` while the clients
 still see the nominal sample rate: the JACK counterpart of ``simulation.time_scale``.
 
-The server runs synchronously (``-S``): each period waits for every client to finish (up to
-``client_timeout_ms``) instead of dropping a late client's output, and the dummy driver
-catches up on the periods after. A client that computes a simulation in Python on a busy
+By default the server runs synchronously (``--sync``): each period waits for every client to
+finish (up to ``client_timeout_ms``) instead of dropping a late client's output, and the dummy
+driver catches up on the periods after. A client that computes a simulation in Python on a busy
 machine is late now and then; with a sound card that is an xrun, here it only delays a period,
-so the samples stay continuous and the clients' streams stay in step.
+so the samples stay continuous and the clients' streams stay in step. An asynchronous server
+(``synchronous=False``) behaves as a sound card does: a late client is an xrun.
 
 Clients find the server by name through ``JACK_DEFAULT_SERVER`` (``default`` when unset).
 """
@@ -30,6 +31,8 @@ from hil.errors import ConfigError
 
 #: The server name clients use when ``JACK_DEFAULT_SERVER`` is unset.
 DEFAULT_SERVER_NAME = "default"
+#: The JACK programs a dummy server and its wiring need.
+JACK_TOOLS = ("jackd", "jack_lsp", "jack_connect")
 #: Deadlock guard for the server to answer ``jack_lsp``: it answers within a second on a
 #: quiet machine, tens of seconds on a badly overloaded one.
 STARTUP_TIMEOUT_S = 60.0
@@ -38,6 +41,11 @@ STARTUP_TIMEOUT_S = 60.0
 def server_name() -> str:
     """The JACK server clients of this process connect to (``JACK_DEFAULT_SERVER``)."""
     return os.environ.get("JACK_DEFAULT_SERVER") or DEFAULT_SERVER_NAME
+
+
+def missing_tools() -> list[str]:
+    """The programs of :data:`JACK_TOOLS` not found on ``PATH`` (empty when JACK is there)."""
+    return [tool for tool in JACK_TOOLS if shutil.which(tool) is None]
 
 
 def server_answers(name: str) -> bool:
@@ -55,13 +63,15 @@ def server_answers(name: str) -> bool:
 @dataclass(frozen=True)
 class DummyServerSettings:
     """A dummy-driver server: sample rate (Hz), period (frames), time scale (simulated
-    seconds per wall second, in (0, 1]), and how long a period waits for a late client (ms)
-    before the server gives up on it."""
+    seconds per wall second, in (0, 1]), how long a period waits for a late client (ms)
+    before the server gives up on it, and whether periods wait for late clients at all
+    (``synchronous``; False: a late client is an xrun, as on a sound card)."""
 
     samplerate: int
     period: int
     time_scale: float = 1.0
     client_timeout_ms: int = 20_000
+    synchronous: bool = True
 
     def __post_init__(self) -> None:
         if int(self.samplerate) != self.samplerate or not 1000 <= self.samplerate <= 768_000:
@@ -83,9 +93,16 @@ class DummyServerSettings:
         return round(self.period / self.samplerate / self.time_scale * 1e6)
 
     def command(self, name: str) -> list[str]:
-        """The ``jackd`` command line of this server, called ``name``."""
+        """The ``jackd`` command line of this server, called ``name``.
+
+        >>> " ".join(DummyServerSettings(192000, 256).command("lab"))
+        'jackd --no-realtime --sync -t 20000 -n lab -d dummy -r 192000 -p 256 -w 1333'
+        >>> " ".join(DummyServerSettings(192000, 256, synchronous=False).command("lab"))
+        'jackd --no-realtime -n lab -d dummy -r 192000 -p 256 -w 1333'
+        """
+        sync = ["--sync", "-t", str(self.client_timeout_ms)] if self.synchronous else []
         return [
-            "jackd", "--no-realtime", "--sync", "-t", str(self.client_timeout_ms), "-n", name,
+            "jackd", "--no-realtime", *sync, "-n", name,
             "-d", "dummy",
             "-r", str(self.samplerate), "-p", str(self.period), "-w", str(self.wait_us),
         ]  # fmt: skip
@@ -105,7 +122,7 @@ class JackDummyServer:
     def start(self, timeout_s: float = STARTUP_TIMEOUT_S) -> JackDummyServer:
         """Start the server and wait until it answers; raises :class:`JackToolError` naming
         what is missing or what went wrong (with the server's last output)."""
-        missing = [t for t in ("jackd", "jack_lsp", "jack_connect") if shutil.which(t) is None]
+        missing = missing_tools()
         if missing:
             raise JackToolError(
                 f"{', '.join(missing)} not found; install JACK (Debian: apt-get install jackd2)"
