@@ -38,8 +38,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from hil.errors import ConfigError
 from hil.estimation.first_arrival import RANGE_READOUTS, FirstArrivalReadout
-from hil.estimation.input_stage import StagedGcas, StageParts
-from hil.signals.schedule import HopSchedule
+from hil.estimation.input_stage import StagedGcas, StageParts, StageSetting
 
 
 def load_background(path: str | Path, period_samples: int) -> NDArray[np.float64]:
@@ -115,16 +114,7 @@ class BackgroundGcas(StagedGcas):
         self.subtractor = subtractor
 
     @classmethod
-    def stage_from_options(
-        cls,
-        schedule: HopSchedule,
-        fs_hz: float,
-        period_samples: int,
-        *,
-        sound_speed_mps: float,
-        m_hops: int,
-        options: dict[str, Any],
-    ) -> StageParts:
+    def stage_from_options(cls, where: StageSetting, options: dict[str, Any]) -> StageParts:
         """The subtraction of the background at ``options["background"]`` and, unless
         ``range_readout = "peak"``, the first-arrival readout on its output (GCAS itself
         reads the peak)."""
@@ -140,13 +130,13 @@ class BackgroundGcas(StagedGcas):
             )
         if range_readout not in RANGE_READOUTS:
             raise ConfigError("range_readout", range_readout, f"one of {', '.join(RANGE_READOUTS)}")
-        subtractor = BackgroundSubtractor(load_background(background, period_samples))
+        subtractor = BackgroundSubtractor(load_background(background, where.period_samples))
         readout = (
             FirstArrivalReadout(
-                schedule,
-                float(fs_hz),
-                int(m_hops),
-                float(sound_speed_mps),
+                where.schedule,
+                where.fs_hz,
+                where.m_hops,
+                where.sound_speed_mps,
                 max_spread_s,
                 cancel_period=False,
             )

@@ -33,8 +33,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from hil.errors import ConfigError
 from hil.estimation.first_arrival import FirstArrivalReadout
-from hil.estimation.input_stage import StagedGcas, StageParts
-from hil.signals.schedule import HopSchedule
+from hil.estimation.input_stage import StagedGcas, StageParts, StageSetting
 
 
 class PeriodCanceller:
@@ -108,16 +107,7 @@ class ClutterCancelledGcas(StagedGcas):
         self.canceller = stage
 
     @classmethod
-    def stage_from_options(
-        cls,
-        schedule: HopSchedule,
-        fs_hz: float,
-        period_samples: int,
-        *,
-        sound_speed_mps: float,
-        m_hops: int,
-        options: dict[str, Any],
-    ) -> StageParts:
+    def stage_from_options(cls, where: StageSetting, options: dict[str, Any]) -> StageParts:
         """The canceller of one code period; every option is GCAS's. GCAS's first-arrival
         readout (``range_readout``) runs its own canceller on the cancelled stream."""
-        return StageParts(PeriodCanceller(period_samples), None, options)
+        return StageParts(PeriodCanceller(where.period_samples), None, options)

@@ -44,6 +44,19 @@ class InputStage(Protocol):
 
 
 @dataclasses.dataclass(frozen=True)
+class StageSetting:
+    """What a stage is built for: the transmit schedule, the input rate ``fs_hz`` (Hz), the
+    code period ``period_samples`` (input samples), ``sound_speed_mps`` (m/s) and GCAS's
+    correlator length ``m_hops``."""
+
+    schedule: HopSchedule
+    fs_hz: float
+    period_samples: int
+    sound_speed_mps: float
+    m_hops: int
+
+
+@dataclasses.dataclass(frozen=True)
 class StageParts:
     """What a subclass builds from its options: the stage, the first-arrival readout that
     re-reads each detection on the stage's output (None: GCAS's own readout stands) and the
@@ -87,16 +100,7 @@ class StagedGcas:
 
     # ------------------------------------------------------------------ construction
     @classmethod
-    def stage_from_options(
-        cls,
-        schedule: HopSchedule,
-        fs_hz: float,
-        period_samples: int,
-        *,
-        sound_speed_mps: float,
-        m_hops: int,
-        options: dict[str, Any],
-    ) -> StageParts:
+    def stage_from_options(cls, where: StageSetting, options: dict[str, Any]) -> StageParts:
         """The stage of this receiver from its own ``options`` (the rest go to GCAS)."""
         raise NotImplementedError(f"{cls.__name__} names no input stage")
 
@@ -124,10 +128,8 @@ class StagedGcas:
                 f"period {schedule.period_s} s × {fs_hz} Hz = "
                 f"{schedule.period_s * fs_hz:.4f} samples: {cls.period_reason}; use gcas",
             )
-        parts = cls.stage_from_options(
-            schedule, fs_hz, period, sound_speed_mps=sound_speed_mps, m_hops=m_hops,
-            options=dict(extra),
-        )  # fmt: skip
+        where = StageSetting(schedule, float(fs_hz), period, float(sound_speed_mps), int(m_hops))
+        parts = cls.stage_from_options(where, dict(extra))
         check_option_types(GcasReceiver, parts.gcas_options, cls.name)
         inner = GcasReceiver.from_options(
             schedule,
