@@ -131,15 +131,12 @@ class StagedGcas:
         where = StageSetting(schedule, float(fs_hz), period, float(sound_speed_mps), int(m_hops))
         parts = cls.stage_from_options(where, dict(extra))
         check_option_types(GcasReceiver, parts.gcas_options, cls.name)
-        inner = GcasReceiver.from_options(
-            schedule,
-            fs_hz,
-            sound_speed_mps=sound_speed_mps,
-            max_speed_mps=max_speed_mps,
-            max_range_m=max_range_m,
-            m_hops=m_hops,
-            **{"refine": cls.refine_default, **parts.gcas_options},
-        )
+        common: dict[str, Any] = {
+            "sound_speed_mps": sound_speed_mps, "max_speed_mps": max_speed_mps,
+            "max_range_m": max_range_m, "m_hops": m_hops,
+        }  # fmt: skip
+        options = {"refine": cls.refine_default, **parts.gcas_options}
+        inner = GcasReceiver.from_options(schedule, fs_hz, **common, **options)
         return cls(inner, parts.stage, parts.readout)
 
     # ------------------------------------------------------------------ streaming
