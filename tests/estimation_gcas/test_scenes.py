@@ -252,8 +252,9 @@ MOTION_HOPS = MOTION_S / 0.01
 def _motion_scene(
     kind: str, snr_db: float, srr_db: float | None, seed: int = 3
 ) -> tuple[list[Estimate], dict[int, HopTruth]]:
-    """``kind``: "still" (40 m at rest), "braking" (from 50 m closing at 10 m/s, 5 m/s² to
-    rest at 2 s) or "reversing" (from 50 m, +8 m/s closing to -8 m/s opening at 8 m/s²)."""
+    """``kind``: "still" (40 m at rest), "slow" (from 40 m closing at 0.5 m/s), "braking"
+    (from 50 m closing at 10 m/s, 5 m/s² to rest at 2 s) or "reversing" (from 50 m, +8 m/s
+    closing to -8 m/s opening at 8 m/s²)."""
     x, truth = _motion_input(kind, snr_db, srr_db, seed)
     return run_blocks(_receiver(), x), truth
 
@@ -272,8 +273,8 @@ def _motion_input(
     from sim_devices.acoustics.beam import OmniBeam, TwoWayAmplitudeTable
     from sim_devices.acoustics.reverberation import ReverberationSettings, VolumeReverberation
 
-    r0, v0, acc = {"still": (40.0, 0.0, 0.0), "braking": (50.0, 10.0, 5.0),
-                   "reversing": (50.0, 8.0, 8.0)}[kind]  # fmt: skip
+    r0, v0, acc = {"still": (40.0, 0.0, 0.0), "slow": (40.0, 0.5, 0.0),
+                   "braking": (50.0, 10.0, 5.0), "reversing": (50.0, 8.0, 8.0)}[kind]  # fmt: skip
 
     def position(t: np.ndarray) -> np.ndarray:
         return np.stack([r0 - v0 * t + 0.5 * acc * t**2, 0 * t, 0 * t], axis=-1)
@@ -358,13 +359,21 @@ def test_still_stopping_and_reversing_echoes_give_no_false_estimate(
 # coherence one echo has against the interference measured on the other tones of its windows
 # (hil.estimation.reverb_band), the target is kept.
 @pytest.mark.slow
-def test_a_target_at_rest_in_reverberation_is_kept_with_the_band_off() -> None:
-    x, truth = _motion_input("still", 0.0, 0.0, 4, min_range_m=1.0)
+@pytest.mark.parametrize(
+    ("kind", "snr_db", "pd_min"),
+    # Measured pd / false per hop (before, held to the white-noise expectation): still at
+    # 0 dB 0.967 / 0.015 (0.457 / 0.030); slow (0.5 m/s) 1.0 / 0 (0.875 / 0); still at
+    # -10 dB 0.842 / 0.040 (0.533 / 0.085). The false ones are a lone scatterer at 1.07 m:
+    # a point echo at rest, which no test of one echo tells from a target.
+    [("still", 0.0, 0.9), ("slow", 0.0, 0.9), ("still", -10.0, 0.8)],
+)
+def test_a_slow_or_still_target_in_reverberation_is_kept_with_the_band_off(
+    kind: str, snr_db: float, pd_min: float
+) -> None:
+    x, truth = _motion_input(kind, snr_db, 0.0, 4, min_range_m=1.0)
     rx = _receiver(reverb_speed_mps=0.0)
     false, pd = _false_and_moving_pd(run_blocks(rx, x), truth, faster_than_mps=-1.0)
-    # Measured: pd 0.967 (0.457 held to the white-noise expectation), 0.015 false per hop
-    # (a lone scatterer at 1.07 m: a point echo at rest, reported as one).
-    assert pd >= 0.9 and false <= 0.05
+    assert pd >= pd_min and false <= 0.05
 
 
 @pytest.mark.slow
