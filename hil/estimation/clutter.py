@@ -20,7 +20,8 @@ restarts its accumulation after them as after a gap. A target at rest cancels wi
 clutter. The noise power doubles (+3 dB).
 
 :class:`ClutterCancelledGcas` is a :class:`~hil.estimation.gcas.GcasReceiver` with the
-canceller in front; it takes GCAS's options and delegates everything else to it.
+canceller in front (:class:`~hil.estimation.input_stage.StagedGcas`); it takes GCAS's options
+and delegates everything else to it.
 """
 
 from __future__ import annotations
@@ -31,9 +32,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from hil.errors import ConfigError
-from hil.estimation.base import Estimate
-from hil.estimation.option_types import check_option_types
-from hil.signals.schedule import HopSchedule
+from hil.estimation.first_arrival import FirstArrivalReadout
+from hil.estimation.input_stage import StagedGcas, StageParts, StageSetting
 
 
 class PeriodCanceller:
@@ -63,9 +63,13 @@ class PeriodCanceller:
         self._ring[:] = 0.0
         self._valid = 0
 
-    def process(self, block: ArrayLike, *, gap_before: int = 0) -> NDArray[np.float64]:
+    def process(
+        self, block: ArrayLike, *, first_index: int = 0, gap_before: int = 0
+    ) -> NDArray[np.float64]:
         """The cancelled samples of ``block`` (``gap_before`` samples went missing before
-        it: the history restarts)."""
+        it: the history restarts). ``first_index`` (the absolute index of ``block[0]``) is
+        not needed: the ring keeps its own phase, so the output depends only on the order
+        of the samples and the gaps."""
         x = np.asarray(block, dtype=np.float64).reshape(-1)
         if gap_before:
             self.reset()
@@ -87,84 +91,23 @@ class PeriodCanceller:
         return y
 
 
-class ClutterCancelledGcas:
+class ClutterCancelledGcas(StagedGcas):
     """GCAS behind a :class:`PeriodCanceller` of the schedule's code period (see the module
     docstring). Options: GCAS's (``range_readout``, ``reverb_speed_mps``, ...); ``refine``
     is False unless given (the canceller leaves two copies of a moving echo)."""
 
     name = "gcas-mti"
+    period_reason = "the canceller subtracts the period before"
 
-    def __init__(self, inner: Any, period_samples: int) -> None:
-        self.inner = inner
-        self.canceller = PeriodCanceller(period_samples)
-        self.fs_hz = float(inner.fs_hz)
+    def __init__(
+        self, inner: Any, stage: PeriodCanceller, readout: FirstArrivalReadout | None = None
+    ) -> None:
+        super().__init__(inner, stage, readout)
+        #: The canceller in front of GCAS.
+        self.canceller = stage
 
     @classmethod
-    def from_options(
-        cls,
-        schedule: HopSchedule,
-        fs_hz: float,
-        *,
-        sound_speed_mps: float,
-        max_speed_mps: float,
-        max_range_m: float,
-        m_hops: int,
-        **extra: Any,
-    ) -> ClutterCancelledGcas:
-        """The registry's common constructor (:mod:`hil.estimation.registry`)."""
-        from hil.estimation.gcas import GcasReceiver
-
-        check_option_types(GcasReceiver, extra, "gcas-mti")
-        period = schedule.period_samples(fs_hz)
-        if period is None:
-            raise ConfigError(
-                "receiver",
-                "gcas-mti",
-                "a code period of a whole number of samples",
-                f"period {schedule.period_s} s × {fs_hz} Hz = "
-                f"{schedule.period_s * fs_hz:.4f} samples: the canceller subtracts the period "
-                "before; use gcas",
-            )
-        # After the canceller a moving echo is two (itself and its sign-flipped copy a
-        # period later, P·2v/c apart): not the one echo GCAS's refinement fits, so it is off
-        # unless asked for (the tank reads the first arrival).
-        inner = GcasReceiver.from_options(
-            schedule,
-            fs_hz,
-            sound_speed_mps=sound_speed_mps,
-            max_speed_mps=max_speed_mps,
-            max_range_m=max_range_m,
-            m_hops=m_hops,
-            **{"refine": False, **extra},
-        )
-        return cls(inner, period)
-
-    def process(self, block: ArrayLike, *, gap_before: int = 0) -> list[Estimate]:
-        """Cancel, then GCAS (shape ``(n,)`` real samples)."""
-        y = self.canceller.process(block, gap_before=gap_before)
-        result: list[Estimate] = self.inner.process(y, gap_before=gap_before)
-        return result
-
-    def flush(self) -> list[Estimate]:
-        """GCAS's held estimates."""
-        result: list[Estimate] = self.inner.flush()
-        return result
-
-    def reset(self) -> None:
-        """Forget all state (canceller and GCAS)."""
-        self.canceller.reset()
-        self.inner.reset()
-
-    @property
-    def samples_seen(self) -> int:
-        """Samples consumed so far (GCAS's count)."""
-        return int(self.inner.samples_seen)
-
-    @property
-    def next_decision_index(self) -> int:
-        """GCAS's next decision index (the canceller adds no delay)."""
-        return int(self.inner.next_decision_index)
-
-    def __getattr__(self, name: str) -> Any:
-        # Everything else (counts, maps, settings) is GCAS's.
-        return getattr(self.inner, name)
+    def stage_from_options(cls, where: StageSetting, options: dict[str, Any]) -> StageParts:
+        """The canceller of one code period; every option is GCAS's. GCAS's first-arrival
+        readout (``range_readout``) runs its own canceller on the cancelled stream."""
+        return StageParts(PeriodCanceller(where.period_samples), None, options)

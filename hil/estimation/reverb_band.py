@@ -20,6 +20,22 @@ a target is estimated, and so is any stationary clutter stronger than the noise 
 target's echo, a tank wall, the direct blast) as a zero-speed estimate. Turn it off for a
 stationary or slow target in a quiet tank.
 
+With the band off, an echo slower than ``v_res`` shares its Doppler cells with the
+reverberation, which is not white: it sits at the tones, so each hop's correlator of the echo
+holds reverberation a white-noise model of the window's power does not predict, and the hops'
+coherence falls short of what one echo in white noise has (att, a target at rest at 0 dB SRR:
+0.74-0.87 of it, half the fits refused). The interference a hop's term really holds is
+measured in the same windows at the same Doppler on the *other* tones
+(:func:`reverberation_coherence`): the echo is not there (the tones are orthogonal over a
+hop), the reverberation is (it arrives at every tone from the delays that sent it), and so
+is the noise. The coherence one echo of that signal-to-interference ratio has is the
+expectation such an echo is held to (:func:`in_reverberation`). What stays short of it is
+not one point echo: where its coherence within each tone holds (each tone its own complex
+gain, as a patch of scatterers spread over more than ``c/(2 B)`` in range gives, ``B`` the
+tones' span), it is **clutter**, diffuse reverberation, counted apart
+(:attr:`hil.estimation.gcas.GcasReceiver.clutter_count`) and not reported
+(:func:`is_diffuse`).
+
 A target inside the band is not reported at the band's edge: its Doppler response leaks into
 the first allowed cells, whose weighted maximum is then a ghost at the edge speed. Detections
 whose hypothesis lies on the edge (:func:`edge_hypotheses`) are therefore refused, and counted
@@ -137,3 +153,58 @@ def edge_hypotheses(hyp_weights: NDArray[np.floating], allow_in_band: bool) -> N
     near[1:] |= band[:-1]
     near[:-1] |= band[1:]
     return near & ~band if allow_in_band else near
+
+
+def in_reverberation(speed_mps: float, tones_hz: ArrayLike, hop_s: float, c: float) -> bool:
+    """Whether an echo of radial speed ``speed_mps`` (m/s) shares its Doppler cells with the
+    still reverberation: slower than one Doppler resolution cell,
+    :func:`doppler_resolution_mps` (the reverberation fills ``±1/T_h`` Hz about every tone).
+
+    >>> in_reverberation(0.5, [28350.0, 31650.0], 0.01, 1500.0)
+    True
+    >>> in_reverberation(-3.0, [28350.0, 31650.0], 0.01, 1500.0)
+    False
+    """
+    return abs(float(speed_mps)) < doppler_resolution_mps(tones_hz, hop_s, c)
+
+
+def reverberation_coherence(
+    on_tone: NDArray[np.complexfloating], off_tone: NDArray[np.complexfloating]
+) -> float:
+    """The coherence over ``M`` hops one echo has against the interference measured beside
+    it: ``E[ρ] = (M s + 1) / (M (s + 1))`` with ``s`` its per-hop signal-to-interference
+    ratio (the white-noise form of :func:`hil.estimation.refine._fit_quality`, with the
+    interference measured instead of modelled).
+
+    ``on_tone`` (shape ``(M,)``): the hops' unit correlators at the echo's cell, each on its
+    hop's tone; ``off_tone`` (shape ``(M, J)``, ``J ≥ 1``): the same windows and Doppler on
+    the other tones (no echo there: the tones are orthogonal over a hop). The interference
+    power is the mean ``|off_tone|²``; ``s = mean |on_tone|² / it − 1`` (0 at the least).
+    1.0 where the other tones hold nothing (no interference to measure: silence or masked
+    cells).
+
+    >>> round(reverberation_coherence(np.full(10, 3.0 + 0j), np.ones((10, 3))), 3)
+    0.9
+    >>> reverberation_coherence(np.ones(10), np.zeros((10, 3)))
+    1.0
+    """
+    on = np.asarray(on_tone)
+    off = np.asarray(off_tone)
+    level = float(np.mean(np.square(np.abs(off)))) if off.size else 0.0
+    if not level > 0.0:
+        return 1.0
+    m = on.shape[0]
+    s = max(float(np.mean(np.square(np.abs(on)))) / level - 1.0, 0.0)
+    return (m * s + 1.0) / (m * (s + 1.0))
+
+
+def is_diffuse(coherence: float, tone_coherence: float, fraction: float) -> bool:
+    """Whether a fit short of one echo's coherence over all hops is diffuse reverberation:
+    its coherence within each tone (both as fractions of one echo's, ``(0, 1]``) holds to
+    ``fraction`` and stands above its coherence over all hops (a patch of scatterers
+    spread in range answers each tone with its own complex gain; a point echo does not).
+
+    >>> is_diffuse(0.55, 0.9, 0.8), is_diffuse(0.3, 0.45, 0.8)
+    (True, False)
+    """
+    return tone_coherence >= fraction and tone_coherence > coherence

@@ -9,9 +9,11 @@ band, :mod:`hil.estimation.reverb_band`) is the leak of an echo inside the band,
 detection. The default refinement (:mod:`hil.estimation.refine`) measures ``t_rx`` and
 ``α`` by local maximum likelihood and refuses a detection that is not one echo of the
 schedule (a still echo read at the tone spacing's speed, an echo beyond the span:
-:data:`ECHO_TEST`); without it the coherent sum refines ``t_rx`` and ``α̂``. The
-first-arrival readout (:mod:`hil.estimation.first_arrival`) replaces ``t_rx`` by the direct
-path's. Hop-index consistency is a soft flag.
+:data:`ECHO_TEST`; in the still reverberation's Doppler cells, with the band off, against
+the interference measured on the other tones of its windows, and a diffuse fit there is
+counted as clutter: :mod:`hil.estimation.reverb_band`); without it the coherent sum refines
+``t_rx`` and ``α̂``. The first-arrival readout (:mod:`hil.estimation.first_arrival`)
+replaces ``t_rx`` by the direct path's. Hop-index consistency is a soft flag.
 """
 
 from __future__ import annotations
@@ -30,7 +32,8 @@ from hil.estimation.first_arrival import FirstArrivalReadout
 from hil.estimation.gcas.beyond_span import BeyondSpanCheck
 from hil.estimation.gcas.front_end import FrontEnd
 from hil.estimation.gcas.threshold import Peak
-from hil.estimation.refine import CoherentRefiner, EchoTest
+from hil.estimation.refine import CoherentRefiner, EchoTest, Refinement
+from hil.estimation.reverb_band import in_reverberation, is_diffuse, reverberation_coherence
 
 #: A refined detection is an echo of the schedule when its hops' coherence is at least
 #: COHERENCE_FRACTION of what one echo of its SNR would have, or their coherence over runs of
@@ -151,6 +154,9 @@ class Readout:
         #: Detections refused by the refinement as no one echo of the schedule
         #: (:data:`COHERENCE_FRACTION`).
         self.incoherent_count = 0
+        #: Detections refused as clutter: diffuse reverberation in the echo's Doppler cells,
+        #: not one point echo (:func:`~hil.estimation.reverb_band.is_diffuse`).
+        self.clutter_count = 0
         #: Detections the refinement could not measure: their hops reach back before the
         #: input's start or a gap (refused: the search reports every echo's cell, ghosts
         #: included, and only the refinement tells them apart).
@@ -207,8 +213,13 @@ class Readout:
             ):
                 return None
             if not refined.is_echo(ECHO_TEST):
-                self.incoherent_count += 1
-                return None
+                verdict = self._in_reverberation(p, refined)
+                if verdict is not True:
+                    if verdict is False:
+                        self.clutter_count += 1
+                    else:
+                        self.incoherent_count += 1
+                    return None
             t_rx, alpha, bound = refined.t_s, refined.alpha, refined.bound
         elif self._coherent:
             t_rx, alpha = self._coherent_refine(p.n_star, p.d0, hop_index, t_rx, alpha)
@@ -277,6 +288,27 @@ class Readout:
                 break
             h = h + 1 if up else h - 1
         return (h - d) + parabolic_offset(power[h - 1], power[h], power[h + 1])
+
+    def _in_reverberation(self, p: Peak, refined: Refinement) -> bool | None:
+        """A fit short of one echo's coherence in white noise, judged again where it shares
+        its Doppler cells with the still reverberation (:mod:`hil.estimation.reverb_band`):
+        True, one echo against the interference measured on the other tones of its windows;
+        False, clutter (diffuse reverberation); None, neither (no echo: refused as
+        incoherent), also outside the reverberation's cells."""
+        fe, test = self._fe, ECHO_TEST
+        c = fe.sound_speed_mps
+        if not (refined.found and refined.e_over_n0_db >= test.min_e_over_n0_db):
+            return None
+        if not in_reverberation(refined.speed_mps(c), fe.tones_hz, fe.hop_s, c):
+            return None
+        m, k = fe.m_hops, fe.n_tones
+        tone = fe.schedule.hops(p.codeword - m + 1, m).tone_index[::-1].astype(np.int64)
+        on = self._unit_values(p.n_star, p.d0, tone)
+        off = np.stack([self._unit_values(p.n_star, p.d0, (tone + j) % k) for j in range(1, k)])
+        if refined.coherence.measured >= test.fraction * reverberation_coherence(on, off.T):
+            return True
+        coherence, tone_coherence = refined.coherence.fraction, refined.tone_coherence.fraction
+        return False if is_diffuse(coherence, tone_coherence, test.fraction) else None
 
     def _edge_side(self, d0: int) -> int:
         """+1 for the span's closing edge hypothesis, −1 for its opening one, else 0."""

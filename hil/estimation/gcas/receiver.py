@@ -270,6 +270,12 @@ class GcasReceiver:
         return self.readout.incoherent_count
 
     @property
+    def clutter_count(self) -> int:
+        """Detections refused as clutter: diffuse reverberation in the echo's Doppler cells
+        (the band off), not one point echo (:mod:`hil.estimation.reverb_band`)."""
+        return self.readout.clutter_count
+
+    @property
     def beyond_span_count(self) -> int:
         """Detections refused as an echo beyond the Doppler span: its edge leak, or a fit
         past the span (:mod:`hil.estimation.gcas.beyond_span`; with the refinement only)."""
