@@ -34,7 +34,12 @@ For each of the ``M`` boundaries the GCAS detection used (receive times from its
    arrival's own part of the ramp (:meth:`FirstArrivalReadout._fit_ramp`). A flat level
    above ``hi`` that is the previous boundary's late images switching tones (stronger on the
    boundaries whose next tone they leave than on the others, where only their switch leaks
-   through the window) is stepped over: the ramp is searched again above it. A rise from
+   through the window) is stepped over: the ramp is searched again above it. Where those
+   boundaries hold more than :data:`LATE_RATIO` times the others' power ahead of the first
+   arrival, they are left out of the onset altogether
+   (:meth:`FirstArrivalReadout._late_images_seen`: in the 12 × 6 × 4 m tank at image order 2
+   the far end wall on both legs, an opening path 240 Hz off the direct path's tone grid,
+   switches 0.4 ms ahead of the direct path at 8 m). A rise from
    ``lo`` to ``hi`` slower than :data:`SLOW_RISE` windows is a low level ahead of the ramp:
    the line is fitted on the ramp's steep part, from ``hi`` to twice its level.
 4. **Doppler**: the direct path's complex amplitude at the ``M`` boundaries, fitted over its
