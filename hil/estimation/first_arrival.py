@@ -307,7 +307,7 @@ class FirstArrivalReadout:
         amp = np.sqrt(np.maximum(power - power[base].mean(), 0.0))
         top_i = self._after + int(np.argmax(amp[self._after :]))
         leave = self._late_leaving(hop_index)
-        if self._late_images_seen(p_all, clean, leave, top_i):
+        if self._late_images_seen(p_all, power, clean, leave, top_i):
             clean = clean & ~leave
             power = np.mean(p_all[clean], axis=0)
             base = self._noise_window(power)
@@ -346,7 +346,7 @@ class FirstArrivalReadout:
             ped = float(np.max(amp[j_hi : j_hi + w]))
             if ped >= PEDESTAL_RISE * max(float(amp[j_hi]), wobble):
                 break
-            p_box = np.abs(box[:, j_hi : j_hi + w] / w) ** 2
+            p_box = p_all[:, j_hi : j_hi + w]
             if np.mean(p_box[leave]) < PEDESTAL_RATIO * np.mean(p_box[~leave]):
                 break
             floor += ped**2
@@ -433,6 +433,7 @@ class FirstArrivalReadout:
     def _late_images_seen(
         self,
         p_all: NDArray[np.float64],
+        power: NDArray[np.float64],
         clean: NDArray[np.bool_],
         leave: NDArray[np.bool_],
         top_i: int,
@@ -440,15 +441,15 @@ class FirstArrivalReadout:
         """Whether the previous boundary's late images sound this boundary's next tone ahead
         of its first arrival: on the boundaries read (``clean``, shape ``(M,)``) whose next
         tone is the tone two hops back (``leave``), the next-tone channel's power (``p_all``,
-        shape ``(M, L)``) between the search's start and the first arrival (half a window
-        before the first rise to :data:`EARLY_FRACTION` of the top ``top_i``) is more than
-        :data:`LATE_RATIO` times that on the others (at least :data:`MIN_CLEAN` of them). A
-        first arrival switches every boundary alike."""
+        shape ``(M, L)``; ``power``, its mean over ``clean``, shape ``(L,)``) between the
+        search's start and the first arrival (half a window before the first rise to
+        :data:`EARLY_FRACTION` of the top ``top_i``) is more than :data:`LATE_RATIO` times
+        that on the others (at least :data:`MIN_CLEAN` of them). A first arrival switches
+        every boundary alike."""
         late = clean & leave
         other = clean & ~leave
         # Before the first arrival: half a window before the first rise to EARLY_FRACTION
         # of the top (an arrival's ramp takes a window to its top).
-        power = np.mean(p_all[clean], axis=0)
         strong = np.flatnonzero(
             power[self._search_from : top_i + 1] >= EARLY_FRACTION**2 * power[top_i]
         )
