@@ -34,7 +34,12 @@ For each of the ``M`` boundaries the GCAS detection used (receive times from its
    arrival's own part of the ramp (:meth:`FirstArrivalReadout._fit_ramp`). A flat level
    above ``hi`` that is the previous boundary's late images switching tones (stronger on the
    boundaries whose next tone they leave than on the others, where only their switch leaks
-   through the window) is stepped over: the ramp is searched again above it. A rise from
+   through the window) is stepped over: the ramp is searched again above it. Where those
+   boundaries hold more than :data:`LATE_RATIO` times the others' power ahead of the first
+   arrival, they are left out of the onset altogether
+   (:meth:`FirstArrivalReadout._late_images_seen`: in the 12 × 6 × 4 m tank at image order 2
+   the far end wall on both legs, an opening path 240 Hz off the direct path's tone grid,
+   switches 0.4 ms ahead of the direct path at 8 m). A rise from
    ``lo`` to ``hi`` slower than :data:`SLOW_RISE` windows is a low level ahead of the ramp:
    the line is fitted on the ramp's steep part, from ``hi`` to twice its level.
 4. **Doppler**: the direct path's complex amplitude at the ``M`` boundaries, fitted over its
@@ -107,6 +112,17 @@ FIT_SPAN = 16
 FIT_STEP = 0.125
 #: Speed step of the direct path's Doppler search, m/s.
 DIRECT_SPEED_STEP = 0.002
+#: The direct path's Doppler is searched this far (in Doppler resolutions ``v_res``) from
+#: GCAS's towards a slower target, and :data:`DIRECT_SPAN_FASTER` towards a faster one. Every
+#: image is slower than the direct path (:data:`DIRECT_BELOW_GCAS_MPS`), so GCAS's
+#: energy-weighted speed is the direct path's less what the images pull it down: in the
+#: 12 x 6 x 4 m tank at image order 2 the far end wall on both legs (an opening path while the
+#: target closes) pulls it down by up to 0.33 m/s (v_res/4) at 7-8 m, on the span's edge.
+#: Measured: 0.33 v_res towards the faster side took that run's speed RMSE from 0.049 to
+#: 0.028 m/s, but an opening target behind the period canceller then read more than 0.1 m/s
+#: off in 10.5 % of its estimates (9.5 % allowed by its test), so both sides stay at v_res/4.
+DIRECT_SPAN_SLOWER = 0.25
+DIRECT_SPAN_FASTER = 0.25
 #: The direct path has the largest radial speed of all arrivals (an image's is the carriage
 #: speed times the cosine of its path's elevation), so its Doppler is not below GCAS's
 #: energy-weighted one by more than this, m/s; a direct-path speed slower by more is a phase
@@ -123,6 +139,10 @@ EARLY_FRACTION = 0.5
 #: boundaries, and at 0 dB per-sample SNR the 90th percentile of the range error rose from
 #: 0.11 to 0.20 m.
 LATE_HOPS = 0
+#: Boundaries whose next tone is the tone two hops back are left out when the next-tone
+#: channel before the first arrival holds more than this times the power on them as on the
+#: others (:meth:`FirstArrivalReadout._late_images_seen`).
+LATE_RATIO = 2.0
 #: Fewest boundaries the onset is read on; with fewer clean ones, every boundary is read.
 MIN_CLEAN = 3
 #: The noise is read in the stretch of :data:`BASELINE_S` before the search unless that holds
@@ -233,9 +253,13 @@ class FirstArrivalReadout:
         self._ring = RowBuffer(self.history, (), np.float64)
         self._valid_from = 0
         self.sound_speed_mps = float(sound_speed_mps)
-        span = 0.25 * doppler_resolution_mps(schedule.tones_hz, schedule.hop_s, sound_speed_mps)
-        n = int(round(span / DIRECT_SPEED_STEP))
-        self._speed_grid = np.arange(-n, n + 1) * DIRECT_SPEED_STEP  # m/s
+        v_res = doppler_resolution_mps(schedule.tones_hz, schedule.hop_s, sound_speed_mps)
+        n_slow = int(round(DIRECT_SPAN_SLOWER * v_res / DIRECT_SPEED_STEP))
+        n_fast = int(round(DIRECT_SPAN_FASTER * v_res / DIRECT_SPEED_STEP))
+        #: Speed offsets from GCAS's searched for a closing target (an opening one: negated;
+        #: at rest: the slower span both ways), m/s.
+        self._speed_grid = np.arange(-n_slow, n_fast + 1) * DIRECT_SPEED_STEP
+        self._speed_grid_still = np.arange(-n_slow, n_slow + 1) * DIRECT_SPEED_STEP
 
     def reset(self, input_index: int) -> None:
         """Forget the history; the next sample is ``input_index`` (after a gap)."""
@@ -277,10 +301,18 @@ class FirstArrivalReadout:
         # gives the same boxcar sum w samples apart and cancels; only switches remain.
         box = full[:, w:] - full[:, :-w]  # (M, L)
         clean = self._clean_boundaries(hop_index)
-        power = np.mean(np.abs(box[clean] / w) ** 2, axis=0)  # (L,)
+        p_all = np.abs(box / w) ** 2  # (M, L)
+        power = np.mean(p_all[clean], axis=0)  # (L,)
         base = self._noise_window(power)
         amp = np.sqrt(np.maximum(power - power[base].mean(), 0.0))
         top_i = self._after + int(np.argmax(amp[self._after :]))
+        leave = self._late_leaving(hop_index)
+        if self._late_images_seen(p_all, power, clean, leave, top_i):
+            clean = clean & ~leave
+            power = np.mean(p_all[clean], axis=0)
+            base = self._noise_window(power)
+            amp = np.sqrt(np.maximum(power - power[base].mean(), 0.0))
+            top_i = self._after + int(np.argmax(amp[self._after :]))
         top = float(amp[top_i])
         noise = float(np.sqrt(power[base].mean()))
         if not top > 3.0 * noise:
@@ -308,14 +340,13 @@ class FirstArrivalReadout:
         # crossing level within a window (the top still farther), with PEDESTAL_RATIO times the
         # power on the boundaries leaving the tone as on the others, is read as a level and
         # the ramp searched again above it.
-        leave = self._late_leaving(hop_index)
         for _ in range(MAX_PEDESTALS):
             if j_lo <= k0 or j_hi + w >= top_i or leave.all() or not leave.any():
                 break
             ped = float(np.max(amp[j_hi : j_hi + w]))
             if ped >= PEDESTAL_RISE * max(float(amp[j_hi]), wobble):
                 break
-            p_box = np.abs(box[:, j_hi : j_hi + w] / w) ** 2
+            p_box = p_all[:, j_hi : j_hi + w]
             if np.mean(p_box[leave]) < PEDESTAL_RATIO * np.mean(p_box[~leave]):
                 break
             floor += ped**2
@@ -398,6 +429,35 @@ class FirstArrivalReadout:
         while j > k0 and amp[j - 1] >= lo_level:
             j -= 1
         return min(j, j_hi - 2), j_hi
+
+    def _late_images_seen(
+        self,
+        p_all: NDArray[np.float64],
+        power: NDArray[np.float64],
+        clean: NDArray[np.bool_],
+        leave: NDArray[np.bool_],
+        top_i: int,
+    ) -> bool:
+        """Whether the previous boundary's late images sound this boundary's next tone ahead
+        of its first arrival: on the boundaries read (``clean``, shape ``(M,)``) whose next
+        tone is the tone two hops back (``leave``), the next-tone channel's power (``p_all``,
+        shape ``(M, L)``; ``power``, its mean over ``clean``, shape ``(L,)``) between the
+        search's start and the first arrival (half a window before the first rise to
+        :data:`EARLY_FRACTION` of the top ``top_i``) is more than :data:`LATE_RATIO` times
+        that on the others (at least :data:`MIN_CLEAN` of them). A first arrival switches
+        every boundary alike."""
+        late = clean & leave
+        other = clean & ~leave
+        # Before the first arrival: half a window before the first rise to EARLY_FRACTION
+        # of the top (an arrival's ramp takes a window to its top).
+        strong = np.flatnonzero(
+            power[self._search_from : top_i + 1] >= EARLY_FRACTION**2 * power[top_i]
+        )
+        stop = self._search_from + int(strong[0]) - self.boxcar // 2
+        if not late.any() or np.count_nonzero(other) < MIN_CLEAN or stop <= self._search_from:
+            return False
+        pre = slice(self._search_from, stop)
+        return bool(np.mean(p_all[late, pre]) > LATE_RATIO * np.mean(p_all[other, pre]))
 
     def _late_leaving(self, hop_index: int) -> NDArray[np.bool_]:
         """Which of the ``M`` boundaries (newest first) have the tone two hops back as their
@@ -561,9 +621,11 @@ class FirstArrivalReadout:
         the canceller, the target's reflection), ``Δα`` what GCAS's time scale lacks. GCAS's
         comes from the whole hop, so every image weighs in, each at its path's own radial
         speed (the cosine of its elevation: 5 % slow in the built-in tank); this one is the
-        direct path's. ``Δα`` maximises ``Σ_k |Σ_{m: tone k} p_m e^{−j2π f_m Δα t_m}|²`` over
-        ``±v_res/4`` (:func:`~hil.estimation.reverb_band.doppler_resolution_mps`; the boundaries
-        are a hop apart, so the phase repeats every ``v_res``); None where no tone recurs.
+        direct path's. ``Δα`` maximises ``Σ_k |Σ_{m: tone k} p_m e^{−j2π f_m Δα t_m}|²`` from
+        :data:`DIRECT_SPAN_SLOWER` ``v_res`` slower than GCAS's speed to
+        :data:`DIRECT_SPAN_FASTER` ``v_res`` faster
+        (:func:`~hil.estimation.reverb_band.doppler_resolution_mps`; the boundaries are a hop
+        apart, so the phase repeats every ``v_res``); None where no tone recurs.
         """
         fs = self.fs_hz
         f = hops.freq_hz[::-1]
@@ -575,7 +637,9 @@ class FirstArrivalReadout:
             return None
         t_m = (n_b - n_b[-1]) / fs  # relative: a common shift is a per-tone phase
         c = self.sound_speed_mps
-        d_alpha = 2.0 * self._speed_grid / c  # (G,)
+        sign = float(np.sign(alpha - 1.0))
+        grid = self._speed_grid_still if sign == 0.0 else sign * self._speed_grid
+        d_alpha = 2.0 * grid / c  # (G,)
         rot = np.exp(-2j * np.pi * d_alpha[:, None] * (f * t_m)[None, :])  # (G, M)
         sums = np.zeros((d_alpha.size, tones.size), dtype=np.complex128)
         for k in range(tones.size):
@@ -584,6 +648,6 @@ class FirstArrivalReadout:
         g = int(np.argmax(score))
         if g in (0, d_alpha.size - 1):
             return None  # the peak is outside the span: keep GCAS's
-        if np.sign(alpha - 1.0) * self._speed_grid[g] < -DIRECT_BELOW_GCAS_MPS:
+        if sign * grid[g] < -DIRECT_BELOW_GCAS_MPS:
             return None  # slower than every image: an ambiguity of the phase (see the bound)
         return float(alpha + d_alpha[g])

@@ -176,13 +176,15 @@ def test_the_late_images_level_before_the_first_arrival_is_stepped_over(
     """The previous boundary's late images leave a level in the next-tone channel before the
     first arrival; followed back into it, the ramp reads the target 0.82 m short. Stepped over
     (stronger on the boundaries whose next tone they leave), most estimates read the direct
-    path; with the rules off (``MAX_PEDESTALS = 0``, no slow rise) every one is short."""
+    path; with the rules off (``MAX_PEDESTALS = 0``, no slow rise, the boundaries whose next tone
+    the late images leave kept: ``LATE_RATIO = inf``) every one is short."""
     from hil.estimation import first_arrival
     from hil.estimation.background import BackgroundGcas, BackgroundSubtractor
 
     if not rules_on:
         monkeypatch.setattr(first_arrival, "MAX_PEDESTALS", 0)
         monkeypatch.setattr(first_arrival, "SLOW_RISE", np.inf)
+        monkeypatch.setattr(first_arrival, "LATE_RATIO", np.inf)
     s = _schedule()
     period = s.period_samples(FS)
     assert period is not None
