@@ -22,6 +22,13 @@ once per side (closing, opening) when it first sees one
 span was seen (closing) at t = … s (hop …)`` in the table, a JSON line
 ``{"notice": "beyond_span", "t_s", "hop_index", "side", "max_speed_mps", "speed_mps"}`` with
 ``--json`` (no estimate line has a ``notice`` key), a warning on stderr with ``--csv``.
+
+What GCAS refused instead of reporting is said at the end, by reason
+(:data:`hil.estimation.base.REFUSAL_REASONS`: not one echo of the schedule — ghosts and
+noise —, diffuse reverberation as clutter, the reverberation band's edge, beyond the Doppler
+span, beyond the maximum range, hops before the input's start): a line ``refused: 3 not one
+echo of the schedule (ghosts, sidelobes, noise), …`` after the table, on stderr with ``--json`` or
+``--csv``.
 """
 
 from __future__ import annotations
@@ -41,7 +48,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hil.errors import ConfigError
-from hil.estimation.base import ESTIMATE_FIELDS, Estimate
+from hil.estimation.base import ESTIMATE_FIELDS, CountsRefusals, Estimate, refusal_text
 from hil.estimation.registry import RECEIVERS
 from hil.estimation.track_summary import track_figures, track_lines
 from hil.recording.records import ReceiverSetup
@@ -340,6 +347,8 @@ def run(args: argparse.Namespace) -> int:
     if not args.json and args.csv is None:
         print(f"{sink.count} estimates from {args.input} ({args.receiver})")
         print("\n".join(track_lines(track_figures(sink.kept))))
+    if isinstance(receiver, CountsRefusals):
+        sink.refusals(receiver.refusals())
     return 0
 
 
@@ -431,6 +440,15 @@ class _Sink:
                 print(f"note: {sighting.text()}", flush=True)
             else:
                 _LOG.warning("%s", sighting.text())
+
+    def refusals(self, counts: dict[str, int]) -> None:
+        """Say what the receiver refused instead of reporting (``counts`` by reason,
+        :class:`~hil.estimation.base.CountsRefusals`) in one ``refused: …`` line, none where
+        nothing was refused: after the table, on stderr with ``--json`` or ``--csv`` (their
+        stdout holds estimates)."""
+        text = refusal_text(counts)
+        if text:
+            print(text, file=sys.stdout if self.table else sys.stderr, flush=True)
 
     def close(self) -> None:
         if self._csv_file is not None and self._csv_file is not sys.stdout:

@@ -155,3 +155,35 @@ class Receiver(Protocol):
     def reset(self) -> None:
         """Forget all state; the next sample is sample 0 again."""
         ...
+
+
+#: What a receiver refused, by reason (:meth:`CountsRefusals.refusals`' keys), as a user reads
+#: it; the order of the CLI's ``refused:`` line.
+REFUSAL_REASONS: dict[str, str] = {
+    "not_one_echo": "not one echo of the schedule (ghosts, sidelobes, noise)",
+    "clutter": "diffuse reverberation (clutter)",
+    "in_band": "on the reverberation band's edge",
+    "beyond_span": "beyond the Doppler span",
+    "beyond_max_range": "beyond the maximum range",
+    "unmeasured": "whose hops reach before the input's start or a gap",
+}
+
+
+@runtime_checkable
+class CountsRefusals(Protocol):
+    """A receiver that counts the detections it refused instead of reporting them."""
+
+    def refusals(self) -> dict[str, int]:
+        """Detections refused since the last reset, by reason (keys of
+        :data:`REFUSAL_REASONS`; every key present, 0 for none)."""
+        ...
+
+
+def refusal_text(counts: dict[str, int]) -> str:
+    """``counts`` (:meth:`CountsRefusals.refusals`) as one line; empty where none.
+
+    >>> refusal_text({"not_one_echo": 0, "clutter": 1, "in_band": 2})
+    "refused: 1 diffuse reverberation (clutter), 2 on the reverberation band's edge"
+    """
+    parts = [f"{counts[key]} {text}" for key, text in REFUSAL_REASONS.items() if counts.get(key, 0)]
+    return "refused: " + ", ".join(parts) if parts else ""

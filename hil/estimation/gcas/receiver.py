@@ -269,6 +269,18 @@ class GcasReceiver:
         read at the tone spacing's speed, an echo beyond the Doppler span, noise."""
         return self.readout.incoherent_count
 
+    def refusals(self) -> dict[str, int]:
+        """Detections refused since the last reset, by reason
+        (:class:`~hil.estimation.base.CountsRefusals`): the counts below."""
+        return {
+            "not_one_echo": self.incoherent_count,
+            "clutter": self.clutter_count,
+            "in_band": self.in_band_count,
+            "beyond_span": self.beyond_span_count,
+            "beyond_max_range": self.refused_count,
+            "unmeasured": self.unmeasured_count,
+        }
+
     @property
     def clutter_count(self) -> int:
         """Detections refused as clutter: diffuse reverberation in the echo's Doppler cells
