@@ -138,6 +138,8 @@ class Readout:
         self._coherent = coherent
         self._first_arrival = first_arrival
         self._unit_values = unit_values
+        #: Each codeword's term tones (term m is hop codeword − m), shape (M,), made once.
+        self._term_tones: dict[int, NDArray[np.int64]] = {}
         self._refiner = refiner
         self._receiver = receiver
         #: The check for an echo beyond the Doppler span (with the refinement).
@@ -266,9 +268,7 @@ class Readout:
         fe, d = self._fe, p.d0
         if fe.tone_w is None or d == 0 or d == fe.grid.size - 1:
             return p.dd
-        m = fe.m_hops
-        hops = fe.schedule.hops(p.codeword - m + 1, m)
-        tone = hops.tone_index[::-1].astype(np.int64)  # term m is hop codeword − m
+        tone = self._term_tone(p.codeword)
         lo, hi = max(0, d - DOPPLER_MOVES - 1), min(fe.grid.size, d + DOPPLER_MOVES + 2)
         w = fe.tone_w[lo:hi][:, tone]  # (H, M)
         if np.all(w == w[d - lo]):
@@ -301,14 +301,25 @@ class Readout:
             return None
         if not in_reverberation(refined.speed_mps(c), fe.tones_hz, fe.hop_s, c):
             return None
-        m, k = fe.m_hops, fe.n_tones
-        tone = fe.schedule.hops(p.codeword - m + 1, m).tone_index[::-1].astype(np.int64)
+        k = fe.n_tones
+        tone = self._term_tone(p.codeword)
         on = self._unit_values(p.n_star, p.d0, tone)
         off = np.stack([self._unit_values(p.n_star, p.d0, (tone + j) % k) for j in range(1, k)])
         if refined.coherence.measured >= test.fraction * reverberation_coherence(on, off.T):
             return True
         coherence, tone_coherence = refined.coherence.fraction, refined.tone_coherence.fraction
         return False if is_diffuse(coherence, tone_coherence, test.fraction) else None
+
+    def _term_tone(self, codeword: int) -> NDArray[np.int64]:
+        """The tones of ``codeword``'s M terms (term m is hop ``codeword − m``), shape
+        ``(M,)``: the same every code period, so made once per codeword."""
+        tone = self._term_tones.get(codeword)
+        if tone is None:
+            m = self._fe.m_hops
+            hops = self._fe.schedule.hops(codeword - m + 1, m)
+            tone = np.ascontiguousarray(hops.tone_index[::-1], dtype=np.int64)
+            self._term_tones[codeword] = tone
+        return tone
 
     def _edge_side(self, d0: int) -> int:
         """+1 for the span's closing edge hypothesis, −1 for its opening one, else 0."""
