@@ -13,7 +13,8 @@ estimates go to stdout); exit status 1 when they differ. A recording whose write
 holds the live estimates up to its last flush: equal as far as they go is not a difference.
 Each estimate carries its ``track_id`` as live; a recording made before track ids were kept
 (all −1) is compared without them. An echo seen beyond the Doppler span is said once per
-side after the estimates, as ``hil estimate`` says it.
+side after the estimates, and what the receiver refused instead of reporting in a
+``refused: …`` line, as ``hil estimate`` says them.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from hil.cli.estimate import _parse_option, _Sink, check_option_kinds, check_outputs
+from hil.estimation.base import refusal_text
 from hil.estimation.registry import RECEIVERS
 from hil.estimation.track_summary import track_figures, track_lines
 from hil.recording import RunRecording, compare_estimates, replay
@@ -80,7 +82,11 @@ def run(args: argparse.Namespace) -> int:
         if live is not None and args.receiver in (None, live.name):
             check_option_kinds(overrides, dict(live.settings))
         notices: list[Any] = []
-        estimates = replay(rec, args.receiver, channel=args.channel, notices=notices, **overrides)
+        refusals: dict[str, int] = {}
+        estimates = replay(
+            rec, args.receiver, channel=args.channel, notices=notices, refusals=refusals,
+            **overrides,
+        )  # fmt: skip
         recorded = rec.estimates(live.name) if live is not None else []
         track_ids = rec.has_track_ids
     sink = _Sink(args)
@@ -96,11 +102,13 @@ def run(args: argparse.Namespace) -> int:
     if to_stdout:
         print(f"{len(estimates)} estimates from {args.run} ({name})")
         print("\n".join(track_lines(track_figures(estimates))))
+    status = 0
     same_as_live = live is not None and args.receiver in (None, live.name)
     if same_as_live and not overrides and args.channel is None:
         agreement, text = compare_estimates(recorded, estimates, track_ids=track_ids)
         verdict = {"equal": "replay equals live", "prefix": "replay matches live"}
         print(f"{verdict.get(agreement, 'replay DIFFERS from live')}: {text}", file=report)
-        if agreement == "differ":
-            return EXIT_DIFFERS
-    return 0
+        status = EXIT_DIFFERS if agreement == "differ" else 0
+    if text := refusal_text(refusals):
+        print(text, file=sys.stdout if to_stdout else sys.stderr)
+    return status

@@ -16,7 +16,7 @@ from typing import Any, Literal
 
 from hil.acquisition.feed import ReceiverFeed
 from hil.errors import ConfigError
-from hil.estimation.base import Estimate, Receiver
+from hil.estimation.base import CountsRefusals, Estimate, Receiver
 from hil.estimation.registry import RECEIVERS, make_receiver
 from hil.estimation.tracking import (
     TrackedReceiver,
@@ -103,6 +103,7 @@ def replay(
     block_frames: int = REPLAY_BLOCK_FRAMES,
     hooks: dict[str, Any] | None = None,
     notices: list[Any] | None = None,
+    refusals: dict[str, int] | None = None,
     **overrides: Any,
 ) -> list[Estimate]:
     """Run a receiver over the recorded samples and return its estimates.
@@ -112,7 +113,10 @@ def replay(
     (``m_hops=12``, ``n_doppler=64``, ...); ``hooks`` are callbacks given to the receiver
     (GCAS's ``on_map``: its time-codeword map, as live). ``notices``, when given, is extended
     with the echoes the receiver saw beyond its Doppler span (GCAS's ``beyond_span``:
-    :class:`~hil.estimation.gcas.beyond_span.BeyondSpan`, the first per side).
+    :class:`~hil.estimation.gcas.beyond_span.BeyondSpan`, the first per side); ``refusals``,
+    when given, is updated with what the receiver refused instead of reporting, by reason
+    (:class:`~hil.estimation.base.CountsRefusals`; left empty for a receiver that does not
+    count them).
     """
     if not isinstance(recording, RunRecording):
         with RunRecording.open(recording) as rec:
@@ -123,6 +127,7 @@ def replay(
                 block_frames=block_frames,
                 hooks=hooks,
                 notices=notices,
+                refusals=refusals,
                 **overrides,
             )
     setup = replay_setup(recording, receiver_name, channel, **overrides)
@@ -136,6 +141,8 @@ def replay(
     out.extend(feed.finish())
     if notices is not None:
         notices.extend(getattr(receiver, "beyond_span", []))
+    if refusals is not None and isinstance(receiver, CountsRefusals):
+        refusals.update(receiver.refusals())
     return out
 
 

@@ -196,10 +196,12 @@ def test_cli_replays_the_live_receiver_and_checks_it(
     out, err = capsys.readouterr()
     rows = [json.loads(line) for line in out.splitlines()]
     assert rows == [json.loads(json.dumps(e.to_dict())) for e in live]
+    verdict, refused = err.splitlines()
     assert (
-        err
-        == f"replay equals live: all {len(live)} replayed estimates equal the recorded live ones\n"
+        verdict
+        == f"replay equals live: all {len(live)} replayed estimates equal the recorded live ones"
     )
+    assert refused.startswith("refused: ")
 
 
 def test_cli_another_receiver_to_csv(
@@ -457,3 +459,6 @@ def test_cli_replay_lists_the_tracks(live_run: Any, capsys: pytest.CaptureFixtur
     )
     assert lines[2].startswith("track 1: 1 estimates") and lines[3].startswith("track 2: 2 ")
     assert lines[4] == "6 estimates on no confirmed track"
+    # Then the verdict, and what GCAS refused instead of reporting (as hil estimate says it).
+    assert lines[5].startswith("replay equals live")
+    assert lines[6].startswith("refused: ") and "not one echo of the schedule" in lines[6]
