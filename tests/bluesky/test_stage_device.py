@@ -240,9 +240,12 @@ def test_a_move_past_its_timeout_holds_the_stage_and_fails_saying_so(run_engine:
         await stage.connect()
         await stage.speed.set(SPEED_MPS)
         clock.gate_s = clock.now() + 2.0
-        # The gate holds the move at 2 s until the timeout's feed hold releases it.
-        with pytest.raises(TimeoutError, match=r"did not end within its timeout 0.01 s"):
-            await stage.set(-0.05, timeout=0.01)
+        # The gate holds the move at 2 s until the timeout's feed hold releases it. set()'s
+        # timeout is the device's own, on the event loop's (wall) clock: it must outlast the
+        # move's run to the gate on the simulated clock (a few ms of CPU; 1 s leaves room
+        # for a starved machine, where 0.01 s let the hold land before the gate).
+        with pytest.raises(TimeoutError, match=r"did not end within its timeout 1 s"):
+            await stage.set(-0.05, timeout=1.0)
         return (await stage.read())["stage"]["value"]
 
     position = call_in_bluesky_event_loop(scenario())
