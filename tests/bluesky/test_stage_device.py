@@ -243,7 +243,7 @@ def test_a_move_past_its_timeout_holds_the_stage_and_fails_saying_so(run_engine:
         # The gate holds the move at 2 s until the timeout's feed hold releases it. set()'s
         # timeout is the device's own, on the event loop's (wall) clock: it must outlast the
         # move's run to the gate on the simulated clock (a few ms of CPU; 1 s leaves room
-        # for a starved machine, where 0.01 s let the hold land before the gate).
+        # for a starved machine: a timeout that expires before the gate holds it early).
         with pytest.raises(TimeoutError, match=r"did not end within its timeout 1 s"):
             await stage.set(-0.05, timeout=1.0)
         return (await stage.read())["stage"]["value"]
