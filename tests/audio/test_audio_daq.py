@@ -78,6 +78,9 @@ def test_start_plays_the_source_and_read_returns_the_loopback_exactly() -> None:
         assert daq.start(source) == 0
         assert daq.wait_for_samples(n + 512, timeout_s=5.0)
         got = daq.read(0, n + 512)
+        # The stream ends by itself at the block whose source call ends it (stop() before
+        # then would end it after the current block instead).
+        assert daq.backend.wait(timeout_s=5.0)
     # The source was asked for consecutive blocks from stream index 0.
     assert source.calls == [(k, 64) for k in range(0, n + 512, 64)]
     latency = 128 + 5  # io delay + cable
