@@ -62,10 +62,13 @@ of the window, half a window before the boundary. Where a fit's coherence shows 
 at its own centre), fitted from a grid of rates and kept where the likelihood rises by
 :data:`ACCEL_GAIN` (a generalised likelihood ratio test of one more parameter): the estimate
 is then the boundary's own time and speed, with the acceleration (:attr:`Refinement.
-accel_mps2`), and the next detections of that echo start from the curve. Below about
-1.5 m/s² at M = 10 on ``att`` the drift stays within the coherence of one echo and the speed
-lags by ``a M T_h / 2`` (at most 0.075 m/s); above about 12 m/s² some hops' runs lose their
-coherence too and those detections are refused.
+accel_mps2`), and the next detections of that echo start from the curve. Over more than
+:data:`SUB_HOPS` hops the rates' curves pass through a constant-speed fit of the last of
+them (the curvature grows as ``M²``: at M = 29 and 4 m/s² it is 10 rad at the ends, and the
+fit of all M hops at one speed is nowhere near the echo). Below about 1.5 m/s² at M = 10 on
+``att`` (about 6 m/s² at M = 5) the drift stays within the coherence of one echo and the
+speed lags by ``a M T_h / 2`` (at most 0.075 m/s); above about 12 m/s² at M = 10 some hops'
+runs lose their coherence too and those detections are refused.
 
 Limits: one echo. Through multipath a fraction of a millisecond long (a tank's images) the
 maximum sits between the arrivals and the fit is not one echo (tanks read the first arrival
@@ -625,8 +628,9 @@ class CoherentRefiner:
     ) -> Refinement:  # fmt: skip
         """``fit`` (constant speed, its maximum found) fitted again with a changing time scale
         (:data:`ACCEL_TRY`): the rate's grid at the fit's delay and time scale (those of the
-        hops' centre: the curvature is even about it) on the fit's grating lobe and its two
-        neighbours; from each of the :data:`ACCEL_STARTS` best local maxima, the delay–speed
+        hops' centre: the curvature is even about it; over more than :data:`SUB_HOPS` hops,
+        each rate's curve through the fit of the last of them) on the fit's grating lobe and
+        its two neighbours; from each of the :data:`ACCEL_STARTS` best local maxima, the delay–speed
         fit and a parabola in the rate, :data:`ACCEL_ROUNDS` times. The best accelerating fit
         where it raises the likelihood by :data:`ACCEL_GAIN`, else ``fit``; its time and time
         scale are the boundary's."""
@@ -636,11 +640,28 @@ class CoherentRefiner:
         args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
         gammas = self._gammas
         n = gammas.shape[0]
+        # Each rate's curve through a point of the echo: the fit's own (the hops' centre)
+        # or, over more than SUB_HOPS hops (where the curvature, growing as M², leaves the
+        # constant-speed fit of all M hops nowhere near the echo), a constant-speed fit of
+        # the last SUB_HOPS hops, whose line is the curve's tangent at their centre.
+        t_c = np.full(n, fit.t_s)
+        a_c = np.full(n, fit.alpha)
+        if self.sub_hops < self.m_hops:
+            sub = self._sub_word(int(hop_ids[-1]))
+            grid = (0.5 * lobe, self.speed_span_mps, TIME_POINTS, self.sub_speed_points)
+            v = fit.speed_mps(self.c)
+            searched = self._search(sub, hop_ids[-self.sub_hops :], fit.t_s, v, lobe, known, grid)
+            if searched is None or searched[2] != FOUND:
+                return fit
+            t_sub, a_sub = searched[0], (self.c + searched[1]) / (self.c - searched[1])
+            for i, g in enumerate(gammas):
+                a_b = a_sub - float(g) * sub.centre_s / a_sub
+                t_c[i], a_c[i] = _to_centre(t_sub, a_b, float(g), word.centre_s)
         # Over the M hops the rate's phase (even about the centre) can alias with the
         # delay's and time scale's (odd) at another grating lobe or rate: several starts.
-        lobes = fit.t_s + lobe * np.array([-1.0, 0.0, 1.0])
+        shifts = lobe * np.array([-1.0, 0.0, 1.0])
         power = self._powers(
-            args, known, np.repeat(lobes, n), np.full(3 * n, fit.alpha), np.tile(gammas, 3)
+            args, known, (shifts[:, None] + t_c).ravel(), np.tile(a_c, 3), np.tile(gammas, 3)
         ).reshape(3, n)
         inner = power[:, 1:-1]
         peak = (inner > power[:, :-2]) & (inner >= power[:, 2:])
@@ -648,7 +669,8 @@ class CoherentRefiner:
         order = np.argsort(-inner[rows, cols])[:ACCEL_STARTS]
         best: tuple[float, float, float, float] | None = None
         for r, c in zip(rows[order], cols[order] + 1, strict=True):
-            found = self._accel_fit(args, known, float(lobes[r]), fit.alpha, float(gammas[c]), lobe)
+            t0, a0, g0 = float(t_c[c] + shifts[r]), float(a_c[c]), float(gammas[c])
+            found = self._accel_fit(args, known, t0, a0, g0, lobe)
             if found is not None and (best is None or found[3] > best[3]):
                 best = found
         if best is None:
