@@ -128,7 +128,7 @@ def test_a_braking_target_is_kept_and_ranged(decel: float, min_count: int) -> No
 def test_a_braking_target_over_a_long_window_is_read_at_its_boundary() -> None:
     # M = 29 at 4 m/s²: the curvature over the window is 10 rad at its ends, so the rates'
     # curves start from a constant-speed fit of the last 10 hops. Measured (seed 1): 40 of
-    # 71 boundaries, range RMSE 0.3 mm, speed bias -0.1 mm/s, RMS 1.2 mm/s (none before).
+    # 71 boundaries, range RMSE 0.3 mm, speed bias -0.1 mm/s, RMS 1.2 mm/s.
     est, truth = _braking(4.0, m_hops=29)
     assert len(est) >= 35
     dr = np.array([e.range_m - truth[e.hop_index + 1].range_m for e in est])
