@@ -634,10 +634,6 @@ class CoherentRefiner:
         fit and a parabola in the rate, :data:`ACCEL_ROUNDS` times. The best accelerating fit
         where it raises the likelihood by :data:`ACCEL_GAIN`, else ``fit``; its time and time
         scale are the boundary's."""
-        slots = self._slots(hop_ids, word, fit.t_s, fit.alpha)
-        if slots is None:
-            return fit
-        args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
         gammas = self._gammas
         n = gammas.shape[0]
         # Each rate's curve through a point of the echo: the fit's own (the hops' centre)
@@ -657,6 +653,11 @@ class CoherentRefiner:
             for i, g in enumerate(gammas):
                 a_b = a_sub - float(g) * sub.centre_s / a_sub
                 t_c[i], a_c[i] = _to_centre(t_sub, a_b, float(g), word.centre_s)
+        # The M hops' tables after the fewer hops' search, whose fills may take slots.
+        slots = self._slots(hop_ids, word, fit.t_s, fit.alpha)
+        if slots is None:
+            return fit
+        args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
         # Over the M hops the rate's phase (even about the centre) can alias with the
         # delay's and time scale's (odd) at another grating lobe or rate: several starts.
         shifts = lobe * np.array([-1.0, 0.0, 1.0])
