@@ -79,7 +79,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -147,8 +147,14 @@ SAME_ECHO_LOBES = 1.5
 #: that align with the echo's hops change along the comb and its ghost peak spreads (measured
 #: 0.02-0.50 hop at M = 15, over ±0.3 hop at M = 22, anywhere in the hop at M = 29).
 GHOST_HOPS = 0.25
-#: Lobe checks after a search (each may move the fit by one grating lobe).
-LOBE_MOVES = 2
+#: Times across ±½ grating lobe at which a detection's strength is read against the echo
+#: whose ghost it may be (:meth:`CoherentRefiner._amplitude_near`): the likelihood's main
+#: peak is ``1/B`` wide (``B`` the tones' span), a lobe holds about K of them (att: 4).
+GHOST_POINTS = 9
+#: Lobe checks after a search (each may move the fit by one grating lobe; they stop where
+#: neither neighbour is better): a detector's time can be several lobes off at an echo's
+#: first boundary (att three-state, full search: 2.75 lobes, 1.8 ms).
+LOBE_MOVES = 4
 #: ``known`` rows of no other echo.
 _NO_KNOWN = np.zeros((5, 0), dtype=np.complex128)
 #: Accelerating echoes (:meth:`CoherentRefiner._with_acceleration`): a fit whose coherence
@@ -187,6 +193,9 @@ class _EchoFit:
     amplitude: complex
     #: The time scale's rate, 1/s (an accelerating fit's; 0 for a constant speed).
     rate: float = 0.0
+    #: Whether a detection where this echo's ghost peaks was found weaker than it (then the
+    #: echo's later ghosts are refused without reading their strength again).
+    ghosts_weaker: bool = False
 
     def speed(self, sound_speed_mps: float) -> float:
         """Radial speed, m/s (closing positive)."""
@@ -428,37 +437,75 @@ class CoherentRefiner:
             self._remember(fit, hop_index)
         return fit
 
-    def ghost_of_known(self, t_s: float, alpha: float) -> bool:
-        """Whether a detection at ``t_s`` (s) and time scale ``alpha`` is the ghost of an echo
-        measured lately, where that echo's every tone is read as its neighbour: one tone
-        spacing's speed away from it (within one Doppler resolution cell) and where its comb
-        peaks, ``(M − 1)/2`` hops of the two time scales' drift after one of the echo's
-        boundaries (within :data:`GHOST_HOPS`). Such a detection is refused without a fit; a
+    def ghost_of_known(self, t_s: float, alpha: float, hop_index: int) -> bool:
+        """Whether a detection at ``t_s`` (s) and time scale ``alpha``, the boundary ending
+        hop ``hop_index``, is the ghost of an echo measured lately, where that echo's every
+        tone is read as its neighbour: one tone spacing's speed away from it (within one
+        Doppler resolution cell), where its comb peaks, ``(M − 1)/2`` hops of the two time
+        scales' drift after one of the echo's boundaries (within :data:`GHOST_HOPS`), and
+        weaker than it (a ghost collects part of its echo's energy: a detection stronger than
+        the measured echo is that echo's source, the measured one its ghost, as when a weak
+        ghost passed the echo test first). Such a detection is refused without a fit; a
         second echo exactly there is given up."""
         speed = self.c * (alpha - 1.0) / (alpha + 1.0)
-        for e in self._echoes:
+        amplitude: float | None = None
+        for i, e in enumerate(self._echoes):
             if abs(abs(speed - e.speed(self.c)) - self._ghost_speed) > self._cell_speed:
                 continue
             period = self.hop_len_s / e.alpha
             drift = 0.5 * (self.m_hops - 1) * (e.alpha / alpha - 1.0)  # hops
             k = round((t_s - e.t_s) / period - drift)
             spread = 2.0 * abs(drift)  # hops between the first and the last term's offsets
-            if abs((t_s - e.t_s) / period - drift - k) <= GHOST_HOPS + max(0.0, spread - 0.5) / 2:
+            if abs((t_s - e.t_s) / period - drift - k) > GHOST_HOPS + max(0.0, spread - 0.5) / 2:
+                continue
+            if e.ghosts_weaker:
+                return True
+            if amplitude is None:
+                amplitude = self._amplitude_near(t_s, alpha, hop_index)
+            if amplitude <= abs(e.amplitude):
+                self._echoes[i] = replace(e, ghosts_weaker=True)
                 return True
         return False
 
+    def _amplitude_near(self, t_s: float, alpha: float, hop_index: int) -> float:
+        """The largest fitted amplitude ``|β| = 2|C|/E_s`` of an echo of constant speed
+        within ±½ grating lobe of ``t_s`` (s, :data:`GHOST_POINTS` times) at the detection's
+        time scale ``alpha``: a detection's strength without its fit (0 where the input does
+        not cover its hops)."""
+        lobe = 1.0 / (alpha * self.spacing_hz)
+        t = t_s + lobe * np.linspace(-0.5, 0.5, GHOST_POINTS)
+        word = self._codeword(hop_index)
+        hop_ids = np.arange(hop_index - self.m_hops + 1, hop_index + 1, dtype=np.int64)
+        slots = self._slots(hop_ids, word, t_s, alpha)
+        if slots is None:
+            return 0.0
+        args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
+        n = t.size
+        c, e_s, signal = np.empty(n, np.complex128), np.empty(n), np.empty(n)
+        candidate_sums(
+            *args, t, np.full(n, alpha), np.zeros(n), c, e_s, signal,
+            np.empty((n, 0), np.complex128), _NO_KNOWN,
+        )  # fmt: skip
+        ok = e_s > 0
+        return float(np.max(2.0 * np.abs(c[ok]) / e_s[ok])) if ok.any() else 0.0
+
     def _remember(self, fit: Refinement, hop_index: int) -> None:
         """Keep ``fit`` as its echo's latest (with its fitted amplitude ``β = 2C/E_s``),
-        replacing that echo's earlier fit and forgetting fits :data:`KNOWN_HOPS` hops old."""
+        replacing that echo's earlier fit (whose finding that its ghosts are weaker it
+        carries on) and forgetting fits :data:`KNOWN_HOPS` hops old."""
         if fit.amplitude == 0:
             return
         new = _EchoFit(hop_index, fit.t_s, fit.alpha, fit.amplitude, fit.rate(self.c))
         oldest = fit.t_s - KNOWN_HOPS * self.hop_len_s
-        self._echoes = [
-            e for e in self._echoes
-            if e.t_s >= oldest and not self._same_echo(e, hop_index, fit.t_s, new.speed(self.c))
-        ]  # fmt: skip
-        self._echoes.append(new)
+        kept = []
+        for e in self._echoes:
+            if e.t_s < oldest:
+                continue
+            if self._same_echo(e, hop_index, fit.t_s, new.speed(self.c)):
+                new = replace(new, ghosts_weaker=e.ghosts_weaker or new.ghosts_weaker)
+            else:
+                kept.append(e)
+        self._echoes = [*kept, new]
 
     def _same_echo(self, fit: _EchoFit, hop_index: int, t_s: float, speed: float) -> bool:
         """Whether a detection at ``t_s`` (s) ending hop ``hop_index`` at ``speed`` (m/s) is

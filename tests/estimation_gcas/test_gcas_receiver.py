@@ -229,17 +229,10 @@ def test_estimate_latency_is_within_one_hop(rc_schedule: HopSchedule) -> None:
 @pytest.mark.parametrize("family", ["three-state", "random-cyclic"])
 @pytest.mark.parametrize("preset", ["att", "tank-audio", "tank-board"])
 @pytest.mark.filterwarnings("error")
-def test_every_preset_and_family(
-    preset: str, family: str, search: str, request: pytest.FixtureRequest
-) -> None:
-    if family == "three-state" and preset == "att" and search == "full":
-        request.applymarker(
-            pytest.mark.xfail(
-                reason="known defect of the full search: isolated 1-2 m outliers "
-                "(neighbouring-codeword picks) for the three-state code at M = 8",
-                strict=True,
-            )
-        )
+def test_every_preset_and_family(preset: str, family: str, search: str) -> None:
+    # att three-state with the full search: its first detection's time was 2.75 grating lobes
+    # (1.8 ms) late, and the refinement's lobe checks moved it by two lobes at most, leaving
+    # a 0.51 m outlier; they move on while a neighbouring lobe is better (LOBE_MOVES).
     spec = get_preset(preset).spec(family)
     schedule = check_design(spec)
     c, vmax = spec.sound_speed_mps, spec.max_speed_mps

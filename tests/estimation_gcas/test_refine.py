@@ -275,6 +275,34 @@ def test_after_a_gap_every_estimate_is_refined_on_samples_after_it() -> None:
     assert refiner.refine(first.t_s - 0.05, first.alpha, first.hop_index - 5) is None
 
 
+@pytest.mark.parametrize(("scale", "ghost"), [(0.2, False), (5.0, True)])
+def test_a_detection_is_the_ghost_of_a_measured_echo_only_where_it_is_weaker(
+    scale: float, ghost: bool
+) -> None:
+    # A measured echo one tone spacing's speed beyond the target, where its comb would put
+    # the target's detection as its ghost: five times the target's amplitude, the detection
+    # is its ghost; a fifth of it, the measured echo is the ghost (a weak ghost fit that
+    # passed the echo test first) and the detection is kept.
+    schedule = att_schedule()
+    x = echo_samples(schedule, R0, V0, 0.6, snr_db=0.0, seed=6)
+    first = run_blocks(make_gcas(schedule), x)[12]
+    refiner = CoherentRefiner(schedule, FS, 10, C, 0.5, 30.0)
+    refiner.push(x, 0)
+    fit = refiner.refine(first.t_s, first.alpha, first.hop_index)
+    assert fit is not None and fit.is_echo(refiner.echo_test)
+    refiner.reset(0)
+    refiner.push(x, 0)
+    v_ghost = V0 - refiner._ghost_speed
+    a_ghost = (C + v_ghost) / (C - v_ghost)
+    drift = 0.5 * (10 - 1) * (a_ghost / first.alpha - 1.0)  # hops
+    t_ghost = first.t_s - drift * refiner.hop_len_s / a_ghost
+    known = refine_module._EchoFit(first.hop_index, t_ghost, a_ghost, scale * fit.amplitude)
+    refiner._echoes = [known]
+    assert refiner.ghost_of_known(first.t_s, first.alpha, first.hop_index) is ghost
+    # Found weaker once, the echo's later ghosts are refused without reading them again.
+    assert refiner._echoes[0].ghosts_weaker is ghost
+
+
 def test_refine_must_be_a_bool() -> None:
     with pytest.raises(ConfigError, match=r"refine = 'yes' is not allowed: must be true or false"):
         GcasReceiver(

@@ -203,7 +203,7 @@ class Readout:
         hop_index = p.codeword + q * fe.n_codewords
         bound = None
         if self._refiner is not None:
-            if self._refiner.ghost_of_known(t_rx, alpha):
+            if self._refiner.ghost_of_known(t_rx, alpha, hop_index):
                 self.incoherent_count += 1
                 return None
             refined = self._refiner.refine(t_rx, alpha, hop_index)
