@@ -22,6 +22,11 @@ once per side (closing, opening) when it first sees one
 span was seen (closing) at t = … s (hop …)`` in the table, a JSON line
 ``{"notice": "beyond_span", "t_s", "hop_index", "side", "max_speed_mps", "speed_mps"}`` with
 ``--json`` (no estimate line has a ``notice`` key), a warning on stderr with ``--csv``.
+Clutter is said the same way (:mod:`hil.estimation.gcas.clutter_seen`; the reverberation
+band off): ``note: diffuse reverberation (clutter) at 2.46 m at t = … s (hop …): counted as
+clutter, not reported as a target``, or ``{"notice": "clutter", "t_s", "hop_index",
+"range_m", "speed_mps"}``, the first time at each range (again only more than 1 m from every
+range said).
 
 What GCAS refused instead of reporting is said at the end, by reason
 (:data:`hil.estimation.base.REFUSAL_REASONS`: not one echo of the schedule — ghosts and
@@ -40,7 +45,7 @@ import json
 import logging
 import math
 import sys
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -48,7 +53,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hil.errors import ConfigError
-from hil.estimation.base import ESTIMATE_FIELDS, CountsRefusals, Estimate, refusal_text
+from hil.estimation.base import (
+    ESTIMATE_FIELDS,
+    CountsRefusals,
+    Estimate,
+    Notice,
+    SaysNotices,
+    refusal_text,
+)
 from hil.estimation.registry import RECEIVERS
 from hil.estimation.track_summary import track_figures, track_lines
 from hil.recording.records import ReceiverSetup
@@ -328,12 +340,15 @@ def run(args: argparse.Namespace) -> int:
     receiver = build_receiver(ReceiverSetup(args.receiver, settings), schedule, fs, **hooks)
     blocks = _check_schedule(args, blocks, schedule, fs, c)
     sink = _Sink(args)
+    says = receiver if isinstance(receiver, SaysNotices) else None
     try:
         for x in blocks:
             sink.emit(receiver.process(x))
-            sink.notices(getattr(receiver, "beyond_span", []))
+            if says is not None:
+                sink.notices(says.notices())
         sink.emit(receiver.flush())
-        sink.notices(getattr(receiver, "beyond_span", []))
+        if says is not None:
+            sink.notices(says.notices())
     finally:
         sink.close()
     if clip.count:
@@ -395,7 +410,7 @@ class _Sink:
         self.json = bool(args.json)
         self.table = not args.json and args.csv is None
         self.count = 0
-        self._said = 0  # beyond-span sightings said so far
+        self._said = 0  # notices said so far
         self.kept: list[Estimate] = []  # for the per-track lines of the plain listing
         self._keep = not self.json and args.csv is None
         self._csv_file: TextIO | None = None
@@ -427,11 +442,11 @@ class _Sink:
         if self.json or self.table:
             sys.stdout.flush()
 
-    def notices(self, sightings: list[Any]) -> None:
-        """Say once each echo the receiver saw beyond its Doppler span (``sightings``, all
-        so far: GCAS's ``beyond_span``, :mod:`hil.estimation.gcas.beyond_span`): a JSON line
-        ``{"notice": "beyond_span", ...}`` with ``--json``, a ``note:`` line in the table, a
-        warning on stderr with ``--csv``."""
+    def notices(self, sightings: Sequence[Notice]) -> None:
+        """Say once each notice of the receiver (``sightings``, all so far,
+        :class:`~hil.estimation.base.SaysNotices`: an echo beyond the Doppler span, clutter):
+        a JSON line ``{"notice": "beyond_span" | "clutter", ...}`` with ``--json``, a
+        ``note:`` line in the table, a warning on stderr with ``--csv``."""
         for sighting in sightings[self._said :]:
             self._said += 1
             if self.json:

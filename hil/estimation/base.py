@@ -10,6 +10,7 @@ whole signal.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from typing import Any, Protocol, runtime_checkable
 
@@ -176,6 +177,29 @@ class CountsRefusals(Protocol):
     def refusals(self) -> dict[str, int]:
         """Detections refused since the last reset, by reason (keys of
         :data:`REFUSAL_REASONS`; every key present, 0 for none)."""
+        ...
+
+
+class Notice(Protocol):
+    """Something a receiver says of what it refused (an echo beyond its Doppler span,
+    clutter): when (``t_s``, s of input time, the detection's boundary), a line for a person
+    and JSON-ready fields with a ``"notice"`` key."""
+
+    @property
+    def t_s(self) -> float: ...
+
+    def text(self) -> str: ...
+
+    def to_dict(self) -> dict[str, object]: ...
+
+
+@runtime_checkable
+class SaysNotices(Protocol):
+    """A receiver that says what it refused, beside counting it (GCAS with its refinement:
+    :mod:`hil.estimation.gcas.beyond_span`, :mod:`hil.estimation.gcas.clutter_seen`)."""
+
+    def notices(self) -> Sequence[Notice]:
+        """The notices since the last reset, in the order seen."""
         ...
 
 

@@ -15,6 +15,7 @@ import numpy as np
 
 from hil.acquisition.annotations import ADC_CLIPPING_TEXT
 from hil.estimation.gcas.beyond_span import BEYOND_SPAN_TEXT
+from hil.estimation.gcas.clutter_seen import CLUTTER_TEXT
 from hil.estimation.track_summary import track_figures
 from hil.experiments.run_calibrations import true_stage_motion
 from hil.experiments.tank_run import STAGE_POLL_S, TELEMETRY_MAX_REPLY_S, RunOutcome
@@ -325,6 +326,11 @@ def summarize(outcome: RunOutcome) -> dict[str, Any]:
         # not reported): the recording's note of it, once per side.
         "beyond_span_notices": [
             text for _, _, _, text in outcome.events if text.startswith(BEYOND_SPAN_TEXT)
+        ],
+        # Where the receiver refused clutter (diffuse reverberation, the band off): the
+        # recording's notes of it, once per range (hil.estimation.gcas.clutter_seen).
+        "clutter_notices": [
+            text for _, _, _, text in outcome.events if text.startswith(CLUTTER_TEXT)
         ],
         "interrupted": outcome.interrupted,
         "error": outcome.error,

@@ -16,7 +16,7 @@ from typing import Any, Literal
 
 from hil.acquisition.feed import ReceiverFeed
 from hil.errors import ConfigError
-from hil.estimation.base import CountsRefusals, Estimate, Receiver
+from hil.estimation.base import CountsRefusals, Estimate, Receiver, SaysNotices
 from hil.estimation.registry import RECEIVERS, make_receiver
 from hil.estimation.tracking import (
     TrackedReceiver,
@@ -112,8 +112,8 @@ def replay(
     them the result equals the live estimates exactly. ``overrides`` are receiver settings
     (``m_hops=12``, ``n_doppler=64``, ...); ``hooks`` are callbacks given to the receiver
     (GCAS's ``on_map``: its time-codeword map, as live). ``notices``, when given, is extended
-    with the echoes the receiver saw beyond its Doppler span (GCAS's ``beyond_span``:
-    :class:`~hil.estimation.gcas.beyond_span.BeyondSpan`, the first per side); ``refusals``,
+    with what the receiver said of what it refused (:class:`~hil.estimation.base.SaysNotices`:
+    GCAS's echoes beyond its Doppler span, the first per side, and its clutter); ``refusals``,
     when given, is updated with what the receiver refused instead of reporting, by reason
     (:class:`~hil.estimation.base.CountsRefusals`; left empty for a receiver that does not
     count them).
@@ -139,8 +139,8 @@ def replay(
     for block in recording.iter_blocks(block_frames):
         out.extend(feed.feed(block.first_index, block.data))
     out.extend(feed.finish())
-    if notices is not None:
-        notices.extend(getattr(receiver, "beyond_span", []))
+    if notices is not None and isinstance(receiver, SaysNotices):
+        notices.extend(receiver.notices())
     if refusals is not None and isinstance(receiver, CountsRefusals):
         refusals.update(receiver.refusals())
     return out

@@ -384,3 +384,17 @@ def test_the_summary_lists_the_receivers_notices_of_an_echo_beyond_the_span() ->
         "it is refused, not reported: raise --max-speed to measure it"
     )
     assert summarize(_outcome(T_TEL, KS))["beyond_span_notices"] == []
+
+
+def test_the_summary_lists_the_receivers_notices_of_clutter() -> None:
+    from hil.estimation.gcas.beyond_span import CLOSING, BeyondSpan
+    from hil.estimation.gcas.clutter_seen import ClutterSeen
+
+    near = ClutterSeen(0.1135, 10, 2.634, 0.02).text()
+    far = ClutterSeen(0.2415, 23, 1.14, -0.01).text()
+    beyond = BeyondSpan(0.1085, 3, CLOSING, 3.0, 3.6).text()
+    events = [("note", 108, 0, beyond), ("note", 113, 0, near), ("note", 241, 0, far)]
+    summary = summarize(dataclasses.replace(_outcome(T_TEL, KS), events=events))
+    assert summary["clutter_notices"] == [near, far]
+    assert summary["beyond_span_notices"] == [beyond] and summary["events"] == 3
+    assert summarize(_outcome(T_TEL, KS))["clutter_notices"] == []

@@ -29,7 +29,8 @@ from hil.estimation.base import Estimate
 from hil.estimation.detection import parabolic_offset
 from hil.estimation.doppler_grid import alpha_to_speed, speed_to_alpha
 from hil.estimation.first_arrival import FirstArrivalReadout
-from hil.estimation.gcas.beyond_span import BeyondSpanCheck
+from hil.estimation.gcas.beyond_span import BeyondSpan, BeyondSpanCheck
+from hil.estimation.gcas.clutter_seen import ClutterLog, ClutterSeen
 from hil.estimation.gcas.front_end import FrontEnd
 from hil.estimation.gcas.threshold import Peak
 from hil.estimation.refine import CoherentRefiner, EchoTest, Refinement
@@ -144,6 +145,8 @@ class Readout:
         self._receiver = receiver
         #: The check for an echo beyond the Doppler span (with the refinement).
         self.beyond_span = beyond_span
+        #: Where clutter was refused (:mod:`hil.estimation.gcas.clutter_seen`).
+        self.clutter_seen = ClutterLog()
         self.reset()
 
     def reset(self) -> None:
@@ -166,6 +169,10 @@ class Readout:
         self.last_detection: DetectionInfo | None = None
         if self.beyond_span is not None:
             self.beyond_span.reset()
+        self.clutter_seen.reset()
+        #: What the receiver says of what it refused (beyond the span, clutter), in the
+        #: order seen.
+        self.notices: list[BeyondSpan | ClutterSeen] = []
 
     def restart(self) -> None:
         """Forget the previous hop (a gap: consistency restarts with the next detection)."""
@@ -213,12 +220,16 @@ class Readout:
             if self.beyond_span is not None and self.beyond_span.check(
                 t_rx, alpha, hop_index, self._edge_side(p.d0), refined
             ):
+                said = self.beyond_span.sightings
+                if said and said[-1] not in self.notices:
+                    self.notices.append(said[-1])
                 return None
             if not refined.is_echo(ECHO_TEST):
                 verdict = self._in_reverberation(p, refined)
                 if verdict is not True:
                     if verdict is False:
                         self.clutter_count += 1
+                        self._say_clutter(refined, t_tx, hop_index)
                     else:
                         self.incoherent_count += 1
                     return None
@@ -251,6 +262,19 @@ class Readout:
             crlb_range_m=math.nan if bound is None else bound.sigma_range_m,
             crlb_speed_mps=math.nan if bound is None else bound.sigma_speed_mps,
         )
+
+    def _say_clutter(self, fit: Refinement, t_tx: float, hop_index: int) -> None:
+        """Note clutter refused at the fit's range (:class:`ClutterLog`), said where no
+        notice so far is near it."""
+        c = self._fe.sound_speed_mps
+        seen = ClutterSeen(
+            t_s=fit.t_s,
+            hop_index=int(hop_index),
+            range_m=c * (fit.t_s - t_tx) / 2.0,
+            speed_mps=float(alpha_to_speed(fit.alpha, c)),
+        )
+        if self.clutter_seen.add(seen):
+            self.notices.append(seen)
 
     def _doppler_offset(self, p: Peak) -> float:
         """The peak's Doppler offset from ``d0`` (grid steps), measured on the tones weighted

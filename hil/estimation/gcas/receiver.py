@@ -13,6 +13,7 @@ from hil.errors import ConfigError
 from hil.estimation.base import Estimate
 from hil.estimation.first_arrival import FirstArrivalReadout
 from hil.estimation.gcas.beyond_span import BeyondSpan, BeyondSpanCheck
+from hil.estimation.gcas.clutter_seen import ClutterSeen
 from hil.estimation.gcas.front_end import FrontEnd
 from hil.estimation.gcas.options import (
     COARSE_STEP,
@@ -298,6 +299,19 @@ class GcasReceiver:
         """Echoes seen beyond the Doppler span since the last reset: the first sighting on
         each side (closing, opening), in the order seen; empty without the refinement."""
         return [] if self._beyond is None else list(self._beyond.sightings)
+
+    @property
+    def clutter_seen(self) -> list[ClutterSeen]:
+        """Where clutter was refused since the last reset: one notice per range more than
+        :data:`~hil.estimation.gcas.clutter_seen.CLUTTER_NOTICE_M` from the others, in the
+        order seen (:mod:`hil.estimation.gcas.clutter_seen`)."""
+        return list(self.readout.clutter_seen.sightings)
+
+    def notices(self) -> list[BeyondSpan | ClutterSeen]:
+        """Everything the receiver says of what it refused since the last reset, in the
+        order seen (:class:`~hil.estimation.base.SaysNotices`): :attr:`beyond_span` and
+        :attr:`clutter_seen`."""
+        return list(self.readout.notices)
 
     @property
     def unmeasured_count(self) -> int:

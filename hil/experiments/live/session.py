@@ -16,7 +16,7 @@ from functools import partial
 
 from hil.acquisition.capture import CapturedBlock, CaptureLoop
 from hil.acquisition.feed import ReceiverFeed
-from hil.estimation.base import Estimate, Receiver
+from hil.estimation.base import Estimate, Receiver, SaysNotices
 from hil.experiments.experiment import Experiment
 from hil.experiments.live.board_state import collect_sync_pairs, sample_zero_time_s
 from hil.experiments.live.devices import RunDevices
@@ -81,8 +81,8 @@ class LiveSession:
         self.tow = TowController(tow, self.stage, timing.tail_s)
         self.telemetry = Telemetry()
         self.estimates: list[Estimate] = []
-        #: Events the receiver gave (an echo beyond its Doppler span, once per side), as
-        #: recorded: ``(kind, board sample index, length, text)``.
+        #: Events the receiver gave (an echo beyond its Doppler span, once per side; clutter,
+        #: once per range), as recorded: ``(kind, board sample index, length, text)``.
         self.notices: list[tuple[str, int, int, str]] = []
         self._origin = 0  # board index of the receiver's sample 0
         self.start_index = 0
@@ -127,9 +127,12 @@ class LiveSession:
         self._say_notices()
 
     def _say_notices(self) -> None:
-        """Each echo the receiver saw beyond its Doppler span, once: a ``note`` event of the
-        recording (logged as its events are) at the detection's board sample."""
-        for seen in getattr(self.receiver, "beyond_span", [])[len(self.notices) :]:
+        """Each notice of the receiver (:class:`~hil.estimation.base.SaysNotices`: an echo
+        beyond its Doppler span, clutter), once: a ``note`` event of the recording (logged as
+        its events are) at the detection's board sample."""
+        if not isinstance(self.receiver, SaysNotices):
+            return
+        for seen in self.receiver.notices()[len(self.notices) :]:
             event = ("note", self._origin + int(round(seen.t_s * self.fs)), 0, seen.text())
             self.notices.append(event)
             self.recorder.events([event])
