@@ -62,7 +62,9 @@ Implementation notes (speed; none changes the approximation above): the trains h
 frequency domain, so there is one inverse FFT per order; the sub-sample phase weights use
 float32 cosines (the phase is at most half a sample at ``f_ref``); the transmit is read by
 :class:`~sim_devices.acoustics.transmit_eval.TransmitEvaluator` (float32, 3e-7 of the
-amplitude). The scatterers near the sonar are culled in cache-sized chunks without
+amplitude); with one Doppler bin (a sonar at rest) the bin's centre is a scalar, not a gathered
+array, and at ``α = 1`` the division and product by it, exact, are left out. The scatterers
+near the sonar are culled in cache-sized chunks without
 per-point arc functions, from a coarse cull (margin five times the fine one) that is redone
 only when the sonar has moved four fine margins; the field keeps only the cubes in use.
 
@@ -526,15 +528,20 @@ class VolumeReverberation:
         width_max = 2.0 * self.phi_budget * self.fs / (math.pi * self.f_ref * nf)
         n_bins = max(1, math.ceil((a_hi - a_lo) / width_max))
         width = (a_hi - a_lo) / n_bins
-        if width > 0:
-            b = np.minimum(((alpha - a_lo) / width).astype(np.int64), n_bins - 1)
-        else:
-            b = np.zeros(alpha.shape, dtype=np.int64)
         centres = a_lo + (np.arange(n_bins) + 0.5) * width
-        alpha_b = centres[b]
-        delay = (t_c - g.emit_s) / alpha_b * self.fs
+        # One bin (a sonar at rest among them): every scatterer has the bin's centre, so a
+        # scalar gives the same elementwise arithmetic as the gathered array, without it.
+        one_bin = n_bins == 1
+        b = np.zeros(0, dtype=np.int64)
+        if not one_bin:
+            b = np.minimum(((alpha - a_lo) / width).astype(np.int64), n_bins - 1)
+        alpha_b = float(centres[0]) if one_bin else centres[b]
+        # Dividing or multiplying by α_b = 1 (a sonar at rest) is exact: skipped.
+        unit = one_bin and alpha_b == 1.0
+        delay = (t_c - g.emit_s) if unit else (t_c - g.emit_s) / alpha_b
+        delay *= self.fs
         k = np.rint(delay)
-        frac = delay - k
+        frac = np.subtract(delay, k, out=delay)
         k_idx = k.astype(np.int64)
         if k_idx.size and (k_idx.min() < 0 or k_idx.max() > self.k_max):
             raise ConfigError(
@@ -544,16 +551,22 @@ class VolumeReverberation:
                 "internal: the delay span estimate is too small",
             )
         # The phase is at most π f_ref/fs (half a sample): float32 cos/sin are exact to 1e-7.
-        phase = ((-2.0 * math.pi * self.f_ref / self.fs) * (alpha_b * frac)).astype(np.float32)
+        phase = (
+            (-2.0 * math.pi * self.f_ref / self.fs) * (frac if unit else alpha_b * frac)
+        ).astype(np.float32)
         w_re = amp * np.cos(phase)
         w_im = amp * np.sin(phase)
-        omega = (2.0 * math.pi * self.f_ref) * (alpha - alpha_b)
-        moving = bool(np.any(omega != 0.0))
+        if one_bin and a_lo == a_hi:
+            moving = False  # every residual α − α_b is exactly 0
+            omega = alpha  # unused: no Taylor terms past order 0
+        else:
+            omega = (2.0 * math.pi * self.f_ref) * (alpha - alpha_b)
+            moving = bool(np.any(omega != 0.0))
         orders = self.settings.taylor_order + 1 if moving else 1
         # Trains hold delays 0 … k_max only (the FFT zero-pads them to n_fft).
         width_k = self.k_max + 1
         size = n_bins * width_k
-        flat = b * width_k + k_idx
+        flat = k_idx if one_bin else b * width_k + k_idx
         trains = np.empty((orders, n_bins, width_k), dtype=np.complex64)
         f = w_re  # placeholder for the type checker; set on p = 1
         for p in range(orders):
