@@ -369,6 +369,7 @@ class VolumeReverberation:
         )
         self.frames_done = 0
         self.bins_used = 0
+        self._alpha_span: tuple[FloatArray | None, float, float] = (None, 0.0, 0.0)
 
     # ---------------------------------------------------------------- geometry per frame
     def sonar_position(self, t: float) -> FloatArray:
@@ -524,7 +525,9 @@ class VolumeReverberation:
         if g.alpha.size == 0:
             return out
         alpha = g.alpha
-        a_lo, a_hi = float(alpha.min()), float(alpha.max())
+        if self._alpha_span[0] is not alpha:  # at rest, one array for every frame of a set
+            self._alpha_span = (alpha, float(alpha.min()), float(alpha.max()))
+        _, a_lo, a_hi = self._alpha_span
         width_max = 2.0 * self.phi_budget * self.fs / (math.pi * self.f_ref * nf)
         n_bins = max(1, math.ceil((a_hi - a_lo) / width_max))
         width = (a_hi - a_lo) / n_bins
@@ -551,11 +554,19 @@ class VolumeReverberation:
                 "internal: the delay span estimate is too small",
             )
         # The phase is at most π f_ref/fs (half a sample): float32 cos/sin are exact to 1e-7.
-        phase = (
-            (-2.0 * math.pi * self.f_ref / self.fs) * (frac if unit else alpha_b * frac)
-        ).astype(np.float32)
-        w_re = amp * np.cos(phase)
-        w_im = amp * np.sin(phase)
+        # Products in float64, rounded to float32 on output (as a cast after them would).
+        phase = np.empty(frac.shape, dtype=np.float32)
+        np.multiply(
+            -2.0 * math.pi * self.f_ref / self.fs,
+            frac if unit else alpha_b * frac,
+            out=phase,
+            casting="same_kind",
+        )
+        # float32 → float64 is exact: the products are those of amp with the float32 values.
+        w_re = np.cos(phase).astype(np.float64)
+        w_re *= amp
+        w_im = np.sin(phase).astype(np.float64)
+        w_im *= amp
         if one_bin and a_lo == a_hi:
             moving = False  # every residual α − α_b is exactly 0
             omega = alpha  # unused: no Taylor terms past order 0
