@@ -149,11 +149,15 @@ class _EchoGain:
             g = g * 10.0 ** (-self.absorption * (r1 + r2) / 20000.0)
         if (self.tx is not None or self.rx is not None) and sol.t_bounce_s is not None:
             p = self.path
-            at = p.target.position(sol.t_bounce_s)
+            if sol.positions_m is not None:  # where the solve found them: no new queries
+                tx_at, at, rx_at = sol.positions_m
+            else:
+                at = p.target.position(sol.t_bounce_s)
+                tx_at, rx_at = p.tx.position(sol.t_emit_s), p.rx.position(sol.t_rx_s)
             if self.tx is not None:
-                g = g * self.tx.response((at - p.tx.position(sol.t_emit_s)) * p.tx_sign)
+                g = g * self.tx.response((at - tx_at) * p.tx_sign)
             if self.rx is not None:
-                g = g * self.rx.response((at - p.rx.position(sol.t_rx_s)) * p.rx_sign)
+                g = g * self.rx.response((at - rx_at) * p.rx_sign)
         return np.asarray(g, dtype=np.float64)
 
 
