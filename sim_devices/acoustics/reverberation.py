@@ -62,8 +62,9 @@ Implementation notes (speed; none changes the approximation above): the trains h
 frequency domain, so there is one inverse FFT per order; the sub-sample phase weights use
 float32 cosines (the phase is at most half a sample at ``f_ref``); the transmit is read by
 :class:`~sim_devices.acoustics.transmit_eval.TransmitEvaluator` (float32, 3e-7 of the
-amplitude); with one Doppler bin (a sonar at rest) the bin's centre is a scalar, not a gathered
-array, and at ``α = 1`` the division and product by it, exact, are left out. The scatterers
+amplitude); when every scatterer has the same ``α`` (a sonar at rest) the delays, phases and
+trains come from compiled loops (:mod:`~sim_devices.acoustics.reverb_kernels`, the same
+bits); with one Doppler bin the bin's centre is a scalar, not a gathered array. The scatterers
 near the sonar are culled in cache-sized chunks without
 per-point arc functions, from a coarse cull (margin five times the fine one) that is redone
 only when the sonar has moved four fine margins; the field keeps only the cubes in use.
@@ -86,6 +87,7 @@ from hil.errors import ConfigError
 from sim_devices.acoustics.beam import TwoWayAmplitudeTable
 from sim_devices.acoustics.echo import TransmitWaveform
 from sim_devices.acoustics.frame_stream import FrameStream
+from sim_devices.acoustics.reverb_kernels import delays_and_phases, weighted_trains
 from sim_devices.acoustics.trajectory import FloatArray, as_point
 from sim_devices.acoustics.transmit_eval import TransmitEvaluator
 
@@ -535,6 +537,9 @@ class VolumeReverberation:
         # One bin (a sonar at rest among them): every scatterer has the bin's centre, so a
         # scalar gives the same elementwise arithmetic as the gathered array, without it.
         one_bin = n_bins == 1
+        if one_bin and a_lo == a_hi:  # one α for all: no Doppler residual, order 0 only
+            trains = self._stationary_trains(t_c, g.emit_s, amp, float(centres[0]))
+            return self._frame_from_trains(trains, centres, n0, t_c, out)
         b = np.zeros(0, dtype=np.int64)
         if not one_bin:
             b = np.minimum(((alpha - a_lo) / width).astype(np.int64), n_bins - 1)
@@ -546,13 +551,8 @@ class VolumeReverberation:
         k = np.rint(delay)
         frac = np.subtract(delay, k, out=delay)
         k_idx = k.astype(np.int64)
-        if k_idx.size and (k_idx.min() < 0 or k_idx.max() > self.k_max):
-            raise ConfigError(
-                "reverberation delay",
-                int(k_idx.max()),
-                f"0 … {self.k_max} samples",
-                "internal: the delay span estimate is too small",
-            )
+        if k_idx.size:
+            self._check_delays(int(k_idx.min()), int(k_idx.max()))
         # The phase is at most π f_ref/fs (half a sample): float32 cos/sin are exact to 1e-7.
         # Products in float64, rounded to float32 on output (as a cast after them would).
         phase = np.empty(frac.shape, dtype=np.float32)
@@ -567,12 +567,8 @@ class VolumeReverberation:
         w_re *= amp
         w_im = np.sin(phase).astype(np.float64)
         w_im *= amp
-        if one_bin and a_lo == a_hi:
-            moving = False  # every residual α − α_b is exactly 0
-            omega = alpha  # unused: no Taylor terms past order 0
-        else:
-            omega = (2.0 * math.pi * self.f_ref) * (alpha - alpha_b)
-            moving = bool(np.any(omega != 0.0))
+        omega = (2.0 * math.pi * self.f_ref) * (alpha - alpha_b)
+        moving = bool(np.any(omega != 0.0))
         orders = self.settings.taylor_order + 1 if moving else 1
         # Trains hold delays 0 … k_max only (the FFT zero-pads them to n_fft).
         width_k = self.k_max + 1
@@ -591,6 +587,50 @@ class VolumeReverberation:
             tr = trains[p]
             tr.real = np.bincount(flat, re_p, size).reshape(n_bins, width_k)
             tr.imag = np.bincount(flat, im_p, size).reshape(n_bins, width_k)
+        return self._frame_from_trains(trains, centres, n0, t_c, out)
+
+    def _check_delays(self, k_lo: int, k_hi: int) -> None:
+        if k_lo < 0 or k_hi > self.k_max:
+            raise ConfigError(
+                "reverberation delay",
+                k_hi,
+                f"0 … {self.k_max} samples",
+                "internal: the delay span estimate is too small",
+            )
+
+    def _stationary_trains(
+        self, t_c: float, emit_s: FloatArray, amp: FloatArray, alpha_b: float
+    ) -> NDArray[np.complex64]:
+        """The order-0 train, shape ``(1, 1, k_max + 1)``, of scatterers that all have
+        ``α = alpha_b``: the arithmetic of the general form (compiled loops, the same bits)."""
+        m = emit_s.shape[0]
+        k = np.empty(m, dtype=np.int64)
+        phase = np.empty(m, dtype=np.float32)
+        k_lo, k_hi = delays_and_phases(
+            t_c, emit_s, alpha_b, alpha_b == 1.0, self.fs,
+            -2.0 * math.pi * self.f_ref / self.fs, k, phase,
+        )  # fmt: skip
+        self._check_delays(int(k_lo), int(k_hi))
+        re, im = np.zeros(self.k_max + 1), np.zeros(self.k_max + 1)
+        weighted_trains(k, amp, np.cos(phase), np.sin(phase), re, im)
+        trains = np.empty((1, 1, self.k_max + 1), dtype=np.complex64)
+        trains[0, 0].real = re
+        trains[0, 0].imag = im
+        return trains
+
+    def _frame_from_trains(
+        self,
+        trains: NDArray[np.complex64],
+        centres: FloatArray,
+        n0: int,
+        t_c: float,
+        out: FloatArray,
+    ) -> FloatArray:
+        """The frame from its trains (shape ``(orders, bins, k_max + 1)``): each convolved
+        with the transmit time-scaled by its bin's centre, summed per order, Horner in
+        ``(t − t_c)``; added to ``out`` (shape ``(N_f,)``)."""
+        orders, n_bins = trains.shape[0], trains.shape[1]
+        nf = self.frame
         # complex64 FFTs: the output's float32 resolution (-140 dB) is far below the
         # approximation error, and they run twice as fast.
         spectra = sp_fft.fft(trains, n=self.n_fft, axis=-1, workers=1)[..., : self.n_fft // 2 + 1]
