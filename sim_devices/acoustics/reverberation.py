@@ -92,6 +92,14 @@ from sim_devices.acoustics.trajectory import FloatArray, as_point
 from sim_devices.acoustics.transmit_eval import TransmitEvaluator
 
 _CUBE_CACHE = 256  # cubes kept before the first neighbourhood look-up sizes the cache
+#: Scatterers kept in the process-wide cube cache (about 24 bytes each): several fields of
+#: the same water (a run's tank, its empty-tank background, its level plan) draw each cube
+#: once.
+_SHARED_POINTS = 1 << 21
+_SHARED: OrderedDict[tuple[float, float, int, tuple[int, int, int]], tuple[FloatArray, ...]] = (
+    OrderedDict()
+)
+_shared_points = 0
 _CULL_CHUNK = 32768  # points culled per pass (cache-sized)
 
 
@@ -184,12 +192,7 @@ class ScattererField:
             self._cache.move_to_end(key)
             x, y, z = self._cache[key]
             return x, y, z
-        offset = 1 << 40  # spawn keys must be non-negative
-        ss = np.random.SeedSequence(self.seed, spawn_key=tuple(int(k) + offset for k in key))
-        rng = np.random.default_rng(ss)
-        count = int(rng.poisson(self.density * self.cube_m**3))
-        u = rng.random((3, count))
-        pts = tuple((np.asarray(key, dtype=np.float64)[:, None] + u) * self.cube_m)
+        pts = _shared_cube(self.density, self.cube_m, self.seed, key)
         self._cache[key] = pts
         if len(self._cache) > self._capacity:
             self._cache.popitem(last=False)
@@ -235,6 +238,40 @@ class ScattererField:
             )
             self._set_key = key_set
         return self._set
+
+
+def _draw_cube(
+    density: float, cube_m: float, seed: int, key: tuple[int, int, int]
+) -> tuple[FloatArray, ...]:
+    """x, y, z (m) of the Poisson scatterers of cube ``key``, from its own seed sequence."""
+    offset = 1 << 40  # spawn keys must be non-negative
+    ss = np.random.SeedSequence(seed, spawn_key=tuple(int(k) + offset for k in key))
+    rng = np.random.default_rng(ss)
+    count = int(rng.poisson(density * cube_m**3))
+    u = rng.random((3, count))
+    return tuple((np.asarray(key, dtype=np.float64)[:, None] + u) * cube_m)
+
+
+def _shared_cube(
+    density: float, cube_m: float, seed: int, key: tuple[int, int, int]
+) -> tuple[FloatArray, ...]:
+    """:func:`_draw_cube`, kept process-wide (read-only arrays, at most
+    :data:`_SHARED_POINTS` scatterers, least recently used dropped first)."""
+    global _shared_points
+    full = (density, cube_m, seed, key)
+    pts = _SHARED.get(full)
+    if pts is not None:
+        _SHARED.move_to_end(full)
+        return pts
+    pts = _draw_cube(density, cube_m, seed, key)
+    for a in pts:
+        a.setflags(write=False)
+    _SHARED[full] = pts
+    _shared_points += pts[0].shape[0]
+    while _shared_points > _SHARED_POINTS and len(_SHARED) > 1:
+        _, old = _SHARED.popitem(last=False)
+        _shared_points -= old[0].shape[0]
+    return pts
 
 
 @dataclass(frozen=True)
