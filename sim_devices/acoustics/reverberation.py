@@ -64,10 +64,11 @@ float32 cosines (the phase is at most half a sample at ``f_ref``); the transmit 
 :class:`~sim_devices.acoustics.transmit_eval.TransmitEvaluator` (float32, 3e-7 of the
 amplitude); when every scatterer has the same ``α`` (a sonar at rest) the delays, phases and
 trains come from compiled loops (:mod:`~sim_devices.acoustics.reverb_kernels`, the same
-bits); with one Doppler bin the bin's centre is a scalar, not a gathered array. The scatterers
-near the sonar are culled in cache-sized chunks without
-per-point arc functions, from a coarse cull (margin five times the fine one) that is redone
-only when the sonar has moved four fine margins; the field keeps only the cubes in use.
+bits); with one Doppler bin the bin's centre is a scalar, not a gathered array. The
+scatterers near the sonar are culled in cache-sized chunks without per-point arc functions,
+from a coarse cull (margin five times the fine one) that is redone only when the sonar has
+moved four fine margins; the field keeps only the cubes in use, and fields of the same water
+share the cubes drawn (a process-wide cache of bounded size).
 
 Streaming: frames are fixed by their index, so :meth:`VolumeReverberation.generate` returns the
 same samples for any chunking (bit for bit).
