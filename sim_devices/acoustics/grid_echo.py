@@ -282,6 +282,8 @@ class GridEcho(AnalyticEcho):
         if exact.any():
             out += self.render(grid)
             return
+        # Contiguous copies (a few values an interval): one compiled form for every block.
+        coeffs, gains = np.ascontiguousarray(coeffs), np.ascontiguousarray(gains)
         n = grid.count
         gain = np.empty(n, dtype=np.float32)
         emit = np.empty(n)
