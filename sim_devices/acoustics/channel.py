@@ -46,6 +46,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hil.errors import ConfigError
+from hil.signals.schedule import HopSchedule
 from sim_devices.acoustics.delay import OneWayPath, PathSolution, TwoWayPath
 from sim_devices.acoustics.directivity import Transducer
 from sim_devices.acoustics.echo import TransmitWaveform
@@ -249,9 +250,14 @@ class Channel:
             tx=self.tx_beam, rx=self.rx_beam, absorption_db_per_km=self.absorption_db_per_km,
         )  # fmt: skip
         fs, waveform = self.fs_hz, self.waveform
+        # Hops all of amplitude 1: s = 1 · cos Φ is cos Φ exactly, without evaluate()'s
+        # second hop look-up.
+        unit = isinstance(waveform, HopSchedule) and bool(np.all(waveform.amplitude == 1.0))
 
         def source(n0: int, count: int) -> FloatArray:
             n = np.arange(n0, n0 + count, dtype=np.int64)
+            if unit:
+                return np.cos(waveform.instantaneous_phase(n / fs))  # type: ignore[attr-defined]
             return np.asarray(waveform.evaluate(n / fs), dtype=np.float64)
 
         return TankEchoes(h, source, self.amplitude)
