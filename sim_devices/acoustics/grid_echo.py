@@ -174,38 +174,7 @@ class GridEcho(AnalyticEcho):
 
     def store_batch(self, b: int, sol: PathSolution) -> None:
         """Build batch ``b``'s interval data from the path solved at :meth:`batch_times`."""
-        p = self.prefetch
-        g_all = np.asarray(self.gain(sol), dtype=np.float64)
-        span = self.grid_samples / self.fs_hz  # s per unit u
-        d_all = sol.delay_s
-        s_all = (1.0 - sol.alpha) * span
-        d0, dq1, dm, dq3, d1 = (d_all[q::4][:p] if q < 4 else d_all[4::4] for q in range(5))
-        s0, sm, s1 = s_all[0:-1:4], s_all[2::4], s_all[4::4]
-        c2 = 3.0 * (d1 - d0) - 2.0 * s0 - s1
-        c3 = 2.0 * (d0 - d1) + s0 + s1
-
-        def cubic(u: float) -> FloatArray:
-            return d0 + u * (s0 + u * (c2 + u * c3))
-
-        delay_err = np.maximum.reduce(
-            [
-                np.abs(cubic(0.25) - dq1),
-                np.abs(cubic(0.5) - dm),
-                np.abs(cubic(0.75) - dq3),
-                np.abs(s0 + c2 + 0.75 * c3 - sm),  # slope at ½ (s per unit u)
-            ]
-        )
-        limit = np.maximum(0.5 * self.tolerance_s, 16.0 * _EPS * np.abs(sol.t_rx_s[2::4]))
-        g0, gq1, gm, gq3, g1 = (g_all[q::4][:p] if q < 4 else g_all[4::4] for q in range(5))
-        gb = 4.0 * gm - 3.0 * g0 - g1
-        gc = 2.0 * (g0 + g1) - 4.0 * gm
-        gain_err = np.maximum(
-            np.abs(g0 + 0.25 * gb + 0.0625 * gc - gq1), np.abs(g0 + 0.75 * gb + 0.5625 * gc - gq3)
-        )
-        exact = (delay_err > limit) | (gain_err > self.gain_tolerance / 3.0 * np.abs(gm))
-        self.exact_intervals += int(np.count_nonzero(exact))
-        gains = np.stack((g0, gb, gc)).astype(np.float32)  # 1e-7 relative: below the transmit's
-        self._batches[b] = _Batch(np.stack((d0, s0, c2, c3)), gains, exact)
+        store_batches([self], b, [sol])
 
     def has_batch(self, b: int) -> bool:
         """Whether batch ``b`` is solved and held."""
@@ -314,6 +283,51 @@ class GridEcho(AnalyticEcho):
         return out
 
 
+def store_batches(echoes: Sequence[GridEcho], b: int, sols: Sequence[PathSolution]) -> None:
+    """:meth:`GridEcho.store_batch` of ``b`` for each echo (all on one grid) from its
+    solution at :meth:`GridEcho.batch_times`: the paths stacked, one array operation for all
+    of them (the same values per path: every operation is elementwise)."""
+    first = echoes[0]
+    p = first.prefetch
+    span = first.grid_samples / first.fs_hz  # s per unit u
+    g_all = np.stack(
+        [np.asarray(e.gain(sol), dtype=np.float64) for e, sol in zip(echoes, sols, strict=True)]
+    )
+    d_all = np.stack([sol.delay_s for sol in sols])
+    s_all = (1.0 - np.stack([sol.alpha for sol in sols])) * span
+    d0, dq1, dm, dq3, d1 = (d_all[:, q::4][:, :p] if q < 4 else d_all[:, 4::4] for q in range(5))
+    s0, sm, s1 = s_all[:, 0:-1:4], s_all[:, 2::4], s_all[:, 4::4]
+    c2 = 3.0 * (d1 - d0) - 2.0 * s0 - s1
+    c3 = 2.0 * (d0 - d1) + s0 + s1
+
+    def cubic(u: float) -> FloatArray:
+        return d0 + u * (s0 + u * (c2 + u * c3))
+
+    delay_err = np.maximum.reduce(
+        [
+            np.abs(cubic(0.25) - dq1),
+            np.abs(cubic(0.5) - dm),
+            np.abs(cubic(0.75) - dq3),
+            np.abs(s0 + c2 + 0.75 * c3 - sm),  # slope at ½ (s per unit u)
+        ]
+    )
+    tolerance = np.array([[e.tolerance_s] for e in echoes])
+    limit = np.maximum(0.5 * tolerance, 16.0 * _EPS * np.abs(sols[0].t_rx_s[2::4]))
+    g0, gq1, gm, gq3, g1 = (g_all[:, q::4][:, :p] if q < 4 else g_all[:, 4::4] for q in range(5))
+    gb = 4.0 * gm - 3.0 * g0 - g1
+    gc = 2.0 * (g0 + g1) - 4.0 * gm
+    gain_err = np.maximum(
+        np.abs(g0 + 0.25 * gb + 0.0625 * gc - gq1), np.abs(g0 + 0.75 * gb + 0.5625 * gc - gq3)
+    )
+    gain_tolerance = np.array([[e.gain_tolerance] for e in echoes])
+    exact = (delay_err > limit) | (gain_err > gain_tolerance / 3.0 * np.abs(gm))
+    gains = np.stack((g0, gb, gc), axis=1).astype(np.float32)  # 1e-7: below the transmit's
+    coeffs = np.stack((d0, s0, c2, c3), axis=1)
+    for i, e in enumerate(echoes):
+        e.exact_intervals += int(np.count_nonzero(exact[i]))
+        e._batches[b] = _Batch(coeffs[i], gains[i], exact[i])
+
+
 class SampleGrid:
     """Per-block arrays that every path on the same grid shares.
 
@@ -410,8 +424,7 @@ class EchoBank:
             todo = [e for e in self.echoes if not e.has_batch(b)]
             if todo:
                 sols = solve_paths([e.path for e in todo], first.batch_times(b))
-                for e, sol in zip(todo, sols, strict=True):
-                    e.store_batch(b, sol)
+                store_batches(todo, b, sols)
 
     def block(self, n0: int, count: int) -> FloatArray:
         """Sum of the echoes' samples ``n0 … n0 + count − 1``, shape ``(count,)``."""
