@@ -89,9 +89,33 @@ class PistonBeam:
         return np.where(np.cos(theta) > 0, d * d, 0.0)
 
 
-def equivalent_two_way_beam_angle(tx: BeamPattern, rx: BeamPattern) -> float:
-    """``Ψ = 2π ∫₀^π b_tx(θ) b_rx(θ) sinθ dθ`` in steradians (adaptive quadrature)."""
+def _pattern_key(pattern: BeamPattern) -> tuple[str, float] | None:
+    """What fixes a built-in pattern's response (None for any other pattern)."""
+    if type(pattern) is OmniBeam:
+        return ("omni", 0.0)
+    if type(pattern) is PistonBeam:
+        return ("piston", pattern.ka)
+    return None
 
+
+#: Ψ per pair of built-in patterns: the quadrature costs tens of milliseconds, and every
+#: simulated tank (the run's, its background's, its level plan's) asks for the same pairs.
+_BEAM_ANGLES: dict[tuple[tuple[str, float], tuple[str, float]], float] = {}
+
+
+def equivalent_two_way_beam_angle(tx: BeamPattern, rx: BeamPattern) -> float:
+    """``Ψ = 2π ∫₀^π b_tx(θ) b_rx(θ) sinθ dθ`` in steradians (adaptive quadrature; kept per
+    pair of built-in patterns, the same value)."""
+    tx_key, rx_key = _pattern_key(tx), _pattern_key(rx)
+    if tx_key is None or rx_key is None:
+        return _beam_angle(tx, rx)
+    key = (tx_key, rx_key)
+    if key not in _BEAM_ANGLES:
+        _BEAM_ANGLES[key] = _beam_angle(tx, rx)
+    return _BEAM_ANGLES[key]
+
+
+def _beam_angle(tx: BeamPattern, rx: BeamPattern) -> float:
     def integrand(theta: float) -> float:
         return float(tx.intensity(theta) * rx.intensity(theta) * np.sin(theta))
 

@@ -46,6 +46,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hil.errors import ConfigError
+from hil.signals.schedule import HopSchedule
 from sim_devices.acoustics.delay import OneWayPath, PathSolution, TwoWayPath
 from sim_devices.acoustics.directivity import Transducer
 from sim_devices.acoustics.echo import TransmitWaveform
@@ -149,11 +150,15 @@ class _EchoGain:
             g = g * 10.0 ** (-self.absorption * (r1 + r2) / 20000.0)
         if (self.tx is not None or self.rx is not None) and sol.t_bounce_s is not None:
             p = self.path
-            at = p.target.position(sol.t_bounce_s)
+            if sol.positions_m is not None:  # where the solve found them: no new queries
+                tx_at, at, rx_at = sol.positions_m
+            else:
+                at = p.target.position(sol.t_bounce_s)
+                tx_at, rx_at = p.tx.position(sol.t_emit_s), p.rx.position(sol.t_rx_s)
             if self.tx is not None:
-                g = g * self.tx.response((at - p.tx.position(sol.t_emit_s)) * p.tx_sign)
+                g = g * self.tx.response((at - tx_at) * p.tx_sign)
             if self.rx is not None:
-                g = g * self.rx.response((at - p.rx.position(sol.t_rx_s)) * p.rx_sign)
+                g = g * self.rx.response((at - rx_at) * p.rx_sign)
         return np.asarray(g, dtype=np.float64)
 
 
@@ -245,9 +250,14 @@ class Channel:
             tx=self.tx_beam, rx=self.rx_beam, absorption_db_per_km=self.absorption_db_per_km,
         )  # fmt: skip
         fs, waveform = self.fs_hz, self.waveform
+        # Hops all of amplitude 1: s = 1 · cos Φ is cos Φ exactly, without evaluate()'s
+        # second hop look-up.
+        unit = isinstance(waveform, HopSchedule) and bool(np.all(waveform.amplitude == 1.0))
 
         def source(n0: int, count: int) -> FloatArray:
             n = np.arange(n0, n0 + count, dtype=np.int64)
+            if unit:
+                return np.cos(waveform.instantaneous_phase(n / fs))  # type: ignore[attr-defined]
             return np.asarray(waveform.evaluate(n / fs), dtype=np.float64)
 
         return TankEchoes(h, source, self.amplitude)

@@ -122,6 +122,10 @@ class PathSolution:
     leg_lengths_m: length (m) of each leg at its own instants, source to destination order
         (``(r1, r2)`` for an echo: tx→target, target→rx; ``(r,)`` one-way).
     iterations: largest number of fixed-point iterations any sample took.
+    positions_m: where the solve found the path's ends (m, each shape ``(n, 3)``): the
+        transmitter at ``t_emit_s``, the target at ``t_bounce_s`` and the receiver at
+        ``t_rx_s`` for an echo; None when not given. A gain hook reads them instead of
+        asking the trajectories again (the same values: trajectories are elementwise).
     """
 
     t_rx_s: FloatArray
@@ -131,6 +135,7 @@ class PathSolution:
     alpha: FloatArray
     leg_lengths_m: tuple[FloatArray, ...]
     iterations: int
+    positions_m: tuple[FloatArray, FloatArray, FloatArray] | None = None
 
 
 class PropagationPath(Protocol):
@@ -160,6 +165,8 @@ class _Leg:
     length_m: FloatArray
     alpha: FloatArray
     iterations: int
+    src_position: FloatArray
+    src_velocity: FloatArray
 
 
 def _grouped(
@@ -248,7 +255,7 @@ def _solve_leg(
         u[:, 0] * src_velocity[:, 0] + u[:, 1] * src_velocity[:, 1] + u[:, 2] * src_velocity[:, 2]
     )
     alpha = (1.0 - u_dst / c) / (1.0 - u_src / c)
-    return _Leg(delay, t_emit, length, alpha, iterations)
+    return _Leg(delay, t_emit, length, alpha, iterations, src_position, src_velocity)
 
 
 def _check_speed(trajectory: Trajectory, role: str, c: float) -> None:
@@ -346,14 +353,16 @@ class TwoWayPath:
 
     def solve(self, t_rx_s: ArrayLike) -> PathSolution:
         t = _receive_times(t_rx_s)
+        rx_p = self.rx.position(t)
         back = _solve_leg(
-            t, self.rx.position(t), self.rx.velocity(t), (self.target,), self._c, self._tol,
-            self._max_it, "target",
+            t, rx_p, self.rx.velocity(t), (self.target,), self._c, self._tol, self._max_it,
+            "target",
         )  # fmt: skip
         t_b = back.t_emit_s
+        # The back leg's source is the target at t_b: its position and velocity there.
         out = _solve_leg(
-            t_b, self.target.position(t_b), self.target.velocity(t_b), (self.tx,), self._c,
-            self._tol, self._max_it, "tx",
+            t_b, back.src_position, back.src_velocity, (self.tx,), self._c, self._tol,
+            self._max_it, "tx",
         )  # fmt: skip
         return PathSolution(
             t_rx_s=t,
@@ -363,6 +372,7 @@ class TwoWayPath:
             alpha=back.alpha * out.alpha,
             leg_lengths_m=(out.length_m, back.length_m),
             iterations=max(back.iterations, out.iterations),
+            positions_m=(out.src_position, back.src_position, rx_p),
         )
 
 
@@ -474,8 +484,8 @@ def _solve_two_way(
     rx_p, rx_v = _at_receiver([p.rx for p in paths], back_l, t)
     back = _solve_leg(t_all, rx_p, rx_v, back_l.unique, c, tol, max_it, "target", back_l.group)
     t_b = back.t_emit_s
-    tgt_p = _grouped(back_l.unique, back_l.group, t_b)
-    tgt_v = _grouped(back_l.unique, back_l.group, t_b, velocity=True)
+    # The back leg's sources are the targets at t_b: their positions and velocities there.
+    tgt_p, tgt_v = back.src_position, back.src_velocity
     out_l = _Layout([p.tx for p in paths], n)
     perm = out_l.take_from(back_l)
     out = _solve_leg(
@@ -494,6 +504,7 @@ def _solve_two_way(
                 alpha=back.alpha[rb] * out.alpha[ro],
                 leg_lengths_m=(out.length_m[ro], back.length_m[rb]),
                 iterations=iterations,
+                positions_m=(out.src_position[ro], tgt_p[rb], rx_p[rb]),
             )
         )
     return sols

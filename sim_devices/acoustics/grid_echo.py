@@ -38,7 +38,9 @@ the last sample read; a batch costs one solve call, so the look-ahead buys speed
 
 :class:`EchoBank` renders several paths on one grid (a target's direct and tank-image echoes):
 their batches are solved together by :func:`~sim_devices.acoustics.delay.solve_paths` and the
-per-block arrays (:class:`SampleGrid`) are shared.
+per-block arrays (:class:`SampleGrid`) are shared; each path is added to the block by compiled
+loops (:meth:`GridEcho.add_render`, :mod:`~sim_devices.acoustics.echo_kernels`: the same bits
+as :meth:`GridEcho.render`).
 
 Example: against the exact per-sample solve, for a target closing at 2 m/s.
 
@@ -71,6 +73,11 @@ from sim_devices.acoustics.echo import (
     TransmitWaveform,
     sample_times,
     unit_gain,
+)
+from sim_devices.acoustics.echo_kernels import (
+    add_echo,
+    gains_and_emission_times,
+    transmit_phases,
 )
 from sim_devices.acoustics.trajectory import FloatArray
 from sim_devices.acoustics.transmit_eval import TransmitEvaluator
@@ -167,38 +174,7 @@ class GridEcho(AnalyticEcho):
 
     def store_batch(self, b: int, sol: PathSolution) -> None:
         """Build batch ``b``'s interval data from the path solved at :meth:`batch_times`."""
-        p = self.prefetch
-        g_all = np.asarray(self.gain(sol), dtype=np.float64)
-        span = self.grid_samples / self.fs_hz  # s per unit u
-        d_all = sol.delay_s
-        s_all = (1.0 - sol.alpha) * span
-        d0, dq1, dm, dq3, d1 = (d_all[q::4][:p] if q < 4 else d_all[4::4] for q in range(5))
-        s0, sm, s1 = s_all[0:-1:4], s_all[2::4], s_all[4::4]
-        c2 = 3.0 * (d1 - d0) - 2.0 * s0 - s1
-        c3 = 2.0 * (d0 - d1) + s0 + s1
-
-        def cubic(u: float) -> FloatArray:
-            return d0 + u * (s0 + u * (c2 + u * c3))
-
-        delay_err = np.maximum.reduce(
-            [
-                np.abs(cubic(0.25) - dq1),
-                np.abs(cubic(0.5) - dm),
-                np.abs(cubic(0.75) - dq3),
-                np.abs(s0 + c2 + 0.75 * c3 - sm),  # slope at ½ (s per unit u)
-            ]
-        )
-        limit = np.maximum(0.5 * self.tolerance_s, 16.0 * _EPS * np.abs(sol.t_rx_s[2::4]))
-        g0, gq1, gm, gq3, g1 = (g_all[q::4][:p] if q < 4 else g_all[4::4] for q in range(5))
-        gb = 4.0 * gm - 3.0 * g0 - g1
-        gc = 2.0 * (g0 + g1) - 4.0 * gm
-        gain_err = np.maximum(
-            np.abs(g0 + 0.25 * gb + 0.0625 * gc - gq1), np.abs(g0 + 0.75 * gb + 0.5625 * gc - gq3)
-        )
-        exact = (delay_err > limit) | (gain_err > self.gain_tolerance / 3.0 * np.abs(gm))
-        self.exact_intervals += int(np.count_nonzero(exact))
-        gains = np.stack((g0, gb, gc)).astype(np.float32)  # 1e-7 relative: below the transmit's
-        self._batches[b] = _Batch(np.stack((d0, s0, c2, c3)), gains, exact)
+        store_batches([self], b, [sol])
 
     def has_batch(self, b: int) -> bool:
         """Whether batch ``b`` is solved and held."""
@@ -263,6 +239,40 @@ class GridEcho(AnalyticEcho):
         g *= self.transmit.at_sorted_times(t_emit)
         return g
 
+    def add_render(self, grid: SampleGrid, out: FloatArray) -> None:
+        """``out += render(grid)`` (``out`` float64, shape ``(grid.count,)``), the same bits:
+        by compiled loops (:mod:`~sim_devices.acoustics.echo_kernels`) for a hop schedule
+        and intervals all interpolated, else by :meth:`render`."""
+        transmit = self.transmit
+        if grid.count == 0 or transmit.schedule is None:
+            out += self.render(grid)
+            return
+        coeffs, gains, exact = self._interval_data(grid.ka, grid.kb)
+        if exact.any():
+            out += self.render(grid)
+            return
+        # Contiguous copies (a few values an interval): one compiled form for every block.
+        coeffs, gains = np.ascontiguousarray(coeffs), np.ascontiguousarray(gains)
+        n = grid.count
+        gain = np.empty(n, dtype=np.float32)
+        emit = np.empty(n)
+        ordered = gains_and_emission_times(
+            grid.t, grid.u, grid.interval, coeffs, gains, np.float32(self.amplitude),
+            self.amplitude != 1.0, gain, emit,
+        )  # fmt: skip
+        if not ordered:  # the transmit is read at sorted times only
+            out += self.render(grid)
+            return
+        win, a, b = transmit.hop_window(float(emit[0]), float(emit[-1]))
+        phase = np.empty(n, dtype=np.float32)
+        hop = np.empty(n, dtype=np.int64)
+        transmit_phases(
+            emit, win.snap_start_s, win.start_s, win.freq_hz, win.half_chirp, win.phase_cycles,
+            win.chirped, a, b, phase, hop,
+        )  # fmt: skip
+        np.cos(phase, out=phase)
+        add_echo(gain, phase, hop, win.amplitude, win.unit, out)
+
     def block(self, n0: int, count: int) -> FloatArray:
         """Received samples ``n0 … n0 + count − 1`` at ``fs_hz``, shape ``(count,)``."""
         sample_times(n0, count, self.fs_hz)  # checks n0 and count
@@ -271,6 +281,51 @@ class GridEcho(AnalyticEcho):
             m = min(SUB_BLOCK, int(count) - a)
             out[a : a + m] = self.render(self.sample_grid(int(n0) + a, m))
         return out
+
+
+def store_batches(echoes: Sequence[GridEcho], b: int, sols: Sequence[PathSolution]) -> None:
+    """:meth:`GridEcho.store_batch` of ``b`` for each echo (all on one grid) from its
+    solution at :meth:`GridEcho.batch_times`: the paths stacked, one array operation for all
+    of them (the same values per path: every operation is elementwise)."""
+    first = echoes[0]
+    p = first.prefetch
+    span = first.grid_samples / first.fs_hz  # s per unit u
+    g_all = np.stack(
+        [np.asarray(e.gain(sol), dtype=np.float64) for e, sol in zip(echoes, sols, strict=True)]
+    )
+    d_all = np.stack([sol.delay_s for sol in sols])
+    s_all = (1.0 - np.stack([sol.alpha for sol in sols])) * span
+    d0, dq1, dm, dq3, d1 = (d_all[:, q::4][:, :p] if q < 4 else d_all[:, 4::4] for q in range(5))
+    s0, sm, s1 = s_all[:, 0:-1:4], s_all[:, 2::4], s_all[:, 4::4]
+    c2 = 3.0 * (d1 - d0) - 2.0 * s0 - s1
+    c3 = 2.0 * (d0 - d1) + s0 + s1
+
+    def cubic(u: float) -> FloatArray:
+        return d0 + u * (s0 + u * (c2 + u * c3))
+
+    delay_err = np.maximum.reduce(
+        [
+            np.abs(cubic(0.25) - dq1),
+            np.abs(cubic(0.5) - dm),
+            np.abs(cubic(0.75) - dq3),
+            np.abs(s0 + c2 + 0.75 * c3 - sm),  # slope at ½ (s per unit u)
+        ]
+    )
+    tolerance = np.array([[e.tolerance_s] for e in echoes])
+    limit = np.maximum(0.5 * tolerance, 16.0 * _EPS * np.abs(sols[0].t_rx_s[2::4]))
+    g0, gq1, gm, gq3, g1 = (g_all[:, q::4][:, :p] if q < 4 else g_all[:, 4::4] for q in range(5))
+    gb = 4.0 * gm - 3.0 * g0 - g1
+    gc = 2.0 * (g0 + g1) - 4.0 * gm
+    gain_err = np.maximum(
+        np.abs(g0 + 0.25 * gb + 0.0625 * gc - gq1), np.abs(g0 + 0.75 * gb + 0.5625 * gc - gq3)
+    )
+    gain_tolerance = np.array([[e.gain_tolerance] for e in echoes])
+    exact = (delay_err > limit) | (gain_err > gain_tolerance / 3.0 * np.abs(gm))
+    gains = np.stack((g0, gb, gc), axis=1).astype(np.float32)  # 1e-7: below the transmit's
+    coeffs = np.stack((d0, s0, c2, c3), axis=1)
+    for i, e in enumerate(echoes):
+        e.exact_intervals += int(np.count_nonzero(exact[i]))
+        e._batches[b] = _Batch(coeffs[i], gains[i], exact[i])
 
 
 class SampleGrid:
@@ -285,6 +340,7 @@ class SampleGrid:
         self.t = sample_times(n0, count, fs_hz, t_start_s)
         self.n0, self.count, self.h = int(n0), int(count), int(h)
         self._u32: NDArray[np.float32] | None = None
+        self._interval: NDArray[np.int64] | None = None
         shift = h.bit_length() - 1
         if self.count == 0:
             self.ka, self.kb = 0, -1
@@ -302,6 +358,15 @@ class SampleGrid:
         self.u *= 1.0 / h
         #: Whole intervals only: per-interval values broadcast over a (m, h) layout.
         self.whole = self.n0 % h == 0 and self.count % h == 0
+
+    @property
+    def interval(self) -> NDArray[np.int64]:
+        """Each sample's interval, counted from ``ka`` (``(count,)``)."""
+        if self._interval is None:
+            shift = self.h.bit_length() - 1
+            n = np.arange(self.n0, self.n0 + self.count, dtype=np.int64)
+            self._interval = (n >> shift) - self.ka
+        return self._interval
 
     def polynomial(self, coeffs: NDArray[np.floating[Any]]) -> NDArray[np.floating[Any]]:
         """``Σ_i coeffs[i, k] u^i`` of every sample (Horner, highest power first), ``(count,)``,
@@ -359,8 +424,7 @@ class EchoBank:
             todo = [e for e in self.echoes if not e.has_batch(b)]
             if todo:
                 sols = solve_paths([e.path for e in todo], first.batch_times(b))
-                for e, sol in zip(todo, sols, strict=True):
-                    e.store_batch(b, sol)
+                store_batches(todo, b, sols)
 
     def block(self, n0: int, count: int) -> FloatArray:
         """Sum of the echoes' samples ``n0 … n0 + count − 1``, shape ``(count,)``."""
@@ -375,5 +439,5 @@ class EchoBank:
             self._solve(grid)
             acc = out[a : a + m]
             for e in self.echoes:
-                acc += e.render(grid)
+                e.add_render(grid, acc)
         return out

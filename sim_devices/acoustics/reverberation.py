@@ -62,9 +62,13 @@ Implementation notes (speed; none changes the approximation above): the trains h
 frequency domain, so there is one inverse FFT per order; the sub-sample phase weights use
 float32 cosines (the phase is at most half a sample at ``f_ref``); the transmit is read by
 :class:`~sim_devices.acoustics.transmit_eval.TransmitEvaluator` (float32, 3e-7 of the
-amplitude). The scatterers near the sonar are culled in cache-sized chunks without
-per-point arc functions, from a coarse cull (margin five times the fine one) that is redone
-only when the sonar has moved four fine margins; the field keeps only the cubes in use.
+amplitude); when every scatterer has the same ``α`` (a sonar at rest) the delays, phases and
+trains come from compiled loops (:mod:`~sim_devices.acoustics.reverb_kernels`, the same
+bits); with one Doppler bin the bin's centre is a scalar, not a gathered array. The
+scatterers near the sonar are culled in cache-sized chunks without per-point arc functions,
+from a coarse cull (margin five times the fine one) that is redone only when the sonar has
+moved four fine margins; the field keeps only the cubes in use, and fields of the same water
+share the cubes drawn (a process-wide cache of bounded size).
 
 Streaming: frames are fixed by their index, so :meth:`VolumeReverberation.generate` returns the
 same samples for any chunking (bit for bit).
@@ -84,10 +88,19 @@ from hil.errors import ConfigError
 from sim_devices.acoustics.beam import TwoWayAmplitudeTable
 from sim_devices.acoustics.echo import TransmitWaveform
 from sim_devices.acoustics.frame_stream import FrameStream
+from sim_devices.acoustics.reverb_kernels import delays_and_phases, weighted_trains
 from sim_devices.acoustics.trajectory import FloatArray, as_point
 from sim_devices.acoustics.transmit_eval import TransmitEvaluator
 
 _CUBE_CACHE = 256  # cubes kept before the first neighbourhood look-up sizes the cache
+#: Scatterers kept in the process-wide cube cache (about 24 bytes each): several fields of
+#: the same water (a run's tank, its empty-tank background, its level plan) draw each cube
+#: once.
+_SHARED_POINTS = 1 << 21
+_SHARED: OrderedDict[tuple[float, float, int, tuple[int, int, int]], tuple[FloatArray, ...]] = (
+    OrderedDict()
+)
+_shared_points = 0
 _CULL_CHUNK = 32768  # points culled per pass (cache-sized)
 
 
@@ -180,12 +193,7 @@ class ScattererField:
             self._cache.move_to_end(key)
             x, y, z = self._cache[key]
             return x, y, z
-        offset = 1 << 40  # spawn keys must be non-negative
-        ss = np.random.SeedSequence(self.seed, spawn_key=tuple(int(k) + offset for k in key))
-        rng = np.random.default_rng(ss)
-        count = int(rng.poisson(self.density * self.cube_m**3))
-        u = rng.random((3, count))
-        pts = tuple((np.asarray(key, dtype=np.float64)[:, None] + u) * self.cube_m)
+        pts = _shared_cube(self.density, self.cube_m, self.seed, key)
         self._cache[key] = pts
         if len(self._cache) > self._capacity:
             self._cache.popitem(last=False)
@@ -231,6 +239,40 @@ class ScattererField:
             )
             self._set_key = key_set
         return self._set
+
+
+def _draw_cube(
+    density: float, cube_m: float, seed: int, key: tuple[int, int, int]
+) -> tuple[FloatArray, ...]:
+    """x, y, z (m) of the Poisson scatterers of cube ``key``, from its own seed sequence."""
+    offset = 1 << 40  # spawn keys must be non-negative
+    ss = np.random.SeedSequence(seed, spawn_key=tuple(int(k) + offset for k in key))
+    rng = np.random.default_rng(ss)
+    count = int(rng.poisson(density * cube_m**3))
+    u = rng.random((3, count))
+    return tuple((np.asarray(key, dtype=np.float64)[:, None] + u) * cube_m)
+
+
+def _shared_cube(
+    density: float, cube_m: float, seed: int, key: tuple[int, int, int]
+) -> tuple[FloatArray, ...]:
+    """:func:`_draw_cube`, kept process-wide (read-only arrays, at most
+    :data:`_SHARED_POINTS` scatterers, least recently used dropped first)."""
+    global _shared_points
+    full = (density, cube_m, seed, key)
+    pts = _SHARED.get(full)
+    if pts is not None:
+        _SHARED.move_to_end(full)
+        return pts
+    pts = _draw_cube(density, cube_m, seed, key)
+    for a in pts:
+        a.setflags(write=False)
+    _SHARED[full] = pts
+    _shared_points += pts[0].shape[0]
+    while _shared_points > _SHARED_POINTS and len(_SHARED) > 1:
+        _, old = _SHARED.popitem(last=False)
+        _shared_points -= old[0].shape[0]
+    return pts
 
 
 @dataclass(frozen=True)
@@ -367,6 +409,7 @@ class VolumeReverberation:
         )
         self.frames_done = 0
         self.bins_used = 0
+        self._alpha_span: tuple[FloatArray | None, float, float] = (None, 0.0, 0.0)
 
     # ---------------------------------------------------------------- geometry per frame
     def sonar_position(self, t: float) -> FloatArray:
@@ -522,38 +565,53 @@ class VolumeReverberation:
         if g.alpha.size == 0:
             return out
         alpha = g.alpha
-        a_lo, a_hi = float(alpha.min()), float(alpha.max())
+        if self._alpha_span[0] is not alpha:  # at rest, one array for every frame of a set
+            self._alpha_span = (alpha, float(alpha.min()), float(alpha.max()))
+        _, a_lo, a_hi = self._alpha_span
         width_max = 2.0 * self.phi_budget * self.fs / (math.pi * self.f_ref * nf)
         n_bins = max(1, math.ceil((a_hi - a_lo) / width_max))
         width = (a_hi - a_lo) / n_bins
-        if width > 0:
-            b = np.minimum(((alpha - a_lo) / width).astype(np.int64), n_bins - 1)
-        else:
-            b = np.zeros(alpha.shape, dtype=np.int64)
         centres = a_lo + (np.arange(n_bins) + 0.5) * width
-        alpha_b = centres[b]
-        delay = (t_c - g.emit_s) / alpha_b * self.fs
+        # One bin (a sonar at rest among them): every scatterer has the bin's centre, so a
+        # scalar gives the same elementwise arithmetic as the gathered array, without it.
+        one_bin = n_bins == 1
+        if one_bin and a_lo == a_hi:  # one α for all: no Doppler residual, order 0 only
+            trains = self._stationary_trains(t_c, g.emit_s, amp, float(centres[0]))
+            return self._frame_from_trains(trains, centres, n0, t_c, out)
+        b = np.zeros(0, dtype=np.int64)
+        if not one_bin:
+            b = np.minimum(((alpha - a_lo) / width).astype(np.int64), n_bins - 1)
+        alpha_b = float(centres[0]) if one_bin else centres[b]
+        # Dividing or multiplying by α_b = 1 (a sonar at rest) is exact: skipped.
+        unit = one_bin and alpha_b == 1.0
+        delay = (t_c - g.emit_s) if unit else (t_c - g.emit_s) / alpha_b
+        delay *= self.fs
         k = np.rint(delay)
-        frac = delay - k
+        frac = np.subtract(delay, k, out=delay)
         k_idx = k.astype(np.int64)
-        if k_idx.size and (k_idx.min() < 0 or k_idx.max() > self.k_max):
-            raise ConfigError(
-                "reverberation delay",
-                int(k_idx.max()),
-                f"0 … {self.k_max} samples",
-                "internal: the delay span estimate is too small",
-            )
+        if k_idx.size:
+            self._check_delays(int(k_idx.min()), int(k_idx.max()))
         # The phase is at most π f_ref/fs (half a sample): float32 cos/sin are exact to 1e-7.
-        phase = ((-2.0 * math.pi * self.f_ref / self.fs) * (alpha_b * frac)).astype(np.float32)
-        w_re = amp * np.cos(phase)
-        w_im = amp * np.sin(phase)
+        # Products in float64, rounded to float32 on output (as a cast after them would).
+        phase = np.empty(frac.shape, dtype=np.float32)
+        np.multiply(
+            -2.0 * math.pi * self.f_ref / self.fs,
+            frac if unit else alpha_b * frac,
+            out=phase,
+            casting="same_kind",
+        )
+        # float32 → float64 is exact: the products are those of amp with the float32 values.
+        w_re = np.cos(phase).astype(np.float64)
+        w_re *= amp
+        w_im = np.sin(phase).astype(np.float64)
+        w_im *= amp
         omega = (2.0 * math.pi * self.f_ref) * (alpha - alpha_b)
         moving = bool(np.any(omega != 0.0))
         orders = self.settings.taylor_order + 1 if moving else 1
         # Trains hold delays 0 … k_max only (the FFT zero-pads them to n_fft).
         width_k = self.k_max + 1
         size = n_bins * width_k
-        flat = b * width_k + k_idx
+        flat = k_idx if one_bin else b * width_k + k_idx
         trains = np.empty((orders, n_bins, width_k), dtype=np.complex64)
         f = w_re  # placeholder for the type checker; set on p = 1
         for p in range(orders):
@@ -567,6 +625,50 @@ class VolumeReverberation:
             tr = trains[p]
             tr.real = np.bincount(flat, re_p, size).reshape(n_bins, width_k)
             tr.imag = np.bincount(flat, im_p, size).reshape(n_bins, width_k)
+        return self._frame_from_trains(trains, centres, n0, t_c, out)
+
+    def _check_delays(self, k_lo: int, k_hi: int) -> None:
+        if k_lo < 0 or k_hi > self.k_max:
+            raise ConfigError(
+                "reverberation delay",
+                k_hi,
+                f"0 … {self.k_max} samples",
+                "internal: the delay span estimate is too small",
+            )
+
+    def _stationary_trains(
+        self, t_c: float, emit_s: FloatArray, amp: FloatArray, alpha_b: float
+    ) -> NDArray[np.complex64]:
+        """The order-0 train, shape ``(1, 1, k_max + 1)``, of scatterers that all have
+        ``α = alpha_b``: the arithmetic of the general form (compiled loops, the same bits)."""
+        m = emit_s.shape[0]
+        k = np.empty(m, dtype=np.int64)
+        phase = np.empty(m, dtype=np.float32)
+        k_lo, k_hi = delays_and_phases(
+            t_c, emit_s, alpha_b, alpha_b == 1.0, self.fs,
+            -2.0 * math.pi * self.f_ref / self.fs, k, phase,
+        )  # fmt: skip
+        self._check_delays(int(k_lo), int(k_hi))
+        re, im = np.zeros(self.k_max + 1), np.zeros(self.k_max + 1)
+        weighted_trains(k, amp, np.cos(phase), np.sin(phase), re, im)
+        trains = np.empty((1, 1, self.k_max + 1), dtype=np.complex64)
+        trains[0, 0].real = re
+        trains[0, 0].imag = im
+        return trains
+
+    def _frame_from_trains(
+        self,
+        trains: NDArray[np.complex64],
+        centres: FloatArray,
+        n0: int,
+        t_c: float,
+        out: FloatArray,
+    ) -> FloatArray:
+        """The frame from its trains (shape ``(orders, bins, k_max + 1)``): each convolved
+        with the transmit time-scaled by its bin's centre, summed per order, Horner in
+        ``(t − t_c)``; added to ``out`` (shape ``(N_f,)``)."""
+        orders, n_bins = trains.shape[0], trains.shape[1]
+        nf = self.frame
         # complex64 FFTs: the output's float32 resolution (-140 dB) is far below the
         # approximation error, and they run twice as fast.
         spectra = sp_fft.fft(trains, n=self.n_fft, axis=-1, workers=1)[..., : self.n_fft // 2 + 1]

@@ -54,7 +54,7 @@ HOP_WINDOW = 64
 _TWO_PI_F32 = np.float32(2.0 * math.pi)
 
 
-class _HopWindow:
+class HopWindow:
     """Consecutive hops ``first … first + len − 1`` as the arrays the evaluation uses."""
 
     def __init__(self, hops: HopTable) -> None:
@@ -79,7 +79,7 @@ class TransmitEvaluator:
         self.schedule = waveform if isinstance(waveform, HopSchedule) else None
         if self.schedule is not None:
             self._starts = self.schedule.start_s.tolist()
-        self._window: _HopWindow | None = None
+        self._window: HopWindow | None = None
 
     def _hop_index(self, t: float) -> int:
         """Global index of the hop sounding at ``t`` (s), possibly off by one at a boundary."""
@@ -91,7 +91,7 @@ class TransmitEvaluator:
         r = bisect_right(self._starts, rel - q * period) - 1
         return q * sch.period_hops + min(max(r, 0), sch.period_hops - 1)
 
-    def _hops_covering(self, t_first: float, t_last: float) -> tuple[_HopWindow, int, int]:
+    def _hops_covering(self, t_first: float, t_last: float) -> tuple[HopWindow, int, int]:
         """A window of hops and the range ``[a, b)`` in it that includes every hop sounding
         in ``[t_first, t_last]`` (s); one schedule look-up per :data:`HOP_WINDOW` hops."""
         assert self.schedule is not None
@@ -99,9 +99,14 @@ class TransmitEvaluator:
         last = self._hop_index(t_last) + 2
         win = self._window
         if win is None or first < win.first or last >= win.first + win.size:
-            win = _HopWindow(self.schedule.hops(first, max(HOP_WINDOW, last - first + 1)))
+            win = HopWindow(self.schedule.hops(first, max(HOP_WINDOW, last - first + 1)))
             self._window = win
         return win, first - win.first, last - win.first + 1
+
+    def hop_window(self, t_first: float, t_last: float) -> tuple[HopWindow, int, int]:
+        """The hops of the schedule sounding in ``[t_first, t_last]`` (s): a window and the
+        range ``[a, b)`` in it that holds them (for a hop schedule only)."""
+        return self._hops_covering(t_first, t_last)
 
     def at_sorted_times(self, t: FloatArray) -> NDArray[np.floating[Any]]:
         """``s(t)`` (dimensionless) at non-decreasing times ``t`` (s), shape ``(n,)``.
@@ -135,7 +140,7 @@ class TransmitEvaluator:
 
 # Two layouts of the same per-sample arithmetic (so the values never depend on which one a
 # call takes): a loop over long hops, or the hop parameters repeated per sample.
-def _cycles_by_hop(t: FloatArray, win: _HopWindow, runs: list[tuple[int, int, int]]) -> FloatArray:
+def _cycles_by_hop(t: FloatArray, win: HopWindow, runs: list[tuple[int, int, int]]) -> FloatArray:
     """Phase in cycles, ``φ/2π + f τ + ½ k τ²`` (``τ = t − t_hop``), hop by hop."""
     cyc = np.empty(t.shape[0])
     for j, lo, hi in runs:
@@ -152,7 +157,7 @@ def _cycles_by_hop(t: FloatArray, win: _HopWindow, runs: list[tuple[int, int, in
 
 
 def _cycles_repeated(
-    t: FloatArray, win: _HopWindow, a: int, b: int, counts: NDArray[np.intp]
+    t: FloatArray, win: HopWindow, a: int, b: int, counts: NDArray[np.intp]
 ) -> FloatArray:
     """Phase in cycles with the hop parameters repeated per sample (many short hops)."""
     cyc = t - np.repeat(win.start_s[a:b], counts)
