@@ -474,18 +474,10 @@ class CoherentRefiner:
         not cover its hops)."""
         lobe = 1.0 / (alpha * self.spacing_hz)
         t = t_s + lobe * np.linspace(-0.5, 0.5, GHOST_POINTS)
-        word = self._codeword(hop_index)
-        hop_ids = np.arange(hop_index - self.m_hops + 1, hop_index + 1, dtype=np.int64)
-        slots = self._slots(hop_ids, word, t_s, alpha)
-        if slots is None:
+        sums = self._sums(t_s, alpha, hop_index, t, np.full(t.size, alpha), np.zeros(t.size))
+        if sums is None:
             return 0.0
-        args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
-        n = t.size
-        c, e_s, signal = np.empty(n, np.complex128), np.empty(n), np.empty(n)
-        candidate_sums(
-            *args, t, np.full(n, alpha), np.zeros(n), c, e_s, signal,
-            np.empty((n, 0), np.complex128), _NO_KNOWN,
-        )  # fmt: skip
+        c, e_s = sums
         ok = e_s > 0
         return float(np.max(2.0 * np.abs(c[ok]) / e_s[ok])) if ok.any() else 0.0
 
@@ -897,11 +889,6 @@ class CoherentRefiner:
         mapping of :func:`~hil.estimation.refine_kernels.candidate_sums`). None where the
         input does not cover the hops. For plots of the local ambiguity and for checks
         against a direct correlation."""
-        word = self._codeword(hop_index)
-        hop_ids = np.arange(hop_index - self.m_hops + 1, hop_index + 1, dtype=np.int64)
-        slots = self._slots(hop_ids, word, t_s, alpha)
-        if slots is None:
-            return None
         t = np.ascontiguousarray(np.asarray(t_rx, dtype=np.float64).ravel())
         a = np.ascontiguousarray(np.asarray(alphas, dtype=np.float64).ravel())
         g = np.zeros(t.size) if rates is None else np.asarray(rates, dtype=np.float64).ravel()
@@ -910,14 +897,29 @@ class CoherentRefiner:
                 raise ConfigError(
                     name, f"shape {arr.shape}", f"the shape of t_rx, {np.shape(t_rx)}"
                 )
+        sums = self._sums(t_s, alpha, hop_index, t, a, np.ascontiguousarray(g))
+        return None if sums is None else sums[0].reshape(np.shape(t_rx))
+
+    def _sums(
+        self, t_s: float, alpha: float, hop_index: int, t: NDArray[np.float64],
+        alphas: NDArray[np.float64], rates: NDArray[np.float64],
+    ) -> tuple[NDArray[np.complex128], NDArray[np.float64]] | None:  # fmt: skip
+        """``C`` and the model's energy ``E_s`` of the candidates ``(t, alphas, rates)``
+        (shape ``(n,)`` each, contiguous) near a detection ``(t_s, alpha)`` of the boundary
+        ending hop ``hop_index``, without other echoes taken out; None where the input does
+        not cover the hops."""
+        word = self._codeword(hop_index)
+        hop_ids = np.arange(hop_index - self.m_hops + 1, hop_index + 1, dtype=np.int64)
+        slots = self._slots(hop_ids, word, t_s, alpha)
+        if slots is None:
+            return None
         args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
         n = t.size
-        c, model, energy = np.empty(n, np.complex128), np.empty(n), np.empty(n)
+        c, e_s, signal = np.empty(n, np.complex128), np.empty(n), np.empty(n)
         candidate_sums(
-            *args, t, a, np.ascontiguousarray(g), c, model, energy,
-            np.empty((n, 0), np.complex128), _NO_KNOWN,
-        )  # fmt: skip
-        return c.reshape(np.shape(t_rx))
+            *args, t, alphas, rates, c, e_s, signal, np.empty((n, 0), np.complex128), _NO_KNOWN
+        )
+        return c, e_s
 
     @property
     def _tables(self) -> tuple[NDArray[Any], ...]:
