@@ -45,9 +45,12 @@ For each of the ``M`` boundaries the GCAS detection used (receive times from its
 4. **Doppler**: the direct path's complex amplitude at the ``M`` boundaries, fitted over its
    first :data:`DIRECT_S` on the ramp's model (the previous tone's leak divided out), gives
    its own time scale (:meth:`FirstArrivalReadout._direct_alpha`): GCAS's weighs the
-   images in, each at its path's slower radial speed. A direct-path speed more than
-   :data:`DIRECT_BELOW_GCAS_MPS` below GCAS's is a phase ambiguity (no image is faster than
-   the direct path) and GCAS's is kept.
+   images in, each at its path's slower radial speed. Its score over speed has sidelobes
+   (a few tones over ``M`` boundaries) that an image leaking into the first arrival can
+   raise above the peak; the detections of the same echo a few hops back
+   (:data:`DOPPLER_LAGS`) read other tone patterns with other sidelobes, so their scores are
+   summed with this one. A direct-path speed more than :data:`DIRECT_BELOW_GCAS_MPS` below
+   GCAS's is a phase ambiguity (no image is faster than the direct path) and GCAS's is kept.
 
 The range then comes from the first arrival instead of the centroid. Measured on the built-in
 simulated tank run (12 × 4 × 2.5 m, own echoes, reverberation, direct blast, 1.5 m/s tow),
@@ -62,7 +65,10 @@ is mostly cancelled with the clutter (no onset found: the peak readout is kept),
 opening target's copy one period back arrives first (its onset is the target a period ago,
 corrected by one period's travel at the present speed); the readout needs the samples of
 one code period plus ``M`` hops behind the boundary (:attr:`FirstArrivalReadout.history`); it
-assumes first arrivals within ``max_spread_s`` before the centroid (default 0.3 hop).
+assumes first arrivals within ``max_spread_s`` before the centroid (default 0.3 hop). The
+Doppler scores of two echoes within :data:`DOPPLER_GATE_S` of delay of each other (0.37 m) are
+summed as one echo's, and a speed that changes within 8 hops is read nearer its mean over
+them.
 """
 
 from __future__ import annotations
@@ -117,12 +123,12 @@ DIRECT_SPEED_STEP = 0.002
 #: image is slower than the direct path (:data:`DIRECT_BELOW_GCAS_MPS`), so GCAS's
 #: energy-weighted speed is the direct path's less what the images pull it down: in the
 #: 12 x 6 x 4 m tank at image order 2 the far end wall on both legs (an opening path while the
-#: target closes) pulls it down by up to 0.33 m/s (v_res/4) at 7-8 m, on the span's edge.
-#: Measured: 0.33 v_res towards the faster side took that run's speed RMSE from 0.049 to
-#: 0.028 m/s, but an opening target behind the period canceller then read more than 0.1 m/s
-#: off in 10.5 % of its estimates (9.5 % allowed by its test), so both sides stay at v_res/4.
+#: target closes) pulls it down by up to 0.33 m/s (v_res/4) at 5.5-8 m. Measured with the
+#: scores summed (:data:`DOPPLER_LAGS`): 0.3 v_res faster took that run's speed RMSE from
+#: 0.049 to 0.010 m/s; 0.4 v_res let a sidelobe 0.32 m/s faster win for an opening target
+#: behind the period canceller (90th percentile of its speed error 0.107 m/s against 0.072).
 DIRECT_SPAN_SLOWER = 0.25
-DIRECT_SPAN_FASTER = 0.4
+DIRECT_SPAN_FASTER = 0.3
 #: The direct path has the largest radial speed of all arrivals (an image's is the carriage
 #: speed times the cosine of its path's elevation), so its Doppler is not below GCAS's
 #: energy-weighted one by more than this, m/s; a direct-path speed slower by more is a phase
@@ -168,13 +174,20 @@ SLOW_RISE = 0.55
 PEDESTAL_RATIO = 2.0
 
 
-#: The direct path's Doppler score is summed with the same echo's at this many hops before
-#: (:meth:`FirstArrivalReadout._summed_score`).
-DOPPLER_HISTORY_HOPS = 3
+#: The direct path's Doppler score is summed with the same echo's at the detections this many
+#: hops before (:meth:`FirstArrivalReadout._summed_score`): their boundaries overlap the
+#: present ones less and less (M − 1 … M − 8 of M), so their tone patterns, and the score's
+#: sidelobes, differ more, within 8 hops (0.08 m/s of speed change at 1 m/s²). Measured
+#: (speed RMSE of the built-in tank at order 1 and 2, of the 12 x 6 x 4 m tank at order 2;
+#: 90th percentile of the speed error of an opening target behind the period canceller):
+#: (1, 2, 4, 8) 0.0096, 0.0100, 0.0103, 0.072 m/s; (1, 2, 3) 0.0093, 0.0103, 0.0110, 0.107;
+#: 1 to 7 hops 0.0111, 0.0111, 0.0118, 0.107; no sum (and 0.25 v_res faster) 0.0095,
+#: 0.0113, 0.049, 0.088.
+DOPPLER_LAGS = (1, 2, 4, 8)
 #: A detection some hops back is the same echo when its delay, moved on at the present speed,
 #: is within this of the present one, s (0.37 m of range at 1482 m/s: a first arrival read
 #: 0.2 m off among good ones is still summed with them; measured on the 12 x 6 x 4 m tank at
-#: image order 2: 0.3 ms left one such estimate 0.21 m/s off, speed RMSE 0.019 against 0.011).
+#: image order 2: 0.3 ms left one such estimate 0.21 m/s off, speed RMSE 0.019 against 0.010).
 DOPPLER_GATE_S = 0.5e-3
 
 
@@ -662,10 +675,9 @@ class FirstArrivalReadout:
         With a few tones over ``M`` boundaries that score has sidelobes 0.3-0.6 m/s from its
         peak, as high as 0.4-0.9 of it once an image leaks into the first arrival. The next
         detection reads a different tone pattern, so its sidelobes fall elsewhere while the
-        direct path's speed stays (30 m/s² would move it 0.3 m/s in a hop): the score (divided
-        by its maximum) is summed with those of the same echo at the last
-        :data:`DOPPLER_HISTORY_HOPS` hops (:meth:`_summed_score`). None where no tone
-        recurs or the summed peak is on the span's edge.
+        direct path's speed stays: the score (divided by its maximum) is summed with those of
+        the same echo :data:`DOPPLER_LAGS` hops back (:meth:`_summed_score`). None where no
+        tone recurs or the summed peak is on the span's edge.
         """
         fs = self.fs_hz
         f = hops.freq_hz[::-1]
@@ -703,21 +715,23 @@ class FirstArrivalReadout:
         return float(alpha + d_alpha[g])
 
     def _summed_score(self, own: DopplerScore, v_mps: float) -> NDArray[np.float64]:
-        """``own.score`` plus the scores of the same echo at the last
-        :data:`DOPPLER_HISTORY_HOPS` hops, on ``own``'s speeds (shape ``(G,)``).
+        """``own.score`` plus the scores of the same echo :data:`DOPPLER_LAGS` hops back, on
+        ``own``'s speeds (shape ``(G,)``).
 
-        The same echo: a detection 1 to :data:`DOPPLER_HISTORY_HOPS` hops back whose delay,
+        The same echo: a detection one of :data:`DOPPLER_LAGS` hops back whose delay,
         moved on by the range the echo covers at ``v_mps`` (m/s, closing positive) in those
         hops, is within :data:`DOPPLER_GATE_S` of ``own``'s. The scores kept are pruned to
         those hops."""
         hop_s = self.schedule.hop_s
         c = self.sound_speed_mps
         self._scores = [
-            s for s in self._scores if 0 < own.hop_index - s.hop_index <= DOPPLER_HISTORY_HOPS
+            s for s in self._scores if 0 < own.hop_index - s.hop_index <= max(DOPPLER_LAGS)
         ]
         total = own.score.copy()
         n = own.score.size
         for s in self._scores:
+            if own.hop_index - s.hop_index not in DOPPLER_LAGS:
+                continue
             moved = 2.0 * v_mps * (own.hop_index - s.hop_index) * hop_s / c
             if abs(s.delay_s - moved - own.delay_s) > DOPPLER_GATE_S:
                 continue
