@@ -49,8 +49,9 @@ For each of the ``M`` boundaries the GCAS detection used (receive times from its
    (a few tones over ``M`` boundaries) that an image leaking into the first arrival can
    raise above the peak; the detections of the same echo a few hops back
    (:data:`DOPPLER_LAGS`) read other tone patterns with other sidelobes, so their scores are
-   summed with this one. A direct-path speed more than :data:`DIRECT_BELOW_GCAS_MPS` below
-   GCAS's is a phase ambiguity (no image is faster than the direct path) and GCAS's is kept.
+   summed with this one to choose the lobe. A direct-path speed more than
+   :data:`DIRECT_BELOW_GCAS_MPS` below GCAS's is a phase ambiguity (no image is faster than
+   the direct path) and GCAS's is kept.
 
 The range then comes from the first arrival instead of the centroid. Measured on the built-in
 simulated tank run (12 × 4 × 2.5 m, own echoes, reverberation, direct blast, 1.5 m/s tow),
@@ -67,8 +68,8 @@ corrected by one period's travel at the present speed); the readout needs the sa
 one code period plus ``M`` hops behind the boundary (:attr:`FirstArrivalReadout.history`); it
 assumes first arrivals within ``max_spread_s`` before the centroid (default 0.3 hop). The
 Doppler scores of two echoes within :data:`DOPPLER_GATE_S` of delay of each other (0.37 m) are
-summed as one echo's, and a speed that changes within 8 hops is read nearer its mean over
-them.
+summed as one echo's; a speed changing faster than :data:`DOPPLER_SPEED_GATE_MPS` over the lags
+is read on the present score alone.
 """
 
 from __future__ import annotations
@@ -175,32 +176,40 @@ PEDESTAL_RATIO = 2.0
 
 
 #: The direct path's Doppler score is summed with the same echo's at the detections this many
-#: hops before (:meth:`FirstArrivalReadout._summed_score`): their boundaries overlap the
-#: present ones less and less (M − 1 … M − 8 of M), so their tone patterns, and the score's
-#: sidelobes, differ more, within 8 hops (0.08 m/s of speed change at 1 m/s²). Measured
-#: (speed RMSE of the built-in tank at order 1 and 2, of the 12 x 6 x 4 m tank at order 2;
-#: 90th percentile of the speed error of an opening target behind the period canceller):
-#: (1, 2, 4, 8) 0.0096, 0.0100, 0.0103, 0.072 m/s; (1, 2, 3) 0.0093, 0.0103, 0.0110, 0.107;
-#: 1 to 7 hops 0.0111, 0.0111, 0.0118, 0.107; no sum (and 0.25 v_res faster) 0.0095,
-#: 0.0113, 0.049, 0.088.
+#: hops before to choose its lobe (:meth:`FirstArrivalReadout._direct_alpha`): their boundaries
+#: overlap the present ones less and less (M − 1 … M − 8 of M), so their tone patterns, and the
+#: score's sidelobes, differ more. Measured (speed RMSE against the telemetry of the built-in
+#: tank at order 1 and 2 and of the 12 x 6 x 4 m tank at order 2; 90th percentile of the speed
+#: error of an opening target behind the period canceller): (1, 2, 4, 8) 0.0096, 0.0113,
+#: 0.013, 0.083 m/s; 1 to 8 hops 0.0096, 0.0113, 0.013, 0.104; no sum (and 0.25 v_res
+#: faster) 0.0095, 0.0113, 0.049, 0.088.
 DOPPLER_LAGS = (1, 2, 4, 8)
 #: A detection some hops back is the same echo when its delay, moved on at the present speed,
 #: is within this of the present one, s (0.37 m of range at 1482 m/s: a first arrival read
 #: 0.2 m off among good ones is still summed with them; measured on the 12 x 6 x 4 m tank at
 #: image order 2: 0.3 ms left one such estimate 0.21 m/s off, speed RMSE 0.019 against 0.010).
 DOPPLER_GATE_S = 0.5e-3
+#: ... and when GCAS's speeds of the two differ by no more than this, m/s: a third of the
+#: score's lobe spacing (0.3 m/s), so a speed that changed (a carriage braking at 2 m/s²
+#: changes 0.16 m/s in 8 hops) does not move the lobe. Measured on the 12 x 6 x 4 m tank at
+#: order 2 (speed RMSE over every estimate with a truth, ramps and stop included): none
+#: 0.111 m/s, 0.1 m/s 0.105 (0.091 without the sum); 0.05 m/s left out enough of the scored
+#: stretch's sums to raise its speed RMSE from 0.013 to 0.019.
+DOPPLER_SPEED_GATE_MPS = 0.1
 
 
 @dataclass(frozen=True)
 class DopplerScore:
     """The direct path's Doppler score of one detection: its hop index, its delay ``delay_s``
-    (s, first arrival less the boundary's transmit time) and its score divided by its
-    maximum, shape ``(G,)``, at the speeds ``(k0 + i) ·`` :data:`DIRECT_SPEED_STEP` m/s."""
+    (s, first arrival less the boundary's transmit time), its score divided by its maximum,
+    shape ``(G,)``, at the speeds ``(k0 + i) ·`` :data:`DIRECT_SPEED_STEP` m/s, and GCAS's
+    speed ``v_gcas_mps`` (m/s, closing positive)."""
 
     hop_index: int
     delay_s: float
     k0: int
     score: NDArray[np.float64]
+    v_gcas_mps: float
 
 
 @dataclass(frozen=True)
@@ -676,8 +685,9 @@ class FirstArrivalReadout:
         peak, as high as 0.4-0.9 of it once an image leaks into the first arrival. The next
         detection reads a different tone pattern, so its sidelobes fall elsewhere while the
         direct path's speed stays: the score (divided by its maximum) is summed with those of
-        the same echo :data:`DOPPLER_LAGS` hops back (:meth:`_summed_score`). None where no
-        tone recurs or the summed peak is on the span's edge.
+        the same echo :data:`DOPPLER_LAGS` hops back (:meth:`_summed_score`) to choose the
+        lobe; the present score's own peak on that lobe (refined by a parabola) is the speed.
+        None where no tone recurs or the peak is on the span's edge.
         """
         fs = self.fs_hz
         f = hops.freq_hz[::-1]
@@ -704,24 +714,36 @@ class FirstArrivalReadout:
         for k in range(tones.size):
             sums[:, k] = (rot[:, group == k] * q[group == k]).sum(axis=1)
         score = np.sum(np.abs(sums) ** 2, axis=1)
-        own = DopplerScore(int(hop_index), float(delay_s), k0, score / max(score.max(), 1e-300))
+        own = DopplerScore(
+            int(hop_index), float(delay_s), k0, score / max(score.max(), 1e-300), v_gcas
+        )
         total = self._summed_score(own, v_gcas)
         self._scores.append(own)
+        # The summed score chooses the lobe, the present one alone places the peak on it: a
+        # speed that changes over the lags would move a summed peak.
         g = int(np.argmax(total))
+        own_score = own.score
+        while 0 < g < own_score.size - 1 and max(own_score[g - 1], own_score[g + 1]) > own_score[g]:
+            g = g - 1 if own_score[g - 1] > own_score[g + 1] else g + 1
         if g in (0, d_alpha.size - 1):
             return None  # the peak is outside the span: keep GCAS's
         if sign * (speeds[g] - v_gcas) < -DIRECT_BELOW_GCAS_MPS:
             return None  # slower than every image: an ambiguity of the phase (see the bound)
-        return float(alpha + d_alpha[g])
+        # Between grid speeds: the parabola through the peak and its neighbours.
+        v = speeds[g] + DIRECT_SPEED_STEP * parabolic_offset(
+            own_score[g - 1], own_score[g], own_score[g + 1]
+        )
+        return float((c + v) / (c - v))
 
     def _summed_score(self, own: DopplerScore, v_mps: float) -> NDArray[np.float64]:
         """``own.score`` plus the scores of the same echo :data:`DOPPLER_LAGS` hops back, on
         ``own``'s speeds (shape ``(G,)``).
 
-        The same echo: a detection one of :data:`DOPPLER_LAGS` hops back whose delay,
-        moved on by the range the echo covers at ``v_mps`` (m/s, closing positive) in those
-        hops, is within :data:`DOPPLER_GATE_S` of ``own``'s. The scores kept are pruned to
-        those hops."""
+        The same echo at the same speed: a detection one of :data:`DOPPLER_LAGS` hops back
+        whose delay, moved on by the range the echo covers at ``v_mps`` (m/s, closing
+        positive) in those hops, is within :data:`DOPPLER_GATE_S` of ``own``'s, and whose
+        GCAS speed is within :data:`DOPPLER_SPEED_GATE_MPS` of ``own``'s. The scores kept are
+        pruned to those hops."""
         hop_s = self.schedule.hop_s
         c = self.sound_speed_mps
         self._scores = [
@@ -734,6 +756,8 @@ class FirstArrivalReadout:
                 continue
             moved = 2.0 * v_mps * (own.hop_index - s.hop_index) * hop_s / c
             if abs(s.delay_s - moved - own.delay_s) > DOPPLER_GATE_S:
+                continue
+            if abs(own.v_gcas_mps - s.v_gcas_mps) > DOPPLER_SPEED_GATE_MPS:
                 continue
             a = max(own.k0, s.k0)
             b = min(own.k0 + n, s.k0 + s.score.size)
