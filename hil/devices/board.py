@@ -348,11 +348,19 @@ class Board:
         self._link.flush()
 
     def _command(self, message: Configure | Start | Stop) -> Ack:
-        with self._link.lock:
+        link = self._link
+        with link.lock:
             self._replies.pop(message.TYPE_ID, None)
             self._send(message)
-        self._link.wait(
-            lambda: message.TYPE_ID in self._replies, self.command_timeout_s, message.NAME
+            sent_at = link.bytes_queued
+        # The reply is due command_timeout_s after the command left the host: a command
+        # queued behind a DAC burst on a slow link (an emulated UART, a starved board
+        # process) waits while the bytes ahead of it are still being written.
+        link.wait(
+            lambda: message.TYPE_ID in self._replies,
+            self.command_timeout_s,
+            message.NAME,
+            progress=lambda: min(link.bytes_written, sent_at),
         )
         reply = self._replies.pop(message.TYPE_ID)
         if isinstance(reply, Nak):
@@ -433,9 +441,10 @@ class Board:
         """Start streaming; returns the board sample index of the first sample.
 
         With a DAC ``source`` the DAC buffer is preloaded (within the granted credit) before
-        START, so playback begins without an underrun. Sample ``k`` of the source plays at
-        the returned index ``+ k``; a callable source is asked ``source(k, n)`` for samples
-        ``k .. k+n-1`` (consecutive, from 0).
+        START, so playback begins without an underrun; the preload fails after
+        ``preload_timeout_s`` (real seconds) with no sample sent. Sample ``k`` of the source
+        plays at the returned index ``+ k``; a callable source is asked ``source(k, n)`` for
+        samples ``k .. k+n-1`` (consecutive, from 0).
 
         The first sample is scheduled :attr:`start_lead_s` after the board clock. If the
         board refuses START because that index has passed (the preload took longer than the
@@ -502,10 +511,13 @@ class Board:
         with self._link.lock:
             self._feeder = feeder
             self._link.wake()
+        # Fails only after timeout_s with no sample sent: a loaded host or a slow board
+        # that still takes samples completes its preload, however long it takes.
         self._link.wait(
             lambda: feeder.exhausted or (self._conn.dac_credit == 0 and feeder.next_index > first),
             timeout_s,
             "DAC preload (credit)",
+            progress=lambda: feeder.next_index,
         )
 
     def stop(self) -> None:

@@ -98,6 +98,10 @@ class BoardLink(ABC):
         #: The transport is connected and not known lost.
         self.up = False
         self._outgoing = bytearray()  # encoded frames not yet written, in sequence order
+        #: Bytes queued and bytes written since the link was made: a frame queued when
+        #: ``bytes_queued`` reached N has left the host once ``bytes_written`` >= N.
+        self.bytes_queued = 0
+        self.bytes_written = 0
         self._write_lock = threading.Lock()  # held by the one thread writing (see flush)
         self._closing = threading.Event()
 
@@ -117,11 +121,21 @@ class BoardLink(ABC):
         """Stop the background reading and feeding (the transport stays for the driver)."""
 
     @abstractmethod
-    def wait(self, done: Callable[[], bool], timeout_s: float, what: str) -> None:
+    def wait(
+        self,
+        done: Callable[[], bool],
+        timeout_s: float,
+        what: str,
+        progress: Callable[[], int] | None = None,
+    ) -> None:
         """Return once ``done()`` holds (checked under the session lock).
 
         Raises the driver's refusal, TransportTimeoutError after ``timeout_s`` (naming
-        ``what``), TransportClosedError if the link is lost meanwhile.
+        ``what``), TransportClosedError if the link is lost meanwhile. With ``progress`` (a
+        count that grows while the awaited thing is on its way: bytes of a command written
+        out behind a DAC burst, samples of a preload sent), the timeout counts from its last
+        growth: a slow link or a starved host that still moves waits on, a stuck one fails
+        after ``timeout_s``.
         """
 
     @abstractmethod
@@ -134,6 +148,7 @@ class BoardLink(ABC):
         belong to the old session). Called holding the session lock."""
         with self.lock:
             self.transport = transport
+            self.bytes_written += len(self._outgoing)  # dropped: never to be written
             self._outgoing.clear()
             self.up = True
 
@@ -147,6 +162,7 @@ class BoardLink(ABC):
     def queue(self, frames: bytes) -> None:
         """Queue encoded frames for the next :meth:`flush` (called holding the lock)."""
         self._outgoing += frames
+        self.bytes_queued += len(frames)
 
     @property
     def queued(self) -> bool:
@@ -182,6 +198,7 @@ class BoardLink(ABC):
                         held = False
                         return
                 transport.write(data)
+                self.bytes_written += len(data)  # one writer at a time (the write lock)
         finally:
             if held:
                 self._write_lock.release()
@@ -249,16 +266,25 @@ class ThreadedBoardLink(BoardLink):
                 thread.join(timeout=5.0)
         self._reader = self._writer = None
 
-    def wait(self, done: Callable[[], bool], timeout_s: float, what: str) -> None:
+    def wait(
+        self,
+        done: Callable[[], bool],
+        timeout_s: float,
+        what: str,
+        progress: Callable[[], int] | None = None,
+    ) -> None:
         """See :meth:`BoardLink.wait`; ``timeout_s`` is real seconds. Without a reader
         thread (the handshake of :meth:`open`), or on it (a reconnect), the waiter pumps the
         link itself."""
         deadline = time.monotonic() + timeout_s
+        moved = progress() if progress is not None else 0
         pumping = self._reader is None or threading.current_thread() is self._reader
         while True:
             with self.cond:
                 if done():
                     return
+                if progress is not None and progress() != moved:
+                    moved, deadline = progress(), time.monotonic() + timeout_s
                 refusal = self.hooks.refusal()
                 if refusal is not None:
                     raise refusal
