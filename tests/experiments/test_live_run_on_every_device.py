@@ -315,7 +315,7 @@ def test_a_run_stopped_by_its_caller_stops_safely_and_says_so(
                 if seen == 5:
                     break
     summary = json.loads((folder / "summary.json").read_text())
-    assert summary["interrupted"] is True
+    assert summary["interrupted"] is True, (seen, summary["error"])
     assert summary["error"] == "interrupted (stopped by the caller)"
     with RunRecording.open(folder / "run.h5") as rec:
         assert rec.events()[-1].text == "stop: interrupted (stopped by the caller)"
