@@ -68,13 +68,33 @@ class Device:
     latency_step: int = 1
 
     def experiment(self, text: str = SHORT) -> str:
-        return text.replace('board = "sim://board"', f'board = "{self.board}"')
+        text = text.replace('board = "sim://board"', f'board = "{self.board}"')
+        if self.virtual_time or self.needs_jack:
+            return text
+        # The simulated tank in real time: slowed to the CPU this machine has to spare now.
+        return text.replace("time_scale = 0.4", f"time_scale = {load_time_scale():.3f}")
 
     def latency_holds(self, latency: int) -> bool:
         """Whether a run's measured loopback ``latency`` (samples) is this device's."""
         if self.latency_samples is not None:
             return latency == self.latency_samples
         return latency >= self.latency_min and (latency - 64) % self.latency_step == 0
+
+
+#: The built-in experiment's time scale, which the real-time simulated tank (world, C
+#: firmware, GRBL twin, receiver: about 1 CPU s per wall s) keeps up with on an idle core.
+IDLE_TIME_SCALE = 0.4
+
+
+def load_time_scale() -> float:
+    """The simulated tank's time scale for a real-time run now: :data:`IDLE_TIME_SCALE` times
+    the share of a core this process can expect (cores / the 1-minute load average, at most
+    1), at least 0.05. A run slower than its capture fills its 8 s ring and fails (measured at
+    load 13: 'read more often or enlarge the ring'); slowed as the machine is loaded, the
+    run's CPU per wall second stays what an idle core gives."""
+    cores = os.cpu_count() or 1
+    share = min(1.0, cores / max(os.getloadavg()[0], 1e-9))
+    return max(0.05, IDLE_TIME_SCALE * share)
 
 
 JACK_PERIOD = DEFAULT_PERIOD  # frames, the served JACK tank's
