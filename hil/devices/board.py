@@ -348,19 +348,11 @@ class Board:
         self._link.flush()
 
     def _command(self, message: Configure | Start | Stop) -> Ack:
-        link = self._link
-        with link.lock:
+        with self._link.lock:
             self._replies.pop(message.TYPE_ID, None)
             self._send(message)
-            sent_at = link.bytes_queued
-        # The reply is due command_timeout_s after the command left the host: a command
-        # queued behind a DAC burst on a slow link (an emulated UART, a starved board
-        # process) waits while the bytes ahead of it are still being written.
-        link.wait(
-            lambda: message.TYPE_ID in self._replies,
-            self.command_timeout_s,
-            message.NAME,
-            progress=lambda: min(link.bytes_written, sent_at),
+        self._link.wait(
+            lambda: message.TYPE_ID in self._replies, self.command_timeout_s, message.NAME
         )
         reply = self._replies.pop(message.TYPE_ID)
         if isinstance(reply, Nak):

@@ -98,10 +98,6 @@ class BoardLink(ABC):
         #: The transport is connected and not known lost.
         self.up = False
         self._outgoing = bytearray()  # encoded frames not yet written, in sequence order
-        #: Bytes queued and bytes written since the link was made: a frame queued when
-        #: ``bytes_queued`` reached N has left the host once ``bytes_written`` >= N.
-        self.bytes_queued = 0
-        self.bytes_written = 0
         self._write_lock = threading.Lock()  # held by the one thread writing (see flush)
         self._closing = threading.Event()
 
@@ -132,10 +128,9 @@ class BoardLink(ABC):
 
         Raises the driver's refusal, TransportTimeoutError after ``timeout_s`` (naming
         ``what``), TransportClosedError if the link is lost meanwhile. With ``progress`` (a
-        count that grows while the awaited thing is on its way: bytes of a command written
-        out behind a DAC burst, samples of a preload sent), the timeout counts from its last
-        growth: a slow link or a starved host that still moves waits on, a stuck one fails
-        after ``timeout_s``.
+        count that grows while the awaited thing is on its way: the samples of a DAC preload
+        sent), the timeout counts from its last growth: a starved host or a slow board that
+        still takes samples waits on, a stuck one fails after ``timeout_s``.
         """
 
     @abstractmethod
@@ -148,7 +143,6 @@ class BoardLink(ABC):
         belong to the old session). Called holding the session lock."""
         with self.lock:
             self.transport = transport
-            self.bytes_written += len(self._outgoing)  # dropped: never to be written
             self._outgoing.clear()
             self.up = True
 
@@ -162,7 +156,6 @@ class BoardLink(ABC):
     def queue(self, frames: bytes) -> None:
         """Queue encoded frames for the next :meth:`flush` (called holding the lock)."""
         self._outgoing += frames
-        self.bytes_queued += len(frames)
 
     @property
     def queued(self) -> bool:
@@ -198,7 +191,6 @@ class BoardLink(ABC):
                         held = False
                         return
                 transport.write(data)
-                self.bytes_written += len(data)  # one writer at a time (the write lock)
         finally:
             if held:
                 self._write_lock.release()

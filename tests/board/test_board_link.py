@@ -173,24 +173,6 @@ def test_a_wait_that_sees_progress_waits_on_and_one_that_sees_none_times_out(
         link.wait(lambda: False, 5.0, "a reply", progress=lambda: 7)
 
 
-def test_a_command_queued_behind_a_burst_is_timed_from_when_it_was_written() -> None:
-    link = ThreadedBoardLink(ManualClock(), Recorder().hooks())
-    transport = ScriptedTransport()
-    link.connect(transport)
-    with link.lock:
-        link.queue(b"d" * 1000)  # a DAC burst
-        link.queue(b"command")
-        sent_at = link.bytes_queued
-    assert (sent_at, link.bytes_written) == (1007, 0)
-    link.flush()
-    assert link.bytes_written == sent_at == sum(len(w) for w in transport.written)
-    # Frames dropped for a new session count as gone: a later command is not held up.
-    with link.lock:
-        link.queue(b"old session")
-    link.connect(ScriptedTransport())
-    assert link.bytes_written == link.bytes_queued == 1018
-
-
 def test_the_virtual_link_stays_lost_and_its_wait_says_so() -> None:
     clock = VirtualClock(tick_s=0.001)
     recorder = Recorder()
