@@ -201,6 +201,11 @@ class PtyEndpoint:
             self._wake_device.wait(tick_wait_s(next_tick, time.monotonic()))
             self._wake_device.clear()  # before taking the input: a later arrival re-sets it
             with self._io_lock:
+                # What the pty holds now goes in before the service pass: this device shares
+                # the CPU with its host, and after a stall of this process the host's bytes
+                # that arrived meanwhile must reach it before its watchdog judges the host
+                # silent (a real board hears them as they arrive).
+                self._take_pending()
                 incoming = list(self._incoming)
                 self._incoming.clear()
             with self.lock:
@@ -249,21 +254,39 @@ class PtyEndpoint:
 
     def _read(self) -> bool:
         """Read what the host wrote into the device's input; True if the host hung up."""
-        try:
-            data = os.read(self._master, 65536)
-        except BlockingIOError:
-            return False
-        except OSError as error:
-            if error.errno == errno.EIO:
+        with self._io_lock:  # one reader at a time, appending as it reads: input in order
+            try:
+                data = os.read(self._master, 65536)
+            except BlockingIOError:
+                return False
+            except OSError as error:
+                if error.errno == errno.EIO:
+                    return True
+                raise
+            if not data:
                 return True
-            raise
-        if not data:
-            return True
-        self._set_host_present(True)
-        with self._io_lock:
-            self._incoming.append(data)
+            self._arrived(data)
         self._wake_device.set()
         return False
+
+    def _arrived(self, data: bytes) -> None:
+        """Append host bytes to the input (called holding ``_io_lock``); bytes mean a host."""
+        if not self._host_present:
+            self._host_present = True
+            self._incoming.append(True)
+        self._incoming.append(data)
+
+    def _take_pending(self) -> None:
+        """Append to the input what the pty holds now (called holding ``_io_lock``); a hang-up
+        or an empty pty ends it (the I/O thread reports a hang-up)."""
+        while True:
+            try:
+                data = os.read(self._master, 65536)
+            except OSError:  # BlockingIOError: nothing more; EIO: the host hung up
+                return
+            if not data:
+                return
+            self._arrived(data)
 
     def _write(self) -> None:
         """Write as much pending output as the pty takes now."""

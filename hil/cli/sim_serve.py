@@ -68,8 +68,8 @@ tank in between, use devices sim://board and sim://stage (the default of 'hil ta
          else 'default'), the tank's GRBL controller on a pty, and the tank as a JACK client
          (transmitter in, hydrophone and DAC monitor out), wired to each run that opens its
          stream; prints the path of the experiment file to run (board = audio://JACK?...,
-         stage = the pty). Server, controller and tank run at simulation.time_scale of the
-         wall clock, so the world keeps up:
+         stage = the pty). The server runs in real time and synchronously: a late tank
+         slows the stream instead of losing samples:
 
   $ hil sim-serve tank --jack                 # prints e.g. /tmp/hil-jack-tank-x1/experiment.toml
   $ hil tank-run /tmp/hil-jack-tank-x1/experiment.toml --out runs/jack

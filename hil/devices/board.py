@@ -429,13 +429,17 @@ class Board:
         elapsed = max(0.0, self._clock.now() - host_t)
         return index + round(elapsed * self._configured.sample_rate_hz)
 
-    def start(self, source: DacSource | None = None, *, preload_timeout_s: float = 1.0) -> int:
+    def start(
+        self, source: DacSource | None = None, *, preload_timeout_s: float | None = None
+    ) -> int:
         """Start streaming; returns the board sample index of the first sample.
 
         With a DAC ``source`` the DAC buffer is preloaded (within the granted credit) before
-        START, so playback begins without an underrun. Sample ``k`` of the source plays at
-        the returned index ``+ k``; a callable source is asked ``source(k, n)`` for samples
-        ``k .. k+n-1`` (consecutive, from 0).
+        START, so playback begins without an underrun; the preload fails after
+        ``preload_timeout_s`` (real seconds; default :attr:`command_timeout_s`: the credit
+        it waits for is the board's answer to CONFIGURE) with no sample sent. Sample ``k`` of
+        the source plays at the returned index ``+ k``; a callable source is asked
+        ``source(k, n)`` for samples ``k .. k+n-1`` (consecutive, from 0).
 
         The first sample is scheduled :attr:`start_lead_s` after the board clock. If the
         board refuses START because that index has passed (the preload took longer than the
@@ -461,7 +465,10 @@ class Board:
                 # stream that begins later than the run reads it from.
                 self.ring.expect(first)
             if feeder is not None:
-                self._preload(feeder, first, preload_timeout_s)
+                preload_s = (
+                    self.command_timeout_s if preload_timeout_s is None else preload_timeout_s
+                )
+                self._preload(feeder, first, preload_s)
             try:
                 self._command(Start(first))
             except BoardCommandError as error:
@@ -502,10 +509,13 @@ class Board:
         with self._link.lock:
             self._feeder = feeder
             self._link.wake()
+        # Fails only after timeout_s with no sample sent: a loaded host or a slow board
+        # that still takes samples completes its preload, however long it takes.
         self._link.wait(
             lambda: feeder.exhausted or (self._conn.dac_credit == 0 and feeder.next_index > first),
             timeout_s,
             "DAC preload (credit)",
+            progress=lambda: feeder.next_index,
         )
 
     def stop(self) -> None:

@@ -117,11 +117,20 @@ class BoardLink(ABC):
         """Stop the background reading and feeding (the transport stays for the driver)."""
 
     @abstractmethod
-    def wait(self, done: Callable[[], bool], timeout_s: float, what: str) -> None:
+    def wait(
+        self,
+        done: Callable[[], bool],
+        timeout_s: float,
+        what: str,
+        progress: Callable[[], int] | None = None,
+    ) -> None:
         """Return once ``done()`` holds (checked under the session lock).
 
         Raises the driver's refusal, TransportTimeoutError after ``timeout_s`` (naming
-        ``what``), TransportClosedError if the link is lost meanwhile.
+        ``what``), TransportClosedError if the link is lost meanwhile. With ``progress`` (a
+        count that grows while the awaited thing is on its way: the samples of a DAC preload
+        sent), the timeout counts from its last growth: a starved host or a slow board that
+        still takes samples waits on, a stuck one fails after ``timeout_s``.
         """
 
     @abstractmethod
@@ -249,16 +258,25 @@ class ThreadedBoardLink(BoardLink):
                 thread.join(timeout=5.0)
         self._reader = self._writer = None
 
-    def wait(self, done: Callable[[], bool], timeout_s: float, what: str) -> None:
+    def wait(
+        self,
+        done: Callable[[], bool],
+        timeout_s: float,
+        what: str,
+        progress: Callable[[], int] | None = None,
+    ) -> None:
         """See :meth:`BoardLink.wait`; ``timeout_s`` is real seconds. Without a reader
         thread (the handshake of :meth:`open`), or on it (a reconnect), the waiter pumps the
         link itself."""
         deadline = time.monotonic() + timeout_s
+        moved = progress() if progress is not None else 0
         pumping = self._reader is None or threading.current_thread() is self._reader
         while True:
             with self.cond:
                 if done():
                     return
+                if progress is not None and progress() != moved:
+                    moved, deadline = progress(), time.monotonic() + timeout_s
                 refusal = self.hooks.refusal()
                 if refusal is not None:
                     raise refusal

@@ -48,8 +48,15 @@ class VirtualTimeBoardLink(BoardLink):
             self._detach()
             self._detach = None
 
-    def wait(self, done: Callable[[], bool], timeout_s: float, what: str) -> None:
-        """See :meth:`BoardLink.wait`; ``timeout_s`` is virtual seconds, slept on the clock."""
+    def wait(
+        self,
+        done: Callable[[], bool],
+        timeout_s: float,
+        what: str,
+        progress: Callable[[], int] | None = None,
+    ) -> None:
+        """See :meth:`BoardLink.wait`; ``timeout_s`` is virtual seconds, slept on the clock
+        (``progress`` is not needed: on virtual time nothing is starved of CPU)."""
 
         def settled() -> bool:
             refusal = self.hooks.refusal()

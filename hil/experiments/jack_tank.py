@@ -18,10 +18,13 @@ Time: the tank's world starts at the first non-silent sample on its transmitter 
 run's first transmitted sample: JACK's digital path carries exact zeros before it). The
 simulation's time is the tank stream's sample time: the GRBL controller runs on it
 (:class:`AudioPacedClock`), and the carriage position an input sample's echo is rendered
-with is the controller's at that sample's time. The server runs ``simulation.time_scale``
-times slower than the wall clock (the dummy driver waits longer between periods) and
+with is the controller's at that sample's time. The server runs in real time (the dummy
+driver has no slower pace: ``simulation.time_scale`` does not apply to it) and
 synchronously (each period waits for every client), so a world that computes slower than
-real time keeps up; the run sees a device at its nominal rate, slowed as a whole.
+real time slows the whole stream instead of losing samples: the run sees a device at its
+nominal rate whose pace against the wall clock varies, and maps its wall-clock-dated stage
+telemetry through its callback's stamps
+(:func:`~hil.experiments.live.board_state.sample_index_at`).
 
 Everything from :mod:`sim_devices` is imported inside the functions (DESIGN: the host never
 imports simulated devices at module level).
@@ -399,8 +402,8 @@ def _clients(ports: list[str]) -> dict[str, set[str]]:
 
 
 class JackTankServer:
-    """``hil sim-serve tank --jack``: a JACK dummy server paced at the experiment's time
-    scale, the tank's GRBL controller on a pty, the tank as a JACK client; :meth:`write`
+    """``hil sim-serve tank --jack``: a JACK dummy server (real time, synchronous), the
+    tank's GRBL controller on a pty, the tank as a JACK client; :meth:`write`
     writes the experiment file a run takes (see the module docstring)."""
 
     def __init__(self, exp: Experiment, period: int = DEFAULT_PERIOD) -> None:
@@ -416,11 +419,11 @@ class JackTankServer:
         from hil.devices.audio.portaudio_backend import rescan_devices
         from sim_devices.stage.on_pty import SimulatedGrblOnPty
 
-        scale = self.exp.simulation.time_scale
-        settings = DummyServerSettings(int(self.exp.waveform.fs_hz), self.period, scale)
+        settings = DummyServerSettings(int(self.exp.waveform.fs_hz), self.period)
         try:
             self.server = JackDummyServer(settings).start()
-            clock = AudioPacedClock(self.period / settings.samplerate, scale)
+            # The server's periods come at most at real time (slower when a client is late).
+            clock = AudioPacedClock(self.period / settings.samplerate, 1.0)
             self.stage = SimulatedGrblOnPty(tank_stage_config(), clock=clock).start()
             rescan_devices()  # PortAudio lists a server started after it loaded only now
             stage = self.stage

@@ -22,7 +22,7 @@ import numpy as np
 
 from hil.errors import ConfigError
 from hil.experiments.experiment import Experiment, parse_experiment
-from hil.experiments.live.board_state import sample_zero_time_s
+from hil.experiments.live.board_state import sample_index_at, stamped_in_callback
 from hil.experiments.run_calibrations import RunCalibrations, load_run_calibrations
 from hil.experiments.tank_run import CodewordMaps, RunOutcome, Telemetry
 from hil.recording.reader import RunRecording
@@ -64,7 +64,7 @@ def outcome_from_recording(
         end = int(segments.stop_index[-1]) if len(segments) else start
         estimates = rec.estimates()
         events = [(e.kind, e.sample_index, e.length, e.text) for e in rec.events()]
-        telemetry = _telemetry(rec, rec.fs_hz)
+        telemetry = _telemetry(rec, rec.fs_hz, exp.board_url)
         fs = rec.fs_hz
         origin = rec.origin_sample
         live = rec.metadata.receiver
@@ -106,20 +106,20 @@ def outcome_from_recording(
     )
 
 
-def _telemetry(rec: RunRecording, fs: float) -> Telemetry:
+def _telemetry(rec: RunRecording, fs: float, board_url: str) -> Telemetry:
     """The recorded stage telemetry, mapped onto sample time as the live run maps it after
-    its end: by the least-delayed SYNC pair of the whole run."""
+    its end, through the sync pairs of the whole run as its DAC/ADC ``board_url`` stamps
+    them (:func:`~hil.experiments.live.board_state.sample_index_at`)."""
     tel = rec.telemetry()
     pairs = rec.sync_pairs()
-    zero = sample_zero_time_s(
-        list(zip(pairs.sample_index.tolist(), pairs.host_time_s.tolist(), strict=True)), fs
-    )
     host = np.array([t.host_time_s for t in tel], dtype=float)
-    index = (
-        np.round((host - zero) * fs).astype(np.int64).tolist()
-        if zero is not None
-        else [-1] * len(tel)
+    mapped = sample_index_at(
+        host,
+        list(zip(pairs.sample_index.tolist(), pairs.host_time_s.tolist(), strict=True)),
+        fs,
+        in_callback=stamped_in_callback(board_url),
     )
+    index = np.round(mapped).astype(np.int64).tolist() if mapped is not None else [-1] * len(tel)
     return Telemetry(
         host_time_s=host.tolist(),
         sample_index=index,

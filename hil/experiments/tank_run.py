@@ -43,7 +43,8 @@ from hil.experiments.live.board_state import (
     board_stopped,
     collect_sync_pairs,
     run_event,
-    sample_zero_time_s,
+    sample_index_at,
+    stamped_in_callback,
     xrun_counts,
     xruns_since,
 )
@@ -426,9 +427,14 @@ def _outcome(
     samples = session.next_index - start if session is not None else 0
     estimates = session.estimates if session is not None else []
     telemetry = session.telemetry if session is not None else Telemetry()
-    zero = sample_zero_time_s(recorder.sync_pairs, fs)
-    if zero is not None:
-        telemetry.sample_index = [int(round((t - zero) * fs)) for t in telemetry.host_time_s]
+    mapped = sample_index_at(
+        telemetry.host_time_s,
+        recorder.sync_pairs,
+        fs,
+        in_callback=stamped_in_callback(exp.board_url),
+    )
+    if mapped is not None:
+        telemetry.sample_index = np.round(mapped).astype(np.int64).tolist()
         # One time base: the recording's telemetry gets the mapping the summary uses.
         with contextlib.suppress(Exception):
             recorder.map_telemetry_times(telemetry.sample_index)

@@ -63,38 +63,43 @@ def telemetry_sample_index(
     recorded_index: NDArray[np.int64],
     sync: SyncPairs,
     fs_hz: float,
+    board_url: str = "",
 ) -> NDArray[np.float64]:
     """Board sample index (float) of every stage report, shape ``(n,)``; -1 where unknown.
 
     ``host_time_s`` (s) and ``recorded_index`` are the reports' columns as recorded. With
-    SYNC pairs recorded, the host times are mapped by the least-delayed pair
-    (:func:`hil.experiments.tank_run.sample_zero_time_s`, as ``hil tank-run`` maps them for
-    its truth when the run ends): the index recorded beside each report comes from the live
-    clock fit, which every late SYNC drags late, so the truth would lead the estimates by
-    the host's backlog. Without pairs, the recorded index is used (-1: not mapped).
+    SYNC pairs recorded, the host times are mapped through them as ``hil tank-run`` maps
+    them for its truth when the run ends
+    (:func:`hil.experiments.live.board_state.sample_index_at`, as the DAC/ADC
+    ``board_url`` stamps them; a board's by the least-delayed pair): the index recorded
+    beside each report comes from the live clock fit, which every late SYNC drags late, so
+    the truth would lead the estimates by the host's backlog. Without pairs, the recorded
+    index is used (-1: not mapped).
     """
-    from hil.experiments.tank_run import sample_zero_time_s
+    from hil.experiments.live.board_state import sample_index_at, stamped_in_callback
 
     pairs = list(zip(sync.sample_index.tolist(), sync.host_time_s.tolist(), strict=True))
-    offset = sample_zero_time_s(pairs, fs_hz)
-    if offset is None:
+    in_callback = bool(board_url) and stamped_in_callback(board_url)
+    mapped = sample_index_at(host_time_s, pairs, fs_hz, in_callback=in_callback)
+    if mapped is None:
         recorded = np.asarray(recorded_index, dtype=np.float64)
         return np.where(recorded >= 0, recorded, -1.0)
-    return (np.asarray(host_time_s, dtype=np.float64) - offset) * fs_hz
+    return mapped
 
 
-def _geometry(experiment_toml: str) -> tuple[Geometry | None, str, str]:
-    """The tank geometry and name of the recorded experiment file, or None and why not."""
+def _geometry(experiment_toml: str) -> tuple[Geometry | None, str, str, str]:
+    """The tank geometry, name and board URL of the recorded experiment file, or None and
+    why not (and empty strings)."""
     if not experiment_toml.strip():
-        return None, "the recording holds no experiment file (no tank geometry)", ""
+        return None, "the recording holds no experiment file (no tank geometry)", "", ""
     from hil.experiments.experiment import parse_experiment
 
     try:
         exp = parse_experiment(experiment_toml, "the recorded experiment file")
     except (ConfigError, ValueError) as exc:
-        return None, f"the recorded experiment file gives no tank geometry ({exc})", ""
+        return None, f"the recorded experiment file gives no tank geometry ({exc})", "", ""
     geometry = Geometry(exp.transducer_m, exp.stage_origin_m, exp.stage_axis, exp.sound_speed_mps)
-    return geometry, "", exp.name
+    return geometry, "", exp.name, exp.board_url
 
 
 class WatchData:
@@ -110,7 +115,9 @@ class WatchData:
         """The map computed from the samples (``live_map=True``), else None."""
         meta = recording.metadata
         self._schedule = recording.schedule()
-        self._geometry, self._no_truth, self._experiment = _geometry(meta.experiment_toml)
+        self._geometry, self._no_truth, self._experiment, self._board_url = _geometry(
+            meta.experiment_toml
+        )
         doc_c = recording.schedule_document().get("sound_speed_mps", 1500.0)
         self.sound_speed_mps = (
             self._geometry.sound_speed_mps if self._geometry is not None else float(doc_c)
@@ -252,7 +259,9 @@ class WatchData:
             sync = self._rec.sync_pairs()
             origin = self._rec.origin_sample
             fs = self._rec.fs_hz
-        index = telemetry_sample_index(tel["host_time_s"], tel["sample_index"], sync, fs)
+        index = telemetry_sample_index(
+            tel["host_time_s"], tel["sample_index"], sync, fs, self._board_url
+        )
         mapped = index >= 0
         if mapped.sum() < 2:
             return None

@@ -6,6 +6,7 @@ protocol: a transport scripted by the test and hooks that record what the link a
 
 from __future__ import annotations
 
+import itertools
 import threading
 from dataclasses import dataclass, field
 
@@ -137,6 +138,39 @@ def test_a_threaded_wait_without_reader_pumps_and_times_out_naming_what_it_waite
     link.connect(ScriptedTransport())
     with pytest.raises(TransportTimeoutError, match=r"test://link: no VERSION within 0\.01 s"):
         link.wait(lambda: False, 0.01, "VERSION")
+
+
+class SteppingMonotonic:
+    """A stand-in for ``time.monotonic`` that moves 1 s at every reading: a wait's deadline
+    is then reached by counting its own checks, not by how fast this machine runs them."""
+
+    def __init__(self) -> None:
+        self.now = 0.0
+
+    def __call__(self) -> float:
+        self.now += 1.0
+        return self.now
+
+
+def test_a_wait_that_sees_progress_waits_on_and_one_that_sees_none_times_out(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from hil.devices import board_link
+
+    link = ThreadedBoardLink(ManualClock(), Recorder().hooks())
+    link.connect(ScriptedTransport())
+    monkeypatch.setattr(board_link.time, "monotonic", SteppingMonotonic())
+    link._reader = threading.Thread(target=lambda: None)  # a reader, not this thread
+    checks = itertools.count()
+
+    def moving() -> int:  # grows at every look of the wait
+        return next(checks)
+
+    # About 30 checks, each seconds of "time" later, with a 5 s timeout: it waits on while the
+    # awaited thing moves.
+    link.wait(lambda: moving() >= 99, 5.0, "a reply", progress=moving)
+    with pytest.raises(TransportTimeoutError, match=r"^test://link: no a reply within 5.0 s"):
+        link.wait(lambda: False, 5.0, "a reply", progress=lambda: 7)
 
 
 def test_the_virtual_link_stays_lost_and_its_wait_says_so() -> None:

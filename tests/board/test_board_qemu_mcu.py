@@ -11,6 +11,7 @@ on events (samples in the ring) with a deadlock guard, never on elapsed time.
 
 from __future__ import annotations
 
+import os
 import re
 from collections.abc import Callable
 
@@ -25,6 +26,19 @@ from sim_devices.board import qemu_mcu
 
 RATE_HZ = 8_000
 WAIT_S = 60.0  # deadlock guard, real seconds
+#: What the emulated UART carries when QEMU has a core to itself, bytes/s (measured in
+#: firmware_protocol/c/mcu/mps2_an386.c), and the firmware's largest frame and DAC buffer.
+UART_BYTES_PER_S = 64_000
+MAX_FRAME_BYTES = 8192
+PRELOAD_BYTES = 4096 * 2 * 2  # its DAC buffer: 4096 frames of 2 int16 channels
+
+
+def uart_seconds(n_bytes: int) -> float:
+    """Seconds the emulated UART takes to carry ``n_bytes`` on this machine now: at its rate
+    times the share of a core QEMU can expect (cores / the load average, at most 1)."""
+    cores = os.cpu_count() or 1
+    share = min(1.0, cores / max(os.getloadavg()[0], 1e-9))
+    return n_bytes / (UART_BYTES_PER_S * share)
 
 
 @pytest.fixture(autouse=True)
@@ -35,9 +49,9 @@ def _tools(require_system: Callable[[bool, str], None]) -> None:
 
 def test_cortex_m4_image_fits_a_small_mcu() -> None:
     report = qemu_mcu.build_image()
-    text, data, bss = (
-        int(v) for v in re.search(r"^\s*(\d+)\s+(\d+)\s+(\d+)", report, re.M).groups()
-    )  # type: ignore[union-attr]
+    sizes = re.search(r"^\s*(\d+)\s+(\d+)\s+(\d+)", report, re.M)
+    assert sizes is not None, report
+    text, data, bss = (int(v) for v in sizes.groups())
     assert 4_000 < text < 64_000  # flash: code and constants, bytes
     assert data + bss < 256_000  # RAM without the stack: fixed buffers only, no heap
 
@@ -48,10 +62,19 @@ def test_board_driver_completes_a_session_on_the_emulated_mcu() -> None:
     dac = rng.integers(-20000, 20000, (2 * RATE_HZ, 2)).astype(np.int16)
     with qemu_mcu.QemuBoard() as mcu:
         transport = open_serial(mcu.port_name, timeout=0.05)
-        # The start lead covers the DAC preload over the emulated UART (about 64 kB/s: 0.5 s
-        # for the firmware's 16 k-sample buffer, several times that when QEMU shares a busy
-        # machine); a START refused as passed is retried with the lead doubled (4, 8 s).
-        board = Board(transport, keepalive_ms=1000, ring_seconds=4.0, start_lead_s=2.0)
+        # The board's watchdog is fed by whole host frames: it must outlast the largest one
+        # crossing the UART, or it fires mid-preload and empties the DAC buffer (on a busy
+        # machine QEMU's UART slows to a few kB/s). Timeouts are 20 times what the UART
+        # needs now (the watchdog for one frame, START's reply for the preload ahead of it),
+        # at least the driver's own; the start lead covers the preload twice (a START
+        # refused as passed is retried with the lead doubled).
+        board = Board(
+            transport,
+            keepalive_ms=min(65_535, max(1000, round(20e3 * uart_seconds(MAX_FRAME_BYTES)))),
+            command_timeout_s=max(5.0, 20 * uart_seconds(PRELOAD_BYTES + MAX_FRAME_BYTES)),
+            ring_seconds=4.0,
+            start_lead_s=min(10.0, max(2.0, 2 * uart_seconds(PRELOAD_BYTES))),
+        )
         try:
             board.open()
             assert board.version is not None and board.version.board_serial == 0x4D500386
@@ -61,12 +84,14 @@ def test_board_driver_completes_a_session_on_the_emulated_mcu() -> None:
             first = board.start(iter([dac]))
             n = RATE_HZ // 2
             assert board.wait_for_samples(first + n, WAIT_S)
+            # Read before STOP: on a slow UART STOP waits behind the DAC data already sent,
+            # while the board streams on into the ring.
+            got = board.read(first, n)
             board.stop()
             assert board.state is State.STOPPED
             # The loopback cable has no delay: the ADC holds what the DAC played, sample for
             # sample, and silence only where the DAC ran dry (an emulator starved of CPU
             # feeds its UART late; each such run is counted as a DAC underrun).
-            got = board.read(first, n)
             equal = np.all(got == dac[:n], axis=1)
             silent = np.all(got == 0, axis=1)
             assert np.all(equal | silent)

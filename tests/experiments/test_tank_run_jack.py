@@ -35,18 +35,16 @@ from hil.recording.instrument import read_entry
 from hil.recording.reader import RunRecording
 from hil.recording.replay import compare_estimates, replay
 
-TIME_SCALE = 0.25
-#: The short tow of the audio tank tests, at a time scale that leaves a loaded 2-core machine
-#: room for the world (0.7 CPU s per simulated s), the run and everything else.
-SHORT = (
-    DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -3.5")
-    .replace("time_scale = 0.4", f"time_scale = {TIME_SCALE}")
-    # Wall seconds: the run is slowed 4 times, and more on a busy machine.
-    .replace('output_dir = "runs"', 'output_dir = "runs"\nmax_duration_s = 1000.0')
+#: The short tow of the audio tank tests. The JACK server runs in real time, slower while
+#: a client is late (a loaded machine): a run may take several times its signal's length.
+SHORT = DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -3.5").replace(
+    'output_dir = "runs"', 'output_dir = "runs"\nmax_duration_s = 1000.0'
 )
-#: The truth error (m) a server that lost its pace may cause: the run dates the stage
-#: telemetry on the wall clock through a straight-line fit of its audio callback's stamps.
-PACE_ERROR_M = 0.01
+#: The accuracy of a JACK run against the stage telemetry. Measured at load 7-10 (the stream
+#: 2 to 26 times slower than the wall clock, 1-1.7 s off a straight line): detection 1.0,
+#: range RMSE 0.017-0.019 m (bias -0.005 to +0.004), speed RMSE 0.004-0.0055 m/s, 0 to 1.9 %
+#: of estimates off (the telemetry is dated by the reply's arrival, as on any real stage).
+JACK_DETECTION, JACK_WRONG, JACK_RANGE_M, JACK_SPEED_MPS = 1.0, 0.03, 0.03, 0.05
 #: Deadlock guards (never asserted on): the served tank prints its file within seconds.
 SERVE_TIMEOUT_S = 300.0
 RUN_TIMEOUT_S = 1200.0
@@ -179,27 +177,19 @@ def test_tank_run_through_jack_and_portaudio_is_tracked_as_on_the_board(
     at_speed = speeds[np.abs(speeds) > 0.8 * exp.tow.speed_mps]
     assert at_speed.size >= 50
     assert abs(float(np.median(at_speed)) - exp.tow.speed_mps) < 0.02
-    # Against the stage telemetry, as on the simulated board (test_tank_run_virtual) when
-    # the server kept its pace; a server slowed unevenly by a busy machine (its synchronous
-    # periods wait for every client) moves the wall-clock dating of the telemetry, which no
-    # receiver can see: then the accuracy is not judged, and the skip says by how much.
+    # Against the stage telemetry, as on the simulated board (test_tank_run_virtual),
+    # whatever the server's pace: the run maps the telemetry through the callback's stamps.
+    # Reported with how far the pace left a straight line (a steady clock's mapping).
     with h5py.File(folder / "run.h5", "r") as f:
         index, host_s = f["sync/sample_index"][:], f["sync/host_time_s"][:]
     fit = np.polyfit(index, host_s, 1)
-    residual_s = float(np.max(np.abs(np.polyval(fit, index) - host_s)))
-    pace_error_m = residual_s * TIME_SCALE * exp.tow.speed_mps
-    if pace_error_m > PACE_ERROR_M:
-        pytest.skip(
-            f"the JACK server lost its pace (load {os.getloadavg()[0]:.1f}): the callback "
-            f"stamps leave a straight line by up to {residual_s:.3f} s, {pace_error_m:.3f} m "
-            f"of tow; the accuracy against the telemetry is not judged (range bias "
-            f"{summary['range_bias_m']}, detection rate {summary['detection_rate']})"
-        )
-    assert summary["detection_rate"] == 1.0
+    print(f"pace: {fit[0] * exp.waveform.fs_hz:.2f} wall s per stream s, off a straight "
+          f"line by up to {np.max(np.abs(np.polyval(fit, index) - host_s)):.3f} s")  # fmt: skip
+    assert summary["detection_rate"] >= JACK_DETECTION
     assert summary["scored_estimates"] >= 50
-    assert summary["wrong_fraction"] <= 0.01
-    assert abs(summary["range_bias_m"]) < 0.03 and summary["range_rmse_m"] < 0.03
-    assert summary["speed_rmse_mps"] < 0.05
+    assert summary["wrong_fraction"] <= JACK_WRONG
+    assert abs(summary["range_bias_m"]) < JACK_RANGE_M and summary["range_rmse_m"] < JACK_RANGE_M
+    assert summary["speed_rmse_mps"] < JACK_SPEED_MPS
 
 
 def test_the_served_experiment_points_at_jack_and_the_stage_pty() -> None:

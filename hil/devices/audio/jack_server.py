@@ -1,17 +1,20 @@
 """A private JACK server on the dummy driver (``jackd -d dummy``), started and stopped by this
 process: the audio stack a simulated device runs on when no sound card is there.
 
-The dummy driver paces its periods by waiting ``wait_us`` microseconds between them; by
-default one period's duration, so the server runs in real time. A longer wait runs the whole
-server (every client's stream) slower than the wall clock by ``time_scale`` while the clients
-still see the nominal sample rate: the JACK counterpart of ``simulation.time_scale``.
+The dummy driver runs in real time: one period every ``period / samplerate`` seconds of the
+wall clock. It has no slower pace: its ``-w`` (wait) option, which reads like the wait between
+periods, sets the period itself in jackd 2 (``period = wait x samplerate``, jack2's
+``JackDummyDriver.cpp``), so this module never passes it.
 
 By default the server runs synchronously (``--sync``): each period waits for every client to
-finish (up to ``client_timeout_ms``) instead of dropping a late client's output, and the dummy
-driver catches up on the periods after. A client that computes a simulation in Python on a busy
-machine is late now and then; with a sound card that is an xrun, here it only delays a period,
-so the samples stay continuous and the clients' streams stay in step. An asynchronous server
-(``synchronous=False``) behaves as a sound card does: a late client is an xrun.
+finish (up to ``client_timeout_ms``) instead of dropping a late client's output. A client that
+computes a simulation in Python on a busy machine is late now and then; with a sound card that
+is an xrun, here it only delays the period, so the samples stay continuous and the clients'
+streams stay in step, while the stream's pace against the wall clock slows for a while (the
+dummy driver starts its timing afresh after a late period and reports it as an xrun). A
+client that dates things on the wall clock maps them onto the stream through its callback's
+stamps, not through the nominal rate. An asynchronous server (``synchronous=False``) behaves
+as a sound card does: a late client is an xrun.
 
 Clients find the server by name through ``JACK_DEFAULT_SERVER`` (``default`` when unset).
 """
@@ -62,14 +65,12 @@ def server_answers(name: str) -> bool:
 
 @dataclass(frozen=True)
 class DummyServerSettings:
-    """A dummy-driver server: sample rate (Hz), period (frames), time scale (simulated
-    seconds per wall second, in (0, 1]), how long a period waits for a late client (ms)
-    before the server gives up on it, and whether periods wait for late clients at all
-    (``synchronous``; False: a late client is an xrun, as on a sound card)."""
+    """A dummy-driver server: sample rate (Hz), period (frames), how long a period waits for
+    a late client (ms) before the server gives up on it, and whether periods wait for late
+    clients at all (``synchronous``; False: a late client is an xrun, as on a sound card)."""
 
     samplerate: int
     period: int
-    time_scale: float = 1.0
     client_timeout_ms: int = 20_000
     synchronous: bool = True
 
@@ -80,31 +81,19 @@ class DummyServerSettings:
             )
         if self.period not in {2**k for k in range(4, 16)}:
             raise ConfigError("period", self.period, "a power of two from 16 to 32768 frames")
-        if not 0 < self.time_scale <= 1:
-            raise ConfigError("time_scale", self.time_scale, "in (0, 1]")
-
-    @property
-    def wait_us(self) -> int:
-        """Microseconds between periods: one period's duration divided by the time scale.
-
-        >>> DummyServerSettings(192000, 2048, 0.4).wait_us
-        26667
-        """
-        return round(self.period / self.samplerate / self.time_scale * 1e6)
 
     def command(self, name: str) -> list[str]:
         """The ``jackd`` command line of this server, called ``name``.
 
         >>> " ".join(DummyServerSettings(192000, 256).command("lab"))
-        'jackd --no-realtime --sync -t 20000 -n lab -d dummy -r 192000 -p 256 -w 1333'
+        'jackd --no-realtime --sync -t 20000 -n lab -d dummy -r 192000 -p 256'
         >>> " ".join(DummyServerSettings(192000, 256, synchronous=False).command("lab"))
-        'jackd --no-realtime -n lab -d dummy -r 192000 -p 256 -w 1333'
+        'jackd --no-realtime -n lab -d dummy -r 192000 -p 256'
         """
         sync = ["--sync", "-t", str(self.client_timeout_ms)] if self.synchronous else []
         return [
             "jackd", "--no-realtime", *sync, "-n", name,
-            "-d", "dummy",
-            "-r", str(self.samplerate), "-p", str(self.period), "-w", str(self.wait_us),
+            "-d", "dummy", "-r", str(self.samplerate), "-p", str(self.period),
         ]  # fmt: skip
 
 

@@ -4,6 +4,9 @@ put host times (the stage's reports) onto sample time."""
 
 from __future__ import annotations
 
+import numpy as np
+import numpy.typing as npt
+
 from hil.acquisition import Annotation, AnnotationKind
 from hil.acquisition.clock_fit import SampleClockFit
 from hil.acquisition.device import StreamingDevice, XrunStatus
@@ -101,6 +104,62 @@ def sample_zero_time_s(pairs: list[tuple[int, float]], fs: float) -> float | Non
     if not pairs:
         return None
     return float(min(host_t - index / fs for index, host_t in pairs))
+
+
+def stamped_in_callback(board_url: str) -> bool:
+    """Whether the DAC/ADC at ``board_url`` stamps its sync pairs in its own sample callback
+    (an audio interface: ``audio://``, ``sim://audio``) rather than when its SYNC reaches
+    the host (a board, whose SYNCs queue behind its ADC data).
+
+    >>> stamped_in_callback("audio://JACK?rate=192000"), stamped_in_callback("sim://board")
+    (True, False)
+    """
+    from hil.devices.audio.daq import is_audio_url
+
+    return is_audio_url(board_url)
+
+
+def sample_index_at(
+    host_time_s: npt.ArrayLike,
+    pairs: list[tuple[int, float]],
+    fs: float,
+    *,
+    in_callback: bool,
+) -> npt.NDArray[np.float64] | None:
+    """Sample index (float) at each host time ``host_time_s`` (s, shape ``(n,)``) from the run's
+    sync pairs ``(sample_index, host_time_s)``; None without pairs.
+
+    A board's pairs (``in_callback=False``) are late by the ADC data queued before each
+    SYNC: the least-delayed pair gives the offset and the nominal rate ``fs`` (Hz) the
+    slope (:func:`sample_zero_time_s`). An audio interface's pairs (``in_callback=True``)
+    are stamped in its callback, never behind a queue, so they follow the stream's own
+    pace: the host times are interpolated between them, and beyond the first or last pair
+    the nominal rate continues. A stream whose pace is not the nominal rate (a JACK server
+    that waits for a late client, ``hil sim-serve tank --jack``) is then still mapped to
+    the sample it was at, not to where a steady clock would have been.
+
+    >>> pairs = [(0, 10.0), (1000, 12.0), (2000, 12.5)]  # the stream paused, then ran on
+    >>> sample_index_at([11.0, 12.25, 13.0], pairs, 1000.0, in_callback=True).tolist()
+    [500.0, 1500.0, 2500.0]
+    >>> sample_index_at([11.0], pairs, 1000.0, in_callback=False).tolist()  # sample 0 at 10 s
+    [1000.0]
+    """
+    if not pairs:
+        return None
+    host = np.atleast_1d(np.asarray(host_time_s, dtype=np.float64))
+    if not in_callback:
+        zero = sample_zero_time_s(pairs, fs)
+        assert zero is not None
+        return (host - zero) * fs
+    ordered = sorted(pairs)
+    index = np.array([p[0] for p in ordered], dtype=np.float64)
+    # A stamp never goes back in time; one that does (a clock step) is held at the last.
+    stamps = np.maximum.accumulate(np.array([p[1] for p in ordered], dtype=np.float64))
+    out = np.interp(host, stamps, index)
+    before, after = host < stamps[0], host > stamps[-1]
+    out[before] = index[0] + (host[before] - stamps[0]) * fs
+    out[after] = index[-1] + (host[after] - stamps[-1]) * fs
+    return out
 
 
 def collect_sync_pairs(fit: SampleClockFit | None, run_pairs: list[tuple[int, float]]) -> None:

@@ -18,7 +18,11 @@ from hil.acquisition.capture import CapturedBlock, CaptureLoop
 from hil.acquisition.feed import ReceiverFeed
 from hil.estimation.base import Estimate, Receiver, SaysNotices
 from hil.experiments.experiment import Experiment
-from hil.experiments.live.board_state import collect_sync_pairs, sample_zero_time_s
+from hil.experiments.live.board_state import (
+    collect_sync_pairs,
+    sample_index_at,
+    stamped_in_callback,
+)
 from hil.experiments.live.devices import RunDevices
 from hil.experiments.live.latency import LatencyProbe
 from hil.experiments.live.plan import CheckedTow
@@ -219,14 +223,20 @@ class LiveSession:
     def _tail_captured(self) -> bool:
         """Every pass done and the capture past its tail, on captured samples, not the
         clock: a capture that lags still records the whole pass and its last echoes. The
-        board's clock at the tail's end comes from the least-delayed SYNC (a board that
-        falls behind its clock delivers every later SYNC late)."""
+        device's sample at the tail's end comes from the sync pairs as it stamps them
+        (:func:`~hil.experiments.live.board_state.sample_index_at`: a board that falls
+        behind its clock delivers every later SYNC late)."""
         until = self.tow.tail_until
         if self.tow.phase is not TowPhase.TAIL or until is None or self.now() < until:
             return False
         self.recorder.sync(self._collect_sync)
-        zero = sample_zero_time_s(self.recorder.sync_pairs, self.fs)
-        end_index = int((until - zero) * self.fs) if zero is not None else 0
+        mapped = sample_index_at(
+            [until],
+            self.recorder.sync_pairs,
+            self.fs,
+            in_callback=stamped_in_callback(self.exp.board_url),
+        )
+        end_index = int(mapped[0]) if mapped is not None else 0
         return self.next_index >= end_index
 
     def _status_line(self) -> str:
