@@ -14,7 +14,8 @@ call (its load from numba's cache; the first one carries numba's one-off initial
 The WAVs: a target closing at 9 m/s from 40 m in white noise (as tests/cli/test_cli_estimate),
 ``att`` random-cyclic, 100 kHz, float32; written to a temporary folder.
 
-Run: ``python benchmarks/bench_estimate_start.py [--seconds 1] [--repeat 3] [--kernels]``.
+Run: ``python benchmarks/bench_estimate_start.py [--seconds 1] [--repeat 3] [--kernels]
+[--quick]``.
 The last line is one JSON object with the figures.
 """
 
@@ -126,7 +127,10 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=1.0, help="shorter WAV, s (default 1)")
     parser.add_argument("--repeat", type=int, default=3, help="runs per input (best kept)")
     parser.add_argument("--kernels", action="store_true", help="list each kernel's load CPU")
+    parser.add_argument("--quick", action="store_true", help="0.5 s WAV, one run per input")
     args = parser.parse_args()
+    if args.quick:
+        args.seconds, args.repeat = 0.5, 1
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         wavs = write_inputs(folder, args.seconds)
