@@ -21,35 +21,22 @@ import argparse
 import contextlib
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from hil.errors import ConfigError
-from hil.experiments.calibration.device import CalibrationError, PlayRecordDevice, from_duplex
-from hil.experiments.calibration.latency import calibrate_latency
-from hil.experiments.calibration.level import (
-    ReferenceHydrophone,
-    ReferenceSource,
-    calibrate_level,
-)
-from hil.experiments.calibration.positions import PositioningStage
-from hil.experiments.calibration.ranging import EchoRanger
-from hil.experiments.calibration.response import calibrate_response
-from hil.experiments.calibration.simworld import (
-    SimTruth,
-    sim_hydrophones,
-    sim_loopback,
-    sim_tank,
-    sim_transducer,
-)
-from hil.experiments.calibration.sound_speed import (
-    calibrate_sound_speed_temperature,
-    calibrate_sound_speed_tof,
-)
-from hil.experiments.calibration.stage import calibrate_stage
-from hil.experiments.calibration.store import CalibrationStore
 from hil.paths import resolve_calibration_dir
+
+# The calibrations (and through them the audio devices and scipy.signal, about 2 s of CPU)
+# are imported where a calibration runs, so that building the parser for --help stays cheap.
+if TYPE_CHECKING:
+    from hil.experiments.calibration.device import PlayRecordDevice
+    from hil.experiments.calibration.level import ReferenceHydrophone, ReferenceSource
+    from hil.experiments.calibration.positions import PositioningStage
+    from hil.experiments.calibration.ranging import EchoRanger
+    from hil.experiments.calibration.simworld import SimTruth
+    from hil.experiments.calibration.store import CalibrationStore
 
 EXIT_MEASUREMENT_FAILED = 1
 SIM_DEVICE = "sim://audio"
@@ -230,6 +217,8 @@ def register(sub: Any) -> None:
 
 def _truth(args: argparse.Namespace) -> SimTruth:
     """The simulated bench's truths, at ``--samplerate`` and ``--blocksize`` when given."""
+    from hil.experiments.calibration.simworld import SimTruth
+
     rate = getattr(args, "samplerate", None)
     if rate is None:
         return SimTruth()
@@ -257,6 +246,7 @@ def _simulated(args: argparse.Namespace) -> bool:
 def _audio_device(args: argparse.Namespace, channels_in: int = 1) -> PlayRecordDevice:
     """The real audio interface named by ``--device`` (the device table opens it)."""
     from hil.devices.table import open_audio_interface
+    from hil.experiments.calibration.device import from_duplex
 
     duplex = open_audio_interface(
         args.device, samplerate=args.samplerate or 48000.0, channels_in=channels_in,
@@ -273,12 +263,18 @@ def _channel_kwargs(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _latency(args: argparse.Namespace, truth: SimTruth) -> tuple[Any, dict[str, Any], list[str]]:
+    from hil.experiments.calibration.latency import calibrate_latency
+    from hil.experiments.calibration.simworld import sim_loopback
+
     device, lines = sim_loopback(truth) if _simulated(args) else (_audio_device(args), [])
     result = calibrate_latency(device, repeats=args.repeats, **_channel_kwargs(args))
     return result, {"device": device.name, "repeats": args.repeats}, lines
 
 
 def _response(args: argparse.Namespace, truth: SimTruth) -> tuple[Any, dict[str, Any], list[str]]:
+    from hil.experiments.calibration.response import calibrate_response
+    from hil.experiments.calibration.simworld import sim_transducer
+
     device, lines = sim_transducer(truth) if _simulated(args) else (_audio_device(args), [])
     band = None if args.band is None else (args.band[0], args.band[1])
     result = calibrate_response(
@@ -291,6 +287,13 @@ def _response(args: argparse.Namespace, truth: SimTruth) -> tuple[Any, dict[str,
 
 
 def _level(args: argparse.Namespace, truth: SimTruth) -> tuple[Any, dict[str, Any], list[str]]:
+    from hil.experiments.calibration.level import (
+        ReferenceHydrophone,
+        ReferenceSource,
+        calibrate_level,
+    )
+    from hil.experiments.calibration.simworld import sim_hydrophones
+
     reference: ReferenceHydrophone | ReferenceSource | None = None
     if args.reference_sensitivity is not None or args.reference_channel is not None:
         if args.reference_sensitivity is None or args.reference_channel is None:
@@ -328,6 +331,9 @@ def _tank(
     args: argparse.Namespace, truth: SimTruth, store: CalibrationStore
 ) -> Iterator[tuple[PositioningStage, EchoRanger, list[str], int]]:
     """Stage and echo ranger: simulated, or the real audio device and GRBL stage."""
+    from hil.experiments.calibration.ranging import EchoRanger
+    from hil.experiments.calibration.simworld import sim_tank
+
     gate = (args.gate_ms[0] * 1e-3, args.gate_ms[1] * 1e-3)
     if _simulated(args):
         with sim_tank(truth) as (stage, tank, lines):
@@ -358,6 +364,11 @@ def _tank(
 def _sound_speed(
     args: argparse.Namespace, truth: SimTruth, store: CalibrationStore
 ) -> tuple[Any, dict[str, Any], list[str]]:
+    from hil.experiments.calibration.sound_speed import (
+        calibrate_sound_speed_temperature,
+        calibrate_sound_speed_tof,
+    )
+
     method = args.method or ("temperature" if args.temperature is not None else "tof")
     if method == "temperature":
         if args.temperature is None:
@@ -383,6 +394,9 @@ def _sound_speed(
 def _stage(
     args: argparse.Namespace, truth: SimTruth, store: CalibrationStore
 ) -> tuple[Any, dict[str, Any], list[str]]:
+    from hil.experiments.calibration.sound_speed import calibrate_sound_speed_temperature
+    from hil.experiments.calibration.stage import calibrate_stage
+
     c = args.sound_speed
     source = "--sound-speed"
     if c is None and args.temperature is not None:
@@ -413,6 +427,9 @@ def _stage(
 
 def run(args: argparse.Namespace) -> int:
     """Run the chosen calibration, print it and store it."""
+    from hil.experiments.calibration.device import CalibrationError
+    from hil.experiments.calibration.store import CalibrationStore
+
     if getattr(args, "device", None) is not None:
         from hil.devices.table import audio_interface_url
 

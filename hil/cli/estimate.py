@@ -47,25 +47,18 @@ import math
 import sys
 from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import Any, TextIO
-
-import numpy as np
-from numpy.typing import NDArray
+from typing import TYPE_CHECKING, Any, TextIO
 
 from hil.errors import ConfigError
-from hil.estimation.base import (
-    ESTIMATE_FIELDS,
-    CountsRefusals,
-    Estimate,
-    Notice,
-    SaysNotices,
-    refusal_text,
-)
-from hil.estimation.registry import RECEIVERS
-from hil.estimation.track_summary import track_figures, track_lines
-from hil.recording.records import ReceiverSetup
-from hil.recording.replay import build_receiver
-from hil.signals.schedule_file import read_schedule_file
+
+# The numeric modules (numpy; numba through the receivers and the tracker; scipy; h5py through
+# hil.recording) are imported where the command runs, so that building the parser for
+# ``hil estimate --help`` (and for ``hil replay``, which reuses this module) stays cheap.
+if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import NDArray
+
+    from hil.estimation.base import Estimate, Notice
 
 _LOG = logging.getLogger(__name__)
 
@@ -84,6 +77,8 @@ _READ_BLOCK = 1 << 16
 
 def register(sub: Any) -> None:
     """Add the ``estimate`` sub-command."""
+    from hil.estimation.registry import RECEIVERS
+
     p: argparse.ArgumentParser = sub.add_parser(
         "estimate",
         help="estimate range and speed from a received WAV",
@@ -167,6 +162,8 @@ class ClipCount:
 
     def add(self, start: int, at_full_scale: NDArray[np.bool_]) -> None:
         """Count the flagged samples of the block starting at sample ``start``."""
+        import numpy as np
+
         hits = int(np.count_nonzero(at_full_scale))
         if hits and self.first < 0:
             self.first = start + int(np.argmax(at_full_scale))
@@ -181,6 +178,7 @@ def read_wav_blocks(
     Integer formats are scaled to [-1, 1). Multi-channel files need ``channel``. ``clip``
     counts the integer samples at the format's minimum or maximum.
     """
+    import numpy as np
     from scipy.io import wavfile
 
     try:
@@ -239,6 +237,8 @@ def _check_schedule(
     c: float,
 ) -> Iterator[NDArray[np.float64]]:
     """Warn when the input's first hops do not follow the schedule's code; the blocks again."""
+    import numpy as np
+
     from hil.signals.schedule_match import match_schedule
 
     head: list[NDArray[np.float64]] = []
@@ -290,6 +290,8 @@ def _check_numbers(args: argparse.Namespace) -> None:
 
 def _check_length(path: Path, n_frames: int, fs: float, schedule: Any) -> None:
     """Refuse a WAV shorter than one hop of the schedule: no hop boundary, no estimate."""
+    import numpy as np
+
     try:
         hop_s = float(schedule.hop_s)
     except ConfigError:  # unequal hops: the shortest one
@@ -306,6 +308,12 @@ def _check_length(path: Path, n_frames: int, fs: float, schedule: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``hil estimate``; return the exit status."""
+    from hil.estimation.base import CountsRefusals, SaysNotices
+    from hil.estimation.track_summary import track_figures, track_lines
+    from hil.recording.records import ReceiverSetup
+    from hil.recording.replay import build_receiver
+    from hil.signals.schedule_file import read_schedule_file
+
     check_outputs(args)
     _check_numbers(args)
     schedule, doc = read_schedule_file(args.schedule)
@@ -420,6 +428,8 @@ class _Sink:
                 self._csv_file = sys.stdout
             else:
                 self._csv_file = args.csv.open("w", newline="", encoding="utf-8")
+            from hil.estimation.base import ESTIMATE_FIELDS
+
             self._writer = csv.DictWriter(self._csv_file, fieldnames=list(ESTIMATE_FIELDS))
             self._writer.writeheader()
 
@@ -461,6 +471,8 @@ class _Sink:
         :class:`~hil.estimation.base.CountsRefusals`) in one ``refused: …`` line, none where
         nothing was refused: after the table, on stderr with ``--json`` or ``--csv`` (their
         stdout holds estimates)."""
+        from hil.estimation.base import refusal_text
+
         text = refusal_text(counts)
         if text:
             print(text, file=sys.stdout if self.table else sys.stderr, flush=True)
@@ -481,6 +493,8 @@ class _MapCollector:
         self.kept = 0
 
     def __call__(self, t_s: NDArray[np.float64], p: NDArray[np.floating], speed: Any) -> None:
+        import numpy as np
+
         if self.kept >= self.max_columns or len(t_s) == 0:
             return
         self.times.append(np.asarray(t_s, dtype=float).copy())

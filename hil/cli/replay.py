@@ -25,11 +25,9 @@ from pathlib import Path
 from typing import Any
 
 from hil.cli.estimate import _parse_option, _Sink, check_option_kinds, check_outputs
-from hil.estimation.base import refusal_text
-from hil.estimation.registry import RECEIVERS
-from hil.estimation.track_summary import track_figures, track_lines
-from hil.recording import RunRecording, compare_estimates, replay
-from hil.recording.reader import probe_structure
+
+# The numeric modules (numpy, numba, h5py through hil.recording) are imported where the
+# command runs, so that building the parser for ``hil replay --help`` stays cheap.
 
 # Internal field names -> the options that set them (hil.cli.main names them in errors).
 OPTION_NAMES = {
@@ -43,6 +41,8 @@ EXIT_DIFFERS = 1
 
 def register(sub: Any) -> None:
     """Add the ``replay`` sub-command."""
+    from hil.estimation.registry import RECEIVERS
+
     p: argparse.ArgumentParser = sub.add_parser(
         "replay",
         help="re-run a receiver over a run recording",
@@ -73,6 +73,11 @@ def register(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``hil replay``; return the exit status."""
+    from hil.estimation.base import refusal_text
+    from hil.estimation.track_summary import track_figures, track_lines
+    from hil.recording import RunRecording, compare_estimates, replay
+    from hil.recording.reader import probe_structure
+
     check_outputs(args)
     overrides = dict(_parse_option(o) for o in args.option)
     probe_structure(args.run)

@@ -17,8 +17,8 @@ import logging
 from pathlib import Path
 from typing import Any
 
-from hil.estimation.track_summary import track_lines
-from hil.experiments.experiment import DEFAULT_EXPERIMENT, load_experiment, parse_experiment
+# The experiment (and through it numpy, scipy and the simulated devices) is imported where
+# the command runs, so that building the parser for --help stays cheap.
 
 _LOG = logging.getLogger(__name__)
 
@@ -53,6 +53,8 @@ def register(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``hil tank-run``; 0 on success, 1 if the run stopped on an error."""
+    from hil.experiments.experiment import DEFAULT_EXPERIMENT, load_experiment, parse_experiment
+
     if args.print_default:
         print(DEFAULT_EXPERIMENT, end="")
         return 0
@@ -104,6 +106,8 @@ def _run_and_report(exp: Any, folder: Path, args: argparse.Namespace) -> tuple[d
 
 def print_summary(summary: dict[str, Any], folder: Path, *, as_json: bool) -> None:
     """Print a run's summary: one JSON line, or one ``key  value`` line per entry."""
+    from hil.estimation.track_summary import track_lines
+
     if as_json:
         print(json.dumps(summary))
         return

@@ -60,13 +60,13 @@ import dataclasses
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
+from types import ModuleType
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from hil.errors import ConfigError
-from hil.estimation import tracking_kernel as kernel
 from hil.estimation.base import Estimate, Receiver
 
 TRACK_OPTION_PREFIX = "track_"
@@ -183,6 +183,15 @@ def split_track_options(settings: Mapping[str, Any]) -> tuple[dict[str, Any], di
     return rest, track
 
 
+def _kernel() -> ModuleType:
+    """:mod:`hil.estimation.tracking_kernel`, imported when a tracker is first made: it
+    imports numba (0.3-0.4 s of CPU), which a reader of recordings (``hil.recording``
+    imports this module) that never tracks must not pay."""
+    from hil.estimation import tracking_kernel
+
+    return tracking_kernel
+
+
 class Tracker:
     """Constant-velocity tracks over (range, closing speed); streaming.
 
@@ -217,7 +226,7 @@ class Tracker:
     def reset(self) -> None:
         """Forget every track; the next confirmed track gets id 0."""
         # Live tracks are the first _n rows (columns: hil.estimation.tracking_kernel).
-        self._table = np.zeros((16, kernel.N_COLUMNS))
+        self._table = np.zeros((16, _kernel().N_COLUMNS))
         self._n = 0
         self.next_id = 0
 
@@ -229,7 +238,7 @@ class Tracker:
     @property
     def confirmed_ids(self) -> list[int]:
         """Ids of the live confirmed tracks, ascending."""
-        ids = self._table[: self._n, kernel.ID]
+        ids = self._table[: self._n, _kernel().ID]
         return sorted(int(i) for i in ids[ids >= 0])
 
     def update(self, estimates: Iterable[Estimate]) -> list[Estimate]:
@@ -253,11 +262,11 @@ class Tracker:
             column("crlb_speed_mps"), s.min_speed_sigma_mps, s.default_speed_sigma_mps
         )
         if self._table.shape[0] < self._n + n:  # each estimate starts at most one track
-            grown = np.zeros((max(2 * self._table.shape[0], self._n + n), kernel.N_COLUMNS))
+            grown = np.zeros((max(2 * self._table.shape[0], self._n + n), _kernel().N_COLUMNS))
             grown[: self._n] = self._table[: self._n]
             self._table = grown
         ids = np.empty(n, dtype=np.int64)
-        self._n, self.next_id = kernel.associate(
+        self._n, self.next_id = _kernel().associate(
             self._table, self._n, self.next_id, t_rx, t_b, z_r, z_v, var_r, var_v, hop, valid,
             float(s.accel_mps2) ** 2, float(s.gate_sigmas) ** 2, int(s.confirm_hits),
             int(s.confirm_hops), (s.max_missed_hops + 1.5) * self.hop_s,

@@ -44,6 +44,15 @@ def test_a_command_imports_only_its_own_module() -> None:
     assert loaded.isdisjoint(HEAVY), sorted(loaded & set(HEAVY))
 
 
+@pytest.mark.parametrize("argv", [["estimate"], ["replay"], ["calibrate", "latency"], ["tank-run"]])
+def test_heavy_commands_build_their_parser_without_numba_scipy_or_h5py(argv: list[str]) -> None:
+    # Their runs import numba, scipy and h5py (about 1-2 s of CPU); their --help needs none of
+    # them (the receivers' names in the help come from the registry, which needs numpy only).
+    loaded = _modules_after([*argv, "--help"])
+    assert "hil" in loaded
+    assert loaded.isdisjoint({"numba", "scipy", "h5py", "matplotlib"}), sorted(loaded)
+
+
 def _subparsers(parser: argparse.ArgumentParser) -> argparse._SubParsersAction:  # type: ignore[type-arg]
     return next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
 
