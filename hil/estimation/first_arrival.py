@@ -198,6 +198,21 @@ DOPPLER_GATE_S = 0.5e-3
 DOPPLER_SPEED_GATE_MPS = 0.1
 
 
+def _hop_slice(table: HopTable, start: int, count: int) -> HopTable:
+    """Hops ``start .. start + count − 1`` of ``table`` (positions in it, not hop indices)."""
+    part = slice(start, start + count)
+    return HopTable(
+        index=table.index[part],
+        start_s=table.start_s[part],
+        duration_s=table.duration_s[part],
+        tone_index=table.tone_index[part],
+        freq_hz=table.freq_hz[part],
+        chirp_hz_per_s=table.chirp_hz_per_s[part],
+        phase_rad=table.phase_rad[part],
+        amplitude=table.amplitude[part],
+    )
+
+
 @dataclass(frozen=True)
 class DopplerScore:
     """The direct path's Doppler score of one detection: its hop index, its delay ``delay_s``
@@ -286,6 +301,9 @@ class FirstArrivalReadout:
         self._offsets = offs
         t_rel = offs / self.fs_hz
         self._base = (t_rel >= -max_spread_s - BASELINE_S) & (t_rel < -max_spread_s)
+        #: The noise window's length and first index (fixed per readout).
+        self._base_count = int(np.count_nonzero(self._base))
+        self._base_start = int(np.flatnonzero(self._base)[0])
         self._search_from = int(np.flatnonzero(t_rel >= -max_spread_s)[0])
         self._after = int(np.flatnonzero(t_rel >= 0.0)[0])
         #: Input samples kept behind the newest: one period plus the M boundaries' windows.
@@ -297,7 +315,9 @@ class FirstArrivalReadout:
         self._ring = RowBuffer(self.history, (), np.float64)
         self._valid_from = 0
         self.sound_speed_mps = float(sound_speed_mps)
-        v_res = doppler_resolution_mps(schedule.tones_hz, schedule.hop_s, sound_speed_mps)
+        #: The hop length, s (a schedule property that checks every hop: read once).
+        self._hop_s = float(schedule.hop_s)
+        v_res = doppler_resolution_mps(schedule.tones_hz, self._hop_s, sound_speed_mps)
         n_slow = int(round(DIRECT_SPAN_SLOWER * v_res / DIRECT_SPEED_STEP))
         n_fast = int(round(DIRECT_SPAN_FASTER * v_res / DIRECT_SPEED_STEP))
         #: Speed steps from GCAS's searched towards a slower and a faster target.
@@ -323,8 +343,14 @@ class FirstArrivalReadout:
         or no onset stands out."""
         fs = self.fs_hz
         sch = self.schedule
-        hops = sch.hops(hop_index - self.m_hops + 2, self.m_hops)  # hops h-M+2 .. h+1
-        prev_hop = sch.hops(hop_index - self.m_hops + 1, 1)  # before the oldest boundary
+        m = self.m_hops
+        # One look-up of every hop the readout needs (h − M − LATE_HOPS + 1 .. h + 1, at least
+        # from h − M); each hop's values do not depend on the span asked for.
+        first_hop = hop_index - m - max(LATE_HOPS - 1, 0)
+        table = sch.hops(first_hop, hop_index + 2 - first_hop)
+        tones = table.freq_hz
+        hops = _hop_slice(table, hop_index - m + 2 - first_hop, m)  # hops h-M+2 .. h+1
+        prev_hop = _hop_slice(table, hop_index - m + 1 - first_hop, 1)  # before the oldest
         f_next = hops.freq_hz[::-1]  # tone after boundary m (m = 0: after hop h)
         # Receive times of the boundaries, from their transmit spacing compressed by α.
         ends = hops.start_s[::-1]  # start of the hop after boundary m = its transmit time
@@ -346,13 +372,13 @@ class FirstArrivalReadout:
         # previous tones, and the next tone as sounded by late images of earlier boundaries)
         # gives the same boxcar sum w samples apart and cancels; only switches remain.
         box = full[:, w:] - full[:, :-w]  # (M, L)
-        clean = self._clean_boundaries(hop_index)
+        clean = self._clean_boundaries(tones[hop_index - m - LATE_HOPS + 1 - first_hop :])
         p_all = np.abs(box / w) ** 2  # (M, L)
         power = np.mean(p_all[clean], axis=0)  # (L,)
         base = self._noise_window(power)
         amp = np.sqrt(np.maximum(power - power[base].mean(), 0.0))
         top_i = self._after + int(np.argmax(amp[self._after :]))
-        leave = self._late_leaving(hop_index)
+        leave = self._late_leaving(tones[hop_index - m - first_hop :])
         if self._late_images_seen(p_all, power, clean, leave, top_i):
             clean = clean & ~leave
             power = np.mean(p_all[clean], axis=0)
@@ -505,20 +531,22 @@ class FirstArrivalReadout:
         pre = slice(self._search_from, stop)
         return bool(np.mean(p_all[late, pre]) > LATE_RATIO * np.mean(p_all[other, pre]))
 
-    def _late_leaving(self, hop_index: int) -> NDArray[np.bool_]:
+    def _late_leaving(self, tones: NDArray[np.float64]) -> NDArray[np.bool_]:
         """Which of the ``M`` boundaries (newest first) have the tone two hops back as their
         next tone: there the previous boundary's late images leave the next tone (shape
-        ``(M,)``)."""
+        ``(M,)``). ``tones``: the tones of hops ``h − M .. h + 1`` (Hz, oldest first, shape
+        ``(M + 2,)``)."""
         m = self.m_hops
-        tones = self.schedule.hops(hop_index - m, m + 2).freq_hz  # hops h-M .. h+1, oldest first
         nxt = tones[2:][::-1]  # next tone of boundary j (j = 0: after hop h)
         two_back = tones[:m][::-1]  # tone of hop h − j − 1
         return np.asarray(np.abs(two_back - nxt) < 0.5, dtype=bool)
 
-    def _clean_boundaries(self, hop_index: int) -> NDArray[np.bool_]:
+    def _clean_boundaries(self, tones: NDArray[np.float64]) -> NDArray[np.bool_]:
         """Which of the ``M`` boundaries (newest first) the onset is read on: those whose next
         tone was sounded neither in the hop it follows nor in the :data:`LATE_HOPS` before (all of
-        them where fewer than :data:`MIN_CLEAN` are left). Shape ``(M,)``.
+        them where fewer than :data:`MIN_CLEAN` are left). Shape ``(M,)``. ``tones``: the tones
+        of hops ``h − M − LATE_HOPS + 1 .. h + 1`` (Hz, oldest first, shape
+        ``(M + LATE_HOPS + 1,)``).
 
         A tank's late images (the far end wall on one leg comes 0.9 hop after the direct path
         in the built-in tank at 5 m) switch tones a fraction of a hop before a later
@@ -526,7 +554,6 @@ class FirstArrivalReadout:
         next-tone channel changes there too, and an onset read on it is up to a hop early.
         """
         m, k = self.m_hops, LATE_HOPS
-        tones = self.schedule.hops(hop_index - m - k + 1, m + k + 1).freq_hz  # oldest first
         nxt = tones[k + 1 :][::-1]  # next tone of boundary j (j = 0: after hop h)
         # Tone of hop h − j − i for boundary j, i = 0 (the hop it follows) .. K: (K + 1, M).
         before = np.stack([tones[k - i : k - i + m][::-1] for i in range(k + 1)])
@@ -542,8 +569,8 @@ class FirstArrivalReadout:
         images of earlier boundaries switch tones before the first arrival too (at image
         order 2 the target's echo through both end walls comes a hop late): a noise level
         read on one hides the onset."""
-        n = int(np.count_nonzero(self._base))
-        k_start = int(np.flatnonzero(self._base)[0])
+        n = self._base_count
+        k_start = self._base_start
         seg = power[k_start : self._after]
         c = np.concatenate([[0.0], np.cumsum(seg)])
         sums = c[n:] - c[:-n]  # power summed over each stretch
@@ -744,7 +771,7 @@ class FirstArrivalReadout:
         positive) in those hops, is within :data:`DOPPLER_GATE_S` of ``own``'s, and whose
         GCAS speed is within :data:`DOPPLER_SPEED_GATE_MPS` of ``own``'s. The scores kept are
         pruned to those hops."""
-        hop_s = self.schedule.hop_s
+        hop_s = self._hop_s
         c = self.sound_speed_mps
         self._scores = [
             s for s in self._scores if 0 < own.hop_index - s.hop_index <= max(DOPPLER_LAGS)
