@@ -214,6 +214,24 @@ def _hop_slice(table: HopTable, start: int, count: int) -> HopTable:
 
 
 @dataclass(frozen=True)
+class _RampTables:
+    """The ramp model's tables for the ``M`` boundaries of one detection (or those read):
+    each boundary's predicted switch ``frac`` (samples past its sample), beat ``theta``
+    (rad per sample), phase jump ``jump`` (rad), shape ``(M,)`` each, and ``geometric``
+    (shape ``(M, w + 1)``, complex): ``Σ_{i<k} e^{jθ i}`` for ``k = 0 .. w``, that is
+    ``(1 − r^k)/(1 − r)`` with ``r = e^{jθ}``, or ``k`` where ``θ = 0``."""
+
+    frac: NDArray[np.float64]
+    theta: NDArray[np.float64]
+    jump: NDArray[np.float64]
+    geometric: NDArray[np.complex128]
+
+    def subset(self, keep: NDArray[np.bool_]) -> _RampTables:
+        """The tables of the boundaries ``keep`` (shape ``(M,)``)."""
+        return _RampTables(self.frac[keep], self.theta[keep], self.jump[keep], self.geometric[keep])
+
+
+@dataclass(frozen=True)
 class DopplerScore:
     """The direct path's Doppler score of one detection: its hop index, its delay ``delay_s``
     (s, first arrival less the boundary's transmit time), its score divided by its maximum,
@@ -453,9 +471,8 @@ class FirstArrivalReadout:
         if not -self.max_spread_s - BASELINE_S < guess < TOP_S:
             return None
         beat = alpha * (prev_f - f_next)
-        rel = self._fit_ramp(
-            excess[lo_fit : j_fit + 1], lo_fit, guess, frac[clean], beat[clean], jump[clean]
-        )
+        ramp = self._ramp_tables(frac, beat, jump)
+        rel = self._fit_ramp(excess[lo_fit : j_fit + 1], lo_fit, guess, ramp.subset(clean))
         # ``rel`` is the onset after each boundary's predicted switch ``t_b`` (the model
         # places boundary m's switch at ``t_b[m] fs + rel fs``).
         onset = float(t_b[0] + rel)
@@ -467,7 +484,7 @@ class FirstArrivalReadout:
         j1 = self._pre + int(round((rel + DIRECT_S) * fs))
         if 0 <= j0 < j1 < box.shape[1]:
             n = np.arange(j0, j1 + 1)
-            shape = self._ramp_shape(np.array([rel * fs]), n, frac, beat, jump)[0]  # (M, J)
+            shape = self._ramp_shape(np.array([rel * fs]), n, ramp)[0]  # (M, J)
             seen = np.asarray(box[:, j0 : j1 + 1], dtype=np.complex128) / w
             # Each boundary's complex amplitude by least squares on the model's shape: the
             # previous tone's leak, different at each boundary, is divided out.
@@ -591,32 +608,52 @@ class FirstArrivalReadout:
         ) * np.concatenate([hops.duration_s[::-1][1:], prev_hop.duration_s])
         return np.asarray(start - prev_end, dtype=np.float64)
 
+    def _ramp_tables(
+        self,
+        frac: NDArray[np.float64],
+        beat_hz: NDArray[np.float64],
+        jump: NDArray[np.float64],
+    ) -> _RampTables:
+        """The ramp model's per-boundary tables of one detection (:class:`_RampTables`) from
+        each boundary's predicted switch ``frac`` (samples past its sample), beat ``beat_hz``
+        (``α(f_prev − f_next)``, Hz) and phase jump ``jump`` (rad), each shape ``(M,)``."""
+        w = self.boxcar
+        theta = 2.0 * np.pi * beat_hz / self.fs_hz  # (M,)
+        ratio = np.exp(1j * theta)
+        # Σ_{i=a}^{a+k−1} e^{jθ(i−o)} = e^{jθa} e^{−jθo} (1 − r^k)/(1 − r), r = e^{jθ}
+        # (k terms where θ = 0): the last factor for every k = 0 .. w, once per detection.
+        steady = np.abs(1.0 - ratio) < 1e-12
+        powers = ratio[:, None] ** np.arange(w + 1)[None, :]  # (M, w + 1)
+        denom = np.where(steady, 1.0, 1.0 - ratio)[:, None]
+        geometric = np.where(steady[:, None], np.arange(w + 1)[None, :], (1.0 - powers) / denom)
+        return _RampTables(frac, theta, jump, np.asarray(geometric, dtype=np.complex128))
+
     def _fit_ramp(
         self,
         excess: NDArray[np.float64],
         first: int,
         guess_s: float,
-        frac: NDArray[np.float64],
-        beat_hz: NDArray[np.float64],
-        jump: NDArray[np.float64],
+        ramp: _RampTables,
     ) -> float:
         """The onset (s after boundary 0's sample) whose model ramp fits ``excess`` best.
 
         ``excess`` (shape ``(L,)``): the mean next-tone power less the noise, at window
-        indices ``first …``; ``frac`` (samples), ``beat_hz`` (``α(f_prev − f_next)``) and
-        ``jump`` (rad) per boundary. The model's residual (:meth:`_ramp_residuals`) is
-        searched on whole samples within ``±FIT_SPAN`` of ``guess_s``, then in steps of
-        ``FIT_STEP`` within a sample of the best, and refined by a parabola (``guess_s``
-        itself where the best is on the span's edge).
+        indices ``first …``; ``ramp``: the boundaries' tables (:meth:`_ramp_tables`). The
+        model's residual (:meth:`_ramp_residuals`) is searched on whole samples within
+        ``±FIT_SPAN`` of ``guess_s``, then in steps of ``FIT_STEP`` within a sample of the
+        best, and refined by a parabola (``guess_s`` itself where the best is on the span's
+        edge).
         """
         fs = self.fs_hz
+        n = first + np.arange(excess.size)  # window indices (L,)
+        start = self._window_start_phasors(ramp, n)
         coarse = guess_s * fs + np.arange(-FIT_SPAN, FIT_SPAN + 1, dtype=np.float64)
-        resid = self._ramp_residuals(coarse, excess, first, frac, beat_hz, jump)
+        resid = self._ramp_residuals(coarse, excess, n, ramp, start)
         k = int(np.argmin(resid))
         if k in (0, coarse.size - 1):
             return guess_s  # no minimum inside the span: the line stands
         fine = coarse[k] + np.arange(-1.0, 1.0 + FIT_STEP / 2, FIT_STEP)
-        resid = self._ramp_residuals(fine, excess, first, frac, beat_hz, jump)
+        resid = self._ramp_residuals(fine, excess, n, ramp, start)
         k = int(np.argmin(resid))
         best = float(fine[k])
         if 0 < k < fine.size - 1:
@@ -627,20 +664,19 @@ class FirstArrivalReadout:
         self,
         grid: NDArray[np.float64],
         excess: NDArray[np.float64],
-        first: int,
-        frac: NDArray[np.float64],
-        beat_hz: NDArray[np.float64],
-        jump: NDArray[np.float64],
+        n: NDArray[np.int64],
+        ramp: _RampTables,
+        start: NDArray[np.complex128],
     ) -> NDArray[np.float64]:
         """Least-squares residual of the model ramp for each onset of ``grid`` (samples after
-        boundary 0's sample, shape ``(C,)``).
+        boundary 0's sample, shape ``(C,)``) against ``excess`` at window indices ``n`` (shape
+        ``(L,)`` each; ``start`` from :meth:`_window_start_phasors`).
 
         The model for one arrival of unit amplitude at onset ``o`` (window index): the boxcar
         of ``1`` after ``o`` and of the previous tone, ``e^{j(2π beat (i − o)/fs − jump)}``,
         before it; its mean power over the boundaries, scaled by least squares.
         """
-        n = first + np.arange(excess.size)  # window indices (L,)
-        shape = self._ramp_shape(grid, n, frac, beat_hz, jump)  # (C, M, L)
+        shape = self._ramp_shape(grid, n, ramp, start)  # (C, M, L)
         model = np.mean(np.abs(shape) ** 2, axis=1)  # (C, L)
         mm = np.sum(model * model, axis=1)
         scale = np.sum(model * excess[None, :], axis=1) / np.maximum(mm, 1e-300)
@@ -648,37 +684,41 @@ class FirstArrivalReadout:
             np.sum((excess[None, :] - scale[:, None] * model) ** 2, axis=1), dtype=np.float64
         )
 
+    def _window_start_phasors(
+        self, ramp: _RampTables, n: NDArray[np.int64]
+    ) -> NDArray[np.complex128]:
+        """``e^{jθa}`` of each boundary's beat at the first sample ``a = n − w + 1`` of the
+        window ending at each index of ``n`` (shape ``(L,)``): shape ``(1, M, L)``."""
+        w = self.boxcar
+        return np.exp(1j * np.outer(ramp.theta, n - w + 1))[None, :, :]
+
     def _ramp_shape(
         self,
         grid: NDArray[np.float64],
         n: NDArray[np.int64],
-        frac: NDArray[np.float64],
-        beat_hz: NDArray[np.float64],
-        jump: NDArray[np.float64],
+        ramp: _RampTables,
+        start: NDArray[np.complex128] | None = None,
     ) -> NDArray[np.complex128]:
         """The next-tone channel of one arrival of unit amplitude switching at each onset of
         ``grid`` (samples after each boundary's predicted switch, shape ``(C,)``), at window
-        indices ``n`` (shape ``(L,)``): shape ``(C, M, L)``, complex.
+        indices ``n`` (shape ``(L,)``): shape ``(C, M, L)``, complex. ``start``: the
+        boundaries' :meth:`_window_start_phasors` at ``n`` when already computed.
 
         At onset ``o`` (window index) the boxcar holds ``1`` for each sample after ``o`` and
         the previous tone, ``e^{j(2π beat (i − o)/fs − jump)}``, for each one before it; over
         the window's ``w`` samples, divided by ``w``.
         """
         w = self.boxcar
-        o = (self._pre + grid)[:, None, None] + frac[None, :, None]  # (C, M, 1)
+        theta = ramp.theta
+        o = (self._pre + grid)[:, None, None] + ramp.frac[None, :, None]  # (C, M, 1)
         n_next = np.clip(n[None, None, :] - np.ceil(o) + 1, 0, w).astype(np.int64)
         n_prev = w - n_next  # (C, M, L) samples before o in the window
-        theta = 2.0 * np.pi * beat_hz / self.fs_hz  # (M,)
-        ratio = np.exp(1j * theta)
-        # Σ_{i=a}^{a+n_prev−1} e^{jθ(i−o)} = e^{jθa} e^{−jθo} (1 − r^n_prev)/(1 − r), r = e^{jθ}
-        # (n_prev terms where θ = 0); r^k from a table, the phasors factored by axis.
-        steady = np.abs(1.0 - ratio) < 1e-12
-        powers = ratio[:, None] ** np.arange(w + 1)[None, :]  # (M, w + 1)
-        gathered = powers[np.arange(theta.size)[None, :, None], n_prev]  # (C, M, L)
-        denom = np.where(steady, 1.0, 1.0 - ratio)[None, :, None]
-        sums = np.where(steady[None, :, None], n_prev, (1.0 - gathered) / denom)
-        start = np.exp(1j * np.outer(theta, n - w + 1))[None, :, :]  # e^{jθa}, (1, M, L)
-        at_o = np.exp(-1j * (theta[None, :, None] * o + jump[None, :, None]))  # (C, M, 1)
+        # The geometric sums of the previous tone's n_prev samples, from the table.
+        rows = (np.arange(theta.size, dtype=np.int64) * (w + 1))[None, :, None]
+        sums = np.take(ramp.geometric, rows + n_prev)  # (C, M, L)
+        if start is None:
+            start = self._window_start_phasors(ramp, n)
+        at_o = np.exp(-1j * (theta[None, :, None] * o + ramp.jump[None, :, None]))  # (C, M, 1)
         return np.asarray((n_next + start * at_o * sums) / w, dtype=np.complex128)
 
     def _direct_alpha(
