@@ -198,6 +198,12 @@ DOPPLER_GATE_S = 0.5e-3
 DOPPLER_SPEED_GATE_MPS = 0.1
 
 
+def _mean(x: NDArray[np.float64], axis: int) -> NDArray[np.float64]:
+    """``np.mean(x, axis=axis)`` computed as it does (the sum, then divided by the count)
+    without its wrapper's overhead: the same values, bit for bit."""
+    return np.asarray(np.add.reduce(x, axis=axis) / x.shape[axis], dtype=np.float64)
+
+
 def _hop_slice(table: HopTable, start: int, count: int) -> HopTable:
     """Hops ``start .. start + count − 1`` of ``table`` (positions in it, not hop indices)."""
     part = slice(start, start + count)
@@ -392,14 +398,14 @@ class FirstArrivalReadout:
         box = full[:, w:] - full[:, :-w]  # (M, L)
         clean = self._clean_boundaries(tones[hop_index - m - LATE_HOPS + 1 - first_hop :])
         p_all = np.abs(box / w) ** 2  # (M, L)
-        power = np.mean(p_all[clean], axis=0)  # (L,)
+        power = _mean(p_all[clean], axis=0)  # (L,)
         base = self._noise_window(power)
         amp = np.sqrt(np.maximum(power - power[base].mean(), 0.0))
         top_i = self._after + int(np.argmax(amp[self._after :]))
         leave = self._late_leaving(tones[hop_index - m - first_hop :])
         if self._late_images_seen(p_all, power, clean, leave, top_i):
             clean = clean & ~leave
-            power = np.mean(p_all[clean], axis=0)
+            power = _mean(p_all[clean], axis=0)
             base = self._noise_window(power)
             amp = np.sqrt(np.maximum(power - power[base].mean(), 0.0))
             top_i = self._after + int(np.argmax(amp[self._after :]))
@@ -677,7 +683,7 @@ class FirstArrivalReadout:
         before it; its mean power over the boundaries, scaled by least squares.
         """
         shape = self._ramp_shape(grid, n, ramp, start)  # (C, M, L)
-        model = np.mean(np.abs(shape) ** 2, axis=1)  # (C, L)
+        model = _mean(np.abs(shape) ** 2, axis=1)  # (C, L)
         mm = np.sum(model * model, axis=1)
         scale = np.sum(model * excess[None, :], axis=1) / np.maximum(mm, 1e-300)
         return np.asarray(
@@ -711,7 +717,9 @@ class FirstArrivalReadout:
         w = self.boxcar
         theta = ramp.theta
         o = (self._pre + grid)[:, None, None] + ramp.frac[None, :, None]  # (C, M, 1)
-        n_next = np.clip(n[None, None, :] - np.ceil(o) + 1, 0, w).astype(np.int64)
+        # Samples at or after o in each window, in integers (ceil(o) is a whole number).
+        n_next = n[None, None, :] + (1 - np.ceil(o).astype(np.int64))
+        np.clip(n_next, 0, w, out=n_next)
         n_prev = w - n_next  # (C, M, L) samples before o in the window
         # The geometric sums of the previous tone's n_prev samples, from the table.
         rows = (np.arange(theta.size, dtype=np.int64) * (w + 1))[None, :, None]
