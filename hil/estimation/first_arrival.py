@@ -198,6 +198,45 @@ DOPPLER_GATE_S = 0.5e-3
 DOPPLER_SPEED_GATE_MPS = 0.1
 
 
+def _mean(x: NDArray[np.float64], axis: int) -> NDArray[np.float64]:
+    """``np.mean(x, axis=axis)`` computed as it does (the sum, then divided by the count)
+    without its wrapper's overhead: the same values, bit for bit."""
+    return np.asarray(np.add.reduce(x, axis=axis) / x.shape[axis], dtype=np.float64)
+
+
+def _hop_slice(table: HopTable, start: int, count: int) -> HopTable:
+    """Hops ``start .. start + count − 1`` of ``table`` (positions in it, not hop indices)."""
+    part = slice(start, start + count)
+    return HopTable(
+        index=table.index[part],
+        start_s=table.start_s[part],
+        duration_s=table.duration_s[part],
+        tone_index=table.tone_index[part],
+        freq_hz=table.freq_hz[part],
+        chirp_hz_per_s=table.chirp_hz_per_s[part],
+        phase_rad=table.phase_rad[part],
+        amplitude=table.amplitude[part],
+    )
+
+
+@dataclass(frozen=True)
+class _RampTables:
+    """The ramp model's tables for the ``M`` boundaries of one detection (or those read):
+    each boundary's predicted switch ``frac`` (samples past its sample), beat ``theta``
+    (rad per sample), phase jump ``jump`` (rad), shape ``(M,)`` each, and ``geometric``
+    (shape ``(M, w + 1)``, complex): ``Σ_{i<k} e^{jθ i}`` for ``k = 0 .. w``, that is
+    ``(1 − r^k)/(1 − r)`` with ``r = e^{jθ}``, or ``k`` where ``θ = 0``."""
+
+    frac: NDArray[np.float64]
+    theta: NDArray[np.float64]
+    jump: NDArray[np.float64]
+    geometric: NDArray[np.complex128]
+
+    def subset(self, keep: NDArray[np.bool_]) -> _RampTables:
+        """The tables of the boundaries ``keep`` (shape ``(M,)``)."""
+        return _RampTables(self.frac[keep], self.theta[keep], self.jump[keep], self.geometric[keep])
+
+
 @dataclass(frozen=True)
 class DopplerScore:
     """The direct path's Doppler score of one detection: its hop index, its delay ``delay_s``
@@ -286,6 +325,9 @@ class FirstArrivalReadout:
         self._offsets = offs
         t_rel = offs / self.fs_hz
         self._base = (t_rel >= -max_spread_s - BASELINE_S) & (t_rel < -max_spread_s)
+        #: The noise window's length and first index (fixed per readout).
+        self._base_count = int(np.count_nonzero(self._base))
+        self._base_start = int(np.flatnonzero(self._base)[0])
         self._search_from = int(np.flatnonzero(t_rel >= -max_spread_s)[0])
         self._after = int(np.flatnonzero(t_rel >= 0.0)[0])
         #: Input samples kept behind the newest: one period plus the M boundaries' windows.
@@ -297,7 +339,9 @@ class FirstArrivalReadout:
         self._ring = RowBuffer(self.history, (), np.float64)
         self._valid_from = 0
         self.sound_speed_mps = float(sound_speed_mps)
-        v_res = doppler_resolution_mps(schedule.tones_hz, schedule.hop_s, sound_speed_mps)
+        #: The hop length, s (a schedule property that checks every hop: read once).
+        self._hop_s = float(schedule.hop_s)
+        v_res = doppler_resolution_mps(schedule.tones_hz, self._hop_s, sound_speed_mps)
         n_slow = int(round(DIRECT_SPAN_SLOWER * v_res / DIRECT_SPEED_STEP))
         n_fast = int(round(DIRECT_SPAN_FASTER * v_res / DIRECT_SPEED_STEP))
         #: Speed steps from GCAS's searched towards a slower and a faster target.
@@ -323,8 +367,14 @@ class FirstArrivalReadout:
         or no onset stands out."""
         fs = self.fs_hz
         sch = self.schedule
-        hops = sch.hops(hop_index - self.m_hops + 2, self.m_hops)  # hops h-M+2 .. h+1
-        prev_hop = sch.hops(hop_index - self.m_hops + 1, 1)  # before the oldest boundary
+        m = self.m_hops
+        # One look-up of every hop the readout needs (h − M − LATE_HOPS + 1 .. h + 1, at least
+        # from h − M); each hop's values do not depend on the span asked for.
+        first_hop = hop_index - m - max(LATE_HOPS - 1, 0)
+        table = sch.hops(first_hop, hop_index + 2 - first_hop)
+        tones = table.freq_hz
+        hops = _hop_slice(table, hop_index - m + 2 - first_hop, m)  # hops h-M+2 .. h+1
+        prev_hop = _hop_slice(table, hop_index - m + 1 - first_hop, 1)  # before the oldest
         f_next = hops.freq_hz[::-1]  # tone after boundary m (m = 0: after hop h)
         # Receive times of the boundaries, from their transmit spacing compressed by α.
         ends = hops.start_s[::-1]  # start of the hop after boundary m = its transmit time
@@ -346,16 +396,16 @@ class FirstArrivalReadout:
         # previous tones, and the next tone as sounded by late images of earlier boundaries)
         # gives the same boxcar sum w samples apart and cancels; only switches remain.
         box = full[:, w:] - full[:, :-w]  # (M, L)
-        clean = self._clean_boundaries(hop_index)
+        clean = self._clean_boundaries(tones[hop_index - m - LATE_HOPS + 1 - first_hop :])
         p_all = np.abs(box / w) ** 2  # (M, L)
-        power = np.mean(p_all[clean], axis=0)  # (L,)
+        power = _mean(p_all[clean], axis=0)  # (L,)
         base = self._noise_window(power)
         amp = np.sqrt(np.maximum(power - power[base].mean(), 0.0))
         top_i = self._after + int(np.argmax(amp[self._after :]))
-        leave = self._late_leaving(hop_index)
+        leave = self._late_leaving(tones[hop_index - m - first_hop :])
         if self._late_images_seen(p_all, power, clean, leave, top_i):
             clean = clean & ~leave
-            power = np.mean(p_all[clean], axis=0)
+            power = _mean(p_all[clean], axis=0)
             base = self._noise_window(power)
             amp = np.sqrt(np.maximum(power - power[base].mean(), 0.0))
             top_i = self._after + int(np.argmax(amp[self._after :]))
@@ -427,9 +477,8 @@ class FirstArrivalReadout:
         if not -self.max_spread_s - BASELINE_S < guess < TOP_S:
             return None
         beat = alpha * (prev_f - f_next)
-        rel = self._fit_ramp(
-            excess[lo_fit : j_fit + 1], lo_fit, guess, frac[clean], beat[clean], jump[clean]
-        )
+        ramp = self._ramp_tables(frac, beat, jump)
+        rel = self._fit_ramp(excess[lo_fit : j_fit + 1], lo_fit, guess, ramp.subset(clean))
         # ``rel`` is the onset after each boundary's predicted switch ``t_b`` (the model
         # places boundary m's switch at ``t_b[m] fs + rel fs``).
         onset = float(t_b[0] + rel)
@@ -441,7 +490,7 @@ class FirstArrivalReadout:
         j1 = self._pre + int(round((rel + DIRECT_S) * fs))
         if 0 <= j0 < j1 < box.shape[1]:
             n = np.arange(j0, j1 + 1)
-            shape = self._ramp_shape(np.array([rel * fs]), n, frac, beat, jump)[0]  # (M, J)
+            shape = self._ramp_shape(np.array([rel * fs]), n, ramp)[0]  # (M, J)
             seen = np.asarray(box[:, j0 : j1 + 1], dtype=np.complex128) / w
             # Each boundary's complex amplitude by least squares on the model's shape: the
             # previous tone's leak, different at each boundary, is divided out.
@@ -505,20 +554,22 @@ class FirstArrivalReadout:
         pre = slice(self._search_from, stop)
         return bool(np.mean(p_all[late, pre]) > LATE_RATIO * np.mean(p_all[other, pre]))
 
-    def _late_leaving(self, hop_index: int) -> NDArray[np.bool_]:
+    def _late_leaving(self, tones: NDArray[np.float64]) -> NDArray[np.bool_]:
         """Which of the ``M`` boundaries (newest first) have the tone two hops back as their
         next tone: there the previous boundary's late images leave the next tone (shape
-        ``(M,)``)."""
+        ``(M,)``). ``tones``: the tones of hops ``h − M .. h + 1`` (Hz, oldest first, shape
+        ``(M + 2,)``)."""
         m = self.m_hops
-        tones = self.schedule.hops(hop_index - m, m + 2).freq_hz  # hops h-M .. h+1, oldest first
         nxt = tones[2:][::-1]  # next tone of boundary j (j = 0: after hop h)
         two_back = tones[:m][::-1]  # tone of hop h − j − 1
         return np.asarray(np.abs(two_back - nxt) < 0.5, dtype=bool)
 
-    def _clean_boundaries(self, hop_index: int) -> NDArray[np.bool_]:
+    def _clean_boundaries(self, tones: NDArray[np.float64]) -> NDArray[np.bool_]:
         """Which of the ``M`` boundaries (newest first) the onset is read on: those whose next
         tone was sounded neither in the hop it follows nor in the :data:`LATE_HOPS` before (all of
-        them where fewer than :data:`MIN_CLEAN` are left). Shape ``(M,)``.
+        them where fewer than :data:`MIN_CLEAN` are left). Shape ``(M,)``. ``tones``: the tones
+        of hops ``h − M − LATE_HOPS + 1 .. h + 1`` (Hz, oldest first, shape
+        ``(M + LATE_HOPS + 1,)``).
 
         A tank's late images (the far end wall on one leg comes 0.9 hop after the direct path
         in the built-in tank at 5 m) switch tones a fraction of a hop before a later
@@ -526,7 +577,6 @@ class FirstArrivalReadout:
         next-tone channel changes there too, and an onset read on it is up to a hop early.
         """
         m, k = self.m_hops, LATE_HOPS
-        tones = self.schedule.hops(hop_index - m - k + 1, m + k + 1).freq_hz  # oldest first
         nxt = tones[k + 1 :][::-1]  # next tone of boundary j (j = 0: after hop h)
         # Tone of hop h − j − i for boundary j, i = 0 (the hop it follows) .. K: (K + 1, M).
         before = np.stack([tones[k - i : k - i + m][::-1] for i in range(k + 1)])
@@ -542,8 +592,8 @@ class FirstArrivalReadout:
         images of earlier boundaries switch tones before the first arrival too (at image
         order 2 the target's echo through both end walls comes a hop late): a noise level
         read on one hides the onset."""
-        n = int(np.count_nonzero(self._base))
-        k_start = int(np.flatnonzero(self._base)[0])
+        n = self._base_count
+        k_start = self._base_start
         seg = power[k_start : self._after]
         c = np.concatenate([[0.0], np.cumsum(seg)])
         sums = c[n:] - c[:-n]  # power summed over each stretch
@@ -564,32 +614,52 @@ class FirstArrivalReadout:
         ) * np.concatenate([hops.duration_s[::-1][1:], prev_hop.duration_s])
         return np.asarray(start - prev_end, dtype=np.float64)
 
+    def _ramp_tables(
+        self,
+        frac: NDArray[np.float64],
+        beat_hz: NDArray[np.float64],
+        jump: NDArray[np.float64],
+    ) -> _RampTables:
+        """The ramp model's per-boundary tables of one detection (:class:`_RampTables`) from
+        each boundary's predicted switch ``frac`` (samples past its sample), beat ``beat_hz``
+        (``α(f_prev − f_next)``, Hz) and phase jump ``jump`` (rad), each shape ``(M,)``."""
+        w = self.boxcar
+        theta = 2.0 * np.pi * beat_hz / self.fs_hz  # (M,)
+        ratio = np.exp(1j * theta)
+        # Σ_{i=a}^{a+k−1} e^{jθ(i−o)} = e^{jθa} e^{−jθo} (1 − r^k)/(1 − r), r = e^{jθ}
+        # (k terms where θ = 0): the last factor for every k = 0 .. w, once per detection.
+        steady = np.abs(1.0 - ratio) < 1e-12
+        powers = ratio[:, None] ** np.arange(w + 1)[None, :]  # (M, w + 1)
+        denom = np.where(steady, 1.0, 1.0 - ratio)[:, None]
+        geometric = np.where(steady[:, None], np.arange(w + 1)[None, :], (1.0 - powers) / denom)
+        return _RampTables(frac, theta, jump, np.asarray(geometric, dtype=np.complex128))
+
     def _fit_ramp(
         self,
         excess: NDArray[np.float64],
         first: int,
         guess_s: float,
-        frac: NDArray[np.float64],
-        beat_hz: NDArray[np.float64],
-        jump: NDArray[np.float64],
+        ramp: _RampTables,
     ) -> float:
         """The onset (s after boundary 0's sample) whose model ramp fits ``excess`` best.
 
         ``excess`` (shape ``(L,)``): the mean next-tone power less the noise, at window
-        indices ``first …``; ``frac`` (samples), ``beat_hz`` (``α(f_prev − f_next)``) and
-        ``jump`` (rad) per boundary. The model's residual (:meth:`_ramp_residuals`) is
-        searched on whole samples within ``±FIT_SPAN`` of ``guess_s``, then in steps of
-        ``FIT_STEP`` within a sample of the best, and refined by a parabola (``guess_s``
-        itself where the best is on the span's edge).
+        indices ``first …``; ``ramp``: the boundaries' tables (:meth:`_ramp_tables`). The
+        model's residual (:meth:`_ramp_residuals`) is searched on whole samples within
+        ``±FIT_SPAN`` of ``guess_s``, then in steps of ``FIT_STEP`` within a sample of the
+        best, and refined by a parabola (``guess_s`` itself where the best is on the span's
+        edge).
         """
         fs = self.fs_hz
+        n = first + np.arange(excess.size)  # window indices (L,)
+        start = self._window_start_phasors(ramp, n)
         coarse = guess_s * fs + np.arange(-FIT_SPAN, FIT_SPAN + 1, dtype=np.float64)
-        resid = self._ramp_residuals(coarse, excess, first, frac, beat_hz, jump)
+        resid = self._ramp_residuals(coarse, excess, n, ramp, start)
         k = int(np.argmin(resid))
         if k in (0, coarse.size - 1):
             return guess_s  # no minimum inside the span: the line stands
         fine = coarse[k] + np.arange(-1.0, 1.0 + FIT_STEP / 2, FIT_STEP)
-        resid = self._ramp_residuals(fine, excess, first, frac, beat_hz, jump)
+        resid = self._ramp_residuals(fine, excess, n, ramp, start)
         k = int(np.argmin(resid))
         best = float(fine[k])
         if 0 < k < fine.size - 1:
@@ -600,58 +670,63 @@ class FirstArrivalReadout:
         self,
         grid: NDArray[np.float64],
         excess: NDArray[np.float64],
-        first: int,
-        frac: NDArray[np.float64],
-        beat_hz: NDArray[np.float64],
-        jump: NDArray[np.float64],
+        n: NDArray[np.int64],
+        ramp: _RampTables,
+        start: NDArray[np.complex128],
     ) -> NDArray[np.float64]:
         """Least-squares residual of the model ramp for each onset of ``grid`` (samples after
-        boundary 0's sample, shape ``(C,)``).
+        boundary 0's sample, shape ``(C,)``) against ``excess`` at window indices ``n`` (shape
+        ``(L,)`` each; ``start`` from :meth:`_window_start_phasors`).
 
         The model for one arrival of unit amplitude at onset ``o`` (window index): the boxcar
         of ``1`` after ``o`` and of the previous tone, ``e^{j(2π beat (i − o)/fs − jump)}``,
         before it; its mean power over the boundaries, scaled by least squares.
         """
-        n = first + np.arange(excess.size)  # window indices (L,)
-        shape = self._ramp_shape(grid, n, frac, beat_hz, jump)  # (C, M, L)
-        model = np.mean(np.abs(shape) ** 2, axis=1)  # (C, L)
+        shape = self._ramp_shape(grid, n, ramp, start)  # (C, M, L)
+        model = _mean(np.abs(shape) ** 2, axis=1)  # (C, L)
         mm = np.sum(model * model, axis=1)
         scale = np.sum(model * excess[None, :], axis=1) / np.maximum(mm, 1e-300)
         return np.asarray(
             np.sum((excess[None, :] - scale[:, None] * model) ** 2, axis=1), dtype=np.float64
         )
 
+    def _window_start_phasors(
+        self, ramp: _RampTables, n: NDArray[np.int64]
+    ) -> NDArray[np.complex128]:
+        """``e^{jθa}`` of each boundary's beat at the first sample ``a = n − w + 1`` of the
+        window ending at each index of ``n`` (shape ``(L,)``): shape ``(1, M, L)``."""
+        w = self.boxcar
+        return np.exp(1j * np.outer(ramp.theta, n - w + 1))[None, :, :]
+
     def _ramp_shape(
         self,
         grid: NDArray[np.float64],
         n: NDArray[np.int64],
-        frac: NDArray[np.float64],
-        beat_hz: NDArray[np.float64],
-        jump: NDArray[np.float64],
+        ramp: _RampTables,
+        start: NDArray[np.complex128] | None = None,
     ) -> NDArray[np.complex128]:
         """The next-tone channel of one arrival of unit amplitude switching at each onset of
         ``grid`` (samples after each boundary's predicted switch, shape ``(C,)``), at window
-        indices ``n`` (shape ``(L,)``): shape ``(C, M, L)``, complex.
+        indices ``n`` (shape ``(L,)``): shape ``(C, M, L)``, complex. ``start``: the
+        boundaries' :meth:`_window_start_phasors` at ``n`` when already computed.
 
         At onset ``o`` (window index) the boxcar holds ``1`` for each sample after ``o`` and
         the previous tone, ``e^{j(2π beat (i − o)/fs − jump)}``, for each one before it; over
         the window's ``w`` samples, divided by ``w``.
         """
         w = self.boxcar
-        o = (self._pre + grid)[:, None, None] + frac[None, :, None]  # (C, M, 1)
-        n_next = np.clip(n[None, None, :] - np.ceil(o) + 1, 0, w).astype(np.int64)
+        theta = ramp.theta
+        o = (self._pre + grid)[:, None, None] + ramp.frac[None, :, None]  # (C, M, 1)
+        # Samples at or after o in each window, in integers (ceil(o) is a whole number).
+        n_next = n[None, None, :] + (1 - np.ceil(o).astype(np.int64))
+        np.clip(n_next, 0, w, out=n_next)
         n_prev = w - n_next  # (C, M, L) samples before o in the window
-        theta = 2.0 * np.pi * beat_hz / self.fs_hz  # (M,)
-        ratio = np.exp(1j * theta)
-        # Σ_{i=a}^{a+n_prev−1} e^{jθ(i−o)} = e^{jθa} e^{−jθo} (1 − r^n_prev)/(1 − r), r = e^{jθ}
-        # (n_prev terms where θ = 0); r^k from a table, the phasors factored by axis.
-        steady = np.abs(1.0 - ratio) < 1e-12
-        powers = ratio[:, None] ** np.arange(w + 1)[None, :]  # (M, w + 1)
-        gathered = powers[np.arange(theta.size)[None, :, None], n_prev]  # (C, M, L)
-        denom = np.where(steady, 1.0, 1.0 - ratio)[None, :, None]
-        sums = np.where(steady[None, :, None], n_prev, (1.0 - gathered) / denom)
-        start = np.exp(1j * np.outer(theta, n - w + 1))[None, :, :]  # e^{jθa}, (1, M, L)
-        at_o = np.exp(-1j * (theta[None, :, None] * o + jump[None, :, None]))  # (C, M, 1)
+        # The geometric sums of the previous tone's n_prev samples, from the table.
+        rows = (np.arange(theta.size, dtype=np.int64) * (w + 1))[None, :, None]
+        sums = np.take(ramp.geometric, rows + n_prev)  # (C, M, L)
+        if start is None:
+            start = self._window_start_phasors(ramp, n)
+        at_o = np.exp(-1j * (theta[None, :, None] * o + ramp.jump[None, :, None]))  # (C, M, 1)
         return np.asarray((n_next + start * at_o * sums) / w, dtype=np.complex128)
 
     def _direct_alpha(
@@ -744,7 +819,7 @@ class FirstArrivalReadout:
         positive) in those hops, is within :data:`DOPPLER_GATE_S` of ``own``'s, and whose
         GCAS speed is within :data:`DOPPLER_SPEED_GATE_MPS` of ``own``'s. The scores kept are
         pruned to those hops."""
-        hop_s = self.schedule.hop_s
+        hop_s = self._hop_s
         c = self.sound_speed_mps
         self._scores = [
             s for s in self._scores if 0 < own.hop_index - s.hop_index <= max(DOPPLER_LAGS)

@@ -220,3 +220,63 @@ def test_the_late_images_level_before_the_first_arrival_is_stepped_over(
         assert 0.0 < np.median(err) < 0.2 and np.count_nonzero(np.abs(err) > 0.5) <= 0.15 * err.size
     else:
         assert np.all(err < -0.6)
+
+
+def _direct_ramp(
+    readout: FirstArrivalReadout,
+    grid: np.ndarray,
+    n: np.ndarray,
+    frac: np.ndarray,
+    beat_hz: np.ndarray,
+    jump: np.ndarray,
+) -> np.ndarray:
+    """The ramp model by its definition, sample by sample: over the window of ``w`` samples
+    ending at each index of ``n``, ``1`` for a sample at or after the onset ``o`` and
+    ``e^{j(θ(i − o) − jump)}`` (θ = 2π beat/fs) for one before it, summed and divided by
+    ``w``. Shape ``(C, M, L)``."""
+    w = readout.boxcar
+    theta = 2.0 * np.pi * beat_hz / readout.fs_hz
+    out = np.zeros((grid.size, frac.size, n.size), dtype=np.complex128)
+    for c, g in enumerate(grid):
+        for m in range(frac.size):
+            o = readout._pre + g + frac[m]
+            for l_, end in enumerate(n):
+                i = np.arange(end - w + 1, end + 1)
+                before = i < np.ceil(o)
+                terms = np.where(before, np.exp(1j * (theta[m] * (i - o) - jump[m])), 1.0)
+                out[c, m, l_] = terms.sum() / w
+    return out
+
+
+def test_the_tabled_ramp_model_is_its_definition() -> None:
+    """The ramp model from its per-detection tables (geometric sums for every count of
+    previous-tone samples, window phasors shared by the grids) against the sum it stands
+    for, with a steady boundary (no beat) among them; and a subset of the tables is the
+    tables of that subset, bit for bit."""
+    readout = FirstArrivalReadout(_schedule(), FS, 10, C)
+    rng = np.random.default_rng(7)
+    m = 6
+    frac = rng.uniform(-0.5, 0.5, m)
+    beat = rng.choice([-4000.0, -2000.0, 2000.0, 6000.0], m) * rng.uniform(0.99, 1.01, m)
+    beat[2] = 0.0  # the same tone either side: the steady case
+    jump = rng.uniform(-np.pi, np.pi, m)
+    grid = rng.uniform(-6.0, 6.0, 5)
+    n = readout._pre + np.arange(-20, readout.boxcar + 20)
+    tables = readout._ramp_tables(frac, beat, jump)
+    got = readout._ramp_shape(grid, n, tables)
+    want = _direct_ramp(readout, grid, n, frac, beat, jump)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+    # A window wholly before the onset holds the previous tone alone: a steady one keeps its
+    # level (|·| = 1), a beating one cancels partly; a window wholly after it is 1.
+    assert np.allclose(np.abs(got[:, 2, 0]), 1.0)
+    assert np.all(np.abs(np.delete(got[:, :, 0], 2, axis=1)) < 0.5)
+    np.testing.assert_allclose(got[:, :, -1], 1.0, rtol=0, atol=1e-15)
+    keep = np.array([True, False, True, True, False, True])
+    part = tables.subset(keep)
+    alone = readout._ramp_tables(frac[keep], beat[keep], jump[keep])
+    for name in ("frac", "theta", "jump", "geometric"):
+        assert np.array_equal(getattr(part, name), getattr(alone, name))
+    start = readout._window_start_phasors(part, n)
+    assert np.array_equal(
+        readout._ramp_shape(grid, n, part, start), readout._ramp_shape(grid, n, alone)
+    )
