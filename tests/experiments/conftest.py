@@ -8,6 +8,10 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import select
+import signal
+import subprocess
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -67,3 +71,35 @@ def short_virtual_outcome(tmp_path_factory: pytest.TempPathFactory) -> RunOutcom
         view=LiveView(enabled=False),
         virtual_time=True,
     )
+
+
+#: Deadlock guard (never asserted on): the served tank prints its file within seconds.
+SERVE_TIMEOUT_S = 300.0
+
+
+@contextlib.contextmanager
+def serve_jack_tank(
+    command: list[str], env: dict[str, str]
+) -> Iterator[tuple[Path, subprocess.Popen[str]]]:
+    """Run ``command`` (``hil sim-serve tank --jack --experiment FILE``) as its own process
+    with ``env``: the experiment file it printed, and the process; stopped with SIGTERM at the
+    end (killed if it has not ended 60 s later)."""
+    proc = subprocess.Popen(
+        command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env
+    )
+    try:
+        assert proc.stdout is not None
+        ready, _, _ = select.select([proc.stdout], [], [], SERVE_TIMEOUT_S)
+        line = proc.stdout.readline().strip() if ready else ""
+        if not line:
+            proc.kill()
+            pytest.fail(f"sim-serve tank printed no file: {proc.communicate()[1][-3000:]}")
+        yield Path(line), proc
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGTERM)
+            try:
+                proc.communicate(timeout=60)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.communicate()

@@ -23,7 +23,6 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-import select
 import signal
 import subprocess
 import sys
@@ -42,7 +41,7 @@ from hil.experiments.jack_tank import DEFAULT_PERIOD
 from hil.experiments.run_scoring import summarize
 from hil.experiments.tank_run import LiveView, RunOutcome, run_experiment
 from hil.recording.reader import RunRecording
-from tests.experiments.conftest import SHORT_CLI_EXPERIMENT
+from tests.experiments.conftest import SHORT_CLI_EXPERIMENT, serve_jack_tank
 
 SHORT = DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -3.5")
 
@@ -108,8 +107,10 @@ DEVICES = {
     # simulated board's thresholds hold. Its loop latency is 2 periods of JACK's round trip,
     # the tank's 2-period pipeline and 64 samples of converters, plus half periods that
     # PortAudio's JACK host API adds when a stream starts on a busy server.
-    "jack": Device(f"audio://JACK?rate=192000&blocksize={JACK_PERIOD}", False, None, 0.03,
-                   0.05, 1.0, "audio", needs_jack=True, latency_min=4 * JACK_PERIOD + 64,
+    # JACK runs in real time and varies from run to run (test_tank_run_jack's bounds and
+    # measured spread: detection 0.96-1.0, range RMSE 0.009-0.037 m).
+    "jack": Device(f"audio://JACK?rate=192000&blocksize={JACK_PERIOD}", False, None, 0.05,
+                   0.05, 0.95, "audio", needs_jack=True, latency_min=4 * JACK_PERIOD + 64,
                    latency_step=JACK_PERIOD // 2),
 }  # fmt: skip
 
@@ -168,10 +169,6 @@ class ServedJackTank:
     process: subprocess.Popen[str]
 
 
-#: Deadlock guard (never asserted on): the served tank prints its file within seconds.
-SERVE_TIMEOUT_S = 300.0
-
-
 @contextlib.contextmanager
 def served_jack_tank(folder: Path) -> Iterator[ServedJackTank]:
     """Serve the simulated tank on a private JACK server (unique name) for the short tow,
@@ -194,28 +191,19 @@ def served_jack_tank(folder: Path) -> Iterator[ServedJackTank]:
     )
     command = [sys.executable, "-m", "hil.cli.main", "sim-serve", "tank", "--jack",
                "--experiment", str(exp_in)]  # fmt: skip
-    proc = subprocess.Popen(
-        command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env
-    )
+    # PortAudio's JACK client closes before its server goes; PortAudio re-opens after.
+    terminated = False
     try:
-        assert proc.stdout is not None
-        ready, _, _ = select.select([proc.stdout], [], [], SERVE_TIMEOUT_S)
-        line = proc.stdout.readline().strip() if ready else ""
-        if not line:
-            proc.kill()
-            pytest.fail(f"sim-serve tank printed no file: {proc.communicate()[1][-3000:]}")
-        rescan_devices()  # PortAudio enumerated devices before this server ran
-        yield ServedJackTank(Path(line).read_text(encoding="utf-8"), proc)
-    finally:
-        # PortAudio's JACK client closes before its server goes; PortAudio re-opens after.
-        sounddevice._terminate()
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGTERM)
+        with serve_jack_tank(command, env) as (printed, proc):
             try:
-                proc.communicate(timeout=60)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.communicate()
+                rescan_devices()  # PortAudio enumerated devices before this server ran
+                yield ServedJackTank(printed.read_text(encoding="utf-8"), proc)
+            finally:
+                sounddevice._terminate()
+                terminated = True
+    finally:
+        if not terminated:
+            sounddevice._terminate()
         for key, value in saved.items():
             if value is None:
                 os.environ.pop(key, None)

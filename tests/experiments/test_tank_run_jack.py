@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import json
 import os
-import select
 import shutil
 import signal
 import subprocess
@@ -34,6 +33,7 @@ from hil.experiments.sim_tank import CONVERTER_DELAY_SAMPLES
 from hil.recording.instrument import read_entry
 from hil.recording.reader import RunRecording
 from hil.recording.replay import compare_estimates, replay
+from tests.experiments.conftest import serve_jack_tank
 
 #: The short tow of the audio tank tests. The JACK server runs in real time, slower while
 #: a client is late (a loaded machine): a run may take several times its signal's length.
@@ -43,10 +43,14 @@ SHORT = DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -3.5").replace(
 #: The accuracy of a JACK run against the stage telemetry. Measured at load 7-10 (the stream
 #: 2 to 26 times slower than the wall clock, 1-1.7 s off a straight line): detection 1.0,
 #: range RMSE 0.017-0.019 m (bias -0.005 to +0.004), speed RMSE 0.004-0.0055 m/s, 0 to 1.9 %
-#: of estimates off (the telemetry is dated by the reply's arrival, as on any real stage).
-JACK_DETECTION, JACK_WRONG, JACK_RANGE_M, JACK_SPEED_MPS = 1.0, 0.03, 0.03, 0.05
-#: Deadlock guards (never asserted on): the served tank prints its file within seconds.
-SERVE_TIMEOUT_S = 300.0
+#: of estimates off (the telemetry is dated by the reply's arrival, as on any real stage);
+#: beside a CI run (load 2-4), eight runs of the merged code: detection 0.96-1.0, range RMSE
+#: 0.009-0.037 m (bias within 0.01 m), speed RMSE 0.002-0.041 m/s, 0-1.5 % off. A run in real
+#: time through JACK varies from run to run as the simulated board on virtual time does not
+#: (it detects every boundary at 0.003-0.004 m); the bounds are the tank's own targets
+#: (issue 31: 0.05 m, 5 % off) with that spread inside them.
+JACK_DETECTION, JACK_WRONG, JACK_RANGE_M, JACK_SPEED_MPS = 0.95, 0.03, 0.05, 0.05
+#: Deadlock guard (never asserted on; the served tank's own: conftest.SERVE_TIMEOUT_S).
 RUN_TIMEOUT_S = 1200.0
 #: The least loop latency: JACK's round trip through the two PortAudio clients (at least 2
 #: periods, as the JACK loopback tests measure through one), the tank's pipeline and its
@@ -99,25 +103,8 @@ def served_tank(tmp_path: Path, jack_env: dict[str, str]) -> Iterator[tuple[Path
     serve, _ = _recipe()
     assert serve == ["sim-serve", "tank", "--jack"]
     command = _hil(*serve, "--experiment", str(exp_in))
-    proc = subprocess.Popen(
-        command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=jack_env
-    )
-    try:
-        assert proc.stdout is not None
-        ready, _, _ = select.select([proc.stdout], [], [], SERVE_TIMEOUT_S)
-        line = proc.stdout.readline().strip() if ready else ""
-        if not line:
-            proc.kill()
-            pytest.fail(f"sim-serve tank printed no file: {proc.communicate()[1][-3000:]}")
-        yield Path(line), proc
-    finally:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGTERM)
-            try:
-                proc.wait(timeout=60)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+    with serve_jack_tank(command, jack_env) as served:
+        yield served
 
 
 @pytest.mark.slow
@@ -185,11 +172,15 @@ def test_tank_run_through_jack_and_portaudio_is_tracked_as_on_the_board(
     fit = np.polyfit(index, host_s, 1)
     print(f"pace: {fit[0] * exp.waveform.fs_hz:.2f} wall s per stream s, off a straight "
           f"line by up to {np.max(np.abs(np.polyval(fit, index) - host_s)):.3f} s")  # fmt: skip
-    assert summary["detection_rate"] >= JACK_DETECTION
-    assert summary["scored_estimates"] >= 50
-    assert summary["wrong_fraction"] <= JACK_WRONG
-    assert abs(summary["range_bias_m"]) < JACK_RANGE_M and summary["range_rmse_m"] < JACK_RANGE_M
-    assert summary["speed_rmse_mps"] < JACK_SPEED_MPS
+    seen = {k: summary[k] for k in ("detection_rate", "scored_estimates", "wrong_fraction",
+                                    "range_bias_m", "range_rmse_m", "speed_rmse_mps")}  # fmt: skip
+    print(f"accuracy: {seen}")
+    assert summary["detection_rate"] >= JACK_DETECTION, seen
+    assert summary["scored_estimates"] >= 50, seen
+    assert summary["wrong_fraction"] <= JACK_WRONG, seen
+    assert abs(summary["range_bias_m"]) < JACK_RANGE_M, seen
+    assert summary["range_rmse_m"] < JACK_RANGE_M, seen
+    assert summary["speed_rmse_mps"] < JACK_SPEED_MPS, seen
 
 
 def test_the_served_experiment_points_at_jack_and_the_stage_pty() -> None:
