@@ -20,6 +20,7 @@ import pytest
 
 from hil.devices.audio.jack_ports import JackToolError
 from hil.devices.audio.jack_server import DummyServerSettings, JackDummyServer, missing_tools
+from tests.environment import environment
 
 JACK_SAMPLERATE = 192000
 JACK_PERIOD = 256
@@ -46,39 +47,34 @@ def jack_server(require_system: Callable[[bool, str], None]) -> Iterator[JackSer
     ok, why = portaudio_available()
     require_system(ok, f"PortAudio is not available: {why}")
 
+    import sounddevice
+
     name = f"hil-test-{os.getpid()}-{uuid.uuid4().hex[:6]}"
-    saved = {k: os.environ.get(k) for k in _JACK_ENV}
-    os.environ.update(
+    settings = DummyServerSettings(JACK_SAMPLERATE, JACK_PERIOD, synchronous=False)
+    server = JackDummyServer(settings, name=name)
+    jack_env = environment(
         JACK_DEFAULT_SERVER=name,
         JACK_NO_START_SERVER="1",  # a client must never auto-start a server of its own
         JACK_NO_AUDIO_RESERVATION="1",  # no D-Bus device reservation for the dummy driver
     )
-    settings = DummyServerSettings(JACK_SAMPLERATE, JACK_PERIOD, synchronous=False)
-    server = JackDummyServer(settings, name=name)
     try:
-        try:
-            server.start()
-        except JackToolError as error:
-            pytest.fail(str(error))
-        from hil.devices.audio import list_devices, rescan_devices
+        with jack_env:
+            try:
+                try:
+                    server.start()
+                except JackToolError as error:
+                    pytest.fail(str(error))
+                from hil.devices.audio import list_devices, rescan_devices
 
-        rescan_devices()  # PortAudio enumerated devices at import, maybe before jackd ran
-        has_jack = any(d.hostapi.startswith("JACK") for d in list_devices())
-        require_system(has_jack, "this PortAudio build has no JACK host API")
-        yield JackServer(name=name, samplerate=JACK_SAMPLERATE, period=JACK_PERIOD)
+                rescan_devices()  # PortAudio enumerated devices at import, maybe before jackd ran
+                has_jack = any(d.hostapi.startswith("JACK") for d in list_devices())
+                require_system(has_jack, "this PortAudio build has no JACK host API")
+                yield JackServer(name=name, samplerate=JACK_SAMPLERATE, period=JACK_PERIOD)
+            finally:
+                # Close PortAudio's JACK client before its server goes away.
+                sounddevice._terminate()
+                server.close()
     finally:
-        import sounddevice
-
-        # Close PortAudio's JACK client before its server goes away, then re-open PortAudio
-        # so later users of sounddevice in this process still work.
-        sounddevice._terminate()
-        server.close()
-        for key, value in saved.items():
-            if value is None:
-                os.environ.pop(key, None)
-            else:
-                os.environ[key] = value
+        # Re-open PortAudio (its environment restored) so later users of sounddevice in this
+        # process still work.
         sounddevice._initialize()
-
-
-_JACK_ENV = ("JACK_DEFAULT_SERVER", "JACK_NO_START_SERVER", "JACK_NO_AUDIO_RESERVATION")

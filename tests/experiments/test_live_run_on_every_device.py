@@ -41,6 +41,7 @@ from hil.experiments.jack_tank import DEFAULT_PERIOD
 from hil.experiments.run_scoring import summarize
 from hil.experiments.tank_run import LiveView, RunOutcome, run_experiment
 from hil.recording.reader import RunRecording
+from tests.environment import environment
 from tests.experiments.conftest import SHORT_CLI_EXPERIMENT, serve_jack_tank
 
 SHORT = DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -3.5")
@@ -179,36 +180,31 @@ def served_jack_tank(folder: Path) -> Iterator[ServedJackTank]:
 
     exp_in = folder / "short.toml"
     exp_in.write_text(SHORT, encoding="utf-8")
-    names = ("JACK_DEFAULT_SERVER", "JACK_NO_START_SERVER")
-    saved = {k: os.environ.get(k) for k in names}
-    os.environ.update(
+    command = [sys.executable, "-m", "hil.cli.main", "sim-serve", "tank", "--jack",
+               "--experiment", str(exp_in)]  # fmt: skip
+    root = Path(__file__).resolve().parents[2]
+    jack_env = environment(
         JACK_DEFAULT_SERVER=f"hil-suite-{os.getpid()}-{uuid.uuid4().hex[:6]}",
         JACK_NO_START_SERVER="1",
     )
-    root = Path(__file__).resolve().parents[2]
-    env = dict(
-        os.environ, PYTHONPATH=os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")])
-    )
-    command = [sys.executable, "-m", "hil.cli.main", "sim-serve", "tank", "--jack",
-               "--experiment", str(exp_in)]  # fmt: skip
     # PortAudio's JACK client closes before its server goes; PortAudio re-opens after.
     terminated = False
     try:
-        with serve_jack_tank(command, env) as (printed, proc):
-            try:
-                rescan_devices()  # PortAudio enumerated devices before this server ran
-                yield ServedJackTank(printed.read_text(encoding="utf-8"), proc)
-            finally:
-                sounddevice._terminate()
-                terminated = True
+        with jack_env:
+            env = dict(
+                os.environ,
+                PYTHONPATH=os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")]),
+            )
+            with serve_jack_tank(command, env) as (printed, proc):
+                try:
+                    rescan_devices()  # PortAudio enumerated devices before this server ran
+                    yield ServedJackTank(printed.read_text(encoding="utf-8"), proc)
+                finally:
+                    sounddevice._terminate()
+                    terminated = True
     finally:
         if not terminated:
             sounddevice._terminate()
-        for key, value in saved.items():
-            if value is None:
-                os.environ.pop(key, None)
-            else:
-                os.environ[key] = value
         sounddevice._initialize()
 
 
