@@ -18,12 +18,14 @@ Dask is imported only by :class:`DaskRunner`; everything else needs no extra pac
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import logging
 import multiprocessing
 import os
+import threading
 from collections.abc import Callable, Iterable, Iterator
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, Future, InvalidStateError, ProcessPoolExecutor, wait
 from types import TracebackType
 from typing import Any
 
@@ -218,9 +220,10 @@ class LocalPoolRunner(Runner):
         # Python 3.14 has ProcessPoolExecutor.terminate_workers(); before it, the processes
         # are only reachable through the executor's process table.
         procs = list((getattr(pool, "_processes", None) or {}).values())
-        for proc in procs:
-            proc.kill()
-        pool.shutdown(wait=True, cancel_futures=True)
+        with _quiet_broken_pool():
+            for proc in procs:
+                proc.kill()
+            pool.shutdown(wait=True, cancel_futures=True)
         for proc in procs:
             proc.join(_ABORT_JOIN_S)
 
@@ -260,6 +263,26 @@ class LocalPoolRunner(Runner):
         finally:
             for future in pending:
                 future.cancel()
+
+
+@contextlib.contextmanager
+def _quiet_broken_pool() -> Iterator[None]:
+    """Workers killed on purpose: the executor's manager thread marks every pending future
+    broken, and before Python 3.12 it raises ``InvalidStateError`` on one already cancelled
+    (a trial the interrupted sweep gave up), printing that thread's traceback on stderr. That
+    one error is swallowed while the pool is torn down; any other reaches the usual hook."""
+    previous = threading.excepthook
+
+    def hook(args: threading.ExceptHookArgs) -> None:
+        if args.exc_type is InvalidStateError:
+            return
+        previous(args)
+
+    threading.excepthook = hook
+    try:
+        yield
+    finally:
+        threading.excepthook = previous
 
 
 def _refill(

@@ -218,3 +218,29 @@ def test_kill_9_of_the_command_leaves_no_worker(tmp_path: Path) -> None:
         if proc.stderr:
             proc.stderr.close()
     _resume_matches_a_clean_run(tmp_path, sweep, out, gate)
+
+
+def test_a_torn_down_pools_cancelled_future_error_is_the_only_one_swallowed(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import threading
+    from concurrent.futures import InvalidStateError
+
+    from hil.evaluation.runners import _quiet_broken_pool
+
+    seen: list[type[BaseException]] = []
+    monkeypatch.setattr(threading, "excepthook", lambda args: seen.append(args.exc_type))
+
+    def raising(error: BaseException) -> None:
+        def run() -> None:
+            raise error
+
+        thread = threading.Thread(target=run)
+        thread.start()
+        thread.join()
+
+    with _quiet_broken_pool():
+        raising(InvalidStateError("CANCELLED"))
+        raising(ValueError("another"))
+    raising(InvalidStateError("after"))
+    assert seen == [ValueError, InvalidStateError]
