@@ -10,9 +10,17 @@ summary as ``hil tank-run`` does. What a recording cannot give back is listed in
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+from hil.errors import ConfigError
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from hil.experiments.tank_run import RunOutcome
 
 OPTION_NAMES = {"recording": "RUN"}
 
@@ -35,6 +43,14 @@ def register(sub: Any) -> None:
         "summary.json)",
     )
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.add_argument(
+        "--exact-truth",
+        type=Path,
+        metavar="CSV",
+        help="score the run against this exact truth too (truth-run-N.csv, written by hil "
+        "sim-serve tank --jack beside its experiment file): range_rmse_vs_exact_m, "
+        "speed_rmse_vs_exact_mps, telemetry_truth_error_max_m",
+    )
     p.add_argument(
         "--no-map",
         action="store_true",
@@ -62,6 +78,28 @@ def report_folder(recording: Path, out: Path | None) -> Path:
     return folder / REBUILT if (folder / "summary.json").exists() else folder
 
 
+def with_exact_truth(outcome: RunOutcome, table: np.ndarray, path: Path) -> RunOutcome:
+    """``outcome`` with its exact truth read from ``table`` (:mod:`hil.experiments.exact_truth`)
+    at each estimate's bounce instant. Refused when the table does not cover the run's
+    estimates (the truth of another run, or of a run cut short)."""
+    import numpy
+
+    from hil.experiments.exact_truth import truth_at
+    from hil.experiments.run_scoring import bounce_times
+
+    t_b = bounce_times(outcome)
+    exact = truth_at(table, t_b)
+    outside = int(numpy.count_nonzero(numpy.isnan(exact["range_m"])))
+    if outside:
+        raise ConfigError(
+            "--exact-truth", str(path),
+            f"a table covering the run's estimates ({t_b.min():.3f}-{t_b.max():.3f} s)",
+            f"it covers {table[0, 0]:.3f}-{table[-1, 0]:.3f} s and misses {outside} of "
+            f"{t_b.size} estimates: give the truth-run-N.csv of this run",
+        )  # fmt: skip
+    return dataclasses.replace(outcome, exact_truth=exact)
+
+
 def run(args: argparse.Namespace) -> int:
     """Execute ``hil report``; 0, or 1 when the recorded run stopped on an error."""
     from hil.cli.tank_run import print_summary
@@ -74,7 +112,14 @@ def run(args: argparse.Namespace) -> int:
     from hil.recording.reader import probe_structure
 
     probe_structure(args.run)
+    table = None
+    if args.exact_truth is not None:
+        from hil.experiments.exact_truth import read_truth
+
+        table = read_truth(args.exact_truth)
     outcome = outcome_from_recording(args.run, out, codeword_map=not args.no_map)
+    if table is not None:
+        outcome = with_exact_truth(outcome, table, args.exact_truth)
     summary = summarize(outcome)
     summary["rebuilt_from"] = str(args.run)
     write_summary(outcome, summary)

@@ -73,9 +73,14 @@ tank in between, use devices sim://board and sim://stage (the default of 'hil ta
 
   $ hil sim-serve tank --jack                 # prints e.g. /tmp/hil-jack-tank-x1/experiment.toml
   $ hil tank-run /tmp/hil-jack-tank-x1/experiment.toml --out runs/jack
+  $ hil report runs/jack/run.h5 --exact-truth /tmp/hil-jack-tank-x1/truth-run-1.csv
 
 The run captures through PortAudio's JACK host API, as with a USB audio interface; its
-summary counts the xruns (dac_underruns, adc_overruns)."""
+summary counts the xruns (dac_underruns, adc_overruns) and scores it against the stage
+telemetry. The tank writes each run's exact truth beside the experiment file when the run
+ends (truth-run-N.csv: range and closing speed against the run's time); hil report scores
+the run against it too (range_rmse_vs_exact_m), telling the telemetry's error from the
+receiver's."""
 
 
 def register(subparsers: Any) -> None:
@@ -202,11 +207,15 @@ def _serve_tank(args: argparse.Namespace, stop: threading.Event) -> int:
         served.write(path)
         assert served.server is not None and served.tank is not None
         print(
-            f"hil sim-serve tank: JACK server {served.server.name!r}, stage {served.stage_port}",
+            f"hil sim-serve tank: JACK server {served.server.name!r}, stage {served.stage_port}; "
+            f"each run's exact truth: {path.parent / 'truth-run-N.csv'} (hil report RUN.h5 "
+            "--exact-truth FILE)",
             file=sys.stderr,
         )
         _serve(str(path), stop, served.tank.check)
         tank = served.tank
+    for truth in tank.truth_files:
+        print(f"hil sim-serve tank: exact truth written: {truth}", file=sys.stderr)
     print(
         f"hil sim-serve tank: {tank.runs_started} run(s) served, {tank.xruns} xrun(s) "
         f"reported to the tank, blocks the world rendered late: {tank.late_blocks} waited "

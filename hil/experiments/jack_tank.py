@@ -164,6 +164,7 @@ class TankJackClient:
         *,
         device: str | int = JACK_DEVICE,
         pipeline_blocks: int = PIPELINE_BLOCKS,
+        truth_dir: Path | None = None,
     ) -> None:
         from hil.signals.synthesis import BlockSynthesizer
 
@@ -188,6 +189,14 @@ class TankJackClient:
         self._world: Any = None
         self._origin: int | None = None
         self.runs_started = 0
+        # Each run's exact truth (hil.experiments.exact_truth) goes to ``truth_dir`` when it
+        # ends: (run number, origin, the sample after its last sound) of the runs ended, for
+        # the worker to write off the audio thread.
+        self.truth_dir = truth_dir
+        self._sounding_until = 0
+        self._ended: queue.SimpleQueue[tuple[int, int, int]] = queue.SimpleQueue()
+        #: The truth tables written, one per run ended (paths).
+        self.truth_files: list[Path] = []
         # The pipeline: slot ``seq % slots`` holds block ``seq``'s input, its world, the
         # world sample of its first input sample, the silent samples before the onset, and
         # (once rendered) its output.
@@ -286,11 +295,13 @@ class TankJackClient:
             self._silent_blocks += 1
             if self._silent_blocks >= END_SILENT_BLOCKS:
                 # The run stopped transmitting: the world is done; the next is built.
+                self._ended.put((self.runs_started, self._origin, self._sounding_until))
                 with self._lock:
                     self._origin, self._world = None, None
                 self._jobs.put(ARM)
         else:
             self._silent_blocks = 0
+            self._sounding_until = time.sample_index + frames
         if self._origin is not None:
             first = time.sample_index - self._origin
             self._in[slot] = x
@@ -322,12 +333,32 @@ class TankJackClient:
             self.lost_blocks += 1
 
     # ------------------------------------------------------------------ worker threads
+    def _write_truths(self) -> None:
+        """Write the exact truth of each run that ended (:mod:`hil.experiments.exact_truth`):
+        the carriage as its controller planned it, from the run's first sample (world time
+        0, the tank stream's ``origin``) to its last sound."""
+        from hil.experiments.exact_truth import FILE_PATTERN, truth_table, write_truth
+
+        while not self._ended.empty():
+            n, origin, until = self._ended.get()
+            if self.truth_dir is None:
+                continue
+            t0 = origin / self.fs
+
+            def motion(t: np.ndarray, t0: float = t0) -> tuple[np.ndarray, np.ndarray]:
+                return self._carriage_motion(t + t0)
+
+            table = truth_table(self.exp, motion, max(until - origin, 0) / self.fs)
+            path = write_truth(self.truth_dir / FILE_PATTERN.format(n=n), table)
+            self.truth_files.append(path)
+
     def _render(self) -> None:
         while True:
             seq = self._jobs.get()
             if seq is None:
                 return
             if seq == ARM:
+                self._write_truths()
                 self._arm()
                 continue
             slot = seq % len(self._ready)
@@ -377,13 +408,18 @@ class TankJackClient:
         return 0 if self.backend is None else len(self.backend.xruns)
 
     def close(self) -> None:
-        """Stop the threads and close the stream."""
+        """Stop the threads and close the stream; write the truth of a run still sounding
+        (up to its last sound) and of any run whose end the worker had not reached."""
         self._stop.set()
         if self.backend is not None:
             self.backend.close()
         self._jobs.put(None)
         for thread in self._threads:
             thread.join(timeout=5)
+        if self._origin is not None:
+            self._ended.put((self.runs_started, self._origin, self._sounding_until))
+            self._origin = None
+        self._write_truths()
 
 
 def _clients(ports: list[str]) -> dict[str, set[str]]:
@@ -445,8 +481,12 @@ class JackTankServer:
         return str(self.stage.port_name)
 
     def write(self, path: Path) -> Path:
-        """Write the experiment file of a run on the served tank to ``path``."""
+        """Write the experiment file of a run on the served tank to ``path``; each run's
+        exact truth goes beside it from then on (``truth-run-N.csv``,
+        :mod:`hil.experiments.exact_truth`)."""
         path.write_text(served_experiment(self.exp, self.stage_port, self.period), "utf-8")
+        if self.tank is not None:
+            self.tank.truth_dir = path.parent
         return path
 
     def close(self) -> None:

@@ -43,13 +43,17 @@ SHORT = DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -3.5").replace(
 #: The accuracy of a JACK run against the stage telemetry. Measured at load 7-10 (the stream
 #: 2 to 26 times slower than the wall clock, 1-1.7 s off a straight line): detection 1.0,
 #: range RMSE 0.017-0.019 m (bias -0.005 to +0.004), speed RMSE 0.004-0.0055 m/s, 0 to 1.9 %
-#: of estimates off (the telemetry is dated by the reply's arrival, as on any real stage);
-#: beside a CI run (load 2-4), eight runs of the merged code: detection 0.96-1.0, range RMSE
-#: 0.009-0.037 m (bias within 0.01 m), speed RMSE 0.002-0.041 m/s, 0-1.5 % off. A run in real
-#: time through JACK varies from run to run as the simulated board on virtual time does not
-#: (it detects every boundary at 0.003-0.004 m); the bounds are the tank's own targets
-#: (issue 31: 0.05 m, 5 % off) with that spread inside them.
+#: of estimates off; beside a CI run (load 2-4), eight runs: detection 0.96-1.0, range RMSE
+#: 0.009-0.037 m (bias within 0.01 m), speed RMSE 0.002-0.041 m/s, 0-1.5 % off. The range's
+#: spread is the telemetry's own error (JACK_EXACT_RANGE_M); the bounds are the tank's own
+#: targets (issue 31: 0.05 m, 5 % off) with that spread inside them.
 JACK_DETECTION, JACK_WRONG, JACK_RANGE_M, JACK_SPEED_MPS = 0.95, 0.03, 0.05, 0.05
+#: The range RMSE of a JACK run against the exact truth the served tank writes: the
+#: receiver's own, as on the simulated board (0.002-0.004 m). Measured at load 6-9 (four
+#: runs): 0.0027-0.0039 m, where the same runs read 0.019-0.026 m against the telemetry (its
+#: dating through sync pairs 0.1 s apart on this server's wandering pace). The speed has no
+#: second bound: in the scored segment both truths are the feed rate.
+JACK_EXACT_RANGE_M = 0.01
 #: Deadlock guard (never asserted on; the served tank's own: conftest.SERVE_TIMEOUT_S).
 RUN_TIMEOUT_S = 1200.0
 #: The least loop latency: JACK's round trip through the two PortAudio clients (at least 2
@@ -80,18 +84,20 @@ def jack_env(require_system: Any) -> dict[str, str]:
     )
 
 
-def _recipe() -> tuple[list[str], list[str]]:
-    """The JACK tank recipe of ``hil sim-serve --help`` (and docs/tank-run.md): its two
-    commands, split into words."""
+def _recipe() -> tuple[list[str], list[str], list[str]]:
+    """The JACK tank recipe of ``hil sim-serve --help`` (and docs/tank-run.md): its three
+    commands (serve, run, score against the exact truth), split into words."""
     from hil.cli.sim_serve import DESCRIPTION
 
     lines = [
         line.split("$ ", 1)[1].split("  #", 1)[0].split()
         for line in DESCRIPTION.splitlines()
-        if line.strip().startswith(("$ hil sim-serve tank", "$ hil tank-run /tmp/hil-jack"))
+        if line.strip().startswith(
+            ("$ hil sim-serve tank", "$ hil tank-run /tmp/hil-jack", "$ hil report runs/jack")
+        )
     ]
-    serve, run = lines
-    return serve[1:], run[1:]
+    serve, run, report = lines
+    return serve[1:], run[1:], report[1:]
 
 
 @pytest.fixture
@@ -100,7 +106,7 @@ def served_tank(tmp_path: Path, jack_env: dict[str, str]) -> Iterator[tuple[Path
     experiment file it printed."""
     exp_in = tmp_path / "short.toml"
     exp_in.write_text(SHORT, encoding="utf-8")
-    serve, _ = _recipe()
+    serve, _, _ = _recipe()
     assert serve == ["sim-serve", "tank", "--jack"]
     command = _hil(*serve, "--experiment", str(exp_in))
     with serve_jack_tank(command, jack_env) as served:
@@ -117,8 +123,9 @@ def test_tank_run_through_jack_and_portaudio_is_tracked_as_on_the_board(
     assert exp.stage_url.startswith("/dev/pts/") and not exp.simulated
     folder = tmp_path / "run"
     cpu0 = time.process_time()
-    _, run = _recipe()
+    _, run, rescore = _recipe()
     assert run[0] == "tank-run" and run[2] == "--out"
+    assert rescore[0] == "report" and rescore[2] == "--exact-truth"
     done = subprocess.run(
         _hil(run[0], str(exp_file), "--out", str(folder), "--no-live", "--json"),
         capture_output=True, text=True, env=jack_env, timeout=RUN_TIMEOUT_S, check=False,
@@ -136,6 +143,8 @@ def test_tank_run_through_jack_and_portaudio_is_tracked_as_on_the_board(
     )})  # fmt: skip
     print(report.strip().splitlines()[-1])
     assert "1 run(s) served" in report and report.rstrip().endswith("0 lost")
+    truth_file = exp_file.parent / "truth-run-1.csv"
+    assert f"exact truth written: {truth_file}" in report
     # Through the real stack: a real device, the whole loop's latency measured to the sample.
     assert summary["simulated"] is False
     assert summary["error"] == "" and not summary["interrupted"]
@@ -181,6 +190,22 @@ def test_tank_run_through_jack_and_portaudio_is_tracked_as_on_the_board(
     assert abs(summary["range_bias_m"]) < JACK_RANGE_M, seen
     assert summary["range_rmse_m"] < JACK_RANGE_M, seen
     assert summary["speed_rmse_mps"] < JACK_SPEED_MPS, seen
+    # Against the exact truth the tank wrote (the recipe's third command): the receiver
+    # through the real stack is as accurate as on the simulated board; what the telemetry
+    # adds is the telemetry's own error (telemetry_truth_error_max_m).
+    done = subprocess.run(
+        _hil(rescore[0], str(folder / "run.h5"), rescore[2], str(truth_file), "--no-map",
+             "--json"),
+        capture_output=True, text=True, env=jack_env, timeout=RUN_TIMEOUT_S, check=False,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr[-3000:]
+    rescored = json.loads(done.stdout.strip().splitlines()[-1])
+    exact = {k: rescored[k] for k in ("range_rmse_vs_exact_m", "speed_rmse_vs_exact_mps",
+                                      "telemetry_truth_error_max_m", "range_rmse_m")}  # fmt: skip
+    print(f"against the exact truth: {exact}")
+    assert rescored["range_rmse_m"] == summary["range_rmse_m"], exact
+    assert rescored["range_rmse_vs_exact_m"] < JACK_EXACT_RANGE_M, exact
+    assert abs(rescored["speed_rmse_vs_exact_mps"] - summary["speed_rmse_mps"]) < 1e-3, exact
 
 
 def test_the_served_experiment_points_at_jack_and_the_stage_pty() -> None:
