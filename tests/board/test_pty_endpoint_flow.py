@@ -25,8 +25,12 @@ from hil.devices.board import Board
 from hil.devices.board_settings import BoardSettings
 from sim_devices.board import BoardSpec, SimulatedBoardOnPty
 from sim_devices.pty_endpoint import PtyEndpoint
+from tests.thread_lateness import LatenessProbe
 
 TICK_S = 0.15  # how long each slow tick takes, s
+#: A stall of the whole process this long (s, a third of the test's 0.68 s DAC FIFO) can run
+#: the FIFO dry whatever the pump does (tests/thread_lateness.py).
+FIFO_STALL_S = 0.22
 CHUNK = 48_000  # bytes a slow tick produces (more than the pty buffers, about 14 KB)
 
 
@@ -184,6 +188,7 @@ def test_board_keeps_its_dac_fed_through_slow_world_ticks() -> None:
         return np.resize(np.roll(tone, -(k % rate)), n)
 
     with (
+        LatenessProbe() as probe,
         SimulatedBoardOnPty(spec, world=SlowWorld(), poll_interval=0.1) as sim,
         Board(sim.port_name, settings=settings, ring_seconds=8.0) as board,
     ):
@@ -195,7 +200,15 @@ def test_board_keeps_its_dac_fed_through_slow_world_ticks() -> None:
         underruns = sim.call(lambda b: b.dac_underruns)
         late = sim.call(lambda b: b._fifo.late_samples)
         board.stop()
-    assert underruns == 0
-    assert late == 0
-    assert backlog < 60_000  # at most about two ticks' output still queued
+    seen = (
+        f"underruns {underruns}, late samples {late}, backlog {backlog} B, {probe.longest_s=:.3f} s"
+    )
+    print(seen)
+    # The pump's credits keep pace with its ADC data: the output queue stays short.
+    assert backlog < 60_000, seen  # at most about two ticks' output still queued
+    # So the FIFO never runs dry, unless the machine kept this process (its host writer and
+    # the simulated board both) off the CPUs for a third of the FIFO's 0.68 s.
+    if probe.longest_s < FIFO_STALL_S:
+        assert underruns == 0, seen
+        assert late == 0, seen
     assert board.ring is not None and board.ring.missing == 0
