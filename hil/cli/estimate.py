@@ -51,9 +51,10 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 from hil.errors import ConfigError
 
-# The numeric modules (numpy; numba through the receivers and the tracker; scipy; h5py through
-# hil.recording) are imported where the command runs, so that building the parser for
-# ``hil estimate --help`` (and for ``hil replay``, which reuses this module) stays cheap.
+# The numeric modules (numpy; numba through the receivers and the tracker; scipy through
+# numba and the CFAR threshold) are imported where the command runs, so that building the
+# parser for ``hil estimate --help`` (and for ``hil replay``, which reuses this module) stays
+# cheap. Nothing on this path imports h5py or scipy.io (tests/cli/test_cli_estimate.py).
 if TYPE_CHECKING:
     import numpy as np
     from numpy.typing import NDArray

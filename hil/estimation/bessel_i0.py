@@ -1,7 +1,8 @@
 """The modified Bessel function of the first kind, order 0, ``I0(x)``, for the Kaiser
 window: Cephes' Chebyshev expansions (Moshier), the algorithm both ``scipy.special.i0`` and
 ``numpy.i0`` use, evaluated so that the result equals ``scipy.special.i0``'s to the last bit
-(tested), without importing ``scipy.special`` (0.15-0.4 s of CPU at the start of a receiver).
+(tested), so that the window needs no ``scipy.special`` (0.06 s of CPU to import after
+``scipy.linalg``, about 0.2 s without it).
 
 >>> float(bessel_i0(np.array([0.0]))[0]), round(float(bessel_i0(np.array([10.0]))[0]), 6)
 (1.0, 2815.716628)
