@@ -10,12 +10,20 @@ The cost per added second of input is the difference of the totals on a WAV of `
 ``2 T`` s, over ``T``. CPU, not wall clock, because the machine is shared: the load average
 is printed beside the figures. ``--kernels`` also lists the CPU of each numba kernel's first
 call (its load from numba's cache; the first one carries numba's one-off initialisation).
+``--breakdown`` measures, in another fresh interpreter, the parts of the start-up no
+``hil`` code controls, one after the other: ``import numpy``; ``import numba`` (which
+imports scipy's base package to check its version); ``import scipy.linalg``, which numba's
+initialisation imports for its BLAS check; numba's initialisation and the load of one
+kernel from its cache (its first call, with scipy.linalg already loaded).
+``--whole S`` also runs ``hil estimate`` once on a WAV of ``S`` s (the target going to and fro
+between 40 and 10 m at 9 m/s, so it stays in range) and prints its whole CPU and real-time
+factor (``S`` over the CPU; the issue's goal: at least 25 for 60 s).
 
 The WAVs: a target closing at 9 m/s from 40 m in white noise (as tests/cli/test_cli_estimate),
 ``att`` random-cyclic, 100 kHz, float32; written to a temporary folder.
 
 Run: ``python benchmarks/bench_estimate_start.py [--seconds 1] [--repeat 3] [--kernels]
-[--quick]``.
+[--breakdown] [--whole 60] [--quick]``.
 The last line is one JSON object with the figures.
 """
 
@@ -38,7 +46,7 @@ from hil.signals.presets import check_design, get_preset
 from hil.signals.schedule_file import schedule_document, write_schedule_file
 from sim_devices.acoustics.delay import TwoWayPath
 from sim_devices.acoustics.echo import AnalyticEcho
-from sim_devices.acoustics.trajectory import ConstantVelocity, Fixed
+from sim_devices.acoustics.trajectory import ConstantVelocity, Fixed, Piecewise
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGET_S = 1.0
@@ -78,6 +86,35 @@ figures["total_s"] = time.process_time()
 print(json.dumps(figures))
 """
 
+# The parts of the start-up that come from numpy and numba, in a fresh interpreter: prints one
+# JSON object {part: CPU s}, each part timed after the ones before it are loaded.
+_BREAKDOWN = """
+import json, time
+cpu = time.process_time
+parts = {}
+start = cpu(); import numpy as np; parts["import numpy"] = cpu() - start
+start = cpu(); import numba; parts["import numba (with scipy's base)"] = cpu() - start
+start = cpu(); import scipy.linalg
+parts["import scipy.linalg (numba's BLAS check)"] = cpu() - start
+from hil.estimation import kernels
+buf, taps, out = np.zeros(100), np.zeros(5), np.zeros(10)
+start = cpu(); kernels.fir_decimate(buf, 0, 10, 2, taps, taps, out, out.copy())
+parts["numba's initialisation + one kernel's cache load"] = cpu() - start
+print(json.dumps(parts))
+"""
+
+
+def breakdown(repeat: int) -> dict[str, float]:
+    """The least CPU (s) of each part of :data:`_BREAKDOWN` over ``repeat`` fresh runs."""
+    runs = []
+    for _ in range(repeat):
+        proc = subprocess.run(
+            [sys.executable, "-c", _BREAKDOWN],
+            cwd=ROOT, capture_output=True, text=True, check=True,
+        )  # fmt: skip
+        runs.append(json.loads(proc.stdout.strip().splitlines()[-1]))
+    return {part: min(float(r[part]) for r in runs) for part in runs[0]}
+
 
 def write_inputs(folder: Path, seconds: float) -> dict[float, Path]:
     """The schedule ``folder/x.json`` and WAVs of ``seconds`` and ``2 * seconds`` s."""
@@ -95,6 +132,25 @@ def write_inputs(folder: Path, seconds: float) -> dict[float, Path]:
         wavs[length] = folder / f"rx-{length:g}s.wav"
         wavfile.write(wavs[length], int(FS), x[: int(length * FS)].astype(np.float32))
     return wavs
+
+
+def write_whole(folder: Path, seconds: float) -> Path:
+    """A WAV ``folder/whole.wav`` of ``seconds`` s: the target runs to and fro between 40 m
+    and 10 m at 9 m/s (white noise as in :func:`write_inputs`); the schedule ``x.json``."""
+    spec = get_preset("att").spec("random-cyclic")
+    sch = check_design(spec)
+    sonar = Fixed([0.0, 0.0, 0.0])
+    legs = int(seconds * 9.0 / 30.0) + 2
+    points = [[40.0 if i % 2 == 0 else 10.0, 0.0, 0.0] for i in range(legs + 1)]
+    target = Piecewise(points, np.full(legs, 9.0))
+    n = int(seconds * FS)
+    x = AnalyticEcho(sch, TwoWayPath(sonar, target, sonar, 1500.0), FS).block(0, n)
+    x = x + np.random.default_rng(7).normal(0.0, 0.5, n)
+    x = 0.5 * x / np.max(np.abs(x))
+    doc = schedule_document(sch, FS, seconds, sound_speed_mps=1500.0, spec=spec.to_dict())
+    write_schedule_file(folder / "x.json", doc)
+    wavfile.write(folder / "whole.wav", int(FS), x.astype(np.float32))
+    return folder / "whole.wav"
 
 
 def child_cpu(command: list[str]) -> float:
@@ -127,6 +183,12 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=1.0, help="shorter WAV, s (default 1)")
     parser.add_argument("--repeat", type=int, default=3, help="runs per input (best kept)")
     parser.add_argument("--kernels", action="store_true", help="list each kernel's load CPU")
+    parser.add_argument(
+        "--breakdown", action="store_true", help="CPU of numpy's and numba's parts, apart"
+    )
+    parser.add_argument(
+        "--whole", type=float, default=0.0, help="also one run on a WAV of this many s"
+    )
     parser.add_argument("--quick", action="store_true", help="0.5 s WAV, one run per input")
     args = parser.parse_args()
     if args.quick:
@@ -145,6 +207,14 @@ def main() -> None:
             for _ in range(args.repeat)
         )
         short, long = (best_probe(estimate(wavs[t]), args.repeat) for t in sorted(wavs))
+        whole_cpu = None
+        if args.whole > 0:
+            (folder / "whole").mkdir()
+            whole = write_whole(folder / "whole", args.whole)
+            schedule = str(folder / "whole" / "x.json")
+            command = ["-m", "hil.cli.main", "estimate", "--schedule", schedule]
+            whole_cpu = child_cpu([sys.executable, *command, "--input", str(whole)])
+    parts = breakdown(args.repeat) if args.breakdown else {}
     start_up = float(short["start_up_s"])
     per_second = (float(long["total_s"]) - float(short["total_s"])) / args.seconds
     ratio = start_up / TARGET_S
@@ -161,6 +231,11 @@ def main() -> None:
         for name, cpu in kernels:
             print(f"  first call of {name:<34} {cpu * 1e3:7.1f} ms CPU")
         print(f"  {len(kernels)} kernels, {sum(c for _, c in kernels):.3f} s CPU in all")
+    for part, cpu in parts.items():
+        print(f"  {part:<50} {cpu * 1e3:7.1f} ms CPU (least of {args.repeat})")
+    if whole_cpu is not None:
+        print(f"hil estimate, {args.whole:g} s WAV, one run: {whole_cpu:7.2f} s CPU "
+              f"({args.whole / whole_cpu:.1f}x real time)")  # fmt: skip
     print(
         json.dumps(
             {
@@ -175,6 +250,12 @@ def main() -> None:
                 "start_up_over_target": round(ratio, 3),
                 "met": ratio <= 1.0,
                 "kernel_first_call_cpu_s": {n: round(c, 4) for n, c in kernels},
+                "breakdown_cpu_s": {p: round(c, 4) for p, c in parts.items()},
+                "whole_s": args.whole if whole_cpu is not None else None,
+                "whole_cpu_s": None if whole_cpu is None else round(whole_cpu, 3),
+                "whole_real_time_factor": (
+                    None if whole_cpu is None else round(args.whole / whole_cpu, 2)
+                ),
             }
         )
     )

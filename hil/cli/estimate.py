@@ -51,9 +51,10 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 from hil.errors import ConfigError
 
-# The numeric modules (numpy; numba through the receivers and the tracker; scipy; h5py through
-# hil.recording) are imported where the command runs, so that building the parser for
-# ``hil estimate --help`` (and for ``hil replay``, which reuses this module) stays cheap.
+# The numeric modules (numpy; numba through the receivers and the tracker; scipy through
+# numba and the CFAR threshold) are imported where the command runs, so that building the
+# parser for ``hil estimate --help`` (and for ``hil replay``, which reuses this module) stays
+# cheap. Nothing on this path imports h5py or scipy.io (tests/cli/test_cli_estimate.py).
 if TYPE_CHECKING:
     import numpy as np
     from numpy.typing import NDArray
@@ -82,7 +83,8 @@ def register(sub: Any) -> None:
     p: argparse.ArgumentParser = sub.add_parser(
         "estimate",
         help="estimate range and speed from a received WAV",
-        description="Run a receiver over a received WAV (any sample format scipy reads) "
+        description="Run a receiver over a received WAV (PCM of 8 to 64 bits or 32/64-bit "
+        "float, any number of channels) "
         "and print one estimate per detected hop boundary: time (s), range (m), speed (m/s), "
         "SNR (dB). The WAV's sample 0 is the schedule's t = 0. Warns when the WAV does not "
         "follow the schedule's hop code (a schedule of another seed) or is clipped. An echo "
@@ -175,19 +177,17 @@ def read_wav_blocks(
 ) -> tuple[float, int, Iterator[NDArray[np.float64]]]:
     """Open a WAV for block-wise reading: (fs, n_frames, iterator of float64 blocks).
 
-    Integer formats are scaled to [-1, 1). Multi-channel files need ``channel``. ``clip``
-    counts the integer samples at the format's minimum or maximum.
+    Any format :mod:`hil.signals.wav_read` reads (PCM of 8 to 64 bits, 32- or 64-bit float,
+    plain or WAVE_FORMAT_EXTENSIBLE, RIFF, RIFX or RF64). Integer formats are scaled to
+    [-1, 1). Multi-channel files need ``channel``. ``clip`` counts the integer samples at
+    the format's full scale (either sign).
     """
     import numpy as np
-    from scipy.io import wavfile
 
-    try:
-        fs, data = wavfile.read(path, mmap=True)
-    except FileNotFoundError:
-        raise ConfigError("--input", str(path), "an existing WAV file") from None
-    except ValueError as exc:
-        raise ConfigError("--input", str(path), f"a readable WAV file ({exc})") from None
-    n_channels = 1 if data.ndim == 1 else int(data.shape[1])
+    from hil.signals.wav_read import read_wav_layout, wav_blocks
+
+    layout = read_wav_layout(path, "--input")
+    n_channels = layout.n_channels
     if n_channels > 1 and channel is None:
         raise ConfigError(
             "--channel",
@@ -197,22 +197,24 @@ def read_wav_blocks(
         )
     if channel is not None and not 0 <= channel < n_channels:
         raise ConfigError("--channel", channel, f"0..{n_channels - 1} ({n_channels} channels)")
-    scale = 1.0
-    if np.issubdtype(data.dtype, np.integer):
-        scale = 1.0 / float(2 ** (8 * data.dtype.itemsize - 1))
-        if data.dtype == np.uint8:
-            scale = 1.0 / 128.0
+    fs = float(layout.fs_hz)
+    dtype = layout.dtype
+    integer = not layout.is_float
+    unsigned = dtype == np.uint8  # 8 bits or fewer: offset binary, 128 is zero
+    scale = 1.0 / (128.0 if unsigned else float(2 ** (8 * dtype.itemsize - 1)))
+    # Full scale of the stored bits, left-justified as read: -32767 clips as -32768 does.
+    step = 1 << 8 * (dtype.itemsize - layout.container_bytes)
+    high = 255 if unsigned else ((1 << 8 * layout.container_bytes - 1) - 1) * step
+    low = 0 if unsigned else -high
 
     def blocks() -> Iterator[NDArray[np.float64]]:
-        for start in range(0, data.shape[0], block):
-            raw = data[start : start + block]
-            col = raw if raw.ndim == 1 else raw[:, channel]
-            if clip is not None and np.issubdtype(data.dtype, np.integer):
-                info = np.iinfo(data.dtype)
-                low = info.min + 1 if info.min < 0 else info.min  # -32767 clips as -32768 does
-                clip.add(start, (col <= low) | (col >= info.max))
+        start = 0
+        for raw in wav_blocks(path, layout, block):
+            col: NDArray[Any] = raw if raw.ndim == 1 else raw[:, channel]
+            if clip is not None and integer:
+                clip.add(start, (col <= low) | (col >= high))
             x = np.asarray(col, dtype=np.float64)
-            if data.dtype == np.uint8:
+            if unsigned:
                 x = x - 128.0
             x = x * scale
             bad = ~np.isfinite(x)
@@ -224,9 +226,10 @@ def read_wav_blocks(
                     f"finite samples; sample {first} (t = {first / fs:.6f} s) is {x[bad][0]}",
                     "repair or trim the recording",
                 )
+            start += len(x)
             yield x
 
-    return float(fs), int(data.shape[0]), blocks()
+    return fs, layout.n_frames, blocks()
 
 
 def _check_schedule(

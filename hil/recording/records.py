@@ -12,7 +12,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hil.errors import ConfigError
-from hil.recording.schema import EVENT_KINDS
 
 
 @dataclass(frozen=True)
@@ -29,6 +28,9 @@ class RunEvent:
     text: str = ""
 
     def __post_init__(self) -> None:
+        # Imported here: the schema imports h5py, which building a receiver does not need.
+        from hil.recording.schema import EVENT_KINDS
+
         if self.kind not in EVENT_KINDS:
             raise ConfigError("event.kind", self.kind, f"one of {', '.join(EVENT_KINDS)}")
         if self.length < 0:

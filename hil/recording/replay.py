@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 from hil.acquisition.feed import ReceiverFeed
 from hil.errors import ConfigError
@@ -25,9 +25,11 @@ from hil.estimation.tracking import (
     mean_hop_s,
     split_track_options,
 )
-from hil.recording.reader import RunRecording
 from hil.recording.records import COMMON_SETTINGS, ReceiverSetup
 from hil.signals.schedule import HopSchedule
+
+if TYPE_CHECKING:
+    from hil.recording.reader import RunRecording
 
 _COMMON = ("sound_speed_mps", "max_speed_mps", "max_range_m", "m_hops")
 
@@ -118,6 +120,8 @@ def replay(
     (:class:`~hil.estimation.base.CountsRefusals`; left empty for a receiver that does not
     count them).
     """
+    from hil.recording.reader import RunRecording  # with h5py: only where a file is read
+
     if not isinstance(recording, RunRecording):
         with RunRecording.open(recording) as rec:
             return replay(

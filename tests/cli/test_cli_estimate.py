@@ -326,3 +326,62 @@ def test_clutter_is_labelled_as_clutter_and_not_reported(
         f"(hop {r['hop_index']}): counted as clutter, not reported as a target"
         for r in clutter
     ]
+
+
+def _write_24_bit(path: Path, x: np.ndarray, fs: int) -> None:
+    """A mono 24-bit PCM WAV (a format scipy.io.wavfile cannot write) of ``x`` in [-1, 1]."""
+    q = np.clip(np.round(x * 2**23), -(2**23), 2**23 - 1).astype("<i4")
+    stored = q.view(np.uint8).reshape(-1, 4)[:, :3].tobytes()
+    fmt = b"fmt " + (16).to_bytes(4, "little") + np.array(
+        [1, 1], dtype="<u2").tobytes() + np.array([fs, 3 * fs], dtype="<u4").tobytes() + np.array(
+        [3, 24], dtype="<u2").tobytes()  # fmt: skip
+    data = b"data" + len(stored).to_bytes(4, "little") + stored
+    body = b"WAVE" + fmt + data
+    path.write_bytes(b"RIFF" + len(body).to_bytes(4, "little") + body)
+
+
+def test_a_24_bit_input_gives_the_float_inputs_estimates_and_its_clipping_is_warned(
+    recording: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """24-bit samples are read (scaled by 2**-23, left-justified as scipy reads them), and a
+    sample at either full scale (+0x7fffff, -0x7fffff or -0x800000) counts as clipped."""
+    _, x = wavfile.read(recording / "rx.wav")
+    y = x.astype(np.float64)
+    y[[1000, 2000, 3000]] = [1.0, -1.0, -2.0]  # stored as +0x7fffff, -0x800000, -0x800000
+    y[4000] = -(2**23 - 1) / 2**23
+    _write_24_bit(tmp_path / "rx24.wav", y, int(FS))
+    base = ["estimate", "--schedule", str(recording / "x.json"), "--json", "--input"]
+    assert main([*base, str(recording / "rx.wav")]) == 0
+    floats = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert main([*base, str(tmp_path / "rx24.wav")]) == 0
+    out, err = capsys.readouterr()
+    ints = [json.loads(line) for line in out.splitlines()]
+    assert [r["hop_index"] for r in ints] == [r["hop_index"] for r in floats]
+    # 24-bit quantisation (6e-8 of full scale) moves a range by far less than a millimetre.
+    assert max(abs(a["range_m"] - b["range_m"]) for a, b in zip(ints, floats, strict=True)) < 1e-3
+    assert f"{tmp_path / 'rx24.wav'} is clipped: 4 samples at the integer format's full " in err
+    assert "the first at t = 0.010000 s" in err
+
+
+def test_estimate_imports_neither_h5py_nor_scipys_io_or_signal(recording: Path) -> None:
+    """The start-up of hil estimate (issue 27): no HDF5 library where no HDF5 is written, no
+    scipy.io for the WAV, no scipy.signal for the filters (checked in a fresh interpreter)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import json, sys\n"
+        "from hil.cli.main import main\n"
+        f"status = main(['estimate', '--schedule', {str(recording / 'x.json')!r}, "
+        f"'--input', {str(recording / 'rx.wav')!r}, '--json'])\n"
+        "sys.stdout = sys.__stdout__\n"
+        "print(json.dumps([status, sorted(sys.modules)]))\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True,
+                          text=True, check=True)  # fmt: skip
+    status, modules = json.loads(proc.stdout.splitlines()[-1])
+    assert status == 0 and "hil.estimation.gcas.receiver" in modules
+    loaded = set(modules)
+    assert loaded.isdisjoint({"h5py", "scipy.io", "scipy.io.wavfile", "scipy.signal"}), sorted(
+        m for m in loaded if m.startswith(("h5py", "scipy.io", "scipy.signal"))
+    )

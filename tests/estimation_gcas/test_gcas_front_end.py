@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 
 from hil.errors import ConfigError
 from hil.estimation.baseband import ComplexBaseband, kaiser_lowpass, kaiser_order
+from hil.estimation.bessel_i0 import bessel_i0
 from hil.estimation.unit_correlators import UnitCorrelatorBank
 
 
@@ -49,6 +50,18 @@ def test_the_kaiser_design_is_scipy_signals_bit_for_bit(
     numtaps |= 1
     taps = kaiser_lowpass(numtaps, cutoff, beta)
     assert np.array_equal(taps, signal.firwin(numtaps, cutoff, window=("kaiser", beta)))
+
+
+@settings(max_examples=100, deadline=None)
+@given(x=st.lists(st.floats(-760.0, 760.0), min_size=1, max_size=20))
+def test_the_kaisers_bessel_i0_is_scipy_specials_bit_for_bit(x: list[float]) -> None:
+    # The window's I0 without importing scipy.special: the same bits, so the taps and every
+    # result downstream of the front end are unchanged.
+    from scipy import special
+
+    edges = [0.0, 8.0, math.nextafter(8.0, 9.0), 709.0, 713.0, float("nan")]
+    values = np.array([*x, *edges])
+    assert np.array_equal(bessel_i0(values), special.i0(values), equal_nan=True)
 
 
 def test_a_kaiser_design_below_8_db_is_refused_naming_the_attenuation() -> None:
