@@ -1,0 +1,113 @@
+"""How often the beyond-span check scans its guard band (hil.estimation.gcas.beyond_span):
+for detections not fitted as one echo, after scans that found nothing, each edge waits 1, 2,
+4 … up to MAX_SCAN_GAP_HOPS hops; a scan that finds the echo starts the waits again; an echo
+fit near the edge after a sighting is scanned every time (there the scan decides what is
+reported). The refiner here is a stand-in that only answers the scan's questions."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from hil.estimation.gcas.beyond_span import MAX_SCAN_GAP_HOPS, BeyondSpanCheck
+from hil.estimation.refine import EchoTest
+
+C = 1500.0
+TEST = EchoTest(fraction=0.5, run_fraction=0.5, min_e_over_n0_db=12.0)
+
+
+@dataclass
+class _Fit:
+    alpha: float
+    t_s: float = 1.0
+    echo: bool = True
+
+    def speed_mps(self, c: float) -> float:
+        return c * (self.alpha - 1.0) / (self.alpha + 1.0)
+
+    def is_echo(self, test: EchoTest) -> bool:
+        return self.echo
+
+
+def _alpha(v: float) -> float:
+    return (C + v) / (C - v)
+
+
+class _Refiner:
+    """Answers the scan: a flat likelihood, and (where ``beyond_at`` is set) one echo at that
+    speed for the fit started from the scan's best point."""
+
+    c, m_hops, speed_span_mps, spacing_hz = C, 10, 2.0, 100.0
+
+    def __init__(self) -> None:
+        self.scans: list[int] = []
+        self.beyond_at: float | None = None
+        self.hop = 0
+
+    def correlation(self, t_c: float, a_c: float, hop: int, tt: Any, aa: Any) -> np.ndarray:
+        if not self.scans or self.scans[-1] != hop:
+            self.scans.append(hop)
+        return np.ones(np.shape(tt))
+
+    def refine(self, t_s: float, alpha: float, hop: int) -> _Fit | None:
+        return None if self.beyond_at is None else _Fit(_alpha(self.beyond_at))
+
+
+def _check(refiner: _Refiner) -> BeyondSpanCheck:
+    return BeyondSpanCheck(
+        refiner,
+        30.0,
+        TEST,
+        hop_s=0.01,
+        center_hz=30_000.0,
+        f_max_hz=35_000.0,  # type: ignore[arg-type]
+    )
+
+
+def test_a_fruitless_edge_is_scanned_with_doubling_waits() -> None:
+    refiner = _Refiner()
+    check = _check(refiner)
+    for hop in range(300):
+        assert not check.check(
+            1.0 + hop * 0.01, _alpha(30.0), hop, 1, _Fit(_alpha(29.9), echo=False)
+        )
+    expected, hop, gap = [], 0, 1
+    while hop < 300:
+        expected.append(hop)
+        hop, gap = hop + gap, min(2 * gap, MAX_SCAN_GAP_HOPS)
+    assert refiner.scans == expected
+    assert expected[:9] == [0, 1, 3, 7, 15, 31, 63, 127, 191]
+    # The other edge has its own waits.
+    assert not check.check(4.0, _alpha(-30.0), 300, -1, None)
+    assert refiner.scans[-1] == 300
+
+
+def test_a_scan_that_finds_the_echo_starts_the_waits_again() -> None:
+    refiner = _Refiner()
+    check = _check(refiner)
+    not_echo = _Fit(_alpha(29.9), echo=False)
+    for hop in range(8):
+        check.check(1.0, _alpha(30.0), hop, 1, not_echo)
+    assert refiner.scans == [0, 1, 3, 7]
+    refiner.beyond_at = 33.0  # an echo beyond the span appears: the next scan finds it
+    assert check.check(1.0, _alpha(30.0), 15, 1, not_echo)
+    assert [s.side for s in check.sightings] == ["closing"] and check.count == 1
+    # Followed from that fit while it lasts (no scan); once it cannot be followed, scanned
+    # at once: the waits started again.
+    refiner.beyond_at = None
+    assert not check.check(1.0, _alpha(30.0), 30, 1, not_echo)
+    assert refiner.scans == [0, 1, 3, 7, 15, 30]
+
+
+def test_an_echo_fit_near_the_edge_after_a_sighting_is_scanned_every_time() -> None:
+    refiner = _Refiner()
+    check = _check(refiner)
+    refiner.beyond_at = 33.0
+    assert check.check(1.0, _alpha(30.0), 0, 1, _Fit(_alpha(29.9), echo=False))
+    refiner.beyond_at = None
+    near = _Fit(_alpha(29.95))  # one echo, within a Doppler cell of the edge
+    for hop in range(10, 20):
+        assert not check.check(1.0, _alpha(30.0), hop, 1, near)
+    assert refiner.scans == [0, *range(10, 20)]
