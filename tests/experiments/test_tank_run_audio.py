@@ -18,6 +18,7 @@ from hil.errors import ConfigError
 from hil.experiments.experiment import DEFAULT_EXPERIMENT, parse_experiment
 from hil.experiments.tank_run import LiveView, run_experiment
 from hil.recording.instrument import read_entry
+from tests.thread_lateness import LatenessProbe
 
 SHORT = DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -3.5")
 #: The board line as docs/tank-run.md writes it.
@@ -37,19 +38,30 @@ def _tank_run(tmp_path: Path, text: str, capsys: pytest.CaptureFixture[str], *ex
 
 
 def _assert_tracked_as_on_the_board(
-    summary: dict[str, Any], latency: int = AUDIO_LATENCY, wrong_fraction: float = 0.0
+    summary: dict[str, Any],
+    latency: int = AUDIO_LATENCY,
+    wrong_fraction: float = 0.0,
+    telemetry_slack_m: float = 0.0,
 ) -> None:
-    # The thresholds of the simulated board's run (test_tank_run_virtual).
+    """The thresholds of the simulated board's run (test_tank_run_virtual); the figures
+    against the stage telemetry widened by ``telemetry_slack_m`` (m): how far the telemetry
+    itself may be off in real time (a report is dated by its query)."""
     assert summary["error"] == "" and not summary["interrupted"]
     assert summary["dropped_samples"] == 0
     assert summary["dac_underruns"] == 0 and summary["adc_overruns"] == 0
     assert summary["loopback_latency_samples"] == latency
-    assert summary["wrong_fraction"] <= wrong_fraction
     assert summary["detection_rate"] == 1.0
     assert summary["scored_estimates"] >= 50
-    assert abs(summary["range_bias_m"]) < 0.03 and summary["range_rmse_m"] < 0.03
+    # Against the simulation's exact truth: the receiver's own accuracy.
+    assert summary["range_rmse_vs_exact_m"] < 0.03
+    assert summary["speed_rmse_vs_exact_mps"] < 0.05
+    # Against the telemetry, the truth a lab has.
+    assert summary["telemetry_truth_error_max_m"] < 0.02 + telemetry_slack_m
+    assert abs(summary["range_bias_m"]) < 0.03 + telemetry_slack_m
+    assert summary["range_rmse_m"] < 0.03 + telemetry_slack_m
     assert summary["speed_rmse_mps"] < 0.05
-    assert summary["telemetry_truth_error_max_m"] < 0.02
+    if telemetry_slack_m < 0.5 * summary["wrong_gate_m"]:
+        assert summary["wrong_fraction"] <= wrong_fraction
 
 
 def test_hil_tank_run_with_the_simulated_audio_interface_on_virtual_time(
@@ -94,10 +106,17 @@ def test_hil_tank_run_with_the_simulated_audio_interface_in_real_time(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     # In real time on a machine busy with other work, the stage's telemetry (the truth) is
-    # dated by when its replies arrive: runs at load 9-12 had 2 estimates off (under 1 %),
-    # at load 15-17 1.14 %; on virtual time none (above). 2 % leaves that margin and still
-    # fails a receiver that loses its way (a wrong lobe or codeword is a run of estimates).
-    _assert_tracked_as_on_the_board(_tank_run(tmp_path, AUDIO, capsys), wrong_fraction=0.02)
+    # off by how long a status report waited for the CPU after its query dated it: runs at
+    # load 9-12 had 2 estimates off (under 1 %), at load 15-17 1.14 %; on virtual time none
+    # (above). 2 % leaves that margin and still fails a receiver that loses its way (a wrong
+    # lobe or codeword is a run of estimates); where this process was kept off the CPUs long
+    # enough for the tow to move half a range cell, the telemetry cannot judge "wrong" and
+    # the exact truth's figures stand alone.
+    with LatenessProbe() as probe:
+        summary = _tank_run(tmp_path, AUDIO, capsys)
+    slack = parse_experiment(AUDIO).tow.speed_mps * probe.longest_s
+    print(f"longest wait for a CPU {probe.longest_s:.3f} s: telemetry slack {slack:.3f} m")
+    _assert_tracked_as_on_the_board(summary, wrong_fraction=0.02, telemetry_slack_m=slack)
 
 
 def test_the_former_spelling_is_read_as_sim_audio_with_a_deprecation_warning(
