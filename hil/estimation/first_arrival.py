@@ -173,6 +173,12 @@ SLOW_RISE = 0.55
 #: previous boundary's late images leave as on the others (measured on the built-in tank at
 #: image order 2, carriage at rest: 4-5 times; a first arrival: 0.8-1.2).
 PEDESTAL_RATIO = 2.0
+#: A rise is the next tone arriving to stay when the next-tone channel's power a window after
+#: it has grown by at least this times the power of its change over that window
+#: (:meth:`FirstArrivalReadout._new_tone_holds`). Measured: a first arrival 1.6-12 (built-in
+#: tank, order 3, scored stretch), the late images' level in the carriage's stop at order 2
+#: 0.02-0.97.
+NEW_TONE_RATIO = 1.0
 
 
 #: The direct path's Doppler score is summed with the same echo's at the detections this many
@@ -455,7 +461,11 @@ class FirstArrivalReadout:
         # A slow rise from lo to hi is not the ramp itself (SLOW_RISE).
         j_a, j_b = j_lo, j_hi
         if j_hi - j_lo > SLOW_RISE * w:
-            up = np.flatnonzero(amp[j_hi : top_i + 1] >= 2.0 * amp[j_hi])
+            # The next tone arriving to stay (a weak first arrival under its images) has its
+            # steep part within a window; a late images' level ahead of it does not.
+            holds = self._new_tone_holds(full, clean, j_lo, top_i)
+            stop = min(top_i, j_hi + w) if holds else top_i
+            up = np.flatnonzero(amp[j_hi : stop + 1] >= 2.0 * amp[j_hi])
             if up.size:
                 j_a, j_b = j_hi, j_hi + max(2, int(up[0]))
         tt = self._offsets[j_a : j_b + 1] / fs
@@ -524,6 +534,33 @@ class FirstArrivalReadout:
         while j > k0 and amp[j - 1] >= lo_level:
             j -= 1
         return min(j, j_hi - 2), j_hi
+
+    def _new_tone_holds(
+        self,
+        full: NDArray[np.complex128],
+        clean: NDArray[np.bool_],
+        j_lo: int,
+        top_i: int,
+    ) -> bool:
+        """Whether the rise that crosses ``lo`` at window index ``j_lo`` is the next tone
+        arriving to stay, on the boundaries read (``clean``, shape ``(M,)``).
+
+        ``full`` (shape ``(M, L + w)``, complex): the next-tone channel ``b``, its window
+        ending at window index ``j`` in column ``j + w``. A first arrival switches to the next
+        tone and keeps sounding it: ``|b|²`` a window after its onset (one and a half windows
+        after ``j_lo − w/4``, at most at the top ``top_i``) exceeds ``|b|²`` half a window
+        before it by about the power of the change over that window, ``|z|²`` (more where
+        images join it), mean over the boundaries: :data:`NEW_TONE_RATIO` times at least. The
+        previous boundary's late images switch between two other tones: on most boundaries
+        only their switch leaks through the window and ``b`` returns to its level (on those
+        whose next tone they leave, it falls), so their level's ratio is near 0."""
+        w = self.boxcar
+        j_on = j_lo - w // 4
+        before = np.abs(full[clean, j_on - w // 2 + w]) ** 2
+        after = np.abs(full[clean, min(j_on + w + w // 2, top_i) + w]) ** 2
+        change = np.abs(full[clean, min(j_on + w, top_i) + w] - full[clean, min(j_on + w, top_i)])
+        grown = float(np.mean(after - before))
+        return grown > NEW_TONE_RATIO * float(np.mean(change**2))
 
     def _late_images_seen(
         self,
