@@ -40,8 +40,12 @@ For each of the ``M`` boundaries the GCAS detection used (receive times from its
    (:meth:`FirstArrivalReadout._late_images_seen`: in the 12 × 6 × 4 m tank at image order 2
    the far end wall on both legs, an opening path 240 Hz off the direct path's tone grid,
    switches 0.4 ms ahead of the direct path at 8 m). A rise from
-   ``lo`` to ``hi`` slower than :data:`SLOW_RISE` windows is a low level ahead of the ramp:
-   the line is fitted on the ramp's steep part, from ``hi`` to twice its level.
+   ``lo`` to ``hi`` slower than :data:`SLOW_RISE` windows is a low level ahead of the ramp,
+   or a first arrival weak against the images that join it (image order 3): the line is
+   fitted on the ramp's steep part, from ``hi`` to twice its level, searched within one
+   window where the rise is the next tone arriving to stay
+   (:meth:`FirstArrivalReadout._new_tone_holds`: a late images' level passes), up to the top
+   otherwise.
 4. **Doppler**: the direct path's complex amplitude at the ``M`` boundaries, fitted over its
    first :data:`DIRECT_S` on the ramp's model (the previous tone's leak divided out), gives
    its own time scale (:meth:`FirstArrivalReadout._direct_alpha`): GCAS's weighs the
@@ -166,7 +170,10 @@ MAX_PEDESTALS = 2
 #: An arrival of at least a fifth of the top crosses from ``lo`` to ``hi`` in under half a
 #: window; a stretch between them longer than this many windows is a low level ahead of the
 #: ramp (in the 12 x 6 x 4 m tank at image order 2, 0.15-0.4 m of range ahead of the direct
-#: path), and the line is fitted on the ramp's steep part, from ``hi`` to twice its level.
+#: path), and the line is fitted on the ramp's steep part, from ``hi`` to twice its level
+#: (within one window where the rise is the next tone arriving to stay: :data:`NEW_TONE_RATIO`;
+#: searched up to the top, the line of a first arrival weak against its images runs into
+#: their slow climb and crosses zero up to 1.2 ms early at image order 3).
 #: Measured: 0.25 and 0.4 also took weak first arrivals of the built-in tank for it.
 SLOW_RISE = 0.55
 #: A pedestal holds at least this many times the power on the boundaries whose next tone the
@@ -175,9 +182,10 @@ SLOW_RISE = 0.55
 PEDESTAL_RATIO = 2.0
 #: A rise is the next tone arriving to stay when the next-tone channel's power a window after
 #: it has grown by at least this times the power of its change over that window
-#: (:meth:`FirstArrivalReadout._new_tone_holds`). Measured: a first arrival 1.6-12 (built-in
-#: tank, order 3, scored stretch), the late images' level in the carriage's stop at order 2
-#: 0.02-0.97.
+#: (:meth:`FirstArrivalReadout._new_tone_holds`): a lone arrival's ratio is 1 on average,
+#: more where its images join it. Measured: a first arrival 1.6-12 (built-in tank, order 3,
+#: scored stretch), the late images' level in the carriage's stop at order 2 0.02-0.97 (0.5
+#: let one of those levels, at 0.58, read a target 1.5 m short).
 NEW_TONE_RATIO = 1.0
 
 
