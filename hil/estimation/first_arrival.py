@@ -40,8 +40,12 @@ For each of the ``M`` boundaries the GCAS detection used (receive times from its
    (:meth:`FirstArrivalReadout._late_images_seen`: in the 12 × 6 × 4 m tank at image order 2
    the far end wall on both legs, an opening path 240 Hz off the direct path's tone grid,
    switches 0.4 ms ahead of the direct path at 8 m). A rise from
-   ``lo`` to ``hi`` slower than :data:`SLOW_RISE` windows is a low level ahead of the ramp:
-   the line is fitted on the ramp's steep part, from ``hi`` to twice its level.
+   ``lo`` to ``hi`` slower than :data:`SLOW_RISE` windows is a low level ahead of the ramp,
+   or a first arrival weak against the images that join it (image order 3): the line is
+   fitted on the ramp's steep part, from ``hi`` to twice its level, searched within one
+   window where the rise is the next tone arriving to stay
+   (:meth:`FirstArrivalReadout._new_tone_holds`: a late images' level passes), up to the top
+   otherwise.
 4. **Doppler**: the direct path's complex amplitude at the ``M`` boundaries, fitted over its
    first :data:`DIRECT_S` on the ramp's model (the previous tone's leak divided out), gives
    its own time scale (:meth:`FirstArrivalReadout._direct_alpha`): GCAS's weighs the
@@ -166,13 +170,23 @@ MAX_PEDESTALS = 2
 #: An arrival of at least a fifth of the top crosses from ``lo`` to ``hi`` in under half a
 #: window; a stretch between them longer than this many windows is a low level ahead of the
 #: ramp (in the 12 x 6 x 4 m tank at image order 2, 0.15-0.4 m of range ahead of the direct
-#: path), and the line is fitted on the ramp's steep part, from ``hi`` to twice its level.
+#: path), and the line is fitted on the ramp's steep part, from ``hi`` to twice its level
+#: (within one window where the rise is the next tone arriving to stay: :data:`NEW_TONE_RATIO`;
+#: searched up to the top, the line of a first arrival weak against its images runs into
+#: their slow climb and crosses zero up to 1.2 ms early at image order 3).
 #: Measured: 0.25 and 0.4 also took weak first arrivals of the built-in tank for it.
 SLOW_RISE = 0.55
 #: A pedestal holds at least this many times the power on the boundaries whose next tone the
 #: previous boundary's late images leave as on the others (measured on the built-in tank at
 #: image order 2, carriage at rest: 4-5 times; a first arrival: 0.8-1.2).
 PEDESTAL_RATIO = 2.0
+#: A rise is the next tone arriving to stay when the next-tone channel's power a window after
+#: it has grown by at least this times the power of its change over that window
+#: (:meth:`FirstArrivalReadout._new_tone_holds`): a lone arrival's ratio is 1 on average,
+#: more where its images join it. Measured: a first arrival 1.6-12 (built-in tank, order 3,
+#: scored stretch), the late images' level in the carriage's stop at order 2 0.02-0.97 (0.5
+#: let one of those levels, at 0.58, read a target 1.5 m short).
+NEW_TONE_RATIO = 1.0
 
 
 #: The direct path's Doppler score is summed with the same echo's at the detections this many
@@ -455,7 +469,11 @@ class FirstArrivalReadout:
         # A slow rise from lo to hi is not the ramp itself (SLOW_RISE).
         j_a, j_b = j_lo, j_hi
         if j_hi - j_lo > SLOW_RISE * w:
-            up = np.flatnonzero(amp[j_hi : top_i + 1] >= 2.0 * amp[j_hi])
+            # The next tone arriving to stay (a weak first arrival under its images) has its
+            # steep part within a window; a late images' level ahead of it does not.
+            holds = self._new_tone_holds(full, clean, j_lo, top_i)
+            stop = min(top_i, j_hi + w) if holds else top_i
+            up = np.flatnonzero(amp[j_hi : stop + 1] >= 2.0 * amp[j_hi])
             if up.size:
                 j_a, j_b = j_hi, j_hi + max(2, int(up[0]))
         tt = self._offsets[j_a : j_b + 1] / fs
@@ -524,6 +542,33 @@ class FirstArrivalReadout:
         while j > k0 and amp[j - 1] >= lo_level:
             j -= 1
         return min(j, j_hi - 2), j_hi
+
+    def _new_tone_holds(
+        self,
+        full: NDArray[np.complex128],
+        clean: NDArray[np.bool_],
+        j_lo: int,
+        top_i: int,
+    ) -> bool:
+        """Whether the rise that crosses ``lo`` at window index ``j_lo`` is the next tone
+        arriving to stay, on the boundaries read (``clean``, shape ``(M,)``).
+
+        ``full`` (shape ``(M, L + w)``, complex): the next-tone channel ``b``, its window
+        ending at window index ``j`` in column ``j + w``. A first arrival switches to the next
+        tone and keeps sounding it: ``|b|²`` a window after its onset (one and a half windows
+        after ``j_lo − w/4``, at most at the top ``top_i``) exceeds ``|b|²`` half a window
+        before it by about the power of the change over that window, ``|z|²`` (more where
+        images join it), mean over the boundaries: :data:`NEW_TONE_RATIO` times at least. The
+        previous boundary's late images switch between two other tones: on most boundaries
+        only their switch leaks through the window and ``b`` returns to its level (on those
+        whose next tone they leave, it falls), so their level's ratio is near 0."""
+        w = self.boxcar
+        j_on = j_lo - w // 4
+        before = np.abs(full[clean, j_on - w // 2 + w]) ** 2
+        after = np.abs(full[clean, min(j_on + w + w // 2, top_i) + w]) ** 2
+        change = np.abs(full[clean, min(j_on + w, top_i) + w] - full[clean, min(j_on + w, top_i)])
+        grown = float(np.mean(after - before))
+        return grown > NEW_TONE_RATIO * float(np.mean(change**2))
 
     def _late_images_seen(
         self,

@@ -280,3 +280,50 @@ def test_the_tabled_ramp_model_is_its_definition() -> None:
     assert np.array_equal(
         readout._ramp_shape(grid, n, part, start), readout._ramp_shape(grid, n, alone)
     )
+
+
+def _next_tone_channel(
+    readout: FirstArrivalReadout, onset: int, before: np.ndarray, after: np.ndarray
+) -> np.ndarray:
+    """A next-tone channel ``b`` (shape ``(M, L + w)``, column ``j + w`` for window index
+    ``j``) holding ``before`` (shape ``(M,)``) until window index ``onset`` and ``after`` a
+    window later, the boxcar's linear ramp between them."""
+    w = readout.boxcar
+    cols = np.arange(readout._offsets.size + w) - w
+    frac = np.clip((cols - onset) / w, 0.0, 1.0)
+    return np.asarray(before[:, None] * (1 - frac) + after[:, None] * frac, dtype=np.complex128)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_the_next_tone_arriving_to_stay_is_told_from_a_switch_that_passes(seed: int) -> None:
+    """A first arrival: the next tone comes and stays (``b`` from a level to that level plus
+    the direct path, its images joining half a window later, as in a tank at image order 3).
+    A late image switching between two other tones: only its leak passes through the
+    window and ``b`` returns to its level (a triangle a window long); or it leaves the next
+    tone (``b`` falls). Random complex amplitudes per boundary; the level a fifth of the
+    direct path's, the images together twice it."""
+    readout = FirstArrivalReadout(_schedule(), FS, 10, C, cancel_period=False)
+    w = readout.boxcar
+    rng = np.random.default_rng(seed)
+    m = 10
+
+    def tones(scale: float) -> np.ndarray:
+        return scale * (rng.normal(size=m) + 1j * rng.normal(size=m)) / np.sqrt(2.0)
+
+    level, direct, images = tones(0.2), tones(1.0), tones(2.0)
+    clean = np.ones(m, dtype=bool)
+    onset, top_i = readout._pre, readout._pre + 3 * w
+    j_lo = onset + w // 4  # the ramp crosses lo a little after its onset
+    zero = np.zeros(m)
+    arriving = _next_tone_channel(readout, onset, level, level + direct) + _next_tone_channel(
+        readout, onset + w // 2, zero, images
+    )
+    assert readout._new_tone_holds(arriving, clean, j_lo, top_i)
+    up = _next_tone_channel(readout, onset, zero, direct)
+    down = _next_tone_channel(readout, onset + w // 2, zero, direct)
+    passing = _next_tone_channel(readout, onset, level, level) + up - down
+    # Back to its level from window index onset + 1.5 w (column + w) on.
+    assert np.allclose(passing[:, w + onset + 3 * w // 2 :], level[:, None])
+    assert not readout._new_tone_holds(passing, clean, j_lo, top_i)
+    leaving = _next_tone_channel(readout, onset, level + direct, level)
+    assert not readout._new_tone_holds(leaving, clean, j_lo, top_i)

@@ -146,8 +146,9 @@ def test_order_3_figures(order_3_run: RunOutcome) -> None:
 @pytest.mark.slow
 @pytest.mark.xfail(
     strict=True,
-    reason="open: at order 3 a dozen late images of the previous boundary switch tones "
-    "0.8-1.5 ms ahead of the direct path; range RMSE 0.212 m, speed RMSE 0.086 m/s",
+    reason="open: at order 3 the direct path's phase in its first 0.2 ms holds its images' "
+    "(speed RMSE 0.075 m/s, GCAS's pulled 0.11-0.26 m/s slow), and a weak first arrival under "
+    "the level ahead of it is read 0.1-0.25 m late (range RMSE 0.066 m)",
 )
 def test_order_3_meets_the_tank_targets(order_3_run: RunOutcome) -> None:
     """Issue 31 item 6 in the built-in tank at image order 3."""
@@ -162,10 +163,10 @@ BIG_TANK_GOLDEN = {
     "range_rmse_m": 0.031602044828912816,
     "speed_rmse_mps": 0.013049849394480482,
 }
-ORDER_3_COUNTS = (408, 389, 8, 135, 201)
+ORDER_3_COUNTS = (407, 388, 5, 120, 201)
 ORDER_3_GOLDEN = {
-    "detection_rate": 0.8209,
-    "range_bias_m": -0.03665779540003154,
-    "range_rmse_m": 0.21232757012185088,
-    "speed_rmse_mps": 0.08572614969185739,
+    "detection_rate": 0.9104,
+    "range_bias_m": 0.016398508297511348,
+    "range_rmse_m": 0.06637987127312926,
+    "speed_rmse_mps": 0.07490639206980736,
 }
