@@ -35,9 +35,12 @@ PRELOAD_BYTES = 4096 * 2 * 2  # its DAC buffer: 4096 frames of 2 int16 channels
 #: Bytes of the probe that measures what the emulated UART carries now: empty frames (COBS
 #: delimiters) the firmware skips, sent ahead of the handshake.
 PROBE_BYTES = 2048
-#: Deadlock guard of the probe (the handshake behind it) and bound on every timeout and
-#: lead derived from its rate, real seconds.
-PROBE_GUARD_S = 300.0
+#: Deadlock guard of the probe (the handshake behind it) and bound on every timeout derived
+#: from its rate, real seconds.
+PROBE_GUARD_S = 120.0
+#: Bound on the first start lead, real seconds (a refused START is retried with the lead
+#: doubled, twice).
+MAX_START_LEAD_S = 30.0
 
 
 def measured_uart_bytes_per_s(transport: Transport, board: Board) -> float:
@@ -83,8 +86,8 @@ def test_board_driver_completes_a_session_on_the_emulated_mcu() -> None:
         try:
             rate = measured_uart_bytes_per_s(transport, board)
 
-            def uart_s(n_bytes: int) -> float:
-                return min(PROBE_GUARD_S, n_bytes / rate)
+            def uart_s(n_bytes: int, times: float) -> float:
+                return min(PROBE_GUARD_S, times * n_bytes / rate)
 
             # The board's watchdog is fed by whole host frames: it must outlast the largest
             # one crossing the UART, or it fires mid-preload and empties the DAC buffer.
@@ -92,9 +95,9 @@ def test_board_driver_completes_a_session_on_the_emulated_mcu() -> None:
             # for one frame, START's reply for the preload ahead of it), at least the
             # driver's own; the start lead covers the preload twice (a START refused as
             # passed is retried with the lead doubled).
-            board.keepalive_ms = min(65_535, max(1000, round(20e3 * uart_s(MAX_FRAME_BYTES))))
-            board.command_timeout_s = max(5.0, 20 * uart_s(PRELOAD_BYTES + MAX_FRAME_BYTES))
-            board.start_lead_s = max(2.0, 2 * uart_s(PRELOAD_BYTES))
+            board.keepalive_ms = min(65_535, max(1000, round(1e3 * uart_s(MAX_FRAME_BYTES, 20))))
+            board.command_timeout_s = max(5.0, uart_s(PRELOAD_BYTES + MAX_FRAME_BYTES, 20))
+            board.start_lead_s = min(MAX_START_LEAD_S, max(2.0, uart_s(PRELOAD_BYTES, 2)))
             assert board.version is not None and board.version.board_serial == 0x4D500386
             assert board.capabilities is not None
             assert board.capabilities.sample_rates_hz == (16_000, 8_000)
