@@ -5,6 +5,7 @@ lost-mid-run case (tests/experiments/test_live_run_on_every_device.py)."""
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import textwrap
@@ -72,9 +73,11 @@ ABANDON = textwrap.dedent(
     from hil.devices.audio.portaudio_backend import AudioUnavailableError, rescan_devices
     from hil.devices.audio.stream_release import abandon, abandoned_why
 
-    def terminate():  # stands in for Pa_Terminate: says whether the exit handler ran
+    real_terminate = sd._terminate
+
+    def terminate():  # says whether sounddevice's exit handler terminated PortAudio
         print("PortAudio terminated at exit", flush=True)
-        sd._initialized -= 1
+        real_terminate()
 
     sd._terminate = terminate
     print("abandoned before:", abandoned_why())
@@ -98,12 +101,16 @@ def test_an_abandoned_stream_keeps_portaudio_from_terminating_and_rescanning(
 
     ok, why = portaudio_available()
     require_system(ok, f"PortAudio is not available: {why}")
+    # No JACK server for its PortAudio to join: a JACK client left running at exit (as
+    # PortAudio not terminated leaves it) can crash the interpreter's teardown.
+    env = dict(os.environ, JACK_DEFAULT_SERVER=f"hil-none-{os.getpid()}", JACK_NO_START_SERVER="1")
     proc = subprocess.run(
         [sys.executable, "-c", f"ABANDON = {abandon}\n{ABANDON}"],
         capture_output=True,
         text=True,
         timeout=120,
         check=True,
+        env=env,
     )
     lines = proc.stdout.splitlines()
     if not abandon:
