@@ -49,11 +49,16 @@ def measured_uart_bytes_per_s(transport: Transport, board: Board) -> float:
     once the firmware has taken them, over the wall time to that reply (the handshake's own
     time counted in: the rate comes out low, the timeouts derived from it long).
 
-    The UART's intake follows QEMU's share of the CPU, which the load average does not
-    tell: the emulated MCU polls its UART without pause, one core's worth of work, and its
-    one-byte receive buffer takes a host byte only when QEMU's I/O thread runs (measured on
-    this 2-core machine: 64 kB/s on an idle machine; at load 11-13 the 24 kB of a preload
-    and START took over 42 s, past a START timeout that the load average had put at 42 s).
+    The UART's intake follows how often QEMU's I/O thread runs, which the load average does
+    not tell: QEMU 7.2's CMSDK APB UART holds one received byte and does not call
+    ``qemu_chr_fe_accept_input()`` when the firmware reads it (``hw/char/cmsdk-apb-uart.c``),
+    so the pty is polled for the next byte only on the I/O thread's next pass, and the
+    emulated MCU, polling its UART without pause, takes QEMU's lock for every register
+    read. Measured on this 2-core machine: 64 kB/s on an idle machine; at load 11-13 the
+    24 kB of a preload and START took over 42 s; at load 10-17 a session stalled for over
+    15 minutes. An MCU idling in WFI between passes (tried) cut QEMU's idle CPU from 0.42 to
+    0.05 cores but took bytes that draw no reply at one per 1 ms tick (1.3-1.8 kB/s), and
+    stalled as well at load 12 (probe 554 B/s, then no START within 400 s).
     """
     t0 = time.monotonic()
     transport.write(bytes(PROBE_BYTES))
