@@ -6,13 +6,15 @@ QEMU's MPS2 has no DAC or ADC, so the firmware's analog path is a software loopb
 everything else is the firmware as a real board would run it. Needs ``make``,
 ``arm-none-eabi-gcc`` and ``qemu-system-arm``: without them these tests skip, except under
 ``HIL_REQUIRE_SYSTEM_DEPS=1`` (CI), where they fail. QEMU runs in real time: the test waits
-on events (samples in the ring) with a deadlock guard, never on elapsed time.
+on events (samples in the ring) with deadlock guards, never on elapsed time, and derives the
+board's watchdog, its command timeout and the start lead from what the emulated UART carries,
+measured at the start of the session (:func:`measured_uart_bytes_per_s`).
 """
 
 from __future__ import annotations
 
-import os
 import re
+import time
 from collections.abc import Callable
 
 import numpy as np
@@ -21,24 +23,47 @@ import pytest
 from firmware_protocol import State
 from hil.devices.board import Board
 from hil.devices.board_settings import BoardSettings
+from hil.transports.base import Transport
 from hil.transports.serial_transport import open_serial
 from sim_devices.board import qemu_mcu
 
 RATE_HZ = 8_000
 WAIT_S = 60.0  # deadlock guard, real seconds
-#: What the emulated UART carries when QEMU has a core to itself, bytes/s (measured in
-#: firmware_protocol/c/mcu/mps2_an386.c), and the firmware's largest frame and DAC buffer.
-UART_BYTES_PER_S = 64_000
+#: The firmware's largest frame and DAC buffer, bytes.
 MAX_FRAME_BYTES = 8192
 PRELOAD_BYTES = 4096 * 2 * 2  # its DAC buffer: 4096 frames of 2 int16 channels
+#: Bytes of the probe that measures what the emulated UART carries now: empty frames (COBS
+#: delimiters) the firmware skips, sent ahead of the handshake.
+PROBE_BYTES = 2048
+#: Deadlock guard of the probe (the handshake behind it) and bound on every timeout derived
+#: from its rate, real seconds.
+PROBE_GUARD_S = 120.0
+#: Bound on the first start lead, real seconds (a refused START is retried with the lead
+#: doubled, twice).
+MAX_START_LEAD_S = 30.0
 
 
-def uart_seconds(n_bytes: int) -> float:
-    """Seconds the emulated UART takes to carry ``n_bytes`` on this machine now: at its rate
-    times the share of a core QEMU can expect (cores / the load average, at most 1)."""
-    cores = os.cpu_count() or 1
-    share = min(1.0, cores / max(os.getloadavg()[0], 1e-9))
-    return n_bytes / (UART_BYTES_PER_S * share)
+def measured_uart_bytes_per_s(transport: Transport, board: Board) -> float:
+    """What QEMU's emulated UART carries from the host now, bytes/s: :data:`PROBE_BYTES`
+    zero bytes written ahead of the board's handshake (``board.open()``), whose reply comes
+    once the firmware has taken them, over the wall time to that reply (the handshake's own
+    time counted in: the rate comes out low, the timeouts derived from it long).
+
+    The UART's intake follows how often QEMU's I/O thread runs, which the load average does
+    not tell: QEMU 7.2's CMSDK APB UART holds one received byte and does not call
+    ``qemu_chr_fe_accept_input()`` when the firmware reads it (``hw/char/cmsdk-apb-uart.c``),
+    so the pty is polled for the next byte only on the I/O thread's next pass, and the
+    emulated MCU, polling its UART without pause, takes QEMU's lock for every register
+    read. Measured on this 2-core machine: 64 kB/s on an idle machine; at load 11-13 the
+    24 kB of a preload and START took over 42 s; at load 10-17 a session stalled for over
+    15 minutes. An MCU idling in WFI between passes (tried) cut QEMU's idle CPU from 0.42 to
+    0.05 cores but took bytes that draw no reply at one per 1 ms tick (1.3-1.8 kB/s), and
+    stalled as well at load 12 (probe 554 B/s, then no START within 400 s).
+    """
+    t0 = time.monotonic()
+    transport.write(bytes(PROBE_BYTES))
+    board.open()
+    return PROBE_BYTES / (time.monotonic() - t0)
 
 
 @pytest.fixture(autouse=True)
@@ -62,28 +87,32 @@ def test_board_driver_completes_a_session_on_the_emulated_mcu() -> None:
     dac = rng.integers(-20000, 20000, (2 * RATE_HZ, 2)).astype(np.int16)
     with qemu_mcu.QemuBoard() as mcu:
         transport = open_serial(mcu.port_name, timeout=0.05)
-        # The board's watchdog is fed by whole host frames: it must outlast the largest one
-        # crossing the UART, or it fires mid-preload and empties the DAC buffer (on a busy
-        # machine QEMU's UART slows to a few kB/s). Timeouts are 20 times what the UART
-        # needs now (the watchdog for one frame, START's reply for the preload ahead of it),
-        # at least the driver's own; the start lead covers the preload twice (a START
-        # refused as passed is retried with the lead doubled).
-        board = Board(
-            transport,
-            keepalive_ms=min(65_535, max(1000, round(20e3 * uart_seconds(MAX_FRAME_BYTES)))),
-            command_timeout_s=max(5.0, 20 * uart_seconds(PRELOAD_BYTES + MAX_FRAME_BYTES)),
-            ring_seconds=4.0,
-            start_lead_s=min(10.0, max(2.0, 2 * uart_seconds(PRELOAD_BYTES))),
-        )
+        board = Board(transport, command_timeout_s=PROBE_GUARD_S, ring_seconds=4.0)
         try:
-            board.open()
+            rate = measured_uart_bytes_per_s(transport, board)
+
+            def uart_s(n_bytes: int, times: float) -> float:
+                return min(PROBE_GUARD_S, times * n_bytes / rate)
+
+            # The board's watchdog is fed by whole host frames: it must outlast the largest
+            # one crossing the UART, or it fires mid-preload and empties the DAC buffer.
+            # Timeouts are 20 times what the UART needs at the measured rate (the watchdog
+            # for one frame, START's reply for the preload ahead of it), at least the
+            # driver's own; the start lead covers the preload twice (a START refused as
+            # passed is retried with the lead doubled).
+            board.keepalive_ms = min(65_535, max(1000, round(1e3 * uart_s(MAX_FRAME_BYTES, 20))))
+            board.command_timeout_s = max(5.0, uart_s(PRELOAD_BYTES + MAX_FRAME_BYTES, 20))
+            board.start_lead_s = min(MAX_START_LEAD_S, max(2.0, uart_s(PRELOAD_BYTES, 2)))
             assert board.version is not None and board.version.board_serial == 0x4D500386
             assert board.capabilities is not None
             assert board.capabilities.sample_rates_hz == (16_000, 8_000)
             board.configure(BoardSettings(sample_rate_hz=RATE_HZ))
             first = board.start(iter([dac]))
             n = RATE_HZ // 2
-            assert board.wait_for_samples(first + n, WAIT_S)
+            # The first sample comes a start lead after START (the last attempt's: 4 leads).
+            assert board.wait_for_samples(first + n, WAIT_S + 4 * board.start_lead_s), (
+                f"UART measured at {rate:.0f} B/s"
+            )
             # Read before STOP: on a slow UART STOP waits behind the DAC data already sent,
             # while the board streams on into the ring.
             got = board.read(first, n)

@@ -435,7 +435,8 @@ class AudioDaq:
                 return True
             raise AudioStreamLost(
                 f"the audio stream ended at sample {self.ring.end_index}, before {end}: check"
-                " the interface's cable and power, and that no other program took it",
+                " the interface's cable and power (on JACK: that its server still runs), and that"
+                " no other program took it",
                 url=self.url,
             )
         return False
@@ -469,8 +470,22 @@ class AudioDaq:
             self._collect_xruns()
 
     def close(self) -> None:
-        """Release the device. Re-raises an exception from the callback not yet raised."""
-        self.backend.close()
+        """Release the device. Re-raises an exception from the callback not yet raised.
+
+        A stream the backend had to abandon (its host went away, see
+        :mod:`hil.devices.audio.stream_release`) is recorded as a ``disconnect``
+        annotation at the last captured sample, saying why."""
+        try:
+            self.backend.close()
+        finally:
+            abandoned = getattr(self.backend, "abandoned", None)
+            if abandoned is not None and not self.annotations.log.of_kind(
+                AnnotationKind.DISCONNECT
+            ):
+                end = (self.ring.end_index or 0) if self.ring is not None else 0
+                self.annotations.log.add(
+                    Annotation(end, AnnotationKind.DISCONNECT, 0, f"{self.url}: {abandoned}")
+                )
 
     def __enter__(self) -> AudioDaq:
         return self.open()

@@ -11,8 +11,11 @@ xrun log, exception hand-over to the host thread).
 
 from __future__ import annotations
 
+import math
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
+from time import monotonic
 from types import ModuleType
 from typing import Any
 
@@ -25,6 +28,12 @@ from hil.devices.audio.contract import (
     check_callback,
 )
 from hil.devices.audio.settings import AudioSettings, SettingsView
+from hil.devices.audio.stream_release import (
+    abandon,
+    abandoned_why,
+    call_bounded,
+    release_timeout_s,
+)
 from hil.errors import ConfigError, DeviceUnavailable
 
 PORTAUDIO_HINT = (
@@ -64,10 +73,18 @@ def rescan_devices() -> None:
     """Re-initialise PortAudio so the device list reflects servers started since import.
 
     PortAudio enumerates devices once, when ``sounddevice`` is imported: a JACK server
-    started later is invisible until this is called. No stream may be open.
+    started later is invisible until this is called. No stream may be open. Raises
+    :class:`AudioUnavailableError` when this process abandoned a stream
+    (:mod:`hil.devices.audio.stream_release`): re-initialising would wait on it.
     """
     from hil.devices.audio.c_stderr import held_c_stderr
 
+    why = abandoned_why()
+    if why is not None:
+        raise AudioUnavailableError(
+            f"PortAudio cannot re-scan its devices in this process: it holds a stream it "
+            f"could not release ({why}); start a new process to use audio devices again"
+        )
     sd = import_sounddevice()
     with held_c_stderr("PortAudio initialising"):
         sd._terminate()
@@ -198,6 +215,12 @@ class SoundDeviceDuplex(SettingsView):
     creating the stream, ``start()``, ``wait()``, ``stop()``, ``close()``. A callback
     exception stops the stream and is re-raised by ``wait()``, ``stop()`` or ``close()``.
 
+    ``stop()`` and ``close()`` never hang on a host that went away: a stream its host ended
+    without finishing (:attr:`lost`) is abandoned without a call, and a stop or close that
+    does not return within :func:`~hil.devices.audio.stream_release.release_timeout_s` of
+    the stream's longest gap between callbacks is abandoned too (:attr:`abandoned` says
+    why; see :mod:`hil.devices.audio.stream_release`).
+
     Parameters
     ----------
     settings:
@@ -213,12 +236,24 @@ class SoundDeviceDuplex(SettingsView):
         self._stream: Any = None
         self._done = threading.Event()
         self._started = False
+        self._longest_gap_s = 0.0
         self.device: DeviceInfo | None = None
+        #: Why the stream was abandoned instead of stopped and closed; None when released.
+        self.abandoned: str | None = None
 
     @property
     def active(self) -> bool:
         """True while the stream runs."""
         return self._stream is not None and bool(self._stream.active)
+
+    @property
+    def lost(self) -> bool:
+        """True when the stream ended without finishing: its host took it away (PortAudio
+        calls the finished callback whenever it ends a stream itself)."""
+        stream = self._stream
+        return (
+            stream is not None and self._started and not stream.active and not self._done.is_set()
+        )
 
     @property
     def frames_processed(self) -> int:
@@ -251,8 +286,14 @@ class SoundDeviceDuplex(SettingsView):
         done = self._done
         done.clear()
         stop_exc, abort_exc = sd.CallbackStop, sd.CallbackAbort
+        self._longest_gap_s = 0.0
+        last = [math.inf]  # host time of the previous callback, s
 
         def pa_callback(indata: Any, outdata: Any, frames: int, time: Any, status: Any) -> None:
+            now = monotonic()
+            gap, last[0] = now - last[0], now
+            if gap > self._longest_gap_s:
+                self._longest_gap_s = gap
             outcome = runner.run_block(
                 indata,
                 outdata,
@@ -280,6 +321,7 @@ class SoundDeviceDuplex(SettingsView):
         )
         self._runner = runner
         self._started = False
+        self.abandoned = None
         self.device = dev
 
     def _check_samplerate(self, sd: ModuleType, dev: DeviceInfo) -> None:
@@ -316,19 +358,44 @@ class SoundDeviceDuplex(SettingsView):
         return finished
 
     def stop(self) -> None:
-        """Stop the stream (pending output still plays). Re-raises a callback exception."""
-        if self._stream is not None:
-            self._stream.stop(ignore_errors=True)
+        """Stop the stream (pending output still plays). Re-raises a callback exception.
+
+        A lost stream gets no call (:meth:`close` abandons it); a stop that does not return
+        in time abandons the stream."""
+        stream = self._stream
+        if stream is not None and self.abandoned is None and not self.lost:
+            self._bounded(stream, lambda: stream.stop(ignore_errors=True), "stopping")
         if self._runner is not None:
             self._runner.raise_pending()
 
     def close(self) -> None:
-        """Close the stream and release the device. Re-raises a callback exception."""
+        """Close the stream and release the device, or abandon it (see :meth:`stop`).
+        Re-raises a callback exception."""
+        lost = self.lost
         stream, self._stream = self._stream, None
-        if stream is not None:
-            stream.close(ignore_errors=True)
+        if stream is not None and self.abandoned is None:  # else a stop was abandoned
+            if lost:
+                self._abandon(
+                    stream,
+                    "its host ended it without finishing (a JACK server that shut down does "
+                    "this); stopping or closing it would wait on that host",
+                )
+            else:
+                self._bounded(stream, lambda: stream.close(ignore_errors=True), "closing")
         if self._runner is not None:
             self._runner.raise_pending()
+
+    def _bounded(self, stream: Any, call: Callable[[], object], doing: str) -> None:
+        """Run ``call`` (a stop or close of ``stream``) with a bounded wait; abandon the
+        stream when it does not return."""
+        timeout_s = release_timeout_s(self._longest_gap_s)
+        if not call_bounded(call, timeout_s, f"PortAudio {doing}"):
+            self._abandon(stream, f"{doing} it did not return within {timeout_s:.1f} s")
+
+    def _abandon(self, stream: Any, why: str) -> None:
+        where = self.device.describe() if self.device is not None else "its device"
+        self.abandoned = f"the stream on {where}: {why}"
+        abandon(stream, self.abandoned)
 
     def __enter__(self) -> SoundDeviceDuplex:
         return self
