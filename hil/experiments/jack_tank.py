@@ -32,6 +32,7 @@ imports simulated devices at module level).
 
 from __future__ import annotations
 
+import logging
 import queue
 import re
 import threading
@@ -50,6 +51,8 @@ from hil.experiments.sim_tank import build_tank_world, tank_stage_config
 if TYPE_CHECKING:
     from hil.devices.audio.jack_server import JackDummyServer
     from hil.devices.audio.portaudio_backend import SoundDeviceDuplex
+
+_LOG = logging.getLogger(__name__)
 
 #: Frames per JACK period by default (5.3 ms at 192 kHz): the world renders a block per
 #: period (its per-call overhead grows at smaller blocks), and the loop's latency, several
@@ -191,10 +194,11 @@ class TankJackClient:
         self.runs_started = 0
         # Each run's exact truth (hil.experiments.exact_truth) goes to ``truth_dir`` when it
         # ends: (run number, origin, the sample after its last sound) of the runs ended, for
-        # the worker to write off the audio thread.
+        # a thread of its own to write (the world's worker arms the next run meanwhile: a run
+        # that starts right after another must find its world ready), None to stop it.
         self.truth_dir = truth_dir
         self._sounding_until = 0
-        self._ended: queue.SimpleQueue[tuple[int, int, int]] = queue.SimpleQueue()
+        self._ended: queue.SimpleQueue[tuple[int, int, int] | None] = queue.SimpleQueue()
         #: The truth tables written, one per run ended (paths).
         self.truth_files: list[Path] = []
         # The pipeline: slot ``seq % slots`` holds block ``seq``'s input, its world, the
@@ -240,7 +244,11 @@ class TankJackClient:
             backend.close()
             raise RuntimeError(f"expected one new JACK client for the tank, found {new}")
         self.client_name = new[0]
-        for target, name in ((self._render, "tank-world"), (self._wire_runs, "tank-wiring")):
+        for target, name in (
+            (self._render, "tank-world"),
+            (self._wire_runs, "tank-wiring"),
+            (self._write_truths, "tank-truth"),
+        ):
             thread = threading.Thread(target=target, name=name, daemon=True)
             thread.start()
             self._threads.append(thread)
@@ -334,13 +342,13 @@ class TankJackClient:
 
     # ------------------------------------------------------------------ worker threads
     def _write_truths(self) -> None:
-        """Write the exact truth of each run that ended (:mod:`hil.experiments.exact_truth`):
-        the carriage as its controller planned it, from the run's first sample (world time
-        0, the tank stream's ``origin``) to its last sound."""
+        """Write the exact truth of each run that ended (:mod:`hil.experiments.exact_truth`),
+        until told to stop: the carriage as its controller planned it, from the run's first
+        sample (world time 0, the tank stream's ``origin``) to its last sound."""
         from hil.experiments.exact_truth import FILE_PATTERN, truth_table, write_truth
 
-        while not self._ended.empty():
-            n, origin, until = self._ended.get()
+        while (ended := self._ended.get()) is not None:
+            n, origin, until = ended
             if self.truth_dir is None:
                 continue
             t0 = origin / self.fs
@@ -349,7 +357,12 @@ class TankJackClient:
                 return self._carriage_motion(t + t0)
 
             table = truth_table(self.exp, motion, max(until - origin, 0) / self.fs)
-            path = write_truth(self.truth_dir / FILE_PATTERN.format(n=n), table)
+            path = self.truth_dir / FILE_PATTERN.format(n=n)
+            try:
+                write_truth(path, table)
+            except OSError as error:  # the tank serves on; the run only lacks its table
+                _LOG.warning("the exact truth of run %d was not written to %s: %s", n, path, error)
+                continue
             self.truth_files.append(path)
 
     def _render(self) -> None:
@@ -358,7 +371,6 @@ class TankJackClient:
             if seq is None:
                 return
             if seq == ARM:
-                self._write_truths()
                 self._arm()
                 continue
             slot = seq % len(self._ready)
@@ -414,12 +426,14 @@ class TankJackClient:
         if self.backend is not None:
             self.backend.close()
         self._jobs.put(None)
-        for thread in self._threads:
-            thread.join(timeout=5)
         if self._origin is not None:
             self._ended.put((self.runs_started, self._origin, self._sounding_until))
             self._origin = None
-        self._write_truths()
+        self._ended.put(None)
+        if not any(thread.name == "tank-truth" for thread in self._threads):
+            self._write_truths()  # a client never started: its truths are written here
+        for thread in self._threads:
+            thread.join(timeout=5)
 
 
 def _clients(ports: list[str]) -> dict[str, set[str]]:
