@@ -420,8 +420,8 @@ class TankJackClient:
         return 0 if self.backend is None else len(self.backend.xruns)
 
     def close(self) -> None:
-        """Stop the threads and close the stream; write the truth of a run still sounding
-        (up to its last sound) and of any run whose end the worker had not reached."""
+        """Stop the threads and close the stream; the truth of a run still sounding is
+        written up to its last sound, and every truth queued before the truth thread stops."""
         self._stop.set()
         if self.backend is not None:
             self.backend.close()
