@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from hil.environment import environment
 from hil.evaluation.registry import load_trial
 from hil.evaluation.seeds import seed_record, trial_seed
 
@@ -240,13 +241,5 @@ def probe_pool_worker() -> dict[str, str | None]:
 def pinned_blas_env() -> Iterator[None]:
     """Within the block, this process's environment has the BLAS variables at 1, so the
     processes it spawns start pinned; the previous values come back afterwards."""
-    saved = {name: os.environ.get(name) for name in BLAS_THREAD_VARS}
-    pin_blas_threads()
-    try:
+    with environment(**dict.fromkeys(BLAS_THREAD_VARS, "1")):
         yield
-    finally:
-        for name, value in saved.items():
-            if value is None:
-                os.environ.pop(name, None)
-            else:
-                os.environ[name] = value

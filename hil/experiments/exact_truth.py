@@ -24,6 +24,7 @@ File format (CSV, one header line, then one row per ``step_s``)::
 
 from __future__ import annotations
 
+import io
 from collections.abc import Callable
 from pathlib import Path
 
@@ -75,19 +76,18 @@ def read_truth(path: Path) -> FloatArray:
     field = "--exact-truth"
     try:
         with open(path, encoding="utf-8") as f:
-            header = f.readline().strip()
-            if header != ",".join(COLUMNS):
-                raise ConfigError(
-                    field, str(path), f"a CSV whose header is {','.join(COLUMNS)!r}",
-                    f"its header is {header[:80]!r}: give the truth-run-N.csv that hil "
-                    "sim-serve tank --jack wrote beside its experiment file",
-                )  # fmt: skip
-            table = np.loadtxt(f, delimiter=",", ndmin=2, dtype=np.float64)
+            header, body = f.readline().strip(), f.read()
     except FileNotFoundError:
         raise ConfigError(field, str(path), "an existing file", "check the path") from None
+    if header != ",".join(COLUMNS):
+        raise ConfigError(
+            field, str(path), f"a CSV whose header is {','.join(COLUMNS)!r}",
+            f"its header is {header[:80]!r}: give the truth-run-N.csv that hil "
+            "sim-serve tank --jack wrote beside its experiment file",
+        )  # fmt: skip
+    try:
+        table = np.loadtxt(io.StringIO(body), delimiter=",", ndmin=2, dtype=np.float64)
     except ValueError as exc:
-        if isinstance(exc, ConfigError):
-            raise
         raise ConfigError(
             field, str(path), "rows of three numbers", f"the file is damaged ({exc})"
         ) from None

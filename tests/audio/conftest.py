@@ -20,7 +20,7 @@ import pytest
 
 from hil.devices.audio.jack_ports import JackToolError
 from hil.devices.audio.jack_server import DummyServerSettings, JackDummyServer, missing_tools
-from tests.environment import environment
+from hil.environment import environment
 
 JACK_SAMPLERATE = 192000
 JACK_PERIOD = 256

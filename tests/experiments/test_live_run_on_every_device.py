@@ -33,6 +33,7 @@ from typing import Any
 
 import pytest
 
+from hil.environment import environment
 from hil.estimation.base import Estimate
 from hil.experiments import api
 from hil.experiments.experiment import DEFAULT_EXPERIMENT, parse_experiment
@@ -40,7 +41,6 @@ from hil.experiments.jack_tank import DEFAULT_PERIOD
 from hil.experiments.run_scoring import summarize
 from hil.experiments.tank_run import LiveView, RunOutcome, run_experiment
 from hil.recording.reader import RunRecording
-from tests.environment import environment
 from tests.experiments.conftest import SHORT_CLI_EXPERIMENT, serve_jack_tank
 
 SHORT = DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -3.5")

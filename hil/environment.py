@@ -1,5 +1,7 @@
-"""``os.environ`` set for a while: what pytest's ``monkeypatch`` does, for the module- and
-session-scoped fixtures it cannot serve (a JACK server's name for this process's clients)."""
+"""``os.environ`` set for a while, then put back: the BLAS thread variables a process pool's
+workers inherit (:func:`hil.evaluation.worker.pinned_blas_env`), a JACK server's name for
+this process's clients (the tests' module- and session-scoped fixtures, which pytest's
+``monkeypatch`` cannot serve)."""
 
 from __future__ import annotations
 
