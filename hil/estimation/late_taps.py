@@ -17,8 +17,8 @@ copy of it with a complex gain: this module fits the samples ``y`` (real) of
 - the paths that sound one tone throughout the stretch: a steady ``f_cur`` and a steady
   ``f_prev``;
 - up to :data:`LATE_TAPS` late paths, each ``f_prev`` switching to ``f_cur`` at a sample ``s``
-  of a one-sample grid over ``[o − LEAD_S, o]``, chosen greedily (orthogonal matching pursuit:
-  the tap that best matches what the fit so far leaves, then all refitted);
+  of a one-sample grid over ``[o − LEAD_S, o]``, chosen greedily (orthogonal least squares:
+  the tap that lowers the residual most, then all refitted);
 
 each as ``Re{g · u(t)}`` with ``u(t) = e^{j2π α f t}`` (``t`` the absolute input time, ``α`` the
 detection's time scale) and ``g`` complex, by least squares. The direct path's ``g`` is its
@@ -60,8 +60,10 @@ RIDGE = 1e-9
 @dataclass(frozen=True)
 class DirectFit:
     """What :func:`direct_amplitudes` fits: the direct path's complex amplitude at each
-    boundary (shape ``(M,)``, the next-tone channel's convention) and the late taps' power,
-    summed over the boundaries, over the direct path's (dimensionless)."""
+    boundary (shape ``(M,)``, the next-tone channel's convention) and ``late_ratio``: the
+    late taps' power ``Σ|g|²`` over the direct path's, both summed over the boundaries
+    (dimensionless; taps fitted where no late path is hold a little, their gains partly
+    cancelling each other)."""
 
     amplitude: NDArray[np.complex128]
     late_ratio: float
@@ -130,19 +132,31 @@ def direct_amplitudes(
     taps = _switch(ii, grid, w_prev, w_cur, j_pc)  # (M, G, N): f_prev -> f_cur at each sample
     rows = np.arange(m)[:, None]
     chosen = np.zeros((m, 0), dtype=np.int64)
+    # Each tap as two real columns: Re{g u} = Re g Re u − Im g Im u.
+    tap_re, tap_im = taps.real, -taps.imag
     while True:
         u = np.concatenate([base, taps[rows, chosen]], axis=1)  # (M, K, N)
-        x = np.concatenate([u.real, -u.imag], axis=1)  # Re{g u} = Re g Re u − Im g Im u
+        x = np.concatenate([u.real, -u.imag], axis=1)  # (M, 2K, N)
         gram = x @ np.swapaxes(x, 1, 2)
         ridge = RIDGE * np.trace(gram, axis1=1, axis2=2) / gram.shape[1]
         gram += ridge[:, None, None] * np.eye(gram.shape[1])
         coef = np.linalg.solve(gram, np.einsum("mkn,mn->mk", x, y)[..., None])[..., 0]
+        left = y - np.einsum("mkn,mk->mn", x, coef)
         if chosen.shape[1] == min(LATE_TAPS, lead):
             break
-        left = y - np.einsum("mkn,mk->mn", x, coef)
-        match = np.abs(np.einsum("mgn,mn->mg", taps.conj(), left))
-        match[rows, chosen] = -1.0
-        chosen = np.concatenate([chosen, np.argmax(match, axis=1)[:, None]], axis=1)
+        # The tap that lowers the residual most once both its columns are made orthogonal
+        # to the fit's (orthogonal least squares: neighbouring taps differ by one sample,
+        # so the best-matching one alone is not the best to add).
+        q = np.linalg.qr(np.swapaxes(x, 1, 2))[0]  # (M, N, 2K)
+        a = tap_re - (tap_re @ q) @ np.swapaxes(q, 1, 2)  # (M, G, N)
+        b = tap_im - (tap_im @ q) @ np.swapaxes(q, 1, 2)
+        aa, bb, ab = np.sum(a * a, axis=2), np.sum(b * b, axis=2), np.sum(a * b, axis=2)
+        ar, br = a @ left[:, :, None], b @ left[:, :, None]
+        ar, br = ar[..., 0], br[..., 0]
+        det = np.maximum(aa * bb - ab * ab, 1e-300)
+        gain_g = (bb * ar * ar - 2.0 * ab * ar * br + aa * br * br) / det
+        gain_g[rows, chosen] = -1.0
+        chosen = np.concatenate([chosen, np.argmax(gain_g, axis=1)[:, None]], axis=1)
     k = u.shape[1]
     power = coef[:, :k] ** 2 + coef[:, k:] ** 2  # (M, K): |g|² of each column
     direct = float(np.sum(power[:, 0]))
