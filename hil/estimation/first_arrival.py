@@ -214,11 +214,11 @@ DOPPLER_SPEED_GATE_MPS = 0.1
 #: Where the direct path's speed read on the next-tone channel is refused, it is read again with
 #: the late paths' switches fitted (:mod:`hil.estimation.late_taps`) when their taps hold at
 #: least this times the direct path's power: the late paths are there and leak into its first
-#: :data:`DIRECT_S`. Measured on the recorded detections: 0.97-233 where that reading helped
-#: (built-in tank, order 3); 0.00-0.01 in the carriage's run-up at orders 1 and 2, where the
-#: speed changes over the ``M`` hops and a second reading only moved a refused speed (one of
-#: them 0.04 m/s further off).
-LATE_TAP_RATIO = 0.5
+#: :data:`DIRECT_S`. Measured on the recorded detections of the seed-1 runs: where it read
+#: again, 0.91-393 (built-in tank, order 3), 0.81-54 (order 2), 1.02-347 (12 x 6 x 4 m, order
+#: 2); where it did not, at most 0.48 (order 1, the carriage's run-up, where the speed changes
+#: over the ``M`` hops) and 0.50 (order 2 and 12 x 6 x 4 m).
+LATE_TAP_RATIO = 0.75
 
 
 def _mean(x: NDArray[np.float64], axis: int) -> NDArray[np.float64]:
