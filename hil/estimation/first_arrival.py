@@ -55,7 +55,12 @@ For each of the ``M`` boundaries the GCAS detection used (receive times from its
    (:data:`DOPPLER_LAGS`) read other tone patterns with other sidelobes, so their scores are
    summed with this one to choose the lobe. A direct-path speed more than
    :data:`DIRECT_BELOW_GCAS_MPS` below GCAS's is a phase ambiguity (no image is faster than
-   the direct path) and GCAS's is kept.
+   the direct path) and GCAS's is kept. Where it is refused (or on the span's edge) and the
+   late paths are there (their fitted power at least :data:`LATE_TAP_RATIO` times the direct
+   path's), the direct path's amplitudes are read again on the input samples with the late
+   paths' switches fitted as nuisance taps (:mod:`hil.estimation.late_taps`; no canceller
+   only): at image order 3 in the built-in tank their switches, 0.1-1 ms ahead of it, leak
+   through the next-tone window into its first :data:`DIRECT_S`.
 
 The range then comes from the first arrival instead of the centroid. Measured on the built-in
 simulated tank run (12 × 4 × 2.5 m, own echoes, reverberation, direct blast, 1.5 m/s tow),

@@ -27,13 +27,18 @@ its Doppler is read from it as from the channel's (``FirstArrivalReadout._direct
 
 Measured on the built-in tank at image order 3 (seed 1, the recorded detections replayed),
 as the readout's second reading where the next-tone channel's gives a speed slower than every
-image: scored speed RMSE 0.075 -> 0.041 m/s. Fitting every boundary this way instead (not
-done) also gave 0.033-0.047 m/s there, but 0.021-0.023 m/s in the 12 x 6 x 4 m tank at order 2
-(0.013 m/s on the channel), where an onset read 0.26-0.32 ms early on the far wall's switch
-puts the direct path's model where it is not. Late taps (with ``LEAD_S`` 0.8 ms): 1 0.083, 2
-0.047, 3 0.033, 4 0.032 (1 ms), 5 0.055 (0.5 ms), 8 0.081 (0.5 ms) m/s fitting every boundary:
-beyond a few, the taps fit the direct path's own switch. The late paths' Doppler is taken as the
-direct path's: fitting taps at 1 and 1/α too gave 0.057 m/s.
+image (``LATE_TAP_RATIO`` in :mod:`hil.estimation.first_arrival`): scored speed RMSE 0.075 ->
+0.046 m/s. Fitting every boundary this way instead (not done; measured with the taps chosen by
+their match to the residual alone, orthogonal matching pursuit) gave 0.033-0.048 m/s there,
+but 0.021-0.023 m/s in the 12 x 6 x 4 m tank at order 2 (0.013 m/s on the channel), where an
+onset read 0.26-0.32 ms early on the far wall's switch puts the direct path's model where it
+is not. Late taps (with ``LEAD_S`` 0.8 ms, every boundary, matching pursuit): 1 0.083, 2
+0.047, 3 0.033, 4 0.032 (1 ms), 5 0.055 (0.5 ms), 8 0.081 (0.5 ms) m/s: beyond a few, the taps
+fit the direct path's own switch. The late paths' Doppler is taken as the direct path's:
+fitting taps at 1 and 1/α too gave 0.057 m/s. Choosing each tap by the residual's fall
+(orthogonal least squares) is exact on a noise-free late switch where the match alone picks a
+neighbouring sample (tests/estimation_gcas/test_late_taps.py); as the second reading it gave
+0.046 m/s against the match's 0.041.
 """
 
 from __future__ import annotations
@@ -48,7 +53,8 @@ from hil.errors import ConfigError
 
 #: The fit's stretch before the onset, s: at least one window of the next-tone channel (0.5 ms
 #: at 2 kHz spacing), so the steady tones are told apart by frequency. Measured (order 3,
-#: every boundary fitted, 3 taps): 0.3 ms 0.055, 0.5 ms 0.041, 0.8 ms 0.033 m/s.
+#: every boundary fitted, 3 taps by matching pursuit): 0.3 ms 0.055, 0.5 ms 0.041, 0.8 ms
+#: 0.033, 1 ms 0.048 m/s.
 LEAD_S = 0.8e-3
 #: Late paths fitted at most per boundary (see the module docstring).
 LATE_TAPS = 3
