@@ -505,12 +505,14 @@ def test_ctrl_c_sigterm_and_sighup_stop_cleanly_and_keep_the_recording(
     # 4.5 s of wall time, all but over before the interrupt arrived).
     exp_file.write_text(SHORT.replace("speed_mps = 1.5", "speed_mps = 0.5"))
     folder = tmp_path / "run"
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "hil.cli.main", "tank-run", str(exp_file), "--out", str(folder),
-         "--no-live", "--json"],
-        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, start_new_session=True,
-        preexec_fn=_default_sigint,
-    )  # fmt: skip
+    log = tmp_path / "stderr.txt"  # shown if the run did not stop as it should
+    with log.open("w") as err:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "hil.cli.main", "tank-run", str(exp_file), "--out",
+             str(folder), "--no-live", "--json"],
+            stdout=subprocess.PIPE, stderr=err, text=True, start_new_session=True,
+            preexec_fn=_default_sigint,
+        )  # fmt: skip
     h5 = folder / "run.h5"
     try:
         deadline = time.monotonic() + 60
@@ -524,9 +526,10 @@ def test_ctrl_c_sigterm_and_sighup_stop_cleanly_and_keep_the_recording(
         if proc.poll() is None:  # the test failed first: leave nothing running
             os.killpg(proc.pid, signal.SIGKILL)
             proc.communicate()
-    assert proc.returncode == 1  # the run stopped before its end
+    said = f"stdout: {out}\nstderr: {log.read_text()}"
+    assert proc.returncode == 1, said  # the run stopped before its end
     summary = json.loads(out.strip().splitlines()[-1])
-    assert summary["interrupted"] is True and summary["error"] == f"interrupted ({how})"
+    assert (summary["interrupted"], summary["error"]) == (True, f"interrupted ({how})"), said
     rec = RunRecording.open(h5)
     assert sum(b.data.shape[0] for b in rec.samples()) > 10_000
     stop = rec.events()[-1]
