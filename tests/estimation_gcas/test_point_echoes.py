@@ -88,10 +88,10 @@ def _field(
 
 @pytest.mark.parametrize(
     ("others_m", "amplitude", "crowded"),
-    # Around a still echo at 7.0 m of amplitude 0.3: two others within 2.5 m make a field;
-    # one, or others beyond 2.5 m, do not; twice the field's median stands out of it.
-    [([5.8, 7.9], 0.3, True), ([7.9], 0.3, False), ([4.4, 9.6], 0.3, False),
-     ([5.8, 7.9, 9.3], 0.59, True), ([5.8, 7.9, 9.3], 0.61, False),
+    # Around a still echo at 7.0 m of amplitude 0.3: two others within 5 m make a field;
+    # one, or others beyond 5 m, do not; twice the field's median stands out of it.
+    [([5.8, 7.9], 0.3, True), ([7.9], 0.3, False), ([1.9, 12.1], 0.3, False),
+     ([2.1, 11.9], 0.3, True), ([5.8, 7.9, 9.3], 0.59, True), ([5.8, 7.9, 9.3], 0.61, False),
      ([7.05, 7.9], 0.3, False)],  # 7.05 m is within its own main lobe: itself
 )  # fmt: skip
 def test_a_still_echo_in_a_field_of_still_echoes_is_crowded(

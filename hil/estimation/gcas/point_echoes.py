@@ -48,9 +48,10 @@ SPEED_CELLS = 2.0
 
 #: Other still echoes around a still echo that make it part of a field of scatterers.
 CROWD = 2
-#: How far (m, in range) those others are counted: a few hops' worth of near water (a hop's
-#: echoes span ``c T_h/2``, 7.5 m on att) but not the tank or the sea beyond.
-CROWD_RANGE_M = 2.5
+#: How far (m, in range) those others are counted: two thirds of the range a hop's echoes
+#: span (``c T_h/2``, 7.5 m on att). Sparse near water held scatterers 3.7-4.3 m apart in
+#: sim-03 (two of them and their grating lobes at 5.1-5.8 and 8.7-9.4 m).
+CROWD_RANGE_M = 5.0
 #: A still echo this many times the field's median amplitude (6 dB) stands out of it.
 CROWD_LEVEL = 2.0
 
@@ -78,7 +79,7 @@ class PointEchoes:
     (True, False)
     >>> echoes.predicts(40 + 2 * 17 + 1, 0.5 + 0.35, 1.0)
     False
-    >>> echoes.note(41, 0.5159667, 1.0, 0.3)  # 2.6 m beyond (0.5525, 45): not counted
+    >>> echoes.note(41, 0.5199667, 1.0, 0.3)  # 5.6 m beyond (0.5525, 45): not counted
     >>> echoes.note(42, 0.5226, 1.0, 0.3)  # its own main lobe: itself
     >>> echoes.crowded(45, 0.5525, 1.0, 0.3)  # the first one, 1.9 m short of it: alone
     False
