@@ -89,6 +89,7 @@ from hil.errors import ConfigError
 from hil.estimation.crlb import Crlb, crlb, rms_bandwidth, rms_duration
 from hil.estimation.refine_kernels import (
     FOUND,
+    N_MOMENTS,
     NO_LOBE,
     RECENTRE,
     assign_slots,
@@ -99,8 +100,6 @@ from hil.estimation.refine_kernels import (
 from hil.estimation.row_buffer import RowBuffer
 from hil.signals.schedule import HopSchedule
 
-#: Taylor terms of the in-hop Doppler rotation (module docstring).
-N_MOMENTS = 7
 #: Points of the search's grid: over ±½ grating lobe in time, and at least SPEED_POINTS over
 #: ± the speed span (more where half the M hops' Doppler resolution is finer).
 TIME_POINTS = 9
