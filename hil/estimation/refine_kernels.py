@@ -171,6 +171,8 @@ def assign_slots(
 #: ``f α_i`` (Hz), and under a time-scale rate the offset ``u`` of the hop's centre from the
 #: hops' (s), its ``d/α_i`` (s) and the curve's mean phase over the hop (rad).
 _A, _LO, _HI, _PF, _FA, _U, _DA, _CURVE = range(8)
+#: Margin (s) of :func:`_columns_near`'s reach: far beyond the rounding of its bounds.
+_NEAR_SLACK_S = 1e-4
 
 
 @numba.njit(**_JIT)
@@ -270,7 +272,7 @@ def _window(
 def _candidate(
     prefix: Any, energy: Any, first: Any, tail: Any, centre: Any, slots: Any, k: Any,
     amp2: Any, fs: float, t_rx: float, curved: bool, d_c_alpha: float, consts: Any,
-    coef: Any, per_hop: Any, known: Any,
+    coef: Any, per_hop: Any, known: Any, near: Any, n_near: Any,
 ) -> tuple[complex, float, float]:  # fmt: skip
     """``(C, Σ a_i² N_i, input energy in the windows)`` of one candidate at ``t_rx`` (s) on
     the line whose per-hop constants :func:`_line` made (``consts``, ``coef``, and
@@ -289,7 +291,9 @@ def _candidate(
     ``a_i e^{−j(φ_i + 2π f_i (T_b − T_i))}``, ``amp2`` its squared amplitude. ``per_hop``
     receives each hop's term of ``C`` (shape ``(M,)``, or ``(0,)`` for none); ``known``: the
     hops of other echoes already measured, whose part of each term and of the energy is
-    taken out (:func:`_known_part`; shape ``(5, Q)``).
+    taken out (:func:`_known_part`; shape ``(5, Q)``), of which hop ``i`` reads the columns
+    ``near[i, :n_near[i]]`` (ascending; every column that can overlap its window:
+    :func:`_columns_near`).
     """
     total = complex(0.0, 0.0)
     model = 0.0
@@ -308,8 +312,10 @@ def _candidate(
         if curved:
             ph -= consts[_CURVE, i]
         term_i = k[i] * complex(math.cos(ph), math.sin(ph)) * z
-        if known.shape[1]:
-            part, energy_part = _known_part(known, t_i, lo_s, hi_s, consts[_FA, i])
+        if n_near[i]:
+            part, energy_part = _known_part(
+                known, near, i, n_near[i], t_i, lo_s, hi_s, consts[_FA, i]
+            )
             kp = k[i] * part
             term_i -= complex(kp.real * fs, kp.imag * fs)
             signal -= energy_part * fs
@@ -323,7 +329,8 @@ def _candidate(
 
 @numba.njit(**_JIT)
 def _known_part(
-    known: Any, t_rx: float, lo: float, hi: float, f_rx: float
+    known: Any, near: Any, i: int, n_near: int, t_rx: float, lo: float, hi: float,
+    f_rx: float,
 ) -> tuple[complex, float]:  # fmt: skip
     """What the hops of other echoes already measured put into one hop's term (before its
     transmit phasor and the sample rate) and into its window's energy (per sample rate).
@@ -335,11 +342,13 @@ def _known_part(
     real rows hold floats, the weight's row complex. The term's window is ``[lo, hi)`` (s),
     demodulated at ``f_rx`` (Hz) about ``t_rx``: the part is
     ``Σ_h w_h e^{j2π g_h (t_rx − t_e)} ∫ e^{j2π (g_h − f_rx) τ} dτ`` over the overlap
-    (``τ = t − t_rx``), the energy ``Σ_h 2|w_h|²`` times the overlap's length.
+    (``τ = t − t_rx``), the energy ``Σ_h 2|w_h|²`` times the overlap's length. Only the
+    columns ``near[i, :n_near]`` are read (the others cannot overlap the window).
     """
     part = complex(0.0, 0.0)
     energy = 0.0
-    for h in range(known.shape[1]):
+    for q in range(n_near):
+        h = near[i, q]
         a = max(lo, known[2, h].real)
         b = min(hi, known[3, h].real)
         if b <= a:
@@ -362,6 +371,42 @@ def _known_part(
         part += w * rot * integral
         energy += 2.0 * (w.real * w.real + w.imag * w.imag) * (b - a)
     return part, energy
+
+
+@numba.njit(**_JIT)
+def _every_column(m_hops: int, known: Any) -> tuple[Any, Any]:
+    """:func:`_candidate`'s ``near`` and ``n_near`` reading every column of ``known`` for
+    each of ``m_hops`` hops."""
+    n_cols = known.shape[1]
+    near = np.empty((m_hops, n_cols), dtype=np.int64)
+    for i in range(m_hops):
+        for h in range(n_cols):
+            near[i, h] = h
+    return near, np.full(m_hops, n_cols, dtype=np.int64)
+
+
+@numba.njit(**_JIT)
+def _columns_near(
+    known: Any, dt_lo: Any, dt_hi: Any, t_lo: float, t_hi: float, a_lo: float, a_hi: float
+) -> tuple[Any, Any]:  # fmt: skip
+    """:func:`_candidate`'s ``near`` and ``n_near`` for candidates of constant time scale
+    (no rate) with ``t_rx`` in ``[t_lo, t_hi]`` (s) and ``α`` in ``[a_lo, a_hi]``: the
+    columns of ``known`` whose interval comes within :data:`_NEAR_SLACK_S` of a window hop
+    ``i`` can have, ``[t_rx + dt_lo[i]/α, t_rx + dt_hi[i]/α]`` (monotonic in ``α``: its
+    ends' extremes are at ``a_lo`` and ``a_hi``). A column left out adds nothing to any of
+    them, so every sum is the same as over all columns."""
+    m_hops = dt_lo.shape[0]
+    n_cols = known.shape[1]
+    near = np.empty((m_hops, n_cols), dtype=np.int64)
+    n_near = np.zeros(m_hops, dtype=np.int64)
+    for i in range(m_hops):
+        lo = t_lo + min(dt_lo[i] / a_lo, dt_lo[i] / a_hi) - _NEAR_SLACK_S
+        hi = t_hi + max(dt_hi[i] / a_lo, dt_hi[i] / a_hi) + _NEAR_SLACK_S
+        for h in range(n_cols):
+            if known[2, h].real < hi and known[3, h].real > lo:
+                near[i, n_near[i]] = h
+                n_near[i] += 1
+    return near, n_near
 
 
 @numba.njit(**_JIT)
@@ -389,6 +434,7 @@ def candidate_sums(
     ``T_i + D_i − T_b``), ``amp2`` its squared amplitude; ``hop_s`` the hop length ``D`` (s).
     """
     consts, coef = _scratch(slots, prefix)
+    near, n_near = _every_column(slots.shape[0], known)
     d_c_alpha = 0.0
     for c in range(t_rx.shape[0]):
         if c == 0 or alpha[c] != alpha[c - 1] or gamma[c] != gamma[c - 1]:
@@ -397,7 +443,7 @@ def candidate_sums(
             )
         out_c[c], out_model[c], out_signal[c] = _candidate(
             prefix, energy, first, tail, centre, slots, k, amp2, fs, t_rx[c], gamma[c] != 0.0,
-            d_c_alpha, consts, coef, per_hop[c], known,
+            d_c_alpha, consts, coef, per_hop[c], known, near, n_near,
         )  # fmt: skip
 
 
@@ -428,6 +474,16 @@ def maximise(
     none = np.empty(0, dtype=np.complex128)
     step_t = 2.0 * half_t / (n_t - 1)
     step_v = 2.0 * half_v / (n_v - 1)
+    if curved:
+        near, n_near = _every_column(slots.shape[0], known)
+    else:
+        # Every candidate lies within the grid widened by one grid step: the fit's stencil
+        # starts at half a step and halves, each pass moving it by at most its step.
+        reach_t = half_t + 2.0 * step_t
+        reach_v = half_v + 2.0 * step_v
+        a_lo = (c_mps + v0 - reach_v) / (c_mps - v0 + reach_v)
+        a_hi = (c_mps + v0 + reach_v) / (c_mps - v0 - reach_v)
+        near, n_near = _columns_near(known, dt_lo, dt_hi, t0 - reach_t, t0 + reach_t, a_lo, a_hi)
     best = -1.0
     bi = 0
     bj = 0
@@ -438,7 +494,8 @@ def maximise(
         for j in range(n_t):
             cc, _, _ = _candidate(
                 prefix, energy, first, tail, centre, slots, k, amp2, fs,
-                t0 - half_t + j * step_t, curved, d_c_a, consts, coef, none, known,
+                t0 - half_t + j * step_t, curved, d_c_a, consts, coef, none, known, near,
+                n_near,
             )  # fmt: skip
             pw = cc.real * cc.real + cc.imag * cc.imag
             if pw > best:
@@ -460,7 +517,8 @@ def maximise(
             for j in range(3):
                 cc, _, _ = _candidate(
                     prefix, energy, first, tail, centre, slots, k, amp2, fs,
-                    t + (j - 1) * step_t, curved, d_c_a, consts, coef, none, known,
+                    t + (j - 1) * step_t, curved, d_c_a, consts, coef, none, known, near,
+                    n_near,
                 )  # fmt: skip
                 z[i, j] = cc.real * cc.real + cc.imag * cc.imag
         # z[i, j] ≈ z0 + gt x + gv y + ½ (htt x² + 2 htv x y + hvv y²); x, y in steps.
@@ -509,7 +567,7 @@ def fit_quality(
     d_c_alpha = _line(alpha0, slots, f, dt_lo, dt_hi, hop_s, alpha, gamma, consts, coef)
     c, es, signal = _candidate(
         prefix, energy, first, tail, centre, slots, k, amp2, fs, t_rx, gamma != 0.0,
-        d_c_alpha, consts, coef, h, known,
+        d_c_alpha, consts, coef, h, known, *_every_column(m_hops, known),
     )  # fmt: skip
     mag2 = c.real * c.real + c.imag * c.imag
     spread = 0.0
