@@ -347,8 +347,8 @@ def _known_part(
     """
     part = complex(0.0, 0.0)
     energy = 0.0
-    for q in range(n_near):
-        h = near[i, q]
+    for col in range(n_near):
+        h = near[i, col]
         a = max(lo, known[2, h].real)
         b = min(hi, known[3, h].real)
         if b <= a:
