@@ -32,6 +32,7 @@ from hil.estimation.first_arrival import FirstArrivalReadout
 from hil.estimation.gcas.beyond_span import BeyondSpan, BeyondSpanCheck
 from hil.estimation.gcas.clutter_seen import ClutterLog, ClutterSeen
 from hil.estimation.gcas.front_end import FrontEnd
+from hil.estimation.gcas.hidden_echoes import HiddenEchoes
 from hil.estimation.gcas.threshold import Peak
 from hil.estimation.refine import CoherentRefiner, EchoTest, Refinement
 from hil.estimation.reverb_band import in_reverberation, is_diffuse, reverberation_coherence
@@ -145,6 +146,9 @@ class Readout:
         self._receiver = receiver
         #: The check for an echo beyond the Doppler span (with the refinement).
         self.beyond_span = beyond_span
+        #: The echoes the reverberation band hides, measured where what they leak is near
+        #: (with the refinement: :mod:`hil.estimation.gcas.hidden_echoes`).
+        self.hidden = None if refiner is None else HiddenEchoes(refiner, fe.hop_s)
         #: Where clutter was refused (:mod:`hil.estimation.gcas.clutter_seen`).
         self.clutter_seen = ClutterLog()
         self.reset()
@@ -175,9 +179,12 @@ class Readout:
         self.notices: list[BeyondSpan | ClutterSeen] = []
 
     def restart(self) -> None:
-        """Forget the previous hop (a gap: consistency restarts with the next detection)."""
+        """Forget the previous hop (a gap: consistency restarts with the next detection, and
+        the hidden echoes noted before it are forgotten with the refinement's input)."""
         self._last_hop: int | None = None
         self._last_t = 0.0
+        if self.hidden is not None:
+            self.hidden.reset()
 
     def decide_all(self, peaks: Iterable[Peak]) -> list[Estimate]:
         """:meth:`decide` on each peak, in order; the estimates it accepts."""
@@ -191,9 +198,6 @@ class Readout:
     def decide(self, p: Peak) -> Estimate | None:
         """The estimate of one peak, or None where it is refused (band edge, too far)."""
         fe, k = self._fe, self._k
-        if fe.refused_hypotheses[p.d0]:
-            self.in_band_count += 1
-            return None
         c, fs_bb = fe.sound_speed_mps, fe.fs_bb
         dd = p.dd if self._refiner is not None else self._doppler_offset(p)
         speed = k.speeds[p.d0] + dd * k.speed_step
@@ -208,8 +212,15 @@ class Readout:
         q = math.floor((t_rx - end_j + tol) / k.period)
         t_tx = end_j + q * k.period
         hop_index = p.codeword + q * fe.n_codewords
+        if fe.refused_hypotheses[p.d0]:
+            self.in_band_count += 1
+            if self.hidden is not None:
+                self.hidden.note(t_rx, alpha, hop_index)
+            return None
         bound = None
         if self._refiner is not None:
+            if self.hidden is not None:
+                self.hidden.measure_near(t_rx)
             if self._refiner.ghost_of_known(t_rx, alpha, hop_index):
                 self.incoherent_count += 1
                 return None

@@ -1,0 +1,128 @@
+"""Echoes the reverberation band hides: never reported, measured when what they leak is near.
+
+A target slower than the band's edge (:mod:`hil.estimation.reverb_band`) is detected only on
+the band's edge hypotheses, and those detections are refused: it is never reported, so the
+refinement never measures it (:mod:`hil.estimation.refine`). What it leaks elsewhere is then
+not known to come from it:
+
+- its **ghost**, every tone read as its neighbour, one tone spacing's speed out
+  (``c Δf / (2 f_c)``, 27.5 m/s on ``att``): a target at 2-3.3 m/s leaks into -24.7 to
+  -25.5 m/s, inside a ±25.72 m/s span;
+- its **Doppler sidelobes** past the opposite edge of the band (a strong 3.1 m/s target,
+  +5 dB, fitted at -3.43 m/s about 0.3 m from its range; a unit correlator's response falls
+  only as ``sinc`` of the Doppler offset);
+- the ghosts of those sidelobes (a 2.6 m/s target at 0 dB: +24.3 m/s, 22 m off its range).
+
+Each of these fits, at low SNR or beside a strong source, can pass the echo test. A measured
+echo's leaks are handled by the refinement (the echo is taken out of every other detection's
+input within a few hops, and a detection where its ghost peaks and weaker than it is refused:
+:meth:`~hil.estimation.refine.CoherentRefiner.ghost_of_known`). So the band's refused
+detections are kept here (:meth:`HiddenEchoes.note`), and before a detection outside the band
+is refined, the hidden echoes detected within :data:`~hil.estimation.refine.KNOWN_HOPS` hops
+of it are measured (:meth:`HiddenEchoes.measure_near`): refined at their last boundary before
+the detection, so that a fit that is one echo of the schedule becomes one of the echoes the
+refinement knows. Nothing hidden is ever reported; a fit that is no echo (clutter, the leak
+of another echo, noise) changes nothing.
+
+Cost: a refused detection costs a note; one fit per hidden echo per hop at most, and only
+when another detection comes within the hops that echo would be taken out of. A note whose
+boundary falls within :data:`~hil.estimation.refine.SAME_ECHO_LOBES` grating lobes of an
+echo measured here lately (its own later detections, or its lobes on the band's other edge)
+is not fitted again.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from hil.estimation.refine import KNOWN_HOPS, SAME_ECHO_LOBES, CoherentRefiner
+
+
+@dataclass
+class _Note:
+    """A detection refused on the band's edge: boundary receive time ``t_s`` (s), time scale
+    ``alpha`` (the edge hypothesis's, with its parabolic offset), the hop it ends
+    ``hop_index``; ``measured`` once it has been fitted or found to be a measured echo's."""
+
+    t_s: float
+    alpha: float
+    hop_index: int
+    measured: bool = False
+
+
+class HiddenEchoes:
+    """The band's refused detections of one receiver, measured on demand (module docstring).
+
+    ``refiner`` is the receiver's refinement (each fit here is remembered by it as any fit
+    that is one echo); ``hop_s`` the hop length (s)."""
+
+    def __init__(self, refiner: CoherentRefiner, hop_s: float) -> None:
+        self.refiner = refiner
+        self.hop_s = float(hop_s)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget every note and fit (a new input, or a gap)."""
+        self._notes: list[_Note] = []
+        #: Fits made here that were one echo: (hop index, boundary time s, α).
+        self._fits: list[tuple[int, float, float]] = []
+        #: Fits made here (each a refinement of a hidden echo), for diagnostics.
+        self.fit_count = 0
+
+    def note(self, t_s: float, alpha: float, hop_index: int) -> None:
+        """Keep a detection refused on the band's edge (boundary ``t_s`` s, ``alpha``, ending
+        hop ``hop_index``); notes older than :data:`KNOWN_HOPS` hops are dropped."""
+        self._forget(t_s)
+        self._notes.append(_Note(float(t_s), float(alpha), int(hop_index)))
+
+    def measure_near(self, t_s: float) -> None:
+        """Measure the hidden echoes noted within :data:`KNOWN_HOPS` hops of a detection at
+        ``t_s`` (s) that no fit here explains: each refined at its last boundary at or before
+        ``t_s`` (the refinement keeps a fit that is one echo)."""
+        self._forget(t_s)
+        for note in self._notes:
+            if note.measured:
+                continue
+            note.measured = True
+            if self._explained(note):
+                continue
+            period = self.hop_s / note.alpha
+            k = max(0, int(math.floor((t_s - note.t_s) / period)))
+            t_b, hop = note.t_s + k * period, note.hop_index + k
+            for alpha in self._starts(note.alpha):
+                fit = self.refiner.refine(t_b, alpha, hop)
+                self.fit_count += 1
+                if fit is None:
+                    break
+                if fit.is_echo(self.refiner.echo_test):
+                    self._fits.append((hop, fit.t_s, fit.alpha))
+                    break
+
+    def _starts(self, alpha: float) -> list[float]:
+        """Time scales to start a hidden echo's fit from: the edge detection's, then every
+        two speed spans (one fit's reach) toward zero speed, the band's inside (an edge
+        detection's speed is the edge's, up to the band's width from the echo's, and a fit
+        started there can stop on a sidelobe of the likelihood)."""
+        c, step = self.refiner.c, 2.0 * self.refiner.speed_span_mps
+        v = c * (alpha - 1.0) / (alpha + 1.0)
+        n = int(math.floor(abs(v) / step)) + 1
+        speeds = [v - math.copysign(i * step, v) for i in range(n)]
+        return [(c + s) / (c - s) for s in speeds]
+
+    def _explained(self, note: _Note) -> bool:
+        """Whether an echo fitted here lately puts a boundary within
+        :data:`SAME_ECHO_LOBES` grating lobes of the note's (its detection, or its lobe on
+        the band's other edge)."""
+        spacing = self.refiner.spacing_hz
+        for hop, t_fit, a_fit in self._fits:
+            t_pred = t_fit + (note.hop_index - hop) * self.hop_s / a_fit
+            if abs(t_pred - note.t_s) <= SAME_ECHO_LOBES / (a_fit * spacing):
+                return True
+        return False
+
+    def _forget(self, t_s: float) -> None:
+        """Drop notes and fits more than :data:`KNOWN_HOPS` hops before ``t_s`` (s)."""
+        oldest = t_s - KNOWN_HOPS * self.hop_s
+        self._notes = [n for n in self._notes if n.t_s >= oldest]
+        self._fits = [f for f in self._fits if f[1] >= oldest]
