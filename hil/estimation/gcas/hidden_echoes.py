@@ -38,6 +38,20 @@ from dataclasses import dataclass
 
 from hil.estimation.refine import KNOWN_HOPS, SAME_ECHO_LOBES, CoherentRefiner
 
+#: A hidden echo is measured for a detection when its edge detection's statistic (above the
+#: noise mean) is at least LEAK_FRACTION of the detection's: what an echo leaks is weaker
+#: than the echo (a ghost collects part of its hops, a sidelobe a fraction of a cell's
+#: response), and its edge detection keeps most of it (the edge is within a Doppler cell of
+#: it). A strong target's own ghost inside the band is then not fitted at each of its
+#: detections (at 0 dB: a fit per note, 5 times the receiver's CPU).
+LEAK_FRACTION = 0.5
+
+#: Longest wait, in hops, between two measurements on one side of the band after
+#: measurements that found no echo (a strong echo's leaks into the band: its ghost's Doppler
+#: sidelobes, noise): a hidden echo whose fit failed at low SNR is measured again at most
+#: this many hops later.
+MAX_WAIT_HOPS = 8
+
 
 @dataclass
 class _Note:
@@ -48,6 +62,7 @@ class _Note:
     t_s: float
     alpha: float
     hop_index: int
+    strength: float
     measured: bool = False
 
 
@@ -69,35 +84,62 @@ class HiddenEchoes:
         self._fits: list[tuple[int, float, float]] = []
         #: Fits made here (each a refinement of a hidden echo), for diagnostics.
         self.fit_count = 0
+        #: Per side of the band (+1 closing, −1 opening): the first hop whose notes are
+        #: measured again after a measurement that found no echo, and the next wait (hops).
+        self._next: dict[int, int] = {}
+        self._wait: dict[int, int] = {}
 
-    def note(self, t_s: float, alpha: float, hop_index: int) -> None:
+    def note(self, t_s: float, alpha: float, hop_index: int, strength: float) -> None:
         """Keep a detection refused on the band's edge (boundary ``t_s`` s, ``alpha``, ending
-        hop ``hop_index``); notes older than :data:`KNOWN_HOPS` hops are dropped."""
+        hop ``hop_index``, the detector's statistic ``strength`` above its noise mean); notes
+        older than :data:`KNOWN_HOPS` hops are dropped."""
         self._forget(t_s)
-        self._notes.append(_Note(float(t_s), float(alpha), int(hop_index)))
+        self._notes.append(_Note(float(t_s), float(alpha), int(hop_index), float(strength)))
 
-    def measure_near(self, t_s: float) -> None:
+    def measure_near(self, t_s: float, strength: float) -> None:
         """Measure the hidden echoes noted within :data:`KNOWN_HOPS` hops of a detection at
-        ``t_s`` (s) that no fit here explains: each refined at its last boundary at or before
-        ``t_s`` (the refinement keeps a fit that is one echo)."""
+        ``t_s`` (s) of the detector's statistic ``strength`` above its noise mean: each note
+        that could outshine it (noted at least :data:`LEAK_FRACTION` of its strength), that
+        no fit here explains and that is not itself the ghost of an echo the refinement
+        knows, refined at its last boundary at or before ``t_s`` (the refinement keeps a fit
+        that is one echo). After a measurement that finds no echo, that side of the band
+        waits 1, 2, 4 … up to :data:`MAX_WAIT_HOPS` hops before the next."""
         self._forget(t_s)
         for note in self._notes:
-            if note.measured:
+            if note.measured or note.strength < LEAK_FRACTION * strength:
+                continue
+            side = 1 if note.alpha > 1.0 else -1
+            if note.hop_index < self._next.get(side, note.hop_index):
                 continue
             note.measured = True
-            if self._explained(note):
+            if self._explained(note) or self.refiner.ghost_of_known(
+                note.t_s, note.alpha, note.hop_index
+            ):
                 continue
-            period = self.hop_s / note.alpha
-            k = max(0, int(math.floor((t_s - note.t_s) / period)))
-            t_b, hop = note.t_s + k * period, note.hop_index + k
-            for alpha in self._starts(note.alpha):
-                fit = self.refiner.refine(t_b, alpha, hop)
-                self.fit_count += 1
-                if fit is None:
-                    break
-                if fit.is_echo(self.refiner.echo_test):
-                    self._fits.append((hop, fit.t_s, fit.alpha))
-                    break
+            found = self._measure(note, t_s)
+            if found:
+                self._next.pop(side, None)
+                self._wait.pop(side, None)
+            else:
+                wait = self._wait.get(side, 1)
+                self._next[side] = note.hop_index + wait
+                self._wait[side] = min(2 * wait, MAX_WAIT_HOPS)
+
+    def _measure(self, note: _Note, t_s: float) -> bool:
+        """Refine the hidden echo of ``note`` at its last boundary at or before ``t_s`` (s)
+        from each of :meth:`_starts` until a fit is one echo; whether one was."""
+        period = self.hop_s / note.alpha
+        k = max(0, int(math.floor((t_s - note.t_s) / period)))
+        t_b, hop = note.t_s + k * period, note.hop_index + k
+        for alpha in self._starts(note.alpha):
+            fit = self.refiner.refine(t_b, alpha, hop)
+            self.fit_count += 1
+            if fit is None:
+                return False
+            if fit.is_echo(self.refiner.echo_test):
+                self._fits.append((hop, fit.t_s, fit.alpha))
+                return True
+        return False
 
     def _starts(self, alpha: float) -> list[float]:
         """Time scales to start a hidden echo's fit from: the edge detection's, then every

@@ -215,12 +215,12 @@ class Readout:
         if fe.refused_hypotheses[p.d0]:
             self.in_band_count += 1
             if self.hidden is not None:
-                self.hidden.note(t_rx, alpha, hop_index)
+                self.hidden.note(t_rx, alpha, hop_index, p.peak - p.mean)
             return None
         bound = None
         if self._refiner is not None:
             if self.hidden is not None:
-                self.hidden.measure_near(t_rx)
+                self.hidden.measure_near(t_rx, p.peak - p.mean)
             if self._refiner.ghost_of_known(t_rx, alpha, hop_index):
                 self.incoherent_count += 1
                 return None
