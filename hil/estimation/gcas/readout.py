@@ -7,14 +7,15 @@ end of hop ``ĵ`` plus the multiple of the code period that puts the delay in ``
 ``v = c (α̂ − 1)/(α̂ + 1)``. A peak on a refused hypothesis (the edge of the reverberation
 band, :mod:`hil.estimation.reverb_band`) is the leak of an echo inside the band, not a
 detection: it is noted, and that echo is measured when another detection comes near it
-(:mod:`hil.estimation.gcas.hidden_echoes`: what it leaks is then refused). The default refinement (:mod:`hil.estimation.refine`) measures ``t_rx`` and
-``α`` by local maximum likelihood and refuses a detection that is not one echo of the
-schedule (a still echo read at the tone spacing's speed, an echo beyond the span:
-:data:`ECHO_TEST`; in the still reverberation's Doppler cells, with the band off, against
-the interference measured on the other tones of its windows, and a diffuse fit there is
-counted as clutter: :mod:`hil.estimation.reverb_band`); without it the coherent sum refines
-``t_rx`` and ``α̂``. The first-arrival readout (:mod:`hil.estimation.first_arrival`)
-replaces ``t_rx`` by the direct path's. Hop-index consistency is a soft flag.
+(:mod:`hil.estimation.gcas.hidden_echoes`: what it leaks is then refused). The default
+refinement (:mod:`hil.estimation.refine`) measures ``t_rx`` and ``α`` by local maximum
+likelihood and refuses a detection that is not one echo of the schedule (a still echo read
+at the tone spacing's speed, an echo beyond the span: :data:`ECHO_TEST`; in the still
+reverberation's Doppler cells, with the band off, against the interference measured on the
+other tones of its windows, and a diffuse fit there is counted as clutter:
+:mod:`hil.estimation.reverb_band`); without it the coherent sum refines ``t_rx`` and ``α̂``.
+The first-arrival readout (:mod:`hil.estimation.first_arrival`) replaces ``t_rx`` by the
+direct path's. Hop-index consistency is a soft flag.
 """
 
 from __future__ import annotations
