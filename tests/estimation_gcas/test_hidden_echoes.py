@@ -122,7 +122,7 @@ def _period(v: float) -> float:
 
 
 def test_a_note_is_fitted_from_its_edge_speed_toward_zero_at_the_detection_boundary() -> None:
-    ref = _Refiner(echo_at=(1.0,))
+    ref = _Refiner(echo_at=(2.0,))
     hidden = _hidden(ref)
     hidden.note(0.5, _alpha(3.0), 40, strength=10.0)
     hidden.measure_near(0.5 + 1.7 * _period(3.0), strength=10.0)
@@ -130,15 +130,15 @@ def test_a_note_is_fitted_from_its_edge_speed_toward_zero_at_the_detection_bound
     # (1 m/s) toward zero, until a fit is one echo.
     t_b = 0.5 + _period(3.0)
     assert [(round(t, 9), v, h) for t, v, h, _ in ref.fits] == [
-        (round(t_b, 9), 3.0, 41), (round(t_b, 9), 2.0, 41), (round(t_b, 9), 1.0, 41)
+        (round(t_b, 9), 3.0, 41), (round(t_b, 9), 2.0, 41)
     ]  # fmt: skip
     # Fitted with the hidden echoes' test, and the refinement's own test given back.
     assert {f[3] for f in ref.fits} == {EchoTest(HIDDEN_FRACTION, HIDDEN_FRACTION, 12.0)}
     assert ref.echo_test == EchoTest(0.8, 0.85, 12.0)
-    assert hidden.fit_count == 3
+    assert hidden.fit_count == 2
     # Measured once: a later detection fits nothing more.
     hidden.measure_near(0.5 + 2.5 * _period(3.0), strength=10.0)
-    assert hidden.fit_count == 3
+    assert hidden.fit_count == 2
 
 
 def test_an_opening_note_starts_toward_zero_from_below() -> None:
@@ -146,7 +146,8 @@ def test_an_opening_note_starts_toward_zero_from_below() -> None:
     hidden = _hidden(ref)
     hidden.note(0.5, _alpha(-2.4), 7, strength=1.0)
     hidden.measure_near(0.5, strength=1.0)
-    assert [f[1] for f in ref.fits] == pytest.approx([-2.4, -1.4, -0.4])
+    # Not below 1 m/s: slower is the still water's.
+    assert [f[1] for f in ref.fits] == pytest.approx([-2.4, -1.4])
     assert {f[2] for f in ref.fits} == {7}
 
 
