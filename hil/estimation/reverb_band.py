@@ -29,7 +29,10 @@ measured in the same windows at the same Doppler on the *other* tones
 (:func:`reverberation_coherence`): the echo is not there (the tones are orthogonal over a
 hop), the reverberation is (it arrives at every tone from the delays that sent it), and so
 is the noise. The coherence one echo of that signal-to-interference ratio has is the
-expectation such an echo is held to (:func:`in_reverberation`). What stays short of it is
+expectation such an echo is held to (:func:`in_reverberation`), where a point echo was
+confirmed lately by the white-noise test on the hops the reverberation leaves clear
+(:mod:`hil.estimation.gcas.point_echoes`: a few scatterers in one near range cell pass the
+relative test too, never the white-noise one). What stays short of it is
 not one point echo: where its coherence within each tone holds (each tone its own complex
 gain, as a patch of scatterers spread over more than ``c/(2 B)`` in range gives, ``B`` the
 tones' span), it is **clutter**, diffuse reverberation, counted apart

@@ -12,7 +12,8 @@ refinement (:mod:`hil.estimation.refine`) measures ``t_rx`` and ``α`` by local 
 likelihood and refuses a detection that is not one echo of the schedule (a still echo read
 at the tone spacing's speed, an echo beyond the span: :data:`ECHO_TEST`; in the still
 reverberation's Doppler cells, with the band off, against the interference measured on the
-other tones of its windows, and a diffuse fit there is counted as clutter:
+other tones of its windows where a point echo was confirmed lately
+(:mod:`hil.estimation.gcas.point_echoes`), and a diffuse fit there is counted as clutter:
 :mod:`hil.estimation.reverb_band`); without it the coherent sum refines ``t_rx`` and ``α̂``.
 The first-arrival readout (:mod:`hil.estimation.first_arrival`) replaces ``t_rx`` by the
 direct path's. Hop-index consistency is a soft flag.
@@ -35,9 +36,15 @@ from hil.estimation.gcas.beyond_span import BeyondSpan, BeyondSpanCheck
 from hil.estimation.gcas.clutter_seen import ClutterLog, ClutterSeen
 from hil.estimation.gcas.front_end import FrontEnd
 from hil.estimation.gcas.hidden_echoes import HiddenEchoes
+from hil.estimation.gcas.point_echoes import PointEchoes
 from hil.estimation.gcas.threshold import Peak
 from hil.estimation.refine import CoherentRefiner, EchoTest, Refinement
-from hil.estimation.reverb_band import in_reverberation, is_diffuse, reverberation_coherence
+from hil.estimation.reverb_band import (
+    doppler_resolution_mps,
+    in_reverberation,
+    is_diffuse,
+    reverberation_coherence,
+)
 
 #: A refined detection is an echo of the schedule when its hops' coherence is at least
 #: COHERENCE_FRACTION of what one echo of its SNR would have, or their coherence over runs of
@@ -153,6 +160,16 @@ class Readout:
         self.hidden = None if refiner is None else HiddenEchoes(refiner, fe.hop_s)
         #: Where clutter was refused (:mod:`hil.estimation.gcas.clutter_seen`).
         self.clutter_seen = ClutterLog()
+        tones, c = np.asarray(fe.tones_hz, dtype=np.float64), fe.sound_speed_mps
+        span_hz = float(np.ptp(tones)) if tones.size > 1 else 1.0 / fe.hop_s
+        #: The point echoes confirmed lately in the still reverberation's cells.
+        self.point_echoes = PointEchoes(
+            fe.hop_s,
+            fe.schedule.period_hops,
+            1.0 / span_hz,
+            doppler_resolution_mps(tones, fe.hop_s, c) / fe.m_hops,
+            c,
+        )
         self.reset()
 
     def reset(self) -> None:
@@ -176,6 +193,7 @@ class Readout:
         if self.beyond_span is not None:
             self.beyond_span.reset()
         self.clutter_seen.reset()
+        self.point_echoes.reset()
         #: What the receiver says of what it refused (beyond the span, clutter), in the
         #: order seen.
         self.notices: list[BeyondSpan | ClutterSeen] = []
@@ -237,8 +255,10 @@ class Readout:
                 if said and said[-1] not in self.notices:
                     self.notices.append(said[-1])
                 return None
-            if not refined.is_echo(ECHO_TEST):
-                verdict = self._in_reverberation(p, refined)
+            if refined.is_echo(ECHO_TEST):
+                self._confirm_point_echo(refined, hop_index)
+            else:
+                verdict = self._in_reverberation(p, refined, hop_index)
                 if verdict is not True:
                     if verdict is False:
                         self.clutter_count += 1
@@ -246,6 +266,10 @@ class Readout:
                     else:
                         self.incoherent_count += 1
                     return None
+            if self._in_still_field(refined, hop_index):
+                self.clutter_count += 1
+                self._say_clutter(refined, t_tx, hop_index)
+                return None
             t_rx, alpha, bound = refined.t_s, refined.alpha, refined.bound
         elif self._coherent:
             t_rx, alpha = self._coherent_refine(p.n_star, p.d0, hop_index, t_rx, alpha)
@@ -326,12 +350,29 @@ class Readout:
             h = h + 1 if up else h - 1
         return (h - d) + parabolic_offset(power[h - 1], power[h], power[h + 1])
 
-    def _in_reverberation(self, p: Peak, refined: Refinement) -> bool | None:
+    def _confirm_point_echo(self, refined: Refinement, hop_index: int) -> None:
+        """A fit that passed the white-noise echo test in the still reverberation's cells
+        confirms a point echo there (:mod:`hil.estimation.gcas.point_echoes`)."""
+        fe = self._fe
+        c = fe.sound_speed_mps
+        if in_reverberation(refined.speed_mps(c), fe.tones_hz, fe.hop_s, c):
+            self.point_echoes.note(hop_index, refined.t_s, refined.alpha, abs(refined.amplitude))
+
+    def _in_still_field(self, refined: Refinement, hop_index: int) -> bool:
+        """Whether an echo is a still scatterer among others, not one standing out of them
+        (:meth:`~hil.estimation.gcas.point_echoes.PointEchoes.crowded`)."""
+        return self.point_echoes.crowded(
+            hop_index, refined.t_s, refined.alpha, abs(refined.amplitude)
+        )
+
+    def _in_reverberation(self, p: Peak, refined: Refinement, hop_index: int) -> bool | None:
         """A fit short of one echo's coherence in white noise, judged again where it shares
         its Doppler cells with the still reverberation (:mod:`hil.estimation.reverb_band`):
-        True, one echo against the interference measured on the other tones of its windows;
-        False, clutter (diffuse reverberation); None, neither (no echo: refused as
-        incoherent), also outside the reverberation's cells."""
+        True, one echo against the interference measured on the other tones of its windows,
+        where a point echo confirmed lately predicts it
+        (:mod:`hil.estimation.gcas.point_echoes`); False, clutter (diffuse reverberation);
+        None, neither (refused as incoherent: no echo, or one not yet confirmed as a point
+        echo), also outside the reverberation's cells."""
         fe, test = self._fe, ECHO_TEST
         c = fe.sound_speed_mps
         if not (refined.found and refined.e_over_n0_db >= test.min_e_over_n0_db):
@@ -343,7 +384,11 @@ class Readout:
         on = self._unit_values(p.n_star, p.d0, tone)
         off = np.stack([self._unit_values(p.n_star, p.d0, (tone + j) % k) for j in range(1, k)])
         if refined.coherence.measured >= test.fraction * reverberation_coherence(on, off.T):
-            return True
+            # Reported where a point echo was confirmed; elsewhere neither reported nor said
+            # to be clutter: a target whose clear hops are still to come reads so too.
+            return (
+                True if self.point_echoes.predicts(hop_index, refined.t_s, refined.alpha) else None
+            )
         coherence, tone_coherence = refined.coherence.fraction, refined.tone_coherence.fraction
         return False if is_diffuse(coherence, tone_coherence, test.fraction) else None
 
