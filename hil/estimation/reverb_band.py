@@ -42,7 +42,9 @@ tones' span), it is **clutter**, diffuse reverberation, counted apart
 A target inside the band is not reported at the band's edge: its Doppler response leaks into
 the first allowed cells, whose weighted maximum is then a ghost at the edge speed. Detections
 whose hypothesis lies on the edge (:func:`edge_hypotheses`) are therefore refused, and counted
-(:attr:`hil.estimation.gcas.GcasReceiver.in_band_count`).
+(:attr:`hil.estimation.gcas.GcasReceiver.in_band_count`); with the refinement they are noted,
+so that what the hidden echo leaks outside the band (its ghost one tone spacing out, its
+Doppler sidelobes) is refused as any measured echo's (:mod:`hil.estimation.gcas.hidden_echoes`).
 
 >>> round(auto_reverb_speed_mps(np.array([57e3, 59e3, 61e3, 63e3]), 0.01, 1482.3), 3)
 0.65

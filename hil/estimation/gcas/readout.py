@@ -6,15 +6,17 @@ end of hop ``ĵ`` plus the multiple of the code period that puts the delay in ``
 ``τ_max = 2 max_range/c`` (a longer delay is refused and counted); ``R = c (t_rx − t_tx)/2``,
 ``v = c (α̂ − 1)/(α̂ + 1)``. A peak on a refused hypothesis (the edge of the reverberation
 band, :mod:`hil.estimation.reverb_band`) is the leak of an echo inside the band, not a
-detection. The default refinement (:mod:`hil.estimation.refine`) measures ``t_rx`` and
-``α`` by local maximum likelihood and refuses a detection that is not one echo of the
-schedule (a still echo read at the tone spacing's speed, an echo beyond the span:
-:data:`ECHO_TEST`; in the still reverberation's Doppler cells, with the band off, against
-the interference measured on the other tones of its windows where a point echo was confirmed
-lately (:mod:`hil.estimation.gcas.point_echoes`), and a diffuse fit there is
-counted as clutter: :mod:`hil.estimation.reverb_band`); without it the coherent sum refines
-``t_rx`` and ``α̂``. The first-arrival readout (:mod:`hil.estimation.first_arrival`)
-replaces ``t_rx`` by the direct path's. Hop-index consistency is a soft flag.
+detection: it is noted, and that echo is measured when another detection comes near it
+(:mod:`hil.estimation.gcas.hidden_echoes`: what it leaks is then refused). The default
+refinement (:mod:`hil.estimation.refine`) measures ``t_rx`` and ``α`` by local maximum
+likelihood and refuses a detection that is not one echo of the schedule (a still echo read
+at the tone spacing's speed, an echo beyond the span: :data:`ECHO_TEST`; in the still
+reverberation's Doppler cells, with the band off, against the interference measured on the
+other tones of its windows where a point echo was confirmed lately
+(:mod:`hil.estimation.gcas.point_echoes`), and a diffuse fit there is counted as clutter:
+:mod:`hil.estimation.reverb_band`); without it the coherent sum refines ``t_rx`` and ``α̂``.
+The first-arrival readout (:mod:`hil.estimation.first_arrival`) replaces ``t_rx`` by the
+direct path's. Hop-index consistency is a soft flag.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ from hil.estimation.first_arrival import FirstArrivalReadout
 from hil.estimation.gcas.beyond_span import BeyondSpan, BeyondSpanCheck
 from hil.estimation.gcas.clutter_seen import ClutterLog, ClutterSeen
 from hil.estimation.gcas.front_end import FrontEnd
+from hil.estimation.gcas.hidden_echoes import HiddenEchoes
 from hil.estimation.gcas.point_echoes import PointEchoes
 from hil.estimation.gcas.threshold import Peak
 from hil.estimation.refine import CoherentRefiner, EchoTest, Refinement
@@ -152,6 +155,9 @@ class Readout:
         self._receiver = receiver
         #: The check for an echo beyond the Doppler span (with the refinement).
         self.beyond_span = beyond_span
+        #: The echoes the reverberation band hides, measured where what they leak is near
+        #: (with the refinement: :mod:`hil.estimation.gcas.hidden_echoes`).
+        self.hidden = None if refiner is None else HiddenEchoes(refiner, fe.hop_s)
         #: Where clutter was refused (:mod:`hil.estimation.gcas.clutter_seen`).
         self.clutter_seen = ClutterLog()
         tones, c = np.asarray(fe.tones_hz, dtype=np.float64), fe.sound_speed_mps
@@ -193,9 +199,12 @@ class Readout:
         self.notices: list[BeyondSpan | ClutterSeen] = []
 
     def restart(self) -> None:
-        """Forget the previous hop (a gap: consistency restarts with the next detection)."""
+        """Forget the previous hop (a gap: consistency restarts with the next detection, and
+        the hidden echoes noted before it are forgotten with the refinement's input)."""
         self._last_hop: int | None = None
         self._last_t = 0.0
+        if self.hidden is not None:
+            self.hidden.reset()
 
     def decide_all(self, peaks: Iterable[Peak]) -> list[Estimate]:
         """:meth:`decide` on each peak, in order; the estimates it accepts."""
@@ -209,9 +218,6 @@ class Readout:
     def decide(self, p: Peak) -> Estimate | None:
         """The estimate of one peak, or None where it is refused (band edge, too far)."""
         fe, k = self._fe, self._k
-        if fe.refused_hypotheses[p.d0]:
-            self.in_band_count += 1
-            return None
         c, fs_bb = fe.sound_speed_mps, fe.fs_bb
         dd = p.dd if self._refiner is not None else self._doppler_offset(p)
         speed = k.speeds[p.d0] + dd * k.speed_step
@@ -226,8 +232,15 @@ class Readout:
         q = math.floor((t_rx - end_j + tol) / k.period)
         t_tx = end_j + q * k.period
         hop_index = p.codeword + q * fe.n_codewords
+        if fe.refused_hypotheses[p.d0]:
+            self.in_band_count += 1
+            if self.hidden is not None:
+                self.hidden.note(t_rx, alpha, hop_index, p.peak - p.mean)
+            return None
         bound = None
         if self._refiner is not None:
+            if self.hidden is not None:
+                self.hidden.measure_near(t_rx, p.peak - p.mean)
             if self._refiner.ghost_of_known(t_rx, alpha, hop_index):
                 self.incoherent_count += 1
                 return None
