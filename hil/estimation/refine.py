@@ -419,12 +419,16 @@ class CoherentRefiner:
         self._ring.append(x, first_index)
 
     # ------------------------------------------------------------------ refinement
-    def refine(self, t_s: float, alpha: float, hop_index: int) -> Refinement | None:
+    def refine(
+        self, t_s: float, alpha: float, hop_index: int, echo_test: EchoTest | None = None
+    ) -> Refinement | None:
         """The maximum-likelihood boundary time and time scale near ``(t_s, alpha)`` for the
         boundary that ends hop ``hop_index``; None where the input does not cover the ``M``
         hops (start, gaps). Where no maximum lies inside the search (``found`` False) the
         detection's own point is kept and its fit reported. The other echoes measured lately
-        are taken out of the input first (module docstring, several echoes)."""
+        are taken out of the input first (module docstring, several echoes). A fit that
+        passes ``echo_test`` (default :attr:`echo_test`) is remembered as one echo."""
+        test = self.echo_test if echo_test is None else echo_test
         word = self._codeword(hop_index)
         hop_ids = np.arange(hop_index - self.m_hops + 1, hop_index + 1, dtype=np.int64)
         lobe = 1.0 / (alpha * self.spacing_hz)
@@ -437,10 +441,10 @@ class CoherentRefiner:
             and fit.accel_mps2 == 0.0
             and fit.coherence.fraction < ACCEL_TRY
             and fit.run_coherence.fraction >= ACCEL_RUN_MIN
-            and fit.e_over_n0_db >= self.echo_test.min_e_over_n0_db + ACCEL_MARGIN_DB
+            and fit.e_over_n0_db >= test.min_e_over_n0_db + ACCEL_MARGIN_DB
         ):
             fit = self._with_acceleration(fit, word, hop_ids, lobe, known)
-        if fit is not None and fit.is_echo(self.echo_test):
+        if fit is not None and fit.is_echo(test):
             self._recent.append((hop_index, fit.t_s, fit.alpha, fit.rate(self.c)))
             self._remember(fit, hop_index)
         return fit

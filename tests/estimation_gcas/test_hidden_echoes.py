@@ -104,9 +104,11 @@ class _Refiner:
         self.echo_at, self.ghosts = echo_at, ghosts
         self.fits: list[tuple[float, float, int, EchoTest]] = []
 
-    def refine(self, t_s: float, alpha: float, hop: int) -> _Fit:
+    def refine(self, t_s: float, alpha: float, hop: int, echo_test: EchoTest | None = None) -> _Fit:
         v = C * (alpha - 1.0) / (alpha + 1.0)
-        self.fits.append((t_s, round(v, 6), hop, self.echo_test))
+        self.fits.append(
+            (t_s, round(v, 6), hop, self.echo_test if echo_test is None else echo_test)
+        )
         return _Fit(t_s, alpha, any(abs(v - e) < 1e-9 for e in self.echo_at))
 
     def ghost_of_known(self, t_s: float, alpha: float, hop: int) -> bool:
@@ -132,7 +134,7 @@ def test_a_note_is_fitted_from_its_edge_speed_toward_zero_at_the_detection_bound
     assert [(round(t, 9), v, h) for t, v, h, _ in ref.fits] == [
         (round(t_b, 9), 3.0, 41), (round(t_b, 9), 2.0, 41)
     ]  # fmt: skip
-    # Fitted with the hidden echoes' test, and the refinement's own test given back.
+    # Fitted with the hidden echoes' test, the refinement's own left as it was.
     assert {f[3] for f in ref.fits} == {EchoTest(HIDDEN_FRACTION, HIDDEN_FRACTION, 12.0)}
     assert ref.echo_test == EchoTest(0.8, 0.85, 12.0)
     assert hidden.fit_count == 2

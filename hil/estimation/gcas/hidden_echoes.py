@@ -167,22 +167,17 @@ class HiddenEchoes:
             t_pred = last[1] + (hop - last[0]) * self.hop_s / last[2]
             if abs(t_pred - t_b) <= SAME_HOP * self.hop_s:
                 starts.insert(0, (t_pred, last[2]))
-        # The refinement keeps the fits that pass its echo test: for a hidden echo, this one.
-        ref = self.refiner
-        usual, ref.echo_test = ref.echo_test, self.test
-        try:
-            for t_start, alpha in starts:
-                fit = ref.refine(t_start, alpha, hop)
-                self.fit_count += 1
-                if fit is None:
-                    return False
-                if fit.is_echo(self.test):
-                    self._fits.append((hop, fit.t_s, fit.alpha))
-                    self._last[side] = (hop, fit.t_s, fit.alpha)
-                    return True
-            return False
-        finally:
-            ref.echo_test = usual
+        # The refinement remembers the fits that pass the test it is given: here this one.
+        for t_start, alpha in starts:
+            fit = self.refiner.refine(t_start, alpha, hop, self.test)
+            self.fit_count += 1
+            if fit is None:
+                return False
+            if fit.is_echo(self.test):
+                self._fits.append((hop, fit.t_s, fit.alpha))
+                self._last[side] = (hop, fit.t_s, fit.alpha)
+                return True
+        return False
 
     def _starts(self, alpha: float) -> list[float]:
         """Time scales to start a hidden echo's fit from: the edge detection's, then every
