@@ -442,3 +442,16 @@ def test_near_reverberation_is_not_reported_as_still_targets_with_the_band_off(
               "srr_db": srr_db, "reverb_speed_mps": 0.0}  # fmt: skip
     out = ch6_receiver_trial(params, np.random.SeedSequence(2067, spawn_key=(point, rep)))
     assert out["pd"] == 1.0 and out["n_false"] <= false_max
+
+
+def test_two_peaks_of_one_echo_at_one_boundary_give_one_estimate() -> None:
+    # The JIFS comparison's trial 343 (4.28 m/s at 69.6 m, -20 dB, ±25.72 m/s span): two
+    # peaks of the target at hop 31, 0.9 µs apart, both refined onto it, were both reported
+    # (68.0228 and 68.0235 m, 4.2805 and 4.2807 m/s): the second is the same echo.
+    from hil.evaluation.trials_ch6 import ch6_receiver_trial
+
+    params = {"m_hops": 10, "speed_mps": [2.0, 10.0], "receiver": "gcas",
+              "max_speed_mps": 25.72, "snr_db": -20.0}  # fmt: skip
+    out = ch6_receiver_trial(params, np.random.SeedSequence(2072, spawn_key=(11, 13)))
+    assert (out["n_detected"], out["n_truth"], out["n_false"]) == (47, 47, 0)
+    assert out["n_estimates"] == 47

@@ -162,13 +162,13 @@ class Readout:
         self.clutter_seen = ClutterLog()
         tones, c = np.asarray(fe.tones_hz, dtype=np.float64), fe.sound_speed_mps
         span_hz = float(np.ptp(tones)) if tones.size > 1 else 1.0 / fe.hop_s
+        #: One echo's resolution cell: the likelihood's main lobe in time (``1/B``, s) and
+        #: the M-hop fit's Doppler resolution (m/s).
+        self._lobe_s = 1.0 / span_hz
+        self._cell_mps = doppler_resolution_mps(tones, fe.hop_s, c) / fe.m_hops
         #: The point echoes confirmed lately in the still reverberation's cells.
         self.point_echoes = PointEchoes(
-            fe.hop_s,
-            fe.schedule.period_hops,
-            1.0 / span_hz,
-            doppler_resolution_mps(tones, fe.hop_s, c) / fe.m_hops,
-            c,
+            fe.hop_s, fe.schedule.period_hops, self._lobe_s, self._cell_mps, c
         )
         self.reset()
 
@@ -189,6 +189,11 @@ class Readout:
         #: input's start or a gap (refused: the search reports every echo's cell, ghosts
         #: included, and only the refinement tells them apart).
         self.unmeasured_count = 0
+        #: Detections of an echo already reported at the same boundary (two peaks of one
+        #: echo, both refined onto it): the first is kept.
+        self.same_echo_count = 0
+        #: The estimates reported lately: (hop index, boundary time s, speed m/s).
+        self._reported: list[tuple[int, float, float]] = []
         self.last_detection: DetectionInfo | None = None
         if self.beyond_span is not None:
             self.beyond_span.reset()
@@ -281,6 +286,10 @@ class Readout:
         if delay > self._max_delay + tol:
             self.refused_count += 1
             return None
+        speed = c * (alpha - 1.0) / (alpha + 1.0)  # alpha_to_speed, on Python floats
+        if self._reported_already(int(hop_index), t_rx, speed):
+            self.same_echo_count += 1
+            return None
         consistent = self._consistent(hop_index, t_rx, alpha)
         self.last_detection = DetectionInfo(p.n_star, p.threshold, p.mean, p.ratio, consistent)
         mean, thr = p.mean, p.threshold
@@ -288,7 +297,7 @@ class Readout:
         return Estimate(
             t_s=t_rx,
             range_m=c * delay / 2.0,
-            speed_mps=c * (alpha - 1.0) / (alpha + 1.0),  # alpha_to_speed, on Python floats
+            speed_mps=speed,
             hop_index=int(hop_index),
             score=p.peak / thr if thr > 0 else math.inf,
             snr_db=10.0 * math.log10(snr) if snr > 0 else -math.inf,
@@ -299,6 +308,21 @@ class Readout:
             crlb_range_m=math.nan if bound is None else bound.sigma_range_m,
             crlb_speed_mps=math.nan if bound is None else bound.sigma_speed_mps,
         )
+
+    def _reported_already(self, hop_index: int, t_s: float, speed_mps: float) -> bool:
+        """Whether an estimate reported at this boundary (hop ``hop_index``) lies within one
+        resolution cell of ``(t_s, speed_mps)``: the same echo (two echoes that close are not
+        resolved). Otherwise it is kept among those reported at this hop."""
+        self._reported = [r for r in self._reported if abs(r[0] - hop_index) <= 2]
+        for hop, t, v in self._reported:
+            if (
+                hop == hop_index
+                and abs(t - t_s) <= 0.5 * self._lobe_s
+                and abs(v - speed_mps) <= self._cell_mps
+            ):
+                return True
+        self._reported.append((hop_index, t_s, speed_mps))
+        return False
 
     def _say_clutter(self, fit: Refinement, t_tx: float, hop_index: int) -> None:
         """Note clutter refused at the fit's range (:class:`ClutterLog`), said where no
