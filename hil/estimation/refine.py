@@ -89,6 +89,7 @@ from hil.errors import ConfigError
 from hil.estimation.crlb import Crlb, crlb, rms_bandwidth, rms_duration
 from hil.estimation.refine_kernels import (
     FOUND,
+    N_MOMENTS,
     NO_LOBE,
     RECENTRE,
     assign_slots,
@@ -99,8 +100,6 @@ from hil.estimation.refine_kernels import (
 from hil.estimation.row_buffer import RowBuffer
 from hil.signals.schedule import HopSchedule
 
-#: Taylor terms of the in-hop Doppler rotation (module docstring).
-N_MOMENTS = 7
 #: Points of the search's grid: over ±½ grating lobe in time, and at least SPEED_POINTS over
 #: ± the speed span (more where half the M hops' Doppler resolution is finer).
 TIME_POINTS = 9
@@ -155,6 +154,14 @@ GHOST_POINTS = 9
 #: neither neighbour is better): a detector's time can be several lobes off at an echo's
 #: first boundary (att three-state, full search: 2.75 lobes, 1.8 ms).
 LOBE_MOVES = 4
+#: Runs of hops kept for the other echoes' ``known`` rows
+#: (:meth:`CoherentRefiner._hop_run`; all are dropped when full).
+HOP_RUNS = 256
+#: A run of hops (:meth:`CoherentRefiner._hop_run`): transmit phasors, tones (Hz), starts
+#: after the boundary (s), lengths (s); shape ``(n,)`` each.
+_HopRun = tuple[
+    NDArray[np.complex128], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]
+]
 #: ``known`` rows of no other echo.
 _NO_KNOWN = np.zeros((5, 0), dtype=np.complex128)
 #: Accelerating echoes (:meth:`CoherentRefiner._with_acceleration`): a fit whose coherence
@@ -367,6 +374,7 @@ class CoherentRefiner:
         self._used = np.zeros(n_slots, dtype=np.int64)
         self._clock = 0
         self._codewords: dict[int, _Codeword] = {}
+        self._hop_runs: dict[tuple[int, int, int], _HopRun] = {}
         self._sub_words: dict[int, _Codeword] = {}
         self._recent: deque[tuple[int, float, float, float]] = deque(maxlen=RECENT_FITS)
         #: The latest fit of each echo measured lately (:meth:`_known_hops`).
@@ -411,12 +419,16 @@ class CoherentRefiner:
         self._ring.append(x, first_index)
 
     # ------------------------------------------------------------------ refinement
-    def refine(self, t_s: float, alpha: float, hop_index: int) -> Refinement | None:
+    def refine(
+        self, t_s: float, alpha: float, hop_index: int, echo_test: EchoTest | None = None
+    ) -> Refinement | None:
         """The maximum-likelihood boundary time and time scale near ``(t_s, alpha)`` for the
         boundary that ends hop ``hop_index``; None where the input does not cover the ``M``
         hops (start, gaps). Where no maximum lies inside the search (``found`` False) the
         detection's own point is kept and its fit reported. The other echoes measured lately
-        are taken out of the input first (module docstring, several echoes)."""
+        are taken out of the input first (module docstring, several echoes). A fit that
+        passes ``echo_test`` (default :attr:`echo_test`) is remembered as one echo."""
+        test = self.echo_test if echo_test is None else echo_test
         word = self._codeword(hop_index)
         hop_ids = np.arange(hop_index - self.m_hops + 1, hop_index + 1, dtype=np.int64)
         lobe = 1.0 / (alpha * self.spacing_hz)
@@ -429,10 +441,10 @@ class CoherentRefiner:
             and fit.accel_mps2 == 0.0
             and fit.coherence.fraction < ACCEL_TRY
             and fit.run_coherence.fraction >= ACCEL_RUN_MIN
-            and fit.e_over_n0_db >= self.echo_test.min_e_over_n0_db + ACCEL_MARGIN_DB
+            and fit.e_over_n0_db >= test.min_e_over_n0_db + ACCEL_MARGIN_DB
         ):
             fit = self._with_acceleration(fit, word, hop_ids, lobe, known)
-        if fit is not None and fit.is_echo(self.echo_test):
+        if fit is not None and fit.is_echo(test):
             self._recent.append((hop_index, fit.t_s, fit.alpha, fit.rate(self.c)))
             self._remember(fit, hop_index)
         return fit
@@ -529,28 +541,43 @@ class CoherentRefiner:
 
     def _echo_hops(self, echo: _EchoFit, t_lo: float, t_hi: float) -> NDArray[np.complex128]:
         """The ``known`` columns of ``echo``'s hops received within ``[t_lo, t_hi]`` (s)."""
-        period = self.schedule.period_hops
-        key = echo.hop_index % period
+        key = echo.hop_index % self.schedule.period_hops
         t_len = self.hop_len_s / echo.alpha  # a hop's received length, s
         # Hop key + r is received over [t_e + (r − 1) T/α, t_e + r T/α).
         r_lo = int(math.floor((t_lo - echo.t_s) / t_len))
         r_hi = int(math.ceil((t_hi - echo.t_s) / t_len)) + 1
-        hops = self.schedule.hops(key + r_lo, r_hi - r_lo + 1)
-        end = self.schedule.hops(key, 1)
-        t_b = float(end.start_s[0] + end.duration_s[0])
-        dt_lo = hops.start_s - t_b
-        f = hops.freq_hz
-        k = hops.amplitude * np.exp(-1j * (hops.phase_rad - 2 * np.pi * f * dt_lo))
+        k, f, dt_lo, duration = self._hop_run(key, r_lo, r_hi - r_lo + 1)
         # Each hop heard on the tangent of the echo's curve at its centre (an accelerating
         # fit's time scale changes at its rate; the boundary's line where it does not).
-        t_i, a_i = _hops_on_curve(echo.t_s, echo.alpha, echo.rate, dt_lo + 0.5 * hops.duration_s)
+        t_i, a_i = _hops_on_curve(echo.t_s, echo.alpha, echo.rate, dt_lo + 0.5 * duration)
         out = np.empty((5, f.shape[0]), dtype=np.complex128)
         out[0] = 0.5 * echo.amplitude * np.conj(k)
         out[1] = f * a_i
         out[2] = t_i + dt_lo / a_i
-        out[3] = t_i + (dt_lo + hops.duration_s) / a_i
+        out[3] = t_i + (dt_lo + duration) / a_i
         out[4] = t_i
         return out
+
+    def _hop_run(self, key: int, r_first: int, count: int) -> _HopRun:
+        """Hops ``key + r_first …`` (``count`` of them) relative to the boundary ending hop
+        ``key`` of the first code period: each one's transmit phasor ``a e^{−j(φ − 2π f
+        dt_lo)}``, tone (Hz), start ``dt_lo`` after that boundary (s) and length (s). Kept
+        (:data:`HOP_RUNS` of them): the other echoes' hops of consecutive detections are
+        the same runs."""
+        run = self._hop_runs.get((key, r_first, count))
+        if run is None:
+            hops = self.schedule.hops(key + r_first, count)
+            end = self.schedule.hops(key, 1)
+            t_b = float(end.start_s[0] + end.duration_s[0])
+            dt_lo = hops.start_s - t_b
+            f = hops.freq_hz
+            k: NDArray[np.complex128] = hops.amplitude * np.exp(
+                -1j * (hops.phase_rad - 2 * np.pi * f * dt_lo)
+            )
+            if len(self._hop_runs) >= HOP_RUNS:
+                self._hop_runs.clear()
+            run = self._hop_runs[(key, r_first, count)] = (k, f, dt_lo, hops.duration_s)
+        return run
 
     def _fit_near(
         self,

@@ -23,6 +23,27 @@ import numpy as np
 _JIT: dict[str, Any] = {"cache": True, "nogil": True}
 #: Hops of the runs over which :func:`fit_quality`'s third coherence is taken.
 RUN_HOPS = 3
+#: Taylor terms of the in-hop Doppler rotation (:mod:`hil.estimation.refine`): the tables'
+#: last axis (:func:`_fill_slot` keeps exactly this many sums).
+N_MOMENTS = 7
+
+
+@numba.njit(**_JIT)
+def _store_row(
+    prefix: Any, energy: Any, s: int, side: int, j: int, e: float, a0: float, a1: float,
+    a2: float, a3: float, a4: float, a5: float, a6: float, b0: float, b1: float, b2: float,
+    b3: float, b4: float, b5: float, b6: float,
+) -> None:  # fmt: skip
+    """Row ``j`` of slot ``s``'s side-``side`` tables: moment ``p`` has real part ``a_p`` and
+    imaginary part ``b_p``; the energy is ``e``."""
+    prefix[s, side, j, 0] = complex(a0, b0)
+    prefix[s, side, j, 1] = complex(a1, b1)
+    prefix[s, side, j, 2] = complex(a2, b2)
+    prefix[s, side, j, 3] = complex(a3, b3)
+    prefix[s, side, j, 4] = complex(a4, b4)
+    prefix[s, side, j, 5] = complex(a5, b5)
+    prefix[s, side, j, 6] = complex(a6, b6)
+    energy[s, side, j] = e
 
 
 @numba.njit(**_JIT)
@@ -37,38 +58,57 @@ def _fill_slot(
     and ``E[j] = Σ_{k < j} x²`` for ``0 ≤ j ≤ span``. Side 0 keeps ``j ≤ R``, side 1
     ``j ≥ span − R`` (the module's tables, ``tail = span − R``). The rotation runs as a
     recurrence renewed every 256 samples (rounding below 1e-13).
+
+    The :data:`N_MOMENTS` sums are fourteen scalars (real and imaginary parts apart), so they
+    stay in registers: sums kept in an array go through memory at every sample (2.5x the
+    time), and a complex product by a real factor would spend four multiplies on it.
     """
-    n_mom = prefix.shape[3]
     r = prefix.shape[2] - 1
     tail = span - r
-    acc = np.zeros(n_mom, dtype=np.complex128)
+    a0 = a1 = a2 = a3 = a4 = a5 = a6 = 0.0
+    b0 = b1 = b2 = b3 = b4 = b5 = b6 = 0.0
     e = 0.0
     w = -2.0 * math.pi * cycles_per_sample
-    step = complex(math.cos(w), math.sin(w))
-    rot = complex(1.0, 0.0)
+    step_r, step_i = math.cos(w), math.sin(w)
+    rot_r, rot_i = 1.0, 0.0
     for j in range(span + 1):
         if j <= r:
-            for p in range(n_mom):
-                prefix[s, 0, j, p] = acc[p]
-            energy[s, 0, j] = e
+            _store_row(prefix, energy, s, 0, j, e, a0, a1, a2, a3, a4, a5, a6,
+                       b0, b1, b2, b3, b4, b5, b6)  # fmt: skip
         if j >= tail:
-            for p in range(n_mom):
-                prefix[s, 1, j - tail, p] = acc[p]
-            energy[s, 1, j - tail] = e
+            _store_row(prefix, energy, s, 1, j - tail, e, a0, a1, a2, a3, a4, a5, a6,
+                       b0, b1, b2, b3, b4, b5, b6)  # fmt: skip
         if j == span:
             break
         u = u0 + j
         if j % 256 == 0:
-            rot = complex(math.cos(w * u), math.sin(w * u))
+            rot_r, rot_i = math.cos(w * u), math.sin(w * u)
         v = x[pos + j]
-        y = v * rot
+        y_r = v * rot_r
+        y_i = v * rot_i
         q = u / hop_samples
-        pw = 1.0
-        for p in range(n_mom):
-            acc[p] += y * pw
-            pw *= q
+        a0 += y_r
+        b0 += y_i
+        pw = q
+        a1 += y_r * pw
+        b1 += y_i * pw
+        pw *= q
+        a2 += y_r * pw
+        b2 += y_i * pw
+        pw *= q
+        a3 += y_r * pw
+        b3 += y_i * pw
+        pw *= q
+        a4 += y_r * pw
+        b4 += y_i * pw
+        pw *= q
+        a5 += y_r * pw
+        b5 += y_i * pw
+        pw *= q
+        a6 += y_r * pw
+        b6 += y_i * pw
         e += v * v
-        rot *= step
+        rot_r, rot_i = rot_r * step_r - rot_i * step_i, rot_r * step_i + rot_i * step_r
 
 
 @numba.njit(**_JIT)
@@ -126,52 +166,119 @@ def assign_slots(
     return True
 
 
+#: Rows of a candidate line's per-hop constants (:func:`_line`): the hop's time scale, its
+#: window's start and end after the boundary (s), ``−2π f α_i`` (rad/s), the received tone
+#: ``f α_i`` (Hz), and under a time-scale rate the offset ``u`` of the hop's centre from the
+#: hops' (s), its ``d/α_i`` (s) and the curve's mean phase over the hop (rad).
+_A, _LO, _HI, _PF, _FA, _U, _DA, _CURVE = range(8)
+#: Margin (s) of :func:`_columns_near`'s reach: far beyond the rounding of its bounds.
+_NEAR_SLACK_S = 1e-4
+
+
 @numba.njit(**_JIT)
-def _edge_sums(
-    prefix: Any, energy: Any, s: int, side: int, pos: float, out: Any
+def _line(
+    alpha0: Any, slots: Any, f: Any, dt_lo: Any, dt_hi: Any, hop_s: float, alpha: float,
+    gamma: float, consts: Any, coef: Any,
 ) -> float:  # fmt: skip
-    """Slot ``s``'s side-``side`` prefix sums at fractional position ``pos`` (linear between
-    rows, clipped to the table) into ``out`` (shape ``(P,)``); returns the energy's."""
-    last = prefix.shape[2] - 2
+    """What every candidate of time scale ``alpha`` and rate ``gamma`` shares, per hop, into
+    ``consts`` (shape ``(8, M)``, rows :data:`_A` …) and ``coef`` (shape ``(2, M, P)``: real
+    and imaginary parts of ``(jθ)^p / p!``, ``θ = −2π (α_i − α0) D f``, the in-hop Doppler
+    rotation's Taylor terms); returns ``d_c/α`` (s, ``d_c`` the hops' transmit centre). With
+    ``gamma = 0`` every hop has the line's own time scale and no curve. Otherwise (the
+    accelerating mapping of :func:`_candidate`) ``α_i`` is the time scale where the hop's
+    transmit centre ``T_b + d`` (``d`` s, negative before the boundary) is heard, and the hop
+    is the straight line through that point with slope ``α_i``, boundary time
+    ``t_rx + d_c/α + u − d/α_i``; the point's receive offset ``u`` from the hops' centre is
+    one Newton step from ``(d − d_c)/α`` (error ``O(γ²)``). A grid's row of candidates
+    computes these once (the same operations each candidate would: the same bits)."""
+    m_hops = slots.shape[0]
+    n_mom = coef.shape[2]
+    d_c = 0.5 * (dt_lo[0] + dt_hi[m_hops - 1])
+    for i in range(m_hops):
+        a_i = alpha
+        if gamma != 0.0:
+            d = 0.5 * (dt_lo[i] + dt_hi[i])
+            u = (d - d_c) / alpha
+            u -= 0.5 * gamma * u * u / (alpha + gamma * u)
+            a_i = alpha + gamma * u
+            consts[_U, i] = u
+            consts[_DA, i] = d / a_i
+            # The curve about the hop's tangent, ½ γ (t − m)², averaged over the hop: a phase
+            # of π f γ D²/12 (D the hop's received length), second order in D beyond it.
+            dur = (dt_hi[i] - dt_lo[i]) / a_i
+            consts[_CURVE, i] = math.pi * f[i] * gamma * dur * dur / 12.0
+        consts[_A, i] = a_i
+        consts[_LO, i] = dt_lo[i] / a_i
+        consts[_HI, i] = dt_hi[i] / a_i
+        consts[_PF, i] = -2.0 * math.pi * f[i] * a_i
+        consts[_FA, i] = f[i] * a_i
+        # Σ_p (jθ)^p / p! (hi − lo), θ = −2π (α − α0) D f: the term's real recurrence.
+        theta = -2.0 * math.pi * (a_i - alpha0[slots[i]]) * hop_s * f[i]
+        tr = 1.0
+        ti = 0.0
+        for p in range(n_mom):
+            coef[0, i, p] = tr
+            coef[1, i, p] = ti
+            g = theta / (p + 1)
+            tr, ti = -ti * g, tr * g
+    return d_c / alpha
+
+
+@numba.njit(**_JIT)
+def _edge(pos: float, last: int) -> tuple[int, float]:
+    """Row and weight of fractional table position ``pos`` (linear between rows, clipped to
+    rows ``0 … last + 1``)."""
     j = int(math.floor(pos))
     w = pos - j
     if j < 0:
-        j, w = 0, 0.0
-    elif j > last:
-        j, w = last, 1.0
-    for p in range(out.shape[0]):
-        a = prefix[s, side, j, p]
-        out[p] = a + w * (prefix[s, side, j + 1, p] - a)
-    b = energy[s, side, j]
-    return b + w * (energy[s, side, j + 1] - b)
+        return 0, 0.0
+    if j > last:
+        return last, 1.0
+    return j, w
 
 
 @numba.njit(**_JIT)
-def _hop_mapping(
-    t_rx: float, alpha: float, gamma: float, d_c: float, d: float
-) -> tuple[float, float]:  # fmt: skip
-    """The constant-time-scale model ``(t_i, α_i)`` of one hop under :func:`_candidate`'s
-    accelerating mapping: ``α_i`` the time scale where the hop's transmit centre ``T_b + d``
-    (``d`` s, negative before the boundary) is heard, ``t_i`` the boundary time of the
-    straight line through that point with slope ``α_i`` (``d_c`` the hops' transmit centre,
-    s). The point's receive offset from the hops' centre is one Newton step from
-    ``(d − d_c)/α`` (error ``O(γ²)``)."""
-    u = (d - d_c) / alpha
-    u -= 0.5 * gamma * u * u / (alpha + gamma * u)
-    a_i = alpha + gamma * u
-    return t_rx + d_c / alpha + u - d / a_i, a_i
+def _window(
+    prefix: Any, energy: Any, s: int, lo: float, hi: float, coef: Any, i: int
+) -> tuple[complex, float]:  # fmt: skip
+    """``Σ_p coef_p (S_hi[p] − S_lo[p])`` and ``E_hi − E_lo`` of slot ``s`` between the
+    fractional positions ``lo`` (side 0) and ``hi`` (side 1), ``coef = coef[:, i, :]``.
+    Parts real and imaginary apart (a complex product by the real weights would spend four
+    multiplies on each)."""
+    last = prefix.shape[2] - 2
+    j0, w0 = _edge(lo, last)
+    j1, w1 = _edge(hi, last)
+    zr = 0.0
+    zi = 0.0
+    for p in range(prefix.shape[3]):
+        a = prefix[s, 0, j0, p]
+        b = prefix[s, 0, j0 + 1, p]
+        c = prefix[s, 1, j1, p]
+        d = prefix[s, 1, j1 + 1, p]
+        dr = (c.real + w1 * (d.real - c.real)) - (a.real + w0 * (b.real - a.real))
+        di = (c.imag + w1 * (d.imag - c.imag)) - (a.imag + w0 * (b.imag - a.imag))
+        cr = coef[0, i, p]
+        ci = coef[1, i, p]
+        zr += cr * dr - ci * di
+        zi += cr * di + ci * dr
+    e0 = energy[s, 0, j0]
+    e1 = energy[s, 1, j1]
+    e_lo = e0 + w0 * (energy[s, 0, j0 + 1] - e0)
+    e_hi = e1 + w1 * (energy[s, 1, j1 + 1] - e1)
+    return complex(zr, zi), e_hi - e_lo
 
 
 @numba.njit(**_JIT)
 def _candidate(
-    prefix: Any, energy: Any, first: Any, tail: Any, alpha0: Any, centre: Any, slots: Any,
-    k: Any, f: Any, dt_lo: Any, dt_hi: Any, amp2: Any, fs: float, hop_s: float,
-    t_rx: float, alpha: float, gamma: float, lo_sums: Any, hi_sums: Any, per_hop: Any,
-    known: Any,
+    prefix: Any, energy: Any, first: Any, tail: Any, centre: Any, slots: Any, k: Any,
+    amp2: Any, fs: float, t_rx: float, curved: bool, d_c_alpha: float, consts: Any,
+    coef: Any, per_hop: Any, known: Any, near: Any, n_near: Any,
 ) -> tuple[complex, float, float]:  # fmt: skip
-    """``(C, Σ a_i² N_i, input energy in the windows)`` of one candidate.
+    """``(C, Σ a_i² N_i, input energy in the windows)`` of one candidate at ``t_rx`` (s) on
+    the line whose per-hop constants :func:`_line` made (``consts``, ``coef``, and
+    ``d_c_alpha`` its return; ``curved`` where its rate is not 0).
 
-    ``gamma`` (1/s) is the rate of change of the time scale: the transmit time heard at
+    The time scale's rate ``gamma`` (1/s, :func:`_line`'s) maps transmit time: heard at
     ``t`` is ``T_b + d_c + α (τ − τ_c) + ½ γ (τ − τ_c)²`` with ``τ = t − t_rx``, ``T_b + d_c``
     the transmit centre of the ``M`` hops and ``τ_c = d_c/α`` (``α`` is the time scale where
     that centre is heard; the curvature, even about it, leaves the delay and time scale
@@ -181,61 +288,49 @@ def _candidate(
     ``gamma = 0`` is the constant time scale ``T_b + α τ``, computed without that mapping.
 
     Per hop ``i`` (shape ``(M,)``): ``slots`` its table slot, ``k`` the transmit phasor
-    ``a_i e^{−j(φ_i + 2π f_i (T_b − T_i))}``, ``f`` the tone (Hz), ``dt_lo``/``dt_hi`` the
-    transmit times of its start and end relative to the boundary (s, ``T_i − T_b`` and
-    ``T_i + D_i − T_b``), ``amp2`` its squared amplitude. ``lo_sums``/``hi_sums``: scratch,
-    shape ``(P,)``; ``per_hop`` receives each hop's term of ``C`` (shape ``(M,)``, or
-    ``(0,)`` for none); ``known``: the hops of other echoes already measured, whose part of
-    each term and of the energy is taken out (:func:`_known_part`; shape ``(5, Q)``).
+    ``a_i e^{−j(φ_i + 2π f_i (T_b − T_i))}``, ``amp2`` its squared amplitude. ``per_hop``
+    receives each hop's term of ``C`` (shape ``(M,)``, or ``(0,)`` for none); ``known``: the
+    hops of other echoes already measured, whose part of each term and of the energy is
+    taken out (:func:`_known_part`; shape ``(5, Q)``), of which hop ``i`` reads the columns
+    ``near[i, :n_near[i]]`` (ascending; every column that can overlap its window:
+    :func:`_columns_near`).
     """
     total = complex(0.0, 0.0)
     model = 0.0
     signal = 0.0
-    n_mom = lo_sums.shape[0]
-    m_hops = slots.shape[0]
-    d_c = 0.5 * (dt_lo[0] + dt_hi[m_hops - 1])
-    for i in range(m_hops):
+    for i in range(slots.shape[0]):
         s = slots[i]
-        t_i, a_i = t_rx, alpha
-        if gamma != 0.0:
-            t_i, a_i = _hop_mapping(t_rx, alpha, gamma, d_c, 0.5 * (dt_lo[i] + dt_hi[i]))
-        lo = (t_i + dt_lo[i] / a_i) * fs - first[s] + 0.5
-        hi = (t_i + dt_hi[i] / a_i) * fs - first[s] + 0.5
-        e_lo = _edge_sums(prefix, energy, s, 0, lo, lo_sums)
-        e_hi = _edge_sums(prefix, energy, s, 1, hi - tail[s], hi_sums)
-        # Σ_p (jθ)^p / p! (hi − lo), θ = −2π (α − α0) D f: the term's real recurrence.
-        theta = -2.0 * math.pi * (a_i - alpha0[s]) * hop_s * f[i]
-        z = complex(0.0, 0.0)
-        tr = 1.0
-        ti = 0.0
-        for p in range(n_mom):
-            z += complex(tr, ti) * (hi_sums[p] - lo_sums[p])
-            g = theta / (p + 1)
-            tr, ti = -ti * g, tr * g
-        ph = -2.0 * math.pi * f[i] * a_i * (centre[s] - t_i)
-        if gamma != 0.0:
-            # The curve about the hop's tangent, ½ γ (t − m)², averaged over the hop: a phase
-            # of π f γ D²/12 (D the hop's received length), second order in D beyond it.
-            dur = (dt_hi[i] - dt_lo[i]) / a_i
-            ph -= math.pi * f[i] * gamma * dur * dur / 12.0
+        t_i = t_rx
+        if curved:
+            t_i = t_rx + d_c_alpha + consts[_U, i] - consts[_DA, i]
+        lo_s = t_i + consts[_LO, i]
+        hi_s = t_i + consts[_HI, i]
+        lo = lo_s * fs - first[s] + 0.5
+        hi = hi_s * fs - first[s] + 0.5
+        z, e_window = _window(prefix, energy, s, lo, hi - tail[s], coef, i)
+        ph = consts[_PF, i] * (centre[s] - t_i)
+        if curved:
+            ph -= consts[_CURVE, i]
         term_i = k[i] * complex(math.cos(ph), math.sin(ph)) * z
-        if known.shape[1]:
+        if n_near[i]:
             part, energy_part = _known_part(
-                known, t_i, t_i + dt_lo[i] / a_i, t_i + dt_hi[i] / a_i, f[i] * a_i
+                known, near, i, n_near[i], t_i, lo_s, hi_s, consts[_FA, i]
             )
-            term_i -= k[i] * part * fs
+            kp = k[i] * part
+            term_i -= complex(kp.real * fs, kp.imag * fs)
             signal -= energy_part * fs
         total += term_i
         if per_hop.shape[0]:
             per_hop[i] = term_i
         model += amp2[i] * (hi - lo)
-        signal += e_hi - e_lo
+        signal += e_window
     return total, model, signal
 
 
 @numba.njit(**_JIT)
 def _known_part(
-    known: Any, t_rx: float, lo: float, hi: float, f_rx: float
+    known: Any, near: Any, i: int, n_near: int, t_rx: float, lo: float, hi: float,
+    f_rx: float,
 ) -> tuple[complex, float]:  # fmt: skip
     """What the hops of other echoes already measured put into one hop's term (before its
     transmit phasor and the sample rate) and into its window's energy (per sample rate).
@@ -247,11 +342,13 @@ def _known_part(
     real rows hold floats, the weight's row complex. The term's window is ``[lo, hi)`` (s),
     demodulated at ``f_rx`` (Hz) about ``t_rx``: the part is
     ``Σ_h w_h e^{j2π g_h (t_rx − t_e)} ∫ e^{j2π (g_h − f_rx) τ} dτ`` over the overlap
-    (``τ = t − t_rx``), the energy ``Σ_h 2|w_h|²`` times the overlap's length.
+    (``τ = t − t_rx``), the energy ``Σ_h 2|w_h|²`` times the overlap's length. Only the
+    columns ``near[i, :n_near]`` are read (the others cannot overlap the window).
     """
     part = complex(0.0, 0.0)
     energy = 0.0
-    for h in range(known.shape[1]):
+    for col in range(n_near):
+        h = near[i, col]
         a = max(lo, known[2, h].real)
         b = min(hi, known[3, h].real)
         if b <= a:
@@ -264,14 +361,59 @@ def _known_part(
         ta = a - t_rx
         tb = b - t_rx
         if abs(x * (tb - ta)) < 1e-9:
-            integral = complex(math.cos(x * ta), math.sin(x * ta)) * (tb - ta)
+            dt = tb - ta
+            integral = complex(math.cos(x * ta) * dt, math.sin(x * ta) * dt)
         else:
-            e_b = complex(math.cos(x * tb), math.sin(x * tb))
-            e_a = complex(math.cos(x * ta), math.sin(x * ta))
-            integral = (e_b - e_a) / complex(0.0, x)
+            # (e^{jx tb} − e^{jx ta}) / (jx), real and imaginary parts apart.
+            p = math.cos(x * tb) - math.cos(x * ta)
+            q = math.sin(x * tb) - math.sin(x * ta)
+            integral = complex(q / x, -p / x)
         part += w * rot * integral
         energy += 2.0 * (w.real * w.real + w.imag * w.imag) * (b - a)
     return part, energy
+
+
+@numba.njit(**_JIT)
+def _every_column(m_hops: int, known: Any) -> tuple[Any, Any]:
+    """:func:`_candidate`'s ``near`` and ``n_near`` reading every column of ``known`` for
+    each of ``m_hops`` hops."""
+    n_cols = known.shape[1]
+    near = np.empty((m_hops, n_cols), dtype=np.int64)
+    for i in range(m_hops):
+        for h in range(n_cols):
+            near[i, h] = h
+    return near, np.full(m_hops, n_cols, dtype=np.int64)
+
+
+@numba.njit(**_JIT)
+def _columns_near(
+    known: Any, dt_lo: Any, dt_hi: Any, t_lo: float, t_hi: float, a_lo: float, a_hi: float
+) -> tuple[Any, Any]:  # fmt: skip
+    """:func:`_candidate`'s ``near`` and ``n_near`` for candidates of constant time scale
+    (no rate) with ``t_rx`` in ``[t_lo, t_hi]`` (s) and ``α`` in ``[a_lo, a_hi]``: the
+    columns of ``known`` whose interval comes within :data:`_NEAR_SLACK_S` of a window hop
+    ``i`` can have, ``[t_rx + dt_lo[i]/α, t_rx + dt_hi[i]/α]`` (monotonic in ``α``: its
+    ends' extremes are at ``a_lo`` and ``a_hi``). A column left out adds nothing to any of
+    them, so every sum is the same as over all columns."""
+    m_hops = dt_lo.shape[0]
+    n_cols = known.shape[1]
+    near = np.empty((m_hops, n_cols), dtype=np.int64)
+    n_near = np.zeros(m_hops, dtype=np.int64)
+    for i in range(m_hops):
+        lo = t_lo + min(dt_lo[i] / a_lo, dt_lo[i] / a_hi) - _NEAR_SLACK_S
+        hi = t_hi + max(dt_hi[i] / a_lo, dt_hi[i] / a_hi) + _NEAR_SLACK_S
+        for h in range(n_cols):
+            if known[2, h].real < hi and known[3, h].real > lo:
+                near[i, n_near[i]] = h
+                n_near[i] += 1
+    return near, n_near
+
+
+@numba.njit(**_JIT)
+def _scratch(slots: Any, prefix: Any) -> tuple[Any, Any]:
+    """:func:`_line`'s outputs for the hops ``slots`` (shapes ``(8, M)`` and ``(2, M, P)``)."""
+    m_hops = slots.shape[0]
+    return np.zeros((8, m_hops)), np.empty((2, m_hops, prefix.shape[3]))
 
 
 @numba.njit(**_JIT)
@@ -284,14 +426,24 @@ def candidate_sums(
     """:func:`_candidate` for candidates ``(t_rx[c], alpha[c], gamma[c])`` (shape ``(C,)``;
     ``gamma`` the time-scale rate, 1/s) into the outputs (shape ``(C,)``: ``C`` complex, the
     model's energy, the input's energy) and each hop's term (``per_hop``, complex, shape
-    ``(C, M)`` or ``(C, 0)`` for none); ``known`` as :func:`_candidate`."""
-    n_mom = prefix.shape[3]
-    lo_sums = np.empty(n_mom, dtype=np.complex128)
-    hi_sums = np.empty(n_mom, dtype=np.complex128)
+    ``(C, M)`` or ``(C, 0)`` for none); ``known`` as :func:`_candidate`.
+
+    Per hop (shape ``(M,)``): ``slots`` its table slot, ``k`` the transmit phasor
+    ``a_i e^{−j(φ_i + 2π f_i (T_b − T_i))}``, ``f`` the tone (Hz), ``dt_lo``/``dt_hi`` the
+    transmit times of its start and end relative to the boundary (s, ``T_i − T_b`` and
+    ``T_i + D_i − T_b``), ``amp2`` its squared amplitude; ``hop_s`` the hop length ``D`` (s).
+    """
+    consts, coef = _scratch(slots, prefix)
+    near, n_near = _every_column(slots.shape[0], known)
+    d_c_alpha = 0.0
     for c in range(t_rx.shape[0]):
+        if c == 0 or alpha[c] != alpha[c - 1] or gamma[c] != gamma[c - 1]:
+            d_c_alpha = _line(
+                alpha0, slots, f, dt_lo, dt_hi, hop_s, alpha[c], gamma[c], consts, coef
+            )
         out_c[c], out_model[c], out_signal[c] = _candidate(
-            prefix, energy, first, tail, alpha0, centre, slots, k, f, dt_lo, dt_hi, amp2,
-            fs, hop_s, t_rx[c], alpha[c], gamma[c], lo_sums, hi_sums, per_hop[c], known,
+            prefix, energy, first, tail, centre, slots, k, amp2, fs, t_rx[c], gamma[c] != 0.0,
+            d_c_alpha, consts, coef, per_hop[c], known, near, n_near,
         )  # fmt: skip
 
 
@@ -317,23 +469,33 @@ def maximise(
     ``passes`` 2-D quadratic fits on a 3 × 3 stencil (half the grid's steps) around the best
     point, the stencil halving each pass (:data:`FOUND`).
     """
-    n_mom = prefix.shape[3]
-    lo_sums = np.empty(n_mom, dtype=np.complex128)
-    hi_sums = np.empty(n_mom, dtype=np.complex128)
+    consts, coef = _scratch(slots, prefix)
+    curved = gamma != 0.0
     none = np.empty(0, dtype=np.complex128)
     step_t = 2.0 * half_t / (n_t - 1)
     step_v = 2.0 * half_v / (n_v - 1)
+    if curved:
+        near, n_near = _every_column(slots.shape[0], known)
+    else:
+        # Every candidate lies within the grid widened by one grid step: the fit's stencil
+        # starts at half a step and halves, each pass moving it by at most its step.
+        reach_t = half_t + 2.0 * step_t
+        reach_v = half_v + 2.0 * step_v
+        a_lo = (c_mps + v0 - reach_v) / (c_mps - v0 + reach_v)
+        a_hi = (c_mps + v0 + reach_v) / (c_mps - v0 - reach_v)
+        near, n_near = _columns_near(known, dt_lo, dt_hi, t0 - reach_t, t0 + reach_t, a_lo, a_hi)
     best = -1.0
     bi = 0
     bj = 0
     for i in range(n_v):
         vv = v0 - half_v + i * step_v
         a = (c_mps + vv) / (c_mps - vv)
+        d_c_a = _line(alpha0, slots, f, dt_lo, dt_hi, hop_s, a, gamma, consts, coef)
         for j in range(n_t):
             cc, _, _ = _candidate(
-                prefix, energy, first, tail, alpha0, centre, slots, k, f, dt_lo, dt_hi,
-                amp2, fs, hop_s, t0 - half_t + j * step_t, a, gamma, lo_sums, hi_sums, none,
-                known,
+                prefix, energy, first, tail, centre, slots, k, amp2, fs,
+                t0 - half_t + j * step_t, curved, d_c_a, consts, coef, none, known, near,
+                n_near,
             )  # fmt: skip
             pw = cc.real * cc.real + cc.imag * cc.imag
             if pw > best:
@@ -351,11 +513,12 @@ def maximise(
         for i in range(3):
             vv = v + (i - 1) * step_v
             a = (c_mps + vv) / (c_mps - vv)
+            d_c_a = _line(alpha0, slots, f, dt_lo, dt_hi, hop_s, a, gamma, consts, coef)
             for j in range(3):
                 cc, _, _ = _candidate(
-                    prefix, energy, first, tail, alpha0, centre, slots, k, f, dt_lo, dt_hi,
-                    amp2, fs, hop_s, t + (j - 1) * step_t, a, gamma, lo_sums, hi_sums, none,
-                    known,
+                    prefix, energy, first, tail, centre, slots, k, amp2, fs,
+                    t + (j - 1) * step_t, curved, d_c_a, consts, coef, none, known, near,
+                    n_near,
                 )  # fmt: skip
                 z[i, j] = cc.real * cc.real + cc.imag * cc.imag
         # z[i, j] ≈ z0 + gt x + gv y + ½ (htt x² + 2 htv x y + hvv y²); x, y in steps.
@@ -399,13 +562,12 @@ def fit_quality(
     each hop's tone index (shape ``(M,)``, below ``n_tones``). E/N0 is ``inf`` where the
     windows hold no noise."""
     m_hops = slots.shape[0]
-    n_mom = prefix.shape[3]
-    lo_sums = np.empty(n_mom, dtype=np.complex128)
-    hi_sums = np.empty(n_mom, dtype=np.complex128)
     h = np.empty(m_hops, dtype=np.complex128)
+    consts, coef = _scratch(slots, prefix)
+    d_c_alpha = _line(alpha0, slots, f, dt_lo, dt_hi, hop_s, alpha, gamma, consts, coef)
     c, es, signal = _candidate(
-        prefix, energy, first, tail, alpha0, centre, slots, k, f, dt_lo, dt_hi, amp2, fs,
-        hop_s, t_rx, alpha, gamma, lo_sums, hi_sums, h, known,
+        prefix, energy, first, tail, centre, slots, k, amp2, fs, t_rx, gamma != 0.0,
+        d_c_alpha, consts, coef, h, known, *_every_column(m_hops, known),
     )  # fmt: skip
     mag2 = c.real * c.real + c.imag * c.imag
     spread = 0.0

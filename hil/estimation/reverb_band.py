@@ -29,7 +29,10 @@ measured in the same windows at the same Doppler on the *other* tones
 (:func:`reverberation_coherence`): the echo is not there (the tones are orthogonal over a
 hop), the reverberation is (it arrives at every tone from the delays that sent it), and so
 is the noise. The coherence one echo of that signal-to-interference ratio has is the
-expectation such an echo is held to (:func:`in_reverberation`). What stays short of it is
+expectation such an echo is held to (:func:`in_reverberation`), where a point echo was
+confirmed lately by the white-noise test on the hops the reverberation leaves clear
+(:mod:`hil.estimation.gcas.point_echoes`: a few scatterers in one near range cell pass the
+relative test too, never the white-noise one). What stays short of it is
 not one point echo: where its coherence within each tone holds (each tone its own complex
 gain, as a patch of scatterers spread over more than ``c/(2 B)`` in range gives, ``B`` the
 tones' span), it is **clutter**, diffuse reverberation, counted apart
@@ -39,7 +42,9 @@ tones' span), it is **clutter**, diffuse reverberation, counted apart
 A target inside the band is not reported at the band's edge: its Doppler response leaks into
 the first allowed cells, whose weighted maximum is then a ghost at the edge speed. Detections
 whose hypothesis lies on the edge (:func:`edge_hypotheses`) are therefore refused, and counted
-(:attr:`hil.estimation.gcas.GcasReceiver.in_band_count`).
+(:attr:`hil.estimation.gcas.GcasReceiver.in_band_count`); with the refinement they are noted,
+so that what the hidden echo leaks outside the band (its ghost one tone spacing out, its
+Doppler sidelobes) is refused as any measured echo's (:mod:`hil.estimation.gcas.hidden_echoes`).
 
 >>> round(auto_reverb_speed_mps(np.array([57e3, 59e3, 61e3, 63e3]), 0.01, 1482.3), 3)
 0.65

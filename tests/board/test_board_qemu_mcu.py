@@ -1,6 +1,7 @@
 """The C reference firmware on an emulated Cortex-M4 (QEMU ``mps2-an386``), its UART0 on a
 host pty, driven by the real :class:`~hil.devices.board.Board` driver: handshake, configure,
-stream, stop, at a rate the emulated UART carries (8 kS/s x 2 channels, int16).
+stream, stop, at a rate the emulated UART carries on an idle machine (8 kS/s x 2 channels,
+int16).
 
 QEMU's MPS2 has no DAC or ADC, so the firmware's analog path is a software loopback cable;
 everything else is the firmware as a real board would run it. Needs ``make``,
@@ -8,7 +9,11 @@ everything else is the firmware as a real board would run it. Needs ``make``,
 ``HIL_REQUIRE_SYSTEM_DEPS=1`` (CI), where they fail. QEMU runs in real time: the test waits
 on events (samples in the ring) with deadlock guards, never on elapsed time, and derives the
 board's watchdog, its command timeout and the start lead from what the emulated UART carries,
-measured at the start of the session (:func:`measured_uart_bytes_per_s`).
+measured at the start of the session (:func:`measured_uart_bytes_per_s`). What the UART
+carries falls a hundredfold on a loaded machine (:func:`measured_uart_bytes_per_s`), so the
+session asks it for no real-time throughput: the DAC samples compared are the whole DAC
+source, in the board's DAC buffer before START, and their ADC replies fit the firmware's
+link buffer.
 """
 
 from __future__ import annotations
@@ -29,9 +34,14 @@ from sim_devices.board import qemu_mcu
 
 RATE_HZ = 8_000
 WAIT_S = 60.0  # deadlock guard, real seconds
-#: The firmware's largest frame and DAC buffer, bytes.
+#: The firmware's largest frame, bytes.
 MAX_FRAME_BYTES = 8192
-PRELOAD_BYTES = 4096 * 2 * 2  # its DAC buffer: 4096 frames of 2 int16 channels
+#: Sample frames the DAC plays and the ADC gives back, compared sample for sample: the whole
+#: DAC source, within the firmware's DAC buffer (4096 frames), so all of it is sent before
+#: START (the preload) and nothing after; its ADC frames (4 KB) within the firmware's link
+#: buffer (CASFW_TX_BYTES = 20 KB), so none is lost while the UART is slow.
+N_SAMPLES = 1024
+PRELOAD_BYTES = N_SAMPLES * 2 * 2  # 2 int16 channels
 #: Bytes of the probe that measures what the emulated UART carries now: empty frames (COBS
 #: delimiters) the firmware skips, sent ahead of the handshake.
 PROBE_BYTES = 2048
@@ -49,16 +59,20 @@ def measured_uart_bytes_per_s(transport: Transport, board: Board) -> float:
     once the firmware has taken them, over the wall time to that reply (the handshake's own
     time counted in: the rate comes out low, the timeouts derived from it long).
 
-    The UART's intake follows how often QEMU's I/O thread runs, which the load average does
-    not tell: QEMU 7.2's CMSDK APB UART holds one received byte and does not call
-    ``qemu_chr_fe_accept_input()`` when the firmware reads it (``hw/char/cmsdk-apb-uart.c``),
-    so the pty is polled for the next byte only on the I/O thread's next pass, and the
-    emulated MCU, polling its UART without pause, takes QEMU's lock for every register
-    read. Measured on this 2-core machine: 64 kB/s on an idle machine; at load 11-13 the
-    24 kB of a preload and START took over 42 s; at load 10-17 a session stalled for over
-    15 minutes. An MCU idling in WFI between passes (tried) cut QEMU's idle CPU from 0.42 to
-    0.05 cores but took bytes that draw no reply at one per 1 ms tick (1.3-1.8 kB/s), and
-    stalled as well at load 12 (probe 554 B/s, then no START within 400 s).
+    The UART's intake is one byte per pass of QEMU's main loop, and each pass needs both of
+    QEMU's threads scheduled in turn: QEMU 7.2's CMSDK APB UART holds one received byte,
+    refuses the next while it is held (no overrun: the firmware never sees one) and does not
+    call ``qemu_chr_fe_accept_input()`` when the firmware reads it
+    (``hw/char/cmsdk-apb-uart.c``), so the main loop reads the pty again only when the
+    emulated MCU, polling its UART, wakes it; the main loop then waits for QEMU's lock,
+    which the MCU takes for every register read. Measured on this 2-core machine: 64 kB/s
+    idle; with 8 busy loops beside it (load 13-20), 120-200 B/s, the main-loop thread 79 %
+    of the time in ``poll`` waiting for the MCU and the MCU's thread runnable throughout on
+    5-7 % of a core (strace: one 1-byte ``readv`` per main-loop pass). Neither QEMU's
+    settings nor the firmware's polling change it: both threads on one core (``taskset``),
+    single-threaded TCG and ``-icount shift=5,sleep=off`` took 136-181 B/s at the same
+    load; an MCU idling in WFI between passes (tried) cut QEMU's idle CPU from 0.42 to 0.05
+    cores but took bytes that draw no reply at one per 1 ms tick (1.3-1.8 kB/s).
     """
     t0 = time.monotonic()
     transport.write(bytes(PROBE_BYTES))
@@ -84,7 +98,7 @@ def test_cortex_m4_image_fits_a_small_mcu() -> None:
 @pytest.mark.slow
 def test_board_driver_completes_a_session_on_the_emulated_mcu() -> None:
     rng = np.random.default_rng(7)
-    dac = rng.integers(-20000, 20000, (2 * RATE_HZ, 2)).astype(np.int16)
+    dac = rng.integers(-20000, 20000, (N_SAMPLES, 2)).astype(np.int16)
     with qemu_mcu.QemuBoard() as mcu:
         transport = open_serial(mcu.port_name, timeout=0.05)
         board = Board(transport, command_timeout_s=PROBE_GUARD_S, ring_seconds=4.0)
@@ -108,26 +122,20 @@ def test_board_driver_completes_a_session_on_the_emulated_mcu() -> None:
             assert board.capabilities.sample_rates_hz == (16_000, 8_000)
             board.configure(BoardSettings(sample_rate_hz=RATE_HZ))
             first = board.start(iter([dac]))
-            n = RATE_HZ // 2
             # The first sample comes a start lead after START (the last attempt's: 4 leads).
-            assert board.wait_for_samples(first + n, WAIT_S + 4 * board.start_lead_s), (
+            assert board.wait_for_samples(first + N_SAMPLES, WAIT_S + 4 * board.start_lead_s), (
                 f"UART measured at {rate:.0f} B/s"
             )
-            # Read before STOP: on a slow UART STOP waits behind the DAC data already sent,
-            # while the board streams on into the ring.
-            got = board.read(first, n)
+            got = board.read(first, N_SAMPLES)
             board.stop()
             assert board.state is State.STOPPED
             # The loopback cable has no delay: the ADC holds what the DAC played, sample for
-            # sample, and silence only where the DAC ran dry (an emulator starved of CPU
-            # feeds its UART late; each such run is counted as a DAC underrun).
-            equal = np.all(got == dac[:n], axis=1)
-            silent = np.all(got == 0, axis=1)
-            assert np.all(equal | silent)
-            assert np.count_nonzero(equal) >= 0.9 * n
-            assert board.last_status is not None
-            assert np.all(equal) or board.last_status.dac_underruns >= 1
-            assert board.gaps.gap_samples == 0
+            # sample (all of it was in the DAC buffer before START; the DAC runs dry after).
+            np.testing.assert_array_equal(got, dac)
+            # Nothing lost or damaged on the link. The board streams on until STOP: where
+            # its link buffer fills faster than the UART drains it, it drops whole ADC
+            # frames as overruns (sample gaps past the compared samples, counted by the
+            # board), never part of a frame.
             stats = board.protocol_stats
             assert stats["crc_errors"] == stats["cobs_errors"] == stats["sequence_gaps"] == 0
         finally:

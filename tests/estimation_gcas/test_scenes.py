@@ -407,9 +407,10 @@ def test_diffuse_reverberation_is_counted_as_clutter_and_not_reported() -> None:
     est = run_blocks(rx, x)
     false, pd = _false_and_moving_pd(est, truth, faster_than_mps=-1.0)
     # Measured: 43 detections counted as clutter, none reported nearer than 5 m, no false
-    # estimate; pd 0.658 (0.337 before). The issue's 0.9 is not met here: the boundaries
-    # missed recur every code period, where the search puts no detection on the target
-    # (every one it does put there is kept).
+    # estimate; pd 0.625. The issue's 0.9 is not met here: the boundaries missed recur every
+    # code period, where the search puts no detection on the target, and 6 of its first
+    # fits, short of one echo's coherence in white noise, wait for the target to be
+    # confirmed as a point echo (hil.estimation.gcas.point_echoes).
     assert rx.clutter_count >= 30 and false == 0.0
     assert not [e for e in est if e.range_m < 5.0]
     # Said where it is (measured: 2.63 m at hop 10, 1.14 m at hop 23), each range once.
@@ -417,3 +418,40 @@ def test_diffuse_reverberation_is_counted_as_clutter_and_not_reported() -> None:
     assert 1 <= len(ranges) <= 5 and all(1.0 <= r <= 5.0 for r in ranges)
     assert rx.notices() == rx.clutter_seen
     assert pd >= 0.6
+
+
+# sim-03's band-off case (docs/results.md): a target at 10-25 m/s, -10 dB per-sample SNR,
+# volume reverberation of 0.01 scatterers/m³ from 5 m. A few scatterers in one near range
+# cell fit as one echo whose coherence passes the relative test (the neighbours load the
+# other tones as much as it loads its own) but never the white-noise one, which a point echo
+# passes on the hops its tones leave clear: reported only where a point echo was confirmed
+# (hil.estimation.gcas.point_echoes).
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("point", "rep", "srr_db", "false_max"),
+    # Measured false estimates in 46-47 hops: 25 -> 2 (0 dB SRR, 10.8 m/s), 9 -> 1 (+5 dB
+    # SRR, 19.7 m/s); every boundary detected before and after.
+    [(14, 0, 0.0, 2), (16, 0, 5.0, 1)],
+)
+def test_near_reverberation_is_not_reported_as_still_targets_with_the_band_off(
+    point: int, rep: int, srr_db: float, false_max: int
+) -> None:
+    from hil.evaluation.trials_ch6 import ch6_receiver_trial
+
+    params = {"receiver": "gcas", "m_hops": 10, "snr_db": -10.0, "speed_mps": [10.0, 25.0],
+              "srr_db": srr_db, "reverb_speed_mps": 0.0}  # fmt: skip
+    out = ch6_receiver_trial(params, np.random.SeedSequence(2067, spawn_key=(point, rep)))
+    assert out["pd"] == 1.0 and out["n_false"] <= false_max
+
+
+def test_two_peaks_of_one_echo_at_one_boundary_give_one_estimate() -> None:
+    # The JIFS comparison's trial 343 (4.28 m/s at 69.6 m, -20 dB, ±25.72 m/s span): two
+    # peaks of the target at hop 31, 0.9 µs apart, both refined onto it, were both reported
+    # (68.0228 and 68.0235 m, 4.2805 and 4.2807 m/s): the second is the same echo.
+    from hil.evaluation.trials_ch6 import ch6_receiver_trial
+
+    params = {"m_hops": 10, "speed_mps": [2.0, 10.0], "receiver": "gcas",
+              "max_speed_mps": 25.72, "snr_db": -20.0}  # fmt: skip
+    out = ch6_receiver_trial(params, np.random.SeedSequence(2072, spawn_key=(11, 13)))
+    assert (out["n_detected"], out["n_truth"], out["n_false"]) == (47, 47, 0)
+    assert out["n_estimates"] == 47

@@ -10,7 +10,9 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -441,10 +443,9 @@ def test_kill_9_during_a_run_leaves_a_recording_hil_report_rebuilds(
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
     )  # fmt: skip
     h5 = folder / "run.h5"
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline and not (h5.exists() and h5.stat().st_size > 200_000):
-        time.sleep(0.2)
-    time.sleep(2.0)  # at least one more flush (every second)
+    _wait_while_running(proc, lambda: h5.exists() and h5.stat().st_size > 200_000, "200 kB")
+    grown = h5.stat().st_size
+    _wait_while_running(proc, lambda: h5.stat().st_size > grown, "one more flush")
     os.killpg(proc.pid, signal.SIGKILL)  # the run and its simulated-tank child
     proc.wait(timeout=10)
     rec = RunRecording.open(h5)
@@ -466,6 +467,16 @@ def test_kill_9_during_a_run_leaves_a_recording_hil_report_rebuilds(
     assert json.loads((folder / "summary.json").read_text()) == summary
     for name in ("estimates.csv", "range_speed.png", "errors.png", "time_codeword_map.png"):
         assert (folder / name).exists(), name
+
+
+def _wait_while_running(proc: subprocess.Popen[Any], ready: Callable[[], bool], what: str) -> None:
+    """Poll ``ready`` until it holds; fails if the run ends first. The 15 minutes guard
+    against a hung run only: no test here relies on how fast the machine is."""
+    guard = time.monotonic() + 900
+    while not ready():
+        assert proc.poll() is None, f"the run ended (status {proc.returncode}) before {what}"
+        assert time.monotonic() < guard, f"no {what} within 15 minutes: the run hangs"
+        time.sleep(0.1)
 
 
 def _carriage_moving(h5: Path) -> bool:
@@ -505,28 +516,30 @@ def test_ctrl_c_sigterm_and_sighup_stop_cleanly_and_keep_the_recording(
     # 4.5 s of wall time, all but over before the interrupt arrived).
     exp_file.write_text(SHORT.replace("speed_mps = 1.5", "speed_mps = 0.5"))
     folder = tmp_path / "run"
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "hil.cli.main", "tank-run", str(exp_file), "--out", str(folder),
-         "--no-live", "--json"],
-        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, start_new_session=True,
-        preexec_fn=_default_sigint,
-    )  # fmt: skip
+    log = tmp_path / "stderr.txt"  # shown if the run did not stop as it should
+    with log.open("w") as err:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "hil.cli.main", "tank-run", str(exp_file), "--out",
+             str(folder), "--no-live", "--json"],
+            stdout=subprocess.PIPE, stderr=err, text=True, start_new_session=True,
+            preexec_fn=_default_sigint,
+        )  # fmt: skip
     h5 = folder / "run.h5"
     try:
-        deadline = time.monotonic() + 60
         # Interrupt while the carriage is on its pass, as the recording's telemetry shows (a
-        # fixed delay after the capture starts may land after the pass on a loaded machine).
-        while time.monotonic() < deadline and not _carriage_moving(h5):
-            time.sleep(0.1)
+        # fixed delay after the capture starts may land after the pass on a loaded machine,
+        # or before the recording exists while a loaded machine builds the receiver).
+        _wait_while_running(proc, lambda: _carriage_moving(h5), "the carriage on its pass")
         os.killpg(proc.pid, sig)  # as a terminal does: the whole process group
         out, _ = proc.communicate(timeout=60)
     finally:
         if proc.poll() is None:  # the test failed first: leave nothing running
             os.killpg(proc.pid, signal.SIGKILL)
             proc.communicate()
-    assert proc.returncode == 1  # the run stopped before its end
+    said = f"stdout: {out}\nstderr: {log.read_text()}"
+    assert proc.returncode == 1, said  # the run stopped before its end
     summary = json.loads(out.strip().splitlines()[-1])
-    assert summary["interrupted"] is True and summary["error"] == f"interrupted ({how})"
+    assert (summary["interrupted"], summary["error"]) == (True, f"interrupted ({how})"), said
     rec = RunRecording.open(h5)
     assert sum(b.data.shape[0] for b in rec.samples()) > 10_000
     stop = rec.events()[-1]

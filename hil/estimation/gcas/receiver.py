@@ -280,6 +280,7 @@ class GcasReceiver:
             "beyond_span": self.beyond_span_count,
             "beyond_max_range": self.refused_count,
             "unmeasured": self.unmeasured_count,
+            "same_echo": self.readout.same_echo_count,
         }
 
     @property
