@@ -55,12 +55,13 @@ For each of the ``M`` boundaries the GCAS detection used (receive times from its
    (:data:`DOPPLER_LAGS`) read other tone patterns with other sidelobes, so their scores are
    summed with this one to choose the lobe. A direct-path speed more than
    :data:`DIRECT_BELOW_GCAS_MPS` below GCAS's is a phase ambiguity (no image is faster than
-   the direct path) and GCAS's is kept. Where it is refused (or on the span's edge) and the
-   late paths are there (their fitted power at least :data:`LATE_TAP_RATIO` times the direct
-   path's), the direct path's amplitudes are read again on the input samples with the late
-   paths' switches fitted as nuisance taps (:mod:`hil.estimation.late_taps`; no canceller
-   only): at image order 3 in the built-in tank their switches, 0.1-1 ms ahead of it, leak
-   through the next-tone window into its first :data:`DIRECT_S`.
+   the direct path) and GCAS's is kept. Where it is refused (or on the span's edge), GCAS
+   reads the target moving at :data:`LATE_TAP_MIN_SPEED_MPS` or more and the late paths are
+   there (their fitted power at least :data:`LATE_TAP_RATIO` times the direct path's), the
+   direct path's amplitudes are read again on the input samples with the late paths'
+   switches fitted as nuisance taps (:mod:`hil.estimation.late_taps`; no canceller only): at
+   image order 3 in the built-in tank their switches, 0.1-1 ms ahead of it, leak through the
+   next-tone window into its first :data:`DIRECT_S`.
 
 The range then comes from the first arrival instead of the centroid. Measured on the built-in
 simulated tank run (12 × 4 × 2.5 m, own echoes, reverberation, direct blast, 1.5 m/s tow),
@@ -219,10 +220,13 @@ DOPPLER_SPEED_GATE_MPS = 0.1
 #: Where the direct path's speed read on the next-tone channel is refused, it is read again with
 #: the late paths' switches fitted (:mod:`hil.estimation.late_taps`) when their taps hold at
 #: least this times the direct path's power: the late paths are there and leak into its first
-#: :data:`DIRECT_S`. Measured on the recorded detections of the seed-1 runs: where it read
-#: again, 0.91-393 (built-in tank, order 3), 0.81-54 (order 2), 1.02-347 (12 x 6 x 4 m, order
-#: 2); where it did not, at most 0.48 (order 1, the carriage's run-up, where the speed changes
-#: over the ``M`` hops) and 0.50 (order 2 and 12 x 6 x 4 m).
+#: :data:`DIRECT_S` (with no late path the taps fitted anyway hold less: the test of
+#: :mod:`hil.estimation.late_taps`). Measured on every refused reading of the seed-1 runs (the
+#: recorded detections, :data:`LATE_TAP_MIN_SPEED_MPS` aside): order 3 0.78-366 (69 of 69 at
+#: least 0.75), order 2 0.01-44 (61 of 79), 12 x 6 x 4 m order 2 0.17-325 (35 of 38), order 1
+#: 0.03-3.4 (7 of 21, at rest and in the run-up; none of them read a speed). So on these runs
+#: the speed bound, not this one, chooses where the second reading is tried: of order 3's 24
+#: readings at 1 m/s or more (0.78-15.6) it refuses none.
 LATE_TAP_RATIO = 0.75
 
 #: The second reading is tried only for a target GCAS reads closing or opening at this speed or
@@ -231,8 +235,9 @@ LATE_TAP_RATIO = 0.75
 #: the second reading moved speeds of the carriage at rest, in the run-up and in its stop
 #: 0.1-0.4 m/s further from the telemetry (0.25 m/s: 12 x 6 x 4 m tank, order 2, 0.105 ->
 #: 0.108 m/s, as 0.5); 0.75 and 1 m/s leave the order-2 runs' estimates as without it and take
-#: order 3 0.105 -> 0.096 m/s (scored 0.075 -> 0.046); 1.25 m/s scored 0.053. At order 1 every
-#: refused reading is below it (at rest and in the run-up), so the fit never runs there.
+#: order 3 0.105 -> 0.096 m/s (scored 0.075 -> 0.046); 1.25 m/s scored 0.053 (these with a tap
+#: on the fit's first sample allowed; left out, at 1 m/s: 0.095 and 0.045 m/s). At order 1
+#: every refused reading is below it (at rest and in the run-up): the fit never runs there.
 LATE_TAP_MIN_SPEED_MPS = 1.0
 
 

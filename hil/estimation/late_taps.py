@@ -27,8 +27,9 @@ its Doppler is read from it as from the channel's (``FirstArrivalReadout._direct
 
 Measured on the built-in tank at image order 3 (seed 1, the recorded detections replayed),
 as the readout's second reading where the next-tone channel's gives a speed slower than every
-image (``LATE_TAP_RATIO`` in :mod:`hil.estimation.first_arrival`): scored speed RMSE 0.075 ->
-0.046 m/s. Fitting every boundary this way instead (not done; measured with the taps chosen by
+image, for a target GCAS reads at 1 m/s or more (``LATE_TAP_RATIO`` and
+``LATE_TAP_MIN_SPEED_MPS`` in :mod:`hil.estimation.first_arrival`): scored speed RMSE 0.075 ->
+0.045 m/s. Fitting every boundary this way instead (not done; measured with the taps chosen by
 their match to the residual alone, orthogonal matching pursuit) gave 0.033-0.048 m/s there,
 but 0.021-0.023 m/s in the 12 x 6 x 4 m tank at order 2 (0.013 m/s on the channel), where an
 onset read 0.26-0.32 ms early on the far wall's switch puts the direct path's model where it
@@ -61,6 +62,9 @@ LATE_TAPS = 3
 #: Ridge added to the normal equations, relative to their mean diagonal: keeps a fit whose
 #: taps coincide solvable, far below the noise.
 RIDGE = 1e-9
+#: A tap's two real columns, made orthogonal to the fit's, count as one direction where the
+#: determinant of their products is below this fraction of the product of their norms².
+COLLINEAR = 1e-9
 
 
 @dataclass(frozen=True)
@@ -134,12 +138,19 @@ def direct_amplitudes(
         [_switch(ii, o, w_cur, w_next, j_cn), np.exp(1j * w_cur * ii), np.exp(1j * w_prev * ii)],
         axis=1,
     )  # (M, 3, N): the direct path, steady f_cur, steady f_prev
+    # Each late tap switches at a sample s of the grid: e^{j w_cur i} from s on, and before it
+    # e^{j w_prev i} times e^{j((w_cur − w_prev) s − jump)} (_switch's formula, its factors
+    # apart): one product per tap, no exponential of the (M, G, N) table.
     grid = np.arange(1, lead + 1, dtype=np.float64)[None, :, None]
-    taps = _switch(ii, grid, w_prev, w_cur, j_pc)  # (M, G, N): f_prev -> f_cur at each sample
+    at_switch = np.exp(1j * ((w_cur - w_prev) * grid - j_pc))  # (M, G, 1)
+    taps = np.where(ii >= grid, np.exp(1j * w_cur * ii), np.exp(1j * w_prev * ii) * at_switch)
     rows = np.arange(m)[:, None]
     chosen = np.zeros((m, 0), dtype=np.int64)
     # Each tap as two real columns: Re{g u} = Re g Re u − Im g Im u.
-    tap_re, tap_im = taps.real, -taps.imag
+    tap_re, tap_im = taps.real, -taps.imag  # (M, G, N) each
+    re_re = np.einsum("mgn,mgn->mg", tap_re, tap_re)  # (M, G): the columns' products, once
+    im_im = np.einsum("mgn,mgn->mg", tap_im, tap_im)
+    re_im = np.einsum("mgn,mgn->mg", tap_re, tap_im)
     while True:
         u = np.concatenate([base, taps[rows, chosen]], axis=1)  # (M, K, N)
         x = np.concatenate([u.real, -u.imag], axis=1)  # (M, 2K, N)
@@ -152,15 +163,26 @@ def direct_amplitudes(
             break
         # The tap that lowers the residual most once both its columns are made orthogonal
         # to the fit's (orthogonal least squares: neighbouring taps differ by one sample,
-        # so the best-matching one alone is not the best to add).
+        # so the best-matching one alone is not the best to add). With ``q`` an orthonormal
+        # basis of the fit's columns, a column ``t`` made orthogonal is ``t − q qᵀt``: its
+        # products follow from ``qᵀt`` (shape (M, G, 2K)) without forming it.
         q = np.linalg.qr(np.swapaxes(x, 1, 2))[0]  # (M, N, 2K)
-        a = tap_re - (tap_re @ q) @ np.swapaxes(q, 1, 2)  # (M, G, N)
-        b = tap_im - (tap_im @ q) @ np.swapaxes(q, 1, 2)
-        aa, bb, ab = np.sum(a * a, axis=2), np.sum(b * b, axis=2), np.sum(a * b, axis=2)
-        ar, br = a @ left[:, :, None], b @ left[:, :, None]
-        ar, br = ar[..., 0], br[..., 0]
-        det = np.maximum(aa * bb - ab * ab, 1e-300)
-        gain_g = (bb * ar * ar - 2.0 * ab * ar * br + aa * br * br) / det
+        pa, pb = tap_re @ q, tap_im @ q  # (M, G, 2K)
+        ql = np.einsum("mnk,mn->mk", q, left)[:, :, None]  # (M, 2K, 1)
+        aa = re_re - np.sum(pa * pa, axis=2)
+        bb = im_im - np.sum(pb * pb, axis=2)
+        ab = re_im - np.sum(pa * pb, axis=2)
+        ar = (tap_re @ left[:, :, None] - pa @ ql)[..., 0]
+        br = (tap_im @ left[:, :, None] - pb @ ql)[..., 0]
+        det = aa * bb - ab * ab
+        # A tap whose two columns are one direction once made orthogonal (the grid's first
+        # sample: it differs from the steady f_cur in one sample) adds nothing to fit: left out.
+        solid = det > COLLINEAR * np.maximum(aa * bb, 1e-300)
+        gain_g = np.where(
+            solid,
+            (bb * ar * ar - 2.0 * ab * ar * br + aa * br * br) / np.where(solid, det, 1.0),
+            0.0,
+        )
         gain_g[rows, chosen] = -1.0
         chosen = np.concatenate([chosen, np.argmax(gain_g, axis=1)[:, None]], axis=1)
     k = u.shape[1]

@@ -7,8 +7,13 @@ import numpy as np
 import pytest
 
 from hil.errors import ConfigError
-from hil.estimation.first_arrival import LATE_TAP_RATIO
+from hil.estimation.first_arrival import (
+    LATE_TAP_MIN_SPEED_MPS,
+    LATE_TAP_RATIO,
+    FirstArrivalReadout,
+)
 from hil.estimation.late_taps import LEAD_S, direct_amplitudes
+from hil.signals.presets import check_design, get_preset
 
 FS = 192_000.0
 LEAD = int(round(LEAD_S * FS))
@@ -99,3 +104,26 @@ def test_tables_of_another_boundary_count_are_refused() -> None:
             y, np.zeros(3, np.int64), np.full(3, 200.0), FREQS.T[:, :2].copy(), np.zeros((2, 3)),
             1.0, FS, LEAD,
         )  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("speed_mps", "cancel_period", "reads"),
+    [
+        (LATE_TAP_MIN_SPEED_MPS + 0.01, False, True),
+        (-(LATE_TAP_MIN_SPEED_MPS + 0.01), False, True),
+        (LATE_TAP_MIN_SPEED_MPS - 0.01, False, False),
+        (0.0, False, False),
+        (1.5, True, False),
+    ],
+)
+def test_the_second_reading_is_tried_for_a_moving_target_and_no_canceller_only(
+    speed_mps: float, cancel_period: bool, reads: bool
+) -> None:
+    """The check before the fit: GCAS's speed (closing or opening) at least
+    LATE_TAP_MIN_SPEED_MPS (1 m/s), and no period canceller."""
+    c = 1482.3
+    schedule = check_design(get_preset("tank-audio").spec("random-cyclic"))
+    readout = FirstArrivalReadout(schedule, FS, 10, c, cancel_period=cancel_period)
+    alpha = (c + speed_mps) / (c - speed_mps)
+    assert LATE_TAP_MIN_SPEED_MPS == 1.0
+    assert readout._reads_late_taps(alpha) is reads
