@@ -176,7 +176,8 @@ def direct_amplitudes(
         br = (tap_im @ left[:, :, None] - pb @ ql)[..., 0]
         det = aa * bb - ab * ab
         # A tap whose two columns are one direction once made orthogonal (the grid's first
-        # sample: it differs from the steady f_cur in one sample) adds nothing to fit: left out.
+        # sample: it differs from the steady f_cur in one sample only) would fit that sample,
+        # and its gain is a ratio of two rounding errors: left out.
         solid = det > COLLINEAR * np.maximum(aa * bb, 1e-300)
         gain_g = np.where(
             solid,
