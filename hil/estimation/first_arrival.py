@@ -55,7 +55,13 @@ For each of the ``M`` boundaries the GCAS detection used (receive times from its
    (:data:`DOPPLER_LAGS`) read other tone patterns with other sidelobes, so their scores are
    summed with this one to choose the lobe. A direct-path speed more than
    :data:`DIRECT_BELOW_GCAS_MPS` below GCAS's is a phase ambiguity (no image is faster than
-   the direct path) and GCAS's is kept.
+   the direct path) and GCAS's is kept. Where it is refused (or on the span's edge), GCAS
+   reads the target moving at :data:`LATE_TAP_MIN_SPEED_MPS` or more and the late paths are
+   there (their fitted power at least :data:`LATE_TAP_RATIO` times the direct path's), the
+   direct path's amplitudes are read again on the input samples with the late paths'
+   switches fitted as nuisance taps (:mod:`hil.estimation.late_taps`; no canceller only): at
+   image order 3 in the built-in tank their switches, 0.1-1 ms ahead of it, leak through the
+   next-tone window into its first :data:`DIRECT_S`.
 
 The range then comes from the first arrival instead of the centroid. Measured on the built-in
 simulated tank run (12 × 4 × 2.5 m, own echoes, reverberation, direct blast, 1.5 m/s tow),
@@ -86,6 +92,7 @@ from numpy.typing import NDArray
 
 from hil.errors import ConfigError
 from hil.estimation.detection import parabolic_offset
+from hil.estimation.late_taps import LEAD_S, DirectFit, direct_amplitudes
 from hil.estimation.reverb_band import doppler_resolution_mps
 from hil.estimation.row_buffer import RowBuffer
 from hil.signals.schedule import HopSchedule, HopTable
@@ -210,6 +217,28 @@ DOPPLER_GATE_S = 0.5e-3
 #: 0.111 m/s, 0.1 m/s 0.105 (0.091 without the sum); 0.05 m/s left out enough of the scored
 #: stretch's sums to raise its speed RMSE from 0.013 to 0.019.
 DOPPLER_SPEED_GATE_MPS = 0.1
+#: Where the direct path's speed read on the next-tone channel is refused, it is read again with
+#: the late paths' switches fitted (:mod:`hil.estimation.late_taps`) when their taps hold at
+#: least this times the direct path's power: the late paths are there and leak into its first
+#: :data:`DIRECT_S` (with no late path the taps fitted anyway hold less: the test of
+#: :mod:`hil.estimation.late_taps`). Measured on every refused reading of the seed-1 runs (the
+#: recorded detections, :data:`LATE_TAP_MIN_SPEED_MPS` aside): order 3 0.78-366 (69 of 69 at
+#: least 0.75), order 2 0.01-44 (61 of 79), 12 x 6 x 4 m order 2 0.17-325 (35 of 38), order 1
+#: 0.03-3.4 (7 of 21, at rest and in the run-up; none of them read a speed). So on these runs
+#: the speed bound, not this one, chooses where the second reading is tried: of order 3's 24
+#: readings at 1 m/s or more (0.78-15.6) it refuses none.
+LATE_TAP_RATIO = 0.75
+
+#: The second reading is tried only for a target GCAS reads closing or opening at this speed or
+#: more, m/s: a check on what is at hand, before the fit. Measured (seed-1 runs, the recorded
+#: detections replayed, speed RMSE over every estimate with a truth / scored): with no bound
+#: the second reading moved speeds of the carriage at rest, in the run-up and in its stop
+#: 0.1-0.4 m/s further from the telemetry (0.25 m/s: 12 x 6 x 4 m tank, order 2, 0.105 ->
+#: 0.108 m/s, as 0.5); 0.75 and 1 m/s leave the order-2 runs' estimates as without it and take
+#: order 3 0.105 -> 0.096 m/s (scored 0.075 -> 0.046); 1.25 m/s scored 0.053 (these with a tap
+#: on the fit's first sample allowed; left out, at 1 m/s: 0.095 and 0.045 m/s). At order 1
+#: every refused reading is below it (at rest and in the run-up): the fit never runs there.
+LATE_TAP_MIN_SPEED_MPS = 1.0
 
 
 def _mean(x: NDArray[np.float64], axis: int) -> NDArray[np.float64]:
@@ -516,8 +545,72 @@ class FirstArrivalReadout:
                 np.sum(np.abs(shape) ** 2, axis=1), 1e-300
             )
             direct_alpha = self._direct_alpha(p, hops, n_b, alpha, hop_index, onset - ends[0])
+            if direct_alpha is None and self._reads_late_taps(alpha):
+                direct_alpha = self._second_reading(
+                    table, hop_index, first_hop, t_b * fs + rel * fs, alpha, hops, n_b,
+                    onset - ends[0],
+                )  # fmt: skip
         return FirstArrival(
             onset - min(0.0, delta), alpha if direct_alpha is None else direct_alpha
+        )
+
+    def _reads_late_taps(self, alpha: float) -> bool:
+        """Whether a refused direct-path speed is read again with the late paths fitted
+        (:meth:`_second_reading`): with no canceller only (its copy one period back is not in
+        the tap model), for a target GCAS reads moving at :data:`LATE_TAP_MIN_SPEED_MPS` or
+        more (``alpha``: GCAS's time scale)."""
+        v_gcas = self.sound_speed_mps * (alpha - 1.0) / (alpha + 1.0)
+        return not self.period and abs(v_gcas) >= LATE_TAP_MIN_SPEED_MPS
+
+    def _second_reading(
+        self,
+        table: HopTable,
+        hop_index: int,
+        first_hop: int,
+        onset_n: NDArray[np.float64],
+        alpha: float,
+        hops: HopTable,
+        n_b: NDArray[np.int64],
+        delay_s: float,
+    ) -> float | None:
+        """The direct path's time scale read again on the input samples with the late paths'
+        switches fitted (:meth:`_late_tap_fit`), where the late taps hold at least
+        :data:`LATE_TAP_RATIO` times the direct path's power; None otherwise (GCAS's is
+        kept). Where it is read, its Doppler score takes the first reading's place among the
+        scores the next detections sum with. ``table``: the hops from ``first_hop``;
+        ``onset_n``: each boundary's switch, absolute samples (shape ``(M,)``); ``delay_s``:
+        the first arrival less the newest boundary's transmit time, s."""
+        fit = self._late_tap_fit(table, hop_index - first_hop, onset_n, alpha)
+        if fit.late_ratio < LATE_TAP_RATIO:
+            return None
+        last = self._scores[-1] if self._scores else None
+        if last is not None and (last.hop_index, last.delay_s) == (hop_index, delay_s):
+            self._scores.pop()
+        return self._direct_alpha(fit.amplitude, hops, n_b, alpha, hop_index, delay_s)
+
+    def _late_tap_fit(
+        self, table: HopTable, h: int, onset: NDArray[np.float64], alpha: float
+    ) -> DirectFit:
+        """The direct path's complex amplitude at the ``M`` boundaries (shape ``(M,)``) by
+        :func:`hil.estimation.late_taps.direct_amplitudes` on the input samples: its first
+        :data:`DIRECT_S` after ``onset`` (absolute samples, shape ``(M,)``) and
+        :data:`~hil.estimation.late_taps.LEAD_S` before, the late paths' switches fitted.
+        ``table``: the hops from ``h − M`` (``h``: the row of hop ``hop_index``, the newest
+        boundary's) to ``h + 1``."""
+        fs = self.fs_hz
+        m = self.m_hops
+        lead = int(round(LEAD_S * fs))
+        first = np.ceil(onset).astype(np.int64) - lead
+        idx = first[:, None] + np.arange(lead + int(round(DIRECT_S * fs)) + 1)[None, :]
+        y = self._ring.rows(idx)
+        tones = table.freq_hz[h - m : h + 2][::-1]  # tone of hop h + 1 − k at row k
+        freqs = np.stack([tones[2 : m + 2], tones[1 : m + 1], tones[:m]])  # (3, M)
+        jump_cn = self._phase_jumps(
+            _hop_slice(table, h - m + 2, m), _hop_slice(table, h - m + 1, 1)
+        )
+        jump_pc = self._phase_jumps(_hop_slice(table, h - m + 1, m), _hop_slice(table, h - m, 1))
+        return direct_amplitudes(
+            y, first, onset, freqs, np.stack([jump_pc, jump_cn]), alpha, fs, lead
         )
 
     @staticmethod
