@@ -146,6 +146,17 @@ SAME_ECHO_LOBES = 1.5
 #: that align with the echo's hops change along the comb and its ghost peak spreads (measured
 #: 0.02-0.50 hop at M = 15, over ±0.3 hop at M = 22, anywhere in the hop at M = 29).
 GHOST_HOPS = 0.25
+#: A detection on the span's edge hypothesis where a measured echo's ghost lies beyond that
+#: edge (more than one Doppler cell of a hop past it, at most GHOST_LEAK_CELLS: the reach of
+#: the Doppler response's tail, as the beyond-span check's guard band) is that ghost's leak
+#: when its strength read without a fit is at most GHOST_LEAK_FRACTION of the echo's
+#: (:meth:`CoherentRefiner.ghost_of_known`). Measured on att (a target going to and fro at
+#: 9 m/s, its ghost at 36.5 m/s beyond a 30 m/s span, 6 s): 314 edge detections, each
+#: 0.02-0.089 of the echo, every one refused by its fit (E/N0 6-9 dB); a ghost's own peak
+#: reads 0.15-0.34 of its echo. An echo at the edge weaker than that beside a strong one is
+#: given up; one 10 dB weaker (0.32) is fitted.
+GHOST_LEAK_FRACTION = 0.15
+GHOST_LEAK_CELLS = 3.0
 #: Times across ±½ grating lobe at which a detection's strength is read against the echo
 #: whose ghost it may be (:meth:`CoherentRefiner._amplitude_near`): the likelihood's main
 #: peak is ``1/B`` wide (``B`` the tones' span), a lobe holds about K of them (att: 4).
@@ -449,7 +460,7 @@ class CoherentRefiner:
             self._remember(fit, hop_index)
         return fit
 
-    def ghost_of_known(self, t_s: float, alpha: float, hop_index: int) -> bool:
+    def ghost_of_known(self, t_s: float, alpha: float, hop_index: int, edge_side: int = 0) -> bool:
         """Whether a detection at ``t_s`` (s) and time scale ``alpha``, the boundary ending
         hop ``hop_index``, is the ghost of an echo measured lately, where that echo's every
         tone is read as its neighbour: one tone spacing's speed away from it (within one
@@ -458,9 +469,27 @@ class CoherentRefiner:
         weaker than it (a ghost collects part of its echo's energy: a detection stronger than
         the measured echo is that echo's source, the measured one its ghost, as when a weak
         ghost passed the echo test first). Such a detection is refused without a fit; a
-        second echo exactly there is given up."""
+        second echo exactly there is given up.
+
+        On the span's edge hypothesis (``edge_side`` +1 closing, −1 opening; 0 elsewhere), a
+        ghost beyond that edge (more than one Doppler cell past the detection's speed, at
+        most :data:`GHOST_LEAK_CELLS`) leaks into it at any time of the echo's hops: there
+        the detection is the leak when it is at most :data:`GHOST_LEAK_FRACTION` of the
+        echo's strength."""
         speed = self.c * (alpha - 1.0) / (alpha + 1.0)
         amplitude: float | None = None
+        if edge_side:
+            leak_of = [
+                abs(e.amplitude) for e in self._echoes
+                if abs(e.t_s - t_s) <= KNOWN_HOPS * self.hop_len_s
+                and self._cell_speed
+                < edge_side * (e.speed(self.c) + edge_side * self._ghost_speed - speed)
+                <= GHOST_LEAK_CELLS * self._cell_speed
+            ]  # fmt: skip
+            if leak_of:
+                inside = self._amplitude_near(t_s, alpha, hop_index, inward=-edge_side)
+                if inside <= GHOST_LEAK_FRACTION * max(leak_of):
+                    return True
         for i, e in enumerate(self._echoes):
             if abs(abs(speed - e.speed(self.c)) - self._ghost_speed) > self._cell_speed:
                 continue
@@ -479,14 +508,26 @@ class CoherentRefiner:
                 return True
         return False
 
-    def _amplitude_near(self, t_s: float, alpha: float, hop_index: int) -> float:
+    def _amplitude_near(self, t_s: float, alpha: float, hop_index: int, inward: int = 0) -> float:
         """The largest fitted amplitude ``|β| = 2|C|/E_s`` of an echo of constant speed
         within ±½ grating lobe of ``t_s`` (s, :data:`GHOST_POINTS` times) at the detection's
         time scale ``alpha``: a detection's strength without its fit (0 where the input does
-        not cover its hops)."""
+        not cover its hops). With ``inward`` (+1 or −1, the sign of the speeds toward the
+        span's inside from a detection on its edge hypothesis, whose speed the detector
+        cannot interpolate) also at the speeds up to the speed span that way, every half
+        Doppler resolution cell of the ``M`` hops (an echo 0.2 m/s inside the edge reads a
+        third of its amplitude at the edge's speed on att)."""
         lobe = 1.0 / (alpha * self.spacing_hz)
-        t = t_s + lobe * np.linspace(-0.5, 0.5, GHOST_POINTS)
-        sums = self._sums(t_s, alpha, hop_index, t, np.full(t.size, alpha), np.zeros(t.size))
+        t1 = t_s + lobe * np.linspace(-0.5, 0.5, GHOST_POINTS)
+        alphas1 = np.array([alpha])
+        if inward:
+            speed = self.c * (alpha - 1.0) / (alpha + 1.0)
+            steps = int(math.ceil(self.speed_span_mps / (0.5 * self._v_res)))
+            v = speed + inward * np.linspace(0.0, self.speed_span_mps, steps + 1)
+            alphas1 = (self.c + v) / (self.c - v)
+        t = np.ascontiguousarray(np.tile(t1, alphas1.size))
+        alphas = np.ascontiguousarray(np.repeat(alphas1, t1.size))
+        sums = self._sums(t_s, alpha, hop_index, t, alphas, np.zeros(t.size))
         if sums is None:
             return 0.0
         c, e_s = sums

@@ -246,7 +246,7 @@ class Readout:
         if self._refiner is not None:
             if self.hidden is not None:
                 self.hidden.measure_near(t_rx, p.peak - p.mean)
-            if self._refiner.ghost_of_known(t_rx, alpha, hop_index):
+            if self._refiner.ghost_of_known(t_rx, alpha, hop_index, self._edge_side(p.d0)):
                 self.incoherent_count += 1
                 return None
             refined = self._refiner.refine(t_rx, alpha, hop_index)
