@@ -9,11 +9,12 @@ and one worker per core (``os.cpu_count()``; the counts are deduplicated). Two t
 - ``ch6``: ``ch6_receiver``, GCAS on 0.8 s of the ``att`` preset at −10 dB (the chapter-6
   trial, about 0.35 s of CPU each).
 
-Workers start, and every worker runs a short warm-up sweep of the same trial, before the clock
-starts (imports, compiled kernels loaded): a long sweep's steady state is what is timed. Per
-runner and count the bench prints trials/s, the parallel efficiency ``rate(n) / (n ·
-rate(1))`` of that runner, CPU s per trial, and the Dask/pool ratio of trials/s at the same
-count. Target: Dask at least 0.8 × the pool at every count (within 20 %).
+Workers start (one pool or cluster per runner and count, serving both kinds in turn), and
+every worker runs a short warm-up sweep of the same trial, before the clock starts (imports,
+compiled kernels loaded): a long sweep's steady state is what is timed. Per runner and count
+the bench prints trials/s, the parallel efficiency ``rate(n) / (n · rate(1))`` of that runner,
+CPU s per trial, and the Dask/pool ratio of trials/s at the same count. Target: Dask at least
+0.8 × the pool at every count (within 20 %).
 
     python benchmarks/bench_sweep.py            # the full run (a few minutes on 2 cores)
     python benchmarks/bench_sweep.py --quick    # smoke run, a minute
@@ -81,18 +82,17 @@ def make(runner: str, workers: int) -> Runner:
     return LocalPoolRunner(workers) if runner == "pool" else DaskRunner(n_workers=workers)
 
 
-def measure(runner: str, workers: int, kind: str, trials: int, out: Path) -> dict[str, float]:
-    """Trials/s of ``trials`` trials of ``kind`` on a fresh ``runner`` of ``workers``
-    (start-up and one warm-up sweep of 2 trials per worker not timed)."""
+def measure(r: Runner, workers: int, kind: str, trials: int, out: Path) -> dict[str, float]:
+    """Trials/s of ``trials`` trials of ``kind`` on the started runner ``r`` of ``workers``
+    (one warm-up sweep of 2 trials per worker of the same kind first, not timed)."""
     warm = sweep_from_dict(sweep_doc(kind, 2 * workers, "warm"))
     spec = sweep_from_dict(sweep_doc(kind, trials, "bench"))
-    with make(runner, workers) as r:
-        run_sweep(warm, out / "warm", r, show_progress=False)
-        load = os.getloadavg()[0]
-        cpu_before = time.process_time()
-        start = time.perf_counter()
-        outcome = run_sweep(spec, out / "bench", r, show_progress=False)
-        seconds = time.perf_counter() - start
+    run_sweep(warm, out / "warm", r, show_progress=False)
+    load = os.getloadavg()[0]
+    cpu_before = time.process_time()
+    start = time.perf_counter()
+    outcome = run_sweep(spec, out / "bench", r, show_progress=False)
+    seconds = time.perf_counter() - start
     if outcome.n_failed or not outcome.complete:
         raise SystemExit(f"benchmark sweep incomplete: {outcome.n_failed} failed")
     n = len(outcome.records)
@@ -126,13 +126,17 @@ def main() -> None:
     counts = [1, 2] if args.quick else worker_counts()
     rows: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory() as tmp:
-        for kind in kinds:
-            trials = KINDS[kind]["quick_trials" if args.quick else "trials"]
-            for runner in ("pool", "dask"):
-                for n in counts:
-                    out = Path(tmp) / f"{kind}-{runner}-{n}"
-                    rows.append({"kind": kind, "runner": runner, "workers": n,
-                                 **measure(runner, n, kind, trials, out)})  # fmt: skip
+        # One runner per (runner, count) serves every kind: its start-up is not timed, and
+        # each kind's own warm-up sweep comes before its timed one.
+        for runner in ("pool", "dask"):
+            for n in counts:
+                with make(runner, n) as r:
+                    for kind in kinds:
+                        trials = KINDS[kind]["quick_trials" if args.quick else "trials"]
+                        out = Path(tmp) / f"{kind}-{runner}-{n}"
+                        rows.append({"kind": kind, "runner": runner, "workers": n,
+                                     **measure(r, n, kind, trials, out)})  # fmt: skip
+    rows.sort(key=lambda row: kinds.index(row["kind"]))  # stable: per kind, runner, count
     _derive(rows)
     _print_table(rows)
     worst = min((r["dask_over_pool"] for r in rows if r["runner"] == "dask"), default=0.0)

@@ -35,8 +35,8 @@ from hil.experiments.tank_run import LiveView, RunOutcome, run_experiment
 
 #: wall / signal to reach: 10x real time.
 TARGET_RATIO = 0.1
-# --quick: a 1.5 m pass instead of 3 m (the smoke test of the script, not the figure).
-QUICK = DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -3.5")
+# --quick: a 0.5 m pass instead of 3 m (the smoke test of the script, not the figure).
+QUICK = DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -2.5")
 
 
 def _run(text: str, folder: Path) -> RunOutcome:
