@@ -452,7 +452,6 @@ def codeword_sums(
     cache_p: Any,
     cache_max: Any,
     cache_n: Any,
-    margin: int,
     hyp_w: Any,
     prune: bool,
     out: Any,
@@ -470,8 +469,8 @@ def codeword_sums(
     the whole anchor group at once, and kept, weighted by ``w``, in ``cache_p`` (shape
     ``(D, K, cap)``, ``cap`` a power of two, slot ``n mod cap``) with its maximum over ``k``
     in ``cache_max`` (shape ``(D, cap)``), stamped in ``cache_n`` (shape ``(D, cap)``) when
-    sample ``n`` has arrived (``n < n_avail``); a run with a missing sample fills every
-    group within ``margin`` samples of it. Consecutive candidates share ``M − 1`` of their
+    sample ``n`` has arrived (``n < n_avail``); a run with a missing sample fills the groups
+    of its samples not yet kept. Consecutive candidates share ``M − 1`` of their
     ``M`` terms (a few samples apart), so each computes about one new term per hypothesis.
     ``table`` holds the phasor ``e^{−j2π ν[d, k] i/fs}`` for ``i < max N + anchor − 1``
     (shape ``(D, ·, K, 2)``).
@@ -515,11 +514,11 @@ def codeword_sums(
                         bound[t] += top[slot]
                         t += 1
                         continue
-                    # Fill every anchor group within `margin` of the run: the next candidate's
-                    # runs sit a few samples off this one's (coarse quantisation), and would
-                    # otherwise miss at their edges every time.
-                    g = ((s0 - margin - n_len + 1) // anchor) * anchor
-                    g_end = s0 + width - 1 + margin - n_len + 1
+                    # Fill the anchor groups of the run's missing samples only: filling
+                    # groups beyond the run ahead of the next candidates' runs (a few samples
+                    # off this one's) computes more groups than it saves misses.
+                    g = ((s0 - n_len + 1) // anchor) * anchor
+                    g_end = s0 + width - 1 - n_len + 1
                     while g <= g_end:
                         first = g + n_len - 1
                         need = False
