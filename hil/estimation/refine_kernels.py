@@ -114,21 +114,29 @@ def _fill_slot(
 @numba.njit(**_JIT)
 def assign_slots(
     slot_hop: Any, slot_edge: Any, slot_alpha: Any, slot_used: Any, slot_first: Any,
-    slot_tail: Any, slot_centre: Any, clock: int, hop_ids: Any, edge: Any, centre: Any,
-    f: Any, alpha: float, slack: float, alpha_tol: float, half: int, span: int,
+    slot_tail: Any, slot_centre: Any, clock: int, hop_ids: Any, t_s: float, dt_lo: Any,
+    dt_hi: Any, f: Any, alpha: float, slack: float, alpha_tol: float, half: int, span: int,
     valid_from: int, next_index: int, x: Any, x_origin: int, fs: float, hop_samples: float,
     prefix: Any, energy: Any, out: Any,
 ) -> bool:  # fmt: skip
-    """The table slot of each hop of a detection into ``out`` (shape ``(M,)``): a kept slot
-    of that hop made for a lower window edge within ``slack`` samples of ``edge`` (absolute
-    samples, shape ``(M,)``) and a time scale within ``alpha_tol`` of ``alpha``, else the
+    """The table slot of each hop of a detection at ``t_s`` (s) and time scale ``alpha``
+    into ``out`` (shape ``(M,)``). Hop ``i`` (transmit edges ``dt_lo[i]``, ``dt_hi[i]`` s
+    from the boundary, tone ``f[i]`` Hz) has its lower window edge at
+    ``edge = (t_s + dt_lo/alpha)·fs`` (absolute samples) and its centre at
+    ``t_s + ½ (dt_lo + dt_hi)/alpha`` (s): a kept slot of that hop made for an edge within
+    ``slack`` samples of it and a time scale within ``alpha_tol`` of ``alpha``, else the
     least recently used slot not taken by this detection, filled now (:func:`_fill_slot`,
-    from ``edge − half`` for ``span`` samples, demodulated at ``f·alpha`` about ``centre``,
-    s). ``x`` holds absolute sample ``x_origin + i`` at ``i``; samples from ``valid_from``
-    to ``next_index`` are real input. Slot arrays shape ``(S,)`` are updated; ``clock`` marks
+    from ``edge − half`` for ``span`` samples, demodulated at ``f·alpha`` about the centre).
+    ``x`` holds absolute sample ``x_origin + i`` at ``i``; samples from ``valid_from`` to
+    ``next_index`` are real input. Slot arrays shape ``(S,)`` are updated; ``clock`` marks
     the use. False where a hop to fill is not covered by the input."""
     m_hops = hop_ids.shape[0]
     n_slots = slot_hop.shape[0]
+    edge = np.empty(m_hops)
+    centre = np.empty(m_hops)
+    for i in range(m_hops):
+        edge[i] = (t_s + dt_lo[i] / alpha) * fs
+        centre[i] = t_s + 0.5 * (dt_lo[i] + dt_hi[i]) / alpha
     for i in range(m_hops):
         out[i] = -1
         for s in range(n_slots):
@@ -509,12 +517,18 @@ def maximise(
     step_t *= 0.5
     step_v *= 0.5
     z = np.empty((3, 3))
+    # The stencil's centre is a point already evaluated (the grid's best, or the best of the
+    # last stencil where its fit did not move): the same arguments, so the same value.
+    z_centre = best
     for _ in range(passes):
         for i in range(3):
             vv = v + (i - 1) * step_v
             a = (c_mps + vv) / (c_mps - vv)
             d_c_a = _line(alpha0, slots, f, dt_lo, dt_hi, hop_s, a, gamma, consts, coef)
             for j in range(3):
+                if i == 1 and j == 1 and z_centre >= 0.0:
+                    z[1, 1] = z_centre
+                    continue
                 cc, _, _ = _candidate(
                     prefix, energy, first, tail, centre, slots, k, amp2, fs,
                     t + (j - 1) * step_t, curved, d_c_a, consts, coef, none, known, near,
@@ -529,6 +543,7 @@ def maximise(
         htv = 0.25 * (z[2, 2] - z[2, 0] - z[0, 2] + z[0, 0])
         det = htt * hvv - htv * htv
         moved = False
+        z_centre = -1.0
         if htt < 0.0 and hvv < 0.0 and det > 0.0:
             x = (-hvv * gt + htv * gv) / det
             y = (htv * gt - htt * gv) / det
@@ -545,6 +560,7 @@ def maximise(
                         bi, bj = i, j
             t += (bj - 1) * step_t
             v += (bi - 1) * step_v
+            z_centre = z[bi, bj]
         step_t *= 0.5
         step_v *= 0.5
     return t, v, FOUND
