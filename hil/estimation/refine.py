@@ -540,16 +540,18 @@ class CoherentRefiner:
         carries on) and forgetting fits :data:`KNOWN_HOPS` hops old."""
         if fit.amplitude == 0:
             return
-        new = _EchoFit(hop_index, fit.t_s, fit.alpha, fit.amplitude, fit.rate(self.c))
+        speed = self.c * (fit.alpha - 1.0) / (fit.alpha + 1.0)  # _EchoFit.speed
         oldest = fit.t_s - KNOWN_HOPS * self.hop_len_s
         kept = []
+        weaker = False
         for e in self._echoes:
             if e.t_s < oldest:
                 continue
-            if self._same_echo(e, hop_index, fit.t_s, new.speed(self.c)):
-                new = replace(new, ghosts_weaker=e.ghosts_weaker or new.ghosts_weaker)
+            if self._same_echo(e, hop_index, fit.t_s, speed):
+                weaker = weaker or e.ghosts_weaker
             else:
                 kept.append(e)
+        new = _EchoFit(hop_index, fit.t_s, fit.alpha, fit.amplitude, fit.rate(self.c), weaker)
         self._echoes = [*kept, new]
 
     def _same_echo(self, fit: _EchoFit, hop_index: int, t_s: float, speed: float) -> bool:
@@ -1000,16 +1002,14 @@ class CoherentRefiner:
         one filled now (:func:`~hil.estimation.refine_kernels.assign_slots`); None where the
         input does not cover a hop's window."""
         fs = self.fs_hz
-        _, _, dt_lo, dt_hi, _ = word.hops
-        edge = (t_s + dt_lo / alpha) * fs  # lower window edges, absolute samples
-        centre = t_s + 0.5 * (dt_lo + dt_hi) / alpha  # the hops' centres, s
+        _, f, dt_lo, dt_hi, _ = word.hops
         span = int(math.ceil(self.hop_len_s / alpha * fs)) + 2 * self._half + 2
         slots = np.empty(hop_ids.shape[0], dtype=np.int64)
         self._clock += 1
         ring = self._ring
         covered = assign_slots(
             self._hop, self._edge, self._alpha0, self._used, self._first, self._tail,
-            self._centre, self._clock, hop_ids, edge, centre, word.hops[1], alpha,
+            self._centre, self._clock, hop_ids, float(t_s), dt_lo, dt_hi, f, float(alpha),
             REUSE_SLACK, self._alpha_tol, self._half, span, self._valid_from, ring.next_index,
             ring.array, ring.next_index - ring.available, fs, self.hop_len_s * fs,
             self._prefix, self._energy, slots,

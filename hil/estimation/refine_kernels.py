@@ -114,21 +114,29 @@ def _fill_slot(
 @numba.njit(**_JIT)
 def assign_slots(
     slot_hop: Any, slot_edge: Any, slot_alpha: Any, slot_used: Any, slot_first: Any,
-    slot_tail: Any, slot_centre: Any, clock: int, hop_ids: Any, edge: Any, centre: Any,
-    f: Any, alpha: float, slack: float, alpha_tol: float, half: int, span: int,
+    slot_tail: Any, slot_centre: Any, clock: int, hop_ids: Any, t_s: float, dt_lo: Any,
+    dt_hi: Any, f: Any, alpha: float, slack: float, alpha_tol: float, half: int, span: int,
     valid_from: int, next_index: int, x: Any, x_origin: int, fs: float, hop_samples: float,
     prefix: Any, energy: Any, out: Any,
 ) -> bool:  # fmt: skip
-    """The table slot of each hop of a detection into ``out`` (shape ``(M,)``): a kept slot
-    of that hop made for a lower window edge within ``slack`` samples of ``edge`` (absolute
-    samples, shape ``(M,)``) and a time scale within ``alpha_tol`` of ``alpha``, else the
+    """The table slot of each hop of a detection at ``t_s`` (s) and time scale ``alpha``
+    into ``out`` (shape ``(M,)``). Hop ``i`` (transmit edges ``dt_lo[i]``, ``dt_hi[i]`` s
+    from the boundary, tone ``f[i]`` Hz) has its lower window edge at
+    ``edge = (t_s + dt_lo/alpha)·fs`` (absolute samples) and its centre at
+    ``t_s + ½ (dt_lo + dt_hi)/alpha`` (s): a kept slot of that hop made for an edge within
+    ``slack`` samples of it and a time scale within ``alpha_tol`` of ``alpha``, else the
     least recently used slot not taken by this detection, filled now (:func:`_fill_slot`,
-    from ``edge − half`` for ``span`` samples, demodulated at ``f·alpha`` about ``centre``,
-    s). ``x`` holds absolute sample ``x_origin + i`` at ``i``; samples from ``valid_from``
-    to ``next_index`` are real input. Slot arrays shape ``(S,)`` are updated; ``clock`` marks
+    from ``edge − half`` for ``span`` samples, demodulated at ``f·alpha`` about the centre).
+    ``x`` holds absolute sample ``x_origin + i`` at ``i``; samples from ``valid_from`` to
+    ``next_index`` are real input. Slot arrays shape ``(S,)`` are updated; ``clock`` marks
     the use. False where a hop to fill is not covered by the input."""
     m_hops = hop_ids.shape[0]
     n_slots = slot_hop.shape[0]
+    edge = np.empty(m_hops)
+    centre = np.empty(m_hops)
+    for i in range(m_hops):
+        edge[i] = (t_s + dt_lo[i] / alpha) * fs
+        centre[i] = t_s + 0.5 * (dt_lo[i] + dt_hi[i]) / alpha
     for i in range(m_hops):
         out[i] = -1
         for s in range(n_slots):
@@ -272,7 +280,7 @@ def _window(
 def _candidate(
     prefix: Any, energy: Any, first: Any, tail: Any, centre: Any, slots: Any, k: Any,
     amp2: Any, fs: float, t_rx: float, curved: bool, d_c_alpha: float, consts: Any,
-    coef: Any, per_hop: Any, known: Any, near: Any, n_near: Any,
+    coef: Any, per_hop: Any, known: Any, near: Any, n_near: Any, rot_key: Any, rot: Any,
 ) -> tuple[complex, float, float]:  # fmt: skip
     """``(C, Σ a_i² N_i, input energy in the windows)`` of one candidate at ``t_rx`` (s) on
     the line whose per-hop constants :func:`_line` made (``consts``, ``coef``, and
@@ -293,7 +301,7 @@ def _candidate(
     hops of other echoes already measured, whose part of each term and of the energy is
     taken out (:func:`_known_part`; shape ``(5, Q)``), of which hop ``i`` reads the columns
     ``near[i, :n_near[i]]`` (ascending; every column that can overlap its window:
-    :func:`_columns_near`).
+    :func:`_columns_near`); ``rot_key`` and ``rot`` its rotations kept (:func:`_known_part`).
     """
     total = complex(0.0, 0.0)
     model = 0.0
@@ -314,7 +322,7 @@ def _candidate(
         term_i = k[i] * complex(math.cos(ph), math.sin(ph)) * z
         if n_near[i]:
             part, energy_part = _known_part(
-                known, near, i, n_near[i], t_i, lo_s, hi_s, consts[_FA, i]
+                known, near, i, n_near[i], t_i, lo_s, hi_s, consts[_FA, i], rot_key, rot
             )
             kp = k[i] * part
             term_i -= complex(kp.real * fs, kp.imag * fs)
@@ -330,7 +338,7 @@ def _candidate(
 @numba.njit(**_JIT)
 def _known_part(
     known: Any, near: Any, i: int, n_near: int, t_rx: float, lo: float, hi: float,
-    f_rx: float,
+    f_rx: float, rot_key: Any, rot: Any,
 ) -> tuple[complex, float]:  # fmt: skip
     """What the hops of other echoes already measured put into one hop's term (before its
     transmit phasor and the sample rate) and into its window's energy (per sample rate).
@@ -344,6 +352,11 @@ def _known_part(
     ``Σ_h w_h e^{j2π g_h (t_rx − t_e)} ∫ e^{j2π (g_h − f_rx) τ} dτ`` over the overlap
     (``τ = t − t_rx``), the energy ``Σ_h 2|w_h|²`` times the overlap's length. Only the
     columns ``near[i, :n_near]`` are read (the others cannot overlap the window).
+
+    ``rot_key`` (float, shape ``(Q,)``) and ``rot`` (complex, shape ``(Q,)``) keep each
+    column's ``e^{j2π g_h (t_rx − t_e)}`` with the ``t_rx`` it was made for: a candidate of
+    the same ``t_rx`` (a search grid's column, the other hops over that column) reads it
+    instead of a remainder and a sine and cosine, the same value; shape ``(0,)`` keeps none.
     """
     part = complex(0.0, 0.0)
     energy = 0.0
@@ -355,8 +368,14 @@ def _known_part(
             continue
         g = known[1, h].real
         w = known[0, h]
-        cyc = (g * (t_rx - known[4, h].real)) % 1.0
-        rot = complex(math.cos(2.0 * math.pi * cyc), math.sin(2.0 * math.pi * cyc))
+        if rot_key.shape[0] and rot_key[h] == t_rx:
+            r = rot[h]
+        else:
+            cyc = (g * (t_rx - known[4, h].real)) % 1.0
+            r = complex(math.cos(2.0 * math.pi * cyc), math.sin(2.0 * math.pi * cyc))
+            if rot_key.shape[0]:
+                rot_key[h] = t_rx
+                rot[h] = r
         x = 2.0 * math.pi * (g - f_rx)
         ta = a - t_rx
         tb = b - t_rx
@@ -368,7 +387,7 @@ def _known_part(
             p = math.cos(x * tb) - math.cos(x * ta)
             q = math.sin(x * tb) - math.sin(x * ta)
             integral = complex(q / x, -p / x)
-        part += w * rot * integral
+        part += w * r * integral
         energy += 2.0 * (w.real * w.real + w.imag * w.imag) * (b - a)
     return part, energy
 
@@ -435,6 +454,7 @@ def candidate_sums(
     """
     consts, coef = _scratch(slots, prefix)
     near, n_near = _every_column(slots.shape[0], known)
+    no_key, no_rot = np.empty(0), np.empty(0, dtype=np.complex128)  # no rotations kept
     d_c_alpha = 0.0
     for c in range(t_rx.shape[0]):
         if c == 0 or alpha[c] != alpha[c - 1] or gamma[c] != gamma[c - 1]:
@@ -443,7 +463,7 @@ def candidate_sums(
             )
         out_c[c], out_model[c], out_signal[c] = _candidate(
             prefix, energy, first, tail, centre, slots, k, amp2, fs, t_rx[c], gamma[c] != 0.0,
-            d_c_alpha, consts, coef, per_hop[c], known, near, n_near,
+            d_c_alpha, consts, coef, per_hop[c], known, near, n_near, no_key, no_rot,
         )  # fmt: skip
 
 
@@ -484,6 +504,11 @@ def maximise(
         a_lo = (c_mps + v0 - reach_v) / (c_mps - v0 + reach_v)
         a_hi = (c_mps + v0 + reach_v) / (c_mps - v0 - reach_v)
         near, n_near = _columns_near(known, dt_lo, dt_hi, t0 - reach_t, t0 + reach_t, a_lo, a_hi)
+    # Each time column of the grid (and of the stencil) keeps the known columns' rotations:
+    # its candidates share their t_rx across the speeds (NaN: none kept yet).
+    n_cols = known.shape[1]
+    rot_key = np.full((max(n_t, 3), n_cols), np.nan)
+    rot = np.empty((max(n_t, 3), n_cols), dtype=np.complex128)
     best = -1.0
     bi = 0
     bj = 0
@@ -495,7 +520,7 @@ def maximise(
             cc, _, _ = _candidate(
                 prefix, energy, first, tail, centre, slots, k, amp2, fs,
                 t0 - half_t + j * step_t, curved, d_c_a, consts, coef, none, known, near,
-                n_near,
+                n_near, rot_key[j], rot[j],
             )  # fmt: skip
             pw = cc.real * cc.real + cc.imag * cc.imag
             if pw > best:
@@ -509,16 +534,22 @@ def maximise(
     step_t *= 0.5
     step_v *= 0.5
     z = np.empty((3, 3))
+    # The stencil's centre is a point already evaluated (the grid's best, or the best of the
+    # last stencil where its fit did not move): the same arguments, so the same value.
+    z_centre = best
     for _ in range(passes):
         for i in range(3):
             vv = v + (i - 1) * step_v
             a = (c_mps + vv) / (c_mps - vv)
             d_c_a = _line(alpha0, slots, f, dt_lo, dt_hi, hop_s, a, gamma, consts, coef)
             for j in range(3):
+                if i == 1 and j == 1 and z_centre >= 0.0:
+                    z[1, 1] = z_centre
+                    continue
                 cc, _, _ = _candidate(
                     prefix, energy, first, tail, centre, slots, k, amp2, fs,
                     t + (j - 1) * step_t, curved, d_c_a, consts, coef, none, known, near,
-                    n_near,
+                    n_near, rot_key[j], rot[j],
                 )  # fmt: skip
                 z[i, j] = cc.real * cc.real + cc.imag * cc.imag
         # z[i, j] ≈ z0 + gt x + gv y + ½ (htt x² + 2 htv x y + hvv y²); x, y in steps.
@@ -529,6 +560,7 @@ def maximise(
         htv = 0.25 * (z[2, 2] - z[2, 0] - z[0, 2] + z[0, 0])
         det = htt * hvv - htv * htv
         moved = False
+        z_centre = -1.0
         if htt < 0.0 and hvv < 0.0 and det > 0.0:
             x = (-hvv * gt + htv * gv) / det
             y = (htv * gt - htt * gv) / det
@@ -545,6 +577,7 @@ def maximise(
                         bi, bj = i, j
             t += (bj - 1) * step_t
             v += (bi - 1) * step_v
+            z_centre = z[bi, bj]
         step_t *= 0.5
         step_v *= 0.5
     return t, v, FOUND
@@ -564,10 +597,11 @@ def fit_quality(
     m_hops = slots.shape[0]
     h = np.empty(m_hops, dtype=np.complex128)
     consts, coef = _scratch(slots, prefix)
+    no_key, no_rot = np.empty(0), np.empty(0, dtype=np.complex128)  # no rotations kept
     d_c_alpha = _line(alpha0, slots, f, dt_lo, dt_hi, hop_s, alpha, gamma, consts, coef)
     c, es, signal = _candidate(
         prefix, energy, first, tail, centre, slots, k, amp2, fs, t_rx, gamma != 0.0,
-        d_c_alpha, consts, coef, h, known, *_every_column(m_hops, known),
+        d_c_alpha, consts, coef, h, known, *_every_column(m_hops, known), no_key, no_rot,
     )  # fmt: skip
     mag2 = c.real * c.real + c.imag * c.imag
     spread = 0.0

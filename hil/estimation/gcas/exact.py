@@ -37,7 +37,6 @@ class ExactHistory:
 
     def __init__(self, fe: FrontEnd, *, keep: int, block: int, widest: int) -> None:
         self._fe = fe
-        self._block = block
         self._ring = RowBuffer(keep, (), np.complex128)
         self._nu_fs = fe.nu / fe.fs_bb  # (D, K)
         self._table: NDArray[np.float64] | None = None
@@ -122,7 +121,7 @@ class ExactHistory:
             centres,
             np.ascontiguousarray(dset, dtype=np.int64), half, fe.lags, fe.grid.lengths,
             self.phasor_table(EXACT_ANCHOR), self._term_tone, self._cell_w, EXACT_ANCHOR,
-            self._cache_p, self._cache_max, self._cache_n, self._block, self.hyp_w, prune, out,
+            self._cache_p, self._cache_max, self._cache_n, self.hyp_w, prune, out,
         )  # fmt: skip
         return out
 

@@ -41,7 +41,6 @@ from hil.estimation.gcas.threshold import Peak
 from hil.estimation.refine import CoherentRefiner, EchoTest, Refinement
 from hil.estimation.reverb_band import (
     doppler_resolution_mps,
-    in_reverberation,
     is_diffuse,
     reverberation_coherence,
 )
@@ -166,6 +165,9 @@ class Readout:
         #: the M-hop fit's Doppler resolution (m/s).
         self._lobe_s = 1.0 / span_hz
         self._cell_mps = doppler_resolution_mps(tones, fe.hop_s, c) / fe.m_hops
+        #: Speeds below this share their Doppler cells with the still reverberation, m/s
+        #: (:func:`~hil.estimation.reverb_band.in_reverberation`'s bound, made once).
+        self._still_mps = doppler_resolution_mps(tones, fe.hop_s, c)
         #: The point echoes confirmed lately in the still reverberation's cells.
         self.point_echoes = PointEchoes(
             fe.hop_s, fe.schedule.period_hops, self._lobe_s, self._cell_mps, c
@@ -379,7 +381,7 @@ class Readout:
         confirms a point echo there (:mod:`hil.estimation.gcas.point_echoes`)."""
         fe = self._fe
         c = fe.sound_speed_mps
-        if in_reverberation(refined.speed_mps(c), fe.tones_hz, fe.hop_s, c):
+        if abs(float(refined.speed_mps(c))) < self._still_mps:  # in_reverberation
             self.point_echoes.note(hop_index, refined.t_s, refined.alpha, abs(refined.amplitude))
 
     def _in_still_field(self, refined: Refinement, hop_index: int) -> bool:
@@ -401,7 +403,7 @@ class Readout:
         c = fe.sound_speed_mps
         if not (refined.found and refined.e_over_n0_db >= test.min_e_over_n0_db):
             return None
-        if not in_reverberation(refined.speed_mps(c), fe.tones_hz, fe.hop_s, c):
+        if not abs(float(refined.speed_mps(c))) < self._still_mps:  # in_reverberation
             return None
         k = fe.n_tones
         tone = self._term_tone(p.codeword)

@@ -169,8 +169,8 @@ class TwoStageSearch:
         self._c_origin = c0
         self._c_valid_from = -(-(b0 + self._fe.settle) // self._B) + 1
         self._det_next = c0
-        #: The latest peaks given out (:meth:`_distinct`).
-        self._recent: deque[Peak] = deque(maxlen=RECENT_PEAKS)
+        #: The latest peaks given out (:meth:`_distinct`): codeword, peak sample, hypothesis.
+        self._recent: deque[tuple[int, int, int]] = deque(maxlen=RECENT_PEAKS)
 
     # ------------------------------------------------------------------ streaming
     def process(self, y: NDArray[np.complex128]) -> list[Peak]:
@@ -251,16 +251,15 @@ class TwoStageSearch:
         the same codeword within the fine window and one Doppler cell. Decided in candidate
         order, so any chunking keeps the same peaks."""
         out: list[Peak] = []
-        w, hd = self.search_half_window, self.candidates.lobe
+        w, hd, recent = self.search_half_window, self.candidates.lobe, self._recent
         for p in peaks:
-            if any(
-                q.codeword == p.codeword and abs(q.n_star - p.n_star) <= w
-                and abs(q.d0 - p.d0) <= hd
-                for q in self._recent
-            ):  # fmt: skip
-                continue
-            out.append(p)
-            self._recent.append(p)
+            word, n_star, d0 = p.codeword, p.n_star, p.d0
+            for q_word, q_n, q_d in recent:  # a plain loop: some 30 peaks per candidate
+                if q_word == word and abs(q_n - n_star) <= w and abs(q_d - d0) <= hd:
+                    break
+            else:
+                out.append(p)
+                recent.append((word, n_star, d0))
         return out
 
     # ------------------------------------------------------------------ stage 2
