@@ -472,7 +472,7 @@ class FirstArrivalReadout:
         if self.period:
             d = d - self._ring.rows(idx - self.period)
         t = idx / fs
-        # d · e^{−j2π α f t}, each step into one buffer (the same operations, no copies).
+        # d · e^{−j2π α f t} (M, L + lead), each step into one buffer.
         z = np.multiply(-2j * np.pi * alpha * f_next[:, None], t)
         np.exp(z, out=z)
         np.multiply(d, z, out=z)
