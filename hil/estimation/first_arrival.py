@@ -247,6 +247,22 @@ def _mean(x: NDArray[np.float64], axis: int) -> NDArray[np.float64]:
     return np.asarray(np.add.reduce(x, axis=axis) / x.shape[axis], dtype=np.float64)
 
 
+def _mean_all(x: NDArray[np.float64]) -> float:
+    """``np.mean(x)`` over every element, computed as it does (the sum, then divided by the
+    count) without its wrapper's overhead: the same value, bit for bit."""
+    return float(np.add.reduce(x, axis=None) / x.size)
+
+
+def _std(x: NDArray[np.float64]) -> float:
+    """``np.std(x)`` of a 1-D array (shape ``(n,)``), computed as it does (the mean as a
+    length-1 array, the squared deviations summed, divided by ``n``, the root) without its
+    wrapper's overhead: the same value, bit for bit."""
+    n = x.size
+    dev = x - np.add.reduce(x, axis=None, keepdims=True) / n
+    np.square(dev, out=dev)
+    return math.sqrt(float(np.add.reduce(dev, axis=None) / n))
+
+
 def _hop_slice(table: HopTable, start: int, count: int) -> HopTable:
     """Hops ``start .. start + count − 1`` of ``table`` (positions in it, not hop indices)."""
     part = slice(start, start + count)
@@ -278,6 +294,26 @@ class _RampTables:
     def subset(self, keep: NDArray[np.bool_]) -> _RampTables:
         """The tables of the boundaries ``keep`` (shape ``(M,)``)."""
         return _RampTables(self.frac[keep], self.theta[keep], self.jump[keep], self.geometric[keep])
+
+
+@dataclass(frozen=True)
+class _TonePattern:
+    """What the readout needs of the tones of hops ``h − M .. h + 1`` of a detection at hop
+    ``h`` (they repeat with the code, so one pattern serves every period): the boundaries
+    read (``clean``) and those the previous boundary's late images leave (``leave``), shape
+    ``(M,)`` each, newest first (read-only); and for the Doppler score over the next tones of
+    the ``M`` boundaries (newest first): the columns of each distinct tone (``columns``,
+    ascending tone order) and whether any tone recurs (``recurs``)."""
+
+    clean: NDArray[np.bool_]
+    leave: NDArray[np.bool_]
+    columns: tuple[NDArray[np.intp], ...]
+    recurs: bool
+
+
+#: Tone patterns kept per readout (:class:`_TonePattern`); a code has at most one per hop of
+#: its period, and a longer code only starts the cache again.
+MAX_PATTERNS = 4096
 
 
 @dataclass(frozen=True)
@@ -371,6 +407,8 @@ class FirstArrivalReadout:
         #: The noise window's length and first index (fixed per readout).
         self._base_count = int(np.count_nonzero(self._base))
         self._base_start = int(np.flatnonzero(self._base)[0])
+        #: The same window as a slice (the offsets ascend: it is one stretch).
+        self._base_slice = slice(self._base_start, self._base_start + self._base_count)
         self._search_from = int(np.flatnonzero(t_rel >= -max_spread_s)[0])
         self._after = int(np.flatnonzero(t_rel >= 0.0)[0])
         #: Input samples kept behind the newest: one period plus the M boundaries' windows.
@@ -392,6 +430,8 @@ class FirstArrivalReadout:
         self._steps_faster = n_fast
         #: The direct-path Doppler scores of the last detections (:class:`DopplerScore`).
         self._scores: list[DopplerScore] = []
+        #: Tone patterns seen (:meth:`_tone_pattern`), by the bytes of their tones.
+        self._patterns: dict[bytes, _TonePattern] = {}
 
     def reset(self, input_index: int) -> None:
         """Forget the history; the next sample is ``input_index`` (after a gap)."""
@@ -432,32 +472,37 @@ class FirstArrivalReadout:
         if self.period:
             d = d - self._ring.rows(idx - self.period)
         t = idx / fs
-        z = d * np.exp(-2j * np.pi * alpha * f_next[:, None] * t)
-        c = np.cumsum(z, axis=1)
+        # d · e^{−j2π α f t} (M, L + lead), each step into one buffer.
+        z = np.multiply(-2j * np.pi * alpha * f_next[:, None], t)
+        np.exp(z, out=z)
+        np.multiply(d, z, out=z)
+        c = np.cumsum(z, axis=1, out=z)
         full = c[:, w:] - c[:, :-w]  # boxcar of w ending at extended index w, w + 1, ...
         # The boxcar's change over its own length: every steady tone on the Δf grid (the
         # previous tones, and the next tone as sounded by late images of earlier boundaries)
         # gives the same boxcar sum w samples apart and cancels; only switches remain.
         box = full[:, w:] - full[:, :-w]  # (M, L)
-        clean = self._clean_boundaries(tones[hop_index - m - LATE_HOPS + 1 - first_hop :])
-        p_all = np.abs(box / w) ** 2  # (M, L)
+        pattern = self._tone_pattern(tones)  # clean, leave: read-only, shared
+        clean = pattern.clean
+        p_all = np.abs(box / w)
+        np.square(p_all, out=p_all)  # (M, L)
         power = _mean(p_all[clean], axis=0)  # (L,)
         base = self._noise_window(power)
-        amp = np.sqrt(np.maximum(power - power[base].mean(), 0.0))
+        amp = np.sqrt(np.maximum(power - _mean_all(power[base]), 0.0))
         top_i = self._after + int(np.argmax(amp[self._after :]))
-        leave = self._late_leaving(tones[hop_index - m - first_hop :])
+        leave = pattern.leave
         if self._late_images_seen(p_all, power, clean, leave, top_i):
             clean = clean & ~leave
             power = _mean(p_all[clean], axis=0)
             base = self._noise_window(power)
-            amp = np.sqrt(np.maximum(power - power[base].mean(), 0.0))
+            amp = np.sqrt(np.maximum(power - _mean_all(power[base]), 0.0))
             top_i = self._after + int(np.argmax(amp[self._after :]))
         top = float(amp[top_i])
-        noise = float(np.sqrt(power[base].mean()))
+        noise = math.sqrt(_mean_all(power[base]))
         if not top > 3.0 * noise:
             return None
         # The fit's levels: fractions of the top, but clear of the noise's own fluctuation.
-        wobble = NOISE_MARGIN * float(np.std(amp[base]))
+        wobble = NOISE_MARGIN * _std(amp[base])
         # An earlier arrival of its own (the direct path more than two windows ahead of a
         # cluster of images that sums to the top: the change over a window falls back to the
         # noise between them) has its own ramp and top: the earliest rise above
@@ -468,7 +513,7 @@ class FirstArrivalReadout:
             j_e = k0 + int(early[0])
             top_i = j_e + int(np.argmax(amp[j_e : min(top_i, j_e + 2 * w) + 1]))
             top = float(amp[top_i])
-        floor = float(power[base].mean())
+        floor = _mean_all(power[base])
         j_lo, j_hi = self._ramp_bounds(amp, k0, top_i, top, wobble)
         # A pedestal is not a ramp. The previous boundary's late images (at image order 2 the
         # far end wall and another boundary, 0.9 hop behind their direct path) switch tones
@@ -486,7 +531,7 @@ class FirstArrivalReadout:
             if ped >= PEDESTAL_RISE * max(float(amp[j_hi]), wobble):
                 break
             p_box = p_all[:, j_hi : j_hi + w]
-            if np.mean(p_box[leave]) < PEDESTAL_RATIO * np.mean(p_box[~leave]):
+            if _mean_all(p_box[leave]) < PEDESTAL_RATIO * _mean_all(p_box[~leave]):
                 break
             floor += ped**2
             amp = np.sqrt(np.maximum(power - floor, 0.0))
@@ -544,7 +589,9 @@ class FirstArrivalReadout:
             p = np.sum(np.conj(shape) * seen, axis=1) / np.maximum(
                 np.sum(np.abs(shape) ** 2, axis=1), 1e-300
             )
-            direct_alpha = self._direct_alpha(p, hops, n_b, alpha, hop_index, onset - ends[0])
+            direct_alpha = self._direct_alpha(
+                p, hops, n_b, alpha, hop_index, onset - ends[0], pattern
+            )
             if direct_alpha is None and self._reads_late_taps(alpha):
                 direct_alpha = self._second_reading(
                     table, hop_index, first_hop, t_b * fs + rel * fs, alpha, hops, n_b,
@@ -586,7 +633,8 @@ class FirstArrivalReadout:
         last = self._scores[-1] if self._scores else None
         if last is not None and (last.hop_index, last.delay_s) == (hop_index, delay_s):
             self._scores.pop()
-        return self._direct_alpha(fit.amplitude, hops, n_b, alpha, hop_index, delay_s)
+        pattern = self._tone_pattern(table.freq_hz)
+        return self._direct_alpha(fit.amplitude, hops, n_b, alpha, hop_index, delay_s, pattern)
 
     def _late_tap_fit(
         self, table: HopTable, h: int, onset: NDArray[np.float64], alpha: float
@@ -626,14 +674,13 @@ class FirstArrivalReadout:
         followed down to ``lo``, and ``hi`` is its first crossing."""
         lo_level = max(LO_FRACTION * top, wobble)
         hi_level = max(HI_FRACTION * top, lo_level + wobble)
-        j = top_i
-        while j > k0 and amp[j - 1] >= lo_level:
-            j -= 1
+        # Where ``amp`` last fails ``>= lo`` before ``top_i`` (NaN fails too), searched after k0.
+        below = np.flatnonzero(~(amp[k0:top_i] >= lo_level))
+        j = k0 + int(below[-1]) + 1 if below.size else k0
         above_hi = np.flatnonzero(amp[j : top_i + 1] >= hi_level)
-        j = j + int(above_hi[0]) if above_hi.size else top_i
-        j_hi = j
-        while j > k0 and amp[j - 1] >= lo_level:
-            j -= 1
+        j_hi = j + int(above_hi[0]) if above_hi.size else top_i
+        below = below[below < j_hi - k0]
+        j = k0 + int(below[-1]) + 1 if below.size else k0
         return min(j, j_hi - 2), j_hi
 
     def _new_tone_holds(
@@ -660,8 +707,8 @@ class FirstArrivalReadout:
         before = np.abs(full[clean, j_on - w // 2 + w]) ** 2
         after = np.abs(full[clean, min(j_on + w + w // 2, top_i) + w]) ** 2
         change = np.abs(full[clean, min(j_on + w, top_i) + w] - full[clean, min(j_on + w, top_i)])
-        grown = float(np.mean(after - before))
-        return grown > NEW_TONE_RATIO * float(np.mean(change**2))
+        grown = _mean_all(after - before)
+        return grown > NEW_TONE_RATIO * _mean_all(change**2)
 
     def _late_images_seen(
         self,
@@ -690,7 +737,29 @@ class FirstArrivalReadout:
         if not late.any() or np.count_nonzero(other) < MIN_CLEAN or stop <= self._search_from:
             return False
         pre = slice(self._search_from, stop)
-        return bool(np.mean(p_all[late, pre]) > LATE_RATIO * np.mean(p_all[other, pre]))
+        return _mean_all(p_all[late, pre]) > LATE_RATIO * _mean_all(p_all[other, pre])
+
+    def _tone_pattern(self, tones: NDArray[np.float64]) -> _TonePattern:
+        """The :class:`_TonePattern` of ``tones``: the tones of the hops
+        :meth:`first_arrival` looks up for a detection at hop ``h`` (Hz, oldest first, from
+        hop ``h − M − max(LATE_HOPS − 1, 0)`` to ``h + 1``), computed once per pattern."""
+        key = tones.tobytes()
+        pattern = self._patterns.get(key)
+        if pattern is not None:
+            return pattern
+        lead = max(LATE_HOPS - 1, 0)  # hops in ``tones`` before hop h − M
+        clean = self._clean_boundaries(tones[lead + 1 - LATE_HOPS :])
+        leave = self._late_leaving(tones[lead:])
+        next_tones = tones[lead + 2 : lead + 2 + self.m_hops][::-1]  # after boundary m
+        distinct, group = np.unique(next_tones, return_inverse=True)
+        columns = tuple(np.flatnonzero(group == j) for j in range(distinct.size))
+        clean.setflags(write=False)
+        leave.setflags(write=False)
+        pattern = _TonePattern(clean, leave, columns, bool(np.bincount(group).max() >= 2))
+        if len(self._patterns) >= MAX_PATTERNS:
+            self._patterns.clear()
+        self._patterns[key] = pattern
+        return pattern
 
     def _late_leaving(self, tones: NDArray[np.float64]) -> NDArray[np.bool_]:
         """Which of the ``M`` boundaries (newest first) have the tone two hops back as their
@@ -723,7 +792,7 @@ class FirstArrivalReadout:
             return np.ones(m, dtype=bool)
         return np.asarray(clean, dtype=bool)
 
-    def _noise_window(self, power: NDArray[np.float64]) -> NDArray[np.bool_] | slice:
+    def _noise_window(self, power: NDArray[np.float64]) -> slice:
         """Where the noise level is read in ``power`` (shape ``(L,)``): the stretch of
         :data:`BASELINE_S` before the search, or the quietest such stretch before the
         centroid where the first holds more than :data:`QUIET_RATIO` times its power. Late
@@ -733,12 +802,14 @@ class FirstArrivalReadout:
         n = self._base_count
         k_start = self._base_start
         seg = power[k_start : self._after]
-        c = np.concatenate([[0.0], np.cumsum(seg)])
+        c = np.empty(seg.size + 1)
+        c[0] = 0.0
+        np.cumsum(seg, out=c[1:])
         sums = c[n:] - c[:-n]  # power summed over each stretch
         k = int(np.argmin(sums))
-        fixed = float(np.mean(power[self._base]))
+        fixed = _mean_all(power[self._base_slice])
         if fixed <= QUIET_RATIO * sums[k] / n:
-            return self._base
+            return self._base_slice
         return slice(k_start + k, k_start + k + n)
 
     @staticmethod
@@ -820,13 +891,14 @@ class FirstArrivalReadout:
         of ``1`` after ``o`` and of the previous tone, ``e^{j(2π beat (i − o)/fs − jump)}``,
         before it; its mean power over the boundaries, scaled by least squares.
         """
-        shape = self._ramp_shape(grid, n, ramp, start)  # (C, M, L)
-        model = _mean(np.abs(shape) ** 2, axis=1)  # (C, L)
-        mm = np.sum(model * model, axis=1)
-        scale = np.sum(model * excess[None, :], axis=1) / np.maximum(mm, 1e-300)
-        return np.asarray(
-            np.sum((excess[None, :] - scale[:, None] * model) ** 2, axis=1), dtype=np.float64
-        )
+        power = np.abs(self._ramp_shape(grid, n, ramp, start))  # (C, M, L)
+        np.square(power, out=power)
+        model = _mean(power, axis=1)  # (C, L)
+        mm = np.add.reduce(model * model, axis=1)
+        scale = np.add.reduce(model * excess[None, :], axis=1) / np.maximum(mm, 1e-300)
+        left = excess[None, :] - scale[:, None] * model
+        np.square(left, out=left)
+        return np.asarray(np.add.reduce(left, axis=1), dtype=np.float64)
 
     def _window_start_phasors(
         self, ramp: _RampTables, n: NDArray[np.int64]
@@ -857,15 +929,21 @@ class FirstArrivalReadout:
         o = (self._pre + grid)[:, None, None] + ramp.frac[None, :, None]  # (C, M, 1)
         # Samples at or after o in each window, in integers (ceil(o) is a whole number).
         n_next = n[None, None, :] + (1 - np.ceil(o).astype(np.int64))
-        np.clip(n_next, 0, w, out=n_next)
-        n_prev = w - n_next  # (C, M, L) samples before o in the window
-        # The geometric sums of the previous tone's n_prev samples, from the table.
-        rows = (np.arange(theta.size, dtype=np.int64) * (w + 1))[None, :, None]
-        sums = np.take(ramp.geometric, rows + n_prev)  # (C, M, L)
+        np.maximum(n_next, 0, out=n_next)
+        np.minimum(n_next, w, out=n_next)  # (C, M, L)
+        # The geometric sums of the previous tone's w − n_next samples before o in the
+        # window, from the table (flat index of row m, column w − n_next).
+        row_ends = (np.arange(theta.size, dtype=np.int64) * (w + 1) + w)[None, :, None]
+        sums = ramp.geometric.take(row_ends - n_next)  # (C, M, L)
         if start is None:
             start = self._window_start_phasors(ramp, n)
         at_o = np.exp(-1j * (theta[None, :, None] * o + ramp.jump[None, :, None]))  # (C, M, 1)
-        return np.asarray((n_next + start * at_o * sums) / w, dtype=np.complex128)
+        # (n_next + start · at_o · sums) / w, each step into one buffer.
+        shape = np.multiply(start, at_o)
+        shape *= sums
+        shape += n_next
+        shape /= w
+        return shape
 
     def _direct_alpha(
         self,
@@ -875,9 +953,11 @@ class FirstArrivalReadout:
         alpha: float,
         hop_index: int,
         delay_s: float,
+        pattern: _TonePattern,
     ) -> float | None:
         """The direct path's time scale from its phase at the ``M`` boundaries, its score
-        summed with the same echo's at the last detections.
+        summed with the same echo's at the last detections (``pattern``: the tones'
+        :class:`_TonePattern`).
 
         ``p`` (shape ``(M,)``) holds the first arrival's complex amplitude in the next-tone
         channel, demodulated at ``α f``, fitted over its first :data:`DIRECT_S` (before any
@@ -907,8 +987,7 @@ class FirstArrivalReadout:
         start = hops.start_s[::-1]
         known = np.exp(-1j * (hops.phase_rad[::-1] - 2.0 * np.pi * f * start))
         q = p * known
-        tones, group = np.unique(f, return_inverse=True)
-        if np.bincount(group).max() < 2:
+        if not pattern.recurs:
             return None
         t_m = (n_b - n_b[-1]) / fs  # relative: a common shift is a per-tone phase
         c = self.sound_speed_mps
@@ -922,11 +1001,14 @@ class FirstArrivalReadout:
         k0 = int(round(v_gcas / DIRECT_SPEED_STEP)) + lo
         speeds = (k0 + np.arange(hi - lo + 1)) * DIRECT_SPEED_STEP  # (G,) m/s
         d_alpha = (c + speeds) / (c - speeds) - alpha  # (G,)
-        rot = np.exp(-2j * np.pi * d_alpha[:, None] * (f * t_m)[None, :])  # (G, M)
-        sums = np.zeros((d_alpha.size, tones.size), dtype=np.complex128)
-        for k in range(tones.size):
-            sums[:, k] = (rot[:, group == k] * q[group == k]).sum(axis=1)
-        score = np.sum(np.abs(sums) ** 2, axis=1)
+        rot = np.multiply(-2j * np.pi * d_alpha[:, None], (f * t_m)[None, :])
+        np.exp(rot, out=rot)  # (G, M)
+        sums = np.zeros((d_alpha.size, len(pattern.columns)), dtype=np.complex128)
+        for k, cols in enumerate(pattern.columns):
+            sums[:, k] = (rot[:, cols] * q[cols]).sum(axis=1)
+        power = np.abs(sums)
+        np.square(power, out=power)
+        score = np.add.reduce(power, axis=1)
         own = DopplerScore(
             int(hop_index), float(delay_s), k0, score / max(score.max(), 1e-300), v_gcas
         )

@@ -211,3 +211,33 @@ def test_heap_freeze_keeps_setup_objects_out_of_full_collections_until_stopped()
     with HeapFreeze() as h:
         assert gc.get_freeze_count() >= len(setup) and isinstance(h, HeapFreeze)
     assert gc.get_freeze_count() == 0
+
+
+def test_heap_freeze_without_its_collection_keeps_the_setups_garbage_until_stopped() -> None:
+    """``collect=False`` (a run on virtual time) freezes the setup's garbage with it: a
+    reference cycle dropped before the start outlives a full collection while frozen and is
+    freed at the first one after the stop; with the collection it is freed at the start."""
+    import gc
+    import weakref
+
+    from hil.acquisition import HeapFreeze
+
+    class Node:
+        def __init__(self) -> None:
+            self.me = self  # a cycle: only the collector frees it
+
+    automatic = gc.isenabled()
+    gc.disable()  # no automatic pass between the drop and the start
+    try:
+        for collect in (True, False):
+            node = Node()
+            alive = weakref.ref(node)
+            del node
+            with HeapFreeze(collect=collect):
+                gc.collect()
+                assert (alive() is None) is collect
+            gc.collect()
+            assert alive() is None and gc.get_freeze_count() == 0
+    finally:
+        if automatic:
+            gc.enable()

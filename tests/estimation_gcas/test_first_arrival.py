@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from hil.errors import ConfigError
+from hil.estimation import first_arrival as fa
 from hil.estimation.base import Estimate
 from hil.estimation.first_arrival import FirstArrivalReadout
 from hil.estimation.gcas import GcasReceiver
@@ -327,3 +328,77 @@ def test_the_next_tone_arriving_to_stay_is_told_from_a_switch_that_passes(seed: 
     assert not readout._new_tone_holds(passing, clean, j_lo, top_i)
     leaving = _next_tone_channel(readout, onset, level + direct, level)
     assert not readout._new_tone_holds(leaving, clean, j_lo, top_i)
+
+
+def test_the_mean_and_std_helpers_are_numpys_bit_for_bit() -> None:
+    """The readout's mean and standard deviation without NumPy's wrappers give NumPy's
+    values exactly (its levels and thresholds are compared against them)."""
+    rng = np.random.default_rng(11)
+    for n in (1, 2, 7, 8, 9, 77, 128, 129, 300):
+        x = rng.lognormal(0.0, 3.0, n) * rng.choice([-1.0, 1.0], n)
+        assert fa._mean_all(x) == float(np.mean(x))
+        assert fa._std(x) == float(np.std(x))
+        block = rng.lognormal(0.0, 3.0, (5, n))
+        assert fa._mean_all(block[[0, 2, 3]]) == float(np.mean(block[[0, 2, 3]]))
+
+
+def _bounds_by_steps(
+    amp: np.ndarray, k0: int, top_i: int, top: float, wobble: float
+) -> tuple[int, int]:
+    """The ramp's bounds of :meth:`FirstArrivalReadout._ramp_bounds` walked sample by sample
+    (its definition)."""
+    lo_level = max(fa.LO_FRACTION * top, wobble)
+    hi_level = max(fa.HI_FRACTION * top, lo_level + wobble)
+    j = top_i
+    while j > k0 and amp[j - 1] >= lo_level:
+        j -= 1
+    above_hi = np.flatnonzero(amp[j : top_i + 1] >= hi_level)
+    j = j + int(above_hi[0]) if above_hi.size else top_i
+    j_hi = j
+    while j > k0 and amp[j - 1] >= lo_level:
+        j -= 1
+    return min(j, j_hi - 2), j_hi
+
+
+def test_the_ramp_bounds_are_those_walked_sample_by_sample() -> None:
+    """The ramp's last rise from ``lo`` and first ``hi`` crossing, found on whole arrays, are
+    those of the walk back from the top, on ramps with dips, plateaus, noise and NaNs."""
+    rng = np.random.default_rng(5)
+    for trial in range(400):
+        n = int(rng.integers(20, 120))
+        amp = np.abs(rng.normal(0.0, 0.05, n))
+        on = int(rng.integers(2, n - 4))
+        amp[on:] += np.minimum(1.0, (np.arange(n - on) + 1) / rng.uniform(1.0, 30.0))
+        if trial % 3 == 0:  # a dip back under hi inside the ramp (an image of opposite sign)
+            amp[int(rng.integers(on, n))] *= rng.uniform(0.0, 0.2)
+        if trial % 7 == 0:
+            amp[int(rng.integers(0, n))] = np.nan
+        top_i = int(rng.integers(on, n))
+        k0 = int(rng.integers(0, top_i + 1))
+        top = float(np.nanmax(amp[top_i:])) if trial % 2 else float(rng.uniform(0.2, 1.5))
+        wobble = float(rng.choice([0.0, 0.02, 0.1]))
+        got = FirstArrivalReadout._ramp_bounds(amp, k0, top_i, top, wobble)
+        assert got == _bounds_by_steps(amp, k0, top_i, top, wobble), trial
+
+
+def test_a_tone_pattern_is_read_once_and_is_the_tones() -> None:
+    """The boundaries read, those the late images leave, and the Doppler score's columns per
+    tone come from the hops' tones (as computed from them directly), once per pattern; the
+    masks are shared, so they are read-only."""
+    s = _schedule()
+    readout = FirstArrivalReadout(s, FS, 10, C)
+    m = readout.m_hops
+    for h in range(m + 1, m + 1 + 2 * s.period_hops):
+        tones = s.hops(h - m, m + 2).freq_hz
+        pattern = readout._tone_pattern(tones)
+        assert np.array_equal(pattern.clean, readout._clean_boundaries(tones[1:]))
+        assert np.array_equal(pattern.leave, readout._late_leaving(tones))
+        distinct, group = np.unique(tones[2:][::-1], return_inverse=True)
+        assert len(pattern.columns) == distinct.size
+        for k, cols in enumerate(pattern.columns):
+            assert np.array_equal(cols, np.flatnonzero(group == k))
+        assert pattern.recurs == bool(np.bincount(group).max() >= 2)
+        assert readout._tone_pattern(tones.copy()) is pattern
+        with pytest.raises(ValueError):
+            pattern.clean[0] = not pattern.clean[0]
+    assert len(readout._patterns) <= s.period_hops

@@ -13,6 +13,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import partial
+from typing import cast
 
 from hil.acquisition.capture import CapturedBlock, CaptureLoop
 from hil.acquisition.feed import ReceiverFeed
@@ -78,6 +79,9 @@ class LiveSession:
         status: Callable[[str], None],
     ) -> None:
         self.exp, self.devices, self.receiver = exp, devices, receiver
+        # Asked once: a runtime protocol check looks the method up through the receiver's
+        # wrappers (tracker, input stage), a tenth of a millisecond at every block.
+        self._says_notices = isinstance(receiver, SaysNotices)
         self.board, self.stage, clock = devices.opened()
         self.recorder, self.cals, self.timing, self.status = recorder, cals, timing, status
         self.fs = float(exp.waveform.fs_hz)
@@ -134,9 +138,10 @@ class LiveSession:
         """Each notice of the receiver (:class:`~hil.estimation.base.SaysNotices`: an echo
         beyond its Doppler span, clutter), once: a ``note`` event of the recording (logged as
         its events are) at the detection's board sample."""
-        if not isinstance(self.receiver, SaysNotices):
+        if not self._says_notices:
             return
-        for seen in self.receiver.notices()[len(self.notices) :]:
+        says = cast(SaysNotices, self.receiver)  # checked once, in __init__
+        for seen in says.notices()[len(self.notices) :]:
             event = ("note", self._origin + int(round(seen.t_s * self.fs)), 0, seen.text())
             self.notices.append(event)
             self.recorder.events([event])
