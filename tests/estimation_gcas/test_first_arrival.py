@@ -402,3 +402,41 @@ def test_a_tone_pattern_is_read_once_and_is_the_tones() -> None:
         with pytest.raises(ValueError):
             pattern.clean[0] = not pattern.clean[0]
     assert len(readout._patterns) <= s.period_hops
+
+
+def _alpha(v: float) -> float:
+    return (C + v) / (C - v)
+
+
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_a_refused_speed_keeps_the_same_echos_reading_of_two_hops_back(sign: float) -> None:
+    """Where both readings of the direct path's speed are refused, the same echo's reading
+    of up to HOLD_HOPS (2) hops back stands instead of GCAS's (pulled 0.2 m/s slow by the
+    images): the newest one whose delay, moved on at its speed, is within 0.5 ms; none from
+    another echo, from three hops back, or slower than GCAS's by more than 0.05 m/s. Closing
+    (``sign`` 1) and opening (-1) targets alike."""
+    readout = FirstArrivalReadout(_schedule(), FS, 10, C, cancel_period=False)
+    hop_s = readout._hop_s
+    v, v_gcas = sign * 1.5, sign * 1.3
+    d100 = 2.0 * 8.0 / C  # the delay at hop 100, s
+
+    def delay(hop: int, speed: float) -> float:
+        """The echo's delay at ``hop`` read at ``speed`` (closing shortens it)."""
+        return d100 + 2.0 * speed * (100 - hop) * hop_s / C
+
+    readout._read_speeds = [
+        (98, delay(98, v), _alpha(v - sign * 0.01)),
+        (99, delay(99, v), _alpha(v)),
+    ]
+    assert readout._held_alpha(100, d100, _alpha(v_gcas)) == _alpha(v)
+    # Another echo 1 ms later: none.
+    assert readout._held_alpha(100, d100 + 1e-3, _alpha(v_gcas)) is None
+    # Only the reading of two hops back left: it stands.
+    readout._read_speeds = [(98, delay(98, v), _alpha(v - sign * 0.01))]
+    assert readout._held_alpha(100, d100, _alpha(v_gcas)) == _alpha(v - sign * 0.01)
+    # Three hops back: too old.
+    readout._read_speeds = [(97, delay(97, v), _alpha(v))]
+    assert readout._held_alpha(100, d100, _alpha(v_gcas)) is None
+    # Slower than GCAS's by 0.1 m/s: no image is faster than the direct path, refused.
+    readout._read_speeds = [(99, delay(99, v), _alpha(v))]
+    assert readout._held_alpha(100, d100, _alpha(sign * 1.6)) is None

@@ -147,8 +147,8 @@ def test_order_3_figures(order_3_run: RunOutcome) -> None:
 @pytest.mark.xfail(
     strict=True,
     reason="open: at order 3 a weak first arrival under the late paths' level ahead of it is "
-    "read 0.1-0.25 m late (range RMSE 0.066 m); speed RMSE 0.045 m/s with the late paths fitted "
-    "(22 of the 40 speeds more than 0.03 m/s off are on onsets more than 0.05 m off)",
+    "read 0.1-0.25 m late (range RMSE 0.066 m); speed RMSE 0.028 m/s (0.036 m/s with every "
+    "onset put at the truth: a few lobes of the phase score are chosen wrong either way)",
 )
 def test_order_3_meets_the_tank_targets(order_3_run: RunOutcome) -> None:
     """Issue 31 item 6 in the built-in tank at image order 3."""
@@ -168,5 +168,5 @@ ORDER_3_GOLDEN = {
     "detection_rate": 0.9104,
     "range_bias_m": 0.016398508297511348,
     "range_rmse_m": 0.06637987127312926,
-    "speed_rmse_mps": 0.04543259627594139,
+    "speed_rmse_mps": 0.028420714998222286,
 }
