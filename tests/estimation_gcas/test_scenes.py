@@ -326,14 +326,14 @@ def _false_and_moving_pd(
     """False estimates per hop (more than 0.5 m or 0.5 m/s from the truth of their boundary)
     and the detected fraction of the boundaries faster than ``faster_than_mps`` (default
     4 m/s: outside the band; below 0: every boundary)."""
-    hit = {
-        e.hop_index + 1
-        for e in est
-        if (h := truth.get(e.hop_index + 1)) is not None
+    on_target = [
+        (h := truth.get(e.hop_index + 1)) is not None
         and abs(e.range_m - h.range_m) < 0.5
         and abs(e.speed_mps - h.radial_speed_mps) < 0.5
-    }
-    false = sum(1 for e in est if e.hop_index + 1 not in hit) / MOTION_HOPS
+        for e in est
+    ]
+    hit = {e.hop_index + 1 for e, ok in zip(est, on_target, strict=True) if ok}
+    false = on_target.count(False) / MOTION_HOPS
     scored = [k for k, h in truth.items() if 0.13 < h.t_rx_s < MOTION_S - 0.03]
     moving = [k for k in scored if abs(truth[k].radial_speed_mps) > faster_than_mps]
     return false, sum(k in hit for k in moving) / max(len(moving), 1)
@@ -401,11 +401,23 @@ def test_a_still_target_gives_few_ghosts_at_the_design_speed_span(
 @pytest.mark.slow
 @pytest.mark.parametrize(
     ("kind", "snr_db", "pd_min"),
-    # Measured pd / false per hop (before, held to the white-noise expectation): still at
-    # 0 dB 0.967 / 0.015 (0.457 / 0.030); slow (0.5 m/s) 1.0 / 0 (0.875 / 0); still at
-    # -10 dB 0.842 / 0.040 (0.533 / 0.085). The false ones are a lone scatterer at 1.07 m:
-    # a point echo at rest, which no test of one echo tells from a target.
-    [("still", 0.0, 0.9), ("slow", 0.0, 0.9), ("still", -10.0, 0.8)],
+    # Measured pd / false estimates per hop: still at 0 dB 0.967 / 0.040; slow (0.5 m/s)
+    # 1.0 / 0; still at -10 dB 0.842 / 0.165. The false ones are a lone scatterer at
+    # 1.0-1.07 m: a point echo at rest, which no test of one echo tells from a target.
+    [
+        ("still", 0.0, 0.9),
+        ("slow", 0.0, 0.9),
+        pytest.param(
+            "still",
+            -10.0,
+            0.8,
+            marks=pytest.mark.xfail(
+                strict=True,
+                reason="open (issue 26 item 3): at -10 dB the lone scatterer at 1.07 m is "
+                "reported on 33 of 200 hops (0.165 per hop; 0.05 wanted)",
+            ),
+        ),
+    ],
 )
 def test_a_slow_or_still_target_in_reverberation_is_kept_with_the_band_off(
     kind: str, snr_db: float, pd_min: float
@@ -425,18 +437,19 @@ def test_diffuse_reverberation_is_counted_as_clutter_and_not_reported() -> None:
     rx = _receiver(reverb_speed_mps=0.0)
     est = run_blocks(rx, x)
     false, pd = _false_and_moving_pd(est, truth, faster_than_mps=-1.0)
-    # Measured: 43 detections counted as clutter, none reported nearer than 5 m, no false
-    # estimate; pd 0.625. The issue's 0.9 is not met here: the boundaries missed recur every
-    # code period, where the search puts no detection on the target, and 6 of its first
-    # fits, short of one echo's coherence in white noise, wait for the target to be
-    # confirmed as a point echo (hil.estimation.gcas.point_echoes).
+    # Measured: 48 detections counted as clutter, none reported nearer than 5 m, no false
+    # estimate; pd 0.918. Where the near water of a later hop arrives with the target's
+    # boundary, the target is its window's second codeword
+    # (hil.estimation.gcas.still_codewords: pd 0.625 without). Of the 15 boundaries missed,
+    # 10 are one codeword in every code period, where stage 1 gives no still candidate at the
+    # target's time.
     assert rx.clutter_count >= 30 and false == 0.0
     assert not [e for e in est if e.range_m < 5.0]
     # Said where it is (measured: 2.63 m at hop 10, 1.14 m at hop 23), each range once.
     ranges = [seen.range_m for seen in rx.clutter_seen]
     assert 1 <= len(ranges) <= 5 and all(1.0 <= r <= 5.0 for r in ranges)
     assert rx.notices() == rx.clutter_seen
-    assert pd >= 0.6
+    assert pd >= 0.9
 
 
 # sim-03's band-off case (docs/results.md): a target at 10-25 m/s, -10 dB per-sample SNR,

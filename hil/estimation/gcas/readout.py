@@ -214,10 +214,19 @@ class Readout:
             self.hidden.reset()
 
     def decide_all(self, peaks: Iterable[Peak]) -> list[Estimate]:
-        """:meth:`decide` on each peak, in order; the estimates it accepts."""
+        """:meth:`decide` on each peak, in order; the estimates it accepts. A peak
+        ``beside`` the one before it (its window's second codeword, two still echoes at once:
+        :mod:`hil.estimation.gcas.still_codewords`) is decided only where that one was
+        refused: beside a still echo reported, the other is the one the stage-1 search masks
+        by turns (a still target and a lone still scatterer a few milliseconds apart), and
+        deciding it would report every still scatterer beside every still target."""
         out: list[Estimate] = []
+        refused = False
         for p in peaks:
+            if p.beside and not refused:
+                continue
             est = self.decide(p)
+            refused = est is None
             if est is not None:
                 out.append(est)
         return out

@@ -196,6 +196,7 @@ class GcasReceiver:
             return FullSearch(
                 self.front_end, self._sums, cfar, coherent=self.coherent,
                 runner_up_ratio=self.runner_up_ratio,
+                still_codewords=self._refiner is not None,
             )  # fmt: skip
         # Several echoes per hop where the refinement's likelihood tells an echo from the
         # ghosts and sidelobes of another; the strongest one per hop where it does not.

@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hil.estimation.gcas.front_end import FrontEnd
+from hil.estimation.gcas.still_codewords import StillCodewords
 from hil.estimation.gcas.sums import CodewordSums
 from hil.estimation.gcas.threshold import (
     NOISE_STRIDE,
@@ -41,11 +42,14 @@ class FullSearch:
 
     def __init__(
         self, fe: FrontEnd, sums: CodewordSums, cfar: Cfar, *, coherent: bool,
-        runner_up_ratio: float,
+        runner_up_ratio: float, still_codewords: bool,
     ) -> None:  # fmt: skip
         self._fe, self._sums, self._cfar = fe, sums, cfar
         self._coherent = coherent
         self._runner_up_ratio = runner_up_ratio
+        #: With the refinement, a still candidate's second codeword too
+        #: (:mod:`hil.estimation.gcas.still_codewords`).
+        self._beside = StillCodewords(fe, runner_up_ratio) if still_codewords else None
         self.bank = UnitCorrelatorBank(fe.fs_bb, fe.nu, fe.grid.lengths)
         d, k, m = fe.grid.size, fe.n_tones, fe.m_hops
         lag_keep = int(fe.lags.max()) + 2 * fe.search_half + fe.half_width + 2
@@ -162,7 +166,9 @@ class FullSearch:
         ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
             return self._cfar.test(n_pk, peak, tested, self)
 
-        return threshold_peaks(cand, w, dset, a[:, :, 1, :], sides, test, self._runner_up_ratio)
+        return threshold_peaks(
+            cand, w, dset, a[:, :, 1, :], sides, test, self._runner_up_ratio, self._beside
+        )
 
     def noise_floor(self, n_pk: NDArray[np.int64]) -> NDArray[np.float64]:
         """μ_U over the trailing CFAR window of each peak sample ``n_pk``."""

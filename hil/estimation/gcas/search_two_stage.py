@@ -30,6 +30,7 @@ from hil.estimation.gcas.candidates import CandidateCells, EveryEcho, StrongestE
 from hil.estimation.gcas.exact import ExactHistory
 from hil.estimation.gcas.front_end import FrontEnd
 from hil.estimation.gcas.options import check_coarse_step
+from hil.estimation.gcas.still_codewords import StillCodewords
 from hil.estimation.gcas.threshold import (
     NOISE_STRIDE,
     Cfar,
@@ -139,6 +140,9 @@ class TwoStageSearch:
         #: The baseband history and its exact correlators (stage 2).
         self.exact = ExactHistory(fe, keep=y_keep, block=b, widest=2 * self.fine_half + 1)
         self._hyp_w = self.exact.hyp_w
+        #: With the refinement, a still candidate's second codeword too
+        #: (:mod:`hil.estimation.gcas.still_codewords`).
+        self._beside = StillCodewords(fe, runner_up_ratio) if every_echo else None
         self.reset(0)
 
     def _coarse_shift(self) -> NDArray[np.int64]:
@@ -304,7 +308,10 @@ class TwoStageSearch:
         kept = hit[keep]
         side = self.exact.sums(n_pk[kept], sides, 0)
         dd = fine_doppler(side, a, kept, i_pk, word, d0, sides)
-        return peaks_of(n_pk[kept], peak, word, ratio, dn, d0[kept], dd, mean[kept], thr[kept])
+        peaks = peaks_of(n_pk[kept], peak, word, ratio, dn, d0[kept], dd, mean[kept], thr[kept])
+        if self._beside is None:
+            return peaks
+        return self._beside.add(peaks, a[kept], centre[kept] - w)
 
     def _fine_stage_reference(
         self, cand_b: NDArray[np.int64], sets: NDArray[np.int64]
@@ -344,7 +351,7 @@ class TwoStageSearch:
         ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
             return self._cfar.test(n_pk, peak, tested, self)
 
-        return threshold_peaks(centre, w, dset, a, sides, test, self._runner_up_ratio)
+        return threshold_peaks(centre, w, dset, a, sides, test, self._runner_up_ratio, self._beside)
 
     def _cell_statistic(
         self, cand_b: NDArray[np.int64], cand_d: NDArray[np.int64]

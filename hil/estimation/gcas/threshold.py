@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Any, NamedTuple, Protocol
+from typing import TYPE_CHECKING, Any, NamedTuple, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -22,6 +22,9 @@ from numpy.typing import NDArray
 from hil.estimation.detection import noise_moments, parabolic_offsets
 from hil.estimation.kernels import peak_indices
 from hil.estimation.row_buffer import RowBuffer
+
+if TYPE_CHECKING:
+    from hil.estimation.gcas.still_codewords import StillCodewords
 
 #: Noise-floor estimate on every this-many baseband samples (absolute grid).
 NOISE_STRIDE = 32
@@ -33,7 +36,8 @@ class Peak(NamedTuple):
     ``n_star``: peak sample (baseband index) with sub-sample offset ``dn``; ``peak``: the
     statistic there; ``codeword``: best codeword, ``ratio`` times the runner-up; ``d0``:
     hypothesis with offset ``dd`` (grid steps); ``mean``, ``threshold``: noise mean and
-    threshold (statistic units).
+    threshold (statistic units); ``beside``: the second codeword of the peak before it
+    (:mod:`hil.estimation.gcas.still_codewords`), decided only where that one is refused.
     """
 
     n_star: int
@@ -45,6 +49,7 @@ class Peak(NamedTuple):
     dd: float
     mean: float
     threshold: float
+    beside: bool = False
 
 
 class NoiseHistory(Protocol):
@@ -149,13 +154,15 @@ def threshold_peaks(
         tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]],
     ],
     runner_up_ratio: float,
+    beside: StillCodewords | None = None,
 ) -> list[Peak]:
     """Threshold and runner-up tests of candidates centred on samples ``cand`` (shape
     ``(C,)``), as NumPy expressions: ``a`` holds ``A[n, d, j]`` at the chosen hypothesis
     (middle of ``dset``, shape ``(C, 3)``) for ``n`` within ``±w``, shape
     ``(C, 2w + 1, J)``; ``sides(hit, n)`` gives ``A`` at the two neighbouring hypotheses at
     samples ``n`` of candidates ``hit`` (shape ``(H, 2, J)``); ``test(n_pk, peak)`` is the
-    CFAR test (:meth:`Cfar.test`)."""
+    CFAR test (:meth:`Cfar.test`); ``beside``: where given, each still peak is followed by
+    its window's second codeword (:mod:`hil.estimation.gcas.still_codewords`)."""
     # Threshold test for all candidates at once; only the survivors are read out.
     s_win = a.max(axis=2)  # (C, 2W + 1)
     i_pk = np.argmax(s_win, axis=1)
@@ -191,10 +198,13 @@ def threshold_peaks(
     d_in = (dh[keep, 0] != dh[keep, 1]) & (dh[keep, 2] != dh[keep, 1])
     dd = np.where(d_in, parabolic_offsets(side[rk, 0, jk], rows[keep, jk], side[rk, 1, jk]), 0.0)
     n_star = (cand[hit] - w + ip)[keep]
-    return peaks_of(
+    peaks = peaks_of(
         n_star, peak[keep], jk, ratio[keep], dn[keep], dh[keep, 1], dd, mean[hit[keep]],
         thr[hit[keep]],
     )  # fmt: skip
+    if beside is None:
+        return peaks
+    return beside.add(peaks, a[hit[keep]], cand[hit[keep]] - w)
 
 
 def peaks_of(*columns: NDArray[Any]) -> list[Peak]:
