@@ -172,33 +172,39 @@ class SimulatedBoard:
             self._next_status = now + round(self.spec.status_interval_s * _NS)
         self._grant_credit()
 
-    def quiet_until_ns(self, awaited_index: int, max_bytes: int) -> int:
-        """Board time (ns) before which :meth:`tick` has nothing to do but capture samples
-        below ``awaited_index`` and send them, at most ``max_bytes`` of them: a tick skipped
-        before it does its capture, identically, at the next tick (the ADC frames are cut
-        differently, the samples are the same). Now (:meth:`_now_ns`) when something is due
-        or pending: bytes to send, a fault, no capture running.
+    def quiet_until_ns(self, awaited_index: int | None, max_bytes: int) -> int:
+        """Board time (ns) before which :meth:`tick` has nothing to do but, while capturing,
+        capture samples below ``awaited_index`` and send them, at most ``max_bytes`` of them:
+        a tick skipped before it does its capture, identically, at the next tick (the ADC
+        frames are cut differently, the samples are the same). Now (:meth:`_now_ns`) when
+        something is due or pending: bytes to send, a fault, no session, or a capture
+        running while no index is awaited (``awaited_index`` None).
 
-        Due are: the next SYNC and STATUS, the watchdog's deadline, the first instant the
-        DAC FIFO may have freed enough to grant credit (each played index frees at most one
-        sample), the instant the sample clock reaches ``awaited_index``, and the instant the
-        capture would exceed ``max_bytes``.
+        Due are: the next SYNC and STATUS and the watchdog's deadline; while capturing also
+        the first instant the DAC FIFO may have freed enough to grant credit (each played
+        index frees at most one sample), the instant the sample clock reaches
+        ``awaited_index``, and the instant the capture would exceed ``max_bytes``. While no
+        capture runs nothing plays, so the credit to grant changes only with host bytes
+        (which the host's next service follows): due now if it is due at all.
         """
         now = self._now_ns()
         config, fifo = self.conn.configuration, self._fifo
-        if (
-            self._out
-            or self.faults.any_pending
-            or not self._capturing
-            or config is None
-            or fifo is None
-            or self.conn.state not in _SESSION_STATES
-        ):
+        if self._out or self.faults.any_pending or self.conn.state not in _SESSION_STATES:
             return now
-        due = [self._next_sync, self._next_status, self._ns_at_index(awaited_index)]
+        due = [self._next_sync, self._next_status]
         if self._watchdog_ns is not None:
             due.append(self._last_host + self._watchdog_ns + 1)  # it fires after the deadline
         threshold = max(1, self.spec.dac_buffer_samples // 8)
+        if not self._capturing:
+            if fifo is not None and self.conn.state in _CREDIT_STATES:
+                free = self.spec.dac_buffer_samples - fifo.level - self.conn.dac_credit
+                if free >= threshold:
+                    return now
+            first = min(due)
+            return now if math.isinf(first) else max(now, int(first))
+        if awaited_index is None or config is None or fifo is None:
+            return now
+        due.append(self._ns_at_index(awaited_index))
         free = self.spec.dac_buffer_samples - fifo.level - self.conn.dac_credit
         due.append(self._ns_at_index(self._produced + max(0, threshold - free)))
         per_frame = self.adc_frame_samples
