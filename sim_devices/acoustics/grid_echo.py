@@ -257,7 +257,7 @@ class GridEcho(AnalyticEcho):
         gain = np.empty(n, dtype=np.float32)
         emit = np.empty(n)
         ordered = gains_and_emission_times(
-            grid.t, grid.u, grid.interval, coeffs, gains, np.float32(self.amplitude),
+            grid.t, grid.u, grid.offsets, coeffs, gains, np.float32(self.amplitude),
             self.amplitude != 1.0, gain, emit,
         )  # fmt: skip
         if not ordered:  # the transmit is read at sorted times only
@@ -340,7 +340,6 @@ class SampleGrid:
         self.t = sample_times(n0, count, fs_hz, t_start_s)
         self.n0, self.count, self.h = int(n0), int(count), int(h)
         self._u32: NDArray[np.float32] | None = None
-        self._interval: NDArray[np.int64] | None = None
         shift = h.bit_length() - 1
         if self.count == 0:
             self.ka, self.kb = 0, -1
@@ -358,15 +357,6 @@ class SampleGrid:
         self.u *= 1.0 / h
         #: Whole intervals only: per-interval values broadcast over a (m, h) layout.
         self.whole = self.n0 % h == 0 and self.count % h == 0
-
-    @property
-    def interval(self) -> NDArray[np.int64]:
-        """Each sample's interval, counted from ``ka`` (``(count,)``)."""
-        if self._interval is None:
-            shift = self.h.bit_length() - 1
-            n = np.arange(self.n0, self.n0 + self.count, dtype=np.int64)
-            self._interval = (n >> shift) - self.ka
-        return self._interval
 
     def polynomial(self, coeffs: NDArray[np.floating[Any]]) -> NDArray[np.floating[Any]]:
         """``Σ_i coeffs[i, k] u^i`` of every sample (Horner, highest power first), ``(count,)``,
