@@ -129,6 +129,10 @@ class _EchoGain:
     absorption on both legs, the projector's response in the direction the path leaves it
     and the hydrophone's in the direction it arrives from."""
 
+    #: Its value is a function of the solved geometry (leg lengths, positions), not of the
+    #: times: a still path's gain is the same at every time (see ``GridEcho``).
+    from_geometry = True
+
     def __init__(
         self,
         amplitude: float,
