@@ -141,6 +141,8 @@ class SimulatedBoard:
         self._base_index = 0
         self._base_ns = self._power_up_ns = self._now_ns()
         self._out = bytearray()
+        self._layout_for: Configure | None = None
+        self._layout = (1, 1, SampleFormat.INT16, 0)
         self._new_session()
 
     # --- sans-IO device contract ---------------------------------------------------------
@@ -207,10 +209,7 @@ class SimulatedBoard:
         due.append(self._ns_at_index(awaited_index))
         free = self.spec.dac_buffer_samples - fifo.level - self.conn.dac_credit
         due.append(self._ns_at_index(self._produced + max(0, threshold - free)))
-        per_frame = self.adc_frame_samples
-        sample_bytes = channel_count(config.adc_channel_mask) * SampleFormat(config.adc_format).size
-        wire = per_frame * sample_bytes + _FRAME_OVERHEAD
-        wire += wire // 254 + 2  # COBS: a code byte per 254, the delimiters
+        per_frame, _, _, wire = self._adc_layout(config)
         frames = max_bytes // 2 // wire  # half: room for a SYNC or STATUS beside them
         due.append(self._ns_at_index(self._produced + frames * per_frame))
         return max(now, int(min(due)))
@@ -249,8 +248,20 @@ class SimulatedBoard:
         config = self.conn.configuration
         if config is None:
             return 1
-        size = channel_count(config.adc_channel_mask) * SampleFormat(config.adc_format).size
-        return (self.spec.max_frame_len - _FRAME_OVERHEAD) // size
+        return self._adc_layout(config)[0]
+
+    def _adc_layout(self, config: Configure) -> tuple[int, int, SampleFormat, int]:
+        """The ADC stream of ``config``: sample frames per ADC_DATA frame, channels, sample
+        format, and the wire bytes of a full frame (COBS included). Kept for the
+        configuration object last asked about (a configuration is immutable)."""
+        if config is not self._layout_for:
+            n_adc = channel_count(config.adc_channel_mask)
+            fmt = SampleFormat(config.adc_format)
+            per_frame = (self.spec.max_frame_len - _FRAME_OVERHEAD) // (n_adc * fmt.size)
+            wire = per_frame * n_adc * fmt.size + _FRAME_OVERHEAD
+            wire += wire // 254 + 2  # COBS: a code byte per 254, the delimiters
+            self._layout, self._layout_for = (per_frame, n_adc, fmt, wire), config
+        return self._layout
 
     def snapshot(self) -> BoardSnapshot:
         """The board's state now."""
@@ -481,9 +492,7 @@ class SimulatedBoard:
         fifo = self._fifo
         if config is None or fifo is None:
             return
-        step = self.adc_frame_samples
-        n_adc = channel_count(config.adc_channel_mask)
-        fmt = SampleFormat(config.adc_format)
+        step, n_adc, fmt, _ = self._adc_layout(config)
         while self._produced < end:
             first = self._produced
             # The world computes up to _WORLD_FRAMES frames in one call (its per-call cost
