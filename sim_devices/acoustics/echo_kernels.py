@@ -6,7 +6,9 @@ interval's delay cubic and gain quadratic, the transmit's hop at the emission ti
 phase; as NumPy expressions that is some twenty passes over temporaries per path and block.
 :func:`gains_and_emission_times` and :func:`transmit_phases` do them in two loops and
 :func:`add_echo` multiplies and adds the result to the block; NumPy's float32 cosine in
-between stays (its values are the reference).
+between stays (its values are the reference). The loops run one grid interval, or one hop,
+at a time over views indexed from 0, the interval's or hop's values held: the compiler then
+vectorises them (no gather, no negative-index check per sample).
 
 Same bits as the NumPy form (:meth:`GridEcho.render` with
 :meth:`~sim_devices.acoustics.transmit_eval.TransmitEvaluator.at_sorted_times`): every output
