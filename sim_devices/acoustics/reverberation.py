@@ -79,6 +79,7 @@ same samples for any chunking (bit for bit).
 from __future__ import annotations
 
 import math
+import threading
 from collections import OrderedDict
 from dataclasses import dataclass, replace
 
@@ -110,6 +111,7 @@ _CULL_CHUNK = 32768  # points culled per pass (cache-sized)
 _AT_REST_SETS = 2
 _AtRestSet = tuple[FloatArray, "ScattererGeometry", FloatArray, FloatArray]
 _AT_REST: OrderedDict[tuple[object, ...], tuple[tuple[FloatArray, ...], _AtRestSet]] = OrderedDict()
+_AT_REST_LOCK = threading.Lock()
 
 
 @dataclass(frozen=True)
@@ -439,9 +441,12 @@ class VolumeReverberation:
         if self._cull_until is not None and self._cull_from <= t < self._cull_until:
             return self._cull
         if self._at_rest and self._at_rest_set is None:
-            shared = _AT_REST.get(self._at_rest_key())
+            key = self._at_rest_key()
+            with _AT_REST_LOCK:  # worlds may run in threads (a sweep's)
+                shared = _AT_REST.get(key)
+                if shared is not None:
+                    _AT_REST.move_to_end(key)
             if shared is not None:  # at rest the set is the same at every t
-                _AT_REST.move_to_end(self._at_rest_key())
                 (x, y, z), self._at_rest_set = shared
                 self._cull = (x, y, z)
                 self._cull_from, self._cull_until = -math.inf, math.inf
@@ -538,9 +543,10 @@ class VolumeReverberation:
             g0 = self._geometry_inside(0.0, x, y, z)
             self._at_rest_set = (x, g0, self.amplitudes(g0), 2.0 * g0.r_back_m / self.c)
             # Shared with later reverberations of the same set-up (never written to).
-            _AT_REST[self._at_rest_key()] = ((x, y, z), self._at_rest_set)
-            while len(_AT_REST) > _AT_REST_SETS:
-                _AT_REST.popitem(last=False)
+            with _AT_REST_LOCK:
+                _AT_REST[self._at_rest_key()] = ((x, y, z), self._at_rest_set)
+                while len(_AT_REST) > _AT_REST_SETS:
+                    _AT_REST.popitem(last=False)
         _, g0, amp, two_way_s = self._at_rest_set
         return replace(g0, emit_s=t - two_way_s), amp
 
