@@ -105,14 +105,15 @@ class VirtualTimeBoardLink(BoardLink):
 
     def quiet_until_ns(self) -> int | None:
         """Virtual time (ns) before which :meth:`_service` may be skipped, or None (every
-        tick). Only while :meth:`wait_for_samples` waits on a link that says how long its
-        device has nothing but samples below the awaited index to send (the simulated
-        board's ``quiet_until_ns``): the skipped ticks' samples then arrive, the same, at
-        the next service, before the wait can end. A keepalive due, DAC samples to send
-        within credit, or frames not yet written end the quiet."""
+        tick). Asked of a link that says how long its device has nothing to send but, while
+        :meth:`wait_for_samples` waits, samples below the awaited index (the simulated
+        board's ``quiet_until_ns``; with no index awaited, only while the board captures
+        nothing): the skipped ticks would have read nothing, or their samples arrive, the
+        same, at the next service, before the wait can end. A keepalive due, DAC samples to
+        send within credit, or frames not yet written end the quiet."""
         transport, awaited = self.transport, self._awaited_index
         quiet = getattr(transport, "quiet_until_ns", None)
-        if awaited is None or quiet is None or not self.up or self.queued:
+        if quiet is None or not self.up or self.queued:
             return None
         if self.hooks.dac_pending():
             return None

@@ -4,10 +4,12 @@ The simulated GRBL controller and the simulated board run in the host's own thre
 in-memory links, with the acoustic tank (:func:`~hil.experiments.sim_tank.build_tank_world`)
 between them, all on one :class:`~hil.devices.clock.VirtualClock`: time passes only while
 the host waits, and then every simulated millisecond the board driver's link is serviced
-as its threads would on real time, but for the milliseconds on which nothing is due while
+as its threads would on real time, but for the milliseconds on which nothing is due: while
 the host waits for samples (the simulated board then captures the skipped span at the next
-service, the same samples at the same instants: see ``VirtualTimeBoardLink.quiet_until_ns``
-in :mod:`hil.devices.board_link_virtual`). A run is therefore
+service, the same samples at the same instants) and while the board captures nothing (until
+its next SYNC or STATUS, or the host's next KEEPALIVE): see
+``VirtualTimeBoardLink.quiet_until_ns`` in :mod:`hil.devices.board_link_virtual`. A run is
+therefore
 
 - deterministic: the same experiment and seed give identical estimates and recording tables,
   however loaded the machine;

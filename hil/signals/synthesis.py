@@ -24,6 +24,8 @@ from hil.errors import ConfigError
 from hil.signals.schedule import TWO_PI, FloatArray, HopSchedule, HopTable
 
 _TABLE_CACHE_SIZE = 64
+#: Hops whose first samples are found at a time and kept (a stream reads consecutive spans).
+HOP_WINDOW = 64
 
 # Chirp tables depend on the hop's sub-sample offset δ. δ is quantised to this grid so that
 # float noise in computed start times (≈1e-15 s after 10 s of signal) does not defeat the
@@ -78,6 +80,7 @@ class BlockSynthesizer:
             OrderedDict()
         )
         self._scratch = np.empty(0)
+        self._window: tuple[HopTable, NDArray[np.int64]] | None = None
 
     # -------------------------------------------------------------- public
     def read(self, n_samples: int, dtype: DTypeLike = np.float64) -> NDArray[np.floating]:
@@ -104,13 +107,13 @@ class BlockSynthesizer:
         out = np.zeros(n_samples, dtype=np.float64)
         if n_samples == 0:
             return out.astype(dtype, copy=False)
-        fs = self.fs_hz
         n_end = first_sample + n_samples
-        span = self.schedule.hops_in_span(first_sample / fs, (n_end - 1) / fs + 0.5 / fs)
-        # One more hop than the span, so every hop's end sample is known.
-        hops = self.schedule.hops(int(span.index[0]), len(span) + 1)
-        bounds = self._first_samples(hops.start_s, hops.index)
-        for i in range(len(hops) - 1):
+        hops, bounds = self._hop_window(first_sample, n_end)
+        # The hops sounding in the span: from the one holding first_sample to the last that
+        # starts before n_end (each sample is written by the hop whose samples hold it).
+        first_hop = int(np.searchsorted(bounds, first_sample, side="right")) - 1
+        end_hop = int(np.searchsorted(bounds, n_end, side="left"))
+        for i in range(first_hop, end_hop):
             if hops.amplitude[i] == 0.0:
                 continue
             h_first, h_end = int(bounds[i]), int(bounds[i + 1])
@@ -124,6 +127,22 @@ class BlockSynthesizer:
         return out.astype(dtype, copy=False)
 
     # -------------------------------------------------------------- internals
+    def _hop_window(self, first_sample: int, n_end: int) -> tuple[HopTable, NDArray[np.int64]]:
+        """Consecutive hops that cover samples ``first_sample … n_end − 1``, and the first
+        sample of each (one more than the hops: the last hop's end). At least
+        :data:`HOP_WINDOW` hops, kept for the next spans they cover; a hop's first sample
+        does not depend on the window it is found in."""
+        if self._window is not None:
+            bounds = self._window[1]
+            if bounds[0] <= first_sample and n_end <= bounds[-1]:
+                return self._window
+        fs = self.fs_hz
+        span = self.schedule.hops_in_span(first_sample / fs, (n_end - 1) / fs + 0.5 / fs)
+        # One more hop than the span, so every hop's end sample is known.
+        hops = self.schedule.hops(int(span.index[0]), max(HOP_WINDOW, len(span)) + 1)
+        self._window = (hops, self._first_samples(hops.start_s, hops.index))
+        return self._window
+
     def _first_samples(self, starts: FloatArray, index: NDArray[np.int64]) -> NDArray[np.int64]:
         """First sample of each hop: the smallest n with locate(n/fs) >= hop, vectorised.
 

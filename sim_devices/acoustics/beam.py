@@ -141,6 +141,8 @@ class TwoWayAmplitudeTable:
         self._amp = np.sqrt(tx.intensity(theta) * rx.intensity(theta))
         self._slope = np.append(np.diff(self._amp), 0.0)
         self._scale = (points - 1) / 2.0
+        #: The table's values as bytes: equal keys, equal responses.
+        self.key = self._amp.tobytes()
 
     def __call__(self, cos_theta: FloatArray) -> FloatArray:
         # Uniform grid: the index is arithmetic (np.interp's binary search is 5x slower).

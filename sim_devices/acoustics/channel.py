@@ -51,6 +51,7 @@ from sim_devices.acoustics.delay import OneWayPath, PathSolution, TwoWayPath
 from sim_devices.acoustics.directivity import Transducer
 from sim_devices.acoustics.echo import TransmitWaveform
 from sim_devices.acoustics.grid_echo import EchoBank, GridEcho
+from sim_devices.acoustics.hop_phase import sample_phases
 from sim_devices.acoustics.noise_generator import ShapedNoiseGenerator
 from sim_devices.acoustics.reverberation import VolumeReverberation
 from sim_devices.acoustics.tank import EchoPath, Offset, Tank, echo_paths
@@ -127,6 +128,10 @@ class _EchoGain:
     """Path gain hook (see the module docstring) for one echo path: spreading and
     absorption on both legs, the projector's response in the direction the path leaves it
     and the hydrophone's in the direction it arrives from."""
+
+    #: Its value is a function of the solved geometry (leg lengths, positions), not of the
+    #: times: a still path's gain is the same at every time (see ``GridEcho``).
+    from_geometry = True
 
     def __init__(
         self,
@@ -255,9 +260,9 @@ class Channel:
         unit = isinstance(waveform, HopSchedule) and bool(np.all(waveform.amplitude == 1.0))
 
         def source(n0: int, count: int) -> FloatArray:
+            if unit:  # the phase of instantaneous_phase(n / fs), bit for bit, compiled
+                return np.cos(sample_phases(waveform, n0, count, fs))  # type: ignore[arg-type]
             n = np.arange(n0, n0 + count, dtype=np.int64)
-            if unit:
-                return np.cos(waveform.instantaneous_phase(n / fs))  # type: ignore[attr-defined]
             return np.asarray(waveform.evaluate(n / fs), dtype=np.float64)
 
         return TankEchoes(h, source, self.amplitude)

@@ -34,7 +34,10 @@ Streaming. The grid is solved in fixed batches of ``prefetch_intervals`` interva
 sample is computed from its own interval's data with the same arithmetic whatever the block:
 :meth:`GridEcho.block` returns the same samples, bit for bit, for any chunking. The paths'
 trajectories are queried up to one batch (``P h`` samples, 66 ms at 1 MHz by default) after
-the last sample read; a batch costs one solve call, so the look-ahead buys speed.
+the last sample read; a batch costs one solve call, so the look-ahead buys speed. A still path
+(every trajectory ``still``, e.g. the direct blast of a fixed transducer, and a gain from the
+geometry alone) has the same delay and gain at every time: its first batch, solved once, is
+every batch's (the same values a solve of each would give).
 
 :class:`EchoBank` renders several paths on one grid (a target's direct and tank-image echoes):
 their batches are solved together by :func:`~sim_devices.acoustics.delay.solve_paths` and the
@@ -163,6 +166,12 @@ class GridEcho(AnalyticEcho):
         self._batches: dict[int, _Batch] = {}
         #: Number of intervals that failed the check and were solved per sample.
         self.exact_intervals = 0
+        #: A still path (every trajectory ``still``, a gain from the geometry alone) has the
+        #: same delay and gain at every time: its first batch serves every batch.
+        self.still = _still_path(path) and (
+            gain is unit_gain or bool(getattr(gain, "from_geometry", False))
+        )
+        self._still_batch: _Batch | None = None
 
     # ------------------------------------------------------------------ grid
     def batch_times(self, b: int) -> FloatArray:
@@ -177,11 +186,20 @@ class GridEcho(AnalyticEcho):
         store_batches([self], b, [sol])
 
     def has_batch(self, b: int) -> bool:
-        """Whether batch ``b`` is solved and held."""
+        """Whether batch ``b`` is solved and held (a still path's is as soon as one is)."""
+        if b not in self._batches and self._still_batch is not None:
+            self._keep(b, self._still_batch)
         return b in self._batches
 
+    def _keep(self, b: int, batch: _Batch) -> None:
+        """Hold ``batch`` as batch ``b``."""
+        self._batches[b] = batch
+        self.exact_intervals += int(np.count_nonzero(batch.exact))
+        if self.still and self._still_batch is None:
+            self._still_batch = batch
+
     def _batch(self, b: int) -> _Batch:
-        if b not in self._batches:
+        if not self.has_batch(b):
             self.store_batch(b, self.path.solve(self.batch_times(b)))
         return self._batches[b]
 
@@ -257,7 +275,7 @@ class GridEcho(AnalyticEcho):
         gain = np.empty(n, dtype=np.float32)
         emit = np.empty(n)
         ordered = gains_and_emission_times(
-            grid.t, grid.u, grid.interval, coeffs, gains, np.float32(self.amplitude),
+            grid.t, grid.u, grid.offsets, coeffs, gains, np.float32(self.amplitude),
             self.amplitude != 1.0, gain, emit,
         )  # fmt: skip
         if not ordered:  # the transmit is read at sorted times only
@@ -324,8 +342,14 @@ def store_batches(echoes: Sequence[GridEcho], b: int, sols: Sequence[PathSolutio
     gains = np.stack((g0, gb, gc), axis=1).astype(np.float32)  # 1e-7: below the transmit's
     coeffs = np.stack((d0, s0, c2, c3), axis=1)
     for i, e in enumerate(echoes):
-        e.exact_intervals += int(np.count_nonzero(exact[i]))
-        e._batches[b] = _Batch(coeffs[i], gains[i], exact[i])
+        e._keep(b, _Batch(coeffs[i], gains[i], exact[i]))
+
+
+def _still_path(path: PropagationPath) -> bool:
+    """Whether every trajectory of ``path`` (its ``tx``, ``target``, ``rx``) is ``still``:
+    the same position, bit for bit, at every time."""
+    ends = [getattr(path, name) for name in ("tx", "target", "rx") if hasattr(path, name)]
+    return bool(ends) and all(getattr(end, "still", False) for end in ends)
 
 
 class SampleGrid:
@@ -340,7 +364,6 @@ class SampleGrid:
         self.t = sample_times(n0, count, fs_hz, t_start_s)
         self.n0, self.count, self.h = int(n0), int(count), int(h)
         self._u32: NDArray[np.float32] | None = None
-        self._interval: NDArray[np.int64] | None = None
         shift = h.bit_length() - 1
         if self.count == 0:
             self.ka, self.kb = 0, -1
@@ -358,15 +381,6 @@ class SampleGrid:
         self.u *= 1.0 / h
         #: Whole intervals only: per-interval values broadcast over a (m, h) layout.
         self.whole = self.n0 % h == 0 and self.count % h == 0
-
-    @property
-    def interval(self) -> NDArray[np.int64]:
-        """Each sample's interval, counted from ``ka`` (``(count,)``)."""
-        if self._interval is None:
-            shift = self.h.bit_length() - 1
-            n = np.arange(self.n0, self.n0 + self.count, dtype=np.int64)
-            self._interval = (n >> shift) - self.ka
-        return self._interval
 
     def polynomial(self, coeffs: NDArray[np.floating[Any]]) -> NDArray[np.floating[Any]]:
         """``Σ_i coeffs[i, k] u^i`` of every sample (Horner, highest power first), ``(count,)``,

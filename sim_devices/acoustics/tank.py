@@ -111,6 +111,8 @@ class BoxImage:
         self._inner = inner
         self.sign = as_point(sign, "image.sign")
         self.offset = as_point(offset_m, "image.offset_m")
+        #: A still trajectory's image is still (see :attr:`~.trajectory.Fixed.still`).
+        self.still = bool(getattr(inner, "still", False))
 
     @property
     def max_speed_mps(self) -> float | None:
@@ -207,6 +209,8 @@ class Offset:
     def __init__(self, inner: Trajectory, offset_m: ArrayLike) -> None:
         self._inner = inner
         self._d = as_point(offset_m, "direct_blast.offset_m")
+        #: A still trajectory displaced is still (see :attr:`~.trajectory.Fixed.still`).
+        self.still = bool(getattr(inner, "still", False))
 
     @property
     def max_speed_mps(self) -> float | None:

@@ -45,10 +45,10 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.signal import oaconvolve
 
 from hil.errors import ConfigError
 from sim_devices.acoustics.directivity import Transducer
+from sim_devices.acoustics.fixed_convolver import FixedResponseConvolver
 from sim_devices.acoustics.fractional_delay import kaiser_sinc
 from sim_devices.acoustics.images import box_images, check_order
 from sim_devices.acoustics.tank import Tank
@@ -259,6 +259,7 @@ class TankEchoes:
     ) -> None:
         self.h = np.asarray(h, dtype=np.float64) * float(amplitude)
         self.source = source
+        self._convolve = FixedResponseConvolver(self.h)
         self.frame = max(16384, 1 << int(math.ceil(math.log2(max(self.h.size, 2)))))
         self.position = 0
         self._frame_index = -1
@@ -272,7 +273,7 @@ class TankEchoes:
         # response's length of earlier transmit and keep what reaches past sample 0.
         m = self.h.size
         before = self.source(-m, m)
-        full = oaconvolve(before, self.h)
+        full = self._convolve(before)
         self._carry = np.zeros(m)
         self._carry[: m - 1] = full[m : 2 * m - 1]
         self._primed = True
@@ -282,7 +283,7 @@ class TankEchoes:
             self._prime()
         k = self._frame_index + 1
         f = self.frame
-        y = oaconvolve(self.source(k * f, f), self.h)
+        y = self._convolve(self.source(k * f, f))
         m = self.h.size
         y[:m] += self._carry
         self._frame = y[:f]

@@ -113,6 +113,10 @@ class Fixed:
            [ 0.,  0., -1.]])
     """
 
+    #: The same position, bit for bit, at every time (a path between still points is solved
+    #: once: :class:`~sim_devices.acoustics.grid_echo.GridEcho`).
+    still = True
+
     def __init__(self, position_m: ArrayLike) -> None:
         self._p = as_point(position_m, "position_m")
 
@@ -370,6 +374,8 @@ class Mirrored:
             )
         self._n = n / norm
         self._inner = trajectory
+        #: A still trajectory's image is still (see :attr:`Fixed.still`).
+        self.still = bool(getattr(trajectory, "still", False))
 
     @property
     def max_speed_mps(self) -> float | None:

@@ -141,6 +141,8 @@ class SimulatedBoard:
         self._base_index = 0
         self._base_ns = self._power_up_ns = self._now_ns()
         self._out = bytearray()
+        self._layout_for: Configure | None = None
+        self._layout = (1, 1, SampleFormat.INT16, 0)
         self._new_session()
 
     # --- sans-IO device contract ---------------------------------------------------------
@@ -172,39 +174,42 @@ class SimulatedBoard:
             self._next_status = now + round(self.spec.status_interval_s * _NS)
         self._grant_credit()
 
-    def quiet_until_ns(self, awaited_index: int, max_bytes: int) -> int:
-        """Board time (ns) before which :meth:`tick` has nothing to do but capture samples
-        below ``awaited_index`` and send them, at most ``max_bytes`` of them: a tick skipped
-        before it does its capture, identically, at the next tick (the ADC frames are cut
-        differently, the samples are the same). Now (:meth:`_now_ns`) when something is due
-        or pending: bytes to send, a fault, no capture running.
+    def quiet_until_ns(self, awaited_index: int | None, max_bytes: int) -> int:
+        """Board time (ns) before which :meth:`tick` has nothing to do but, while capturing,
+        capture samples below ``awaited_index`` and send them, at most ``max_bytes`` of them:
+        a tick skipped before it does its capture, identically, at the next tick (the ADC
+        frames are cut differently, the samples are the same). Now (:meth:`_now_ns`) when
+        something is due or pending: bytes to send, a fault, no session, or a capture
+        running while no index is awaited (``awaited_index`` None).
 
-        Due are: the next SYNC and STATUS, the watchdog's deadline, the first instant the
-        DAC FIFO may have freed enough to grant credit (each played index frees at most one
-        sample), the instant the sample clock reaches ``awaited_index``, and the instant the
-        capture would exceed ``max_bytes``.
+        Due are: the next SYNC and STATUS and the watchdog's deadline; while capturing also
+        the first instant the DAC FIFO may have freed enough to grant credit (each played
+        index frees at most one sample), the instant the sample clock reaches
+        ``awaited_index``, and the instant the capture would exceed ``max_bytes``. While no
+        capture runs nothing plays, so the credit to grant changes only with host bytes
+        (which the host's next service follows): due now if it is due at all.
         """
         now = self._now_ns()
         config, fifo = self.conn.configuration, self._fifo
-        if (
-            self._out
-            or self.faults.any_pending
-            or not self._capturing
-            or config is None
-            or fifo is None
-            or self.conn.state not in _SESSION_STATES
-        ):
+        if self._out or self.faults.any_pending or self.conn.state not in _SESSION_STATES:
             return now
-        due = [self._next_sync, self._next_status, self._ns_at_index(awaited_index)]
+        due = [self._next_sync, self._next_status]
         if self._watchdog_ns is not None:
             due.append(self._last_host + self._watchdog_ns + 1)  # it fires after the deadline
         threshold = max(1, self.spec.dac_buffer_samples // 8)
+        if not self._capturing:
+            if fifo is not None and self.conn.state in _CREDIT_STATES:
+                free = self.spec.dac_buffer_samples - fifo.level - self.conn.dac_credit
+                if free >= threshold:
+                    return now
+            first = min(due)
+            return now if math.isinf(first) else max(now, int(first))
+        if awaited_index is None or config is None or fifo is None:
+            return now
+        due.append(self._ns_at_index(awaited_index))
         free = self.spec.dac_buffer_samples - fifo.level - self.conn.dac_credit
         due.append(self._ns_at_index(self._produced + max(0, threshold - free)))
-        per_frame = self.adc_frame_samples
-        sample_bytes = channel_count(config.adc_channel_mask) * SampleFormat(config.adc_format).size
-        wire = per_frame * sample_bytes + _FRAME_OVERHEAD
-        wire += wire // 254 + 2  # COBS: a code byte per 254, the delimiters
+        per_frame, _, _, wire = self._adc_layout(config)
         frames = max_bytes // 2 // wire  # half: room for a SYNC or STATUS beside them
         due.append(self._ns_at_index(self._produced + frames * per_frame))
         return max(now, int(min(due)))
@@ -243,8 +248,20 @@ class SimulatedBoard:
         config = self.conn.configuration
         if config is None:
             return 1
-        size = channel_count(config.adc_channel_mask) * SampleFormat(config.adc_format).size
-        return (self.spec.max_frame_len - _FRAME_OVERHEAD) // size
+        return self._adc_layout(config)[0]
+
+    def _adc_layout(self, config: Configure) -> tuple[int, int, SampleFormat, int]:
+        """The ADC stream of ``config``: sample frames per ADC_DATA frame, channels, sample
+        format, and the wire bytes of a full frame (COBS included). Kept for the
+        configuration object last asked about (a configuration is immutable)."""
+        if config is not self._layout_for:
+            n_adc = channel_count(config.adc_channel_mask)
+            fmt = SampleFormat(config.adc_format)
+            per_frame = (self.spec.max_frame_len - _FRAME_OVERHEAD) // (n_adc * fmt.size)
+            wire = per_frame * n_adc * fmt.size + _FRAME_OVERHEAD
+            wire += wire // 254 + 2  # COBS: a code byte per 254, the delimiters
+            self._layout, self._layout_for = (per_frame, n_adc, fmt, wire), config
+        return self._layout
 
     def snapshot(self) -> BoardSnapshot:
         """The board's state now."""
@@ -475,9 +492,7 @@ class SimulatedBoard:
         fifo = self._fifo
         if config is None or fifo is None:
             return
-        step = self.adc_frame_samples
-        n_adc = channel_count(config.adc_channel_mask)
-        fmt = SampleFormat(config.adc_format)
+        step, n_adc, fmt, _ = self._adc_layout(config)
         while self._produced < end:
             first = self._produced
             # The world computes up to _WORLD_FRAMES frames in one call (its per-call cost

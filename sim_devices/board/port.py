@@ -73,7 +73,7 @@ class BoardPort:
             self.board.receive_data(bytes(data))
         return len(data)
 
-    def quiet_until_ns(self, awaited_index: int, max_bytes: int) -> int:
+    def quiet_until_ns(self, awaited_index: int | None, max_bytes: int) -> int:
         """:meth:`SimulatedBoard.quiet_until_ns`; 0 (due at once) while bytes wait to be
         read or the port is closed."""
         with self.lock:
@@ -133,10 +133,11 @@ class MemoryBoardLink:
         """Send bytes to the board."""
         return self.port.write(data)
 
-    def quiet_until_ns(self, awaited_index: int, max_bytes: int) -> int:
+    def quiet_until_ns(self, awaited_index: int | None, max_bytes: int) -> int:
         """Board time (ns) before which the board only captures samples below
-        ``awaited_index`` (:meth:`SimulatedBoard.quiet_until_ns`): a host on virtual time
-        need not read it before then."""
+        ``awaited_index`` (None: none awaited), or idles, with nothing to send
+        (:meth:`SimulatedBoard.quiet_until_ns`): a host on virtual time need not read it
+        before then."""
         return self.port.quiet_until_ns(awaited_index, max_bytes)
 
     def close(self) -> None:

@@ -59,3 +59,35 @@ def test_a_block_with_intervals_solved_per_sample_equals_the_numpy_form() -> Non
     expected, got = both_forms(echo, 0, 16384 * 6)
     assert echo.exact_intervals > 0
     assert got.tobytes() == expected.tobytes()
+
+
+def test_a_still_path_is_solved_once_and_gives_the_same_samples() -> None:
+    """The direct blast between two still points (a fixed transducer and an offset of it):
+    its first batch serves every batch, with the samples of solving each one."""
+    from sim_devices.acoustics.delay import OneWayPath
+    from sim_devices.acoustics.tank import BoxImage, Offset
+
+    sonar = Fixed((0.5, 2.0, -1.2))
+    image = BoxImage(sonar, (1.0, 1.0, -1.0), (0.0, 0.0, 0.0))  # in the surface
+    for tx in (Offset(sonar, (0.0, 0.0, 0.05)), image):
+        path = OneWayPath(tx, sonar, 1480.0)
+        still = GridEcho(chirps(), path, FS, amplitude=2.5e3)
+        every = GridEcho(chirps(), path, FS, amplitude=2.5e3)
+        every.still = False
+        assert still.still
+        solves = {"n": 0}
+        real_solve = path.solve
+
+        def counted(t: np.ndarray, real=real_solve, tally=solves) -> object:
+            tally["n"] += 1
+            return real(t)
+
+        path.solve = counted  # type: ignore[method-assign]
+        got = still.block(7_000, 200_000)
+        assert solves["n"] == 1
+        expected = every.block(7_000, 200_000)
+        assert solves["n"] > 10
+        assert got.tobytes() == expected.tobytes()
+        assert np.max(np.abs(got)) > 1.0
+    moving = TwoWayPath.monostatic(sonar, ConstantVelocity((3.0, 2.0, -1.2), (-1.0, 0, 0)), 1480.0)
+    assert not GridEcho(tones(), moving, FS).still

@@ -151,3 +151,56 @@ def test_the_simulated_board_is_quiet_only_while_it_has_nothing_else_due() -> No
     faults.adc_overrun(10)  # a pending fault is due at once
     assert link.quiet_until_ns(first + RATE_HZ, 1 << 16) == now
     board.close()
+
+
+def idle_then_streamed() -> tuple[Board, SimulatedBoard, list[tuple[int, float]], np.ndarray]:
+    """Configure a board on virtual time, leave it idle (configured, not capturing) for
+    1.3 s while the host sleeps in 70 ms steps, as a stage driver polls while it homes, then
+    stream 0.1 s. Returns the driver, the simulated board, the SYNC pairs of the idle span
+    and the samples."""
+    clock = VirtualClock(tick_s=0.001)
+    sim = SimulatedBoard(clock=clock, world=LoopbackWorld(DELAY))
+    link = MemoryBoardLink(BoardPort(sim), timeout=0.0)
+    settings = BoardSettings(sample_rate_hz=RATE_HZ, dac_channels=1, adc_channels=1)
+    board = Board(link, settings=settings, virtual_time=clock, keepalive_ms=300).open()
+    board.configure()
+    for _ in range(19):
+        clock.sleep(0.07)
+    assert board.clock_fit is not None
+    idle_pairs = board.clock_fit.pair_list()
+    first = board.start(source)
+    assert board.wait_for_samples(first + 19_200, timeout_s=1.0)
+    return board, sim, idle_pairs, board.read(first, 19_200)
+
+
+def test_skipping_the_ticks_of_an_idle_board_changes_no_byte(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """While the simulated board captures nothing, the link sleeps past the ticks before
+    its next SYNC, STATUS or the host's next KEEPALIVE: the same SYNC pairs, keepalives,
+    status reports and samples as servicing every tick, with a tick per event instead of
+    one a millisecond."""
+    ticks = {"n": 0}
+    real_tick = SimulatedBoard.tick
+
+    def counted(self: SimulatedBoard) -> None:
+        ticks["n"] += 1
+        real_tick(self)
+
+    monkeypatch.setattr(SimulatedBoard, "tick", counted)
+    quiet = idle_then_streamed()
+    quiet_ticks, ticks["n"] = ticks["n"], 0
+    monkeypatch.setattr(VirtualTimeBoardLink, "quiet_until_ns", lambda self: None)
+    every = idle_then_streamed()
+    (a, sim_a, pairs_a, data_a), (b, sim_b, pairs_b, data_b) = quiet, every
+    # a SYNC each 0.1 s of the 1.33 s idle span (the first, at CONFIGURE, before the fit)
+    assert [t for _, t in pairs_a] == pytest.approx([0.001 + 0.1 * k for k in range(1, 14)])
+    assert pairs_a == pairs_b
+    assert sim_a.host_frames == sim_b.host_frames  # the keepalives arrived alike
+    assert a.last_status == b.last_status
+    np.testing.assert_array_equal(data_a, data_b)
+    assert a._clock.now() == b._clock.now()
+    assert ticks["n"] > 1330  # every millisecond of the idle span
+    assert quiet_ticks < ticks["n"] / 4
+    for board in (a, b):
+        board.close()

@@ -69,6 +69,37 @@ def test_chunks_equal_whole(family: str, cuts: list[int], start: int) -> None:
     np.testing.assert_array_equal(np.concatenate(parts), whole)
 
 
+@pytest.mark.parametrize("family", FAMILIES)
+def test_spans_read_in_any_order_equal_a_fresh_synthesizers(
+    family: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """One synthesizer keeps the hops it found for the next spans: spans read forward, back
+    and far ahead are those of a synthesizer that reads only that span, and a stream of short
+    consecutive reads finds its hops once per window, not once per read."""
+    sch = build_schedule(get_preset("att").spec(family))
+    fs = 100_000.0
+    rng = np.random.default_rng(7)
+    syn = BlockSynthesizer(sch, fs, amplitude=0.7)
+    spans = [(-3000, 2500), (-500, 4000), (60_000, 1), (2_000_000, 9000), (100, 30_000)]
+    starts, counts = rng.integers(-(10**5), 10**6, 20), rng.integers(1, 20_000, 20)
+    spans += [(int(a), int(n)) for a, n in zip(starts, counts, strict=True)]
+    for first, n in spans:
+        fresh = BlockSynthesizer(sch, fs, amplitude=0.7).render(first, n)
+        assert syn.render(first, n).tobytes() == fresh.tobytes()
+    found = {"n": 0}
+    real = BlockSynthesizer._first_samples
+
+    def counted(self: BlockSynthesizer, *args: np.ndarray) -> np.ndarray:
+        found["n"] += 1
+        return real(self, *args)
+
+    monkeypatch.setattr(BlockSynthesizer, "_first_samples", counted)
+    stream = BlockSynthesizer(sch, fs)
+    for _ in range(200):
+        stream.read(500)  # 1 s: 100 hops of 10 ms at most
+    assert 1 <= found["n"] <= 3
+
+
 def test_blocks_iterator() -> None:
     sch = build_schedule(get_preset("att").spec("random-cyclic"))
     blocks = list(BlockSynthesizer(sch, 100_000.0).blocks(1000, 7))
