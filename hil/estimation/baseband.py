@@ -235,4 +235,10 @@ class ComplexBaseband:
         fir_decimate(buf, lo, n.shape[0], self.decimation, self._g_re, self._g_im, acc_re, acc_im)
         phase = np.mod(n.astype(np.float64) * self._cycles_per_output, 1.0)
         rot = np.exp(-2j * np.pi * phase)
-        return rot * (acc_re + 1j * acc_im)
+        # The rotation as real products and sums, each rounded once (IEEE): NumPy's complex
+        # multiply rounds differently in its in-place loop, which it takes by itself for a
+        # temporary over 256 KiB, so an output's last bit would depend on the block's size.
+        out = np.empty(n.shape[0], dtype=np.complex128)
+        out.real = rot.real * acc_re - rot.imag * acc_im
+        out.imag = rot.real * acc_im + rot.imag * acc_re
+        return out
