@@ -130,12 +130,4 @@ def test_second_codewords_chunks_equal_whole() -> None:
     whole = run_blocks(rx, x, block=x.shape[0])
     for block in (997, 10_000):
         rx2, _, _ = _dense_scene(0.0)
-        parts = run_blocks(rx2, x, block=block)
-        assert [(e.hop_index, e.codeword) for e in parts] == [
-            (e.hop_index, e.codeword) for e in whole
-        ]
-        # In reverberation the exact sums' last bits depend on the chunking (1-3 ulps, the
-        # same without the second codewords); a fit started from them ends within 4e-11.
-        for field in ("t_s", "range_m", "speed_mps", "score"):
-            got, want = [getattr(e, field) for e in parts], [getattr(e, field) for e in whole]
-            assert got == pytest.approx(want, rel=1e-9, abs=1e-9)
+        assert run_blocks(rx2, x, block=block) == whole
