@@ -100,11 +100,8 @@ def test_virtual_time_and_another_clock_are_refused() -> None:
         Board("sim://board", clock=MonotonicClock(), virtual_time=VirtualClock())
 
 
-def test_skipping_the_quiet_ticks_changes_no_byte(monkeypatch: pytest.MonkeyPatch) -> None:
-    """The virtual-time link skips the ticks on which the simulated board only captures
-    samples short of the awaited index (``VirtualTimeBoardLink.quiet_until_ns``): the same
-    samples, SYNC pairs and instants as a run that services the link at every tick, with far
-    fewer board ticks."""
+def _count_board_ticks(monkeypatch: pytest.MonkeyPatch) -> dict[str, int]:
+    """Count the simulated board's ticks from now on (``["n"]``)."""
     ticks = {"n": 0}
     real_tick = SimulatedBoard.tick
 
@@ -113,6 +110,15 @@ def test_skipping_the_quiet_ticks_changes_no_byte(monkeypatch: pytest.MonkeyPatc
         real_tick(self)
 
     monkeypatch.setattr(SimulatedBoard, "tick", counted)
+    return ticks
+
+
+def test_skipping_the_quiet_ticks_changes_no_byte(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The virtual-time link skips the ticks on which the simulated board only captures
+    samples short of the awaited index (``VirtualTimeBoardLink.quiet_until_ns``): the same
+    samples, SYNC pairs and instants as a run that services the link at every tick, with far
+    fewer board ticks."""
+    ticks = _count_board_ticks(monkeypatch)
     quiet = streamed(0.3)
     quiet_ticks, ticks["n"] = ticks["n"], 0
     monkeypatch.setattr(VirtualTimeBoardLink, "quiet_until_ns", lambda self: None)
@@ -180,14 +186,7 @@ def test_skipping_the_ticks_of_an_idle_board_changes_no_byte(
     its next SYNC, STATUS or the host's next KEEPALIVE: the same SYNC pairs, keepalives,
     status reports and samples as servicing every tick, with a tick per event instead of
     one a millisecond."""
-    ticks = {"n": 0}
-    real_tick = SimulatedBoard.tick
-
-    def counted(self: SimulatedBoard) -> None:
-        ticks["n"] += 1
-        real_tick(self)
-
-    monkeypatch.setattr(SimulatedBoard, "tick", counted)
+    ticks = _count_board_ticks(monkeypatch)
     quiet = idle_then_streamed()
     quiet_ticks, ticks["n"] = ticks["n"], 0
     monkeypatch.setattr(VirtualTimeBoardLink, "quiet_until_ns", lambda self: None)
