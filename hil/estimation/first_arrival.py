@@ -78,8 +78,9 @@ Limits with its canceller: a target slower than about one carrier wavelength per
 is mostly cancelled with the clutter (no onset found: the peak readout is kept), and an
 opening target's copy one period back arrives first (its onset is the target a period ago,
 corrected by one period's travel at the present speed); the readout needs the samples of
-one code period plus ``M`` hops behind the boundary (:attr:`FirstArrivalReadout.history`); it
-assumes first arrivals within ``max_spread_s`` before the centroid (default 0.3 hop). The
+one code period plus ``M`` hops behind the boundary, and the detector's decision lag behind
+the newest sample (:attr:`FirstArrivalReadout.history`, :meth:`~FirstArrivalReadout.allow_lag`);
+it assumes first arrivals within ``max_spread_s`` before the centroid (default 0.3 hop). The
 Doppler scores of two echoes within :data:`DOPPLER_GATE_S` of delay of each other (0.37 m) are
 summed as one echo's; a speed changing faster than :data:`DOPPLER_SPEED_GATE_MPS` over the lags
 is read on the present score alone.
@@ -429,6 +430,8 @@ class FirstArrivalReadout:
         self._lead = 2 * self.boxcar
         self.history += self._pre + self._post + self._lead
         self._offsets_ext = np.arange(-self._pre - self._lead, self._post)
+        #: :attr:`history` without the caller's decision lag (:meth:`allow_lag`).
+        self._own_history = self.history
         self._ring = RowBuffer(self.history, (), np.float64)
         self._valid_from = 0
         self.sound_speed_mps = float(sound_speed_mps)
@@ -446,6 +449,17 @@ class FirstArrivalReadout:
         self._patterns: dict[bytes, _TonePattern] = {}
         #: The direct path's readings of the last hops: (hop index, delay (s), time scale).
         self._read_speeds: list[tuple[int, float, float]] = []
+
+    def allow_lag(self, samples: int) -> None:
+        """Keep ``samples`` (input samples) more history: a detection reaches
+        :meth:`first_arrival` up to that long after its boundary's samples were pushed (the
+        caller's decision lag), and its windows must still be in the history. Forgets the
+        history."""
+        if samples < 0:
+            raise ConfigError("samples", samples, ">= 0 (input samples of decision lag)")
+        self.history = self._own_history + int(samples)
+        self._ring = RowBuffer(self.history, (), np.float64)
+        self.reset(0)
 
     def reset(self, input_index: int) -> None:
         """Forget the history; the next sample is ``input_index`` (after a gap)."""
@@ -480,7 +494,8 @@ class FirstArrivalReadout:
         n_b = np.round(t_b * fs).astype(np.int64)
         w = self.boxcar
         first = n_b - self._pre - self._lead - self.period
-        if first.min() < self._valid_from or n_b.max() + self._post > self._ring.next_index:
+        held_from = max(self._valid_from, self._ring.next_index - self._ring.available)
+        if first.min() < held_from or n_b.max() + self._post > self._ring.next_index:
             return None
         idx = n_b[:, None] + self._offsets_ext[None, :]  # (M, L + lead)
         d = self._ring.rows(idx)

@@ -91,6 +91,9 @@ class StagedGcas:
         self.inner = inner
         self.stage = stage
         self.first_arrival = readout
+        if readout is not None:
+            # GCAS's estimates come out up to its decision lag after their samples arrived.
+            readout.allow_lag(inner.decision_lag_samples)
         self.fs_hz = float(inner.fs_hz)
         self.sound_speed_mps = float(inner.sound_speed_mps)
         self.max_range_m = float(inner.max_range_m)

@@ -370,6 +370,8 @@ class CoherentRefiner:
         self._alpha_tol = 0.5 * self.speed_span_mps / self.c  # a quarter span, as a time scale
         self.history = int(math.ceil((self.m_hops + 1) * self.hop_len_s / alpha_lo * fs_hz))
         self.history += 2 * self._half + 8
+        #: :attr:`history` without the caller's decision lag (:meth:`allow_lag`).
+        self._own_history = self.history
         self._ring = RowBuffer(self.history, (), np.float64)
         self._valid_from = 0
         n_slots = SLOTS_PER_HOP * self.m_hops
@@ -402,6 +404,16 @@ class CoherentRefiner:
         self._cell_speed = self.c / (2.0 * f_c * self.hop_len_s)
 
     # ------------------------------------------------------------------ stream
+    def allow_lag(self, samples: int) -> None:
+        """Keep ``samples`` (input samples) more history: a detection reaches :meth:`refine`
+        up to that long after its boundary's samples were pushed (the caller's decision lag),
+        and its hops' windows must still be in the history. Forgets the history."""
+        if samples < 0:
+            raise ConfigError("samples", samples, ">= 0 (input samples of decision lag)")
+        self.history = self._own_history + int(samples)
+        self._ring = RowBuffer(self.history, (), np.float64)
+        self.reset(0)
+
     def reset(self, input_index: int) -> None:
         """Forget the history; the next sample is ``input_index`` (after a gap)."""
         self._ring.reset(input_index)

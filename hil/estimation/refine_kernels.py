@@ -128,8 +128,9 @@ def assign_slots(
     least recently used slot not taken by this detection, filled now (:func:`_fill_slot`,
     from ``edge − half`` for ``span`` samples, demodulated at ``f·alpha`` about the centre).
     ``x`` holds absolute sample ``x_origin + i`` at ``i``; samples from ``valid_from`` to
-    ``next_index`` are real input. Slot arrays shape ``(S,)`` are updated; ``clock`` marks
-    the use. False where a hop to fill is not covered by the input."""
+    ``next_index`` are real input, held from ``x_origin`` on. Slot arrays shape ``(S,)`` are
+    updated; ``clock`` marks the use. False where a hop to fill is not covered by the input
+    or no longer held."""
     m_hops = hop_ids.shape[0]
     n_slots = slot_hop.shape[0]
     edge = np.empty(m_hops)
@@ -153,7 +154,8 @@ def assign_slots(
         if out[i] >= 0:
             continue
         first = int(math.floor(edge[i])) - half
-        if first < valid_from or first + span > next_index:
+        # Only real input still held: an index before x_origin would wrap to other samples.
+        if first < max(valid_from, x_origin) or first + span > next_index:
             return False
         best = -1
         for s in range(n_slots):  # the least recently used, not this detection's

@@ -3,6 +3,7 @@ readout, in that order (the algorithm: :mod:`hil.estimation.gcas`)."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Any
 
@@ -182,6 +183,11 @@ class GcasReceiver:
         self.refine = self._refiner is not None
         self._sums = CodewordSums(fe)
         self.strategy = self._make_search(search, cfar, coarse_step)
+        # The readouts re-read the input at a peak's boundary when the peak comes out, up to
+        # the search's decision lag after its samples arrived: they keep that much more.
+        for reader in (self._refiner, self._first_arrival):
+            if reader is not None:
+                reader.allow_lag(self.decision_lag_samples)
         self.readout = Readout(
             fe, max_range_m=self.max_range_m, coherent=self.coherent,
             first_arrival=self._first_arrival, unit_values=self.strategy.unit_values,
@@ -332,6 +338,15 @@ class GcasReceiver:
         self._samples_seen = 0
         self._restart(0)
         self.readout.reset()
+
+    @property
+    def decision_lag_samples(self) -> int:
+        """Input samples an estimate's boundary can lie behind the newest input sample when
+        it comes out: the search's decision lag (:attr:`SearchStrategy.decision_lag`,
+        baseband samples of ``R`` input samples), the low-pass's group delay and two baseband
+        samples (the newest baseband sample is up to one behind the input, one of margin)."""
+        r = self.baseband.decimation
+        return (self.strategy.decision_lag + 2) * r + math.ceil(self.baseband.group_delay)
 
     @property
     def samples_seen(self) -> int:

@@ -40,6 +40,12 @@ class SearchStrategy(Protocol):
         (``samples_seen`` when the search gives no such bound)."""
         ...
 
+    @property
+    def decision_lag(self) -> int:
+        """Baseband samples a peak can lie behind the newest baseband sample when it comes
+        out (the history its decision reads): how long a readout must keep the input."""
+        ...
+
     def map_hypotheses(self, count: int) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         """The last ``count`` baseband sample indices and the hypothesis chosen at each (the
         rows of the time–codeword map)."""

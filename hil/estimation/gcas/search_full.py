@@ -57,6 +57,9 @@ class FullSearch:
         self._g_ring = RowBuffer(m * fe.n_max + 1, (d,), np.float64)
         self._acc_ring = RowBuffer(fe.n_max + 1, (d,), np.float64)
         det_keep = fe.cfar_window + 2 * fe.n_max + 4
+        #: A peak's statistic is read from the detection history: at most this far behind
+        #: the newest baseband sample (:attr:`SearchStrategy.decision_lag`).
+        self.decision_lag = det_keep
         self._s_ring = RowBuffer(det_keep, (), np.float64)
         self._dhat_ring = RowBuffer(det_keep, (), np.int64)
         self._noise_ring = RowBuffer(det_keep, (), np.float64)

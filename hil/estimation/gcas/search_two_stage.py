@@ -137,6 +137,9 @@ class TwoStageSearch:
             int(fe.lags.max()) + fe.n_max + 2 * self.fine_half + (self._c_lookahead + 2) * b
             + abs(int(np.min(self._c_shift))) + RECENTRE_STEPS * self.fine_half + 8
         )  # fmt: skip
+        #: A peak comes out from the stage-2 history: at most this far behind the newest
+        #: baseband sample (:attr:`SearchStrategy.decision_lag`).
+        self.decision_lag = y_keep
         #: The baseband history and its exact correlators (stage 2).
         self.exact = ExactHistory(fe, keep=y_keep, block=b, widest=2 * self.fine_half + 1)
         self._hyp_w = self.exact.hyp_w
