@@ -76,3 +76,12 @@ def run_blocks(rx: Receiver, x: np.ndarray, block: int = 10_000) -> list[Estimat
     for i in range(0, x.shape[0], block):
         out += rx.process(x[i : i + block])
     return out + rx.flush()
+
+
+def block_edges(n: int, cut: int | str) -> list[int]:
+    """Block edges over ``n`` samples: every ``cut`` samples, or 20 random cuts seeded with
+    ``cut`` (given as ``"random-<seed>"``)."""
+    if isinstance(cut, int):
+        return [*range(0, n, cut), n]
+    rng = np.random.default_rng(int(cut.split("-")[1]))
+    return sorted({0, n, *rng.integers(1, n, 20).tolist()})

@@ -30,7 +30,7 @@ from sim_devices.acoustics.delay import TwoWayPath
 from sim_devices.acoustics.echo import AnalyticEcho
 from sim_devices.acoustics.trajectory import Fixed, Live
 
-from .conftest import FS, C, att_schedule
+from .conftest import FS, C, att_schedule, block_edges
 
 SECONDS = 3.0
 #: FMCW's sweep (10 kHz about 50 kHz, 0.1 s) needs 200 kHz sampling.
@@ -86,15 +86,6 @@ def _scene(name: str) -> tuple[np.ndarray, np.ndarray]:
     return x + reverb, background
 
 
-def _edges(n: int, cut: int | str) -> list[int]:
-    """Block edges over ``n`` samples: every ``cut`` samples, or 20 random cuts seeded with
-    ``cut`` (given as ``"random-<seed>"``)."""
-    if isinstance(cut, int):
-        return [*range(0, n, cut), n]
-    rng = np.random.default_rng(int(cut.split("-")[1]))
-    return sorted({0, n, *rng.integers(1, n, 20).tolist()})
-
-
 def _run(name: str, edges: list[int], tracked: bool = False, **extra: Any) -> dict[str, Any]:
     """Receiver ``name``'s (options ``extra``; behind a :class:`Tracker` where ``tracked``)
     estimates, refusals and notices with its scene fed in the blocks between ``edges``."""
@@ -145,7 +136,7 @@ def test_every_receiver_gives_the_same_estimates_in_any_blocks(
         extra["background"] = str(tmp_path / "background.npy")
     whole = _run(name, [0, x.shape[0]], tracked, **extra)
     for cut in (*BLOCKS, *(f"random-{s}" for s in RANDOM_SEEDS)):
-        parts = _run(name, _edges(x.shape[0], cut), tracked, **extra)
+        parts = _run(name, block_edges(x.shape[0], cut), tracked, **extra)
         for key, value in whole.items():
             assert parts[key] == value, (key, cut)
     assert len(whole["estimates"]) >= 10

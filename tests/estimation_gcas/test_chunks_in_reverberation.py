@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from hil.estimation.gcas.threshold import Peak
+from tests.estimation_gcas.conftest import block_edges
 from tests.estimation_gcas.test_scenes import _motion_input, _receiver
 
 #: The cut lists besides the whole input: fixed blocks, then random cuts (seeded).
@@ -30,15 +31,6 @@ def _scene(density_per_m3: float) -> np.ndarray:
     """The 2 s input (shape ``(200 000,)``), made once per density."""
     x, _ = _motion_input("still", 0.0, 0.0, 4, min_range_m=1.0, density_per_m3=density_per_m3)
     return x
-
-
-def _edges(n: int, cut: int | str) -> list[int]:
-    """Block edges over ``n`` samples: every ``cut`` samples, or 20 random cuts seeded with
-    ``cut`` (given as ``"random-<seed>"``)."""
-    if isinstance(cut, int):
-        return [*range(0, n, cut), n]
-    rng = np.random.default_rng(int(cut.split("-")[1]))
-    return sorted({0, n, *rng.integers(1, n, 20).tolist()})
 
 
 def _run(x: np.ndarray, edges: list[int], band: bool) -> dict[str, Any]:
@@ -66,7 +58,7 @@ def _check(density_per_m3: float, band: bool, cuts: tuple[int | str, ...]) -> di
     x = _scene(density_per_m3)
     whole = _run(x, [0, x.shape[0]], band)
     for cut in cuts:
-        parts = _run(x, _edges(x.shape[0], cut), band)
+        parts = _run(x, block_edges(x.shape[0], cut), band)
         for key, value in whole.items():
             assert parts[key] == value, (key, cut)
     return whole

@@ -440,3 +440,38 @@ def test_a_refused_speed_keeps_the_same_echos_reading_of_two_hops_back(sign: flo
     # Slower than GCAS's by 0.1 m/s: no image is faster than the direct path, refused.
     readout._read_speeds = [(99, delay(99, v), _alpha(v))]
     assert readout._held_alpha(100, d100, _alpha(sign * 1.6)) is None
+
+
+def test_a_first_arrival_older_than_the_history_is_refused_not_read_wrapped() -> None:
+    # The readout keeps a code period and M hops behind the newest sample, plus the caller's
+    # decision lag (allow_lag); a boundary older than that is refused, never read wrapped.
+    # The tank's 1.2 s and as long again of silence, pushed after it.
+    x, block = np.concatenate([_tank_echo(7.0, 1.5, seed=21), np.zeros(230_400)]), 1920
+    est = next(
+        e for e in run_blocks(_receiver("peak", refine=False), x, 19_200)
+        if e.t_s > 0.5 and abs(e.speed_mps - 1.5) < 0.5
+    )  # fmt: skip
+    stop = int((est.t_s + 0.02) * FS)
+
+    def pushed(samples: int, lag: int = 0) -> FirstArrivalReadout:
+        readout = FirstArrivalReadout(_schedule(), FS, 10, C)
+        if lag:
+            readout.allow_lag(lag)
+        for i in range(0, samples, block):
+            readout.push(x[i : min(i + block, samples)], i)
+        return readout
+
+    want = pushed(stop).first_arrival(est.t_s, est.alpha, est.hop_index)
+    assert want is not None
+    late = pushed(x.size)
+    # A ring holds at most 4 histories and a block: the boundary's windows have left it.
+    assert x.size - 4 * late.history - block > int(est.t_s * FS) - late.history
+    assert late.first_arrival(est.t_s, est.alpha, est.hop_index) is None
+    got = pushed(x.size, lag=x.size - stop).first_arrival(est.t_s, est.alpha, est.hop_index)
+    assert got == want
+
+
+def test_a_negative_decision_lag_is_refused_by_the_readout_with_its_field() -> None:
+    readout = FirstArrivalReadout(_schedule(), FS, 10, C)
+    with pytest.raises(ConfigError, match=r"samples = -1 .*>= 0 \(input samples of decision lag\)"):
+        readout.allow_lag(-1)

@@ -346,3 +346,38 @@ def test_a_long_window_searched_through_fewer_hops_finds_the_full_searchs_maxima
     assert max(abs(a.speed_mps - b.speed_mps) for a, b in zip(fewer, full, strict=True)) < 5e-3
     err = [e.range_m - true_range(R0, V0, e.t_tx_s, e.t_s) for e in fewer]
     assert np.sqrt(np.mean(np.square(err))) < (0.02 if snr_db < 0 else 0.005)
+
+
+def test_a_window_older_than_the_history_is_refused_not_read_wrapped() -> None:
+    # A detection reaches the refiner up to the search's decision lag after its samples were
+    # pushed; allow_lag keeps that much more history. Past it, the hops' windows are refused.
+    schedule, block = att_schedule(), 1000
+    x = echo_samples(schedule, R0, V0, 1.0, snr_db=-5.0, seed=3)
+    est = next(e for e in run_blocks(make_gcas(schedule, refine=False), x) if e.t_s > 0.2)
+    args = (est.t_s, est.alpha, est.hop_index, np.array([est.t_s]), np.array([est.alpha]))
+    stop = int((est.t_s + 0.01) * FS)
+
+    def pushed(samples: int, lag: int = 0) -> CoherentRefiner:
+        refiner = CoherentRefiner(schedule, FS, 10, C, 0.5, 30.0)
+        if lag:
+            refiner.allow_lag(lag)
+        for i in range(0, samples, block):
+            refiner.push(x[i : min(i + block, samples)], i)
+        return refiner
+
+    want = pushed(stop).correlation(*args)
+    assert want is not None
+    late = pushed(x.size)
+    # A ring holds at most 4 histories and a block: the boundary's hops have left it.
+    assert x.size - 4 * late.history - block > int(est.t_s * FS)
+    assert late.correlation(*args) is None
+    kept = pushed(x.size, lag=x.size - stop)
+    assert kept.history == late.history + x.size - stop
+    got = kept.correlation(*args)
+    assert got is not None and np.array_equal(got, want)
+
+
+def test_a_negative_decision_lag_is_refused_with_its_field() -> None:
+    refiner = CoherentRefiner(att_schedule(), FS, 10, C, 0.5, 30.0)
+    with pytest.raises(ConfigError, match=r"samples = -1 .*>= 0 \(input samples of decision lag\)"):
+        refiner.allow_lag(-1)
