@@ -45,7 +45,12 @@ For each of the ``M`` boundaries the GCAS detection used (receive times from its
    fitted on the ramp's steep part, from ``hi`` to twice its level, searched within one
    window where the rise is the next tone arriving to stay
    (:meth:`FirstArrivalReadout._new_tone_holds`: a late images' level passes), up to the top
-   otherwise.
+   otherwise. Behind the canceller a closing target's first arrival comes with its
+   sign-flipped copies δ later (0.33 ms at 1.5 m/s, under a window), which with its first
+   images can hold its own ramp under ``hi``: where such a rise holds the next tone and the
+   steep part's line starts after the ``lo`` crossing (no ramp crosses ``lo`` before its
+   onset), the steep part is those later arrivals and the line is fitted from ``lo`` to
+   ``hi`` (read late by a range cell otherwise: 0.13-0.20 m at 7.2-8.0 m in the built-in tank).
 4. **Doppler**: the direct path's complex amplitude at the ``M`` boundaries, fitted over its
    first :data:`DIRECT_S` on the ramp's model (the previous tone's leak divided out), gives
    its own time scale (:meth:`FirstArrivalReadout._direct_alpha`): GCAS's weighs the
@@ -572,6 +577,7 @@ class FirstArrivalReadout:
             return None  # the ramp runs into the baseline: no clean onset
         # A slow rise from lo to hi is not the ramp itself (SLOW_RISE).
         j_a, j_b = j_lo, j_hi
+        holds = False
         if j_hi - j_lo > SLOW_RISE * w:
             # The next tone arriving to stay (a weak first arrival under its images) has its
             # steep part within a window; a late images' level ahead of it does not.
@@ -580,8 +586,24 @@ class FirstArrivalReadout:
             up = np.flatnonzero(amp[j_hi : stop + 1] >= 2.0 * amp[j_hi])
             if up.size:
                 j_a, j_b = j_hi, j_hi + max(2, int(up[0]))
-        tt = self._offsets[j_a : j_b + 1] / fs
-        slope, icept = np.polyfit(tt, amp[j_a : j_b + 1], 1)
+        slope, icept = self._line(amp, j_a, j_b)
+        if (
+            self.period
+            and alpha > 1.0
+            and holds
+            and j_a != j_lo
+            and slope > 0
+            and -icept / slope > self._offsets[j_lo] / fs
+        ):
+            # Behind the canceller a closing target's every arrival comes with its
+            # sign-flipped copy a period back, delta later (0.33 ms at 1.5 m/s, under a
+            # window): with the first images it can hold the first arrival's own ramp under
+            # ``hi``, so its rise from ``lo`` to ``hi`` is slow though it holds the next
+            # tone. A ramp crosses ``lo`` after its onset: a steep part whose line starts
+            # after that crossing is those later arrivals, and the first arrival is the rise
+            # from ``lo`` itself. (An opening target's copy comes first: not this case.)
+            j_a, j_b = j_lo, j_hi
+            slope, icept = self._line(amp, j_a, j_b)
         if not slope > 0:
             return None
         # The line is the start; the ramp's exact shape (the previous tone's partial window
@@ -723,6 +745,14 @@ class FirstArrivalReadout:
         return direct_amplitudes(
             y, first, onset, freqs, np.stack([jump_pc, jump_cn]), alpha, fs, lead
         )
+
+    def _line(self, amp: NDArray[np.float64], j_a: int, j_b: int) -> tuple[float, float]:
+        """Slope (per s) and intercept of the least-squares line through ``amp`` (shape
+        ``(L,)``) at window indices ``j_a .. j_b``, against their offsets in s: its zero
+        crossing ``−intercept / slope`` is an onset, s after boundary 0's sample."""
+        tt = self._offsets[j_a : j_b + 1] / self.fs_hz
+        slope, icept = np.polyfit(tt, amp[j_a : j_b + 1], 1)
+        return float(slope), float(icept)
 
     @staticmethod
     def _ramp_bounds(
