@@ -20,7 +20,9 @@ from typing import Any
 import numba
 import numpy as np
 
-_JIT: dict[str, Any] = {"cache": True, "nogil": True}
+#: ``error_model="numpy"``: a division by zero gives inf or NaN instead of raising, so the
+#: compiled divisions carry no zero test (every divisor here is guarded or nonzero).
+_JIT: dict[str, Any] = {"cache": True, "nogil": True, "error_model": "numpy"}
 #: Hops of the runs over which :func:`fit_quality`'s third coherence is taken.
 RUN_HOPS = 3
 #: Taylor terms of the in-hop Doppler rotation (:mod:`hil.estimation.refine`): the tables'
@@ -283,6 +285,7 @@ def _candidate(
     prefix: Any, energy: Any, first: Any, tail: Any, centre: Any, slots: Any, k: Any,
     amp2: Any, fs: float, t_rx: float, curved: bool, d_c_alpha: float, consts: Any,
     coef: Any, per_hop: Any, known: Any, near: Any, n_near: Any, rot_key: Any, rot: Any,
+    phasors: Any,
 ) -> tuple[complex, float, float]:  # fmt: skip
     """``(C, Σ a_i² N_i, input energy in the windows)`` of one candidate at ``t_rx`` (s) on
     the line whose per-hop constants :func:`_line` made (``consts``, ``coef``, and
@@ -304,6 +307,9 @@ def _candidate(
     taken out (:func:`_known_part`; shape ``(5, Q)``), of which hop ``i`` reads the columns
     ``near[i, :n_near[i]]`` (ascending; every column that can overlap its window:
     :func:`_columns_near`); ``rot_key`` and ``rot`` its rotations kept (:func:`_known_part`).
+    ``phasors`` (complex, shape ``(M,)``): each hop's ``e^{j ph_i}`` at this candidate, made
+    by the caller along a row of equally spaced times (:func:`_row_phasors`), or shape
+    ``(0,)`` to compute it here.
     """
     total = complex(0.0, 0.0)
     model = 0.0
@@ -318,10 +324,13 @@ def _candidate(
         lo = lo_s * fs - first[s] + 0.5
         hi = hi_s * fs - first[s] + 0.5
         z, e_window = _window(prefix, energy, s, lo, hi - tail[s], coef, i)
-        ph = consts[_PF, i] * (centre[s] - t_i)
-        if curved:
-            ph -= consts[_CURVE, i]
-        term_i = k[i] * complex(math.cos(ph), math.sin(ph)) * z
+        if phasors.shape[0]:
+            term_i = k[i] * phasors[i] * z
+        else:
+            ph = consts[_PF, i] * (centre[s] - t_i)
+            if curved:
+                ph -= consts[_CURVE, i]
+            term_i = k[i] * complex(math.cos(ph), math.sin(ph)) * z
         if n_near[i]:
             part, energy_part = _known_part(
                 known, near, i, n_near[i], t_i, lo_s, hi_s, consts[_FA, i], rot_key, rot
@@ -335,6 +344,37 @@ def _candidate(
         model += amp2[i] * (hi - lo)
         signal += e_window
     return total, model, signal
+
+
+@numba.njit(**_JIT)
+def _row_phasors(
+    centre: Any, slots: Any, t_rx: float, curved: bool, d_c_alpha: float, consts: Any,
+    step_s: float, start: Any, step: Any,
+) -> None:  # fmt: skip
+    """Each hop's phasor ``e^{j ph_i}`` of :func:`_candidate` at ``t_rx`` (s) on the line of
+    ``consts`` (and ``d_c_alpha``, ``curved``: :func:`_line`'s) into ``start``, and the
+    factor ``e^{−j PF_i step_s}`` that moves it to the candidate ``step_s`` (s) later into
+    ``step`` (complex, shape ``(M,)`` each): ``ph_i`` is linear in ``t_rx`` with slope
+    ``−PF_i``, so a row of equally spaced candidates costs one sine and cosine pair per hop
+    and a complex product per candidate instead of a pair per candidate (:func:`_advance`;
+    the product's rounding over a row of tens of steps stays near 1e-15)."""
+    for i in range(slots.shape[0]):
+        t_i = t_rx
+        if curved:
+            t_i = t_rx + d_c_alpha + consts[_U, i] - consts[_DA, i]
+        ph = consts[_PF, i] * (centre[slots[i]] - t_i)
+        if curved:
+            ph -= consts[_CURVE, i]
+        start[i] = complex(math.cos(ph), math.sin(ph))
+        w = -consts[_PF, i] * step_s
+        step[i] = complex(math.cos(w), math.sin(w))
+
+
+@numba.njit(**_JIT)
+def _advance(phasors: Any, step: Any) -> None:
+    """Move :func:`_row_phasors`' phasors one step along their row (in place)."""
+    for i in range(phasors.shape[0]):
+        phasors[i] *= step[i]
 
 
 @numba.njit(**_JIT)
@@ -465,7 +505,7 @@ def candidate_sums(
             )
         out_c[c], out_model[c], out_signal[c] = _candidate(
             prefix, energy, first, tail, centre, slots, k, amp2, fs, t_rx[c], gamma[c] != 0.0,
-            d_c_alpha, consts, coef, per_hop[c], known, near, n_near, no_key, no_rot,
+            d_c_alpha, consts, coef, per_hop[c], known, near, n_near, no_key, no_rot, no_rot,
         )  # fmt: skip
 
 
@@ -511,6 +551,11 @@ def maximise(
     n_cols = known.shape[1]
     rot_key = np.full((max(n_t, 3), n_cols), np.nan)
     rot = np.empty((max(n_t, 3), n_cols), dtype=np.complex128)
+    # Each row of candidates (one time scale, equally spaced times) turns the hops' phasors
+    # by a fixed factor a step (:func:`_row_phasors`).
+    m_hops = slots.shape[0]
+    phasors = np.empty(m_hops, dtype=np.complex128)
+    turn = np.empty(m_hops, dtype=np.complex128)
     best = -1.0
     bi = 0
     bj = 0
@@ -518,11 +563,14 @@ def maximise(
         vv = v0 - half_v + i * step_v
         a = (c_mps + vv) / (c_mps - vv)
         d_c_a = _line(alpha0, slots, f, dt_lo, dt_hi, hop_s, a, gamma, consts, coef)
+        _row_phasors(centre, slots, t0 - half_t, curved, d_c_a, consts, step_t, phasors, turn)
         for j in range(n_t):
+            if j:
+                _advance(phasors, turn)
             cc, _, _ = _candidate(
                 prefix, energy, first, tail, centre, slots, k, amp2, fs,
                 t0 - half_t + j * step_t, curved, d_c_a, consts, coef, none, known, near,
-                n_near, rot_key[j], rot[j],
+                n_near, rot_key[j], rot[j], phasors,
             )  # fmt: skip
             pw = cc.real * cc.real + cc.imag * cc.imag
             if pw > best:
@@ -544,14 +592,17 @@ def maximise(
             vv = v + (i - 1) * step_v
             a = (c_mps + vv) / (c_mps - vv)
             d_c_a = _line(alpha0, slots, f, dt_lo, dt_hi, hop_s, a, gamma, consts, coef)
+            _row_phasors(centre, slots, t - step_t, curved, d_c_a, consts, step_t, phasors, turn)
             for j in range(3):
+                if j:
+                    _advance(phasors, turn)
                 if i == 1 and j == 1 and z_centre >= 0.0:
                     z[1, 1] = z_centre
                     continue
                 cc, _, _ = _candidate(
                     prefix, energy, first, tail, centre, slots, k, amp2, fs,
                     t + (j - 1) * step_t, curved, d_c_a, consts, coef, none, known, near,
-                    n_near, rot_key[j], rot[j],
+                    n_near, rot_key[j], rot[j], phasors,
                 )  # fmt: skip
                 z[i, j] = cc.real * cc.real + cc.imag * cc.imag
         # z[i, j] ≈ z0 + gt x + gv y + ½ (htt x² + 2 htv x y + hvv y²); x, y in steps.
@@ -604,6 +655,7 @@ def fit_quality(
     c, es, signal = _candidate(
         prefix, energy, first, tail, centre, slots, k, amp2, fs, t_rx, gamma != 0.0,
         d_c_alpha, consts, coef, h, known, *_every_column(m_hops, known), no_key, no_rot,
+        no_rot,
     )  # fmt: skip
     mag2 = c.real * c.real + c.imag * c.imag
     spread = 0.0
