@@ -642,7 +642,8 @@ def maximise(
     step_v *= 0.5
     z = np.empty((3, 3))
     # The stencil's centre is a point already evaluated (the grid's best, or the best of the
-    # last stencil where its fit did not move): the same arguments, so the same value.
+    # last stencil where its fit did not move): that value is kept (the same candidate reached
+    # along another row, equal to rounding).
     z_centre = best
     for _ in range(passes):
         for i in range(3):
