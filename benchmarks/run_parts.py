@@ -41,7 +41,10 @@ PARTS: dict[str, tuple[tuple[str, str], ...]] = {
     "board driver (host service)": (
         ("hil.devices.board_link_virtual", "VirtualTimeBoardLink._service"),
     ),
-    "virtual clock": (("hil.devices.clock", "VirtualClock.sleep"),),
+    "virtual clock": (
+        ("hil.devices.clock", "VirtualClock.sleep"),
+        ("hil.devices.clock", "VirtualClock.wait_until"),
+    ),
     "first-arrival readout": (
         ("hil.estimation.first_arrival", "FirstArrivalReadout.first_arrival"),
     ),

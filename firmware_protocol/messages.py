@@ -121,6 +121,10 @@ class Message:
 
     def _checked(self, spec: Field, value: Any) -> Any:
         # Every frame is checked on both sides: the field is named only in an error.
+        if type(value) is int and spec.enum is None:  # the usual field: a plain int in range
+            low, high = spec.bounds
+            if low <= value <= high:
+                return value
         if isinstance(value, bool) or not isinstance(value, int | np.integer):
             raise FieldValueError(self._where(spec), value, f"an integer, {spec.allowed_text()}")
         given = value

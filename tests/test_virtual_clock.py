@@ -69,6 +69,7 @@ class _Producer:
         self.made = 0
         self.awaited: int | None = None
         self.calls = 0
+        self.quiet_asked = 0
         self.events: list[int] = []
 
     def __call__(self) -> None:
@@ -79,6 +80,7 @@ class _Producer:
             self.events.append(now)
 
     def quiet_until_ns(self) -> int | None:
+        self.quiet_asked += 1
         if not self.quiet or self.awaited is None:
             return None
         next_event = (len(self.events) + 1) * 7_000_000
@@ -123,3 +125,13 @@ def test_a_quiet_service_still_runs_at_the_end_of_every_sleep() -> None:
     assert seen == [2500, 4500]
     assert clock.wait_until(lambda: False, timeout_s=0.01) is False
     assert seen == [2500, 4500, 14500] and round(clock.now() * 1e6) == 14500
+
+
+def test_a_wait_asks_the_quiet_time_once_per_turn_it_runs() -> None:
+    clock = VirtualClock(tick_s=0.001)
+    producer = _Producer(clock, quiet=True)
+    clock.attach(producer, producer.quiet_until_ns)
+    assert _wait_for(producer, clock, 30) == (True, 30_000_000)
+    # Turns at the 7, 14, 21 and 28 ms events and at 30 ms: one question before each.
+    assert producer.calls == 5
+    assert producer.quiet_asked == 5

@@ -154,13 +154,19 @@ class VirtualClock(SleepUntil):
             raise RuntimeError("a VirtualClock service slept: services must return at once")
         end = self._ns + round(max(0.0, seconds) * 1e9)
         while self._ns < end:
-            self._ns = min(end, self._next_tick_at(self._quiet_until()))
-            self._in_service = True
-            try:
-                for service, _ in list(self._services.values()):
-                    service()
-            finally:
-                self._in_service = False
+            self._serve_at(min(end, self._next_tick_at(self._quiet_until())))
+
+    def _serve_at(self, t_ns: int) -> None:
+        """Advance to ``t_ns`` (a tick, or the end of a sleep) and run every service once."""
+        if self._in_service:
+            raise RuntimeError("a VirtualClock service slept: services must return at once")
+        self._ns = t_ns
+        self._in_service = True
+        try:
+            for service, _ in list(self._services.values()):
+                service()
+        finally:
+            self._in_service = False
 
     def wait_until(self, done: Callable[[], bool], timeout_s: float) -> bool:
         """Sleep until ``done()`` (True) or ``timeout_s`` virtual s pass (False): to the next
@@ -170,6 +176,7 @@ class VirtualClock(SleepUntil):
         while not done():
             if self._ns >= deadline:
                 return False
-            wake = self._next_tick_at(self._quiet_until())
-            self.sleep((min(wake, deadline) - self._ns) / 1e9)
+            # One step of sleep(): the services' quiet time just asked is the one sleep
+            # would ask again (nothing ran in between), so the step is taken directly.
+            self._serve_at(min(self._next_tick_at(self._quiet_until()), deadline))
         return True

@@ -505,11 +505,14 @@ class SimulatedBoard:
             dac, covered = fifo.play(first, span)
             self._count_underruns(covered)
             world_out = np.asarray(self.world(dac, first), dtype=np.float64)
-            adc_all = np.zeros((span, n_adc))
-            k = min(world_out.shape[1], n_adc)
-            adc_all[:, :k] = world_out[:, :k]
-            if self._adc_gain != 1.0:
-                adc_all *= self._adc_gain
+            if world_out.shape == (span, n_adc) and self._adc_gain == 1.0:
+                adc_all = world_out  # read only below: no copy needed
+            else:
+                adc_all = np.zeros((span, n_adc))
+                k = min(world_out.shape[1], n_adc)
+                adc_all[:, :k] = world_out[:, :k]
+                if self._adc_gain != 1.0:
+                    adc_all *= self._adc_gain
             counts, clipped = from_full_scale_clipped(adc_all, fmt)
             if clipped:
                 self.adc_clipped_samples += clipped

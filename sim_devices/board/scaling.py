@@ -61,7 +61,15 @@ def from_full_scale_clipped(
     if fmt is SampleFormat.FLOAT32:
         return values.astype(np.float32), 0
     scale = _FULL_SCALE[fmt]
-    counts = _rounded_counts(values, scale)
+    dtype = np.int16 if fmt is SampleFormat.INT16 else np.int32
+    counts = np.rint(np.asarray(values, dtype=np.float64) * scale)
+    if counts.size:
+        # The usual block: no NaN (either extreme would be NaN) and nothing out of range, so
+        # neither the NaN rule nor the clip changes a count: two reductions decide it.
+        low, high = float(counts.min()), float(counts.max())
+        if -scale <= low and high <= scale - 1:
+            return counts.astype(dtype), 0
+    counts[np.isnan(counts)] = 0.0  # as _rounded_counts
     clipped = int(np.count_nonzero((counts > scale - 1) | (counts < -scale)))
     np.clip(counts, -scale, scale - 1, out=counts)
-    return counts.astype(np.int16 if fmt is SampleFormat.INT16 else np.int32), clipped
+    return counts.astype(dtype), clipped

@@ -11,7 +11,7 @@ from hil.devices.board import Board
 from hil.devices.board_settings import BoardSettings
 from hil.devices.clock import VirtualClock
 from sim_devices.board import BoardPort, LoopbackWorld, MemoryBoardLink, SimulatedBoard
-from sim_devices.board.scaling import from_full_scale_clipped
+from sim_devices.board.scaling import from_full_scale, from_full_scale_clipped
 from sim_devices.board.spec import SampleFormat
 
 RATE_HZ = 48_000
@@ -41,6 +41,33 @@ def test_the_conversion_counts_every_clipped_value() -> None:
     assert counts[:, 0].tolist() == [16384, 32767, -32768, -32768, 32767, 0]
     assert clipped == 3  # +1.0 is beyond the top code; -1.0 is the bottom code, not clipped
     assert from_full_scale_clipped(values, SampleFormat.FLOAT32)[1] == 0
+
+
+def test_a_block_with_nothing_to_clip_converts_as_the_full_rule() -> None:
+    rng = np.random.default_rng(7)
+    # In range up to both rails: -1.0 is the bottom code, 32766.5 / 32768 rounds (to even)
+    # down to the top code 32766, 32767.4 / 32768 to the top code 32767.
+    values = np.concatenate(
+        [
+            rng.uniform(-1.0, 1.0 - 1.0 / 32768, (500, 2)),
+            [[-1.0, 32766.5 / 32768]],
+            [[32767.4 / 32768, 0.0]],
+        ]
+    )
+    counts, clipped = from_full_scale_clipped(values, SampleFormat.INT16)
+    assert clipped == 0 and counts.dtype == np.int16
+    assert counts[-2:].tolist() == [[-32768, 32766], [32767, 0]]
+    np.testing.assert_array_equal(counts, np.rint(values * 32768.0).astype(np.int16))
+    np.testing.assert_array_equal(counts, from_full_scale(values, SampleFormat.INT16))
+    counts24, clipped24 = from_full_scale_clipped(values, SampleFormat.INT24)
+    assert clipped24 == 0 and counts24.dtype == np.int32
+    np.testing.assert_array_equal(counts24, from_full_scale(values, SampleFormat.INT24))
+    # One value past the top rail in a block: the block takes the clipping rule.
+    values[3, 1] = 1.0
+    counts, clipped = from_full_scale_clipped(values, SampleFormat.INT16)
+    assert clipped == 1 and counts[3, 1] == 32767
+    empty, none = from_full_scale_clipped(np.zeros((0, 2)), SampleFormat.INT16)
+    assert empty.shape == (0, 2) and empty.dtype == np.int16 and none == 0
 
 
 def test_a_loud_input_is_counted_on_the_board_and_raised_as_an_alarm_by_the_host() -> None:
