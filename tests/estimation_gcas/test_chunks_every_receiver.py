@@ -131,9 +131,11 @@ CASES = [
     ("gcas-mti", "first-arrival", False),
     ("gcas", "first-arrival", True),
 ]
-#: Over 5 s of CPU: the matched-filter bank (11 s over its 1 s prefix, whole and three cut
-#: lists); the others take 0.5-2.0 s of CPU (measured, numba's cache warm).
-SLOW = {("mfbank", "", False)}
+#: Left to ``--all``: the matched-filter bank (11 CPU s over its 1 s prefix, whole and three
+#: cut lists) and the STFT, FMCW and JIFS baselines (2.8, 1.4 and 1.0 CPU s), whose own
+#: modules keep a chunks == whole test in the fast tier (test_baselines_stft_fmcw_jifs); the
+#: GCAS cases take 0.4-1.4 CPU s (measured, numba's cache warm).
+SLOW = {("mfbank", "", False), ("stft", "", False), ("fmcw", "", False), ("jifs", "", False)}
 
 
 @pytest.mark.parametrize(
