@@ -1,7 +1,7 @@
 """Collection rules for the whole suite (pyproject's testpaths run doctests over the packages).
 
-Two tiers: plain ``pytest`` is the fast tier for development (under 2 minutes on a 2-core
-machine): it deselects the tests marked ``slow``. ``pytest --all`` runs the whole suite, slow
+Two tiers: plain ``pytest`` is the fast tier for development (the README gives its measured
+time): it deselects the tests marked ``slow``. ``pytest --all`` runs the whole suite, slow
 tests included; that is what ``.ci/run`` runs. A marker expression (``-m slow``, ``-m "not
 hardware"``) replaces the default selection, and a test named by its node id
 (``pytest path/test_x.py::test_y``) runs even when it is slow.

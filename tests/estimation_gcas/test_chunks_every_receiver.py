@@ -2,9 +2,10 @@
 
 Each receiver is fed one scene whole, in 997- and 10 000-sample blocks and at 20 seeded random
 cuts; the estimates (dataclass ==), refusals and notices must be the same. The scene is long
-enough (3 s at 100 kHz; FMCW 3 s at 200 kHz) that a whole-input temporary passes the 256 KiB
-past which NumPy reuses a temporary in place (its in-place complex loops round differently), so
-any result that depends on the block size or on which NumPy loop runs shows here: a target
+enough (3 s at 100 kHz; FMCW 3 s at 200 kHz; the matched-filter bank, 8 CPU s a pass over 3 s,
+reads its first second) that a whole-input temporary passes the 256 KiB past which NumPy
+reuses a temporary in place (its in-place complex loops round differently), so any result
+that depends on the block size or on which NumPy loop runs shows here: a target
 closing from 50 m at 10 m/s, braking at 5 m/s² (FMCW: from 25 m at 3 m/s, its
 largest range 30 m), 10 dB per-sample SNR, with volume
 reverberation at 0 dB SRR from 1 m to 100 m (0.3 scatterers/m³, a diffuse patch) as in
@@ -37,6 +38,10 @@ SECONDS = 3.0
 FS_FM = 200_000.0
 BLOCKS = (997, 10_000)
 RANDOM_SEEDS = (0,)
+#: Receivers fed a prefix of their scene, s: the matched-filter bank costs 2.8 CPU s per second
+#: of input (four passes over 3 s: 33 s); one second still holds 96 estimates, six code periods
+#: and 100 000 samples (a whole-input temporary of 800 kB real, 1.6 MB complex).
+PREFIX_S = {"mfbank": 1.0}
 
 
 def _schedule(name: str) -> tuple[HopSchedule, float]:
@@ -47,11 +52,20 @@ def _schedule(name: str) -> tuple[HopSchedule, float]:
     return att_schedule(), FS
 
 
-@functools.lru_cache(maxsize=8)
 def _scene(name: str) -> tuple[np.ndarray, np.ndarray]:
-    """The input for receiver ``name`` (shape ``(SECONDS·fs,)``) and its empty-water
-    background (the reverberation averaged over the whole code periods after its first,
-    shape ``(P,)``), made once per receiver."""
+    """The input for receiver ``name`` (shape ``(SECONDS·fs,)``, or its first
+    ``PREFIX_S[name]·fs`` samples) and its empty-water background (the reverberation averaged
+    over the whole code periods after its first, shape ``(P,)``)."""
+    x, background = _scene_of("fmcw" if name == "fmcw" else "att")
+    if name in PREFIX_S:
+        x = x[: int(PREFIX_S[name] * _schedule(name)[1])]
+    return x, background
+
+
+@functools.lru_cache(maxsize=2)
+def _scene_of(name: str) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_scene` of receiver ``name`` whole, made once per schedule: every receiver but
+    FMCW hears the same ``att`` scene."""
     from sim_devices.acoustics.beam import OmniBeam, TwoWayAmplitudeTable
     from sim_devices.acoustics.reverberation import ReverberationSettings, VolumeReverberation
 
@@ -117,9 +131,11 @@ CASES = [
     ("gcas-mti", "first-arrival", False),
     ("gcas", "first-arrival", True),
 ]
-#: Over 5 s of CPU: the matched-filter bank (31 s wall, whole and three cut lists); the others
-#: take 0.5-2.0 s of CPU with their scene (measured, load 0.5, numba's cache warm).
-SLOW = {("mfbank", "", False)}
+#: Left to ``--all``: the matched-filter bank (11 CPU s over its 1 s prefix, whole and three
+#: cut lists) and the STFT, FMCW and JIFS baselines (2.8, 1.4 and 1.0 CPU s), whose own
+#: modules keep a chunks == whole test in the fast tier (test_baselines_stft_fmcw_jifs); the
+#: GCAS cases take 0.4-1.4 CPU s (measured, numba's cache warm).
+SLOW = {("mfbank", "", False), ("stft", "", False), ("fmcw", "", False), ("jifs", "", False)}
 
 
 @pytest.mark.parametrize(

@@ -28,7 +28,12 @@ def _pooled(params: dict[str, object], seed: int) -> dict[str, float]:
     }
 
 
-@pytest.mark.parametrize("family", ["random-cyclic", "three-state"])
+#: The fast tier runs the random-cyclic family; three-state (0.5 CPU s a case on constant
+#: velocity, 1.6 in reverberation) is left to ``--all`` (test_gcas_receiver runs it fast).
+FAMILIES = ["random-cyclic", pytest.param("three-state", marks=pytest.mark.slow)]
+
+
+@pytest.mark.parametrize("family", FAMILIES)
 @pytest.mark.parametrize("speeds", [(8.0, 25.0), (-25.0, -8.0)], ids=["closing", "opening"])
 @pytest.mark.parametrize(
     ("snr_db", "pd_min", "rmse_max"),
@@ -48,7 +53,7 @@ def test_default_options_on_constant_velocity_targets(
     assert got["rmse"] <= rmse_max, got
 
 
-@pytest.mark.parametrize("family", ["random-cyclic", "three-state"])
+@pytest.mark.parametrize("family", FAMILIES)
 def test_default_options_in_reverberation_at_0_db_srr(family: str) -> None:
     # -10 dB per-sample SNR on top; targets clear of the clutter band (10-25 m/s closing).
     base = {"family": family, "speed_mps": [10.0, 25.0], "snr_db": -10.0, "srr_db": 0.0}

@@ -44,6 +44,11 @@ from hil.recording.reader import RunRecording
 from tests.experiments.conftest import SHORT_CLI_EXPERIMENT, serve_jack_tank
 
 SHORT = DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -3.5")
+#: SHORT started 0.1 m from home (its run-up from -0.1 m), for the runs stopped mid-pass (by
+#: their caller, or their device lost): positioning the carriage 1.4 m out to SHORT's run-up
+#: costs about 3.5 s of wall time at time_scale 0.4 before the run streams, and their stop
+#: comes within the pass's first metre.
+NEAR_HOME = SHORT.replace("start_m = -2.0", "start_m = -0.7")
 
 
 @dataclass(frozen=True)
@@ -159,15 +164,15 @@ class ServedJackTank:
 
 
 @contextlib.contextmanager
-def served_jack_tank(folder: Path) -> Iterator[ServedJackTank]:
-    """Serve the simulated tank on a private JACK server (unique name) for the short tow,
-    point this process's PortAudio at it, and stop both at the end."""
+def served_jack_tank(folder: Path, text: str = SHORT) -> Iterator[ServedJackTank]:
+    """Serve the simulated tank on a private JACK server (unique name) for experiment
+    ``text`` (its tow), point this process's PortAudio at it, and stop both at the end."""
     import sounddevice
 
     from hil.devices.audio import rescan_devices
 
     exp_in = folder / "short.toml"
-    exp_in.write_text(SHORT, encoding="utf-8")
+    exp_in.write_text(text, encoding="utf-8")
     command = [sys.executable, "-m", "hil.cli.main", "sim-serve", "tank", "--jack",
                "--experiment", str(exp_in)]  # fmt: skip
     root = Path(__file__).resolve().parents[2]
@@ -197,14 +202,14 @@ def served_jack_tank(folder: Path) -> Iterator[ServedJackTank]:
 
 
 def _experiment(
-    name: str, stack: contextlib.ExitStack, folder: Path
+    name: str, stack: contextlib.ExitStack, folder: Path, text: str = SHORT
 ) -> tuple[str, ServedJackTank | None]:
-    """The experiment text of a run on device ``name``; for JACK, the served tank's (served
-    until ``stack`` closes)."""
+    """The experiment ``text`` on device ``name``; for JACK, the served tank's (served until
+    ``stack`` closes)."""
     device = DEVICES[name]
     if not device.needs_jack:
-        return device.experiment(), None
-    tank = stack.enter_context(served_jack_tank(folder))
+        return device.experiment(text), None
+    tank = stack.enter_context(served_jack_tank(folder, text))
     assert f'board = "{device.board}"' in tank.experiment
     return tank.experiment, tank
 
@@ -297,7 +302,7 @@ def test_a_run_stopped_by_its_caller_stops_safely_and_says_so(
     folder = tmp_path / "run"
     seen = 0
     with contextlib.ExitStack() as stack:
-        text, _ = _experiment(name, stack, tmp_path)
+        text, _ = _experiment(name, stack, tmp_path, NEAR_HOME)
         run: Any = api.iterate(  # a generator: closing it ends the run
             parse_experiment(text), folder=folder, virtual_time=device.virtual_time
         )
@@ -347,7 +352,7 @@ def test_a_board_lost_mid_run_stops_the_run_naming_it(
     monkeypatch.setattr(kind, "__init__", keep)
     seen: list[Estimate] = []
     with contextlib.ExitStack() as stack:
-        text, _ = _experiment(name, stack, tmp_path)
+        text, _ = _experiment(name, stack, tmp_path, NEAR_HOME)
 
         def lose_after_30(estimates: list[Estimate]) -> None:
             if len(seen) < 30 <= len(seen) + len(estimates):
@@ -411,7 +416,7 @@ def _jack_server_lost_mid_run(device: Device, folder: Path) -> None:
     and summary, and its process exits. This process keeps PortAudio off that server (its
     JACK client would outlive the server, and terminating PortAudio then aborts)."""
     exp_in = folder / "short.toml"
-    exp_in.write_text(SHORT, encoding="utf-8")
+    exp_in.write_text(NEAR_HOME, encoding="utf-8")
     name = f"hil-suite-{os.getpid()}-{uuid.uuid4().hex[:6]}"
     root = Path(__file__).resolve().parents[2]
     with environment(JACK_DEFAULT_SERVER=name, JACK_NO_START_SERVER="1"):

@@ -33,6 +33,15 @@ SHORT = DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -3.5").replace(
 )
 
 
+#: SHORT slowed to 0.5 m/s and started 0.1 m from home (its run-up from -0.1 m) for the tests
+#: that stop the run mid-pass: positioning the carriage 1.4 m out to the run-up's start costs
+#: about 3.5 s of wall time at time_scale 0.4 before the recording begins, and the pass they
+#: interrupt is 2.8 m long (5.6 s of tow, 14 s of wall time).
+STOPPED_MID_PASS = SHORT.replace("speed_mps = 1.5", "speed_mps = 0.5").replace(
+    "start_m = -2.0", "start_m = -0.7"
+)
+
+
 def _edit(old: str, new: str) -> str:
     assert old in DEFAULT_EXPERIMENT, old
     return DEFAULT_EXPERIMENT.replace(old, new)
@@ -435,7 +444,7 @@ def test_kill_9_during_a_run_leaves_a_recording_hil_report_rebuilds(
     from hil.recording.reader import RunRecording
 
     exp_file = tmp_path / "short.toml"
-    exp_file.write_text(SHORT)
+    exp_file.write_text(STOPPED_MID_PASS)
     folder = tmp_path / "run"
     proc = subprocess.Popen(
         [sys.executable, "-m", "hil.cli.main", "tank-run", str(exp_file), "--out", str(folder),
@@ -510,11 +519,11 @@ def test_ctrl_c_sigterm_and_sighup_stop_cleanly_and_keep_the_recording(
     from hil.recording.reader import RunRecording
 
     exp_file = tmp_path / "slow.toml"
-    # A slow tow (0.5 m/s: a 2.7 m pass takes 13.5 s of wall time at time_scale 0.4) leaves
+    # A slow tow (0.5 m/s: a 2.8 m pass takes 14 s of wall time at time_scale 0.4) leaves
     # the interrupt many seconds of the pass to land in, even when the telemetry that shows
     # the carriage moving is read seconds late on a loaded machine (CI once saw a 1.5 m/s pass,
     # 4.5 s of wall time, all but over before the interrupt arrived).
-    exp_file.write_text(SHORT.replace("speed_mps = 1.5", "speed_mps = 0.5"))
+    exp_file.write_text(STOPPED_MID_PASS)
     folder = tmp_path / "run"
     log = tmp_path / "stderr.txt"  # shown if the run did not stop as it should
     with log.open("w") as err:
@@ -646,7 +655,7 @@ def test_the_built_in_tank_lost_mid_run_stops_the_run_naming_it(
     killer.start()
     try:
         outcome = run_experiment(
-            parse_experiment(SHORT.replace("speed_mps = 1.5", "speed_mps = 0.5")),
+            parse_experiment(STOPPED_MID_PASS),
             folder=folder,
             view=LiveView(enabled=False),
         )
