@@ -7,18 +7,23 @@ blocks and one Doppler resolution cell that stands above the Doppler sidelobes o
 (:func:`~hil.estimation.gcas.search_two_stage.doppler_leak`): several echoes per hop. Their
 ghosts (tones read as the neighbouring tone at another speed) and the sidelobes left become
 candidates too; the refinement's likelihood test tells them from echoes
-(:mod:`hil.estimation.refine`). Two echoes of one Doppler cell (a formation, two objects at
-rest with the band off) put two peaks in that cell's row every hop, and any two boundaries of
-one row lie within half a hop of each other: the weaker is never the maximum over ``±hc``
-blocks. So a second maximum is a candidate too where it is the maximum over
-``±inner`` blocks (:data:`SECOND_ECHO_HOPS` of a hop: one echo's row falls from its boundary
-to the middle of the hop with no maximum of its own), reaches :data:`SECOND_LEVEL` of the
-greater one, and lies in a row away from the reverberation band's edges and the span's
-(``second_rows``: there one echo's leak into a mismatched Doppler cell ripples along the row).
-Measured on att at 0 dB (two closing targets at 10 m/s 3 m apart, independent synthesis):
-per-target detection 0.26 / 0.28 without, 1.0 / 1.0 with; 10.1 m apart 0.46 / 0.54 and 1.0 /
-1.0. Echoes whose boundaries lie within about a tenth of a hop of each other (modulo the hop)
-are one peak of the coarse row and stay one candidate.
+(:mod:`hil.estimation.refine`).
+
+Two echoes of one Doppler cell (a formation) put two peaks in that cell's row every hop, and
+any two boundaries of one row lie within half a hop of each other: the weaker is never the
+maximum over ``±hc`` blocks. So a second maximum is a candidate too where it is the maximum
+over ``±inner`` blocks (:data:`SECOND_ECHO_HOPS` of a hop: one echo's row falls from its
+boundary to the middle of the hop with no maximum of its own), reaches :data:`SECOND_LEVEL`
+of the greater one, and lies in a row away from the reverberation band's edges and the
+span's (``second_rows``: there one echo's leak into a mismatched Doppler cell ripples along
+the row) and outside the still reverberation's cells. Its peak is decided only beside an
+echo measured at its speed (:meth:`~hil.estimation.refine.CoherentRefiner.beside_known`), and
+its fit and the other's need each other taken out (the refinement's partners,
+:data:`~hil.estimation.refine.PARTNER_COHERENCE`). Measured on att at 0 dB (two closing
+targets at 10 m/s, independent synthesis): per-target detection 3 m apart 0.26 / 0.28
+before, 1.0 / 1.0 with both; 10.1 m apart 0.46 / 0.54 and 1.0 / 1.0. Echoes whose boundaries
+lie within about a tenth of a hop of each other (modulo the hop) are one peak of the coarse
+row and stay one candidate.
 
 :class:`StrongestEcho` (without it: the detector alone cannot tell an echo from a ghost):
 the strongest cell over ``±hc`` blocks and every hypothesis, compared in stage 2 with the
