@@ -4,6 +4,11 @@ Preset ``att``, random cyclic code (4 tones, L = 17, T_h = 10 ms), real input at
 fs = 100 kHz, D = 64 Doppler hypotheses over ±30 m/s, one core (BLAS threads pinned to 1
 before numpy is imported; the bank's FFTs on one worker). The input is an exact moving-target
 echo (60 m, 12 m/s closing) in white noise at 0 dB per-sample SNR, fed in blocks of 0.1 s.
+The echo is :data:`SIGNAL_S` seconds long (``--signal-seconds``) and cycled to make longer
+inputs: at each cycle the target jumps back to 60 m, so the ``M`` or so detections whose hops
+straddle the jump are fits of part of an echo (their hops' coherence falls, and the refinement
+tries an accelerating fit on them): a cost that grows with ``M`` and that one continuous echo
+does not have.
 
 Timing is interleaved: every repeat runs each receiver once (GCAS at every M, then the bank at
 every M), and each figure is the best of the repeats, so a slow spell of a shared machine hits
@@ -23,9 +28,10 @@ Figures and targets:
   timed) at M = 5, 10 and 29: GCAS >= 5x faster at M = 10 (the ratio at every M is listed).
 
 Run: ``python benchmarks/bench_gcas.py [--seconds 20] [--bank-seconds 4] [--repeat 3]
-[--stream-minutes 10] [--quick] [--search full|two-stage]`` (``--search`` picks the GCAS
-correlator search). The last line is one JSON object with the figures and the ratios to the
-targets.
+[--stream-minutes 10] [--quick] [--search full|two-stage] [--signal-seconds 2]``
+(``--search`` picks the GCAS correlator search; ``--signal-seconds`` the echo's length before
+it is cycled, at most :data:`MAX_SIGNAL_S`). The last line is one JSON object with the
+figures and the ratios to the targets.
 """
 
 from __future__ import annotations
@@ -37,6 +43,7 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUME
 
 import argparse  # noqa: E402
 import json  # noqa: E402
+import math  # noqa: E402
 import time  # noqa: E402
 import tracemalloc  # noqa: E402
 from collections.abc import Iterator  # noqa: E402
@@ -65,6 +72,9 @@ TARGET_XRT = 100.0
 TARGET_FLAT = 1.3
 TARGET_BANK = 5.0
 SIGNAL_S = 2.0  # distinct echo seconds, repeated to make longer inputs
+#: The longest echo ``--signal-seconds`` gives, s: the target (60 m closing at 12 m/s) is then
+#: 6 m from the transducer.
+MAX_SIGNAL_S = 4.5
 
 
 def schedule() -> HopSchedule:
@@ -192,12 +202,22 @@ def main() -> None:
     parser.add_argument(
         "--search", choices=("full", "two-stage"), default="two-stage", help="GCAS search"
     )
+    parser.add_argument(
+        "--signal-seconds", type=float, default=SIGNAL_S,
+        help=f"echo seconds before the input cycles (0 < s <= {MAX_SIGNAL_S})",
+    )  # fmt: skip
     args = parser.parse_args()
+    if not 0.0 < args.signal_seconds <= MAX_SIGNAL_S:
+        parser.error(
+            f"--signal-seconds = {args.signal_seconds} is not allowed: must be > 0 and <= "
+            f"{MAX_SIGNAL_S} s (the target reaches the transducer soon after); use a shorter echo"
+        )
     SEARCH["search"] = args.search
     if args.quick:
         args.seconds, args.bank_seconds, args.repeat, args.stream_minutes = 0.5, 0.5, 1, 0.02
     sch = schedule()
-    base = test_signal(sch, min(SIGNAL_S, max(args.seconds, args.bank_seconds)))
+    base = test_signal(sch, min(args.signal_seconds, max(args.seconds, args.bank_seconds)))
+    base_s = base.shape[0] / FS_HZ
 
     runs: dict[tuple[str, int], tuple[Any, float]] = {}
     for m in M_LIST:
@@ -280,6 +300,8 @@ def main() -> None:
                 "repeat": args.repeat,
                 "timing": "interleaved, best of repeat",
                 "seconds": args.seconds,
+                "signal_seconds": round(base_s, 3),
+                "echo_jumps_per_run": max(0, math.ceil(args.seconds / base_s - 1e-9) - 1),
                 "gcas_xrt_m10": xrt10,
                 "target_xrt": TARGET_XRT,
                 "xrt_ratio": round(xrt10 / TARGET_XRT, 3),

@@ -45,7 +45,20 @@ For each of the ``M`` boundaries the GCAS detection used (receive times from its
    fitted on the ramp's steep part, from ``hi`` to twice its level, searched within one
    window where the rise is the next tone arriving to stay
    (:meth:`FirstArrivalReadout._new_tone_holds`: a late images' level passes), up to the top
-   otherwise.
+   otherwise. Behind the canceller a closing target's first arrival comes with its
+   sign-flipped copies δ later (0.33 ms at 1.5 m/s, under a window), which with its first
+   images can hold its own ramp under ``hi``: where such a rise holds the next tone and the
+   steep part's line starts after the ``lo`` crossing (no ramp crosses ``lo`` before its
+   onset), the steep part is those later arrivals and the line is fitted from ``lo`` to
+   ``hi`` (read late by a range cell otherwise: 0.13-0.20 m at 7.2-8.0 m in the built-in tank).
+   That line's onset is where the Doppler is read (step 4). For the range, where
+   the rise is the next tone arriving to stay, the ramp's model (a constant level beside it)
+   is searched again from a quarter window before ``lo`` to the line's crossing, and that
+   onset kept where the model explains at least :data:`COHERENT_FIT` of the channel on each
+   boundary (a weak first arrival, not a late path's switch ahead of it); and where the noise
+   level read before the search is more than :data:`NEAR_RATIO` times the level just before
+   the ramp (the older late paths' leak; :meth:`FirstArrivalReadout._near_floor`), the onset
+   is read again on that level (:meth:`FirstArrivalReadout._onset`).
 4. **Doppler**: the direct path's complex amplitude at the ``M`` boundaries, fitted over its
    first :data:`DIRECT_S` on the ramp's model (the previous tone's leak divided out), gives
    its own time scale (:meth:`FirstArrivalReadout._direct_alpha`): GCAS's weighs the
@@ -53,7 +66,9 @@ For each of the ``M`` boundaries the GCAS detection used (receive times from its
    (a few tones over ``M`` boundaries) that an image leaking into the first arrival can
    raise above the peak; the detections of the same echo a few hops back
    (:data:`DOPPLER_LAGS`) read other tone patterns with other sidelobes, so their scores are
-   summed with this one to choose the lobe. A direct-path speed more than
+   summed with this one to choose the lobe, and to place the peak on it where the direct
+   path's speed has been steady (:data:`STEADY_MPS`; the present score alone places it
+   otherwise). A direct-path speed more than
    :data:`DIRECT_BELOW_GCAS_MPS` below GCAS's is a phase ambiguity (no image is faster than
    the direct path) and refused. Where it is refused (or on the span's edge), GCAS
    reads the target moving at :data:`LATE_TAP_MIN_SPEED_MPS` or more and the late paths are
@@ -247,11 +262,52 @@ LATE_TAP_MIN_SPEED_MPS = 1.0
 #: :data:`LATE_TAP_MIN_SPEED_MPS` or more, the same echo's direct-path speed read up to this many
 #: hops back is kept instead of GCAS's (:meth:`FirstArrivalReadout._held_alpha`): GCAS's weighs
 #: the images in (at image order 3 in the built-in tank it reads 0.13-0.25 m/s slow there), and
-#: in two hops (20 ms) a carriage braking at 2 m/s² changes by 0.04 m/s. Measured (seed-1 runs,
-#: the recorded detections replayed, scored speed RMSE): order 3 0.045 m/s with none, 0.031 with
-#: 1 hop, 0.028 with 2 and 4 hops (8 of the 9 speeds it changes closer to the telemetry); orders 1
-#: and 2 and the 12 x 6 x 4 m tank at order 2 read the same estimates with any of them.
-HOLD_HOPS = 2
+#: in six hops (60 ms) a carriage braking at 2 m/s² changes by 0.12 m/s. Measured (the recorded
+#: detections replayed, scored speed RMSE): seed 1, order 3 0.045 m/s with none, 0.031 with
+#: 1 hop, 0.028 with 2 and 4 hops (8 of the 9 speeds it changes closer to the telemetry), the
+#: same figures with 2 to 8 hops once the speed is placed on the summed score where steady
+#: (:data:`STEADY_MPS`); seed 2, order 3 0.035 m/s with 2 hops, 0.025 with 4, 0.018 with 6
+#: and 8 (three speeds 0.25 m/s slow at 6.2 m, refused three hops running, held); orders 1 and
+#: 2 and the 12 x 6 x 4 m tank at order 2 (seed 1) read the same estimates with any of them.
+HOLD_HOPS = 6
+#: The noise level is read again just before the ramp (:meth:`FirstArrivalReadout._near_floor`)
+#: as the least mean power over this many windows within the window before its ``lo``
+#: crossing, where the level read before the search is more than :data:`NEAR_RATIO` times it.
+#: Measured (seed-1 runs, the recorded detections replayed; range over the scored estimates):
+#: order 3 range RMSE 0.066 -> 0.056 m, estimates more than the gate off 120 -> 93; order 2
+#: 0.0077 -> 0.0076 m, 53 -> 17 more than the gate off (the stop's onsets read on the late
+#: images' pedestal); 12 x 6 x 4 m order 2 0.0314 -> 0.0319 m; order 1 the same figures (8
+#: estimates outside the scored stretch moved by less than 3 mm). Read at that onset, the
+#: speed was worse at order 3 (0.028 -> 0.037 m/s): the speed is read at the line's.
+NEAR_PART = 0.25
+NEAR_RATIO = 2.0
+#: Where a slow rise is the next tone arriving to stay (:data:`SLOW_RISE`), the ramp's model is
+#: searched again from this many windows before the ``lo`` crossing, a constant level beside
+#: it (:meth:`FirstArrivalReadout._onset`). Measured (order 3, with the near floor, range RMSE):
+#: 0.056 m without this search; 0.25 window 0.048 m (0.050 m without the constant level);
+#: without the level, 0.125 window 0.051 m.
+WIDE_LEAD = 0.25
+#: ... and that onset is kept where the ramp's model explains at least this fraction of the
+#: channel's power on each boundary from it to the line's crossing: measured 0.62-0.78 at the
+#: weak first arrivals of order 3 (built-in tank; one at 0.57), 0.29-0.57 at the far end wall's
+#: switch ahead of the direct path in the 12 x 6 x 4 m tank at order 2, whose range RMSE is
+#: 0.035 m with this check and 0.057 m without (0.032 and 0.052 m without the constant
+#: level); 0.65: order 3 0.052 m (without the level).
+COHERENT_FIT = 0.6
+#: The direct path's speed is placed on the summed score of the same echo's last detections
+#: (:data:`DOPPLER_LAGS`), not on the present score alone, where its speeds have been steady:
+#: the median of those given 1 to :data:`STEADY_HOPS` hops back and that of those given
+#: :data:`STEADY_HOPS` + 1 to 2 :data:`STEADY_HOPS` hops back (at least two each) differ by at
+#: most :data:`STEADY_MPS`. A speed that changes over the lags moves a summed peak (a carriage
+#: speeding up at 2 m/s² changes by 0.16 m/s over 8 hops): with the summed score everywhere,
+#: order 1's speed RMSE over every estimate with a truth (the ramps included) rose from 0.059
+#: to 0.074 m/s. Measured (scored speed RMSE, and over every estimate with a truth): order 3
+#: 0.028 -> 0.013 m/s (0.092 -> 0.091), order 2 0.0113 -> 0.0106 (0.066 -> 0.067),
+#: 12 x 6 x 4 m order 2 0.0130 -> 0.0109 (0.105 -> 0.106), order 1 0.0096 -> 0.0096 (0.059 ->
+#: 0.060); 0.05 and 0.07 m/s read the scored speeds about the same (order 3 0.013 m/s) and
+#: keep more of the ramps' lag (order 1 0.061-0.062 m/s over every estimate).
+STEADY_HOPS = 4
+STEADY_MPS = 0.03
 
 
 def _mean(x: NDArray[np.float64], axis: int) -> NDArray[np.float64]:
@@ -449,6 +505,9 @@ class FirstArrivalReadout:
         self._patterns: dict[bytes, _TonePattern] = {}
         #: The direct path's readings of the last hops: (hop index, delay (s), time scale).
         self._read_speeds: list[tuple[int, float, float]] = []
+        #: The direct path's speeds as given (held ones too) of the last 2 STEADY_HOPS hops,
+        #: as above (:meth:`_steady`).
+        self._steady_speeds: list[tuple[int, float, float]] = []
 
     def allow_lag(self, samples: int) -> None:
         """Keep ``samples`` (input samples) more history: a detection reaches
@@ -467,6 +526,7 @@ class FirstArrivalReadout:
         self._valid_from = int(input_index)
         self._scores.clear()
         self._read_speeds.clear()
+        self._steady_speeds.clear()
 
     def push(self, x: NDArray[np.float64], first_index: int) -> None:
         """Append input samples (shape ``(n,)``) starting at absolute index ``first_index``."""
@@ -568,51 +628,39 @@ class FirstArrivalReadout:
             k0 = j_hi
             top = float(amp[top_i])
             j_lo, j_hi = self._ramp_bounds(amp, k0, top_i, top, wobble)
-        if j_lo <= k0:
-            return None  # the ramp runs into the baseline: no clean onset
-        # A slow rise from lo to hi is not the ramp itself (SLOW_RISE).
-        j_a, j_b = j_lo, j_hi
-        if j_hi - j_lo > SLOW_RISE * w:
-            # The next tone arriving to stay (a weak first arrival under its images) has its
-            # steep part within a window; a late images' level ahead of it does not.
-            holds = self._new_tone_holds(full, clean, j_lo, top_i)
-            stop = min(top_i, j_hi + w) if holds else top_i
-            up = np.flatnonzero(amp[j_hi : stop + 1] >= 2.0 * amp[j_hi])
-            if up.size:
-                j_a, j_b = j_hi, j_hi + max(2, int(up[0]))
-        tt = self._offsets[j_a : j_b + 1] / fs
-        slope, icept = np.polyfit(tt, amp[j_a : j_b + 1], 1)
-        if not slope > 0:
-            return None
-        # The line is the start; the ramp's exact shape (the previous tone's partial window
-        # leaks into the channel while the window straddles the switch) moves its zero
-        # crossing by some 30 µs: fit that shape instead.
         frac = t_b * fs - n_b  # each boundary's predicted switch, samples past its n_b
         prev_f = np.concatenate([f_next[1:], prev_hop.freq_hz])
-        jump = self._phase_jumps(hops, prev_hop)
-        excess = power - floor
-        lo_fit = max(k0, j_lo - FIT_LEAD)
-        above = np.flatnonzero(amp[j_lo : j_hi + 1] >= FIT_HI_FRACTION * top)
-        j_fit = j_lo + int(above[0]) if above.size else j_hi
-        j_fit = max(j_fit, j_lo + 2)
-        guess = -icept / slope
-        if not -self.max_spread_s - BASELINE_S < guess < TOP_S:
+        ramp = self._ramp_tables(frac, alpha * (prev_f - f_next), self._phase_jumps(hops, prev_hop))
+        copy_after = bool(self.period) and alpha > 1.0
+        onsets = self._onset(
+            power, floor, amp, k0, top_i, top, wobble, full, box, clean, ramp, copy_after
+        )
+        if onsets is None:
             return None
-        beat = alpha * (prev_f - f_next)
-        ramp = self._ramp_tables(frac, beat, jump)
-        rel = self._fit_ramp(excess[lo_fit : j_fit + 1], lo_fit, guess, ramp.subset(clean))
-        # ``rel`` is the onset after each boundary's predicted switch ``t_b`` (the model
-        # places boundary m's switch at ``t_b[m] fs + rel fs``).
+        # The speed is read at the line's onset, the range at the onset searched for the
+        # first arrival itself (:meth:`_onset`): on the new floor where the level just
+        # before the ramp is lower than the noise read (:meth:`_near_floor`).
+        rel_speed, rel = onsets
+        near = self._near_floor(power, floor, amp, k0, top_i, top, wobble)
+        if near is not None:
+            amp_near = np.sqrt(np.maximum(power - near, 0.0))
+            top_near = float(amp_near[top_i])
+            again = self._onset(
+                power, near, amp_near, k0, top_i, top_near, wobble, full, box, clean, ramp,
+                copy_after,
+            )  # fmt: skip
+            if again is not None:
+                rel = again[1]
         onset = float(t_b[0] + rel)
         # The canceller's copy of an opening target (δ < 0) arrives |δ| earlier.
         delta = sch.period_s * (alpha - 1.0) / alpha if self.period else 0.0
         # The direct path alone: its first DIRECT_S (before the first image).
         direct_alpha = None
-        j0 = self._pre + int(math.ceil(rel * fs))
-        j1 = self._pre + int(round((rel + DIRECT_S) * fs))
+        j0 = self._pre + int(math.ceil(rel_speed * fs))
+        j1 = self._pre + int(round((rel_speed + DIRECT_S) * fs))
         if 0 <= j0 < j1 < box.shape[1]:
             n = np.arange(j0, j1 + 1)
-            shape = self._ramp_shape(np.array([rel * fs]), n, ramp)[0]  # (M, J)
+            shape = self._ramp_shape(np.array([rel_speed * fs]), n, ramp)[0]  # (M, J)
             seen = np.asarray(box[:, j0 : j1 + 1], dtype=np.complex128) / w
             # Each boundary's complex amplitude by least squares on the model's shape: the
             # previous tone's leak, different at each boundary, is divided out.
@@ -624,7 +672,7 @@ class FirstArrivalReadout:
             )
             if direct_alpha is None and self._reads_late_taps(alpha):
                 direct_alpha = self._second_reading(
-                    table, hop_index, first_hop, t_b * fs + rel * fs, alpha, hops, n_b,
+                    table, hop_index, first_hop, t_b * fs + rel_speed * fs, alpha, hops, n_b,
                     onset - ends[0],
                 )  # fmt: skip
             self._read_speeds = [r for r in self._read_speeds if 0 < hop_index - r[0] <= HOLD_HOPS]
@@ -632,9 +680,192 @@ class FirstArrivalReadout:
                 self._read_speeds.append((int(hop_index), float(onset - ends[0]), direct_alpha))
             elif self._reads_late_taps(alpha):
                 direct_alpha = self._held_alpha(hop_index, onset - ends[0], alpha)
+        if direct_alpha is not None:
+            kept = [r for r in self._steady_speeds if 0 < hop_index - r[0] < 2 * STEADY_HOPS]
+            kept.append((int(hop_index), float(onset - ends[0]), direct_alpha))
+            self._steady_speeds = kept
         return FirstArrival(
             onset - min(0.0, delta), alpha if direct_alpha is None else direct_alpha
         )
+
+    def _steady(self, hop_index: int, delay_s: float) -> bool:
+        """Whether the direct path's speed of the same echo has been steady before hop
+        ``hop_index`` (:data:`STEADY_MPS`): its readings (held ones too) 1 to
+        :data:`STEADY_HOPS` hops back and :data:`STEADY_HOPS` + 1 to 2 :data:`STEADY_HOPS`
+        back, at least two each, have medians at most :data:`STEADY_MPS` apart. The same
+        echo: a reading whose delay, moved on by the range the echo covers at its own speed
+        in those hops, is within :data:`DOPPLER_GATE_S` of ``delay_s`` (s, the first arrival
+        less the newest boundary's transmit time)."""
+        c = self.sound_speed_mps
+        newer: list[float] = []
+        older: list[float] = []
+        for hop, delay, a in self._steady_speeds:
+            lag = hop_index - hop
+            if not 0 < lag <= 2 * STEADY_HOPS:
+                continue
+            v = c * (a - 1.0) / (a + 1.0)
+            if abs(delay - 2.0 * v * lag * self._hop_s / c - delay_s) > DOPPLER_GATE_S:
+                continue
+            (newer if lag <= STEADY_HOPS else older).append(v)
+        if len(newer) < 2 or len(older) < 2:
+            return False
+        return abs(float(np.median(newer)) - float(np.median(older))) <= STEADY_MPS
+
+    def _onset(
+        self,
+        power: NDArray[np.float64],
+        floor: float,
+        amp: NDArray[np.float64],
+        k0: int,
+        top_i: int,
+        top: float,
+        wobble: float,
+        full: NDArray[np.complex128],
+        box: NDArray[np.complex128],
+        clean: NDArray[np.bool_],
+        ramp: _RampTables,
+        copy_after: bool = False,
+    ) -> tuple[float, float] | None:
+        """The onset of the ramp that leads to the top, twice (s after each boundary's
+        predicted switch; None where no clean onset stands out): the line's, and the first
+        arrival's where the line is fitted on the ramp's steep part.
+
+        ``power`` (shape ``(L,)``): the mean next-tone power over the boundaries read
+        (``clean``, shape ``(M,)``); ``floor``: the level subtracted from it; ``amp``:
+        ``√(power − floor)``; ``k0``: where the search starts; ``top_i``, ``top``: the top's
+        index and amplitude; ``wobble``: the noise's amplitude margin; ``full``, ``box``: the
+        next-tone channel and its change over a window (shapes ``(M, L + w)``, ``(M, L)``);
+        ``ramp``: the boundaries' ramp tables; ``copy_after``: the canceller's sign-flipped
+        copy of each arrival comes after it (a closing target behind the canceller).
+
+        The line runs from ``lo`` to ``hi`` and the ramp's model is fitted within
+        ``±FIT_SPAN`` samples of its zero crossing. A rise from ``lo`` to ``hi`` slower than
+        :data:`SLOW_RISE` windows puts the line on the ramp's steep part; where that rise is
+        the next tone arriving to stay, it is a weak first arrival whose images join it
+        before it reaches ``hi`` (image order 3), and the model is fitted again, with a
+        constant level, from a quarter window before ``lo`` up to the line's crossing: the
+        second onset, kept where the model explains at least :data:`COHERENT_FIT` of the
+        channel's power on each boundary from there to the line's crossing
+        (:meth:`_explained`; a late path switching ahead of the first arrival, off the
+        direct path's tone grid, does not fit its shape).
+        """
+        fs = self.fs_hz
+        w = self.boxcar
+        j_lo, j_hi = self._ramp_bounds(amp, k0, top_i, top, wobble)
+        if j_lo <= k0:
+            return None  # the ramp runs into the baseline: no clean onset
+        # A slow rise from lo to hi is not the ramp itself (SLOW_RISE).
+        j_a, j_b = j_lo, j_hi
+        holds = False
+        if j_hi - j_lo > SLOW_RISE * w:
+            # The next tone arriving to stay (a weak first arrival under its images) has its
+            # steep part within a window; a late images' level ahead of it does not.
+            holds = self._new_tone_holds(full, clean, j_lo, top_i)
+            stop = min(top_i, j_hi + w) if holds else top_i
+            up = np.flatnonzero(amp[j_hi : stop + 1] >= 2.0 * amp[j_hi])
+            if up.size:
+                j_a, j_b = j_hi, j_hi + max(2, int(up[0]))
+        slope, icept = self._line(amp, j_a, j_b)
+        if (
+            copy_after
+            and holds
+            and j_a != j_lo
+            and slope > 0
+            and -icept / slope > self._offsets[j_lo] / fs
+        ):
+            # Behind the canceller a closing target's every arrival comes with its
+            # sign-flipped copy a period back, delta later (0.33 ms at 1.5 m/s, under a
+            # window): with the first images it can hold the first arrival's own ramp under
+            # ``hi``, so its rise from ``lo`` to ``hi`` is slow though it holds the next
+            # tone. A ramp crosses ``lo`` after its onset: a steep part whose line starts
+            # after that crossing is those later arrivals, and the first arrival is the rise
+            # from ``lo`` itself. (An opening target's copy comes first: not this case.)
+            j_a, j_b = j_lo, j_hi
+            slope, icept = self._line(amp, j_a, j_b)
+        if not slope > 0:
+            return None
+        # The line is the start; the ramp's exact shape (the previous tone's partial window
+        # leaks into the channel while the window straddles the switch) moves its zero
+        # crossing by some 30 µs: fit that shape instead.
+        excess = power - floor
+        lo_fit = max(k0, j_lo - FIT_LEAD)
+        above = np.flatnonzero(amp[j_lo : j_hi + 1] >= FIT_HI_FRACTION * top)
+        j_fit = j_lo + int(above[0]) if above.size else j_hi
+        j_fit = max(j_fit, j_lo + 2)
+        guess = -icept / slope
+        if not -self.max_spread_s - BASELINE_S < guess < TOP_S:
+            return None
+        part = ramp.subset(clean)
+        rel = self._fit_ramp(excess[lo_fit : j_fit + 1], lo_fit, guess, part)
+        # ``rel`` is the onset after each boundary's predicted switch ``t_b`` (the model
+        # places boundary m's switch at ``t_b[m] fs + rel fs``).
+        if not holds or j_a == j_lo:
+            return rel, rel
+        # A weak first arrival under its images: the model searched from a quarter window
+        # before ``lo`` to the line's crossing, a constant level beside it.
+        first_s = (j_lo - int(WIDE_LEAD * w) - self._pre) / fs
+        last_s = guess + FIT_SPAN / fs
+        span = max(FIT_SPAN, int((last_s - first_s) * fs / 2) + 1)
+        wide = self._fit_ramp(
+            excess[lo_fit : j_fit + 1], lo_fit, (first_s + last_s) / 2, part, span, level=True
+        )
+        i_w = self._pre + int(round(wide * fs))
+        i_g = max(self._pre + int(round(guess * fs)), i_w + 4)
+        if i_g >= box.shape[1] or self._explained(box, clean, ramp, wide, i_w, i_g) < COHERENT_FIT:
+            return rel, rel
+        return rel, wide
+
+    def _near_floor(
+        self,
+        power: NDArray[np.float64],
+        floor: float,
+        amp: NDArray[np.float64],
+        k0: int,
+        top_i: int,
+        top: float,
+        wobble: float,
+    ) -> float | None:
+        """The noise level just before the ramp, where the one read (``floor``) is more than
+        :data:`NEAR_RATIO` times it; None otherwise. ``power``, ``amp`` (shape ``(L,)``),
+        ``k0``, ``top_i``, ``top``, ``wobble``: as :meth:`_onset`'s.
+
+        The least mean of ``power`` over :data:`NEAR_PART` windows within the window before
+        the ramp's ``lo`` crossing. The noise window lies before the search; the older late
+        paths' leak there can be several times the level just before a weak first arrival
+        (image order 3: 4 times at 8.3 m), which then falls under it and is read late."""
+        w = self.boxcar
+        j_lo, _ = self._ramp_bounds(amp, k0, top_i, top, wobble)
+        part = max(2, int(round(NEAR_PART * w)))
+        seg = power[max(k0, j_lo - w) : j_lo]
+        if seg.size < part:
+            return None
+        c = np.empty(seg.size + 1)
+        c[0] = 0.0
+        np.cumsum(seg, out=c[1:])
+        least = float(np.min(c[part:] - c[:-part])) / part
+        return least if floor > NEAR_RATIO * least else None
+
+    def _explained(
+        self,
+        box: NDArray[np.complex128],
+        clean: NDArray[np.bool_],
+        ramp: _RampTables,
+        rel: float,
+        i0: int,
+        i1: int,
+    ) -> float:
+        """The fraction of the next-tone channel's change (``box``, shape ``(M, L)``) on the
+        boundaries read (``clean``) at window indices ``i0 .. i1 − 1`` that one arrival's
+        ramp model at onset ``rel`` (s, :meth:`_ramp_shape`) explains, its complex amplitude
+        fitted on each boundary by least squares (dimensionless, 0..1)."""
+        n = np.arange(i0, i1)
+        shape = self._ramp_shape(np.array([rel * self.fs_hz]), n, ramp)[0][clean]  # (K, J)
+        seen = box[clean][:, n] / self.boxcar
+        gain = np.sum(np.conj(shape) * seen, axis=1) / np.maximum(
+            np.sum(np.abs(shape) ** 2, axis=1), 1e-300
+        )
+        fitted = float(np.sum(np.abs(gain[:, None] * shape) ** 2))
+        return fitted / max(float(np.sum(np.abs(seen) ** 2)), 1e-300)
 
     def _held_alpha(self, hop_index: int, delay_s: float, alpha: float) -> float | None:
         """The direct path's time scale read at the same echo up to :data:`HOLD_HOPS` hops
@@ -723,6 +954,14 @@ class FirstArrivalReadout:
         return direct_amplitudes(
             y, first, onset, freqs, np.stack([jump_pc, jump_cn]), alpha, fs, lead
         )
+
+    def _line(self, amp: NDArray[np.float64], j_a: int, j_b: int) -> tuple[float, float]:
+        """Slope (per s) and intercept of the least-squares line through ``amp`` (shape
+        ``(L,)``) at window indices ``j_a .. j_b``, against their offsets in s: its zero
+        crossing ``−intercept / slope`` is an onset, s after boundary 0's sample."""
+        tt = self._offsets[j_a : j_b + 1] / self.fs_hz
+        slope, icept = np.polyfit(tt, amp[j_a : j_b + 1], 1)
+        return float(slope), float(icept)
 
     @staticmethod
     def _ramp_bounds(
@@ -912,26 +1151,29 @@ class FirstArrivalReadout:
         first: int,
         guess_s: float,
         ramp: _RampTables,
+        span: int = FIT_SPAN,
+        *,
+        level: bool = False,
     ) -> float:
         """The onset (s after boundary 0's sample) whose model ramp fits ``excess`` best.
 
         ``excess`` (shape ``(L,)``): the mean next-tone power less the noise, at window
         indices ``first …``; ``ramp``: the boundaries' tables (:meth:`_ramp_tables`). The
-        model's residual (:meth:`_ramp_residuals`) is searched on whole samples within
-        ``±FIT_SPAN`` of ``guess_s``, then in steps of ``FIT_STEP`` within a sample of the
-        best, and refined by a parabola (``guess_s`` itself where the best is on the span's
-        edge).
+        model's residual (:meth:`_ramp_residuals`; with ``level``, a constant level fitted
+        beside the ramp) is searched on whole samples within ``±span`` of ``guess_s``, then
+        in steps of ``FIT_STEP`` within a sample of the best, and refined by a parabola
+        (``guess_s`` itself where the best is on the span's edge).
         """
         fs = self.fs_hz
         n = first + np.arange(excess.size)  # window indices (L,)
         start = self._window_start_phasors(ramp, n)
-        coarse = guess_s * fs + np.arange(-FIT_SPAN, FIT_SPAN + 1, dtype=np.float64)
-        resid = self._ramp_residuals(coarse, excess, n, ramp, start)
+        coarse = guess_s * fs + np.arange(-span, span + 1, dtype=np.float64)
+        resid = self._ramp_residuals(coarse, excess, n, ramp, start, level)
         k = int(np.argmin(resid))
         if k in (0, coarse.size - 1):
             return guess_s  # no minimum inside the span: the line stands
         fine = coarse[k] + np.arange(-1.0, 1.0 + FIT_STEP / 2, FIT_STEP)
-        resid = self._ramp_residuals(fine, excess, n, ramp, start)
+        resid = self._ramp_residuals(fine, excess, n, ramp, start, level)
         k = int(np.argmin(resid))
         best = float(fine[k])
         if 0 < k < fine.size - 1:
@@ -945,6 +1187,7 @@ class FirstArrivalReadout:
         n: NDArray[np.int64],
         ramp: _RampTables,
         start: NDArray[np.complex128],
+        level: bool = False,
     ) -> NDArray[np.float64]:
         """Least-squares residual of the model ramp for each onset of ``grid`` (samples after
         boundary 0's sample, shape ``(C,)``) against ``excess`` at window indices ``n`` (shape
@@ -952,11 +1195,16 @@ class FirstArrivalReadout:
 
         The model for one arrival of unit amplitude at onset ``o`` (window index): the boxcar
         of ``1`` after ``o`` and of the previous tone, ``e^{j(2π beat (i − o)/fs − jump)}``,
-        before it; its mean power over the boundaries, scaled by least squares.
+        before it; its mean power over the boundaries, scaled by least squares (with
+        ``level``, beside a constant level: both less their means).
         """
         power = np.abs(self._ramp_shape(grid, n, ramp, start))  # (C, M, L)
         np.square(power, out=power)
         model = _mean(power, axis=1)  # (C, L)
+        if level:
+            # A constant level fitted beside the ramp: both less their means.
+            model -= _mean(model, axis=1)[:, None]
+            excess = excess - _mean_all(excess)
         mm = np.add.reduce(model * model, axis=1)
         scale = np.add.reduce(model * excess[None, :], axis=1) / np.maximum(mm, 1e-300)
         left = excess[None, :] - scale[:, None] * model
@@ -1042,7 +1290,9 @@ class FirstArrivalReadout:
         detection reads a different tone pattern, so its sidelobes fall elsewhere while the
         direct path's speed stays: the score (divided by its maximum) is summed with those of
         the same echo :data:`DOPPLER_LAGS` hops back (:meth:`_summed_score`) to choose the
-        lobe; the present score's own peak on that lobe (refined by a parabola) is the speed.
+        lobe; the peak on that lobe (refined by a parabola) is the speed, of the summed score
+        where the direct path's speed has been steady (:meth:`_steady`), of the present score
+        alone otherwise.
         None where no tone recurs or the peak is on the span's edge.
         """
         fs = self.fs_hz
@@ -1077,10 +1327,11 @@ class FirstArrivalReadout:
         )
         total = self._summed_score(own, v_gcas)
         self._scores.append(own)
-        # The summed score chooses the lobe, the present one alone places the peak on it: a
-        # speed that changes over the lags would move a summed peak.
+        # The summed score chooses the lobe; the present one alone places the peak on it
+        # unless the direct path's speed has been steady (a speed that changes over the lags
+        # would move a summed peak).
         g = int(np.argmax(total))
-        own_score = own.score
+        own_score = total if self._steady(hop_index, delay_s) else own.score
         while 0 < g < own_score.size - 1 and max(own_score[g - 1], own_score[g + 1]) > own_score[g]:
             g = g - 1 if own_score[g - 1] > own_score[g + 1] else g + 1
         if g in (0, d_alpha.size - 1):

@@ -20,7 +20,9 @@ from typing import Any
 import numba
 import numpy as np
 
-_JIT: dict[str, Any] = {"cache": True, "nogil": True}
+#: ``error_model="numpy"``: a division by zero gives inf or NaN instead of raising, so the
+#: compiled divisions carry no zero test (every divisor here is guarded or nonzero).
+_JIT: dict[str, Any] = {"cache": True, "nogil": True, "error_model": "numpy"}
 #: Hops of the runs over which :func:`fit_quality`'s third coherence is taken.
 RUN_HOPS = 3
 #: Taylor terms of the in-hop Doppler rotation (:mod:`hil.estimation.refine`): the tables'
@@ -283,6 +285,7 @@ def _candidate(
     prefix: Any, energy: Any, first: Any, tail: Any, centre: Any, slots: Any, k: Any,
     amp2: Any, fs: float, t_rx: float, curved: bool, d_c_alpha: float, consts: Any,
     coef: Any, per_hop: Any, known: Any, near: Any, n_near: Any, rot_key: Any, rot: Any,
+    phasors: Any, edges: Any,
 ) -> tuple[complex, float, float]:  # fmt: skip
     """``(C, Σ a_i² N_i, input energy in the windows)`` of one candidate at ``t_rx`` (s) on
     the line whose per-hop constants :func:`_line` made (``consts``, ``coef``, and
@@ -304,6 +307,10 @@ def _candidate(
     taken out (:func:`_known_part`; shape ``(5, Q)``), of which hop ``i`` reads the columns
     ``near[i, :n_near[i]]`` (ascending; every column that can overlap its window:
     :func:`_columns_near`); ``rot_key`` and ``rot`` its rotations kept (:func:`_known_part`).
+    ``phasors`` (complex, shape ``(M,)``): each hop's ``e^{j ph_i}`` at this candidate, made
+    by the caller along a row of equally spaced times (:func:`_row_phasors`), or shape
+    ``(0,)`` to compute it here; ``edges`` (complex, shape ``(5, M, Q')``) the same for the
+    known columns' integrals (:func:`_row_edges`), or shape ``(5, 0, 0)``.
     """
     total = complex(0.0, 0.0)
     model = 0.0
@@ -318,13 +325,16 @@ def _candidate(
         lo = lo_s * fs - first[s] + 0.5
         hi = hi_s * fs - first[s] + 0.5
         z, e_window = _window(prefix, energy, s, lo, hi - tail[s], coef, i)
-        ph = consts[_PF, i] * (centre[s] - t_i)
-        if curved:
-            ph -= consts[_CURVE, i]
-        term_i = k[i] * complex(math.cos(ph), math.sin(ph)) * z
+        if phasors.shape[0]:
+            term_i = k[i] * phasors[i] * z
+        else:
+            ph = consts[_PF, i] * (centre[s] - t_i)
+            if curved:
+                ph -= consts[_CURVE, i]
+            term_i = k[i] * complex(math.cos(ph), math.sin(ph)) * z
         if n_near[i]:
             part, energy_part = _known_part(
-                known, near, i, n_near[i], t_i, lo_s, hi_s, consts[_FA, i], rot_key, rot
+                known, near, i, n_near[i], t_i, lo_s, hi_s, consts[_FA, i], rot_key, rot, edges
             )
             kp = k[i] * part
             term_i -= complex(kp.real * fs, kp.imag * fs)
@@ -338,9 +348,80 @@ def _candidate(
 
 
 @numba.njit(**_JIT)
+def _row_phasors(
+    centre: Any, slots: Any, t_rx: float, curved: bool, d_c_alpha: float, consts: Any,
+    step_s: float, start: Any, step: Any,
+) -> None:  # fmt: skip
+    """Each hop's phasor ``e^{j ph_i}`` of :func:`_candidate` at ``t_rx`` (s) on the line of
+    ``consts`` (and ``d_c_alpha``, ``curved``: :func:`_line`'s) into ``start``, and the
+    factor ``e^{−j PF_i step_s}`` that moves it to the candidate ``step_s`` (s) later into
+    ``step`` (complex, shape ``(M,)`` each): ``ph_i`` is linear in ``t_rx`` with slope
+    ``−PF_i``, so a row of equally spaced candidates costs one sine and cosine pair per hop
+    and a complex product per candidate instead of a pair per candidate (:func:`_advance`;
+    the product's rounding over a row of tens of steps stays near 1e-15)."""
+    for i in range(slots.shape[0]):
+        t_i = t_rx
+        if curved:
+            t_i = t_rx + d_c_alpha + consts[_U, i] - consts[_DA, i]
+        ph = consts[_PF, i] * (centre[slots[i]] - t_i)
+        if curved:
+            ph -= consts[_CURVE, i]
+        start[i] = complex(math.cos(ph), math.sin(ph))
+        w = -consts[_PF, i] * step_s
+        step[i] = complex(math.cos(w), math.sin(w))
+
+
+@numba.njit(**_JIT)
+def _advance(phasors: Any, step: Any) -> None:
+    """Move :func:`_row_phasors`' phasors one step along their row (in place)."""
+    for i in range(phasors.shape[0]):
+        phasors[i] *= step[i]
+
+
+@numba.njit(**_JIT)
+def _row_edges(
+    known: Any, near: Any, n_near: Any, t_rx: float, curved: bool, d_c_alpha: float,
+    consts: Any, step_s: float, edges: Any,
+) -> None:  # fmt: skip
+    """:func:`_known_part`'s integral ends along a row of candidates from ``t_rx`` (s) in steps
+    of ``step_s`` (one time scale: :func:`_line`'s ``consts``, ``d_c_alpha`` and ``curved``),
+    into ``edges`` (complex, shape ``(5, M, Q')``; per hop ``i`` and column ``near[i, col]``,
+    ``x = 2π (g − f_rx)``): ``e^{jx (start − t_i)}`` and ``e^{jx (end − t_i)}`` of the
+    column's own interval (``t_i`` the hop's time at ``t_rx``), ``e^{jx LO_i}`` and
+    ``e^{jx HI_i}`` of the window's edges (fixed along the row: they move with ``t_i``), and
+    the factor ``e^{−jx step_s}`` that moves the first two one candidate on
+    (:func:`_advance_edges`). The integral ``(e^{jx τ_b} − e^{jx τ_a})/(jx)`` then costs two
+    complex products per candidate instead of two sine and cosine pairs."""
+    for i in range(n_near.shape[0]):
+        t_i = t_rx
+        if curved:
+            t_i = t_rx + d_c_alpha + consts[_U, i] - consts[_DA, i]
+        f_rx = consts[_FA, i]
+        for col in range(n_near[i]):
+            h = near[i, col]
+            x = 2.0 * math.pi * (known[1, h].real - f_rx)
+            ta = x * (known[2, h].real - t_i)
+            tb = x * (known[3, h].real - t_i)
+            edges[0, i, col] = complex(math.cos(ta), math.sin(ta))
+            edges[1, i, col] = complex(math.cos(tb), math.sin(tb))
+            edges[2, i, col] = complex(math.cos(x * consts[_LO, i]), math.sin(x * consts[_LO, i]))
+            edges[3, i, col] = complex(math.cos(x * consts[_HI, i]), math.sin(x * consts[_HI, i]))
+            edges[4, i, col] = complex(math.cos(x * step_s), -math.sin(x * step_s))
+
+
+@numba.njit(**_JIT)
+def _advance_edges(edges: Any, n_near: Any) -> None:
+    """Move :func:`_row_edges`' column ends one candidate along their row (in place)."""
+    for i in range(n_near.shape[0]):
+        for col in range(n_near[i]):
+            edges[0, i, col] *= edges[4, i, col]
+            edges[1, i, col] *= edges[4, i, col]
+
+
+@numba.njit(**_JIT)
 def _known_part(
     known: Any, near: Any, i: int, n_near: int, t_rx: float, lo: float, hi: float,
-    f_rx: float, rot_key: Any, rot: Any,
+    f_rx: float, rot_key: Any, rot: Any, edges: Any,
 ) -> tuple[complex, float]:  # fmt: skip
     """What the hops of other echoes already measured put into one hop's term (before its
     transmit phasor and the sample rate) and into its window's energy (per sample rate).
@@ -359,6 +440,8 @@ def _known_part(
     column's ``e^{j2π g_h (t_rx − t_e)}`` with the ``t_rx`` it was made for: a candidate of
     the same ``t_rx`` (a search grid's column, the other hops over that column) reads it
     instead of a remainder and a sine and cosine, the same value; shape ``(0,)`` keeps none.
+    ``edges`` (complex, shape ``(5, M, Q')``, or ``(5, 0, 0)`` for none): :func:`_row_edges`'
+    ``e^{jx τ}`` at the integral's ends for column ``near[i, col]`` at this candidate.
     """
     part = complex(0.0, 0.0)
     energy = 0.0
@@ -384,6 +467,12 @@ def _known_part(
         if abs(x * (tb - ta)) < 1e-9:
             dt = tb - ta
             integral = complex(math.cos(x * ta) * dt, math.sin(x * ta) * dt)
+        elif edges.shape[1]:
+            # The ends' phasors kept along the row: a column's own end, or the window's.
+            ea = edges[0, i, col] if known[2, h].real >= lo else edges[2, i, col]
+            eb = edges[1, i, col] if known[3, h].real <= hi else edges[3, i, col]
+            d = eb - ea
+            integral = complex(d.imag / x, -d.real / x)
         else:
             # (e^{jx tb} − e^{jx ta}) / (jx), real and imaginary parts apart.
             p = math.cos(x * tb) - math.cos(x * ta)
@@ -457,6 +546,7 @@ def candidate_sums(
     consts, coef = _scratch(slots, prefix)
     near, n_near = _every_column(slots.shape[0], known)
     no_key, no_rot = np.empty(0), np.empty(0, dtype=np.complex128)  # no rotations kept
+    no_edges = np.empty((5, 0, 0), dtype=np.complex128)
     d_c_alpha = 0.0
     for c in range(t_rx.shape[0]):
         if c == 0 or alpha[c] != alpha[c - 1] or gamma[c] != gamma[c - 1]:
@@ -465,7 +555,8 @@ def candidate_sums(
             )
         out_c[c], out_model[c], out_signal[c] = _candidate(
             prefix, energy, first, tail, centre, slots, k, amp2, fs, t_rx[c], gamma[c] != 0.0,
-            d_c_alpha, consts, coef, per_hop[c], known, near, n_near, no_key, no_rot,
+            d_c_alpha, consts, coef, per_hop[c], known, near, n_near, no_key, no_rot, no_rot,
+            no_edges,
         )  # fmt: skip
 
 
@@ -511,6 +602,13 @@ def maximise(
     n_cols = known.shape[1]
     rot_key = np.full((max(n_t, 3), n_cols), np.nan)
     rot = np.empty((max(n_t, 3), n_cols), dtype=np.complex128)
+    # Each row of candidates (one time scale, equally spaced times) turns the hops' phasors
+    # by a fixed factor a step (:func:`_row_phasors`).
+    m_hops = slots.shape[0]
+    phasors = np.empty(m_hops, dtype=np.complex128)
+    turn = np.empty(m_hops, dtype=np.complex128)
+    # So do the known columns' integral ends (:func:`_row_edges`).
+    edges = np.empty((5, m_hops, n_cols), dtype=np.complex128)
     best = -1.0
     bi = 0
     bj = 0
@@ -518,11 +616,18 @@ def maximise(
         vv = v0 - half_v + i * step_v
         a = (c_mps + vv) / (c_mps - vv)
         d_c_a = _line(alpha0, slots, f, dt_lo, dt_hi, hop_s, a, gamma, consts, coef)
+        _row_phasors(centre, slots, t0 - half_t, curved, d_c_a, consts, step_t, phasors, turn)
+        if n_cols:
+            _row_edges(known, near, n_near, t0 - half_t, curved, d_c_a, consts, step_t, edges)
         for j in range(n_t):
+            if j:
+                _advance(phasors, turn)
+                if n_cols:
+                    _advance_edges(edges, n_near)
             cc, _, _ = _candidate(
                 prefix, energy, first, tail, centre, slots, k, amp2, fs,
                 t0 - half_t + j * step_t, curved, d_c_a, consts, coef, none, known, near,
-                n_near, rot_key[j], rot[j],
+                n_near, rot_key[j], rot[j], phasors, edges,
             )  # fmt: skip
             pw = cc.real * cc.real + cc.imag * cc.imag
             if pw > best:
@@ -537,21 +642,29 @@ def maximise(
     step_v *= 0.5
     z = np.empty((3, 3))
     # The stencil's centre is a point already evaluated (the grid's best, or the best of the
-    # last stencil where its fit did not move): the same arguments, so the same value.
+    # last stencil where its fit did not move): that value is kept (the same candidate reached
+    # along another row, equal to rounding).
     z_centre = best
     for _ in range(passes):
         for i in range(3):
             vv = v + (i - 1) * step_v
             a = (c_mps + vv) / (c_mps - vv)
             d_c_a = _line(alpha0, slots, f, dt_lo, dt_hi, hop_s, a, gamma, consts, coef)
+            _row_phasors(centre, slots, t - step_t, curved, d_c_a, consts, step_t, phasors, turn)
+            if n_cols:
+                _row_edges(known, near, n_near, t - step_t, curved, d_c_a, consts, step_t, edges)
             for j in range(3):
+                if j:
+                    _advance(phasors, turn)
+                    if n_cols:
+                        _advance_edges(edges, n_near)
                 if i == 1 and j == 1 and z_centre >= 0.0:
                     z[1, 1] = z_centre
                     continue
                 cc, _, _ = _candidate(
                     prefix, energy, first, tail, centre, slots, k, amp2, fs,
                     t + (j - 1) * step_t, curved, d_c_a, consts, coef, none, known, near,
-                    n_near, rot_key[j], rot[j],
+                    n_near, rot_key[j], rot[j], phasors, edges,
                 )  # fmt: skip
                 z[i, j] = cc.real * cc.real + cc.imag * cc.imag
         # z[i, j] ≈ z0 + gt x + gv y + ½ (htt x² + 2 htv x y + hvv y²); x, y in steps.
@@ -604,6 +717,7 @@ def fit_quality(
     c, es, signal = _candidate(
         prefix, energy, first, tail, centre, slots, k, amp2, fs, t_rx, gamma != 0.0,
         d_c_alpha, consts, coef, h, known, *_every_column(m_hops, known), no_key, no_rot,
+        no_rot, np.empty((5, 0, 0), dtype=np.complex128),
     )  # fmt: skip
     mag2 = c.real * c.real + c.imag * c.imag
     spread = 0.0

@@ -111,3 +111,67 @@ def test_the_known_hops_a_search_reads_include_every_one_it_can_meet(
         read = near[i, : n_near[i]]
         assert set(meets.tolist()) <= set(read.tolist())
         assert np.all(np.diff(read) > 0)
+
+
+def test_a_search_rows_carried_phasors_give_each_candidates_own_sums() -> None:
+    # maximise walks a row of equally spaced times turning each hop's phasor and each known
+    # column's integral ends by a fixed factor a step (_row_phasors, _row_edges); a candidate
+    # so reached equals the same candidate computed alone (candidate_sums), to rounding, while
+    # other echoes' hops start and end inside the windows, across their edges or outside.
+    schedule = att_schedule()
+    refiner = CoherentRefiner(schedule, FS, 10, C, 0.5, 30.0)
+    refiner.push(echo_samples(schedule, 70.0, 12.0, 0.4, snr_db=0.0, seed=4), 0)
+    alpha = (C + 12.0) / (C - 12.0)
+    hop = 28
+    t_s = float(schedule.hops(hop + 1, 1).start_s[0]) + 2 * 70.0 / C
+    args = _kernel_args(refiner, hop, t_s, alpha)
+    prefix, energy, first, tail, alpha0, centre, slots, k, f, dt_lo, dt_hi, amp2, fs, hop_s = args
+    m = slots.shape[0]
+    rng = np.random.default_rng(7)
+    n_cols = 40
+    known = np.zeros((5, n_cols), dtype=np.complex128)
+    known[0] = rng.normal(size=n_cols) + 1j * rng.normal(size=n_cols)
+    known[1] = rng.choice(schedule.tones_hz, n_cols) * (1.0 + rng.uniform(-0.02, 0.02, n_cols))
+    known[2] = t_s + rng.uniform(-0.11, 0.0, n_cols)
+    known[3] = known[2].real + rng.uniform(0.001, 0.012, n_cols)
+    known[4] = t_s - rng.uniform(0.0, 0.02, n_cols)
+    near, n_near = kernels._every_column(m, known)
+    step = 1e-4  # the row's times cross the known hops' ends and the windows' edges
+    n_t = 9
+    for a, gamma in ((alpha + 2e-4, 0.0), (alpha - 1e-4, 0.003)):
+        consts, coef = kernels._scratch(slots, prefix)
+        d_c_a = kernels._line(alpha0, slots, f, dt_lo, dt_hi, hop_s, a, gamma, consts, coef)
+        curved = gamma != 0.0
+        t0 = t_s - 0.5 * (n_t - 1) * step
+        phasors = np.empty(m, dtype=np.complex128)
+        turn = np.empty(m, dtype=np.complex128)
+        edges = np.empty((5, m, n_cols), dtype=np.complex128)
+        kernels._row_phasors(centre, slots, t0, curved, d_c_a, consts, step, phasors, turn)
+        kernels._row_edges(known, near, n_near, t0, curved, d_c_a, consts, step, edges)
+        no_key, no_rot = np.empty(0), np.empty(0, dtype=np.complex128)
+        row = np.empty(n_t, dtype=np.complex128)
+        for j in range(n_t):
+            if j:
+                kernels._advance(phasors, turn)
+                kernels._advance_edges(edges, n_near)
+            row[j] = kernels._candidate(
+                prefix, energy, first, tail, centre, slots, k, amp2, fs, t0 + j * step,
+                curved, d_c_a, consts, coef, no_rot, known, near, n_near, no_key, no_rot,
+                phasors, edges,
+            )[0]  # fmt: skip
+        t = t0 + step * np.arange(n_t)
+        alone = np.empty(n_t, dtype=np.complex128)
+        kernels.candidate_sums(
+            *args, t, np.full(n_t, a), np.full(n_t, gamma), alone, np.empty(n_t), np.empty(n_t),
+            np.empty((n_t, 0), dtype=np.complex128), known,
+        )  # fmt: skip
+        # Rounding: a hop's phase is about 1e4 rad (2π f α over the centre's 50 ms), whose
+        # last bit is 2e-12 rad, in either path; ten hops' terms.
+        assert np.max(np.abs(row - alone)) <= 1e-11 * np.max(np.abs(alone))
+        # The known hops move the sums (the comparison reads their integrals).
+        bare = np.empty(n_t, dtype=np.complex128)
+        kernels.candidate_sums(
+            *args, t, np.full(n_t, a), np.full(n_t, gamma), bare, np.empty(n_t), np.empty(n_t),
+            np.empty((n_t, 0), dtype=np.complex128), np.zeros((5, 0), dtype=np.complex128),
+        )  # fmt: skip
+        assert np.min(np.abs(bare - alone)) > 1e-3 * np.max(np.abs(alone))

@@ -52,16 +52,17 @@ SHORT = DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -3.5").replace(
 #: spread is the telemetry's own error (JACK_EXACT_RANGE_M); the bounds are the tank's own
 #: targets (issue 31: 0.05 m, 5 % off) with that spread inside them.
 JACK_DETECTION, JACK_WRONG, JACK_RANGE_M, JACK_SPEED_MPS = 0.95, 0.03, 0.05, 0.05
-#: The range error of a JACK run against the exact truth the served tank writes (95th
-#: percentile of the scored estimates): the receiver's own, as on the simulated board (RMSE
-#: 0.002-0.004 m). Measured at load 6-16 (seven runs): RMSE 0.0027-0.0039 m, and 0.013 m in
-#: one run with one estimate a range cell (0.127 m) off; its 95th percentile 0.0057 m. The
-#: same runs read 0.013-0.026 m against the telemetry (its dating through sync pairs 0.1 s
-#: apart on this server's wandering pace). On 29 Nov, 16 runs on five commits at load 1-2
-#: (the dummy server reporting 94-201 xruns a run): 95th percentile 0.0044-0.0097 m, and
-#: 0.0198 m in one CI run (load 1-2): the estimates a range cell off (0.12-0.19 m, 0-3 of
-#: about 100) set it, not the receiver's own spread.
-JACK_EXACT_RANGE_M = 0.025
+#: The range error of a JACK run against the exact truth the served tank writes, over the
+#: scored estimates: the receiver's own, as on the simulated board (RMSE 0.002-0.004 m).
+#: Measured on 29 Nov at load 6.7-9.8 (five runs, the stream 1.1-3.5 times slower than the
+#: wall clock): RMSE 0.0028-0.0039 m, 95th percentile 0.0054-0.0108 m, largest error
+#: 0.0097-0.0140 m, none a range cell (0.12-0.20 m) off; eight earlier recordings replayed
+#: through the present receiver: RMSE 0.0030-0.0039 m, 95th percentile 0.0058-0.0103 m,
+#: largest 0.0066-0.0153 m (earlier that day, 16 runs at load 1-2: 95th percentile
+#: 0.0044-0.0097 m). Before the first-arrival readout read a rise cut short by the
+#: canceller's copies at its own ramp (hil.estimation.first_arrival), 3 runs in 5 had one
+#: estimate in a hundred a range cell off, which set the RMSE (0.013-0.029 m).
+JACK_EXACT_RMSE_M, JACK_EXACT_RANGE_M, JACK_EXACT_MAX_M = 0.01, 0.015, 0.04
 #: Deadlock guard (never asserted on; the served tank's own: conftest.SERVE_TIMEOUT_S).
 RUN_TIMEOUT_S = 1200.0
 #: The least loop latency: JACK's round trip through the two PortAudio clients (at least 2
@@ -213,10 +214,10 @@ def test_tank_run_through_jack_and_portaudio_is_tracked_as_on_the_board(
                                       "telemetry_truth_error_max_m", "range_rmse_m")}  # fmt: skip
     print(f"against the exact truth: {exact}")
     assert rescored["range_rmse_m"] == summary["range_rmse_m"], exact
-    assert rescored["range_rmse_vs_exact_m"] < JACK_RANGE_M, exact
+    assert rescored["range_rmse_vs_exact_m"] < JACK_EXACT_RMSE_M, exact
     assert rescored["speed_rmse_vs_exact_mps"] < JACK_SPEED_MPS, exact
-    # Estimate by estimate: 95 % of the scored ones within JACK_EXACT_RANGE_M of the truth
-    # (a rare one a range cell off would dominate an RMSE of a hundred).
+    # Estimate by estimate: 95 % of the scored ones within JACK_EXACT_RANGE_M of the truth,
+    # and none a range cell off (one such in a hundred would dominate the RMSE).
     outcome = outcome_from_recording(folder / "run.h5", codeword_map=False)
     scored = score_run(outcome).scored
     truth = exact_truth_at(read_truth(truth_file), bounce_times(outcome))["range_m"]
@@ -225,6 +226,7 @@ def test_tank_run_through_jack_and_portaudio_is_tracked_as_on_the_board(
     print(f"range error against the exact truth: 95th percentile {p95:.4f} m, largest "
           f"{errors.max():.4f} m")  # fmt: skip
     assert p95 < JACK_EXACT_RANGE_M, exact
+    assert errors.max() < JACK_EXACT_MAX_M, exact
 
 
 def test_the_served_experiment_points_at_jack_and_the_stage_pty() -> None:
