@@ -150,6 +150,36 @@ def peak_cells(
 
 
 @numba.njit(**_JIT)
+def second_peak_cells(
+    s: Any, half_rows: int, half_inner: int, half_cols: int, lo: int, hi: int, leak: Any,
+    level: float,
+) -> Any:  # fmt: skip
+    """Cells ``(i, d)`` with ``i`` in ``[lo, hi)`` that :func:`peak_cells` gives over
+    ``±half_inner`` rows but not over ``±half_rows`` (a second maximum within
+    ``±half_rows`` rows of a greater one), at least ``level`` times the greatest cell of
+    that window. Row and column indices (int64, shape ``(P,)`` each), row-major order."""
+    rows = np.empty((hi - lo) * s.shape[1] if hi > lo else 0, dtype=np.int64)
+    cols = np.empty_like(rows)
+    n = s.shape[0]
+    count = 0
+    for i in range(lo, hi):
+        for d in range(s.shape[1]):
+            if not _cell_peak_at(s, i, d, half_inner, half_cols, n, leak):
+                continue
+            if _cell_peak_at(s, i, d, half_rows, half_cols, n, leak):
+                continue
+            top = -math.inf
+            for j in range(max(0, i - half_rows), min(n, i + half_rows + 1)):
+                for e in range(max(0, d - half_cols), min(s.shape[1], d + half_cols + 1)):
+                    top = max(top, s[j, e])
+            if s[i, d] >= level * top:
+                rows[count] = i
+                cols[count] = d
+                count += 1
+    return rows[:count], cols[:count]
+
+
+@numba.njit(**_JIT)
 def first_possible_cells(
     s: Any, half_rows: int, half_cols: int, lo: int, hi: int, leak: Any
 ) -> Any:  # fmt: skip

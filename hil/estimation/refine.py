@@ -97,6 +97,7 @@ from hil.estimation.refine_kernels import (
     fit_quality,
     maximise,
 )
+from hil.estimation.reverb_band import doppler_resolution_mps
 from hil.estimation.row_buffer import RowBuffer
 from hil.signals.schedule import HopSchedule
 
@@ -165,6 +166,19 @@ GHOST_POINTS = 9
 #: neither neighbour is better): a detector's time can be several lobes off at an echo's
 #: first boundary (att three-state, full search: 2.75 lobes, 1.8 ms).
 LOBE_MOVES = 4
+#: Two echoes at one speed (a formation, two objects at rest with the reverberation band off)
+#: share their tones: each echo's hops hold the other's on the hops where their tones meet,
+#: with unrelated phases, so neither fit reaches one echo's coherence until the other is taken
+#: out, and neither is taken out until it has passed (measured on att, two closing targets at
+#: 10 m/s 3 m apart, 0 dB: every fit at 0.70-0.80 of one echo's coherence, E/N0 33-35 dB; the
+#: ghosts of the same scene at 0.30-0.44). A refused fit whose coherence over all hops is at
+#: least PARTNER_COHERENCE of one echo's, that collects what an echo must, is kept as a
+#: partner for KNOWN_HOPS; a later refused detection of another echo is fitted again with the
+#: partners taken out as well, and kept where that fit is one echo (the partner's own next
+#: detection then has it as a known echo). Not in the still reverberation's Doppler cells
+#: (band off): there every lone scatterer of sparse volume reverberation is such a partner
+#: of the next (sim-03 at +5 dB SRR, one trial: 1 -> 3 scatterers reported).
+PARTNER_COHERENCE = 0.5
 #: Runs of hops kept for the other echoes' ``known`` rows
 #: (:meth:`CoherentRefiner._hop_run`; all are dropped when full).
 HOP_RUNS = 256
@@ -392,6 +406,8 @@ class CoherentRefiner:
         self._recent: deque[tuple[int, float, float, float]] = deque(maxlen=RECENT_FITS)
         #: The latest fit of each echo measured lately (:meth:`_known_hops`).
         self._echoes: list[_EchoFit] = []
+        #: Refused fits that may be one of two echoes at one speed (:data:`PARTNER_COHERENCE`).
+        self._partners: list[_EchoFit] = []
         # The acceleration grid's time-scale rates (1/s): an eighth of a cycle of the highest
         # tone at the window's ends, ±half the window from its centre, a step.
         half_window = 0.5 * self.m_hops * self.hop_len_s
@@ -402,6 +418,9 @@ class CoherentRefiner:
         f_c = 0.5 * float(np.min(schedule.tones_hz) + np.max(schedule.tones_hz))
         self._ghost_speed = self.c * self.spacing_hz / (2.0 * f_c)
         self._cell_speed = self.c / (2.0 * f_c * self.hop_len_s)
+        #: Speeds below this share their Doppler cells with the still reverberation (m/s,
+        #: :func:`~hil.estimation.reverb_band.doppler_resolution_mps`).
+        self._still_mps = doppler_resolution_mps(schedule.tones_hz, self.hop_len_s, self.c)
 
     # ------------------------------------------------------------------ stream
     def allow_lag(self, samples: int) -> None:
@@ -421,6 +440,7 @@ class CoherentRefiner:
         self._hop[:] = np.iinfo(np.int64).min
         self._recent.clear()
         self._echoes.clear()
+        self._partners.clear()
 
     def warm_up(self) -> None:
         """Run every compiled kernel once on a made-up detection in silence, then forget it:
@@ -467,10 +487,68 @@ class CoherentRefiner:
             and fit.e_over_n0_db >= test.min_e_over_n0_db + ACCEL_MARGIN_DB
         ):
             fit = self._with_acceleration(fit, word, hop_ids, lobe, known)
+        if fit is not None and fit.found and not fit.is_echo(test):
+            fit = self._with_partners(fit, word, hop_ids, t_s, speed0, lobe, hop_index, known, test)
         if fit is not None and fit.is_echo(test):
             self._recent.append((hop_index, fit.t_s, fit.alpha, fit.rate(self.c)))
             self._remember(fit, hop_index)
         return fit
+
+    def _with_partners(
+        self, fit: Refinement, word: _Codeword, hop_ids: NDArray[np.int64], t_s: float,
+        speed: float, lobe: float, hop_index: int, known: NDArray[np.complex128],
+        test: EchoTest,
+    ) -> Refinement:  # fmt: skip
+        """A refused ``fit`` of the detection at ``t_s`` (s) and ``speed`` (m/s) that may be
+        one of two echoes at one speed (it collects what an echo must, with at least
+        :data:`PARTNER_COHERENCE` of one echo's coherence) fitted again with the partners of
+        other echoes taken out: that fit where it is one echo by ``test``; else ``fit``, kept
+        as a partner. A fit short of an echo's E/N0 is neither: taking another fit out only
+        lowers the noise it is measured against."""
+        if not (
+            fit.amplitude != 0
+            and fit.e_over_n0_db >= test.min_e_over_n0_db
+            and fit.coherence.fraction >= PARTNER_COHERENCE
+            and abs(speed) >= self._still_mps
+        ):
+            return fit
+        oldest = fit.t_s - KNOWN_HOPS * self.hop_len_s
+        self._partners = [p for p in self._partners if p.t_s >= oldest]
+        others = [
+            p for p in self._partners
+            if abs(p.speed(self.c) - speed) <= self.speed_span_mps
+            and not self._same_echo(p, hop_index, t_s, speed)
+        ]  # fmt: skip
+        if others:
+            t_lo = t_s - (self.m_hops + 1) * self.hop_len_s / (
+                1.0 - 2.0 * self.speed_span_mps / self.c
+            )
+            rows = [known, *(self._echo_hops(p, t_lo, t_s + self.hop_len_s) for p in others)]
+            with_others = np.ascontiguousarray(np.concatenate(rows, axis=1))
+            again = self._fit_near(word, hop_ids, t_s, speed, lobe, hop_index, with_others)
+            if again is not None and again.is_echo(test):
+                return again
+        v = self.c * (fit.alpha - 1.0) / (fit.alpha + 1.0)
+        kept = [p for p in self._partners if not self._same_echo(p, hop_index, fit.t_s, v)]
+        new = _EchoFit(hop_index, fit.t_s, fit.alpha, fit.amplitude, fit.rate(self.c))
+        self._partners = [*kept, new]
+        return fit
+
+    def beside_known(self, t_s: float, alpha: float, hop_index: int) -> bool:
+        """Whether another echo at the speed of a detection at ``t_s`` (s) and time scale
+        ``alpha`` (the boundary ending hop ``hop_index``) was measured lately or kept as a
+        partner (:data:`PARTNER_COHERENCE`): within :data:`KNOWN_HOPS` hops of it, within
+        the speed span, and not this detection's own echo. A second maximum of a Doppler row
+        (:mod:`hil.estimation.gcas.candidates`) is decided only there: in noise alone it is
+        one more chance for a false alarm."""
+        speed = self.c * (alpha - 1.0) / (alpha + 1.0)
+        reach = KNOWN_HOPS * self.hop_len_s
+        return any(
+            abs(e.t_s - t_s) <= reach
+            and abs(e.speed(self.c) - speed) <= self.speed_span_mps
+            and not self._same_echo(e, hop_index, t_s, speed)
+            for e in (*self._echoes, *self._partners)
+        )
 
     def ghost_of_known(self, t_s: float, alpha: float, hop_index: int, edge_side: int = 0) -> bool:
         """Whether a detection at ``t_s`` (s) and time scale ``alpha``, the boundary ending

@@ -9,7 +9,12 @@ from scipy import ndimage
 
 from hil.estimation.gcas import NO_SAMPLE, GcasReceiver
 from hil.estimation.gcas.search_two_stage import TwoStageSearch
-from hil.estimation.kernels import first_possible_cells, peak_cells, peak_indices
+from hil.estimation.kernels import (
+    first_possible_cells,
+    peak_cells,
+    peak_indices,
+    second_peak_cells,
+)
 
 from .conftest import FS, C, att_schedule, echo_samples
 
@@ -79,6 +84,39 @@ def test_peak_cells_equal_the_written_out_rule(
     assert list(zip(got_rows.tolist(), got_cols.tolist(), strict=True)) == _cells_reference(
         s, hr, hc, leak
     )
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    CELL_ROWS, st.integers(2, 4), st.integers(1, 3), st.integers(1, 3),
+    st.sampled_from([0.0, 0.5]), st.sampled_from([0.0, 0.6, 0.9]),
+)  # fmt: skip
+def test_second_peak_cells_equal_the_written_out_rule(
+    rows: list[list[float]], hr: int, inner: int, hc: int, far_leak: float, level: float
+) -> None:
+    s = np.array(rows)
+    leak = np.array([0.0, 0.0, far_leak, far_leak])
+    inner = min(inner, hr - 1)
+    got_rows, got_cols = second_peak_cells(s, hr, inner, hc, 0, s.shape[0], leak, level)
+    wide = set(_cells_reference(s, hr, hc, leak))
+    want = []
+    for i, j in _cells_reference(s, inner, hc, leak):
+        top = s[max(0, i - hr) : i + hr + 1, max(0, j - hc) : j + hc + 1].max()
+        if (i, j) not in wide and s[i, j] >= level * top:
+            want.append((i, j))
+    assert list(zip(got_rows.tolist(), got_cols.tolist(), strict=True)) == want
+
+
+def test_a_second_echo_within_half_a_hop_of_a_greater_one_is_a_second_cell() -> None:
+    # One row (one Doppler cell): two echoes' peaks 3 blocks apart (1.0 and 0.9), one echo's
+    # trough (0.4) and a bump on it (0.45) between boundaries; hc = 5 blocks, inner = 1; the
+    # rows decided are those with hc rows known after them, as in the search.
+    row = np.array([0.5, 0.7, 1.0, 0.8, 0.85, 0.9, 0.6, 0.4, 0.45, 0.4, 0.5, 0.6])
+    s = row[:, None]
+    none = np.zeros(1)
+    assert peak_cells(s, 5, 1, 0, 7, none)[0].tolist() == [2]
+    assert second_peak_cells(s, 5, 1, 1, 0, 7, none, 0.6)[0].tolist() == [5]
+    assert second_peak_cells(s, 5, 1, 1, 0, 7, none, 0.95)[0].tolist() == []
 
 
 def test_peak_cells_of_one_column_are_peak_indices() -> None:

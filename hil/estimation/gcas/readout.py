@@ -254,6 +254,10 @@ class Readout:
                 self.hidden.note(t_rx, alpha, hop_index, p.peak - p.mean)
             return None
         bound = None
+        if p.second and (
+            self._refiner is None or not self._refiner.beside_known(t_rx, alpha, hop_index)
+        ):
+            return None
         if self._refiner is not None:
             if self.hidden is not None:
                 self.hidden.measure_near(t_rx, p.peak - p.mean)

@@ -26,7 +26,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hil.estimation.coarse_search import CoarseSearch
-from hil.estimation.gcas.candidates import CandidateCells, EveryEcho, StrongestEcho
+from hil.estimation.gcas.candidates import (
+    SECOND_ECHO_HOPS,
+    CandidateCells,
+    EveryEcho,
+    StrongestEcho,
+)
 from hil.estimation.gcas.exact import ExactHistory
 from hil.estimation.gcas.front_end import FrontEnd
 from hil.estimation.gcas.options import check_coarse_step
@@ -37,6 +42,7 @@ from hil.estimation.gcas.threshold import (
     Peak,
     median_spread,
     peaks_of,
+    seconds_marked,
     threshold_peaks,
     window_means,
 )
@@ -49,6 +55,7 @@ from hil.estimation.kernels import (
     peak_cells,
     peak_indices,
 )
+from hil.estimation.reverb_band import doppler_resolution_mps
 from hil.estimation.row_buffer import RowBuffer
 
 #: Peaks remembered to drop a repeat of one (:meth:`TwoStageSearch._distinct`): more than
@@ -84,6 +91,23 @@ def doppler_leak(fe: FrontEnd) -> NDArray[np.float64]:
     x = np.maximum(dd - 0.5, 0.0) * step / cell
     leak = np.where(x >= 1.0, LEAK_MARGIN / (np.pi * np.maximum(x, 1.0)) ** 2, 0.0)
     return np.ascontiguousarray(leak)
+
+
+def second_echo_rows(fe: FrontEnd) -> NDArray[np.bool_]:
+    """The hypotheses whose rows are searched for a second maximum (shape ``(D,)``,
+    :class:`~hil.estimation.gcas.candidates.EveryEcho`): searched at full weight, and more than
+    one Doppler resolution cell and a step from a refused or down-weighted hypothesis and from
+    the span's ends, where one echo's leak into a mismatched cell ripples along the row; and
+    not in the still reverberation's cells (with the band off, the lone scatterers of sparse
+    reverberation would each be a second echo beside the last)."""
+    still = np.abs(fe.grid.speeds_mps) < doppler_resolution_mps(
+        fe.tones_hz, fe.hop_s, fe.sound_speed_mps
+    )
+    bad = (fe.grid.weights < 1.0) | np.asarray(fe.refused_hypotheses, dtype=np.bool_) | still
+    bad[0] = bad[-1] = True
+    reach = np.ones(2 * (fe.lobe_hypotheses + 1) + 1)
+    rows: NDArray[np.bool_] = np.convolve(bad.astype(np.float64), reach, mode="same") == 0
+    return rows
 
 
 class TwoStageSearch:
@@ -128,8 +152,9 @@ class TwoStageSearch:
         self._cn_ring = RowBuffer(c_keep, (), np.float64)
         self._ca_ring = RowBuffer(c_keep, (fe.grid.size,), np.float64)  # h_d Acc_d per block
         #: The candidates' rule (:mod:`hil.estimation.gcas.candidates`).
+        inner = int(round(SECOND_ECHO_HOPS * fe.n_min / b))
         self.candidates: CandidateCells = (
-            EveryEcho(self._hc, fe.lobe_hypotheses, doppler_leak(fe))
+            EveryEcho(self._hc, fe.lobe_hypotheses, doppler_leak(fe), inner, second_echo_rows(fe))
             if every_echo
             else StrongestEcho(self._hc, fe.lobe_hypotheses, fe.grid.size)
         )
@@ -238,7 +263,7 @@ class TwoStageSearch:
         first = max(lo - self._hc, self._c_origin)
         acc = np.array(self._ca_ring.span(first, min(stop + self._hc, self._ca_ring.next_index)))
         acc[: max(0, self._c_valid_from - first)] = -np.inf
-        rows, sets = self.candidates.cells(acc, lo - first, stop - first)
+        rows, sets, second = self.candidates.cells(acc, lo - first, stop - first)
         cand_b = rows + first
         # A candidate waits until its fine window has arrived (its shift depends on d).
         late = cand_b * self._B + self._c_shift[sets].max(axis=1) + 2 * self.fine_half
@@ -246,11 +271,12 @@ class TwoStageSearch:
         if wait.size:
             stop = int(cand_b[wait[0]])
             keep = cand_b < stop
-            cand_b, sets = cand_b[keep], sets[keep]
+            cand_b, sets, second = cand_b[keep], sets[keep], second[keep]
         self._det_next = stop
         if cand_b.size == 0:
             return []
-        return self._distinct(self._fine_stage(cand_b, sets))
+        peaks = self._fine_stage(cand_b, sets, second)
+        return self._distinct(peaks)
 
     def _distinct(self, peaks: list[Peak]) -> list[Peak]:
         """``peaks`` without those that repeat an earlier one: two candidate cells of one echo
@@ -270,7 +296,9 @@ class TwoStageSearch:
         return out
 
     # ------------------------------------------------------------------ stage 2
-    def _fine_stage(self, cand_b: NDArray[np.int64], sets: NDArray[np.int64]) -> list[Peak]:
+    def _fine_stage(
+        self, cand_b: NDArray[np.int64], sets: NDArray[np.int64], second: NDArray[np.bool_]
+    ) -> list[Peak]:
         """Stage 2: exact codeword sums around the coarse candidate cells: blocks ``cand_b``
         (shape ``(C,)``), each with the hypotheses ``sets`` (shape ``(C, H)``, its own first)
         of which the best by the exact sums is kept.
@@ -312,12 +340,13 @@ class TwoStageSearch:
         side = self.exact.sums(n_pk[kept], sides, 0)
         dd = fine_doppler(side, a, kept, i_pk, word, d0, sides)
         peaks = peaks_of(n_pk[kept], peak, word, ratio, dn, d0[kept], dd, mean[kept], thr[kept])
+        peaks = seconds_marked(peaks, second[kept])
         if self._beside is None:
             return peaks
         return self._beside.add(peaks, a[kept], centre[kept] - w)
 
     def _fine_stage_reference(
-        self, cand_b: NDArray[np.int64], sets: NDArray[np.int64]
+        self, cand_b: NDArray[np.int64], sets: NDArray[np.int64], second: NDArray[np.bool_]
     ) -> list[Peak]:
         """:meth:`_fine_stage` as NumPy expressions (the reference the compiled path is
         tested against)."""
@@ -354,7 +383,9 @@ class TwoStageSearch:
         ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
             return self._cfar.test(n_pk, peak, tested, self)
 
-        return threshold_peaks(centre, w, dset, a, sides, test, self._runner_up_ratio, self._beside)
+        return threshold_peaks(
+            centre, w, dset, a, sides, test, self._runner_up_ratio, self._beside, second
+        )
 
     def _cell_statistic(
         self, cand_b: NDArray[np.int64], cand_d: NDArray[np.int64]

@@ -50,6 +50,9 @@ class Peak(NamedTuple):
     mean: float
     threshold: float
     beside: bool = False
+    #: A second maximum of its Doppler row (:mod:`hil.estimation.gcas.candidates`), decided
+    #: only beside an echo measured at its speed.
+    second: bool = False
 
 
 class NoiseHistory(Protocol):
@@ -155,6 +158,7 @@ def threshold_peaks(
     ],
     runner_up_ratio: float,
     beside: StillCodewords | None = None,
+    second: NDArray[np.bool_] | None = None,
 ) -> list[Peak]:
     """Threshold and runner-up tests of candidates centred on samples ``cand`` (shape
     ``(C,)``), as NumPy expressions: ``a`` holds ``A[n, d, j]`` at the chosen hypothesis
@@ -162,7 +166,8 @@ def threshold_peaks(
     ``(C, 2w + 1, J)``; ``sides(hit, n)`` gives ``A`` at the two neighbouring hypotheses at
     samples ``n`` of candidates ``hit`` (shape ``(H, 2, J)``); ``test(n_pk, peak)`` is the
     CFAR test (:meth:`Cfar.test`); ``beside``: where given, each still peak is followed by
-    its window's second codeword (:mod:`hil.estimation.gcas.still_codewords`)."""
+    its window's second codeword (:mod:`hil.estimation.gcas.still_codewords`); ``second``
+    (shape ``(C,)``) marks the candidates that are a second maximum of their row."""
     # Threshold test for all candidates at once; only the survivors are read out.
     s_win = a.max(axis=2)  # (C, 2W + 1)
     i_pk = np.argmax(s_win, axis=1)
@@ -202,9 +207,19 @@ def threshold_peaks(
         n_star, peak[keep], jk, ratio[keep], dn[keep], dh[keep, 1], dd, mean[hit[keep]],
         thr[hit[keep]],
     )  # fmt: skip
+    if second is not None:
+        peaks = seconds_marked(peaks, second[hit[keep]])
     if beside is None:
         return peaks
     return beside.add(peaks, a[hit[keep]], cand[hit[keep]] - w)
+
+
+def seconds_marked(peaks: list[Peak], second: NDArray[np.bool_]) -> list[Peak]:
+    """``peaks`` with :attr:`Peak.second` set where ``second`` (shape ``(len(peaks),)``)."""
+    if not second.any():
+        return peaks
+    marks = second.tolist()
+    return [p._replace(second=True) if s else p for p, s in zip(peaks, marks, strict=True)]
 
 
 def peaks_of(*columns: NDArray[Any]) -> list[Peak]:
