@@ -151,6 +151,8 @@ TWO_TARGETS = {
     # refinement's partners).
     "one speed, 3 m apart": ((50.0, 10.0, 1.0), (53.0, 10.0, 1.0)),
     "one speed, 10.1 m apart": ((50.0, 10.0, 1.0), (60.1, 10.0, 1.0)),
+    # One hop of delay apart: every boundary of one arrives with a boundary of the other.
+    "one speed, 7.5 m apart": ((50.0, 10.0, 1.0), (57.5, 10.0, 1.0)),
 }
 SCENE_S = 1.5
 
@@ -194,7 +196,7 @@ def _detection_and_false(
     [("apart", 0.99), ("one speed, 3 m apart", 0.99),
      *(pytest.param(*case, marks=pytest.mark.slow) for case in
        (("crossing", 0.99), ("same start", 0.99), ("10 dB weaker", 0.95),
-        ("one speed, 10.1 m apart", 0.99)))],
+        ("one speed, 10.1 m apart", 0.99), ("one speed, 7.5 m apart", 0.99)))],
 )  # fmt: skip
 def test_every_target_at_every_hop_at_0_db(scene: str, pd_min: float) -> None:
     # Measured: 1.0 / 1.0 for the equal pairs and for the weaker one, here and with another
@@ -208,8 +210,10 @@ def test_every_target_at_every_hop_at_0_db(scene: str, pd_min: float) -> None:
 
 @pytest.mark.slow
 @pytest.mark.parametrize(
-    "scene", ["apart", "crossing", "same start", "one speed, 3 m apart", "one speed, 10.1 m apart"]
-)
+    "scene",
+    ["apart", "crossing", "same start", "one speed, 3 m apart", "one speed, 10.1 m apart",
+     "one speed, 7.5 m apart"],
+)  # fmt: skip
 def test_two_equal_targets_at_every_hop_at_minus_10_db(scene: str) -> None:
     pd, false = _detection_and_false(scene, -10.0)
     assert min(pd) >= 0.95 and false <= 0.02

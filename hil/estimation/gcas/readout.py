@@ -223,7 +223,7 @@ class Readout:
         out: list[Estimate] = []
         refused = False
         for p in peaks:
-            if p.beside and not refused:
+            if p.beside and not p.second and not refused:
                 continue
             est = self.decide(p)
             refused = est is None

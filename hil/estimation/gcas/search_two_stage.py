@@ -170,7 +170,12 @@ class TwoStageSearch:
         self._hyp_w = self.exact.hyp_w
         #: With the refinement, a still candidate's second codeword too
         #: (:mod:`hil.estimation.gcas.still_codewords`).
-        self._beside = StillCodewords(fe, runner_up_ratio) if every_echo else None
+        #: Hypotheses at which two echoes of one speed may tie in a window
+        #: (:func:`second_echo_rows`; none without the refinement, which tells them apart).
+        self._pair_rows = (
+            second_echo_rows(fe) if every_echo else np.zeros(fe.grid.size, dtype=np.bool_)
+        )
+        self._beside = StillCodewords(fe, runner_up_ratio, self._pair_rows) if every_echo else None
         self.reset(0)
 
     def _coarse_shift(self) -> NDArray[np.int64]:
@@ -332,8 +337,9 @@ class TwoStageSearch:
         if hit.size == 0:
             return []
         keep, peak, word, ratio, dn, sides = fine_keep(
-            hit, a, s_win, i_pk, d0, self._fe.grid.size, w, float(self._runner_up_ratio)
-        )
+            hit, a, s_win, i_pk, d0, self._fe.grid.size, w, float(self._runner_up_ratio),
+            self._pair_rows,
+        )  # fmt: skip
         if keep.size == 0:
             return []
         kept = hit[keep]
@@ -384,8 +390,9 @@ class TwoStageSearch:
             return self._cfar.test(n_pk, peak, tested, self)
 
         return threshold_peaks(
-            centre, w, dset, a, sides, test, self._runner_up_ratio, self._beside, second
-        )
+            centre, w, dset, a, sides, test, self._runner_up_ratio, self._beside, second,
+            self._pair_rows,
+        )  # fmt: skip
 
     def _cell_statistic(
         self, cand_b: NDArray[np.int64], cand_d: NDArray[np.int64]
@@ -450,7 +457,9 @@ class TwoStageSearch:
         d0, centre, a, s_win, i_pk, edges = fine_pick(a2, two, two, self._hyp_w, w, True)
         sums = self.exact.sums(centre[edges], d0[edges, None], w)
         fine_recentre(a, sums, edges, s_win, i_pk, centre, w, True)
-        _, _, word, _, _, sides = fine_keep(one[0], a, s_win, i_pk, d0, self._fe.grid.size, w, 1.0)
+        _, _, word, _, _, sides = fine_keep(
+            one[0], a, s_win, i_pk, d0, self._fe.grid.size, w, 1.0, self._pair_rows
+        )
         side = self.exact.sums(one[0], sides, 0)
         fine_doppler(side, a, one[0], i_pk, word, d0, sides)
         self.exact.windows(one[:, 0], one[:, 0], 1)
