@@ -535,19 +535,25 @@ class CoherentRefiner:
         return fit
 
     def beside_known(self, t_s: float, alpha: float, hop_index: int) -> bool:
-        """Whether another echo at the speed of a detection at ``t_s`` (s) and time scale
-        ``alpha`` (the boundary ending hop ``hop_index``) was measured lately or kept as a
-        partner (:data:`PARTNER_COHERENCE`): within :data:`KNOWN_HOPS` hops of it, within
-        the speed span, and not this detection's own echo. A second maximum of a Doppler row
-        (:mod:`hil.estimation.gcas.candidates`) is decided only there: in noise alone it is
-        one more chance for a false alarm."""
+        """Whether a second echo at the speed of a detection at ``t_s`` (s) and time scale
+        ``alpha`` (the boundary ending hop ``hop_index``) may be there: within
+        :data:`KNOWN_HOPS` hops of it and within the speed span, a partner kept lately
+        (:data:`PARTNER_COHERENCE`) that is not this detection's own echo, or two echoes
+        measured lately, one of them not this detection's own. A second maximum of a Doppler
+        row (:mod:`hil.estimation.gcas.candidates`) is decided only there: beside one lone
+        echo it is that echo's shoulder (its fit would be that echo on another codeword), and
+        in noise alone one more chance for a false alarm."""
         speed = self.c * (alpha - 1.0) / (alpha + 1.0)
         reach = KNOWN_HOPS * self.hop_len_s
-        return any(
-            abs(e.t_s - t_s) <= reach
-            and abs(e.speed(self.c) - speed) <= self.speed_span_mps
-            and not self._same_echo(e, hop_index, t_s, speed)
-            for e in (*self._echoes, *self._partners)
+
+        def near(e: _EchoFit) -> bool:
+            return abs(e.t_s - t_s) <= reach and abs(e.speed(self.c) - speed) <= self.speed_span_mps
+
+        if any(near(e) and not self._same_echo(e, hop_index, t_s, speed) for e in self._partners):
+            return True
+        echoes = [e for e in self._echoes if near(e)]
+        return len(echoes) >= 2 and any(
+            not self._same_echo(e, hop_index, t_s, speed) for e in echoes
         )
 
     def ghost_of_known(self, t_s: float, alpha: float, hop_index: int, edge_side: int = 0) -> bool:
