@@ -31,6 +31,7 @@ from hil.estimation.gcas.candidates import (
     CandidateCells,
     EveryEcho,
     StrongestEcho,
+    second_echo_rows,
 )
 from hil.estimation.gcas.exact import ExactHistory
 from hil.estimation.gcas.front_end import FrontEnd
@@ -55,7 +56,6 @@ from hil.estimation.kernels import (
     peak_cells,
     peak_indices,
 )
-from hil.estimation.reverb_band import doppler_resolution_mps
 from hil.estimation.row_buffer import RowBuffer
 
 #: Peaks remembered to drop a repeat of one (:meth:`TwoStageSearch._distinct`): more than
@@ -91,23 +91,6 @@ def doppler_leak(fe: FrontEnd) -> NDArray[np.float64]:
     x = np.maximum(dd - 0.5, 0.0) * step / cell
     leak = np.where(x >= 1.0, LEAK_MARGIN / (np.pi * np.maximum(x, 1.0)) ** 2, 0.0)
     return np.ascontiguousarray(leak)
-
-
-def second_echo_rows(fe: FrontEnd) -> NDArray[np.bool_]:
-    """The hypotheses whose rows are searched for a second maximum (shape ``(D,)``,
-    :class:`~hil.estimation.gcas.candidates.EveryEcho`): searched at full weight, and more than
-    one Doppler resolution cell and a step from a refused or down-weighted hypothesis and from
-    the span's ends, where one echo's leak into a mismatched cell ripples along the row; and
-    not in the still reverberation's cells (with the band off, the lone scatterers of sparse
-    reverberation would each be a second echo beside the last)."""
-    still = np.abs(fe.grid.speeds_mps) < doppler_resolution_mps(
-        fe.tones_hz, fe.hop_s, fe.sound_speed_mps
-    )
-    bad = (fe.grid.weights < 1.0) | np.asarray(fe.refused_hypotheses, dtype=np.bool_) | still
-    bad[0] = bad[-1] = True
-    reach = np.ones(2 * (fe.lobe_hypotheses + 1) + 1)
-    rows: NDArray[np.bool_] = np.convolve(bad.astype(np.float64), reach, mode="same") == 0
-    return rows
 
 
 class TwoStageSearch:
