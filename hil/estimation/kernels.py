@@ -781,11 +781,13 @@ def fine_recentre(
 @numba.njit(**_JIT)
 def fine_keep(
     hit: Any, a: Any, s_win: Any, i_pk: Any, d0: Any, n_hyp: int, half: int,
-    runner_up_ratio: float,
+    runner_up_ratio: float, pair_rows: Any,
 ) -> Any:  # fmt: skip
     """Readout of the candidates ``hit`` (indices into :func:`fine_pick`'s outputs) that
     passed the threshold: kept when the peak codeword beats the runner-up codeword by at
-    least ``runner_up_ratio`` (any ratio when the runner-up is 0).
+    least ``runner_up_ratio`` (any ratio when the runner-up is 0), or, at a hypothesis
+    ``pair_rows`` marks (shape ``(n_hyp,)``, bool), beats the third codeword by it (two
+    echoes of one speed at once: their codewords tie; the ratio is then to the third).
 
     Returns, for the kept ones in ``hit`` order: their position in ``hit``, peak value,
     codeword, ratio, time offset (parabolic, 0 on the window's edge), and the neighbouring
@@ -808,19 +810,28 @@ def fine_keep(
         jh = 0
         first = -math.inf
         second = -math.inf
+        third = -math.inf
         for j in range(n_words):
             v = a[c, ip, j]
             if v > a[c, ip, jh]:
                 jh = j
             if v > first:
+                third = second
                 second = first
                 first = v
             elif v > second:
+                third = second
                 second = v
+            elif v > third:
+                third = v
         runner = second if n_words > 1 else 0.0
         r = p / runner if runner > 0 else math.inf
         if not r >= runner_up_ratio:
-            continue
+            if not pair_rows[d0[c]] or n_words < 3:
+                continue
+            r = p / third if third > 0 else math.inf
+            if not r >= runner_up_ratio:
+                continue
         keep[n_keep] = h
         peak[n_keep] = p
         word[n_keep] = jh

@@ -463,14 +463,18 @@ class CoherentRefiner:
 
     # ------------------------------------------------------------------ refinement
     def refine(
-        self, t_s: float, alpha: float, hop_index: int, echo_test: EchoTest | None = None
-    ) -> Refinement | None:
+        self, t_s: float, alpha: float, hop_index: int, echo_test: EchoTest | None = None,
+        partners: bool = True,
+    ) -> Refinement | None:  # fmt: skip
         """The maximum-likelihood boundary time and time scale near ``(t_s, alpha)`` for the
         boundary that ends hop ``hop_index``; None where the input does not cover the ``M``
         hops (start, gaps). Where no maximum lies inside the search (``found`` False) the
         detection's own point is kept and its fit reported. The other echoes measured lately
         are taken out of the input first (module docstring, several echoes). A fit that
-        passes ``echo_test`` (default :attr:`echo_test`) is remembered as one echo."""
+        passes ``echo_test`` (default :attr:`echo_test`) is remembered as one echo. With
+        ``partners`` a refused fit may be one of two echoes at one speed
+        (:data:`PARTNER_COHERENCE`); the caller says where that cannot be (the reverberation
+        band's edges, the span's)."""
         test = self.echo_test if echo_test is None else echo_test
         word = self._codeword(hop_index)
         hop_ids = np.arange(hop_index - self.m_hops + 1, hop_index + 1, dtype=np.int64)
@@ -487,7 +491,7 @@ class CoherentRefiner:
             and fit.e_over_n0_db >= test.min_e_over_n0_db + ACCEL_MARGIN_DB
         ):
             fit = self._with_acceleration(fit, word, hop_ids, lobe, known)
-        if fit is not None and fit.found and not fit.is_echo(test):
+        if partners and fit is not None and fit.found and not fit.is_echo(test):
             fit = self._with_partners(fit, word, hop_ids, t_s, speed0, lobe, hop_index, known, test)
         if fit is not None and fit.is_echo(test):
             self._recent.append((hop_index, fit.t_s, fit.alpha, fit.rate(self.c)))
@@ -535,19 +539,25 @@ class CoherentRefiner:
         return fit
 
     def beside_known(self, t_s: float, alpha: float, hop_index: int) -> bool:
-        """Whether another echo at the speed of a detection at ``t_s`` (s) and time scale
-        ``alpha`` (the boundary ending hop ``hop_index``) was measured lately or kept as a
-        partner (:data:`PARTNER_COHERENCE`): within :data:`KNOWN_HOPS` hops of it, within
-        the speed span, and not this detection's own echo. A second maximum of a Doppler row
-        (:mod:`hil.estimation.gcas.candidates`) is decided only there: in noise alone it is
-        one more chance for a false alarm."""
+        """Whether a second echo at the speed of a detection at ``t_s`` (s) and time scale
+        ``alpha`` (the boundary ending hop ``hop_index``) may be there: within
+        :data:`KNOWN_HOPS` hops of it and within the speed span, a partner kept lately
+        (:data:`PARTNER_COHERENCE`) that is not this detection's own echo, or two echoes
+        measured lately, one of them not this detection's own. A second maximum of a Doppler
+        row (:mod:`hil.estimation.gcas.candidates`) is decided only there: beside one lone
+        echo it is that echo's shoulder (its fit would be that echo on another codeword), and
+        in noise alone one more chance for a false alarm."""
         speed = self.c * (alpha - 1.0) / (alpha + 1.0)
         reach = KNOWN_HOPS * self.hop_len_s
-        return any(
-            abs(e.t_s - t_s) <= reach
-            and abs(e.speed(self.c) - speed) <= self.speed_span_mps
-            and not self._same_echo(e, hop_index, t_s, speed)
-            for e in (*self._echoes, *self._partners)
+
+        def near(e: _EchoFit) -> bool:
+            return abs(e.t_s - t_s) <= reach and abs(e.speed(self.c) - speed) <= self.speed_span_mps
+
+        if any(near(e) and not self._same_echo(e, hop_index, t_s, speed) for e in self._partners):
+            return True
+        echoes = [e for e in self._echoes if near(e)]
+        return len(echoes) >= 2 and any(
+            not self._same_echo(e, hop_index, t_s, speed) for e in echoes
         )
 
     def ghost_of_known(self, t_s: float, alpha: float, hop_index: int, edge_side: int = 0) -> bool:

@@ -38,7 +38,9 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from hil.estimation.gcas.front_end import FrontEnd
 from hil.estimation.kernels import first_possible_cells, peak_cells, second_peak_cells
+from hil.estimation.reverb_band import doppler_resolution_mps
 
 #: Where a second maximum of one Doppler row is looked for (:class:`EveryEcho`): from this
 #: fraction of a hop beside a greater one.
@@ -149,3 +151,20 @@ class StrongestEcho:
         pairs[:, 0] = cols
         pairs[:, 1] = np.where(found, second, cols)
         return pairs
+
+
+def second_echo_rows(fe: FrontEnd) -> NDArray[np.bool_]:
+    """The hypotheses whose rows are searched for a second maximum (shape ``(D,)``,
+    :class:`EveryEcho`): searched at full weight, and more than
+    one Doppler resolution cell and a step from a refused or down-weighted hypothesis and from
+    the span's ends, where one echo's leak into a mismatched cell ripples along the row; and
+    not in the still reverberation's cells (with the band off, the lone scatterers of sparse
+    reverberation would each be a second echo beside the last)."""
+    still = np.abs(fe.grid.speeds_mps) < doppler_resolution_mps(
+        fe.tones_hz, fe.hop_s, fe.sound_speed_mps
+    )
+    bad = (fe.grid.weights < 1.0) | np.asarray(fe.refused_hypotheses, dtype=np.bool_) | still
+    bad[0] = bad[-1] = True
+    reach = np.ones(2 * (fe.lobe_hypotheses + 1) + 1)
+    rows: NDArray[np.bool_] = np.convolve(bad.astype(np.float64), reach, mode="same") == 0
+    return rows

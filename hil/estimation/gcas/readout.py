@@ -33,6 +33,7 @@ from hil.estimation.detection import parabolic_offset
 from hil.estimation.doppler_grid import alpha_to_speed, speed_to_alpha
 from hil.estimation.first_arrival import FirstArrivalReadout
 from hil.estimation.gcas.beyond_span import BeyondSpan, BeyondSpanCheck
+from hil.estimation.gcas.candidates import second_echo_rows
 from hil.estimation.gcas.clutter_seen import ClutterLog, ClutterSeen
 from hil.estimation.gcas.front_end import FrontEnd
 from hil.estimation.gcas.hidden_echoes import HiddenEchoes
@@ -168,6 +169,10 @@ class Readout:
         #: Speeds below this share their Doppler cells with the still reverberation, m/s
         #: (:func:`~hil.estimation.reverb_band.in_reverberation`'s bound, made once).
         self._still_mps = doppler_resolution_mps(tones, fe.hop_s, c)
+        #: Hypotheses where a refused fit may be one of two echoes at one speed
+        #: (:func:`~hil.estimation.gcas.candidates.second_echo_rows`): not at the band's or the
+        #: span's edges, where the leaks of other echoes fit as well with a partner taken out.
+        self._pair_rows = second_echo_rows(fe)
         #: The point echoes confirmed lately in the still reverberation's cells.
         self.point_echoes = PointEchoes(
             fe.hop_s, fe.schedule.period_hops, self._lobe_s, self._cell_mps, c
@@ -223,7 +228,7 @@ class Readout:
         out: list[Estimate] = []
         refused = False
         for p in peaks:
-            if p.beside and not refused:
+            if p.beside and not p.second and not refused:
                 continue
             est = self.decide(p)
             refused = est is None
@@ -264,7 +269,9 @@ class Readout:
             if self._refiner.ghost_of_known(t_rx, alpha, hop_index, self._edge_side(p.d0)):
                 self.incoherent_count += 1
                 return None
-            refined = self._refiner.refine(t_rx, alpha, hop_index)
+            refined = self._refiner.refine(
+                t_rx, alpha, hop_index, partners=bool(self._pair_rows[p.d0])
+            )
             if refined is None:
                 self.unmeasured_count += 1
                 return None

@@ -31,6 +31,7 @@ from hil.estimation.gcas.candidates import (
     CandidateCells,
     EveryEcho,
     StrongestEcho,
+    second_echo_rows,
 )
 from hil.estimation.gcas.exact import ExactHistory
 from hil.estimation.gcas.front_end import FrontEnd
@@ -55,7 +56,6 @@ from hil.estimation.kernels import (
     peak_cells,
     peak_indices,
 )
-from hil.estimation.reverb_band import doppler_resolution_mps
 from hil.estimation.row_buffer import RowBuffer
 
 #: Peaks remembered to drop a repeat of one (:meth:`TwoStageSearch._distinct`): more than
@@ -91,23 +91,6 @@ def doppler_leak(fe: FrontEnd) -> NDArray[np.float64]:
     x = np.maximum(dd - 0.5, 0.0) * step / cell
     leak = np.where(x >= 1.0, LEAK_MARGIN / (np.pi * np.maximum(x, 1.0)) ** 2, 0.0)
     return np.ascontiguousarray(leak)
-
-
-def second_echo_rows(fe: FrontEnd) -> NDArray[np.bool_]:
-    """The hypotheses whose rows are searched for a second maximum (shape ``(D,)``,
-    :class:`~hil.estimation.gcas.candidates.EveryEcho`): searched at full weight, and more than
-    one Doppler resolution cell and a step from a refused or down-weighted hypothesis and from
-    the span's ends, where one echo's leak into a mismatched cell ripples along the row; and
-    not in the still reverberation's cells (with the band off, the lone scatterers of sparse
-    reverberation would each be a second echo beside the last)."""
-    still = np.abs(fe.grid.speeds_mps) < doppler_resolution_mps(
-        fe.tones_hz, fe.hop_s, fe.sound_speed_mps
-    )
-    bad = (fe.grid.weights < 1.0) | np.asarray(fe.refused_hypotheses, dtype=np.bool_) | still
-    bad[0] = bad[-1] = True
-    reach = np.ones(2 * (fe.lobe_hypotheses + 1) + 1)
-    rows: NDArray[np.bool_] = np.convolve(bad.astype(np.float64), reach, mode="same") == 0
-    return rows
 
 
 class TwoStageSearch:
@@ -170,7 +153,12 @@ class TwoStageSearch:
         self._hyp_w = self.exact.hyp_w
         #: With the refinement, a still candidate's second codeword too
         #: (:mod:`hil.estimation.gcas.still_codewords`).
-        self._beside = StillCodewords(fe, runner_up_ratio) if every_echo else None
+        #: Hypotheses at which two echoes of one speed may tie in a window
+        #: (:func:`second_echo_rows`; none without the refinement, which tells them apart).
+        self._pair_rows = (
+            second_echo_rows(fe) if every_echo else np.zeros(fe.grid.size, dtype=np.bool_)
+        )
+        self._beside = StillCodewords(fe, runner_up_ratio, self._pair_rows) if every_echo else None
         self.reset(0)
 
     def _coarse_shift(self) -> NDArray[np.int64]:
@@ -282,7 +270,10 @@ class TwoStageSearch:
         """``peaks`` without those that repeat an earlier one: two candidate cells of one echo
         (a block's best with its runner-up, neighbours across the lobe) whose stage 2 met on
         the same codeword within the fine window and one Doppler cell. Decided in candidate
-        order, so any chunking keeps the same peaks."""
+        order, so any chunking keeps the same peaks. A second echo's peak
+        (:attr:`~hil.estimation.gcas.threshold.Peak.second`, decided only beside an echo
+        measured at its speed) never hides a later one: its cell is often the shoulder of the
+        greater maximum beside it, whose stage 2 meets that maximum's own peak."""
         out: list[Peak] = []
         w, hd, recent = self.search_half_window, self.candidates.lobe, self._recent
         for p in peaks:
@@ -292,7 +283,8 @@ class TwoStageSearch:
                     break
             else:
                 out.append(p)
-                recent.append((word, n_star, d0))
+                if not p.second:
+                    recent.append((word, n_star, d0))
         return out
 
     # ------------------------------------------------------------------ stage 2
@@ -332,8 +324,9 @@ class TwoStageSearch:
         if hit.size == 0:
             return []
         keep, peak, word, ratio, dn, sides = fine_keep(
-            hit, a, s_win, i_pk, d0, self._fe.grid.size, w, float(self._runner_up_ratio)
-        )
+            hit, a, s_win, i_pk, d0, self._fe.grid.size, w, float(self._runner_up_ratio),
+            self._pair_rows,
+        )  # fmt: skip
         if keep.size == 0:
             return []
         kept = hit[keep]
@@ -384,8 +377,9 @@ class TwoStageSearch:
             return self._cfar.test(n_pk, peak, tested, self)
 
         return threshold_peaks(
-            centre, w, dset, a, sides, test, self._runner_up_ratio, self._beside, second
-        )
+            centre, w, dset, a, sides, test, self._runner_up_ratio, self._beside, second,
+            self._pair_rows,
+        )  # fmt: skip
 
     def _cell_statistic(
         self, cand_b: NDArray[np.int64], cand_d: NDArray[np.int64]
@@ -450,7 +444,9 @@ class TwoStageSearch:
         d0, centre, a, s_win, i_pk, edges = fine_pick(a2, two, two, self._hyp_w, w, True)
         sums = self.exact.sums(centre[edges], d0[edges, None], w)
         fine_recentre(a, sums, edges, s_win, i_pk, centre, w, True)
-        _, _, word, _, _, sides = fine_keep(one[0], a, s_win, i_pk, d0, self._fe.grid.size, w, 1.0)
+        _, _, word, _, _, sides = fine_keep(
+            one[0], a, s_win, i_pk, d0, self._fe.grid.size, w, 1.0, self._pair_rows
+        )
         side = self.exact.sums(one[0], sides, 0)
         fine_doppler(side, a, one[0], i_pk, word, d0, sides)
         self.exact.windows(one[:, 0], one[:, 0], 1)

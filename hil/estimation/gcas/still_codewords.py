@@ -1,4 +1,4 @@
-"""A second codeword at a still candidate: two still echoes arriving at once (band off).
+"""A second codeword at a candidate: two echoes of one speed arriving at once.
 
 With the reverberation band off, every still echo (a target at rest, the near water, the
 walls) peaks in the same few Doppler hypotheses, those slower than one Doppler resolution
@@ -19,6 +19,17 @@ first echo adds ``(peak − mean)·shared/M`` to the second codeword's sum, whic
 threshold does not count. The readout decides it as any other detection (the refinement's
 echo test with the echoes it measured taken out, the clutter and point-echo rules), and only
 where the first was refused (:meth:`~hil.estimation.gcas.readout.Readout.decide_all`).
+
+Two moving echoes of one speed whose delays differ by a whole number of hops (a formation
+7.5 m apart on att) arrive together the same way on every boundary, on two codewords whose
+sums tie. At the hypotheses where a second echo of one speed is looked for
+(:func:`~hil.estimation.gcas.search_two_stage.second_echo_rows`) the runner-up test reads the
+third codeword where the first two tie (:func:`~hil.estimation.kernels.fine_keep`), and the
+window's second codeword is a candidate too where it reaches
+:data:`~hil.estimation.gcas.candidates.SECOND_LEVEL` of the first (one echo's other codewords
+hold at most ``shared/M`` of it, 0.5 on att), marked
+:attr:`~hil.estimation.gcas.threshold.Peak.second`: decided beside an echo measured at that
+speed, whatever became of the first (no still scatterer field there).
 """
 
 from __future__ import annotations
@@ -30,6 +41,7 @@ from numpy.typing import NDArray
 
 from hil.estimation.detection import parabolic_offset
 from hil.estimation.doppler_grid import DopplerGrid
+from hil.estimation.gcas.candidates import SECOND_LEVEL
 from hil.estimation.gcas.front_end import FrontEnd
 from hil.estimation.gcas.threshold import Peak
 from hil.estimation.reverb_band import doppler_resolution_mps
@@ -123,11 +135,23 @@ def second_codeword(
 
 class StillCodewords:
     """The rule of this module for one front end: which hypotheses hold still echoes, the
-    codewords' shared terms, and the runner-up ratio of the search (``runner_up_ratio``)."""
+    codewords' shared terms, and the runner-up ratio of the search (``runner_up_ratio``).
 
-    def __init__(self, fe: FrontEnd, runner_up_ratio: float) -> None:
+    ``pair_rows`` (shape ``(D,)``, bool): moving hypotheses whose candidates also give their
+    window's second codeword, marked :attr:`~hil.estimation.gcas.threshold.Peak.second` (two
+    echoes of one speed whose boundaries arrive together: decided beside an echo measured at
+    that speed, :meth:`~hil.estimation.refine.CoherentRefiner.beside_known`)."""
+
+    def __init__(
+        self, fe: FrontEnd, runner_up_ratio: float, pair_rows: NDArray[np.bool_] | None = None
+    ) -> None:
         self.still = still_hypotheses(
             fe.grid, fe.tones_hz, fe.hop_s, fe.sound_speed_mps, fe.refused_hypotheses
+        )
+        self.pair = (
+            np.zeros(fe.grid.size, dtype=np.bool_)
+            if pair_rows is None
+            else np.asarray(pair_rows, dtype=np.bool_) & ~self.still
         )
         self._share = shared_terms(fe.schedule, fe.m_hops) / fe.m_hops
         self._ratio = float(runner_up_ratio)
@@ -135,26 +159,41 @@ class StillCodewords:
     def add(
         self, peaks: list[Peak], windows: NDArray[np.floating], first: NDArray[np.int64]
     ) -> list[Peak]:
-        """``peaks``, each on a still hypothesis followed by its window's second codeword
-        where it has one (``beside``). ``windows[i]``: the exact sums of ``peaks[i]``'s window
-        at its hypothesis (shape ``(P, 2w + 1, J)``), whose row 0 is baseband sample
-        ``first[i]`` (shape ``(P,)``)."""
-        if not any(self.still[p.d0] for p in peaks):
+        """``peaks``, each on a still hypothesis (or a moving one of ``pair_rows``) followed
+        by its window's second codeword where it has one (``beside``). ``windows[i]``: the
+        exact sums of ``peaks[i]``'s window at its hypothesis (shape ``(P, 2w + 1, J)``),
+        whose row 0 is baseband sample ``first[i]`` (shape ``(P,)``)."""
+        d0 = np.fromiter((p.d0 for p in peaks), np.int64, len(peaks))
+        still, pair = self.still[d0], self.pair[d0]
+        if pair.any():
+            # At a moving hypothesis only a codeword of the first one's level is a second
+            # echo: read every window's other codewords at once, then only those.
+            word = np.fromiter((p.codeword for p in peaks), np.int64, len(peaks))
+            level = np.fromiter((p.peak for p in peaks), np.float64, len(peaks))
+            above = np.fromiter((p.peak - p.mean for p in peaks), np.float64, len(peaks))
+            thr = np.fromiter((p.threshold for p in peaks), np.float64, len(peaks))
+            other = np.asarray(windows, dtype=np.float64).max(axis=1)  # (P, J)
+            other[np.arange(len(peaks)), word] = -np.inf
+            clear = other - above[:, None] * self._share[word] >= thr[:, None]
+            pair &= np.any(clear & (other >= SECOND_LEVEL * level[:, None]), axis=1)
+        if not (still.any() or pair.any()):
             return peaks
         out: list[Peak] = []
         for i, p in enumerate(peaks):
             out.append(p)
-            if not self.still[p.d0]:
+            if not (still[i] or pair[i]):
                 continue
             leak = (p.peak - p.mean) * self._share[p.codeword]
             window = np.asarray(windows[i], dtype=np.float64)
             second = second_codeword(window, p.codeword, p.threshold, leak, self._ratio)
+            if second is not None and pair[i] and second.value < SECOND_LEVEL * p.peak:
+                second = None  # one echo's own codewords, not a second echo of its level
             if second is not None:
                 out.append(
                     p._replace(
                         n_star=int(first[i]) + second.sample, peak=second.value,
                         codeword=second.codeword, ratio=second.ratio, dn=second.dn,
-                        beside=True,
+                        beside=True, second=bool(pair[i]),
                     )
                 )  # fmt: skip
         return out

@@ -50,8 +50,10 @@ class Peak(NamedTuple):
     mean: float
     threshold: float
     beside: bool = False
-    #: A second maximum of its Doppler row (:mod:`hil.estimation.gcas.candidates`), decided
-    #: only beside an echo measured at its speed.
+    #: A second echo of one speed: a second maximum of its Doppler row
+    #: (:mod:`hil.estimation.gcas.candidates`) or its window's second codeword at a moving
+    #: hypothesis (:mod:`hil.estimation.gcas.still_codewords`); decided only beside an echo
+    #: measured at its speed.
     second: bool = False
 
 
@@ -159,6 +161,7 @@ def threshold_peaks(
     runner_up_ratio: float,
     beside: StillCodewords | None = None,
     second: NDArray[np.bool_] | None = None,
+    pair_rows: NDArray[np.bool_] | None = None,
 ) -> list[Peak]:
     """Threshold and runner-up tests of candidates centred on samples ``cand`` (shape
     ``(C,)``), as NumPy expressions: ``a`` holds ``A[n, d, j]`` at the chosen hypothesis
@@ -167,7 +170,9 @@ def threshold_peaks(
     samples ``n`` of candidates ``hit`` (shape ``(H, 2, J)``); ``test(n_pk, peak)`` is the
     CFAR test (:meth:`Cfar.test`); ``beside``: where given, each still peak is followed by
     its window's second codeword (:mod:`hil.estimation.gcas.still_codewords`); ``second``
-    (shape ``(C,)``) marks the candidates that are a second maximum of their row."""
+    (shape ``(C,)``) marks the candidates that are a second maximum of their row;
+    ``pair_rows`` (shape ``(D,)``) the hypotheses at which a peak tied with the runner-up is
+    kept where it beats the third codeword (:func:`~hil.estimation.kernels.fine_keep`)."""
     # Threshold test for all candidates at once; only the survivors are read out.
     s_win = a.max(axis=2)  # (C, 2W + 1)
     i_pk = np.argmax(s_win, axis=1)
@@ -187,6 +192,12 @@ def threshold_peaks(
     runner = np.partition(rows, -2, axis=1)[:, -2] if rows.shape[1] > 1 else np.zeros(r.size)
     ratio = np.full(r.size, np.inf)
     np.divide(peak, runner, out=ratio, where=runner > 0)
+    if pair_rows is not None and rows.shape[1] > 2:
+        third = np.partition(rows, -3, axis=1)[:, -3]
+        ratio3 = np.full(r.size, np.inf)
+        np.divide(peak, third, out=ratio3, where=third > 0)
+        paired = (ratio < runner_up_ratio) & pair_rows[dset[hit, 1]]
+        ratio = np.where(paired, ratio3, ratio)
     keep = np.flatnonzero(ratio >= runner_up_ratio)
     if keep.size == 0:
         return []
