@@ -224,7 +224,10 @@ class Readout:
         :mod:`hil.estimation.gcas.still_codewords`) is decided only where that one was
         refused: beside a still echo reported, the other is the one the stage-1 search masks
         by turns (a still target and a lone still scatterer a few milliseconds apart), and
-        deciding it would report every still scatterer beside every still target."""
+        deciding it would report every still scatterer beside every still target. A second
+        echo of one speed (:attr:`~hil.estimation.gcas.threshold.Peak.second`: a moving
+        window's second codeword, a row's second maximum) is decided whatever became of the
+        one before it, where :meth:`decide` finds a partner or two echoes at its speed."""
         out: list[Estimate] = []
         refused = False
         for p in peaks:
