@@ -166,18 +166,19 @@ GHOST_POINTS = 9
 #: neither neighbour is better): a detector's time can be several lobes off at an echo's
 #: first boundary (att three-state, full search: 2.75 lobes, 1.8 ms).
 LOBE_MOVES = 4
-#: Two echoes at one speed (a formation, two objects at rest with the reverberation band off)
-#: share their tones: each echo's hops hold the other's on the hops where their tones meet,
-#: with unrelated phases, so neither fit reaches one echo's coherence until the other is taken
-#: out, and neither is taken out until it has passed (measured on att, two closing targets at
-#: 10 m/s 3 m apart, 0 dB: every fit at 0.70-0.80 of one echo's coherence, E/N0 33-35 dB; the
-#: ghosts of the same scene at 0.30-0.44). A refused fit whose coherence over all hops is at
-#: least PARTNER_COHERENCE of one echo's, that collects what an echo must, is kept as a
+#: Two echoes at one speed (a formation) share their tones: each echo's hops hold the other's on the
+#: hops where their tones meet, with unrelated phases, so neither fit reaches one echo's coherence
+#: until the other is taken out, and neither is taken out until it has passed (measured on att, two
+#: closing targets at 10 m/s 3 m apart, 0 dB: every fit at 0.70-0.80 of one echo's coherence, E/N0
+#: 33-35 dB; the ghosts of the same scene at 0.30-0.44). A refused fit whose coherence over all hops
+#: is at least PARTNER_COHERENCE of one echo's, that collects what an echo must, is kept as a
 #: partner for KNOWN_HOPS; a later refused detection of another echo is fitted again with the
-#: partners taken out as well, and kept where that fit is one echo (the partner's own next
-#: detection then has it as a known echo). Not in the still reverberation's Doppler cells
-#: (band off): there every lone scatterer of sparse volume reverberation is such a partner
-#: of the next (sim-03 at +5 dB SRR, one trial: 1 -> 3 scatterers reported).
+#: partners taken out as well, and kept where that fit is one echo (the partner's own next detection
+#: then has it as a known echo). Not in the still reverberation's Doppler cells (band off): there
+#: every lone scatterer of sparse volume reverberation is such a partner of the next (sim-03 at +5
+#: dB SRR, one trial: 1 -> 3 scatterers reported); nor where the caller says a second echo is not
+#: looked for (:meth:`CoherentRefiner.refine`'s ``partners``: the reverberation band's and the
+#: span's edges, where other echoes' leaks fit as well once a partner is taken out).
 PARTNER_COHERENCE = 0.5
 #: Runs of hops kept for the other echoes' ``known`` rows
 #: (:meth:`CoherentRefiner._hop_run`; all are dropped when full).
