@@ -16,8 +16,9 @@ over ``±inner`` blocks (:data:`SECOND_ECHO_HOPS` of a hop: one echo's row falls
 boundary to the middle of the hop with no maximum of its own), reaches :data:`SECOND_LEVEL`
 of the greater one, and lies in a row away from the reverberation band's edges and the
 span's (``second_rows``: there one echo's leak into a mismatched Doppler cell ripples along
-the row) and outside the still reverberation's cells. Its peak is decided only beside an
-echo measured at its speed (:meth:`~hil.estimation.refine.CoherentRefiner.beside_known`), and
+the row) and outside the still reverberation's cells. Its peak is decided only beside a
+partner or two echoes measured at its speed
+(:meth:`~hil.estimation.refine.CoherentRefiner.beside_known`), and
 its fit and the other's need each other taken out (the refinement's partners,
 :data:`~hil.estimation.refine.PARTNER_COHERENCE`). Measured on att at 0 dB (two closing
 targets at 10 m/s, independent synthesis): per-target detection 3 m apart 0.26 / 0.28
@@ -64,8 +65,9 @@ class CandidateCells(Protocol):
     ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.bool_]]:
         """Candidates in rows ``[lo, hi)``: their rows (shape ``(C,)``), the hypotheses
         stage 2 compares for each (shape ``(C, H)``, the cell's own first) and whether each is
-        a second maximum of its row (shape ``(C,)``: decided only beside an echo measured at
-        its speed, :meth:`hil.estimation.refine.CoherentRefiner.beside_known`)."""
+        a second maximum of its row (shape ``(C,)``: decided only beside a partner or two
+        echoes measured at its speed,
+        :meth:`hil.estimation.refine.CoherentRefiner.beside_known`)."""
         ...
 
     def first_possible(

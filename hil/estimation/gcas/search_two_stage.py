@@ -271,9 +271,10 @@ class TwoStageSearch:
         (a block's best with its runner-up, neighbours across the lobe) whose stage 2 met on
         the same codeword within the fine window and one Doppler cell. Decided in candidate
         order, so any chunking keeps the same peaks. A second echo's peak
-        (:attr:`~hil.estimation.gcas.threshold.Peak.second`, decided only beside an echo
-        measured at its speed) never hides a later one: its cell is often the shoulder of the
-        greater maximum beside it, whose stage 2 meets that maximum's own peak."""
+        (:attr:`~hil.estimation.gcas.threshold.Peak.second`, decided only beside a partner
+        or two echoes measured at its speed) never hides a later one: its cell is often the
+        shoulder of the greater maximum beside it, whose stage 2 meets that maximum's own
+        peak."""
         out: list[Peak] = []
         w, hd, recent = self.search_half_window, self.candidates.lobe, self._recent
         for p in peaks:

@@ -28,8 +28,8 @@ third codeword where the first two tie (:func:`~hil.estimation.kernels.fine_keep
 window's second codeword is a candidate too where it reaches
 :data:`~hil.estimation.gcas.candidates.SECOND_LEVEL` of the first (one echo's other codewords
 hold at most ``shared/M`` of it, 0.5 on att), marked
-:attr:`~hil.estimation.gcas.threshold.Peak.second`: decided beside an echo measured at that
-speed, whatever became of the first (no still scatterer field there).
+:attr:`~hil.estimation.gcas.threshold.Peak.second`: decided beside a partner or two echoes
+measured at that speed, whatever became of the first (no still scatterer field there).
 """
 
 from __future__ import annotations
@@ -139,8 +139,8 @@ class StillCodewords:
 
     ``pair_rows`` (shape ``(D,)``, bool): moving hypotheses whose candidates also give their
     window's second codeword, marked :attr:`~hil.estimation.gcas.threshold.Peak.second` (two
-    echoes of one speed whose boundaries arrive together: decided beside an echo measured at
-    that speed, :meth:`~hil.estimation.refine.CoherentRefiner.beside_known`)."""
+    echoes of one speed whose boundaries arrive together: decided beside a partner or two echoes
+    measured at that speed, :meth:`~hil.estimation.refine.CoherentRefiner.beside_known`)."""
 
     def __init__(
         self, fe: FrontEnd, runner_up_ratio: float, pair_rows: NDArray[np.bool_] | None = None

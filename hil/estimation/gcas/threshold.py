@@ -52,8 +52,8 @@ class Peak(NamedTuple):
     beside: bool = False
     #: A second echo of one speed: a second maximum of its Doppler row
     #: (:mod:`hil.estimation.gcas.candidates`) or its window's second codeword at a moving
-    #: hypothesis (:mod:`hil.estimation.gcas.still_codewords`); decided only beside an echo
-    #: measured at its speed.
+    #: hypothesis (:mod:`hil.estimation.gcas.still_codewords`); decided only beside a partner
+    #: or two echoes measured at its speed.
     second: bool = False
 
 
