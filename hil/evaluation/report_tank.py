@@ -169,7 +169,8 @@ def _markdown(spec: SweepSpec, records: list[dict[str, Any]], rows: list[dict[st
     grid = ", ".join(f"{k} = {v}" for k, v in spec.grid.items()) or "none"
     fixed = ", ".join(f"{k} = {v}" for k, v in spec.fixed.items()) or "none"
     cols = [*spec.grid, "detection_rate", "false_alarm_rate", "range_rmse_m", "range_bias_m",
-            "range_p95_m", "speed_rmse_mps", "speed_bias_mps", "n_ok", "n_failed"]  # fmt: skip
+            "range_p05_m", "range_p95_m", "speed_rmse_mps", "speed_bias_mps", "n_ok",
+            "n_failed"]  # fmt: skip
     lines = [
         f"# Tank sweep {spec.name}",
         "",
@@ -179,7 +180,8 @@ def _markdown(spec: SweepSpec, records: list[dict[str, Any]], rows: list[dict[st
         f"{n_ok} of {len(records)} recorded trials ran to the end. Grid: {grid}. Fixed: {fixed}.",
         "",
         "Detection rate: detected / expected hop boundaries; false-alarm rate: false alarms / "
-        "scored estimates; errors over every scored estimate of the point's trials (m, m/s). "
+        "scored estimates; errors over every scored estimate of the point's trials (m, m/s), "
+        "estimate less truth: p05 and p95 are the signed errors' 5th and 95th percentiles. "
         "All columns: `tank_points.csv`.",
         "",
         "| " + " | ".join(cols) + " |",

@@ -251,6 +251,10 @@ def test_the_report_writes_its_table_figures_and_markdown(tmp_path: Path) -> Non
     ]  # fmt: skip
     report = (tmp_path / "report.md").read_text()
     assert "| closing | 1 | 0 | 0.01 | 0 |" in report
+    # The opening point's signed errors -0.3 and -0.25 m: its 5th and 95th percentiles both
+    # stand in the table, so a one-sided error reads as one.
+    assert "range_p05_m | range_p95_m" in report
+    assert "| opening | 0 | 1 | 0.2761 | -0.275 | -0.2975 | -0.2525 |" in report
     assert "![range errors](figures/tank_range_errors.png)" in report
 
 
