@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hil.estimation.gcas.front_end import FrontEnd
-from hil.estimation.kernels import codeword_sums, exact_windows
+from hil.estimation.kernels import codeword_sums, exact_values, exact_windows
 from hil.estimation.row_buffer import RowBuffer
 from hil.resident_arrays import resident_zeros
 
@@ -48,6 +48,9 @@ class ExactHistory:
         self._cache_p = resident_zeros((fe.grid.size, fe.n_tones, cap))
         self._cache_max = resident_zeros((fe.grid.size, cap))
         self._cache_n = np.full((fe.grid.size, cap), NO_SAMPLE, dtype=np.int64)
+        # The exact unit correlators of width-1 windows (exact_values), by window end.
+        self._value_u = resident_zeros((fe.grid.size, cap, fe.n_tones, 2))
+        self._value_n = np.full((fe.grid.size, cap), NO_SAMPLE, dtype=np.int64)
         #: Hypothesis weights of the reverberation band, shape ``(D,)``.
         self.hyp_w = np.ascontiguousarray(fe.grid.weights, dtype=np.float64)
         code, m_idx = fe.code, np.arange(fe.m_hops)
@@ -59,6 +62,7 @@ class ExactHistory:
         """Forget the history and the cache; the next sample is ``b0``."""
         self._ring.reset(b0)
         self._cache_n.fill(NO_SAMPLE)
+        self._value_n.fill(NO_SAMPLE)
 
     def append(self, y: NDArray[np.complex128]) -> None:
         """The next baseband samples."""
@@ -102,6 +106,20 @@ class ExactHistory:
         )  # fmt: skip
         return out[..., 0] + 1j * out[..., 1]
 
+    def values(self, first: NDArray[np.int64], dd: NDArray[np.int64]) -> NDArray[np.complex128]:
+        """:meth:`windows` of width 1, ``u[first_r, dd_r, k]`` (shape ``(R, K)``), each value
+        kept for the calls after while its window is held (:func:`exact_values`): the same
+        bits."""
+        ring = self._ring
+        out = np.empty((first.shape[0], 1, self._fe.n_tones, 2))
+        exact_values(
+            ring.array[: ring.available], ring.next_index - ring.available,
+            np.ascontiguousarray(first, dtype=np.int64), np.ascontiguousarray(dd, dtype=np.int64),
+            self._fe.grid.lengths, self._nu_fs, self.phasor_table(1), self._value_u,
+            self._value_n, out,
+        )  # fmt: skip
+        return out[:, 0, :, 0] + 1j * out[:, 0, :, 1]
+
     def sums(
         self, centre: NDArray[np.int64], dset: NDArray[np.int64], half: int, prune: bool = False
     ) -> NDArray[np.float64]:
@@ -133,7 +151,7 @@ class ExactHistory:
         ``coherent``, else ``w·|u|²`` (float32)."""
         n, m, tone_w = idx.shape[0], self._fe.m_hops, self._fe.tone_w
         first = (idx[:, None] - self._fe.lags[dcol]).reshape(-1)
-        u = self.windows(first, np.repeat(dcol, m), 1)[:, 0, :].reshape(n, m, -1)
+        u = self.values(first, np.repeat(dcol, m)).reshape(n, m, -1)
         w = None if tone_w is None else tone_w[dcol][:, None, :]
         if coherent:
             uc = u.astype(np.complex64)
