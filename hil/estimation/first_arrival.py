@@ -643,7 +643,8 @@ class FirstArrivalReadout:
         box = full[:, w:] - full[:, :-w]  # (M, L)
         pattern = self._tone_pattern(tones)  # clean, leave: read-only, shared
         clean = pattern.clean
-        p_all = np.abs(box / w)
+        # |box / w|² with box times 1/w: the same bits (see _ramp_residuals), a product's cost.
+        p_all = np.abs(box * (1.0 / w))
         np.square(p_all, out=p_all)  # (M, L)
         power = _mean(p_all[clean], axis=0)  # (L,)
         base = self._noise_window(power)

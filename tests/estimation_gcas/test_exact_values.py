@@ -64,3 +64,29 @@ def test_kept_values_after_a_gap_are_the_new_history_s(rc_schedule: HopSchedule)
         assert exact.values(first, dd).tobytes() == _fresh(exact, first, dd).tobytes()
     # The old windows are no longer held: they read the restarted (empty) history.
     assert not np.any(exact.values(old, dd))
+
+
+def test_the_map_terms_are_the_windows_computed_anew(rc_schedule: HopSchedule) -> None:
+    """``ExactHistory.terms`` (the time-codeword map's) from the kept values: ``w·|u|²``
+    (float32) and ``w·u`` (complex64) of ``windows`` to the bit, with and without the
+    reverberation band's weights."""
+    x = echo_samples(rc_schedule, 50.0, 10.0, 0.5, snr_db=0.0, seed=8)
+    rng = np.random.default_rng(9)
+    for extra in ({"reverb_speed_mps": 0.0}, {}):
+        rx = make_gcas(rc_schedule, search="two-stage", **extra)  # type: ignore[arg-type]
+        assert isinstance(rx.strategy, TwoStageSearch)
+        exact, fe = rx.strategy.exact, rx.strategy._fe
+        for i in range(0, x.shape[0], 9_000):
+            rx.process(x[i : i + 9_000])
+            idx = rx.strategy.retained(300)
+            dcol = np.repeat(rng.integers(0, fe.grid.size, idx.size // 30 + 1), 30)[: idx.size]
+            first = (idx[:, None] - fe.lags[dcol]).reshape(-1)
+            u = _fresh(exact, first, np.repeat(dcol, fe.m_hops)).reshape(idx.size, fe.m_hops, -1)
+            w = None if fe.tone_w is None else fe.tone_w[dcol][:, None, :]
+            power = (np.square(u.real) + np.square(u.imag)).astype(np.float32)
+            coherent = u.astype(np.complex64)
+            if w is not None:
+                power, coherent = power * w, coherent * w
+            assert exact.terms(idx, dcol, False).tobytes() == power.tobytes()
+            assert exact.terms(idx, dcol, True).tobytes() == coherent.tobytes()
+        assert extra or fe.tone_w is not None  # the weighted case was run

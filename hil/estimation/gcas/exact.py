@@ -110,6 +110,11 @@ class ExactHistory:
         """:meth:`windows` of width 1, ``u[first_r, dd_r, k]`` (shape ``(R, K)``), each value
         kept for the calls after while its window is held (:func:`exact_values`): the same
         bits."""
+        out = self._value_parts(first, dd)
+        return out[..., 0] + 1j * out[..., 1]
+
+    def _value_parts(self, first: NDArray[np.int64], dd: NDArray[np.int64]) -> NDArray[np.float64]:
+        """:meth:`values` as re and im, shape ``(R, K, 2)``."""
         ring = self._ring
         out = np.empty((first.shape[0], 1, self._fe.n_tones, 2))
         exact_values(
@@ -118,7 +123,7 @@ class ExactHistory:
             self._fe.grid.lengths, self._nu_fs, self.phasor_table(1), self._value_u,
             self._value_n, out,
         )  # fmt: skip
-        return out[:, 0, :, 0] + 1j * out[:, 0, :, 1]
+        return out[:, 0]
 
     def sums(
         self, centre: NDArray[np.int64], dset: NDArray[np.int64], half: int, prune: bool = False
@@ -151,12 +156,14 @@ class ExactHistory:
         ``coherent``, else ``w·|u|²`` (float32)."""
         n, m, tone_w = idx.shape[0], self._fe.m_hops, self._fe.tone_w
         first = (idx[:, None] - self._fe.lags[dcol]).reshape(-1)
-        u = self.values(first, np.repeat(dcol, m)).reshape(n, m, -1)
+        parts = self._value_parts(first, np.repeat(dcol, m)).reshape(n, m, -1, 2)
         w = None if tone_w is None else tone_w[dcol][:, None, :]
         if coherent:
-            uc = u.astype(np.complex64)
+            uc = (parts[..., 0] + 1j * parts[..., 1]).astype(np.complex64)
             return uc if w is None else uc * w
-        p = (np.square(u.real) + np.square(u.imag)).astype(np.float32)
+        # |u|² from the parts themselves: the complex u's parts are these but for the sign
+        # of a zero, which the squares drop (the same bits, two temporaries fewer).
+        p = (np.square(parts[..., 0]) + np.square(parts[..., 1])).astype(np.float32)
         return p if w is None else p * w
 
     def unit_values(self, n_star: int, d0: int, tone: NDArray[np.int64]) -> NDArray[np.complex128]:
