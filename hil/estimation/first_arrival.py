@@ -1247,7 +1247,7 @@ class FirstArrivalReadout:
         before it; its mean power over the boundaries, scaled by least squares (with
         ``level``, beside a constant level: both less their means).
         """
-        shape = self._ramp_sum(grid, n, ramp, start)  # (C, M, L), w times the shape
+        shape = self._ramp_shape(grid, n, ramp, start, times_w=True)  # (C, M, L)
         # Times 1/w instead of divided by w: NumPy divides a complex by a real w as the
         # product with 1/w, so every nonzero part is the same bits (a zero may change sign,
         # which |·| ignores), and a product costs a fifth of a complex division.
@@ -1279,29 +1279,19 @@ class FirstArrivalReadout:
         n: NDArray[np.int64],
         ramp: _RampTables,
         start: NDArray[np.complex128] | None = None,
+        *,
+        times_w: bool = False,
     ) -> NDArray[np.complex128]:
         """The next-tone channel of one arrival of unit amplitude switching at each onset of
         ``grid`` (samples after each boundary's predicted switch, shape ``(C,)``), at window
         indices ``n`` (shape ``(L,)``): shape ``(C, M, L)``, complex. ``start``: the
-        boundaries' :meth:`_window_start_phasors` at ``n`` when already computed.
+        boundaries' :meth:`_window_start_phasors` at ``n`` when already computed;
+        ``times_w``: the window's sum, not yet divided by ``w``.
 
         At onset ``o`` (window index) the boxcar holds ``1`` for each sample after ``o`` and
         the previous tone, ``e^{j(2π beat (i − o)/fs − jump)}``, for each one before it; over
-        the window's ``w`` samples, divided by ``w`` (:meth:`_ramp_sum` divided by ``w``).
+        the window's ``w`` samples, divided by ``w``.
         """
-        shape = self._ramp_sum(grid, n, ramp, start)
-        shape /= self.boxcar
-        return shape
-
-    def _ramp_sum(
-        self,
-        grid: NDArray[np.float64],
-        n: NDArray[np.int64],
-        ramp: _RampTables,
-        start: NDArray[np.complex128] | None = None,
-    ) -> NDArray[np.complex128]:
-        """:meth:`_ramp_shape` times ``w``: the window's sum of one arrival of unit amplitude
-        (shape ``(C, M, L)``, complex; the arguments as :meth:`_ramp_shape`'s)."""
         w = self.boxcar
         theta = ramp.theta
         o = (self._pre + grid)[:, None, None] + ramp.frac[None, :, None]  # (C, M, 1)
@@ -1316,10 +1306,12 @@ class FirstArrivalReadout:
         if start is None:
             start = self._window_start_phasors(ramp, n)
         at_o = np.exp(-1j * (theta[None, :, None] * o + ramp.jump[None, :, None]))  # (C, M, 1)
-        # n_next + start · at_o · sums, each step into one buffer.
+        # (n_next + start · at_o · sums) / w, each step into one buffer.
         shape = np.multiply(start, at_o)
         shape *= sums
         shape += n_next
+        if not times_w:
+            shape /= w
         return shape
 
     def _direct_alpha(

@@ -650,6 +650,6 @@ def test_the_ramp_residuals_use_the_shape_bit_for_bit() -> None:
     n = readout._pre + np.arange(-40, 60)
     grid = rng.uniform(-20.0, 20.0, 33)
     shape = readout._ramp_shape(grid, n, tables)
-    summed = readout._ramp_sum(grid, n, tables)
+    summed = readout._ramp_shape(grid, n, tables, times_w=True)
     summed *= 1.0 / w
     assert np.abs(summed).tobytes() == np.abs(shape).tobytes()
