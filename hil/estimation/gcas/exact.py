@@ -48,9 +48,10 @@ class ExactHistory:
         self._cache_p = resident_zeros((fe.grid.size, fe.n_tones, cap))
         self._cache_max = resident_zeros((fe.grid.size, cap))
         self._cache_n = np.full((fe.grid.size, cap), NO_SAMPLE, dtype=np.int64)
-        # The exact unit correlators of width-1 windows (exact_values), by window end.
-        self._value_u = resident_zeros((fe.grid.size, cap, fe.n_tones, 2))
-        self._value_n = np.full((fe.grid.size, cap), NO_SAMPLE, dtype=np.int64)
+        # The kept exact unit correlators of width-1 windows (exact_values) and their window
+        # ends: made at the first call of values (the time-codeword map's), none without it.
+        self._value_u: NDArray[np.float64] | None = None
+        self._value_n: NDArray[np.int64] | None = None
         #: Hypothesis weights of the reverberation band, shape ``(D,)``.
         self.hyp_w = np.ascontiguousarray(fe.grid.weights, dtype=np.float64)
         code, m_idx = fe.code, np.arange(fe.m_hops)
@@ -62,7 +63,8 @@ class ExactHistory:
         """Forget the history and the cache; the next sample is ``b0``."""
         self._ring.reset(b0)
         self._cache_n.fill(NO_SAMPLE)
-        self._value_n.fill(NO_SAMPLE)
+        if self._value_n is not None:
+            self._value_n.fill(NO_SAMPLE)
 
     def append(self, y: NDArray[np.complex128]) -> None:
         """The next baseband samples."""
@@ -115,15 +117,29 @@ class ExactHistory:
 
     def _value_parts(self, first: NDArray[np.int64], dd: NDArray[np.int64]) -> NDArray[np.float64]:
         """:meth:`values` as re and im, shape ``(R, K, 2)``."""
-        ring = self._ring
-        out = np.empty((first.shape[0], 1, self._fe.n_tones, 2))
+        ring, fe = self._ring, self._fe
+        if self._value_u is None or self._value_n is None:
+            cap = self._cache_n.shape[1]
+            self._value_u = resident_zeros((fe.grid.size, cap, fe.n_tones, 2))
+            self._value_n = np.full((fe.grid.size, cap), NO_SAMPLE, dtype=np.int64)
+        out = np.empty((first.shape[0], 1, fe.n_tones, 2))
         exact_values(
             ring.array[: ring.available], ring.next_index - ring.available,
             np.ascontiguousarray(first, dtype=np.int64), np.ascontiguousarray(dd, dtype=np.int64),
-            self._fe.grid.lengths, self._nu_fs, self.phasor_table(1), self._value_u,
-            self._value_n, out,
+            fe.grid.lengths, self._nu_fs, self.phasor_table(1), self._value_u, self._value_n, out,
         )  # fmt: skip
         return out[:, 0]
+
+    def load_value_kernel(self) -> None:
+        """Load :func:`exact_values`' compiled code (else the time-codeword map's first block
+        does) on one-slot arrays of the same types, the values' store left unmade."""
+        fe = self._fe
+        exact_values(
+            np.zeros(1, dtype=np.complex128), 0, np.zeros(1, dtype=np.int64),
+            np.zeros(1, dtype=np.int64), fe.grid.lengths, self._nu_fs, self.phasor_table(1),
+            np.zeros((1, 1, fe.n_tones, 2)), np.full((1, 1), NO_SAMPLE, dtype=np.int64),
+            np.empty((1, 1, fe.n_tones, 2)),
+        )  # fmt: skip
 
     def sums(
         self, centre: NDArray[np.int64], dset: NDArray[np.int64], half: int, prune: bool = False

@@ -454,4 +454,4 @@ class TwoStageSearch:
         side = self.exact.sums(one[0], sides, 0)
         fine_doppler(side, a, one[0], i_pk, word, d0, sides)
         self.exact.windows(one[:, 0], one[:, 0], 1)
-        self.exact.values(one[:, 0], one[:, 0])
+        self.exact.load_value_kernel()
