@@ -104,6 +104,7 @@ is read on the present score alone.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -332,6 +333,44 @@ def _std(x: NDArray[np.float64]) -> float:
     return math.sqrt(float(np.add.reduce(dev, axis=None) / n))
 
 
+def _nonzero(x: NDArray[np.bool_]) -> NDArray[np.intp]:
+    """``np.flatnonzero(x)`` of a 1-D array (shape ``(n,)``) without its wrapper's overhead:
+    the indices of its true elements, ascending."""
+    return x.nonzero()[0]
+
+
+def _median(values: list[float]) -> float:
+    """``np.median(values)`` of a non-empty list, without its wrapper's overhead: the middle
+    value, or the two middle ones summed and halved as it does (NaN where any is NaN)."""
+    if any(v != v for v in values):
+        return math.nan
+    ordered = sorted(values)
+    n = len(ordered)
+    half = n // 2
+    return ordered[half] if n % 2 else (ordered[half - 1] + ordered[half]) / 2.0
+
+
+def _line_fit(x: NDArray[np.float64], y: NDArray[np.float64]) -> tuple[float, float]:
+    """``np.polyfit(x, y, 1)`` of 1-D float arrays (shape ``(n,)``, ``n >= 2``): slope and
+    intercept by the same steps (the Vandermonde columns scaled to unit norm, least squares
+    by ``np.linalg.lstsq``, the scale divided out) without its wrapper's overhead: the same
+    values, bit for bit, and its warning where the fit is poorly conditioned."""
+    lhs = np.empty((x.size, 2))
+    lhs[:, 0] = x
+    lhs[:, 1] = 1.0
+    scale = np.sqrt((lhs * lhs).sum(axis=0))
+    lhs /= scale
+    c, _, rank, _ = np.linalg.lstsq(lhs, y, x.size * _EPS)
+    if rank != 2:
+        warnings.warn("Polyfit may be poorly conditioned", np.exceptions.RankWarning, stacklevel=3)
+    c = (c.T / scale).T
+    return float(c[0]), float(c[1])
+
+
+#: Machine epsilon of float64 (``np.polyfit``'s default ``rcond`` is ``n`` of it).
+_EPS = float(np.finfo(np.float64).eps)
+
+
 def _hop_slice(table: HopTable, start: int, count: int) -> HopTable:
     """Hops ``start .. start + count − 1`` of ``table`` (positions in it, not hop indices)."""
     part = slice(start, start + count)
@@ -363,6 +402,36 @@ class _RampTables:
     def subset(self, keep: NDArray[np.bool_]) -> _RampTables:
         """The tables of the boundaries ``keep`` (shape ``(M,)``)."""
         return _RampTables(self.frac[keep], self.theta[keep], self.jump[keep], self.geometric[keep])
+
+
+@dataclass(frozen=True)
+class _Levels:
+    """The next-tone power of one detection and the levels its ramp is read against:
+    ``power`` (shape ``(L,)``), the mean power over the boundaries read; ``floor``, the level
+    subtracted from it; ``amp`` (shape ``(L,)``), ``√(power − floor)``; ``k0``, the window
+    index the search starts at; ``top_i``, ``top``, the top's index and amplitude;
+    ``wobble``, the noise's amplitude margin; ``j_lo``, ``j_hi``, the ramp's last rise from
+    ``lo`` and its first ``hi`` crossing (:meth:`FirstArrivalReadout._ramp_bounds` of the
+    above, read once)."""
+
+    power: NDArray[np.float64]
+    floor: float
+    amp: NDArray[np.float64]
+    k0: int
+    top_i: int
+    top: float
+    wobble: float
+    j_lo: int
+    j_hi: int
+
+    @classmethod
+    def read(
+        cls, power: NDArray[np.float64], floor: float, amp: NDArray[np.float64], k0: int,
+        top_i: int, top: float, wobble: float,
+    ) -> _Levels:  # fmt: skip
+        """The levels with their ramp's bounds found."""
+        j_lo, j_hi = FirstArrivalReadout._ramp_bounds(amp, k0, top_i, top, wobble)
+        return cls(power, floor, amp, k0, top_i, top, wobble, j_lo, j_hi)
 
 
 @dataclass(frozen=True)
@@ -574,7 +643,8 @@ class FirstArrivalReadout:
         box = full[:, w:] - full[:, :-w]  # (M, L)
         pattern = self._tone_pattern(tones)  # clean, leave: read-only, shared
         clean = pattern.clean
-        p_all = np.abs(box / w)
+        # |box / w|² with box times 1/w: the same bits (see _ramp_residuals), a product's cost.
+        p_all = np.abs(box * (1.0 / w))
         np.square(p_all, out=p_all)  # (M, L)
         power = _mean(p_all[clean], axis=0)  # (L,)
         base = self._noise_window(power)
@@ -598,7 +668,7 @@ class FirstArrivalReadout:
         # noise between them) has its own ramp and top: the earliest rise above
         # EARLY_FRACTION of the top, and its top within two windows.
         k0 = self._search_from
-        early = np.flatnonzero(amp[k0:top_i] >= max(EARLY_FRACTION * top, 2.0 * wobble))
+        early = _nonzero(amp[k0:top_i] >= max(EARLY_FRACTION * top, 2.0 * wobble))
         if early.size:
             j_e = k0 + int(early[0])
             top_i = j_e + int(np.argmax(amp[j_e : min(top_i, j_e + 2 * w) + 1]))
@@ -632,23 +702,20 @@ class FirstArrivalReadout:
         prev_f = np.concatenate([f_next[1:], prev_hop.freq_hz])
         ramp = self._ramp_tables(frac, alpha * (prev_f - f_next), self._phase_jumps(hops, prev_hop))
         copy_after = bool(self.period) and alpha > 1.0
-        onsets = self._onset(
-            power, floor, amp, k0, top_i, top, wobble, full, box, clean, ramp, copy_after
-        )
+        levels = _Levels(power, floor, amp, k0, top_i, top, wobble, j_lo, j_hi)
+        onsets = self._onset(levels, full, box, clean, ramp, copy_after)
         if onsets is None:
             return None
         # The speed is read at the line's onset, the range at the onset searched for the
         # first arrival itself (:meth:`_onset`): on the new floor where the level just
         # before the ramp is lower than the noise read (:meth:`_near_floor`).
         rel_speed, rel = onsets
-        near = self._near_floor(power, floor, amp, k0, top_i, top, wobble)
+        near = self._near_floor(levels)
         if near is not None:
             amp_near = np.sqrt(np.maximum(power - near, 0.0))
             top_near = float(amp_near[top_i])
-            again = self._onset(
-                power, near, amp_near, k0, top_i, top_near, wobble, full, box, clean, ramp,
-                copy_after,
-            )  # fmt: skip
+            on_near = _Levels.read(power, near, amp_near, k0, top_i, top_near, wobble)
+            again = self._onset(on_near, full, box, clean, ramp, copy_after)
             if again is not None:
                 rel = again[1]
         onset = float(t_b[0] + rel)
@@ -709,17 +776,11 @@ class FirstArrivalReadout:
             (newer if lag <= STEADY_HOPS else older).append(v)
         if len(newer) < 2 or len(older) < 2:
             return False
-        return abs(float(np.median(newer)) - float(np.median(older))) <= STEADY_MPS
+        return abs(_median(newer) - _median(older)) <= STEADY_MPS
 
     def _onset(
         self,
-        power: NDArray[np.float64],
-        floor: float,
-        amp: NDArray[np.float64],
-        k0: int,
-        top_i: int,
-        top: float,
-        wobble: float,
+        levels: _Levels,
         full: NDArray[np.complex128],
         box: NDArray[np.complex128],
         clean: NDArray[np.bool_],
@@ -730,11 +791,10 @@ class FirstArrivalReadout:
         predicted switch; None where no clean onset stands out): the line's, and the first
         arrival's where the line is fitted on the ramp's steep part.
 
-        ``power`` (shape ``(L,)``): the mean next-tone power over the boundaries read
-        (``clean``, shape ``(M,)``); ``floor``: the level subtracted from it; ``amp``:
-        ``√(power − floor)``; ``k0``: where the search starts; ``top_i``, ``top``: the top's
-        index and amplitude; ``wobble``: the noise's amplitude margin; ``full``, ``box``: the
-        next-tone channel and its change over a window (shapes ``(M, L + w)``, ``(M, L)``);
+        ``levels``: the mean next-tone power over the boundaries read (``clean``, shape
+        ``(M,)``) and the levels its ramp is read against (:class:`_Levels`); ``full``,
+        ``box``: the next-tone channel and its change over a window (shapes ``(M, L + w)``,
+        ``(M, L)``);
         ``ramp``: the boundaries' ramp tables; ``copy_after``: the canceller's sign-flipped
         copy of each arrival comes after it (a closing target behind the canceller).
 
@@ -751,7 +811,8 @@ class FirstArrivalReadout:
         """
         fs = self.fs_hz
         w = self.boxcar
-        j_lo, j_hi = self._ramp_bounds(amp, k0, top_i, top, wobble)
+        amp, k0, top_i, top = levels.amp, levels.k0, levels.top_i, levels.top
+        j_lo, j_hi = levels.j_lo, levels.j_hi
         if j_lo <= k0:
             return None  # the ramp runs into the baseline: no clean onset
         # A slow rise from lo to hi is not the ramp itself (SLOW_RISE).
@@ -762,7 +823,7 @@ class FirstArrivalReadout:
             # steep part within a window; a late images' level ahead of it does not.
             holds = self._new_tone_holds(full, clean, j_lo, top_i)
             stop = min(top_i, j_hi + w) if holds else top_i
-            up = np.flatnonzero(amp[j_hi : stop + 1] >= 2.0 * amp[j_hi])
+            up = _nonzero(amp[j_hi : stop + 1] >= 2.0 * amp[j_hi])
             if up.size:
                 j_a, j_b = j_hi, j_hi + max(2, int(up[0]))
         slope, icept = self._line(amp, j_a, j_b)
@@ -787,9 +848,9 @@ class FirstArrivalReadout:
         # The line is the start; the ramp's exact shape (the previous tone's partial window
         # leaks into the channel while the window straddles the switch) moves its zero
         # crossing by some 30 µs: fit that shape instead.
-        excess = power - floor
+        excess = levels.power - levels.floor
         lo_fit = max(k0, j_lo - FIT_LEAD)
-        above = np.flatnonzero(amp[j_lo : j_hi + 1] >= FIT_HI_FRACTION * top)
+        above = _nonzero(amp[j_lo : j_hi + 1] >= FIT_HI_FRACTION * top)
         j_fit = j_lo + int(above[0]) if above.size else j_hi
         j_fit = max(j_fit, j_lo + 2)
         guess = -icept / slope
@@ -815,35 +876,26 @@ class FirstArrivalReadout:
             return rel, rel
         return rel, wide
 
-    def _near_floor(
-        self,
-        power: NDArray[np.float64],
-        floor: float,
-        amp: NDArray[np.float64],
-        k0: int,
-        top_i: int,
-        top: float,
-        wobble: float,
-    ) -> float | None:
-        """The noise level just before the ramp, where the one read (``floor``) is more than
-        :data:`NEAR_RATIO` times it; None otherwise. ``power``, ``amp`` (shape ``(L,)``),
-        ``k0``, ``top_i``, ``top``, ``wobble``: as :meth:`_onset`'s.
+    def _near_floor(self, levels: _Levels) -> float | None:
+        """The noise level just before the ramp, where the one read (``levels.floor``) is
+        more than :data:`NEAR_RATIO` times it; None otherwise. ``levels``: as
+        :meth:`_onset`'s.
 
         The least mean of ``power`` over :data:`NEAR_PART` windows within the window before
         the ramp's ``lo`` crossing. The noise window lies before the search; the older late
         paths' leak there can be several times the level just before a weak first arrival
         (image order 3: 4 times at 8.3 m), which then falls under it and is read late."""
         w = self.boxcar
-        j_lo, _ = self._ramp_bounds(amp, k0, top_i, top, wobble)
+        j_lo = levels.j_lo
         part = max(2, int(round(NEAR_PART * w)))
-        seg = power[max(k0, j_lo - w) : j_lo]
+        seg = levels.power[max(levels.k0, j_lo - w) : j_lo]
         if seg.size < part:
             return None
         c = np.empty(seg.size + 1)
         c[0] = 0.0
         np.cumsum(seg, out=c[1:])
         least = float(np.min(c[part:] - c[:-part])) / part
-        return least if floor > NEAR_RATIO * least else None
+        return least if levels.floor > NEAR_RATIO * least else None
 
     def _explained(
         self,
@@ -960,8 +1012,7 @@ class FirstArrivalReadout:
         ``(L,)``) at window indices ``j_a .. j_b``, against their offsets in s: its zero
         crossing ``−intercept / slope`` is an onset, s after boundary 0's sample."""
         tt = self._offsets[j_a : j_b + 1] / self.fs_hz
-        slope, icept = np.polyfit(tt, amp[j_a : j_b + 1], 1)
-        return float(slope), float(icept)
+        return _line_fit(tt, amp[j_a : j_b + 1])
 
     @staticmethod
     def _ramp_bounds(
@@ -977,9 +1028,9 @@ class FirstArrivalReadout:
         lo_level = max(LO_FRACTION * top, wobble)
         hi_level = max(HI_FRACTION * top, lo_level + wobble)
         # Where ``amp`` last fails ``>= lo`` before ``top_i`` (NaN fails too), searched after k0.
-        below = np.flatnonzero(~(amp[k0:top_i] >= lo_level))
+        below = _nonzero(~(amp[k0:top_i] >= lo_level))
         j = k0 + int(below[-1]) + 1 if below.size else k0
-        above_hi = np.flatnonzero(amp[j : top_i + 1] >= hi_level)
+        above_hi = _nonzero(amp[j : top_i + 1] >= hi_level)
         j_hi = j + int(above_hi[0]) if above_hi.size else top_i
         below = below[below < j_hi - k0]
         j = k0 + int(below[-1]) + 1 if below.size else k0
@@ -1032,9 +1083,7 @@ class FirstArrivalReadout:
         other = clean & ~leave
         # Before the first arrival: half a window before the first rise to EARLY_FRACTION
         # of the top (an arrival's ramp takes a window to its top).
-        strong = np.flatnonzero(
-            power[self._search_from : top_i + 1] >= EARLY_FRACTION**2 * power[top_i]
-        )
+        strong = _nonzero(power[self._search_from : top_i + 1] >= EARLY_FRACTION**2 * power[top_i])
         stop = self._search_from + int(strong[0]) - self.boxcar // 2
         if not late.any() or np.count_nonzero(other) < MIN_CLEAN or stop <= self._search_from:
             return False
@@ -1198,7 +1247,12 @@ class FirstArrivalReadout:
         before it; its mean power over the boundaries, scaled by least squares (with
         ``level``, beside a constant level: both less their means).
         """
-        power = np.abs(self._ramp_shape(grid, n, ramp, start))  # (C, M, L)
+        shape = self._ramp_shape(grid, n, ramp, start, times_w=True)  # (C, M, L)
+        # Times 1/w instead of divided by w: NumPy divides a complex by a real w as the
+        # product with 1/w, so every nonzero part is the same bits (a zero may change sign,
+        # which |·| ignores), and a product costs a fifth of a complex division.
+        shape *= 1.0 / self.boxcar
+        power = np.abs(shape)
         np.square(power, out=power)
         model = _mean(power, axis=1)  # (C, L)
         if level:
@@ -1225,11 +1279,14 @@ class FirstArrivalReadout:
         n: NDArray[np.int64],
         ramp: _RampTables,
         start: NDArray[np.complex128] | None = None,
+        *,
+        times_w: bool = False,
     ) -> NDArray[np.complex128]:
         """The next-tone channel of one arrival of unit amplitude switching at each onset of
         ``grid`` (samples after each boundary's predicted switch, shape ``(C,)``), at window
         indices ``n`` (shape ``(L,)``): shape ``(C, M, L)``, complex. ``start``: the
-        boundaries' :meth:`_window_start_phasors` at ``n`` when already computed.
+        boundaries' :meth:`_window_start_phasors` at ``n`` when already computed;
+        ``times_w``: the window's sum, not yet divided by ``w``.
 
         At onset ``o`` (window index) the boxcar holds ``1`` for each sample after ``o`` and
         the previous tone, ``e^{j(2π beat (i − o)/fs − jump)}``, for each one before it; over
@@ -1253,7 +1310,8 @@ class FirstArrivalReadout:
         shape = np.multiply(start, at_o)
         shape *= sums
         shape += n_next
-        shape /= w
+        if not times_w:
+            shape /= w
         return shape
 
     def _direct_alpha(

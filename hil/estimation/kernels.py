@@ -469,22 +469,76 @@ def exact_windows(
     K, 2)``). Each run is a prefix sum over its span rotated by the phase of its first sample
     (float64 throughout).
     """
+    pre = np.empty((table.shape[1] + 1, nu_fs.shape[1], 2))
+    for row in range(first.shape[0]):
+        _exact_run(y, origin, first[row], dd[row], width, lengths, nu_fs, table, pre, out[row])
+
+
+@numba.njit(**_JIT)
+def _exact_run(
+    y: Any, origin: int, first: int, d: int, width: int, lengths: Any, nu_fs: Any, table: Any,
+    pre: Any, out: Any,
+) -> None:  # fmt: skip
+    """One run of :func:`exact_windows`: ``u[first + t, d, k]`` for ``t < width`` into
+    ``out`` (shape ``(width, K, 2)``), from one prefix sum over its span (``pre``: scratch of
+    shape ``(>= N_d + width, K, 2)``) rotated by the phase of its first sample."""
+    n_len = lengths[d]
+    s0 = first - n_len + 1
+    _window_prefix(y, origin, s0, n_len + width - 1, d, table, pre)
+    for k in range(nu_fs.shape[1]):
+        ang = -2.0 * math.pi * ((float(s0) * nu_fs[d, k]) % 1.0)
+        br = math.cos(ang)
+        bi = math.sin(ang)
+        for t in range(width):
+            ur = pre[n_len + t, k, 0] - pre[t, k, 0]
+            ui = pre[n_len + t, k, 1] - pre[t, k, 1]
+            out[t, k, 0] = ur * br - ui * bi
+            out[t, k, 1] = ur * bi + ui * br
+
+
+@numba.njit(**_JIT)
+def exact_values(
+    y: Any,
+    origin: int,
+    first: Any,
+    dd: Any,
+    lengths: Any,
+    nu_fs: Any,
+    table: Any,
+    cache_u: Any,
+    cache_n: Any,
+    out: Any,
+) -> None:
+    """:func:`exact_windows` of width 1 (``u[first_r, dd_r, k]``, ``out`` shape
+    ``(R, 1, K, 2)``), each value kept for the calls after.
+
+    A window held whole by ``y`` (its ``N_d`` samples from ``first − N_d + 1`` to ``first``
+    between ``origin`` and the newest) is kept in ``cache_u`` (shape ``(D, cap, K, 2)``,
+    ``cap`` a power of two, slot ``first mod cap``), stamped with ``first`` in ``cache_n``
+    (shape ``(D, cap)``), and read back while it is still held whole: its samples never
+    change once arrived, so the value kept is the bits :func:`exact_windows` computes again
+    (a caller whose history restarts clears ``cache_n``). A window not held whole is computed
+    (its missing samples read as zero) and not kept. The time-codeword map asks for the M
+    terms of every sample, ``u[n − ℓ_{d,m}, d]``: while ``d`` stays, each value comes back as
+    the next term of the samples a hop later, so about one in M is computed (23 % of them in
+    the built-in tank run, where ``d`` moves between hypotheses).
+    """
     n_tones = nu_fs.shape[1]
     pre = np.empty((table.shape[1] + 1, n_tones, 2))
+    mask = cache_n.shape[1] - 1
+    stop = origin + y.shape[0]
     for row in range(first.shape[0]):
         d = dd[row]
-        n_len = lengths[d]
-        s0 = first[row] - n_len + 1
-        _window_prefix(y, origin, s0, n_len + width - 1, d, table, pre)
-        for k in range(n_tones):
-            ang = -2.0 * math.pi * ((float(s0) * nu_fs[d, k]) % 1.0)
-            br = math.cos(ang)
-            bi = math.sin(ang)
-            for t in range(width):
-                ur = pre[n_len + t, k, 0] - pre[t, k, 0]
-                ui = pre[n_len + t, k, 1] - pre[t, k, 1]
-                out[row, t, k, 0] = ur * br - ui * bi
-                out[row, t, k, 1] = ur * bi + ui * br
+        f = first[row]
+        held = f - lengths[d] + 1 >= origin and f < stop
+        slot = f & mask
+        if held and cache_n[d, slot] == f:
+            out[row, 0] = cache_u[d, slot]
+            continue
+        _exact_run(y, origin, f, d, 1, lengths, nu_fs, table, pre, out[row])
+        if held:
+            cache_u[d, slot] = out[row, 0]
+            cache_n[d, slot] = f
 
 
 @numba.njit(**_JIT)

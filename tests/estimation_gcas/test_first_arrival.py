@@ -556,7 +556,7 @@ def test_the_noise_is_read_again_just_before_the_ramp_under_a_higher_level(
     floor = 4e-2
     amp = np.sqrt(np.maximum(power - floor, 0.0))
     top_i = j + readout.boxcar
-    near = readout._near_floor(power, floor, amp, 0, top_i, float(amp[top_i]), 0.0)
+    near = readout._near_floor(fa._Levels.read(power, floor, amp, 0, top_i, float(amp[top_i]), 0.0))
     if read_again:
         assert near == pytest.approx(dip, rel=1e-12)
     else:
@@ -621,3 +621,35 @@ def test_a_steady_speed_is_told_from_one_that_changes() -> None:
         readout._steady_speeds.clear()
         _readings(readout, speeds, shown)
         assert readout._steady(len(speeds) + 1, delay) is steady, speeds
+
+
+def test_the_median_and_the_line_are_numpy_s_bit_for_bit() -> None:
+    """``_median`` is ``np.median`` of a list (odd and even counts, NaN) and ``_line_fit`` is
+    ``np.polyfit(x, y, 1)``, to the bit, on seeded random data."""
+    rng = np.random.default_rng(11)
+    for n in range(1, 12):
+        for _ in range(20):
+            values = list(rng.normal(1.5, 0.02, n))
+            assert fa._median(values) == float(np.median(values))
+    assert np.isnan(fa._median([1.0, float("nan"), 2.0]))
+    for n in range(2, 40):
+        x = (np.arange(n) - rng.integers(0, 50)) / 192_000.0
+        y = rng.normal(0.0, 1.0, n) + 300.0 * x
+        slope, icept = np.polyfit(x, y, 1)
+        assert fa._line_fit(x, y) == (float(slope), float(icept))
+
+
+def test_the_ramp_residuals_use_the_shape_bit_for_bit() -> None:
+    """The residuals' power (the window's sum times 1/w) is ``|_ramp_shape|²`` to the bit."""
+    readout = FirstArrivalReadout(_schedule(), FS, 10, C, cancel_period=False)
+    rng = np.random.default_rng(12)
+    m, w = readout.m_hops, readout.boxcar
+    tables = readout._ramp_tables(
+        rng.uniform(-0.5, 0.5, m), rng.choice([-4000.0, 2000.0, 6000.0], m), rng.normal(0, 1, m)
+    )
+    n = readout._pre + np.arange(-40, 60)
+    grid = rng.uniform(-20.0, 20.0, 33)
+    shape = readout._ramp_shape(grid, n, tables)
+    summed = readout._ramp_shape(grid, n, tables, times_w=True)
+    summed *= 1.0 / w
+    assert np.abs(summed).tobytes() == np.abs(shape).tobytes()

@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hil.estimation.gcas.front_end import FrontEnd
-from hil.estimation.kernels import codeword_sums, exact_windows
+from hil.estimation.kernels import codeword_sums, exact_values, exact_windows
 from hil.estimation.row_buffer import RowBuffer
 from hil.resident_arrays import resident_zeros
 
@@ -48,6 +48,10 @@ class ExactHistory:
         self._cache_p = resident_zeros((fe.grid.size, fe.n_tones, cap))
         self._cache_max = resident_zeros((fe.grid.size, cap))
         self._cache_n = np.full((fe.grid.size, cap), NO_SAMPLE, dtype=np.int64)
+        # The kept exact unit correlators of width-1 windows (exact_values) and their window
+        # ends: made at the first call of values (the time-codeword map's), none without it.
+        self._value_u: NDArray[np.float64] | None = None
+        self._value_n: NDArray[np.int64] | None = None
         #: Hypothesis weights of the reverberation band, shape ``(D,)``.
         self.hyp_w = np.ascontiguousarray(fe.grid.weights, dtype=np.float64)
         code, m_idx = fe.code, np.arange(fe.m_hops)
@@ -59,6 +63,8 @@ class ExactHistory:
         """Forget the history and the cache; the next sample is ``b0``."""
         self._ring.reset(b0)
         self._cache_n.fill(NO_SAMPLE)
+        if self._value_n is not None:
+            self._value_n.fill(NO_SAMPLE)
 
     def append(self, y: NDArray[np.complex128]) -> None:
         """The next baseband samples."""
@@ -102,6 +108,39 @@ class ExactHistory:
         )  # fmt: skip
         return out[..., 0] + 1j * out[..., 1]
 
+    def values(self, first: NDArray[np.int64], dd: NDArray[np.int64]) -> NDArray[np.complex128]:
+        """:meth:`windows` of width 1, ``u[first_r, dd_r, k]`` (shape ``(R, K)``), each value
+        kept for the calls after while its window is held (:func:`exact_values`): the same
+        bits."""
+        out = self._value_parts(first, dd)
+        return out[..., 0] + 1j * out[..., 1]
+
+    def _value_parts(self, first: NDArray[np.int64], dd: NDArray[np.int64]) -> NDArray[np.float64]:
+        """:meth:`values` as re and im, shape ``(R, K, 2)``."""
+        ring, fe = self._ring, self._fe
+        if self._value_u is None or self._value_n is None:
+            cap = self._cache_n.shape[1]
+            self._value_u = resident_zeros((fe.grid.size, cap, fe.n_tones, 2))
+            self._value_n = np.full((fe.grid.size, cap), NO_SAMPLE, dtype=np.int64)
+        out = np.empty((first.shape[0], 1, fe.n_tones, 2))
+        exact_values(
+            ring.array[: ring.available], ring.next_index - ring.available,
+            np.ascontiguousarray(first, dtype=np.int64), np.ascontiguousarray(dd, dtype=np.int64),
+            fe.grid.lengths, self._nu_fs, self.phasor_table(1), self._value_u, self._value_n, out,
+        )  # fmt: skip
+        return out[:, 0]
+
+    def load_value_kernel(self) -> None:
+        """Load :func:`exact_values`' compiled code (else the time-codeword map's first block
+        does) on one-slot arrays of the same types, the values' store left unmade."""
+        fe = self._fe
+        exact_values(
+            np.zeros(1, dtype=np.complex128), 0, np.zeros(1, dtype=np.int64),
+            np.zeros(1, dtype=np.int64), fe.grid.lengths, self._nu_fs, self.phasor_table(1),
+            np.zeros((1, 1, fe.n_tones, 2)), np.full((1, 1), NO_SAMPLE, dtype=np.int64),
+            np.empty((1, 1, fe.n_tones, 2)),
+        )  # fmt: skip
+
     def sums(
         self, centre: NDArray[np.int64], dset: NDArray[np.int64], half: int, prune: bool = False
     ) -> NDArray[np.float64]:
@@ -133,12 +172,14 @@ class ExactHistory:
         ``coherent``, else ``w·|u|²`` (float32)."""
         n, m, tone_w = idx.shape[0], self._fe.m_hops, self._fe.tone_w
         first = (idx[:, None] - self._fe.lags[dcol]).reshape(-1)
-        u = self.windows(first, np.repeat(dcol, m), 1)[:, 0, :].reshape(n, m, -1)
+        parts = self._value_parts(first, np.repeat(dcol, m)).reshape(n, m, -1, 2)
         w = None if tone_w is None else tone_w[dcol][:, None, :]
         if coherent:
-            uc = u.astype(np.complex64)
+            uc = (parts[..., 0] + 1j * parts[..., 1]).astype(np.complex64)
             return uc if w is None else uc * w
-        p = (np.square(u.real) + np.square(u.imag)).astype(np.float32)
+        # |u|² from the parts themselves: the complex u's parts are these but for the sign
+        # of a zero, which the squares drop (the same bits, two temporaries fewer).
+        p = (np.square(parts[..., 0]) + np.square(parts[..., 1])).astype(np.float32)
         return p if w is None else p * w
 
     def unit_values(self, n_star: int, d0: int, tone: NDArray[np.int64]) -> NDArray[np.complex128]:

@@ -421,7 +421,10 @@ class TwoStageSearch:
         stop = self.exact.next_index
         idx = np.arange(stop - count, stop, dtype=np.int64)
         if self._cd_ring.next_index > self._c_origin:
-            blk = np.clip(idx // self._B, self._c_origin, self._cd_ring.next_index - 1)
+            # np.clip's bounds as two ufuncs (integers: the same values, without its wrapper).
+            blk = idx // self._B
+            np.maximum(blk, self._c_origin, out=blk)
+            np.minimum(blk, self._cd_ring.next_index - 1, out=blk)
             d_map: NDArray[np.int64] = self._cd_ring.rows(blk)
         else:
             d_map = np.zeros(idx.shape[0], dtype=np.int64)
@@ -451,3 +454,4 @@ class TwoStageSearch:
         side = self.exact.sums(one[0], sides, 0)
         fine_doppler(side, a, one[0], i_pk, word, d0, sides)
         self.exact.windows(one[:, 0], one[:, 0], 1)
+        self.exact.load_value_kernel()

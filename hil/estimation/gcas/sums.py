@@ -48,7 +48,7 @@ class CodewordSums:
             terms = np.take(v, self._term_cell, axis=1)  # (n, M, J)
             if np.iscomplexobj(terms):
                 terms = np.square(terms.real) + np.square(terms.imag)
-            out: NDArray[np.float32] = terms.sum(axis=1)  # (n, J)
+            out: NDArray[np.float32] = np.add.reduce(terms, axis=1)  # (n, J): .sum's op
             return out
         t = self._time_of(idx)
         cyc = np.mod(self._fa[dcol] * t[:, None], 1.0) + self._coh_const[dcol]
