@@ -140,6 +140,24 @@ KNOWN_HOPS = 3
 #: where the fit puts it (and its speed within the speed span): a detector's time can be a
 #: lobe off beside a stronger echo.
 SAME_ECHO_LOBES = 1.5
+#: A detection where a measured echo's ghost peaks (:data:`GHOST_HOPS`) is taken for that
+#: ghost, without a fit, at up to this fraction of the echo's fitted amplitude (read without
+#: a fit, :meth:`CoherentRefiner._amplitude_near`). Measured on att, one target at 0, -10 and
+#: +10 dB, closing 5-25 and opening 10-20 m/s, 2 s each: a ghost reads 0.07-0.53 of its echo
+#: (median 0.25-0.30, 99th percentile 0.30-0.52). A second echo there at its own speed reads
+#: its own level: one within 4.4 dB of the measured echo is fitted (two targets one tone
+#: spacing's speed apart, 0 dB: both kept at every hop, against half of the hops each when
+#: every detection there no stronger than the echo was taken for its ghost).
+GHOST_FRACTION = 0.6
+#: Except beside an echo measured within this many Doppler cells of a hop (``c/(2 f_c
+#: T_h)``) of rest: there it may be the leak of a still echo the reverberation band hides
+#: (att, a target at rest, -10 dB: fits at 2-4 m/s), and what peaks where its ghost would
+#: is that still echo's ghost, read at 0.3-1.1 of the fit. A detection there is taken for
+#: a ghost up to the measured echo's own strength.
+STILL_LEAK_CELLS = 2.0
+#: A detection at a measured echo's ghost whose detector statistic is at most this many
+#: times the strongest of that echo's ghosts read so far is taken for its ghost unread.
+GHOST_STRENGTH_MARGIN = 1.5
 #: How far (hops) from where an echo's ghost's comb peaks a detection at its ghost's speed is
 #: taken for it (:meth:`CoherentRefiner.ghost_of_known`): measured 0.10-0.33 hop after the
 #: boundary beside an expected 0.17 (att, 10 m/s, its ghost at -17.5 m/s). Widened by half
@@ -180,6 +198,15 @@ LOBE_MOVES = 4
 #: looked for (:meth:`CoherentRefiner.refine`'s ``partners``: the reverberation band's and the
 #: span's edges, where other echoes' leaks fit as well once a partner is taken out).
 PARTNER_COHERENCE = 0.5
+#: Two echoes of nearby speeds (within this many Doppler cells of a hop, ``c/(2 f_c T_h)``,
+#: 2.5 m/s on att, of each other) share the detector's Doppler resolution cell: each one's
+#: row holds the other's Doppler response, so the weaker one's boundary is only a second
+#: maximum of its row, decided beside the measured other
+#: (:meth:`CoherentRefiner.beside_known`). Measured on att, two targets 2.3-3 m/s apart at
+#: 0 dB, independent synthesis: per-target detection 0.48 / 0.49 -> 0.90 / 0.92 (equal),
+#: 0.77 / 0.21 -> 0.95 / 0.96, 0.99 / 0.01 -> 1.0 / 0.77 (the second 1 dB weaker), no false
+#: estimate or 0.006-0.011 per hop at the first boundaries; one target unchanged.
+NEIGHBOUR_CELLS = 2.0
 #: Runs of hops kept for the other echoes' ``known`` rows
 #: (:meth:`CoherentRefiner._hop_run`; all are dropped when full).
 HOP_RUNS = 256
@@ -226,9 +253,9 @@ class _EchoFit:
     amplitude: complex
     #: The time scale's rate, 1/s (an accelerating fit's; 0 for a constant speed).
     rate: float = 0.0
-    #: Whether a detection where this echo's ghost peaks was found weaker than it (then the
-    #: echo's later ghosts are refused without reading their strength again).
-    ghosts_weaker: bool = False
+    #: The largest detector statistic (above its noise mean) of a detection read as this
+    #: echo's ghost (:meth:`CoherentRefiner.ghost_of_known`; 0 before any).
+    ghost_strength: float = 0.0
 
     def speed(self, sound_speed_mps: float) -> float:
         """Radial speed, m/s (closing positive)."""
@@ -544,10 +571,12 @@ class CoherentRefiner:
         ``alpha`` (the boundary ending hop ``hop_index``) may be there: within
         :data:`KNOWN_HOPS` hops of it and within the speed span, a partner kept lately
         (:data:`PARTNER_COHERENCE`) that is not this detection's own echo, or two echoes
-        measured lately, one of them not this detection's own. A second maximum of a Doppler
-        row (:mod:`hil.estimation.gcas.candidates`) is decided only there: beside one lone
-        echo it is that echo's shoulder (its fit would be that echo on another codeword), and
-        in noise alone one more chance for a false alarm."""
+        measured lately, one of them not this detection's own; or an echo measured lately
+        beyond the speed span but within :data:`NEIGHBOUR_CELLS` Doppler cells of a hop of
+        it. A second maximum of a Doppler row (:mod:`hil.estimation.gcas.candidates`) is
+        decided only there: beside one lone echo of its speed it is that echo's shoulder (its
+        fit would be that echo on another codeword), and in noise alone one more chance for a
+        false alarm."""
         speed = self.c * (alpha - 1.0) / (alpha + 1.0)
         reach = KNOWN_HOPS * self.hop_len_s
 
@@ -557,20 +586,35 @@ class CoherentRefiner:
         if any(near(e) and not self._same_echo(e, hop_index, t_s, speed) for e in self._partners):
             return True
         echoes = [e for e in self._echoes if near(e)]
-        return len(echoes) >= 2 and any(
-            not self._same_echo(e, hop_index, t_s, speed) for e in echoes
+        if len(echoes) >= 2 and any(not self._same_echo(e, hop_index, t_s, speed) for e in echoes):
+            return True
+        cells = NEIGHBOUR_CELLS * self._cell_speed
+        return any(
+            abs(e.t_s - t_s) <= reach
+            and self.speed_span_mps < abs(e.speed(self.c) - speed) <= cells
+            for e in self._echoes
         )
 
-    def ghost_of_known(self, t_s: float, alpha: float, hop_index: int, edge_side: int = 0) -> bool:
+    def ghost_of_known(
+        self, t_s: float, alpha: float, hop_index: int, edge_side: int = 0,
+        strength: float = math.inf,
+    ) -> bool:  # fmt: skip
         """Whether a detection at ``t_s`` (s) and time scale ``alpha``, the boundary ending
         hop ``hop_index``, is the ghost of an echo measured lately, where that echo's every
         tone is read as its neighbour: one tone spacing's speed away from it (within one
         Doppler resolution cell), where its comb peaks, ``(M − 1)/2`` hops of the two time
         scales' drift after one of the echo's boundaries (within :data:`GHOST_HOPS`), and
-        weaker than it (a ghost collects part of its echo's energy: a detection stronger than
-        the measured echo is that echo's source, the measured one its ghost, as when a weak
-        ghost passed the echo test first). Such a detection is refused without a fit; a
-        second echo exactly there is given up.
+        at most :data:`GHOST_FRACTION` of its strength (a ghost collects part of its echo's
+        energy; up to its whole strength beside a slow echo, :data:`STILL_LEAK_CELLS`).
+        Such a detection is refused without a fit. One stronger than that is
+        fitted, and the echo test decides: a second echo there (a target one tone spacing's
+        speed from another, whose boundaries pass where the other's ghost peaks half of the
+        time), or the measured echo's source where the measured one is a weak ghost that
+        passed the echo test first. A second echo there weaker than that is given up. A
+        detection whose detector statistic ``strength`` (above its noise mean) is at most
+        :data:`GHOST_STRENGTH_MARGIN` times that of a detection already read as this echo's
+        ghost is taken for its ghost without reading it again (a second echo within
+        :data:`GHOST_FRACTION` of the echo collects several times what its ghost does).
 
         On the span's edge hypothesis (``edge_side`` +1 closing, −1 opening; 0 elsewhere), a
         ghost beyond that edge (more than one Doppler cell past the detection's speed, at
@@ -600,16 +644,20 @@ class CoherentRefiner:
             spread = 2.0 * abs(drift)  # hops between the first and the last term's offsets
             if abs((t_s - e.t_s) / period - drift - k) > GHOST_HOPS + max(0.0, spread - 0.5) / 2:
                 continue
-            if e.ghosts_weaker:
+            if strength <= GHOST_STRENGTH_MARGIN * e.ghost_strength:
                 return True
             if amplitude is None:
-                amplitude = self._amplitude_near(t_s, alpha, hop_index)
-            if amplitude <= abs(e.amplitude):
-                self._echoes[i] = replace(e, ghosts_weaker=True)
+                amplitude = self._amplitude_near(t_s, alpha, hop_index, around=True)
+            slow = abs(e.speed(self.c)) <= STILL_LEAK_CELLS * self._cell_speed
+            if amplitude <= (1.0 if slow else GHOST_FRACTION) * abs(e.amplitude):
+                if math.isfinite(strength) and strength > e.ghost_strength:
+                    self._echoes[i] = replace(e, ghost_strength=strength)
                 return True
         return False
 
-    def _amplitude_near(self, t_s: float, alpha: float, hop_index: int, inward: int = 0) -> float:
+    def _amplitude_near(
+        self, t_s: float, alpha: float, hop_index: int, inward: int = 0, around: bool = False
+    ) -> float:
         """The largest fitted amplitude ``|β| = 2|C|/E_s`` of an echo of constant speed
         within ±½ grating lobe of ``t_s`` (s, :data:`GHOST_POINTS` times) at the detection's
         time scale ``alpha``: a detection's strength without its fit (0 where the input does
@@ -626,6 +674,11 @@ class CoherentRefiner:
             steps = int(math.ceil(self.speed_span_mps / (0.5 * self._v_res)))
             v = speed + inward * np.linspace(0.0, self.speed_span_mps, steps + 1)
             alphas1 = (self.c + v) / (self.c - v)
+        elif around:
+            speed = self.c * (alpha - 1.0) / (alpha + 1.0)
+            steps = int(math.ceil(self.speed_span_mps / (0.5 * self._v_res)))
+            v = speed + np.linspace(-self.speed_span_mps, self.speed_span_mps, 2 * steps + 1)
+            alphas1 = (self.c + v) / (self.c - v)
         t = np.ascontiguousarray(np.tile(t1, alphas1.size))
         alphas = np.ascontiguousarray(np.repeat(alphas1, t1.size))
         sums = self._sums(t_s, alpha, hop_index, t, alphas, np.zeros(t.size))
@@ -637,22 +690,24 @@ class CoherentRefiner:
 
     def _remember(self, fit: Refinement, hop_index: int) -> None:
         """Keep ``fit`` as its echo's latest (with its fitted amplitude ``β = 2C/E_s``),
-        replacing that echo's earlier fit (whose finding that its ghosts are weaker it
-        carries on) and forgetting fits :data:`KNOWN_HOPS` hops old."""
+        replacing that echo's earlier fit (the strength of its ghosts read so far carried
+        on) and forgetting fits :data:`KNOWN_HOPS` hops old."""
         if fit.amplitude == 0:
             return
         speed = self.c * (fit.alpha - 1.0) / (fit.alpha + 1.0)  # _EchoFit.speed
         oldest = fit.t_s - KNOWN_HOPS * self.hop_len_s
         kept = []
-        weaker = False
+        ghost_strength = 0.0
         for e in self._echoes:
             if e.t_s < oldest:
                 continue
             if self._same_echo(e, hop_index, fit.t_s, speed):
-                weaker = weaker or e.ghosts_weaker
+                ghost_strength = max(ghost_strength, e.ghost_strength)
             else:
                 kept.append(e)
-        new = _EchoFit(hop_index, fit.t_s, fit.alpha, fit.amplitude, fit.rate(self.c), weaker)
+        new = _EchoFit(
+            hop_index, fit.t_s, fit.alpha, fit.amplitude, fit.rate(self.c), ghost_strength
+        )
         self._echoes = [*kept, new]
 
     def _same_echo(self, fit: _EchoFit, hop_index: int, t_s: float, speed: float) -> bool:

@@ -111,7 +111,7 @@ class _Refiner:
         )
         return _Fit(t_s, alpha, any(abs(v - e) < 1e-9 for e in self.echo_at))
 
-    def ghost_of_known(self, t_s: float, alpha: float, hop: int) -> bool:
+    def ghost_of_known(self, t_s: float, alpha: float, hop: int, strength: float) -> bool:
         return self.ghosts
 
 

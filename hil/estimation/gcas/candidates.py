@@ -17,14 +17,15 @@ boundary to the middle of the hop with no maximum of its own), reaches :data:`SE
 of the greater one, and lies in a row away from the reverberation band's edges and the
 span's (``second_rows``: there one echo's leak into a mismatched Doppler cell ripples along
 the row) and outside the still reverberation's cells. Its peak is decided only beside a
-partner or two echoes measured at its speed
-(:meth:`~hil.estimation.refine.CoherentRefiner.beside_known`), and
-its fit and the other's need each other taken out (the refinement's partners,
-:data:`~hil.estimation.refine.PARTNER_COHERENCE`). Measured on att at 0 dB (two closing
-targets at 10 m/s, independent synthesis): per-target detection 3 m apart 0.26 / 0.28
-before, 1.0 / 1.0 with both; 10.1 m apart 0.46 / 0.54 and 1.0 / 1.0. Echoes whose boundaries
-lie within about a tenth of a hop of each other (modulo the hop) are one peak of the coarse
-row and stay one candidate.
+partner or two echoes measured at its speed, or beside an echo measured at a nearby speed
+(:meth:`~hil.estimation.refine.CoherentRefiner.beside_known`: two echoes within a Doppler
+cell of a hop of each other share the detector's cell, and the weaker one's boundary is only
+a second maximum of its row), and its fit and the other's need each other taken out (the
+refinement's partners, :data:`~hil.estimation.refine.PARTNER_COHERENCE`). Measured on att at
+0 dB (two closing targets at 10 m/s, independent synthesis): per-target detection 3 m apart
+0.26 / 0.28 before, 1.0 / 1.0 with both; 10.1 m apart 0.46 / 0.54 and 1.0 / 1.0. Echoes
+whose boundaries lie within about a tenth of a hop of each other (modulo the hop) are one
+peak of the coarse row and stay one candidate.
 
 :class:`StrongestEcho` (without it: the detector alone cannot tell an echo from a ghost):
 the strongest cell over ``±hc`` blocks and every hypothesis, compared in stage 2 with the

@@ -137,7 +137,7 @@ class HiddenEchoes:
                 continue
             note.measured = True
             if self._explained(note) or self.refiner.ghost_of_known(
-                note.t_s, note.alpha, note.hop_index
+                note.t_s, note.alpha, note.hop_index, strength=note.strength
             ):
                 continue
             found = self._measure(note, t_s)

@@ -269,7 +269,9 @@ class Readout:
         if self._refiner is not None:
             if self.hidden is not None:
                 self.hidden.measure_near(t_rx, p.peak - p.mean)
-            if self._refiner.ghost_of_known(t_rx, alpha, hop_index, self._edge_side(p.d0)):
+            if self._refiner.ghost_of_known(
+                t_rx, alpha, hop_index, self._edge_side(p.d0), p.peak - p.mean
+            ):
                 self.incoherent_count += 1
                 return None
             refined = self._refiner.refine(
