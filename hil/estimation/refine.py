@@ -892,10 +892,11 @@ class CoherentRefiner:
         first = self._earlier_power(hop_ids, fit.t_s, fit.alpha, lobe)
         if first is None:
             return fit
-        own = self._powers(
-            self._search_args(word, hop_ids, fit.t_s, fit.alpha), known,
-            np.array([fit.t_s]), np.array([fit.alpha]), np.zeros(1),
-        )  # fmt: skip
+        slots = self._slots(hop_ids, word, fit.t_s, fit.alpha)
+        if slots is None:
+            return fit
+        args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
+        own = self._powers(args, known, np.array([fit.t_s]), np.array([fit.alpha]), np.zeros(1))
         if first < LOBE_HELD * own[0]:
             return fit
         best = (float(own[0]) + first, fit.t_s, v_fit)
@@ -918,18 +919,14 @@ class CoherentRefiner:
         if not moved:
             return fit
         _, t, v = best
+        # The winner's tables, made by its search (later searches' fills may have taken some
+        # of its slots: those are made again, the others reused).
         alpha = (self.c + v) / (self.c - v)
-        args = self._search_args(word, hop_ids, t, alpha)
+        slots = self._slots(hop_ids, word, t, alpha)
+        if slots is None:
+            return fit
+        args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
         return self._refinement(args, known, word, t, alpha, 0.0, True)
-
-    def _search_args(
-        self, word: _Codeword, hop_ids: NDArray[np.int64], t_s: float, alpha: float
-    ) -> tuple[Any, ...]:
-        """The kernels' arguments of tables made (or kept) for ``(t_s, alpha)``; the input
-        covers the hops (a search there has just run)."""
-        slots = self._slots(hop_ids, word, t_s, alpha)
-        assert slots is not None
-        return (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
 
     def _refinement(
         self, args: tuple[Any, ...], known: NDArray[np.complex128], word: _Codeword, t: float,
