@@ -283,6 +283,8 @@ class _EchoFit:
     #: The largest detector statistic (above its noise mean) of a detection read as this
     #: echo's ghost (:meth:`CoherentRefiner.ghost_of_known`; 0 before any).
     ghost_strength: float = 0.0
+    #: The fit's E/N0, dB (:attr:`Refinement.e_over_n0_db`).
+    e_over_n0_db: float = math.inf
 
     def speed(self, sound_speed_mps: float) -> float:
         """Radial speed, m/s (closing positive)."""
@@ -609,16 +611,17 @@ class CoherentRefiner:
         return fit
 
     def beside_known(self, t_s: float, alpha: float, hop_index: int) -> bool:
-        """Whether a second echo at the speed of a detection at ``t_s`` (s) and time scale
-        ``alpha`` (the boundary ending hop ``hop_index``) may be there: within
-        :data:`KNOWN_HOPS` hops of it and within the speed span, a partner kept lately
-        (:data:`PARTNER_COHERENCE`) that is not this detection's own echo, or two echoes
-        measured lately, one of them not this detection's own; or an echo measured lately
-        beyond the speed span but within :data:`NEIGHBOUR_CELLS` Doppler cells of a hop of
-        it. A second maximum of a Doppler row (:mod:`hil.estimation.gcas.candidates`) is
-        decided only there: beside one lone echo of its speed it is that echo's shoulder (its
-        fit would be that echo on another codeword), and in noise alone one more chance for a
-        false alarm."""
+        """Whether a second echo at the speed of a detection at ``t_s`` (s) and time scale ``alpha``
+        (the boundary ending hop ``hop_index``) may be there: within :data:`KNOWN_HOPS` hops
+        of it and within the speed span, a partner kept lately (:data:`PARTNER_COHERENCE`)
+        that is not this detection's own echo, or two echoes measured lately, one of them
+        not this detection's own; or an echo measured lately beyond the speed span but
+        within :data:`NEIGHBOUR_CELLS` Doppler cells of a hop of it, above the lobe
+        decision's threshold region (:data:`LOBE_Z`: near threshold the fits that pass
+        include noise's, beside which a second maximum is noise too). A second maximum of a
+        Doppler row (:mod:`hil.estimation.gcas.candidates`) is decided only there: beside
+        one lone echo of its speed it is that echo's shoulder (its fit would be that echo on
+        another codeword), and in noise alone one more chance for a false alarm."""
         speed = self.c * (alpha - 1.0) / (alpha + 1.0)
         reach = KNOWN_HOPS * self.hop_len_s
 
@@ -634,6 +637,7 @@ class CoherentRefiner:
         return any(
             abs(e.t_s - t_s) <= reach
             and self.speed_span_mps < abs(e.speed(self.c) - speed) <= cells
+            and e.e_over_n0_db >= self.lobe_sure_db
             for e in self._echoes
         )
 
@@ -748,8 +752,9 @@ class CoherentRefiner:
             else:
                 kept.append(e)
         new = _EchoFit(
-            hop_index, fit.t_s, fit.alpha, fit.amplitude, fit.rate(self.c), ghost_strength
-        )
+            hop_index, fit.t_s, fit.alpha, fit.amplitude, fit.rate(self.c), ghost_strength,
+            fit.e_over_n0_db,
+        )  # fmt: skip
         self._echoes = [*kept, new]
 
     def _same_echo(self, fit: _EchoFit, hop_index: int, t_s: float, speed: float) -> bool:
@@ -906,14 +911,16 @@ class CoherentRefiner:
         return self._refinement(args, known, word, best_t, a_best, gamma, outcome == FOUND)
 
     def _earlier_power(
-        self, hop_ids: NDArray[np.int64], t_s: float, alpha: float, lobe: float
-    ) -> float | None:
+        self, hop_ids: NDArray[np.int64], t_s: float, alpha: float, lobe: float,
+        known: NDArray[np.complex128],
+    ) -> float | None:  # fmt: skip
         """The largest ``|C|²`` over the ``M`` hops before ``hop_ids`` of the echo whose
         boundary ending ``hop_ids[-1]`` is received at ``t_s`` (s) with time scale ``alpha``
         (constant speed: that window's boundary ``M T_h / α`` earlier), over
         :data:`LOBE_POINTS` times across ±⅛ lobe and :data:`LOBE_SPEEDS` speeds across ± a
-        quarter of the ``M`` hops' speed resolution; without the other echoes taken out.
-        None where the input does not cover those hops."""
+        quarter of the ``M`` hops' speed resolution, with the ``known`` rows of the other
+        echoes over those hops taken out (:meth:`_known_before`). None where the input does
+        not cover those hops."""
         before = hop_ids - self.m_hops
         word = self._codeword(int(before[-1]))
         centre = t_s - self.m_hops * self.hop_len_s / alpha
@@ -925,7 +932,34 @@ class CoherentRefiner:
         alphas = np.repeat((self.c + speeds) / (self.c - speeds), LOBE_POINTS)
         t = np.tile(centre + 0.125 * lobe * np.linspace(-1.0, 1.0, LOBE_POINTS), LOBE_SPEEDS)
         args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
-        return float(np.max(self._powers(args, _NO_KNOWN, t, alphas, np.zeros(t.size))))
+        return float(np.max(self._powers(args, known, t, alphas, np.zeros(t.size))))
+
+    def _known_before(
+        self, hop_index: int, t_s: float, alpha: float, amplitude: float
+    ) -> NDArray[np.complex128]:
+        """The ``known`` rows of the other echoes measured lately stronger than
+        ``amplitude`` (a fit's ``|β|``; as :meth:`_known_hops` for a detection at ``t_s``,
+        s, time scale ``alpha``, ending hop ``hop_index``) over the ``M`` hops before the
+        detection's: each echo continued back at its fitted delay, time scale and amplitude.
+        Beside a stronger echo, the earlier window of a weak one holds the stronger one's
+        lobes as much as its own window does (att, a target 10 dB below another at -10 dB
+        per-sample SNR: 5 of 200 hops a lobe off without them, none with them)."""
+        speed = self.c * (alpha - 1.0) / (alpha + 1.0)
+        others = [
+            e for e in self._echoes
+            if abs(e.t_s - t_s) <= KNOWN_HOPS * self.hop_len_s
+            and abs(e.amplitude) > amplitude
+            and not self._same_echo(e, hop_index, t_s, speed)
+        ]  # fmt: skip
+        if not others:
+            return _NO_KNOWN
+        t_end = t_s - self.m_hops * self.hop_len_s / alpha
+        t_lo = t_end - (self.m_hops + 1) * self.hop_len_s / (
+            1.0 - 2.0 * self.speed_span_mps / self.c
+        )
+        t_hi = t_end + self.hop_len_s
+        columns = [self._echo_hops(e, t_lo, t_hi) for e in others]
+        return np.ascontiguousarray(np.concatenate(columns, axis=1))
 
     def _lobe_by_more_hops(
         self, fit: Refinement, word: _Codeword, hop_ids: NDArray[np.int64], t0: float,
@@ -944,7 +978,8 @@ class CoherentRefiner:
         v_fit = fit.speed_mps(self.c)
         v_reach = LOBE_SPANS * self.speed_span_mps
         grid = (0.5 * lobe, v_reach, TIME_POINTS, 2 * LOBE_SPANS * (self.speed_points // 2) + 1)
-        first = self._earlier_power(hop_ids, fit.t_s, fit.alpha, lobe)
+        before = self._known_before(int(hop_ids[-1]), fit.t_s, fit.alpha, abs(fit.amplitude))
+        first = self._earlier_power(hop_ids, fit.t_s, fit.alpha, lobe, before)
         if first is None:
             return fit
         slots = self._slots(hop_ids, word, fit.t_s, fit.alpha)
@@ -968,7 +1003,7 @@ class CoherentRefiner:
             t, v, _, args = searched
             alpha = (self.c + v) / (self.c - v)
             p = self._powers(args, known, np.array([t]), np.array([alpha]), np.zeros(1))
-            earlier = self._earlier_power(hop_ids, t, alpha, lobe)
+            earlier = self._earlier_power(hop_ids, t, alpha, lobe, before)
             if earlier is not None and p[0] + earlier > best[0]:
                 best, moved = (float(p[0]) + earlier, t, v), True
         if not moved:
