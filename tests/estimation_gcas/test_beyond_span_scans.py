@@ -158,11 +158,18 @@ def test_a_fit_beyond_the_edge_short_of_the_inside_is_refused_and_not_said() -> 
     refiner = _Refiner()
     check = _check(refiner)
     refiner.inside = 2.0
-    for hop in (0, 1, 2):
+    for hop in (10, 11, 12):
         assert check.check(1.0, _alpha(30.0), hop, 1, _Fit(_alpha(30.5)))
     assert check.sightings == [] and check.count == 3
     refiner.inside = 0.5
-    for hop in (3, 4):
+    for hop in (13, 14):
         assert check.check(1.0, _alpha(30.0), hop, 1, _Fit(_alpha(30.5)))
-    assert [(s.side, s.hop_index) for s in check.sightings] == [("closing", 4)]
+    assert [(s.side, s.hop_index) for s in check.sightings] == [("closing", 14)]
+    # Fits of hops partly before the schedule's first (hop < M - 1) are not said.
+    early = _check(refiner)
+    for hop in (5, 6, 7, 8):
+        assert early.check(1.0, _alpha(30.0), hop, 1, _Fit(_alpha(30.5)))
+    assert early.sightings == [] and early.count == 4
+    assert early.check(1.0, _alpha(30.0), 9, 1, _Fit(_alpha(30.5)))
+    assert [s.hop_index for s in early.sightings] == [9]
     assert check.sightings[0].speed_mps == pytest.approx(30.5)

@@ -56,9 +56,10 @@ sighting, and the detection is refused as its. An echo fitted inside the span wh
 beyond the span lately puts its ghost (one or two tone spacings inward, where its comb
 peaks) and weaker than that fit is refused as that ghost: at low SNR a ghost's phases can
 agree (measured, 35 m/s at -10 dB: 7.44 m/s at 99.67 m; -35 m/s: 19.53 m/s). Each side is
-said at the second fit beyond it within :data:`GHOST_FOLLOW_HOPS` hops of another, with
-that fit's time and speed: a lone fit may be noise's or of hops partly before the signal
-began (a far echo's first boundaries, read 0.1 m/s off).
+said at the second fit beyond it within :data:`GHOST_FOLLOW_HOPS` hops of another whose
+hops were all transmitted, with that fit's time and speed: a lone fit may be noise's, and
+one of hops partly before the schedule's first (a far echo's first boundaries) is read
+0.1 m/s off.
 
 The guard band only serves this test; nothing beyond the span is ever reported as an
 estimate. A target further than the guard band past the edge leaves no edge detection and
@@ -436,15 +437,18 @@ class BeyondSpanCheck:
     def _seen(self, fit: Refinement, hop_index: int, side: int) -> None:
         """Keep ``fit`` (ending hop ``hop_index``) as the latest beyond the ``side`` edge;
         the side's sighting is said at the first fit that follows another within
-        :data:`GHOST_FOLLOW_HOPS` hops, with its time and speed: one fit may be noise's, or
-        of hops partly before the signal began (the first of a far echo), whose speed is
-        off by more than the fit's resolution."""
+        :data:`GHOST_FOLLOW_HOPS` hops and whose ``M`` hops were all transmitted (hop
+        ``M − 1`` on), with its time and speed: one fit may be noise's, and a fit of hops
+        partly before the schedule's first is off in speed by more than the fit's resolution
+        (a far echo's first boundaries: 34.86 m/s for 35 m/s at -5 dB)."""
         before = self._last.get(side)
         self._last[side] = (hop_index, fit.t_s, fit.alpha)
         name = CLOSING if side > 0 else OPENING
         if any(s.side == name for s in self.sightings):
             return
         if before is None or abs(fit.t_s - before[1]) > GHOST_FOLLOW_HOPS * self.hop_s:
+            return
+        if hop_index < self.m_hops - 1:
             return
         self.sightings.append(
             BeyondSpan(fit.t_s, int(hop_index), name, self.max_speed_mps, fit.speed_mps(self.c))
