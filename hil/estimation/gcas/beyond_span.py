@@ -76,7 +76,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from hil.estimation.gcas.ghost_source import GhostSources
-from hil.estimation.refine import GHOST_HOPS, CoherentRefiner, EchoTest, Refinement
+from hil.estimation.refine import (
+    GHOST_HOPS,
+    GHOST_LEAK_FRACTION,
+    CoherentRefiner,
+    EchoTest,
+    Refinement,
+)
 
 #: Doppler cells of one hop (``c/(2 f_c T_h)``) past the span's edge that the check scans: an
 #: echo three cells out still leaks onto the edge hypothesis above a 0 dB detection threshold.
@@ -332,7 +338,7 @@ class BeyondSpanCheck:
         fit beyond that edge, else (with the scans' waits) looked for; found, it is counted
         and the first per side said."""
         for side, v_lo, v_hi in self.ghosts.bands(alpha):
-            found = self._follow_ghost(t_s, alpha, side, fit, timed=False)
+            found = self._follow_ghost(t_s, alpha, (side, v_lo, v_hi), fit, timed=False)
             if (
                 found is None
                 and hop_index >= self._next_ghost_scan.get(side, hop_index)
@@ -371,8 +377,9 @@ class BeyondSpanCheck:
         the echo test at low SNR (its phases then happen to agree). Refused and counted."""
         if not self._last:
             return False
-        for side, _, _ in self.ghosts.bands(fit.alpha):
-            found = self._follow_ghost(t_s, alpha, side, fit, timed=True)
+        for band in self.ghosts.bands(fit.alpha):
+            side = band[0]
+            found = self._follow_ghost(t_s, alpha, band, fit, timed=True)
             if found is not None:
                 self._seen(found[0], found[1], side)
                 self.count += 1
@@ -380,29 +387,42 @@ class BeyondSpanCheck:
         return False
 
     def _follow_ghost(
-        self, t_s: float, alpha: float, side: int, fit: Refinement, *, timed: bool
-    ) -> tuple[Refinement, int] | None:
-        """The echo beyond the ``side`` edge fitted within :data:`GHOST_FOLLOW_HOPS` hops of
-        a ghost detected at ``t_s`` (s) and ``alpha`` (whose own fit is ``fit``), fitted
-        again at its boundary that the ghost aligns with: ``(fit, hop index)`` where that
-        fit is one echo beyond the span, stronger than the ghost's
-        (:data:`GHOST_SOURCE_RATIO`); else None. ``timed``: the ghost's time must also lie
-        within :data:`~hil.estimation.refine.GHOST_HOPS` of that boundary's comb."""
+        self, t_s: float, alpha: float, band: tuple[int, float, float], fit: Refinement, *,
+        timed: bool,
+    ) -> tuple[Refinement, int] | None:  # fmt: skip
+        """The echo beyond the edge of ``band`` (side, and the speeds in m/s where the
+        ghost's source may be: :meth:`GhostSources.bands`) fitted within
+        :data:`GHOST_FOLLOW_HOPS` hops of a ghost detected at ``t_s`` (s) and ``alpha``
+        (whose own fit is ``fit``) at a speed in that band, fitted again at its boundary that
+        the ghost aligns with: ``(fit, hop index)`` where that fit is one echo beyond the
+        span, stronger than the ghost's (:data:`GHOST_SOURCE_RATIO`); else None. ``timed``:
+        the ghost's time must also lie within :data:`~hil.estimation.refine.GHOST_HOPS` of
+        that boundary's comb, unless the ghost is at most
+        :data:`~hil.estimation.refine.GHOST_LEAK_FRACTION` of the echo (a ghost two tone
+        spacings out spreads further in time: measured 0.3-0.45 hop off at 0.06 of it)."""
+        side, v_lo, v_hi = band
         last = self._last.get(side)
         if last is None:
             return None
         hop, t_fit, a_fit = last
+        if not v_lo <= self.c * (a_fit - 1.0) / (a_fit + 1.0) <= v_hi:
+            return None
         t_b = self.ghosts.boundary(t_s, alpha, a_fit)
         if abs(t_b - t_fit) > GHOST_FOLLOW_HOPS * self.hop_s:
             return None
         period = self.hop_s / a_fit
         r = round((t_b - t_fit) / period)
-        if timed and abs(t_b - t_fit - r * period) > GHOST_HOPS * period:
-            return None
         again = self.refiner.refine(t_fit + r * period, a_fit, hop + r)
-        if not self._source(again, side, fit):
+        if again is None or not self._source(again, side, fit):
             return None
-        return again, hop + r  # type: ignore[return-value]
+        off = abs(t_b - t_fit - r * period)
+        if (
+            timed
+            and off > GHOST_HOPS * period
+            and abs(fit.amplitude) > GHOST_LEAK_FRACTION * abs(again.amplitude)
+        ):
+            return None
+        return again, hop + r
 
     def _scan_ghost(
         self, t_s: float, alpha: float, side: int, v_lo: float, v_hi: float, fit: Refinement
