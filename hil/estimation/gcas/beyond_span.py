@@ -126,12 +126,13 @@ GHOST_FOLLOW_HOPS = 8
 GHOST_SOURCE_RATIO = 1.0
 
 #: Doppler cells of one hop within which a detection is the leak of an echo measured lately
-#: inside the span (its codeword's Doppler sidelobes, 3 cells out on ``att``: a 12 m/s target
-#: at 0 dB leaks at 4.4 and 19.3 m/s), and within which of that echo's ghosts' speeds (one or
-#: two tone spacings from it, :data:`~hil.estimation.gcas.ghost_source.SPACINGS`) a
-#: detection is its ghost: neither is scanned for a source beyond the span (a scan costs as
-#: much as the rest of a lone target's hop).
-LEAK_CELLS = 3.5
+#: inside the span (its codeword's Doppler sidelobes, 3-3.7 cells out on ``att`` at 0 dB: a
+#: 12 m/s target leaks at 4.4 and 19.3 m/s, 20 m/s at 11.0, -12 m/s at -21.3), and within
+#: which of that echo's ghosts' speeds (one or two tone spacings from it,
+#: :data:`~hil.estimation.gcas.ghost_source.SPACINGS`) a detection is its ghost: neither is
+#: scanned for a source beyond the span (a scan costs as much as the rest of a lone
+#: target's hop).
+LEAK_CELLS = 4.0
 GHOST_CELLS = 1.0
 
 #: The side of the span an echo is beyond: closing (positive speed) or opening.
@@ -196,7 +197,7 @@ class BeyondSpanCheck:
         #: Where the source of a ghost detected inside the span may be beyond it.
         self.ghosts = GhostSources(
             refiner, self.max_speed_mps, inside_mps=0.5 * self.resolution_mps,
-            guard_mps=self.guard_mps, step_mps=0.5 * self.resolution_mps,
+            guard_mps=self.guard_mps, step_mps=self.resolution_mps,
             cell_mps=self.cell_mps,
         )  # fmt: skip
         self.reset()
@@ -405,7 +406,9 @@ class BeyondSpanCheck:
         if last is None:
             return None
         hop, t_fit, a_fit = last
-        if not v_lo <= self.c * (a_fit - 1.0) / (a_fit + 1.0) <= v_hi:
+        # The band is cut at the guard band's end, which a fit may pass.
+        margin = self.ghosts.margin_mps
+        if not v_lo - margin <= self.c * (a_fit - 1.0) / (a_fit + 1.0) <= v_hi + margin:
             return None
         t_b = self.ghosts.boundary(t_s, alpha, a_fit)
         if abs(t_b - t_fit) > GHOST_FOLLOW_HOPS * self.hop_s:
