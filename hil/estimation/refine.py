@@ -561,11 +561,14 @@ class CoherentRefiner:
             not self._same_echo(e, hop_index, t_s, speed) for e in echoes
         )
 
-    def known_speeds(self, t_s: float) -> list[float]:
-        """The speeds (m/s) of the echoes measured within :data:`KNOWN_HOPS` hops of
-        ``t_s`` (s): the ones taken out of a detection's input there."""
+    def known_echoes(self, t_s: float) -> list[tuple[float, float]]:
+        """The echoes measured within :data:`KNOWN_HOPS` hops of ``t_s`` (s), the ones taken
+        out of a detection's input there: ``(speed m/s, |β|)`` each, ``β`` the fitted
+        amplitude (:attr:`Refinement.amplitude`)."""
         reach = KNOWN_HOPS * self.hop_len_s
-        return [e.speed(self.c) for e in self._echoes if abs(e.t_s - t_s) <= reach]
+        return [
+            (e.speed(self.c), abs(e.amplitude)) for e in self._echoes if abs(e.t_s - t_s) <= reach
+        ]
 
     def ghost_of_known(self, t_s: float, alpha: float, hop_index: int, edge_side: int = 0) -> bool:
         """Whether a detection at ``t_s`` (s) and time scale ``alpha``, the boundary ending
