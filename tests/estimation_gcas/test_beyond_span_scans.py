@@ -121,12 +121,14 @@ def test_an_echo_fit_near_the_edge_after_a_sighting_is_scanned_every_time() -> N
     refiner = _Refiner()
     check = _check(refiner)
     refiner.beyond_at = 33.0
-    assert check.check(1.0, _alpha(30.0), 0, 1, _Fit(_alpha(29.9), echo=False))
+    for hop in (9, 10):  # a fit, and a second one that says it
+        assert check.check(1.0, _alpha(30.0), hop, 1, _Fit(_alpha(29.9), echo=False))
+    assert len(check.sightings) == 1
     refiner.beyond_at = None
     near = _Fit(_alpha(29.95))  # one echo, within a Doppler cell of the edge
-    for hop in range(10, 20):
+    for hop in range(20, 30):
         assert not check.check(1.0, _alpha(30.0), hop, 1, near)
-    assert refiner.scans == [0, *range(10, 20)]
+    assert refiner.scans == [9, *range(20, 30)]
 
 
 def test_an_echo_fit_short_of_something_stronger_beyond_the_edge_is_refused() -> None:

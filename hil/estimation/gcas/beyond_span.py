@@ -235,8 +235,10 @@ class BeyondSpanCheck:
         return abs(speed_mps) > self.max_speed_mps - within_mps
 
     def _seen_on(self, side: int) -> bool:
-        """Whether an echo beyond the ``side`` edge (+1 closing, −1 opening) was seen."""
-        return side in self._last
+        """Whether an echo beyond the ``side`` edge (+1 closing, −1 opening) was seen (said:
+        a lone fit there, not followed by another, may be noise's or an echo's lobe)."""
+        name = CLOSING if side > 0 else OPENING
+        return any(s.side == name for s in self.sightings)
 
     def _inside_echo_at(self, t_s: float, side: int) -> bool:
         """Whether an echo inside the span within the guard band's width of the ``side`` edge was
