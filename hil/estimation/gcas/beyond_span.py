@@ -65,7 +65,8 @@ The guard band only serves this test; nothing beyond the span is ever reported a
 estimate. A target further than the guard band past the edge leaves no edge detection and
 no ghost whose source fits an echo there: it is refused (ghosts, edge leaks) without a
 sighting (``att``, a 30 m/s span: 38 m/s is said, 45 m/s is not; a 20 m/s span does not say
-35 m/s).
+35 m/s). Just past the guard band's reach the echo's lobe one Doppler cell inward can be
+fitted and said instead, at a wrong speed (40 m/s at -10 dB: said at 37.5 m/s).
 """
 
 from __future__ import annotations
