@@ -641,6 +641,15 @@ class CoherentRefiner:
             for e in self._echoes
         )
 
+    def known_echoes(self, t_s: float) -> list[tuple[float, float]]:
+        """The echoes measured within :data:`KNOWN_HOPS` hops of ``t_s`` (s), the ones taken
+        out of a detection's input there: ``(speed m/s, |β|)`` each, ``β`` the fitted
+        amplitude (:attr:`Refinement.amplitude`)."""
+        reach = KNOWN_HOPS * self.hop_len_s
+        return [
+            (e.speed(self.c), abs(e.amplitude)) for e in self._echoes if abs(e.t_s - t_s) <= reach
+        ]
+
     def ghost_of_known(
         self, t_s: float, alpha: float, hop_index: int, edge_side: int = 0,
         strength: float = math.inf,

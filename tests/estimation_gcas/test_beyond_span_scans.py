@@ -12,9 +12,12 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import pytest
 
 from hil.estimation.gcas.beyond_span import MAX_SCAN_GAP_HOPS, BeyondSpanCheck
 from hil.estimation.refine import EchoTest
+
+from .conftest import att_schedule
 
 C = 1500.0
 TEST = EchoTest(fraction=0.5, run_fraction=0.5, min_e_over_n0_db=12.0)
@@ -42,17 +45,21 @@ class _Refiner:
     speed for the fit started from the scan's best point."""
 
     c, m_hops, speed_span_mps, spacing_hz = C, 10, 2.0, 100.0
+    schedule = att_schedule()
 
     def __init__(self) -> None:
         self.scans: list[int] = []
         self.beyond_at: float | None = None
         self.hop = 0
-        #: ``|C|²`` at a fit (a one-point call) and over the guard band (a grid).
-        self.at_fit, self.in_guard = 1.0, 1.0
+        #: ``|C|²`` at a fit (a one-point call), over the guard band and inside the span
+        #: near its edge (grids about a speed past the 30 m/s edge, or inside it).
+        self.at_fit, self.in_guard, self.inside = 1.0, 1.0, 0.5
 
     def correlation(self, t_c: float, a_c: float, hop: int, tt: Any, aa: Any) -> np.ndarray:
         if np.size(tt) == 1:
             return np.full(np.shape(tt), np.sqrt(self.at_fit))
+        if abs(C * (a_c - 1.0) / (a_c + 1.0)) < 30.0:
+            return np.full(np.shape(tt), np.sqrt(self.inside))
         if not self.scans or self.scans[-1] != hop:
             self.scans.append(hop)
         return np.full(np.shape(tt), np.sqrt(self.in_guard))
@@ -99,9 +106,12 @@ def test_a_scan_that_finds_the_echo_starts_the_waits_again() -> None:
     assert refiner.scans == [0, 1, 3, 7]
     refiner.beyond_at = 33.0  # an echo beyond the span appears: the next scan finds it
     assert check.check(1.0, _alpha(30.0), 15, 1, not_echo)
-    assert [s.side for s in check.sightings] == ["closing"] and check.count == 1
-    # Followed from that fit while it lasts (no scan); once it cannot be followed, scanned
-    # at once: the waits started again.
+    assert check.sightings == [] and check.count == 1  # said once a second fit follows
+    # Followed from that fit while it lasts (no scan), and said then; once it cannot be
+    # followed, scanned at once: the waits started again.
+    assert check.check(1.01, _alpha(30.0), 16, 1, not_echo)
+    assert [s.side for s in check.sightings] == ["closing"] and check.count == 2
+    assert check.sightings[0].hop_index == 16
     refiner.beyond_at = None
     assert not check.check(1.0, _alpha(30.0), 30, 1, not_echo)
     assert refiner.scans == [0, 1, 3, 7, 15, 30]
@@ -111,12 +121,14 @@ def test_an_echo_fit_near_the_edge_after_a_sighting_is_scanned_every_time() -> N
     refiner = _Refiner()
     check = _check(refiner)
     refiner.beyond_at = 33.0
-    assert check.check(1.0, _alpha(30.0), 0, 1, _Fit(_alpha(29.9), echo=False))
+    for hop in (9, 10):  # a fit, and a second one that says it
+        assert check.check(1.0, _alpha(30.0), hop, 1, _Fit(_alpha(29.9), echo=False))
+    assert len(check.sightings) == 1
     refiner.beyond_at = None
     near = _Fit(_alpha(29.95))  # one echo, within a Doppler cell of the edge
-    for hop in range(10, 20):
+    for hop in range(20, 30):
         assert not check.check(1.0, _alpha(30.0), hop, 1, near)
-    assert refiner.scans == [0, *range(10, 20)]
+    assert refiner.scans == [9, *range(20, 30)]
 
 
 def test_an_echo_fit_short_of_something_stronger_beyond_the_edge_is_refused() -> None:
@@ -139,3 +151,27 @@ def test_an_echo_fit_short_of_something_stronger_beyond_the_edge_is_refused() ->
     # Further inside than the guard band's width (7.5 m/s here) nothing is checked.
     assert not check.check(1.3, _alpha(20.0), 30, 0, _Fit(_alpha(20.0)))
     assert refiner.scans == [3, 10, 20] and check.count == 1
+
+
+def test_a_fit_beyond_the_edge_short_of_the_inside_is_refused_and_not_said() -> None:
+    """A fit one Doppler cell past the edge is a lobe of an echo inside the span where the
+    likelihood inside near the edge holds more than it: refused (as any fit beyond the span)
+    but no sighting; a fit that outshines the inside is said at the second fit."""
+    refiner = _Refiner()
+    check = _check(refiner)
+    refiner.inside = 2.0
+    for hop in (10, 11, 12):
+        assert check.check(1.0, _alpha(30.0), hop, 1, _Fit(_alpha(30.5)))
+    assert check.sightings == [] and check.count == 3
+    refiner.inside = 0.5
+    for hop in (13, 14):
+        assert check.check(1.0, _alpha(30.0), hop, 1, _Fit(_alpha(30.5)))
+    assert [(s.side, s.hop_index) for s in check.sightings] == [("closing", 14)]
+    # Fits of hops partly before the schedule's first (hop < M - 1) are not said.
+    early = _check(refiner)
+    for hop in (5, 6, 7, 8):
+        assert early.check(1.0, _alpha(30.0), hop, 1, _Fit(_alpha(30.5)))
+    assert early.sightings == [] and early.count == 4
+    assert early.check(1.0, _alpha(30.0), 9, 1, _Fit(_alpha(30.5)))
+    assert [s.hop_index for s in early.sightings] == [9]
+    assert check.sightings[0].speed_mps == pytest.approx(30.5)

@@ -44,9 +44,29 @@ for one finds nothing, that edge's next scans for them wait 1, 2, 4 … up to
 echo fit near the edge once an echo beyond it was seen is always scanned: there the scan
 decides whether it is reported.
 
+Below about 0 dB per-sample SNR the edge leak may never cross the threshold while the
+echo's ghosts do (``att``, 35 m/s with a 30 m/s span at -10 dB: none on the edge in 2 s, 190
+ghost detections at 7.3-8.1 m/s). So a detection inside the span whose fit is not one echo
+is read as a ghost (:mod:`hil.estimation.gcas.ghost_source`): where its source would lie
+beyond the span within the guard band, that source is fitted again from the latest fit
+beyond that edge (within :data:`GHOST_FOLLOW_HOPS`), else looked for over every hop of a
+code period (with its own waits per edge, as above) and refined; a fit there that is one
+echo beyond the span and stronger than the ghost's own (:data:`GHOST_SOURCE_RATIO`) is a
+sighting, and the detection is refused as its. An echo fitted inside the span where a fit
+beyond the span lately puts its ghost (one or two tone spacings inward, where its comb
+peaks) and weaker than that fit is refused as that ghost: at low SNR a ghost's phases can
+agree (measured, 35 m/s at -10 dB: 7.44 m/s at 99.67 m; -35 m/s: 19.53 m/s). Each side is
+said at the second fit beyond it within :data:`GHOST_FOLLOW_HOPS` hops of another whose
+hops were all transmitted, with that fit's time and speed: a lone fit may be noise's, and
+one of hops partly before the schedule's first (a far echo's first boundaries) is read
+0.1 m/s off.
+
 The guard band only serves this test; nothing beyond the span is ever reported as an
-estimate. A target further than the guard band past the edge leaves no edge detection that
-fits an echo there: it is refused (ghosts, edge leaks) without a sighting.
+estimate. A target further than the guard band past the edge leaves no edge detection and
+no ghost whose source fits an echo there: it is refused (ghosts, edge leaks) without a
+sighting (``att``, a 30 m/s span: 38 m/s is said, 45 m/s is not; a 20 m/s span does not say
+35 m/s). Just past the guard band's reach the echo's lobe one Doppler cell inward can be
+fitted and said instead, at a wrong speed (40 m/s at -10 dB: said at 37.5 m/s).
 """
 
 from __future__ import annotations
@@ -56,7 +76,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hil.estimation.refine import CoherentRefiner, EchoTest, Refinement
+from hil.estimation.gcas.ghost_source import GhostSources
+from hil.estimation.refine import (
+    GHOST_HOPS,
+    GHOST_LEAK_FRACTION,
+    CoherentRefiner,
+    EchoTest,
+    Refinement,
+)
 
 #: Doppler cells of one hop (``c/(2 f_c T_h)``) past the span's edge that the check scans: an
 #: echo three cells out still leaks onto the edge hypothesis above a 0 dB detection threshold.
@@ -77,14 +104,37 @@ INSIDE_HOPS = 3
 #: How every notice of an echo beyond the span begins (:meth:`BeyondSpan.text`).
 BEYOND_SPAN_TEXT = "an echo beyond the "
 
-#: Hops after a fit beyond the span within which an edge detection is checked by fitting
-#: that echo again where it puts the detection's boundary, before a scan.
+#: Hops from a fit beyond the span (before or after: a ghost's follow may have fitted a later
+#: boundary) within which an edge detection is checked by fitting that echo again where it
+#: puts the detection's boundary, before a scan.
 FOLLOW_HOPS = 3
 
 #: Longest wait, in hops, between two scans of an edge for detections not fitted as one echo
 #: after scans that found nothing (module docstring): an echo beyond the span that appears
 #: then is said at most this many hops late (0.3 s on ``att``).
 MAX_SCAN_GAP_HOPS = 64
+
+#: Hops from the latest fit beyond an edge within which a ghost of that echo is followed
+#: (its source fitted again where it puts the ghost's boundary, before a scan): its ghosts
+#: come every few hops, and between them the refinement refuses them as the ghosts of a
+#: known echo for :data:`~hil.estimation.refine.KNOWN_HOPS` without a fit.
+GHOST_FOLLOW_HOPS = 8
+
+#: How many times a ghost's own fit's amplitude its source beyond the span must have: a
+#: ghost collects part of its echo's energy (0.15-0.34 of its echo's peak,
+#: :data:`~hil.estimation.refine.GHOST_LEAK_FRACTION`), while the ghost beyond the span of
+#: an echo inside it (a slow echo's, one tone spacing out) is weaker than that echo.
+GHOST_SOURCE_RATIO = 1.0
+
+#: Doppler cells of one hop within which a detection is the leak of an echo measured lately
+#: inside the span (its codeword's Doppler sidelobes, 3-3.7 cells out on ``att`` at 0 dB: a
+#: 12 m/s target leaks at 4.4 and 19.3 m/s, 20 m/s at 11.0, -12 m/s at -21.3), and within
+#: which of that echo's ghosts' speeds (one or two tone spacings from it,
+#: :data:`~hil.estimation.gcas.ghost_source.SPACINGS`) a detection is its ghost: neither is
+#: scanned for a source beyond the span (a scan costs as much as the rest of a lone
+#: target's hop).
+LEAK_CELLS = 4.0
+GHOST_CELLS = 1.0
 
 #: The side of the span an echo is beyond: closing (positive speed) or opening.
 CLOSING, OPENING = "closing", "opening"
@@ -145,6 +195,12 @@ class BeyondSpanCheck:
         self.cell_mps = self.c / (2.0 * center_hz * self.hop_s)
         #: Width of the guard band past the edge, m/s.
         self.guard_mps = self.guard_width_mps(self.c, center_hz, self.hop_s)
+        #: Where the source of a ghost detected inside the span may be beyond it.
+        self.ghosts = GhostSources(
+            refiner, self.max_speed_mps, inside_mps=0.5 * self.resolution_mps,
+            guard_mps=self.guard_mps, step_mps=self.resolution_mps,
+            cell_mps=self.cell_mps,
+        )  # fmt: skip
         self.reset()
 
     @staticmethod
@@ -166,6 +222,9 @@ class BeyondSpanCheck:
         #: again, and the wait after the next scan that finds nothing (hops).
         self._next_scan: dict[int, int] = {}
         self._scan_gap: dict[int, int] = {}
+        #: The same for the scans for the source of a ghost beyond each edge.
+        self._next_ghost_scan: dict[int, int] = {}
+        self._ghost_scan_gap: dict[int, int] = {}
 
     def beyond(self, speed_mps: float) -> bool:
         """Whether a fitted speed (m/s) lies beyond the span (by more than half the
@@ -177,7 +236,8 @@ class BeyondSpanCheck:
         return abs(speed_mps) > self.max_speed_mps - within_mps
 
     def _seen_on(self, side: int) -> bool:
-        """Whether an echo beyond the ``side`` edge (+1 closing, −1 opening) was seen."""
+        """Whether an echo beyond the ``side`` edge (+1 closing, −1 opening) was seen (said:
+        a lone fit there, not followed by another, may be noise's or an echo's lobe)."""
         name = CLOSING if side > 0 else OPENING
         return any(s.side == name for s in self.sightings)
 
@@ -199,12 +259,15 @@ class BeyondSpanCheck:
         echo = fit is not None and fit.is_echo(self.test)
         own = math.nan if fit is None else fit.speed_mps(self.c)
         if echo and self.beyond(own):
-            self._seen(fit, hop_index, 1 if own > 0 else -1)  # type: ignore[arg-type]
+            # Refused in any case; seen where it is not the lobe of an echo inside the span.
+            out = 1 if own > 0 else -1
+            if self._outshines_inside(fit, hop_index, out):  # type: ignore[arg-type]
+                self._seen(fit, hop_index, out)  # type: ignore[arg-type]
             self.count += 1
             return True
         if echo:
             if not self.near_edge(own, self.guard_mps):
-                return False
+                return self._ghost_that_passed(t_s, alpha, fit)  # type: ignore[arg-type]
             side = 1 if own > 0 else -1
             if not (self._seen_on(side) and self.near_edge(own, self.cell_mps)):
                 if not self._held(t_s, own) and self._outshone(
@@ -222,7 +285,9 @@ class BeyondSpanCheck:
                 return False
             # Once an echo beyond this edge has been seen, a fit within one Doppler cell of
             # the edge may be its leak, fitted on a sidelobe of the likelihood: scanned.
-        elif side == 0 or self._inside_echo_at(t_s, side):
+        elif side == 0:
+            return fit is not None and self._ghost_refused(t_s, alpha, hop_index, fit)
+        elif self._inside_echo_at(t_s, side):
             # An edge detection not fitted as an echo is checked unless an echo inside the
             # span near that edge holds its detections.
             return False
@@ -230,7 +295,7 @@ class BeyondSpanCheck:
         if found is None and (echo or hop_index >= self._next_scan.get(side, hop_index)):
             found = self._scan(t_s, alpha, hop_index, side)
             if not echo:
-                self._scanned(hop_index, side, found is not None)
+                self._scanned(hop_index, side, found is not None, self._next_scan, self._scan_gap)
         if found is None:
             return False
         self._seen(found, hop_index, side)
@@ -238,14 +303,14 @@ class BeyondSpanCheck:
         return True
 
     def _follow(self, hop_index: int, side: int) -> Refinement | None:
-        """The echo beyond the ``side`` edge fitted within :data:`FOLLOW_HOPS` hops before
+        """The echo beyond the ``side`` edge fitted within :data:`FOLLOW_HOPS` hops of
         ``hop_index``, fitted again where it puts this boundary (the refinement's warm
         start: a few evaluations, where a scan costs hundreds); None where there is none or
         the fit is not one echo beyond the span. Each fit is one of the echoes the
         refinement takes out of other detections (its ghosts then collect what noise
         does)."""
         last = self._last.get(side)
-        if last is None or not 1 <= hop_index - last[0] <= FOLLOW_HOPS:
+        if last is None or abs(hop_index - last[0]) > FOLLOW_HOPS:
             return None
         hop, t_fit, a_fit = last
         t_pred = t_fit + (hop_index - hop) * self.hop_s / a_fit
@@ -254,25 +319,174 @@ class BeyondSpanCheck:
             return None
         return fit
 
-    def _scanned(self, hop_index: int, side: int, found: bool) -> None:
+    @staticmethod
+    def _scanned(
+        hop_index: int, side: int, found: bool, next_scan: dict[int, int], gaps: dict[int, int]
+    ) -> None:
         """After a scan of the ``side`` edge at ``hop_index`` for a detection not fitted as
-        one echo: the waits start again where it ``found`` the echo, else the next is
-        doubled (module docstring)."""
+        one echo: the waits (``next_scan``: the next hop scanned, ``gaps``: the wait after the
+        next scan that finds nothing) start again where it ``found`` the echo, else the next
+        is doubled (module docstring)."""
         if found:
-            self._next_scan.pop(side, None)
-            self._scan_gap.pop(side, None)
+            next_scan.pop(side, None)
+            gaps.pop(side, None)
             return
-        gap = self._scan_gap.get(side, 1)
-        self._next_scan[side] = hop_index + gap
-        self._scan_gap[side] = min(2 * gap, MAX_SCAN_GAP_HOPS)
+        gap = gaps.get(side, 1)
+        next_scan[side] = hop_index + gap
+        gaps[side] = min(2 * gap, MAX_SCAN_GAP_HOPS)
+
+    def _ghost_refused(self, t_s: float, alpha: float, hop_index: int, fit: Refinement) -> bool:
+        """Whether a detection inside the span at ``t_s`` (s) and ``alpha`` (hop
+        ``hop_index``) whose ``fit`` is not one echo is the ghost of an echo beyond the span
+        (:mod:`hil.estimation.gcas.ghost_source`): its source is followed from the latest
+        fit beyond that edge, else (with the scans' waits) looked for; found, it is counted
+        and the first per side said."""
+        for side, v_lo, v_hi in self.ghosts.bands(alpha):
+            found = self._follow_ghost(t_s, alpha, (side, v_lo, v_hi), fit, timed=False)
+            if (
+                found is None
+                and hop_index >= self._next_ghost_scan.get(side, hop_index)
+                and not self._leak_of_known(t_s, alpha, fit)
+            ):
+                found = self._scan_ghost(t_s, alpha, side, v_lo, v_hi, fit)
+                self._scanned(
+                    hop_index, side, found is not None, self._next_ghost_scan, self._ghost_scan_gap
+                )
+            if found is not None:
+                self._seen(found[0], found[1], side)
+                self.count += 1
+                return True
+        return False
+
+    def _leak_of_known(self, t_s: float, alpha: float, fit: Refinement) -> bool:
+        """Whether a detection at ``t_s`` (s) and ``alpha`` whose fit is ``fit`` is explained
+        by an echo measured lately inside the span: within :data:`LEAK_CELLS` Doppler cells
+        of its speed, within :data:`GHOST_CELLS` of one of its ghosts'
+        (:data:`LEAK_CELLS`), or at most :data:`~hil.estimation.refine.GHOST_LEAK_FRACTION`
+        of its amplitude anywhere (a strong echo's leaks reach further: 9 m/s at 20 dB
+        leaks at -24.2 m/s; a ghost holds 0.15-0.34 of its source, so the source of a ghost
+        that weak would be weaker than that echo, and is given up while it is measured)."""
+        speed = self.c * (alpha - 1.0) / (alpha + 1.0)
+        for v, amplitude in self.refiner.known_echoes(t_s):
+            if self.beyond(v):
+                continue
+            apart = abs(speed - v)
+            if (
+                apart <= LEAK_CELLS * self.cell_mps
+                or any(
+                    abs(apart - g) <= GHOST_CELLS * self.cell_mps for g in self.ghosts.spacing_mps
+                )
+                or abs(fit.amplitude) <= GHOST_LEAK_FRACTION * amplitude
+            ):
+                return True
+        return False
+
+    def _ghost_that_passed(self, t_s: float, alpha: float, fit: Refinement) -> bool:
+        """Whether an echo fitted inside the span (detected at ``t_s`` s, ``alpha``) is the
+        ghost of an echo beyond it fitted lately, where that echo puts its ghost (one tone
+        spacing's speed inward, within :data:`~hil.estimation.refine.GHOST_HOPS` of its
+        comb's time) and stronger than it by :data:`GHOST_SOURCE_RATIO`: a ghost can pass
+        the echo test at low SNR (its phases then happen to agree). Refused and counted."""
+        if not self._last:
+            return False
+        for band in self.ghosts.bands(fit.alpha):
+            side = band[0]
+            found = self._follow_ghost(t_s, alpha, band, fit, timed=True)
+            if found is not None:
+                self._seen(found[0], found[1], side)
+                self.count += 1
+                return True
+        return False
+
+    def _follow_ghost(
+        self, t_s: float, alpha: float, band: tuple[int, float, float], fit: Refinement, *,
+        timed: bool,
+    ) -> tuple[Refinement, int] | None:  # fmt: skip
+        """The echo beyond the edge of ``band`` (side, and the speeds in m/s where the
+        ghost's source may be: :meth:`GhostSources.bands`) fitted within
+        :data:`GHOST_FOLLOW_HOPS` hops of a ghost detected at ``t_s`` (s) and ``alpha``
+        (whose own fit is ``fit``) at a speed in that band, fitted again at its boundary that
+        the ghost aligns with: ``(fit, hop index)`` where that fit is one echo beyond the
+        span, stronger than the ghost's (:data:`GHOST_SOURCE_RATIO`); else None. ``timed``:
+        the ghost's time must also lie within :data:`~hil.estimation.refine.GHOST_HOPS` of
+        that boundary's comb, unless the ghost is at most
+        :data:`~hil.estimation.refine.GHOST_LEAK_FRACTION` of the echo (a ghost two tone
+        spacings out spreads further in time: measured 0.3-0.45 hop off at 0.06 of it)."""
+        side, v_lo, v_hi = band
+        last = self._last.get(side)
+        if last is None:
+            return None
+        hop, t_fit, a_fit = last
+        # The band is cut at the guard band's end, which a fit may pass.
+        margin = self.ghosts.margin_mps
+        if not v_lo - margin <= self.c * (a_fit - 1.0) / (a_fit + 1.0) <= v_hi + margin:
+            return None
+        t_b = self.ghosts.boundary(t_s, alpha, a_fit)
+        if abs(t_b - t_fit) > GHOST_FOLLOW_HOPS * self.hop_s:
+            return None
+        period = self.hop_s / a_fit
+        r = round((t_b - t_fit) / period)
+        again = self.refiner.refine(t_fit + r * period, a_fit, hop + r)
+        if again is None or not self._source(again, side, fit):
+            return None
+        off = abs(t_b - t_fit - r * period)
+        if (
+            timed
+            and off > GHOST_HOPS * period
+            and abs(fit.amplitude) > GHOST_LEAK_FRACTION * abs(again.amplitude)
+        ):
+            return None
+        return again, hop + r
+
+    def _scan_ghost(
+        self, t_s: float, alpha: float, side: int, v_lo: float, v_hi: float, fit: Refinement
+    ) -> tuple[Refinement, int] | None:
+        """The source of a ghost detected at ``t_s`` (s) and ``alpha`` (its own fit ``fit``)
+        looked for over ``[v_lo, v_hi]`` (m/s) beyond the ``side`` edge and refined:
+        ``(fit, hop index)`` where it is one echo there, stronger than the ghost; else
+        None."""
+        peak = self.ghosts.peak(t_s, alpha, v_lo, v_hi)
+        if peak is None:
+            return None
+        t_b, a_b, hop = peak
+        source = self.refiner.refine(t_b, a_b, hop)
+        if source is None or not self._source(source, side, fit):
+            return None
+        if not self._outshines_inside(source, hop, side):
+            return None
+        return source, hop
+
+    def _source(self, source: Refinement | None, side: int, ghost: Refinement) -> bool:
+        """Whether ``source`` is one echo beyond the ``side`` edge that a ghost fitted as
+        ``ghost`` may come from: stronger than it by :data:`GHOST_SOURCE_RATIO`."""
+        if source is None or not source.is_echo(self.test):
+            return False
+        v = source.speed_mps(self.c)
+        return (
+            self.beyond(v)
+            and side * v > 0
+            and abs(source.amplitude) > GHOST_SOURCE_RATIO * abs(ghost.amplitude)
+        )
 
     def _seen(self, fit: Refinement, hop_index: int, side: int) -> None:
+        """Keep ``fit`` (ending hop ``hop_index``) as the latest beyond the ``side`` edge;
+        the side's sighting is said at the first fit that follows another within
+        :data:`GHOST_FOLLOW_HOPS` hops and whose ``M`` hops were all transmitted (hop
+        ``M − 1`` on), with its time and speed: one fit may be noise's, and a fit of hops
+        partly before the schedule's first is off in speed by more than the fit's resolution
+        (a far echo's first boundaries: 34.86 m/s for 35 m/s at -5 dB)."""
+        before = self._last.get(side)
         self._last[side] = (hop_index, fit.t_s, fit.alpha)
         name = CLOSING if side > 0 else OPENING
-        if all(s.side != name for s in self.sightings):
-            self.sightings.append(
-                BeyondSpan(fit.t_s, int(hop_index), name, self.max_speed_mps, fit.speed_mps(self.c))
-            )
+        if any(s.side == name for s in self.sightings):
+            return
+        if before is None or abs(fit.t_s - before[1]) > GHOST_FOLLOW_HOPS * self.hop_s:
+            return
+        if hop_index < self.m_hops - 1:
+            return
+        self.sightings.append(
+            BeyondSpan(fit.t_s, int(hop_index), name, self.max_speed_mps, fit.speed_mps(self.c))
+        )
 
     def _held(self, t_s: float, speed_mps: float) -> bool:
         """Whether an echo fitted near the edge within :data:`INSIDE_HOPS` hops before
@@ -338,6 +552,35 @@ class BeyondSpanCheck:
                 best_a = float((c + vv.flat[k]) / (c - vv.flat[k]))
         return best, best_t, best_a
 
+    def _outshines_inside(self, fit: Refinement, hop_index: int, side: int) -> bool:
+        """Whether ``fit``, beyond the ``side`` edge (the boundary ending hop ``hop_index``),
+        holds more likelihood ``|C|²`` than every speed inside the span within the guard
+        band's width of that edge at its boundary (±½ grating lobe): else it is a lobe of an
+        echo inside the span, one Doppler cell of a hop out (the ``M`` hops' phases advance
+        by whole cycles there; ``att``, 28 m/s fitted at 30.46 m/s) or noise on its tail."""
+        c, ref = self.c, self.refiner
+        at_fit = ref.correlation(
+            fit.t_s, fit.alpha, hop_index, np.array([fit.t_s]), np.array([fit.alpha])
+        )
+        if at_fit is None:
+            return False
+        power_fit = float(np.abs(at_fit[0]) ** 2)
+        half_v = ref.speed_span_mps
+        lobe = 1.0 / (fit.alpha * ref.spacing_hz)
+        n_chunks = max(1, int(math.ceil(self.guard_mps / (2.0 * half_v))))
+        n_v = max(3, int(math.ceil(2.0 * half_v / (0.5 * self.resolution_mps))) + 1)
+        offsets_v = np.linspace(-half_v, half_v, n_v)[:, None]
+        offsets_t = np.linspace(-0.5 * lobe, 0.5 * lobe, SCAN_TIME_POINTS)[None, :]
+        for i in range(n_chunks):
+            v_c = side * (self.max_speed_mps - half_v * (2 * i + 1))
+            a_c = (c + v_c) / (c - v_c)
+            vv = v_c + offsets_v + 0.0 * offsets_t
+            tt = fit.t_s + offsets_t + 0.0 * offsets_v
+            corr = ref.correlation(fit.t_s, a_c, hop_index, tt, (c + vv) / (c - vv))
+            if corr is not None and float(np.max(np.abs(corr) ** 2)) >= power_fit:
+                return False
+        return True
+
     def _scan(self, t_s: float, alpha: float, hop_index: int, side: int) -> Refinement | None:
         """The guard band's best point past the ``side`` edge, refined; the fit if it is one
         echo beyond the span, else None."""
@@ -349,6 +592,6 @@ class BeyondSpanCheck:
         fit = ref.refine(best_t, best_a, hop_index)
         if fit is None or not fit.is_echo(self.test) or not self.beyond(fit.speed_mps(c)):
             return None
-        if side * fit.speed_mps(c) < 0:
+        if side * fit.speed_mps(c) < 0 or not self._outshines_inside(fit, hop_index, side):
             return None
         return fit
