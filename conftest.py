@@ -6,6 +6,11 @@ tests included; that is what ``.ci/run`` runs. A marker expression (``-m slow``,
 hardware"``) replaces the default selection, and a test named by its node id
 (``pytest path/test_x.py::test_y``) runs even when it is slow.
 
+Both tiers run on every core (``-n auto`` in pyproject's addopts, pytest-xdist: one worker
+process per core, tests handed out as workers finish). A run that names its tests by node id
+only runs in this process instead (no workers to start, ``--pdb`` and breakpoints work);
+``-n 0`` does the same for any run, ``-n N`` sets the workers.
+
 ``hil.bluesky`` needs the optional ``bluesky`` extra: without it, its modules are not imported
 for their doctests (``tests/bluesky`` says why it skips, or fails under
 ``HIL_REQUIRE_SYSTEM_DEPS=1``).
@@ -55,6 +60,16 @@ def _named_node_ids(config: pytest.Config) -> list[str]:
             rel = path
         named.append(f"{rel}::{rest}")
     return named
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_auto_num_workers(config: pytest.Config) -> int | None:
+    """Workers for ``-n auto``: none when every argument names a test by node id (a test or
+    two run where they are asked, in this process); otherwise ``None``, leaving the count
+    to pytest-xdist (one per core, ``PYTEST_XDIST_AUTO_NUM_WORKERS`` overrides it)."""
+    if config.args and len(_named_node_ids(config)) == len(config.args):
+        return 0
+    return None
 
 
 def pytest_report_header(config: pytest.Config) -> str | None:

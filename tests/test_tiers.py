@@ -79,6 +79,33 @@ def test_a_slow_test_named_by_its_node_id_runs(project: pytest.Pytester) -> None
     assert _passed(named) == ["test_slow_cases[1]", "test_slow_cases[2]"]
 
 
+def test_a_run_naming_its_tests_by_node_id_starts_no_workers(project: pytest.Pytester) -> None:
+    """``-n auto`` (the suite's addopts) runs tests named by node id in process."""
+    result = project.runpytest_subprocess(*QUIET, "-n", "auto", "test_tiers_sample.py::test_slow")
+    result.assert_outcomes(passed=1)
+    result.stdout.fnmatch_lines(["collected 1 item"])
+    result.stdout.no_fnmatch_line("created: *workers")
+
+
+def test_a_run_over_the_suite_shares_its_tests_among_workers(
+    project: pytest.Pytester, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("PYTEST_XDIST_AUTO_NUM_WORKERS", "2")
+    result = project.runpytest_subprocess(*QUIET, "-n", "auto", "--all")
+    result.stdout.fnmatch_lines(["*2 workers [[]4 items[]]*"])
+    result.assert_outcomes(passed=4)
+    fast = project.runpytest_subprocess(*QUIET, "-n", "auto")
+    fast.stdout.fnmatch_lines(["*2 workers [[]1 item[]]*"])
+    fast.assert_outcomes(passed=1)
+
+
+def test_the_suite_runs_on_every_core() -> None:
+    """pyproject's addopts hand the suite to one pytest-xdist worker per core."""
+    pyproject = tomllib.loads((ROOT_CONFTEST.parent / "pyproject.toml").read_text())
+    addopts = pyproject["tool"]["pytest"]["ini_options"]["addopts"].split()
+    assert "auto" in addopts and addopts[addopts.index("auto") - 1] == "-n"
+
+
 def test_the_header_says_how_to_run_everything(project: pytest.Pytester) -> None:
     fast = project.runpytest(*QUIET)
     fast.stdout.fnmatch_lines(["fast tier: tests marked slow are deselected (pytest --all *"])

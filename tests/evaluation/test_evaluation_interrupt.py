@@ -100,6 +100,13 @@ def _lines(path: Path) -> list[str]:
     return [line for line in path.read_text().splitlines(keepends=True) if line.endswith("\n")]
 
 
+def _default_sigint() -> None:
+    """In the child before exec: SIGINT raises KeyboardInterrupt again, as in a terminal (a
+    suite started as a background job hands its children SIGINT ignored, and Python keeps
+    an inherited ignore)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _start(sweep: Path, out: Path) -> subprocess.Popen[bytes]:
     command = [sys.executable, "-m", "hil.cli.main", "sweep", str(sweep), "--out", str(out)]
     return subprocess.Popen(
@@ -107,6 +114,7 @@ def _start(sweep: Path, out: Path) -> subprocess.Popen[bytes]:
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
         start_new_session=True,  # its own process group, as a shell job has
+        preexec_fn=_default_sigint,
     )
 
 
@@ -127,7 +135,7 @@ def _started_and_blocked(
         assert len(pool) == 2
     except BaseException:
         os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait()
+        proc.communicate()
         raise
     return proc, pool, children
 
@@ -164,7 +172,7 @@ def test_ctrl_c_saves_the_finished_trials_ends_the_workers_and_resume_completes(
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
+            proc.communicate()  # reaps it and closes its stderr pipe
     assert proc.returncode == 130
     saved = len(_lines(out / "results.jsonl"))
     assert saved == FREE_REPS  # the blocked trials never finished
@@ -192,7 +200,7 @@ def test_sigterm_saves_like_ctrl_c(tmp_path: Path) -> None:
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
+            proc.communicate()  # reaps it and closes its stderr pipe
     assert proc.returncode == 130
     assert (
         err.decode()

@@ -23,12 +23,17 @@ from tests.stage.conftest import INSTANT
 
 @pytest.fixture
 def after_hard_limit() -> Iterator[tuple[GrblStage, ManualClock, SimulatedGrblOnPty]]:
-    """A move into the far limit switch (at -501 mm, 6 mm from power-up) raised ALARM:1."""
+    """A move into the far limit switch (at -501 mm, 6 mm from power-up) raised ALARM:1.
+
+    The driver moves the manual clock on by ``wait_step`` at each read that finds nothing
+    (5 ms of real time): with the simulator's thread held off by other work, such reads come
+    more often, each one 20 ms of the firmware's time here (0.1 s would spend the second's
+    budget in ten of them)."""
     clock = ManualClock(100.0)
     config = replace(INSTANT, soft_limits=False, power_up_position_mm=-495.0)
     with (
         SimulatedGrblOnPty(config, clock=clock) as sim,
-        GrblStage(sim.port_name, clock=clock, wait_step=0.1, read_timeout=0.005) as stage,
+        GrblStage(sim.port_name, clock=clock, wait_step=0.02, read_timeout=0.005) as stage,
     ):
         stage.unlock()
         with pytest.raises(StageAlarmError, match=r"ALARM:1 \(Hard limit"):
