@@ -329,15 +329,13 @@ def test_after_a_gap_every_estimate_is_refined_on_samples_after_it() -> None:
     assert refiner.refine(first.t_s - 0.05, first.alpha, first.hop_index - 5) is None
 
 
-@pytest.mark.parametrize(("scale", "ghost"), [(0.2, False), (1.25, False), (5.0, True)])
-def test_a_detection_is_the_ghost_of_a_measured_echo_only_where_it_is_much_weaker(
-    scale: float, ghost: bool
-) -> None:
-    # A measured echo one tone spacing's speed beyond the target, where its comb would put
-    # the target's detection as its ghost: five times the target's amplitude, the detection
-    # (a fifth of it, below GHOST_FRACTION) is its ghost; 1.25 times, the detection reads 0.8
-    # of it, a second echo there, fitted; a fifth of it, the measured echo is the ghost (a
-    # weak ghost fit that passed the echo test first) and the detection is kept.
+def _beside_an_echo_whose_ghost_it_may_be(
+    scale: float, ghost_strength: float = 0.0
+) -> tuple[CoherentRefiner, Estimate]:
+    """A refiner that has measured one echo one tone spacing's speed beyond a target, where
+    its comb would put the target's detection (returned, the 13th) as its ghost, at
+    ``scale`` times the target's fitted amplitude, its ghosts read so far at a detector
+    statistic of ``ghost_strength``."""
     schedule = att_schedule()
     x = echo_samples(schedule, R0, V0, 0.6, snr_db=0.0, seed=6)
     first = run_blocks(make_gcas(schedule), x)[12]
@@ -351,8 +349,24 @@ def test_a_detection_is_the_ghost_of_a_measured_echo_only_where_it_is_much_weake
     a_ghost = (C + v_ghost) / (C - v_ghost)
     drift = 0.5 * (10 - 1) * (a_ghost / first.alpha - 1.0)  # hops
     t_ghost = first.t_s - drift * refiner.hop_len_s / a_ghost
-    known = refine_module._EchoFit(first.hop_index, t_ghost, a_ghost, scale * fit.amplitude)
-    refiner._echoes = [known]
+    refiner._echoes = [
+        refine_module._EchoFit(
+            first.hop_index, t_ghost, a_ghost, scale * fit.amplitude,
+            ghost_strength=ghost_strength,
+        )
+    ]  # fmt: skip
+    return refiner, first
+
+
+@pytest.mark.parametrize(("scale", "ghost"), [(0.2, False), (1.25, False), (5.0, True)])
+def test_a_detection_is_the_ghost_of_a_measured_echo_only_where_it_is_much_weaker(
+    scale: float, ghost: bool
+) -> None:
+    # Five times the target's amplitude, the detection (a fifth of it, below GHOST_FRACTION)
+    # is the measured echo's ghost; 1.25 times, the detection reads 0.8 of it, a second echo
+    # there, fitted; a fifth of it, the measured echo is the ghost (a weak ghost fit that
+    # passed the echo test first) and the detection is kept.
+    refiner, first = _beside_an_echo_whose_ghost_it_may_be(scale)
     assert refiner.ghost_of_known(first.t_s, first.alpha, first.hop_index, strength=4.0) is ghost
     # Read as its ghost, the detector statistic is kept: later detections there up to
     # GHOST_STRENGTH_MARGIN times it are refused unread, stronger ones are read again.
@@ -360,26 +374,10 @@ def test_a_detection_is_the_ghost_of_a_measured_echo_only_where_it_is_much_weake
 
 
 def test_a_ghost_read_once_refuses_the_next_as_weak_unread_and_reads_a_stronger_one() -> None:
-    schedule = att_schedule()
-    x = echo_samples(schedule, R0, V0, 0.6, snr_db=0.0, seed=6)
-    first = run_blocks(make_gcas(schedule), x)[12]
-    refiner = CoherentRefiner(schedule, FS, 10, C, 0.5, 30.0)
-    refiner.push(x, 0)
-    fit = refiner.refine(first.t_s, first.alpha, first.hop_index)
-    assert fit is not None
-    refiner.reset(0)
-    refiner.push(x, 0)
-    v_ghost = V0 - refiner._ghost_speed
-    a_ghost = (C + v_ghost) / (C - v_ghost)
-    drift = 0.5 * (10 - 1) * (a_ghost / first.alpha - 1.0)  # hops
-    t_ghost = first.t_s - drift * refiner.hop_len_s / a_ghost
     # The echo's ghosts read so far reached a statistic of 4; the detection itself reads 0.8
     # of the echo (a second echo there): at 5.9 (within 1.5 times 4) it is refused unread,
     # at 6.1 it is read, and kept.
-    known = refine_module._EchoFit(
-        first.hop_index, t_ghost, a_ghost, 1.25 * fit.amplitude, ghost_strength=4.0
-    )
-    refiner._echoes = [known]
+    refiner, first = _beside_an_echo_whose_ghost_it_may_be(1.25, ghost_strength=4.0)
     assert refiner.ghost_of_known(first.t_s, first.alpha, first.hop_index, strength=5.9)
     assert not refiner.ghost_of_known(first.t_s, first.alpha, first.hop_index, strength=6.1)
     # Without a statistic (a caller that has none) it is always read.
