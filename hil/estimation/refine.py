@@ -544,7 +544,7 @@ class CoherentRefiner:
         hop_ids = np.arange(hop_index - self.m_hops + 1, hop_index + 1, dtype=np.int64)
         lobe = 1.0 / (alpha * self.spacing_hz)
         speed0 = self.c * (alpha - 1.0) / (alpha + 1.0)
-        known = self._known_hops(hop_index, t_s, speed0, lobe)
+        known = self._known_hops(hop_index, t_s, speed0)
         fit = self._fit_near(word, hop_ids, t_s, speed0, lobe, hop_index, known)
         if (
             fit is not None
@@ -600,10 +600,7 @@ class CoherentRefiner:
             and not self._same_echo(p, hop_index, t_s, speed)
         ]  # fmt: skip
         if others:
-            t_lo = t_s - (self.m_hops + 1) * self.hop_len_s / (
-                1.0 - 2.0 * self.speed_span_mps / self.c
-            )
-            rows = [known, *(self._echo_hops(p, t_lo, t_s + self.hop_len_s) for p in others)]
+            rows = [known, self._rows(others, t_s)]
             with_others = np.ascontiguousarray(np.concatenate(rows, axis=1))
             again = self._fit_near(word, hop_ids, t_s, speed, lobe, hop_index, with_others)
             if again is not None and again.is_echo(test):
@@ -724,19 +721,21 @@ class CoherentRefiner:
         span's inside from a detection on its edge hypothesis, whose speed the detector
         cannot interpolate) also at the speeds up to the speed span that way, every half
         Doppler resolution cell of the ``M`` hops (an echo 0.2 m/s inside the edge reads a
-        third of its amplitude at the edge's speed on att)."""
+        third of its amplitude at the edge's speed on att); with ``around``, at the speeds
+        within the speed span either way, on the same steps (a detection where a measured
+        echo's ghost peaks: a second echo there read at the detector's speed alone fell to
+        0.17 of its level)."""
         lobe = 1.0 / (alpha * self.spacing_hz)
         t1 = t_s + lobe * np.linspace(-0.5, 0.5, GHOST_POINTS)
         alphas1 = np.array([alpha])
-        if inward:
+        if inward or around:
             speed = self.c * (alpha - 1.0) / (alpha + 1.0)
-            steps = int(math.ceil(self.speed_span_mps / (0.5 * self._v_res)))
-            v = speed + inward * np.linspace(0.0, self.speed_span_mps, steps + 1)
-            alphas1 = (self.c + v) / (self.c - v)
-        elif around:
-            speed = self.c * (alpha - 1.0) / (alpha + 1.0)
-            steps = int(math.ceil(self.speed_span_mps / (0.5 * self._v_res)))
-            v = speed + np.linspace(-self.speed_span_mps, self.speed_span_mps, 2 * steps + 1)
+            span = self.speed_span_mps
+            steps = int(math.ceil(span / (0.5 * self._v_res)))
+            if inward:
+                v = speed + inward * np.linspace(0.0, span, steps + 1)
+            else:
+                v = speed + np.linspace(-span, span, 2 * steps + 1)
             alphas1 = (self.c + v) / (self.c - v)
         t = np.ascontiguousarray(np.tile(t1, alphas1.size))
         alphas = np.ascontiguousarray(np.repeat(alphas1, t1.size))
@@ -779,23 +778,36 @@ class CoherentRefiner:
         t_pred = fit.t_s + (hop_index - fit.hop_index) * self.hop_len_s / fit.alpha
         return abs(t_pred - t_s) <= SAME_ECHO_LOBES / (fit.alpha * self.spacing_hz)
 
-    def _known_hops(
-        self, hop_index: int, t_s: float, speed: float, lobe: float
-    ) -> NDArray[np.complex128]:
-        """The hops of the other echoes measured lately that a detection at ``t_s`` (s)
-        ending hop ``hop_index`` hears over its ``M`` hops, as the ``known`` rows of
-        :func:`~hil.estimation.refine_kernels.candidate_sums` (shape ``(5, Q)``): each echo
-        continues at its fitted delay, time scale and amplitude."""
-        others = [
+    def _known_hops(self, hop_index: int, t_s: float, speed: float) -> NDArray[np.complex128]:
+        """The hops of the other echoes measured lately that a detection at ``t_s`` (s) and
+        ``speed`` (m/s) ending hop ``hop_index`` hears over its ``M`` hops, as the ``known``
+        rows of :func:`~hil.estimation.refine_kernels.candidate_sums` (shape ``(5, Q)``):
+        each echo continues at its fitted delay, time scale and amplitude."""
+        return self._rows(self._others(hop_index, t_s, speed), t_s)
+
+    def _others(
+        self, hop_index: int, t_s: float, speed: float, stronger_than: float = 0.0
+    ) -> list[_EchoFit]:
+        """The echoes measured within :data:`KNOWN_HOPS` hops of a detection at ``t_s`` (s)
+        and ``speed`` (m/s) ending hop ``hop_index`` that are not its own, with a fitted
+        ``|β|`` above ``stronger_than``."""
+        return [
             e for e in self._echoes
             if abs(e.t_s - t_s) <= KNOWN_HOPS * self.hop_len_s
+            and abs(e.amplitude) > stronger_than
             and not self._same_echo(e, hop_index, t_s, speed)
         ]  # fmt: skip
-        if not others:
+
+    def _rows(self, echoes: list[_EchoFit], t_end: float) -> NDArray[np.complex128]:
+        """The ``known`` rows (shape ``(5, Q)``) of ``echoes`` over the ``M`` hops whose
+        last boundary is received at ``t_end`` (s), widened by the speed span's drift."""
+        if not echoes:
             return _NO_KNOWN
-        t_lo = t_s - (self.m_hops + 1) * self.hop_len_s / (1.0 - 2.0 * self.speed_span_mps / self.c)
-        t_hi = t_s + self.hop_len_s
-        columns = [self._echo_hops(e, t_lo, t_hi) for e in others]
+        t_lo = t_end - (self.m_hops + 1) * self.hop_len_s / (
+            1.0 - 2.0 * self.speed_span_mps / self.c
+        )
+        t_hi = t_end + self.hop_len_s
+        columns = [self._echo_hops(e, t_lo, t_hi) for e in echoes]
         return np.ascontiguousarray(np.concatenate(columns, axis=1))
 
     def _echo_hops(self, echo: _EchoFit, t_lo: float, t_hi: float) -> NDArray[np.complex128]:
@@ -958,21 +970,8 @@ class CoherentRefiner:
         lobes as much as its own window does (att, a target 10 dB below another at -10 dB
         per-sample SNR: 5 of 200 hops a lobe off without them, none with them)."""
         speed = self.c * (alpha - 1.0) / (alpha + 1.0)
-        others = [
-            e for e in self._echoes
-            if abs(e.t_s - t_s) <= KNOWN_HOPS * self.hop_len_s
-            and abs(e.amplitude) > amplitude
-            and not self._same_echo(e, hop_index, t_s, speed)
-        ]  # fmt: skip
-        if not others:
-            return _NO_KNOWN
-        t_end = t_s - self.m_hops * self.hop_len_s / alpha
-        t_lo = t_end - (self.m_hops + 1) * self.hop_len_s / (
-            1.0 - 2.0 * self.speed_span_mps / self.c
-        )
-        t_hi = t_end + self.hop_len_s
-        columns = [self._echo_hops(e, t_lo, t_hi) for e in others]
-        return np.ascontiguousarray(np.concatenate(columns, axis=1))
+        others = self._others(hop_index, t_s, speed, stronger_than=amplitude)
+        return self._rows(others, t_s - self.m_hops * self.hop_len_s / alpha)
 
     def _lobe_by_more_hops(
         self, fit: Refinement, word: _Codeword, hop_ids: NDArray[np.int64], t0: float,
