@@ -17,6 +17,10 @@ AVX2 and FMA (what NumPy dispatches to there), checked against them element by e
 - no other operation is fused or reordered: numba compiles without ``fastmath``, so LLVM
   contracts nothing into an FMA that the source does not call.
 
+The FMA here is exact everywhere (``llvm.fma``), so the kernels give the same bits on any
+machine; NumPy's loops fuse only where the CPU has FMA (x86-64 FMA3, AArch64), so on a CPU
+without it NumPy's own expressions round twice and differ from these in the last bits.
+
 Why compiled: the readout runs once per detection on arrays of ``M × L`` (10 × 1133 in the
 built-in tank run) and ``C × M × L`` (33 × 10 × 60) elements, each NumPy expression a pass
 over a temporary plus its call overhead; fused, the passes share one loop.
