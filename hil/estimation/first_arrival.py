@@ -116,6 +116,7 @@ from hil.estimation.first_arrival_kernels import (
     doppler_score,
     next_tone_channel,
     ramp_residuals,
+    warm_up,
 )
 from hil.estimation.late_taps import LEAD_S, DirectFit, direct_amplitudes
 from hil.estimation.reverb_band import doppler_resolution_mps
@@ -606,6 +607,8 @@ class FirstArrivalReadout:
         self._ring = RowBuffer(self.history, (), np.float64)
         self._valid_from = 0
         self.sound_speed_mps = float(sound_speed_mps)
+        # The compiled loops loaded now, not at a live run's first detection.
+        warm_up()
         #: The hop length, s (a schedule property that checks every hop: read once).
         self._hop_s = float(schedule.hop_s)
         v_res = doppler_resolution_mps(schedule.tones_hz, self._hop_s, sound_speed_mps)
