@@ -112,6 +112,12 @@ from numpy.typing import NDArray
 
 from hil.errors import ConfigError
 from hil.estimation.detection import parabolic_offset
+from hil.estimation.first_arrival_kernels import (
+    doppler_score,
+    next_tone_channel,
+    ramp_residuals,
+    warm_up,
+)
 from hil.estimation.late_taps import LEAD_S, DirectFit, direct_amplitudes
 from hil.estimation.reverb_band import doppler_resolution_mps
 from hil.estimation.row_buffer import RowBuffer
@@ -371,6 +377,43 @@ def _line_fit(x: NDArray[np.float64], y: NDArray[np.float64]) -> tuple[float, fl
 _EPS = float(np.finfo(np.float64).eps)
 
 
+def _doppler_score_numpy(
+    d_alpha: NDArray[np.float64],
+    ft: NDArray[np.float64],
+    q: NDArray[np.complex128],
+    columns: tuple[NDArray[np.intp], ...],
+) -> NDArray[np.float64]:
+    """The direct path's Doppler score (:meth:`FirstArrivalReadout._direct_alpha`) as NumPy
+    expressions: ``Σ_k |Σ_{m ∈ columns[k]} e^{−j2π Δα_g f_m t_m} q_m|²`` for each ``Δα_g``
+    of ``d_alpha`` (shape ``(G,)``); ``ft`` (shape ``(M,)``): ``f_m t_m``; ``q`` (shape
+    ``(M,)``): the amplitudes. Shape ``(G,)``."""
+    rot = np.multiply(-2j * np.pi * d_alpha[:, None], ft[None, :])
+    np.exp(rot, out=rot)  # (G, M)
+    sums = np.zeros((d_alpha.size, len(columns)), dtype=np.complex128)
+    for k, cols in enumerate(columns):
+        sums[:, k] = (rot[:, cols] * q[cols]).sum(axis=1)
+    power = np.abs(sums)
+    np.square(power, out=power)
+    return np.asarray(np.add.reduce(power, axis=1), dtype=np.float64)
+
+
+def _doppler_score(
+    d_alpha: NDArray[np.float64],
+    ft: NDArray[np.float64],
+    q: NDArray[np.complexfloating],
+    pattern: _TonePattern,
+) -> NDArray[np.float64]:
+    """:func:`_doppler_score_numpy` of ``pattern``'s columns, by the compiled loop
+    (:func:`~hil.estimation.first_arrival_kernels.doppler_score`, the same bits)."""
+    q128: NDArray[np.complex128] = np.ascontiguousarray(q, dtype=np.complex128)
+    b = np.ascontiguousarray((-2j * np.pi * d_alpha).imag)
+    score = np.empty(d_alpha.size)
+    doppler_score(
+        b, np.ascontiguousarray(ft), q128, pattern.order, pattern.starts, score,
+    )  # fmt: skip
+    return score
+
+
 def _hop_slice(table: HopTable, start: int, count: int) -> HopTable:
     """Hops ``start .. start + count − 1`` of ``table`` (positions in it, not hop indices)."""
     part = slice(start, start + count)
@@ -441,11 +484,15 @@ class _TonePattern:
     read (``clean``) and those the previous boundary's late images leave (``leave``), shape
     ``(M,)`` each, newest first (read-only); and for the Doppler score over the next tones of
     the ``M`` boundaries (newest first): the columns of each distinct tone (``columns``,
-    ascending tone order) and whether any tone recurs (``recurs``)."""
+    ascending tone order), the same as one array (``order``, shape ``(M,)``) with tone
+    ``k``'s at ``order[starts[k] : starts[k + 1]]``, and whether any tone recurs
+    (``recurs``)."""
 
     clean: NDArray[np.bool_]
     leave: NDArray[np.bool_]
     columns: tuple[NDArray[np.intp], ...]
+    order: NDArray[np.int64]
+    starts: NDArray[np.int64]
     recurs: bool
 
 
@@ -560,6 +607,8 @@ class FirstArrivalReadout:
         self._ring = RowBuffer(self.history, (), np.float64)
         self._valid_from = 0
         self.sound_speed_mps = float(sound_speed_mps)
+        # The compiled loops loaded now, not at a live run's first detection.
+        warm_up()
         #: The hop length, s (a schedule property that checks every hop: read once).
         self._hop_s = float(schedule.hop_s)
         v_res = doppler_resolution_mps(schedule.tones_hz, self._hop_s, sound_speed_mps)
@@ -630,22 +679,24 @@ class FirstArrivalReadout:
         d = self._ring.rows(idx)
         if self.period:
             d = d - self._ring.rows(idx - self.period)
-        t = idx / fs
-        # d · e^{−j2π α f t} (M, L + lead), each step into one buffer.
-        z = np.multiply(-2j * np.pi * alpha * f_next[:, None], t)
-        np.exp(z, out=z)
-        np.multiply(d, z, out=z)
-        c = np.cumsum(z, axis=1, out=z)
-        full = c[:, w:] - c[:, :-w]  # boxcar of w ending at extended index w, w + 1, ...
-        # The boxcar's change over its own length: every steady tone on the Δf grid (the
-        # previous tones, and the next tone as sounded by late images of earlier boundaries)
-        # gives the same boxcar sum w samples apart and cancels; only switches remain.
-        box = full[:, w:] - full[:, :-w]  # (M, L)
+        # d · e^{−j2π α f t} (t = idx / fs) summed along each row; ``full``: the boxcar of w
+        # ending at extended index w, w + 1, ... (M, L + w); ``box``: the boxcar's change over
+        # its own length (M, L): every steady tone on the Δf grid (the previous tones, and the
+        # next tone as sounded by late images of earlier boundaries) gives the same boxcar
+        # sum w samples apart and cancels, only switches remain; ``p_all``: |box / w|², as
+        # |box · (1/w)|² (the same bits: see _ramp_residuals). The kernel's operations are
+        # NumPy's (hil.estimation.first_arrival_kernels).
+        coef = -2j * np.pi * alpha * f_next  # (M,), complex: its real parts are 0
+        n_ext = idx.shape[1]
+        full = np.empty((m, n_ext - w), dtype=np.complex128)
+        box = np.empty((m, n_ext - 2 * w), dtype=np.complex128)
+        p_all = np.empty((m, n_ext - 2 * w))
+        next_tone_channel(
+            np.ascontiguousarray(d, dtype=np.float64), idx, fs, np.ascontiguousarray(coef.imag),
+            w, 1.0 / w, full, box, p_all,
+        )  # fmt: skip
         pattern = self._tone_pattern(tones)  # clean, leave: read-only, shared
         clean = pattern.clean
-        # |box / w|² with box times 1/w: the same bits (see _ramp_residuals), a product's cost.
-        p_all = np.abs(box * (1.0 / w))
-        np.square(p_all, out=p_all)  # (M, L)
         power = _mean(p_all[clean], axis=0)  # (L,)
         base = self._noise_window(power)
         amp = np.sqrt(np.maximum(power - _mean_all(power[base]), 0.0))
@@ -1106,7 +1157,10 @@ class FirstArrivalReadout:
         columns = tuple(np.flatnonzero(group == j) for j in range(distinct.size))
         clean.setflags(write=False)
         leave.setflags(write=False)
-        pattern = _TonePattern(clean, leave, columns, bool(np.bincount(group).max() >= 2))
+        order = np.concatenate(columns).astype(np.int64)
+        starts = np.cumsum([0] + [c.size for c in columns]).astype(np.int64)
+        recurs = bool(np.bincount(group).max() >= 2)
+        pattern = _TonePattern(clean, leave, columns, order, starts, recurs)
         if len(self._patterns) >= MAX_PATTERNS:
             self._patterns.clear()
         self._patterns[key] = pattern
@@ -1247,23 +1301,20 @@ class FirstArrivalReadout:
         before it; its mean power over the boundaries, scaled by least squares (with
         ``level``, beside a constant level: both less their means).
         """
-        shape = self._ramp_shape(grid, n, ramp, start, times_w=True)  # (C, M, L)
-        # Times 1/w instead of divided by w: NumPy divides a complex by a real w as the
-        # product with 1/w, so every nonzero part is the same bits (a zero may change sign,
-        # which |·| ignores), and a product costs a fifth of a complex division.
-        shape *= 1.0 / self.boxcar
-        power = np.abs(shape)
-        np.square(power, out=power)
-        model = _mean(power, axis=1)  # (C, L)
-        if level:
-            # A constant level fitted beside the ramp: both less their means.
-            model -= _mean(model, axis=1)[:, None]
-            excess = excess - _mean_all(excess)
-        mm = np.add.reduce(model * model, axis=1)
-        scale = np.add.reduce(model * excess[None, :], axis=1) / np.maximum(mm, 1e-300)
-        left = excess[None, :] - scale[:, None] * model
-        np.square(left, out=left)
-        return np.asarray(np.add.reduce(left, axis=1), dtype=np.float64)
+        # The model's window sums (_ramp_shape with times_w) times 1/w instead of divided by
+        # w: NumPy divides a complex by a real w as the product with 1/w, so every nonzero
+        # part is the same bits (a zero may change sign, which |·| ignores). The kernel does
+        # in one loop what NumPy's expressions would: |shape|², its mean over the boundaries,
+        # the scale and the residual (hil.estimation.first_arrival_kernels).
+        o = (self._pre + grid)[:, None] + ramp.frac[None, :]  # (C, M)
+        at_o = np.exp(-1j * (ramp.theta[None, :] * o + ramp.jump[None, :]))  # (C, M)
+        out = np.empty(grid.size)
+        ramp_residuals(
+            o, np.ascontiguousarray(n, dtype=np.int64), self.boxcar, ramp.geometric,
+            np.ascontiguousarray(start[0]), at_o, 1.0 / self.boxcar,
+            np.ascontiguousarray(excess, dtype=np.float64), level, out,
+        )  # fmt: skip
+        return out
 
     def _window_start_phasors(
         self, ramp: _RampTables, n: NDArray[np.int64]
@@ -1372,14 +1423,7 @@ class FirstArrivalReadout:
         k0 = int(round(v_gcas / DIRECT_SPEED_STEP)) + lo
         speeds = (k0 + np.arange(hi - lo + 1)) * DIRECT_SPEED_STEP  # (G,) m/s
         d_alpha = (c + speeds) / (c - speeds) - alpha  # (G,)
-        rot = np.multiply(-2j * np.pi * d_alpha[:, None], (f * t_m)[None, :])
-        np.exp(rot, out=rot)  # (G, M)
-        sums = np.zeros((d_alpha.size, len(pattern.columns)), dtype=np.complex128)
-        for k, cols in enumerate(pattern.columns):
-            sums[:, k] = (rot[:, cols] * q[cols]).sum(axis=1)
-        power = np.abs(sums)
-        np.square(power, out=power)
-        score = np.add.reduce(power, axis=1)
+        score = _doppler_score(d_alpha, f * t_m, q, pattern)
         own = DopplerScore(
             int(hop_index), float(delay_s), k0, score / max(score.max(), 1e-300), v_gcas
         )
