@@ -5,10 +5,14 @@ fs = 100 kHz, D = 64 Doppler hypotheses over ±30 m/s, one core (BLAS threads pi
 before numpy is imported; the bank's FFTs on one worker). The input is an exact moving-target
 echo (60 m, 12 m/s closing) in white noise at 0 dB per-sample SNR, fed in blocks of 0.1 s.
 The echo is :data:`SIGNAL_S` seconds long (``--signal-seconds``) and cycled to make longer
-inputs: at each cycle the target jumps back to 60 m, so the ``M`` or so detections whose hops
-straddle the jump are fits of part of an echo (their hops' coherence falls as an accelerating
-echo's does; the refinement does not try its accelerating fit where the echo holds one side of
-the window only, :data:`hil.estimation.refine.PARTIAL_LEVEL`).
+inputs: at each cycle the echo starts again, and as 2 s is not a whole number of code periods
+(17 hops, 0.17 s) the receiver reads each cycle's echo 30 m nearer than the last (over 20 s it
+starts at 60, 30, 0, 97.5, 67.5, 37.5, 7.5, 105, 75 and 45 m and closes 24 m in each); a range
+below 0 reads 127.5 m (one code period) further, and the detections beyond ``max_range_m`` =
+100 m are fitted and then refused by range (1637 estimates of some 2000 boundaries at M = 10).
+The ``M`` or so detections whose hops straddle a jump are fits of part of an echo (their hops'
+coherence falls as an accelerating echo's does; the refinement does not try its accelerating
+fit where the echo holds one side of the window only, :data:`hil.estimation.refine.PARTIAL_LEVEL`).
 
 Timing is interleaved: every repeat runs each receiver once (GCAS at every M, then the bank at
 every M), and each figure is the best of the repeats, so a slow spell of a shared machine hits
