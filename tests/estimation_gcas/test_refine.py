@@ -462,3 +462,30 @@ def test_a_negative_decision_lag_is_refused_with_its_field() -> None:
     refiner = CoherentRefiner(att_schedule(), FS, 10, C, 0.5, 30.0)
     with pytest.raises(ConfigError, match=r"samples = -1 .*>= 0 \(input samples of decision lag\)"):
         refiner.allow_lag(-1)
+
+
+def test_an_echo_that_begins_within_the_window_is_not_fitted_as_accelerating() -> None:
+    # An echo that begins within a detection's window (its first hops hold noise) loses
+    # coherence as an accelerating one does, but it is one-sided (refine.PARTIAL_LEVEL): the
+    # accelerating fit is not tried. The same detections on the whole echo are not one-sided.
+    schedule = att_schedule()
+    clean = echo_samples(schedule, R0, V0, 0.7)
+    noise = np.random.default_rng(4).normal(0.0, np.sqrt(0.5), clean.shape)  # 0 dB
+    t_cut = 0.45
+    cut = clean.copy()
+    cut[: int(t_cut * FS)] = 0.0
+    whole = run_blocks(make_gcas(schedule, refine=False), clean + noise)
+    span = 10 * schedule.hop_s
+    # Windows with 3 to 7 of their 10 hops before the echo begins.
+    straddling = [e for e in whole if 0.3 * span <= t_cut - (e.t_s - span) <= 0.7 * span]
+    assert len(straddling) >= 3
+    for x, one_sided in ((cut + noise, True), (clean + noise, False)):
+        refiner = CoherentRefiner(schedule, FS, 10, C, 0.5, 30.0)
+        refiner.push(x, 0)
+        for e in straddling:
+            fit = refiner.refine(e.t_s, e.alpha, e.hop_index)
+            assert fit is not None and fit.found and fit.accel_mps2 == 0.0
+            word = refiner._codeword(e.hop_index)
+            hop_ids = np.arange(e.hop_index - 9, e.hop_index + 1, dtype=np.int64)
+            known = refine_module._NO_KNOWN
+            assert refiner._one_sided(fit, word, hop_ids, known) is one_sided
