@@ -291,6 +291,9 @@ class _EchoFit:
     ghost_strength: tuple[float, ...] = ()
     #: The fit's E/N0, dB (:attr:`Refinement.e_over_n0_db`).
     e_over_n0_db: float = math.inf
+    #: The latest hop at which this echo was looked for where the fit puts it, without a
+    #: detection (:meth:`CoherentRefiner.due`; its own hop before any).
+    followed: int = -1
 
     def speed(self, sound_speed_mps: float) -> float:
         """Radial speed, m/s (closing positive)."""
@@ -658,6 +661,26 @@ class CoherentRefiner:
             and e.e_over_n0_db >= self.lobe_sure_db
             for e in self._echoes
         )
+
+    def due(self, t_s: float) -> list[tuple[int, float, float]]:
+        """The boundaries of echoes measured lately that no detection brought by ``t_s`` (s):
+        for each echo fitted above the lobe decision's threshold region (:data:`LOBE_Z`)
+        outside the still reverberation's Doppler cells, its next boundary where its latest
+        fit carries on, received before ``t_s`` and at most :data:`KNOWN_HOPS` hops after
+        that fit, each once: ``(hop_index, t, α)`` (hop, s, 1). Another echo's ghost or
+        Doppler response can hold the row's maximum at an echo's boundary (a weaker echo a
+        tone spacing's speed from a stronger one: the ghost's peak beside it); the echo is
+        then fitted there (:meth:`refine`) and its echo test decides."""
+        out = []
+        for i, e in enumerate(self._echoes):
+            if e.e_over_n0_db < self.lobe_sure_db or abs(e.speed(self.c)) < self._still_mps:
+                continue
+            hop = max(e.hop_index, e.followed) + 1
+            t_next = e.t_s + (hop - e.hop_index) * self.hop_len_s / e.alpha
+            if t_next <= t_s and hop - e.hop_index <= KNOWN_HOPS:
+                out.append((hop, t_next, e.alpha))
+                self._echoes[i] = replace(e, followed=hop)
+        return out
 
     def known_echoes(self, t_s: float) -> list[tuple[float, float]]:
         """The echoes measured within :data:`KNOWN_HOPS` hops of ``t_s`` (s), the ones taken

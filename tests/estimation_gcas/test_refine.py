@@ -417,6 +417,32 @@ def test_an_echo_measured_at_a_ghosts_speed_is_followed_through_the_ghosts_hops(
     assert not refiner.ghost_of_known(first.t_s, first.alpha, first.hop_index, strength=3.0)
 
 
+def test_an_echo_measured_lately_is_due_at_its_next_boundary_once() -> None:
+    # A target fitted at one boundary: its next boundary is due once the stream has passed
+    # it, once, and never beyond KNOWN_HOPS hops of the fit; a fit below the lobe decision's
+    # threshold region or at rest is not followed.
+    refiner, first = _beside_an_echo_whose_ghost_it_may_be(1.0)
+    refiner._echoes = []
+    fit = refiner.refine(first.t_s, first.alpha, first.hop_index)
+    assert fit is not None and fit.is_echo(refiner.echo_test)
+    period = refiner.hop_len_s / fit.alpha
+    assert refiner.due(fit.t_s + 0.5 * period) == []
+    [(hop, t_next, alpha)] = refiner.due(fit.t_s + 1.5 * period)
+    assert hop == first.hop_index + 1 and alpha == fit.alpha
+    assert t_next == pytest.approx(fit.t_s + period, abs=1e-12)
+    assert refiner.due(fit.t_s + 1.5 * period) == []
+    assert [h for h, _, _ in refiner.due(fit.t_s + 10 * period)] == [first.hop_index + 2]
+    assert [h for h, _, _ in refiner.due(fit.t_s + 10 * period)] == [first.hop_index + 3]
+    assert refiner.due(fit.t_s + 10 * period) == []
+    echo = refiner._echoes[0]
+    for other in (
+        dataclasses.replace(echo, followed=-1, e_over_n0_db=refiner.lobe_sure_db - 0.1),
+        dataclasses.replace(echo, followed=-1, alpha=1.0),
+    ):
+        refiner._echoes = [other]
+        assert refiner.due(fit.t_s + 10 * period) == []
+
+
 def test_refine_must_be_a_bool() -> None:
     with pytest.raises(ConfigError, match=r"refine = 'yes' is not allowed: must be true or false"):
         GcasReceiver(

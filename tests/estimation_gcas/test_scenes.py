@@ -159,17 +159,19 @@ TWO_TARGETS = {
     # every detection there no stronger than the measured echo was taken for its ghost
     # (CoherentRefiner.ghost_of_known, GHOST_FRACTION).
     "a tone spacing's speed apart": ((45.0, -6.0, 1.0), (85.0, 20.0, 1.0)),
-    # The second 4 and 5 dB weaker (27.5 m/s apart: its boundaries pass where the stronger
-    # one's ghost peaks). Read with the stronger echo taken out, a ghost keeps a few per cent
-    # of it and the weaker echo its own level (refine.GHOST_LEFT); once fitted, the weaker one
-    # is followed through the ghost's hops, also where its peak is only the second of the
-    # row. Measured (seed 11): 4 dB 0.993 at 0 dB and 1.0 at -10 dB, 5 dB 0.867 and 0.734,
-    # no false estimate (0.66 / 0.50 and 0.18 / 0.16 when every detection there reading at
-    # most 0.6 of the echo with it in, or as weak as its strongest ghost, was that ghost).
-    # Still short: 6 dB weaker 0.54 / 0.48 (the ghost holds the row's maximum and the weaker
-    # peak beside it falls below a second maximum's level).
+    # The second 4, 5 and 6 dB weaker (27.5 m/s apart: its boundaries pass where the
+    # stronger one's ghost peaks). Read with the stronger echo taken out, a ghost keeps a few
+    # per cent of it and the weaker echo its own level (refine.GHOST_LEFT); once fitted, the
+    # weaker one is followed through the ghost's hops: where its peak is only the second of
+    # its row, and where the ghost's peak hides it, at the boundary its fit puts next
+    # (Readout._follow). Measured (seed 11, 0 / -10 dB): 4 dB 0.993 / 1.0, 5 dB 0.951 /
+    # 0.93, 6 dB 0.888 / 0.713, no false estimate; 0.66 / 0.50, 0.18 / 0.16 and 0.105 /
+    # 0.112 when every detection there reading at most 0.6 of the echo with it in, or as
+    # weak as its strongest ghost, was that ghost; 0.993 / 1.0, 0.867 / 0.734 and 0.538 /
+    # 0.476 without following.
     "a tone spacing's speed apart, 4 dB weaker": ((50.0, 10.0, 1.0), (70.0, -17.5, 0.63)),
     "a tone spacing's speed apart, 5 dB weaker": ((60.0, -8.0, 1.0), (45.0, 19.5, 0.56)),
+    "a tone spacing's speed apart, 6 dB weaker": ((60.0, -8.0, 1.0), (45.0, 19.5, 0.5)),
     # Nearby speeds (2-2.3 m/s apart, within a Doppler cell of a hop, 2.5 m/s on att): each
     # one's row holds the other's Doppler response, so the weaker one's boundary is only a
     # second maximum of its row (refine.NEIGHBOUR_CELLS). Measured (seed 11): 0.993 / 1.0
@@ -226,7 +228,8 @@ def _detection_and_false(
      *(pytest.param(*case, marks=pytest.mark.slow) for case in
        (("crossing", 0.99), ("same start", 0.99), ("10 dB weaker", 0.95),
         ("a tone spacing's speed apart", 0.95), ("a tone spacing's speed apart, 4 dB weaker", 0.95),
-        ("a tone spacing's speed apart, 5 dB weaker", 0.8), ("2.3 m/s apart", 0.98),
+        ("a tone spacing's speed apart, 5 dB weaker", 0.9),
+        ("a tone spacing's speed apart, 6 dB weaker", 0.8), ("2.3 m/s apart", 0.98),
         ("2 m/s apart", 0.98),
         ("one speed, 10.1 m apart", 0.98), ("one speed, 7.5 m apart", 0.9)))],
 )  # fmt: skip
@@ -255,7 +258,8 @@ def test_two_equal_targets_at_every_hop_at_minus_10_db(scene: str) -> None:
 @pytest.mark.parametrize(
     ("scene", "pd_min"),
     [("a tone spacing's speed apart, 4 dB weaker", 0.95),
-     ("a tone spacing's speed apart, 5 dB weaker", 0.65)],
+     ("a tone spacing's speed apart, 5 dB weaker", 0.85),
+     ("a tone spacing's speed apart, 6 dB weaker", 0.6)],
 )  # fmt: skip
 def test_a_weaker_target_where_a_stronger_ones_ghost_peaks_at_minus_10_db(
     scene: str, pd_min: float
