@@ -379,16 +379,27 @@ class Readout:
         """The boundaries of echoes measured lately that no detection brought by ``t_s``
         (s), fitted where their latest fits put them
         (:meth:`~hil.estimation.refine.CoherentRefiner.due`): those one echo by the echo test
-        (:attr:`followed_count`)."""
+        (:attr:`followed_count`) within the likelihood's main lobe (``1/B``) of where the fit
+        put it (a constant speed carries a fit on to far less; a fit that moved further is on
+        another grating lobe or another echo). None in the reverberation band's refused
+        hypotheses (an echo measured there is hidden, :mod:`hil.estimation.gcas.hidden_echoes`)."""
         assert self._refiner is not None
         out = []
+        fe = self._fe
         for hop_index, t_pred, alpha in self._refiner.due(t_s):
+            speed = fe.sound_speed_mps * (alpha - 1.0) / (alpha + 1.0)
+            if fe.refused_hypotheses[int(np.argmin(np.abs(fe.grid.speeds_mps - speed)))]:
+                continue  # in the reverberation band: hidden, not reported
             refined = self._refiner.refine(t_pred, alpha, hop_index, partners=False)
-            if refined is None or not refined.is_echo(ECHO_TEST):
-                continue
+            if (
+                refined is None
+                or not refined.is_echo(ECHO_TEST)
+                or abs(refined.t_s - t_pred) > self._lobe_s
+            ):
+                continue  # not one echo, or another lobe than the one its fit carried on
             k = self._k
-            word = hop_index % self._fe.n_codewords
-            t_tx = k.hop_end[word] + (hop_index // self._fe.n_codewords) * k.period
+            word = hop_index % fe.n_codewords
+            t_tx = k.hop_end[word] + (hop_index // fe.n_codewords) * k.period
             est = self._estimate(refined.t_s, refined.alpha, t_tx, hop_index, refined.bound)
             if est is not None:
                 self.followed_count += 1
