@@ -668,6 +668,23 @@ class CoherentRefiner:
             for e in self._echoes
         )
 
+    def followed_near(self, t_s: float, alpha: float, hop_index: int) -> bool:
+        """Whether a detection at ``t_s`` (s) and time scale ``alpha`` (the boundary ending hop
+        ``hop_index``) is the boundary of an echo that :meth:`due` gives: measured before this
+        hop, within :data:`KNOWN_HOPS` hops, above the lobe decision's threshold region and
+        moving, and the same echo (:meth:`_same_echo`). A peak masked by a greater one of
+        another boundary (:attr:`~hil.estimation.gcas.threshold.Peak.masked`) is not decided
+        there: the echo is fitted where its fit puts it, and the detector's boundary, read
+        beside the greater echo's Doppler response, would take that hop from it."""
+        speed = self.c * (alpha - 1.0) / (alpha + 1.0)
+        return any(
+            e.e_over_n0_db >= self.lobe_sure_db
+            and abs(e.speed(self.c)) >= self._still_mps
+            and 0 < hop_index - e.hop_index <= KNOWN_HOPS
+            and self._same_echo(e, hop_index, t_s, speed)
+            for e in self._echoes
+        )
+
     def due(self, t_s: float) -> list[tuple[int, float, float]]:
         """The boundaries of echoes measured lately that no detection brought by ``t_s`` (s):
         for each echo fitted above the lobe decision's threshold region (:data:`LOBE_Z`)

@@ -270,6 +270,12 @@ class Readout:
             self._refiner is None or not self._refiner.beside_known(t_rx, alpha, hop_index)
         ):
             return None
+        if (
+            p.masked
+            and self._refiner is not None
+            and self._refiner.followed_near(t_rx, alpha, hop_index)
+        ):
+            return None
         if self._refiner is not None:
             if self.hidden is not None:
                 self.hidden.measure_near(t_rx, p.peak - p.mean)
