@@ -56,9 +56,12 @@ class Estimate:
         at ``t_s``: the boundary between transmit hops ``hop_index`` and ``hop_index + 1``.
         Consecutive detections of one target advance it by one.
     score:
-        Detection statistic of the receiver (dimensionless; larger is more confident).
+        Detection statistic of the receiver (dimensionless; larger is more confident); NaN
+        for an echo measured without a detection of its own (GCAS with the refinement
+        follows an echo measured lately to its next boundary where another echo's ghost
+        or response hides its peak: :meth:`hil.estimation.gcas.readout.Readout.decide_all`).
     snr_db:
-        Estimated output SNR of the detection, dB.
+        Estimated output SNR of the detection, dB; NaN where ``score`` is.
     alpha:
         Estimated Doppler time-scale factor α = (c + v)/(c − v).
     t_tx_s:

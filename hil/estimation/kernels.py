@@ -180,6 +180,53 @@ def second_peak_cells(
 
 
 @numba.njit(**_JIT)
+def masked_peak_cells(
+    s: Any, half_rows: int, half_cols: int, own_cols: int, apart: int, lo: int, hi: int,
+    level: float, below: float,
+) -> Any:  # fmt: skip
+    """Cells ``(i, d)`` with ``i`` in ``[lo, hi)`` that are the first maximum of ``s`` over
+    ``±half_rows`` rows and ``±own_cols`` columns but not over ``±half_cols`` columns: the
+    greatest cell of that wider window (the first in row-major order) lies at least
+    ``apart`` rows from row ``i`` and ``s[i, d]`` reaches ``level`` times it but not
+    ``below`` times it. A peak of
+    its own beside a greater one of another row (rows are time, columns hypotheses; −inf
+    cells are never one). ``s`` shape ``(n, D)``; returns row and column indices (int64,
+    shape ``(P,)`` each), row-major order."""
+    rows = np.empty((hi - lo) * s.shape[1] if hi > lo else 0, dtype=np.int64)
+    cols = np.empty_like(rows)
+    n, n_cols = s.shape
+    count = 0
+    for i in range(lo, hi):
+        r_lo, r_hi = max(0, i - half_rows), min(n, i + half_rows + 1)
+        for d in range(n_cols):
+            v = s[i, d]
+            if not v > -math.inf:
+                continue
+            own = True
+            for j in range(r_lo, r_hi):
+                for e in range(max(0, d - own_cols), min(n_cols, d + own_cols + 1)):
+                    if j < i or (j == i and e < d):
+                        if s[j, e] >= v:
+                            own = False
+                    elif s[j, e] > v:
+                        own = False
+                if not own:
+                    break
+            if not own:
+                continue
+            top, top_row = v, i
+            for j in range(r_lo, r_hi):
+                for e in range(max(0, d - half_cols), min(n_cols, d + half_cols + 1)):
+                    if s[j, e] > top:
+                        top, top_row = s[j, e], j
+            if abs(top_row - i) >= apart and level * top <= v < below * top:
+                rows[count] = i
+                cols[count] = d
+                count += 1
+    return rows[:count], cols[:count]
+
+
+@numba.njit(**_JIT)
 def first_possible_cells(
     s: Any, half_rows: int, half_cols: int, lo: int, hi: int, leak: Any
 ) -> Any:  # fmt: skip

@@ -141,14 +141,15 @@ KNOWN_HOPS = 3
 #: lobe off beside a stronger echo.
 SAME_ECHO_LOBES = 1.5
 #: A detection where a measured echo's ghost peaks (:data:`GHOST_HOPS`) is taken for that
-#: ghost, without a fit, at up to this fraction of the echo's fitted amplitude (read without
-#: a fit, :meth:`CoherentRefiner._amplitude_near`). Measured on att, one target at 0, -10 and
-#: +10 dB, closing 5-25 and opening 10-20 m/s, 2 s each: a ghost reads 0.07-0.53 of its echo
-#: (median 0.25-0.30, 99th percentile 0.30-0.52). A second echo there at its own speed reads
-#: its own level: one within 4.4 dB of the measured echo is fitted (two targets one tone
-#: spacing's speed apart, 0 dB: both kept at every hop, against half of the hops each when
-#: every detection there no stronger than the echo was taken for its ghost).
-GHOST_FRACTION = 0.6
+#: ghost, without a fit, where read without a fit with that echo taken out (its fitted delay,
+#: time scale and amplitude, :meth:`CoherentRefiner._amplitude_near`) it keeps at most this
+#: fraction of the echo's fitted amplitude: the ghost is that echo's tones read at another
+#: speed, and goes with it. Measured on att (one target at 40-70 m, 12-20 m/s closing and
+#: 15 m/s opening, 2 s): its ghosts keep 0.02-0.04 of it at 0 dB per-sample SNR and
+#: 0.07-0.13 at -10 dB (5th-95th percentile; 0.26-0.44 read with the echo in). A second echo
+#: there keeps its own level (0.7-1.1 of it) and is fitted, with the measured echo taken out;
+#: one more than 12 dB below the measured echo is given up.
+GHOST_LEFT = 0.25
 #: Except beside an echo measured within this many Doppler cells of a hop (``c/(2 f_c
 #: T_h)``) of rest: there it may be the leak of a still echo the reverberation band hides
 #: (att, a target at rest, -10 dB: fits at 2-4 m/s), and what peaks where its ghost would
@@ -156,7 +157,11 @@ GHOST_FRACTION = 0.6
 #: a ghost up to the measured echo's own strength.
 STILL_LEAK_CELLS = 2.0
 #: A detection at a measured echo's ghost whose detector statistic is at most this many
-#: times the strongest of that echo's ghosts read so far is taken for its ghost unread.
+#: times the strongest of that echo's ghosts read so far on the same codeword (the hop
+#: offset from the echo's, modulo a code period: a ghost's codeword recurs, on att 5-8 of
+#: the 17 offsets) is taken for its ghost unread. A second echo at the ghost's speed is read
+#: at its first boundary on an offset no ghost took (its detector statistic is 0.6-1.9 of
+#: the ghost's), and followed after its fit (:meth:`CoherentRefiner.ghost_of_known`).
 GHOST_STRENGTH_MARGIN = 1.5
 #: How far (hops) from where an echo's ghost's comb peaks a detection at its ghost's speed is
 #: taken for it (:meth:`CoherentRefiner.ghost_of_known`): measured 0.10-0.33 hop after the
@@ -180,6 +185,10 @@ GHOST_LEAK_CELLS = 3.0
 #: whose ghost it may be (:meth:`CoherentRefiner._amplitude_near`): the likelihood's main
 #: peak is ``1/B`` wide (``B`` the tones' span), a lobe holds about K of them (att: 4).
 GHOST_POINTS = 9
+#: An echo is followed to a boundary no detection brought (:meth:`CoherentRefiner.due`)
+#: once this many of its boundaries were fitted: one fit that passed the echo test may be
+#: noise's or another echo's ghost, and following it would carry it on.
+FOLLOW_FITS = 2
 #: Lobe checks after a search (each may move the fit by one grating lobe; they stop where
 #: neither neighbour is better): a detector's time can be several lobes off at an echo's
 #: first boundary (att three-state, full search: 2.75 lobes, 1.8 ms).
@@ -296,10 +305,16 @@ class _EchoFit:
     #: The time scale's rate, 1/s (an accelerating fit's; 0 for a constant speed).
     rate: float = 0.0
     #: The largest detector statistic (above its noise mean) of a detection read as this
-    #: echo's ghost (:meth:`CoherentRefiner.ghost_of_known`; 0 before any).
-    ghost_strength: float = 0.0
+    #: echo's ghost (:meth:`CoherentRefiner.ghost_of_known`; 0 before any), by the ghost's
+    #: hop offset from the echo's, modulo a code period (shape ``(period_hops,)``).
+    ghost_strength: tuple[float, ...] = ()
     #: The fit's E/N0, dB (:attr:`Refinement.e_over_n0_db`).
     e_over_n0_db: float = math.inf
+    #: The latest hop at which this echo was looked for where the fit puts it, without a
+    #: detection (:meth:`CoherentRefiner.due`; its own hop before any).
+    followed: int = -1
+    #: How many boundaries of this echo were fitted (this one and those it replaced).
+    fits: int = 1
 
     def speed(self, sound_speed_mps: float) -> float:
         """Radial speed, m/s (closing positive)."""
@@ -635,7 +650,10 @@ class CoherentRefiner:
         not this detection's own; or an echo measured lately beyond the speed span but
         within :data:`NEIGHBOUR_CELLS` Doppler cells of a hop of it, above the lobe
         decision's threshold region (:data:`LOBE_Z`: near threshold the fits that pass
-        include noise's, beside which a second maximum is noise too). A second maximum of a
+        include noise's, beside which a second maximum is noise too); or where an echo
+        measured lately at its speed puts its boundary and has no fit at this hop yet, while
+        another echo's ghost shares the row (the ghost is the row's maximum there, the echo's
+        own peak a second one). A second maximum of a
         Doppler row (:mod:`hil.estimation.gcas.candidates`) is decided only there: beside
         one lone echo of its speed it is that echo's shoulder (its fit would be that echo on
         another codeword), and in noise alone one more chance for a false alarm."""
@@ -650,6 +668,14 @@ class CoherentRefiner:
         echoes = [e for e in self._echoes if near(e)]
         if len(echoes) >= 2 and any(not self._same_echo(e, hop_index, t_s, speed) for e in echoes):
             return True
+        if any(
+            e.hop_index < hop_index and self._same_echo(e, hop_index, t_s, speed) for e in echoes
+        ) and any(
+            abs(e.t_s - t_s) <= reach
+            and abs(abs(speed - e.speed(self.c)) - self._ghost_speed) <= self._cell_speed
+            for e in self._echoes
+        ):
+            return True
         cells = NEIGHBOUR_CELLS * self._cell_speed
         return any(
             abs(e.t_s - t_s) <= reach
@@ -657,6 +683,47 @@ class CoherentRefiner:
             and e.e_over_n0_db >= self.lobe_sure_db
             for e in self._echoes
         )
+
+    def followed_near(self, t_s: float, alpha: float, hop_index: int) -> bool:
+        """Whether a detection at ``t_s`` (s) and time scale ``alpha`` (the boundary ending hop
+        ``hop_index``) is the boundary of an echo that :meth:`due` gives: measured before this
+        hop, within :data:`KNOWN_HOPS` hops, above the lobe decision's threshold region and
+        moving, and the same echo (:meth:`_same_echo`). A peak masked by a greater one of
+        another boundary (:attr:`~hil.estimation.gcas.threshold.Peak.masked`) is not decided
+        there: the echo is fitted where its fit puts it, and the detector's boundary, read
+        beside the greater echo's Doppler response, would take that hop from it."""
+        speed = self.c * (alpha - 1.0) / (alpha + 1.0)
+        return any(
+            e.e_over_n0_db >= self.lobe_sure_db
+            and abs(e.speed(self.c)) >= self._still_mps
+            and 0 < hop_index - e.hop_index <= KNOWN_HOPS
+            and self._same_echo(e, hop_index, t_s, speed)
+            for e in self._echoes
+        )
+
+    def due(self, t_s: float) -> list[tuple[int, float, float]]:
+        """The boundaries of echoes measured lately that no detection brought by ``t_s`` (s):
+        for each echo fitted above the lobe decision's threshold region (:data:`LOBE_Z`)
+        outside the still reverberation's Doppler cells, its next boundary where its latest
+        fit carries on, received before ``t_s`` and at most :data:`KNOWN_HOPS` hops after
+        that fit, each once: ``(hop_index, t, α)`` (hop, s, 1). Another echo's ghost or
+        Doppler response can hold the row's maximum at an echo's boundary (a weaker echo a
+        tone spacing's speed from a stronger one: the ghost's peak beside it); the echo is
+        then fitted there (:meth:`refine`) and its echo test decides."""
+        out = []
+        for i, e in enumerate(self._echoes):
+            if (
+                e.fits < FOLLOW_FITS
+                or e.e_over_n0_db < self.lobe_sure_db
+                or abs(e.speed(self.c)) < self._still_mps
+            ):
+                continue
+            hop = max(e.hop_index, e.followed) + 1
+            t_next = e.t_s + (hop - e.hop_index) * self.hop_len_s / e.alpha
+            if t_next <= t_s and hop - e.hop_index <= KNOWN_HOPS:
+                out.append((hop, t_next, e.alpha))
+                self._echoes[i] = replace(e, followed=hop)
+        return out
 
     def known_echoes(self, t_s: float) -> list[tuple[float, float]]:
         """The echoes measured within :data:`KNOWN_HOPS` hops of ``t_s`` (s), the ones taken
@@ -676,17 +743,17 @@ class CoherentRefiner:
         tone is read as its neighbour: one tone spacing's speed away from it (within one
         Doppler resolution cell), where its comb peaks, ``(M − 1)/2`` hops of the two time
         scales' drift after one of the echo's boundaries (within :data:`GHOST_HOPS`), and
-        at most :data:`GHOST_FRACTION` of its strength (a ghost collects part of its echo's
-        energy; up to its whole strength beside a slow echo, :data:`STILL_LEAK_CELLS`).
-        Such a detection is refused without a fit. One stronger than that is
-        fitted, and the echo test decides: a second echo there (a target one tone spacing's
-        speed from another, whose boundaries pass where the other's ghost peaks half of the
-        time), or the measured echo's source where the measured one is a weak ghost that
-        passed the echo test first. A second echo there weaker than that is given up. A
-        detection whose detector statistic ``strength`` (above its noise mean) is at most
+        not an echo measured lately itself continuing there (a second echo at the ghost's
+        speed, found once, is followed through the ghost's hops). It is the ghost where,
+        read with the echo taken out, at most :data:`GHOST_LEFT` of the echo's strength is
+        left (the ghost goes with its echo; a second echo there keeps its own level); beside
+        a slow echo (:data:`STILL_LEAK_CELLS`, whose ghosts may be a hidden still echo's
+        and stay when it is taken out) where read with it in it is at most the echo's own
+        strength. Such a detection is refused without a fit; any other is fitted with the
+        measured echoes taken out, and the echo test decides. A detection whose detector
+        statistic ``strength`` (above its noise mean) is at most
         :data:`GHOST_STRENGTH_MARGIN` times that of a detection already read as this echo's
-        ghost is taken for its ghost without reading it again (a second echo within
-        :data:`GHOST_FRACTION` of the echo collects several times what its ghost does).
+        ghost on the same codeword is taken for its ghost without reading it.
 
         On the span's edge hypothesis (``edge_side`` +1 closing, −1 opening; 0 elsewhere), a
         ghost beyond that edge (more than one Doppler cell past the detection's speed, at
@@ -716,19 +783,41 @@ class CoherentRefiner:
             spread = 2.0 * abs(drift)  # hops between the first and the last term's offsets
             if abs((t_s - e.t_s) / period - drift - k) > GHOST_HOPS + max(0.0, spread - 0.5) / 2:
                 continue
-            if strength <= GHOST_STRENGTH_MARGIN * e.ghost_strength:
-                return True
-            if amplitude is None:
-                amplitude = self._amplitude_near(t_s, alpha, hop_index, around=True)
             slow = abs(e.speed(self.c)) <= STILL_LEAK_CELLS * self._cell_speed
-            if amplitude <= (1.0 if slow else GHOST_FRACTION) * abs(e.amplitude):
-                if math.isfinite(strength) and strength > e.ghost_strength:
-                    self._echoes[i] = replace(e, ghost_strength=strength)
+            if not slow and any(self._same_echo(o, hop_index, t_s, speed) for o in self._echoes):
+                return False
+            # The ghost's codeword (its hop's offset from the echo's, modulo a code period)
+            # recurs: a detection there no stronger than its ghosts is one of them.
+            offset = (hop_index - e.hop_index - round((t_s - e.t_s) / period)) % len(
+                e.ghost_strength
+            )
+            if strength <= GHOST_STRENGTH_MARGIN * e.ghost_strength[offset]:
+                return True
+            if slow:
+                if amplitude is None:
+                    amplitude = self._amplitude_near(t_s, alpha, hop_index, around=True)
+                ghost = amplitude <= abs(e.amplitude)
+            else:
+                left = self._amplitude_near(
+                    t_s, alpha, hop_index, around=True, known=self._rows([e], t_s)
+                )
+                ghost = left <= GHOST_LEFT * abs(e.amplitude)
+            if ghost:
+                if math.isfinite(strength) and strength > e.ghost_strength[offset]:
+                    read = list(e.ghost_strength)
+                    read[offset] = strength
+                    self._echoes[i] = replace(e, ghost_strength=tuple(read))
                 return True
         return False
 
     def _amplitude_near(
-        self, t_s: float, alpha: float, hop_index: int, inward: int = 0, around: bool = False
+        self,
+        t_s: float,
+        alpha: float,
+        hop_index: int,
+        inward: int = 0,
+        around: bool = False,
+        known: NDArray[np.complex128] = _NO_KNOWN,
     ) -> float:
         """The largest fitted amplitude ``|β| = 2|C|/E_s`` of an echo of constant speed
         within ±½ grating lobe of ``t_s`` (s, :data:`GHOST_POINTS` times) at the detection's
@@ -755,7 +844,7 @@ class CoherentRefiner:
             alphas1 = (self.c + v) / (self.c - v)
         t = np.ascontiguousarray(np.tile(t1, alphas1.size))
         alphas = np.ascontiguousarray(np.repeat(alphas1, t1.size))
-        sums = self._sums(t_s, alpha, hop_index, t, alphas, np.zeros(t.size))
+        sums = self._sums(t_s, alpha, hop_index, t, alphas, np.zeros(t.size), known)
         if sums is None:
             return 0.0
         c, e_s = sums
@@ -771,17 +860,19 @@ class CoherentRefiner:
         speed = self.c * (fit.alpha - 1.0) / (fit.alpha + 1.0)  # _EchoFit.speed
         oldest = fit.t_s - KNOWN_HOPS * self.hop_len_s
         kept = []
-        ghost_strength = 0.0
+        ghost_strength = (0.0,) * self.schedule.period_hops
+        fits = 1
         for e in self._echoes:
             if e.t_s < oldest:
                 continue
             if self._same_echo(e, hop_index, fit.t_s, speed):
-                ghost_strength = max(ghost_strength, e.ghost_strength)
+                ghost_strength = tuple(map(max, ghost_strength, e.ghost_strength or ghost_strength))
+                fits = max(fits, e.fits + 1)
             else:
                 kept.append(e)
         new = _EchoFit(
             hop_index, fit.t_s, fit.alpha, fit.amplitude, fit.rate(self.c), ghost_strength,
-            fit.e_over_n0_db,
+            fit.e_over_n0_db, fits=fits,
         )  # fmt: skip
         self._echoes = [*kept, new]
 
@@ -1336,6 +1427,7 @@ class CoherentRefiner:
     def _sums(
         self, t_s: float, alpha: float, hop_index: int, t: NDArray[np.float64],
         alphas: NDArray[np.float64], rates: NDArray[np.float64],
+        known: NDArray[np.complex128] = _NO_KNOWN,
     ) -> tuple[NDArray[np.complex128], NDArray[np.float64]] | None:  # fmt: skip
         """``C`` and the model's energy ``E_s`` of the candidates ``(t, alphas, rates)``
         (shape ``(n,)`` each, contiguous) near a detection ``(t_s, alpha)`` of the boundary
@@ -1350,7 +1442,7 @@ class CoherentRefiner:
         n = t.size
         c, e_s, signal = np.empty(n, np.complex128), np.empty(n), np.empty(n)
         candidate_sums(
-            *args, t, alphas, rates, c, e_s, signal, np.empty((n, 0), np.complex128), _NO_KNOWN
+            *args, t, alphas, rates, c, e_s, signal, np.empty((n, 0), np.complex128), known
         )
         return c, e_s
 

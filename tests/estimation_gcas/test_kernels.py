@@ -11,6 +11,7 @@ from hil.estimation.gcas import NO_SAMPLE, GcasReceiver
 from hil.estimation.gcas.search_two_stage import TwoStageSearch
 from hil.estimation.kernels import (
     first_possible_cells,
+    masked_peak_cells,
     peak_cells,
     peak_indices,
     second_peak_cells,
@@ -105,6 +106,52 @@ def test_second_peak_cells_equal_the_written_out_rule(
         if (i, j) not in wide and s[i, j] >= level * top:
             want.append((i, j))
     assert list(zip(got_rows.tolist(), got_cols.tolist(), strict=True)) == want
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    CELL_ROWS, st.integers(1, 4), st.integers(1, 3), st.integers(0, 1), st.integers(1, 3),
+    st.sampled_from([0.0, 0.3]), st.sampled_from([0.6, 1.0]),
+)  # fmt: skip
+def test_masked_peak_cells_equal_the_written_out_rule(
+    rows: list[list[float]], hr: int, hc: int, own: int, apart: int, level: float, below: float
+) -> None:
+    s = np.array(rows)
+    own = min(own, hc - 1)
+    got_rows, got_cols = masked_peak_cells(s, hr, hc, own, apart, 0, s.shape[0], level, below)
+    want = []
+    for i, j in _cells_reference(s, hr, own, np.full(4, np.nan)):  # no leak test
+        window = s[max(0, i - hr) : i + hr + 1, max(0, j - hc) : j + hc + 1]
+        top_row = max(0, i - hr) + int(np.argmax(window)) // window.shape[1]
+        top, v = window.max(), s[i, j]
+        if abs(top_row - i) >= apart and level * top <= v < below * top:
+            want.append((i, j))
+    assert list(zip(got_rows.tolist(), got_cols.tolist(), strict=True)) == want
+
+
+def test_a_weaker_echo_beside_a_stronger_ones_lobe_is_a_masked_cell() -> None:
+    # Five hypotheses, lobe 2: a stronger echo's boundary at row 2 in column 1, its main lobe
+    # over columns 0-2 and its Doppler response in column 3 peaking at its own boundary; a
+    # weaker echo in column 4 with its boundary at row 6, half of the greatest cell within
+    # two hypotheses of it (0.8, the stronger one's main lobe), which hides it from a
+    # ±2-hypothesis maximum.
+    s = np.array([
+        [0.3, 0.5, 0.5, 0.2, 0.1],
+        [0.5, 0.8, 0.6, 0.3, 0.1],
+        [0.6, 1.0, 0.8, 0.35, 0.1],
+        [0.5, 0.8, 0.6, 0.3, 0.1],
+        [0.4, 0.6, 0.4, 0.3, 0.2],
+        [0.4, 0.6, 0.4, 0.3, 0.3],
+        [0.4, 0.6, 0.4, 0.3, 0.4],
+        [0.4, 0.6, 0.4, 0.3, 0.3],
+    ])  # fmt: skip
+    assert peak_cells(s, 4, 2, 0, 8, np.zeros(5))[1].tolist() == [1]
+    rows, cols = masked_peak_cells(s, 4, 2, 1, 2, 0, 8, 0.08, 0.6)
+    assert list(zip(rows.tolist(), cols.tolist(), strict=True)) == [(6, 4)]
+    # The stronger one's own response in column 3 peaks at its boundary: never a masked cell.
+    assert masked_peak_cells(s, 4, 2, 0, 2, 0, 8, 0.0, 1.0)[1].tolist() == [4]
+    # Reaching the bound's fraction of the greater cell it is not one.
+    assert masked_peak_cells(s, 4, 2, 1, 2, 0, 8, 0.08, 0.45)[0].tolist() == []
 
 
 def test_a_second_echo_within_half_a_hop_of_a_greater_one_is_a_second_cell() -> None:

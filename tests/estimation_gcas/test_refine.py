@@ -12,6 +12,7 @@ below a third of the bound is far inside the noise of the mean (σ/sqrt(24) ≈ 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -352,7 +353,7 @@ def _beside_an_echo_whose_ghost_it_may_be(
     refiner._echoes = [
         refine_module._EchoFit(
             first.hop_index, t_ghost, a_ghost, scale * fit.amplitude,
-            ghost_strength=ghost_strength,
+            ghost_strength=(ghost_strength,) * schedule.period_hops,
         )
     ]  # fmt: skip
     return refiner, first
@@ -362,15 +363,18 @@ def _beside_an_echo_whose_ghost_it_may_be(
 def test_a_detection_is_the_ghost_of_a_measured_echo_only_where_it_is_much_weaker(
     scale: float, ghost: bool
 ) -> None:
-    # Five times the target's amplitude, the detection (a fifth of it, below GHOST_FRACTION)
-    # is the measured echo's ghost; 1.25 times, the detection reads 0.8 of it, a second echo
-    # there, fitted; a fifth of it, the measured echo is the ghost (a weak ghost fit that
-    # passed the echo test first) and the detection is kept.
+    # Read with the measured echo taken out, the detection keeps its own level: five times
+    # the target's amplitude, that is a fifth of the echo (below GHOST_LEFT), given up as its
+    # ghost; 1.25 times, 0.8 of it, a second echo there, fitted; a fifth of it, the measured
+    # echo is the ghost (a weak ghost fit that passed the echo test first) and the detection
+    # is kept.
     refiner, first = _beside_an_echo_whose_ghost_it_may_be(scale)
     assert refiner.ghost_of_known(first.t_s, first.alpha, first.hop_index, strength=4.0) is ghost
-    # Read as its ghost, the detector statistic is kept: later detections there up to
-    # GHOST_STRENGTH_MARGIN times it are refused unread, stronger ones are read again.
-    assert refiner._echoes[0].ghost_strength == (4.0 if ghost else 0.0)
+    # Read as its ghost, the detector statistic is kept on its codeword: later detections
+    # there up to GHOST_STRENGTH_MARGIN times it are refused unread, stronger ones are read
+    # again.
+    read = refiner._echoes[0].ghost_strength
+    assert sorted(read) == [0.0] * (len(read) - 1) + [4.0 if ghost else 0.0]
 
 
 def test_a_ghost_read_once_refuses_the_next_as_weak_unread_and_reads_a_stronger_one() -> None:
@@ -382,6 +386,64 @@ def test_a_ghost_read_once_refuses_the_next_as_weak_unread_and_reads_a_stronger_
     assert not refiner.ghost_of_known(first.t_s, first.alpha, first.hop_index, strength=6.1)
     # Without a statistic (a caller that has none) it is always read.
     assert not refiner.ghost_of_known(first.t_s, first.alpha, first.hop_index)
+
+
+def test_a_ghost_read_on_another_codeword_does_not_refuse_a_detection_unread() -> None:
+    # A ghost's codeword recurs; a second echo at the ghost's speed arrives on codewords of
+    # its own. Ghosts read at a statistic of 4 on every other hop offset from the echo's: the
+    # detection (0.8 of the echo, a second echo) at 3.0 is read, and kept.
+    refiner, first = _beside_an_echo_whose_ghost_it_may_be(1.25)
+    echo = refiner._echoes[0]
+    period = refiner.hop_len_s / echo.alpha
+    own = (first.hop_index - echo.hop_index - round((first.t_s - echo.t_s) / period)) % len(
+        echo.ghost_strength
+    )
+    others = tuple(0.0 if i == own else 4.0 for i in range(len(echo.ghost_strength)))
+    refiner._echoes = [dataclasses.replace(echo, ghost_strength=others)]
+    assert not refiner.ghost_of_known(first.t_s, first.alpha, first.hop_index, strength=3.0)
+    # On its own codeword the same statistic is refused unread.
+    refiner._echoes = [dataclasses.replace(echo, ghost_strength=(4.0,) * len(others))]
+    assert refiner.ghost_of_known(first.t_s, first.alpha, first.hop_index, strength=3.0)
+
+
+def test_an_echo_measured_at_a_ghosts_speed_is_followed_through_the_ghosts_hops() -> None:
+    # The target's own fit one hop earlier is kept: its next boundary, where the measured
+    # echo's ghost peaks and weaker than its ghosts read so far, is that echo's, not a ghost.
+    refiner, first = _beside_an_echo_whose_ghost_it_may_be(5.0, ghost_strength=4.0)
+    earlier = first.t_s - refiner.hop_len_s / first.alpha
+    own = refine_module._EchoFit(first.hop_index - 1, earlier, first.alpha, 1.0)
+    assert refiner.ghost_of_known(first.t_s, first.alpha, first.hop_index, strength=3.0)
+    refiner._echoes = [*refiner._echoes, own]
+    assert not refiner.ghost_of_known(first.t_s, first.alpha, first.hop_index, strength=3.0)
+
+
+def test_an_echo_measured_lately_is_due_at_its_next_boundary_once() -> None:
+    # A target fitted at one boundary: its next boundary is due once the stream has passed
+    # it, once, and never beyond KNOWN_HOPS hops of the fit, from its second fit on
+    # (FOLLOW_FITS); a fit below the lobe decision's threshold region or at rest is not
+    # followed.
+    refiner, first = _beside_an_echo_whose_ghost_it_may_be(1.0)
+    refiner._echoes = []
+    fit = refiner.refine(first.t_s, first.alpha, first.hop_index)
+    assert fit is not None and fit.is_echo(refiner.echo_test)
+    period = refiner.hop_len_s / fit.alpha
+    assert refiner._echoes[0].fits == 1 and refiner.due(fit.t_s + 10 * period) == []
+    refiner._echoes = [dataclasses.replace(refiner._echoes[0], fits=refine_module.FOLLOW_FITS)]
+    assert refiner.due(fit.t_s + 0.5 * period) == []
+    [(hop, t_next, alpha)] = refiner.due(fit.t_s + 1.5 * period)
+    assert hop == first.hop_index + 1 and alpha == fit.alpha
+    assert t_next == pytest.approx(fit.t_s + period, abs=1e-12)
+    assert refiner.due(fit.t_s + 1.5 * period) == []
+    assert [h for h, _, _ in refiner.due(fit.t_s + 10 * period)] == [first.hop_index + 2]
+    assert [h for h, _, _ in refiner.due(fit.t_s + 10 * period)] == [first.hop_index + 3]
+    assert refiner.due(fit.t_s + 10 * period) == []
+    echo = refiner._echoes[0]
+    for other in (
+        dataclasses.replace(echo, followed=-1, e_over_n0_db=refiner.lobe_sure_db - 0.1),
+        dataclasses.replace(echo, followed=-1, alpha=1.0),
+    ):
+        refiner._echoes = [other]
+        assert refiner.due(fit.t_s + 10 * period) == []
 
 
 def test_refine_must_be_a_bool() -> None:

@@ -23,12 +23,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
 from hil.estimation.base import Estimate
+from hil.estimation.crlb import Crlb
 from hil.estimation.detection import parabolic_offset
 from hil.estimation.doppler_grid import alpha_to_speed, speed_to_alpha
 from hil.estimation.first_arrival import FirstArrivalReadout
@@ -66,6 +67,11 @@ COHERENCE_FRACTION = 0.8
 RUN_COHERENCE_FRACTION = 0.85
 MIN_ECHO_SNR_DB = 12.0
 ECHO_TEST = EchoTest(COHERENCE_FRACTION, RUN_COHERENCE_FRACTION, MIN_ECHO_SNR_DB)
+#: An echo measured lately whose next boundary no detection brought is fitted where its fit
+#: puts it once the peaks decided have passed that boundary by this many hops
+#: (:meth:`Readout._follow`): peaks are decided in the order of their candidates' blocks,
+#: within a fine window of them, so a detection of that boundary comes before.
+FOLLOW_LAG_HOPS = 1.0
 
 #: Grid steps the detector-only readout moves its Doppler parabola onto the largest of the
 #: sums measured on common tones (:meth:`Readout._doppler_offset`): the search's hypothesis
@@ -199,6 +205,9 @@ class Readout:
         #: Detections of an echo already reported at the same boundary (two peaks of one
         #: echo, both refined onto it): the first is kept.
         self.same_echo_count = 0
+        #: Estimates of echoes measured lately fitted where their fits put their next
+        #: boundary, without a detection there (:meth:`_follow`).
+        self.followed_count = 0
         #: The estimates reported lately: (hop index, boundary time s, speed m/s).
         self._reported: list[tuple[int, float, float]] = []
         self.last_detection: DetectionInfo | None = None
@@ -227,10 +236,18 @@ class Readout:
         deciding it would report every still scatterer beside every still target. A second
         echo of one speed (:attr:`~hil.estimation.gcas.threshold.Peak.second`: a moving
         window's second codeword, a row's second maximum) is decided whatever became of the
-        one before it, where :meth:`decide` finds a partner or two echoes at its speed."""
+        one before it, where :meth:`decide` finds a partner or two echoes at its speed.
+
+        With the refinement, before each peak the echoes measured lately whose next boundary
+        the peaks have passed by :data:`FOLLOW_LAG_HOPS` without a fit there are fitted where
+        their fits put it (:meth:`_follow`): another echo's ghost or Doppler response can
+        hold the row's maximum at that boundary. Decided in the peaks' order, so any
+        chunking of the input gives the same estimates."""
         out: list[Estimate] = []
         refused = False
         for p in peaks:
+            if self._refiner is not None:
+                out += self._follow(self._boundary(p)[0] - FOLLOW_LAG_HOPS * self._fe.hop_s)
             if p.beside and not p.second and not refused:
                 continue
             est = self.decide(p)
@@ -241,21 +258,8 @@ class Readout:
 
     def decide(self, p: Peak) -> Estimate | None:
         """The estimate of one peak, or None where it is refused (band edge, too far)."""
-        fe, k = self._fe, self._k
-        c, fs_bb = fe.sound_speed_mps, fe.fs_bb
-        dd = p.dd if self._refiner is not None else self._doppler_offset(p)
-        speed = k.speeds[p.d0] + dd * k.speed_step
-        alpha = (c + speed) / (c - speed)  # speed_to_alpha, on Python floats
-        exact_len = k.hop_samples / alpha
-        t_rx = ((p.n_star + p.dn) * k.decimation - k.group_delay) / k.fs_in + (
-            exact_len - k.lengths[p.d0] + 1
-        ) / (2.0 * fs_bb)
-        # Transmit time: end of hop ĵ, folded by whole code periods into [0, τ_max].
-        end_j = k.hop_end[p.codeword]
-        tol = 2.0 / fs_bb
-        q = math.floor((t_rx - end_j + tol) / k.period)
-        t_tx = end_j + q * k.period
-        hop_index = p.codeword + q * fe.n_codewords
+        fe = self._fe
+        t_rx, alpha, t_tx, hop_index = self._boundary(p)
         if fe.refused_hypotheses[p.d0]:
             self.in_band_count += 1
             if self.hidden is not None:
@@ -264,6 +268,12 @@ class Readout:
         bound = None
         if p.second and (
             self._refiner is None or not self._refiner.beside_known(t_rx, alpha, hop_index)
+        ):
+            return None
+        if (
+            p.masked
+            and self._refiner is not None
+            and self._refiner.followed_near(t_rx, alpha, hop_index)
         ):
             return None
         if self._refiner is not None:
@@ -305,36 +315,102 @@ class Readout:
             t_rx, alpha, bound = refined.t_s, refined.alpha, refined.bound
         elif self._coherent:
             t_rx, alpha = self._coherent_refine(p.n_star, p.d0, hop_index, t_rx, alpha)
+        est = self._estimate(t_rx, alpha, t_tx, hop_index, bound)
+        if est is None:
+            return None
+        consistent = self._consistent(hop_index, est.t_s, est.alpha)
+        self.last_detection = DetectionInfo(p.n_star, p.threshold, p.mean, p.ratio, consistent)
+        mean, thr = p.mean, p.threshold
+        snr = (p.peak - mean) / mean if mean > 0 and math.isfinite(mean) else math.inf
+        return replace(
+            est,
+            score=p.peak / thr if thr > 0 else math.inf,
+            snr_db=10.0 * math.log10(snr) if snr > 0 else -math.inf,
+        )
+
+    def _boundary(self, p: Peak) -> tuple[float, float, float, int]:
+        """A peak's boundary: received at ``t_rx`` (s) at time scale ``α`` (the detector's
+        speed), transmitted at ``t_tx`` (s, the end of hop ``hop_index``, folded by whole code
+        periods into ``[0, τ_max]``)."""
+        k = self._k
+        dd = p.dd if self._refiner is not None else self._doppler_offset(p)
+        speed = k.speeds[p.d0] + dd * k.speed_step
+        c = self._fe.sound_speed_mps
+        alpha = (c + speed) / (c - speed)  # speed_to_alpha, on Python floats
+        exact_len = k.hop_samples / alpha
+        t_rx = ((p.n_star + p.dn) * k.decimation - k.group_delay) / k.fs_in + (
+            exact_len - k.lengths[p.d0] + 1
+        ) / (2.0 * self._fe.fs_bb)
+        end_j = k.hop_end[p.codeword]
+        q = math.floor((t_rx - end_j + 2.0 / self._fe.fs_bb) / k.period)
+        return t_rx, alpha, end_j + q * k.period, p.codeword + q * self._fe.n_codewords
+
+    def _estimate(
+        self, t_rx: float, alpha: float, t_tx: float, hop_index: int,
+        bound: Crlb | None,
+    ) -> Estimate | None:  # fmt: skip
+        """The estimate of the boundary ending hop ``hop_index`` (transmitted at ``t_tx``,
+        s) measured at ``t_rx`` (s) and time scale ``alpha``, timed at its first arrival where
+        the multipath readout is on; None beyond the range or already reported. Its score and
+        SNR are NaN (a detection's replace them)."""
+        c = self._fe.sound_speed_mps
         if self._first_arrival is not None:
             first = self._first_arrival.first_arrival(t_rx, alpha, hop_index)
             if first is not None:
                 t_rx, alpha = first.t_s, first.alpha
         delay = t_rx - t_tx
-        if delay > self._max_delay + tol:
+        if delay > self._max_delay + 2.0 / self._fe.fs_bb:
             self.refused_count += 1
             return None
         speed = c * (alpha - 1.0) / (alpha + 1.0)  # alpha_to_speed, on Python floats
         if self._reported_already(int(hop_index), t_rx, speed):
             self.same_echo_count += 1
             return None
-        consistent = self._consistent(hop_index, t_rx, alpha)
-        self.last_detection = DetectionInfo(p.n_star, p.threshold, p.mean, p.ratio, consistent)
-        mean, thr = p.mean, p.threshold
-        snr = (p.peak - mean) / mean if mean > 0 and math.isfinite(mean) else math.inf
         return Estimate(
             t_s=t_rx,
             range_m=c * delay / 2.0,
             speed_mps=speed,
             hop_index=int(hop_index),
-            score=p.peak / thr if thr > 0 else math.inf,
-            snr_db=10.0 * math.log10(snr) if snr > 0 else -math.inf,
+            score=math.nan,
+            snr_db=math.nan,
             alpha=alpha,
             t_tx_s=t_tx,
-            codeword=p.codeword,
+            codeword=int(hop_index) % self._fe.n_codewords,
             receiver=self._receiver,
             crlb_range_m=math.nan if bound is None else bound.sigma_range_m,
             crlb_speed_mps=math.nan if bound is None else bound.sigma_speed_mps,
         )
+
+    def _follow(self, t_s: float) -> list[Estimate]:
+        """The boundaries of echoes measured lately that no detection brought by ``t_s``
+        (s), fitted where their latest fits put them
+        (:meth:`~hil.estimation.refine.CoherentRefiner.due`): those one echo by the echo test
+        (:attr:`followed_count`) within the likelihood's main lobe (``1/B``) of where the fit
+        put it (a constant speed carries a fit on to far less; a fit that moved further is on
+        another grating lobe or another echo). None in the reverberation band's refused
+        hypotheses (an echo measured there is hidden, :mod:`hil.estimation.gcas.hidden_echoes`)."""
+        assert self._refiner is not None
+        out = []
+        fe = self._fe
+        for hop_index, t_pred, alpha in self._refiner.due(t_s):
+            speed = fe.sound_speed_mps * (alpha - 1.0) / (alpha + 1.0)
+            if fe.refused_hypotheses[int(np.argmin(np.abs(fe.grid.speeds_mps - speed)))]:
+                continue  # in the reverberation band: hidden, not reported
+            refined = self._refiner.refine(t_pred, alpha, hop_index, partners=False)
+            if (
+                refined is None
+                or not refined.is_echo(ECHO_TEST)
+                or abs(refined.t_s - t_pred) > self._lobe_s
+            ):
+                continue  # not one echo, or another lobe than the one its fit carried on
+            k = self._k
+            word = hop_index % fe.n_codewords
+            t_tx = k.hop_end[word] + (hop_index // fe.n_codewords) * k.period
+            est = self._estimate(refined.t_s, refined.alpha, t_tx, hop_index, refined.bound)
+            if est is not None:
+                self.followed_count += 1
+                out.append(est)
+        return out
 
     def _reported_already(self, hop_index: int, t_s: float, speed_mps: float) -> bool:
         """Whether an estimate reported at this boundary (hop ``hop_index``) lies within one

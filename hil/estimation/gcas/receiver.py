@@ -291,6 +291,13 @@ class GcasReceiver:
         }
 
     @property
+    def followed_count(self) -> int:
+        """Estimates of echoes measured lately at the next boundary their fits put, where no
+        detection brought it (another echo's ghost or response held their row's maximum;
+        :meth:`~hil.estimation.gcas.readout.Readout.decide_all`)."""
+        return self.readout.followed_count
+
+    @property
     def clutter_count(self) -> int:
         """Detections refused as clutter: diffuse reverberation in the echo's Doppler cells
         (the band off), not one point echo (:mod:`hil.estimation.reverb_band`)."""

@@ -53,6 +53,7 @@ from hil.estimation.kernels import (
     fine_pick,
     fine_recentre,
     first_possible_cells,
+    masked_peak_cells,
     peak_cells,
     peak_indices,
 )
@@ -290,7 +291,7 @@ class TwoStageSearch:
 
     # ------------------------------------------------------------------ stage 2
     def _fine_stage(
-        self, cand_b: NDArray[np.int64], sets: NDArray[np.int64], second: NDArray[np.bool_]
+        self, cand_b: NDArray[np.int64], sets: NDArray[np.int64], second: NDArray[np.int8]
     ) -> list[Peak]:
         """Stage 2: exact codeword sums around the coarse candidate cells: blocks ``cand_b``
         (shape ``(C,)``), each with the hypotheses ``sets`` (shape ``(C, H)``, its own first)
@@ -340,7 +341,7 @@ class TwoStageSearch:
         return self._beside.add(peaks, a[kept], centre[kept] - w)
 
     def _fine_stage_reference(
-        self, cand_b: NDArray[np.int64], sets: NDArray[np.int64], second: NDArray[np.bool_]
+        self, cand_b: NDArray[np.int64], sets: NDArray[np.int64], second: NDArray[np.int8]
     ) -> list[Peak]:
         """:meth:`_fine_stage` as NumPy expressions (the reference the compiled path is
         tested against)."""
@@ -440,6 +441,7 @@ class TwoStageSearch:
         peak_indices(np.zeros(3), 1, 0, 3)
         peak_cells(np.zeros((3, 2)), 1, 1, 0, 3, np.zeros(2))
         first_possible_cells(np.zeros((3, 2)), 1, 1, 0, 3, np.zeros(2))
+        masked_peak_cells(np.zeros((3, 2)), 1, 1, 0, 1, 0, 3, 0.0, 1.0)
         one = np.zeros((1, 1), dtype=np.int64)
         w = self.fine_half
         self.exact.sums(one[:, 0], one, w, prune=True)

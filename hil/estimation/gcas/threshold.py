@@ -30,6 +30,14 @@ if TYPE_CHECKING:
 NOISE_STRIDE = 32
 
 
+#: A candidate's kind (:meth:`~hil.estimation.gcas.candidates.CandidateCells.cells`): a
+#: second maximum of its Doppler row (:attr:`Peak.second`) ...
+SECOND_MAX = 1
+#: ... or a peak masked by a greater one of another boundary (:attr:`Peak.masked`); 0 for
+#: neither.
+MASKED_PEAK = 2
+
+
 class Peak(NamedTuple):
     """A candidate that passed the threshold and the runner-up test, ready for the readout.
 
@@ -55,6 +63,11 @@ class Peak(NamedTuple):
     #: hypothesis (:mod:`hil.estimation.gcas.still_codewords`); decided only beside a partner
     #: or two echoes measured at its speed.
     second: bool = False
+    #: A second echo's peak masked by a greater one of another boundary within one Doppler
+    #: resolution cell (:func:`~hil.estimation.kernels.masked_peak_cells`): also
+    #: :attr:`second`; not decided where an echo measured at its speed has its boundary
+    #: (:meth:`~hil.estimation.refine.CoherentRefiner.followed_near`).
+    masked: bool = False
 
 
 class NoiseHistory(Protocol):
@@ -160,7 +173,7 @@ def threshold_peaks(
     ],
     runner_up_ratio: float,
     beside: StillCodewords | None = None,
-    second: NDArray[np.bool_] | None = None,
+    second: NDArray[np.int8] | None = None,
     pair_rows: NDArray[np.bool_] | None = None,
 ) -> list[Peak]:
     """Threshold and runner-up tests of candidates centred on samples ``cand`` (shape
@@ -225,12 +238,16 @@ def threshold_peaks(
     return beside.add(peaks, a[hit[keep]], cand[hit[keep]] - w)
 
 
-def seconds_marked(peaks: list[Peak], second: NDArray[np.bool_]) -> list[Peak]:
-    """``peaks`` with :attr:`Peak.second` set where ``second`` (shape ``(len(peaks),)``)."""
+def seconds_marked(peaks: list[Peak], second: NDArray[np.int8]) -> list[Peak]:
+    """``peaks`` with :attr:`Peak.second` set where ``second`` (shape ``(len(peaks),)``) is
+    :data:`SECOND_MAX` or :data:`MASKED_PEAK`, and :attr:`Peak.masked` where it is the latter."""
     if not second.any():
         return peaks
     marks = second.tolist()
-    return [p._replace(second=True) if s else p for p, s in zip(peaks, marks, strict=True)]
+    return [
+        p._replace(second=True, masked=s == MASKED_PEAK) if s else p
+        for p, s in zip(peaks, marks, strict=True)
+    ]
 
 
 def peaks_of(*columns: NDArray[Any]) -> list[Peak]:
