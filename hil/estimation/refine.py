@@ -415,10 +415,16 @@ class CoherentRefiner:
         Half-width of the speed search around the detector's speed, m/s (several times the
         detector's speed error).
     max_speed_mps:
-        The largest speed a detection can have, m/s (sets the widest window kept).
+        The largest speed a detection can have, m/s (sets the widest window kept and the
+        lobe decision's threshold, :attr:`lobe_sure_db`).
     echo_test:
         :meth:`Refinement.is_echo`'s thresholds: a fit that is an echo seeds the warm start
         of the next detections of its echo.
+    window_speed_mps:
+        The largest speed a fit is asked at, m/s, where above ``max_speed_mps`` (the
+        beyond-span check fits the sources of ghosts up to tone spacings past the span):
+        sets the widest window and the history kept; the lobe threshold keeps
+        ``max_speed_mps``'s.
     """
 
     def __init__(
@@ -430,6 +436,7 @@ class CoherentRefiner:
         speed_span_mps: float,
         max_speed_mps: float,
         echo_test: EchoTest = EchoTest(0.8, 0.85, 12.0),
+        window_speed_mps: float | None = None,
     ) -> None:
         if np.any(schedule.chirp_hz_per_s != 0):
             raise ConfigError("refine", True, "a schedule of tones (no chirps)", "refine=False")
@@ -459,7 +466,8 @@ class CoherentRefiner:
         self.n_tones = int(np.asarray(schedule.tones_hz).shape[0])
         self.hop_len_s = float(schedule.duration_s[0])
         v_max = abs(float(max_speed_mps)) + self.speed_span_mps
-        alpha_lo = (self.c - v_max) / (self.c + v_max)
+        v_window = max(v_max, abs(float(window_speed_mps or 0.0)) + self.speed_span_mps)
+        alpha_lo = (self.c - v_window) / (self.c + v_window)
         # How far a candidate's window edge can move from the detection's: the time grid's
         # reach (±½ lobe and the fit's two steps), the edges' drift over M hops as α moves
         # by up to twice the speed span (a reused table's own α may be a quarter span away,

@@ -1,5 +1,5 @@
 """Where the source of a ghost may be beyond the span (hil.estimation.gcas.ghost_source), on
-att (tones 28.35-31.65 kHz, 1.1 kHz apart; a 30 m/s span, its guard band to 37.5 m/s)."""
+att (tones 28.35-31.65 kHz, 1.1 kHz apart; a 30 m/s span)."""
 
 from __future__ import annotations
 
@@ -22,32 +22,50 @@ def _speed(a: float) -> float:
 def _sources(refiner: CoherentRefiner | None = None) -> GhostSources:
     refiner = refiner or CoherentRefiner(att_schedule(), FS, 10, C, 0.5, 37.5)
     res = C / (2.0 * 31_650.0 * 10 * 0.01)  # the M hops' Doppler resolution, m/s
-    return GhostSources(
-        refiner, 30.0, inside_mps=0.5 * res, guard_mps=7.5, step_mps=res, cell_mps=2.5
-    )
+    return GhostSources(refiner, 30.0, inside_mps=0.5 * res, step_mps=res, cell_mps=2.5)
 
 
-def test_the_sources_of_a_ghost_lie_one_or_two_tone_spacings_out() -> None:
+def test_the_sources_of_a_ghost_lie_one_two_or_three_tone_spacings_out() -> None:
     g = _sources()
-    assert g.spacing_mps == pytest.approx([27.5, 55.0])
+    assert g.spacing_mps == pytest.approx([27.5, 55.0, 82.5])
     # 35 m/s: its tones read as their neighbours at 6.5-8.5 m/s, as the tones two apart at
-    # -21.2 to -19.2 m/s; from either, the source's band reaches 35 m/s.
+    # -21.2 to -19.2 m/s; from either, the nearest closing band reaches 35 m/s.
     for ghost in (7.5, -20.0):
-        [(side, lo, hi)] = g.bands(_alpha(ghost))
-        assert side == 1 and lo < 35.0 < hi and lo > 30.0 and hi <= 37.5
-    # The neighbours' ratios give 34.02-36.04 m/s from 7.5 m/s, widened by half a cell.
-    [(side, lo, hi)] = g.bands(_alpha(7.5))
-    assert (lo, hi) == pytest.approx((32.774, 37.293), abs=0.001)
-    [(side, lo, hi)] = g.bands(_alpha(-7.5))
+        side, lo, hi = g.bands(_alpha(ghost))[0]
+        assert side == 1 and lo < 35.0 < hi and lo > 30.0
+    # The neighbours' ratios give 34.02-36.04 m/s from 7.5 m/s, widened by half a cell; then
+    # two and three spacings out (the tones' ratios), each side, beyond the span only (the
+    # opening source one spacing out, -20 m/s, is inside it).
+    bands = [(side, round(lo, 3), round(hi, 3)) for side, lo, hi in g.bands(_alpha(7.5))]
+    assert bands == [
+        (1, 32.774, 37.293), (1, 60.249, 64.765), (1, 88.725, 91.225),
+        (-1, -49.786, -45.268), (-1, -76.271, -73.771),
+    ]  # fmt: skip
+    [(side, lo, hi), *_] = [b for b in g.bands(_alpha(-7.5)) if b[0] < 0]
     assert side == -1 and (lo, hi) == pytest.approx((-37.293, -32.774), abs=0.001)
-    # Up to the guard band's end, from the span's edge plus half the M hops' resolution.
-    assert g.bands(_alpha(12.0)) == [(1, pytest.approx(37.272, abs=0.001), 37.5)]
-    assert g.bands(_alpha(2.0)) == [
-        (1, pytest.approx(30.118, abs=0.001), pytest.approx(31.796, abs=0.001))
-    ]
-    # Sources inside the span or past the guard band are not looked for.
-    for ghost in (0.0, 15.0, -15.0):
-        assert g.bands(_alpha(ghost)) == []
+    # Past the guard band (37.5 m/s): 45 m/s from its ghost at 17.5 m/s, 55 m/s from its
+    # ghost three spacings in, at -27.6 m/s.
+    assert g.bands(_alpha(17.5))[0] == (
+        1,
+        pytest.approx(42.76, abs=0.01),
+        pytest.approx(47.28, abs=0.01),
+    )
+    assert g.bands(_alpha(-27.6))[0] == (
+        1,
+        pytest.approx(53.706, abs=0.001),
+        pytest.approx(56.206, abs=0.001),
+    )
+    # From the span's edge plus half the M hops' resolution on.
+    assert g.bands(_alpha(2.0))[0] == (
+        1, pytest.approx(30.118, abs=0.001), pytest.approx(31.796, abs=0.001)
+    )  # fmt: skip
+    # Sources inside the span are not looked for: a ghost at 0 m/s has none one spacing out
+    # on either side inside 52.76 m/s.
+    assert [round(b[1], 2) for b in g.bands(_alpha(0.0))] == [52.76, 81.25, -57.28, -83.75]
+    # The farthest source: a ghost on the edge three spacings in, plus the margin.
+    assert GhostSources.farthest_mps(att_schedule().tones_hz, 30.0, C, 2.5) == pytest.approx(
+        113.626, abs=0.001
+    )
 
 
 def test_the_likelihood_finds_the_source_and_its_hop_from_a_ghost() -> None:
@@ -65,7 +83,7 @@ def test_the_likelihood_finds_the_source_and_its_hop_from_a_ghost() -> None:
         t_end = float(h.start_s[0] + h.duration_s[0])
         t_true = (t_end * (C - v) + 2.0 * r0) / (C + v)  # the boundary of hop `hop`, s
         t_ghost = t_true + 0.5 * 9 * 0.01 * (1.0 / a_g - 1.0 / a_v)
-        [(_, lo, hi)] = g.bands(a_g)
+        _, lo, hi = g.bands(a_g)[0]  # the closing source one tone spacing out
         peak = g.peak(t_ghost, a_g, lo, hi)
         assert peak is not None
         t_b, a_b, hop_b = peak
@@ -79,3 +97,19 @@ def test_the_likelihood_finds_the_source_and_its_hop_from_a_ghost() -> None:
         assert abs(fit.t_s - t_true) < 0.02 * lobe
     # No input yet: nothing.
     assert _sources().peak(0.5, a_g, 33.0, 37.5) is None
+
+
+def test_a_source_boundary_after_the_ghosts_is_moved_back_by_whole_hops() -> None:
+    # An opening source's boundary that its ghost aligns with comes after the ghost's: at
+    # -113 m/s (three spacings out of a ghost at -28 m/s) by 4.5 hops times the two time
+    # scales' drift, 5.62 ms; read there, its fit would need input past the ghost's own.
+    g = _sources()
+    a_g, a_s = _alpha(-28.0), _alpha(-113.0)
+    t_s = 0.5
+    t_b = g.boundary(t_s, a_g, a_s)
+    assert t_b - t_s == pytest.approx(0.00562, abs=1e-5)
+    # Moved back by one hop of the source (10 ms / alpha), to the boundary before it.
+    assert g.not_after(t_b, a_s, t_s) == pytest.approx(t_b - 0.01 / a_s, abs=1e-12)
+    # A closing source's boundary comes before the ghost's and is kept.
+    t_c = g.boundary(t_s, _alpha(7.5), _alpha(35.0))
+    assert t_c < t_s and g.not_after(t_c, _alpha(35.0), t_s) == t_c

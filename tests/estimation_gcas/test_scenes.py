@@ -342,6 +342,40 @@ def test_an_echo_beyond_the_span_is_said_from_its_ghosts_at_minus_10_db(
 
 
 @pytest.mark.parametrize(
+    ("r0", "v", "max_speed", "said_hop", "said_mps", "refused"),
+    [
+        (90.0, 40.0, 30.0, 11, 40.003, 154),
+        (5.0, -40.0, 30.0, 14, -40.002, 155),
+        (90.0, 45.0, 30.0, 9, 44.998, 157),
+        (5.0, -45.0, 30.0, 11, -44.998, 159),
+        (95.0, 55.0, 30.0, 12, 55.001, 101),
+        (90.0, 35.0, 20.0, 13, 34.999, 118),
+    ],
+)
+def test_an_echo_past_the_guard_band_is_said_from_its_ghosts_at_minus_10_db(
+    r0: float, v: float, max_speed: float, said_hop: int, said_mps: float, refused: int
+) -> None:
+    """2 s, 200 hops (55 m/s: 1.5 s); ``refused``: the detections refused as that echo's,
+    measured."""
+    # Past the guard band (7.5 m/s past the edge) nothing of the echo reaches the edge
+    # hypothesis: its ghosts one, two or three tone spacings inward are all there is (40 m/s:
+    # 12.5 and -15 m/s; 45 m/s: 17.5 and -10 m/s; 55 m/s: 27.5 and -27.5 m/s, the one
+    # between in the reverberation band; 35 m/s with a 20 m/s span: 7.5 and -20 m/s). The
+    # source each puts beyond the span is scanned for over a code period's hops and fitted,
+    # said once at its own speed, and its ghosts are refused as its.
+    seconds = 1.5 if abs(v) > 50.0 else 2.0
+    x = echo_samples(att_schedule(), r0, v, seconds, snr_db=-10.0, seed=4)
+    rx = _receiver(max_speed)
+    est = run_blocks(rx, x)
+    assert len(_wrong(est, r0, v)) / (seconds / 0.01) <= 0.01
+    assert abs(rx.beyond_span_count - refused) <= 10
+    [seen] = rx.beyond_span
+    assert seen.side == ("closing" if v > 0 else "opening") and seen.max_speed_mps == max_speed
+    assert seen.hop_index == said_hop and seen.speed_mps == pytest.approx(said_mps, abs=1e-3)
+    assert abs(seen.speed_mps - v) <= 0.1
+
+
+@pytest.mark.parametrize(
     ("v", "snr_db"),
     [(25.0, 0.0), (29.8, 0.0), (-29.8, -10.0), (29.8, -10.0), (25.0, -10.0), (-25.0, -10.0)],
 )

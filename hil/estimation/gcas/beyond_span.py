@@ -48,25 +48,28 @@ Below about 0 dB per-sample SNR the edge leak may never cross the threshold whil
 echo's ghosts do (``att``, 35 m/s with a 30 m/s span at -10 dB: none on the edge in 2 s, 190
 ghost detections at 7.3-8.1 m/s). So a detection inside the span whose fit is not one echo
 is read as a ghost (:mod:`hil.estimation.gcas.ghost_source`): where its source would lie
-beyond the span within the guard band, that source is fitted again from the latest fit
-beyond that edge (within :data:`GHOST_FOLLOW_HOPS`), else looked for over every hop of a
-code period (with its own waits per edge, as above) and refined; a fit there that is one
-echo beyond the span and stronger than the ghost's own (:data:`GHOST_SOURCE_RATIO`) is a
-sighting, and the detection is refused as its. An echo fitted inside the span where a fit
-beyond the span lately puts its ghost (one or two tone spacings inward, where its comb
-peaks) and weaker than that fit is refused as that ghost: at low SNR a ghost's phases can
-agree (measured, 35 m/s at -10 dB: 7.44 m/s at 99.67 m; -35 m/s: 19.53 m/s). Each side is
-said at the second fit beyond it within :data:`GHOST_FOLLOW_HOPS` hops of another whose
-hops were all transmitted, with that fit's time and speed: a lone fit may be noise's, and
-one of hops partly before the schedule's first (a far echo's first boundaries) is read
-0.1 m/s off.
+beyond the span (one, two or three tone spacings out, as far as that is: the refinement's
+windows reach it, :meth:`BeyondSpanCheck.source_reach_mps`), that source is fitted again
+from the latest fit beyond that edge (within :data:`GHOST_FOLLOW_HOPS`), else looked for
+over every hop of a code period (every band of a side in one scan, with its own waits per
+side, as above; not from a boundary whose ``M`` hops were not all transmitted) and refined;
+a fit there that is one echo beyond the span and :data:`GHOST_SOURCE_RATIO` times the
+ghost's own is a sighting, and the detection is refused as its. An echo fitted inside the
+span where a fit beyond the span lately puts its ghost (one to three tone spacings inward,
+where its comb peaks) and weaker than that fit is refused as that ghost: at low SNR a
+ghost's phases can agree (measured, 35 m/s at -10 dB: 7.44 m/s at 99.67 m; -35 m/s: 19.53
+m/s). Each side is said at the second fit beyond it within :data:`GHOST_FOLLOW_HOPS` hops
+of another whose hops were all transmitted, with that fit's time and speed: a lone fit may
+be noise's, and one of hops partly before the schedule's first (a far echo's first
+boundaries) is read 0.1 m/s off.
 
-The guard band only serves this test; nothing beyond the span is ever reported as an
-estimate. A target further than the guard band past the edge leaves no edge detection and
-no ghost whose source fits an echo there: it is refused (ghosts, edge leaks) without a
-sighting (``att``, a 30 m/s span: 38 m/s is said, 45 m/s is not; a 20 m/s span does not say
-35 m/s). Just past the guard band's reach the echo's lobe one Doppler cell inward can be
-fitted and said instead, at a wrong speed (40 m/s at -10 dB: said at 37.5 m/s).
+Nothing beyond the span is ever reported as an estimate. A target further than the guard
+band past the edge leaves no edge detection: its ghosts are all that reach the grid, and
+their sources are looked for wherever the tones' ratios put them, so it is said at its own
+speed (``att``, a 30 m/s span, -10 dB: 40, 45, 50, 55 and 60 m/s closing and opening said
+within 0.01 m/s; 35-45 m/s with 20 and 25.72 m/s spans). Were the search cut at the guard
+band's end, the echo's lobe one Doppler cell inward would be fitted there and said at a
+wrong speed (40 m/s: said at 37.5 m/s) and 45 m/s not at all.
 """
 
 from __future__ import annotations
@@ -75,6 +78,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
 from hil.estimation.gcas.ghost_source import GhostSources
 from hil.estimation.refine import (
@@ -123,13 +127,18 @@ GHOST_FOLLOW_HOPS = 8
 #: How many times a ghost's own fit's amplitude its source beyond the span must have: a
 #: ghost collects part of its echo's energy (0.15-0.34 of its echo's peak,
 #: :data:`~hil.estimation.refine.GHOST_LEAK_FRACTION`), while the ghost beyond the span of
-#: an echo inside it (a slow echo's, one tone spacing out) is weaker than that echo.
-GHOST_SOURCE_RATIO = 1.0
+#: an echo inside it (a slow echo's, one tone spacing out) is weaker than that echo, and a
+#: fit of noise where the ghost puts its source holds about the ghost's own (the sources are
+#: looked for at every tone spacing, up to five bands a ghost, each a chance for noise).
+#: Measured on ``att`` (a 30 m/s span, 35-60 m/s, -20 to 0 dB): sources 2.1-20 times their
+#: ghosts' fits; noise fitted as an echo at -44.7 m/s beside a 10 m/s target at -20 dB, 1.0
+#: and 1.6 times.
+GHOST_SOURCE_RATIO = 2.0
 
 #: Doppler cells of one hop within which a detection is the leak of an echo measured lately
 #: inside the span (its codeword's Doppler sidelobes, 3-3.7 cells out on ``att`` at 0 dB: a
 #: 12 m/s target leaks at 4.4 and 19.3 m/s, 20 m/s at 11.0, -12 m/s at -21.3), and within
-#: which of that echo's ghosts' speeds (one or two tone spacings from it,
+#: which of that echo's ghosts' speeds (one to three tone spacings from it,
 #: :data:`~hil.estimation.gcas.ghost_source.SPACINGS`) a detection is its ghost: neither is
 #: scanned for a source beyond the span (a scan costs as much as the rest of a lone
 #: target's hop).
@@ -198,8 +207,7 @@ class BeyondSpanCheck:
         #: Where the source of a ghost detected inside the span may be beyond it.
         self.ghosts = GhostSources(
             refiner, self.max_speed_mps, inside_mps=0.5 * self.resolution_mps,
-            guard_mps=self.guard_mps, step_mps=self.resolution_mps,
-            cell_mps=self.cell_mps,
+            step_mps=self.resolution_mps, cell_mps=self.cell_mps,
         )  # fmt: skip
         self.reset()
 
@@ -208,6 +216,21 @@ class BeyondSpanCheck:
         """The guard band's width past the edge, :data:`GUARD_CELLS` Doppler cells of one
         hop, m/s."""
         return GUARD_CELLS * sound_speed_mps / (2.0 * center_hz * hop_s)
+
+    @staticmethod
+    def source_reach_mps(
+        tones_hz: NDArray[np.float64], max_speed_mps: float, sound_speed_mps: float,
+        center_hz: float, hop_s: float,
+    ) -> float:  # fmt: skip
+        """The fastest echo (m/s) the check fits: the source of a ghost on the span's edge
+        :data:`~hil.estimation.gcas.ghost_source.SPACINGS` tone spacings in
+        (:meth:`GhostSources.farthest_mps`), or the guard band's end, whichever is further;
+        the refinement's windows are made to reach it."""
+        cell = sound_speed_mps / (2.0 * center_hz * hop_s)
+        return max(
+            GhostSources.farthest_mps(tones_hz, max_speed_mps, sound_speed_mps, cell),
+            max_speed_mps + GUARD_CELLS * cell,
+        )
 
     def reset(self) -> None:
         """Forget the sightings and the count."""
@@ -341,14 +364,24 @@ class BeyondSpanCheck:
         (:mod:`hil.estimation.gcas.ghost_source`): its source is followed from the latest
         fit beyond that edge, else (with the scans' waits) looked for; found, it is counted
         and the first per side said."""
-        for side, v_lo, v_hi in self.ghosts.bands(alpha):
-            found = self._follow_ghost(t_s, alpha, (side, v_lo, v_hi), fit, timed=False)
+        # A boundary whose M hops were not all transmitted (the schedule's first M - 1) is
+        # not one echo's fit whatever it is: no source is looked for from it (a lone target's
+        # first boundaries would each cost a scan of every band).
+        bands = self.ghosts.bands(alpha) if hop_index >= self.m_hops - 1 else []
+        for side in dict.fromkeys(b[0] for b in bands):
+            own = [b for b in bands if b[0] == side]
+            found = None
+            for band in own:
+                found = found or self._follow_ghost(t_s, alpha, band, fit, timed=False)
             if (
                 found is None
                 and hop_index >= self._next_ghost_scan.get(side, hop_index)
                 and not self._leak_of_known(t_s, alpha, fit)
             ):
-                found = self._scan_ghost(t_s, alpha, side, v_lo, v_hi, fit)
+                # One scan of a side reads every band of it (its tone spacings), nearest
+                # first, and waits as one.
+                for _, v_lo, v_hi in own:
+                    found = found or self._scan_ghost(t_s, alpha, side, v_lo, v_hi, fit)
                 self._scanned(
                     hop_index, side, found is not None, self._next_ghost_scan, self._ghost_scan_gap
                 )
@@ -426,17 +459,22 @@ class BeyondSpanCheck:
             return None
         period = self.hop_s / a_fit
         r = round((t_b - t_fit) / period)
-        again = self.refiner.refine(t_fit + r * period, a_fit, hop + r)
+        off = abs(t_b - t_fit - r * period)
+        # Refitted at a boundary of the echo no later than the ghost's (GhostSources.not_after):
+        # the warm start reads within a sixteenth of a lobe of it.
+        back = round(
+            (t_fit + r * period - self.ghosts.not_after(t_fit + r * period, a_fit, t_s)) / period
+        )
+        again = self.refiner.refine(t_fit + (r - back) * period, a_fit, hop + r - back)
         if again is None or not self._source(again, side, fit):
             return None
-        off = abs(t_b - t_fit - r * period)
         if (
             timed
             and off > GHOST_HOPS * period
             and abs(fit.amplitude) > GHOST_LEAK_FRACTION * abs(again.amplitude)
         ):
             return None
-        return again, hop + r
+        return again, hop + r - back
 
     def _scan_ghost(
         self, t_s: float, alpha: float, side: int, v_lo: float, v_hi: float, fit: Refinement

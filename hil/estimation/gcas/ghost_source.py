@@ -7,12 +7,18 @@ tone ``f_k`` read as the tone ``n`` spacings away, ``f_{k±n}``, at the hypothes
 Below about 0 dB per-sample SNR such a ghost may be all that is detected of it: the tail of
 its Doppler response on the span's edge hypothesis falls as ``sinc²`` of the offset and
 stays under the threshold (``att``, 35 m/s with a 30 m/s span at -10 dB: no detection on the
-edge in 2 s, 190 of its ghost at 7.3-8.1 m/s).
+edge in 2 s, 190 of its ghost at 7.3-8.1 m/s). Past the guard band
+(:mod:`hil.estimation.gcas.beyond_span`) nothing else of it reaches the grid: its ghosts
+are all there is to say it by. Every ``n`` up to the tones' count less one is looked for, as
+any of them may be the one the grid holds (``att``, 55 m/s with a 30 m/s span: its ghosts
+at 26.5-28.5 m/s (``n`` = 1, taken for the ghosts of its fit once fitted), about 0 m/s
+(``n`` = 2, hidden by the reverberation band) and -27.6 m/s (``n`` = 3)).
 
 So the source of a ghost is looked for where the ghost puts it: at the time scales
 ``α_g f_{k±n} / f_k`` over the tones' ratios, widened by :data:`SPEED_MARGIN_CELLS` Doppler
-cells of one hop (the detector's speed of a ghost, whose tones disagree), and only where
-they lie beyond the span within its guard band (:mod:`hil.estimation.gcas.beyond_span`). The
+cells of one hop (the detector's speed of a ghost, whose tones disagree), wherever they lie
+beyond the span (from the edge plus half the ``M`` hops' resolution; the farthest, a ghost on
+the edge ``n`` spacings in, is :meth:`GhostSources.farthest_mps`). The
 ghost's comb peaks ``(M − 1)/2`` hops of the two time scales' drift after the boundary of the
 source's hops that it aligns with (as :meth:`~hil.estimation.refine.CoherentRefiner.
 ghost_of_known` reads), but which of the schedule's hops those are is not the ghost's own
@@ -44,38 +50,46 @@ from hil.estimation.refine import CoherentRefiner
 #: whichever tones it holds (``att``: 35 m/s's ghosts detected at 7.3-8.1 m/s, predicted
 #: 6.5-8.5).
 SPEED_MARGIN_CELLS = 0.5
-#: Ghosts looked for: each tone read as the tone up to SPACINGS tone spacings away (two on
-#: ``att``: 35 m/s's ghosts at 7.5 and -20 m/s, either of which may pass the echo test at
-#: -10 dB).
-SPACINGS = 2
+#: Ghosts looked for: each tone read as the tone up to SPACINGS tone spacings away (at most
+#: the tones' count less one; three on ``att``: 35 m/s's ghosts at 7.5 and -20 m/s, either
+#: of which may pass the echo test at -10 dB; 55 m/s's at 27.5, 0 and -27.5 m/s).
+SPACINGS = 3
 #: Half-width of the time searched about the predicted boundary, in grating lobes
 #: (``1/(α Δf)``), and the times read across it.
 TIME_HALF_LOBES = 1.0
 TIME_POINTS = 17
 
 
+def _ratios(tones_hz: NDArray[np.float64]) -> list[tuple[float, float]]:
+    """The ratios ``f_{k+n}/f_k`` of the tones ``n`` = 1 … :data:`SPACINGS` apart (at most
+    the tones' count less one), least and greatest, for ``tones_hz`` (Hz, any order)."""
+    tones = np.unique(np.asarray(tones_hz, dtype=np.float64))
+    return [
+        (float(np.min(tones[n:] / tones[:-n])), float(np.max(tones[n:] / tones[:-n])))
+        for n in range(1, min(SPACINGS, tones.size - 1) + 1)
+    ]
+
+
 class GhostSources:
     """Where the source of a ghost may be (module docstring) for ``refiner``'s schedule: the
-    span ``max_speed_mps`` (m/s) and the band past each edge, from the edge plus ``inside_mps``
-    to the edge plus ``guard_mps`` (m/s), searched with speed steps ``step_mps`` (m/s)."""
+    span ``max_speed_mps`` (m/s), beyond each edge from the edge plus ``inside_mps`` (m/s) on,
+    searched with speed steps ``step_mps`` (m/s); ``cell_mps``, one Doppler cell of a hop
+    (m/s), sets the margin (:data:`SPEED_MARGIN_CELLS`)."""
 
     def __init__(
         self, refiner: CoherentRefiner, max_speed_mps: float, *, inside_mps: float,
-        guard_mps: float, step_mps: float, cell_mps: float,
+        step_mps: float, cell_mps: float,
     ) -> None:  # fmt: skip
         self.refiner = refiner
         self.c = refiner.c
         self.max_speed_mps = float(max_speed_mps)
-        self.inside_mps, self.guard_mps = float(inside_mps), float(guard_mps)
+        self.inside_mps = float(inside_mps)
         self.step_mps, self.margin_mps = float(step_mps), SPEED_MARGIN_CELLS * float(cell_mps)
         schedule = refiner.schedule
         tones = np.unique(np.asarray(schedule.tones_hz, dtype=np.float64))
         #: The ratios ``f_{k+n}/f_k`` of tones ``n`` = 1 … :data:`SPACINGS` apart, least and
         #: greatest.
-        self.ratios = [
-            (float(np.min(tones[n:] / tones[:-n])), float(np.max(tones[n:] / tones[:-n])))
-            for n in range(1, min(SPACINGS, tones.size - 1) + 1)
-        ]
+        self.ratios = _ratios(tones)
         #: The ghosts' speed offsets, ``n c Δf / (2 f_c)`` for ``n`` = 1 … :data:`SPACINGS`
         #: (m/s; ``Δf`` the least tone spacing, ``f_c`` the tones' centre).
         f_c = 0.5 * float(tones[0] + tones[-1])
@@ -86,24 +100,35 @@ class GhostSources:
         self.m_hops = refiner.m_hops
         self.hop_s = float(schedule.hop_s)
 
+    @staticmethod
+    def farthest_mps(
+        tones_hz: NDArray[np.float64], max_speed_mps: float, sound_speed_mps: float,
+        cell_mps: float,
+    ) -> float:  # fmt: skip
+        """The fastest source (m/s) of a ghost inside the span ``±max_speed_mps`` (m/s) on
+        tones ``tones_hz`` (Hz): a ghost on the edge, :data:`SPACINGS` tone spacings in (at
+        the tones' greatest ratio), widened by the margin (``cell_mps``, one Doppler cell of
+        a hop, m/s). The refinement's windows must reach it."""
+        c = float(sound_speed_mps)
+        a_edge = (c + max_speed_mps) / (c - max_speed_mps)
+        a = a_edge * _ratios(np.asarray(tones_hz, dtype=np.float64))[-1][1]
+        return c * (a - 1.0) / (a + 1.0) + SPEED_MARGIN_CELLS * float(cell_mps)
+
     def _speed(self, alpha: float) -> float:
         return self.c * (alpha - 1.0) / (alpha + 1.0)
 
     def bands(self, alpha: float) -> list[tuple[int, float, float]]:
         """The speeds (m/s) where the source of a ghost detected at time scale ``alpha`` may
-        be, beyond the span within its guard band: ``(side, v_lo, v_hi)`` per edge (+1
-        closing, −1 opening), ``v_lo < v_hi``; none where no source lies there."""
+        be beyond the span: ``(side, v_lo, v_hi)`` per edge (+1 closing, −1 opening) and
+        tone spacings ``n`` (ascending), ``v_lo < v_hi``; none where no source lies there."""
         out = []
-        for (ratio_lo, ratio_hi), side in itertools.product(self.ratios, (1, -1)):
+        for side, (ratio_lo, ratio_hi) in itertools.product((1, -1), self.ratios):
             # Closing source: its tone f_k read as f_{k+n}, α = α_g f_{k+n} / f_k.
             r_lo, r_hi = (ratio_lo, ratio_hi) if side > 0 else (1.0 / ratio_hi, 1.0 / ratio_lo)
             v_lo = self._speed(alpha * r_lo) - self.margin_mps
             v_hi = self._speed(alpha * r_hi) + self.margin_mps
             edge_in = side * (self.max_speed_mps + self.inside_mps)
-            edge_out = side * (self.max_speed_mps + self.guard_mps)
-            lo, hi = (max(v_lo, edge_in), min(v_hi, edge_out)) if side > 0 else (
-                max(v_lo, edge_out), min(v_hi, edge_in)
-            )  # fmt: skip
+            lo, hi = (max(v_lo, edge_in), v_hi) if side > 0 else (v_lo, min(v_hi, edge_in))
             if lo < hi:
                 out.append((side, lo, hi))
         return out
@@ -113,6 +138,22 @@ class GhostSources:
         ``alpha`` aligns with, for a source at ``alpha_source``: its comb peaks ``(M − 1)/2``
         hops of the two time scales' drift after it."""
         return t_s - 0.5 * (self.m_hops - 1) * self.hop_s * (1.0 / alpha - 1.0 / alpha_source)
+
+    def not_after(self, t_b: float, alpha_source: float, t_s: float) -> float:
+        """The source's boundary ``t_b`` (s, time scale ``alpha_source``) moved back by whole
+        hops of the source until it is no later than ``t_s`` (s), the ghost's boundary: an
+        opening source's boundary that the ghost aligns with comes after the ghost's
+        (:meth:`boundary`; 5.6 ms at -113 m/s for a ghost at -28 m/s), its hops' windows in
+        input the receiver may not have read when the ghost is decided (the refinement reads
+        each hop's window about the boundary it starts from, as far past it as past the
+        ghost's). The source's boundaries before it are the same echo, and so the fit does
+        not depend on how the input was cut."""
+        late = t_b - t_s
+        return (
+            t_b - math.ceil(late * alpha_source / self.hop_s) * self.hop_s / alpha_source
+            if late > 0
+            else t_b
+        )
 
     def peak(
         self, t_s: float, alpha: float, v_lo: float, v_hi: float
@@ -130,6 +171,9 @@ class GhostSources:
         offsets = TIME_HALF_LOBES * lobe * np.linspace(-1.0, 1.0, TIME_POINTS)
         # Each speed's boundary drifts with its own time scale about the middle one's.
         t_v = np.array([self.boundary(t_s, alpha, float(a)) for a in alphas]) - t_c
+        t_c = self.not_after(t_c + float(np.max(t_v)) + TIME_HALF_LOBES * lobe, a_mid, t_s) - (
+            float(np.max(t_v)) + TIME_HALF_LOBES * lobe
+        )  # fmt: skip
         tt = t_c + t_v[:, None] + offsets[None, :]
         aa = np.repeat(alphas[:, None], TIME_POINTS, axis=1)
         best: tuple[float, float, float, int] | None = None

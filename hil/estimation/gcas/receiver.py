@@ -170,11 +170,16 @@ class GcasReceiver:
         cfar = Cfar(cfar_mode, self.cfar_lambda, self.m_hops)
         self._refiner = self._beyond = None
         if refine and range_readout == "peak":
-            # The refinement measures up to the end of the beyond-span check's guard band.
+            # The refinement measures up to the end of the beyond-span check's guard band, and
+            # fits the sources of ghosts as far as they lie (tone spacings past the span).
             guard = BeyondSpanCheck.guard_width_mps(self.sound_speed_mps, fe.center_hz, self.hop_s)
             self._refiner = CoherentRefiner(
                 schedule, self.fs_hz, self.m_hops, self.sound_speed_mps,
                 REFINE_SPEED_SPAN_MPS, self.max_speed_mps + guard, ECHO_TEST,
+                window_speed_mps=BeyondSpanCheck.source_reach_mps(
+                    self.tones_hz, self.max_speed_mps, self.sound_speed_mps, fe.center_hz,
+                    self.hop_s,
+                ),
             )  # fmt: skip
             self._beyond = BeyondSpanCheck(
                 self._refiner, self.max_speed_mps, ECHO_TEST, hop_s=self.hop_s,
