@@ -7,7 +7,12 @@ import numpy as np
 import pytest
 
 from hil.estimation.gcas import GcasReceiver
-from hil.estimation.gcas.still_codewords import StillCodewords, second_codeword, shared_terms
+from hil.estimation.gcas.still_codewords import (
+    StillCodewords,
+    second_codeword,
+    second_codewords,
+    shared_terms,
+)
 from hil.estimation.gcas.threshold import Peak
 
 from .conftest import att_schedule, run_blocks
@@ -70,6 +75,31 @@ def test_a_second_codeword_not_above_the_ones_left_gives_none() -> None:
     w = _window()
     w[:, 1] = [0.0, 1.0, 4.9, 1.0, 0.0]  # 5.0 / 4.9 < 1.05
     assert second_codeword(w, 0, 3.0, np.zeros(4), 1.05) is None
+
+
+@pytest.mark.parametrize("words", [2, 3, 17])
+def test_second_codewords_of_many_windows_equal_each_window_s(words: int) -> None:
+    # Stage 2's windows: exponential sums, some rows pruned (−inf) but the peak's, ties
+    # made by rounding; thresholds and leaks that pass and refuse about half.
+    rng = np.random.default_rng(24)
+    n_win, width = 400, 23
+    windows = np.round(rng.exponential(10.0, (n_win, width, words)), 1)
+    pruned = rng.random((n_win, width)) < 0.4
+    pruned[np.arange(n_win), rng.integers(0, width, n_win)] = False
+    windows[pruned] = -np.inf
+    first = rng.integers(0, words, n_win)
+    threshold = rng.uniform(5.0, 40.0, n_win)
+    leak = rng.uniform(0.0, 5.0, (n_win, words))
+    got = second_codewords(windows, first, threshold, leak, 1.05)
+    found = 0
+    for k in range(n_win):
+        one = second_codeword(windows[k], int(first[k]), float(threshold[k]), leak[k], 1.05)
+        assert bool(got.found[k]) == (one is not None)
+        if one is not None:
+            found += 1
+            many = (got.sample[k], got.codeword[k], got.value[k], got.ratio[k], got.dn[k])
+            assert tuple(float(v) for v in many) == tuple(float(v) for v in one)
+    assert found >= n_win // 4
 
 
 def test_with_the_band_on_no_hypothesis_gives_second_codewords() -> None:

@@ -337,7 +337,9 @@ class TwoStageSearch:
         peaks = seconds_marked(peaks, second[kept])
         if self._beside is None:
             return peaks
-        return self._beside.add(peaks, a[kept], centre[kept] - w)
+        return self._beside.add_columns(
+            peaks, a[kept], centre[kept] - w, d0[kept], word, peak, mean[kept], thr[kept]
+        )
 
     def _fine_stage_reference(
         self, cand_b: NDArray[np.int64], sets: NDArray[np.int64], second: NDArray[np.bool_]
