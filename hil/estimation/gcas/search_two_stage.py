@@ -457,3 +457,5 @@ class TwoStageSearch:
         fine_doppler(side, a, one[0], i_pk, word, d0, sides)
         self.exact.windows(one[:, 0], one[:, 0], 1)
         self.exact.load_value_kernel()
+        if self._beside is not None:
+            self._beside.load_kernel()

@@ -39,11 +39,12 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from hil.estimation.detection import parabolic_offset, parabolic_offsets
+from hil.estimation.detection import parabolic_offset
 from hil.estimation.doppler_grid import DopplerGrid
 from hil.estimation.gcas.candidates import SECOND_LEVEL
 from hil.estimation.gcas.front_end import FrontEnd
 from hil.estimation.gcas.threshold import Peak
+from hil.estimation.kernels import second_codeword_rows
 from hil.estimation.reverb_band import doppler_resolution_mps
 from hil.signals.schedule import HopSchedule
 
@@ -133,61 +134,6 @@ def second_codeword(
     return SecondCodeword(i, j, value, float(ratio), dn)
 
 
-class SecondCodewords(NamedTuple):
-    """:func:`second_codewords` of ``P`` windows: ``found`` (shape ``(P,)``, bool) and, where
-    found, the fields of :class:`SecondCodeword` (each shape ``(P,)``; the other entries are
-    meaningless)."""
-
-    found: NDArray[np.bool_]
-    sample: NDArray[np.int64]
-    codeword: NDArray[np.int64]
-    value: NDArray[np.float64]
-    ratio: NDArray[np.float64]
-    dn: NDArray[np.float64]
-
-
-def second_codewords(
-    windows: NDArray[np.float64],
-    first: NDArray[np.int64],
-    threshold: NDArray[np.float64],
-    leak: NDArray[np.float64],
-    runner_up_ratio: float,
-) -> SecondCodewords:
-    """:func:`second_codeword` of ``P`` windows at once (``windows`` shape ``(P, 2w + 1, J)``,
-    ``first`` and ``threshold`` shape ``(P,)``, ``leak`` shape ``(P, J)``): the same samples,
-    codewords and values, bit for bit, in a dozen array operations instead of a dozen per
-    window.
-
-    >>> w = np.array([[1.0, 0.5, 0.1], [9.0, 4.0, 0.2], [2.0, 0.5, 0.1]])
-    >>> got = second_codewords(w[None], np.array([0]), np.array([3.0]), np.zeros((1, 3)), 1.05)
-    >>> bool(got.found[0]), int(got.codeword[0]), float(got.value[0]), float(got.ratio[0])
-    (True, 1, 4.0, 20.0)
-    """
-    p, n, words = windows.shape
-    r = np.arange(p)
-    if words < 2 or n < 3:
-        none, zero = np.zeros(p, dtype=np.int64), np.zeros(p)
-        return SecondCodewords(np.zeros(p, dtype=np.bool_), none, none, zero, zero, zero)
-    best = windows.max(axis=1) - leak  # (P, J)
-    best[r, first] = -np.inf
-    j = np.argmax(best, axis=1)
-    column = windows[r[:, None], np.arange(n)[None, :], j[:, None]]  # (P, n)
-    i = np.argmax(column, axis=1)
-    value = column[r, i]
-    found = (i > 0) & (i < n - 1) & (value >= threshold + leak[r, j])
-    rest = windows[r, i]  # (P, J): the codewords left at the peak, less the first and this
-    rest[r, first] = -np.inf
-    rest[r, j] = -np.inf
-    third = rest.max(axis=1)  # −inf where none is left (J = 2): no ratio, as 0 gives
-    ratio = np.full(p, np.inf)
-    with np.errstate(invalid="ignore"):  # a row left at −inf (pruned) is refused above
-        np.divide(value, third, out=ratio, where=third > 0)
-    found &= ratio >= runner_up_ratio
-    lo, hi = np.maximum(i - 1, 0), np.minimum(i + 1, n - 1)
-    dn = parabolic_offsets(column[r, lo], value, column[r, hi])
-    return SecondCodewords(found, i, j, value, ratio, dn)
-
-
 class StillCodewords:
     """The rule of this module for one front end: which hypotheses hold still echoes, the
     codewords' shared terms, and the runner-up ratio of the search (``runner_up_ratio``).
@@ -237,32 +183,19 @@ class StillCodewords:
         still, pair = self.still[d0], self.pair[d0]
         if not (still.any() or pair.any()):
             return peaks
-        sums: NDArray[np.float64] = np.asarray(windows, dtype=np.float64)
-        above = level - mean
-        if pair.any():
-            # At a moving hypothesis only a codeword of the first one's level is a second
-            # echo: read every window's other codewords at once, then only those.
-            other = sums.max(axis=1)  # (P, J)
-            other[np.arange(len(peaks)), word] = -np.inf
-            clear = other - above[:, None] * self._share[word] >= thr[:, None]
-            pair &= np.any(clear & (other >= SECOND_LEVEL * level[:, None]), axis=1)
-        sel = np.flatnonzero(still | pair)
-        if sel.size == 0:
-            return peaks
-        # The selected windows' second codewords at once (second_codeword per window, the
-        # same values: a dozen array calls per window would cost more than the sums).
-        leak = above[sel, None] * self._share[word[sel]]
-        got = second_codewords(sums[sel], word[sel], thr[sel], leak, self._ratio)
-        # At a moving hypothesis, one echo's own codewords are not a second echo of its level.
-        found = got.found & ~(pair[sel] & (got.value < SECOND_LEVEL * level[sel]))
-        if not found.any():
+        # Compiled: as array expressions, some 30 calls per batch of a few windows cost more
+        # than the windows' sums (second_codeword is the reference, tested equal).
+        idx, sample, code, value, ratio, dn = second_codeword_rows(
+            np.ascontiguousarray(windows, dtype=np.float64), still, pair, word, level,
+            level - mean, thr, self._share, self._ratio, SECOND_LEVEL,
+        )  # fmt: skip
+        if idx.size == 0:
             return peaks
         seconds: dict[int, Peak] = {}
-        for k in np.flatnonzero(found).tolist():
-            i = int(sel[k])
+        for k, i in enumerate(idx.tolist()):
             seconds[i] = peaks[i]._replace(
-                n_star=int(first[i]) + int(got.sample[k]), peak=float(got.value[k]),
-                codeword=int(got.codeword[k]), ratio=float(got.ratio[k]), dn=float(got.dn[k]),
+                n_star=int(first[i]) + int(sample[k]), peak=float(value[k]),
+                codeword=int(code[k]), ratio=float(ratio[k]), dn=float(dn[k]),
                 beside=True, second=bool(pair[i]),
             )  # fmt: skip
         out: list[Peak] = []
@@ -271,3 +204,11 @@ class StillCodewords:
             if i in seconds:
                 out.append(seconds[i])
         return out
+
+    def load_kernel(self) -> None:
+        """Load the compiled second-codeword kernel (else the first still peak does)."""
+        one = np.zeros(1, dtype=np.int64)
+        zero, no = np.zeros(1), np.zeros(1, dtype=np.bool_)
+        second_codeword_rows(
+            np.zeros((1, 3, 2)), no, no, one, zero, zero, zero, self._share, 1.0, SECOND_LEVEL
+        )
