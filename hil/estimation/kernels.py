@@ -963,3 +963,89 @@ def fine_doppler(side: Any, a: Any, cand: Any, i_pk: Any, word: Any, d0: Any, si
             j = word[k]
             out[k] = parabolic_offset_scalar(side[k, 0, 0, j], a[c, i_pk[c], j], side[k, 1, 0, j])
     return out
+
+
+@numba.njit(**_JIT)
+def second_codeword_rows(
+    windows: Any, still: Any, pair: Any, word: Any, level: Any, above: Any, thr: Any,
+    share: Any, runner_up_ratio: float, second_level: float,
+) -> Any:  # fmt: skip
+    """The second codewords of stage 2's kept peaks
+    (:mod:`hil.estimation.gcas.still_codewords`), all at once.
+
+    ``windows``: each peak's exact sums at its hypothesis (shape ``(P, 2w + 1, J)``, finite
+    or −inf where pruned); per peak (shape ``(P,)``): ``still`` (a still hypothesis),
+    ``pair`` (a moving hypothesis where a second echo of one speed is looked for), its
+    codeword ``word``, ``level`` (its sum), ``above`` (``level`` less the noise mean) and its
+    threshold ``thr``; ``share``: the codewords' shared terms over ``M`` (shape ``(J, J)``).
+    A ``pair`` peak is read only where another codeword reaches ``second_level`` of
+    ``level`` and its threshold less its leak ``above·share``; then every read peak as
+    :func:`~hil.estimation.gcas.still_codewords.second_codeword` (leak ``above·share[word]``)
+    and, at a ``pair`` peak, only a second codeword of ``second_level`` of ``level``.
+
+    Returns, for the peaks that have one, in peak order: their index, the window sample,
+    codeword, value, ratio and parabolic offset (the same values as ``second_codeword``, bit
+    for bit: the same operations on the same numbers)."""
+    n_peaks, width, n_words = windows.shape
+    idx = np.empty(n_peaks, dtype=np.int64)
+    sample = np.empty(n_peaks, dtype=np.int64)
+    code = np.empty(n_peaks, dtype=np.int64)
+    value = np.empty(n_peaks)
+    ratio = np.empty(n_peaks)
+    dn = np.empty(n_peaks)
+    top = np.empty(n_words)
+    n_found = 0
+    if n_words < 2 or width < 3:
+        return idx[:0], sample[:0], code[:0], value[:0], ratio[:0], dn[:0]
+    for p in range(n_peaks):
+        if not (still[p] or pair[p]):
+            continue
+        w = word[p]
+        for j in range(n_words):
+            mx = -math.inf
+            for t in range(width):
+                mx = max(mx, windows[p, t, j])
+            top[j] = mx
+        if pair[p]:
+            clear = False
+            for j in range(n_words):
+                beyond = top[j] - above[p] * share[w, j] >= thr[p]
+                if j != w and beyond and top[j] >= second_level * level[p]:
+                    clear = True
+            if not clear:
+                continue
+        # The largest other codeword, less its leak (the first of equals).
+        jb = -1
+        best = -math.inf
+        for j in range(n_words):
+            b = -math.inf if j == w else top[j] - above[p] * share[w, j]
+            if jb < 0 or b > best:
+                jb = j
+                best = b
+        ib = 0
+        for t in range(1, width):
+            if windows[p, t, jb] > windows[p, ib, jb]:
+                ib = t
+        v = windows[p, ib, jb]
+        if not (0 < ib < width - 1) or not v >= thr[p] + above[p] * share[w, jb]:
+            continue
+        third = -math.inf
+        for j in range(n_words):
+            if j != w and j != jb:
+                third = max(third, windows[p, ib, j])
+        r = v / third if third > 0 else math.inf
+        if not r >= runner_up_ratio:
+            continue
+        if pair[p] and v < second_level * level[p]:
+            continue  # one echo's own codewords, not a second echo of its level
+        idx[n_found] = p
+        sample[n_found] = ib
+        code[n_found] = jb
+        value[n_found] = v
+        ratio[n_found] = r
+        dn[n_found] = parabolic_offset_scalar(windows[p, ib - 1, jb], v, windows[p, ib + 1, jb])
+        n_found += 1
+    return (
+        idx[:n_found], sample[:n_found], code[:n_found], value[:n_found], ratio[:n_found],
+        dn[:n_found],
+    )  # fmt: skip

@@ -7,8 +7,10 @@ import numpy as np
 import pytest
 
 from hil.estimation.gcas import GcasReceiver
+from hil.estimation.gcas.candidates import SECOND_LEVEL
 from hil.estimation.gcas.still_codewords import StillCodewords, second_codeword, shared_terms
 from hil.estimation.gcas.threshold import Peak
+from hil.estimation.kernels import second_codeword_rows
 
 from .conftest import att_schedule, run_blocks
 from .test_scenes import _false_and_moving_pd, _motion_input, _receiver
@@ -70,6 +72,37 @@ def test_a_second_codeword_not_above_the_ones_left_gives_none() -> None:
     w = _window()
     w[:, 1] = [0.0, 1.0, 4.9, 1.0, 0.0]  # 5.0 / 4.9 < 1.05
     assert second_codeword(w, 0, 3.0, np.zeros(4), 1.05) is None
+
+
+@pytest.mark.parametrize("words", [2, 3, 17])
+def test_the_compiled_second_codewords_equal_each_window_s(words: int) -> None:
+    # Stage 2's windows: exponential sums, some rows pruned (−inf) but one, ties made by
+    # rounding; thresholds and leaks that pass and refuse about half. A still peak's leak
+    # is above · share[word] (here share's row `word` is the leak itself).
+    rng = np.random.default_rng(24)
+    n_win, width = 400, 23
+    windows = np.round(rng.exponential(10.0, (n_win, width, words)), 1)
+    pruned = rng.random((n_win, width)) < 0.4
+    pruned[np.arange(n_win), rng.integers(0, width, n_win)] = False
+    windows[pruned] = -np.inf
+    first = rng.integers(0, words, n_win)
+    threshold = rng.uniform(5.0, 40.0, n_win)
+    leak = rng.uniform(0.0, 5.0, (n_win, words))
+    yes, no, one = np.ones(1, dtype=np.bool_), np.zeros(1, dtype=np.bool_), np.ones(1)
+    found = 0
+    for k in range(n_win):
+        share = np.zeros((words, words))
+        share[first[k]] = leak[k]
+        got = second_codeword_rows(
+            windows[k : k + 1], yes, no, first[k : k + 1], one, one, threshold[k : k + 1],
+            share, 1.05, SECOND_LEVEL,
+        )  # fmt: skip
+        want = second_codeword(windows[k], int(first[k]), float(threshold[k]), leak[k], 1.05)
+        assert got[0].size == (0 if want is None else 1)
+        if want is not None:
+            found += 1
+            assert tuple(float(v[0]) for v in got[1:]) == tuple(float(v) for v in want)
+    assert found >= n_win // 4
 
 
 def test_with_the_band_on_no_hypothesis_gives_second_codewords() -> None:

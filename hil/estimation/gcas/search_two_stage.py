@@ -338,7 +338,9 @@ class TwoStageSearch:
         peaks = seconds_marked(peaks, second[kept])
         if self._beside is None:
             return peaks
-        return self._beside.add(peaks, a[kept], centre[kept] - w)
+        return self._beside.add_columns(
+            peaks, a[kept], centre[kept] - w, d0[kept], word, peak, mean[kept], thr[kept]
+        )
 
     def _fine_stage_reference(
         self, cand_b: NDArray[np.int64], sets: NDArray[np.int64], second: NDArray[np.int8]
@@ -457,3 +459,5 @@ class TwoStageSearch:
         fine_doppler(side, a, one[0], i_pk, word, d0, sides)
         self.exact.windows(one[:, 0], one[:, 0], 1)
         self.exact.load_value_kernel()
+        if self._beside is not None:
+            self._beside.load_kernel()

@@ -44,6 +44,7 @@ from hil.estimation.doppler_grid import DopplerGrid
 from hil.estimation.gcas.candidates import SECOND_LEVEL
 from hil.estimation.gcas.front_end import FrontEnd
 from hil.estimation.gcas.threshold import Peak
+from hil.estimation.kernels import second_codeword_rows
 from hil.estimation.reverb_band import doppler_resolution_mps
 from hil.signals.schedule import HopSchedule
 
@@ -163,37 +164,51 @@ class StillCodewords:
         by its window's second codeword where it has one (``beside``). ``windows[i]``: the
         exact sums of ``peaks[i]``'s window at its hypothesis (shape ``(P, 2w + 1, J)``),
         whose row 0 is baseband sample ``first[i]`` (shape ``(P,)``)."""
-        d0 = np.fromiter((p.d0 for p in peaks), np.int64, len(peaks))
+        n = len(peaks)
+        d0 = np.fromiter((p.d0 for p in peaks), np.int64, n)
+        word = np.fromiter((p.codeword for p in peaks), np.int64, n)
+        level = np.fromiter((p.peak for p in peaks), np.float64, n)
+        mean = np.fromiter((p.mean for p in peaks), np.float64, n)
+        thr = np.fromiter((p.threshold for p in peaks), np.float64, n)
+        return self.add_columns(peaks, windows, first, d0, word, level, mean, thr)
+
+    def add_columns(
+        self, peaks: list[Peak], windows: NDArray[np.floating], first: NDArray[np.int64],
+        d0: NDArray[np.int64], word: NDArray[np.int64], level: NDArray[np.float64],
+        mean: NDArray[np.float64], thr: NDArray[np.float64],
+    ) -> list[Peak]:  # fmt: skip
+        """:meth:`add` given the peaks' fields as arrays too (shape ``(P,)``: ``d0``,
+        ``codeword``, ``peak``, ``mean``, ``threshold``), as stage 2 has them: the same
+        peaks, without reading the fields back from ``peaks``."""
         still, pair = self.still[d0], self.pair[d0]
-        if pair.any():
-            # At a moving hypothesis only a codeword of the first one's level is a second
-            # echo: read every window's other codewords at once, then only those.
-            word = np.fromiter((p.codeword for p in peaks), np.int64, len(peaks))
-            level = np.fromiter((p.peak for p in peaks), np.float64, len(peaks))
-            above = np.fromiter((p.peak - p.mean for p in peaks), np.float64, len(peaks))
-            thr = np.fromiter((p.threshold for p in peaks), np.float64, len(peaks))
-            other = np.asarray(windows, dtype=np.float64).max(axis=1)  # (P, J)
-            other[np.arange(len(peaks)), word] = -np.inf
-            clear = other - above[:, None] * self._share[word] >= thr[:, None]
-            pair &= np.any(clear & (other >= SECOND_LEVEL * level[:, None]), axis=1)
         if not (still.any() or pair.any()):
             return peaks
+        # Compiled: as array expressions, some 30 calls per batch of a few windows cost more
+        # than the windows' sums (second_codeword is the reference, tested equal).
+        idx, sample, code, value, ratio, dn = second_codeword_rows(
+            np.ascontiguousarray(windows, dtype=np.float64), still, pair, word, level,
+            level - mean, thr, self._share, self._ratio, SECOND_LEVEL,
+        )  # fmt: skip
+        if idx.size == 0:
+            return peaks
+        seconds: dict[int, Peak] = {}
+        for k, i in enumerate(idx.tolist()):
+            seconds[i] = peaks[i]._replace(
+                n_star=int(first[i]) + int(sample[k]), peak=float(value[k]),
+                codeword=int(code[k]), ratio=float(ratio[k]), dn=float(dn[k]),
+                beside=True, second=bool(pair[i]),
+            )  # fmt: skip
         out: list[Peak] = []
         for i, p in enumerate(peaks):
             out.append(p)
-            if not (still[i] or pair[i]):
-                continue
-            leak = (p.peak - p.mean) * self._share[p.codeword]
-            window = np.asarray(windows[i], dtype=np.float64)
-            second = second_codeword(window, p.codeword, p.threshold, leak, self._ratio)
-            if second is not None and pair[i] and second.value < SECOND_LEVEL * p.peak:
-                second = None  # one echo's own codewords, not a second echo of its level
-            if second is not None:
-                out.append(
-                    p._replace(
-                        n_star=int(first[i]) + second.sample, peak=second.value,
-                        codeword=second.codeword, ratio=second.ratio, dn=second.dn,
-                        beside=True, second=bool(pair[i]),
-                    )
-                )  # fmt: skip
+            if i in seconds:
+                out.append(seconds[i])
         return out
+
+    def load_kernel(self) -> None:
+        """Load the compiled second-codeword kernel (else the first still peak does)."""
+        one = np.zeros(1, dtype=np.int64)
+        zero, no = np.zeros(1), np.zeros(1, dtype=np.bool_)
+        second_codeword_rows(
+            np.zeros((1, 3, 2)), no, no, one, zero, zero, zero, self._share, 1.0, SECOND_LEVEL
+        )
