@@ -135,9 +135,9 @@ CASES = [
 
 #: The whole test is left to ``--all``: the matched-filter bank takes 11 CPU s over its 1 s
 #: prefix (whole and three cut lists), the STFT, FMCW and JIFS baselines 2.8, 1.4 and 1.0 CPU s
-#: and the GCAS cases 0.5-1.8 CPU s each (measured, numba's cache warm); the fast tier keeps a
-#: chunks == whole test per receiver in its own module (test_gcas_receiver,
-#: test_baselines_stft_fmcw_jifs).
+#: and the GCAS cases 0.5-1.8 CPU s each (measured, numba's cache warm); the fast tier keeps
+#: chunks == whole tests of GCAS (test_gcas_receiver) and of the STFT, FMCW and JIFS baselines
+#: (test_baselines_stft_fmcw_jifs).
 @pytest.mark.slow
 @pytest.mark.parametrize(("name", "range_readout", "tracked"), CASES)
 def test_every_receiver_gives_the_same_estimates_in_any_blocks(
