@@ -89,6 +89,8 @@ NUMBA_WARM_LOCK = "HIL_TEST_NUMBA_WARM_LOCK"
 #: The parts of ``tests/numba_warm_up.py``, one process each.
 WARM_UP_PARTS = ("tank", "receivers")
 _warm_ups: list[subprocess.Popen[bytes]] = []
+#: The lock file this process made (the controller's), removed at its session's end.
+_own_lock: list[str] = []
 
 
 def pytest_sessionstart(session: pytest.Session) -> None:
@@ -115,6 +117,7 @@ def pytest_sessionstart(session: pytest.Session) -> None:
     finally:
         os.close(fd)
     os.environ[NUMBA_WARM_LOCK] = lock_path
+    _own_lock.append(lock_path)
 
 
 @pytest.hookimpl(tryfirst=True)
@@ -124,22 +127,26 @@ def pytest_runtestloop(session: pytest.Session) -> None:
     lock_path = os.environ.get(NUMBA_WARM_LOCK)
     if lock_path is None or not hasattr(session.config, "workerinput"):
         return
-    with open(lock_path, "rb") as lock:
+    try:
+        lock = open(lock_path, "rb")  # noqa: SIM115 (closed below)
+    except FileNotFoundError:
+        return  # the controller's session has ended: nothing to wait for
+    with lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
         fcntl.flock(lock, fcntl.LOCK_UN)
 
 
 def pytest_sessionfinish(session: pytest.Session) -> None:
     """In the controller: the warm-up processes ended (stopped if the run ended first) and
-    their lock file removed."""
+    the lock file it made removed (a pytest run inside a test leaves the outer run's alone)."""
     for proc in _warm_ups:
         if proc.poll() is None:
             proc.kill()
         proc.wait()
     _warm_ups.clear()
-    lock_path = os.environ.pop(NUMBA_WARM_LOCK, None)
-    if lock_path is not None and not hasattr(session.config, "workerinput"):
-        Path(lock_path).unlink(missing_ok=True)
+    while _own_lock:
+        Path(_own_lock.pop()).unlink(missing_ok=True)
+        os.environ.pop(NUMBA_WARM_LOCK, None)
 
 
 def pytest_report_header(config: pytest.Config) -> str | None:
