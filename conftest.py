@@ -14,7 +14,7 @@ only runs in this process instead (no workers to start, ``--pdb`` and breakpoint
 Before the workers run their first test, numba's on-disk cache holds every kernel the suite
 reaches: the controller starts ``tests/numba_warm_up.py``'s parts, one process each, while the
 workers start and collect, and each worker waits for them (a lock those processes hold) before
-its first test. A fresh checkout so compiles each kernel once (about 55 s of CPU, spread over
+its first test. A fresh checkout so compiles each kernel once (about 47 s of CPU, spread over
 the cores) instead of once in every worker and in every child process that starts before the
 cache is written; with the cache filled the parts only load it (a few seconds of CPU).
 
