@@ -11,6 +11,13 @@ process per core, tests handed out as workers finish). A run that names its test
 only runs in this process instead (no workers to start, ``--pdb`` and breakpoints work);
 ``-n 0`` does the same for any run, ``-n N`` sets the workers.
 
+Before the workers run their first test, numba's on-disk cache holds every kernel the suite
+reaches: the controller starts ``tests/numba_warm_up.py``'s parts, one process each, while the
+workers start and collect, and each worker waits for them (a lock those processes hold) before
+its first test. A fresh checkout so compiles each kernel once (about 47 s of CPU, spread over
+the cores) instead of once in every worker and in every child process that starts before the
+cache is written; with the cache filled the parts only load it (a few seconds of CPU).
+
 ``hil.bluesky`` needs the optional ``bluesky`` extra: without it, its modules are not imported
 for their doctests (``tests/bluesky`` says why it skips, or fails under
 ``HIL_REQUIRE_SYSTEM_DEPS=1``).
@@ -18,7 +25,12 @@ for their doctests (``tests/bluesky`` says why it skips, or fails under
 
 from __future__ import annotations
 
+import fcntl
 import importlib.util
+import os
+import subprocess
+import sys
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -70,6 +82,71 @@ def pytest_xdist_auto_num_workers(config: pytest.Config) -> int | None:
     if config.args and len(_named_node_ids(config)) == len(config.args):
         return 0
     return None
+
+
+#: The environment variable naming the warm-up's lock file to the workers.
+NUMBA_WARM_LOCK = "HIL_TEST_NUMBA_WARM_LOCK"
+#: The parts of ``tests/numba_warm_up.py``, one process each.
+WARM_UP_PARTS = ("tank", "receivers")
+_warm_ups: list[subprocess.Popen[bytes]] = []
+#: The lock file this process made (the controller's), removed at its session's end.
+_own_lock: list[str] = []
+
+
+def pytest_sessionstart(session: pytest.Session) -> None:
+    """In the controller of a run on pytest-xdist workers, before it starts them: fill numba's
+    cache, one process per part of ``tests/numba_warm_up.py``, holding a lock until the last
+    ends; the workers inherit the lock file's name in :data:`NUMBA_WARM_LOCK`."""
+    script = Path(__file__).resolve().parent / "tests" / "numba_warm_up.py"
+    if not session.config.pluginmanager.has_plugin("dsession") or not script.exists():
+        return
+    fd, lock_path = tempfile.mkstemp(prefix="hil-numba-warm-up-")
+    # An flock belongs to the open file, which the warm-up processes inherit: the lock is held
+    # until the last of them has ended, however it ends.
+    fcntl.flock(fd, fcntl.LOCK_EX)
+    try:
+        for part in WARM_UP_PARTS:
+            _warm_ups.append(
+                subprocess.Popen(
+                    [sys.executable, str(script), part],
+                    stdout=subprocess.DEVNULL,
+                    stderr=subprocess.DEVNULL,
+                    pass_fds=(fd,),
+                )
+            )
+    finally:
+        os.close(fd)
+    os.environ[NUMBA_WARM_LOCK] = lock_path
+    _own_lock.append(lock_path)
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtestloop(session: pytest.Session) -> None:
+    """In a worker: wait until the controller's warm-up processes have ended (their lock
+    freed), so that every kernel loads from numba's cache."""
+    lock_path = os.environ.get(NUMBA_WARM_LOCK)
+    if lock_path is None or not hasattr(session.config, "workerinput"):
+        return
+    try:
+        lock = open(lock_path, "rb")  # noqa: SIM115 (closed below)
+    except FileNotFoundError:
+        return  # the controller's session has ended: nothing to wait for
+    with lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        fcntl.flock(lock, fcntl.LOCK_UN)
+
+
+def pytest_sessionfinish(session: pytest.Session) -> None:
+    """In the controller: the warm-up processes ended (stopped if the run ended first) and
+    the lock file it made removed (a pytest run inside a test leaves the outer run's alone)."""
+    for proc in _warm_ups:
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait()
+    _warm_ups.clear()
+    while _own_lock:
+        Path(_own_lock.pop()).unlink(missing_ok=True)
+        os.environ.pop(NUMBA_WARM_LOCK, None)
 
 
 def pytest_report_header(config: pytest.Config) -> str | None:

@@ -87,6 +87,7 @@ def test_a_run_naming_its_tests_by_node_id_starts_no_workers(project: pytest.Pyt
     result.stdout.no_fnmatch_line("created: *workers")
 
 
+@pytest.mark.slow
 def test_a_run_over_the_suite_shares_its_tests_among_workers(
     project: pytest.Pytester, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -131,3 +132,45 @@ def test_ci_runs_the_readme_test_command_verbatim() -> None:
     ci_lines = [line for line in (repo / ".ci/run").read_text().splitlines() if line.strip()]
     assert ci_lines[-1] == commands[0]
     assert commands[0].endswith("pytest --all --durations=20")
+
+
+WARM_UP = """
+import sys
+import time
+from pathlib import Path
+
+# Each part's file appears only after a pause, so a test run before the warm-up ends misses it.
+time.sleep(2.0)
+(Path(__file__).parent / f"warmed-{sys.argv[1]}").write_text("done")
+"""
+
+WARMED_TEST = """
+from pathlib import Path
+
+def test_the_warm_up_ended_first():
+    here = Path(__file__).parent
+    assert (here / "tests" / "warmed-tank").exists()
+    assert (here / "tests" / "warmed-receivers").exists()
+"""
+
+
+@pytest.mark.slow
+def test_workers_wait_for_the_numba_warm_up_before_their_first_test(
+    project: pytest.Pytester, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The controller of an xdist run starts ``tests/numba_warm_up.py`` once per part; every
+    worker runs its first test only after those processes ended (here a stand-in script that
+    leaves one file per part)."""
+    (project.path / "tests").mkdir()
+    (project.path / "tests" / "numba_warm_up.py").write_text(WARM_UP)
+    project.makepyfile(test_warmed=WARMED_TEST)
+    monkeypatch.setenv("PYTEST_XDIST_AUTO_NUM_WORKERS", "2")
+    result = project.runpytest_subprocess(
+        *QUIET, "-n", "auto", "test_warmed.py", "test_tiers_sample.py"
+    )
+    result.assert_outcomes(passed=2)
+    assert sorted(p.name for p in (project.path / "tests").iterdir()) == [
+        "numba_warm_up.py",
+        "warmed-receivers",
+        "warmed-tank",
+    ]

@@ -162,6 +162,7 @@ def test_target_outside_the_tank_is_refused() -> None:
         parse_scenario(sc)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["att", "tank-audio", "tank-board"])
 def test_every_example_scenario_runs(tmp_path: Path, name: str) -> None:
     status = main(["simulate", name, "--out",

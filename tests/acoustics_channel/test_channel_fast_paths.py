@@ -120,6 +120,7 @@ def test_grid_echo_is_smooth_without_corners() -> None:
     assert echo.exact_intervals == 0
 
 
+@pytest.mark.slow
 def test_grid_echo_follows_a_live_trajectory_with_acceleration_steps() -> None:
     """Constant-acceleration pieces (as the simulated stage moves): α has kinks in slope."""
 

@@ -92,6 +92,7 @@ ABANDON = textwrap.dedent(
 )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("abandon", [False, True])
 def test_an_abandoned_stream_keeps_portaudio_from_terminating_and_rescanning(
     abandon: bool, require_system: Callable[[bool, str], None]

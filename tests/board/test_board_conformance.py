@@ -346,6 +346,7 @@ def _random_frame(h: Host, rng: np.random.Generator, t_ms: float) -> bytes:
     return rng.integers(0, 256, int(rng.integers(1, 40)), dtype=np.uint8).tobytes()
 
 
+@pytest.mark.slow
 def test_python_and_c_boards_answer_random_host_streams_alike(
     require_system: Callable[[bool, str], None],
 ) -> None:

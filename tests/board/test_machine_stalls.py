@@ -137,6 +137,7 @@ def test_overlapping_intervals_golden() -> None:
     assert overlapping([], [], [1.0], [2.0]).tolist() == [False]
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(
     st.lists(st.tuples(st.floats(0, 100), st.floats(0, 5)), max_size=12),

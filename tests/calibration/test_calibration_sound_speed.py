@@ -40,6 +40,7 @@ def test_temperatures_outside_the_formulas_are_refused() -> None:
         calibrate_sound_speed_temperature(15.0, salinity_ppt=10.0)
 
 
+@pytest.mark.slow
 def test_time_of_flight_within_0_1_percent_of_the_injected_c(
     tank: tuple[MechanicalStage, EchoTank, EchoRanger],
 ) -> None:

@@ -16,6 +16,7 @@ from hil.experiments.calibration.stage import StageResult, calibrate_stage
 SCALE_TOL, BACKLASH_TOL_M = 3e-4, 50e-6
 
 
+@pytest.mark.slow
 def test_scale_and_backlash_recovered(
     tank: tuple[MechanicalStage, EchoTank, EchoRanger], tank_truth: SimTruth
 ) -> None:

@@ -57,6 +57,7 @@ def test_binary_garbage_as_a_toml_file(
     assert "not text: is it the right file?" in line
 
 
+@pytest.mark.slow
 def test_binary_garbage_as_a_schedule(
     sim_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -206,6 +207,7 @@ def _warnings(capsys: pytest.CaptureFixture[str], argv: list[str]) -> list[str]:
     return [line for line in err.splitlines() if line.startswith("hil: WARNING: ")]
 
 
+@pytest.mark.slow
 def test_schedule_of_another_seed_is_said(
     sim_run: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -218,6 +220,7 @@ def test_schedule_of_another_seed_is_said(
     assert _warnings(capsys, ["estimate", "--input", str(wav), "--schedule", str(own)]) == []
 
 
+@pytest.mark.slow
 def test_clipped_int16_input_is_warned(
     sim_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

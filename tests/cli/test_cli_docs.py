@@ -54,6 +54,7 @@ def _strings(path: Path) -> list[str]:
     ]
 
 
+@pytest.mark.slow
 def test_every_document_named_in_help_or_messages_is_an_installed_topic() -> None:
     named: set[str] = set()
     stale: list[str] = []

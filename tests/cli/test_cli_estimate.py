@@ -116,6 +116,7 @@ def test_json_lines_carry_each_estimates_bound(
     assert rows and all(r["crlb_range_m"] is None and r["crlb_speed_mps"] is None for r in rows)
 
 
+@pytest.mark.slow
 def test_csv_output_and_map(recording: Path, tmp_path: Path) -> None:
     out = tmp_path / "est.csv"
     png = tmp_path / "map.png"
@@ -363,6 +364,7 @@ def test_a_24_bit_input_gives_the_float_inputs_estimates_and_its_clipping_is_war
     assert "the first at t = 0.010000 s" in err
 
 
+@pytest.mark.slow
 def test_estimate_imports_neither_h5py_nor_scipys_io_or_signal(recording: Path) -> None:
     """The start-up of hil estimate (issue 27): no HDF5 library where no HDF5 is written, no
     scipy.io for the WAV, no scipy.signal for the filters (checked in a fresh interpreter)."""

@@ -130,6 +130,7 @@ def test_long_wav_streams_in_blocks(tmp_path: Path, monkeypatch: pytest.MonkeyPa
     np.testing.assert_array_equal(a, b)
 
 
+@pytest.mark.slow
 def test_plots_are_written(tmp_path: Path) -> None:
     out = tmp_path / "diag"
     assert main(["waveform", "--duration", "0.4", "--plot", str(out)]) == 0

@@ -185,6 +185,7 @@ def direct_rho(x: np.ndarray, j: int, m_hops: int, alpha: float, start: int) -> 
     )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("snr_db", [None, 0.0])
 def test_grid_scores_match_direct_correlation(snr_db: float | None, kit: Any) -> None:
     # Unrefined: each estimate is a grid point (lag on the R-sample grid, α on the Doppler

@@ -131,17 +131,15 @@ CASES = [
     ("gcas-mti", "first-arrival", False),
     ("gcas", "first-arrival", True),
 ]
-#: Left to ``--all``: the matched-filter bank (11 CPU s over its 1 s prefix, whole and three
-#: cut lists) and the STFT, FMCW and JIFS baselines (2.8, 1.4 and 1.0 CPU s), whose own
-#: modules keep a chunks == whole test in the fast tier (test_baselines_stft_fmcw_jifs); the
-#: GCAS cases take 0.4-1.4 CPU s (measured, numba's cache warm).
-SLOW = {("mfbank", "", False), ("stft", "", False), ("fmcw", "", False), ("jifs", "", False)}
 
 
-@pytest.mark.parametrize(
-    ("name", "range_readout", "tracked"),
-    [pytest.param(*case, marks=[pytest.mark.slow] if case in SLOW else []) for case in CASES],
-)
+#: The whole test is left to ``--all``: the matched-filter bank takes 11 CPU s over its 1 s
+#: prefix (whole and three cut lists), the STFT, FMCW and JIFS baselines 2.8, 1.4 and 1.0 CPU s
+#: and the GCAS cases 0.5-1.8 CPU s each (measured, numba's cache warm); the fast tier keeps
+#: chunks == whole tests of GCAS (test_gcas_receiver) and of the STFT, FMCW and JIFS baselines
+#: (test_baselines_stft_fmcw_jifs).
+@pytest.mark.slow
+@pytest.mark.parametrize(("name", "range_readout", "tracked"), CASES)
 def test_every_receiver_gives_the_same_estimates_in_any_blocks(
     name: str, range_readout: str, tracked: bool, tmp_path: Path
 ) -> None:

@@ -64,6 +64,7 @@ def _check(density_per_m3: float, band: bool, cuts: tuple[int | str, ...]) -> di
     return whole
 
 
+@pytest.mark.slow
 def test_a_diffuse_patch_gives_the_same_peaks_in_997_sample_blocks() -> None:
     whole = _check(0.3, True, (997,))
     # Measured: 999 Peaks (366 refused on the band's edge), no estimate (a still target).

@@ -33,6 +33,7 @@ def _pooled(params: dict[str, object], seed: int) -> dict[str, float]:
 FAMILIES = ["random-cyclic", pytest.param("three-state", marks=pytest.mark.slow)]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("family", FAMILIES)
 @pytest.mark.parametrize("speeds", [(8.0, 25.0), (-25.0, -8.0)], ids=["closing", "opening"])
 @pytest.mark.parametrize(
@@ -53,6 +54,7 @@ def test_default_options_on_constant_velocity_targets(
     assert got["rmse"] <= rmse_max, got
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("family", FAMILIES)
 def test_default_options_in_reverberation_at_0_db_srr(family: str) -> None:
     # -10 dB per-sample SNR on top; targets clear of the clutter band (10-25 m/s closing).
@@ -64,6 +66,7 @@ def test_default_options_in_reverberation_at_0_db_srr(family: str) -> None:
     assert off["false_per_hop"] > 5 * banded["false_per_hop"], (off, banded)
 
 
+@pytest.mark.slow
 def test_three_state_range_rmse_in_line_with_random_cyclic_at_minus_10_db() -> None:
     # Issue 18: 7 cm for three-state against 4-6 cm for random-cyclic before; now alike.
     rmse = {

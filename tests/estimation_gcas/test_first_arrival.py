@@ -123,6 +123,7 @@ def test_single_arrival_agrees_with_the_peak() -> None:
     assert abs(np.median(first)) < 0.04 and np.percentile(np.abs(first), 90) < 0.12
 
 
+@pytest.mark.slow
 def test_chunks_equal_whole() -> None:
     x = _tank_echo(7.0, 1.5, seed=22)
     whole = run_blocks(_receiver("first-arrival"), x, x.size)
@@ -130,6 +131,7 @@ def test_chunks_equal_whole() -> None:
     assert len(whole) >= 60 and repr(whole) == repr(chunks)
 
 
+@pytest.mark.slow
 def test_after_a_gap_the_peak_is_kept_until_a_period_of_history_exists() -> None:
     x = _tank_echo(7.0, 1.5, seed=23)
     rx = _receiver("first-arrival")
@@ -444,6 +446,7 @@ def test_a_refused_speed_keeps_the_same_echos_reading_of_up_to_hold_hops_back(si
     assert readout._held_alpha(100, d100, _alpha(sign * 1.6)) is None
 
 
+@pytest.mark.slow
 def test_a_first_arrival_older_than_the_history_is_refused_not_read_wrapped() -> None:
     # The readout keeps a code period and M hops behind the newest sample, plus the caller's
     # decision lag (allow_lag); a boundary older than that is refused, never read wrapped.

@@ -153,6 +153,7 @@ def test_coherent_phase_model_matches_the_unit_correlators(rc_schedule: HopSched
             assert 0.85 * 0.5 * n_len < abs(u[n, k]) < 1.02 * 0.5 * n_len
 
 
+@pytest.mark.slow
 def test_noise_only_false_alarm_rate_matches_the_configured_pfa(rc_schedule: HopSchedule) -> None:
     # The detector's own rate (refinement off); the refinement then refuses most of those
     # detections as no echo of the schedule (their hops' phases are unrelated).

@@ -216,6 +216,7 @@ def test_two_stage_coherent_refines_like_the_full_search(rc_schedule: HopSchedul
     assert np.sqrt(np.mean(np.array([e.speed_mps - v for e in two]) ** 2)) < 0.05
 
 
+@pytest.mark.slow
 @settings(max_examples=5, deadline=None)
 @given(st.lists(st.integers(1, 40_000), min_size=1, max_size=5))
 def test_two_stage_chunks_equal_whole(cuts: list[int]) -> None:
@@ -231,6 +232,7 @@ def test_two_stage_chunks_equal_whole(cuts: list[int]) -> None:
     assert parts == whole and len(whole) > 10
 
 
+@pytest.mark.slow
 @settings(max_examples=8, deadline=None)
 @given(st.lists(st.integers(1, 3_000), min_size=20, max_size=60), st.integers(0, 3))
 def test_nothing_comes_out_before_the_next_decision_index(sizes: list[int], seed: int) -> None:
@@ -256,6 +258,7 @@ def test_nothing_comes_out_before_the_next_decision_index(sizes: list[int], seed
     assert out + rx.flush() == whole and len(whole) >= 3
 
 
+@pytest.mark.slow
 def test_feeding_up_to_the_next_decision_index_gives_every_estimate_in_few_calls(
     rc_schedule: HopSchedule,
 ) -> None:

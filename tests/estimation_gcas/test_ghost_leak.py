@@ -46,6 +46,7 @@ def _hits(estimates: list[Estimate], range_m: float, speed_mps: float) -> int:
     )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("speed", [9.0, -9.0])
 def test_a_ghost_beyond_the_edge_costs_no_fit_and_changes_no_estimate(
     speed: float, monkeypatch: pytest.MonkeyPatch
@@ -67,6 +68,7 @@ def test_a_ghost_beyond_the_edge_costs_no_fit_and_changes_no_estimate(
     assert calls_with < 1.35 * len(with_rule)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("weak_speed", "amplitude"),
     # 0.8-1.1 CPU s each: the fast tier keeps the first, --all runs every one.

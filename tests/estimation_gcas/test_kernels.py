@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import ndimage
@@ -28,6 +29,7 @@ def _peaks_reference(s: np.ndarray, h: int) -> np.ndarray:
     return np.flatnonzero((s >= centred) & (s > prev))
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(
     st.lists(st.sampled_from([-np.inf, 0.0, 1.0, 2.0, 3.0, 2.5]), min_size=1, max_size=60),
@@ -172,6 +174,7 @@ def test_peak_cells_of_one_column_are_peak_indices() -> None:
     assert rows.tolist() == peak_indices(s, 6, 0, 300).tolist() and not cols.any()
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(CELL_ROWS, st.lists(st.lists(VALUES, min_size=4, max_size=4), max_size=6),
        st.integers(1, 3), st.integers(1, 3), st.data())  # fmt: skip

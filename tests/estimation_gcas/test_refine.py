@@ -72,6 +72,7 @@ def _check_at_the_bound(got: dict[str, float]) -> None:
     assert abs(got["range_bias_x"]) < 0.4 and abs(got["speed_bias_x"]) < 0.4
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "family", ["random-cyclic", pytest.param("three-state", marks=pytest.mark.slow)]
 )  # three-state: 1.4 CPU s, left to --all (its -10..+10 dB sweep is there too)
@@ -132,6 +133,7 @@ def _off_lobe(family: str, snr_db: float, seeds: range) -> tuple[int, int, float
     return err.size, int(np.sum(err > 0.3)), float(np.sqrt(np.mean(err[err <= 0.3] ** 2)))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("family", "most_off", "rmse_max"),
     [

@@ -44,6 +44,7 @@ def _wrong(est: list[Estimate], r0: float, v: float) -> list[Estimate]:
     ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("speed", [0.0, 0.05, 0.2])
 def test_a_still_or_slow_echo_gives_no_ghost(speed: float) -> None:
     est = _run(40.0, speed, 0.0, seed=1)
@@ -58,6 +59,7 @@ def test_a_still_or_slow_echo_gives_no_ghost_at_minus_10_db(speed: float) -> Non
     assert len(_wrong(est, 40.0, speed)) / HOPS <= 0.05
 
 
+@pytest.mark.slow
 def test_a_still_echo_with_the_span_at_the_design_speed_gives_no_ghost() -> None:
     est = _run(40.0, 0.0, 0.0, seed=3, max_speed=25.72)
     assert len(_wrong(est, 40.0, 0.0)) / HOPS <= 0.05
@@ -228,6 +230,7 @@ def _detection_and_false(
     return [h / a for h, a in zip(hits, alone, strict=True)], false / (SCENE_S / 0.01)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("scene", "pd_min"),
     # 0.8-1.1 CPU s each: the fast tier keeps one of each kind, --all runs every one.
@@ -390,6 +393,7 @@ def test_a_target_inside_the_span_near_its_edge_is_not_taken_for_one_beyond(
     assert len(est) >= 85 and len(_wrong(est, 50.0, v)) / HOPS <= 0.02
 
 
+@pytest.mark.slow
 def test_the_design_speed_reads_without_bias_with_the_band_on() -> None:
     # +25 m/s on att sits beside the Doppler cells the band masks as another tone's clutter
     # (26.5 ± 1.3 m/s for the third tone read as the fourth): the detector's own speed is
@@ -497,6 +501,7 @@ def _false_and_moving_pd(
     return false, sum(k in hit for k in moving) / max(len(moving), 1)
 
 
+@pytest.mark.slow
 def test_a_target_braking_to_rest_gives_no_false_estimate() -> None:
     # Measured: 2 false estimates in 200 hops (30.1 m/s at 31.8 m, 24.4 m/s at 36.8 m),
     # every moving boundary detected (111 of them), none once it is slower than the band.

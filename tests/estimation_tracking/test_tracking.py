@@ -302,6 +302,7 @@ def test_the_docs_settings_table_gives_the_code_defaults() -> None:
     assert documented == defaults
 
 
+@pytest.mark.slow
 def test_a_new_tracker_has_its_compiled_association_loaded() -> None:
     """A live run's first estimate must not wait for numba to load (or compile) the
     association: building the tracker does it (in a fresh process, where nothing else did)."""

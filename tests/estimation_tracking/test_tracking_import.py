@@ -7,6 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -24,5 +26,6 @@ def test_importing_the_recording_package_does_not_import_numba() -> None:
     assert not _numba_loaded_after("import hil.recording, hil.estimation.tracking")
 
 
+@pytest.mark.slow
 def test_making_a_tracker_imports_its_compiled_association() -> None:
     assert _numba_loaded_after("from hil.estimation.tracking import Tracker\nTracker(0.01)")

@@ -150,6 +150,7 @@ def test_trial_returning_a_non_dict_is_a_recorded_failure(tmp_path: Path) -> Non
     assert rec["error"]["message"] == "a trial must return a dict of results, got list"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["pool", "dask"])
 def test_workers_start_with_blas_pinned_to_one_thread(
     tmp_path: Path, kind: str, monkeypatch: pytest.MonkeyPatch
@@ -340,6 +341,7 @@ def test_resume_refuses_results_of_another_grid(tmp_path: Path) -> None:
     assert (tmp_path / "manifest.json").read_text() == manifest_before  # no run added
 
 
+@pytest.mark.slow
 def test_resume_refuses_results_without_manifest(tmp_path: Path) -> None:
     run_sweep(af_sweep(), tmp_path, SerialRunner(), show_progress=False)
     (tmp_path / "manifest.json").unlink()

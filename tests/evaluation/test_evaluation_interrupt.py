@@ -160,6 +160,7 @@ def _resume_matches_a_clean_run(tmp_path: Path, sweep: Path, out: Path, gate: Pa
     assert (out / "summary.csv").read_text() == (tmp_path / "clean" / "summary.csv").read_text()
 
 
+@pytest.mark.slow
 def test_ctrl_c_saves_the_finished_trials_ends_the_workers_and_resume_completes(
     tmp_path: Path,
 ) -> None:

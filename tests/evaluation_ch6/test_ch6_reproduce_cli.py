@@ -67,6 +67,7 @@ def test_tables_hold_pooled_values(quick_run: tuple[int, Path, str]) -> None:
     assert abs(float(fm[("fmcw-tri", 10.0)]["range_bias_m"])) < 0.5
 
 
+@pytest.mark.slow
 def test_existing_folder_needs_resume(
     quick_run: tuple[int, Path, str], capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -229,6 +229,7 @@ def test_a_run_still_sounding_when_the_tank_closes_gets_its_truth(tmp_path: Path
     )
 
 
+@pytest.mark.slow
 def test_hil_report_scores_a_recording_against_a_truth_table(
     short_virtual_outcome: RunOutcome, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -241,6 +241,7 @@ def completed(
     return device, outcome
 
 
+@pytest.mark.slow
 def test_a_run_starts_streams_tracks_and_stops_when_its_tow_is_done(
     completed: tuple[Device, RunOutcome],
 ) -> None:
@@ -269,6 +270,7 @@ def test_a_run_starts_streams_tracks_and_stops_when_its_tow_is_done(
     assert outcome.events[-1][3] == "stop: completed"
 
 
+@pytest.mark.slow
 def test_the_recording_replays_to_the_live_estimates(completed: tuple[Device, RunOutcome]) -> None:
     from hil.recording.replay import compare_estimates, replay
 
@@ -293,6 +295,7 @@ def test_the_recording_names_the_device_it_ran_on(completed: tuple[Device, RunOu
     assert entry["instrument"]["stage"]["build_info"].startswith("[VER:1.1h.")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", PARAMS)
 def test_a_run_stopped_by_its_caller_stops_safely_and_says_so(
     name: str, tmp_path: Path, require_system: Callable[[bool, str], None]

@@ -563,6 +563,7 @@ def test_ctrl_c_sigterm_and_sighup_stop_cleanly_and_keep_the_recording(
     assert x[-1] > -4.1 + 0.05
 
 
+@pytest.mark.slow
 def test_the_receiver_is_built_before_anything_moves_or_transmits(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:

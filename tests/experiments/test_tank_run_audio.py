@@ -64,6 +64,7 @@ def _assert_tracked_as_on_the_board(
         assert summary["wrong_fraction"] <= wrong_fraction
 
 
+@pytest.mark.slow
 def test_hil_tank_run_with_the_simulated_audio_interface_on_virtual_time(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -67,6 +67,7 @@ def first_run(short_virtual_outcome: RunOutcome) -> RunOutcome:
     return short_virtual_outcome
 
 
+@pytest.mark.slow
 def test_a_virtual_run_tracks_the_towed_target(first_run: RunOutcome) -> None:
     from hil.experiments.run_scoring import summarize
 
@@ -267,6 +268,7 @@ def test_the_same_seed_gives_the_same_run_bit_for_bit_under_load(
     assert a["samples"].shape == (first_run.samples, 2)
 
 
+@pytest.mark.slow
 def test_another_seed_gives_another_run(first_run: RunOutcome, tmp_path: Path) -> None:
     # The first 50 estimates are all the comparison needs: the run is stopped there.
     stop, seen = threading.Event(), []

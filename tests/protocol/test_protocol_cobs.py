@@ -119,6 +119,7 @@ print(json.dumps({"before": before, "after": counts()}))
 """
 
 
+@pytest.mark.slow
 def test_cobs_warm_up_loads_every_version_a_driver_calls() -> None:
     # A read-only source (np.frombuffer over bytes) is another numba type: before warm_up
     # covered it, the tank run's first read-only frame compiled mid-stream (0.12 s on a

@@ -107,6 +107,7 @@ def test_fuzz_a_lost_delimiter_costs_at_most_the_next_frame() -> None:
     assert got == [0, "error", 3, 4]
 
 
+@pytest.mark.slow
 def test_fuzz_connection_reports_missed_adc_frames_and_never_raises() -> None:
     rng = np.random.default_rng(7)
     host = Connection(Role.HOST)

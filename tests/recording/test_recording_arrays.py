@@ -6,6 +6,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -15,6 +16,7 @@ from hil.recording.records import StageTelemetry
 from hil.recording.writer import RunWriter
 
 
+@pytest.mark.slow
 @settings(max_examples=15, deadline=None)
 @given(
     blocks=st.lists(st.tuples(st.integers(0, 40), st.integers(1, 300)), min_size=1, max_size=6),

@@ -342,6 +342,7 @@ def _read_and_check(path: Path, rounds: int) -> tuple[int, int, int]:
     return counts
 
 
+@pytest.mark.slow
 def test_a_live_reader_reads_every_string_column_while_the_writer_appends(
     tmp_path: Path,
 ) -> None:

@@ -142,6 +142,7 @@ blocks_strategy = st.lists(
 )
 
 
+@pytest.mark.slow
 @settings(max_examples=40, deadline=None)
 @given(
     blocks=blocks_strategy,

@@ -52,6 +52,7 @@ class FakeClock:
         return self.now
 
 
+@pytest.mark.slow
 def test_reader_sees_data_up_to_the_last_flush(
     tmp_path: Path, schedule_doc: dict[str, Any]
 ) -> None:

@@ -8,6 +8,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[2]
 
 SCRIPT = """
@@ -15,6 +17,7 @@ import sys
 import matplotlib
 matplotlib.use("svg")
 import numpy as np
+import pytest
 from matplotlib.figure import Figure
 from hil.experiments.codeword_map import save_time_codeword_map, time_codeword_map_figure
 from hil.signals.plots import occupancy_figure, plot_spectrogram, spectrogram_figure
@@ -35,6 +38,7 @@ print(matplotlib.get_backend(), "matplotlib.pyplot" in sys.modules)
 """
 
 
+@pytest.mark.slow
 def test_figures_returned_backend_untouched_pyplot_never_imported(tmp_path: Path) -> None:
     proc = subprocess.run(
         [sys.executable, "-c", SCRIPT, str(tmp_path)],
@@ -46,6 +50,7 @@ def test_figures_returned_backend_untouched_pyplot_never_imported(tmp_path: Path
         assert (tmp_path / name).read_bytes().startswith(b"\x89PNG\r\n\x1a\n")
 
 
+@pytest.mark.slow
 def test_no_module_switches_the_backend_or_imports_pyplot() -> None:
     offenders = []
     for path in sorted((ROOT / "hil").rglob("*.py")):

@@ -34,6 +34,7 @@ def _text(driver: Any, element_id: str) -> str:
     return str(driver.find_element(By.ID, element_id).text)
 
 
+@pytest.mark.slow
 def test_page_follows_a_recording_and_highlights_an_alarm(browser: Any, recorder: Any) -> None:
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import WebDriverWait

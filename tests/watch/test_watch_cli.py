@@ -91,6 +91,7 @@ def _default_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
+@pytest.mark.slow
 def test_the_command_serves_a_recording_until_interrupted(recorder: Any) -> None:
     recorder.writer.append_estimates([recorder.estimate(i) for i in range(4)])
     recorder.writer.flush()

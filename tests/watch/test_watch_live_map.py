@@ -94,6 +94,7 @@ def test_the_true_codeword_is_strongest_where_each_boundary_arrives(tmp_path: Pa
     assert np.mean(db[col].argmax(axis=1) == k[inside] % 17) >= 0.95
 
 
+@pytest.mark.slow
 def test_followed_map_equals_the_map_of_the_whole(tmp_path: Path) -> None:
     whole = _snapshot(tmp_path / "a.h5", (N,))
     pieces = _snapshot(tmp_path / "b.h5", (33_333, 90_001, N))
@@ -120,6 +121,7 @@ def test_only_gcas_has_a_map(tmp_path: Path) -> None:
     )
 
 
+@pytest.mark.slow
 def test_a_long_map_is_max_pooled_to_the_columns_sent(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

@@ -51,6 +51,7 @@ def page(browser: Any, recorder: Any) -> Any:
         server.close()
 
 
+@pytest.mark.slow
 def test_axes_read_once_each_and_line_up(page: Any) -> None:
     driver, _ = page
     plots = _plots(driver)["plots"]
@@ -106,6 +107,7 @@ def test_wheel_zooms_every_plot_a_double_click_follows_the_run_again(page: Any) 
     assert driver.find_element("id", "zoom-note").text == ""
 
 
+@pytest.mark.slow
 def test_hover_names_the_estimate_under_the_mouse(page: Any) -> None:
     from selenium.webdriver.common.action_chains import ActionChains
     from selenium.webdriver.support.ui import WebDriverWait
