@@ -185,10 +185,6 @@ GHOST_LEAK_CELLS = 3.0
 #: whose ghost it may be (:meth:`CoherentRefiner._amplitude_near`): the likelihood's main
 #: peak is ``1/B`` wide (``B`` the tones' span), a lobe holds about K of them (att: 4).
 GHOST_POINTS = 9
-#: An echo is followed to a boundary no detection brought (:meth:`CoherentRefiner.due`)
-#: once this many of its boundaries were fitted: one fit that passed the echo test may be
-#: noise's or another echo's ghost, and following it would carry it on.
-FOLLOW_FITS = 2
 #: Lobe checks after a search (each may move the fit by one grating lobe; they stop where
 #: neither neighbour is better): a detector's time can be several lobes off at an echo's
 #: first boundary (att three-state, full search: 2.75 lobes, 1.8 ms).
@@ -313,8 +309,6 @@ class _EchoFit:
     #: The latest hop at which this echo was looked for where the fit puts it, without a
     #: detection (:meth:`CoherentRefiner.due`; its own hop before any).
     followed: int = -1
-    #: How many boundaries of this echo were fitted (this one and those it replaced).
-    fits: int = 1
 
     def speed(self, sound_speed_mps: float) -> float:
         """Radial speed, m/s (closing positive)."""
@@ -720,11 +714,7 @@ class CoherentRefiner:
         then fitted there (:meth:`refine`) and its echo test decides."""
         out = []
         for i, e in enumerate(self._echoes):
-            if (
-                e.fits < FOLLOW_FITS
-                or e.e_over_n0_db < self.lobe_sure_db
-                or abs(e.speed(self.c)) < self._still_mps
-            ):
+            if e.e_over_n0_db < self.lobe_sure_db or abs(e.speed(self.c)) < self._still_mps:
                 continue
             hop = max(e.hop_index, e.followed) + 1
             t_next = e.t_s + (hop - e.hop_index) * self.hop_len_s / e.alpha
@@ -869,18 +859,16 @@ class CoherentRefiner:
         oldest = fit.t_s - KNOWN_HOPS * self.hop_len_s
         kept = []
         ghost_strength = (0.0,) * self.schedule.period_hops
-        fits = 1
         for e in self._echoes:
             if e.t_s < oldest:
                 continue
             if self._same_echo(e, hop_index, fit.t_s, speed):
                 ghost_strength = tuple(map(max, ghost_strength, e.ghost_strength or ghost_strength))
-                fits = max(fits, e.fits + 1)
             else:
                 kept.append(e)
         new = _EchoFit(
             hop_index, fit.t_s, fit.alpha, fit.amplitude, fit.rate(self.c), ghost_strength,
-            fit.e_over_n0_db, fits=fits,
+            fit.e_over_n0_db,
         )  # fmt: skip
         self._echoes = [*kept, new]
 

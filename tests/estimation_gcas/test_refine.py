@@ -421,16 +421,13 @@ def test_an_echo_measured_at_a_ghosts_speed_is_followed_through_the_ghosts_hops(
 
 def test_an_echo_measured_lately_is_due_at_its_next_boundary_once() -> None:
     # A target fitted at one boundary: its next boundary is due once the stream has passed
-    # it, once, and never beyond KNOWN_HOPS hops of the fit, from its second fit on
-    # (FOLLOW_FITS); a fit below the lobe decision's threshold region or at rest is not
-    # followed.
+    # it, once, and never beyond KNOWN_HOPS hops of the fit; a fit below the lobe decision's
+    # threshold region or at rest is not followed.
     refiner, first = _beside_an_echo_whose_ghost_it_may_be(1.0)
     refiner._echoes = []
     fit = refiner.refine(first.t_s, first.alpha, first.hop_index)
     assert fit is not None and fit.is_echo(refiner.echo_test)
     period = refiner.hop_len_s / fit.alpha
-    assert refiner._echoes[0].fits == 1 and refiner.due(fit.t_s + 10 * period) == []
-    refiner._echoes = [dataclasses.replace(refiner._echoes[0], fits=refine_module.FOLLOW_FITS)]
     assert refiner.due(fit.t_s + 0.5 * period) == []
     [(hop, t_next, alpha)] = refiner.due(fit.t_s + 1.5 * period)
     assert hop == first.hop_index + 1 and alpha == fit.alpha

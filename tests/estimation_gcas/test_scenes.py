@@ -167,7 +167,7 @@ TWO_TARGETS = {
     # weaker one is followed through the ghost's hops: where its peak is only the second of
     # its row, and where the ghost's peak hides it, at the boundary its fit puts next
     # (Readout._follow). Measured (seed 11, 0 / -10 dB): 4 dB 0.993 / 1.0, 5 dB 0.951 /
-    # 0.93, 6 dB 0.888 / 0.657, no false estimate; 0.66 / 0.50, 0.18 / 0.16 and 0.105 /
+    # 0.93, 6 dB 0.888 / 0.713, no false estimate; 0.66 / 0.50, 0.18 / 0.16 and 0.105 /
     # 0.112 when every detection there reading at most 0.6 of the echo with it in, or as
     # weak as its strongest ghost, was that ghost; 0.993 / 1.0, 0.867 / 0.734 and 0.538 /
     # 0.476 without following.
