@@ -560,7 +560,7 @@ class CoherentRefiner:
     # ------------------------------------------------------------------ refinement
     def refine(
         self, t_s: float, alpha: float, hop_index: int, echo_test: EchoTest | None = None,
-        partners: bool = True,
+        partners: bool = True, followed: bool = False,
     ) -> Refinement | None:  # fmt: skip
         """The maximum-likelihood boundary time and time scale near ``(t_s, alpha)`` for the
         boundary that ends hop ``hop_index``; None where the input does not cover the ``M``
@@ -570,7 +570,11 @@ class CoherentRefiner:
         passes ``echo_test`` (default :attr:`echo_test`) is remembered as one echo. With
         ``partners`` a refused fit may be one of two echoes at one speed
         (:data:`PARTNER_COHERENCE`); the caller says where that cannot be (the reverberation
-        band's edges, the span's)."""
+        band's edges, the span's). A ``followed`` boundary (no detection brought it,
+        :meth:`due`) is measured only where the fit's last hop holds its echo (at least
+        :data:`PARTIAL_LEVEL` of the hops' mean power): an echo that ended within the window
+        still fits one echo on its earlier hops, and followed on it would go on where it
+        is no more; None otherwise."""
         test = self.echo_test if echo_test is None else echo_test
         word = self._codeword(hop_index)
         hop_ids = np.arange(hop_index - self.m_hops + 1, hop_index + 1, dtype=np.int64)
@@ -578,6 +582,10 @@ class CoherentRefiner:
         speed0 = self.c * (alpha - 1.0) / (alpha + 1.0)
         known = self._known_hops(hop_index, t_s, speed0)
         fit = self._fit_near(word, hop_ids, t_s, speed0, lobe, hop_index, known)
+        if followed and fit is not None:
+            power = self._hop_powers(fit, word, hop_ids, known)
+            if power is None or power[-1] < PARTIAL_LEVEL * np.mean(power):
+                return None
         if (
             fit is not None
             and fit.found
@@ -1157,6 +1165,28 @@ class CoherentRefiner:
             amplitude, accel,
         )  # fmt: skip
 
+    def _hop_powers(
+        self, fit: Refinement, word: _Codeword, hop_ids: NDArray[np.int64],
+        known: NDArray[np.complex128],
+    ) -> NDArray[np.float64] | None:  # fmt: skip
+        """Each hop's power at the constant-speed ``fit`` (shape ``(M,)``, the hop's term
+        over its squared amplitude), ``known`` taken out; None where the input does not cover
+        the hops."""
+        slots = self._slots(hop_ids, word, fit.t_s, fit.alpha)
+        if slots is None:
+            return None
+        args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
+        per_hop = np.empty((1, hop_ids.shape[0]), np.complex128)
+        candidate_sums(
+            *args, np.array([fit.t_s]), np.array([fit.alpha]), np.zeros(1),
+            np.empty(1, np.complex128), np.empty(1), np.empty(1), per_hop, known,
+        )  # fmt: skip
+        amp2 = word.hops[4]
+        power: NDArray[np.float64] = np.abs(per_hop[0]) ** 2 / np.where(
+            amp2 > 0, amp2 * amp2, np.inf
+        )
+        return power
+
     def _one_sided(
         self, fit: Refinement, word: _Codeword, hop_ids: NDArray[np.int64],
         known: NDArray[np.complex128],
@@ -1164,18 +1194,9 @@ class CoherentRefiner:
         """Whether the constant-speed ``fit``'s hops hold its echo on one side of the window
         only (:data:`PARTIAL_LEVEL`): at least :data:`PARTIAL_HOPS` consecutive hops at one
         end below that level of the hops' mean power, none at the other end."""
-        slots = self._slots(hop_ids, word, fit.t_s, fit.alpha)
-        if slots is None:
+        power = self._hop_powers(fit, word, hop_ids, known)
+        if power is None:
             return False
-        args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
-        per_hop = np.empty((1, hop_ids.shape[0]), np.complex128)
-        one = np.empty(1)
-        candidate_sums(
-            *args, np.array([fit.t_s]), np.array([fit.alpha]), np.zeros(1),
-            np.empty(1, np.complex128), one, np.empty(1), per_hop, known,
-        )  # fmt: skip
-        amp2 = word.hops[4]
-        power = np.abs(per_hop[0]) ** 2 / np.where(amp2 > 0, amp2 * amp2, np.inf)
         weak = power < PARTIAL_LEVEL * np.mean(power)
         lead = int(np.argmin(weak)) if not weak.all() else weak.size
         trail = int(np.argmin(weak[::-1])) if not weak.all() else weak.size

@@ -445,6 +445,24 @@ def test_an_echo_measured_lately_is_due_at_its_next_boundary_once() -> None:
         assert refiner.due(fit.t_s + 10 * period) == []
 
 
+def test_an_echo_that_ended_is_not_followed_on_its_earlier_hops() -> None:
+    # The echo stops half a hop after a boundary it was measured at: the next boundary's
+    # window still holds it on its first M - 1 hops, and fitted there it is one echo; followed
+    # (no detection brought it) it is measured only where the window's last hop holds it.
+    schedule = att_schedule()
+    x = echo_samples(schedule, R0, V0, 0.6, snr_db=0.0, seed=6)
+    first = run_blocks(make_gcas(schedule), x)[12]
+    noise = np.random.default_rng(7).normal(0.0, np.sqrt(0.5), x.shape)
+    end = int((first.t_s + 0.5 * schedule.hop_s) * FS)
+    x[end:] = noise[end:]
+    t_next = first.t_s + schedule.hop_s / first.alpha
+    for followed, measured in ((False, True), (True, False)):
+        refiner = CoherentRefiner(schedule, FS, 10, C, 0.5, 30.0)
+        refiner.push(x, 0)
+        fit = refiner.refine(t_next, first.alpha, first.hop_index + 1, followed=followed)
+        assert (fit is not None and fit.is_echo(refiner.echo_test)) is measured
+
+
 def test_refine_must_be_a_bool() -> None:
     with pytest.raises(ConfigError, match=r"refine = 'yes' is not allowed: must be true or false"):
         GcasReceiver(

@@ -396,7 +396,7 @@ class Readout:
             speed = fe.sound_speed_mps * (alpha - 1.0) / (alpha + 1.0)
             if fe.refused_hypotheses[int(np.argmin(np.abs(fe.grid.speeds_mps - speed)))]:
                 continue  # in the reverberation band: hidden, not reported
-            refined = self._refiner.refine(t_pred, alpha, hop_index, partners=False)
+            refined = self._refiner.refine(t_pred, alpha, hop_index, partners=False, followed=True)
             if (
                 refined is None
                 or not refined.is_echo(ECHO_TEST)
