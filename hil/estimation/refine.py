@@ -517,6 +517,10 @@ class CoherentRefiner:
         #: Speeds below this share their Doppler cells with the still reverberation (m/s,
         #: :func:`~hil.estimation.reverb_band.doppler_resolution_mps`).
         self._still_mps = doppler_resolution_mps(schedule.tones_hz, self.hop_len_s, self.c)
+        #: The likelihood's main lobe in time, ``1/B`` (s; ``B`` the tones' span): how far a
+        #: followed fit may move from where its echo's fit carried it (:meth:`refine`).
+        tones = np.asarray(schedule.tones_hz, dtype=np.float64)
+        self._main_lobe_s = 1.0 / (float(np.ptp(tones)) if tones.size > 1 else 1.0 / self.hop_len_s)
 
     # ------------------------------------------------------------------ stream
     def allow_lag(self, samples: int) -> None:
@@ -571,7 +575,10 @@ class CoherentRefiner:
         ``partners`` a refused fit may be one of two echoes at one speed
         (:data:`PARTNER_COHERENCE`); the caller says where that cannot be (the reverberation
         band's edges, the span's). A ``followed`` boundary (no detection brought it,
-        :meth:`due`) is measured only where the fit's last hop holds its echo (at least
+        :meth:`due`) at ``t_s`` where its echo's fit carried on is measured only within the
+        likelihood's main lobe (``1/B``) of ``t_s`` (further is another grating lobe or
+        another echo, and remembered it would be followed on) and where the fit's last hop
+        holds its echo (at least
         :data:`PARTIAL_LEVEL` of the hops' mean power): an echo that ended within the window
         still fits one echo on its earlier hops, and followed on it would go on where it
         is no more; None otherwise."""
@@ -583,6 +590,8 @@ class CoherentRefiner:
         known = self._known_hops(hop_index, t_s, speed0)
         fit = self._fit_near(word, hop_ids, t_s, speed0, lobe, hop_index, known)
         if followed and fit is not None:
+            if abs(fit.t_s - t_s) > self._main_lobe_s:
+                return None  # another grating lobe, or another echo
             power = self._hop_powers(fit, word, hop_ids, known)
             if power is None or power[-1] < PARTIAL_LEVEL * np.mean(power):
                 return None

@@ -82,7 +82,7 @@ def test_an_echo_on_the_edge_beside_a_stronger_one_is_still_reported(
     # on; the weak one is read over the speeds inside the edge (the detector cannot
     # interpolate its speed there) and outshines the leak. Measured at 0 dB (the strong
     # echo's per-sample SNR): with and without the rule the same 144 / 94 / 127 estimates of
-    # the weak echo, no false one (0 / 3 / 72 of them where its fit put its boundary and no
+    # the weak echo, no false one (0 / 3 / 73 of them where its fit put its boundary and no
     # detection brought it, Readout._follow; 144 / 92 / 71 without following).
     strong = 9.0 if weak_speed > 0 else -9.0
     s = att_schedule()

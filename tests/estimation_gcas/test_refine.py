@@ -463,6 +463,27 @@ def test_an_echo_that_ended_is_not_followed_on_its_earlier_hops() -> None:
         assert (fit is not None and fit.is_echo(refiner.echo_test)) is measured
 
 
+def test_a_followed_boundary_is_measured_on_its_own_lobe_only() -> None:
+    # Followed from a point a grating lobe off the echo's next boundary, the fit moves onto
+    # the echo's lobe, further than the main lobe 1/B: not that echo's continuation, and
+    # not remembered; from the boundary itself it is measured.
+    schedule = att_schedule()
+    x = echo_samples(schedule, R0, V0, 0.6, snr_db=0.0, seed=6)
+    first = run_blocks(make_gcas(schedule), x)[12]
+    t_next = first.t_s + schedule.hop_s / first.alpha
+    refiner = CoherentRefiner(schedule, FS, 10, C, 0.5, 30.0)
+    refiner.push(x, 0)
+    lobe = 1.0 / (first.alpha * refiner.spacing_hz)
+    free = refiner.refine(t_next + lobe, first.alpha, first.hop_index + 1)
+    assert free is not None and abs(free.t_s - (t_next + lobe)) > refiner._main_lobe_s
+    refiner = CoherentRefiner(schedule, FS, 10, C, 0.5, 30.0)
+    refiner.push(x, 0)
+    off = refiner.refine(t_next + lobe, first.alpha, first.hop_index + 1, followed=True)
+    assert off is None and refiner._echoes == []
+    on = refiner.refine(t_next, first.alpha, first.hop_index + 1, followed=True)
+    assert on is not None and on.is_echo(refiner.echo_test)
+
+
 def test_refine_must_be_a_bool() -> None:
     with pytest.raises(ConfigError, match=r"refine = 'yes' is not allowed: must be true or false"):
         GcasReceiver(

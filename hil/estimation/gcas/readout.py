@@ -246,20 +246,24 @@ class Readout:
         out: list[Estimate] = []
         refused = False
         for p in peaks:
+            boundary = self._boundary(p)
             if self._refiner is not None:
-                out += self._follow(self._boundary(p)[0] - FOLLOW_LAG_HOPS * self._fe.hop_s)
+                out += self._follow(boundary[0] - FOLLOW_LAG_HOPS * self._fe.hop_s)
             if p.beside and not p.second and not refused:
                 continue
-            est = self.decide(p)
+            est = self.decide(p, boundary)
             refused = est is None
             if est is not None:
                 out.append(est)
         return out
 
-    def decide(self, p: Peak) -> Estimate | None:
-        """The estimate of one peak, or None where it is refused (band edge, too far)."""
+    def decide(
+        self, p: Peak, boundary: tuple[float, float, float, int] | None = None
+    ) -> Estimate | None:
+        """The estimate of one peak, or None where it is refused (band edge, too far);
+        ``boundary`` its :meth:`_boundary` where the caller has it already."""
         fe = self._fe
-        t_rx, alpha, t_tx, hop_index = self._boundary(p)
+        t_rx, alpha, t_tx, hop_index = self._boundary(p) if boundary is None else boundary
         if fe.refused_hypotheses[p.d0]:
             self.in_band_count += 1
             if self.hidden is not None:
@@ -384,10 +388,10 @@ class Readout:
     def _follow(self, t_s: float) -> list[Estimate]:
         """The boundaries of echoes measured lately that no detection brought by ``t_s``
         (s), fitted where their latest fits put them
-        (:meth:`~hil.estimation.refine.CoherentRefiner.due`): those one echo by the echo test
-        (:attr:`followed_count`) within the likelihood's main lobe (``1/B``) of where the fit
-        put it (a constant speed carries a fit on to far less; a fit that moved further is on
-        another grating lobe or another echo). None in the reverberation band's refused
+        (:meth:`~hil.estimation.refine.CoherentRefiner.due`, measured as
+        :meth:`~hil.estimation.refine.CoherentRefiner.refine` measures a followed boundary):
+        those one echo by the echo test (:attr:`followed_count`). None in the reverberation
+        band's refused
         hypotheses (an echo measured there is hidden, :mod:`hil.estimation.gcas.hidden_echoes`)."""
         assert self._refiner is not None
         out = []
@@ -397,12 +401,8 @@ class Readout:
             if fe.refused_hypotheses[int(np.argmin(np.abs(fe.grid.speeds_mps - speed)))]:
                 continue  # in the reverberation band: hidden, not reported
             refined = self._refiner.refine(t_pred, alpha, hop_index, partners=False, followed=True)
-            if (
-                refined is None
-                or not refined.is_echo(ECHO_TEST)
-                or abs(refined.t_s - t_pred) > self._lobe_s
-            ):
-                continue  # not one echo, or another lobe than the one its fit carried on
+            if refined is None or not refined.is_echo(ECHO_TEST):
+                continue
             k = self._k
             word = hop_index % fe.n_codewords
             t_tx = k.hop_end[word] + (hop_index // fe.n_codewords) * k.period
