@@ -544,19 +544,44 @@ def candidate_sums(
     ``T_i + D_i − T_b``), ``amp2`` its squared amplitude; ``hop_s`` the hop length ``D`` (s).
     """
     consts, coef = _scratch(slots, prefix)
-    near, n_near = _every_column(slots.shape[0], known)
-    no_key, no_rot = np.empty(0), np.empty(0, dtype=np.complex128)  # no rotations kept
+    n_cand = t_rx.shape[0]
+    n_cols = known.shape[1]
+    # Candidates of constant time scale (every rate 0) with known hops: each hop reads only
+    # the columns its windows can meet over the candidates' times and time scales
+    # (:func:`_columns_near`; a column left out adds nothing, the same sums), and the
+    # candidates of one time ``t_rx`` (a grid's column across its time scales) share each
+    # column's rotation (:func:`_known_part`'s ``rot_key``: the value computed for that
+    # ``t_rx`` once, the same bits).
+    straight = n_cand > 0 and n_cols > 0
+    for c in range(n_cand):
+        if gamma[c] != 0.0:
+            straight = False
+            break
+    times = np.empty(0)
+    if straight:
+        times = np.unique(t_rx)
+        near, n_near = _columns_near(
+            known, dt_lo, dt_hi, times[0], times[-1], np.min(alpha), np.max(alpha)
+        )
+        rot_key = np.full((times.shape[0], n_cols), np.nan)
+        rot = np.empty((times.shape[0], n_cols), dtype=np.complex128)
+    else:
+        near, n_near = _every_column(slots.shape[0], known)
+        rot_key = np.empty((1, 0))  # no rotations kept
+        rot = np.empty((1, 0), dtype=np.complex128)
+    no_rot = np.empty(0, dtype=np.complex128)
     no_edges = np.empty((5, 0, 0), dtype=np.complex128)
     d_c_alpha = 0.0
-    for c in range(t_rx.shape[0]):
+    for c in range(n_cand):
         if c == 0 or alpha[c] != alpha[c - 1] or gamma[c] != gamma[c - 1]:
             d_c_alpha = _line(
                 alpha0, slots, f, dt_lo, dt_hi, hop_s, alpha[c], gamma[c], consts, coef
             )
+        row = np.searchsorted(times, t_rx[c]) if straight else 0
         out_c[c], out_model[c], out_signal[c] = _candidate(
             prefix, energy, first, tail, centre, slots, k, amp2, fs, t_rx[c], gamma[c] != 0.0,
-            d_c_alpha, consts, coef, per_hop[c], known, near, n_near, no_key, no_rot, no_rot,
-            no_edges,
+            d_c_alpha, consts, coef, per_hop[c], known, near, n_near, rot_key[row], rot[row],
+            no_rot, no_edges,
         )  # fmt: skip
 
 
