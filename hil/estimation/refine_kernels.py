@@ -348,6 +348,60 @@ def _candidate(
 
 
 @numba.njit(**_JIT)
+def _window_sum(prefix: Any, s: int, lo: float, hi: float, coef: Any, i: int) -> complex:
+    """:func:`_window`'s sum alone (the same operations: the same bits), for a search that
+    reads no energy."""
+    last = prefix.shape[2] - 2
+    j0, w0 = _edge(lo, last)
+    j1, w1 = _edge(hi, last)
+    zr = 0.0
+    zi = 0.0
+    for p in range(prefix.shape[3]):
+        a = prefix[s, 0, j0, p]
+        b = prefix[s, 0, j0 + 1, p]
+        c = prefix[s, 1, j1, p]
+        d = prefix[s, 1, j1 + 1, p]
+        dr = (c.real + w1 * (d.real - c.real)) - (a.real + w0 * (b.real - a.real))
+        di = (c.imag + w1 * (d.imag - c.imag)) - (a.imag + w0 * (b.imag - a.imag))
+        cr = coef[0, i, p]
+        ci = coef[1, i, p]
+        zr += cr * dr - ci * di
+        zi += cr * di + ci * dr
+    return complex(zr, zi)
+
+
+@numba.njit(**_JIT)
+def _candidate_c(
+    prefix: Any, first: Any, tail: Any, slots: Any, k: Any, fs: float, t_rx: float,
+    curved: bool, d_c_alpha: float, consts: Any, coef: Any, known: Any, near: Any,
+    n_near: Any, rot_key: Any, rot: Any, phasors: Any, edges: Any,
+) -> complex:  # fmt: skip
+    """:func:`_candidate`'s ``C`` alone, with the row's ``phasors`` (shape ``(M,)``) and
+    ``edges`` given (:func:`maximise`, which reads neither energy): the same operations on
+    ``C``, so the same bits, without the windows' and the model's energies."""
+    total = complex(0.0, 0.0)
+    for i in range(slots.shape[0]):
+        s = slots[i]
+        t_i = t_rx
+        if curved:
+            t_i = t_rx + d_c_alpha + consts[_U, i] - consts[_DA, i]
+        lo_s = t_i + consts[_LO, i]
+        hi_s = t_i + consts[_HI, i]
+        lo = lo_s * fs - first[s] + 0.5
+        hi = hi_s * fs - first[s] + 0.5
+        z = _window_sum(prefix, s, lo, hi - tail[s], coef, i)
+        term_i = k[i] * phasors[i] * z
+        if n_near[i]:
+            part, _ = _known_part(
+                known, near, i, n_near[i], t_i, lo_s, hi_s, consts[_FA, i], rot_key, rot, edges
+            )
+            kp = k[i] * part
+            term_i -= complex(kp.real * fs, kp.imag * fs)
+        total += term_i
+    return total
+
+
+@numba.njit(**_JIT)
 def _row_phasors(
     centre: Any, slots: Any, t_rx: float, curved: bool, d_c_alpha: float, consts: Any,
     step_s: float, start: Any, step: Any,
@@ -609,7 +663,6 @@ def maximise(
     """
     consts, coef = _scratch(slots, prefix)
     curved = gamma != 0.0
-    none = np.empty(0, dtype=np.complex128)
     step_t = 2.0 * half_t / (n_t - 1)
     step_v = 2.0 * half_v / (n_v - 1)
     if curved:
@@ -649,10 +702,9 @@ def maximise(
                 _advance(phasors, turn)
                 if n_cols:
                     _advance_edges(edges, n_near)
-            cc, _, _ = _candidate(
-                prefix, energy, first, tail, centre, slots, k, amp2, fs,
-                t0 - half_t + j * step_t, curved, d_c_a, consts, coef, none, known, near,
-                n_near, rot_key[j], rot[j], phasors, edges,
+            cc = _candidate_c(
+                prefix, first, tail, slots, k, fs, t0 - half_t + j * step_t, curved, d_c_a,
+                consts, coef, known, near, n_near, rot_key[j], rot[j], phasors, edges,
             )  # fmt: skip
             pw = cc.real * cc.real + cc.imag * cc.imag
             if pw > best:
@@ -686,10 +738,9 @@ def maximise(
                 if i == 1 and j == 1 and z_centre >= 0.0:
                     z[1, 1] = z_centre
                     continue
-                cc, _, _ = _candidate(
-                    prefix, energy, first, tail, centre, slots, k, amp2, fs,
-                    t + (j - 1) * step_t, curved, d_c_a, consts, coef, none, known, near,
-                    n_near, rot_key[j], rot[j], phasors, edges,
+                cc = _candidate_c(
+                    prefix, first, tail, slots, k, fs, t + (j - 1) * step_t, curved, d_c_a,
+                    consts, coef, known, near, n_near, rot_key[j], rot[j], phasors, edges,
                 )  # fmt: skip
                 z[i, j] = cc.real * cc.real + cc.imag * cc.imag
         # z[i, j] ≈ z0 + gt x + gv y + ½ (htt x² + 2 htv x y + hvv y²); x, y in steps.
