@@ -27,6 +27,7 @@ import numpy as np
 from hil.devices.clock import SleepUntil
 from hil.errors import ConfigError
 from hil.experiments.experiment import Experiment
+from hil.experiments.towed_kernels import towed_positions
 
 if TYPE_CHECKING:
     from hil.acquisition.device import StreamingDevice
@@ -195,16 +196,25 @@ class _TowedTarget:
         self.world: Any = None
         self._grid = np.zeros(0)
         self._x = self._v = np.zeros(0)
+        self._origin = np.asarray(exp.stage_origin_m, dtype=np.float64)
+        self._axis = np.asarray(exp.stage_axis, dtype=np.float64)
 
     def __call__(self, t: np.ndarray) -> np.ndarray:
         origin = self.world.origin_index or 0
         tq = np.asarray(t, dtype=np.float64) + origin / self.fs  # device sample time
-        lo, hi = float(np.min(tq)), float(np.max(tq))
+        lo, hi = float(tq.min()), float(tq.max())
         h = self.GRID_S
         if self._grid.size == 0 or lo < self._grid[0] or hi > self._grid[-1]:
             self._grid = np.arange(np.floor(lo / h) - 2, np.ceil(hi / h) + 3) * h
-            self._x, self._v = self.motion(self._grid)
-        return self.exp.target_position(_hermite(tq, self._grid, self._x, self._v, h))
+            x, v = self.motion(self._grid)
+            self._x = np.ascontiguousarray(x, dtype=np.float64)
+            self._v = np.ascontiguousarray(v, dtype=np.float64)
+        # One compiled pass: _hermite then Experiment.target_position, the same bits.
+        out = np.empty((tq.size, 3))
+        towed_positions(
+            tq.reshape(-1), self._grid, h, self._x, self._v, self._origin, self._axis, out
+        )
+        return out.reshape(*tq.shape, 3)
 
 
 def _ambient(exp: Experiment, source_level_db: float) -> Any:
