@@ -208,6 +208,11 @@ class Readout:
         #: Estimates of echoes measured lately fitted where their fits put their next
         #: boundary, without a detection there (:meth:`_follow`).
         self.followed_count = 0
+        #: Estimates of detections in the input with the echoes measured lately taken out
+        #: (:mod:`hil.estimation.gcas.residual`).
+        self.residual_count = 0
+        #: Detections there of what was left of a measured echo (dropped unrefined).
+        self.leftover_count = 0
         #: The estimates reported lately: (hop index, boundary time s, speed m/s).
         self._reported: list[tuple[int, float, float]] = []
         self.last_detection: DetectionInfo | None = None
@@ -227,7 +232,7 @@ class Readout:
         if self.hidden is not None:
             self.hidden.reset()
 
-    def decide_all(self, peaks: Iterable[Peak]) -> list[Estimate]:
+    def decide_all(self, peaks: Iterable[Peak], residual: bool = False) -> list[Estimate]:
         """:meth:`decide` on each peak, in order; the estimates it accepts. A peak
         ``beside`` the one before it (its window's second codeword, two still echoes at once:
         :mod:`hil.estimation.gcas.still_codewords`) is decided only where that one was
@@ -242,7 +247,9 @@ class Readout:
         the peaks have passed by :data:`FOLLOW_LAG_HOPS` without a fit there are fitted where
         their fits put it (:meth:`_follow`): another echo's ghost or Doppler response can
         hold the row's maximum at that boundary. Decided in the peaks' order, so any
-        chunking of the input gives the same estimates."""
+        chunking of the input gives the same estimates. ``residual``: the peaks of the
+        second search, in the input with the echoes measured lately taken out
+        (:meth:`decide`)."""
         out: list[Estimate] = []
         refused = False
         for p in peaks:
@@ -251,19 +258,31 @@ class Readout:
                 out += self._follow(boundary[0] - FOLLOW_LAG_HOPS * self._fe.hop_s)
             if p.beside and not p.second and not refused:
                 continue
-            est = self.decide(p, boundary)
+            est = self.decide(p, boundary, residual)
             refused = est is None
             if est is not None:
                 out.append(est)
         return out
 
     def decide(
-        self, p: Peak, boundary: tuple[float, float, float, int] | None = None
-    ) -> Estimate | None:
+        self, p: Peak, boundary: tuple[float, float, float, int] | None = None,
+        residual: bool = False,
+    ) -> Estimate | None:  # fmt: skip
         """The estimate of one peak, or None where it is refused (band edge, too far);
-        ``boundary`` its :meth:`_boundary` where the caller has it already."""
+        ``boundary`` its :meth:`_boundary` where the caller has it already. A ``residual``
+        peak (the second search, :mod:`hil.estimation.gcas.residual`) where a measured echo
+        puts its boundary is what is left of that echo (dropped, :attr:`leftover_count`),
+        and none is taken for a measured echo's ghost unread (the ghosts were taken out with
+        their echoes)."""
         fe = self._fe
         t_rx, alpha, t_tx, hop_index = self._boundary(p) if boundary is None else boundary
+        if (
+            residual
+            and self._refiner is not None
+            and self._refiner.continues_known(t_rx, alpha, hop_index)
+        ):
+            self.leftover_count += 1
+            return None
         if fe.refused_hypotheses[p.d0]:
             self.in_band_count += 1
             if self.hidden is not None:
@@ -283,13 +302,13 @@ class Readout:
         if self._refiner is not None:
             if self.hidden is not None:
                 self.hidden.measure_near(t_rx, p.peak - p.mean)
-            if self._refiner.ghost_of_known(
+            if not residual and self._refiner.ghost_of_known(
                 t_rx, alpha, hop_index, self._edge_side(p.d0), p.peak - p.mean
             ):
                 self.incoherent_count += 1
                 return None
             refined = self._refiner.refine(
-                t_rx, alpha, hop_index, partners=bool(self._pair_rows[p.d0])
+                t_rx, alpha, hop_index, partners=bool(self._pair_rows[p.d0]), residual=residual
             )
             if refined is None:
                 self.unmeasured_count += 1
@@ -326,6 +345,7 @@ class Readout:
         self.last_detection = DetectionInfo(p.n_star, p.threshold, p.mean, p.ratio, consistent)
         mean, thr = p.mean, p.threshold
         snr = (p.peak - mean) / mean if mean > 0 and math.isfinite(mean) else math.inf
+        self.residual_count += residual
         return replace(
             est,
             score=p.peak / thr if thr > 0 else math.inf,
