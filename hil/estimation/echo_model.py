@@ -46,5 +46,4 @@ def echo_samples(
     k = np.arange(hop.size) - np.repeat(np.cumsum(n) - n, n)  # sample within its hop
     at = np.repeat(lo, n) + k
     wave = 2.0 * np.abs(w)[hop] * np.cos(2.0 * math.pi * (cyc0[hop] + (g / fs)[hop] * k))
-    out: NDArray[np.float64] = np.bincount(at, weights=wave, minlength=count)
-    return out
+    return np.asarray(np.bincount(at, weights=wave, minlength=count), dtype=np.float64)
