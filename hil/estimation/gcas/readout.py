@@ -211,7 +211,9 @@ class Readout:
         #: Estimates of detections in the input with the echoes measured lately taken out
         #: (:mod:`hil.estimation.gcas.residual`).
         self.residual_count = 0
-        #: Detections there of what was left of a measured echo (dropped unrefined).
+        #: Detections there dropped unrefined: what was left of a measured echo, or in the
+        #: still reverberation's Doppler cells (what the echoes measured there hid is the
+        #: reverberation itself).
         self.leftover_count = 0
         #: The estimates reported lately: (hop index, boundary time s, speed m/s).
         self._reported: list[tuple[int, float, float]] = []
@@ -271,15 +273,15 @@ class Readout:
         """The estimate of one peak, or None where it is refused (band edge, too far);
         ``boundary`` its :meth:`_boundary` where the caller has it already. A ``residual``
         peak (the second search, :mod:`hil.estimation.gcas.residual`) where a measured echo
-        puts its boundary is what is left of that echo (dropped, :attr:`leftover_count`),
-        and none is taken for a measured echo's ghost unread (the ghosts were taken out with
-        their echoes)."""
+        puts its boundary is what is left of that echo, and one in the still reverberation's
+        Doppler cells is the reverberation the echoes measured there hid (both dropped,
+        :attr:`leftover_count`); none is taken for a measured echo's ghost unread (the
+        ghosts were taken out with their echoes)."""
         fe = self._fe
         t_rx, alpha, t_tx, hop_index = self._boundary(p) if boundary is None else boundary
-        if (
-            residual
-            and self._refiner is not None
-            and self._refiner.continues_known(t_rx, alpha, hop_index)
+        if residual and (
+            abs(fe.sound_speed_mps * (alpha - 1.0) / (alpha + 1.0)) < self._still_mps
+            or (self._refiner is not None and self._refiner.continues_known(t_rx, alpha, hop_index))
         ):
             self.leftover_count += 1
             return None

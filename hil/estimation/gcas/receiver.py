@@ -409,6 +409,8 @@ class GcasReceiver:
         self.strategy.reset(self.baseband.next_output_index)
         if self._residual is not None:
             self._residual.reset()
+        #: The next input sample the second search takes (:meth:`_search_residual`).
+        self._residual_from = int(input_index)
         self.readout.restart()
 
     # ------------------------------------------------------------------ streaming
@@ -431,9 +433,9 @@ class GcasReceiver:
         step, i = self._residual.step, 0
         while i < x.shape[0]:
             j = min(x.shape[0], i + step - (self._samples_seen % step))
-            first = self._samples_seen
             out += self._search(x[i:j])
-            out += self._search_residual(x[i:j], first)
+            if self._samples_seen % step == 0:
+                out += self._search_residual()
             i = j
         return out
 
@@ -453,18 +455,25 @@ class GcasReceiver:
             self._emit_map(self.on_map, y.shape[0])
         return self.readout.decide_all(peaks)
 
-    def _search_residual(self, x: NDArray[np.float64], first_index: int) -> list[Estimate]:
-        """The second search on input samples ``x`` (shape ``(n,)``, from absolute index
-        ``first_index``) with the echoes measured so far taken out."""
+    def _search_residual(self) -> list[Estimate]:
+        """The second search on the input since it last ran (up to a stretch's end or the
+        input's), with the echoes measured by now taken out."""
         residual, refiner = self._residual, self._refiner
         assert residual is not None and refiner is not None
-        known = refiner.known_input(first_index, x.shape[0])
+        first, stop = self._residual_from, self._samples_seen
+        if stop <= first:
+            return []
+        self._residual_from = stop
+        known = refiner.known_input(first, stop - first)
+        start = first
         if known is not None and not residual.running:
             # It starts on the input before, as far back as its M hops (the echoes' fits
             # hold there too): what they hid is found at once.
-            first_index, x = refiner.recent_input(first_index - residual.lead)
-            known = refiner.known_input(first_index, x.shape[0])
-        peaks = residual.process(x, known, first_index)
+            start = first - residual.lead
+        start, x = refiner.recent_input(start)
+        if start != first:
+            known = refiner.known_input(start, x.shape[0])
+        peaks = residual.process(x, known, start)
         return self.readout.decide_all(peaks, residual=True) if peaks else []
 
     def _checked(self, block: ArrayLike, gap_before: int) -> NDArray[np.float64]:
@@ -489,6 +498,7 @@ class GcasReceiver:
         """End of input: decide the candidates still waiting for their look-ahead."""
         out = self.readout.decide_all(self.strategy.flush())
         if self._residual is not None:
+            out += self._search_residual()
             out += self.readout.decide_all(self._residual.flush(), residual=True)
         return out
 
@@ -502,8 +512,12 @@ class GcasReceiver:
         first = self.strategy.next_decision_index(self._samples_seen)
         if self._residual is None:
             return first
-        second = self._residual.next_decision_index(self._samples_seen)
-        return first if second is None else min(first, second)
+        second = self._residual.next_decision_index(self._residual_from)
+        if second is None:
+            return first
+        # The second search decides at the end of a stretch (:meth:`process`).
+        step = self._residual.step
+        return min(first, -(-max(second, self._residual_from + 1) // step) * step)
 
     # ------------------------------------------------------------------ diagnostics
     def _emit_map(self, on_map: MapCallback, count: int) -> None:
