@@ -16,10 +16,10 @@ the input rate so that the same echoes can be taken out of the input a detector 
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numpy.typing import NDArray
+
+from hil.estimation.refine_kernels import echo_input
 
 
 def echo_samples(
@@ -28,22 +28,10 @@ def echo_samples(
     """The echoes of ``columns`` (shape ``(5, Q)``, module docstring) at input samples
     ``first_index … first_index + count − 1`` (sample ``n`` at ``n / fs_hz`` s), shape
     ``(count,)``. A sample belongs to the hop whose interval ``[start, end)`` holds its time;
-    hops of several echoes add."""
-    if count <= 0 or columns.shape[1] == 0:
-        return np.zeros(max(count, 0), dtype=np.float64)
-    fs = float(fs_hz)
-    starts = np.clip(np.ceil(columns[2].real * fs - first_index), 0, count).astype(np.int64)
-    ends = np.clip(np.ceil(columns[3].real * fs - first_index), 0, count).astype(np.int64)
-    keep = np.flatnonzero(ends > starts)
-    if keep.size == 0:
-        return np.zeros(count, dtype=np.float64)
-    lo, n = starts[keep], ends[keep] - starts[keep]
-    g, t_e, w = columns[1, keep].real, columns[4, keep].real, columns[0, keep]
-    # Re(2 w e^{jθ}) = 2|w| cos(θ + arg w); θ in cycles from each hop's first sample on
-    # (the whole cycles dropped in float64 before the samples' steps are added).
-    cyc0 = (g * ((first_index + lo) / fs - t_e) + np.angle(w) / (2.0 * math.pi)) % 1.0
-    hop = np.repeat(np.arange(keep.size), n)
-    k = np.arange(hop.size) - np.repeat(np.cumsum(n) - n, n)  # sample within its hop
-    at = np.repeat(lo, n) + k
-    wave = 2.0 * np.abs(w)[hop] * np.cos(2.0 * math.pi * (cyc0[hop] + (g / fs)[hop] * k))
-    return np.asarray(np.bincount(at, weights=wave, minlength=count), dtype=np.float64)
+    hops of several echoes add; each sample's phase is a function of its own index (any
+    split of a stretch gives the same samples). Compiled
+    (:func:`~hil.estimation.refine_kernels.echo_input`)."""
+    out = np.zeros(max(count, 0), dtype=np.float64)
+    if count > 0 and columns.shape[1] > 0:
+        echo_input(np.ascontiguousarray(columns), int(first_index), float(fs_hz), out)
+    return out

@@ -240,6 +240,12 @@ PARTNER_COHERENCE = 0.5
 #: 0.77 / 0.21 -> 0.95 / 0.96, 0.99 / 0.01 -> 1.0 / 0.77 (the second 1 dB weaker), no false
 #: estimate or 0.006-0.011 per hop at the first boundaries; one target unchanged.
 NEIGHBOUR_CELLS = 2.0
+#: How far from a measured echo's speed or its ghosts' (Doppler cells of a hop) it can hide a
+#: weaker echo from the first search (:meth:`CoherentRefiner.hidden_by_known`): its Doppler
+#: response reaches ``4/(π x)²`` of its peak ``x`` cells away, and the first search takes a
+#: cell below twice that beside it for its sidelobe (``search_two_stage.doppler_leak``): an
+#: echo 10 dB weaker is hidden within 2.8 cells, 15 dB weaker within 5.
+HIDING_CELLS = 4.0
 #: Runs of hops kept for the other echoes' ``known`` rows
 #: (:meth:`CoherentRefiner._hop_run`; all are dropped when full).
 HOP_RUNS = 256
@@ -561,6 +567,7 @@ class CoherentRefiner:
         self.push(np.zeros(int(math.ceil(t_b * self.fs_hz)) + 2 * self.history), 0)
         self.refine(t_b, 1.0, hop)
         self.correlation(t_b, 1.0, hop, np.array([t_b]), np.array([1.0]))
+        echo_samples(np.zeros((5, 1), dtype=np.complex128), 0, 1, self.fs_hz)
         self.reset(0)
 
     def push(self, x: NDArray[np.float64], first_index: int) -> None:
@@ -781,21 +788,42 @@ class CoherentRefiner:
         first = max(int(first_index), self._valid_from, ring.next_index - ring.keep)
         return first, np.array(ring.span(first, ring.next_index))
 
-    def continues_known(self, t_s: float, alpha: float, hop_index: int) -> bool:
+    def hidden_by_known(self, t_s: float, alpha: float, lag_s: float = 0.0) -> bool:
+        """Whether an echo at ``t_s`` (s) and time scale ``alpha`` may have been hidden from
+        the first search by an echo taken out of the second search's input
+        (:meth:`known_input`, measured within :data:`KNOWN_HOPS` hops): within
+        :data:`HIDING_CELLS` Doppler cells of a hop of its speed or of its ghosts' (one tone
+        spacing's speed either way), where its Doppler row, its sidelobes above the leak
+        bound or its ghost's row hold the weaker echo's cells. Elsewhere the first search
+        sees what the second would. ``lag_s``: how far (s) the detection may lie before the
+        echoes' latest fits (the second search's lag behind the first)."""
+        speed = self.c * (alpha - 1.0) / (alpha + 1.0)
+        reach, near = KNOWN_HOPS * self.hop_len_s, HIDING_CELLS * self._cell_speed
+        return any(
+            e.cancelled
+            and -reach <= e.t_s - t_s <= reach + lag_s
+            and min(abs(speed - e.speed(self.c) - k * self._ghost_speed) for k in (-1, 0, 1))
+            <= near
+            for e in self._echoes
+        )
+
+    def continues_known(self, t_s: float, alpha: float, hop_index: int, lag_s: float = 0.0) -> bool:
         """Whether a detection at ``t_s`` (s) and time scale ``alpha`` (the boundary ending hop
         ``hop_index``) is where an echo measured within :data:`KNOWN_HOPS` hops puts that
         boundary (:meth:`_same_echo`) and is taken out of the input (:meth:`known_input`):
-        what is left of it there."""
+        what is left of it there. ``lag_s`` as :meth:`hidden_by_known`'s."""
         speed = self.c * (alpha - 1.0) / (alpha + 1.0)
         reach = KNOWN_HOPS * self.hop_len_s
         return any(
-            e.cancelled and abs(e.t_s - t_s) <= reach and self._same_echo(e, hop_index, t_s, speed)
+            e.cancelled
+            and -reach <= e.t_s - t_s <= reach + lag_s
+            and self._same_echo(e, hop_index, t_s, speed)
             for e in self._echoes
         )
 
     def ghost_of_known(
         self, t_s: float, alpha: float, hop_index: int, edge_side: int = 0,
-        strength: float = math.inf,
+        strength: float = math.inf, residual: bool = False,
     ) -> bool:  # fmt: skip
         """Whether a detection at ``t_s`` (s) and time scale ``alpha``, the boundary ending
         hop ``hop_index``, is the ghost of an echo measured lately, where that echo's every
@@ -818,13 +846,16 @@ class CoherentRefiner:
         ghost beyond that edge (more than one Doppler cell past the detection's speed, at
         most :data:`GHOST_LEAK_CELLS`) leaks into it at any time of the echo's hops: there
         the detection is the leak when it is at most :data:`GHOST_LEAK_FRACTION` of the
-        echo's strength."""
+        echo's strength. A ``residual`` detection (the second search's) is checked against
+        the echoes that were not taken out of its input only (:attr:`_EchoFit.cancelled`:
+        the others' ghosts went with them)."""
         speed = self.c * (alpha - 1.0) / (alpha + 1.0)
         amplitude: float | None = None
         if edge_side:
             leak_of = [
                 abs(e.amplitude) for e in self._echoes
-                if abs(e.t_s - t_s) <= KNOWN_HOPS * self.hop_len_s
+                if not (residual and e.cancelled)
+                and abs(e.t_s - t_s) <= KNOWN_HOPS * self.hop_len_s
                 and self._cell_speed
                 < edge_side * (e.speed(self.c) + edge_side * self._ghost_speed - speed)
                 <= GHOST_LEAK_CELLS * self._cell_speed
@@ -834,6 +865,8 @@ class CoherentRefiner:
                 if inside <= GHOST_LEAK_FRACTION * max(leak_of):
                     return True
         for i, e in enumerate(self._echoes):
+            if residual and e.cancelled:
+                continue  # taken out of the second search's input with its ghosts
             if abs(abs(speed - e.speed(self.c)) - self._ghost_speed) > self._cell_speed:
                 continue
             period = self.hop_len_s / e.alpha

@@ -39,6 +39,7 @@ from hil.estimation.gcas.clutter_seen import ClutterLog, ClutterSeen
 from hil.estimation.gcas.front_end import FrontEnd
 from hil.estimation.gcas.hidden_echoes import HiddenEchoes
 from hil.estimation.gcas.point_echoes import PointEchoes
+from hil.estimation.gcas.residual import STEP_HOPS
 from hil.estimation.gcas.threshold import Peak
 from hil.estimation.refine import CoherentRefiner, EchoTest, Refinement
 from hil.estimation.reverb_band import (
@@ -175,6 +176,11 @@ class Readout:
         #: Speeds below this share their Doppler cells with the still reverberation, m/s
         #: (:func:`~hil.estimation.reverb_band.in_reverberation`'s bound, made once).
         self._still_mps = doppler_resolution_mps(tones, fe.hop_s, c)
+        #: How far (s of receive time) the second search's detections lie behind the first's
+        #: at most: its start-up's ``M + 1`` hops, a stretch and a hop of decision
+        #: (:mod:`hil.estimation.gcas.residual`); an estimate is kept that long to tell a
+        #: repeat of it (:meth:`_reported_already`).
+        self._residual_lag_s = (fe.m_hops + 3 + STEP_HOPS) * fe.hop_s
         #: Hypotheses where a refused fit may be one of two echoes at one speed
         #: (:func:`~hil.estimation.gcas.candidates.second_echo_rows`): not at the band's or the
         #: span's edges, where the leaks of other echoes fit as well with a partner taken out.
@@ -211,9 +217,10 @@ class Readout:
         #: Estimates of detections in the input with the echoes measured lately taken out
         #: (:mod:`hil.estimation.gcas.residual`).
         self.residual_count = 0
-        #: Detections there dropped unrefined: what was left of a measured echo, or in the
+        #: Detections there dropped unrefined: what was left of a measured echo, in the
         #: still reverberation's Doppler cells (what the echoes measured there hid is the
-        #: reverberation itself).
+        #: reverberation itself), or where no echo taken out could hide one
+        #: (:meth:`~hil.estimation.refine.CoherentRefiner.hidden_by_known`).
         self.leftover_count = 0
         #: The estimates reported lately: (hop index, boundary time s, speed m/s).
         self._reported: list[tuple[int, float, float]] = []
@@ -273,15 +280,18 @@ class Readout:
         """The estimate of one peak, or None where it is refused (band edge, too far);
         ``boundary`` its :meth:`_boundary` where the caller has it already. A ``residual``
         peak (the second search, :mod:`hil.estimation.gcas.residual`) where a measured echo
-        puts its boundary is what is left of that echo, and one in the still reverberation's
-        Doppler cells is the reverberation the echoes measured there hid (both dropped,
-        :attr:`leftover_count`); none is taken for a measured echo's ghost unread (the
-        ghosts were taken out with their echoes)."""
+        puts its boundary is what is left of that echo, one in the still reverberation's
+        Doppler cells is the reverberation the echoes measured there hid, and one where no
+        echo taken out could have hidden it is one the first search saw or refused (all
+        dropped, :attr:`leftover_count`); it is checked for the ghosts of the echoes not taken out
+        only (the others' ghosts went with them)."""
         fe = self._fe
         t_rx, alpha, t_tx, hop_index = self._boundary(p) if boundary is None else boundary
         if residual and (
             abs(fe.sound_speed_mps * (alpha - 1.0) / (alpha + 1.0)) < self._still_mps
-            or (self._refiner is not None and self._refiner.continues_known(t_rx, alpha, hop_index))
+            or self._refiner is None
+            or self._refiner.continues_known(t_rx, alpha, hop_index, self._residual_lag_s)
+            or not self._refiner.hidden_by_known(t_rx, alpha, self._residual_lag_s)
         ):
             self.leftover_count += 1
             return None
@@ -304,8 +314,8 @@ class Readout:
         if self._refiner is not None:
             if self.hidden is not None:
                 self.hidden.measure_near(t_rx, p.peak - p.mean)
-            if not residual and self._refiner.ghost_of_known(
-                t_rx, alpha, hop_index, self._edge_side(p.d0), p.peak - p.mean
+            if self._refiner.ghost_of_known(
+                t_rx, alpha, hop_index, self._edge_side(p.d0), p.peak - p.mean, residual
             ):
                 self.incoherent_count += 1
                 return None
@@ -437,8 +447,10 @@ class Readout:
     def _reported_already(self, hop_index: int, t_s: float, speed_mps: float) -> bool:
         """Whether an estimate reported at this boundary (hop ``hop_index``) lies within one
         resolution cell of ``(t_s, speed_mps)``: the same echo (two echoes that close are not
-        resolved). Otherwise it is kept among those reported at this hop."""
-        self._reported = [r for r in self._reported if abs(r[0] - hop_index) <= 2]
+        resolved). Otherwise it is kept among those reported at this hop. Kept for
+        :attr:`_residual_lag_s` of receive time (the second search's estimates come out that
+        far behind the first search's)."""
+        self._reported = [r for r in self._reported if r[1] >= t_s - self._residual_lag_s]
         for hop, t, v in self._reported:
             if (
                 hop == hop_index
