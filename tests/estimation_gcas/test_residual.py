@@ -4,6 +4,8 @@ second search on what is left."""
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -51,9 +53,7 @@ def test_echo_samples_in_pieces_equal_the_whole(cuts: list[int]) -> None:
     cols = _columns(7)
     whole = model_samples(cols, 500, 6000, FS)
     edges = [0, *sorted(set(cuts)), 6000]
-    parts = [
-        model_samples(cols, 500 + a, b - a, FS) for a, b in zip(edges, edges[1:], strict=False)
-    ]
+    parts = [model_samples(cols, 500 + a, b - a, FS) for a, b in itertools.pairwise(edges)]
     assert np.array_equal(np.concatenate(parts), whole)
 
 
