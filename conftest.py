@@ -16,7 +16,9 @@ reaches: the controller starts ``tests/numba_warm_up.py``'s parts, one process e
 workers start and collect, and each worker waits for them (a lock those processes hold) before
 its first test. A fresh checkout so compiles each kernel once (about 47 s of CPU, spread over
 the cores) instead of once in every worker and in every child process that starts before the
-cache is written; with the cache filled the parts only load it (a few seconds of CPU).
+cache is written; with the cache filled the parts only load it (a few seconds of CPU), and
+once a warm-up has run to its end they are not started at all while the kernels' sources and
+numba's cache files stay as it left them (its stamp in the pytest cache).
 
 ``hil.bluesky`` needs the optional ``bluesky`` extra: without it, its modules are not imported
 for their doctests (``tests/bluesky`` says why it skips, or fails under
@@ -91,15 +93,64 @@ WARM_UP_PARTS = ("tank", "receivers")
 _warm_ups: list[subprocess.Popen[bytes]] = []
 #: The lock file this process made (the controller's), removed at its session's end.
 _own_lock: list[str] = []
+#: The pytest cache key of :func:`kernel_sources_stamp` as it was after the last warm-up that
+#: ran to its end.
+WARM_UP_STAMP_KEY = "hil/numba-warm-up-stamp"
+#: The packages whose modules hold the suite's kernels (numba's cache lies beside them).
+KERNEL_PACKAGES = ("hil", "sim_devices", "firmware_protocol")
+
+
+def kernel_sources_stamp(root: Path, *, cache_files: bool = True) -> str:
+    """A digest of what numba's filled cache depends on: the interpreter, numba's version and
+    the machine, the name, size and modification time of every module of
+    :data:`KERNEL_PACKAGES` and of ``tests/numba_warm_up.py``, and (``cache_files``) the names
+    of numba's cache files beside them. A source edited, a cache file removed, another numba:
+    another digest."""
+    import hashlib
+    import importlib.metadata
+    import platform
+
+    digest = hashlib.sha256()
+    machine = (
+        sys.version,
+        importlib.metadata.version("numba"),
+        platform.node(),
+        platform.machine(),
+    )
+    digest.update(repr(machine).encode())
+    sources, cached = [root / "tests" / "numba_warm_up.py"], []
+    for package in KERNEL_PACKAGES:
+        for folder, _, names in os.walk(root / package):
+            sources += [Path(folder, n) for n in names if n.endswith(".py")]
+            cached += [Path(folder, n) for n in names if n.endswith((".nbi", ".nbc"))]
+    for path in sorted(sources):
+        st = path.stat()
+        digest.update(f"{path.relative_to(root)}|{st.st_size}|{st.st_mtime_ns}\n".encode())
+    if cache_files:
+        digest.update("\n".join(sorted(str(p.relative_to(root)) for p in cached)).encode())
+    return digest.hexdigest()
+
+
+#: :func:`kernel_sources_stamp` of the sources alone when the controller started the warm-up.
+_sources_at_warm_up: list[str] = []
 
 
 def pytest_sessionstart(session: pytest.Session) -> None:
     """In the controller of a run on pytest-xdist workers, before it starts them: fill numba's
     cache, one process per part of ``tests/numba_warm_up.py``, holding a lock until the last
-    ends; the workers inherit the lock file's name in :data:`NUMBA_WARM_LOCK`."""
-    script = Path(__file__).resolve().parent / "tests" / "numba_warm_up.py"
+    ends; the workers inherit the lock file's name in :data:`NUMBA_WARM_LOCK`. Not when the
+    last warm-up that ran to its end left the sources and the cache as they are now (its
+    :func:`kernel_sources_stamp` in the pytest cache): the kernels all load from the cache,
+    and the warm-up would only load them again (7 s of CPU on the 2-core development
+    machine, beside the workers' collection)."""
+    root = Path(__file__).resolve().parent
+    script = root / "tests" / "numba_warm_up.py"
     if not session.config.pluginmanager.has_plugin("dsession") or not script.exists():
         return
+    cache = getattr(session.config, "cache", None)
+    if cache is not None and cache.get(WARM_UP_STAMP_KEY, None) == kernel_sources_stamp(root):
+        return
+    _sources_at_warm_up[:] = [kernel_sources_stamp(root, cache_files=False)]
     fd, lock_path = tempfile.mkstemp(prefix="hil-numba-warm-up-")
     # An flock belongs to the open file, which the warm-up processes inherit: the lock is held
     # until the last of them has ended, however it ends.
@@ -138,12 +189,26 @@ def pytest_runtestloop(session: pytest.Session) -> None:
 
 def pytest_sessionfinish(session: pytest.Session) -> None:
     """In the controller: the warm-up processes ended (stopped if the run ended first) and
-    the lock file it made removed (a pytest run inside a test leaves the outer run's alone)."""
+    the lock file it made removed (a pytest run inside a test leaves the outer run's alone);
+    a warm-up that ran to its end, over sources nobody edited meanwhile, leaves its
+    :func:`kernel_sources_stamp`, taken now that the tests' own processes have ended too, in
+    the pytest cache."""
     for proc in _warm_ups:
         if proc.poll() is None:
             proc.kill()
         proc.wait()
+    root = Path(__file__).resolve().parent
+    cache = getattr(session.config, "cache", None)
+    completed = bool(_warm_ups) and all(proc.returncode == 0 for proc in _warm_ups)
+    # Sources edited during the run leave no stamp: the cache was filled from the old ones.
+    if (
+        completed
+        and cache is not None
+        and _sources_at_warm_up == [kernel_sources_stamp(root, cache_files=False)]
+    ):
+        cache.set(WARM_UP_STAMP_KEY, kernel_sources_stamp(root))
     _warm_ups.clear()
+    _sources_at_warm_up.clear()
     while _own_lock:
         Path(_own_lock.pop()).unlink(missing_ok=True)
         os.environ.pop(NUMBA_WARM_LOCK, None)

@@ -174,3 +174,32 @@ def test_workers_wait_for_the_numba_warm_up_before_their_first_test(
         "warmed-receivers",
         "warmed-tank",
     ]
+
+
+@pytest.mark.slow
+def test_a_run_over_the_sources_the_last_warm_up_left_starts_none(
+    project: pytest.Pytester, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The controller keeps the digest of the kernels' sources and numba's cache that a
+    completed warm-up left (the pytest cache): the next run over the same files starts no
+    warm-up; a module added to a kernel package starts it again."""
+    tests = project.path / "tests"
+    tests.mkdir()
+    (tests / "numba_warm_up.py").write_text(WARM_UP)
+    monkeypatch.setenv("PYTEST_XDIST_AUTO_NUM_WORKERS", "2")
+
+    def warmed_parts() -> list[str]:
+        """Run the sample's fast test on 2 workers: the parts the warm-up ran (their files,
+        removed after)."""
+        result = project.runpytest_subprocess(*QUIET, "-n", "auto", "test_tiers_sample.py")
+        result.assert_outcomes(passed=1)
+        parts = sorted(tests.glob("warmed-*"))
+        for path in parts:
+            path.unlink()
+        return [path.name for path in parts]
+
+    assert warmed_parts() == ["warmed-receivers", "warmed-tank"]
+    assert warmed_parts() == []
+    (project.path / "hil").mkdir()
+    (project.path / "hil" / "kernels.py").write_text("SCALE = 2\n")
+    assert warmed_parts() == ["warmed-receivers", "warmed-tank"]

@@ -665,7 +665,7 @@ def codeword_sums(
     late = np.zeros((n_terms, width), dtype=np.bool_)
     bound = np.empty(width)
     done = np.empty(width, dtype=np.bool_)
-    vals = np.empty(n_tones)
+    vals = np.empty((n_terms, n_tones))
     for c in range(n_cand):
         best_c = -math.inf
         for i in range(n_sets):
@@ -753,20 +753,41 @@ def _codeword_row(
     cache_p: Any, mask: int, late: Any, late_p: Any, vals: Any, row: Any,
 ) -> float:  # fmt: skip
     """``row[j] = Σ_m w|u|²`` of term ``m``'s tone ``term_tone[m, j]`` at sample ``t`` of the
-    window (added in the order ``m = 0, 1, ..``); returns ``max_j row[j]``."""
+    window (added in the order ``m = 0, 1, ..``); returns ``max_j row[j]``. ``vals`` (shape
+    ``(M, K)``) receives each term's weighted powers first; the sums then run four codewords
+    at a time in registers (the same additions in the same order: the same bits)."""
     n_terms, n_words = term_tone.shape
-    n_tones = vals.shape[0]
-    row[:] = 0.0
+    n_tones = vals.shape[1]
     for m in range(n_terms):
         if late[m, t]:
             for k in range(n_tones):
-                vals[k] = late_p[m, t, k]
+                vals[m, k] = late_p[m, t, k]
         else:
             slot = (centre[c, i] - half - lags[d, m] + t) & mask
             for k in range(n_tones):
-                vals[k] = cache_p[d, k, slot]
-        for j in range(n_words):
-            row[j] += vals[term_tone[m, j]]
+                vals[m, k] = cache_p[d, k, slot]
+    j = 0
+    while j + 4 <= n_words:
+        s0 = 0.0
+        s1 = 0.0
+        s2 = 0.0
+        s3 = 0.0
+        for m in range(n_terms):
+            s0 += vals[m, term_tone[m, j]]
+            s1 += vals[m, term_tone[m, j + 1]]
+            s2 += vals[m, term_tone[m, j + 2]]
+            s3 += vals[m, term_tone[m, j + 3]]
+        row[j] = s0
+        row[j + 1] = s1
+        row[j + 2] = s2
+        row[j + 3] = s3
+        j += 4
+    while j < n_words:
+        s0 = 0.0
+        for m in range(n_terms):
+            s0 += vals[m, term_tone[m, j]]
+        row[j] = s0
+        j += 1
     top = -math.inf
     for j in range(n_words):
         top = max(top, row[j])

@@ -348,6 +348,60 @@ def _candidate(
 
 
 @numba.njit(**_JIT)
+def _window_sum(prefix: Any, s: int, lo: float, hi: float, coef: Any, i: int) -> complex:
+    """:func:`_window`'s sum alone (the same operations: the same bits), for a search that
+    reads no energy."""
+    last = prefix.shape[2] - 2
+    j0, w0 = _edge(lo, last)
+    j1, w1 = _edge(hi, last)
+    zr = 0.0
+    zi = 0.0
+    for p in range(prefix.shape[3]):
+        a = prefix[s, 0, j0, p]
+        b = prefix[s, 0, j0 + 1, p]
+        c = prefix[s, 1, j1, p]
+        d = prefix[s, 1, j1 + 1, p]
+        dr = (c.real + w1 * (d.real - c.real)) - (a.real + w0 * (b.real - a.real))
+        di = (c.imag + w1 * (d.imag - c.imag)) - (a.imag + w0 * (b.imag - a.imag))
+        cr = coef[0, i, p]
+        ci = coef[1, i, p]
+        zr += cr * dr - ci * di
+        zi += cr * di + ci * dr
+    return complex(zr, zi)
+
+
+@numba.njit(**_JIT)
+def _candidate_c(
+    prefix: Any, first: Any, tail: Any, slots: Any, k: Any, fs: float, t_rx: float,
+    curved: bool, d_c_alpha: float, consts: Any, coef: Any, known: Any, near: Any,
+    n_near: Any, rot_key: Any, rot: Any, phasors: Any, edges: Any,
+) -> complex:  # fmt: skip
+    """:func:`_candidate`'s ``C`` alone, with the row's ``phasors`` (shape ``(M,)``) and
+    ``edges`` given (:func:`maximise`, which reads neither energy): the same operations on
+    ``C``, so the same bits, without the windows' and the model's energies."""
+    total = complex(0.0, 0.0)
+    for i in range(slots.shape[0]):
+        s = slots[i]
+        t_i = t_rx
+        if curved:
+            t_i = t_rx + d_c_alpha + consts[_U, i] - consts[_DA, i]
+        lo_s = t_i + consts[_LO, i]
+        hi_s = t_i + consts[_HI, i]
+        lo = lo_s * fs - first[s] + 0.5
+        hi = hi_s * fs - first[s] + 0.5
+        z = _window_sum(prefix, s, lo, hi - tail[s], coef, i)
+        term_i = k[i] * phasors[i] * z
+        if n_near[i]:
+            part, _ = _known_part(
+                known, near, i, n_near[i], t_i, lo_s, hi_s, consts[_FA, i], rot_key, rot, edges
+            )
+            kp = k[i] * part
+            term_i -= complex(kp.real * fs, kp.imag * fs)
+        total += term_i
+    return total
+
+
+@numba.njit(**_JIT)
 def _row_phasors(
     centre: Any, slots: Any, t_rx: float, curved: bool, d_c_alpha: float, consts: Any,
     step_s: float, start: Any, step: Any,
@@ -544,19 +598,44 @@ def candidate_sums(
     ``T_i + D_i − T_b``), ``amp2`` its squared amplitude; ``hop_s`` the hop length ``D`` (s).
     """
     consts, coef = _scratch(slots, prefix)
-    near, n_near = _every_column(slots.shape[0], known)
-    no_key, no_rot = np.empty(0), np.empty(0, dtype=np.complex128)  # no rotations kept
+    n_cand = t_rx.shape[0]
+    n_cols = known.shape[1]
+    # Candidates of constant time scale (every rate 0) with known hops: each hop reads only
+    # the columns its windows can meet over the candidates' times and time scales
+    # (:func:`_columns_near`; a column left out adds nothing, the same sums), and the
+    # candidates of one time ``t_rx`` (a grid's column across its time scales) share each
+    # column's rotation (:func:`_known_part`'s ``rot_key``: the value computed for that
+    # ``t_rx`` once, the same bits).
+    straight = n_cand > 0 and n_cols > 0
+    for c in range(n_cand):
+        if gamma[c] != 0.0:
+            straight = False
+            break
+    times = np.empty(0)
+    if straight:
+        times = np.unique(t_rx)
+        near, n_near = _columns_near(
+            known, dt_lo, dt_hi, times[0], times[-1], np.min(alpha), np.max(alpha)
+        )
+        rot_key = np.full((times.shape[0], n_cols), np.nan)
+        rot = np.empty((times.shape[0], n_cols), dtype=np.complex128)
+    else:
+        near, n_near = _every_column(slots.shape[0], known)
+        rot_key = np.empty((1, 0))  # no rotations kept
+        rot = np.empty((1, 0), dtype=np.complex128)
+    no_rot = np.empty(0, dtype=np.complex128)
     no_edges = np.empty((5, 0, 0), dtype=np.complex128)
     d_c_alpha = 0.0
-    for c in range(t_rx.shape[0]):
+    for c in range(n_cand):
         if c == 0 or alpha[c] != alpha[c - 1] or gamma[c] != gamma[c - 1]:
             d_c_alpha = _line(
                 alpha0, slots, f, dt_lo, dt_hi, hop_s, alpha[c], gamma[c], consts, coef
             )
+        row = np.searchsorted(times, t_rx[c]) if straight else 0
         out_c[c], out_model[c], out_signal[c] = _candidate(
             prefix, energy, first, tail, centre, slots, k, amp2, fs, t_rx[c], gamma[c] != 0.0,
-            d_c_alpha, consts, coef, per_hop[c], known, near, n_near, no_key, no_rot, no_rot,
-            no_edges,
+            d_c_alpha, consts, coef, per_hop[c], known, near, n_near, rot_key[row], rot[row],
+            no_rot, no_edges,
         )  # fmt: skip
 
 
@@ -584,7 +663,6 @@ def maximise(
     """
     consts, coef = _scratch(slots, prefix)
     curved = gamma != 0.0
-    none = np.empty(0, dtype=np.complex128)
     step_t = 2.0 * half_t / (n_t - 1)
     step_v = 2.0 * half_v / (n_v - 1)
     if curved:
@@ -624,10 +702,9 @@ def maximise(
                 _advance(phasors, turn)
                 if n_cols:
                     _advance_edges(edges, n_near)
-            cc, _, _ = _candidate(
-                prefix, energy, first, tail, centre, slots, k, amp2, fs,
-                t0 - half_t + j * step_t, curved, d_c_a, consts, coef, none, known, near,
-                n_near, rot_key[j], rot[j], phasors, edges,
+            cc = _candidate_c(
+                prefix, first, tail, slots, k, fs, t0 - half_t + j * step_t, curved, d_c_a,
+                consts, coef, known, near, n_near, rot_key[j], rot[j], phasors, edges,
             )  # fmt: skip
             pw = cc.real * cc.real + cc.imag * cc.imag
             if pw > best:
@@ -661,10 +738,9 @@ def maximise(
                 if i == 1 and j == 1 and z_centre >= 0.0:
                     z[1, 1] = z_centre
                     continue
-                cc, _, _ = _candidate(
-                    prefix, energy, first, tail, centre, slots, k, amp2, fs,
-                    t + (j - 1) * step_t, curved, d_c_a, consts, coef, none, known, near,
-                    n_near, rot_key[j], rot[j], phasors, edges,
+                cc = _candidate_c(
+                    prefix, first, tail, slots, k, fs, t + (j - 1) * step_t, curved, d_c_a,
+                    consts, coef, known, near, n_near, rot_key[j], rot[j], phasors, edges,
                 )  # fmt: skip
                 z[i, j] = cc.real * cc.real + cc.imag * cc.imag
         # z[i, j] ≈ z0 + gt x + gv y + ½ (htt x² + 2 htv x y + hvv y²); x, y in steps.

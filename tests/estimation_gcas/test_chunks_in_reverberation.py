@@ -65,13 +65,6 @@ def _check(density_per_m3: float, band: bool, cuts: tuple[int | str, ...]) -> di
 
 
 @pytest.mark.slow
-def test_a_diffuse_patch_gives_the_same_peaks_in_997_sample_blocks() -> None:
-    whole = _check(0.3, True, (997,))
-    # Measured: 999 Peaks (366 refused on the band's edge), no estimate (a still target).
-    assert len(whole["peaks"]) > 900 and whole["refusals"]["in_band"] > 300
-
-
-@pytest.mark.slow
 @pytest.mark.parametrize("band", [True, False], ids=["band-on", "band-off"])
 @pytest.mark.parametrize("density_per_m3", [0.3, 0.01])
 def test_reverberation_chunks_equal_whole(density_per_m3: float, band: bool) -> None:
@@ -81,3 +74,7 @@ def test_reverberation_chunks_equal_whole(density_per_m3: float, band: bool) -> 
     # (0.3) and 514, 189 (0.01).
     assert len(whole["peaks"]) > 500
     assert band or len(whole["estimates"]) > 100
+    if band and density_per_m3 == 0.3:
+        # The diffuse patch with the band on (its 997-sample blocks among the cuts above):
+        # measured 999 Peaks, 366 refused on the band's edge, no estimate (a still target).
+        assert len(whole["peaks"]) > 900 and whole["refusals"]["in_band"] > 300

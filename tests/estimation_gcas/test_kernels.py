@@ -258,6 +258,33 @@ def test_cached_sums_equal_sums_from_an_empty_cache() -> None:
     assert np.array_equal(cold, np.concatenate(one_by_one[::-1]))
 
 
+def test_a_codewords_sum_adds_its_terms_in_order_bit_for_bit() -> None:
+    # A_j = Σ_m w|u|² of term m's tone, added in the order m = 0, 1, ..: each row equals the
+    # cached weighted powers added one term at a time (J = 17 codewords on att: four at a
+    # time, and the last alone).
+    rx, centres, pair = _stage_two_receiver(m_hops=15)
+    exact = two_stage(rx).exact
+    w = two_stage(rx).fine_half
+    full = exact.sums(centres, pair, w)
+    fe = rx.front_end
+    tone = exact._term_tone  # (M, J)
+    mask = exact._cache_n.shape[1] - 1
+    assert tone.shape == (15, fe.n_codewords) and fe.n_codewords % 4 == 1
+    checked = 0
+    for c in range(0, centres.shape[0], 7):
+        for i in range(pair.shape[1]):
+            d = int(pair[c, i])
+            for t in (0, w, 2 * w):
+                n = centres[c, i] - w + t - fe.lags[d]  # each term's sample, shape (M,)
+                assert np.all(exact._cache_n[d, n & mask] == n)  # all arrived and kept
+                want = np.zeros(fe.n_codewords)
+                for m in range(tone.shape[0]):
+                    want += exact._cache_p[d, tone[m], n[m] & mask]
+                assert full[c, i, t].tobytes() == want.tobytes()
+                checked += 1
+    assert checked >= 18
+
+
 def test_samples_not_yet_received_are_never_cached() -> None:
     rx, _, _ = _stage_two_receiver()
     search = two_stage(rx)

@@ -175,3 +175,113 @@ def test_a_search_rows_carried_phasors_give_each_candidates_own_sums() -> None:
             np.empty((n_t, 0), dtype=np.complex128), np.zeros((5, 0), dtype=np.complex128),
         )  # fmt: skip
         assert np.min(np.abs(bare - alone)) > 1e-3 * np.max(np.abs(alone))
+
+
+def test_a_grid_with_known_hops_gives_each_candidates_bits_over_every_column() -> None:
+    # candidate_sums on a grid of constant time scale reads only the known columns its
+    # windows can meet and shares each column's rotation down a column of equal times: every
+    # candidate's C, model energy and input energy are the bits of that candidate computed
+    # over every column with no rotation kept (_candidate as fit_quality calls it).
+    schedule = att_schedule()
+    refiner = CoherentRefiner(schedule, FS, 10, C, 0.5, 30.0)
+    refiner.push(echo_samples(schedule, 70.0, 12.0, 0.4, snr_db=0.0, seed=4), 0)
+    alpha = (C + 12.0) / (C - 12.0)
+    hop = 28
+    t_s = float(schedule.hops(hop + 1, 1).start_s[0]) + 2 * 70.0 / C
+    args = _kernel_args(refiner, hop, t_s, alpha)
+    prefix, energy, first, tail, alpha0, centre, slots, k, f, dt_lo, dt_hi, amp2, fs, hop_s = args
+    m = slots.shape[0]
+    rng = np.random.default_rng(9)
+    n_cols = 60
+    known = np.zeros((5, n_cols), dtype=np.complex128)
+    known[0] = rng.normal(size=n_cols) + 1j * rng.normal(size=n_cols)
+    known[1] = rng.choice(schedule.tones_hz, n_cols) * (1.0 + rng.uniform(-0.02, 0.02, n_cols))
+    # Starts within 1 ms of a window's edge (where a narrower reach would miss them) and,
+    # a quarter of them, far before every window.
+    edge = t_s + rng.choice(np.concatenate([dt_lo, dt_hi]), n_cols) / alpha
+    known[2] = edge + rng.uniform(-1e-3, 1e-3, n_cols)
+    known[2, ::4] = t_s - rng.uniform(0.2, 0.4, n_cols)[::4]
+    known[3] = known[2].real + rng.uniform(0.001, 0.012, n_cols)
+    known[4] = t_s - rng.uniform(0.0, 0.02, n_cols)
+    times = t_s + 1e-4 * np.arange(-4.0, 5.0)  # ±0.4 ms: past the reach's slack
+    alphas = alpha + 1e-3 * np.arange(-3.0, 4.0)
+    t = np.tile(times, alphas.size)
+    a = np.repeat(alphas, times.size)
+    n = t.size
+    got = (np.empty(n, complex), np.empty(n), np.empty(n))
+    kernels.candidate_sums(
+        *args, t, a, np.zeros(n), *got, np.empty((n, 0), dtype=np.complex128), known
+    )
+    near, n_near = kernels._every_column(m, known)
+    assert n_near[0] == n_cols
+    no_key, no_rot = np.empty(0), np.empty(0, dtype=np.complex128)
+    no_edges = np.empty((5, 0, 0), dtype=np.complex128)
+    consts, coef = kernels._scratch(slots, prefix)
+    for c in range(n):
+        d_c_a = kernels._line(alpha0, slots, f, dt_lo, dt_hi, hop_s, a[c], 0.0, consts, coef)
+        want = kernels._candidate(
+            prefix, energy, first, tail, centre, slots, k, amp2, fs, t[c], False, d_c_a,
+            consts, coef, no_rot, known, near, n_near, no_key, no_rot, no_rot, no_edges,
+        )  # fmt: skip
+        for g, w in zip(got, want, strict=True):
+            assert np.asarray(g[c]).tobytes() == np.asarray(w).tobytes()
+    # The known hops move the sums (the comparison reads their integrals).
+    bare = np.empty(n, complex)
+    kernels.candidate_sums(
+        *args, t, a, np.zeros(n), bare, np.empty(n), np.empty(n),
+        np.empty((n, 0), dtype=np.complex128), np.zeros((5, 0), dtype=np.complex128),
+    )  # fmt: skip
+    assert np.min(np.abs(bare - got[0])) > 1e-3 * np.max(np.abs(got[0]))
+
+
+def test_a_searchs_candidate_is_the_candidates_own_c_bit_for_bit() -> None:
+    # maximise reads C alone (_candidate_c: no energies); along a row of carried phasors and
+    # known columns' ends it is _candidate's C, the same bits, at a constant time scale and
+    # under a rate.
+    schedule = att_schedule()
+    refiner = CoherentRefiner(schedule, FS, 10, C, 0.5, 30.0)
+    refiner.push(echo_samples(schedule, 70.0, 12.0, 0.4, snr_db=0.0, seed=4), 0)
+    alpha = (C + 12.0) / (C - 12.0)
+    hop = 28
+    t_s = float(schedule.hops(hop + 1, 1).start_s[0]) + 2 * 70.0 / C
+    args = _kernel_args(refiner, hop, t_s, alpha)
+    prefix, energy, first, tail, alpha0, centre, slots, k, f, dt_lo, dt_hi, amp2, fs, hop_s = args
+    m = slots.shape[0]
+    rng = np.random.default_rng(3)
+    n_cols = 40
+    known = np.zeros((5, n_cols), dtype=np.complex128)
+    known[0] = rng.normal(size=n_cols) + 1j * rng.normal(size=n_cols)
+    known[1] = rng.choice(schedule.tones_hz, n_cols) * (1.0 + rng.uniform(-0.02, 0.02, n_cols))
+    known[2] = t_s + rng.uniform(-0.11, 0.0, n_cols)
+    known[3] = known[2].real + rng.uniform(0.001, 0.012, n_cols)
+    known[4] = t_s - rng.uniform(0.0, 0.02, n_cols)
+    near, n_near = kernels._every_column(m, known)
+    step, n_t = 1e-4, 9
+    compared = 0
+    for a, gamma in ((alpha + 2e-4, 0.0), (alpha - 1e-4, 0.003)):
+        consts, coef = kernels._scratch(slots, prefix)
+        d_c_a = kernels._line(alpha0, slots, f, dt_lo, dt_hi, hop_s, a, gamma, consts, coef)
+        curved = gamma != 0.0
+        t0 = t_s - 0.5 * (n_t - 1) * step
+        phasors = np.empty(m, dtype=np.complex128)
+        turn = np.empty(m, dtype=np.complex128)
+        edges = np.empty((5, m, n_cols), dtype=np.complex128)
+        kernels._row_phasors(centre, slots, t0, curved, d_c_a, consts, step, phasors, turn)
+        kernels._row_edges(known, near, n_near, t0, curved, d_c_a, consts, step, edges)
+        no_key, no_rot = np.empty(0), np.empty(0, dtype=np.complex128)
+        for j in range(n_t):
+            if j:
+                kernels._advance(phasors, turn)
+                kernels._advance_edges(edges, n_near)
+            t = t0 + j * step
+            full = kernels._candidate(
+                prefix, energy, first, tail, centre, slots, k, amp2, fs, t, curved, d_c_a,
+                consts, coef, no_rot, known, near, n_near, no_key, no_rot, phasors, edges,
+            )[0]  # fmt: skip
+            alone = kernels._candidate_c(
+                prefix, first, tail, slots, k, fs, t, curved, d_c_a, consts, coef, known, near,
+                n_near, no_key, no_rot, phasors, edges,
+            )  # fmt: skip
+            assert np.complex128(alone).tobytes() == np.complex128(full).tobytes()
+            compared += abs(full) > 0
+    assert compared == 2 * n_t

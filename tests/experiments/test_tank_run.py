@@ -504,13 +504,25 @@ def _carriage_moving(h5: Path) -> bool:
         return False
 
 
+#: The stop signals of a run, each once. SIGINT (a terminal's Ctrl-C) runs in real time over
+#: ptys, the simulated tank in its own process in the run's process group: real time is what
+#: shows that the tank's process outlives the signal the whole group gets (it ignores SIGINT,
+#: SIGTERM and SIGHUP alike, one rule in ``hil.experiments.sim_tank._serve``) and that the
+#: stage, held, ends short of the pass's end. SIGTERM and SIGHUP run on virtual time: what
+#: they check is the run's own handling (``StopSignals``: a RunInterrupted named after the
+#: signal, the safe stop, the summary and the recording's stop event), the same on either
+#: clock and without the pass's seconds of wall time.
+STOP_CASES = [
+    pytest.param(signal.SIGINT, "Ctrl-C", False, id="Ctrl-C-real-time"),
+    pytest.param(signal.SIGTERM, "SIGTERM", True, id="SIGTERM-virtual-time"),
+    pytest.param(signal.SIGHUP, "SIGHUP", True, id="SIGHUP-virtual-time"),
+]
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize(
-    ("sig", "how"),
-    [(signal.SIGINT, "Ctrl-C"), (signal.SIGTERM, "SIGTERM"), (signal.SIGHUP, "SIGHUP")],
-)
+@pytest.mark.parametrize(("sig", "how", "virtual"), STOP_CASES)
 def test_ctrl_c_sigterm_and_sighup_stop_cleanly_and_keep_the_recording(
-    tmp_path: Path, sig: signal.Signals, how: str
+    tmp_path: Path, sig: signal.Signals, how: str, virtual: bool
 ) -> None:
     """SIGINT (a terminal's Ctrl-C), SIGTERM (kill, a service manager) or SIGHUP (the
     terminal closed) mid-run: transmission stopped, stage held, files closed, a summary
@@ -519,17 +531,18 @@ def test_ctrl_c_sigterm_and_sighup_stop_cleanly_and_keep_the_recording(
     from hil.recording.reader import RunRecording
 
     exp_file = tmp_path / "slow.toml"
-    # A slow tow (0.5 m/s: a 2.8 m pass takes 14 s of wall time at time_scale 0.4) leaves
-    # the interrupt many seconds of the pass to land in, even when the telemetry that shows
-    # the carriage moving is read seconds late on a loaded machine (CI once saw a 1.5 m/s pass,
-    # 4.5 s of wall time, all but over before the interrupt arrived).
+    # A slow tow (0.5 m/s: a 2.8 m pass takes 14 s of wall time at time_scale 0.4, about
+    # 3 s on virtual time) leaves the interrupt seconds of the pass to land in, even when the
+    # telemetry that shows the carriage moving is read seconds late on a loaded machine (CI
+    # once saw a 1.5 m/s pass, 4.5 s of wall time, all but over before the interrupt arrived).
     exp_file.write_text(STOPPED_MID_PASS)
     folder = tmp_path / "run"
     log = tmp_path / "stderr.txt"  # shown if the run did not stop as it should
+    clock = ["--virtual-time"] if virtual else []
     with log.open("w") as err:
         proc = subprocess.Popen(
             [sys.executable, "-m", "hil.cli.main", "tank-run", str(exp_file), "--out",
-             str(folder), "--no-live", "--json"],
+             str(folder), "--no-live", "--json", *clock],
             stdout=subprocess.PIPE, stderr=err, text=True, start_new_session=True,
             preexec_fn=_default_sigint,
         )  # fmt: skip
@@ -553,6 +566,19 @@ def test_ctrl_c_sigterm_and_sighup_stop_cleanly_and_keep_the_recording(
     assert sum(b.data.shape[0] for b in rec.samples()) > 10_000
     stop = rec.events()[-1]
     assert (stop.kind, stop.text) == ("alarm", f"stop: interrupted ({how})")
+    if virtual:
+        import h5py
+
+        from hil.recording.instrument import read_entry
+
+        # The run was on virtual time (no tank process, so no trajectory file): the hold on
+        # a stop is the same safe stop for every signal, checked here in real time and on
+        # virtual time by test_tank_run_virtual's unplugged board (the in-process carriage).
+        with h5py.File(h5, "r") as f:
+            entry = read_entry(f)
+        assert entry is not None
+        assert entry["instrument"]["board"]["link"] == "sim://board (in process, virtual time)"
+        return
     # The stage was held: the simulated carriage (its true trajectory, written by the
     # simulated tank at stop) is at rest at the end and stopped short of the end of the pass
     # (end_m - run_down_m = -4.1 m).
