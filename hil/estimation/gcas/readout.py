@@ -3,7 +3,7 @@
 Parabolic offsets of the peak in time and across ``d`` give the boundary receive time
 ``t_rx`` (window centred on the hop, group delay removed) and ``α̂``; ``t_tx`` is the transmit
 end of hop ``ĵ`` plus the multiple of the code period that puts the delay in ``[0, τ_max]``,
-``τ_max = 2 max_range/c`` (a longer delay is refused and counted); ``R = c (t_rx − t_tx)/2``,
+``τ_max = 2 max_range/c`` (a longer delay, or a negative one, is refused and counted); ``R = c (t_rx − t_tx)/2``,
 ``v = c (α̂ − 1)/(α̂ + 1)``. A peak on a refused hypothesis (the edge of the reverberation
 band, :mod:`hil.estimation.reverb_band`) is the leak of an echo inside the band, not a
 detection: it is noted, and that echo is measured when another detection comes near it
@@ -395,7 +395,10 @@ class Readout:
             if first is not None:
                 t_rx, alpha = first.t_s, first.alpha
         delay = t_rx - t_tx
-        if delay > self._max_delay + 2.0 / self._fe.fs_bb:
+        slack = 2.0 / self._fe.fs_bb
+        if delay > self._max_delay + slack or delay < -slack:
+            # A followed fit's transmit time is its hop's, unfolded: an echo carried past the
+            # transducer (range through zero) would read a negative range.
             self.refused_count += 1
             return None
         speed = c * (alpha - 1.0) / (alpha + 1.0)  # alpha_to_speed, on Python floats

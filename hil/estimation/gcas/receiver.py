@@ -302,7 +302,8 @@ class GcasReceiver:
 
     @property
     def refused_count(self) -> int:
-        """Detections refused for a delay beyond ``max_range_m``."""
+        """Detections refused for a delay beyond ``max_range_m`` (or a negative one: an echo
+        followed past the transducer)."""
         return self.readout.refused_count
 
     @property
