@@ -3,11 +3,12 @@
 Parabolic offsets of the peak in time and across ``d`` give the boundary receive time
 ``t_rx`` (window centred on the hop, group delay removed) and ``α̂``; ``t_tx`` is the transmit
 end of hop ``ĵ`` plus the multiple of the code period that puts the delay in ``[0, τ_max]``,
-``τ_max = 2 max_range/c`` (a longer delay, or a negative one, is refused and counted); ``R = c (t_rx − t_tx)/2``,
-``v = c (α̂ − 1)/(α̂ + 1)``. A peak on a refused hypothesis (the edge of the reverberation
-band, :mod:`hil.estimation.reverb_band`) is the leak of an echo inside the band, not a
-detection: it is noted, and that echo is measured when another detection comes near it
-(:mod:`hil.estimation.gcas.hidden_echoes`: what it leaks is then refused). The default
+``τ_max = 2 max_range/c`` (a longer delay, or a negative one, is refused and counted);
+``R = c (t_rx − t_tx)/2``, ``v = c (α̂ − 1)/(α̂ + 1)``. A peak on a refused hypothesis (the
+edge of the reverberation band, :mod:`hil.estimation.reverb_band`) is the leak of an echo
+inside the band, not a detection: it is noted, and that echo is measured when another
+detection comes near it (:mod:`hil.estimation.gcas.hidden_echoes`: what it leaks is then
+refused). The default
 refinement (:mod:`hil.estimation.refine`) measures ``t_rx`` and ``α`` by local maximum
 likelihood and refuses a detection that is not one echo of the schedule (a still echo read
 at the tone spacing's speed, an echo beyond the span: :data:`ECHO_TEST`; in the still
