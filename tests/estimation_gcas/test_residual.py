@@ -134,3 +134,15 @@ def test_the_second_search_gives_the_same_estimates_in_any_blocks() -> None:
         rx = make_gcas(att_schedule())
         assert run_blocks(rx, x, block=block) == whole, block
         assert rx.readout.residual_count == whole_rx.readout.residual_count
+
+
+def test_a_boundary_before_its_own_transmission_is_refused() -> None:
+    # A followed fit's transmit time is its hop's, unfolded: an echo carried on past the
+    # transducer (an independent synthesiser's target through zero range) read -10 to 0 m on
+    # 45 boundaries of a 2 s triple before such a delay was refused.
+    rx = make_gcas(att_schedule())
+    readout = rx.readout
+    assert readout._estimate(1.0, 1.0, 1.01, 100, None) is None
+    assert rx.refused_count == 1
+    est = readout._estimate(1.0, 1.0, 0.99, 100, None)
+    assert est is not None and abs(est.range_m - 7.5) < 1e-9 and rx.refused_count == 1
