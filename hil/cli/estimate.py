@@ -16,6 +16,11 @@ none; :mod:`hil.estimation.tracking`, set with ``--option track_confirm_hits=4``
 other ``track_*`` settings). Without ``--json``/``--csv`` it prints the count and one line
 per track. ``--map PNG`` draws the time–codeword map (receivers that keep one: GCAS).
 
+GCAS searches the input a second time with the echoes it measured taken out, so a target
+hidden in a stronger one's Doppler row (10 dB weaker at the same speed, a cell or two from
+it, beside its ghost) is reported too (:mod:`hil.estimation.gcas.residual`);
+``--option cancel=false`` searches once (a third less CPU with a target in view).
+
 An echo faster than the Doppler span (``--max-speed``) is refused, not aliased; GCAS says so
 once per side (closing, opening) when it first sees one
 (:mod:`hil.estimation.gcas.beyond_span`): a line ``note: an echo beyond the ±30 m/s Doppler

@@ -87,6 +87,7 @@ from numpy.typing import NDArray
 
 from hil.errors import ConfigError
 from hil.estimation.crlb import Crlb, crlb, rms_bandwidth, rms_duration
+from hil.estimation.echo_model import echo_samples
 from hil.estimation.refine_kernels import (
     FOUND,
     N_MOMENTS,
@@ -239,6 +240,12 @@ PARTNER_COHERENCE = 0.5
 #: 0.77 / 0.21 -> 0.95 / 0.96, 0.99 / 0.01 -> 1.0 / 0.77 (the second 1 dB weaker), no false
 #: estimate or 0.006-0.011 per hop at the first boundaries; one target unchanged.
 NEIGHBOUR_CELLS = 2.0
+#: How far from a measured echo's speed or its ghosts' (Doppler cells of a hop) it can hide a
+#: weaker echo from the first search (:meth:`CoherentRefiner.hidden_by_known`): its Doppler
+#: response reaches ``4/(π x)²`` of its peak ``x`` cells away, and the first search takes a
+#: cell below twice that beside it for its sidelobe (``search_two_stage.doppler_leak``): an
+#: echo 10 dB weaker is hidden within 2.8 cells, 15 dB weaker within 5.
+HIDING_CELLS = 4.0
 #: Runs of hops kept for the other echoes' ``known`` rows
 #: (:meth:`CoherentRefiner._hop_run`; all are dropped when full).
 HOP_RUNS = 256
@@ -309,6 +316,11 @@ class _EchoFit:
     #: The latest hop at which this echo was looked for where the fit puts it, without a
     #: detection (:meth:`CoherentRefiner.due`; its own hop before any).
     followed: int = -1
+    #: Whether the echo is taken out of the second search's input
+    #: (:meth:`CoherentRefiner.known_input`): measured from a detection of the first search
+    #: (or followed on from such a fit). An echo the second search found is not: that search
+    #: goes on detecting it.
+    cancelled: bool = True
 
     def speed(self, sound_speed_mps: float) -> float:
         """Radial speed, m/s (closing positive)."""
@@ -555,6 +567,7 @@ class CoherentRefiner:
         self.push(np.zeros(int(math.ceil(t_b * self.fs_hz)) + 2 * self.history), 0)
         self.refine(t_b, 1.0, hop)
         self.correlation(t_b, 1.0, hop, np.array([t_b]), np.array([1.0]))
+        echo_samples(np.zeros((5, 1), dtype=np.complex128), 0, 1, self.fs_hz)
         self.reset(0)
 
     def push(self, x: NDArray[np.float64], first_index: int) -> None:
@@ -564,7 +577,7 @@ class CoherentRefiner:
     # ------------------------------------------------------------------ refinement
     def refine(
         self, t_s: float, alpha: float, hop_index: int, echo_test: EchoTest | None = None,
-        partners: bool = True, followed: bool = False,
+        partners: bool = True, followed: bool = False, residual: bool = False,
     ) -> Refinement | None:  # fmt: skip
         """The maximum-likelihood boundary time and time scale near ``(t_s, alpha)`` for the
         boundary that ends hop ``hop_index``; None where the input does not cover the ``M``
@@ -581,7 +594,9 @@ class CoherentRefiner:
         holds its echo (at least
         :data:`PARTIAL_LEVEL` of the hops' mean power): an echo that ended within the window
         still fits one echo on its earlier hops, and followed on it would go on where it
-        is no more; None otherwise."""
+        is no more; None otherwise. A ``residual`` detection is the second search's
+        (:meth:`known_input`): its echo, remembered, is not taken out of that search's input
+        (a followed fit keeps its echo's own)."""
         test = self.echo_test if echo_test is None else echo_test
         word = self._codeword(hop_index)
         hop_ids = np.arange(hop_index - self.m_hops + 1, hop_index + 1, dtype=np.int64)
@@ -621,7 +636,7 @@ class CoherentRefiner:
             fit = self._with_partners(fit, word, hop_ids, t_s, speed0, lobe, hop_index, known, test)
         if fit is not None and fit.is_echo(test):
             self._recent.append((hop_index, fit.t_s, fit.alpha, fit.rate(self.c)))
-            self._remember(fit, hop_index)
+            self._remember(fit, hop_index, None if followed else not residual)
         return fit
 
     def _with_partners(
@@ -749,9 +764,66 @@ class CoherentRefiner:
             (e.speed(self.c), abs(e.amplitude)) for e in self._echoes if abs(e.t_s - t_s) <= reach
         ]
 
+    def known_input(self, first_index: int, count: int) -> NDArray[np.float64] | None:
+        """What the echoes measured lately put into input samples ``first_index …``
+        (``count`` of them; shape ``(count,)``): each echo's latest fit carried on at its
+        delay, time scale (and rate) and amplitude (:mod:`hil.estimation.echo_model`), for
+        the echoes fitted within :data:`KNOWN_HOPS` hops of those samples that the first
+        search measured (:attr:`_EchoFit.cancelled`); None where there is none. Taken out
+        of the input, what is left is searched again (:mod:`hil.estimation.gcas.residual`)."""
+        t_lo = first_index / self.fs_hz
+        t_hi = (first_index + count) / self.fs_hz
+        reach = KNOWN_HOPS * self.hop_len_s
+        echoes = [e for e in self._echoes if e.cancelled and t_lo - reach <= e.t_s <= t_hi + reach]
+        if not echoes:
+            return None
+        columns = np.concatenate([self._echo_hops(e, t_lo, t_hi) for e in echoes], axis=1)
+        return echo_samples(columns, first_index, count, self.fs_hz)
+
+    def recent_input(self, first_index: int) -> tuple[int, NDArray[np.float64]]:
+        """The input pushed from ``first_index`` on, or from the earliest sample kept since
+        the last reset where that is later: its first index and the samples (shape ``(n,)``,
+        a copy)."""
+        ring = self._ring
+        first = max(int(first_index), self._valid_from, ring.next_index - ring.keep)
+        return first, np.array(ring.span(first, ring.next_index))
+
+    def hidden_by_known(self, t_s: float, alpha: float, lag_s: float = 0.0) -> bool:
+        """Whether an echo at ``t_s`` (s) and time scale ``alpha`` may have been hidden from
+        the first search by an echo taken out of the second search's input
+        (:meth:`known_input`, measured within :data:`KNOWN_HOPS` hops): within
+        :data:`HIDING_CELLS` Doppler cells of a hop of its speed or of its ghosts' (one tone
+        spacing's speed either way), where its Doppler row, its sidelobes above the leak
+        bound or its ghost's row hold the weaker echo's cells. Elsewhere the first search
+        sees what the second would. ``lag_s``: how far (s) the detection may lie before the
+        echoes' latest fits (the second search's lag behind the first)."""
+        speed = self.c * (alpha - 1.0) / (alpha + 1.0)
+        reach, near = KNOWN_HOPS * self.hop_len_s, HIDING_CELLS * self._cell_speed
+        return any(
+            e.cancelled
+            and -reach <= e.t_s - t_s <= reach + lag_s
+            and min(abs(speed - e.speed(self.c) - k * self._ghost_speed) for k in (-1, 0, 1))
+            <= near
+            for e in self._echoes
+        )
+
+    def continues_known(self, t_s: float, alpha: float, hop_index: int, lag_s: float = 0.0) -> bool:
+        """Whether a detection at ``t_s`` (s) and time scale ``alpha`` (the boundary ending hop
+        ``hop_index``) is where an echo measured within :data:`KNOWN_HOPS` hops puts that
+        boundary (:meth:`_same_echo`) and is taken out of the input (:meth:`known_input`):
+        what is left of it there. ``lag_s`` as :meth:`hidden_by_known`'s."""
+        speed = self.c * (alpha - 1.0) / (alpha + 1.0)
+        reach = KNOWN_HOPS * self.hop_len_s
+        return any(
+            e.cancelled
+            and -reach <= e.t_s - t_s <= reach + lag_s
+            and self._same_echo(e, hop_index, t_s, speed)
+            for e in self._echoes
+        )
+
     def ghost_of_known(
         self, t_s: float, alpha: float, hop_index: int, edge_side: int = 0,
-        strength: float = math.inf,
+        strength: float = math.inf, residual: bool = False,
     ) -> bool:  # fmt: skip
         """Whether a detection at ``t_s`` (s) and time scale ``alpha``, the boundary ending
         hop ``hop_index``, is the ghost of an echo measured lately, where that echo's every
@@ -774,13 +846,16 @@ class CoherentRefiner:
         ghost beyond that edge (more than one Doppler cell past the detection's speed, at
         most :data:`GHOST_LEAK_CELLS`) leaks into it at any time of the echo's hops: there
         the detection is the leak when it is at most :data:`GHOST_LEAK_FRACTION` of the
-        echo's strength."""
+        echo's strength. A ``residual`` detection (the second search's) is checked against
+        the echoes that were not taken out of its input only (:attr:`_EchoFit.cancelled`:
+        the others' ghosts went with them)."""
         speed = self.c * (alpha - 1.0) / (alpha + 1.0)
         amplitude: float | None = None
         if edge_side:
             leak_of = [
                 abs(e.amplitude) for e in self._echoes
-                if abs(e.t_s - t_s) <= KNOWN_HOPS * self.hop_len_s
+                if not (residual and e.cancelled)
+                and abs(e.t_s - t_s) <= KNOWN_HOPS * self.hop_len_s
                 and self._cell_speed
                 < edge_side * (e.speed(self.c) + edge_side * self._ghost_speed - speed)
                 <= GHOST_LEAK_CELLS * self._cell_speed
@@ -790,6 +865,8 @@ class CoherentRefiner:
                 if inside <= GHOST_LEAK_FRACTION * max(leak_of):
                     return True
         for i, e in enumerate(self._echoes):
+            if residual and e.cancelled:
+                continue  # taken out of the second search's input with its ghosts
             if abs(abs(speed - e.speed(self.c)) - self._ghost_speed) > self._cell_speed:
                 continue
             period = self.hop_len_s / e.alpha
@@ -866,26 +943,31 @@ class CoherentRefiner:
         ok = e_s > 0
         return float(np.max(2.0 * np.abs(c[ok]) / e_s[ok])) if ok.any() else 0.0
 
-    def _remember(self, fit: Refinement, hop_index: int) -> None:
+    def _remember(self, fit: Refinement, hop_index: int, cancelled: bool | None) -> None:
         """Keep ``fit`` as its echo's latest (with its fitted amplitude ``β = 2C/E_s``),
         replacing that echo's earlier fit (the strength of its ghosts read so far carried
-        on) and forgetting fits :data:`KNOWN_HOPS` hops old."""
+        on) and forgetting fits :data:`KNOWN_HOPS` hops old; ``cancelled`` as
+        :attr:`_EchoFit.cancelled` (None: the echo's earlier fit's, True for a new echo)."""
         if fit.amplitude == 0:
             return
         speed = self.c * (fit.alpha - 1.0) / (fit.alpha + 1.0)  # _EchoFit.speed
         oldest = fit.t_s - KNOWN_HOPS * self.hop_len_s
         kept = []
         ghost_strength = (0.0,) * self.schedule.period_hops
+        was: bool | None = None
         for e in self._echoes:
             if e.t_s < oldest:
                 continue
             if self._same_echo(e, hop_index, fit.t_s, speed):
                 ghost_strength = tuple(map(max, ghost_strength, e.ghost_strength or ghost_strength))
+                was = e.cancelled if was is None else was or e.cancelled
             else:
                 kept.append(e)
+        if cancelled is None:
+            cancelled = True if was is None else was
         new = _EchoFit(
             hop_index, fit.t_s, fit.alpha, fit.amplitude, fit.rate(self.c), ghost_strength,
-            fit.e_over_n0_db,
+            fit.e_over_n0_db, cancelled=cancelled,
         )  # fmt: skip
         self._echoes = [*kept, new]
 

@@ -845,3 +845,24 @@ def fit_quality(
         en0, rho, expected, num / den if den > 0.0 else 0.0, e_num / e_den, rho_run,
         e_snum / e_sden, c, es,
     )  # fmt: skip
+
+
+@numba.njit(**_JIT)
+def echo_input(columns: Any, first_index: int, fs_hz: float, out: Any) -> None:
+    """Add the echoes of the ``known`` ``columns`` (shape ``(5, Q)``:
+    :mod:`hil.estimation.echo_model`) to ``out`` (shape ``(n,)``, input samples
+    ``first_index …``): ``2|w| cos(2π (g (t − t_e) + arg(w)/2π))`` over each hop's
+    ``[start, end)``, the phase a function of each sample's own index."""
+    n = out.shape[0]
+    for h in range(columns.shape[1]):
+        lo = max(0, int(math.ceil(columns[2, h].real * fs_hz - first_index)))
+        hi = min(n, int(math.ceil(columns[3, h].real * fs_hz - first_index)))
+        if hi <= lo:
+            continue
+        w = columns[0, h]
+        g, t_e = columns[1, h].real, columns[4, h].real
+        amp = 2.0 * abs(w)
+        arg = math.atan2(w.imag, w.real) / (2.0 * math.pi)
+        for k in range(lo, hi):
+            cyc = (g * ((first_index + k) / fs_hz - t_e) + arg) % 1.0
+            out[k] += amp * math.cos(2.0 * math.pi * cyc)

@@ -40,10 +40,10 @@ def _run(x: np.ndarray, edges: list[int], band: bool) -> dict[str, Any]:
     peaks: list[Peak] = []
     decide_all = rx.readout.decide_all
 
-    def recording(found: Any) -> Any:
+    def recording(found: Any, residual: bool = False) -> Any:
         found = list(found)
         peaks.extend(found)
-        return decide_all(found)
+        return decide_all(found, residual)
 
     rx.readout.decide_all = recording  # type: ignore[method-assign]
     est = []

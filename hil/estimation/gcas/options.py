@@ -36,7 +36,7 @@ OPTION_NAMES = frozenset(
         "n_doppler", "coherent", "pfa", "cfar_lambda", "runner_up_ratio",
         "cfar_window_hops", "cfar_mode", "reverb_speed_mps", "reverb_weight",
         "decimation", "attenuation_db", "on_map", "search", "coarse_step",
-        "range_readout", "max_spread_s", "refine",
+        "range_readout", "max_spread_s", "refine", "cancel",
     }
 )  # fmt: skip
 

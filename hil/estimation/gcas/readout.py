@@ -3,11 +3,12 @@
 Parabolic offsets of the peak in time and across ``d`` give the boundary receive time
 ``t_rx`` (window centred on the hop, group delay removed) and ``α̂``; ``t_tx`` is the transmit
 end of hop ``ĵ`` plus the multiple of the code period that puts the delay in ``[0, τ_max]``,
-``τ_max = 2 max_range/c`` (a longer delay is refused and counted); ``R = c (t_rx − t_tx)/2``,
-``v = c (α̂ − 1)/(α̂ + 1)``. A peak on a refused hypothesis (the edge of the reverberation
-band, :mod:`hil.estimation.reverb_band`) is the leak of an echo inside the band, not a
-detection: it is noted, and that echo is measured when another detection comes near it
-(:mod:`hil.estimation.gcas.hidden_echoes`: what it leaks is then refused). The default
+``τ_max = 2 max_range/c`` (a longer delay, or a negative one, is refused and counted);
+``R = c (t_rx − t_tx)/2``, ``v = c (α̂ − 1)/(α̂ + 1)``. A peak on a refused hypothesis (the
+edge of the reverberation band, :mod:`hil.estimation.reverb_band`) is the leak of an echo
+inside the band, not a detection: it is noted, and that echo is measured when another
+detection comes near it (:mod:`hil.estimation.gcas.hidden_echoes`: what it leaks is then
+refused). The default
 refinement (:mod:`hil.estimation.refine`) measures ``t_rx`` and ``α`` by local maximum
 likelihood and refuses a detection that is not one echo of the schedule (a still echo read
 at the tone spacing's speed, an echo beyond the span: :data:`ECHO_TEST`; in the still
@@ -39,6 +40,7 @@ from hil.estimation.gcas.clutter_seen import ClutterLog, ClutterSeen
 from hil.estimation.gcas.front_end import FrontEnd
 from hil.estimation.gcas.hidden_echoes import HiddenEchoes
 from hil.estimation.gcas.point_echoes import PointEchoes
+from hil.estimation.gcas.residual import STEP_HOPS
 from hil.estimation.gcas.threshold import Peak
 from hil.estimation.refine import CoherentRefiner, EchoTest, Refinement
 from hil.estimation.reverb_band import (
@@ -175,6 +177,11 @@ class Readout:
         #: Speeds below this share their Doppler cells with the still reverberation, m/s
         #: (:func:`~hil.estimation.reverb_band.in_reverberation`'s bound, made once).
         self._still_mps = doppler_resolution_mps(tones, fe.hop_s, c)
+        #: How far (s of receive time) the second search's detections lie behind the first's
+        #: at most: its start-up's ``M + 1`` hops, a stretch and a hop of decision
+        #: (:mod:`hil.estimation.gcas.residual`); an estimate is kept that long to tell a
+        #: repeat of it (:meth:`_reported_already`).
+        self._residual_lag_s = (fe.m_hops + 3 + STEP_HOPS) * fe.hop_s
         #: Hypotheses where a refused fit may be one of two echoes at one speed
         #: (:func:`~hil.estimation.gcas.candidates.second_echo_rows`): not at the band's or the
         #: span's edges, where the leaks of other echoes fit as well with a partner taken out.
@@ -208,6 +215,14 @@ class Readout:
         #: Estimates of echoes measured lately fitted where their fits put their next
         #: boundary, without a detection there (:meth:`_follow`).
         self.followed_count = 0
+        #: Estimates of detections in the input with the echoes measured lately taken out
+        #: (:mod:`hil.estimation.gcas.residual`).
+        self.residual_count = 0
+        #: Detections there dropped unrefined: what was left of a measured echo, in the
+        #: still reverberation's Doppler cells (what the echoes measured there hid is the
+        #: reverberation itself), or where no echo taken out could hide one
+        #: (:meth:`~hil.estimation.refine.CoherentRefiner.hidden_by_known`).
+        self.leftover_count = 0
         #: The estimates reported lately: (hop index, boundary time s, speed m/s).
         self._reported: list[tuple[int, float, float]] = []
         self.last_detection: DetectionInfo | None = None
@@ -227,7 +242,7 @@ class Readout:
         if self.hidden is not None:
             self.hidden.reset()
 
-    def decide_all(self, peaks: Iterable[Peak]) -> list[Estimate]:
+    def decide_all(self, peaks: Iterable[Peak], residual: bool = False) -> list[Estimate]:
         """:meth:`decide` on each peak, in order; the estimates it accepts. A peak
         ``beside`` the one before it (its window's second codeword, two still echoes at once:
         :mod:`hil.estimation.gcas.still_codewords`) is decided only where that one was
@@ -242,7 +257,9 @@ class Readout:
         the peaks have passed by :data:`FOLLOW_LAG_HOPS` without a fit there are fitted where
         their fits put it (:meth:`_follow`): another echo's ghost or Doppler response can
         hold the row's maximum at that boundary. Decided in the peaks' order, so any
-        chunking of the input gives the same estimates."""
+        chunking of the input gives the same estimates. ``residual``: the peaks of the
+        second search, in the input with the echoes measured lately taken out
+        (:meth:`decide`)."""
         out: list[Estimate] = []
         refused = False
         for p in peaks:
@@ -251,19 +268,34 @@ class Readout:
                 out += self._follow(boundary[0] - FOLLOW_LAG_HOPS * self._fe.hop_s)
             if p.beside and not p.second and not refused:
                 continue
-            est = self.decide(p, boundary)
+            est = self.decide(p, boundary, residual)
             refused = est is None
             if est is not None:
                 out.append(est)
         return out
 
     def decide(
-        self, p: Peak, boundary: tuple[float, float, float, int] | None = None
-    ) -> Estimate | None:
+        self, p: Peak, boundary: tuple[float, float, float, int] | None = None,
+        residual: bool = False,
+    ) -> Estimate | None:  # fmt: skip
         """The estimate of one peak, or None where it is refused (band edge, too far);
-        ``boundary`` its :meth:`_boundary` where the caller has it already."""
+        ``boundary`` its :meth:`_boundary` where the caller has it already. A ``residual``
+        peak (the second search, :mod:`hil.estimation.gcas.residual`) where a measured echo
+        puts its boundary is what is left of that echo, one in the still reverberation's
+        Doppler cells is the reverberation the echoes measured there hid, and one where no
+        echo taken out could have hidden it is one the first search saw or refused (all
+        dropped, :attr:`leftover_count`); it is checked for the ghosts of the echoes not taken out
+        only (the others' ghosts went with them)."""
         fe = self._fe
         t_rx, alpha, t_tx, hop_index = self._boundary(p) if boundary is None else boundary
+        if residual and (
+            abs(fe.sound_speed_mps * (alpha - 1.0) / (alpha + 1.0)) < self._still_mps
+            or self._refiner is None
+            or self._refiner.continues_known(t_rx, alpha, hop_index, self._residual_lag_s)
+            or not self._refiner.hidden_by_known(t_rx, alpha, self._residual_lag_s)
+        ):
+            self.leftover_count += 1
+            return None
         if fe.refused_hypotheses[p.d0]:
             self.in_band_count += 1
             if self.hidden is not None:
@@ -284,12 +316,12 @@ class Readout:
             if self.hidden is not None:
                 self.hidden.measure_near(t_rx, p.peak - p.mean)
             if self._refiner.ghost_of_known(
-                t_rx, alpha, hop_index, self._edge_side(p.d0), p.peak - p.mean
+                t_rx, alpha, hop_index, self._edge_side(p.d0), p.peak - p.mean, residual
             ):
                 self.incoherent_count += 1
                 return None
             refined = self._refiner.refine(
-                t_rx, alpha, hop_index, partners=bool(self._pair_rows[p.d0])
+                t_rx, alpha, hop_index, partners=bool(self._pair_rows[p.d0]), residual=residual
             )
             if refined is None:
                 self.unmeasured_count += 1
@@ -326,6 +358,7 @@ class Readout:
         self.last_detection = DetectionInfo(p.n_star, p.threshold, p.mean, p.ratio, consistent)
         mean, thr = p.mean, p.threshold
         snr = (p.peak - mean) / mean if mean > 0 and math.isfinite(mean) else math.inf
+        self.residual_count += residual
         return replace(
             est,
             score=p.peak / thr if thr > 0 else math.inf,
@@ -363,7 +396,10 @@ class Readout:
             if first is not None:
                 t_rx, alpha = first.t_s, first.alpha
         delay = t_rx - t_tx
-        if delay > self._max_delay + 2.0 / self._fe.fs_bb:
+        slack = 2.0 / self._fe.fs_bb
+        if delay > self._max_delay + slack or delay < -slack:
+            # A followed fit's transmit time is its hop's, unfolded: an echo carried past the
+            # transducer (range through zero) would read a negative range.
             self.refused_count += 1
             return None
         speed = c * (alpha - 1.0) / (alpha + 1.0)  # alpha_to_speed, on Python floats
@@ -415,8 +451,10 @@ class Readout:
     def _reported_already(self, hop_index: int, t_s: float, speed_mps: float) -> bool:
         """Whether an estimate reported at this boundary (hop ``hop_index``) lies within one
         resolution cell of ``(t_s, speed_mps)``: the same echo (two echoes that close are not
-        resolved). Otherwise it is kept among those reported at this hop."""
-        self._reported = [r for r in self._reported if abs(r[0] - hop_index) <= 2]
+        resolved). Otherwise it is kept among those reported at this hop. Kept for
+        :attr:`_residual_lag_s` of receive time (the second search's estimates come out that
+        far behind the first search's)."""
+        self._reported = [r for r in self._reported if r[1] >= t_s - self._residual_lag_s]
         for hop, t, v in self._reported:
             if (
                 hop == hop_index

@@ -24,6 +24,7 @@ from hil.estimation.gcas.options import (
     resolve_cfar_lambda,
 )
 from hil.estimation.gcas.readout import ECHO_TEST, DetectionInfo, Readout
+from hil.estimation.gcas.residual import ResidualSearch
 from hil.estimation.gcas.search import SearchStrategy
 from hil.estimation.gcas.search_full import FullSearch
 from hil.estimation.gcas.search_two_stage import TwoStageSearch
@@ -99,6 +100,11 @@ class GcasReceiver:
         bound above threshold; each estimate then carries its own bounds). Default True;
         False keeps the detector's own readout. The first-arrival readout times the direct
         path itself, so refinement applies to the peak readout only.
+    cancel:
+        With the refinement, search the input again with the echoes measured lately taken
+        out (:mod:`hil.estimation.gcas.residual`: a weaker echo beside a stronger one's
+        Doppler row or ghost is no maximum of its own in the input). Default True; False
+        searches the input once.
     on_map:
         Called as ``on_map(t_s, P, speed_mps)`` with the time–codeword map of each new stretch
         of baseband samples: times (s, shape ``(n,)``), ``P`` (shape ``(n, J)``) and the chosen
@@ -133,6 +139,7 @@ class GcasReceiver:
         range_readout: str = "peak",
         max_spread_s: float | None = None,
         refine: bool = True,
+        cancel: bool = True,
     ) -> None:
         check_geometry(schedule, fs_hz, sound_speed_mps, max_speed_mps, max_range_m, m_hops)
         check_modes(cfar_mode, runner_up_ratio, cfar_window_hops, search, range_readout)
@@ -146,17 +153,23 @@ class GcasReceiver:
         )
         if not isinstance(refine, bool):
             raise ConfigError("refine", refine, "true or false")
+        if not isinstance(cancel, bool):
+            raise ConfigError("cancel", cancel, "true or false")
         self.schedule, self.fs_hz, self.on_map = schedule, float(fs_hz), on_map
         self.sound_speed_mps, self.max_speed_mps = float(sound_speed_mps), float(max_speed_mps)
         self.max_range_m, self.m_hops = float(max_range_m), int(m_hops)
         self.coherent, self.runner_up_ratio = bool(coherent), float(runner_up_ratio)
-        fe = self.front_end = FrontEnd(
-            schedule, self.fs_hz, sound_speed_mps=self.sound_speed_mps,
-            max_speed_mps=self.max_speed_mps, m_hops=self.m_hops, n_doppler=n_doppler,
-            reverb_speed_mps=reverb_speed_mps, reverb_weight=reverb_weight,
-            decimation=decimation, attenuation_db=attenuation_db,
-            cfar_window_hops=cfar_window_hops,
-        )  # fmt: skip
+
+        def front_end() -> FrontEnd:
+            return FrontEnd(
+                schedule, self.fs_hz, sound_speed_mps=self.sound_speed_mps,
+                max_speed_mps=self.max_speed_mps, m_hops=self.m_hops, n_doppler=n_doppler,
+                reverb_speed_mps=reverb_speed_mps, reverb_weight=reverb_weight,
+                decimation=decimation, attenuation_db=attenuation_db,
+                cfar_window_hops=cfar_window_hops,
+            )  # fmt: skip
+
+        fe = self.front_end = front_end()
         self.baseband, self.grid, self.fs_bb = fe.baseband, fe.grid, fe.fs_bb
         self.tones_hz, self.hop_s, self.n_codewords = fe.tones_hz, fe.hop_s, fe.n_codewords
         self.lags = fe.lags
@@ -187,7 +200,18 @@ class GcasReceiver:
             )  # fmt: skip
         self.refine = self._refiner is not None
         self._sums = CodewordSums(fe)
-        self.strategy = self._make_search(search, cfar, coarse_step)
+        self.strategy = self._make_search(fe, self._sums, search, cfar, coarse_step)
+        #: The second search of successive cancellation (with the refinement and ``cancel``).
+        self._residual: ResidualSearch | None = None
+        if self._refiner is not None and cancel:
+            twin = front_end()
+            twin_search = self._make_search(
+                twin, CodewordSums(twin), search, cfar, coarse_step, every_echo=False
+            )
+            self._residual = ResidualSearch(
+                twin.baseband, twin_search, self.m_hops, self.hop_s * self.fs_hz
+            )
+        self.cancel = self._residual is not None
         # The readouts re-read the input at a peak's boundary when the peak comes out, up to
         # the search's decision lag after its samples arrived: they keep that much more.
         for reader in (self._refiner, self._first_arrival):
@@ -201,19 +225,27 @@ class GcasReceiver:
         self.reset()
         self._warm_up()
 
-    def _make_search(self, search: str, cfar: Cfar, coarse_step: int) -> SearchStrategy:
-        """The strategy object of the ``search`` option (the only place it is read)."""
+    def _make_search(
+        self,
+        fe: FrontEnd,
+        sums: CodewordSums,
+        search: str,
+        cfar: Cfar,
+        coarse_step: int,
+        every_echo: bool = True,
+    ) -> SearchStrategy:
+        """The strategy object of the ``search`` option (the only place it is read) on the
+        front end ``fe``."""
         if search == "full":
             return FullSearch(
-                self.front_end, self._sums, cfar, coherent=self.coherent,
-                runner_up_ratio=self.runner_up_ratio,
+                fe, sums, cfar, coherent=self.coherent, runner_up_ratio=self.runner_up_ratio,
                 still_codewords=self._refiner is not None,
             )  # fmt: skip
         # Several echoes per hop where the refinement's likelihood tells an echo from the
         # ghosts and sidelobes of another; the strongest one per hop where it does not.
         return TwoStageSearch(
-            self.front_end, cfar, coherent=self.coherent, runner_up_ratio=self.runner_up_ratio,
-            coarse_step=coarse_step, every_echo=self._refiner is not None,
+            fe, cfar, coherent=self.coherent, runner_up_ratio=self.runner_up_ratio,
+            coarse_step=coarse_step, every_echo=every_echo and self._refiner is not None,
         )  # fmt: skip
 
     def _warm_up(self) -> None:
@@ -224,6 +256,8 @@ class GcasReceiver:
         try:
             self.process(np.zeros(self.baseband.decimation * 64))
             self.strategy.warm_up()
+            if self._residual is not None:
+                self._residual.strategy.warm_up()
             if self._refiner is not None:
                 self._refiner.warm_up()
         finally:
@@ -268,7 +302,8 @@ class GcasReceiver:
 
     @property
     def refused_count(self) -> int:
-        """Detections refused for a delay beyond ``max_range_m``."""
+        """Detections refused for a delay beyond ``max_range_m`` (or a negative one: an echo
+        followed past the transducer)."""
         return self.readout.refused_count
 
     @property
@@ -373,6 +408,10 @@ class GcasReceiver:
         if self._refiner is not None:
             self._refiner.reset(input_index)
         self.strategy.reset(self.baseband.next_output_index)
+        if self._residual is not None:
+            self._residual.reset()
+        #: The next input sample the second search takes (:meth:`_search_residual`).
+        self._residual_from = int(input_index)
         self.readout.restart()
 
     # ------------------------------------------------------------------ streaming
@@ -388,18 +427,55 @@ class GcasReceiver:
             out += self.flush()
             self._samples_seen += int(gap_before)
             self._restart(self._samples_seen)
+        if self._residual is None:
+            return out + self._search(x)
+        # Stretches on a fixed grid of input samples, each searched again with the echoes
+        # measured by then taken out (:mod:`hil.estimation.gcas.residual`).
+        step, i = self._residual.step, 0
+        while i < x.shape[0]:
+            j = min(x.shape[0], i + step - (self._samples_seen % step))
+            out += self._search(x[i:j])
+            if self._samples_seen % step == 0:
+                out += self._search_residual()
+            i = j
+        return out
+
+    def _search(self, x: NDArray[np.float64]) -> list[Estimate]:
+        """The first search on input samples ``x`` (shape ``(n,)``, the next of the stream):
+        the estimates completed by them."""
         if self._first_arrival is not None:
             self._first_arrival.push(x, self._samples_seen)
         if self._refiner is not None:
             self._refiner.push(x, self._samples_seen)
         self._samples_seen += x.shape[0]
         y = self.baseband.process(x)
-        if y.shape[0]:
-            peaks = self.strategy.process(y)
-            if self.on_map is not None:
-                self._emit_map(self.on_map, y.shape[0])
-            out += self.readout.decide_all(peaks)
-        return out
+        if y.shape[0] == 0:
+            return []
+        peaks = self.strategy.process(y)
+        if self.on_map is not None:
+            self._emit_map(self.on_map, y.shape[0])
+        return self.readout.decide_all(peaks)
+
+    def _search_residual(self) -> list[Estimate]:
+        """The second search on the input since it last ran (up to a stretch's end or the
+        input's), with the echoes measured by now taken out."""
+        residual, refiner = self._residual, self._refiner
+        assert residual is not None and refiner is not None
+        first, stop = self._residual_from, self._samples_seen
+        if stop <= first:
+            return []
+        self._residual_from = stop
+        known = refiner.known_input(first, stop - first)
+        start = first
+        if known is not None and not residual.running:
+            # It starts on the input before, as far back as its M hops (the echoes' fits
+            # hold there too): what they hid is found at once.
+            start = first - residual.lead
+        start, x = refiner.recent_input(start)
+        if start != first:
+            known = refiner.known_input(start, x.shape[0])
+        peaks = residual.process(x, known, start)
+        return self.readout.decide_all(peaks, residual=True) if peaks else []
 
     def _checked(self, block: ArrayLike, gap_before: int) -> NDArray[np.float64]:
         """``block`` as a 1-D float array of finite samples; ``gap_before`` a count."""
@@ -421,7 +497,11 @@ class GcasReceiver:
 
     def flush(self) -> list[Estimate]:
         """End of input: decide the candidates still waiting for their look-ahead."""
-        return self.readout.decide_all(self.strategy.flush())
+        out = self.readout.decide_all(self.strategy.flush())
+        if self._residual is not None:
+            out += self._search_residual()
+            out += self.readout.decide_all(self._residual.flush(), residual=True)
+        return out
 
     @property
     def next_decision_index(self) -> int:
@@ -430,7 +510,15 @@ class GcasReceiver:
         below it (an unbroken stream; a gap flushes). A live loop may wait for that many
         samples instead of calling once per block: fewer, larger calls, the same estimates,
         emitted no later. The full search gives no such bound (``samples_seen``)."""
-        return self.strategy.next_decision_index(self._samples_seen)
+        first = self.strategy.next_decision_index(self._samples_seen)
+        if self._residual is None:
+            return first
+        second = self._residual.next_decision_index(self._residual_from)
+        if second is None:
+            return first
+        # The second search decides at the end of a stretch (:meth:`process`).
+        step = self._residual.step
+        return min(first, -(-max(second, self._residual_from + 1) // step) * step)
 
     # ------------------------------------------------------------------ diagnostics
     def _emit_map(self, on_map: MapCallback, count: int) -> None:
