@@ -308,6 +308,9 @@ class Readout:
             if refined.ended:
                 self.ended_count += 1
                 return None
+            if refined.is_echo(ECHO_TEST) and self._refiner.still_leak(refined, hop_index):
+                self.incoherent_count += 1
+                return None
             if refined.is_echo(ECHO_TEST):
                 self._confirm_point_echo(refined, hop_index)
             else:
@@ -410,6 +413,8 @@ class Readout:
             refined = self._refiner.refine(t_pred, alpha, hop_index, partners=False, followed=True)
             if refined is None or refined.ended or not refined.is_echo(ECHO_TEST):
                 continue
+            if self._refiner.still_leak(refined, hop_index):
+                continue  # the still water's leak, not an echo of its own
             k = self._k
             word = hop_index % fe.n_codewords
             t_tx = k.hop_end[word] + (hop_index // fe.n_codewords) * k.period
