@@ -77,6 +77,7 @@ instead, :mod:`hil.estimation.first_arrival`). Tone schedules of equal hops only
 
 from __future__ import annotations
 
+import functools
 import math
 from collections import deque
 from dataclasses import dataclass, replace
@@ -558,6 +559,15 @@ class CoherentRefiner:
         #: followed fit may move from where its echo's fit carried it (:meth:`refine`).
         tones = np.asarray(schedule.tones_hz, dtype=np.float64)
         self._main_lobe_s = 1.0 / (float(np.ptp(tones)) if tones.size > 1 else 1.0 / self.hop_len_s)
+        # :meth:`_ended`'s F test: its degrees of freedom and threshold, and its kernel
+        # call's buffers (one candidate: t, α, rate; C, model and input energy; the hops'
+        # terms).
+        self._end_m = float(self.m_hops - 1)
+        self._end_limit = self._end_m * ((self._end_m / ENDED_CHANCE) ** (1.0 / self._end_m) - 1)
+        self._end_buffers = (
+            np.zeros(1), np.zeros(1), np.zeros(1), np.empty(1, np.complex128), np.empty(1),
+            np.empty(1), np.empty((1, self.m_hops), np.complex128),
+        )  # fmt: skip
 
     # ------------------------------------------------------------------ stream
     def allow_lag(self, samples: int) -> None:
@@ -1257,30 +1267,27 @@ class CoherentRefiner:
         False where the input does not cover the hops."""
         if self.m_hops < 3:
             return False
-        t, alpha, gamma = fit.t_s, fit.alpha, fit.rate(self.c)
-        if gamma != 0.0:
+        t, alpha, gamma = fit.t_s, fit.alpha, 0.0
+        if fit.accel_mps2 != 0.0:
+            gamma = fit.rate(self.c)
             t, alpha = _to_centre(t, alpha, gamma, word.centre_s)
         slots = self._slots(hop_ids, word, t, alpha)
         if slots is None:
             return False
-        args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
-        per_hop = np.empty((1, hop_ids.shape[0]), np.complex128)
+        b = self._end_buffers
+        b[0][0], b[1][0], b[2][0] = t, alpha, gamma
         candidate_sums(
-            *args, np.array([t]), np.array([alpha]), np.array([gamma]),
-            np.empty(1, np.complex128), np.empty(1), np.empty(1), per_hop, known,
+            *self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s, *b, known
         )  # fmt: skip
-        h, amp2 = per_hop[0], word.hops[4]
-        total = float(np.sum(np.abs(h) ** 2 / np.where(amp2 > 0, amp2, np.inf)))
-        energy = np.cumsum(amp2)
-        fitted = np.abs(np.cumsum(h)) ** 2 / np.where(energy > 0, energy, np.inf)
-        lead, whole = fitted[:-1], float(fitted[-1])  # |Σ H|²/Σ a² of the first M − k, of all
-        rss = total - lead  # the residual with the last k hops empty, k = M − 1 … 1
-        m = self.m_hops - 1
-        limit = m * (((m / ENDED_CHANCE) ** (1.0 / m)) - 1.0)
-        ok = rss > 0.0
-        if not ok.any():
-            return False
-        return bool(np.max((lead[ok] - whole) * m / rss[ok]) > limit)
+        h = b[6][0]
+        c = np.cumsum(h)
+        fitted = (c.real * c.real + c.imag * c.imag) * word.inv_energy
+        # G_k > limit, with the residual RSS_k = total − lead_k ≥ 0 (Cauchy–Schwarz); lead_k
+        # = |Σ H|²/Σ a² of the first M − k hops, k = M − 1 … 1.
+        total = float(np.dot(h.real * h.real + h.imag * h.imag, word.inv_amp2))
+        lead = fitted[:-1]
+        gain = self._end_m * (lead - fitted[-1]) - self._end_limit * (total - lead)
+        return bool(np.max(gain) > 0.0)
 
     def _one_sided(
         self, fit: Refinement, word: _Codeword, hop_ids: NDArray[np.int64],
@@ -1656,6 +1663,18 @@ class _Codeword:
     t_rms: float
     f0: float
     tones: NDArray[np.int64]  # each hop's tone index in the schedule, shape (M,)
+
+    @functools.cached_property
+    def inv_amp2(self) -> NDArray[np.float64]:
+        """``1/a_i²`` per hop (0 for a silent hop), shape ``(M,)``."""
+        amp2 = self.hops[4]
+        return np.divide(1.0, amp2, out=np.zeros_like(amp2), where=amp2 > 0)
+
+    @functools.cached_property
+    def inv_energy(self) -> NDArray[np.float64]:
+        """``1/Σ_{j≤i} a_j²`` (0 while the hops so far are silent), shape ``(M,)``."""
+        energy = np.cumsum(self.hops[4])
+        return np.divide(1.0, energy, out=np.zeros_like(energy), where=energy > 0)
 
     @property
     def centre_s(self) -> float:
