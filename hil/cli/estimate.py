@@ -37,7 +37,8 @@ What GCAS refused instead of reporting is said at the end, by reason
 (:data:`hil.estimation.base.REFUSAL_REASONS`: not one echo of the schedule — ghosts and
 noise —, diffuse reverberation as clutter, the reverberation band's edge, beyond the Doppler
 span, beyond the maximum range, hops before the input's start, a second detection of an echo
-already reported at that boundary): a line ``refused: 3 not one
+already reported at that boundary, an echo that ended within the window, before its
+boundary): a line ``refused: 3 not one
 echo of the schedule (ghosts, sidelobes, noise), …`` after the table, on stderr with ``--json`` or
 ``--csv``.
 """

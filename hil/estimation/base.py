@@ -171,6 +171,7 @@ REFUSAL_REASONS: dict[str, str] = {
     "beyond_max_range": "beyond the maximum range",
     "unmeasured": "whose hops reach before the input's start or a gap",
     "same_echo": "of an echo already reported at that boundary",
+    "ended": "of an echo that ended before their boundary",
 }
 
 

@@ -212,6 +212,10 @@ class Readout:
         #: Detections of an echo already reported at the same boundary (two peaks of one
         #: echo, both refined onto it): the first is kept.
         self.same_echo_count = 0
+        #: Detections whose echo ended within their window: its last hops hold none
+        #: (:attr:`~hil.estimation.refine.Refinement.ended`); the echo is not there at
+        #: their boundary.
+        self.ended_count = 0
         #: Estimates of echoes measured lately fitted where their fits put their next
         #: boundary, without a detection there (:meth:`_follow`).
         self.followed_count = 0
@@ -333,6 +337,12 @@ class Readout:
                 if said and said[-1] not in self.notices:
                     self.notices.append(said[-1])
                 return None
+            if refined.ended:
+                self.ended_count += 1
+                return None
+            if refined.is_echo(ECHO_TEST) and self._refiner.still_leak(refined, hop_index):
+                self.incoherent_count += 1
+                return None
             if refined.is_echo(ECHO_TEST):
                 self._confirm_point_echo(refined, hop_index)
             else:
@@ -437,8 +447,10 @@ class Readout:
             if fe.refused_hypotheses[int(np.argmin(np.abs(fe.grid.speeds_mps - speed)))]:
                 continue  # in the reverberation band: hidden, not reported
             refined = self._refiner.refine(t_pred, alpha, hop_index, partners=False, followed=True)
-            if refined is None or not refined.is_echo(ECHO_TEST):
+            if refined is None or refined.ended or not refined.is_echo(ECHO_TEST):
                 continue
+            if self._refiner.still_leak(refined, hop_index):
+                continue  # the still water's leak, not an echo of its own
             k = self._k
             word = hop_index % fe.n_codewords
             t_tx = k.hop_end[word] + (hop_index // fe.n_codewords) * k.period

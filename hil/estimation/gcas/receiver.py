@@ -328,6 +328,7 @@ class GcasReceiver:
             "beyond_max_range": self.refused_count,
             "unmeasured": self.unmeasured_count,
             "same_echo": self.readout.same_echo_count,
+            "ended": self.readout.ended_count,
         }
 
     @property
