@@ -252,7 +252,13 @@ _NO_KNOWN = np.zeros((5, 0), dtype=np.complex128)
 #: Accelerating echoes (:meth:`CoherentRefiner._with_acceleration`): a fit whose coherence
 #: over all hops is below ACCEL_TRY of one echo's at its SNR while over runs of consecutive
 #: hops it keeps ACCEL_RUN_MIN of it (an echo whose phase drifts slowly: measured 0.85-0.87
-#: at 8 m/s² and 0.55-0.72 at 12 m/s² on att, M = 10), and that collects ACCEL_MARGIN_DB more
+#: at 8 m/s² and 0.55-0.72 at 12 m/s² on att, M = 10; of 830 tries over nine scenes of an
+#: independent synthesiser, braking at 5-15 m/s², reversing, still and moving echoes, at 0
+#: and -10 dB, the 73 whose curved fit passed the echo test kept 0.71-0.97 before it, while
+#: the ghosts of a still echo at 40 m, fitted at 0 dB, keep 0.50-0.85, median 0.55: tried
+#: from 0.5, no try below 0.71 passed, and beside a target at 70 m closing at 12 m/s the
+#: tries took 0.98 s of the receiver's 2.6 s of CPU for 2 s of input),
+#: and that collects ACCEL_MARGIN_DB more
 #: than an echo must (fits of noise collect 12-16 dB and, given a third parameter, fit it;
 #: an echo's curvature needs that margin for its gain to pass ACCEL_GAIN), is fitted again
 #: with a changing time scale: accelerations up to MAX_ACCEL_MPS2 (m/s²) on a grid that moves
@@ -263,7 +269,7 @@ _NO_KNOWN = np.zeros((5, 0), dtype=np.complex128)
 #: (twice that gain is χ² with one degree of freedom for an echo of constant speed: 13.8 is
 #: a chance of 2e-4).
 ACCEL_TRY = 0.98
-ACCEL_RUN_MIN = 0.5
+ACCEL_RUN_MIN = 0.65
 ACCEL_MARGIN_DB = 6.0
 MAX_ACCEL_MPS2 = 20.0
 ACCEL_POINTS = 41
