@@ -17,7 +17,12 @@ import pytest
 
 from hil.estimation.base import Estimate
 from hil.estimation.gcas import GcasReceiver
-from hil.estimation.gcas.hidden_echoes import HIDDEN_FRACTION, MAX_WAIT_HOPS, HiddenEchoes
+from hil.estimation.gcas.hidden_echoes import (
+    HIDDEN_FRACTION,
+    MAX_WAIT_HOPS,
+    STILL_WAIT_HOPS,
+    HiddenEchoes,
+)
 from hil.estimation.refine import EchoTest
 
 from .conftest import FS, C, att_schedule, echo_samples, run_blocks, true_range
@@ -82,6 +87,9 @@ class _Fit:
     t_s: float
     alpha: float
     echo: bool
+    #: Something found there: its maximum found, an echo's E/N0 collected (12 dB).
+    found: bool = False
+    e_over_n0_db: float = 0.0
 
     def is_echo(self, test: EchoTest) -> bool:
         return self.echo
@@ -93,15 +101,20 @@ def _alpha(v: float) -> float:
 
 class _Refiner:
     """What :class:`HiddenEchoes` reads of a refinement: every fit is recorded with the echo
-    test in force; ``echo_at`` lists the start speeds (m/s) whose fit is one echo."""
+    test in force; ``echo_at`` lists the start speeds (m/s) whose fit is one echo; with
+    ``strong`` every fit that is not one finds its maximum at 20 dB E/N0 (an echo's, short of
+    one echo's coherence: a still echo fitted from too far)."""
 
     c = C
     speed_span_mps = 0.5
     spacing_hz = 1100.0
+    m_hops = 10
 
-    def __init__(self, echo_at: tuple[float, ...] = (), ghosts: bool = False) -> None:
+    def __init__(
+        self, echo_at: tuple[float, ...] = (), ghosts: bool = False, strong: bool = False
+    ) -> None:
         self.echo_test = EchoTest(0.8, 0.85, 12.0)
-        self.echo_at, self.ghosts = echo_at, ghosts
+        self.echo_at, self.ghosts, self.strong = echo_at, ghosts, strong
         self.fits: list[tuple[float, float, int, EchoTest]] = []
 
     def refine(self, t_s: float, alpha: float, hop: int, echo_test: EchoTest | None = None) -> _Fit:
@@ -109,7 +122,8 @@ class _Refiner:
         self.fits.append(
             (t_s, round(v, 6), hop, self.echo_test if echo_test is None else echo_test)
         )
-        return _Fit(t_s, alpha, any(abs(v - e) < 1e-9 for e in self.echo_at))
+        echo = any(abs(v - e) < 1e-9 for e in self.echo_at)
+        return _Fit(t_s, alpha, echo, self.strong, 20.0 if self.strong else 0.0)
 
     def ghost_of_known(self, t_s: float, alpha: float, hop: int, strength: float) -> bool:
         return self.ghosts
@@ -207,6 +221,40 @@ def test_a_side_that_finds_no_echo_waits_doubling_hops() -> None:
     assert MAX_WAIT_HOPS == 8
     opening = [h for h in measured_at if any(f[2] == h and f[1] < 0 for f in ref.fits)]
     assert opening == closing
+
+
+def _measured_hops(ref: _Refiner, notes: list[tuple[int, float]]) -> list[int]:
+    """The hops at which closing notes ``(hop, t_s)`` at 3 m/s were measured, each note
+    decided beside a detection at its own time."""
+    hidden = _hidden(ref)
+    out = []
+    for hop, t in notes:
+        before = len(ref.fits)
+        hidden.note(t, _alpha(3.0), hop, strength=10.0)
+        hidden.measure_near(t, strength=1.0)
+        if len(ref.fits) > before:
+            out.append(hop)
+    return out
+
+
+def test_one_echo_found_there_but_never_one_echo_waits_longer_after_a_window() -> None:
+    # Notes of one echo at each hop whose fits collect an echo's E/N0 but are never one echo
+    # (a still echo fitted from the edge): 1, 2, 4, 8 hops, then on past the M = 10 hops of
+    # a window (from hop 50) 16, 32, 64.
+    notes = [(hop, 0.5 + (hop - 40) * _period(3.0)) for hop in range(40, 240)]
+    measured = _measured_hops(_Refiner(strong=True), notes)
+    assert measured == [40, 41, 43, 47, 55, 63, 79, 111, 175, 239]
+    assert STILL_WAIT_HOPS == 64
+    # The same notes whose fits find nothing (noise, a weak echo) keep the 8-hop wait.
+    weak = _measured_hops(_Refiner(), notes)
+    assert weak[:6] == [40, 41, 43, 47, 55, 63] and len(weak) == 28
+
+
+def test_another_echo_each_time_keeps_the_shorter_wait() -> None:
+    # Strong notes, each a third of a hop later than where the one before puts it (not one
+    # echo's boundaries): the waits stop at 8 hops.
+    notes = [(hop, 0.5 + (hop - 40) * (_period(3.0) + HOP_S / 3.0)) for hop in range(40, 120)]
+    assert _measured_hops(_Refiner(strong=True), notes)[:8] == [40, 41, 43, 47, 55, 63, 71, 79]
 
 
 def test_a_gap_forgets_the_notes() -> None:
