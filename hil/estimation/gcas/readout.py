@@ -437,8 +437,10 @@ class Readout:
         (:meth:`~hil.estimation.refine.CoherentRefiner.due`, measured as
         :meth:`~hil.estimation.refine.CoherentRefiner.refine` measures a followed boundary):
         those one echo by the echo test (:attr:`followed_count`). None in the reverberation
-        band's refused
-        hypotheses (an echo measured there is hidden, :mod:`hil.estimation.gcas.hidden_echoes`)."""
+        band's refused hypotheses (an echo measured there is hidden,
+        :mod:`hil.estimation.gcas.hidden_echoes`) nor beyond the Doppler span (an echo fitted
+        there, the source of ghosts inside it, is followed to be taken out of other
+        detections, and said once, :mod:`hil.estimation.gcas.beyond_span`)."""
         assert self._refiner is not None
         out = []
         fe = self._fe
@@ -451,6 +453,8 @@ class Readout:
                 continue
             if self._refiner.still_leak(refined, hop_index):
                 continue  # the still water's leak, not an echo of its own
+            if abs(refined.speed_mps(fe.sound_speed_mps)) > fe.max_speed_mps:
+                continue  # beyond the span: fitted to keep it taken out, refused (beyond_span)
             k = self._k
             word = hop_index % fe.n_codewords
             t_tx = k.hop_end[word] + (hop_index // fe.n_codewords) * k.period
