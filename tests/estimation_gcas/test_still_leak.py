@@ -53,10 +53,12 @@ def test_the_still_waters_doppler_leak_is_not_reported(
 def test_beside_fast_targets_at_minus_10_db_srr_false_alarms_stay_below_0_8_per_second() -> None:
     # The 30 trials of sim-03's 10-25 m/s targets at -10 dB SRR with the default band: 4
     # false estimates in 13.8 s of scored time (16 before the still-leak rule), the
-    # boundaries detected the same.
+    # boundaries detected the same (1106); 1105 with the second search on the input with the
+    # measured echoes taken out (hil.estimation.gcas.residual) and a still target's cheaper
+    # hidden-echo measurements: one boundary fewer, as in sim-03's run on 57daa53.
     outs = [_trial(11, rep) for rep in range(30)]
     n_false = sum(int(o["n_false"]) for o in outs)
     window = sum(float(o["window_s"]) for o in outs)
     assert n_false == 4
     assert n_false / window < 0.8
-    assert sum(int(o["n_detected"]) for o in outs) == 1106
+    assert sum(int(o["n_detected"]) for o in outs) == 1105
