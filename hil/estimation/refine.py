@@ -693,6 +693,10 @@ class CoherentRefiner:
         if partners and fit is not None and fit.found and not fit.is_echo(test):
             fit = self._with_partners(fit, word, hop_ids, t_s, speed0, lobe, hop_index, known, test)
         if fit is not None and fit.is_echo(test) and self._ended(fit, word, hop_ids, known):
+            # Not remembered as its echo's latest, but the next detections of its windows
+            # (up to M - 1 after the end) start from it: a warm start each, not a full
+            # search (bench_gcas at M = 29: 4.3 -> 1.9 s of CPU per 20 s, the same estimates).
+            self._recent.append((hop_index, fit.t_s, fit.alpha, fit.rate(self.c)))
             return replace(fit, ended=True)
         if fit is not None and fit.is_echo(test):
             self._recent.append((hop_index, fit.t_s, fit.alpha, fit.rate(self.c)))
