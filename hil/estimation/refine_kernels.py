@@ -253,31 +253,17 @@ def _edge(pos: float, last: int) -> tuple[int, float]:
 def _window(
     prefix: Any, energy: Any, s: int, lo: float, hi: float, coef: Any, i: int
 ) -> tuple[complex, float]:  # fmt: skip
-    """``Σ_p coef_p (S_hi[p] − S_lo[p])`` and ``E_hi − E_lo`` of slot ``s`` between the
-    fractional positions ``lo`` (side 0) and ``hi`` (side 1), ``coef = coef[:, i, :]``.
-    Parts real and imaginary apart (a complex product by the real weights would spend four
-    multiplies on each)."""
+    """``Σ_p coef_p (S_hi[p] − S_lo[p])`` (:func:`_window_sum`) and ``E_hi − E_lo`` of slot
+    ``s`` between the fractional positions ``lo`` (side 0) and ``hi`` (side 1),
+    ``coef = coef[:, i, :]``."""
     last = prefix.shape[2] - 2
     j0, w0 = _edge(lo, last)
     j1, w1 = _edge(hi, last)
-    zr = 0.0
-    zi = 0.0
-    for p in range(prefix.shape[3]):
-        a = prefix[s, 0, j0, p]
-        b = prefix[s, 0, j0 + 1, p]
-        c = prefix[s, 1, j1, p]
-        d = prefix[s, 1, j1 + 1, p]
-        dr = (c.real + w1 * (d.real - c.real)) - (a.real + w0 * (b.real - a.real))
-        di = (c.imag + w1 * (d.imag - c.imag)) - (a.imag + w0 * (b.imag - a.imag))
-        cr = coef[0, i, p]
-        ci = coef[1, i, p]
-        zr += cr * dr - ci * di
-        zi += cr * di + ci * dr
     e0 = energy[s, 0, j0]
     e1 = energy[s, 1, j1]
     e_lo = e0 + w0 * (energy[s, 0, j0 + 1] - e0)
     e_hi = e1 + w1 * (energy[s, 1, j1 + 1] - e1)
-    return complex(zr, zi), e_hi - e_lo
+    return _window_sum(prefix, s, lo, hi, coef, i), e_hi - e_lo
 
 
 @numba.njit(**_JIT)
@@ -349,8 +335,10 @@ def _candidate(
 
 @numba.njit(**_JIT)
 def _window_sum(prefix: Any, s: int, lo: float, hi: float, coef: Any, i: int) -> complex:
-    """:func:`_window`'s sum alone (the same operations: the same bits), for a search that
-    reads no energy."""
+    """``Σ_p coef_p (S_hi[p] − S_lo[p])`` of slot ``s`` between the fractional positions
+    ``lo`` (side 0) and ``hi`` (side 1), ``coef = coef[:, i, :]`` (:func:`_window` adds the
+    energy). Parts real and imaginary apart (a complex product by the real weights would
+    spend four multiplies on each)."""
     last = prefix.shape[2] - 2
     j0, w0 = _edge(lo, last)
     j1, w1 = _edge(hi, last)

@@ -5,6 +5,8 @@ beside it, and the known hops a search reads per hop include every one its windo
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -113,21 +115,17 @@ def test_the_known_hops_a_search_reads_include_every_one_it_can_meet(
         assert np.all(np.diff(read) > 0)
 
 
-def test_a_search_rows_carried_phasors_give_each_candidates_own_sums() -> None:
-    # maximise walks a row of equally spaced times turning each hop's phasor and each known
-    # column's integral ends by a fixed factor a step (_row_phasors, _row_edges); a candidate
-    # so reached equals the same candidate computed alone (candidate_sums), to rounding, while
-    # other echoes' hops start and end inside the windows, across their edges or outside.
+def _echo_with_known_hops(seed: int) -> tuple[tuple[Any, ...], float, float, np.ndarray]:
+    """A refiner's kernel arguments at a 70 m echo closing at 12 m/s (0 dB, hop 28), its time
+    scale, boundary time (s), and 40 made-up known hops (``rng`` seed ``seed``) that start and
+    end inside the M hops' windows, across their edges or outside."""
     schedule = att_schedule()
     refiner = CoherentRefiner(schedule, FS, 10, C, 0.5, 30.0)
     refiner.push(echo_samples(schedule, 70.0, 12.0, 0.4, snr_db=0.0, seed=4), 0)
     alpha = (C + 12.0) / (C - 12.0)
     hop = 28
     t_s = float(schedule.hops(hop + 1, 1).start_s[0]) + 2 * 70.0 / C
-    args = _kernel_args(refiner, hop, t_s, alpha)
-    prefix, energy, first, tail, alpha0, centre, slots, k, f, dt_lo, dt_hi, amp2, fs, hop_s = args
-    m = slots.shape[0]
-    rng = np.random.default_rng(7)
+    rng = np.random.default_rng(seed)
     n_cols = 40
     known = np.zeros((5, n_cols), dtype=np.complex128)
     known[0] = rng.normal(size=n_cols) + 1j * rng.normal(size=n_cols)
@@ -135,6 +133,17 @@ def test_a_search_rows_carried_phasors_give_each_candidates_own_sums() -> None:
     known[2] = t_s + rng.uniform(-0.11, 0.0, n_cols)
     known[3] = known[2].real + rng.uniform(0.001, 0.012, n_cols)
     known[4] = t_s - rng.uniform(0.0, 0.02, n_cols)
+    return _kernel_args(refiner, hop, t_s, alpha), alpha, t_s, known
+
+
+def test_a_search_rows_carried_phasors_give_each_candidates_own_sums() -> None:
+    # maximise walks a row of equally spaced times turning each hop's phasor and each known
+    # column's integral ends by a fixed factor a step (_row_phasors, _row_edges); a candidate
+    # so reached equals the same candidate computed alone (candidate_sums), to rounding, while
+    # other echoes' hops start and end inside the windows, across their edges or outside.
+    args, alpha, t_s, known = _echo_with_known_hops(7)
+    prefix, energy, first, tail, alpha0, centre, slots, k, f, dt_lo, dt_hi, amp2, fs, hop_s = args
+    m = slots.shape[0]
     near, n_near = kernels._every_column(m, known)
     step = 1e-4  # the row's times cross the known hops' ends and the windows' edges
     n_t = 9
@@ -145,7 +154,7 @@ def test_a_search_rows_carried_phasors_give_each_candidates_own_sums() -> None:
         t0 = t_s - 0.5 * (n_t - 1) * step
         phasors = np.empty(m, dtype=np.complex128)
         turn = np.empty(m, dtype=np.complex128)
-        edges = np.empty((5, m, n_cols), dtype=np.complex128)
+        edges = np.empty((5, m, known.shape[1]), dtype=np.complex128)
         kernels._row_phasors(centre, slots, t0, curved, d_c_a, consts, step, phasors, turn)
         kernels._row_edges(known, near, n_near, t0, curved, d_c_a, consts, step, edges)
         no_key, no_rot = np.empty(0), np.empty(0, dtype=np.complex128)
@@ -238,23 +247,9 @@ def test_a_searchs_candidate_is_the_candidates_own_c_bit_for_bit() -> None:
     # maximise reads C alone (_candidate_c: no energies); along a row of carried phasors and
     # known columns' ends it is _candidate's C, the same bits, at a constant time scale and
     # under a rate.
-    schedule = att_schedule()
-    refiner = CoherentRefiner(schedule, FS, 10, C, 0.5, 30.0)
-    refiner.push(echo_samples(schedule, 70.0, 12.0, 0.4, snr_db=0.0, seed=4), 0)
-    alpha = (C + 12.0) / (C - 12.0)
-    hop = 28
-    t_s = float(schedule.hops(hop + 1, 1).start_s[0]) + 2 * 70.0 / C
-    args = _kernel_args(refiner, hop, t_s, alpha)
+    args, alpha, t_s, known = _echo_with_known_hops(3)
     prefix, energy, first, tail, alpha0, centre, slots, k, f, dt_lo, dt_hi, amp2, fs, hop_s = args
     m = slots.shape[0]
-    rng = np.random.default_rng(3)
-    n_cols = 40
-    known = np.zeros((5, n_cols), dtype=np.complex128)
-    known[0] = rng.normal(size=n_cols) + 1j * rng.normal(size=n_cols)
-    known[1] = rng.choice(schedule.tones_hz, n_cols) * (1.0 + rng.uniform(-0.02, 0.02, n_cols))
-    known[2] = t_s + rng.uniform(-0.11, 0.0, n_cols)
-    known[3] = known[2].real + rng.uniform(0.001, 0.012, n_cols)
-    known[4] = t_s - rng.uniform(0.0, 0.02, n_cols)
     near, n_near = kernels._every_column(m, known)
     step, n_t = 1e-4, 9
     compared = 0
@@ -265,7 +260,7 @@ def test_a_searchs_candidate_is_the_candidates_own_c_bit_for_bit() -> None:
         t0 = t_s - 0.5 * (n_t - 1) * step
         phasors = np.empty(m, dtype=np.complex128)
         turn = np.empty(m, dtype=np.complex128)
-        edges = np.empty((5, m, n_cols), dtype=np.complex128)
+        edges = np.empty((5, m, known.shape[1]), dtype=np.complex128)
         kernels._row_phasors(centre, slots, t0, curved, d_c_a, consts, step, phasors, turn)
         kernels._row_edges(known, near, n_near, t0, curved, d_c_a, consts, step, edges)
         no_key, no_rot = np.empty(0), np.empty(0, dtype=np.complex128)
