@@ -636,6 +636,7 @@ class CoherentRefiner:
     def refine(
         self, t_s: float, alpha: float, hop_index: int, echo_test: EchoTest | None = None,
         partners: bool = True, followed: bool = False, residual: bool = False,
+        lag_s: float = 0.0,
     ) -> Refinement | None:  # fmt: skip
         """The maximum-likelihood boundary time and time scale near ``(t_s, alpha)`` for the
         boundary that ends hop ``hop_index``; None where the input does not cover the ``M``
@@ -654,13 +655,16 @@ class CoherentRefiner:
         still fits one echo on its earlier hops, and followed on it would go on where it
         is no more; None otherwise. A ``residual`` detection is the second search's
         (:meth:`known_input`): its echo, remembered, is not taken out of that search's input
-        (a followed fit keeps its echo's own)."""
+        (a followed fit keeps its echo's own). ``lag_s``: how far (s) the detection may lie
+        behind the fits measured since (the second search's lag): an echo whose latest fit is
+        up to that much later than :data:`KNOWN_HOPS` hops after the detection is taken out
+        too (:meth:`_known_hops`)."""
         test = self.echo_test if echo_test is None else echo_test
         word = self._codeword(hop_index)
         hop_ids = np.arange(hop_index - self.m_hops + 1, hop_index + 1, dtype=np.int64)
         lobe = 1.0 / (alpha * self.spacing_hz)
         speed0 = self.c * (alpha - 1.0) / (alpha + 1.0)
-        known = self._known_hops(hop_index, t_s, speed0)
+        known = self._known_hops(hop_index, t_s, speed0, lag_s)
         fit = self._fit_near(word, hop_ids, t_s, speed0, lobe, hop_index, known)
         if followed and fit is not None:
             if abs(fit.t_s - t_s) > self._main_lobe_s:
@@ -1057,22 +1061,31 @@ class CoherentRefiner:
         t_pred = fit.t_s + (hop_index - fit.hop_index) * self.hop_len_s / fit.alpha
         return abs(t_pred - t_s) <= SAME_ECHO_LOBES / (fit.alpha * self.spacing_hz)
 
-    def _known_hops(self, hop_index: int, t_s: float, speed: float) -> NDArray[np.complex128]:
+    def _known_hops(
+        self, hop_index: int, t_s: float, speed: float, lag_s: float = 0.0
+    ) -> NDArray[np.complex128]:
         """The hops of the other echoes measured lately that a detection at ``t_s`` (s) and
         ``speed`` (m/s) ending hop ``hop_index`` hears over its ``M`` hops, as the ``known``
         rows of :func:`~hil.estimation.refine_kernels.candidate_sums` (shape ``(5, Q)``):
-        each echo continues at its fitted delay, time scale and amplitude."""
-        return self._rows(self._others(hop_index, t_s, speed), t_s)
+        each echo continues at its fitted delay, time scale and amplitude, before its latest
+        fit as after it (``lag_s``: :meth:`_others`)."""
+        return self._rows(self._others(hop_index, t_s, speed, lag_s=lag_s), t_s)
 
     def _others(
-        self, hop_index: int, t_s: float, speed: float, stronger_than: float = 0.0
-    ) -> list[_EchoFit]:
+        self, hop_index: int, t_s: float, speed: float, stronger_than: float = 0.0,
+        lag_s: float = 0.0,
+    ) -> list[_EchoFit]:  # fmt: skip
         """The echoes measured within :data:`KNOWN_HOPS` hops of a detection at ``t_s`` (s)
         and ``speed`` (m/s) ending hop ``hop_index`` that are not its own, with a fitted
-        ``|β|`` above ``stronger_than``."""
+        ``|β|`` above ``stronger_than``; a detection decided ``lag_s`` (s) late (the second
+        search's) also hears the echoes whose latest fits are up to that much later: an echo
+        measured at one speed since is there at that speed before too, and left in it holds
+        the detection's fit on its own partial-overlap lobe (a target 0.8 m/s and 6 m from a
+        stronger one, -10 dB: fitted at the stronger one's speed half a hop off, reported on
+        0.06 of the hops)."""
         return [
             e for e in self._echoes
-            if abs(e.t_s - t_s) <= KNOWN_HOPS * self.hop_len_s
+            if -KNOWN_HOPS * self.hop_len_s <= e.t_s - t_s <= KNOWN_HOPS * self.hop_len_s + lag_s
             and abs(e.amplitude) > stronger_than
             and not self._same_echo(e, hop_index, t_s, speed)
         ]  # fmt: skip

@@ -325,8 +325,9 @@ class Readout:
                 self.incoherent_count += 1
                 return None
             refined = self._refiner.refine(
-                t_rx, alpha, hop_index, partners=bool(self._pair_rows[p.d0]), residual=residual
-            )
+                t_rx, alpha, hop_index, partners=bool(self._pair_rows[p.d0]),
+                residual=residual, lag_s=self._residual_lag_s if residual else 0.0,
+            )  # fmt: skip
             if refined is None:
                 self.unmeasured_count += 1
                 return None
