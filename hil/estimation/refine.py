@@ -360,6 +360,10 @@ class _EchoFit:
     #: The latest hop at which this echo was looked for where the fit puts it, without a
     #: detection (:meth:`CoherentRefiner.due`; its own hop before any).
     followed: int = -1
+    #: The first hop before this fit's at which the echo was neither fitted nor looked for
+    #: (this fit's detection came after a boundary that none brought; -1: none): looked for
+    #: where this fit puts it (:meth:`CoherentRefiner.due`).
+    gap: int = -1
     #: Whether the echo is taken out of the second search's input
     #: (:meth:`CoherentRefiner.known_input`): measured from a detection of the first search
     #: (or followed on from such a fit). An echo the second search found is not: that search
@@ -811,11 +815,20 @@ class CoherentRefiner:
         that fit, each once: ``(hop_index, t, α)`` (hop, s, 1). Another echo's ghost or
         Doppler response can hold the row's maximum at an echo's boundary (a weaker echo a
         tone spacing's speed from a stronger one: the ghost's peak beside it); the echo is
-        then fitted there (:meth:`refine`) and its echo test decides."""
+        then fitted there (:meth:`refine`) and its echo test decides. So are the boundaries
+        a fit's detection came after without any brought (:attr:`_EchoFit.gap`, where that fit
+        puts them): a closing echo's next boundary comes less than a hop after a missed one,
+        so before the peaks have passed the missed one by the readout's lag."""
         out = []
         for i, e in enumerate(self._echoes):
             if e.e_over_n0_db < self.lobe_sure_db or abs(e.speed(self.c)) < self._still_mps:
                 continue
+            if e.gap >= 0:
+                t_gap = e.t_s - (e.hop_index - e.gap) * self.hop_len_s / e.alpha
+                if t_gap <= t_s:
+                    out.append((e.gap, t_gap, e.alpha))
+                    e = replace(e, gap=e.gap + 1 if e.gap + 1 < e.hop_index else -1)
+                    self._echoes[i] = e
             hop = max(e.hop_index, e.followed) + 1
             t_next = e.t_s + (hop - e.hop_index) * self.hop_len_s / e.alpha
             if t_next <= t_s and hop - e.hop_index <= KNOWN_HOPS:
@@ -1028,7 +1041,10 @@ class CoherentRefiner:
         """Keep ``fit`` as its echo's latest (with its fitted amplitude ``β = 2C/E_s``),
         replacing that echo's earlier fit (the strength of its ghosts read so far carried
         on) and forgetting fits :data:`KNOWN_HOPS` hops old; ``cancelled`` as
-        :attr:`_EchoFit.cancelled` (None: the echo's earlier fit's, True for a new echo)."""
+        :attr:`_EchoFit.cancelled` (None: the echo's earlier fit's, True for a new echo). A fit
+        of a boundary before the echo's latest fit (a gap looked for, :meth:`due`) is not kept
+        in its place; a fit after boundaries neither fitted nor looked for since the echo's
+        earlier fit notes them (:attr:`_EchoFit.gap`, at most :data:`KNOWN_HOPS` of them)."""
         if fit.amplitude == 0:
             return
         speed = self.c * (fit.alpha - 1.0) / (fit.alpha + 1.0)  # _EchoFit.speed
@@ -1036,19 +1052,24 @@ class CoherentRefiner:
         kept = []
         ghost_strength = (0.0,) * self.schedule.period_hops
         was: bool | None = None
+        covered = -1
         for e in self._echoes:
             if e.t_s < oldest:
                 continue
             if self._same_echo(e, hop_index, fit.t_s, speed):
+                if e.hop_index > hop_index:
+                    return  # a boundary looked for behind the echo's latest fit keeps that
                 ghost_strength = tuple(map(max, ghost_strength, e.ghost_strength or ghost_strength))
                 was = e.cancelled if was is None else was or e.cancelled
+                covered = max(covered, e.hop_index, e.followed)
             else:
                 kept.append(e)
         if cancelled is None:
             cancelled = True if was is None else was
+        gap = covered + 1 if covered >= 0 and 0 < hop_index - covered - 1 <= KNOWN_HOPS else -1
         new = _EchoFit(
             hop_index, fit.t_s, fit.alpha, fit.amplitude, fit.rate(self.c), ghost_strength,
-            fit.e_over_n0_db, cancelled=cancelled,
+            fit.e_over_n0_db, cancelled=cancelled, gap=gap,
         )  # fmt: skip
         self._echoes = [*kept, new]
 
