@@ -32,14 +32,16 @@ def _trial(point: int, rep: int) -> dict[str, float]:
     [
         # A fast target in strong near reverberation: the still water at 6-22 m read at
         # 2.5-4.1 m/s, just outside the band, gave 2, 2 and 4 false estimates (0.24-0.44 of
-        # the still echo at their delay); the target's boundaries are all kept.
+        # the still echo at their delay); the target's boundaries are kept (47, 48 and 45
+        # of 47, 48 and 47; 45 and 43 before a boundary missed just before the echo's next
+        # detection was followed).
         (11, 0, 47, 0),
-        (11, 1, 45, 0),
-        (11, 9, 43, 0),
-        # A 2-5 m/s target: its estimates stand above the still water at their delay (one
-        # of 46 boundaries, at 0.34 of it, is given up with the leak beside it).
-        (1, 0, 44, 0),
-        (1, 21, 41, 0),
+        (11, 1, 48, 0),
+        (11, 9, 45, 0),
+        # A 2-5 m/s target: its estimates stand above the still water at their delay (46
+        # and 43 of 46 boundaries; 44 and 41 before those gaps were followed).
+        (1, 0, 46, 0),
+        (1, 21, 43, 0),
     ],
 )
 def test_the_still_waters_doppler_leak_is_not_reported(
@@ -55,10 +57,11 @@ def test_beside_fast_targets_at_minus_10_db_srr_false_alarms_stay_below_0_8_per_
     # false estimates in 13.8 s of scored time (16 before the still-leak rule), the
     # boundaries detected the same (1106); 1105 with the second search on the input with the
     # measured echoes taken out (hil.estimation.gcas.residual) and a still target's cheaper
-    # hidden-echo measurements: one boundary fewer, as in sim-03's run on 57daa53.
+    # hidden-echo measurements: one boundary fewer, as in sim-03's run on 57daa53; 1142 with
+    # a boundary missed just before the echo's next detection followed (CoherentRefiner.due).
     outs = [_trial(11, rep) for rep in range(30)]
     n_false = sum(int(o["n_false"]) for o in outs)
     window = sum(float(o["window_s"]) for o in outs)
     assert n_false == 4
     assert n_false / window < 0.8
-    assert sum(int(o["n_detected"]) for o in outs) == 1105
+    assert sum(int(o["n_detected"]) for o in outs) == 1142
