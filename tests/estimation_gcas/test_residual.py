@@ -166,3 +166,24 @@ def test_a_late_detection_hears_the_echoes_measured_since() -> None:
     hits = [_hits(est, r, v) for r, v, _ in targets]
     assert hits[0] >= 180 and hits[1] >= 165
     assert len(est) - sum(hits) <= 1
+
+
+def test_echoes_measured_since_a_late_detection_are_heard_only_with_its_lag() -> None:
+    # The second search's detections are decided up to its lag behind the first's: an echo
+    # whose latest fit is more than KNOWN_HOPS hops after such a detection is read as taken
+    # out of it (CoherentRefiner._others) and as explaining its leak (known_echoes, for the
+    # beyond-span check: on bench_gcas's 20 s input 15 ghost-source scans -> 0, the same
+    # 1602 estimates).
+    from hil.estimation.refine import KNOWN_HOPS, _EchoFit
+
+    rx = make_gcas(att_schedule())
+    refiner = rx._refiner
+    assert refiner is not None
+    hop = refiner.hop_len_s
+    refiner._echoes = [_EchoFit(60, 0.70, (1500.0 + 12.0) / (1500.0 - 12.0), 0.02 + 0.01j)]
+    t_late = 0.70 - (KNOWN_HOPS + 4) * hop  # the detection, 7 hops before that fit
+    assert refiner.known_echoes(t_late) == []
+    lag = rx.readout._residual_lag_s
+    ((speed, amplitude),) = refiner.known_echoes(t_late, lag)
+    assert abs(speed - 12.0) < 1e-9 and abs(amplitude - abs(0.02 + 0.01j)) < 1e-12
+    assert refiner.known_echoes(0.70 + (KNOWN_HOPS + 1) * hop, lag) == []

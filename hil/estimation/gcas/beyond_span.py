@@ -273,12 +273,16 @@ class BeyondSpanCheck:
         return any(v * side > 0 for _, v in recent)
 
     def check(
-        self, t_s: float, alpha: float, hop_index: int, side: int, fit: Refinement | None
-    ) -> bool:
+        self, t_s: float, alpha: float, hop_index: int, side: int, fit: Refinement | None,
+        lag_s: float = 0.0,
+    ) -> bool:  # fmt: skip
         """Whether a detection at ``t_s`` (s), time scale ``alpha``, ending hop
         ``hop_index`` on the ``side`` edge (+1 closing, −1 opening, 0 not on an edge) with
         its own ``fit`` is the leak of an echo beyond the span, or is fitted past it
-        (refused either way, counted; the first sighting per side kept)."""
+        (refused either way, counted; the first sighting per side kept). ``lag_s``: how far
+        (s) the detection may lie before the echoes measured by now (the second search's
+        lag, :meth:`~hil.estimation.refine.CoherentRefiner.hidden_by_known`): those echoes
+        too may explain it as their leak (:meth:`_leak_of_known`)."""
         echo = fit is not None and fit.is_echo(self.test)
         own = math.nan if fit is None else fit.speed_mps(self.c)
         if echo and self.beyond(own):
@@ -309,7 +313,7 @@ class BeyondSpanCheck:
             # Once an echo beyond this edge has been seen, a fit within one Doppler cell of
             # the edge may be its leak, fitted on a sidelobe of the likelihood: scanned.
         elif side == 0:
-            return fit is not None and self._ghost_refused(t_s, alpha, hop_index, fit)
+            return fit is not None and self._ghost_refused(t_s, alpha, hop_index, fit, lag_s)
         elif self._inside_echo_at(t_s, side):
             # An edge detection not fitted as an echo is checked unless an echo inside the
             # span near that edge holds its detections.
@@ -358,12 +362,15 @@ class BeyondSpanCheck:
         next_scan[side] = hop_index + gap
         gaps[side] = min(2 * gap, MAX_SCAN_GAP_HOPS)
 
-    def _ghost_refused(self, t_s: float, alpha: float, hop_index: int, fit: Refinement) -> bool:
+    def _ghost_refused(
+        self, t_s: float, alpha: float, hop_index: int, fit: Refinement, lag_s: float = 0.0
+    ) -> bool:
         """Whether a detection inside the span at ``t_s`` (s) and ``alpha`` (hop
         ``hop_index``) whose ``fit`` is not one echo is the ghost of an echo beyond the span
         (:mod:`hil.estimation.gcas.ghost_source`): its source is followed from the latest
-        fit beyond that edge, else (with the scans' waits) looked for; found, it is counted
-        and the first per side said."""
+        fit beyond that edge, else (with the scans' waits) looked for, unless an echo
+        measured inside the span explains it (:meth:`_leak_of_known`, ``lag_s`` as
+        :meth:`check`'s); found, it is counted and the first per side said."""
         # A boundary whose M hops were not all transmitted (the schedule's first M - 1) is
         # not one echo's fit whatever it is: no source is looked for from it (a lone target's
         # first boundaries would each cost a scan of every band).
@@ -376,7 +383,7 @@ class BeyondSpanCheck:
             if (
                 found is None
                 and hop_index >= self._next_ghost_scan.get(side, hop_index)
-                and not self._leak_of_known(t_s, alpha, fit)
+                and not self._leak_of_known(t_s, alpha, fit, lag_s)
             ):
                 # One scan of a side reads every band of it (its tone spacings), nearest
                 # first, and waits as one.
@@ -391,7 +398,7 @@ class BeyondSpanCheck:
                 return True
         return False
 
-    def _leak_of_known(self, t_s: float, alpha: float, fit: Refinement) -> bool:
+    def _leak_of_known(self, t_s: float, alpha: float, fit: Refinement, lag_s: float = 0.0) -> bool:
         """Whether a detection at ``t_s`` (s) and ``alpha`` whose fit is ``fit`` is explained
         by an echo measured lately inside the span: within :data:`LEAK_CELLS` Doppler cells
         of its speed, within :data:`GHOST_CELLS` of one of its ghosts'
@@ -400,7 +407,7 @@ class BeyondSpanCheck:
         leaks at -24.2 m/s; a ghost holds 0.15-0.34 of its source, so the source of a ghost
         that weak would be weaker than that echo, and is given up while it is measured)."""
         speed = self.c * (alpha - 1.0) / (alpha + 1.0)
-        for v, amplitude in self.refiner.known_echoes(t_s):
+        for v, amplitude in self.refiner.known_echoes(t_s, lag_s):
             if self.beyond(v):
                 continue
             apart = abs(speed - v)

@@ -332,8 +332,9 @@ class Readout:
                 self.unmeasured_count += 1
                 return None
             if self.beyond_span is not None and self.beyond_span.check(
-                t_rx, alpha, hop_index, self._edge_side(p.d0), refined
-            ):
+                t_rx, alpha, hop_index, self._edge_side(p.d0), refined,
+                self._residual_lag_s if residual else 0.0,
+            ):  # fmt: skip
                 said = self.beyond_span.sightings
                 if said and said[-1] not in self.notices:
                     self.notices.append(said[-1])
