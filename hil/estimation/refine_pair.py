@@ -187,8 +187,10 @@ def _fit_one(
     """The one-echo fit near ``start``'s delay and speed with ``rows`` taken out: a grid of
     ±:data:`ROUND_HALF_LOBES` lobe and ±:data:`ROUND_HALF_SPANS` speed spans, re-centred
     and fitted (:meth:`~hil.estimation.refine.CoherentRefiner._search`), the full ±½ lobe
-    search where its maximum is on that grid's edge in time; None where the input does not
-    cover the hops or no maximum is inside."""
+    search where its maximum is on that grid's edge in time, then moved to a neighbouring
+    grating lobe where that is greater (up to
+    :data:`~hil.estimation.refine.LOBE_MOVES` times); None where the input does not cover
+    the hops or no maximum is inside."""
     v0 = start.speed(ref.c)
     grid = (ROUND_HALF_LOBES * lobe, ROUND_HALF_SPANS * ref.speed_span_mps, 5, 5)
     searched = ref._search(word, hop_ids, start.t_s, v0, lobe, rows, grid)
@@ -196,7 +198,20 @@ def _fit_one(
         searched = ref._search(word, hop_ids, start.t_s, v0, lobe, rows)
     if searched is None or searched[2] != FOUND:
         return None
+    from hil.estimation.refine import LOBE_MOVES
+
     t, v, _, args = searched
+    for _ in range(LOBE_MOVES):
+        # The grating lobe: a lobe of the other echo's neighbour keeps most of its hops'
+        # terms (a lobe apart they differ by the hops' edges only), so the likelihood's own
+        # neighbours decide, as for one echo.
+        moved = ref._better_lobe(args, t, v, lobe, rows)
+        if moved is None:
+            break
+        searched = ref._search(word, hop_ids, moved, v, lobe, rows, ref._narrow_grid(lobe))
+        if searched is None or searched[2] != FOUND:
+            return None
+        t, v, _, args = searched
     alpha = (ref.c + v) / (ref.c - v)
     return ref._refinement(args, rows, word, t, alpha, 0.0, True)
 
