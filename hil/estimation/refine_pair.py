@@ -66,6 +66,15 @@ ROUND_HALF_SPANS = 0.5
 RESOLVED_LOBES = 1.0
 #: The chance that one echo in noise passes :func:`pair_gain`'s test.
 PAIR_CHANCE = 1e-3
+#: A pair is kept where what it explains together is at least this fraction of what its two
+#: echoes hold alone (:func:`interference`). Two echoes a whole number of grating lobes
+#: apart in opposite phase cancel on every hop but its edges, so a large such pair fits the
+#: edges of whatever a hop holds: the refused fits of a target's leaks and a still echo's
+#: ghosts (att: 24 m/s targets' leaks at 16.4 m/s, two echoes 1-2 lobes apart of 0.22-0.45
+#: each where the one-echo fit reads 0.10-0.37; 0.17-0.36 of them; real pairs 0.3-2 m
+#: apart 0.9-2). Half is where the two interfere destructively by more than their own
+#: energy's half: such a pair is not told from a hop's edge structure.
+LEAST_INTERFERENCE = 0.5
 
 
 @dataclass(frozen=True)
@@ -111,6 +120,23 @@ def pair_gain(
     )  # fmt: skip
     explained = 2.0 * float(quad) / det
     return 0.5 * samples * (explained - one) / (rss / (m_hops - 2))
+
+
+def interference(c: NDArray[np.complex128], cross: complex, model: NDArray[np.float64]) -> float:
+    """What the pair explains together (``2 cᴴ A⁻¹ c``) over the sum of what each of its
+    least-squares echoes holds alone (``½ |β_k|² E_k``, ``β = 2 A⁻¹ c``); ``c``, ``cross``
+    and ``model`` as :func:`pair_gain`'s. 1 for echoes whose models do not overlap, up to 2
+    for two in phase a grating lobe apart, and near 0 where the two cancel each other on
+    all but their hops' edges (:data:`LEAST_INTERFERENCE`); 0 where the two are one
+    model."""
+    det = float(model[0] * model[1]) - abs(cross) ** 2
+    if not det > 0:
+        return 0.0
+    b1 = 2.0 * (model[1] * c[0] - cross * c[1]) / det
+    b2 = 2.0 * (model[0] * c[1] - np.conj(cross) * c[0]) / det
+    alone = 0.5 * (abs(b1) ** 2 * model[0] + abs(b2) ** 2 * model[1])
+    together = float((np.conj(b1) * c[0] + np.conj(b2) * c[1]).real)
+    return together / alone if alone > 0 else 0.0
 
 
 def hop_scatter(terms: NDArray[np.complex128], amp2: NDArray[np.float64]) -> float:
@@ -161,9 +187,9 @@ def fit_pair(
     assert first is not None and second_fit is not None
     if not (first.is_echo(test) and second_fit.is_echo(test)):
         return None
-    gain = _gain(ref, word, hop_ids, hop_index, fit, first, second_fit, known)
+    gain, together = _gain(ref, word, hop_ids, hop_index, fit, first, second_fit, known)
     cells = 2.0 * SEED_LOBES * lobe / ref._main_lobe_s
-    if not gain > gain_limit(ref.m_hops, cells):
+    if not (gain > gain_limit(ref.m_hops, cells) and together >= LEAST_INTERFERENCE):
         return None
     main = ref._main_lobe_s
     resolved = abs(first.t_s - second_fit.t_s) >= RESOLVED_LOBES * main
@@ -299,8 +325,9 @@ def _seed(
 def _gain(
     ref: CoherentRefiner, word: _Codeword, hop_ids: NDArray[np.int64], hop_index: int,
     one: Refinement, first: Refinement, second: Refinement, known: NDArray[np.complex128],
-) -> float:  # fmt: skip
-    """:func:`pair_gain` of the pair ``first``, ``second`` over the one-echo fit ``one``:
+) -> tuple[float, float]:  # fmt: skip
+    """:func:`pair_gain` and :func:`interference` of the pair ``first``, ``second`` (the
+    gain over the one-echo fit ``one``):
     each echo's ``C`` with the other in and taken out (their difference is the other's
     fitted amplitude times the models' cross term), the scatter of each one's hops with the
     other taken out (the larger of the two)."""
@@ -315,7 +342,7 @@ def _gain(
     for k, f in enumerate(fits):
         slots = ref._slots(hop_ids, word, f.t_s, f.alpha)
         if slots is None:
-            return -math.inf
+            return -math.inf, 0.0
         args = (*ref._tables, slots, *word.hops, ref.fs_hz, ref.hop_len_s)
         other = echoes[1 - k]
         rows = _with(known, ref._rows([other], f.t_s))
@@ -326,14 +353,15 @@ def _gain(
         rss = max(rss, hop_scatter(terms, word.hops[4]))
     slots = ref._slots(hop_ids, word, one.t_s, one.alpha)
     if slots is None:
-        return -math.inf
+        return -math.inf, 0.0
     args = (*ref._tables, slots, *word.hops, ref.fs_hz, ref.hop_len_s)
     c_one, e_one, _ = _sums(args, known, one.t_s, one.alpha, ref.m_hops)
     explained_one = 2.0 * abs(c_one) ** 2 / e_one if e_one > 0 else 0.0
     # Σ s₂ s₁*, read from either side (the second's, conjugated).
     g = 0.5 * (cross[0] + np.conj(cross[1]))
     samples = float(model[0]) / float(np.sum(word.hops[4]))
-    return pair_gain(c, complex(g), model, explained_one, rss, samples, ref.m_hops)
+    gain = pair_gain(c, complex(g), model, explained_one, rss, samples, ref.m_hops)
+    return gain, interference(c, complex(g), model)
 
 
 def _sums(

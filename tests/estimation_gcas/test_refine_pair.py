@@ -160,3 +160,18 @@ def test_a_close_pair_chunks_equal_whole(cut: int | str) -> None:
     # Measured: 88 estimates, both echoes at each of 44 boundaries.
     assert sum(abs(e.speed_mps - V) < 0.5 for e in want) == 88
     assert rx.refusals() == whole.refusals()
+
+
+def test_interference_is_what_two_echoes_explain_together_over_alone() -> None:
+    # Models that do not overlap: 1. Two equal echoes on models of correlation 0.9 (a
+    # grating lobe apart), in phase 1.9, in opposite phase 0.1 (they cancel but for the
+    # hops' edges): c = A b / 2 for the amplitudes b, A the Gram matrix.
+    model = np.array([100.0, 100.0])
+    for cross, b, want in (
+        (0.0, (1.0, 1.0j), 1.0),
+        (90.0, (1.0, 1.0), 1.9),
+        (90.0, (1.0, -1.0), 0.1),
+    ):
+        a = np.array([[model[0], cross], [cross, model[1]]], dtype=np.complex128)
+        c = 0.5 * a @ np.array(b, dtype=np.complex128)
+        assert refine_pair.interference(c, complex(cross), model) == pytest.approx(want)
