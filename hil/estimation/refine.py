@@ -766,7 +766,7 @@ class CoherentRefiner:
     ) -> Refinement | None:  # fmt: skip
         """``fit`` as two echoes of one time scale (:func:`~hil.estimation.refine_pair.
         fit_pair`): the first of them, carrying the second where they are resolved, both
-        remembered (the first alone where they are one resolution cell); None where they are
+        remembered (the stronger alone where they are one resolution cell); None where they are
         not two echoes, or either ended within the window, or none is looked for. Looked
         for from a pair measured within :data:`WARM_HOPS` hops near ``fit``; else from
         ``fit`` and an echo measured there that it jumped from (:meth:`_jumped`: two echoes
@@ -801,6 +801,9 @@ class CoherentRefiner:
             return None
         if self._ended(one, word, hop_ids, known) or self._ended(two, word, hop_ids, known):
             return None
+        if not pair.resolved:
+            # One resolution cell: its stronger echo.
+            one = max((one, two), key=lambda r: abs(r.amplitude))
         kept = [one, two] if pair.resolved else [one]
         for r in kept:
             self._recent.append((hop_index, r.t_s, r.alpha, 0.0))

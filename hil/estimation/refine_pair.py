@@ -1,40 +1,46 @@
 """Two echoes of one time scale in one detection's hops: a formation close in range
 (:meth:`hil.estimation.refine.CoherentRefiner.refine`'s two-echo fit).
 
-Two echoes at one speed whose delays differ by ``Δ`` less than about two grating lobes
+Two echoes at one speed whose delays differ by ``Δ`` less than about three grating lobes
 (``1/(α Δf)``, 0.68 m on ``att``) share the detector's peak and the same hops: at either
 delay each hop's term holds ``β₁ + β₂ g_i(Δ)``, ``g_i`` the other echo read on hop ``i``'s
 tone (a phase ``2π f_i α Δ`` that differs from tone to tone). The one-echo fit then lands
 on one of them (or between) with hops whose phases disagree from tone to tone: refused as
-not one echo, coherent within each tone as multipath is.
+not one echo, coherent within each tone as multipath is. A whole number of grating lobes
+apart the phases agree on every tone (the hops' terms are one echo's, ``β₁ + β₂ (1 −
+k/(α Δf D))``) and only the hops' edges tell the two apart: the one-echo fit passes, on
+either echo by turns.
 
 The model here is the sum of two echoes of the exact schedule at delays ``t₁, t₂`` near
-the detection, each with its own complex amplitude (linear: least squares per hop, as the
-one-echo fit) and its own time scale within the speed span. It is fitted by alternating
-maximisation (each echo's delay, speed and amplitude by the one-echo fit with the other
-taken out of the input, :data:`PAIR_ROUNDS` rounds: each round raises the likelihood of the
-pair, and converges to its joint maximum as two echoes more than a main lobe apart are
-nearly orthogonal), started from the one-echo fit and the largest correlation left within
-:data:`SEED_LOBES` grating lobes of it once that fit is taken out.
+the detection, each with its own complex amplitude (linear: least squares of both
+together, :func:`_joint_amplitudes`, as the one-echo fit's is) and its own time scale
+within the speed span. It is fitted by alternating maximisation (each echo's delay, speed
+and amplitude by the one-echo fit with the other taken out of the input, its grating lobe
+checked, :data:`PAIR_ROUNDS` rounds: each round raises the pair's likelihood), started
+from the one-echo fit and the largest correlation left within :data:`SEED_LOBES` grating
+lobes of it once that fit is taken out, or from a pair measured lately.
 
-The two are kept, and both reported, where
+The two are kept where
 
-- they are resolved: their delays at least :data:`RESOLVED_LOBES` main lobes ``1/B``
-  apart (``B`` the tones' span; 0.30 ms, 0.23 m on ``att``). Closer, the pair is one
-  resolution cell: its hops are nearly one echo's and a second estimate would be the first
-  one's noise. That pair is reported as its stronger echo alone.
 - each is one echo of the schedule with the other taken out
   (:meth:`~hil.estimation.refine.Refinement.is_echo`);
-- the second echo explains the hops' scatter (:func:`pair_gain`): at each echo's own
-  delay the hops' terms scatter about one echo by ``RSS₁`` before the other is taken out
-  and ``RSS₂`` after, and ``G = (M − 2)(RSS₁ − RSS₂)/RSS₂`` exceeds what one echo alone
-  gives by chance. For one echo in noise ``G`` is at most an ``F(2, 2(M − 2))`` variable
-  (the other's complex amplitude fitted to noise: tail ``(1 + g/(M − 2))^{−(M − 2)}``),
-  and the other echo's delay is chosen among ``n`` independent cells (the search's
-  ``2 SEED_LOBES`` grating lobes of ``B/Δf`` main lobes each, a union bound): the limit
-  puts the chance at :data:`PAIR_CHANCE`. The scatter is the hops' own, as
-  :data:`~hil.estimation.refine.ENDED_CHANCE`'s test: reverberation and fading make a
-  hop's term stray more than the fit's E/N0 says, and are not a second echo.
+- the second echo explains significantly more than one echo does (:func:`pair_gain`): the
+  energy the pair explains beyond the one-echo fit, in the hops' units, over the hops' own
+  scatter about the pair (``RSS = Σ |H_i|²/a_i² − |Σ H_i|²/Σ a_i²`` at each echo's delay
+  with the other taken out, the larger), ``G = (M − 2) gain / RSS``. For one echo in white
+  noise the gain of a second complex amplitude is ``σ² N`` times an exponential variable
+  and ``RSS/(M − 2)`` estimates ``σ² N``, so ``G`` is an ``F(2, 2(M − 2))`` variable
+  (tail ``(1 + g/(M − 2))^{−(M − 2)}``); the second echo's delay is chosen among ``n``
+  independent cells (the search's ``2 SEED_LOBES`` grating lobes of ``B/Δf`` main lobes
+  each, a union bound): the limit puts the chance at :data:`PAIR_CHANCE`. The scatter is
+  the hops' own, as :data:`~hil.estimation.refine.ENDED_CHANCE`'s test: reverberation and
+  fading make a hop's term stray more than the fit's E/N0 says;
+- the two do not cancel each other (:func:`interference`, :data:`LEAST_INTERFERENCE`).
+
+Both are reported where their delays are at least :data:`RESOLVED_LOBES` main lobes ``1/B``
+apart (``B`` the tones' span; 0.30 ms, 0.23 m on ``att``); closer, the pair is one
+resolution cell (its hops are nearly one echo's, a second estimate would be the first
+one's noise) and its stronger echo alone is reported.
 """
 
 from __future__ import annotations
