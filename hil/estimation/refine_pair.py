@@ -191,6 +191,8 @@ def fit_pair(
             echoes[k] = _EchoFit(hop_index, got.t_s, got.alpha, got.amplitude)
     first, second_fit = fits
     assert first is not None and second_fit is not None
+    if abs(first.t_s - second_fit.t_s) > SEED_LOBES * lobe:
+        return None  # one of them left the detection's neighbourhood (another echo's)
     if not (first.is_echo(test) and second_fit.is_echo(test)):
         return None
     gain, together = _gain(ref, word, hop_ids, hop_index, fit, first, second_fit, known)
