@@ -945,8 +945,9 @@ class CoherentRefiner:
             t_next = e.t_s + (hop - e.hop_index) * self.hop_len_s / e.alpha
             if hop - e.hop_index > KNOWN_HOPS:
                 continue
-            early = 1.0 / (e.alpha * self.spacing_hz) if len(self._formation(e)) > 1 else 0.0
-            if t_next <= t_s + early:
+            if t_next <= t_s or (
+                t_next <= t_s + 1.0 / (e.alpha * self.spacing_hz) and len(self._formation(e)) > 1
+            ):
                 out.append((hop, t_next, e.alpha))
                 self._echoes[i] = replace(e, followed=hop)
         return out
