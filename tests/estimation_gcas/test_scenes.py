@@ -342,6 +342,77 @@ def test_a_target_10_db_weaker_in_a_stronger_ones_row(
     assert false <= 0.02
 
 
+# Two echoes of one speed close in range (hil.estimation.refine_pair): they share the
+# detector's peak and every hop; the one-echo fit of them is refused (their tones' phases
+# disagree) or, a grating lobe apart (0.68 m on att), passes on either by turns. Closer than
+# the main lobe 1/B (0.23 m) they are one resolution cell and one estimate is reported.
+CLOSE_PAIRS = {
+    "0.3 m apart": ((50.0, 10.0, 1.0), (50.3, 10.0, 1.0)),
+    "a grating lobe apart": ((50.0, 10.0, 1.0), (50.7, 10.0, 1.0)),
+    "1.5 m apart": ((50.0, 10.0, 1.0), (51.5, 10.0, 1.0)),
+    "opening, 0.5 m apart": ((60.0, -8.0, 1.0), (60.5, -8.0, 1.0)),
+}
+
+
+def _close_pair(targets: tuple[tuple[float, float, float], ...], snr_db: float) -> tuple[
+    list[float], float, int
+]:  # fmt: skip
+    """Each target's detected boundaries (an estimate within half the pair's separation of
+    its range, and 0.5 m/s of its speed) over those it gives alone, false estimates per hop,
+    and the most estimates at the pair's speed at one boundary."""
+    gate = 0.5 * abs(targets[1][0] - targets[0][0])
+
+    def hits(est: list[Estimate], r0: float, v: float) -> int:
+        return sum(
+            abs(e.speed_mps - v) < 0.5
+            and abs(e.range_m - true_range(r0, v, e.t_tx_s, e.t_s)) < gate
+            for e in est
+        )
+
+    est = _scene(targets, snr_db)
+    alone = [hits(_scene((t,), snr_db), t[0], t[1]) for t in targets]
+    got = [hits(est, t[0], t[1]) for t in targets]
+    hops = [e.hop_index for e in est if abs(e.speed_mps - targets[0][1]) < 0.5]
+    per_hop = np.bincount(np.asarray(hops) - min(hops))
+    false = (len(est) - sum(got)) / (SCENE_S / 0.01)
+    return [h / a for h, a in zip(got, alone, strict=True)], false, int(per_hop.max())
+
+
+@pytest.mark.parametrize(
+    ("scene", "snr_db", "pd_min"),
+    [("0.3 m apart", 0.0, 0.95),
+     *(pytest.param(*case, marks=pytest.mark.slow) for case in
+       (("0.3 m apart", -10.0, 0.95), ("a grating lobe apart", 0.0, 0.9),
+        ("a grating lobe apart", -10.0, 0.9), ("1.5 m apart", 0.0, 0.95),
+        ("1.5 m apart", -10.0, 0.95), ("opening, 0.5 m apart", 0.0, 0.94),
+        ("opening, 0.5 m apart", -10.0, 0.94)))],
+)  # fmt: skip
+def test_two_echoes_of_one_speed_close_in_range_are_both_reported(
+    scene: str, snr_db: float, pd_min: float
+) -> None:
+    # Measured (seed 11, 0 / -10 dB): 0.3 m 0.957 / 0.957 each at both; a grating lobe
+    # 0.993 / 0.922 and 0.922 / 0.936; 1.5 m 0.986 / 0.965 and 0.986 / 0.957; opening 0.5 m
+    # 0.949 each at both; at most 0.007 false per hop (before, on an independent synthesis
+    # at 0 dB: 0.0 / 0.0, 0.40 / 0.58, 0.80 / 0.79 and 0.0 / 0.0). Lost: the first M - 1
+    # boundaries, whose windows begin before the transmission (no new pair is tried there),
+    # and a grating lobe apart the boundaries before the one-echo fit first jumps from one
+    # echo to the other.
+    pd, false, most = _close_pair(CLOSE_PAIRS[scene], snr_db)
+    assert min(pd) >= pd_min and max(pd) <= 1.0
+    assert false <= 0.02 and most == 2
+
+
+def test_two_echoes_within_one_resolution_cell_are_one_estimate() -> None:
+    # 0.15 m apart (0.20 ms, below 1/B = 0.30 ms): one estimate a boundary, between them.
+    # Measured (seed 11, 0 dB): 141 estimates, within 3 mm of the midpoint.
+    targets = ((50.0, 10.0, 1.0), (50.15, 10.0, 1.0))
+    est = _scene(targets, 0.0)
+    per_hop = np.bincount([e.hop_index - min(e.hop_index for e in est) for e in est])
+    assert per_hop.max() == 1
+    mid = [true_range(50.075, 10.0, e.t_tx_s, e.t_s) for e in est]
+    assert max(abs(e.range_m - m) for e, m in zip(est, mid, strict=True)) < 0.1
+
+
 @pytest.mark.slow
 def test_one_search_misses_a_target_10_db_weaker_in_a_stronger_ones_row() -> None:
     # The same scene without the second search: the weaker one is not found.

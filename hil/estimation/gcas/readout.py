@@ -35,7 +35,7 @@ from hil.estimation.detection import parabolic_offset
 from hil.estimation.doppler_grid import alpha_to_speed, speed_to_alpha
 from hil.estimation.first_arrival import FirstArrivalReadout
 from hil.estimation.gcas.beyond_span import BeyondSpan, BeyondSpanCheck
-from hil.estimation.gcas.candidates import second_echo_rows
+from hil.estimation.gcas.candidates import new_pair_rows, second_echo_rows
 from hil.estimation.gcas.clutter_seen import ClutterLog, ClutterSeen
 from hil.estimation.gcas.front_end import FrontEnd
 from hil.estimation.gcas.hidden_echoes import HiddenEchoes
@@ -186,6 +186,9 @@ class Readout:
         #: (:func:`~hil.estimation.gcas.candidates.second_echo_rows`): not at the band's or the
         #: span's edges, where the leaks of other echoes fit as well with a partner taken out.
         self._pair_rows = second_echo_rows(fe)
+        #: Hypotheses where a refused fit is first tried as two echoes of one speed
+        #: (:func:`~hil.estimation.gcas.candidates.new_pair_rows`).
+        self._new_pair_rows = new_pair_rows(fe)
         #: The point echoes confirmed lately in the still reverberation's cells.
         self.point_echoes = PointEchoes(
             fe.hop_s, fe.schedule.period_hops, self._lobe_s, self._cell_mps, c
@@ -227,6 +230,9 @@ class Readout:
         #: reverberation itself), or where no echo taken out could hide one
         #: (:meth:`~hil.estimation.refine.CoherentRefiner.hidden_by_known`).
         self.leftover_count = 0
+        #: The second echo's estimate of the peak being decided, where its fit was a
+        #: resolved pair (:meth:`decide_all` reports it after the first).
+        self._second: Estimate | None = None
         #: The estimates reported lately: (hop index, boundary time s, speed m/s).
         self._reported: list[tuple[int, float, float]] = []
         self.last_detection: DetectionInfo | None = None
@@ -272,10 +278,13 @@ class Readout:
                 out += self._follow(boundary[0] - FOLLOW_LAG_HOPS * self._fe.hop_s)
             if p.beside and not p.second and not refused:
                 continue
+            self._second = None
             est = self.decide(p, boundary, residual)
             refused = est is None
             if est is not None:
                 out.append(est)
+                if self._second is not None:
+                    out.append(self._second)
         return out
 
     def decide(
@@ -324,9 +333,11 @@ class Readout:
             ):
                 self.incoherent_count += 1
                 return None
+            pair_row = bool(self._pair_rows[p.d0])
             refined = self._refiner.refine(
-                t_rx, alpha, hop_index, partners=bool(self._pair_rows[p.d0]),
-                residual=residual, lag_s=self._residual_lag_s if residual else 0.0,
+                t_rx, alpha, hop_index, partners=pair_row, residual=residual,
+                lag_s=self._residual_lag_s if residual else 0.0, pairs=pair_row,
+                new_pairs=bool(self._new_pair_rows[p.d0]),
             )  # fmt: skip
             if refined is None:
                 self.unmeasured_count += 1
@@ -361,6 +372,8 @@ class Readout:
                 self._say_clutter(refined, t_tx, hop_index)
                 return None
             t_rx, alpha, bound = refined.t_s, refined.alpha, refined.bound
+            if refined.second is not None:
+                self._second = self._second_of(refined.second, t_tx, hop_index, p, residual)
         elif self._coherent:
             t_rx, alpha = self._coherent_refine(p.n_star, p.d0, hop_index, t_rx, alpha)
         est = self._estimate(t_rx, alpha, t_tx, hop_index, bound)
@@ -371,6 +384,28 @@ class Readout:
         mean, thr = p.mean, p.threshold
         snr = (p.peak - mean) / mean if mean > 0 and math.isfinite(mean) else math.inf
         self.residual_count += residual
+        return replace(
+            est,
+            score=p.peak / thr if thr > 0 else math.inf,
+            snr_db=10.0 * math.log10(snr) if snr > 0 else -math.inf,
+        )
+
+    def _second_of(
+        self, fit: Refinement, t_tx: float, hop_index: int, p: Peak, residual: bool
+    ) -> Estimate | None:
+        """The estimate of the second echo of a resolved pair (:attr:`~hil.estimation.
+        refine.Refinement.second`) at the boundary ending hop ``hop_index`` (transmitted at
+        ``t_tx``, s), scored as its peak ``p``; None beyond the range or the span, or
+        already reported."""
+        fe = self._fe
+        if abs(fit.speed_mps(fe.sound_speed_mps)) > fe.max_speed_mps:
+            return None
+        est = self._estimate(fit.t_s, fit.alpha, t_tx, hop_index, fit.bound)
+        if est is None:
+            return None
+        self.residual_count += residual
+        mean, thr = p.mean, p.threshold
+        snr = (p.peak - mean) / mean if mean > 0 and math.isfinite(mean) else math.inf
         return replace(
             est,
             score=p.peak / thr if thr > 0 else math.inf,
