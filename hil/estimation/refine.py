@@ -153,6 +153,16 @@ SAME_ECHO_LOBES = 1.5
 #: there keeps its own level (0.7-1.1 of it) and is fitted, with the measured echo taken out;
 #: one more than 12 dB below the measured echo is given up.
 GHOST_LEFT = 0.25
+#: ...plus this many times the noise's reading there (``|β|/sqrt(E/N0)`` of the measured
+#: echo's fit, per cell), the largest of the search's cells: where the echo's E/N0 is low
+#: (short M at low SNR) what is left at its ghost is the noise's, which reads above
+#: GHOST_LEFT alone, and the ghost was fitted and passed the echo test on its few hops.
+#: sim-05 (30 trials a point, att, -20 dB per-sample SNR): false alarms per second at M = 3,
+#: 5, 10, 22, 29 1.9/0.51/0.29/0.22/0.14 -> 1.2/0.29/0.07/0/0, boundaries detected the same
+#: or more (M = 3 180 -> 191); Fig 6.4 at -20 dB M = 5 0.49 -> 0.27/s. At M = 10 and -10 dB
+#: (E/N0 about 30 dB) it adds 0.1 of the echo: a second echo 10 dB weaker beside the ghost's
+#: row (0.32 of it) and those a tone spacing's speed away 4-6 dB weaker are read as before.
+GHOST_NOISE_Z = 3.0
 #: Except beside an echo measured within this many Doppler cells of a hop (``c/(2 f_c
 #: T_h)``) of rest: there it may be the leak of a still echo the reverberation band hides
 #: (att, a target at rest, -10 dB: fits at 2-4 m/s), and what peaks where its ghost would
@@ -1064,7 +1074,8 @@ class CoherentRefiner:
         not an echo measured lately itself continuing there (a second echo at the ghost's
         speed, found once, is followed through the ghost's hops). It is the ghost where,
         read with the echo taken out, at most :data:`GHOST_LEFT` of the echo's strength is
-        left (the ghost goes with its echo; a second echo there keeps its own level); beside
+        left, plus :data:`GHOST_NOISE_Z` times the noise's reading at the echo's E/N0 (the
+        ghost goes with its echo; a second echo there keeps its own level); beside
         a slow echo (:data:`STILL_LEAK_CELLS`, whose ghosts may be a hidden still echo's
         and stay when it is taken out) where read with it in it is at most the echo's own
         strength. Such a detection is refused without a fit; any other is fitted with the
@@ -1126,7 +1137,9 @@ class CoherentRefiner:
                 left = self._amplitude_near(
                     t_s, alpha, hop_index, around=True, known=self._rows(group, t_s)
                 )
-                ghost = left <= GHOST_LEFT * max(abs(g.amplitude) for g in group)
+                ref = max(group, key=lambda g: abs(g.amplitude))
+                noise = abs(ref.amplitude) * 10.0 ** (-min(ref.e_over_n0_db, 300.0) / 20.0)
+                ghost = left <= GHOST_LEFT * abs(ref.amplitude) + GHOST_NOISE_Z * noise
             if ghost:
                 if math.isfinite(strength) and strength > e.ghost_strength[offset]:
                     read = list(e.ghost_strength)
