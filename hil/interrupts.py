@@ -37,6 +37,27 @@ def interruption(exc: KeyboardInterrupt) -> str:
     return exc.signal_name if isinstance(exc, RunInterrupted) else "Ctrl-C"
 
 
+def interruption_behind(exc: BaseException) -> KeyboardInterrupt | None:
+    """The Ctrl-C or stop signal behind ``exc``, if any: a handler's exception raised while
+    compiled code was running (a numba kernel) comes out as that call's ``SystemError``
+    ("returned a result with an exception set") caused by it, not as itself.
+
+    >>> try:
+    ...     raise SystemError("a result with an exception set") from RunInterrupted("SIGHUP")
+    ... except SystemError as err:
+    ...     interruption(interruption_behind(err)), interruption_behind(ValueError())
+    ('SIGHUP', None)
+    """
+    seen: set[int] = set()
+    cause: BaseException | None = exc
+    while cause is not None and id(cause) not in seen:
+        if isinstance(cause, KeyboardInterrupt):
+            return cause
+        seen.add(id(cause))
+        cause = cause.__cause__ or cause.__context__
+    return None
+
+
 #: Stop signals held by :func:`stops_deferred` (signal numbers), and how deep it is entered.
 _pending: list[int] = []
 _depth = [0]

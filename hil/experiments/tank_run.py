@@ -55,6 +55,7 @@ from hil.experiments.live.session import LiveSession, SessionTiming, Telemetry
 from hil.experiments.live.snapshot import instrument_snapshot
 from hil.experiments.live.stops import RunInterrupted, StopSignals, stop_text
 from hil.experiments.run_calibrations import RunCalibrations, load_run_calibrations
+from hil.interrupts import interruption, interruption_behind
 from hil.outputs import release_output_folder
 from hil.recording.records import ReceiverSetup, RunEvent
 from hil.recording.replay import build_receiver
@@ -295,7 +296,7 @@ def _run_in_folder(
             session.on_estimates = on_estimates
             _transmit_and_tow(session, exp.max_duration_s, stop)
         except KeyboardInterrupt as exc:
-            how = exc.signal_name if isinstance(exc, RunInterrupted) else "Ctrl-C"
+            how = interruption(exc)
             ending = _Ending(True, f"interrupted ({how})")
         except ConfigError as exc:
             if session is None or not session.transmitting:
@@ -303,7 +304,12 @@ def _run_in_folder(
             # Once transmitting, a refusal is a failure of the run: stop safely, report it.
             ending = _Ending(False, f"ConfigError: {exc}")
         except Exception as exc:  # any failure: stop safely below, report it
-            ending = _Ending(False, f"{type(exc).__name__}: {exc}")
+            stopped = interruption_behind(exc)
+            ending = (
+                _Ending(True, f"interrupted ({interruption(stopped)})")
+                if stopped is not None
+                else _Ending(False, f"{type(exc).__name__}: {exc}")
+            )
         finally:
             signals.stopping()  # a second signal must not break off the safe stop
             view.close()
