@@ -258,6 +258,16 @@ def _main(argv: Sequence[str] | None) -> int:
 
         print(f"hil {args.command}: interrupted ({interruption(exc)})", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except SystemError as exc:
+        # Ctrl-C or a stop signal raised while a compiled kernel ran comes out of that call
+        # as its SystemError, caused by the interruption: an interruption all the same.
+        from hil.interrupts import interruption, interruption_behind
+
+        stopped = interruption_behind(exc)
+        if stopped is None:
+            raise
+        print(f"hil {args.command}: interrupted ({interruption(stopped)})", file=sys.stderr)
+        return EXIT_INTERRUPTED
     finally:
         reset_logging()
     return status
