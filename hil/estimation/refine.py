@@ -384,6 +384,12 @@ class _EchoFit:
     #: refine_pair`): the next detection of the pair starts from both.
     pair: bool = False
 
+    def boundary_s(self, hop_index: int, hop_len_s: float) -> float:
+        """Where this fit puts the boundary ending hop ``hop_index`` (s of receive time),
+        its echo carried on at the fitted delay and time scale; ``hop_len_s`` the nominal
+        hop length (s)."""
+        return self.t_s + (hop_index - self.hop_index) * hop_len_s / self.alpha
+
     def speed(self, sound_speed_mps: float) -> float:
         """Radial speed, m/s (closing positive)."""
         return sound_speed_mps * (self.alpha - 1.0) / (self.alpha + 1.0)
@@ -838,7 +844,7 @@ class CoherentRefiner:
         near = []
         for e in self._echoes:
             k = hop_index - e.hop_index
-            t = e.t_s + k * self.hop_len_s / e.alpha
+            t = e.boundary_s(hop_index, self.hop_len_s)
             if (
                 e.pair
                 and 1 <= k <= WARM_HOPS
@@ -873,7 +879,7 @@ class CoherentRefiner:
             k = hop_index - e.hop_index
             if not (1 <= k <= WARM_HOPS and abs(e.speed(self.c) - v) <= self.speed_span_mps):
                 continue
-            gap = abs(e.t_s + k * self.hop_len_s / e.alpha - fit.t_s)
+            gap = abs(e.boundary_s(hop_index, self.hop_len_s) - fit.t_s)
             if gap < RESOLVED_LOBES * main:
                 return None
             if gap <= SEED_LOBES * lobe and left is None and e.e_over_n0_db >= self.lobe_sure_db:
@@ -962,13 +968,13 @@ class CoherentRefiner:
             if e.e_over_n0_db < self.lobe_sure_db or abs(e.speed(self.c)) < self._still_mps:
                 continue
             if e.gap >= 0:
-                t_gap = e.t_s - (e.hop_index - e.gap) * self.hop_len_s / e.alpha
+                t_gap = e.boundary_s(e.gap, self.hop_len_s)
                 if t_gap <= t_s:
                     out.append((e.gap, t_gap, e.alpha))
                     e = replace(e, gap=e.gap + 1 if e.gap + 1 < e.hop_index else -1)
                     self._echoes[i] = e
             hop = max(e.hop_index, e.followed) + 1
-            t_next = e.t_s + (hop - e.hop_index) * self.hop_len_s / e.alpha
+            t_next = e.boundary_s(hop, self.hop_len_s)
             if hop - e.hop_index > KNOWN_HOPS:
                 continue
             if t_next <= t_s or (
@@ -1162,7 +1168,8 @@ class CoherentRefiner:
                 e is not echo
                 and abs(k) <= KNOWN_HOPS
                 and abs(e.speed(self.c) - echo.speed(self.c)) <= self.speed_span_mps
-                and abs(e.t_s + k * self.hop_len_s / e.alpha - echo.t_s) <= SEED_LOBES * lobe
+                and abs(e.boundary_s(echo.hop_index, self.hop_len_s) - echo.t_s)
+                <= SEED_LOBES * lobe
             ):
                 out.append(e)
         return out
@@ -1275,7 +1282,7 @@ class CoherentRefiner:
         :data:`SAME_ECHO_LOBES` grating lobes) at a speed within the speed span."""
         if abs(fit.speed(self.c) - speed) > self.speed_span_mps:
             return False
-        t_pred = fit.t_s + (hop_index - fit.hop_index) * self.hop_len_s / fit.alpha
+        t_pred = fit.boundary_s(hop_index, self.hop_len_s)
         return abs(t_pred - t_s) <= SAME_ECHO_LOBES / (fit.alpha * self.spacing_hz)
 
     def _known_hops(
