@@ -47,6 +47,7 @@ TRIALS: dict[str, str] = {
     "ch6_fmcw": "hil.evaluation.trials_ch6:ch6_fmcw_trial",
     "ch6_cost": "hil.evaluation.trials_ch6:ch6_cost_trial",
     "tank_run": "hil.evaluation.trials_tank:tank_run_trial",
+    "scene": "hil.evaluation.trials_scene:scene_trial",
 }
 
 # An importable module name: dotted identifiers, no path separators, no leading dot.

@@ -187,7 +187,7 @@ def _markdown(spec: SweepSpec, records: list[dict[str, Any]], rows: list[dict[st
         "| " + " | ".join(cols) + " |",
         "|" + "---|" * len(cols),
     ]
-    lines += ["| " + " | ".join(_fmt(row.get(c)) for c in cols) + " |" for row in rows]
+    lines += ["| " + " | ".join(cell_text(row.get(c)) for c in cols) + " |" for row in rows]
     lines += [
         "",
         "![range errors](figures/tank_range_errors.png)",
@@ -200,7 +200,12 @@ def _markdown(spec: SweepSpec, records: list[dict[str, Any]], rows: list[dict[st
     return "\n".join(lines)
 
 
-def _fmt(value: Any) -> str:
+def cell_text(value: Any) -> str:
+    """A table cell: 4 significant digits, "–" for none or NaN, lists joined by "×".
+
+    >>> cell_text(0.123456), cell_text(math.nan), cell_text([12, 4, 2.5]), cell_text(3)
+    ('0.1235', '–', '12×4×2.5', '3')
+    """
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
         return "–"
     if isinstance(value, float):
