@@ -6,11 +6,13 @@ Example::
     hil sweep sweeps/psl.toml --out runs/psl --resume          # after an interruption
     hil sweep sweeps/psl.toml --out runs/psl --scheduler tcp://10.0.0.5:8786
     hil sweep tank-mc --out runs/tank --quick                  # a shipped sweep, reduced
+    hil sweep scenes --out runs/scenes                         # the receiver's scenes
 
-SWEEP is a sweep file or the name of a shipped one (``hil/data/sweeps/``: ``tank-mc`` and the
-chapter-6 items). Writes ``manifest.json``, ``results.jsonl`` and ``summary.csv`` in ``--out``
-(docs/sweeps.md), and the trial's report when it has one (``tank_run``: ``report.md``,
-``tank_points.csv``, ``figures/``), and prints a summary. Exit status 0 when every trial
+SWEEP is a sweep file or the name of a shipped one (``hil/data/sweeps/``: ``tank-mc``,
+``scenes`` and the chapter-6 items). Writes ``manifest.json``, ``results.jsonl`` and
+``summary.csv`` in ``--out`` (docs/sweeps.md), and the trial's report when it has one
+(``tank_run``: ``report.md``, ``tank_points.csv``, ``figures/``; ``scene``: ``report.md``,
+``scene_points.csv``, ``figures/``), and prints a summary. Exit status 0 when every trial
 succeeded, 1 when some failed (their errors are in results.jsonl), 2 for a bad sweep file or
 option, 130 when interrupted (Ctrl-C, SIGTERM or SIGHUP: the finished trials are saved and
 ``--resume`` continues from them; the pool's workers end with the command, even when it is

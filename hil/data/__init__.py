@@ -3,8 +3,8 @@
 Found through :mod:`importlib.resources`, so they are there the same way in a source checkout,
 an editable install and an installed wheel:
 
-- ``sweeps/*.toml``: the sweep files of ``hil reproduce`` and ``hil sweep NAME`` (``tank-mc``;
-  format: docs/sweeps.md);
+- ``sweeps/*.toml``: the sweep files of ``hil reproduce`` and ``hil sweep NAME`` (``tank-mc``,
+  ``scenes``; format: docs/sweeps.md);
 - ``scenarios/*.toml``: example scenarios of ``hil simulate`` (format: hil docs scenarios).
 
 The package is installed as plain files (setuptools never zips it), so each folder is a real
@@ -36,8 +36,8 @@ def _folder(name: str) -> Path:
 
 
 def sweeps_dir() -> Path:
-    """The folder of the shipped sweep files: the chapter-6 items (``<item id>.toml``) and
-    ``tank-mc.toml``."""
+    """The folder of the shipped sweep files: the chapter-6 items (``<item id>.toml``),
+    ``tank-mc.toml`` and ``scenes.toml``."""
     return _folder("sweeps")
 
 

@@ -182,7 +182,7 @@ def validate_receiver_params(params: Params) -> None:
             raise ConfigError(
                 f"receiver_options.{name}", opts, f"a table of options under one of {RECEIVERS}"
             )
-    schedule = _schedule(p["preset"], p["family"], float(p["bandwidth_hz"]), int(p["code_seed"]))
+    schedule = point_schedule(p)
     if warmup >= duration - 3 * schedule.hop_s:
         raise ConfigError(
             "warmup_s", warmup, f"< duration_s − 3 hops = {duration - 3 * schedule.hop_s:.3f} s"
@@ -195,23 +195,23 @@ def validate_receiver_params(params: Params) -> None:
             f"ranges that stay in 2 m .. max_range_m = {p['max_range_m']} m over the trial "
             f"(the target moves up to {v_hi * duration:.1f} m)",
         )
-    _check_receiver(json.dumps({k: p[k] for k in _RECEIVER_KEYS}, sort_keys=True))
+    check_receiver(json.dumps({k: p[k] for k in RECEIVER_KEYS}, sort_keys=True))
 
 
 #: The parameters that decide how the receiver is built (not the scene or the noise).
-_RECEIVER_KEYS = (
+RECEIVER_KEYS = (
     "receiver", "preset", "family", "bandwidth_hz", "code_seed", "m_hops", "coherent", "n_s",
     "receiver_options", "reverb_speed_mps", "max_speed_mps", "max_range_m",
 )  # fmt: skip
 
 
 @functools.lru_cache(maxsize=256)
-def _check_receiver(key: str) -> None:
+def check_receiver(key: str) -> None:
     """Build the receiver once per distinct configuration (the matched-filter bank takes
     seconds to build; a sweep validates every grid point)."""
     p = {**RECEIVER_DEFAULTS, **json.loads(key)}
-    schedule = _schedule(p["preset"], p["family"], float(p["bandwidth_hz"]), int(p["code_seed"]))
-    _make_receiver(p, schedule, _spec(p["preset"], p["family"]).sound_speed_mps)
+    schedule = point_schedule(p)
+    make_receiver(p, schedule, preset_spec(p["preset"], p["family"]).sound_speed_mps)
 
 
 def validate_fmcw_params(params: Params) -> None:
@@ -239,14 +239,14 @@ def validate_cost_params(params: Params) -> None:
 
 # ----------------------------------------------------------------------------- building
 @functools.lru_cache(maxsize=32)
-def _spec(preset: str, family: str) -> Any:
+def preset_spec(preset: str, family: str) -> Any:
     return get_preset(preset).spec(family)
 
 
 @functools.lru_cache(maxsize=32)
-def _schedule(preset: str, family: str, bandwidth_hz: float, code_seed: int) -> HopSchedule:
+def checked_schedule(preset: str, family: str, bandwidth_hz: float, code_seed: int) -> HopSchedule:
     """The checked schedule (cached: every trial of a point uses the same code)."""
-    spec = _spec(preset, family).with_overrides(bandwidth_hz=bandwidth_hz, seed=code_seed)
+    spec = preset_spec(preset, family).with_overrides(bandwidth_hz=bandwidth_hz, seed=code_seed)
     return check_design(spec)
 
 
@@ -255,15 +255,21 @@ def _window_moments(
     preset: str, family: str, bandwidth_hz: float, code_seed: int, m_hops: int
 ) -> tuple[float, float, float]:
     """``(B_rms, T_rms, f_mean)`` of the first ``m_hops`` transmit hops (Hz, s, Hz)."""
-    sch = _schedule(preset, family, bandwidth_hz, code_seed)
-    fs = _spec(preset, family).fs_hz
+    sch = checked_schedule(preset, family, bandwidth_hz, code_seed)
+    fs = preset_spec(preset, family).fs_hz
     t = np.arange(int(round(m_hops * sch.hop_s * fs))) / fs
     x = sch.evaluate_analytic(t)
     b, f0 = rms_bandwidth(x, fs)
     return b, rms_duration(x, fs), f0
 
 
-def _make_receiver(p: dict[str, Any], schedule: HopSchedule, c: float, **hooks: Any) -> Any:
+def point_schedule(p: dict[str, Any]) -> HopSchedule:
+    """The checked schedule of a grid point's ``preset``, ``family``, ``bandwidth_hz`` and
+    ``code_seed``."""
+    return checked_schedule(p["preset"], p["family"], float(p["bandwidth_hz"]), int(p["code_seed"]))
+
+
+def make_receiver(p: dict[str, Any], schedule: HopSchedule, c: float, **hooks: Any) -> Any:
     """The grid point's receiver, built as every caller builds one
     (:func:`hil.recording.replay.build_receiver` from a :class:`ReceiverSetup`); ``hooks``
     are callbacks such as GCAS's ``on_map``."""
@@ -336,7 +342,7 @@ def _echo(
     return AnalyticEcho(schedule, path, fs).block(0, n), path, target
 
 
-def _reverberation(
+def volume_reverberation(
     schedule: HopSchedule, fs: float, c: float, p: dict[str, Any], srr_db: float, seed: int, n: int
 ) -> NDArray[np.float64]:
     """Volume reverberation of a stationary omni sonar scaled so echo power (1/2) over its
@@ -436,7 +442,7 @@ def _crlb_fields(p: dict[str, Any], snr_db: float, fs: float, c: float) -> dict[
     b_rms, t_rms, f0 = _window_moments(
         p["preset"], p["family"], float(p["bandwidth_hz"]), int(p["code_seed"]), m
     )
-    hop = _schedule(p["preset"], p["family"], float(p["bandwidth_hz"]), int(p["code_seed"])).hop_s
+    hop = point_schedule(p).hop_s
     en0 = e_over_n0_db(snr_db, fs / 2.0, m * hop)
     bound = crlb(b_rms, t_rms, f0, en0, c)
     return {
@@ -495,8 +501,8 @@ def ch6_receiver_trial(params: Params, seed: np.random.SeedSequence) -> dict[str
     from sim_devices.acoustics.truth import hop_truth
 
     p = {**RECEIVER_DEFAULTS, **params}
-    schedule = _schedule(p["preset"], p["family"], float(p["bandwidth_hz"]), int(p["code_seed"]))
-    spec = _spec(p["preset"], p["family"])
+    schedule = point_schedule(p)
+    spec = preset_spec(p["preset"], p["family"])
     fs, c = float(spec.fs_hz), float(spec.sound_speed_mps)
     rng = np.random.default_rng(seed)
     r0 = float(rng.uniform(*p["range_m"]))
@@ -507,7 +513,7 @@ def ch6_receiver_trial(params: Params, seed: np.random.SeedSequence) -> dict[str
     x = x + rng.normal(0.0, noise_sigma(snr), n)
     srr = _optional_db("srr_db", p["srr_db"])
     if srr is not None:
-        x = x + _reverberation(schedule, fs, c, p, srr, int(rng.integers(2**31)), n)
+        x = x + volume_reverberation(schedule, fs, c, p, srr, int(rng.integers(2**31)), n)
     map_snr = _optional_db("map_snr_db", p["map_snr_db"])
     # The map is kept once per grid point (repetition 0, see hil.evaluation.seeds).
     keep_map = (
@@ -518,7 +524,7 @@ def ch6_receiver_trial(params: Params, seed: np.random.SeedSequence) -> dict[str
     )
     collector = _MapCollector() if keep_map else None
     more = {"on_map": collector} if collector is not None else {}
-    receiver = _make_receiver(p, schedule, c, **more)
+    receiver = make_receiver(p, schedule, c, **more)
     start = time.process_time()
     estimates = list(receiver.process(x)) + list(receiver.flush())
     cpu = time.process_time() - start
@@ -619,12 +625,12 @@ def ch6_cost_trial(params: Params, seed: np.random.SeedSequence) -> dict[str, An
         "fft_bank_mults": float(table["fft_bank"][0]),
     }
     if float(p["measure_s"]) > 0:
-        sch = _schedule("att", "random-cyclic", 4400.0, 1)
+        sch = checked_schedule("att", "random-cyclic", 4400.0, 1)
         fs = float(sch.params["fs_hz"])
         x = np.random.default_rng(seed).normal(0.0, 1.0, int(float(p["measure_s"]) * fs))
         q = {**RECEIVER_DEFAULTS, "m_hops": p["m_hops"], "receiver_options": {}}
         q["receiver_options"] = {"gcas": {"n_doppler": int(p["n_doppler"])}}
-        rx = _make_receiver(q, sch, 1500.0)
+        rx = make_receiver(q, sch, 1500.0)
         start = time.process_time()
         rx.process(x)
         rx.flush()

@@ -34,6 +34,7 @@ trial function.
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -48,11 +49,13 @@ from hil.evaluation.registry import Params
 from hil.evaluation.report_scene import write_scene_report
 from hil.evaluation.trials_ch6 import (
     RECEIVER_DEFAULTS,
-    _make_receiver,
-    _reverberation,
-    _schedule,
-    _spec,
+    RECEIVER_KEYS,
+    check_receiver,
+    make_receiver,
     noise_sigma,
+    point_schedule,
+    preset_spec,
+    volume_reverberation,
 )
 
 #: Range gate (m) and speed gate (m/s) within which an estimate belongs to a target's boundary
@@ -240,16 +243,22 @@ def validate_scene_params(params: Params) -> None:
             )
     if not isinstance(p["receiver_options"], dict):
         raise ConfigError("receiver_options", p["receiver_options"], "a table of GCAS options")
-    _receiver(p)
+    ch6 = _receiver_params(p)
+    check_receiver(json.dumps({k: ch6[k] for k in RECEIVER_KEYS}, sort_keys=True))
+
+
+def _receiver_params(p: dict[str, Any]) -> dict[str, Any]:
+    """The scene's receiver as a chapter-6 trial's parameters (GCAS on ``att``)."""
+    return {**RECEIVER_DEFAULTS, "receiver": _RECEIVER, "m_hops": p["m_hops"],
+            "max_speed_mps": p["max_speed_mps"], "reverb_speed_mps": p["reverb_speed_mps"],
+            "receiver_options": {_RECEIVER: p["receiver_options"]}}  # fmt: skip
 
 
 def _receiver(p: dict[str, Any]) -> Any:
-    ch6 = {**RECEIVER_DEFAULTS, "receiver": _RECEIVER, "m_hops": p["m_hops"],
-           "max_speed_mps": p["max_speed_mps"], "reverb_speed_mps": p["reverb_speed_mps"],
-           "receiver_options": {_RECEIVER: p["receiver_options"]}}  # fmt: skip
-    schedule = _schedule(ch6["preset"], ch6["family"], ch6["bandwidth_hz"], ch6["code_seed"])
-    c = float(_spec(ch6["preset"], ch6["family"]).sound_speed_mps)
-    return _make_receiver(ch6, schedule, c), schedule, c, ch6
+    ch6 = _receiver_params(p)
+    schedule = point_schedule(ch6)
+    c = float(preset_spec(ch6["preset"], ch6["family"]).sound_speed_mps)
+    return make_receiver(ch6, schedule, c), schedule, c, ch6
 
 
 def _expected_speed_mps(schedule: Any, c: float, p: dict[str, Any]) -> float:
@@ -309,7 +318,7 @@ def scene_trial(params: Params, seed: np.random.SeedSequence) -> dict[str, Any]:
     if p["srr_db"] != "off":
         reverb = {**ch6, "reverb_min_range_m": float(p["reverb_min_range_m"])}
         reverb_seed = int(rng.integers(2**31))
-        x += _reverberation(schedule, fs, c, reverb, float(p["srr_db"]), reverb_seed, n)
+        x += volume_reverberation(schedule, fs, c, reverb, float(p["srr_db"]), reverb_seed, n)
     start = time.process_time()
     estimates = list(receiver.process(x)) + list(receiver.flush())
     cpu = time.process_time() - start

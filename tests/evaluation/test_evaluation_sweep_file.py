@@ -87,7 +87,7 @@ BAD = [
     (
         _edit('"waveform_af_sidelobe"', '"waveform_sidelobes"'),
         "sweep.trial = 'waveform_sidelobes' is not allowed: must be a registered trial (one of "
-        "ch6_cost, ch6_fmcw, ch6_receiver, tank_run, waveform_af_sidelobe), "
+        "ch6_cost, ch6_fmcw, ch6_receiver, scene, tank_run, waveform_af_sidelobe), "
         "'package.module:function' or 'file.py:function'; register the "
         "trial with @register_trial or name its module and function",
     ),

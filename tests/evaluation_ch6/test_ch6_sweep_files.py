@@ -10,7 +10,7 @@ from hil.evaluation.reproduce import ITEMS, default_sweeps_dir, load_item, selec
 from hil.evaluation.sweep_file import load_sweep_file
 
 #: Shipped sweeps that are not chapter-6 items (``hil sweep NAME``; tested with their trial).
-OTHER_SWEEPS = ("tank-mc",)
+OTHER_SWEEPS = ("tank-mc", "scenes")
 FILES = sorted(p for p in default_sweeps_dir().glob("*.toml") if p.stem not in OTHER_SWEEPS)
 
 

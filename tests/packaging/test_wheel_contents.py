@@ -50,6 +50,7 @@ def test_wheel_holds_every_data_file_and_the_entry_point(tmp_path: Path) -> None
         scripts = zf.read(entry_points).decode()
     expected = _data_files()
     must = {"hil/data/sweeps/sim01_codeword_map.toml", "hil/data/sweeps/tank-mc.toml",
+            "hil/data/sweeps/scenes.toml",
             "hil/data/scenarios/att.toml",
             "hil/data/schema/experiment.schema.json", "hil/data/schema/scenario.schema.json",
             "firmware_protocol/SPEC.md", "firmware_protocol/golden_vectors.json"}  # fmt: skip
@@ -69,8 +70,10 @@ def test_shipped_data_is_found_through_importlib_resources() -> None:
     from hil.evaluation.reproduce import ITEM_IDS, default_sweeps_dir
 
     assert default_sweeps_dir() == sweeps_dir()
-    # The chapter-6 items and the tank study of `hil sweep tank-mc`.
-    assert sorted(p.stem for p in sweeps_dir().glob("*.toml")) == sorted([*ITEM_IDS, "tank-mc"])
+    # The chapter-6 items, the tank study of `hil sweep tank-mc` and the receiver's scenes of
+    # `hil sweep scenes`.
+    shipped = sorted(p.stem for p in sweeps_dir().glob("*.toml"))
+    assert shipped == sorted([*ITEM_IDS, "tank-mc", "scenes"])
     assert set(shipped_scenarios()) == {"att", "tank-audio", "tank-board"}
     assert scenario_path("tank-board").read_text().startswith(("preset", "#", "["))
 
