@@ -226,8 +226,11 @@ def validate_scene_params(params: Params) -> None:
     """
     p = _settings(params)
     _number("snr_db", p["snr_db"], -100.0, 200.0)
-    if p["srr_db"] != "off":
-        _number("srr_db", p["srr_db"], -100.0, 200.0)
+    srr = p["srr_db"]
+    if srr != "off" and not (
+        isinstance(srr, (int, float)) and not isinstance(srr, bool) and -100.0 <= srr <= 200.0
+    ):
+        raise ConfigError("srr_db", srr, '"off" (no reverberation) or a number in -100 .. 200 dB')
     duration = _number("duration_s", p["duration_s"], 0.2, 60.0)
     warmup = _number("warmup_s", p["warmup_s"], 0.0, 60.0)
     _number("reverb_min_range_m", p["reverb_min_range_m"], 0.1, 100.0)
