@@ -3,7 +3,10 @@
 Per grid point the trials are pooled (:func:`scene_rows`): a target's ``pd`` is ``Σ detected /
 Σ expected`` boundaries over the point's trials, false estimates per hop ``Σ n_false / Σ
 n_hops``, and the range and speed errors of every estimate that belongs to the target form its
-RMSE and bias (m, m/s). Targets are numbered in the scene's order (``t1``, ``t2``).
+RMSE and bias (m, m/s). Targets are numbered in the scene's order (``t1``, ``t2``). GOSPA
+(:mod:`hil.evaluation.gospa`, cut-off 0.5 m, order 2) pooled the same way: its RMS per
+boundary ``√(Σ d² / Σ boundaries)`` (m), the assigned pairs' RMS distance, missed and false
+per boundary, and the track switches.
 :func:`write_scene_report` writes
 
 - ``scene_points.csv``: one row per point, the grid values then those figures;
@@ -50,6 +53,26 @@ def _target_figures(ok: list[dict[str, Any]], i: int) -> dict[str, float]:
     }
 
 
+def _gospa_figures(ok: list[dict[str, Any]]) -> dict[str, float]:
+    """Pooled GOSPA of the trials ``ok``: its RMS per boundary (m), the assigned pairs' RMS
+    distance (m), missed and false per boundary, and the track switches."""
+    nan = math.nan
+
+    def total(key: str) -> float:
+        return float(sum(r["result"].get(key, 0) for r in ok))
+
+    times, pairs = total("gospa_times"), total("gospa_pairs")
+    return {
+        "gospa_rms_m": math.sqrt(total("gospa_sum_m2") / times) if times else nan,
+        "gospa_localisation_rms_m": (
+            math.sqrt(total("gospa_localisation_m2") / pairs) if pairs else nan
+        ),
+        "gospa_missed_per_boundary": total("gospa_missed") / times if times else nan,
+        "gospa_false_per_boundary": total("gospa_false") / times if times else nan,
+        "track_switches": int(total("track_switches")),
+    }
+
+
 def scene_rows(spec: SweepSpec, records: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """One row per grid point: the grid values and the pooled figures (module docstring).
 
@@ -76,6 +99,7 @@ def scene_rows(spec: SweepSpec, records: list[dict[str, Any]]) -> list[dict[str,
             for key in ("range_rmse_m", "range_bias_m", "speed_rmse_mps", "speed_bias_mps"):
                 name, unit = key.rsplit("_", 1)
                 row[f"{name}_t{i + 1}_{unit}"] = f[key]
+        row.update(_gospa_figures(ok))
         row.update(
             n_false=false,
             n_duplicate=sum(int(r["result"]["n_duplicate"]) for r in ok),
@@ -130,7 +154,9 @@ def _markdown(spec: SweepSpec, records: list[dict[str, Any]], rows: list[dict[st
     grid = ", ".join(f"{k} = {v}" for k, v in spec.grid.items()) or "none"
     fixed = ", ".join(f"{k} = {v}" for k, v in spec.fixed.items()) or "none"
     cols = [*spec.grid, "pd_t1", "pd_t2", "false_per_hop", "range_rmse_t1_m", "range_rmse_t2_m",
-            "speed_rmse_t1_mps", "speed_rmse_t2_mps", "speed_bias_t1_mps", "beyond_span_said",
+            "speed_rmse_t1_mps", "speed_rmse_t2_mps", "speed_bias_t1_mps", "gospa_rms_m",
+            "gospa_missed_per_boundary", "gospa_false_per_boundary", "track_switches",
+            "beyond_span_said",
             "clutter_said", "n_ok", "n_failed"]  # fmt: skip
     scenes = sorted({str(spec.point_values(p).get("scene", spec.fixed.get("scene", "")))
                      for p in range(spec.n_points)})  # fmt: skip
@@ -145,7 +171,9 @@ def _markdown(spec: SweepSpec, records: list[dict[str, Any]], rows: list[dict[st
         f"An estimate belongs to a target when it is within {GATE_M} m and {GATE_MPS} m/s of "
         "the target's truth at its boundary; one that belongs to no target is false. pd: "
         "detected over expected boundaries (inside the span, outside the reverberation band); "
-        "RMSE over every estimate that belongs to the target (m, m/s). All columns: "
+        "RMSE over every estimate that belongs to the target (m, m/s). GOSPA (cut-off 0.5 m, "
+        "order 2, speed weighed 1 s) per boundary: RMS over the boundaries, missed and false "
+        "per boundary; track switches: changes of a target's confirmed track. All columns: "
         "`scene_points.csv`.",
         "",
         "| " + " | ".join(cols) + " |",

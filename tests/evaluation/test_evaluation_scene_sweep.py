@@ -143,6 +143,9 @@ def test_two_targets_apart_at_minus_10_db_are_both_detected_each_its_own_track()
     ]
     for errs in out["range_errors_m"]:
         assert np.sqrt(np.mean(np.square(errs))) < 0.01
+    # GOSPA: every boundary of both paired, nothing missed or false, no track switch.
+    assert out["gospa_pairs"] == sum(out["expected"]) and out["gospa_times"] >= 80
+    assert (out["gospa_missed"], out["gospa_false"], out["track_switches"]) == (0, 0, 0)
 
 
 @pytest.mark.slow
