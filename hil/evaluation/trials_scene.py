@@ -411,8 +411,9 @@ def score_scene(
         return t0 <= h.t_rx_s < t1 and min_speed_mps <= abs(h.radial_speed_mps) <= max_speed_mps
 
     inside = [e for e in estimates if t0 <= e.t_s < t1]
+    boundaries = {h.hop_index for truth in truths for h in truth if t0 <= h.t_rx_s < t1}
     return {
-        **scene_gospa(inside, by_target, is_expected, hop_s),
+        **scene_gospa(inside, by_target, is_expected, hop_s, boundaries),
         "expected": expected,
         "detected": detected,
         "range_errors_m": r_err,
@@ -430,14 +431,16 @@ def scene_gospa(
     by_target: list[dict[int, Any]],
     is_expected: Callable[[Any], bool],
     hop_s: float,
+    boundaries: set[int],
 ) -> dict[str, float | int]:
     """GOSPA (:mod:`hil.evaluation.gospa`, cut-off :data:`GOSPA_CUTOFF_M`, order 2, speed
     weighed 1 s) at each transmit boundary ``h``: the expected targets' truths there (each
     target's boundary ``h``, ``by_target[i][h]``, where ``is_expected``) against the
     estimates of that boundary (``hop_index + 1 == h``), less those within the gates of a
     truth not expected (a target in the band reported: right, not false). Sums over the
-    boundaries: ``gospa_sum_m2`` (``Σ d²``), ``gospa_times`` (boundaries with a target or an
-    estimate), ``gospa_localisation_m2`` and ``gospa_pairs`` (the assigned pairs' ``Σ d²``
+    ``boundaries`` (the scored window's, whether a target is expected there or not) and any
+    other an estimate names: ``gospa_sum_m2`` (``Σ d²``), ``gospa_times`` (their count),
+    ``gospa_localisation_m2`` and ``gospa_pairs`` (the assigned pairs' ``Σ d²``
     and count), ``gospa_missed``, ``gospa_false``; and ``track_switches``
     (:func:`~hil.evaluation.gospa.track_switches` over the confirmed tracks' ids)."""
     by_boundary: dict[int, list[Any]] = {}
@@ -446,9 +449,7 @@ def scene_gospa(
         if owner is not None and not is_expected(owner[1]):
             continue
         by_boundary.setdefault(e.hop_index + 1, []).append(e)
-    truth_at = {h for by in by_target for h, truth in by.items() if is_expected(truth)} | set(
-        by_boundary
-    )
+    truth_at = set(boundaries) | set(by_boundary)
     sums = {"gospa_sum_m2": 0.0, "gospa_times": len(truth_at), "gospa_localisation_m2": 0.0,
             "gospa_pairs": 0, "gospa_missed": 0, "gospa_false": 0}  # fmt: skip
     labels: list[list[int | None]] = []

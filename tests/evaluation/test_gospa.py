@@ -119,7 +119,7 @@ def test_scene_gospa_sums_per_boundary_and_counts_a_swap_of_tracks() -> None:
         _est(3, 40.0, 10.0, 1), _est(3, 60.0, -6.0, 0),  # the tracks swap
         _est(4, 40.0, 10.0, 1), _est(4, 80.0, 0.0, -1),  # target 2 missed, one false
     ]  # fmt: skip
-    s = scene_gospa(est, by_target, lambda h: True, 0.01)
+    s = scene_gospa(est, by_target, lambda h: True, 0.01, set(range(1, 5)))
     assert s["gospa_times"] == 4 and s["gospa_pairs"] == 7
     assert (s["gospa_missed"], s["gospa_false"]) == (1, 1)
     assert s["gospa_localisation_m2"] == pytest.approx(0.01)
@@ -127,12 +127,20 @@ def test_scene_gospa_sums_per_boundary_and_counts_a_swap_of_tracks() -> None:
     assert s["track_switches"] == 2
 
 
+def test_a_boundary_with_nothing_expected_and_nothing_reported_counts_as_zero() -> None:
+    by_target = _truths(range(1, 5))
+    s = scene_gospa([_est(2, 80.0, 0.0, -1)], by_target, lambda h: False, 0.01, set(range(1, 5)))
+    # One false estimate in four boundaries: Σd² = c²/2 over 4 boundaries.
+    assert (s["gospa_times"], s["gospa_false"], s["gospa_missed"]) == (4, 1, 0)
+    assert s["gospa_sum_m2"] == pytest.approx(0.125)
+
+
 def test_a_target_reported_where_it_is_not_expected_is_not_false() -> None:
     # Target 2 is in the reverberation band (not expected): its estimate is right, so it is
     # neither a false estimate nor a pair; target 1's boundary without estimate is missed.
     by_target = _truths(range(1, 3))
     est = [_est(1, 60.0, -6.0, 3), _est(2, 40.0, 10.0, 0)]
-    s = scene_gospa(est, by_target, lambda h: h.radial_speed_mps > 0, 0.01)
+    s = scene_gospa(est, by_target, lambda h: h.radial_speed_mps > 0, 0.01, {1, 2})
     assert (s["gospa_times"], s["gospa_pairs"], s["gospa_missed"], s["gospa_false"]) == (
         2, 1, 1, 0,
     )  # fmt: skip
