@@ -441,6 +441,13 @@ def test_the_default_demo_runs_on_ptys_in_real_time(
 def test_kill_9_during_a_run_leaves_a_recording_hil_report_rebuilds(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
+    """A run killed with SIGKILL mid-pass leaves a recording that reads and that ``hil
+    report`` turns into the summary and figures the run never wrote. What is checked is the
+    recording's writer (SWMR, flushed as it goes), the same on either clock: the run is on
+    virtual time (the simulated tank in the run's own process), without the seconds of wall
+    time of a real-time pass. The real-time tank's own process is checked under a signal by
+    the Ctrl-C case below, and killed mid-run by
+    test_the_built_in_tank_lost_mid_run_stops_the_run_naming_it."""
     from hil.recording.reader import RunRecording
 
     exp_file = tmp_path / "short.toml"
@@ -448,14 +455,14 @@ def test_kill_9_during_a_run_leaves_a_recording_hil_report_rebuilds(
     folder = tmp_path / "run"
     proc = subprocess.Popen(
         [sys.executable, "-m", "hil.cli.main", "tank-run", str(exp_file), "--out", str(folder),
-         "--no-live"],
+         "--no-live", "--virtual-time"],
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
     )  # fmt: skip
     h5 = folder / "run.h5"
     _wait_while_running(proc, lambda: h5.exists() and h5.stat().st_size > 200_000, "200 kB")
     grown = h5.stat().st_size
     _wait_while_running(proc, lambda: h5.stat().st_size > grown, "one more flush")
-    os.killpg(proc.pid, signal.SIGKILL)  # the run and its simulated-tank child
+    os.killpg(proc.pid, signal.SIGKILL)  # the run's process group, as kill -9 of a session
     proc.wait(timeout=10)
     rec = RunRecording.open(h5)
     blocks = rec.samples()
