@@ -25,7 +25,7 @@ from hil.experiments.experiment import DEFAULT_EXPERIMENT, parse_experiment
 from hil.experiments.live.board_state import xrun_counts, xruns_since
 from hil.experiments.live.latency import measure_latency
 from hil.experiments.tank_run import run_experiment
-from tests.experiments.conftest import CliRun
+from tests.experiments.conftest import CliRun, near_home
 
 # A shorter pass than the built-in run keeps the suite quick.
 SHORT = DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -3.5").replace(
@@ -400,7 +400,7 @@ def test_the_default_demo_runs_on_ptys_in_real_time(
     hardware is. Limits are generous: on a machine busy with other work the capture may lag
     seconds behind (the board's ring holds 8 s) and the simulated board may underrun."""
     exp_file = tmp_path / "short.toml"
-    exp_file.write_text(SHORT)
+    exp_file.write_text(near_home(SHORT))
     folder = tmp_path / "run"
     assert main(["tank-run", str(exp_file), "--out", str(folder), "--no-live", "--json"]) == 0
     summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
