@@ -54,7 +54,7 @@ KINDS: dict[str, dict[str, Any]] = {
         "grid": {"snr_db": [-10.0]},
         "fixed": {"receiver": "gcas", "m_hops": 10},
         "trials": 40,
-        "quick_trials": 4,
+        "quick_trials": 2,
     },
 }
 
@@ -82,10 +82,13 @@ def make(runner: str, workers: int) -> Runner:
     return LocalPoolRunner(workers) if runner == "pool" else DaskRunner(n_workers=workers)
 
 
-def measure(r: Runner, workers: int, kind: str, trials: int, out: Path) -> dict[str, float]:
+def measure(
+    r: Runner, workers: int, kind: str, trials: int, out: Path, warm_per_worker: int = 2
+) -> dict[str, float]:
     """Trials/s of ``trials`` trials of ``kind`` on the started runner ``r`` of ``workers``
-    (one warm-up sweep of 2 trials per worker of the same kind first, not timed)."""
-    warm = sweep_from_dict(sweep_doc(kind, 2 * workers, "warm"))
+    (one warm-up sweep of ``warm_per_worker`` trials per worker of the same kind first, not
+    timed)."""
+    warm = sweep_from_dict(sweep_doc(kind, warm_per_worker * workers, "warm"))
     spec = sweep_from_dict(sweep_doc(kind, trials, "bench"))
     run_sweep(warm, out / "warm", r, show_progress=False)
     load = os.getloadavg()[0]
@@ -134,8 +137,11 @@ def main() -> None:
                     for kind in kinds:
                         trials = KINDS[kind]["quick_trials" if args.quick else "trials"]
                         out = Path(tmp) / f"{kind}-{runner}-{n}"
+                        # --quick: one warm-up trial per worker (the smoke run's rows,
+                        # not its rates, are what it checks).
+                        warm = 1 if args.quick else 2
                         rows.append({"kind": kind, "runner": runner, "workers": n,
-                                     **measure(r, n, kind, trials, out)})  # fmt: skip
+                                     **measure(r, n, kind, trials, out, warm)})  # fmt: skip
     rows.sort(key=lambda row: kinds.index(row["kind"]))  # stable: per kind, runner, count
     _derive(rows)
     _print_table(rows)

@@ -3,7 +3,7 @@
 Each receiver is fed one scene whole, in 997- and 10 000-sample blocks and at 20 seeded random
 cuts; the estimates (dataclass ==), refusals and notices must be the same. The scene is long
 enough (3 s at 100 kHz; FMCW 3 s at 200 kHz; the matched-filter bank, 8 CPU s a pass over 3 s,
-reads its first second) that a whole-input temporary passes the 256 KiB past which NumPy
+reads its first half second) that a whole-input temporary passes the 256 KiB past which NumPy
 reuses a temporary in place (its in-place complex loops round differently), so any result
 that depends on the block size or on which NumPy loop runs shows here: a target
 closing from 50 m at 10 m/s, braking at 5 m/s² (FMCW: from 25 m at 3 m/s, its
@@ -39,9 +39,10 @@ FS_FM = 200_000.0
 BLOCKS = (997, 10_000)
 RANDOM_SEEDS = (0,)
 #: Receivers fed a prefix of their scene, s: the matched-filter bank costs 2.8 CPU s per second
-#: of input (four passes over 3 s: 33 s); one second still holds 96 estimates, six code periods
-#: and 100 000 samples (a whole-input temporary of 800 kB real, 1.6 MB complex).
-PREFIX_S = {"mfbank": 1.0}
+#: of input (four passes over 3 s: 33 s); half a second still holds 45 estimates, nearly three
+#: code periods and 50 000 samples (a whole-input temporary of 400 kB real, 800 kB complex:
+#: past NumPy's 256 KiB).
+PREFIX_S = {"mfbank": 0.5}
 
 
 def _schedule(name: str) -> tuple[HopSchedule, float]:
@@ -133,10 +134,11 @@ CASES = [
 ]
 
 
-#: The whole test is left to ``--all``: the matched-filter bank takes 11 CPU s over its 1 s
-#: prefix (whole and three cut lists), the STFT, FMCW and JIFS baselines 2.8, 1.4 and 1.0 CPU s
-#: and the GCAS cases 0.5-1.8 CPU s each (measured, numba's cache warm); the fast tier keeps
-#: chunks == whole tests of GCAS (test_gcas_receiver) and of the STFT, FMCW and JIFS baselines
+#: The whole test is left to ``--all``: the matched-filter bank takes 7.3 CPU s over its 0.5 s
+#: prefix (whole and three cut lists, scene included; 12.7 over 1 s, both at load 12), the
+#: STFT, FMCW and JIFS baselines 2.8, 1.4 and 1.0 CPU s and the GCAS cases 0.5-1.8 CPU s each
+#: (measured, numba's cache warm); the fast tier keeps chunks == whole tests of GCAS
+#: (test_gcas_receiver) and of the STFT, FMCW and JIFS baselines
 #: (test_baselines_stft_fmcw_jifs).
 @pytest.mark.slow
 @pytest.mark.parametrize(("name", "range_readout", "tracked"), CASES)

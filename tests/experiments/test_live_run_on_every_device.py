@@ -41,7 +41,7 @@ from hil.experiments.jack_tank import DEFAULT_PERIOD
 from hil.experiments.run_scoring import summarize
 from hil.experiments.tank_run import LiveView, RunOutcome, run_experiment
 from hil.recording.reader import RunRecording
-from tests.experiments.conftest import SHORT_CLI_EXPERIMENT, serve_jack_tank
+from tests.experiments.conftest import SHORT_CLI_EXPERIMENT, near_home, serve_jack_tank
 
 SHORT = DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -3.5")
 #: SHORT started 0.1 m from home (its run-up from -0.1 m), for the runs stopped mid-pass (by
@@ -223,6 +223,8 @@ def completed(
     """A whole short run on the device (one per device, shared by the tests below)."""
     device = DEVICES[request.param]
     _require(device, require_system)
+    # In real time, the short pass near home (no positioning before it streams).
+    virtual = device.virtual_time
     if request.param == "python-board":
         # The same run as test_tank_run_virtual's (SHORT on the Python board on virtual
         # time, no live view): the conftest runs it once for both.
@@ -231,7 +233,7 @@ def completed(
         return device, outcome
     base = tmp_path_factory.mktemp(request.param)
     with contextlib.ExitStack() as stack:
-        text, _ = _experiment(request.param, stack, base)
+        text, _ = _experiment(request.param, stack, base, SHORT if virtual else near_home(SHORT))
         outcome = run_experiment(
             parse_experiment(text),
             folder=base / "run",

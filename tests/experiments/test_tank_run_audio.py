@@ -18,6 +18,7 @@ from hil.errors import ConfigError
 from hil.experiments.experiment import DEFAULT_EXPERIMENT, parse_experiment
 from hil.experiments.tank_run import LiveView, run_experiment
 from hil.recording.instrument import read_entry
+from tests.experiments.conftest import near_home
 from tests.thread_lateness import LatenessProbe
 
 SHORT = DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -3.5")
@@ -114,7 +115,7 @@ def test_hil_tank_run_with_the_simulated_audio_interface_in_real_time(
     # enough for the tow to move half a range cell, the telemetry cannot judge "wrong" and
     # the exact truth's figures stand alone.
     with LatenessProbe() as probe:
-        summary = _tank_run(tmp_path, AUDIO, capsys)
+        summary = _tank_run(tmp_path, near_home(AUDIO), capsys)
     slack = parse_experiment(AUDIO).tow.speed_mps * probe.longest_s
     print(f"longest wait for a CPU {probe.longest_s:.3f} s: telemetry slack {slack:.3f} m")
     _assert_tracked_as_on_the_board(summary, wrong_fraction=0.02, telemetry_slack_m=slack)

@@ -37,7 +37,7 @@ from hil.experiments.sim_tank import CONVERTER_DELAY_SAMPLES
 from hil.recording.instrument import read_entry
 from hil.recording.reader import RunRecording
 from hil.recording.replay import compare_estimates, replay
-from tests.experiments.conftest import serve_jack_tank
+from tests.experiments.conftest import near_home, serve_jack_tank
 
 #: The short tow of the audio tank tests. The JACK server runs in real time, slower while
 #: a client is late (a loaded machine): a run may take several times its signal's length.
@@ -114,7 +114,7 @@ def served_tank(tmp_path: Path, jack_env: dict[str, str]) -> Iterator[tuple[Path
     """``hil sim-serve tank --jack`` running (the recipe's, on the short tow); the
     experiment file it printed."""
     exp_in = tmp_path / "short.toml"
-    exp_in.write_text(SHORT, encoding="utf-8")
+    exp_in.write_text(near_home(SHORT), encoding="utf-8")
     serve, _, _ = _recipe()
     assert serve == ["sim-serve", "tank", "--jack"]
     # --write keeps the served file and the truth written beside it in this test's folder.

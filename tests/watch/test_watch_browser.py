@@ -108,8 +108,19 @@ def test_page_follows_a_simulated_tank_run(browser: Any, tmp_path: Path) -> None
     from selenium.webdriver.support.ui import WebDriverWait
 
     exp_file = tmp_path / "slow.toml"
-    text = DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -3.5")
-    exp_file.write_text(text.replace("speed_mps = 1.5", "speed_mps = 0.5"))
+    # A 1 m pass at 0.5 m/s with 0.2 m run-up and run-down, from 0.1 m off home: no
+    # positioning out to a run-up further away, seconds of estimates to watch.
+    text = DEFAULT_EXPERIMENT
+    for old, new in (
+        ("start_m = -2.0", "start_m = -0.3"),
+        ("end_m = -5.0", "end_m = -1.3"),
+        ("speed_mps = 1.5", "speed_mps = 0.5"),
+        ("run_up_m = 0.6", "run_up_m = 0.2"),
+        ("run_down_m = 0.6", "run_down_m = 0.2"),
+    ):
+        assert old in text, old
+        text = text.replace(old, new)
+    exp_file.write_text(text)
     folder = tmp_path / "run"
     proc = subprocess.Popen(
         [sys.executable, "-m", "hil.cli.main", "tank-run", str(exp_file), "--out", str(folder),
