@@ -305,10 +305,11 @@ def _run_in_folder(
             ending = _Ending(False, f"ConfigError: {exc}")
         except Exception as exc:  # any failure: stop safely below, report it
             stopped = interruption_behind(exc)
+            cause = devices.cause_of(exc)
             ending = (
                 _Ending(True, f"interrupted ({interruption(stopped)})")
                 if stopped is not None
-                else _Ending(False, f"{type(exc).__name__}: {exc}")
+                else _Ending(False, f"{type(cause).__name__}: {cause}")
             )
         finally:
             signals.stopping()  # a second signal must not break off the safe stop

@@ -177,3 +177,40 @@ def test_the_built_in_tank_killed_while_the_stage_moves_stops_the_run_naming_it(
     )
     assert texts[-1].startswith(phase)  # stopped in that phase
     assert outcome.samples == 0
+
+
+@pytest.mark.parametrize("tank_ended", [True, False])
+def test_a_link_failure_after_the_tank_ended_is_reported_as_the_tank_lost(
+    tank_ended: bool, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # The simulated tank serves the board and the stage: once its process ended, whichever
+    # link noticed first fails in its own way (here the board's transport, waiting for a DAC
+    # preload credit), and the run names the tank. A link failure while the tank runs is
+    # reported as it is.
+    from hil.errors import TransportTimeoutError
+    from hil.experiments import tank_run, virtual_tank
+
+    ended = DeviceLostError(
+        "the built-in simulated tank", "(process 1)", "its process exited with code -9",
+        "that nothing killed it",
+    )  # fmt: skip
+    monkeypatch.setattr(
+        virtual_tank.VirtualTank, "lost", lambda self, grace_s=0.0: ended if tank_ended else None
+    )
+
+    def timed_out(session: Any, max_duration_s: float, stop: Any) -> None:
+        session.transmit()
+        raise TransportTimeoutError("no DAC preload (credit) within 5.0 s")
+
+    monkeypatch.setattr(tank_run, "_transmit_and_tow", timed_out)
+    outcome = run_experiment(
+        parse_experiment(DEFAULT_EXPERIMENT), folder=tmp_path / "run",
+        view=LiveView(enabled=False), virtual_time=True,
+    )  # fmt: skip
+    expected = (
+        f"DeviceLostError: {ended}"
+        if tank_ended
+        else "TransportTimeoutError: no DAC preload (credit) within 5.0 s"
+    )
+    assert outcome.error == expected
+    assert outcome.events[-1][3] == f"stop: error: {expected}"

@@ -167,6 +167,17 @@ class RunDevices:
         its exit, when a link to it already failed)."""
         return self.tank.lost(grace_s) if self.tank is not None else None
 
+    def cause_of(self, error: Exception) -> Exception:
+        """What to report for a run that failed with ``error``: the simulated tank's loss
+        where its process ended (waiting :data:`LINK_LOST_GRACE_S` for it), else ``error``.
+        The tank serves the board and the stage, so once it is gone any of their links fails
+        in its own way (a transport timeout waiting for the board's credit, a broken pty),
+        whichever noticed first; the loss is the cause. An error that is already a device's
+        loss is kept."""
+        if isinstance(error, DeviceLostError) or self.tank is None:
+            return error
+        return self.tank_lost(LINK_LOST_GRACE_S) or error
+
     def lost(self, board_url: str, board_watch: LinkWatch | None) -> DeviceLostError | None:
         """A device found lost since the last look: the simulated tank's process first (it
         serves both simulated devices), then the board's link (``board_watch``, None before
