@@ -4,15 +4,19 @@ span, hops of 10 ms, a code period of 17 hops)."""
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
+from hil.estimation.base import Estimate
 from hil.estimation.gcas.ghost_inside import EVIDENCE_RATIO, InsideSources
 from hil.estimation.gcas.ghost_source import GhostSources
 from hil.estimation.gcas.readout import ECHO_TEST
+from hil.estimation.gcas.receiver import GcasReceiver
 from hil.estimation.refine import CoherentRefiner
 
-from .conftest import FS, C, att_schedule, echo_samples
+from .conftest import FS, C, att_schedule, block_edges, echo_samples
 
 #: The still reverberation's speeds on att (one hop's Doppler resolution at 28.35 kHz), m/s.
 STILL_MPS = 2.65
@@ -143,3 +147,52 @@ def test_sim05_ghosts_of_an_undetected_echo_are_its_estimates(
     params = {"receiver": "gcas", "m_hops": 3, "snr_db": -20.0}
     out = ch6_receiver_trial(params, np.random.SeedSequence(2069, spawn_key=(0, rep)))
     assert (out["n_detected"], out["n_false"]) == (detected, false)
+
+
+@pytest.mark.parametrize("cut", [997, "random-4"])
+def test_the_ghosts_refused_and_their_sources_are_the_same_however_the_input_is_cut(
+    monkeypatch: pytest.MonkeyPatch, cut: int | str
+) -> None:
+    # sim-05's rep 15 above, its input in blocks: the same estimates, and the same ghosts
+    # refused (the evidence reads a code period of boundaries back, which the refinement
+    # keeps beyond the search's decision lag: ghost_inside.evidence_history_s).
+    import hil.evaluation.trials_ch6 as trials
+
+    made: list[GcasReceiver] = []
+    seen: list[list[tuple[int, float, float]]] = []
+    make = trials._make_receiver
+
+    class _Blocks:
+        def __init__(self, rx: GcasReceiver) -> None:
+            self.rx = rx
+
+        def process(self, x: np.ndarray) -> list[Estimate]:
+            edges = block_edges(x.shape[0], cut) if made[-1] is not made[0] else [0, x.shape[0]]
+            out: list[Estimate] = []
+            for a, b in itertools.pairwise(edges):
+                out += self.rx.process(x[a:b])
+            return out
+
+        def flush(self) -> list[Estimate]:
+            out = self.rx.flush()
+            return out
+
+    def _make(*args: object, **kw: object) -> _Blocks:
+        rx = make(*args, **kw)
+        made.append(rx)
+        return _Blocks(rx)
+
+    monkeypatch.setattr(trials, "_make_receiver", _make)
+    score = trials.score_estimates
+
+    def _score(estimates: list[Estimate], *args: object, **kw: object) -> dict[str, object]:
+        seen.append([(e.hop_index, round(e.t_s, 9), round(e.speed_mps, 6)) for e in estimates])
+        return score(estimates, *args, **kw)
+
+    monkeypatch.setattr(trials, "score_estimates", _score)
+    params = {"receiver": "gcas", "m_hops": 3, "snr_db": -20.0}
+    for _ in range(2):  # whole, then cut
+        trials.ch6_receiver_trial(params, np.random.SeedSequence(2069, spawn_key=(0, 15)))
+    counts = [rx.readout.inside_sources.count for rx in made]  # type: ignore[union-attr]
+    assert counts[0] == counts[1] >= 2
+    assert seen[0] == seen[1] and len(seen[0]) == 16

@@ -67,6 +67,21 @@ SPEED_POINTS = 5
 EVIDENCE_RATIO = 2.0
 
 
+def evidence_history_s(
+    period_hops: int, hop_s: float, max_speed_mps: float, sound_speed_mps: float
+) -> float:
+    """The input (s) the refinement must keep beyond its own history for
+    :meth:`InsideSources.evidence`: the code period's ``period_hops`` boundaries read back,
+    plus two hops (the source's boundary lies up to a hop before the ghost's, and the two
+    time scales' drift up to about a hop and a half more at M = 29), each hop of ``hop_s``
+    (s) received at the slowest time scale in the span ``±max_speed_mps`` (m/s). The
+    refinement's own history holds ``2M + 1`` hops: without this, boundaries of the period
+    were gone when read (16 of 680 reads in three of sim-05's trials at M = 3), and which
+    ones would depend on how far the input had been pushed when the detection was decided."""
+    c, v = float(sound_speed_mps), float(max_speed_mps)
+    return (int(period_hops) + 2) * float(hop_s) * (c + v) / (c - v)
+
+
 class InsideSources:
     """The search of the module docstring over ``ghosts``' geometry (its refiner, span and
     Doppler steps), with the echo test ``echo_test``; ``still_mps`` (m/s) the speeds the
