@@ -1004,6 +1004,15 @@ class CoherentRefiner:
         also those up to that much later."""
         return [(e.speed(self.c), abs(e.amplitude)) for e in self._measured_near(t_s, lag_s)]
 
+    def forget(self, fit: Refinement) -> None:
+        """Forget ``fit``, remembered by :meth:`refine` as one echo, where the caller found it
+        to be none (another echo's ghost, :mod:`hil.estimation.gcas.ghost_inside`): it is then
+        neither taken out of other detections' input, nor followed, nor a warm start."""
+        self._echoes = [e for e in self._echoes if (e.t_s, e.alpha) != (fit.t_s, fit.alpha)]
+        kept = [r for r in self._recent if (r[1], r[2]) != (fit.t_s, fit.alpha)]
+        self._recent.clear()
+        self._recent.extend(kept)
+
     def _measured_near(self, t_s: float, lag_s: float = 0.0) -> list[_EchoFit]:
         """The echoes whose latest fits lie within :data:`KNOWN_HOPS` hops of ``t_s`` (s),
         or up to ``lag_s`` (s) more after it (a detection decided that late hears the echoes

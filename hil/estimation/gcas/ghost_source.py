@@ -33,6 +33,13 @@ lobe and the speed span). A coarse grid: this reading costs a few hundred of the
 likelihood's evaluations per hop of the period. Measured on ``att``, M = 10, 35 m/s at
 -10 dB: the source's own hop holds 4 times the likelihood of the next best (8987 against
 2147).
+
+The same geometry puts the source of a ghost inside the span, one to :data:`SPACINGS` tone
+spacings either way (:meth:`GhostSources.inside_bands`, for
+:mod:`hil.estimation.gcas.ghost_inside`). There the likelihood is read only at the hops
+whose tones, shifted by the spacings, the ghost's codeword holds on at least
+:data:`MIN_MATCH_FRACTION` of the ``M`` hops (:meth:`GhostSources.matching`): with few hops
+and a weak source, noise on another hop of the period can outdo the source's own.
 """
 
 from __future__ import annotations
@@ -58,6 +65,10 @@ SPACINGS = 3
 #: (``1/(α Δf)``), and the times read across it.
 TIME_HALF_LOBES = 1.0
 TIME_POINTS = 17
+#: The least fraction of the ``M`` hops on which a source's tones, shifted by the ghost's
+#: tone spacings, must be the ghost's codeword's for the ghost to be looked for there
+#: (:meth:`GhostSources.matching`): a ghost collects the source's energy of those hops only.
+MIN_MATCH_FRACTION = 0.4
 
 
 def _ratios(tones_hz: NDArray[np.float64]) -> list[tuple[float, float]]:
@@ -97,6 +108,8 @@ class GhostSources:
             n * self.c * refiner.spacing_hz / (2.0 * f_c) for n in range(1, len(self.ratios) + 1)
         ]
         self.schedule = schedule
+        #: Each tone's rank by frequency (the schedule's tone index → rank), shape (K,).
+        self._rank = np.searchsorted(tones, np.asarray(schedule.tones_hz, dtype=np.float64))
         self.m_hops = refiner.m_hops
         self.hop_s = float(schedule.hop_s)
 
@@ -133,6 +146,29 @@ class GhostSources:
                 out.append((side, lo, hi))
         return out
 
+    def inside_bands(self, alpha: float, still_mps: float) -> list[tuple[int, float, float]]:
+        """The speeds (m/s) where the source of a ghost detected at time scale ``alpha`` may
+        be inside the span: ``(shift, v_lo, v_hi)`` for each tone spacings ``n`` and
+        direction, ``shift`` the ghost's tone's rank less the source's (``+n``: the source's
+        tones read ``n`` spacings up, the source the faster), cut to the span ``±max_speed_mps``
+        and to outside the still reverberation's cells ``|v| < still_mps`` (m/s; a source
+        there is hidden by the reverberation band: :mod:`hil.estimation.gcas.hidden_echoes`),
+        nearest the ghost first; none where no source lies there."""
+        v_max, ghost = self.max_speed_mps, self._speed(alpha)
+        out = []
+        for n, (ratio_lo, ratio_hi) in enumerate(self.ratios, start=1):
+            for shift, r_lo, r_hi in (
+                (n, ratio_lo, ratio_hi),
+                (-n, 1.0 / ratio_hi, 1.0 / ratio_lo),
+            ):
+                v_lo = max(self._speed(alpha * r_lo) - self.margin_mps, -v_max)
+                v_hi = min(self._speed(alpha * r_hi) + self.margin_mps, v_max)
+                # A band across rest keeps its parts outside the reverberation's cells.
+                for lo, hi in ((v_lo, min(v_hi, -still_mps)), (max(v_lo, still_mps), v_hi)):
+                    if lo < hi:
+                        out.append((shift, lo, hi))
+        return sorted(out, key=lambda b: abs(0.5 * (b[1] + b[2]) - ghost))
+
     def boundary(self, t_s: float, alpha: float, alpha_source: float) -> float:
         """The source's boundary (s) that a ghost detected at ``t_s`` (s) and time scale
         ``alpha`` aligns with, for a source at ``alpha_source``: its comb peaks ``(M − 1)/2``
@@ -156,11 +192,16 @@ class GhostSources:
         )
 
     def peak(
-        self, t_s: float, alpha: float, v_lo: float, v_hi: float
-    ) -> tuple[float, float, int] | None:
+        self, t_s: float, alpha: float, v_lo: float, v_hi: float,
+        ghost: tuple[int, int] | None = None,
+    ) -> tuple[float, float, int] | None:  # fmt: skip
         """The likelihood's best point over the source's speeds ``[v_lo, v_hi]`` (m/s) for
         a ghost detected at ``t_s`` (s) and ``alpha``: ``(t_rx s, α, hop index)``, over
-        every hop of one code period (module docstring); None where the input covers none."""
+        every hop of one code period (module docstring); None where the input covers none.
+        With ``ghost`` = ``(hop index, shift)``, the ghost's boundary and its tones' rank
+        less the source's (:meth:`inside_bands`), only the hops whose boundary the ghost
+        aligns with holds the ghost's tones shifted on at least :data:`MIN_MATCH_FRACTION`
+        of the ``M`` hops (:meth:`matching`) are read."""
         c, ref = self.c, self.refiner
         n_v = max(2, int(math.ceil((v_hi - v_lo) / self.step_mps)) + 1)
         speeds = np.linspace(v_lo, v_hi, n_v)
@@ -177,7 +218,12 @@ class GhostSources:
         tt = t_c + t_v[:, None] + offsets[None, :]
         aa = np.repeat(alphas[:, None], TIME_POINTS, axis=1)
         best: tuple[float, float, float, int] | None = None
-        for hop in self._hops_ending_before(t_c):
+        hops: list[int] | range = self._hops_ending_before(t_c)
+        if ghost is not None:
+            # The boundary the ghost aligns with lies whole hops of the source after t_c.
+            back = round((self.boundary(t_s, alpha, a_mid) - t_c) * a_mid / self.hop_s)
+            hops = self.matching(list(hops), back, *ghost)
+        for hop in hops:
             corr = ref.correlation(t_c, a_mid, hop, tt, aa)
             if corr is None:
                 continue
@@ -186,6 +232,27 @@ class GhostSources:
             if best is None or power.flat[k] > best[0]:
                 best = (float(power.flat[k]), float(tt.flat[k]), float(aa.flat[k]), hop)
         return None if best is None else best[1:]
+
+    def matching(self, hops: list[int], back: int, ghost_hop: int, shift: int) -> list[int]:
+        """Those of ``hops`` (the source's boundaries, each ``back`` hops before the one the
+        ghost aligns with) whose aligned ``M`` hops' tones, ranked and shifted by ``shift``,
+        are the tones of the ghost's ``M`` hops (ending ``ghost_hop``) on at least
+        :data:`MIN_MATCH_FRACTION` of them: where fewer agree the ghost holds too little of
+        the source to be detected and pass the echo test."""
+        m = self.m_hops
+        ghost_tones = self._rank[self.schedule.hops(ghost_hop - m + 1, m).tone_index]
+        need = math.ceil(MIN_MATCH_FRACTION * m)
+        return [
+            h
+            for h in hops
+            if int(
+                np.count_nonzero(
+                    self._rank[self.schedule.hops(h + back - m + 1, m).tone_index] + shift
+                    == ghost_tones
+                )
+            )
+            >= need
+        ]
 
     def _hops_ending_before(self, t_s: float) -> range:
         """The hops of one code period whose transmit end is at most ``t_s`` (s) and more

@@ -38,6 +38,7 @@ from hil.estimation.gcas.beyond_span import BeyondSpan, BeyondSpanCheck
 from hil.estimation.gcas.candidates import new_pair_rows, second_echo_rows
 from hil.estimation.gcas.clutter_seen import ClutterLog, ClutterSeen
 from hil.estimation.gcas.front_end import FrontEnd
+from hil.estimation.gcas.ghost_inside import InsideSources
 from hil.estimation.gcas.hidden_echoes import HiddenEchoes
 from hil.estimation.gcas.point_echoes import PointEchoes
 from hil.estimation.gcas.residual import STEP_HOPS
@@ -177,6 +178,13 @@ class Readout:
         #: Speeds below this share their Doppler cells with the still reverberation, m/s
         #: (:func:`~hil.estimation.reverb_band.in_reverberation`'s bound, made once).
         self._still_mps = doppler_resolution_mps(tones, fe.hop_s, c)
+        #: The undetected echo inside the span whose ghost an echo's fit may be (with the
+        #: beyond-span check, whose geometry it shares: :mod:`hil.estimation.gcas.ghost_inside`).
+        self.inside_sources = (
+            None
+            if beyond_span is None
+            else InsideSources(beyond_span.ghosts, ECHO_TEST, self._still_mps)
+        )
         #: How far (s of receive time) the second search's detections lie behind the first's
         #: at most: its start-up's ``M + 1`` hops, a stretch and a hop of decision
         #: (:mod:`hil.estimation.gcas.residual`); an estimate is kept that long to tell a
@@ -238,6 +246,8 @@ class Readout:
         self.last_detection: DetectionInfo | None = None
         if self.beyond_span is not None:
             self.beyond_span.reset()
+        if self.inside_sources is not None:
+            self.inside_sources.reset()
         self.clutter_seen.reset()
         self.point_echoes.reset()
         #: What the receiver says of what it refused (beyond the span, clutter), in the
@@ -334,6 +344,11 @@ class Readout:
                 self.incoherent_count += 1
                 return None
             pair_row = bool(self._pair_rows[p.d0])
+            # Whether no echo was measured near, read before the fit remembers its own.
+            inside = self.inside_sources
+            alone = inside is not None and not self._refiner.known_echoes(
+                t_rx, self._residual_lag_s if residual else 0.0
+            )
             refined = self._refiner.refine(
                 t_rx, alpha, hop_index, partners=pair_row, residual=residual,
                 lag_s=self._residual_lag_s if residual else 0.0, pairs=pair_row,
@@ -356,6 +371,12 @@ class Readout:
             if refined.is_echo(ECHO_TEST) and self._refiner.still_leak(refined, hop_index):
                 self.incoherent_count += 1
                 return None
+            if inside is not None and alone and refined.is_echo(ECHO_TEST):
+                source = inside.source_of(t_rx, alpha, hop_index, refined)
+                if source is not None:
+                    self.incoherent_count += 1
+                    fit, hop = source
+                    return None if fit is None else self._source_estimate(fit, hop, p, residual)
             if refined.is_echo(ECHO_TEST):
                 self._confirm_point_echo(refined, hop_index)
             else:
@@ -390,6 +411,19 @@ class Readout:
             snr_db=10.0 * math.log10(snr) if snr > 0 else -math.inf,
         )
 
+    def _source_estimate(
+        self, fit: Refinement, hop_index: int, p: Peak, residual: bool
+    ) -> Estimate | None:
+        """The estimate of the echo found inside the span whose ghost peak ``p`` was
+        (:mod:`hil.estimation.gcas.ghost_inside`), fitted as ``fit`` at its own boundary
+        ending hop ``hop_index``, scored as ``p``; None where already reported."""
+        fe, k = self._fe, self._k
+        word = hop_index % fe.n_codewords
+        t_tx = k.hop_end[word] + (hop_index // fe.n_codewords) * k.period
+        return self._scored(
+            self._estimate(fit.t_s, fit.alpha, t_tx, hop_index, fit.bound), p, residual
+        )
+
     def _second_of(
         self, fit: Refinement, t_tx: float, hop_index: int, p: Peak, residual: bool
     ) -> Estimate | None:
@@ -400,7 +434,13 @@ class Readout:
         fe = self._fe
         if abs(fit.speed_mps(fe.sound_speed_mps)) > fe.max_speed_mps:
             return None
-        est = self._estimate(fit.t_s, fit.alpha, t_tx, hop_index, fit.bound)
+        return self._scored(
+            self._estimate(fit.t_s, fit.alpha, t_tx, hop_index, fit.bound), p, residual
+        )
+
+    def _scored(self, est: Estimate | None, p: Peak, residual: bool) -> Estimate | None:
+        """``est`` (an echo read from peak ``p`` at a boundary of its own) scored as ``p``
+        and counted among the second search's where ``residual``; None for None."""
         if est is None:
             return None
         self.residual_count += residual

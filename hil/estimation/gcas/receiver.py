@@ -16,6 +16,7 @@ from hil.estimation.first_arrival import FirstArrivalReadout
 from hil.estimation.gcas.beyond_span import BeyondSpan, BeyondSpanCheck
 from hil.estimation.gcas.clutter_seen import ClutterSeen
 from hil.estimation.gcas.front_end import FrontEnd
+from hil.estimation.gcas.ghost_inside import evidence_history_s
 from hil.estimation.gcas.options import (
     COARSE_STEP,
     check_geometry,
@@ -216,7 +217,7 @@ class GcasReceiver:
         # the search's decision lag after its samples arrived: they keep that much more.
         for reader in (self._refiner, self._first_arrival):
             if reader is not None:
-                reader.allow_lag(self.decision_lag_samples)
+                reader.allow_lag(self.decision_lag_samples + self._evidence_samples(reader))
         self.readout = Readout(
             fe, max_range_m=self.max_range_m, coherent=self.coherent,
             first_arrival=self._first_arrival, unit_values=self.strategy.unit_values,
@@ -224,6 +225,17 @@ class GcasReceiver:
         )  # fmt: skip
         self.reset()
         self._warm_up()
+
+    def _evidence_samples(self, reader: object) -> int:
+        """The input (samples) the refinement keeps beyond its own history and the decision
+        lag for the search for a ghost's source inside the span (with the beyond-span check,
+        whose geometry it shares: :func:`~hil.estimation.gcas.ghost_inside.
+        evidence_history_s`); none for another reader."""
+        if reader is not self._refiner or self._beyond is None:
+            return 0
+        period = self.schedule.period_hops
+        seconds = evidence_history_s(period, self.hop_s, self.max_speed_mps, self.sound_speed_mps)
+        return math.ceil(seconds * self.fs_hz)
 
     def _make_search(
         self,
