@@ -12,16 +12,14 @@ estimates per 2 s trial at the strong target's earlier ranges, measured on 4 see
 :class:`CopyVeto` drops an estimate that is such a copy: within :data:`COPY_GATE_M` and
 :data:`COPY_GATE_MPS` of where an estimate it passed puts its target ``j`` still periods
 earlier (the boundary ``j·Q`` hops back, whose echo the copy repeats; an estimate up to M + 2
-hops from that boundary, moved to it at its speed: GCAS gives none in its first M hops), and
-weaker than that one by at least the copy's loss less
-:data:`COPY_MARGIN_DB` (``snr_db ≤ snr_then − 20·log10 K_j + 6 dB``, ``K_j`` the periods the
-mean held; an estimate without an SNR of its own, NaN, is judged by position alone). A target
-that really is where another was ``j`` periods earlier, at its speed, is as strong as that
-one was and passes; one slower than ``1 m / (j·Q)`` (5.9 m/s at j = 1 on ``att``) that keeps
-its level is not taken for its own copy either. The cost: a target at least ``20·log10 K − 6``
-dB weaker (12 dB at K = 8) at a stronger one's speed (to 0.5 m/s), within the range the
-stronger one crossed in the last K periods (``v·K·Q``: 13.6 m at 10 m/s), is dropped with
-the copies.
+hops from that boundary, moved to it at its speed: GCAS gives none in its first M hops), more
+than :data:`COPY_GATE_M` from where that target is now, and at least :data:`COPY_MARGIN_DB`
+weaker than that estimate (an estimate without an SNR of its own, NaN, is judged by position
+alone). A target is never taken for its own copy: it is where it is now. A copy within
+:data:`COPY_GATE_M` of its target (``v·j·Q`` ≤ 1 m: below 5.9 m/s at j = 1 on ``att``) is
+kept. The cost: a second target at least 3 dB weaker at a stronger one's speed (to 1 m/s),
+within 1 m of a range the stronger one held in the last K periods (``v·K·Q``: 13.6 m at
+10 m/s), is dropped with the copies.
 """
 
 from __future__ import annotations
@@ -32,14 +30,16 @@ import math
 from hil.estimation.base import Estimate
 
 #: Gates (m, m/s) within which an estimate sits on a copy: 1 m, one and a half grating lobes
-#: (1/Δf of delay, 0.68 m on ``att``), and 0.5 m/s. A copy is weak and lies among the other
-#: copies of the same target (``vQ`` apart, 1.7 m at 10 m/s): on ``second-10db-weaker`` its
-#: fits sat 0.3 m (its own lobe's side) to 0.6 m from the estimate it copies.
+#: (1/Δf of delay, 0.68 m on ``att``), and 1 m/s, 0.4 of a hop's Doppler cell. A copy is weak
+#: and lies among the other copies of its target (``vQ`` apart, 1.7 m at 10 m/s): on
+#: ``second-10db-weaker`` its fits sat 0.3 (its own lobe's side) to 0.85 m and up to 0.64 m/s
+#: from where its source was.
 COPY_GATE_M = 1.0
-COPY_GATE_MPS = 0.5
-#: How much stronger than the copy's expected level (dB) an estimate may be and still be taken
-#: for the copy: the copies of j = 1 .. K add where two fall in one cell.
-COPY_MARGIN_DB = 6.0
+COPY_GATE_MPS = 1.0
+#: A copy is weaker than the echo it repeats by ``20·log10 K_j`` in power, but GCAS's
+#: ``snr_db`` is compressed (a copy 12 dB down read 6 dB under its source): an estimate at
+#: least this much (dB) under the one it would copy is taken for the copy.
+COPY_MARGIN_DB = 3.0
 
 
 class CopyVeto:
@@ -85,19 +85,20 @@ class CopyVeto:
         held = min(self.still_periods, math.floor(e.t_s / self.period_s + 1e-9))
         if held < self.warmup:
             return False  # nothing subtracted yet: no copies
-        loss_db = 20.0 * math.log10(held)
         hop_s = self.period_s / self.period_hops
         for j in range(1, held + 1):
             then = e.hop_index - j * self.period_hops  # the boundary the copy repeats
             for h in range(then - self.reach_hops, then + self.reach_hops + 1):
                 for old in self._passed.get(h, ()):
-                    # The passed estimate's target, moved to the copied boundary.
-                    range_then = old.range_m - old.speed_mps * (then - h) * hop_s
-                    if abs(e.range_m - range_then) > COPY_GATE_M:
-                        continue
                     if abs(e.speed_mps - old.speed_mps) > COPY_GATE_MPS:
                         continue
-                    weaker = e.snr_db <= old.snr_db - loss_db + COPY_MARGIN_DB
-                    if weaker or math.isnan(e.snr_db) or math.isnan(old.snr_db):
+                    # The passed estimate's target at the copied boundary, and now.
+                    range_then = old.range_m - old.speed_mps * (then - h) * hop_s
+                    range_now = old.range_m - old.speed_mps * (e.hop_index - h) * hop_s
+                    if abs(e.range_m - range_then) > COPY_GATE_M:
+                        continue
+                    if abs(e.range_m - range_now) <= COPY_GATE_M:
+                        continue  # the target itself (or its copy on it): kept
+                    if not e.snr_db > old.snr_db - COPY_MARGIN_DB:  # weaker, or no SNR
                         return True
         return False

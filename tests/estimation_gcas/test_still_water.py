@@ -152,9 +152,9 @@ def test_a_copy_of_an_earlier_estimate_is_dropped_and_a_target_as_strong_is_not(
     weak = _estimate(110, then + 0.3, 10.0, 6.0)
     strong = _estimate(110, then, 10.0, 19.0)
     # Copies lie 1.7 m apart over the target's last 6 periods (40.7 .. 49.2 m): a weak echo
-    # nearer than 39.7 m, or 1 m/s off the target's speed, is no copy.
+    # nearer than 39.7 m, or more than 1 m/s off the target's speed, is no copy.
     nearer = _estimate(110, 38.0, 10.0, 6.0)
-    slower = _estimate(110, then, 9.0, 6.0)
+    slower = _estimate(110, then, 8.5, 6.0)
     assert veto.filter([weak, strong, nearer, slower]) == [strong, nearer, slower]
     assert veto.dropped == 1
     # Copies of boundaries before the first estimate: matched to the first estimates moved
@@ -162,6 +162,10 @@ def test_a_copy_of_an_earlier_estimate_is_dropped_and_a_target_as_strong_is_not(
     veto2 = CopyVeto(17, 0.17, 8, 4, 10)
     veto2.filter(target[5:])
     assert veto2.filter([_estimate(120, 50.0 - 0.1, 10.0, 3.0)]) == []
+    # A target is never its own copy, however slow, nor a weaker one where it is now.
+    veto4 = CopyVeto(17, 0.17, 8, 4, 10)
+    slow = [_estimate(h, 50.0 - 0.02 * h, 2.0, 20.0 - 0.1 * (h % 3)) for h in range(200)]
+    assert veto4.filter(slow) == slow and veto4.dropped == 0
     # Before the warm-up nothing is subtracted: nothing is a copy.
     veto3 = CopyVeto(17, 0.17, 8, 4, 10)
     veto3.filter(target[:40])
