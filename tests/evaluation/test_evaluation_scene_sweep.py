@@ -223,3 +223,19 @@ def test_gcas_still_finds_the_weaker_target_under_still_reverberation_where_gcas
     assert gcas["detected"][0] == still["detected"][0] == 185
     assert gcas["detected"][1] <= 80 and still["detected"][1] >= 105
     assert gcas["n_false"] <= 3 and still["n_false"] <= 4
+
+
+def test_the_documented_still_water_sweep_is_valid() -> None:
+    # docs/results.md, "Scenes": the gcas against gcas-still sweep, as written there.
+    import tomllib
+
+    from hil.evaluation.sweep_file import sweep_from_dict
+
+    text = RESULTS_DOC.read_text(encoding="utf-8")
+    block = re.search(r'```toml\n(\[sweep\]\nname = "still-scenes".*?)```', text, re.S)
+    assert block is not None
+    spec = sweep_from_dict(tomllib.loads(block.group(1)))
+    points = spec.points()
+    assert len(points) == 48 and {p["receiver"] for p in points} == {"gcas", "gcas-still"}
+    for p in points:
+        validate_scene_params(p)
