@@ -30,6 +30,7 @@ RECEIVERS: dict[str, str] = {
     "mfbank": "hil.estimation.mfbank:MatchedFilterBank",
     "fmcw": "hil.estimation.fmcw:FmcwReceiver",
     "gcas-bg": "hil.estimation.background:BackgroundGcas",
+    "gcas-still": "hil.estimation.still_water:StillWaterGcas",
 }
 
 

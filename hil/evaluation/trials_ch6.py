@@ -66,6 +66,8 @@ from hil.signals.schedule import HopSchedule
 
 #: Receivers the HFC-CW trial can run (registry names).
 RECEIVERS = ("gcas", "jifs", "stft", "mfbank")
+#: GCAS and its input stages that need no file: they take GCAS's ``coherent`` and band.
+GCAS_FAMILY = ("gcas", "gcas-mti", "gcas-still")
 #: Parameters of :func:`ch6_receiver_trial` and their defaults (units in the names).
 RECEIVER_DEFAULTS: dict[str, Any] = {
     "receiver": "gcas",
@@ -278,7 +280,7 @@ def make_receiver(p: dict[str, Any], schedule: HopSchedule, c: float, **hooks: A
 
     name = p["receiver"]
     extra: dict[str, Any] = dict(p["receiver_options"].get(name, {}))
-    if name == "gcas":
+    if name in GCAS_FAMILY:
         extra.setdefault("coherent", bool(p["coherent"]))
         extra.setdefault("reverb_speed_mps", p["reverb_speed_mps"])
     if name == "stft":

@@ -7,8 +7,9 @@ an opening one, and a still target with the reverberation band off.
 :func:`scene_trial` synthesises it (every target's exact echo,
 :class:`~sim_devices.acoustics.echo.AnalyticEcho`, at its own level; white noise at
 ``snr_db``; volume reverberation from a sonar at rest where ``srr_db`` is a number), runs the
-receiver as ``hil estimate`` builds it (GCAS on ``att``, M = 10, ``max_speed_mps`` 30 m/s
-unless the scene or the parameters say otherwise) and scores every estimate against every
+receiver as ``hil estimate`` builds it (``receiver``: GCAS unless given, or one of its input
+stages of :data:`SCENE_RECEIVERS`; on ``att``, M = 10, ``max_speed_mps`` 30 m/s unless the
+scene or the parameters say otherwise) and scores every estimate against every
 target's truth per hop boundary:
 
 - an estimate **belongs** to a target when its boundary's truth (hop index ``h + 1``, receive
@@ -187,10 +188,12 @@ SCENE_DEFAULTS: dict[str, Any] = {
     "reverb_min_range_m": None,
     "duration_s": 2.0,
     "warmup_s": 0.15,
+    "receiver": "gcas",
     "receiver_options": {},
 }
-#: Receivers a scene runs (GCAS: the other receivers report one estimate per hop).
-_RECEIVER = "gcas"
+#: Receivers a scene runs: the GCAS family that needs no file (the other receivers report one
+#: estimate per hop; ``gcas-bg`` needs an empty-water capture).
+SCENE_RECEIVERS = ("gcas", "gcas-mti", "gcas-still")
 
 
 def _number(key: str, value: Any, lo: float, hi: float) -> float:
@@ -248,17 +251,28 @@ def validate_scene_params(params: Params) -> None:
                 "a duration in which every target stays beyond 2 m",
                 f"scene {p['scene']}'s target from {t.range_m} m comes nearer",
             )
+    if p["receiver"] not in SCENE_RECEIVERS:
+        raise ConfigError(
+            "receiver",
+            p["receiver"],
+            f"one of {', '.join(SCENE_RECEIVERS)}",
+            "a scene runs the GCAS receivers that need no file",
+        )
     if not isinstance(p["receiver_options"], dict):
-        raise ConfigError("receiver_options", p["receiver_options"], "a table of GCAS options")
+        raise ConfigError(
+            "receiver_options", p["receiver_options"], f"a table of {p['receiver']} options"
+        )
     ch6 = _receiver_params(p)
     check_receiver(json.dumps({k: ch6[k] for k in RECEIVER_KEYS}, sort_keys=True))
 
 
 def _receiver_params(p: dict[str, Any]) -> dict[str, Any]:
-    """The scene's receiver as a chapter-6 trial's parameters (GCAS on ``att``)."""
-    return {**RECEIVER_DEFAULTS, "receiver": _RECEIVER, "m_hops": p["m_hops"],
+    """The scene's receiver as a chapter-6 trial's parameters (the GCAS family on ``att``;
+    the reverberation band ``reverb_speed_mps`` and ``receiver_options`` go to it)."""
+    name = p["receiver"]
+    return {**RECEIVER_DEFAULTS, "receiver": name, "m_hops": p["m_hops"],
             "max_speed_mps": p["max_speed_mps"], "reverb_speed_mps": p["reverb_speed_mps"],
-            "receiver_options": {_RECEIVER: p["receiver_options"]}}  # fmt: skip
+            "receiver_options": {name: p["receiver_options"]}}  # fmt: skip
 
 
 def _receiver(p: dict[str, Any]) -> Any:

@@ -431,3 +431,21 @@ def test_a_target_10_db_weaker_at_the_same_speed_is_found_unless_cancel_is_off(
     assert strong >= 80 and weak >= 75
     strong_once, weak_once = counts("--option", "cancel=false")
     assert strong_once >= 80 and weak_once <= 5
+
+
+def test_gcas_still_estimates_from_the_command_line(
+    recording: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # No still water here: gcas-still reads the lone target as gcas does; the background is
+    # subtracted from 0.68 s (4 code periods) on.
+    args = ["estimate", "--schedule", str(recording / "x.json"), "--input",
+            str(recording / "rx.wav"), "--receiver", "gcas-still", "--json"]  # fmt: skip
+    assert main(args) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert len(rows) >= 40
+    for row in rows:
+        bounce = (row["t_s"] + row["t_tx_s"]) / 2
+        assert row["range_m"] == pytest.approx(R0 - V * bounce, abs=0.1)
+        assert row["speed_mps"] == pytest.approx(V, abs=0.3)
+    assert main([*args[:-1], "--option", "still_periods=0"]) == 2
+    assert "still_periods = 0" in capsys.readouterr().err
