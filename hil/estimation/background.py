@@ -39,11 +39,13 @@ from numpy.typing import ArrayLike, NDArray
 from hil.errors import ConfigError
 from hil.estimation.first_arrival import RANGE_READOUTS, FirstArrivalReadout
 from hil.estimation.input_stage import StagedGcas, StageParts, StageSetting
+from hil.estimation.still_period import still_period
 
 
 def load_background(path: str | Path, period_samples: int) -> NDArray[np.float64]:
-    """The background saved at ``path`` (``.npy``, one code period: shape ``(P,)``, input
-    full-scale units, receiver sample index ``n`` at element ``n mod P``)."""
+    """The background saved at ``path`` (``.npy``, one still period: shape ``(P,)``, input
+    full-scale units, receiver sample index ``n`` at element ``n mod P``,
+    :class:`BackgroundSubtractor`)."""
     p = Path(path)
     try:
         b = np.load(p, allow_pickle=False)
@@ -66,18 +68,27 @@ def load_background(path: str | Path, period_samples: int) -> NDArray[np.float64
 
 
 class BackgroundSubtractor:
-    """``y[n] = x[n] − b[n mod P]`` on a stream (``n`` the absolute input index).
+    """``y[n] = x[n] − σ^⌊n/P⌋ b[n mod P]`` on a stream (``n`` the absolute input index;
+    ``P`` the still period and ``σ`` its sign, :func:`~hil.estimation.still_period.
+    still_period`: ``b`` is the still water of the even periods, the odd ones hold ``σ b``).
 
     >>> s = BackgroundSubtractor(np.array([1.0, 2.0, 3.0]))
     >>> s.process(np.array([1.0, 2.0, 3.0, 1.0]), first_index=0).tolist()
     [0.0, 0.0, 0.0, 0.0]
     >>> s.process(np.array([5.0]), first_index=5).tolist()
     [2.0]
+    >>> BackgroundSubtractor(np.array([1.0, 2.0]), sign=-1).process(
+    ...     np.array([1.0, 2.0, -1.0, -2.0, 1.0]), first_index=0).tolist()
+    [0.0, 0.0, 0.0, 0.0, 0.0]
     """
 
-    def __init__(self, background: ArrayLike) -> None:
-        #: One code period, shape ``(P,)``, input full-scale units.
+    def __init__(self, background: ArrayLike, sign: int = 1) -> None:
+        #: One still period, shape ``(P,)``, input full-scale units.
         self.background = np.asarray(background, dtype=np.float64).reshape(-1)
+        if sign not in (1, -1):
+            raise ConfigError("sign", sign, "+1 or -1 (the still water's sign per period)")
+        #: The still water's sign from one period to the next.
+        self.sign = int(sign)
         if self.background.size < 1:
             raise ConfigError("background", "empty", "one code period of samples (>= 1)")
 
@@ -90,8 +101,11 @@ class BackgroundSubtractor:
         keeps no history."""
         x = np.asarray(x, dtype=np.float64).reshape(-1)
         p = self.background.size
-        phase = (int(first_index) + np.arange(x.size)) % p
-        return np.asarray(x - self.background[phase], dtype=np.float64)
+        n = int(first_index) + np.arange(x.size)
+        b = self.background[n % p]
+        if self.sign < 0:
+            b = np.where((n // p) % 2 == 1, -b, b)
+        return np.asarray(x - b, dtype=np.float64)
 
 
 class BackgroundGcas(StagedGcas):
@@ -130,7 +144,8 @@ class BackgroundGcas(StagedGcas):
             )
         if range_readout not in RANGE_READOUTS:
             raise ConfigError("range_readout", range_readout, f"one of {', '.join(RANGE_READOUTS)}")
-        subtractor = BackgroundSubtractor(load_background(background, where.period_samples))
+        period, sign = still_period(where.schedule, where.period_samples)
+        subtractor = BackgroundSubtractor(load_background(background, period), sign)
         readout = (
             FirstArrivalReadout(
                 where.schedule,

@@ -34,25 +34,35 @@ from numpy.typing import ArrayLike, NDArray
 from hil.errors import ConfigError
 from hil.estimation.first_arrival import FirstArrivalReadout
 from hil.estimation.input_stage import StagedGcas, StageParts, StageSetting
+from hil.estimation.still_period import still_period
 
 
 class PeriodCanceller:
-    """``y[n] = x[n] − x[n − P]`` on a stream, with zeros for the ``P`` samples after the
+    """``y[n] = x[n] − σ x[n − P]`` on a stream, with zeros for the ``P`` samples after the
     start and after each gap (shape ``(n,)`` in and out; any chunking gives the same output).
+    ``P`` and ``σ`` are the transmit's still period and its sign
+    (:func:`~hil.estimation.still_period.still_period`: the still water at ``n`` is ``σ``
+    times that at ``n − P``).
 
     >>> c = PeriodCanceller(3)
     >>> c.process(np.array([1.0, 2, 3, 1, 2, 4])).tolist()
     [0.0, 0.0, 0.0, 0.0, 0.0, 1.0]
     >>> c.process(np.array([5.0]), gap_before=2).tolist()
     [0.0]
+    >>> PeriodCanceller(2, sign=-1).process(np.array([1.0, 2, -1, -2, -1, -3])).tolist()
+    [0.0, 0.0, 0.0, 0.0, 0.0, -1.0]
     """
 
-    def __init__(self, period_samples: int) -> None:
+    def __init__(self, period_samples: int, sign: int = 1) -> None:
         if isinstance(period_samples, bool) or int(period_samples) != period_samples:
             raise ConfigError("period_samples", period_samples, "an integer number of samples")
         if period_samples < 1:
             raise ConfigError("period_samples", period_samples, ">= 1 sample")
+        if sign not in (1, -1):
+            raise ConfigError("sign", sign, "+1 or -1 (the still water's sign per period)")
         self.period = int(period_samples)
+        #: The still water's sign from one period to the next.
+        self.sign = int(sign)
         # The last P input samples as a ring: sample n sits at n mod P.
         self._ring = np.zeros(self.period)
         self._pos = 0  # ring slot of the next sample
@@ -80,7 +90,10 @@ class PeriodCanceller:
             take = min(x.size - done, p - self._pos)
             now = x[done : done + take]
             before = self._ring[self._pos : self._pos + take]  # a view: P samples earlier
-            np.subtract(now, before, out=y[done : done + take])
+            if self.sign > 0:
+                np.subtract(now, before, out=y[done : done + take])
+            else:
+                np.add(now, before, out=y[done : done + take])
             before[:] = now
             self._pos = (self._pos + take) % p
             done += take
@@ -108,6 +121,9 @@ class ClutterCancelledGcas(StagedGcas):
 
     @classmethod
     def stage_from_options(cls, where: StageSetting, options: dict[str, Any]) -> StageParts:
-        """The canceller of one code period; every option is GCAS's. GCAS's first-arrival
-        readout (``range_readout``) runs its own canceller on the cancelled stream."""
-        return StageParts(PeriodCanceller(where.period_samples), None, options)
+        """The canceller of the still period (one code period, or its sign-flipped copy:
+        :func:`~hil.estimation.still_period.still_period`); every option is GCAS's. GCAS's
+        first-arrival readout (``range_readout``) runs its own canceller on the cancelled
+        stream."""
+        period, sign = still_period(where.schedule, where.period_samples)
+        return StageParts(PeriodCanceller(period, sign), None, options)

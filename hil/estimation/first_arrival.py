@@ -10,8 +10,11 @@ times that switch.
 For each of the ``M`` boundaries the GCAS detection used (receive times from its boundary time
 ``t_c`` and time scale ``α``; the tone after boundary ``m`` from the schedule):
 
-1. **Clutter canceller**: ``d(t) = x(t) − x(t − P)``, ``P`` the code period (samples, an
-   integer). The transmission repeats exactly every period, so every time-invariant return
+1. **Clutter canceller**: ``d(t) = x(t) − σ x(t − P)``, ``P`` the code period (samples, an
+   integer) and ``σ`` the sign the transmission repeats with after it (+1, or −1 where the
+   hops' phase advances by π over a period: ``att``, ``tank-board``;
+   :mod:`hil.estimation.still_period`; a period with another advance is taken as often as
+   it needs to come back to 0 or π). So every time-invariant return
    (the direct blast, walls, volume reverberation of a still tank) cancels; the moving echo
    does not, it leaves a copy of itself shifted by ``δ = P (α − 1)/α`` (later for a closing
    target, earlier for an opening one, whose first onset is then corrected by ``−δ``).
@@ -121,6 +124,7 @@ from hil.estimation.first_arrival_kernels import (
 from hil.estimation.late_taps import LEAD_S, DirectFit, direct_amplitudes
 from hil.estimation.reverb_band import doppler_resolution_mps
 from hil.estimation.row_buffer import RowBuffer
+from hil.estimation.still_period import still_period
 from hil.signals.schedule import HopSchedule, HopTable
 
 #: GCAS range readouts: the peak of the accumulated sums, or the first arrival (this module).
@@ -561,6 +565,9 @@ class FirstArrivalReadout:
         if max_spread_s is None:
             max_spread_s = MAX_SPREAD_HOPS * schedule.hop_s
         period = schedule.period_samples(fs_hz) if cancel_period else 0
+        sign = 1
+        if period:
+            period, sign = still_period(schedule, period)
         if period is None:
             raise ConfigError(
                 "range_readout",
@@ -579,8 +586,10 @@ class FirstArrivalReadout:
         self.schedule = schedule
         self.fs_hz = float(fs_hz)
         self.m_hops = int(m_hops)
-        #: The canceller's period, samples (0: no canceller).
+        #: The canceller's period, samples (0: no canceller), and the still water's sign
+        #: from one period to the next (:func:`~hil.estimation.still_period.still_period`).
         self.period = int(period)
+        self.sign = int(sign)
         self.boxcar = max(2, int(round(fs_hz / spacing)))
         self.max_spread_s = float(max_spread_s)
         self._pre = int(round((max_spread_s + BASELINE_S) * fs_hz)) + self.boxcar
@@ -678,7 +687,8 @@ class FirstArrivalReadout:
         idx = n_b[:, None] + self._offsets_ext[None, :]  # (M, L + lead)
         d = self._ring.rows(idx)
         if self.period:
-            d = d - self._ring.rows(idx - self.period)
+            before = self._ring.rows(idx - self.period)
+            d = d - before if self.sign > 0 else d + before
         # d · e^{−j2π α f t} (t = idx / fs) summed along each row; ``full``: the boxcar of w
         # ending at extended index w, w + 1, ... (M, L + w); ``box``: the boxcar's change over
         # its own length (M, L): every steady tone on the Δf grid (the previous tones, and the

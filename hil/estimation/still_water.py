@@ -8,10 +8,10 @@ of still scatterers. It repeats *up to the transmit's phase advance per period* 
 on, so the still water of one period is the last one's turned by ``Φ``. On ``att`` every hop
 holds a whole number of cycles and a half (283.5–316.5), so ``Φ = π``: the still water
 *changes sign* every period, and ``x[n] − x[n − P]`` doubles it. The stage therefore works on
-the **still period** ``Q = L·P`` (:func:`still_period`), the fewest whole code periods after
-which the phase advance is 0 or π, and its sign ``σ = ±1`` (``att``: ``Q = P``, ``σ = −1``),
-and learns the still part as it goes, with no empty-water capture (which ``"gcas-bg"``,
-:mod:`hil.estimation.background`, needs)::
+the **still period** ``Q = L·P`` (:func:`~hil.estimation.still_period.still_period`), the
+fewest whole code periods after which the phase advance is 0 or π, and its sign ``σ = ±1``
+(``att``: ``Q = P``, ``σ = −1``), and learns the still part as it goes, with no
+empty-water capture (which ``"gcas-bg"``, :mod:`hil.estimation.background`, needs)::
 
     m           = n div Q                     (the still period of sample n)
     b_before[n] = mean of σ^(m − j) x[n − jQ], j = 1 .. K   (the last K values at n mod Q)
@@ -67,7 +67,6 @@ measured by ``tests/estimation_gcas/test_still_water.py``):
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
@@ -78,7 +77,7 @@ from hil.estimation.base import Estimate
 from hil.estimation.first_arrival import FirstArrivalReadout
 from hil.estimation.input_stage import StagedGcas, StageParts, StageSetting
 from hil.estimation.still_copies import CopyVeto
-from hil.signals.schedule import HopSchedule
+from hil.estimation.still_period import still_period
 
 #: ``still_periods`` unless given: 8 periods (1.36 s on ``att``) keep the noise penalty at
 #: +0.51 dB and a moving echo's copies 18 dB down, and absorb a stopped target in 1.36 s.
@@ -90,8 +89,6 @@ DEFAULT_STILL_PERIODS = 8
 #: (before :mod:`hil.estimation.still_copies`).
 WARMUP_PERIODS = 4
 #: The most code periods a still period may hold, and the tolerance (rad) on its phase turn.
-MAX_CODE_PERIODS = 16
-PHASE_TOLERANCE_RAD = 1e-6
 #: The largest ``still_periods`` (the stage holds K code periods of samples).
 MAX_STILL_PERIODS = 64
 
@@ -260,32 +257,3 @@ class StillWaterGcas(StagedGcas):
         k = check_still_periods(options.pop("still_periods", DEFAULT_STILL_PERIODS))
         q, sign = still_period(where.schedule, where.period_samples)
         return StageParts(StillWaterBackground(q, k, sign=sign), None, options)
-
-
-def still_period(schedule: HopSchedule, period_samples: int) -> tuple[int, int]:
-    """The still period ``Q`` (samples) and its sign ``σ`` of a transmit whose code period is
-    ``period_samples``: ``Q = L·P`` for the fewest ``L`` (1 .. :data:`MAX_CODE_PERIODS`) whose
-    phase advance ``L·Φ`` is 0 (σ = +1) or π (σ = −1) to :data:`PHASE_TOLERANCE_RAD`.
-
-    >>> from hil.signals.schedule import HopSchedule
-    >>> still_period(HopSchedule.from_segments("d", [1000.0, 2000.0], [0, 1], 0.001), 20)
-    (20, 1)
-    >>> still_period(HopSchedule.from_segments("d", [1000.0, 1500.0], [0, 1], 0.001), 20)
-    (20, -1)
-    >>> still_period(HopSchedule.from_segments("d", [1000.0, 1250.0], [0, 1], 0.001), 20)
-    (40, -1)
-    """
-    phi = float(schedule.period_phase_rad)
-    for periods in range(1, MAX_CODE_PERIODS + 1):
-        turn = math.remainder(periods * phi, 2.0 * math.pi)  # in [−π, π]
-        if abs(turn) <= PHASE_TOLERANCE_RAD:
-            return periods * int(period_samples), 1
-        if math.pi - abs(turn) <= PHASE_TOLERANCE_RAD:
-            return periods * int(period_samples), -1
-    raise ConfigError(
-        "receiver",
-        StillWaterGcas.name,
-        f"a transmit whose phase advance per code period, times 1 .. {MAX_CODE_PERIODS}, is "
-        "0 or π (the still water then repeats, up to its sign)",
-        f"period_phase_rad = {phi!r}: use gcas (its reverberation band)",
-    )

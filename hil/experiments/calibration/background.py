@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from hil.errors import ConfigError
+from hil.estimation.still_period import still_period
 from hil.experiments.experiment import Experiment
 
 #: Periods a capture averages (the noise falls by 1/√K: 12 dB at 16).
@@ -35,15 +36,22 @@ BACKGROUND_PERIODS = 16
 SETTLE_PERIODS = 2
 
 
-def average_periods(x: ArrayLike, period_samples: int, first_index: int = 0) -> NDArray[np.float64]:
+def average_periods(
+    x: ArrayLike, period_samples: int, first_index: int = 0, sign: int = 1
+) -> NDArray[np.float64]:
     """The mean period of ``x`` (shape ``(n,)``, full scale; its first sample is receiver
-    index ``first_index``): shape ``(P,)``, element ``k`` the mean of the samples whose index
-    is ``k`` modulo ``P``, over the whole periods ``x`` holds.
+    index ``first_index``): shape ``(P,)``, element ``k`` the mean of ``σ^q x`` over the
+    samples whose index is ``qP + k``, over the whole periods ``x`` holds. ``P`` and
+    ``σ = sign`` are the still period and its sign
+    (:func:`~hil.estimation.still_period.still_period`): the still water of the even periods,
+    as :class:`~hil.estimation.background.BackgroundSubtractor` subtracts it.
 
     >>> average_periods([1.0, 2.0, 3.0, 3.0, 4.0, 5.0], 3).tolist()
     [2.0, 3.0, 4.0]
     >>> average_periods([9.0, 1.0, 2.0, 3.0, 3.0, 4.0, 5.0], 3, first_index=2).tolist()
     [2.0, 3.0, 4.0]
+    >>> average_periods([-1.0, -2.0, 1.0, 2.0, -1.0, -2.0], 2, first_index=2, sign=-1).tolist()
+    [1.0, 2.0]
     """
     x = np.asarray(x, dtype=np.float64).reshape(-1)
     p = int(period_samples)
@@ -58,7 +66,12 @@ def average_periods(x: ArrayLike, period_samples: int, first_index: int = 0) -> 
             f"at least one whole code period ({p} samples) after phase 0",
             "record longer: BACKGROUND_PERIODS periods after the tail has settled",
         )
-    return np.asarray(x[skip : skip + k * p].reshape(k, p).mean(axis=0), dtype=np.float64)
+    rows = x[skip : skip + k * p].reshape(k, p)
+    if sign < 0:
+        q0 = (int(first_index) + skip) // p  # the absolute period of the first row
+        flip = (q0 + np.arange(k)) % 2 == 1
+        rows = np.where(flip[:, None], -rows, rows)
+    return np.asarray(rows.mean(axis=0), dtype=np.float64)
 
 
 def simulated_background(exp: Experiment, periods: int = BACKGROUND_PERIODS) -> NDArray[np.float64]:
@@ -69,14 +82,15 @@ def simulated_background(exp: Experiment, periods: int = BACKGROUND_PERIODS) -> 
     from hil.experiments.sim_tank import CONVERTER_DELAY_SAMPLES, build_tank_world
 
     fs = float(exp.waveform.fs_hz)
-    p = exp.schedule.period_samples(fs)
-    if p is None:
+    code_period = exp.schedule.period_samples(fs)
+    if code_period is None:
         raise ConfigError(
             "waveform",
             exp.preset,
             "a code period of a whole number of samples",
             "the background repeats every period; this waveform has none",
         )
+    p, sign = still_period(exp.schedule, code_period)
     if periods < 1:
         raise ConfigError("periods", periods, ">= 1")
 
@@ -87,7 +101,7 @@ def simulated_background(exp: Experiment, periods: int = BACKGROUND_PERIODS) -> 
     world.origin_index = 0
     x = world.channel.read_components((SETTLE_PERIODS + periods) * p, clip=False)["input_fs"]
     lead = SETTLE_PERIODS * p
-    return average_periods(x[lead:], p, first_index=lead - CONVERTER_DELAY_SAMPLES)
+    return average_periods(x[lead:], p, first_index=lead - CONVERTER_DELAY_SAMPLES, sign=sign)
 
 
 def background_from_recording(
@@ -103,14 +117,15 @@ def background_from_recording(
     with RunRecording.open(path) as rec:
         schedule = rec.schedule()
         fs = rec.fs_hz
-        p = schedule.period_samples(fs)
-        if p is None:
+        code_period = schedule.period_samples(fs)
+        if code_period is None:
             raise ConfigError(
                 "recording",
                 str(path),
                 "a waveform whose code period is a whole number of samples",
                 "the background repeats every period; this recording's waveform has none",
             )
+        p, sign = still_period(schedule, code_period)
         live = rec.metadata.receiver
         channel = live.channel if live is not None else 0
         scale = live.scale if live is not None else 2.0**-15
@@ -126,7 +141,7 @@ def background_from_recording(
             )
         longest = max(stretches, key=lambda b: b.data.shape[0])
         x = np.asarray(longest.data[:, channel], dtype=np.float64) * scale
-        return average_periods(x, p, first_index=int(longest.first_index) - origin)
+        return average_periods(x, p, first_index=int(longest.first_index) - origin, sign=sign)
 
 
 def save_background(path: str | Path, background: ArrayLike) -> Path:
