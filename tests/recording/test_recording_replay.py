@@ -311,9 +311,8 @@ def test_cli_needs_a_receiver_name_when_none_ran_live(
     assert main(["replay", str(path)]) == 2
     assert capsys.readouterr().err == (
         "hil replay: error: --receiver (receiver) = None is not allowed: must be one of gcas, "
-        "gcas-mti, jifs, stft, mfbank, fmcw, gcas-bg; the recording holds no live receiver: name "
-        "the one "
-        "to run\n"
+        "gcas-mti, jifs, stft, mfbank, fmcw, gcas-bg, gcas-still; the recording holds no live "
+        "receiver: name the one to run\n"
     )
 
 
