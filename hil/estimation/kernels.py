@@ -755,13 +755,9 @@ def _codeword_row(
     """``row[j] = Σ_m w|u|²`` of term ``m``'s tone ``term_tone[m, j]`` at sample ``t`` of the
     window (added in the order ``m = 0, 1, ..``); returns ``max_j row[j]``. ``vals`` (shape
     ``(M, K)``) receives each term's weighted powers first; the sums then run four codewords
-    at a time in registers (the same additions in the same order: the same bits). Four tones
-    (the presets' K) take :func:`_codeword_row_4`."""
+    at a time in registers (the same additions in the same order: the same bits)."""
     n_terms, n_words = term_tone.shape
     n_tones = vals.shape[1]
-    if n_tones == 4:
-        return _codeword_row_4(c, i, t, half, d, centre, lags, term_tone, cache_p, mask, late,
-                               late_p, row)  # fmt: skip
     for m in range(n_terms):
         if late[m, t]:
             for k in range(n_tones):
@@ -792,41 +788,6 @@ def _codeword_row(
             s0 += vals[m, term_tone[m, j]]
         row[j] = s0
         j += 1
-    top = -math.inf
-    for j in range(n_words):
-        top = max(top, row[j])
-    return top
-
-
-@numba.njit(**_JIT)
-def _codeword_row_4(
-    c: int, i: int, t: int, half: int, d: int, centre: Any, lags: Any, term_tone: Any,
-    cache_p: Any, mask: int, late: Any, late_p: Any, row: Any,
-) -> float:  # fmt: skip
-    """:func:`_codeword_row` for four tones: term by term, each codeword's sum takes the
-    term's power of its tone, picked from the term's four powers by comparisons rather than
-    an indexed load (the compiler runs the codewords in vector lanes: 1.6 times faster than
-    the gathers). Each codeword's sum adds its terms in the order ``m = 0, 1, ..`` from 0,
-    as there: the same bits."""
-    n_terms, n_words = term_tone.shape
-    for j in range(n_words):
-        row[j] = 0.0
-    for m in range(n_terms):
-        if late[m, t]:
-            v0 = late_p[m, t, 0]
-            v1 = late_p[m, t, 1]
-            v2 = late_p[m, t, 2]
-            v3 = late_p[m, t, 3]
-        else:
-            slot = (centre[c, i] - half - lags[d, m] + t) & mask
-            v0 = cache_p[d, 0, slot]
-            v1 = cache_p[d, 1, slot]
-            v2 = cache_p[d, 2, slot]
-            v3 = cache_p[d, 3, slot]
-        tones = term_tone[m]
-        for j in range(n_words):
-            k = tones[j]
-            row[j] += v0 if k == 0 else (v1 if k == 1 else (v2 if k == 2 else v3))
     top = -math.inf
     for j in range(n_words):
         top = max(top, row[j])

@@ -261,8 +261,8 @@ def test_cached_sums_equal_sums_from_an_empty_cache() -> None:
 
 def test_a_codewords_sum_adds_its_terms_in_order_bit_for_bit() -> None:
     # A_j = Σ_m w|u|² of term m's tone, added in the order m = 0, 1, ..: each row equals the
-    # cached weighted powers added one term at a time (J = 17 codewords and K = 4 tones on
-    # att: the four-tone path, every codeword in vector lanes).
+    # cached weighted powers added one term at a time (J = 17 codewords on att: four at a
+    # time, and the last alone).
     rx, centres, pair = _stage_two_receiver(m_hops=15)
     exact = two_stage(rx).exact
     w = two_stage(rx).fine_half
@@ -288,8 +288,8 @@ def test_a_codewords_sum_adds_its_terms_in_order_bit_for_bit() -> None:
 
 @pytest.mark.parametrize("n_tones", [3, 4, 5])
 def test_a_codeword_row_adds_its_terms_in_order_for_any_tone_count(n_tones: int) -> None:
-    # The four-tone path (the presets') and the general one both add term m's power of
-    # codeword j's tone in the order m = 0, 1, ..: the same bits as adding the terms one at a
+    # Any tone count: term m's power of codeword j's tone is added in the order m = 0, 1, ..
+    # (four codewords at a time, then the rest): the same bits as adding the terms one at a
     # time, late terms (samples not yet kept) read from their own array. Seeded.
     rng = np.random.default_rng(27)
     m_hops, n_words, width, cap, d, half = 11, 17, 9, 64, 1, 4
