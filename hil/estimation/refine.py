@@ -97,6 +97,7 @@ from hil.estimation.refine_kernels import (
     assign_slots,
     candidate_sums,
     fit_quality,
+    grid_sums,
     maximise,
 )
 from hil.estimation.refine_pair import RESOLVED_LOBES, SEED_LOBES, fit_pair
@@ -652,6 +653,7 @@ class CoherentRefiner:
         self.reset(0)
         self.push(np.zeros(int(math.ceil(t_b * self.fs_hz)) + 2 * self.history), 0)
         self.refine(t_b, 1.0, hop)
+        self._amplitude_near(t_b, 1.0, hop, around=True)
         self.correlation(t_b, 1.0, hop, np.array([t_b]), np.array([1.0]))
         echo_samples(np.zeros((5, 1), dtype=np.complex128), 0, 1, self.fs_hz)
         self.reset(0)
@@ -1204,8 +1206,7 @@ class CoherentRefiner:
         echo's ghost peaks: a second echo there read at the detector's speed alone fell to
         0.17 of its level)."""
         lobe = 1.0 / (alpha * self.spacing_hz)
-        t1 = t_s + lobe * np.linspace(-0.5, 0.5, GHOST_POINTS)
-        alphas1 = np.array([alpha])
+        alphas = np.array([alpha])
         if inward or around:
             speed = self.c * (alpha - 1.0) / (alpha + 1.0)
             span = self.speed_span_mps
@@ -1214,13 +1215,18 @@ class CoherentRefiner:
                 v = speed + inward * np.linspace(0.0, span, steps + 1)
             else:
                 v = speed + np.linspace(-span, span, 2 * steps + 1)
-            alphas1 = (self.c + v) / (self.c - v)
-        t = np.ascontiguousarray(np.tile(t1, alphas1.size))
-        alphas = np.ascontiguousarray(np.repeat(alphas1, t1.size))
-        sums = self._sums(t_s, alpha, hop_index, t, alphas, np.zeros(t.size), known)
-        if sums is None:
+            alphas = (self.c + v) / (self.c - v)
+        word = self._codeword(hop_index)
+        hop_ids = np.arange(hop_index - self.m_hops + 1, hop_index + 1, dtype=np.int64)
+        slots = self._slots(hop_ids, word, t_s, alpha)
+        if slots is None:
             return 0.0
-        c, e_s = sums
+        c = np.empty((alphas.size, GHOST_POINTS), dtype=np.complex128)
+        e_s = np.empty((alphas.size, GHOST_POINTS))
+        grid_sums(
+            *self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s, known,
+            t_s - 0.5 * lobe, lobe / (GHOST_POINTS - 1), np.ascontiguousarray(alphas), c, e_s,
+        )  # fmt: skip
         ok = e_s > 0
         return float(np.max(2.0 * np.abs(c[ok]) / e_s[ok])) if ok.any() else 0.0
 

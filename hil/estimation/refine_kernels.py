@@ -627,6 +627,54 @@ def candidate_sums(
         )  # fmt: skip
 
 
+@numba.njit(**_JIT)
+def grid_sums(
+    prefix: Any, energy: Any, first: Any, tail: Any, alpha0: Any, centre: Any, slots: Any,
+    k: Any, f: Any, dt_lo: Any, dt_hi: Any, amp2: Any, fs: float, hop_s: float,
+    known: Any, t0: float, step_s: float, alphas: Any, out_c: Any, out_model: Any,
+) -> None:  # fmt: skip
+    """:func:`candidate_sums`' ``C`` and model energy ``Σ a_i² N_i`` of a grid of
+    constant-speed candidates: times ``t0 + j·step_s`` (s) for ``j < n_t`` at each time scale
+    ``alphas[r]`` (shape ``(R,)``), into ``out_c`` (complex) and ``out_model`` (shape
+    ``(R, n_t)`` each); tables, hops and ``known`` as there.
+
+    Each row (one time scale) turns the hops' phasors and the known columns' integral ends by
+    a fixed factor a step (:func:`_row_phasors`, :func:`_row_edges`), as :func:`maximise`'s
+    grid does: two complex products per hop and column instead of a sine and cosine pair each
+    (the products' rounding over a row of a few tens of steps stays near 1e-15)."""
+    consts, coef = _scratch(slots, prefix)
+    n_rows, n_t = out_c.shape
+    m_hops = slots.shape[0]
+    n_cols = known.shape[1]
+    near, n_near = _columns_near(
+        known, dt_lo, dt_hi, t0, t0 + (n_t - 1) * step_s, np.min(alphas), np.max(alphas)
+    )
+    # Each time column shares the known columns' rotations across the time scales.
+    rot_key = np.full((n_t, n_cols), np.nan)
+    rot = np.empty((n_t, n_cols), dtype=np.complex128)
+    phasors = np.empty(m_hops, dtype=np.complex128)
+    turn = np.empty(m_hops, dtype=np.complex128)
+    edges = np.empty((5, m_hops, n_cols), dtype=np.complex128)
+    no_per_hop = np.empty(0, dtype=np.complex128)
+    for r in range(n_rows):
+        d_c_a = _line(alpha0, slots, f, dt_lo, dt_hi, hop_s, alphas[r], 0.0, consts, coef)
+        _row_phasors(centre, slots, t0, False, d_c_a, consts, step_s, phasors, turn)
+        if n_cols:
+            _row_edges(known, near, n_near, t0, False, d_c_a, consts, step_s, edges)
+        for j in range(n_t):
+            if j:
+                _advance(phasors, turn)
+                if n_cols:
+                    _advance_edges(edges, n_near)
+            c, model, _ = _candidate(
+                prefix, energy, first, tail, centre, slots, k, amp2, fs, t0 + j * step_s,
+                False, d_c_a, consts, coef, no_per_hop, known, near, n_near, rot_key[j],
+                rot[j], phasors, edges,
+            )  # fmt: skip
+            out_c[r, j] = c
+            out_model[r, j] = model
+
+
 #: :func:`maximise` outcomes.
 FOUND, NO_LOBE, RECENTRE = 0, 1, 2
 

@@ -11,6 +11,7 @@ from scipy import ndimage
 from hil.estimation.gcas import NO_SAMPLE, GcasReceiver
 from hil.estimation.gcas.search_two_stage import TwoStageSearch
 from hil.estimation.kernels import (
+    _codeword_row,
     first_possible_cells,
     masked_peak_cells,
     peak_cells,
@@ -283,6 +284,33 @@ def test_a_codewords_sum_adds_its_terms_in_order_bit_for_bit() -> None:
                 assert full[c, i, t].tobytes() == want.tobytes()
                 checked += 1
     assert checked >= 18
+
+
+@pytest.mark.parametrize("n_tones", [3, 4, 5])
+def test_a_codeword_row_adds_its_terms_in_order_for_any_tone_count(n_tones: int) -> None:
+    # Any tone count: term m's power of codeword j's tone is added in the order m = 0, 1, ..
+    # (four codewords at a time, then the rest): the same bits as adding the terms one at a
+    # time, late terms (samples not yet kept) read from their own array. Seeded.
+    rng = np.random.default_rng(27)
+    m_hops, n_words, width, cap, d, half = 11, 17, 9, 64, 1, 4
+    tone = rng.integers(0, n_tones, (m_hops, n_words)).astype(np.int64)
+    cache_p = rng.random((3, n_tones, cap)) * 10.0 ** rng.uniform(-3, 3, (3, n_tones, cap))
+    late = rng.random((m_hops, width)) < 0.2
+    late_p = rng.random((m_hops, width, n_tones))
+    lags = rng.integers(0, 40, (3, m_hops)).astype(np.int64)
+    centre = np.array([[200, 300]], dtype=np.int64)
+    row = np.empty(n_words)
+    for t in range(width):
+        got = _codeword_row(0, 1, t, half, d, centre, lags, tone, cache_p, cap - 1, late,
+                            late_p, np.empty((m_hops, n_tones)), row)  # fmt: skip
+        want = np.zeros(n_words)
+        for m in range(m_hops):
+            if late[m, t]:
+                want += late_p[m, t, tone[m]]
+            else:
+                want += cache_p[d, tone[m], (centre[0, 1] - half - lags[d, m] + t) & (cap - 1)]
+        assert row.tobytes() == want.tobytes()
+        assert got == want.max()
 
 
 def test_samples_not_yet_received_are_never_cached() -> None:

@@ -186,6 +186,31 @@ def test_a_search_rows_carried_phasors_give_each_candidates_own_sums() -> None:
         assert np.min(np.abs(bare - alone)) > 1e-3 * np.max(np.abs(alone))
 
 
+def test_a_grid_of_rows_gives_each_candidates_own_sums_and_model_energy() -> None:
+    # grid_sums (the amplitude read near a detection: times t0 + j·step at several time
+    # scales) carries each row's phasors and the known columns' ends as maximise does; every
+    # candidate's C equals candidate_sums' to rounding, with and without known hops, and its
+    # model energy Σ a_i² N_i (no phasor in it) bit for bit.
+    args, alpha, t_s, known = _echo_with_known_hops(5)
+    step, n_t = 1.5e-4, 9
+    alphas = alpha + np.array([-3e-4, -1e-4, 0.0, 2e-4])
+    t0 = t_s - 0.5 * (n_t - 1) * step
+    t = np.tile(t0 + step * np.arange(n_t), alphas.size)
+    a = np.repeat(alphas, n_t)
+    for cols in (known, np.zeros((5, 0), dtype=np.complex128)):
+        got_c = np.empty((alphas.size, n_t), dtype=np.complex128)
+        got_m = np.empty((alphas.size, n_t))
+        kernels.grid_sums(*args, cols, t0, step, alphas, got_c, got_m)
+        want_c, want_m = np.empty(t.size, dtype=np.complex128), np.empty(t.size)
+        kernels.candidate_sums(
+            *args, t, a, np.zeros(t.size), want_c, want_m, np.empty(t.size),
+            np.empty((t.size, 0), dtype=np.complex128), cols,
+        )  # fmt: skip
+        # Rounding as in the search's rows: a hop's phase of ~1e4 rad has a last bit of 2e-12.
+        assert np.max(np.abs(got_c.ravel() - want_c)) <= 1e-11 * np.max(np.abs(want_c))
+        assert got_m.ravel().tobytes() == want_m.tobytes()
+
+
 def test_a_grid_with_known_hops_gives_each_candidates_bits_over_every_column() -> None:
     # candidate_sums on a grid of constant time scale reads only the known columns its
     # windows can meet and shares each column's rotation down a column of equal times: every
