@@ -160,7 +160,7 @@ def test_the_ghosts_refused_and_their_sources_are_the_same_however_the_input_is_
 
     made: list[GcasReceiver] = []
     seen: list[list[tuple[int, float, float]]] = []
-    make = trials._make_receiver
+    make = trials.make_receiver
 
     class _Blocks:
         def __init__(self, rx: GcasReceiver) -> None:
@@ -182,7 +182,7 @@ def test_the_ghosts_refused_and_their_sources_are_the_same_however_the_input_is_
         made.append(rx)
         return _Blocks(rx)
 
-    monkeypatch.setattr(trials, "_make_receiver", _make)
+    monkeypatch.setattr(trials, "make_receiver", _make)
     score = trials.score_estimates
 
     def _score(estimates: list[Estimate], *args: object, **kw: object) -> dict[str, object]:
