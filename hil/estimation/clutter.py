@@ -49,8 +49,8 @@ class PeriodCanceller:
     [0.0, 0.0, 0.0, 0.0, 0.0, 1.0]
     >>> c.process(np.array([5.0]), gap_before=2).tolist()
     [0.0]
-    >>> PeriodCanceller(2, sign=-1).process(np.array([1.0, 2, -1, -2, -1, -3])).tolist()
-    [0.0, 0.0, 0.0, 0.0, 0.0, -1.0]
+    >>> PeriodCanceller(2, sign=-1).process(np.array([1.0, 2, -1, -2, 1, 3])).tolist()
+    [0.0, 0.0, 0.0, 0.0, 0.0, 1.0]
     """
 
     def __init__(self, period_samples: int, sign: int = 1) -> None:
