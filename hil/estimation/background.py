@@ -39,7 +39,7 @@ from numpy.typing import ArrayLike, NDArray
 from hil.errors import ConfigError
 from hil.estimation.first_arrival import RANGE_READOUTS, FirstArrivalReadout
 from hil.estimation.input_stage import StagedGcas, StageParts, StageSetting
-from hil.estimation.still_period import still_period
+from hil.estimation.still_period import checked_still_period, still_period
 
 
 def load_background(path: str | Path, period_samples: int) -> NDArray[np.float64]:
@@ -85,10 +85,8 @@ class BackgroundSubtractor:
     def __init__(self, background: ArrayLike, sign: int = 1) -> None:
         #: One still period, shape ``(P,)``, input full-scale units.
         self.background = np.asarray(background, dtype=np.float64).reshape(-1)
-        if sign not in (1, -1):
-            raise ConfigError("sign", sign, "+1 or -1 (the still water's sign per period)")
         #: The still water's sign from one period to the next.
-        self.sign = int(sign)
+        _, self.sign = checked_still_period(max(self.background.size, 1), sign)
         if self.background.size < 1:
             raise ConfigError("background", "empty", "one code period of samples (>= 1)")
 

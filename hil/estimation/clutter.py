@@ -31,10 +31,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from hil.errors import ConfigError
 from hil.estimation.first_arrival import FirstArrivalReadout
 from hil.estimation.input_stage import StagedGcas, StageParts, StageSetting
-from hil.estimation.still_period import still_period
+from hil.estimation.still_period import checked_still_period, still_period
 
 
 class PeriodCanceller:
@@ -54,15 +53,8 @@ class PeriodCanceller:
     """
 
     def __init__(self, period_samples: int, sign: int = 1) -> None:
-        if isinstance(period_samples, bool) or int(period_samples) != period_samples:
-            raise ConfigError("period_samples", period_samples, "an integer number of samples")
-        if period_samples < 1:
-            raise ConfigError("period_samples", period_samples, ">= 1 sample")
-        if sign not in (1, -1):
-            raise ConfigError("sign", sign, "+1 or -1 (the still water's sign per period)")
-        self.period = int(period_samples)
-        #: The still water's sign from one period to the next.
-        self.sign = int(sign)
+        #: The still period (samples) and the still water's sign from one period to the next.
+        self.period, self.sign = checked_still_period(period_samples, sign)
         # The last P input samples as a ring: sample n sits at n mod P.
         self._ring = np.zeros(self.period)
         self._pos = 0  # ring slot of the next sample

@@ -57,3 +57,19 @@ def still_period(schedule: HopSchedule, period_samples: int) -> tuple[int, int]:
         "a still-water stage (period canceller, background, gcas-still) cannot follow it: "
         "use gcas (its reverberation band)",
     )
+
+
+def checked_still_period(period_samples: int, sign: int) -> tuple[int, int]:
+    """``(period_samples, sign)`` as ints, refused unless a whole number of samples ``>= 1``
+    and a sign of ``+1`` or ``-1`` (what every still-water stage is built from).
+
+    >>> checked_still_period(17000, -1)
+    (17000, -1)
+    """
+    if isinstance(period_samples, bool) or int(period_samples) != period_samples:
+        raise ConfigError("period_samples", period_samples, "an integer number of samples")
+    if period_samples < 1:
+        raise ConfigError("period_samples", period_samples, ">= 1 sample")
+    if isinstance(sign, bool) or sign not in (1, -1):
+        raise ConfigError("sign", sign, "+1 or -1 (the still water's sign per period)")
+    return int(period_samples), int(sign)

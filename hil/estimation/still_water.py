@@ -77,7 +77,7 @@ from hil.estimation.base import Estimate
 from hil.estimation.first_arrival import FirstArrivalReadout
 from hil.estimation.input_stage import StagedGcas, StageParts, StageSetting
 from hil.estimation.still_copies import CopyVeto
-from hil.estimation.still_period import still_period
+from hil.estimation.still_period import checked_still_period, still_period
 
 #: ``still_periods`` unless given: 8 periods (1.36 s on ``att``) keep the noise penalty at
 #: +0.51 dB and a moving echo's copies 18 dB down, and absorb a stopped target in 1.36 s.
@@ -131,15 +131,8 @@ class StillWaterBackground:
         sign: int = 1,
         warmup: int | None = None,
     ) -> None:
-        if isinstance(period_samples, bool) or int(period_samples) != period_samples:
-            raise ConfigError("period_samples", period_samples, "an integer number of samples")
-        if period_samples < 1:
-            raise ConfigError("period_samples", period_samples, ">= 1 sample")
-        if sign not in (1, -1):
-            raise ConfigError("sign", sign, "+1 or -1 (the still water's sign per period)")
         #: Still period Q (samples), its sign σ and the periods averaged K.
-        self.period = int(period_samples)
-        self.sign = int(sign)
+        self.period, self.sign = checked_still_period(period_samples, sign)
         self.still_periods = check_still_periods(still_periods)
         #: Periods a phase's mean must hold before it is subtracted (module docstring).
         wanted = WARMUP_PERIODS if warmup is None else max(1, int(warmup))

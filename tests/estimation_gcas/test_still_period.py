@@ -9,12 +9,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from hil.errors import ConfigError
 from hil.estimation.background import BackgroundSubtractor
 from hil.estimation.clutter import PeriodCanceller
 from hil.estimation.first_arrival import FirstArrivalReadout
 from hil.estimation.still_period import still_period
+from hil.estimation.still_water import StillWaterBackground
 from hil.experiments.calibration.background import average_periods
 from hil.signals.presets import check_design, get_preset
+from hil.signals.schedule import HopSchedule
 
 # Each preset's code period (samples) and the sign its still water repeats with.
 PRESETS = [("att", -1), ("tank-board", -1), ("tank-audio", 1)]
@@ -76,3 +79,31 @@ def test_the_first_arrival_readout_cancels_with_the_sign(preset: str, sign: int)
     assert readout.sign == sign and readout.period == check_design(spec).period_samples(
         float(spec.fs_hz)
     )
+
+
+@pytest.mark.parametrize(
+    ("make", "field", "says"),
+    [
+        (lambda: PeriodCanceller(0), "period_samples", ">= 1 sample"),
+        (lambda: PeriodCanceller(10.5), "period_samples", "an integer number of samples"),
+        (lambda: PeriodCanceller(10, sign=0), "sign", "+1 or -1"),
+        (lambda: BackgroundSubtractor(np.zeros(4), sign=2), "sign", "+1 or -1"),
+        (lambda: StillWaterBackground(10, sign=-2), "sign", "+1 or -1"),
+        (lambda: StillWaterBackground(True), "period_samples", "an integer number of samples"),
+    ],
+)
+def test_every_still_water_stage_refuses_a_bad_period_or_sign_naming_it(
+    make: object, field: str, says: str
+) -> None:
+    with pytest.raises(ConfigError) as err:
+        make()  # type: ignore[operator]
+    assert err.value.field == field and says in str(err.value)
+
+
+def test_a_transmit_whose_still_water_never_repeats_is_refused_saying_what_to_use() -> None:
+    # 1.2373 cycles a hop: over one to 16 code periods the phase advance is never 0 or π.
+    schedule = HopSchedule.from_segments("d", [1000.0, 1237.3], [0, 1], 0.001)
+    with pytest.raises(ConfigError) as err:
+        still_period(schedule, 20)
+    assert err.value.field == "waveform"
+    assert "0 or π" in str(err.value) and "use gcas (its reverberation band)" in str(err.value)
