@@ -727,12 +727,19 @@ class FirstArrivalReadout:
         # An earlier arrival of its own (the direct path more than two windows ahead of a
         # cluster of images that sums to the top: the change over a window falls back to the
         # noise between them) has its own ramp and top: the earliest rise above
-        # EARLY_FRACTION of the top, and its top within two windows.
+        # EARLY_FRACTION of the top, and its top within two windows, before the change falls
+        # back to ``lo`` (a later arrival rising there is another one, with its own ramp: the
+        # carriage at rest in the built-in tank on tank-board, the direct path at 4.90 m and
+        # its surface image on one leg 0.28 m behind it, 1.6 times as strong).
         k0 = self._search_from
         early = _nonzero(amp[k0:top_i] >= max(EARLY_FRACTION * top, 2.0 * wobble))
         if early.size:
             j_e = k0 + int(early[0])
-            top_i = j_e + int(np.argmax(amp[j_e : min(top_i, j_e + 2 * w) + 1]))
+            stop = min(top_i, j_e + 2 * w)
+            fell = _nonzero(~(amp[j_e : stop + 1] >= max(LO_FRACTION * top, wobble)))
+            if fell.size:
+                stop = j_e + int(fell[0]) - 1
+            top_i = j_e + int(np.argmax(amp[j_e : stop + 1]))
             top = float(amp[top_i])
         floor = _mean_all(power[base])
         j_lo, j_hi = self._ramp_bounds(amp, k0, top_i, top, wobble)
