@@ -226,6 +226,18 @@ PEDESTAL_RATIO = 2.0
 NEW_TONE_RATIO = 1.0
 
 
+#: An onset that stands still while its echo moves is not the target's first arrival
+#: (:meth:`FirstArrivalReadout._standing`): at least STANDING_READINGS onsets up to MOVING_HOPS
+#: hops back, from which the echo has moved STANDING_MOVE tolerances since, within
+#: STANDING_TOLERANCE windows (``1/Δf``) of it. Measured on the built-in tank at tank-board's
+#: 1 MS/s (window 0.2 ms; the tow at 1.5 m/s moves the delay 10 µs a hop): the far-wall path's
+#: onsets scatter by ±24 µs about their place, the direct path's by ±3 µs about its track.
+MOVING_HOPS = 12
+STANDING_TOLERANCE = 0.15
+STANDING_MOVE = 2.0
+STANDING_READINGS = 3
+
+
 #: The direct path's Doppler score is summed with the same echo's at the detections this many
 #: hops before to choose its lobe (:meth:`FirstArrivalReadout._direct_alpha`): their boundaries
 #: overlap the present ones less and less (M − 1 … M − 8 of M), so their tone patterns, and the
@@ -635,6 +647,9 @@ class FirstArrivalReadout:
         #: The direct path's speeds as given (held ones too) of the last 2 STEADY_HOPS hops,
         #: as above (:meth:`_steady`).
         self._steady_speeds: list[tuple[int, float, float]] = []
+        #: Every onset read in the last :data:`MOVING_HOPS` hops, refused ones too: (hop
+        #: index, delay (s)) (:meth:`_standing`).
+        self._onsets: list[tuple[int, float]] = []
 
     def allow_lag(self, samples: int) -> None:
         """Keep ``samples`` (input samples) more history: a detection reaches
@@ -654,6 +669,7 @@ class FirstArrivalReadout:
         self._scores.clear()
         self._read_speeds.clear()
         self._steady_speeds.clear()
+        self._onsets.clear()
 
     def push(self, x: NDArray[np.float64], first_index: int) -> None:
         """Append input samples (shape ``(n,)``) starting at absolute index ``first_index``."""
@@ -819,9 +835,40 @@ class FirstArrivalReadout:
             kept = [r for r in self._steady_speeds if 0 < hop_index - r[0] < 2 * STEADY_HOPS]
             kept.append((int(hop_index), float(onset - ends[0]), direct_alpha))
             self._steady_speeds = kept
-        return FirstArrival(
-            onset - min(0.0, delta), alpha if direct_alpha is None else direct_alpha
+        read_alpha = alpha if direct_alpha is None else direct_alpha
+        first_s = onset - min(0.0, delta)
+        # Behind the canceller a path at rest in delay is cancelled with the still water.
+        if not self.period and self._standing(hop_index, first_s - ends[0], read_alpha):
+            return None
+        return FirstArrival(first_s, read_alpha)
+
+    def _standing(self, hop_index: int, delay_s: float, alpha: float) -> bool:
+        """Whether the onset read at hop ``hop_index`` (``delay_s``: the first arrival less
+        the newest boundary's transmit time, s) stands still while the echo moves at time
+        scale ``alpha``: at least :data:`STANDING_READINGS` onsets read
+        :data:`MOVING_HOPS` hops back or fewer, far enough back that the echo has moved
+        :data:`STANDING_MOVE` tolerances since, lie within :data:`STANDING_TOLERANCE` windows
+        of it. The onset is remembered either way.
+
+        A path whose length does not change with the target's place is at rest in delay: on
+        the tank's axis the target's echo through the far end wall on one leg (twice the far
+        wall's distance long). Where it arrives ahead of a later boundary's direct path it is
+        read as the first arrival for as long as the target takes to cross it (tank-board's
+        5 ms hop in the built-in tank: 0.2 s at 8.05-7.78 m, 0.26-0.33 m short); its
+        Doppler is read at the target's, so only its standing delay tells it apart. Read
+        without the canceller only: behind it such a path is cancelled with the still water."""
+        tol = STANDING_TOLERANCE * self.boxcar / self.fs_hz
+        rate = abs(2.0 * (alpha - 1.0) / (alpha + 1.0)) * self._hop_s  # delay moved per hop, s
+        kept = [r for r in self._onsets if 0 < hop_index - r[0] <= MOVING_HOPS]
+        self._onsets = [*kept, (int(hop_index), float(delay_s))]
+        if rate <= 0.0:
+            return False
+        standing = sum(
+            1
+            for hop, delay in kept
+            if rate * (hop_index - hop) >= STANDING_MOVE * tol and abs(delay - delay_s) <= tol
         )
+        return standing >= STANDING_READINGS
 
     def _steady(self, hop_index: int, delay_s: float) -> bool:
         """Whether the direct path's speed of the same echo has been steady before hop

@@ -656,3 +656,35 @@ def test_the_ramp_residuals_use_the_shape_bit_for_bit() -> None:
     summed = readout._ramp_shape(grid, n, tables, times_w=True)
     summed *= 1.0 / w
     assert np.abs(summed).tobytes() == np.abs(shape).tobytes()
+
+
+def _alpha(v_mps: float) -> float:
+    return (C + v_mps) / (C - v_mps)
+
+
+def test_an_onset_standing_still_while_its_echo_moves_is_refused() -> None:
+    """Scripted onsets (``_standing``): a target closing at 1.5 m/s moves its delay by
+    ``2 v T_h / c`` a hop; onsets on that track are kept at every hop, onsets at one delay
+    with the same speed are refused from the hop at which three of them lie far enough back
+    (the echo moved two tolerances since them), and a target at rest is never refused."""
+    s = _schedule()
+    readout = FirstArrivalReadout(s, FS, 10, C, cancel_period=False)
+    tol = fa.STANDING_TOLERANCE * readout.boxcar / FS
+    rate = 2.0 * 1.5 / C * s.hop_s  # s of delay a hop
+    moving = [readout._standing(h, 0.01 - rate * h, _alpha(1.5)) for h in range(40)]
+    assert not any(moving)
+    readout.reset(0)
+    standing = [readout._standing(h, 0.01, _alpha(1.5)) for h in range(40)]
+    # The echo moves two tolerances in ceil(2 tol / rate) hops: the third such onset back
+    # is there that many hops and two more after the first.
+    first = int(np.ceil(fa.STANDING_MOVE * tol / rate)) + fa.STANDING_READINGS - 1
+    assert first <= fa.MOVING_HOPS
+    assert standing == [h >= first for h in range(40)]
+    readout.reset(0)
+    assert not any(readout._standing(h, 0.01, 1.0) for h in range(40))
+    # Onsets scattered about one delay by less than the tolerance either way: standing once
+    # three same-side ones (within the tolerance of each other) lie far enough back.
+    readout.reset(0)
+    jitter = np.where(np.arange(40) % 2 == 0, 0.45, -0.45) * tol
+    got = [readout._standing(h, 0.01 + float(jitter[h]), _alpha(1.5)) for h in range(40)]
+    assert not any(got[:first]) and all(got[first + 2 :])
