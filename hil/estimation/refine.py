@@ -1035,23 +1035,22 @@ class CoherentRefiner:
         the largest ``|C|²`` of a grid of :data:`LEFT_TIMES` times over ±:data:`LEFT_LOBES`
         grating lobes and :data:`LEFT_SPEEDS` speeds over ± the speed span (the lobes the
         full search may reach, :meth:`_fit_near`, at a quarter lobe and half a span): one
-        kernel call on the tables the full search makes first (the same call, so a fit that
-        follows finds them as it would have made them, and its figures do not change).
+        kernel call on the tables of the ``M`` hops at the detection's point, which the full
+        search makes there too (read without refusing, every estimate of ``bench_gcas``'s
+        input stays bit for bit at M = 5, 10 and 29).
 
         None where :meth:`refine` would not search from the detection's point: a recent fit
-        predicts it (the warm fit), the search starts on fewer hops (:attr:`sub_hops` below
-        ``M``), no other echo was measured near (nothing taken out), a pair was measured near
-        (its fit starts from the pair whatever the one-echo fit finds), or the input does
-        not cover the hops.
+        predicts it (the warm fit), no other echo was measured near (nothing taken out), a
+        pair was measured near (its fit starts from the pair whatever the one-echo fit
+        finds), or the input does not cover the hops.
 
         Where an echo was taken out, what is left is its residue and noise, and the full
         search's fit collects little more than this reading: att, ``bench_gcas``'s input,
-        over the 420 such detections at M = 10 (430 at M = 5), 0.8 (0.5) dB more at the
-        median and 5.5 (5.4) dB at most, while every fit accepted as an echo read 12.5 dB or
-        more. A reading far below what an echo must collect decides such a detection without
-        the fit (:data:`~hil.estimation.gcas.readout.LEFT_MARGIN_DB`)."""
-        if self.m_hops != self.sub_hops:
-            return None  # the full search starts on fewer hops' tables
+        over the 430, 420 and 145 such detections at M = 5, 10 and 29, 0.5, 0.8 and 1.6 dB
+        more at the median and 5.4, 5.5 and 5.9 dB at most, while every fit accepted as an
+        echo read 12.5 dB or more. A reading far below what an echo must collect decides
+        such a detection without the fit
+        (:data:`~hil.estimation.gcas.readout.LEFT_MARGIN_DB`)."""
         speed = self.c * (alpha - 1.0) / (alpha + 1.0)
         lobe = 1.0 / (alpha * self.spacing_hz)
         if self._predicted(hop_index, t_s, speed, lobe) is not None:
@@ -1061,7 +1060,6 @@ class CoherentRefiner:
             return None
         word = self._codeword(hop_index)
         hop_ids = np.arange(hop_index - self.m_hops + 1, hop_index + 1, dtype=np.int64)
-        # The full search's first tables (:meth:`_search`).
         slots = self._slots(hop_ids, word, t_s, (self.c + speed) / (self.c - speed))
         if slots is None:
             return None
