@@ -1029,7 +1029,9 @@ class CoherentRefiner:
         reach = KNOWN_HOPS * self.hop_len_s
         return [e for e in self._echoes if -reach <= e.t_s - t_s <= reach + lag_s]
 
-    def left_beside_known(self, t_s: float, alpha: float, hop_index: int) -> float | None:
+    def left_beside_known(
+        self, t_s: float, alpha: float, hop_index: int, max_speed_mps: float
+    ) -> float | None:
         """The E/N0 (dB) a detection at ``t_s`` (s) and time scale ``alpha``, the boundary
         ending hop ``hop_index``, collects with the echoes measured lately taken out, read at
         the largest ``|C|²`` of a grid of :data:`LEFT_TIMES` times over ±:data:`LEFT_LOBES`
@@ -1042,7 +1044,9 @@ class CoherentRefiner:
         None where :meth:`refine` would not search from the detection's point: a recent fit
         predicts it (the warm fit), no other echo was measured near (nothing taken out), a
         pair was measured near (its fit starts from the pair whatever the one-echo fit
-        finds), or the input does not cover the hops.
+        finds), or the input does not cover the hops; and where an echo measured near lies
+        beyond the span ``±max_speed_mps`` (m/s): the detection may be its ghost, which the
+        beyond-span check reads from the fit (:mod:`hil.estimation.gcas.beyond_span`).
 
         Where an echo was taken out, what is left is its residue and noise, and the full
         search's fit collects little more than this reading: att, ``bench_gcas``'s input,
@@ -1056,7 +1060,9 @@ class CoherentRefiner:
         if self._predicted(hop_index, t_s, speed, lobe) is not None:
             return None
         others = self._others(hop_index, t_s, speed)
-        if not others or any(e.pair for e in self._measured_near(t_s, 0.0)):
+        if not others or any(
+            e.pair or abs(e.speed(self.c)) > max_speed_mps for e in self._measured_near(t_s, 0.0)
+        ):
             return None
         word = self._codeword(hop_index)
         hop_ids = np.arange(hop_index - self.m_hops + 1, hop_index + 1, dtype=np.int64)

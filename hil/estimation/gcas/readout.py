@@ -359,7 +359,7 @@ class Readout:
                 t_rx, self._residual_lag_s if residual else 0.0
             )
             if not residual and self._edge_side(p.d0) == 0:
-                left = self._refiner.left_beside_known(t_rx, alpha, hop_index)
+                left = self._refiner.left_beside_known(t_rx, alpha, hop_index, fe.max_speed_mps)
                 if left is not None and left < MIN_ECHO_SNR_DB - LEFT_MARGIN_DB:
                     self.incoherent_count += 1
                     return None
