@@ -348,6 +348,13 @@ PARTIAL_HOPS = 2
 #: (M = 10) 2 of 6 such later estimates are; no estimate of a continuous echo is (0, -10,
 #: -20 dB, 2800; the largest G 4.6), nor of sim-03's 2-5 m/s targets in reverberation (577).
 ENDED_CHANCE = 1e-3
+#: :meth:`CoherentRefiner.left_beside_known`'s grid: ±LEFT_LOBES grating lobes in LEFT_TIMES
+#: times (a quarter lobe apart) by LEFT_SPEEDS speeds over ± the speed span. ±½ lobe is not
+#: enough: beside another echo a detector's time can be a lobe off its echo's (att, M = 5:
+#: fits accepted as echoes read from 9.6 dB on ±½ lobe, from 12.5 dB on ±1.5 lobes).
+LEFT_LOBES = 1.5
+LEFT_TIMES = 13
+LEFT_SPEEDS = 5
 
 
 @dataclass(frozen=True)
@@ -1021,6 +1028,64 @@ class CoherentRefiner:
         measured since: an echo measured at one speed since is there at that speed before)."""
         reach = KNOWN_HOPS * self.hop_len_s
         return [e for e in self._echoes if -reach <= e.t_s - t_s <= reach + lag_s]
+
+    def left_beside_known(
+        self, t_s: float, alpha: float, hop_index: int, max_speed_mps: float
+    ) -> float | None:
+        """The E/N0 (dB) a detection at ``t_s`` (s) and time scale ``alpha``, the boundary
+        ending hop ``hop_index``, collects with the echoes measured lately taken out, read at
+        the largest ``|C|²`` of a grid of :data:`LEFT_TIMES` times over ±:data:`LEFT_LOBES`
+        grating lobes and :data:`LEFT_SPEEDS` speeds over ± the speed span (the lobes the
+        full search may reach, :meth:`_fit_near`, at a quarter lobe and half a span): one
+        kernel call on the tables of the ``M`` hops at the detection's point, which the full
+        search makes there too (read without refusing, every estimate of ``bench_gcas``'s
+        input stays bit for bit at M = 5, 10 and 29).
+
+        None where :meth:`refine` would not search from the detection's point: a recent fit
+        predicts it (the warm fit), no other echo was measured near (nothing taken out), a
+        pair was measured near (its fit starts from the pair whatever the one-echo fit
+        finds), or the input does not cover the hops; and where an echo measured near lies
+        beyond the span ``±max_speed_mps`` (m/s): the detection may be its ghost, which the
+        beyond-span check reads from the fit (:mod:`hil.estimation.gcas.beyond_span`).
+
+        Where an echo was taken out, what is left is its residue and noise, and the full
+        search's fit collects little more than this reading: att, ``bench_gcas``'s input,
+        over the 430, 420 and 145 such detections at M = 5, 10 and 29, 0.5, 0.8 and 1.6 dB
+        more at the median and 5.4, 5.5 and 5.9 dB at most, while every fit accepted as an
+        echo read 12.5 dB or more. A reading far below what an echo must collect decides
+        such a detection without the fit
+        (:data:`~hil.estimation.gcas.readout.LEFT_MARGIN_DB`)."""
+        speed = self.c * (alpha - 1.0) / (alpha + 1.0)
+        lobe = 1.0 / (alpha * self.spacing_hz)
+        if self._predicted(hop_index, t_s, speed, lobe) is not None:
+            return None
+        others = self._others(hop_index, t_s, speed)
+        if not others or any(
+            e.pair or abs(e.speed(self.c)) > max_speed_mps for e in self._measured_near(t_s, 0.0)
+        ):
+            return None
+        word = self._codeword(hop_index)
+        hop_ids = np.arange(hop_index - self.m_hops + 1, hop_index + 1, dtype=np.int64)
+        slots = self._slots(hop_ids, word, t_s, (self.c + speed) / (self.c - speed))
+        if slots is None:
+            return None
+        speeds = speed + self.speed_span_mps * np.linspace(-1.0, 1.0, LEFT_SPEEDS)
+        alphas = np.ascontiguousarray((self.c + speeds) / (self.c - speeds))
+        known = self._rows(others, t_s)
+        args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
+        t_first, step = t_s - LEFT_LOBES * lobe, 2.0 * LEFT_LOBES * lobe / (LEFT_TIMES - 1)
+        c = np.empty((LEFT_SPEEDS, LEFT_TIMES), dtype=np.complex128)
+        grid_sums(*args, known, t_first, step, alphas, c, np.empty(c.shape))
+        i, j = np.unravel_index(int(np.argmax(np.abs(c))), c.shape)
+        one, model, signal = np.empty(1, np.complex128), np.empty(1), np.empty(1)
+        candidate_sums(
+            *args, np.array([t_first + j * step]), alphas[i : i + 1], np.zeros(1), one, model,
+            signal, np.empty((1, 0), np.complex128), known,
+        )  # fmt: skip
+        # E/N0 = |C|² / (E_s σ²), σ² E_s = the windows' energy − 2|C|²/E_s (_fit_quality).
+        mag2 = float(one[0].real * one[0].real + one[0].imag * one[0].imag)
+        noise = float(signal[0]) - 2.0 * mag2 / float(model[0])
+        return 10.0 * math.log10(mag2 / noise) if noise > 0.0 and mag2 > 0.0 else math.inf
 
     def known_input(self, first_index: int, count: int) -> NDArray[np.float64] | None:
         """What the echoes measured lately put into input samples ``first_index …``
