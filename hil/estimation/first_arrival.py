@@ -236,6 +236,9 @@ MOVING_HOPS = 12
 STANDING_TOLERANCE = 0.15
 STANDING_MOVE = 2.0
 STANDING_READINGS = 3
+#: An onset more than this many standing tolerances off the track its echo's kept onsets
+#: agree on is refused (:meth:`FirstArrivalReadout._off_track`).
+TRACK_JUMP = 3.0
 
 
 #: The direct path's Doppler score is summed with the same echo's at the detections this many
@@ -650,6 +653,9 @@ class FirstArrivalReadout:
         #: Every onset read in the last :data:`MOVING_HOPS` hops, refused ones too: (hop
         #: index, delay (s)) (:meth:`_standing`).
         self._onsets: list[tuple[int, float]] = []
+        #: The onsets kept (given) in the last :data:`MOVING_HOPS` hops: (hop index, delay
+        #: (s)) (:meth:`_off_track`).
+        self._kept: list[tuple[int, float]] = []
 
     def allow_lag(self, samples: int) -> None:
         """Keep ``samples`` (input samples) more history: a detection reaches
@@ -670,6 +676,7 @@ class FirstArrivalReadout:
         self._read_speeds.clear()
         self._steady_speeds.clear()
         self._onsets.clear()
+        self._kept.clear()
 
     def push(self, x: NDArray[np.float64], first_index: int) -> None:
         """Append input samples (shape ``(n,)``) starting at absolute index ``first_index``."""
@@ -838,9 +845,37 @@ class FirstArrivalReadout:
         read_alpha = alpha if direct_alpha is None else direct_alpha
         first_s = onset - min(0.0, delta)
         # Behind the canceller a path at rest in delay is cancelled with the still water.
-        if not self.period and self._standing(hop_index, first_s - ends[0], read_alpha):
-            return None
+        if not self.period:
+            delay_s = first_s - ends[0]
+            if self._standing(hop_index, delay_s, read_alpha) or self._off_track(
+                hop_index, delay_s, read_alpha
+            ):
+                return None
         return FirstArrival(first_s, read_alpha)
+
+    def _off_track(self, hop_index: int, delay_s: float, alpha: float) -> bool:
+        """Whether the onset read at hop ``hop_index`` (``delay_s`` as in :meth:`_standing`)
+        leaves the track the same echo's onsets kept: at least :data:`STANDING_READINGS`
+        onsets read and kept up to :data:`MOVING_HOPS` hops back within
+        :data:`DOPPLER_GATE_S` of it (the same echo), each moved on to this hop at time
+        scale ``alpha``, agree within the standing tolerance and this one lies more than
+        :data:`TRACK_JUMP` tolerances off them. Kept onsets are remembered.
+
+        A first arrival moves with its echo; a path that comes ahead of it is read from the
+        hop it first does (tank-board's far-wall path one hop late, its first readings:
+        0.33 m short), before it has stood long enough for :meth:`_standing` to tell. The
+        track is forgotten when no onset of it has been kept for :data:`MOVING_HOPS` hops."""
+        tol = STANDING_TOLERANCE * self.boxcar / self.fs_hz
+        step = 2.0 * (alpha - 1.0) / (alpha + 1.0) * self._hop_s  # delay lost per hop, s
+        kept = [r for r in self._kept if 0 < hop_index - r[0] <= MOVING_HOPS]
+        near = [d - step * (hop_index - h) for h, d in kept if abs(d - delay_s) <= DOPPLER_GATE_S]
+        off = (
+            len(near) >= STANDING_READINGS
+            and max(near) - min(near) <= 2.0 * tol
+            and abs(delay_s - float(np.median(near))) > TRACK_JUMP * tol
+        )
+        self._kept = kept if off else [*kept, (int(hop_index), float(delay_s))]
+        return off
 
     def _standing(self, hop_index: int, delay_s: float, alpha: float) -> bool:
         """Whether the onset read at hop ``hop_index`` (``delay_s``: the first arrival less

@@ -688,3 +688,34 @@ def test_an_onset_standing_still_while_its_echo_moves_is_refused() -> None:
     jitter = np.where(np.arange(40) % 2 == 0, 0.45, -0.45) * tol
     got = [readout._standing(h, 0.01 + float(jitter[h]), _alpha(1.5)) for h in range(40)]
     assert not any(got[:first]) and all(got[first + 2 :])
+
+
+def test_an_onset_leaving_its_echo_s_track_is_refused() -> None:
+    """Scripted onsets (``_off_track``): on a track closing at 1 m/s every onset is kept;
+    one 0.2 m short of it is refused while three kept onsets within MOVING_HOPS hops agree on
+    the track, and kept (a new track) once none is left; an onset beside a track by less
+    than TRACK_JUMP tolerances is kept."""
+    s = _schedule()
+    readout = FirstArrivalReadout(s, FS, 10, C, cancel_period=False)
+    tol = fa.STANDING_TOLERANCE * readout.boxcar / FS
+    step = 2.0 * 1.0 / C * s.hop_s
+    a = _alpha(1.0)
+    assert not any(readout._off_track(h, 0.01 - step * h, a) for h in range(10))
+    short = 2.0 * 0.2 / C
+    # Off the track by more than TRACK_JUMP tolerances, and inside the same-echo gate of
+    # every kept onset up to MOVING_HOPS hops back.
+    assert short > fa.TRACK_JUMP * tol
+    assert short + step * (fa.MOVING_HOPS + 1) < fa.DOPPLER_GATE_S
+    jumped = [readout._off_track(h, 0.01 - step * h - short, a) for h in range(10, 30)]
+    # The track's last three kept onsets are at hops 7, 8, 9: seen up to MOVING_HOPS hops
+    # after hop 7; from then on the short onsets are kept, a track of their own.
+    last = 10 - fa.STANDING_READINGS + fa.MOVING_HOPS
+    assert jumped == [h <= last for h in range(10, 30)]
+    readout.reset(0)
+    for h in range(10):
+        readout._off_track(h, 0.01 - step * h, a)
+    assert readout._off_track(10, 0.01 - step * 10 + 0.9 * fa.TRACK_JUMP * tol, a) is False
+    readout.reset(0)
+    for h in range(10):
+        readout._off_track(h, 0.01 - step * h, a)
+    assert readout._off_track(10, 0.01 - step * 10 - 1.1 * fa.TRACK_JUMP * tol, a) is True

@@ -118,8 +118,8 @@ def test_the_board_preset_s_tank_is_read_against_its_background(tmp_path: Path) 
     # In the pass at 7.7-8.1 m the target's path of constant length through the far end wall
     # (23.0 m on the tank's axis), one hop late, switches ahead of the direct path and was read
     # for it: 34 estimates 0.1-0.32 m short. An onset standing still while its echo moves is
-    # refused: 10 are left, its first readings before it has stood long enough to tell
-    # (measured; docs/tank-run.md).
+    # refused, and so is one leaving its echo's track: 2 are left (measured; 10 with the
+    # first rule alone; docs/tank-run.md).
     wrong = np.abs(errors) > summary["wrong_gate_m"]
-    assert summary["wrong_estimates"] == np.count_nonzero(wrong) <= 10
+    assert summary["wrong_estimates"] == np.count_nonzero(wrong) <= 2
     assert np.all((exact_r[wrong] > 7.7) & (exact_r[wrong] < 8.1))
