@@ -85,3 +85,27 @@ def block_edges(n: int, cut: int | str) -> list[int]:
         return [*range(0, n, cut), n]
     rng = np.random.default_rng(int(cut.split("-")[1]))
     return sorted({0, n, *rng.integers(1, n, 20).tolist()})
+
+
+def count_calls(monkeypatch: pytest.MonkeyPatch, owner: type, name: str) -> list[int]:
+    """Count the calls of method ``name`` of class ``owner`` for the rest of the test: the
+    returned list's one item is the count so far (the method itself still runs)."""
+    calls = [0]
+    original = getattr(owner, name)
+
+    def counted(self: object, *args: object, **kwargs: object) -> object:
+        calls[0] += 1
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(owner, name, counted)
+    return calls
+
+
+def count_hits(estimates: list[Estimate], range_m: float, speed_mps: float) -> int:
+    """How many of ``estimates`` lie within 0.5 m and 0.5 m/s of the target that was at
+    ``range_m`` (m, at t = 0) moving at ``speed_mps`` (m/s, closing positive)."""
+    return sum(
+        abs(e.speed_mps - speed_mps) < 0.5
+        and abs(e.range_m - true_range(range_m, speed_mps, e.t_tx_s, e.t_s)) < 0.5
+        for e in estimates
+    )

@@ -11,7 +11,15 @@ import pytest
 from hil.estimation import refine
 from hil.estimation.base import Estimate
 from hil.estimation.gcas import GcasReceiver
-from tests.estimation_gcas.conftest import FS, C, att_schedule, echo_samples, run_blocks, true_range
+from tests.estimation_gcas.conftest import (
+    FS,
+    C,
+    att_schedule,
+    count_calls,
+    count_hits,
+    echo_samples,
+    run_blocks,
+)
 
 SECONDS = 1.5
 #: The rule as shipped (the tests turn it off with 0 for the comparison).
@@ -24,26 +32,11 @@ def _run(
     """The estimates of ``x`` (att, M = 10, ±30 m/s span) with the leak rule at
     ``fraction`` (0 turns it off), and the number of refinements run."""
     monkeypatch.setattr(refine, "GHOST_LEAK_FRACTION", fraction)
-    calls = [0]
-    original = refine.CoherentRefiner.refine
-
-    def counted(self: refine.CoherentRefiner, *args: object, **kwargs: object) -> object:
-        calls[0] += 1
-        return original(self, *args, **kwargs)  # type: ignore[arg-type]
-
-    monkeypatch.setattr(refine.CoherentRefiner, "refine", counted)
+    calls = count_calls(monkeypatch, refine.CoherentRefiner, "refine")
     rx = GcasReceiver.from_options(
         att_schedule(), FS, sound_speed_mps=C, max_speed_mps=30.0, max_range_m=100.0, m_hops=10
     )
     return run_blocks(rx, x), calls[0]
-
-
-def _hits(estimates: list[Estimate], range_m: float, speed_mps: float) -> int:
-    return sum(
-        abs(e.speed_mps - speed_mps) < 0.5
-        and abs(e.range_m - true_range(range_m, speed_mps, e.t_tx_s, e.t_s)) < 0.5
-        for e in estimates
-    )
 
 
 @pytest.mark.slow
@@ -57,7 +50,7 @@ def test_a_ghost_beyond_the_edge_costs_no_fit_and_changes_no_estimate(
     x = echo_samples(att_schedule(), 45.0, speed, SECONDS, snr_db=20.0, seed=11)
     without, calls_without = _run(x, monkeypatch, 0.0)
     with_rule, calls_with = _run(x, monkeypatch, LEAK_FRACTION)
-    assert len(with_rule) == len(without) == _hits(without, 45.0, speed)
+    assert len(with_rule) == len(without) == count_hits(without, 45.0, speed)
     for a, b in zip(with_rule, without, strict=True):
         assert a.hop_index == b.hop_index
         assert a.range_m == pytest.approx(b.range_m, abs=1e-9)
@@ -92,9 +85,9 @@ def test_an_echo_on_the_edge_beside_a_stronger_one_is_still_reported(
     x = x + np.random.default_rng(5).normal(0.0, 1.0 / np.sqrt(2.0), x.shape)
     without, _ = _run(x, monkeypatch, 0.0)
     with_rule, _ = _run(x, monkeypatch, LEAK_FRACTION)
-    weak_without = _hits(without, 70.0, weak_speed)
-    weak_with = _hits(with_rule, 70.0, weak_speed)
+    weak_without = count_hits(without, 70.0, weak_speed)
+    weak_with = count_hits(with_rule, 70.0, weak_speed)
     assert weak_without >= 60
     assert weak_with == weak_without
-    assert _hits(with_rule, 45.0, strong) == _hits(without, 45.0, strong) >= 130
-    assert len(with_rule) == weak_with + _hits(with_rule, 45.0, strong)
+    assert count_hits(with_rule, 45.0, strong) == count_hits(without, 45.0, strong) >= 130
+    assert len(with_rule) == weak_with + count_hits(with_rule, 45.0, strong)

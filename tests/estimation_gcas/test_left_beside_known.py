@@ -14,7 +14,15 @@ import pytest
 from hil.estimation import refine
 from hil.estimation.base import Estimate
 from hil.estimation.gcas import GcasReceiver, readout
-from tests.estimation_gcas.conftest import FS, C, att_schedule, echo_samples, run_blocks, true_range
+from tests.estimation_gcas.conftest import (
+    FS,
+    C,
+    att_schedule,
+    count_calls,
+    count_hits,
+    echo_samples,
+    run_blocks,
+)
 
 #: The rule as shipped (math.inf turns it off: no reading is below −inf).
 MARGIN_DB = readout.LEFT_MARGIN_DB
@@ -27,27 +35,12 @@ def _run(
     ``margin_db``, and the number of full searches run (fits searched from the detection's
     point)."""
     monkeypatch.setattr(readout, "LEFT_MARGIN_DB", margin_db)
-    calls = [0]
-    original = refine.CoherentRefiner._search_from_fewer_hops
-
-    def counted(self: refine.CoherentRefiner, *args: object, **kwargs: object) -> object:
-        calls[0] += 1
-        return original(self, *args, **kwargs)  # type: ignore[arg-type]
-
-    monkeypatch.setattr(refine.CoherentRefiner, "_search_from_fewer_hops", counted)
+    calls = count_calls(monkeypatch, refine.CoherentRefiner, "_search_from_fewer_hops")
     rx = GcasReceiver.from_options(
         att_schedule(), FS, sound_speed_mps=C, max_speed_mps=30.0, max_range_m=100.0,
         m_hops=m_hops,
     )  # fmt: skip
     return run_blocks(rx, x), calls[0]
-
-
-def _hits(estimates: list[Estimate], range_m: float, speed_mps: float) -> int:
-    return sum(
-        abs(e.speed_mps - speed_mps) < 0.5
-        and abs(e.range_m - true_range(range_m, speed_mps, e.t_tx_s, e.t_s)) < 0.5
-        for e in estimates
-    )
 
 
 @pytest.mark.parametrize(
@@ -62,7 +55,7 @@ def test_ridge_detections_cost_no_search_and_change_no_estimate(
     x = echo_samples(att_schedule(), 60.0, 12.0, 2.0, snr_db=0.0, seed=1)
     without, searches_without = _run(x, monkeypatch, math.inf, m_hops)
     with_rule, searches_with = _run(x, monkeypatch, MARGIN_DB, m_hops)
-    assert len(with_rule) == len(without) == _hits(without, 60.0, 12.0)
+    assert len(with_rule) == len(without) == count_hits(without, 60.0, 12.0)
     for a, b in zip(with_rule, without, strict=True):
         assert a.hop_index == b.hop_index
         # Not bit for bit: the fits of the refused detections no longer fill the
@@ -91,11 +84,11 @@ def test_a_weaker_echo_on_the_ridge_of_a_stronger_one_is_still_reported(
     x = strong + weak + noise
     without, searches_without = _run(x, monkeypatch, math.inf)
     with_rule, searches_with = _run(x, monkeypatch, MARGIN_DB)
-    weak_without, weak_with = _hits(without, 63.75, 19.5), _hits(with_rule, 63.75, 19.5)
+    weak_without, weak_with = count_hits(without, 63.75, 19.5), count_hits(with_rule, 63.75, 19.5)
     # Measured: 142 of the weak echo's boundaries and 141 of the strong one's either way
     # (150 in 1.5 s, the first M - 1 without a fit), 145 full searches without the rule and
     # 81 with it.
     assert weak_with == weak_without >= 135
-    assert _hits(with_rule, 60.0, 12.0) == _hits(without, 60.0, 12.0) >= 135
+    assert count_hits(with_rule, 60.0, 12.0) == count_hits(without, 60.0, 12.0) >= 135
     assert len(with_rule) == len(without)
     assert searches_without - searches_with >= 40  # the rule decided detections here

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from hil.errors import ConfigError
 from hil.estimation.echo_model import echo_samples as model_samples
 
-from .conftest import FS, att_schedule, echo_samples, make_gcas, run_blocks, true_range
+from .conftest import FS, att_schedule, count_hits, echo_samples, make_gcas, run_blocks
 
 
 def _columns(seed: int, q: int = 6) -> np.ndarray:
@@ -115,13 +115,6 @@ def _weaker_at_one_speed(snr_db: float) -> np.ndarray:
     return x + np.random.default_rng(11).normal(0.0, sigma, x.shape)
 
 
-def _hits(est: list, r0: float, v: float) -> int:
-    return sum(
-        abs(e.speed_mps - v) < 0.5 and abs(e.range_m - true_range(r0, v, e.t_tx_s, e.t_s)) < 0.5
-        for e in est
-    )
-
-
 @pytest.mark.slow
 def test_the_second_search_gives_the_same_estimates_in_any_blocks() -> None:
     # The weaker echo is found by the second search only (measured: 0 of its 136 boundaries
@@ -129,7 +122,7 @@ def test_the_second_search_gives_the_same_estimates_in_any_blocks() -> None:
     x = _weaker_at_one_speed(0.0)
     whole_rx = make_gcas(att_schedule())
     whole = run_blocks(whole_rx, x, block=x.shape[0])
-    assert whole_rx.readout.residual_count > 0 and _hits(whole, 50.0, 12.0) >= 130
+    assert whole_rx.readout.residual_count > 0 and count_hits(whole, 50.0, 12.0) >= 130
     for block in (997, 4096, 333):
         rx = make_gcas(att_schedule())
         assert run_blocks(rx, x, block=block) == whole, block
@@ -163,7 +156,7 @@ def test_a_late_detection_hears_the_echoes_measured_since() -> None:
     x = sum(echo_samples(schedule, r, v, 2.0, amplitude=a) for r, v, a in targets)
     x = x + np.random.default_rng(2).normal(0.0, 1.0 / np.sqrt(2.0) * np.sqrt(10.0), x.shape)
     est = run_blocks(make_gcas(schedule), x)
-    hits = [_hits(est, r, v) for r, v, _ in targets]
+    hits = [count_hits(est, r, v) for r, v, _ in targets]
     assert hits[0] >= 180 and hits[1] >= 165
     assert len(est) - sum(hits) <= 1
 

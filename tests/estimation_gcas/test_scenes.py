@@ -20,7 +20,7 @@ from sim_devices.acoustics.echo import AnalyticEcho
 from sim_devices.acoustics.trajectory import Fixed, Live
 from sim_devices.acoustics.truth import HopTruth, hop_truth
 
-from .conftest import FS, C, att_schedule, echo_samples, run_blocks, true_range
+from .conftest import FS, C, att_schedule, count_hits, echo_samples, run_blocks, true_range
 
 SECONDS = 1.0
 HOPS = SECONDS / 0.01
@@ -222,13 +222,6 @@ TWO_TARGETS = {
 SCENE_S = 1.5
 
 
-def _hits(est: list[Estimate], r0: float, v: float) -> int:
-    return sum(
-        abs(e.speed_mps - v) < 0.5 and abs(e.range_m - true_range(r0, v, e.t_tx_s, e.t_s)) < 0.5
-        for e in est
-    )
-
-
 def _scene(
     targets: tuple[tuple[float, float, float], ...], snr_db: float, **options: object
 ) -> list[Estimate]:
@@ -249,8 +242,8 @@ def _detection_and_false(
 ) -> tuple[list[float], float]:  # fmt: skip
     targets = targets or TWO_TARGETS[scene]
     est = _scene(targets, snr_db, **options)
-    alone = [_hits(_scene((t,), snr_db, **options), t[0], t[1]) for t in targets]
-    hits = [_hits(est, t[0], t[1]) for t in targets]
+    alone = [count_hits(_scene((t,), snr_db, **options), t[0], t[1]) for t in targets]
+    hits = [count_hits(est, t[0], t[1]) for t in targets]
     false = len(est) - sum(hits)
     return [h / a for h, a in zip(hits, alone, strict=True)], false / (SCENE_S / 0.01)
 
