@@ -369,11 +369,13 @@ ENDED_CHANCE = 1e-3
 #: :mod:`hil.estimation.still_lobe`). A fit is judged on the input without its still water
 #: where, over its ``M`` hops' samples, the still water's power is at least STILL_OVER_REST
 #: of the rest's (noise and moving echoes, the whole band) and at least STILL_OVER_ECHO
-#: times the fitted echo's. Measured on att, M = 10, 0 dB per-sample SNR: fits of scenes
-#: without reverberation (one and two targets) read -0.08 to 0.11 of the rest; in volume
-#: reverberation at 0 dB SRR, a target 10 dB below another reads 0.38-0.62 of the rest and
-#: 3.6-15 times its own power (5th percentile to largest), the stronger one 0.36-1.3 times its
-#: own (its fits a lobe off: none). Elsewhere the fit is left as found.
+#: times the fitted echo's. Measured on att, M = 10: in volume reverberation at 0 dB SRR a
+#: target 10 dB below another reads 3.6-15 times its own power (5th percentile to largest),
+#: the stronger one 0.36-1.3 (its fits a lobe off: none); of the fits at least twice their
+#: own power, the weaker target's read 0.38-0.62 of the rest at 0 dB per-sample SNR and
+#: 0.061-0.127 at -10 dB, where without reverberation they read 0.015-0.033 (-10 dB) or
+#: there are none (0 dB; every fit there -0.08 to 0.11, the stronger echoes' own copies).
+#: Elsewhere the fit is left as found.
 #: The evidence spans STILL_LOBES grating lobes either side of the fit, STILL_LOBE_POINTS
 #: times across ±⅛ lobe each (the main peak is ¼ lobe wide on att), over STILL_WINDOWS
 #: windows of M hops: with the still water and the other echoes out, a correct fit's
@@ -381,7 +383,7 @@ ENDED_CHANCE = 1e-3
 #: fits a lobe off 1.15-1.64 (that scene, one seed); over one window with the stronger echo
 #: left in, correct fits' neighbours reached 1.05 and fits a lobe off read their echo's lobe
 #: at 0.93-1.17 of their own: no decision.
-STILL_OVER_REST = 0.25
+STILL_OVER_REST = 0.05
 STILL_OVER_ECHO = 2.0
 #: ...and where the canceller keeps at least STILL_GAIN_MIN of the echo's SNR
 #: (:func:`~hil.estimation.still_lobe.canceller_gain`; 3.6 % of the speeds from 2.5 to 30
