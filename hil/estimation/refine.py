@@ -70,6 +70,21 @@ fit of all M hops at one speed is nowhere near the echo). Below about 1.5 m/s² 
 speed lags by ``a M T_h / 2`` (at most 0.075 m/s); above about 12 m/s² at M = 10 some hops'
 runs lose their coherence too and those detections are refused.
 
+Beside still water: still water (volume reverberation at rest, a wall) lies on the
+transmitted tones, and where it is stronger than an echo it leaks coherently into the echo's
+fit through the hops' edges, the only place the grating lobes differ: a weak echo's fit can
+sit a lobe off for runs of hops at an E/N0 well above the white-noise lobe threshold
+(:data:`LOBE_Z`), as a threshold on white noise does not see it. There the lobe is decided
+again on the input without its still water (:mod:`hil.estimation.still_lobe`: the
+one-period canceller and an echo model that holds its copy, so the copy is no ghost), and the
+fit within that lobe is still made on the input itself, which keeps the Cramér–Rao accuracy
+of open water (:meth:`CoherentRefiner._lobe_without_still`). Chosen over fitting on the
+cancelled input throughout: the canceller doubles the noise and blinds the tones whose
+Doppler phase over a still period is a whole turn, and in open water it changes nothing
+worth that; the decision runs only where the still water's measured power is a sizeable part
+of the window's and above the echo's (:data:`STILL_OVER_REST`, :data:`STILL_OVER_ECHO`), so
+estimates without still water are unchanged.
+
 Limits: one echo. Through multipath a fraction of a millisecond long (a tank's images) the
 maximum sits between the arrivals and the fit is not one echo (tanks read the first arrival
 instead, :mod:`hil.estimation.first_arrival`). Tone schedules of equal hops only.
@@ -103,6 +118,8 @@ from hil.estimation.refine_kernels import (
 from hil.estimation.refine_pair import RESOLVED_LOBES, SEED_LOBES, fit_pair
 from hil.estimation.reverb_band import doppler_resolution_mps
 from hil.estimation.row_buffer import RowBuffer
+from hil.estimation.still_lobe import StillStreams, canceller_gain, still_free_powers
+from hil.estimation.still_period import still_period
 from hil.signals.schedule import HopSchedule
 
 #: Points of the search's grid: over ±½ grating lobe in time, and at least SPEED_POINTS over
@@ -356,6 +373,40 @@ LEFT_LOBES = 1.5
 LEFT_TIMES = 13
 LEFT_SPEEDS = 5
 
+#: The lobe decision beside still water (:meth:`CoherentRefiner._lobe_without_still`,
+#: :mod:`hil.estimation.still_lobe`). A fit is judged on the input without its still water
+#: where, over its ``M`` hops' samples, the still water's power is at least STILL_OVER_REST
+#: of the rest's (noise and moving echoes, the whole band) and at least STILL_OVER_ECHO
+#: times the fitted echo's. Measured on att, M = 10: in volume reverberation at 0 dB SRR a
+#: target 10 dB below another reads 3.6-15 times its own power (5th percentile to largest),
+#: the stronger one 0.36-1.3 (its fits a lobe off: none); of the fits at least twice their
+#: own power, the weaker target's read 0.38-0.62 of the rest at 0 dB per-sample SNR and
+#: 0.061-0.127 at -10 dB, where without reverberation they read 0.015-0.033 (-10 dB) or
+#: there are none (0 dB; every fit there -0.08 to 0.11, the stronger echoes' own copies).
+#: Elsewhere the fit is left as found.
+#: The evidence spans STILL_LOBES grating lobes either side of the fit, STILL_LOBE_POINTS
+#: times across ±⅛ lobe each (the main peak is ¼ lobe wide on att), over STILL_WINDOWS
+#: windows of M hops: with the still water and the other echoes out, a correct fit's
+#: neighbours read 0.79-0.85 of it (``ρ²`` of the white-noise lobe decision, :data:`LOBE_Z`),
+#: fits a lobe off 1.15-1.64 (that scene, one seed); over one window with the stronger echo
+#: left in, correct fits' neighbours reached 1.05 and fits a lobe off read their echo's lobe
+#: at 0.93-1.17 of their own: no decision.
+STILL_OVER_REST = 0.05
+STILL_OVER_ECHO = 2.0
+#: ...and where the canceller keeps at least STILL_GAIN_MIN of the echo's SNR
+#: (:func:`~hil.estimation.still_lobe.canceller_gain`; 3.6 % of the speeds from 2.5 to 30
+#: m/s on att keep less, in bands about every 4 m/s): sim-03's 3.9 m/s target at -10 dB SNR
+#: and SRR, kept 0.11-0.36 there, had two fits moved a lobe off, from its echo's lobe.
+STILL_GAIN_MIN = 0.5
+STILL_LOBES = 2
+STILL_LOBE_POINTS = 5
+STILL_WINDOWS = 2
+#: Table slots per hop of the refiner of the input without its still water: a decision
+#: reads each hop of its windows at 2 (2 STILL_LOBES + 1) times (both terms, every lobe), and
+#: the next decision of the same echo reads the same hops' windows again (kept, only the new
+#: hop's tables are made).
+STILL_SLOTS_PER_HOP = 2 * (2 * STILL_LOBES + 1) * STILL_WINDOWS + 4
+
 
 @dataclass(frozen=True)
 class _EchoFit:
@@ -526,6 +577,8 @@ class CoherentRefiner:
         max_speed_mps: float,
         echo_test: EchoTest = EchoTest(0.8, 0.85, 12.0),
         window_speed_mps: float | None = None,
+        still_free: bool = True,
+        slots_per_hop: int = SLOTS_PER_HOP,
     ) -> None:
         if np.any(schedule.chirp_hz_per_s != 0):
             raise ConfigError("refine", True, "a schedule of tones (no chirps)", "refine=False")
@@ -581,7 +634,7 @@ class CoherentRefiner:
         self._own_history = self.history
         self._ring = RowBuffer(self.history, (), np.float64)
         self._valid_from = 0
-        n_slots = SLOTS_PER_HOP * self.m_hops
+        n_slots = int(slots_per_hop) * self.m_hops
         rows = 2 * self._half + 2
         self._prefix = np.zeros((n_slots, 2, rows + 1, N_MOMENTS), dtype=np.complex128)
         self._energy = np.zeros((n_slots, 2, rows + 1))
@@ -627,6 +680,37 @@ class CoherentRefiner:
             np.zeros(1), np.zeros(1), np.zeros(1), np.empty(1, np.complex128), np.empty(1),
             np.empty(1), np.empty((1, self.m_hops), np.complex128),
         )  # fmt: skip
+        #: The input with the still water taken out and a refiner of it, for the lobe
+        #: decision beside still water (:meth:`_lobe_without_still`); None where the schedule's
+        #: still water does not repeat in whole samples.
+        self._still: StillStreams | None = None
+        self._still_fits: CoherentRefiner | None = None
+        self._still_period_s = 0.0
+        self._still_extra = 0
+        period = schedule.period_samples(self.fs_hz) if still_free else None
+        if period:
+            try:
+                q, sign = still_period(schedule, period)
+            except ConfigError:
+                q = 0
+            if q:
+                self._still = StillStreams(q, sign, self.history)
+                self._still_period_s = q / self.fs_hz
+                self._still_fits = CoherentRefiner(
+                    schedule, fs_hz, m_hops, sound_speed_mps, speed_span_mps, max_speed_mps,
+                    echo_test, window_speed_mps, still_free=False,
+                    slots_per_hop=STILL_SLOTS_PER_HOP,
+                )  # fmt: skip
+                # Its history reaches the earlier windows (:data:`STILL_WINDOWS`, one more
+                # where the latest's copy is not in yet) and the copies' move.
+                self._still_extra = int(
+                    math.ceil(
+                        (STILL_WINDOWS * self.m_hops * self.hop_len_s / alpha_lo
+                         + q / self.fs_hz * (1.0 / alpha_lo - 1.0)) * self.fs_hz
+                    )
+                )  # fmt: skip
+                self._still_fits.allow_lag(self._still_extra)
+                self._still_fits._valid_from = self._still.valid_from
 
     # ------------------------------------------------------------------ stream
     def allow_lag(self, samples: int) -> None:
@@ -637,6 +721,9 @@ class CoherentRefiner:
             raise ConfigError("samples", samples, ">= 0 (input samples of decision lag)")
         self.history = self._own_history + int(samples)
         self._ring = RowBuffer(self.history, (), np.float64)
+        if self._still is not None and self._still_fits is not None:
+            self._still_fits.allow_lag(int(samples) + self._still_extra)
+            self._still = StillStreams(self._still.period, self._still.sign, self.history)
         self.reset(0)
 
     def reset(self, input_index: int) -> None:
@@ -647,6 +734,10 @@ class CoherentRefiner:
         self._recent.clear()
         self._echoes.clear()
         self._partners.clear()
+        if self._still is not None and self._still_fits is not None:
+            self._still.reset(input_index)
+            self._still_fits.reset(input_index)
+            self._still_fits._valid_from = self._still.valid_from
 
     def warm_up(self) -> None:
         """Run every compiled kernel once on a made-up detection in silence, then forget it:
@@ -668,6 +759,8 @@ class CoherentRefiner:
     def push(self, x: NDArray[np.float64], first_index: int) -> None:
         """Append input samples (shape ``(n,)``) starting at absolute index ``first_index``."""
         self._ring.append(x, first_index)
+        if self._still is not None and self._still_fits is not None:
+            self._still_fits.push(self._still.push(x, first_index), first_index)
 
     # ------------------------------------------------------------------ refinement
     def refine(
@@ -735,6 +828,14 @@ class CoherentRefiner:
             # weak fit moved to the lobe its neighbours' echoes favour is reported as a still
             # target (sim-03, band off, +5 dB SRR: 136 -> 173 false alarms in 30 trials).
             fit = self._lobe_by_more_hops(fit, word, hop_ids, t_s, speed0, lobe, known)
+        if (
+            fit is not None
+            and fit.found
+            and fit.accel_mps2 == 0.0
+            and fit.is_echo(test)
+            and abs(fit.speed_mps(self.c)) >= self._still_mps
+        ):
+            fit = self._lobe_without_still(fit, word, hop_ids, lobe, known)
         if partners and fit is not None and fit.found and not fit.is_echo(test):
             fit = self._with_partners(fit, word, hop_ids, t_s, speed0, lobe, hop_index, known, test)
         if pairs and fit is not None and abs(speed0) >= self._still_mps:
@@ -1624,6 +1725,107 @@ class CoherentRefiner:
             return fit
         args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
         return self._refinement(args, known, word, t, alpha, 0.0, True)
+
+    def _lobe_without_still(
+        self, fit: Refinement, word: _Codeword, hop_ids: NDArray[np.int64], lobe: float,
+        known: NDArray[np.complex128],
+    ) -> Refinement:  # fmt: skip
+        """``fit`` (constant speed, an echo), or the fit on the grating lobe that the input
+        without its still water favours (:meth:`still_free_evidence`, with the other echoes
+        measured lately taken out), where the still water over the ``M`` hops' samples holds
+        at least :data:`STILL_OVER_REST` of the rest's power and :data:`STILL_OVER_ECHO` of
+        the fitted echo's, and the canceller keeps at least :data:`STILL_GAIN_MIN` of the
+        echo's SNR (:func:`~hil.estimation.still_lobe.canceller_gain`). Where another lobe's
+        evidence exceeds ``fit``'s own: that lobe's fit on ``x`` (the search over ±⅛ lobe and
+        half the speed span about ``fit`` moved by whole lobes; ``x`` keeps the Cramér–Rao
+        accuracy within a lobe), or ``fit`` refused (``found`` False) where that search finds
+        no maximum inside. ``fit`` where ``y`` does not cover the evidence's windows."""
+        still, fits = self._still, self._still_fits
+        if still is None or fits is None:
+            return fit
+        hop_index = int(hop_ids[-1])
+        alpha = fit.alpha
+        window_s = self.m_hops * self.hop_len_s / alpha
+        stop = int(math.floor(fit.t_s * self.fs_hz))
+        s_pow, rest = still.powers(stop - int(math.ceil(window_s * self.fs_hz)), stop)
+        echo_pow = 0.5 * abs(fit.amplitude) ** 2 * float(np.mean(word.hops[4]))
+        if s_pow <= 0 or s_pow < STILL_OVER_REST * rest or s_pow < STILL_OVER_ECHO * echo_pow:
+            return fit
+        delta = self._still_period_s * (alpha - 1.0)
+        if canceller_gain(word.hops[1], word.hops[4], self.hop_len_s, delta) < STILL_GAIN_MIN:
+            return fit  # a blind speed of the canceller: y holds too little of the echo
+        others = self._others(hop_index, fit.t_s, fit.speed_mps(self.c))
+        evidence = self.still_free_evidence(fit.t_s, alpha, hop_index, others)
+        if evidence is None:
+            return fit
+        ks = np.arange(-STILL_LOBES, STILL_LOBES + 1)
+        j = int(np.argmax(evidence))
+        if j == STILL_LOBES or evidence[j] <= evidence[STILL_LOBES]:
+            return fit
+        v = fit.speed_mps(self.c)
+        grid = (0.125 * lobe, 0.5 * self.speed_span_mps, 5, 5)
+        searched = self._search(word, hop_ids, fit.t_s + ks[j] * lobe, v, lobe, known, grid)
+        if searched is None or searched[2] != FOUND:
+            return replace(fit, found=False)
+        t_new, v_new, _, args = searched
+        a_new = (self.c + v_new) / (self.c - v_new)
+        return self._refinement(args, known, word, t_new, a_new, 0.0, True)
+
+    def still_free_evidence(
+        self, t_s: float, alpha: float, hop_index: int, others: list[_EchoFit] | None = None
+    ) -> NDArray[np.float64] | None:
+        """The evidence for each grating lobe of an echo whose boundary ending hop
+        ``hop_index`` is received at ``t_s`` (s) with time scale ``alpha``, on the input
+        without its still water (:mod:`hil.estimation.still_lobe`): shape
+        ``(2 STILL_LOBES + 1,)``, lobe ``k − STILL_LOBES`` at ``t_s + k/(α Δf)``, each the
+        two-term model's largest ``|C_y|²`` over :data:`STILL_LOBE_POINTS` times across ±⅛
+        lobe, summed over the first :data:`STILL_WINDOWS` windows of ``M`` hops (ending at
+        ``hop_index``, ``M`` hops before, ...) whose terms ``y`` covers, with ``others``
+        (echoes measured lately) and their copies taken out. None where fewer windows are
+        covered, or the schedule's still water does not repeat in whole samples."""
+        fits = self._still_fits
+        if fits is None:
+            return None
+        lobe = 1.0 / (alpha * self.spacing_hz)
+        window_s = self.m_hops * self.hop_len_s / alpha
+        shift = self._still_period_s * (1.0 - 1.0 / alpha)
+        ks = np.arange(-STILL_LOBES, STILL_LOBES + 1)
+        offsets = np.linspace(-0.125, 0.125, STILL_LOBE_POINTS) * lobe
+        a = np.full(offsets.size, alpha)
+        g = np.zeros(offsets.size)
+        # The other echoes as the canceller leaves them: each less its copy (a still period
+        # later, stretched), taken out of y as they are out of x.
+        in_y = [*(others or []), *(self._still_copy(e) for e in others or [])]
+        evidence = np.zeros((ks.size, offsets.size))
+        used = 0
+        for w in range(STILL_WINDOWS + 1):
+            if used == STILL_WINDOWS:
+                break
+            hop = hop_index - w * self.m_hops
+            powers = np.empty_like(evidence)
+            for j, k in enumerate(ks):
+                centre = t_s - w * window_s + k * lobe
+                known_y = self._rows(in_y, centre)
+                t = centre + offsets
+                direct = fits._sums(centre, alpha, hop, t, a, g, known_y)
+                copy = fits._sums(centre + shift, alpha, hop, t + shift, a, g, known_y)
+                if direct is None or copy is None:
+                    break
+                powers[j] = still_free_powers(direct[0], copy[0])
+            else:
+                evidence += powers
+                used += 1
+        if used < STILL_WINDOWS:
+            return None
+        best: NDArray[np.float64] = np.max(evidence, axis=1)
+        return best
+
+    def _still_copy(self, echo: _EchoFit) -> _EchoFit:
+        """What the one-period canceller subtracts of ``echo``: the echo at the receive time
+        a still period later less the time scale's stretch (``t + T_Q (1 − 1/α)``), with the
+        opposite amplitude (:mod:`hil.estimation.still_lobe`)."""
+        t = echo.t_s + self._still_period_s * (1.0 - 1.0 / echo.alpha)
+        return replace(echo, t_s=t, amplitude=-echo.amplitude)
 
     def _refinement(
         self, args: tuple[Any, ...], known: NDArray[np.complex128], word: _Codeword, t: float,

@@ -58,17 +58,19 @@ def test_the_still_waters_doppler_leak_is_not_reported(
 
 @pytest.mark.slow
 def test_beside_fast_targets_at_minus_10_db_srr_false_alarms_stay_below_0_8_per_second() -> None:
-    # The 30 trials of sim-03's 10-25 m/s targets at -10 dB SRR with the default band: 4
-    # false estimates in 13.8 s of scored time (16 before the still-leak rule), the
-    # boundaries detected the same (1106); 1105 with the second search on the input with the
-    # measured echoes taken out (hil.estimation.gcas.residual) and a still target's cheaper
-    # hidden-echo measurements: one boundary fewer, as in sim-03's run on 57daa53; 1142 with
-    # a boundary missed just before the echo's next detection followed (CoherentRefiner.due);
-    # 1143 with a ghost judged against the noise's reading at its echo's E/N0
-    # (refine.GHOST_NOISE_Z).
+    # The 30 trials of sim-03's 10-25 m/s targets at -10 dB SRR with the default band: 1
+    # false estimate in 13.8 s of scored time (4 with the grating lobe decided on the input
+    # alone, 16 before the still-leak rule, the boundaries detected the same, 1106); 1105
+    # with the second search on the input with the measured echoes taken out
+    # (hil.estimation.gcas.residual) and a still target's cheaper hidden-echo measurements:
+    # one boundary fewer, as in sim-03's run on 57daa53; 1142 with a boundary missed just
+    # before the echo's next detection followed (CoherentRefiner.due); 1143 with a ghost
+    # judged against the noise's reading at its echo's E/N0 (refine.GHOST_NOISE_Z); 1151
+    # with the grating lobe judged on the input without its still water
+    # (hil.estimation.still_lobe).
     outs = [_trial(11, rep) for rep in range(30)]
     n_false = sum(int(o["n_false"]) for o in outs)
     window = sum(float(o["window_s"]) for o in outs)
-    assert n_false == 4
+    assert n_false == 1
     assert n_false / window < 0.8
-    assert sum(int(o["n_detected"]) for o in outs) == 1143
+    assert sum(int(o["n_detected"]) for o in outs) == 1151

@@ -1,0 +1,138 @@
+"""The input with the still water taken out, for judging a fit's grating lobe beside it.
+
+Still water (volume reverberation at rest, a wall, the direct blast) repeats with the still
+period ``Q`` (samples) and its sign ``σ`` (:mod:`hil.estimation.still_period`). The one-period
+canceller ``y[n] = x[n] − σ x[n − Q]`` takes it out exactly and leaves a moving echo as the
+echo less its own copy a still period earlier: for an echo ``β s(α (t − t_rx) + T_b)`` of a
+schedule ``s`` with ``s(u − T_Q) = σ s(u)`` (``T_Q = Q/f_s``),
+
+    y(t) = β [s(α (t − t_rx) + T_b) − s(α (t − t_rx') + T_b)],  t_rx' = t_rx + T_Q (1 − 1/α),
+
+the same echo model at a second receive time (``σ² = 1``). So the correlation of ``y`` with
+that two-term model is ``C_y(t_rx, α) − C_y(t_rx', α)``, two evaluations of the refinement's
+own correlation (:meth:`hil.estimation.refine.CoherentRefiner.correlation`) on ``y``: the
+copy is modelled, so it never reads as a ghost. ``C_y`` takes each term over its full ``M``
+hops; the copy over the window's own samples differs from that by the hops' edges moved by
+``T_Q (1 − 1/α)`` (1.4 ms of a 100 ms window at 6 m/s on ``att``), the same at every
+grating lobe.
+
+Why a lobe decision on ``y`` and not a fit on ``y``: in open water ``y`` doubles the noise
+and blinds some tones (``|1 − e^{j2π f (α − 1) T_Q}|``), so the refinement's fit on ``x``
+keeps its Cramér–Rao accuracy within a lobe; what the still water spoils is only which lobe,
+as it sits at the transmitted tones, above a weak echo, and leaks coherently into its fit
+through the lobes' edges (att, a target 10 dB below another at 0 dB per-sample SNR in volume
+reverberation at 0 dB SRR: runs of fits one or two lobes off at an E/N0 of 23-24 dB, above
+the white-noise lobe threshold). The still part's share of a window is measured from
+``w[n] = x[n] + σ x[n − Q]``: with still power ``S`` and the rest (noise, moving echoes) ``N``
+per sample, ``E|w|² = 4S + 2N`` and ``E|y|² = 2N`` (:meth:`StillStreams.powers`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hil.estimation.row_buffer import RowBuffer
+from hil.estimation.still_period import checked_still_period
+
+
+class StillStreams:
+    """The canceller's output ``y = x − σ x[n − Q]`` and the still sum ``w = x + σ x[n − Q]``
+    of a stream, kept ``keep`` samples back.
+
+    Parameters
+    ----------
+    period_samples:
+        The still period ``Q``, samples (:func:`~hil.estimation.still_period.still_period`).
+    sign:
+        Its sign ``σ`` (+1 or −1).
+    keep:
+        Samples of ``y`` and ``w`` kept behind the newest one.
+    """
+
+    def __init__(self, period_samples: int, sign: int, keep: int) -> None:
+        self.period, self.sign = checked_still_period(period_samples, sign)
+        self._x = RowBuffer(self.period, (), np.float64)
+        self._y = RowBuffer(keep, (), np.float64)
+        self._w = RowBuffer(keep, (), np.float64)
+        #: The first sample whose ``y`` and ``w`` have a sample a still period before it.
+        self.valid_from = self.period
+
+    def reset(self, next_index: int) -> None:
+        """Forget the history; the next sample is ``next_index``."""
+        for ring in (self._x, self._y, self._w):
+            ring.reset(next_index)
+        self.valid_from = int(next_index) + self.period
+
+    def push(self, x: NDArray[np.float64], first_index: int) -> NDArray[np.float64]:
+        """Append input samples ``x`` (shape ``(n,)``) from absolute index ``first_index``:
+        ``y`` of them (shape ``(n,)``; before :attr:`valid_from` the missing samples count
+        as 0)."""
+        n = x.shape[0]
+        q = self.period
+        # x[n - Q] for the chunk: from the kept tail, then (a chunk longer than Q) its own start.
+        if n <= q:
+            before = self._x.span(first_index - q, first_index - q + n)
+        else:
+            before = np.concatenate([self._x.span(first_index - q, first_index), x[: n - q]])
+        y = x - self.sign * before
+        self._y.append(y, first_index)
+        self._w.append(x + self.sign * before, first_index)
+        self._x.append(x, first_index)
+        return y
+
+    def powers(self, first: int, stop: int) -> tuple[float, float]:
+        """The still water's power ``S`` and the rest's ``N`` (noise and moving echoes), per
+        sample over samples ``first .. stop − 1`` (input units squared):
+        ``S = (Σw² − Σy²) / (4n)``, ``N = Σy² / (2n)`` (module docstring); ``(0, 0)`` where
+        the span is not all valid and kept."""
+        ring = self._y
+        n = stop - first
+        if n <= 0 or first < max(self.valid_from, ring.next_index - ring.available):
+            return 0.0, 0.0
+        if stop > ring.next_index:
+            return 0.0, 0.0
+        y = ring.span(first, stop)
+        w = self._w.span(first, stop)
+        e_y = float(np.einsum("i,i->", y, y))
+        e_w = float(np.einsum("i,i->", w, w))
+        return (e_w - e_y) / (4.0 * n), e_y / (2.0 * n)
+
+
+def still_free_powers(
+    direct: NDArray[np.complex128], copy: NDArray[np.complex128]
+) -> NDArray[np.float64]:
+    """``|C_y(t_rx, α) − C_y(t_rx', α)|²`` of candidates (any shape, the same for both): the
+    likelihood of the two-term echo model on ``y`` (module docstring).
+
+    >>> still_free_powers(np.array([1 + 1j, 2.0]), np.array([1j, -1.0])).tolist()
+    [1.0, 9.0]
+    """
+    out: NDArray[np.float64] = np.abs(direct - copy) ** 2
+    return out
+
+
+def canceller_gain(
+    tones_hz: NDArray[np.float64], amp2: NDArray[np.float64], hop_s: float, delta_s: float
+) -> float:
+    """What the canceller keeps of an echo's SNR on the two-term model, against the input
+    itself in white noise: ``1 − Re R(δ) / R(0)``, ``R(τ) = Σ_i a_i² (D − |τ|)₊ e^{j2π f_i τ}``
+    over the hops (tones ``tones_hz`` Hz, squared amplitudes ``amp2``, shape ``(M,)`` each;
+    hop length ``hop_s`` = ``D``, s), ``δ = T_Q (α − 1)`` the copy's offset in transmit time
+    (s). The model ``m = s − s_δ`` has ``‖m‖² = 2 R(0) − 2 Re R(δ)`` and ``y``'s noise twice
+    the input's, so the model's SNR is this fraction of the input's (0 to 2; hops of other
+    tones are taken as orthogonal). Where every tone turns by about a whole cycle over ``δ``
+    (``δ`` near a whole number of grating lobes, ``f δ`` near whole cycles: blind speeds,
+    about every 4 m/s on ``att``) it falls toward 0.
+
+    >>> round(canceller_gain(np.array([1000.0, 2000.0]), np.ones(2), 0.01, 0.0), 6)
+    0.0
+    >>> round(canceller_gain(np.array([1000.0, 3000.0]), np.ones(2), 0.01, 0.0005), 6)
+    1.95
+    >>> round(canceller_gain(np.array([1000.0, 2000.0]), np.ones(2), 0.01, 0.02), 6)
+    1.0
+    """
+    overlap = np.clip(hop_s - abs(delta_s), 0.0, None)
+    r_delta = np.sum(amp2 * overlap * np.cos(2.0 * np.pi * tones_hz * delta_s))
+    r_zero = float(np.sum(amp2)) * hop_s
+    return 1.0 - float(r_delta) / r_zero if r_zero > 0 else 0.0
