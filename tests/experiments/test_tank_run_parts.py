@@ -244,6 +244,47 @@ def test_a_loopback_longer_than_the_probe_measures_is_refused() -> None:
     )
 
 
+def test_a_monitor_silent_at_first_is_waited_for_and_then_measured() -> None:
+    """A digital path whose monitor carries exact zeros for its first 0.3 s (a JACK graph
+    connected late) is gathered until the drive is heard and a probe's length past it: the
+    latency is the converter's, as on a monitor connected from the start."""
+    from hil.experiments.live.latency import PROBE_MAX_S, PROBE_S
+    from hil.signals.synthesis import BlockSynthesizer
+
+    exp = parse_experiment(DEFAULT_EXPERIMENT)
+    fs = exp.waveform.fs_hz
+    n = int(0.5 * fs)
+    sent = BlockSynthesizer(exp.schedule, fs, amplitude=0.5).render(0, n)
+    monitor = np.concatenate([np.zeros(64), sent])[:n]
+    monitor[: int(0.3 * fs)] = 0.0
+    codes = np.stack([np.zeros(n), monitor * 16384], axis=1).astype(np.int16)
+    probe = LatencyProbe(exp.schedule, fs, 0.5, 0, 1.0 / 32768.0, RunCalibrations())
+    block = 4800
+    ready = []
+    for i in range(0, n, block):
+        ready.append(probe.add(i, codes[i : i + block]))
+        if ready[-1]:
+            break
+    # Silent up to 0.3 s, then PROBE_S of capture from the first block heard.
+    assert ready.index(True) * block == int(0.3 * fs) + int(PROBE_S * fs) - block
+    assert PROBE_S < 0.3 < PROBE_MAX_S
+    assert probe.measure() == (64, "loopback latency 64 samples")
+
+
+def test_a_monitor_silent_throughout_is_no_loopback_after_the_longest_probe() -> None:
+    from hil.experiments.live.latency import PROBE_MAX_S
+
+    exp = parse_experiment(DEFAULT_EXPERIMENT)
+    fs = exp.waveform.fs_hz
+    probe = LatencyProbe(exp.schedule, fs, 0.5, 0, 1.0 / 32768.0, RunCalibrations())
+    block = 4800
+    silent = np.zeros((block, 2), dtype=np.int16)
+    ready = [probe.add(i * block, silent) for i in range(int(PROBE_MAX_S * fs) // block + 1)]
+    assert ready.index(True) + 1 == int(PROBE_MAX_S * fs) // block
+    with pytest.raises(RuntimeError, match="no loopback on the DAC monitor input"):
+        probe.measure()
+
+
 def test_the_recorder_holds_telemetry_until_the_recording_exists(tmp_path: Path) -> None:
     from hil.experiments.live.recorder import RunRecorder
     from hil.recording.reader import RunRecording

@@ -21,6 +21,11 @@ from hil.signals.synthesis import BlockSynthesizer
 #: three quarters of it are measured (75 ms: an audio interface at 192 kHz buffers two blocks,
 #: so blocks of up to 7000 frames).
 PROBE_S = 0.1
+#: Longest the probe gathers while the DAC monitor input is digital silence (exact zeros), s:
+#: an analog input always holds some noise, so exact zeros are a digital path not yet carrying
+#: the drive (a JACK graph whose ports are connected after the stream started, on a loaded
+#: machine more than :data:`PROBE_S` later). Past it, the run says there is no loopback.
+PROBE_MAX_S = 1.0
 
 
 def measure_latency(monitor: np.ndarray, sent: np.ndarray, max_lag: int | None = None) -> int:
@@ -126,11 +131,23 @@ class LatencyProbe:
         #: The blocks gathered, ``(first_index, data)``: the run records and feeds them once
         #: the latency (so the recording's origin) is known.
         self.blocks: list[tuple[int, np.ndarray[Any, Any]]] = []
+        #: Capture sample (from the first block) of the block in which the DAC monitor input
+        #: first held a non-zero sample; None while it has been digital silence.
+        self._heard_from: int | None = None
 
     def add(self, first_index: int, data: np.ndarray[Any, Any]) -> bool:
-        """Keep a block; True once enough capture is gathered to measure."""
+        """Keep a block; True once enough capture is gathered to measure: :data:`PROBE_S`,
+        or up to :data:`PROBE_MAX_S` while the DAC monitor input has been exact zeros."""
+        gathered = sum(b.shape[0] for _, b in self.blocks)
         self.blocks.append((first_index, data))
-        return sum(b.shape[0] for _, b in self.blocks) >= PROBE_S * self._fs
+        if self._heard_from is None and np.any(data[:, 1]):
+            self._heard_from = gathered
+        gathered += data.shape[0]
+        if self._heard_from is None:
+            return gathered >= PROBE_MAX_S * self._fs
+        probe = PROBE_S * self._fs
+        # Heard within a probe's length: the silence ahead may be the latency itself.
+        return gathered - (self._heard_from if self._heard_from >= probe else 0) >= probe
 
     def measure(self) -> tuple[int, str]:
         """``(latency_samples, note)``: see :func:`loopback_latency`."""
@@ -138,9 +155,20 @@ class LatencyProbe:
         # Its own synthesizer: the one transmitting renders on the board's writer thread (or
         # the audio callback) and is not re-entrant.
         reference = BlockSynthesizer(self._schedule, self._fs, amplitude=self._amplitude)
+        monitor = captured[:, 1] * self._scale
         n = captured.shape[0]
+        probe = int(PROBE_S * self._fs)
+        k0 = int(np.argmax(monitor != 0.0)) if monitor.any() else 0
+        if k0 >= probe:
+            # Silent for a whole probe: a digital path that began carrying the drive at k0.
+            # The drive heard from there was sent up to ``limit`` earlier, so the reference
+            # from k0 - limit leads it by limit - latency.
+            limit = probe - probe // 4
+            heard = monitor[k0:]
+            lead, rho = measure_loopback(reference.render(k0 - limit, heard.size), heard, limit)
+            return loopback_latency(limit - lead, rho, self._cals)
         limit = n - n // 4
-        lat, rho = measure_loopback(captured[:, 1] * self._scale, reference.render(0, n), limit)
+        lat, rho = measure_loopback(monitor, reference.render(0, n), limit)
         if rho >= LOOPBACK_MIN_CORRELATION and lat >= limit:
             # The peak at the end of the search: the true delay may lie beyond it.
             raise RuntimeError(
