@@ -894,13 +894,13 @@ class FirstArrivalReadout:
         without the canceller only: behind it such a path is cancelled with the still water."""
         tol = STANDING_TOLERANCE * self.boxcar / self.fs_hz
         rate = abs(2.0 * (alpha - 1.0) / (alpha + 1.0)) * self._hop_s  # delay moved per hop, s
-        kept = [r for r in self._onsets if 0 < hop_index - r[0] <= MOVING_HOPS]
-        self._onsets = [*kept, (int(hop_index), float(delay_s))]
+        recent = [r for r in self._onsets if 0 < hop_index - r[0] <= MOVING_HOPS]
+        self._onsets = [*recent, (int(hop_index), float(delay_s))]
         if rate <= 0.0:
             return False
         standing = sum(
             1
-            for hop, delay in kept
+            for hop, delay in recent
             if rate * (hop_index - hop) >= STANDING_MOVE * tol and abs(delay - delay_s) <= tol
         )
         return standing >= STANDING_READINGS

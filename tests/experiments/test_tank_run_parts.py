@@ -244,18 +244,17 @@ def test_a_loopback_longer_than_the_probe_measures_is_refused() -> None:
     )
 
 
-def test_a_monitor_silent_at_first_is_waited_for_and_then_measured() -> None:
-    """A digital path whose monitor carries exact zeros for its first 0.3 s (a JACK graph
-    connected late) is gathered until the drive is heard and a probe's length past it: the
-    latency is the converter's, as on a monitor connected from the start."""
-    from hil.experiments.live.latency import PROBE_MAX_S, PROBE_S
+def _late_heard_probe(latency: int) -> tuple[LatencyProbe, list[bool], int]:
+    """A probe fed a digital path whose monitor, the drive ``latency`` samples late, carries
+    exact zeros for its first 0.3 s (a JACK graph connected late), block by block until it is
+    ready: the probe, what each ``add`` said, the block length."""
     from hil.signals.synthesis import BlockSynthesizer
 
     exp = parse_experiment(DEFAULT_EXPERIMENT)
     fs = exp.waveform.fs_hz
     n = int(0.5 * fs)
     sent = BlockSynthesizer(exp.schedule, fs, amplitude=0.5).render(0, n)
-    monitor = np.concatenate([np.zeros(64), sent])[:n]
+    monitor = np.concatenate([np.zeros(latency), sent])[:n]
     monitor[: int(0.3 * fs)] = 0.0
     codes = np.stack([np.zeros(n), monitor * 16384], axis=1).astype(np.int16)
     probe = LatencyProbe(exp.schedule, fs, 0.5, 0, 1.0 / 32768.0, RunCalibrations())
@@ -265,10 +264,31 @@ def test_a_monitor_silent_at_first_is_waited_for_and_then_measured() -> None:
         ready.append(probe.add(i, codes[i : i + block]))
         if ready[-1]:
             break
+    return probe, ready, block
+
+
+def test_a_monitor_silent_at_first_is_waited_for_and_then_measured() -> None:
+    """Gathered until the drive is heard and a probe's length past it: the latency is the
+    converter's, as on a monitor connected from the start."""
+    from hil.experiments.live.latency import PROBE_MAX_S, PROBE_S
+
+    probe, ready, block = _late_heard_probe(64)
+    fs = parse_experiment(DEFAULT_EXPERIMENT).waveform.fs_hz
     # Silent up to 0.3 s, then PROBE_S of capture from the first block heard.
     assert ready.index(True) * block == int(0.3 * fs) + int(PROBE_S * fs) - block
     assert PROBE_S < 0.3 < PROBE_MAX_S
     assert probe.measure() == (64, "loopback latency 64 samples")
+
+
+def test_a_late_heard_loopback_longer_than_the_probe_measures_is_refused() -> None:
+    probe, _, _ = _late_heard_probe(14_500)
+    with pytest.raises(RuntimeError) as err:
+        probe.measure()
+    assert str(err.value) == (
+        "loopback latency of 14400 samples or more: beyond the 14400 samples (0.075 s) the"
+        " run's latency probe measures; lower the audio interface's blocksize or latency"
+        " setting"
+    )
 
 
 def test_a_monitor_silent_throughout_is_no_loopback_after_the_longest_probe() -> None:

@@ -166,9 +166,10 @@ class LatencyProbe:
             limit = probe - probe // 4
             heard = monitor[k0:]
             lead, rho = measure_loopback(reference.render(k0 - limit, heard.size), heard, limit)
-            return loopback_latency(limit - lead, rho, self._cals)
-        limit = n - n // 4
-        lat, rho = measure_loopback(monitor, reference.render(0, n), limit)
+            lat = limit - lead
+        else:
+            limit = n - n // 4
+            lat, rho = measure_loopback(monitor, reference.render(0, n), limit)
         if rho >= LOOPBACK_MIN_CORRELATION and lat >= limit:
             # The peak at the end of the search: the true delay may lie beyond it.
             raise RuntimeError(
