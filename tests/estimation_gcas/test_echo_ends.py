@@ -58,12 +58,14 @@ def test_an_echo_that_ends_is_not_reported_after_its_last_hop(
     assert whole_ended == 0
 
 
-@pytest.mark.parametrize(("m_hops", "snr_db", "count"), [(10, -10.0, 110), (10, -20.0, 100)])
+@pytest.mark.parametrize(("m_hops", "snr_db", "count"), [(10, -10.0, 110), (10, -20.0, 106)])
 def test_a_continuous_echo_loses_no_estimate_to_the_end_rule(
     m_hops: int, snr_db: float, count: int
 ) -> None:
     # At -20 dB a hop's share of the echo is noisy (about 0.3 of its amplitude, one sigma):
-    # only a surely empty end is refused, and no estimate of an echo that is there is.
+    # only a surely empty end is refused, and no estimate of an echo that is there is. There
+    # 6 of the 106 boundaries are the echo followed where no detection brought them (its
+    # fits collect 15 dB or more, FOLLOW_MARGIN_DB).
     clean, noise = _echo_and_noise(snr_db, seed=3)
     estimates, ended = _run(clean + noise, m_hops)
     assert ended == 0

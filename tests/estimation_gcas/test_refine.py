@@ -421,8 +421,8 @@ def test_an_echo_measured_at_a_ghosts_speed_is_followed_through_the_ghosts_hops(
 
 def test_an_echo_measured_lately_is_due_at_its_next_boundary_once() -> None:
     # A target fitted at one boundary: its next boundary is due once the stream has passed
-    # it, once, and never beyond KNOWN_HOPS hops of the fit; a fit below the lobe decision's
-    # threshold region or at rest is not followed.
+    # it, once, and never beyond KNOWN_HOPS hops of the fit; a fit below the follow gate
+    # (FOLLOW_MARGIN_DB over the echo test's E/N0: 15 dB on GCAS) or at rest is not followed.
     refiner, first = _beside_an_echo_whose_ghost_it_may_be(1.0)
     refiner._echoes = []
     fit = refiner.refine(first.t_s, first.alpha, first.hop_index)
@@ -436,9 +436,10 @@ def test_an_echo_measured_lately_is_due_at_its_next_boundary_once() -> None:
     assert [h for h, _, _ in refiner.due(fit.t_s + 10 * period)] == [first.hop_index + 2]
     assert [h for h, _, _ in refiner.due(fit.t_s + 10 * period)] == [first.hop_index + 3]
     assert refiner.due(fit.t_s + 10 * period) == []
+    assert refiner.follow_db == 15.0 < refiner.lobe_sure_db
     echo = refiner._echoes[0]
     for other in (
-        dataclasses.replace(echo, followed=-1, e_over_n0_db=refiner.lobe_sure_db - 0.1),
+        dataclasses.replace(echo, followed=-1, e_over_n0_db=refiner.follow_db - 0.1),
         dataclasses.replace(echo, followed=-1, alpha=1.0),
     ):
         refiner._echoes = [other]

@@ -213,16 +213,32 @@ def test_the_documented_quick_scene_sweep_runs_and_reports(tmp_path: Path) -> No
 def test_gcas_still_finds_the_weaker_target_under_still_reverberation_where_gcas_loses_it() -> None:
     # second-10db-weaker at −10 dB SNR with reverberation at 0 dB SRR: the weaker target is
     # 20 dB under the noise and 10 dB under the still reverberation. Measured (this seed, the
-    # first tried): gcas 71 of 182 boundaries, 1 false; gcas-still 115, 2 false (before the
-    # background holds 4 periods, 0.68 s, gcas-still is gcas).
+    # first tried): gcas 127 of 182 boundaries, 1 false; gcas-still 146, 3 false (before the
+    # background holds 4 periods, 0.68 s, gcas-still is gcas). Before an echo was followed
+    # from its fits of 15 dB up (FOLLOW_MARGIN_DB; at the lobe decision's 20.4 dB): 71 and 115.
     params = {"scene": "second-10db-weaker", "snr_db": -10.0, "srr_db": 0.0}
     seed = np.random.SeedSequence(5, spawn_key=(2, 0))
     gcas = scene_trial({**params, "receiver": "gcas"}, seed)
     still = scene_trial({**params, "receiver": "gcas-still"}, seed)
     assert gcas["expected"] == still["expected"] == [185, 182]
     assert gcas["detected"][0] == still["detected"][0] == 185
-    assert gcas["detected"][1] <= 80 and still["detected"][1] >= 105
+    assert 120 <= gcas["detected"][1] <= 135 and still["detected"][1] >= 140
     assert gcas["n_false"] <= 3 and still["n_false"] <= 4
+
+
+@pytest.mark.slow
+def test_a_target_10_db_weaker_at_minus_20_db_per_sample_is_followed_where_undetected() -> None:
+    # second-10db-weaker at -10 dB SNR without reverberation (scenes.toml's point, seed 0):
+    # the weaker target, 20 dB under the noise, is detected at 0.89 of its boundaries over
+    # the point's seeds; its fits collect 16.6-18.6 dB (10th-90th percentile), and an echo
+    # fitted at 15 dB or more is followed to the boundaries no detection brought
+    # (FOLLOW_MARGIN_DB): 182 of 182 here, on one track (161 when only fits of 20.4 dB, the
+    # lobe decision's threshold region, were followed).
+    params = {"scene": "second-10db-weaker", "snr_db": -10.0, "srr_db": "off"}
+    out = scene_trial(params, np.random.SeedSequence(2626, spawn_key=(38, 0)))
+    assert out["expected"] == [185, 182] and out["detected"][0] == 185
+    assert out["detected"][1] >= 0.95 * 182
+    assert out["n_false"] == 0 and len(out["track_ids"][1]) <= 2
 
 
 @pytest.mark.slow
