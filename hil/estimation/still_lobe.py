@@ -24,7 +24,8 @@ through the lobes' edges (att, a target 10 dB below another at 0 dB per-sample S
 reverberation at 0 dB SRR: runs of fits one or two lobes off at an E/N0 of 23-24 dB, above
 the white-noise lobe threshold). The still part's share of a window is measured from
 ``w[n] = x[n] + σ x[n − Q]``: with still power ``S`` and the rest (noise, moving echoes) ``N``
-per sample, ``E|w|² = 4S + 2N`` and ``E|y|² = 2N`` (:meth:`StillStreams.powers`).
+per sample, ``E|w|² = 4S + 2N`` and ``E|y|² = 2N`` (:meth:`StillStreams.powers`;
+``w² − y² = 4σ x[n] x[n − Q]``).
 """
 
 from __future__ import annotations
@@ -37,10 +38,10 @@ from hil.estimation.still_period import checked_still_period
 
 
 class StillStreams:
-    """The canceller's output ``y = x − σ x[n − Q]`` and the still sum ``w = x + σ x[n − Q]``
-    of a stream, made on demand from the input kept ``keep + Q`` samples back: the lobe
-    decision reads them only where a fit beside still water is judged, so nothing is computed
-    per input sample but the copy into the ring.
+    """The canceller's output ``y = x − σ x[n − Q]`` of a stream, made on demand from the
+    input kept ``keep + Q`` samples back (the lobe decision reads it only where a fit beside
+    still water is judged), and the running sums of ``x[n] x[n − Q]`` and ``y[n]²`` that give
+    the still and the rest's powers over any span kept (:meth:`powers`, read at every fit).
 
     Parameters
     ----------
@@ -49,14 +50,16 @@ class StillStreams:
     sign:
         Its sign ``σ`` (+1 or −1).
     keep:
-        Samples of ``y`` and ``w`` readable behind the newest one.
+        Samples of ``y`` and of the sums readable behind the newest one.
     """
 
     def __init__(self, period_samples: int, sign: int, keep: int) -> None:
         self.period, self.sign = checked_still_period(period_samples, sign)
         self.keep = int(keep)
         self._x = RowBuffer(self.keep + self.period, (), np.float64)
-        #: The first sample whose ``y`` and ``w`` have a sample a still period before it.
+        # Row n: Σ x[k] x[k − Q] and Σ y[k]² over k = reset .. n (zeros before the reset).
+        self._sums = RowBuffer(self.keep + 1, (2,), np.float64)
+        #: The first sample whose ``y`` has a sample a still period before it.
         self.valid_from = self.period
 
     @property
@@ -67,11 +70,24 @@ class StillStreams:
     def reset(self, next_index: int) -> None:
         """Forget the history; the next sample is ``next_index``."""
         self._x.reset(next_index)
+        self._sums.reset(next_index)
         self.valid_from = int(next_index) + self.period
 
     def push(self, x: NDArray[np.float64], first_index: int) -> None:
         """Append input samples ``x`` (shape ``(n,)``) from absolute index ``first_index``."""
-        self._x.append(x, first_index)
+        n = x.shape[0]
+        ring, q = self._x, self.period
+        ring.append(x, first_index)
+        # The ring keeps keep + Q samples before the chunk, so x[n − Q] of all of it is there.
+        before = ring.span(first_index - q, first_index - q + n)
+        terms = np.empty((n + 1, 2))
+        terms[0] = self._sums.span(first_index - 1, first_index)[0]
+        terms[1:, 0] = x * before
+        y = x - self.sign * before
+        terms[1:, 1] = y * y
+        # One cumulative sum from the last row on: the rows are the whole stream's sums, bit
+        # for bit, however it is cut into chunks.
+        self._sums.append(np.cumsum(terms, axis=0)[1:], first_index)
 
     def _kept(self, first: int, stop: int) -> bool:
         """Whether samples ``first .. stop − 1`` and those a still period before them are
@@ -97,18 +113,17 @@ class StillStreams:
     def powers(self, first: int, stop: int) -> tuple[float, float]:
         """The still water's power ``S`` and the rest's ``N`` (noise and moving echoes), per
         sample over samples ``first .. stop − 1`` (input units squared):
-        ``S = (Σw² − Σy²) / (4n) = σ Σ x[n] x[n − Q] / n``, ``N = Σy² / (2n)`` (module
-        docstring); ``(0, 0)`` where the span is not all valid and kept."""
-        n = stop - first
-        if n <= 0 or first < self.valid_from or not self._kept(first, stop):
+        ``S = (Σw² − Σy²) / (4n) = σ Σ x[n] x[n − Q] / n`` (``w = x + σ x[n − Q]``, the
+        still sum), ``N = Σy² / (2n)`` (module docstring), each the difference of two running
+        sums (their rounding: about 1e-16 of the sums since the last reset); ``(0, 0)`` where
+        the span is not all valid and kept."""
+        n, sums = stop - first, self._sums
+        origin = sums.next_index - sums.available
+        if n <= 0 or first < self.valid_from or first - 1 < origin or stop > sums.next_index:
             return 0.0, 0.0
-        x = self._x.span(first, stop)
-        before = self._x.span(first - self.period, stop - self.period)
-        y = x - self.sign * before
-        # einsum, not np.dot: a BLAS dot of this length may be threaded, and threads cost
-        # far more than the sum on a loaded machine.
-        s_pow = self.sign * float(np.einsum("i,i->", x, before)) / n
-        return s_pow, float(np.einsum("i,i->", y, y)) / (2.0 * n)
+        run = sums.array
+        s_sum, y_sum = (run[stop - 1 - origin] - run[first - 1 - origin]).tolist()
+        return self.sign * s_sum / n, max(y_sum, 0.0) / (2.0 * n)
 
 
 def still_free_powers(
