@@ -23,9 +23,9 @@ import math
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import special
 
 from hil.errors import ConfigError
+from hil.estimation.erlang_tail import erlang_isf
 
 #: Independent tests per hop and codeword in the union bound of :func:`lambda_for_pfa`
 #: (measured on noise-only input; local maxima over ±N/2 leave about one candidate per hop).
@@ -59,10 +59,13 @@ def lambda_for_pfa(
         raise ConfigError("pfa", pfa, "in (0, 1)", "e.g. 1e-3 false alarms per hop")
     p1 = min(pfa / (n_codewords * cells_per_update), 0.5)
     mean, std = noise_moments(m_hops, coherent)
+    if p1 <= 0.0:
+        allowed = f"> {n_codewords * cells_per_update:g} x 5e-324 (the per-test share underflows)"
+        raise ConfigError("pfa", pfa, allowed, "e.g. 1e-3 false alarms per hop")
     # Inverse survival functions of the statistic under noise: exponential of mean M
-    # (coherent), gamma of shape M (noncoherent) (scipy.stats' numbers; scipy.special keeps
-    # scipy.stats' import, about a second, out of a receiver's start-up).
-    thr = -math.log(p1) * m_hops if coherent else float(special.gammainccinv(m_hops, p1))
+    # (coherent), gamma of integer shape M, i.e. Erlang (noncoherent), in closed form: scipy's
+    # would cost a receiver's start-up the import of scipy.special.
+    thr = -math.log(p1) * m_hops if coherent else erlang_isf(m_hops, p1)
     return (thr - mean) / std
 
 

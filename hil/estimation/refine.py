@@ -712,7 +712,6 @@ class CoherentRefiner:
             except ConfigError:
                 q = 0
             if q:
-                self._still = StillStreams(q, sign, self.history)
                 self._still_period_s = q / self.fs_hz
                 self._still_fits = CoherentRefiner(
                     schedule, fs_hz, m_hops, sound_speed_mps, speed_span_mps, max_speed_mps,
@@ -728,6 +727,7 @@ class CoherentRefiner:
                     )
                 )  # fmt: skip
                 self._still_fits.allow_lag(self._still_extra)
+                self._still = StillStreams(q, sign, self._still_fits.history)
                 self._still_fits._valid_from = self._still.valid_from
 
     # ------------------------------------------------------------------ stream
@@ -741,7 +741,9 @@ class CoherentRefiner:
         self._ring = RowBuffer(self.history, (), np.float64)
         if self._still is not None and self._still_fits is not None:
             self._still_fits.allow_lag(int(samples) + self._still_extra)
-            self._still = StillStreams(self._still.period, self._still.sign, self.history)
+            self._still = StillStreams(
+                self._still.period, self._still.sign, self._still_fits.history
+            )
         self.reset(0)
 
     def reset(self, input_index: int) -> None:
@@ -777,8 +779,25 @@ class CoherentRefiner:
     def push(self, x: NDArray[np.float64], first_index: int) -> None:
         """Append input samples (shape ``(n,)``) starting at absolute index ``first_index``."""
         self._ring.append(x, first_index)
-        if self._still is not None and self._still_fits is not None:
-            self._still_fits.push(self._still.push(x, first_index), first_index)
+        if self._still is not None:
+            self._still.push(x, first_index)
+
+    def _still_up_to_date(self, still: StillStreams, fits: CoherentRefiner) -> None:
+        """Bring the refiner of the input without its still water up to the input pushed:
+        ``y`` (:meth:`StillStreams.canceller`) of the samples pushed since it was last read,
+        or of its whole history where more have been pushed since (its earlier samples are
+        then out of its reach: :attr:`_valid_from` moves past them). The samples it holds are
+        the ones pushing ``y`` with the input would give it; ``y`` is made only where a lobe
+        decision reads it (:meth:`still_free_evidence`)."""
+        ring, newest = fits._ring, still.next_index
+        first = ring.next_index
+        if first >= newest:
+            return
+        if newest - first > fits.history:
+            first = newest - fits.history
+            ring.reset(first)
+            fits._valid_from = max(still.valid_from, first)
+        ring.append(still.canceller(first, newest), first)
 
     # ------------------------------------------------------------------ refinement
     def refine(
@@ -1766,8 +1785,10 @@ class CoherentRefiner:
         window_s = self.m_hops * self.hop_len_s / alpha
         stop = int(math.floor(fit.t_s * self.fs_hz))
         s_pow, rest = still.powers(stop - int(math.ceil(window_s * self.fs_hz)), stop)
+        if s_pow <= 0 or s_pow < STILL_OVER_REST * rest:
+            return fit  # open water: the echo's power is not needed
         echo_pow = 0.5 * abs(fit.amplitude) ** 2 * float(np.mean(word.hops[4]))
-        if s_pow <= 0 or s_pow < STILL_OVER_REST * rest or s_pow < STILL_OVER_ECHO * echo_pow:
+        if s_pow < STILL_OVER_ECHO * echo_pow:
             return fit
         delta = self._still_period_s * (alpha - 1.0)
         if canceller_gain(word.hops[1], word.hops[4], self.hop_len_s, delta) < STILL_GAIN_MIN:
@@ -1801,9 +1822,10 @@ class CoherentRefiner:
         ``hop_index``, ``M`` hops before, ...) whose terms ``y`` covers, with ``others``
         (echoes measured lately) and their copies taken out. None where fewer windows are
         covered, or the schedule's still water does not repeat in whole samples."""
-        fits = self._still_fits
-        if fits is None:
+        fits, still = self._still_fits, self._still
+        if fits is None or still is None:
             return None
+        self._still_up_to_date(still, fits)
         lobe = 1.0 / (alpha * self.spacing_hz)
         window_s = self.m_hops * self.hop_len_s / alpha
         shift = self._still_period_s * (1.0 - 1.0 / alpha)

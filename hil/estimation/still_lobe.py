@@ -24,7 +24,8 @@ through the lobes' edges (att, a target 10 dB below another at 0 dB per-sample S
 reverberation at 0 dB SRR: runs of fits one or two lobes off at an E/N0 of 23-24 dB, above
 the white-noise lobe threshold). The still part's share of a window is measured from
 ``w[n] = x[n] + σ x[n − Q]``: with still power ``S`` and the rest (noise, moving echoes) ``N``
-per sample, ``E|w|² = 4S + 2N`` and ``E|y|² = 2N`` (:meth:`StillStreams.powers`).
+per sample, ``E|w|² = 4S + 2N`` and ``E|y|² = 2N`` (:meth:`StillStreams.powers`;
+``w² − y² = 4σ x[n] x[n − Q]``).
 """
 
 from __future__ import annotations
@@ -37,8 +38,10 @@ from hil.estimation.still_period import checked_still_period
 
 
 class StillStreams:
-    """The canceller's output ``y = x − σ x[n − Q]`` and the still sum ``w = x + σ x[n − Q]``
-    of a stream, kept ``keep`` samples back.
+    """The canceller's output ``y = x − σ x[n − Q]`` of a stream, made on demand from the
+    input kept ``keep + Q`` samples back (the lobe decision reads it only where a fit beside
+    still water is judged), and the running sums of ``x[n] x[n − Q]`` and ``y[n]²`` that give
+    the still and the rest's powers over any span kept (:meth:`powers`, read at every fit).
 
     Parameters
     ----------
@@ -47,56 +50,80 @@ class StillStreams:
     sign:
         Its sign ``σ`` (+1 or −1).
     keep:
-        Samples of ``y`` and ``w`` kept behind the newest one.
+        Samples of ``y`` and of the sums readable behind the newest one.
     """
 
     def __init__(self, period_samples: int, sign: int, keep: int) -> None:
         self.period, self.sign = checked_still_period(period_samples, sign)
-        self._x = RowBuffer(self.period, (), np.float64)
-        self._y = RowBuffer(keep, (), np.float64)
-        self._w = RowBuffer(keep, (), np.float64)
-        #: The first sample whose ``y`` and ``w`` have a sample a still period before it.
+        self.keep = int(keep)
+        self._x = RowBuffer(self.keep + self.period, (), np.float64)
+        # Row n: Σ x[k] x[k − Q] and Σ y[k]² over k = reset .. n (zeros before the reset).
+        self._sums = RowBuffer(self.keep + 1, (2,), np.float64)
+        #: The first sample whose ``y`` has a sample a still period before it.
         self.valid_from = self.period
+
+    @property
+    def next_index(self) -> int:
+        """Absolute index of the next input sample."""
+        return self._x.next_index
 
     def reset(self, next_index: int) -> None:
         """Forget the history; the next sample is ``next_index``."""
-        for ring in (self._x, self._y, self._w):
-            ring.reset(next_index)
+        self._x.reset(next_index)
+        self._sums.reset(next_index)
         self.valid_from = int(next_index) + self.period
 
-    def push(self, x: NDArray[np.float64], first_index: int) -> NDArray[np.float64]:
-        """Append input samples ``x`` (shape ``(n,)``) from absolute index ``first_index``:
-        ``y`` of them (shape ``(n,)``; before :attr:`valid_from` the missing samples count
-        as 0)."""
+    def push(self, x: NDArray[np.float64], first_index: int) -> None:
+        """Append input samples ``x`` (shape ``(n,)``) from absolute index ``first_index``."""
         n = x.shape[0]
-        q = self.period
-        # x[n - Q] for the chunk: from the kept tail, then (a chunk longer than Q) its own start.
-        if n <= q:
-            before = self._x.span(first_index - q, first_index - q + n)
-        else:
-            before = np.concatenate([self._x.span(first_index - q, first_index), x[: n - q]])
+        ring, q = self._x, self.period
+        ring.append(x, first_index)
+        # The ring keeps keep + Q samples before the chunk, so x[n − Q] of all of it is there.
+        before = ring.span(first_index - q, first_index - q + n)
+        terms = np.empty((n + 1, 2))
+        terms[0] = self._sums.span(first_index - 1, first_index)[0]
+        terms[1:, 0] = x * before
         y = x - self.sign * before
-        self._y.append(y, first_index)
-        self._w.append(x + self.sign * before, first_index)
-        self._x.append(x, first_index)
+        terms[1:, 1] = y * y
+        # One cumulative sum from the last row on: the rows are the whole stream's sums, bit
+        # for bit, however it is cut into chunks.
+        self._sums.append(np.cumsum(terms, axis=0)[1:], first_index)
+
+    def _kept(self, first: int, stop: int) -> bool:
+        """Whether samples ``first .. stop − 1`` and those a still period before them are
+        kept (before :attr:`valid_from` and after a reset, the latter read as 0)."""
+        ring = self._x
+        return ring.next_index - ring.available <= first - self.period and stop <= ring.next_index
+
+    def canceller(self, first: int, stop: int) -> NDArray[np.float64]:
+        """``y`` over samples ``first .. stop − 1`` (shape ``(stop − first,)``, a new array;
+        before :attr:`valid_from` the missing samples count as 0). Raises ``IndexError``
+        where they are not kept (at least ``keep`` behind the newest are) or not pushed."""
+        if not self._kept(first, stop):
+            ring = self._x
+            raise IndexError(
+                f"samples {first}..{stop - 1} of y: kept are "
+                f"{ring.next_index - ring.available + self.period}..{ring.next_index - 1}"
+                f" (at least the last {self.keep})"
+            )
+        x, q = self._x, self.period
+        y: NDArray[np.float64] = x.span(first, stop) - self.sign * x.span(first - q, stop - q)
         return y
 
     def powers(self, first: int, stop: int) -> tuple[float, float]:
         """The still water's power ``S`` and the rest's ``N`` (noise and moving echoes), per
         sample over samples ``first .. stop − 1`` (input units squared):
-        ``S = (Σw² − Σy²) / (4n)``, ``N = Σy² / (2n)`` (module docstring); ``(0, 0)`` where
+        ``S = (Σw² − Σy²) / (4n) = σ Σ x[n] x[n − Q] / n`` (``w = x + σ x[n − Q]``, the
+        still sum), ``N = Σy² / (2n)`` (module docstring), each the difference of two running
+        sums (their rounding: about 1e-16 of the sums since the last reset); ``(0, 0)`` where
         the span is not all valid and kept."""
-        ring = self._y
-        n = stop - first
-        if n <= 0 or first < max(self.valid_from, ring.next_index - ring.available):
+        n, sums = stop - first, self._sums
+        origin = sums.next_index - sums.available
+        if n <= 0 or first < self.valid_from or first - 1 < origin or stop > sums.next_index:
             return 0.0, 0.0
-        if stop > ring.next_index:
-            return 0.0, 0.0
-        y = ring.span(first, stop)
-        w = self._w.span(first, stop)
-        e_y = float(np.einsum("i,i->", y, y))
-        e_w = float(np.einsum("i,i->", w, w))
-        return (e_w - e_y) / (4.0 * n), e_y / (2.0 * n)
+        run = sums.array
+        s_sum, y_sum = (run[stop - 1 - origin] - run[first - 1 - origin]).tolist()
+        return self.sign * s_sum / n, max(y_sum, 0.0) / (2.0 * n)
 
 
 def still_free_powers(

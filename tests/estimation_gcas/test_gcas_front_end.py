@@ -153,11 +153,12 @@ def test_unit_correlators_chunks_equal_whole_bitwise(cuts: list[int]) -> None:
     n_codewords=st.integers(1, 40),
     coherent=st.booleans(),
 )
-def test_the_threshold_is_scipy_stats_bit_for_bit(
+def test_the_threshold_is_scipy_stats(
     pfa: float, m_hops: int, n_codewords: int, coherent: bool
 ) -> None:
-    # lambda_for_pfa inverts the noise statistic with scipy.special (scipy.stats would add a
-    # second of start-up): the numbers scipy.stats' exponential and gamma give.
+    # lambda_for_pfa inverts the noise statistic in closed form (scipy.stats would add a
+    # second of start-up): the thresholds scipy.stats' exponential and gamma give, to 1e-12
+    # of the threshold (λ is the threshold less the mean, over the standard deviation).
     from scipy import stats
 
     from hil.estimation.detection import CELLS_PER_UPDATE, lambda_for_pfa
@@ -169,4 +170,13 @@ def test_the_threshold_is_scipy_stats_bit_for_bit(
     else:
         thr = float(stats.gamma.isf(p1, a=m_hops))
         expected = (thr - m_hops) / math.sqrt(m_hops)
-    assert lambda_for_pfa(pfa, m_hops, n_codewords, coherent) == expected
+    std = m_hops if coherent else math.sqrt(m_hops)
+    got = lambda_for_pfa(pfa, m_hops, n_codewords, coherent)
+    assert got == pytest.approx(expected, rel=0.0, abs=1e-12 * thr / std)
+
+
+def test_a_pfa_whose_per_test_share_underflows_is_refused() -> None:
+    from hil.estimation.detection import lambda_for_pfa
+
+    with pytest.raises(ConfigError, match=r"pfa = 5e-324 is not allowed: must be > 4352 x 5e-324"):
+        lambda_for_pfa(5e-324, 10, 17, False)

@@ -19,12 +19,16 @@ from .conftest import FS, C, att_schedule, echo_samples
 def test_the_streams_are_the_canceller_and_the_still_sum_and_chunks_equal_the_whole() -> None:
     x = np.arange(1.0, 9.0)  # 1 .. 8
     whole = StillStreams(3, -1, 16)
-    y = whole.push(x, 0)
+    whole.push(x, 0)
+    y = whole.canceller(0, 8)
     # x[n - 3] is 0 before the start: y = x + x[n - 3] (σ = −1).
     assert y.tolist() == [1.0, 2.0, 3.0, 5.0, 7.0, 9.0, 11.0, 13.0]
     chunked = StillStreams(3, -1, 16)
-    # Chunks shorter than the still period and longer than it.
-    parts = [chunked.push(x[a:b], a) for a, b in ((0, 2), (2, 7), (7, 8))]
+    # Chunks shorter than the still period and longer than it, y read after each.
+    parts = []
+    for a, b in ((0, 2), (2, 7), (7, 8)):
+        chunked.push(x[a:b], a)
+        parts.append(chunked.canceller(a, b))
     assert np.array_equal(np.concatenate(parts), y)
     # Over samples 3 .. 7: Σy² = 445, w = x − x[n − 3] = 3 each, Σw² = 45.
     assert whole.powers(3, 8) == chunked.powers(3, 8) == ((45.0 - 445.0) / 20.0, 445.0 / 10.0)
@@ -33,17 +37,42 @@ def test_the_streams_are_the_canceller_and_the_still_sum_and_chunks_equal_the_wh
     assert whole.valid_from == 103 and whole.powers(100, 100) == (0.0, 0.0)
 
 
+def test_y_is_read_within_what_is_kept_only() -> None:
+    streams = StillStreams(3, 1, 5)
+    for a in range(0, 10_000, 1000):  # samples 0 .. 9999, x[n] = n + 1
+        streams.push(np.arange(a + 1.0, a + 1001.0), a)
+    assert streams.canceller(9995, 10_000).tolist() == [3.0] * 5
+    assert streams.powers(9995, 10_000) == (
+        float(np.dot(np.arange(9996.0, 10_001.0), np.arange(9993.0, 9998.0))) / 5,
+        4.5,
+    )
+    for first, stop in ((0, 10), (9995, 10_001)):
+        with pytest.raises(IndexError, match=r"of y: kept are \d+\.\.9999 \(at least the last 5\)"):
+            streams.canceller(first, stop)
+        assert streams.powers(first, stop) == (0.0, 0.0)
+
+
 def test_random_chunks_give_the_whole_s_streams_and_powers() -> None:
     rng = np.random.default_rng(3)
     x = rng.normal(size=5000)
     cuts = [0, *sorted(rng.choice(np.arange(1, 5000), 25, replace=False).tolist()), 5000]
     whole, chunked = StillStreams(170, 1, 6000), StillStreams(170, 1, 6000)
-    y = whole.push(x, 0)
-    parts = [chunked.push(x[a:b], a) for a, b in itertools.pairwise(cuts)]
+    whole.push(x, 0)
+    y = whole.canceller(0, 5000)
+    parts = []
+    for a, b in itertools.pairwise(cuts):
+        chunked.push(x[a:b], a)
+        parts.append(chunked.canceller(a, b))
     assert np.array_equal(np.concatenate(parts), y)
     assert np.array_equal(y[170:], x[170:] - x[:-170])
     for first, stop in ((170, 5000), (1000, 1234), (4000, 5000)):
-        assert whole.powers(first, stop) == chunked.powers(first, stop)
+        s_pow, rest = whole.powers(first, stop)
+        assert (s_pow, rest) == chunked.powers(first, stop)
+        # S = (Σw² − Σy²)/(4n), N = Σy²/(2n) (w the still sum).
+        w = x[first:stop] + x[first - 170 : stop - 170]
+        e_y, n = float(np.sum(y[first:stop] ** 2)), stop - first
+        assert s_pow == pytest.approx((float(np.sum(w**2)) - e_y) / (4 * n), rel=1e-9)
+        assert rest == pytest.approx(e_y / (2 * n), rel=1e-12)
 
 
 def test_still_water_is_taken_out_exactly_and_measured_as_still_power() -> None:
@@ -51,8 +80,8 @@ def test_still_water_is_taken_out_exactly_and_measured_as_still_power() -> None:
     period = rng.normal(size=5)
     x = np.concatenate([period, -period, period, -period])  # σ = −1 every 5 samples
     streams = StillStreams(5, -1, 32)
-    y = streams.push(x, 0)
-    assert np.all(y[5:] == 0.0)
+    streams.push(x, 0)
+    assert np.all(streams.canceller(5, 20) == 0.0)
     s_pow, rest = streams.powers(5, 20)
     assert s_pow == pytest.approx(float(np.mean(x[5:] ** 2)), rel=1e-12) and rest == 0.0
 
@@ -126,3 +155,36 @@ def test_a_fit_pulled_a_lobe_off_by_still_water_is_returned_to_its_echo_s_lobe(
         errors[judged], lobe = fit.t_s - t_b, 1.0 / (alpha * refiner.spacing_hz)
     assert abs(errors[False]) > 0.9 * lobe
     assert abs(errors[True]) < 0.05 * lobe
+
+
+def test_the_evidence_is_the_same_however_the_input_was_pushed_and_read() -> None:
+    # y is made only when the evidence is read (the samples pushed since the last read, or
+    # the still refiner's whole history after a longer gap): pushed at once, in chunks read
+    # after each, or read early and then after more than that history, it is the same.
+    schedule = att_schedule()
+    hop = 150
+    x = echo_samples(schedule, 60.0, -6.0, 1.7, snr_db=0.0, seed=2)
+    x = x + echo_samples(schedule, 58.6, 0.0, 1.7, amplitude=10**0.5)
+    t_b, alpha = _boundary(schedule, hop, 60.0, -6.0)
+
+    def made() -> CoherentRefiner:
+        refiner = CoherentRefiner(schedule, FS, 10, C, 0.75, 30.0)
+        refiner.reset(0)
+        return refiner
+
+    whole = made()
+    whole.push(x, 0)
+    expected = whole.still_free_evidence(t_b, alpha, hop)
+    assert expected is not None and np.all(expected > 0)
+    chunked = made()
+    cuts = [0, *sorted(np.random.default_rng(4).choice(x.size, 12, replace=False)), x.size]
+    for a, b in itertools.pairwise(cuts):
+        chunked.push(x[a:b], a)
+        chunked.still_free_evidence(t_b, alpha, hop)
+    gap = made()
+    gap.push(x[:20_000], 0)
+    assert gap.still_free_evidence(0.15, alpha, 10) is None  # not covered yet
+    gap.push(x[20_000:], 20_000)
+    assert gap._still_fits is not None and x.size - 20_000 > gap._still_fits.history
+    for refiner in (chunked, gap):
+        assert np.array_equal(refiner.still_free_evidence(t_b, alpha, hop), expected)
