@@ -144,6 +144,14 @@ time.sleep(2.0)
 (Path(__file__).parent / f"warmed-{sys.argv[1]}").write_text("done")
 """
 
+#: The stand-in for the tests that count which parts a warm-up ran, not when: no pause.
+WARM_UP_AT_ONCE = """
+import sys
+from pathlib import Path
+
+(Path(__file__).parent / f"warmed-{sys.argv[1]}").write_text("done")
+"""
+
 WARMED_TEST = """
 from pathlib import Path
 
@@ -185,7 +193,7 @@ def test_a_run_over_the_sources_the_last_warm_up_left_starts_none(
     warm-up; a module added to a kernel package starts it again."""
     tests = project.path / "tests"
     tests.mkdir()
-    (tests / "numba_warm_up.py").write_text(WARM_UP)
+    (tests / "numba_warm_up.py").write_text(WARM_UP_AT_ONCE)
     monkeypatch.setenv("PYTEST_XDIST_AUTO_NUM_WORKERS", "2")
 
     def warmed_parts() -> list[str]:

@@ -29,11 +29,15 @@ from hil.experiments.tank_run import LiveView, run_experiment
 from hil.recording.reader import RunRecording
 from sim_devices.board import FaultPlan, LoopbackWorld, SimulatedBoardOnPty
 from sim_devices.stage.on_pty import SimulatedGrblOnPty
+from tests.experiments.conftest import near_home
 
 LOST_AT_START = 500  # ADC samples lost to an overrun as the stream starts
 LATENCY = 64  # converters and cable, samples
 ECHO_DELAY = 2000  # a fixed echo: 2000 samples at 192 kHz, about 7.7 m
 POWER_UP_MM = tank_stage_config().power_up_position_mm  # the carriage before any move
+#: The pass near home (``PtyDevices.experiment(near=True)``): it starts at -0.7 m and its
+#: run-down ends at -2.8 m, mm.
+NEAR_PASS_START_MM, NEAR_PASS_END_MM = -700.0, -2800.0
 
 
 class WiredTank:
@@ -88,11 +92,15 @@ class PtyDevices:
         assert (snap.dac_samples_received, snap.adc_samples_sent) == (0, 0)
         assert snap.state.name != "STREAMING"
 
-    def experiment(self, out: Path, calibration: str = "") -> Experiment:
+    def experiment(self, out: Path, calibration: str = "", *, near: bool = False) -> Experiment:
         """The short built-in pass with the devices given by their pty paths, the receiver
         keeping stationary echoes: plain GCAS with the peak readout (the wired echo does not
         move, and there is no empty-tank capture for gcas-bg); ``calibration`` replaces the
-        ``[calibration]`` table's keys."""
+        ``[calibration]`` table's keys. ``near``: the same pass moved near home
+        (:func:`near_home`: from -0.7 m, its run-up from -0.1 m), for the runs whose tow is
+        not what they check: the stage, at its own speed on the wall clock, then streams
+        without first positioning the carriage 1.4 m out (1.7 s at the simulated
+        stage's 2 m/s², against 0.45 s to -0.1 m)."""
         text = (
             DEFAULT_EXPERIMENT.replace('name = "gcas-bg"', 'name = "gcas"')
             .replace('"sim://board"', f'"{self.board.port_name}"')
@@ -104,6 +112,8 @@ class PtyDevices:
                 'options = { reverb_speed_mps = 0.0, range_readout = "peak" }',
             )
         )
+        if near:
+            text = near_home(text)
         if calibration:
             head, _, tail = text.partition("[calibration]\n")
             text = head + "[calibration]\n" + calibration + "\n" + tail.split("\n\n", 1)[1]
@@ -210,7 +220,7 @@ def test_a_refusal_once_transmitting_ends_the_run_safely_with_the_reason(
     monkeypatch.setattr(ReceiverFeed, "feed", refusing_feed)
     folder = tmp_path / "run"
     outcome = run_experiment(
-        devices.experiment(tmp_path), folder=folder, view=LiveView(enabled=False)
+        devices.experiment(tmp_path, near=True), folder=folder, view=LiveView(enabled=False)
     )
     assert outcome.error.startswith("ConfigError: block = ")
     assert "is not allowed: must be a block the receiver can take" in outcome.error
@@ -231,7 +241,9 @@ def test_without_a_monitor_signal_the_run_stops_and_says_what_to_cable(
 ) -> None:
     devices.world.monitor = False
     outcome = run_experiment(
-        devices.experiment(tmp_path), folder=tmp_path / "run", view=LiveView(enabled=False)
+        devices.experiment(tmp_path, near=True),
+        folder=tmp_path / "run",
+        view=LiveView(enabled=False),
     )
     assert outcome.error.startswith(
         "RuntimeError: no loopback on the DAC monitor input (ADC input 2, channel 1):"
@@ -266,6 +278,7 @@ def test_required_calibrations_are_applied_in_the_run(tmp_path: Path, devices: P
         tmp_path,
         f'store = "{tmp_path / "cal"}"\nmax_age_days = 1.0\n'
         'required = ["latency", "sound-speed", "stage"]',
+        near=True,
     )
     folder = tmp_path / "run"
     outcome = run_experiment(exp, folder=folder, view=LiveView(enabled=False))
@@ -369,15 +382,16 @@ def test_a_run_name_cannot_leave_output_dir(tmp_path: Path, devices: PtyDevices,
 
 
 def _on_the_pass(devices: PtyDevices, act: Callable[[], None]) -> threading.Thread:
-    """A thread that runs ``act`` once the simulated carriage is on its pass (moving, past
-    the pass's start at -2 m: positioning ends at -1.4 m), as the controller reports it."""
+    """A thread that runs ``act`` once the simulated carriage is on the pass near home
+    (moving, past the pass's start at -0.7 m: its run-up starts at -0.1 m), as the controller
+    reports it."""
     done = threading.Event()
 
     def watch() -> None:
         deadline = time.monotonic() + 120.0
         while time.monotonic() < deadline and not done.wait(0.02):
             status = devices.stage.status()
-            if status.velocity_mm_s != 0.0 and status.physical_mm < -2000.0:
+            if status.velocity_mm_s != 0.0 and status.physical_mm < NEAR_PASS_START_MM:
                 act()
                 return
 
@@ -387,7 +401,7 @@ def _on_the_pass(devices: PtyDevices, act: Callable[[], None]) -> threading.Thre
 
 
 def _slow(exp: Experiment) -> Experiment:
-    """The pass at 0.5 m/s: 2.7 m of pass and run-down take 5.4 s."""
+    """The pass at 0.5 m/s: 2.1 m of the near pass and its run-down take 4.2 s."""
     return dataclasses.replace(exp, tow=dataclasses.replace(exp.tow, speed_mps=0.5))
 
 
@@ -397,16 +411,18 @@ def test_a_board_lost_mid_pass_stops_the_run_naming_it(tmp_path: Path, devices: 
     killer = _on_the_pass(devices, devices.board.close)  # its pty gone, as a killed process
     folder = tmp_path / "run"
     outcome = run_experiment(
-        _slow(devices.experiment(tmp_path)), folder=folder, view=LiveView(enabled=False)
+        _slow(devices.experiment(tmp_path, near=True)),
+        folder=folder,
+        view=LiveView(enabled=False),
     )
     killer.join(10)
     assert outcome.error.startswith(f"DeviceLostError: board {port} lost: its link dropped at")
     assert "check its USB cable and power" in outcome.error
     assert not outcome.interrupted
     # Stopped within its grace, not at the end of the pass or run.max_duration_s: the stage
-    # was held short of the pass's end (-4.1 m) and is at rest.
+    # was held short of the pass's end (-2.8 m) and is at rest.
     status = devices.stage.status()
-    assert status.velocity_mm_s == 0.0 and status.physical_mm > -4100.0 + 250.0
+    assert status.velocity_mm_s == 0.0 and status.physical_mm > NEAR_PASS_END_MM + 250.0
     with RunRecording.open(folder / "run.h5") as rec:
         stop = rec.events()[-1]
     assert (stop.kind, stop.text) == ("alarm", f"stop: error: {outcome.error}")
@@ -418,7 +434,9 @@ def test_a_stage_lost_mid_pass_stops_the_run_naming_it(tmp_path: Path, devices: 
     killer = _on_the_pass(devices, devices.stage.close)
     folder = tmp_path / "run"
     outcome = run_experiment(
-        _slow(devices.experiment(tmp_path)), folder=folder, view=LiveView(enabled=False)
+        _slow(devices.experiment(tmp_path, near=True)),
+        folder=folder,
+        view=LiveView(enabled=False),
     )
     killer.join(10)
     assert outcome.error.startswith(f"DeviceLostError: stage {port} lost: ")
@@ -439,7 +457,7 @@ def test_the_python_api_yields_the_runs_estimates_status_and_summary(
     from hil.estimation.base import Estimate
     from hil.experiments import api
 
-    items = list(api.iterate(devices.experiment(tmp_path), folder=tmp_path / "run"))
+    items = list(api.iterate(devices.experiment(tmp_path, near=True), folder=tmp_path / "run"))
     finished = items[-1]
     assert isinstance(finished, api.Finished)
     estimates = [i for i in items if isinstance(i, Estimate)]
@@ -477,7 +495,8 @@ def test_leaving_the_python_api_loop_early_stops_the_run_safely(
     from hil.experiments import api
 
     seen = 0
-    for item in api.iterate(_slow(devices.experiment(tmp_path)), folder=tmp_path / "run"):
+    near = _slow(devices.experiment(tmp_path, near=True))
+    for item in api.iterate(near, folder=tmp_path / "run"):
         seen += isinstance(item, Estimate)
         if seen == 5:
             break  # closes the iterator: the run stops as on Ctrl-C, and is waited for
@@ -486,6 +505,6 @@ def test_leaving_the_python_api_loop_early_stops_the_run_safely(
     assert summary["error"] == "interrupted (stopped by the caller)"
     assert devices.board.call(lambda b: b.conn.state.name) != "STREAMING"
     status = devices.stage.status()
-    assert status.velocity_mm_s == 0.0 and status.physical_mm > -4100.0 + 250.0
+    assert status.velocity_mm_s == 0.0 and status.physical_mm > NEAR_PASS_END_MM + 250.0
     with RunRecording.open(tmp_path / "run" / "run.h5") as rec:
         assert rec.events()[-1].text == "stop: interrupted (stopped by the caller)"

@@ -91,9 +91,12 @@ def _chromium() -> str | None:
     return shutil.which("chromium") or shutil.which("chromium-browser")
 
 
-@pytest.fixture
-def browser(require_system: Callable[[bool, str], None]) -> Iterator[Any]:
-    """A headless chromium driven by selenium."""
+@pytest.fixture(scope="session")
+def _chromium_session(require_system: Callable[[bool, str], None]) -> Iterator[Any]:
+    """One headless chromium driven by selenium for every browser test of a worker: each
+    start is a chromium and a chromedriver process (1-2 s of wall time on the 2-core
+    development machine), and the tests share nothing a page keeps (each loads its own
+    server's page, on its own port: its own origin)."""
     require_system(
         importlib.util.find_spec("selenium") is not None,
         "selenium is not installed (pip install '.[test]')",
@@ -117,3 +120,18 @@ def browser(require_system: Callable[[bool, str], None]) -> Iterator[Any]:
         yield driver
     finally:
         driver.quit()
+
+
+@pytest.fixture
+def browser(_chromium_session: Any) -> Iterator[Any]:
+    """The headless chromium, as a fresh one is to a test: on a blank page, its console log
+    emptied (what the previous test's page logged is not this test's), its window 1400 by
+    1000; left on a blank page after the test (its page's polling stops)."""
+    driver = _chromium_session
+    driver.get("about:blank")
+    driver.set_window_size(1400, 1000)
+    driver.get_log("browser")  # reading the log empties it
+    try:
+        yield driver
+    finally:
+        driver.get("about:blank")
