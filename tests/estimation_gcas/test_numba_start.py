@@ -12,6 +12,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 from numba.core.registry import CPUDispatcher
 
 import hil
@@ -43,6 +44,7 @@ def _kernels() -> list[CPUDispatcher]:
     return found
 
 
+@pytest.mark.slow
 def test_no_compiled_kernel_uses_blas_or_correlate() -> None:
     kernels = _kernels()
     assert len(kernels) >= 40  # the receivers', the tracker's, the simulator's
@@ -54,6 +56,7 @@ def test_no_compiled_kernel_uses_blas_or_correlate() -> None:
     assert users == []
 
 
+@pytest.mark.slow
 def test_the_check_is_skipped_and_a_compiled_dot_still_works() -> None:
     code = (
         "import json, sys\n"

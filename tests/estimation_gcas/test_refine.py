@@ -507,6 +507,7 @@ def test_candidates_of_two_shapes_are_refused() -> None:
         refiner.correlation(0.25, 1.016, 20, np.zeros(3), np.ones(2))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("snr_db", [-10.0, 0.0])
 def test_a_long_window_searched_through_fewer_hops_finds_the_full_searchs_maxima(
     snr_db: float, monkeypatch: pytest.MonkeyPatch

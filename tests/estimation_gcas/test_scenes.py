@@ -143,6 +143,7 @@ def test_a_braking_target_is_kept_and_ranged(decel: float, min_count: int) -> No
     assert abs(np.mean(dv)) < 0.005 and np.sqrt(np.mean(dv**2)) < 0.02
 
 
+@pytest.mark.slow
 def test_a_braking_target_over_a_long_window_is_read_at_its_boundary() -> None:
     # M = 29 at 4 m/s²: the curvature over the window is 10 rad at its ends, so the rates'
     # curves start from a constant-speed fit of the last 10 hops. Measured (seed 1): 40 of
@@ -296,12 +297,11 @@ def test_a_weaker_target_where_a_stronger_ones_ghost_peaks_at_minus_10_db(
     assert min(pd) >= pd_min and false <= 0.02
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("scene", "snr_db", "pd_min"),
-    [("3.4 m/s apart, 5 dB weaker", 0.0, 0.95),
-     *(pytest.param(*case, marks=pytest.mark.slow) for case in
-       (("3.4 m/s apart, 5 dB weaker", -10.0, 0.95), ("3.9 m/s apart, 5 dB weaker", 0.0, 0.95),
-        ("3.9 m/s apart, 5 dB weaker", -10.0, 0.95)))],
+    [("3.4 m/s apart, 5 dB weaker", 0.0, 0.95), ("3.4 m/s apart, 5 dB weaker", -10.0, 0.95),
+     ("3.9 m/s apart, 5 dB weaker", 0.0, 0.95), ("3.9 m/s apart, 5 dB weaker", -10.0, 0.95)],
 )  # fmt: skip
 def test_a_weaker_target_a_doppler_cell_or_so_from_a_stronger_one(
     scene: str, snr_db: float, pd_min: float
@@ -316,14 +316,13 @@ def test_a_weaker_target_a_doppler_cell_or_so_from_a_stronger_one(
     assert false <= 0.01
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("scene", "snr_db", "pd_min"),
-    [("10 dB weaker, one speed", 0.0, 0.95),
-     *(pytest.param(*case, marks=pytest.mark.slow) for case in
-       (("10 dB weaker, 2.6 m/s apart", 0.0, 0.95),
-        ("10 dB weaker, beside a ghost's row", 0.0, 0.95),
-        ("10 dB weaker, one speed", -10.0, 0.9), ("10 dB weaker, 2.6 m/s apart", -10.0, 0.9),
-        ("10 dB weaker, beside a ghost's row", -10.0, 0.9)))],
+    [("10 dB weaker, one speed", 0.0, 0.95), ("10 dB weaker, 2.6 m/s apart", 0.0, 0.95),
+     ("10 dB weaker, beside a ghost's row", 0.0, 0.95),
+     ("10 dB weaker, one speed", -10.0, 0.9), ("10 dB weaker, 2.6 m/s apart", -10.0, 0.9),
+     ("10 dB weaker, beside a ghost's row", -10.0, 0.9)],
 )  # fmt: skip
 def test_a_target_10_db_weaker_in_a_stronger_ones_row(
     scene: str, snr_db: float, pd_min: float
@@ -374,14 +373,13 @@ def _close_pair(targets: tuple[tuple[float, float, float], ...], snr_db: float) 
     return [h / a for h, a in zip(got, alone, strict=True)], false, int(per_hop.max())
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("scene", "snr_db", "pd_min"),
-    [("0.3 m apart", 0.0, 0.95),
-     *(pytest.param(*case, marks=pytest.mark.slow) for case in
-       (("0.3 m apart", -10.0, 0.95), ("a grating lobe apart", 0.0, 0.9),
-        ("a grating lobe apart", -10.0, 0.9), ("1.5 m apart", 0.0, 0.95),
-        ("1.5 m apart", -10.0, 0.95), ("opening, 0.5 m apart", 0.0, 0.94),
-        ("opening, 0.5 m apart", -10.0, 0.94)))],
+    [("0.3 m apart", 0.0, 0.95), ("0.3 m apart", -10.0, 0.95),
+     ("a grating lobe apart", 0.0, 0.9), ("a grating lobe apart", -10.0, 0.9),
+     ("1.5 m apart", 0.0, 0.95), ("1.5 m apart", -10.0, 0.95),
+     ("opening, 0.5 m apart", 0.0, 0.94), ("opening, 0.5 m apart", -10.0, 0.94)],
 )  # fmt: skip
 def test_two_echoes_of_one_speed_close_in_range_are_both_reported(
     scene: str, snr_db: float, pd_min: float
@@ -423,7 +421,9 @@ def _receiver(max_speed: float = 30.0, **extra: object) -> GcasReceiver:
     )  # fmt: skip
 
 
-@pytest.mark.parametrize(("v", "side"), [(35.0, "closing"), (-35.0, "opening")])
+@pytest.mark.parametrize(
+    ("v", "side"), [(35.0, "closing"), pytest.param(-35.0, "opening", marks=pytest.mark.slow)]
+)
 def test_an_echo_beyond_the_span_is_seen_once_on_its_side(v: float, side: str) -> None:
     # Its edge leak on the span's edge hypothesis, scanned over the guard band, fits one
     # echo at its own speed, said at the second fit of hops all transmitted: measured
@@ -441,6 +441,7 @@ def test_an_echo_beyond_the_span_is_seen_once_on_its_side(v: float, side: str) -
     assert rx.beyond_span == [] and rx.beyond_span_count == 0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("r0", "v", "side", "said_hop", "said_mps", "refused"),
     [(80.0, 35.0, "closing", 9, 34.993, 158), (20.0, -35.0, "opening", 9, -35.005, 165)],
@@ -467,12 +468,17 @@ def test_an_echo_beyond_the_span_is_said_from_its_ghosts_at_minus_10_db(
 @pytest.mark.parametrize(
     ("r0", "v", "max_speed", "said_hop", "said_mps", "refused"),
     [
-        (90.0, 40.0, 30.0, 11, 40.003, 154),
-        (5.0, -40.0, 30.0, 14, -40.002, 155),
-        (90.0, 45.0, 30.0, 9, 44.998, 157),
-        (5.0, -45.0, 30.0, 11, -44.998, 159),
+        *(
+            pytest.param(*case, marks=pytest.mark.slow)
+            for case in (
+                (90.0, 40.0, 30.0, 11, 40.003, 154),
+                (5.0, -40.0, 30.0, 14, -40.002, 155),
+                (90.0, 45.0, 30.0, 9, 44.998, 157),
+                (5.0, -45.0, 30.0, 11, -44.998, 159),
+            )
+        ),
         (95.0, 55.0, 30.0, 12, 55.001, 101),
-        (90.0, 35.0, 20.0, 13, 34.999, 118),
+        pytest.param(90.0, 35.0, 20.0, 13, 34.999, 118, marks=pytest.mark.slow),
     ],
 )
 def test_an_echo_past_the_guard_band_is_said_from_its_ghosts_at_minus_10_db(
@@ -772,6 +778,7 @@ def test_two_peaks_of_one_echo_at_one_boundary_give_one_estimate() -> None:
     assert out["n_estimates"] == 47
 
 
+@pytest.mark.slow
 def test_an_echo_beyond_the_span_followed_beside_a_still_one_is_not_reported() -> None:
     # An echo opening at 55 m/s from 5 m beside a still echo at 40 m, -10 dB, a 30 m/s span:
     # its fits (sources of its ghosts, past the guard band) are followed to keep it taken out

@@ -32,6 +32,7 @@ def _trial(point: int, rep: int) -> dict[str, float]:
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("point", "rep", "detected", "false"),
     [
