@@ -135,10 +135,9 @@ def test_the_schedules_first_boundaries_are_not_looked_at() -> None:
     # target reported three times at -14.2 to -14.4 m/s, ghosts of its boundaries not
     # detected; 5 boundaries detected and 3 false before, now its source's boundaries are
     # reported instead (8 detected, none false). Rep 29: an 11.3 m/s target's ghost at
-    # -15.7 m/s becomes its boundary at 57.1 m (9 -> 10 detected; 11 with the echo followed
-    # from its fits of 15 dB and more, FOLLOW_MARGIN_DB); one false estimate remains (at the
-    # target's speed 29 m short, from the second search: 1 before too).
-    [(15, 8, 0), (29, 11, 1)],
+    # -15.7 m/s becomes its boundary at 57.1 m (9 -> 10 detected); one false estimate
+    # remains (at the target's speed 29 m short, from the second search: 1 before too).
+    [(15, 8, 0), (29, 10, 1)],
 )
 def test_sim05_ghosts_of_an_undetected_echo_are_its_estimates(
     rep: int, detected: int, false: int

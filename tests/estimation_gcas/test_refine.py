@@ -436,6 +436,7 @@ def test_an_echo_measured_lately_is_due_at_its_next_boundary_once() -> None:
     assert [h for h, _, _ in refiner.due(fit.t_s + 10 * period)] == [first.hop_index + 2]
     assert [h for h, _, _ in refiner.due(fit.t_s + 10 * period)] == [first.hop_index + 3]
     assert refiner.due(fit.t_s + 10 * period) == []
+    assert refiner.m_hops >= refine_module.FOLLOW_MIN_HOPS
     assert refiner.follow_db == 15.0 < refiner.lobe_sure_db
     echo = refiner._echoes[0]
     for other in (
@@ -591,3 +592,18 @@ def test_an_echo_that_begins_within_the_window_is_not_fitted_as_accelerating() -
             hop_ids = np.arange(e.hop_index - 9, e.hop_index + 1, dtype=np.int64)
             known = refine_module._NO_KNOWN
             assert refiner._one_sided(fit, word, hop_ids, known) is one_sided
+
+
+@pytest.mark.parametrize(
+    ("m_hops", "gate"), [(5, "lobe"), (7, "lobe"), (8, "margin"), (29, "margin")]
+)
+def test_short_windows_follow_only_from_the_lobe_decisions_threshold_region(
+    m_hops: int, gate: str
+) -> None:
+    # Over fewer than FOLLOW_MIN_HOPS hops a speed sidelobe's or a ghost's fit collects what
+    # the echo's own fits do: an echo is followed from the lobe decision's 20.4 dB there, from
+    # 3 dB over the echo test's 12 dB from M = 8.
+    refiner = CoherentRefiner(att_schedule(), FS, m_hops, C, 0.5, 30.0)
+    assert refiner.lobe_sure_db == pytest.approx(20.42, abs=0.01)
+    want = refiner.lobe_sure_db if gate == "lobe" else 12.0 + refine_module.FOLLOW_MARGIN_DB
+    assert refiner.follow_db == want
