@@ -1106,12 +1106,13 @@ class CoherentRefiner:
             for e in self._echoes
         )
 
-    def due(self, t_s: float) -> list[tuple[int, float, float]]:
+    def due(self, t_s: float) -> list[tuple[int, float, float, float]]:
         """The boundaries of echoes measured lately that no detection brought by ``t_s`` (s):
         for each echo fitted at :attr:`follow_db` or more (:data:`FOLLOW_MARGIN_DB`)
         outside the still reverberation's Doppler cells, its next boundary where its latest
         fit carries on, received before ``t_s`` and at most :data:`KNOWN_HOPS` hops after
-        that fit, each once: ``(hop_index, t, α)`` (hop, s, 1). Another echo's ghost or
+        that fit, each once: ``(hop_index, t, α, E/N0)`` (hop, s, 1, dB: what that fit
+        collected). Another echo's ghost or
         Doppler response can hold the row's maximum at an echo's boundary (a weaker echo a
         tone spacing's speed from a stronger one: the ghost's peak beside it); the echo is
         then fitted there (:meth:`refine`) and its echo test decides. So are the boundaries
@@ -1129,7 +1130,7 @@ class CoherentRefiner:
             if e.gap >= 0:
                 t_gap = e.boundary_s(e.gap, self.hop_len_s)
                 if t_gap <= t_s:
-                    out.append((e.gap, t_gap, e.alpha))
+                    out.append((e.gap, t_gap, e.alpha, e.e_over_n0_db))
                     e = replace(e, gap=e.gap + 1 if e.gap + 1 < e.hop_index else -1)
                     self._echoes[i] = e
             hop = max(e.hop_index, e.followed) + 1
@@ -1139,7 +1140,7 @@ class CoherentRefiner:
             if t_next <= t_s or (
                 t_next <= t_s + 1.0 / (e.alpha * self.spacing_hz) and len(self._formation(e)) > 1
             ):
-                out.append((hop, t_next, e.alpha))
+                out.append((hop, t_next, e.alpha, e.e_over_n0_db))
                 self._echoes[i] = replace(e, followed=hop)
         return out
 

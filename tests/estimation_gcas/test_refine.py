@@ -429,12 +429,13 @@ def test_an_echo_measured_lately_is_due_at_its_next_boundary_once() -> None:
     assert fit is not None and fit.is_echo(refiner.echo_test)
     period = refiner.hop_len_s / fit.alpha
     assert refiner.due(fit.t_s + 0.5 * period) == []
-    [(hop, t_next, alpha)] = refiner.due(fit.t_s + 1.5 * period)
+    [(hop, t_next, alpha, latest_db)] = refiner.due(fit.t_s + 1.5 * period)
+    assert latest_db == fit.e_over_n0_db
     assert hop == first.hop_index + 1 and alpha == fit.alpha
     assert t_next == pytest.approx(fit.t_s + period, abs=1e-12)
     assert refiner.due(fit.t_s + 1.5 * period) == []
-    assert [h for h, _, _ in refiner.due(fit.t_s + 10 * period)] == [first.hop_index + 2]
-    assert [h for h, _, _ in refiner.due(fit.t_s + 10 * period)] == [first.hop_index + 3]
+    assert [d[0] for d in refiner.due(fit.t_s + 10 * period)] == [first.hop_index + 2]
+    assert [d[0] for d in refiner.due(fit.t_s + 10 * period)] == [first.hop_index + 3]
     assert refiner.due(fit.t_s + 10 * period) == []
     assert refiner.m_hops >= refine_module.FOLLOW_MIN_HOPS
     assert refiner.follow_db == 15.0 < refiner.lobe_sure_db

@@ -84,6 +84,14 @@ LEFT_MARGIN_DB = 3.0
 #: (:meth:`Readout._follow`): peaks are decided in the order of their candidates' blocks,
 #: within a fine window of them, so a detection of that boundary comes before.
 FOLLOW_LAG_HOPS = 1.0
+#: A followed boundary's fit that collects more than this much less E/N0 than the echo's
+#: latest fit is not that echo (:meth:`Readout._follow`): consecutive fits of one echo share
+#: M - 1 of their M hops (at -20 dB per-sample SNR, M = 10, an echo's fits collect 16.6-18.6
+#: dB, 10th-90th percentile). Where a detection was fitted on a speed sidelobe beside a
+#: strong echo and remembered as a second echo, its followed fit with the true echo taken out
+#: collects what that echo's residue leaves (Fig 6.4, M = 5, -5 dB, one trial: 28.0 then
+#: 13.9 dB, reported 0.92 m short beside the true echo's own boundary).
+FOLLOW_DROP_DB = 6.0
 
 #: Grid steps the detector-only readout moves its Doppler parabola onto the largest of the
 #: sums measured on common tones (:meth:`Readout._doppler_offset`): the search's hypothesis
@@ -527,7 +535,8 @@ class Readout:
         (s), fitted where their latest fits put them
         (:meth:`~hil.estimation.refine.CoherentRefiner.due`, measured as
         :meth:`~hil.estimation.refine.CoherentRefiner.refine` measures a followed boundary):
-        those one echo by the echo test (:attr:`followed_count`). None in the reverberation
+        those one echo by the echo test and within :data:`FOLLOW_DROP_DB` of what the echo's
+        latest fit collected (:attr:`followed_count`). None in the reverberation
         band's refused hypotheses (an echo measured there is hidden,
         :mod:`hil.estimation.gcas.hidden_echoes`) nor beyond the Doppler span (an echo fitted
         there, the source of ghosts inside it, is followed to be taken out of other
@@ -535,13 +544,15 @@ class Readout:
         assert self._refiner is not None
         out = []
         fe = self._fe
-        for hop_index, t_pred, alpha in self._refiner.due(t_s):
+        for hop_index, t_pred, alpha, latest_db in self._refiner.due(t_s):
             speed = fe.sound_speed_mps * (alpha - 1.0) / (alpha + 1.0)
             if fe.refused_hypotheses[int(np.argmin(np.abs(fe.grid.speeds_mps - speed)))]:
                 continue  # in the reverberation band: hidden, not reported
             refined = self._refiner.refine(t_pred, alpha, hop_index, partners=False, followed=True)
             if refined is None or refined.ended or not refined.is_echo(ECHO_TEST):
                 continue
+            if refined.e_over_n0_db < latest_db - FOLLOW_DROP_DB:
+                continue  # not the echo followed: what another echo's residue left
             if self._refiner.still_leak(refined, hop_index):
                 continue  # the still water's leak, not an echo of its own
             if abs(refined.speed_mps(fe.sound_speed_mps)) > fe.max_speed_mps:
