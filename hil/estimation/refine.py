@@ -848,7 +848,7 @@ class CoherentRefiner:
         lobe = 1.0 / (alpha * self.spacing_hz)
         speed0 = self.c * (alpha - 1.0) / (alpha + 1.0)
         known = self._known_hops(hop_index, t_s, speed0, lag_s)
-        fit = self._fit_near(word, hop_ids, t_s, speed0, lobe, hop_index, known)
+        fit = self._fit_near(word, hop_ids, t_s, speed0, lobe, hop_index, known, followed)
         if followed and fit is not None:
             if abs(fit.t_s - t_s) > self._main_lobe_s:
                 return None  # another grating lobe, or another echo
@@ -869,6 +869,7 @@ class CoherentRefiner:
             fit is not None
             and fit.found
             and fit.accel_mps2 == 0.0
+            and not followed
             and fit.e_over_n0_db < self.lobe_sure_db
             and fit.is_echo(test)
             and abs(fit.speed_mps(self.c)) >= self._still_mps
@@ -881,6 +882,7 @@ class CoherentRefiner:
             fit is not None
             and fit.found
             and fit.accel_mps2 == 0.0
+            and not followed
             and fit.is_echo(test)
             and abs(fit.speed_mps(self.c)) >= self._still_mps
         ):
@@ -1605,10 +1607,12 @@ class CoherentRefiner:
         lobe: float,
         warm_hop: int | None,
         known: NDArray[np.complex128],
+        keep_lobe: bool = False,
     ) -> Refinement | None:
         """The fit of the search around ``(t0, v0)`` (s, m/s): from a recent fit's
         prediction when ``warm_hop`` is given and one agrees, else the full search, then the
-        lobe check; None where the input does not cover the hops."""
+        lobe check (none with ``keep_lobe``: a followed boundary's lobe is its echo's, which
+        that echo's fits decided); None where the input does not cover the hops."""
         outcome = RECENTRE
         gamma = 0.0
         start = None if warm_hop is None else self._predicted(warm_hop, t0, v0, lobe)
@@ -1660,7 +1664,7 @@ class CoherentRefiner:
                 searched = self._search(word, hop_ids, t0, v0, lobe, known, wide)
                 if searched is not None:
                     best_t, best_v, outcome, args = searched
-        for _ in range(LOBE_MOVES if outcome == FOUND else 0):
+        for _ in range(LOBE_MOVES if outcome == FOUND and not keep_lobe else 0):
             # The lobe: the envelope tells a grating lobe from its neighbours by ~1 dB, which
             # a detector's time (noncoherent, beside a stronger echo) can miss; the
             # likelihood's own neighbours decide.
