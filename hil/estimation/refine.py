@@ -465,6 +465,9 @@ class _EchoFit:
     #: Measured as one of two echoes in one detection's hops (:mod:`hil.estimation.
     #: refine_pair`): the next detection of the pair starts from both.
     pair: bool = False
+    #: This fit or an earlier one of its echo reached :attr:`CoherentRefiner.follow_db`: the
+    #: echo is followed on while its fits pass the echo test (:meth:`CoherentRefiner.due`).
+    held: bool = False
 
     def boundary_s(self, hop_index: int, hop_len_s: float) -> float:
         """Where this fit puts the boundary ending hop ``hop_index`` (s of receive time),
@@ -1094,14 +1097,14 @@ class CoherentRefiner:
     def followed_near(self, t_s: float, alpha: float, hop_index: int) -> bool:
         """Whether a detection at ``t_s`` (s) and time scale ``alpha`` (the boundary ending hop
         ``hop_index``) is the boundary of an echo that :meth:`due` gives: measured before this
-        hop, within :data:`KNOWN_HOPS` hops, fitted at :attr:`follow_db` or more and
+        hop, within :data:`KNOWN_HOPS` hops, held (:attr:`_EchoFit.held`) and
         moving, and the same echo (:meth:`_same_echo`). A peak masked by a greater one of
         another boundary (:attr:`~hil.estimation.gcas.threshold.Peak.masked`) is not decided
         there: the echo is fitted where its fit puts it, and the detector's boundary, read
         beside the greater echo's Doppler response, would take that hop from it."""
         speed = self.c * (alpha - 1.0) / (alpha + 1.0)
         return any(
-            e.e_over_n0_db >= self.follow_db
+            (e.held or e.e_over_n0_db >= self.follow_db)
             and abs(e.speed(self.c)) >= self._still_mps
             and 0 < hop_index - e.hop_index <= KNOWN_HOPS
             and self._same_echo(e, hop_index, t_s, speed)
@@ -1110,7 +1113,10 @@ class CoherentRefiner:
 
     def due(self, t_s: float) -> list[tuple[int, float, float, float]]:
         """The boundaries of echoes measured lately that no detection brought by ``t_s`` (s):
-        for each echo fitted at :attr:`follow_db` or more (:data:`FOLLOW_MARGIN_DB`)
+        for each echo one of whose fits reached :attr:`follow_db` (:data:`FOLLOW_MARGIN_DB`;
+        :attr:`_EchoFit.held`: a weak echo's fits scatter about 2 dB either side of their
+        mean, and gated on the latest alone it was dropped at its first dip; att, M = 10, an
+        echo at -20 dB per-sample SNR in reverberation: followed fits of 14.8-18 dB)
         outside the still reverberation's Doppler cells, its next boundary where its latest
         fit carries on, received before ``t_s`` and at most :data:`KNOWN_HOPS` hops after
         that fit, each once: ``(hop_index, t, α, E/N0)`` (hop, s, 1, dB: what that fit
@@ -1127,7 +1133,10 @@ class CoherentRefiner:
         at the detector's time) would otherwise pass the boundary it missed."""
         out = []
         for i, e in enumerate(self._echoes):
-            if e.e_over_n0_db < self.follow_db or abs(e.speed(self.c)) < self._still_mps:
+            if (
+                not (e.held or e.e_over_n0_db >= self.follow_db)
+                or abs(e.speed(self.c)) < self._still_mps
+            ):
                 continue
             if e.gap >= 0:
                 t_gap = e.boundary_s(e.gap, self.hop_len_s)
@@ -1467,7 +1476,7 @@ class CoherentRefiner:
         new = [
             _EchoFit(
                 hop_index, f.t_s, f.alpha, f.amplitude, 0.0, ghost_strength, f.e_over_n0_db,
-                cancelled=cancelled, pair=pair,
+                cancelled=cancelled, pair=pair, held=f.e_over_n0_db >= self.follow_db,
             )
             for f in fits if f.amplitude != 0
         ]  # fmt: skip
@@ -1489,6 +1498,7 @@ class CoherentRefiner:
         ghost_strength = (0.0,) * self.schedule.period_hops
         was: bool | None = None
         covered = -1
+        held = fit.e_over_n0_db >= self.follow_db
         for e in self._echoes:
             if e.t_s < oldest:
                 continue
@@ -1498,6 +1508,7 @@ class CoherentRefiner:
                 ghost_strength = tuple(map(max, ghost_strength, e.ghost_strength or ghost_strength))
                 was = e.cancelled if was is None else was or e.cancelled
                 covered = max(covered, e.hop_index, e.followed)
+                held = held or e.held
             else:
                 kept.append(e)
         if cancelled is None:
@@ -1505,7 +1516,7 @@ class CoherentRefiner:
         gap = covered + 1 if covered >= 0 and 0 < hop_index - covered - 1 <= KNOWN_HOPS else -1
         new = _EchoFit(
             hop_index, fit.t_s, fit.alpha, fit.amplitude, fit.rate(self.c), ghost_strength,
-            fit.e_over_n0_db, cancelled=cancelled, gap=gap,
+            fit.e_over_n0_db, cancelled=cancelled, gap=gap, held=held,
         )  # fmt: skip
         self._echoes = [*kept, new]
 
