@@ -835,7 +835,13 @@ class CoherentRefiner:
         holds its echo (at least
         :data:`PARTIAL_LEVEL` of the hops' mean power): an echo that ended within the window
         still fits one echo on its earlier hops, and followed on it would go on where it
-        is no more; None otherwise. A ``residual`` detection is the second search's
+        is no more; None otherwise. Its grating lobe is its echo's, which that echo's
+        fits decided: a fit weaker than :attr:`lobe_sure_db` stays on the lobe of ``t_s``
+        (no lobe moves, no lobe decision on more hops or without the still water; att,
+        M = 10, an echo at -20 dB per-sample SNR beside volume reverberation: those decisions
+        moved a third of its followed fits a lobe off, then refused); a stronger fit decides
+        its lobe on its own hops, and moved a lobe it is refused. A ``residual`` detection
+        is the second search's
         (:meth:`known_input`): its echo, remembered, is not taken out of that search's input
         (a followed fit keeps its echo's own). ``lag_s``: how far (s) the detection may lie
         behind the fits measured since (the second search's lag): an echo whose latest fit is
@@ -852,6 +858,9 @@ class CoherentRefiner:
         speed0 = self.c * (alpha - 1.0) / (alpha + 1.0)
         known = self._known_hops(hop_index, t_s, speed0, lag_s)
         fit = self._fit_near(word, hop_ids, t_s, speed0, lobe, hop_index, known, followed)
+        if followed and fit is not None and fit.e_over_n0_db >= self.lobe_sure_db:
+            # Strong enough to tell its lobe from the neighbours' on its own M hops.
+            fit = self._fit_near(word, hop_ids, t_s, speed0, lobe, hop_index, known)
         if followed and fit is not None:
             if abs(fit.t_s - t_s) > self._main_lobe_s:
                 return None  # another grating lobe, or another echo

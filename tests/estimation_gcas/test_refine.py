@@ -421,8 +421,9 @@ def test_an_echo_measured_at_a_ghosts_speed_is_followed_through_the_ghosts_hops(
 
 def test_an_echo_measured_lately_is_due_at_its_next_boundary_once() -> None:
     # A target fitted at one boundary: its next boundary is due once the stream has passed
-    # it, once, and never beyond KNOWN_HOPS hops of the fit; a fit below the follow gate
-    # (FOLLOW_MARGIN_DB over the echo test's E/N0: 15 dB on GCAS) or at rest is not followed.
+    # it, once, and never beyond KNOWN_HOPS hops of the fit; an echo none of whose fits
+    # reached the follow gate (FOLLOW_MARGIN_DB over the echo test's E/N0: 15 dB on GCAS) or
+    # at rest is not followed, one whose earlier fit reached it is (held) whatever its latest.
     refiner, first = _beside_an_echo_whose_ghost_it_may_be(1.0)
     refiner._echoes = []
     fit = refiner.refine(first.t_s, first.alpha, first.hop_index)
@@ -440,12 +441,35 @@ def test_an_echo_measured_lately_is_due_at_its_next_boundary_once() -> None:
     assert refiner.m_hops >= refine_module.FOLLOW_MIN_HOPS
     assert refiner.follow_db == 15.0 < refiner.lobe_sure_db
     echo = refiner._echoes[0]
+    assert echo.held
     for other in (
-        dataclasses.replace(echo, followed=-1, e_over_n0_db=refiner.follow_db - 0.1),
+        dataclasses.replace(echo, followed=-1, e_over_n0_db=refiner.follow_db - 0.1, held=False),
         dataclasses.replace(echo, followed=-1, alpha=1.0),
     ):
         refiner._echoes = [other]
         assert refiner.due(fit.t_s + 10 * period) == []
+    refiner._echoes = [dataclasses.replace(echo, followed=-1, e_over_n0_db=12.5)]
+    assert [d[0] for d in refiner.due(fit.t_s + 10 * period)] == [first.hop_index + 1]
+
+
+def test_an_echo_held_once_stays_held_through_weaker_fits() -> None:
+    # A fit of 15 dB or more holds its echo (_EchoFit.held); the echo's next fits replace it
+    # and carry that on however weak, while an echo first fitted below the gate is not held.
+    refiner, first = _beside_an_echo_whose_ghost_it_may_be(1.0)
+    refiner._echoes = []
+    fit = refiner.refine(first.t_s, first.alpha, first.hop_index)
+    assert fit is not None and fit.e_over_n0_db >= refiner.follow_db
+    period = refiner.hop_len_s / fit.alpha
+    [echo] = refiner._echoes
+    assert echo.held
+    weak = dataclasses.replace(fit, t_s=fit.t_s + period, e_over_n0_db=13.0)
+    refiner._remember(weak, first.hop_index + 1, None)
+    [echo] = refiner._echoes
+    assert echo.held and echo.e_over_n0_db == 13.0 and echo.hop_index == first.hop_index + 1
+    refiner._echoes = []
+    refiner._remember(weak, first.hop_index + 1, None)
+    [echo] = refiner._echoes
+    assert not echo.held
 
 
 def test_an_echo_that_ended_is_not_followed_on_its_earlier_hops() -> None:
