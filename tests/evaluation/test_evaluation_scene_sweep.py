@@ -210,20 +210,22 @@ def test_the_documented_quick_scene_sweep_runs_and_reports(tmp_path: Path) -> No
 
 
 @pytest.mark.slow
-def test_gcas_still_finds_the_weaker_target_under_still_reverberation_where_gcas_loses_it() -> None:
-    # second-10db-weaker at −10 dB SNR with reverberation at 0 dB SRR: the weaker target is
-    # 20 dB under the noise and 10 dB under the still reverberation. Measured (this seed, the
-    # first tried): gcas 127 of 182 boundaries, 1 false; gcas-still 146, 3 false (before the
-    # background holds 4 periods, 0.68 s, gcas-still is gcas). Before an echo was followed
-    # from its fits of 15 dB up (FOLLOW_MARGIN_DB; at the lobe decision's 20.4 dB): 71 and 115.
+def test_the_weaker_target_under_still_reverberation_is_followed_on_its_own_lobe() -> None:
+    # second-10db-weaker at -10 dB SNR with reverberation at 0 dB SRR: the weaker target is
+    # 20 dB under the noise and 10 dB under the still reverberation, and the detector misses
+    # a third of its boundaries. Measured (this seed, the first tried): gcas 161 of 182
+    # boundaries, 1 false; gcas-still (the input less its still water) 170, 12 false: its
+    # copies of the echoes a still period on are followed too. With a followed fit's lobe
+    # decided anew on its own M hops, and the echo followed only while its latest fit
+    # reached 15 dB (before _EchoFit.held): gcas 127, gcas-still 146.
     params = {"scene": "second-10db-weaker", "snr_db": -10.0, "srr_db": 0.0}
     seed = np.random.SeedSequence(5, spawn_key=(2, 0))
     gcas = scene_trial({**params, "receiver": "gcas"}, seed)
     still = scene_trial({**params, "receiver": "gcas-still"}, seed)
     assert gcas["expected"] == still["expected"] == [185, 182]
     assert gcas["detected"][0] == still["detected"][0] == 185
-    assert 120 <= gcas["detected"][1] <= 135 and still["detected"][1] >= 140
-    assert gcas["n_false"] <= 3 and still["n_false"] <= 4
+    assert gcas["detected"][1] >= 0.85 * 182 and still["detected"][1] >= 0.9 * 182
+    assert gcas["n_false"] <= 2 and still["n_false"] <= 15
 
 
 @pytest.mark.slow
@@ -239,6 +241,21 @@ def test_a_target_10_db_weaker_at_minus_20_db_per_sample_is_followed_where_undet
     assert out["expected"] == [185, 182] and out["detected"][0] == 185
     assert out["detected"][1] >= 0.95 * 182
     assert out["n_false"] == 0 and len(out["track_ids"][1]) <= 2
+
+
+@pytest.mark.slow
+def test_a_weaker_target_followed_beside_still_reverberation_keeps_its_track() -> None:
+    # scenes.toml's point (second-10db-weaker, -10 dB SNR, reverberation at 0 dB SRR), seed
+    # 2: the detector misses a third of the weaker target's boundaries. Followed from its
+    # fits, the echo was lost for runs of 7-23 hops where the lobe decisions moved a fit a
+    # lobe off its echo's (refused) or its latest fit dipped under 15 dB: 105 of 182 before
+    # (3 false, 6 tracks), 168 (1 false, 2 tracks) with a weak followed fit on its echo's
+    # lobe and the echo held (_EchoFit.held).
+    params = {"scene": "second-10db-weaker", "snr_db": -10.0, "srr_db": 0.0}
+    out = scene_trial(params, np.random.SeedSequence(2626, spawn_key=(39, 2)))
+    assert out["expected"] == [185, 182] and out["detected"][0] == 185
+    assert out["detected"][1] >= 0.9 * 182
+    assert out["n_false"] <= 2 and len(out["track_ids"][1]) <= 3
 
 
 @pytest.mark.slow
