@@ -835,13 +835,15 @@ class CoherentRefiner:
         holds its echo (at least
         :data:`PARTIAL_LEVEL` of the hops' mean power): an echo that ended within the window
         still fits one echo on its earlier hops, and followed on it would go on where it
-        is no more; None otherwise. Its grating lobe is its echo's, which that echo's
-        fits decided: a fit weaker than :attr:`lobe_sure_db` stays on the lobe of ``t_s``
-        (no lobe moves, no lobe decision on more hops or without the still water; att,
-        M = 10, an echo at -20 dB per-sample SNR beside volume reverberation: those decisions
-        moved a third of its followed fits a lobe off, then refused); a stronger fit decides
-        its lobe on its own hops, and moved a lobe it is refused. A ``residual`` detection
-        is the second search's
+        is no more; None otherwise. Where its window holds still water
+        (:meth:`_in_still_water`) its grating lobe is its echo's, which that echo's fits
+        decided: a fit weaker than :attr:`lobe_sure_db` stays on the lobe of ``t_s`` (no lobe
+        moves, no lobe decision on more hops or without the still water; att, M = 10, an echo
+        at -20 dB per-sample SNR beside volume reverberation: those decisions moved a third
+        of its followed fits a lobe off, then refused); a stronger fit decides its lobe on
+        its own hops. In open water the lobe decisions stand (a three-state chain followed
+        from a detection 3 m off its echo, at -20 dB, collects 16-17 dB there: the lobe moves
+        end it). A ``residual`` detection is the second search's
         (:meth:`known_input`): its echo, remembered, is not taken out of that search's input
         (a followed fit keeps its echo's own). ``lag_s``: how far (s) the detection may lie
         behind the fits measured since (the second search's lag): an echo whose latest fit is
@@ -857,9 +859,11 @@ class CoherentRefiner:
         lobe = 1.0 / (alpha * self.spacing_hz)
         speed0 = self.c * (alpha - 1.0) / (alpha + 1.0)
         known = self._known_hops(hop_index, t_s, speed0, lag_s)
-        fit = self._fit_near(word, hop_ids, t_s, speed0, lobe, hop_index, known, followed)
-        if followed and fit is not None and fit.e_over_n0_db >= self.lobe_sure_db:
+        keep_lobe = followed and self._in_still_water(t_s, alpha)
+        fit = self._fit_near(word, hop_ids, t_s, speed0, lobe, hop_index, known, keep_lobe)
+        if keep_lobe and fit is not None and fit.e_over_n0_db >= self.lobe_sure_db:
             # Strong enough to tell its lobe from the neighbours' on its own M hops.
+            keep_lobe = False
             fit = self._fit_near(word, hop_ids, t_s, speed0, lobe, hop_index, known)
         if followed and fit is not None:
             if abs(fit.t_s - t_s) > self._main_lobe_s:
@@ -881,7 +885,7 @@ class CoherentRefiner:
             fit is not None
             and fit.found
             and fit.accel_mps2 == 0.0
-            and not followed
+            and not keep_lobe
             and fit.e_over_n0_db < self.lobe_sure_db
             and fit.is_echo(test)
             and abs(fit.speed_mps(self.c)) >= self._still_mps
@@ -894,7 +898,7 @@ class CoherentRefiner:
             fit is not None
             and fit.found
             and fit.accel_mps2 == 0.0
-            and not followed
+            and not keep_lobe
             and fit.is_echo(test)
             and abs(fit.speed_mps(self.c)) >= self._still_mps
         ):
@@ -1799,6 +1803,18 @@ class CoherentRefiner:
             return fit
         args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
         return self._refinement(args, known, word, t, alpha, 0.0, True)
+
+    def _in_still_water(self, t_s: float, alpha: float) -> bool:
+        """Whether the ``M`` hops' window of the boundary at ``t_s`` (s, time scale
+        ``alpha``) holds still water, at least :data:`STILL_OVER_REST` of the rest's power:
+        where the grating lobe decisions read its leak through the hops' edges."""
+        still = self._still
+        if still is None:
+            return False
+        stop = int(math.floor(t_s * self.fs_hz))
+        window = int(math.ceil(self.m_hops * self.hop_len_s / alpha * self.fs_hz))
+        s_pow, rest = still.powers(stop - window, stop)
+        return s_pow > 0 and s_pow >= STILL_OVER_REST * rest
 
     def _lobe_without_still(
         self, fit: Refinement, word: _Codeword, hop_ids: NDArray[np.int64], lobe: float,
