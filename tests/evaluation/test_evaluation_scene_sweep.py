@@ -214,10 +214,10 @@ def test_the_weaker_target_under_still_reverberation_is_followed_on_its_own_lobe
     # second-10db-weaker at -10 dB SNR with reverberation at 0 dB SRR: the weaker target is
     # 20 dB under the noise and 10 dB under the still reverberation, and the detector misses
     # a third of its boundaries. Measured (this seed, the first tried): gcas 161 of 182
-    # boundaries, 1 false; gcas-still (the input less its still water) 170, 12 false: its
-    # copies of the echoes a still period on are followed too. With a followed fit's lobe
-    # decided anew on its own M hops, and the echo followed only while its latest fit
-    # reached 15 dB (before _EchoFit.held): gcas 127, gcas-still 146.
+    # boundaries, 1 false; gcas-still (the input less its still water) 169, 3 false. With a
+    # followed fit's lobe decided anew on its own M hops beside the still water, and the
+    # echo followed only while its latest fit reached 15 dB (before _EchoFit.held): gcas
+    # 127, gcas-still 146.
     params = {"scene": "second-10db-weaker", "snr_db": -10.0, "srr_db": 0.0}
     seed = np.random.SeedSequence(5, spawn_key=(2, 0))
     gcas = scene_trial({**params, "receiver": "gcas"}, seed)
@@ -225,7 +225,7 @@ def test_the_weaker_target_under_still_reverberation_is_followed_on_its_own_lobe
     assert gcas["expected"] == still["expected"] == [185, 182]
     assert gcas["detected"][0] == still["detected"][0] == 185
     assert gcas["detected"][1] >= 0.85 * 182 and still["detected"][1] >= 0.9 * 182
-    assert gcas["n_false"] <= 2 and still["n_false"] <= 15
+    assert gcas["n_false"] <= 2 and still["n_false"] <= 4
 
 
 @pytest.mark.slow
