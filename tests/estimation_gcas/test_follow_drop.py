@@ -25,3 +25,20 @@ def test_a_speed_sidelobes_fit_is_not_followed_beside_the_echo() -> None:
     out = ch6_receiver_trial(params, np.random.SeedSequence(2064, spawn_key=(5, 18)))
     assert (out["n_detected"], out["n_false"]) == (47, 0)
     assert out["range_rmse_m"] == pytest.approx(0.0268, abs=0.001)
+
+
+@pytest.mark.slow
+def test_a_chain_followed_off_its_echo_in_open_water_is_ended_by_the_lobe_decisions() -> None:
+    # sim-06/07's three-state point at -20 dB per-sample SNR (seed 2070, point 2, rep 16):
+    # the first detection (hop 4) is fitted off the echo, and its next boundaries followed
+    # from it collect 16-17 dB each. In open water the lobe decisions stand for a followed
+    # fit and move it off that chain (refused), so a later detection finds the echo (hop 10):
+    # range SSE 2.04 m² over the 29 boundaries. Kept on the chain's lobe (the rule for a
+    # window holding still water, CoherentRefiner._in_still_water) the chain was followed to
+    # hop 22 and the echo's own detections began at hop 23: 44.2 m².
+    from hil.evaluation.trials_ch6 import ch6_receiver_trial
+
+    params = {"receiver": "gcas", "m_hops": 10, "family": "three-state", "snr_db": -20.0}
+    out = ch6_receiver_trial(params, np.random.SeedSequence(2070, spawn_key=(2, 16)))
+    assert (out["n_detected"], out["n_false"]) == (29, 0)
+    assert out["range_sse_m2"] == pytest.approx(2.04, abs=0.01)
