@@ -696,10 +696,10 @@ def test_a_board_stopped_by_its_watchdog_ends_the_run_with_the_reason() -> None:
 def test_the_built_in_tank_lost_mid_run_stops_the_run_naming_it(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """The simulated tank's process killed under the run: the run stops, naming it (not a
-    bare ``OSError: [Errno 5]`` from whichever pty noticed first)."""
-    import threading
-
+    """The simulated tank's process killed under the run, mid-pass (as the run's 30th
+    estimate comes, an event of the run rather than a size of its file polled): the run
+    stops, naming it (not a bare ``OSError: [Errno 5]`` from whichever pty noticed first)."""
+    from hil.estimation.base import Estimate
     from hil.experiments import sim_tank
     from hil.experiments.tank_run import LiveView
     from hil.recording.reader import RunRecording
@@ -714,25 +714,21 @@ def test_the_built_in_tank_lost_mid_run_stops_the_run_naming_it(
     monkeypatch.setattr(sim_tank.SimulatedTankProcess, "__init__", keep)
     folder = tmp_path / "run"
     h5 = folder / "run.h5"
-    done = threading.Event()
+    seen: list[Estimate] = []
 
-    def kill_once_recording() -> None:
-        while not done.wait(0.05):
-            if started and h5.exists() and h5.stat().st_size > 400_000:
-                os.kill(started[0].pid, signal.SIGKILL)
-                return
+    def kill_at_30(estimates: list[Estimate]) -> None:
+        if len(seen) < 30 <= len(seen) + len(estimates):
+            os.kill(started[0].pid, signal.SIGKILL)
+        seen.extend(estimates)
 
-    killer = threading.Thread(target=kill_once_recording, daemon=True)
-    killer.start()
-    try:
-        outcome = run_experiment(
-            parse_experiment(STOPPED_MID_PASS),
-            folder=folder,
-            view=LiveView(enabled=False),
-        )
-    finally:
-        done.set()
-        killer.join(10)
+    # The short pass near home: 1.5 m at 1.5 m/s, its 30th estimate 0.3 s into the capture.
+    outcome = run_experiment(
+        parse_experiment(near_home(SHORT)),
+        folder=folder,
+        view=LiveView(enabled=False),
+        on_estimates=kill_at_30,
+    )
+    assert len(seen) >= 30 and not outcome.interrupted
     pid = started[0].pid
     assert outcome.error == (
         f"DeviceLostError: the built-in simulated tank (process {pid}) lost: its process exited"
