@@ -54,21 +54,17 @@ class CliRun:
     experiment_name: str
 
 
-@pytest.fixture(scope="session")
-def _short_virtual_cli_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[CliRun, RunOutcome]:
-    """The short built-in pass run once through the command line on virtual time, and the
-    outcome of its run: ``hil tank-run`` calls
-    :func:`~hil.experiments.tank_run.run_experiment` (kept here as it returns) with no live
-    view, as an in-process run of the same text does, then writes the summary, figures and
-    run.log of the command."""
+def cli_run_keeping_the_outcome(
+    exp_file: Path, folder: Path, *options: str
+) -> tuple[int, dict[str, Any], RunOutcome]:
+    """``hil [OPTIONS] tank-run EXP_FILE --out FOLDER --no-live --json --virtual-time`` in this
+    process: its exit status, the JSON summary it printed, and the outcome of its run. The
+    command calls :func:`~hil.experiments.tank_run.run_experiment` (kept here as it returns)
+    with no live view, as an in-process run of the same text does, then writes the summary,
+    figures and run.log of the command."""
     import hil.experiments.tank_run as tank_run
 
-    base = tmp_path_factory.mktemp("cli-virtual-run")
-    exp_file = base / "short.toml"
-    exp_file.write_text(SHORT_CLI_EXPERIMENT)
-    folder, log_file = base / "run", base / "hil.log"
-    argv = ["--log-level", "warning", "--log-file", str(log_file),
-            "tank-run", str(exp_file), "--out", str(folder), "--no-live", "--json",
+    argv = [*options, "tank-run", str(exp_file), "--out", str(folder), "--no-live", "--json",
             "--virtual-time"]  # fmt: skip
     outcomes: list[RunOutcome] = []
     original = tank_run.run_experiment
@@ -82,11 +78,45 @@ def _short_virtual_cli_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Cl
         patch.setattr(tank_run, "run_experiment", keep)
         status = main(argv)
     summary = json.loads(printed.getvalue().strip().splitlines()[-1])
-    scratch = base / "scratch"
-    scratch.mkdir()
     (outcome,) = outcomes
     assert outcome.folder == folder
+    return status, summary, outcome
+
+
+@pytest.fixture(scope="session")
+def _short_virtual_cli_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[CliRun, RunOutcome]:
+    """The short built-in pass run once through the command line on virtual time, and the
+    outcome of its run (:func:`cli_run_keeping_the_outcome`)."""
+    base = tmp_path_factory.mktemp("cli-virtual-run")
+    exp_file = base / "short.toml"
+    exp_file.write_text(SHORT_CLI_EXPERIMENT)
+    folder, log_file = base / "run", base / "hil.log"
+    status, summary, outcome = cli_run_keeping_the_outcome(
+        exp_file, folder, "--log-level", "warning", "--log-file", str(log_file)
+    )
+    scratch = base / "scratch"
+    scratch.mkdir()
     return CliRun(status, summary, folder, log_file, scratch, "sim-towed-pass"), outcome
+
+
+#: The short pass on the simulated audio interface, its board line as docs/tank-run.md
+#: writes it.
+SHORT_AUDIO_EXPERIMENT = SHORT_CLI_EXPERIMENT.replace(
+    'board = "sim://board"', 'board = "sim://audio?blocksize=256"'
+)
+
+
+@pytest.fixture(scope="session")
+def audio_virtual_cli_run(
+    tmp_path_factory: pytest.TempPathFactory,
+) -> tuple[int, dict[str, Any], RunOutcome]:
+    """:data:`SHORT_AUDIO_EXPERIMENT` run once through the command line on virtual time (no
+    log options): its exit status, printed summary and run's outcome (folder ``.../run``),
+    for test_tank_run_audio's command and the every-device suite's audio-interface run."""
+    base = tmp_path_factory.mktemp("audio-virtual-run")
+    exp_file = base / "audio.toml"
+    exp_file.write_text(SHORT_AUDIO_EXPERIMENT)
+    return cli_run_keeping_the_outcome(exp_file, base / "run")
 
 
 @pytest.fixture(scope="session")
