@@ -22,6 +22,10 @@ RESERVE_SIGNAL_S = 2.0
 #: Bytes the reserve holds besides the samples: HDF5's metadata, the tables' last chunks
 #: (events, telemetry, estimates), the stop event.
 RESERVE_FIXED_BYTES = 2 * 1024 * 1024
+#: Seconds of samples a recording takes between two checks of its room (a block arrives
+#: every few milliseconds, and a check asks the file system twice): a fortieth of the
+#: reserve, so the reserve left at a check is at least 1.95 s of samples.
+CHECK_EVERY_S = 0.05
 
 
 class RecordingSpaceError(OSError):
