@@ -32,6 +32,51 @@ def test_less_room_than_the_reserve_is_refused_saying_how_much(tmp_path: Path) -
     assert err.value.errno == 28  # ENOSPC
 
 
+def test_the_recorder_checks_the_room_once_every_check_span_of_samples(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Before the first block, then once CHECK_EVERY_S of samples have been taken since the
+    last check; a check that finds too little room refuses the block."""
+    import numpy as np
+
+    import hil.experiments.live.recorder as recorder_module
+    from hil.experiments.experiment import DEFAULT_EXPERIMENT, parse_experiment
+    from hil.experiments.live.disk_room import CHECK_EVERY_S
+    from hil.experiments.live.recorder import RunRecorder
+    from hil.recording.records import RunEvent
+    from hil.signals.schedule_file import schedule_document
+
+    exp = parse_experiment(DEFAULT_EXPERIMENT)
+    fs = exp.waveform.fs_hz  # 192 kHz: 9600 samples between checks
+    assert int(CHECK_EVERY_S * fs) == 9600
+    checked: list[int] = []  # the samples taken before each check
+    room = {"bytes": 10**12}
+
+    def fake_check(path: Path, reserve: int) -> None:
+        checked.append(taken)
+        if room["bytes"] < reserve:
+            raise RecordingSpaceError("no room")
+
+    monkeypatch.setattr(recorder_module, "check_room", fake_check)
+    doc = schedule_document(exp.schedule, fs, 0.0, sound_speed_mps=exp.sound_speed_mps)
+    options = {"fs_hz": fs, "n_channels": 2, "dtype": "int16", "schedule_document": doc}
+    recorder = RunRecorder(tmp_path / "run.h5", options)
+    recorder.open(0, RunEvent("note", 0, 0, "start"))
+    block = np.zeros((4000, 2), np.int16)
+    taken = 0
+    for _ in range(11):  # checks before samples 0, 12000, 24000 and 36000
+        recorder.samples(taken, block)
+        taken += 4000
+    assert checked == [0, 12000, 24000, 36000]
+    room["bytes"] = 0
+    recorder.samples(taken, block)  # 8000 since the last check: not checked
+    taken += 4000
+    with pytest.raises(RecordingSpaceError):  # 12000 since: checked, refused
+        recorder.samples(taken, block)
+    assert checked[-1] == 48000
+    recorder.close()
+
+
 @pytest.mark.slow
 def test_a_file_size_limit_mid_run_stops_it_with_a_readable_recording(
     tmp_path: Path, capfd: pytest.CaptureFixture[str]
