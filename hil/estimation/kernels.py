@@ -246,6 +246,65 @@ def first_possible_cells(
 
 
 @numba.njit(**_JIT)
+def _kth_smallest(a: Any, k: int, work: Any) -> float:
+    """The ``k``-th smallest value of ``a`` (0-based; shape ``(n,)``, no NaN; ``work`` shape
+    ``(2n,)``, scratch). Quickselect with a branch-free out-of-place partition: each pass
+    writes every value at both ends of the other half of ``work`` and moves the end it
+    belongs to (below the pivot: front, above: back; equal values fall between), so the
+    loop has no data-dependent branch (a compare-and-swap partition mispredicts on about
+    half of the values of noise-like input)."""
+    n = a.shape[0]
+    cur, nxt = 0, n
+    for i in range(n):
+        work[i] = a[i]
+    m = n
+    while True:
+        x0, x1, x2 = work[cur], work[cur + m // 2], work[cur + m - 1]
+        pivot = max(min(x0, x1), min(max(x0, x1), x2))  # the median of the three
+        lo = nxt
+        hi = nxt + m - 1
+        for i in range(cur, cur + m):
+            v = work[i]
+            work[lo] = v
+            work[hi] = v
+            lo += v < pivot
+            hi -= v > pivot
+        n_lo = lo - nxt
+        n_hi = nxt + m - 1 - hi
+        if k < n_lo:
+            cur, m = nxt, n_lo
+        elif k >= m - n_hi:
+            k -= m - n_hi
+            cur, m = hi + 1, n_hi
+        else:
+            return pivot
+        nxt = 0 if cur >= n else n  # the next pass writes into the half not read
+
+
+@numba.njit(**_JIT)
+def median(a: Any, work: Any) -> float:
+    """``np.median(a)`` bit for bit (``a`` shape ``(n,)``, ``n >= 1``, no NaN; ``work`` shape
+    ``(2n,)``, scratch): the middle order statistic, or for even ``n`` the two middle ones
+    ``lo``, ``hi`` as ``(lo + hi) / 2`` (numpy's and numba's formula)."""
+    n = a.shape[0]
+    half = n >> 1
+    if n & 1:
+        return _kth_smallest(a, half, work)
+    lo = _kth_smallest(a, half - 1, work)
+    # The next order statistic: lo again if more than ``half - 1`` others are not above it,
+    # else the least value above it.
+    n_le = 0
+    hi = math.inf
+    for i in range(n):
+        v = a[i]
+        n_le += v <= lo
+        hi = min(hi, v) if v > lo else hi
+    if n_le > half:
+        hi = lo
+    return (lo + hi) / 2
+
+
+@numba.njit(**_JIT)
 def coarse_search(
     y: Any,
     b_first: int,
@@ -319,6 +378,7 @@ def coarse_search(
     short_v = np.empty(shortlist)
     short_d = np.empty(shortlist, dtype=np.int64)
     u_all = np.empty(n_hyp)
+    med_work = np.empty(2 * n_cells)
     peak_v = np.empty(max(peak_count, 1))
     peak_d = np.empty(max(peak_count, 1), dtype=np.int64)
     u_mask = uacc_ring.shape[1] - 1
@@ -426,7 +486,7 @@ def coarse_search(
             acc_out[i, d] = acc_row[d]
         s_out[i] = best
         d_out[i] = best_d
-        noise_out[i] = np.median(pw) / ln2 if b % noise_every == 0 else np.nan
+        noise_out[i] = median(pw, med_work) / ln2 if b % noise_every == 0 else np.nan
 
 
 @numba.njit(**_JIT)

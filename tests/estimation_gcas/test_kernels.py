@@ -14,6 +14,7 @@ from hil.estimation.kernels import (
     _codeword_row,
     first_possible_cells,
     masked_peak_cells,
+    median,
     peak_cells,
     peak_indices,
     second_peak_cells,
@@ -360,3 +361,22 @@ def test_building_a_receiver_does_not_call_the_map() -> None:
     assert calls == []
     rx.process(np.zeros(12_000))
     assert sum(calls) == 1000  # 12 000 input samples at R = 12
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 7, 64, 255, 256])
+def test_median_is_numpys_bit_for_bit(n: int) -> None:
+    """The coarse search's noise floor: chi-square-like powers, few distinct values (ties
+    across the middle), sorted and one-off-constant arrays, each equal to ``np.median``."""
+    rng = np.random.default_rng(n)
+    cases = [
+        rng.normal(size=n) ** 2 * 1e-3,
+        rng.integers(0, 4, size=n).astype(np.float64),
+        np.sort(rng.normal(size=n)),
+        np.sort(rng.normal(size=n))[::-1].copy(),
+        np.where(np.arange(n) == n // 3, -2.0, 1.5),
+    ]
+    for a in cases:
+        before = a.copy()
+        got = median(a, np.empty(2 * n))
+        assert got == np.median(a)
+        assert np.array_equal(a, before)  # the input is left as it was
