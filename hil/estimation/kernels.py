@@ -305,6 +305,34 @@ def median(a: Any, work: Any) -> float:
 
 
 @numba.njit(**_JIT)
+def runner_up_pairs(rows: Any, cols: Any) -> Any:
+    """``(d, d₂)`` per cell ``c`` (``d = cols[c]``; ``rows`` shape ``(C, D)``, ``cols`` shape
+    ``(C,)``): ``d₂`` the first of the largest values of row ``c`` more than one hypothesis
+    from ``d``, or ``d`` where that value is not finite (NaN anywhere there counts as not
+    finite: ``np.argmax`` takes the first NaN). Shape ``(C, 2)``, int64."""
+    n_cells, n_hyp = rows.shape
+    pairs = np.empty((n_cells, 2), dtype=np.int64)
+    for c in range(n_cells):
+        d = cols[c]
+        best = -1
+        top = -math.inf
+        bad = False
+        for e in range(n_hyp):
+            if abs(e - d) <= 1:
+                continue
+            v = rows[c, e]
+            if v != v:
+                bad = True
+                break
+            if best < 0 or v > top:
+                best = e
+                top = v
+        pairs[c, 0] = d
+        pairs[c, 1] = best if not bad and best >= 0 and math.isfinite(top) else d
+    return pairs
+
+
+@numba.njit(**_JIT)
 def coarse_search(
     y: Any,
     b_first: int,
@@ -667,6 +695,20 @@ def _anchored_powers(
 
 
 @numba.njit(**_JIT)
+def _order_down(v: Any, order: Any) -> None:
+    """Indices of ``v`` (shape ``(n,)``, no NaN) by decreasing value, equal values in index
+    order, into ``order`` (shape ``(n,)``): ``np.argsort(-v, kind="stable")`` without its two
+    arrays. Insertion sort: ``n`` is a fine window's width (tens)."""
+    for t in range(v.shape[0]):
+        x = v[t]
+        j = t
+        while j > 0 and v[order[j - 1]] < x:
+            order[j] = order[j - 1]
+            j -= 1
+        order[j] = t
+
+
+@numba.njit(**_JIT)
 def codeword_sums(
     y: Any,
     origin: int,
@@ -725,6 +767,7 @@ def codeword_sums(
     late = np.zeros((n_terms, width), dtype=np.bool_)
     bound = np.empty(width)
     done = np.empty(width, dtype=np.bool_)
+    order = np.empty(width, dtype=np.int64)
     vals = np.empty((n_terms, n_tones))
     for c in range(n_cand):
         best_c = -math.inf
@@ -790,7 +833,9 @@ def codeword_sums(
             done[:] = False
             best_i = -math.inf
             i_pk = -1
-            for t in np.argsort(-bound, kind="mergesort"):
+            _order_down(bound, order)
+            for rank in range(width):
+                t = int(order[rank])
                 if prune and (bound[t] * hyp_w[d] < best_c or bound[t] < best_i):
                     break
                 v = _codeword_row(c, i, t, half, d, centre, lags, term_tone, cache_p, mask,

@@ -12,11 +12,13 @@ from hil.estimation.gcas import NO_SAMPLE, GcasReceiver
 from hil.estimation.gcas.search_two_stage import TwoStageSearch
 from hil.estimation.kernels import (
     _codeword_row,
+    _order_down,
     first_possible_cells,
     masked_peak_cells,
     median,
     peak_cells,
     peak_indices,
+    runner_up_pairs,
     second_peak_cells,
 )
 
@@ -380,3 +382,34 @@ def test_median_is_numpys_bit_for_bit(n: int) -> None:
         got = median(a, np.empty(2 * n))
         assert got == np.median(a)
         assert np.array_equal(a, before)  # the input is left as it was
+
+
+def test_runner_up_pairs_are_the_masked_argmax() -> None:
+    # (d, d₂): d₂ the first largest value more than one hypothesis from d, d where that value
+    # is not finite; rows of few levels (ties), ±inf and a NaN.
+    rng = np.random.default_rng(30)
+    for trial in range(300):
+        n, n_hyp = int(rng.integers(0, 6)), int(rng.integers(1, 12))
+        if trial % 2:
+            rows = rng.choice([-np.inf, 0.0, 1.0, 2.0, np.inf], size=(n, n_hyp))
+        else:
+            rows = rng.normal(size=(n, n_hyp))
+        if trial % 7 == 0 and n:
+            rows[rng.integers(0, n), rng.integers(0, n_hyp)] = np.nan
+        cols = rng.integers(0, n_hyp, size=n)
+        far = np.abs(np.arange(n_hyp)[None, :] - cols[:, None]) > 1
+        masked = np.where(far, rows, -np.inf)
+        second = np.argmax(masked, axis=1)
+        found = np.isfinite(masked[np.arange(n), second])
+        want = np.stack((cols, np.where(found, second, cols)), axis=1)
+        assert np.array_equal(runner_up_pairs(rows, cols), want.reshape(n, 2))
+
+
+def test_rows_in_decreasing_bound_are_the_stable_argsort() -> None:
+    rng = np.random.default_rng(31)
+    for trial in range(300):
+        n = int(rng.integers(1, 40))
+        v = rng.integers(0, 4, n).astype(np.float64) if trial % 2 else rng.normal(size=n)
+        order = np.empty(n, dtype=np.int64)
+        _order_down(v, order)
+        assert np.array_equal(order, np.argsort(-v, kind="stable"))
