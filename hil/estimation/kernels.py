@@ -162,12 +162,60 @@ def peak_cells(
     rows = np.empty((hi - lo) * s.shape[1] if hi > lo else 0, dtype=np.int64)
     cols = np.empty_like(rows)
     count = 0
+    if half_cols >= s.shape[1] - 1 and hi > lo:
+        return _full_width_peak_cells(s, half_rows, lo, hi, leak, rows, cols)
     for i in range(lo, hi):
         for d in range(s.shape[1]):
             if _cell_peak_at(s, i, d, half_rows, half_cols, s.shape[0], leak):
                 rows[count] = i
                 cols[count] = d
                 count += 1
+    return rows[:count], cols[:count]
+
+
+@numba.njit(**_JIT)
+def _full_width_peak_cells(
+    s: Any, half_rows: int, lo: int, hi: int, leak: Any, rows: Any, cols: Any
+) -> Any:  # fmt: skip
+    """:func:`peak_cells` where the window spans every column: a cell is then the first
+    maximum of its own row (the first of its row's largest values; NaN and −inf never one)
+    greater than every value of the ``half_rows`` rows before it and not smaller than any of
+    those after it, the test of :func:`_cell_peak_at` read from each row's maximum (each row's
+    values are compared once instead of once per finite cell of the rows around it)."""
+    n, n_cols = s.shape
+    r_lo = max(0, lo - half_rows)
+    r_hi = min(n, hi + half_rows)
+    top = np.empty(r_hi - r_lo)
+    first = np.empty(r_hi - r_lo, dtype=np.int64)
+    for j in range(r_lo, r_hi):
+        m = -math.inf
+        at = -1
+        for e in range(n_cols):
+            if s[j, e] > m:  # NaN compares false: it fails no test in _cell_peak_at either
+                m = s[j, e]
+                at = e
+        top[j - r_lo] = m
+        first[j - r_lo] = at
+    count = 0
+    for i in range(lo, hi):
+        d = first[i - r_lo]
+        if d < 0:
+            continue
+        v = top[i - r_lo]
+        ok = True
+        for j in range(max(0, i - half_rows), i):
+            if top[j - r_lo] >= v:
+                ok = False
+                break
+        if ok:
+            for j in range(i + 1, min(n, i + half_rows + 1)):
+                if top[j - r_lo] > v:
+                    ok = False
+                    break
+        if ok and _cell_peak_at(s, i, d, half_rows, n_cols, n, leak):
+            rows[count] = i
+            cols[count] = d
+            count += 1
     return rows[:count], cols[:count]
 
 

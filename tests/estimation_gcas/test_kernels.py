@@ -413,3 +413,23 @@ def test_rows_in_decreasing_bound_are_the_stable_argsort() -> None:
         order = np.empty(n, dtype=np.int64)
         _order_down(v, order)
         assert np.array_equal(order, np.argsort(-v, kind="stable"))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_peak_cells_over_every_column_equal_the_written_out_rule(seed: int) -> None:
+    # The second search's candidates (StrongestEcho): the window spans all 64 hypotheses,
+    # the row maxima shortcut; shortlisted cells among −inf, ties across rows, no leak.
+    rng = np.random.default_rng(seed)
+    s = np.full((40, 64), -np.inf)
+    for i in range(40):
+        cols = rng.choice(64, size=8, replace=False)
+        s[i, cols] = rng.integers(0, 6, size=8).astype(np.float64)
+    leak = np.zeros(64)
+    got_rows, got_cols = peak_cells(s, 5, 64, 0, 40, leak)
+    want = _cells_reference(s, 5, 64, leak)
+    assert list(zip(got_rows.tolist(), got_cols.tolist(), strict=True)) == want
+    assert len(want) > 0
+    lo_rows, lo_cols = peak_cells(s, 5, 63, 7, 31, leak)
+    assert list(zip(lo_rows.tolist(), lo_cols.tolist(), strict=True)) == [
+        (i, d) for i, d in want if 7 <= i < 31
+    ]
