@@ -44,7 +44,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from hil.errors import ConfigError
 from hil.estimation.bessel_i0 import bessel_i0
-from hil.estimation.kernels import fir_decimate
+from hil.estimation.kernels import mix_down
 
 ComplexArray = NDArray[np.complex128]
 FloatArray = NDArray[np.float64]
@@ -225,20 +225,16 @@ class ComplexBaseband:
         self._next_in = end
         if last < first:
             return np.zeros(0, dtype=np.complex128)
-        n = np.arange(first, last + 1, dtype=np.int64)
         # Window for output n ends at absolute input index nR: buf position nR − start + T − 1,
         # so it starts at nR − start.
         lo = first * self.decimation - start
-        acc_re = np.empty(n.shape[0])
-        acc_im = np.empty(n.shape[0])
-        # Compiled dot products in a fixed order per output: chunking cannot change a bit.
-        fir_decimate(buf, lo, n.shape[0], self.decimation, self._g_re, self._g_im, acc_re, acc_im)
-        phase = np.mod(n.astype(np.float64) * self._cycles_per_output, 1.0)
-        rot = np.exp(-2j * np.pi * phase)
-        # The rotation as real products and sums, each rounded once (IEEE): NumPy's complex
+        # Compiled dot products in a fixed order per output, and the rotation as real products
+        # and sums each rounded once (IEEE): chunking cannot change a bit. (NumPy's complex
         # multiply rounds differently in its in-place loop, which it takes by itself for a
-        # temporary over 256 KiB, so an output's last bit would depend on the block's size.
-        out = np.empty(n.shape[0], dtype=np.complex128)
-        out.real = rot.real * acc_re - rot.imag * acc_im
-        out.imag = rot.real * acc_im + rot.imag * acc_re
+        # temporary over 256 KiB, so an output's last bit would depend on the block's size.)
+        out = np.empty(last + 1 - first, dtype=np.complex128)
+        mix_down(
+            buf, lo, out.shape[0], self.decimation, self._g_re, self._g_im, first,
+            self._cycles_per_output, out,
+        )  # fmt: skip
         return out

@@ -626,6 +626,8 @@ class FirstArrivalReadout:
         self._lead = 2 * self.boxcar
         self.history += self._pre + self._post + self._lead
         self._offsets_ext = np.arange(-self._pre - self._lead, self._post)
+        #: The sample counts 0 .. w a window's geometric sums are taken over, (1, w + 1).
+        self._window_counts = np.arange(self.boxcar + 1)[None, :]
         #: :attr:`history` without the caller's decision lag (:meth:`allow_lag`).
         self._own_history = self.history
         self._ring = RowBuffer(self.history, (), np.float64)
@@ -872,7 +874,7 @@ class FirstArrivalReadout:
         off = (
             len(near) >= STANDING_READINGS
             and max(near) - min(near) <= 2.0 * tol
-            and abs(delay_s - float(np.median(near))) > TRACK_JUMP * tol
+            and abs(delay_s - _median(near)) > TRACK_JUMP * tol
         )
         self._kept = kept if off else [*kept, (int(hop_index), float(delay_s))]
         return off
@@ -1336,15 +1338,20 @@ class FirstArrivalReadout:
         """The ramp model's per-boundary tables of one detection (:class:`_RampTables`) from
         each boundary's predicted switch ``frac`` (samples past its sample), beat ``beat_hz``
         (``α(f_prev − f_next)``, Hz) and phase jump ``jump`` (rad), each shape ``(M,)``."""
-        w = self.boxcar
+        k = self._window_counts  # 0 .. w, (1, w + 1)
         theta = 2.0 * np.pi * beat_hz / self.fs_hz  # (M,)
         ratio = np.exp(1j * theta)
         # Σ_{i=a}^{a+k−1} e^{jθ(i−o)} = e^{jθa} e^{−jθo} (1 − r^k)/(1 − r), r = e^{jθ}
         # (k terms where θ = 0): the last factor for every k = 0 .. w, once per detection.
-        steady = np.abs(1.0 - ratio) < 1e-12
-        powers = ratio[:, None] ** np.arange(w + 1)[None, :]  # (M, w + 1)
-        denom = np.where(steady, 1.0, 1.0 - ratio)[:, None]
-        geometric = np.where(steady[:, None], np.arange(w + 1)[None, :], (1.0 - powers) / denom)
+        one_minus = 1.0 - ratio
+        steady = np.abs(one_minus) < 1e-12
+        geometric = ratio[:, None] ** k  # r^k, (M, w + 1)
+        np.subtract(1.0, geometric, out=geometric)  # 1 − r^k
+        if not steady.any():  # no θ = 0 (the usual detection): the quotient in place
+            geometric /= one_minus[:, None]
+            return _RampTables(frac, theta, jump, geometric)
+        denom = np.where(steady, 1.0, one_minus)[:, None]
+        geometric = np.where(steady[:, None], k, geometric / denom)
         return _RampTables(frac, theta, jump, np.asarray(geometric, dtype=np.complex128))
 
     def _fit_ramp(

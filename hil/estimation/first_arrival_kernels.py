@@ -1,5 +1,6 @@
-"""Compiled loops of the first-arrival readout (numba, ``nogil``): the next-tone channel and
-the ramp model's residuals (:mod:`hil.estimation.first_arrival`).
+"""Compiled loops of the first-arrival readout (numba, ``nogil``): the next-tone channel, the
+ramp model's residuals, the direct path's Doppler score (:mod:`hil.estimation.first_arrival`)
+and the late taps' table (:mod:`hil.estimation.late_taps`).
 
 Each kernel computes what the readout's NumPy expressions compute, with the same bits: every
 output is the same sequence of floating-point operations NumPy's loops perform on x86-64 with
@@ -325,6 +326,29 @@ def doppler_score(b: Any, ft: Any, q: Any, cols: Any, col_start: Any, out: Any) 
         out[g] = pairwise_sum(power, 0, k_count)
 
 
+@numba.njit(**_JIT)
+def late_tap_table(e_cur: Any, e_prev: Any, at_switch: Any, taps: Any) -> None:
+    """The late taps' table of :func:`hil.estimation.late_taps.direct_amplitudes`: each tap
+    ``g`` of each boundary ``m`` sounds ``e_prev[m, i] · at_switch[m, g]`` before its switch
+    at sample ``g + 1`` and ``e_cur[m, i]`` from it on, into ``taps[m, g, i]``.
+
+    ``e_cur``, ``e_prev`` (shape ``(M, N)``, complex): the steady tones; ``at_switch`` (shape
+    ``(M, G)``, complex): each tap's phase at its switch; ``taps`` (shape ``(M, G, N)``,
+    complex). NumPy's ``np.where(i >= g + 1, e_cur, e_prev · at_switch)`` without its
+    ``(M, G, N)`` product and mask: the product is NumPy's fused complex multiply."""
+    m_count, g_count, n = taps.shape
+    for m in range(m_count):
+        for g in range(g_count):
+            ar = at_switch[m, g].real
+            ai = at_switch[m, g].imag
+            for i in range(min(g + 1, n)):
+                br = e_prev[m, i].real
+                bi = e_prev[m, i].imag
+                taps[m, g, i] = complex(_fma(br, ar, -(bi * ai)), _fma(br, ai, bi * ar))
+            for i in range(g + 1, n):
+                taps[m, g, i] = e_cur[m, i]
+
+
 def warm_up() -> None:
     """Call every kernel once on a few zeros, with the argument types the readout passes:
     the first call in a process loads the machine code from numba's cache (or, in a fresh
@@ -345,3 +369,5 @@ def warm_up() -> None:
     cols = np.zeros(1, dtype=np.int64)
     starts = np.array([0, 1], dtype=np.int64)
     doppler_score(np.zeros(1), np.zeros(1), np.zeros(1, dtype=np.complex128), cols, starts, out)
+    e = np.zeros((1, 3), dtype=np.complex128)
+    late_tap_table(e, e, np.zeros((1, 2), dtype=np.complex128), np.zeros((1, 2, 3), np.complex128))

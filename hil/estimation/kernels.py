@@ -70,6 +70,28 @@ def fir_decimate(
 
 
 @numba.njit(**_JIT)
+def mix_down(
+    buf: Any, lo: int, n_out: int, r: int, g_re: Any, g_im: Any, first: int,
+    cycles_per_output: float, out: Any,
+) -> None:  # fmt: skip
+    """:func:`fir_decimate` then the output rotation of :mod:`hil.estimation.baseband`:
+    ``out[n] = e^{−j2π frac((first + n)·c)} · acc[n]`` (``c = cycles_per_output``; ``out``
+    complex, shape ``(n_out,)``), the product as real products and sums each rounded once.
+    The phase is ``−2π·frac`` (the product NumPy's ``-2j * np.pi * phase`` gives as the
+    imaginary part, its real part 0) and the phasor its cosine and sine (what ``np.exp`` of
+    that imaginary number gives: the C library's complex exponential, ``e^0`` times them):
+    the same bits as the NumPy formulation, checked over 10⁷ phases."""
+    acc_re = np.empty(n_out)
+    acc_im = np.empty(n_out)
+    fir_decimate(buf, lo, n_out, r, g_re, g_im, acc_re, acc_im)
+    for n in range(n_out):
+        y = -2.0 * math.pi * ((float(first + n) * cycles_per_output) % 1.0)
+        c = math.cos(y)
+        s = math.sin(y)
+        out[n] = complex(c * acc_re[n] - s * acc_im[n], c * acc_im[n] + s * acc_re[n])
+
+
+@numba.njit(**_JIT)
 def _peak_at(s: Any, i: int, half_width: int, known: int) -> bool:
     """Whether ``s[i]`` is finite, greater than every sample in the ``half_width`` before it
     and not smaller than any in the ``half_width`` after it that is below index ``known``."""
@@ -140,12 +162,60 @@ def peak_cells(
     rows = np.empty((hi - lo) * s.shape[1] if hi > lo else 0, dtype=np.int64)
     cols = np.empty_like(rows)
     count = 0
+    if half_cols >= s.shape[1] - 1 and hi > lo:
+        return _full_width_peak_cells(s, half_rows, lo, hi, leak, rows, cols)
     for i in range(lo, hi):
         for d in range(s.shape[1]):
             if _cell_peak_at(s, i, d, half_rows, half_cols, s.shape[0], leak):
                 rows[count] = i
                 cols[count] = d
                 count += 1
+    return rows[:count], cols[:count]
+
+
+@numba.njit(**_JIT)
+def _full_width_peak_cells(
+    s: Any, half_rows: int, lo: int, hi: int, leak: Any, rows: Any, cols: Any
+) -> Any:  # fmt: skip
+    """:func:`peak_cells` where the window spans every column: a cell is then the first
+    maximum of its own row (the first of its row's largest values; NaN and −inf never one)
+    greater than every value of the ``half_rows`` rows before it and not smaller than any of
+    those after it, the test of :func:`_cell_peak_at` read from each row's maximum (each row's
+    values are compared once instead of once per finite cell of the rows around it)."""
+    n, n_cols = s.shape
+    r_lo = max(0, lo - half_rows)
+    r_hi = min(n, hi + half_rows)
+    top = np.empty(r_hi - r_lo)
+    first = np.empty(r_hi - r_lo, dtype=np.int64)
+    for j in range(r_lo, r_hi):
+        m = -math.inf
+        at = -1
+        for e in range(n_cols):
+            if s[j, e] > m:  # NaN compares false: it fails no test in _cell_peak_at either
+                m = s[j, e]
+                at = e
+        top[j - r_lo] = m
+        first[j - r_lo] = at
+    count = 0
+    for i in range(lo, hi):
+        d = first[i - r_lo]
+        if d < 0:
+            continue
+        v = top[i - r_lo]
+        ok = True
+        for j in range(max(0, i - half_rows), i):
+            if top[j - r_lo] >= v:
+                ok = False
+                break
+        if ok:
+            for j in range(i + 1, min(n, i + half_rows + 1)):
+                if top[j - r_lo] > v:
+                    ok = False
+                    break
+        if ok and _cell_peak_at(s, i, d, half_rows, n_cols, n, leak):
+            rows[count] = i
+            cols[count] = d
+            count += 1
     return rows[:count], cols[:count]
 
 
@@ -246,6 +316,93 @@ def first_possible_cells(
 
 
 @numba.njit(**_JIT)
+def _kth_smallest(a: Any, k: int, work: Any) -> float:
+    """The ``k``-th smallest value of ``a`` (0-based; shape ``(n,)``, no NaN; ``work`` shape
+    ``(2n,)``, scratch). Quickselect with a branch-free out-of-place partition: each pass
+    writes every value at both ends of the other half of ``work`` and moves the end it
+    belongs to (below the pivot: front, above: back; equal values fall between), so the
+    loop has no data-dependent branch (a compare-and-swap partition mispredicts on about
+    half of the values of noise-like input)."""
+    n = a.shape[0]
+    cur, nxt = 0, n
+    for i in range(n):
+        work[i] = a[i]
+    m = n
+    while True:
+        x0, x1, x2 = work[cur], work[cur + m // 2], work[cur + m - 1]
+        pivot = max(min(x0, x1), min(max(x0, x1), x2))  # the median of the three
+        lo = nxt
+        hi = nxt + m - 1
+        for i in range(cur, cur + m):
+            v = work[i]
+            work[lo] = v
+            work[hi] = v
+            lo += v < pivot
+            hi -= v > pivot
+        n_lo = lo - nxt
+        n_hi = nxt + m - 1 - hi
+        if k < n_lo:
+            cur, m = nxt, n_lo
+        elif k >= m - n_hi:
+            k -= m - n_hi
+            cur, m = hi + 1, n_hi
+        else:
+            return pivot
+        nxt = 0 if cur >= n else n  # the next pass writes into the half not read
+
+
+@numba.njit(**_JIT)
+def median(a: Any, work: Any) -> float:
+    """``np.median(a)`` bit for bit (``a`` shape ``(n,)``, ``n >= 1``, no NaN; ``work`` shape
+    ``(2n,)``, scratch): the middle order statistic, or for even ``n`` the two middle ones
+    ``lo``, ``hi`` as ``(lo + hi) / 2`` (numpy's and numba's formula)."""
+    n = a.shape[0]
+    half = n >> 1
+    if n & 1:
+        return _kth_smallest(a, half, work)
+    lo = _kth_smallest(a, half - 1, work)
+    # The next order statistic: lo again if more than ``half - 1`` others are not above it,
+    # else the least value above it.
+    n_le = 0
+    hi = math.inf
+    for i in range(n):
+        v = a[i]
+        n_le += v <= lo
+        hi = min(hi, v) if v > lo else hi
+    if n_le > half:
+        hi = lo
+    return (lo + hi) / 2
+
+
+@numba.njit(**_JIT)
+def runner_up_pairs(rows: Any, cols: Any) -> Any:
+    """``(d, d₂)`` per cell ``c`` (``d = cols[c]``; ``rows`` shape ``(C, D)``, ``cols`` shape
+    ``(C,)``): ``d₂`` the first of the largest values of row ``c`` more than one hypothesis
+    from ``d``, or ``d`` where that value is not finite (NaN anywhere there counts as not
+    finite: ``np.argmax`` takes the first NaN). Shape ``(C, 2)``, int64."""
+    n_cells, n_hyp = rows.shape
+    pairs = np.empty((n_cells, 2), dtype=np.int64)
+    for c in range(n_cells):
+        d = cols[c]
+        best = -1
+        top = -math.inf
+        bad = False
+        for e in range(n_hyp):
+            if abs(e - d) <= 1:
+                continue
+            v = rows[c, e]
+            if v != v:
+                bad = True
+                break
+            if best < 0 or v > top:
+                best = e
+                top = v
+        pairs[c, 0] = d
+        pairs[c, 1] = best if not bad and best >= 0 and math.isfinite(top) else d
+    return pairs
+
+
+@numba.njit(**_JIT)
 def coarse_search(
     y: Any,
     b_first: int,
@@ -319,6 +476,7 @@ def coarse_search(
     short_v = np.empty(shortlist)
     short_d = np.empty(shortlist, dtype=np.int64)
     u_all = np.empty(n_hyp)
+    med_work = np.empty(2 * n_cells)
     peak_v = np.empty(max(peak_count, 1))
     peak_d = np.empty(max(peak_count, 1), dtype=np.int64)
     u_mask = uacc_ring.shape[1] - 1
@@ -426,7 +584,7 @@ def coarse_search(
             acc_out[i, d] = acc_row[d]
         s_out[i] = best
         d_out[i] = best_d
-        noise_out[i] = np.median(pw) / ln2 if b % noise_every == 0 else np.nan
+        noise_out[i] = median(pw, med_work) / ln2 if b % noise_every == 0 else np.nan
 
 
 @numba.njit(**_JIT)
@@ -607,6 +765,20 @@ def _anchored_powers(
 
 
 @numba.njit(**_JIT)
+def _order_down(v: Any, order: Any) -> None:
+    """Indices of ``v`` (shape ``(n,)``, no NaN) by decreasing value, equal values in index
+    order, into ``order`` (shape ``(n,)``): ``np.argsort(-v, kind="stable")`` without its two
+    arrays. Insertion sort: ``n`` is a fine window's width (tens)."""
+    for t in range(v.shape[0]):
+        x = v[t]
+        j = t
+        while j > 0 and v[order[j - 1]] < x:
+            order[j] = order[j - 1]
+            j -= 1
+        order[j] = t
+
+
+@numba.njit(**_JIT)
 def codeword_sums(
     y: Any,
     origin: int,
@@ -665,6 +837,7 @@ def codeword_sums(
     late = np.zeros((n_terms, width), dtype=np.bool_)
     bound = np.empty(width)
     done = np.empty(width, dtype=np.bool_)
+    order = np.empty(width, dtype=np.int64)
     vals = np.empty((n_terms, n_tones))
     for c in range(n_cand):
         best_c = -math.inf
@@ -730,7 +903,9 @@ def codeword_sums(
             done[:] = False
             best_i = -math.inf
             i_pk = -1
-            for t in np.argsort(-bound, kind="mergesort"):
+            _order_down(bound, order)
+            for rank in range(width):
+                t = int(order[rank])
                 if prune and (bound[t] * hyp_w[d] < best_c or bound[t] < best_i):
                     break
                 v = _codeword_row(c, i, t, half, d, centre, lags, term_tone, cache_p, mask,

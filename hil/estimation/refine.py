@@ -111,6 +111,7 @@ from hil.estimation.refine_kernels import (
     RECENTRE,
     assign_slots,
     candidate_sums,
+    ended_gain,
     fit_quality,
     grid_sums,
     maximise,
@@ -789,6 +790,10 @@ class CoherentRefiner:
         self._amplitude_near(t_b, 1.0, hop, around=True)
         self.correlation(t_b, 1.0, hop, np.array([t_b]), np.array([1.0]))
         echo_samples(np.zeros((5, 1), dtype=np.complex128), 0, 1, self.fs_hz)
+        # :meth:`_ended` runs on echoes only, which silence has none of.
+        ended_gain(
+            np.zeros(self.m_hops, np.complex128), np.zeros(self.m_hops), 0.0, 1.0, 1.0
+        )  # fmt: skip
         self.reset(0)
 
     def push(self, x: NDArray[np.float64], first_index: int) -> None:
@@ -1988,14 +1993,11 @@ class CoherentRefiner:
             *self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s, *b, known
         )  # fmt: skip
         h = b[6][0]
-        c = np.cumsum(h)
-        fitted = (c.real * c.real + c.imag * c.imag) * word.inv_energy
         # G_k > limit, with the residual RSS_k = total − lead_k ≥ 0 (Cauchy–Schwarz); lead_k
-        # = |Σ H|²/Σ a² of the first M − k hops, k = M − 1 … 1.
+        # = |Σ H|²/Σ a² of the first M − k hops, k = M − 1 … 1 (compiled: ended_gain). The
+        # total stays NumPy's dot: BLAS orders a long dot's additions its own way.
         total = float(np.dot(h.real * h.real + h.imag * h.imag, word.inv_amp2))
-        lead = fitted[:-1]
-        gain = self._end_m * (lead - fitted[-1]) - self._end_limit * (total - lead)
-        return bool(np.max(gain) > 0.0)
+        return bool(ended_gain(h, word.inv_energy, total, self._end_m, self._end_limit))
 
     def _one_sided(
         self, fit: Refinement, word: _Codeword, hop_ids: NDArray[np.int64],

@@ -811,6 +811,33 @@ def maximise(
 
 
 @numba.njit(**_JIT)
+def ended_gain(h: Any, inv_energy: Any, total: float, end_m: float, end_limit: float) -> bool:
+    """:meth:`hil.estimation.refine.CoherentRefiner._ended`'s F test from the hops' terms
+    ``h`` (complex, shape ``(M,)``), ``inv_energy`` (``1/Σ_{j≤i} a_j²``, shape ``(M,)``) and
+    ``total = Σ |h_i|²/a_i²``: with ``c = cumsum(h)`` and ``F_k = |c_k|² inv_energy_k``,
+    whether ``max_k end_m (F_k − F_{M−1}) − end_limit (total − F_k)`` over ``k < M − 1`` is
+    above 0 (False where a gain is NaN, as ``np.max`` then is). The same operations in the
+    same order as the NumPy expressions (a running complex sum, then elementwise), so the
+    same bits."""
+    m_hops = h.shape[0]
+    fitted = np.empty(m_hops)
+    c = h[0]
+    fitted[0] = (c.real * c.real + c.imag * c.imag) * inv_energy[0]
+    for i in range(1, m_hops):
+        c = c + h[i]
+        fitted[i] = (c.real * c.real + c.imag * c.imag) * inv_energy[i]
+    last = fitted[m_hops - 1]
+    above = False
+    for i in range(m_hops - 1):
+        lead = fitted[i]
+        gain = end_m * (lead - last) - end_limit * (total - lead)
+        if gain != gain:
+            return False
+        above = above or gain > 0.0
+    return above
+
+
+@numba.njit(**_JIT)
 def fit_quality(
     prefix: Any, energy: Any, first: Any, tail: Any, alpha0: Any, centre: Any, slots: Any,
     k: Any, f: Any, dt_lo: Any, dt_hi: Any, amp2: Any, fs: float, hop_s: float,

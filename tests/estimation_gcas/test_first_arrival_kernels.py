@@ -172,3 +172,24 @@ def test_doppler_score_is_the_numpy_expressions(seed: int) -> None:
     b = np.ascontiguousarray((-2j * np.pi * d_alpha).imag)
     k.doppler_score(b, np.ascontiguousarray(f * t_m), q, order, starts, got)
     assert got.tobytes() == want.tobytes()
+
+
+@needs_fma
+@pytest.mark.parametrize(("seed", "lead", "n"), [(1, 1, 3), (2, 40, 61), (3, 200, 201), (4, 5, 4)])
+def test_late_tap_table_is_the_numpy_where(seed: int, lead: int, n: int) -> None:
+    """The late taps' table (``hil.estimation.late_taps``) as NumPy builds it: each tap the
+    previous tone times its phase at the switch before sample ``g + 1``, the current tone
+    from it on (a tap switching past the stretch's end, ``lead >= n``, too)."""
+    rng = np.random.default_rng(seed)
+    m = 3
+    ii = np.arange(n, dtype=np.float64)[None, None, :]
+    w_cur, w_prev = rng.uniform(-1.0, 1.0, (2, m))[:, :, None, None]
+    grid = np.arange(1, lead + 1, dtype=np.float64)[None, :, None]
+    at_switch = np.exp(1j * ((w_cur - w_prev) * grid - rng.uniform(-np.pi, np.pi, (m, 1, 1))))
+    want = np.where(ii >= grid, np.exp(1j * w_cur * ii), np.exp(1j * w_prev * ii) * at_switch)
+    got = np.empty((m, lead, n), dtype=np.complex128)
+    k.late_tap_table(
+        np.exp(1j * w_cur * ii)[:, 0, :], np.exp(1j * w_prev * ii)[:, 0, :],
+        np.ascontiguousarray(at_switch[:, :, 0]), got,
+    )  # fmt: skip
+    assert got.tobytes() == want.tobytes()

@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from hil.errors import ConfigError
 from hil.estimation.baseband import ComplexBaseband, kaiser_lowpass, kaiser_order
 from hil.estimation.bessel_i0 import bessel_i0
+from hil.estimation.kernels import fir_decimate
 from hil.estimation.unit_correlators import UnitCorrelatorBank
 
 
@@ -180,3 +181,25 @@ def test_a_pfa_whose_per_test_share_underflows_is_refused() -> None:
 
     with pytest.raises(ConfigError, match=r"pfa = 5e-324 is not allowed: must be > 4352 x 5e-324"):
         lambda_for_pfa(5e-324, 10, 17, False)
+
+
+def test_the_compiled_rotation_is_the_numpy_formulation_bit_for_bit() -> None:
+    # ComplexBaseband's output: the decimated complex-tap FIR rotated by
+    # exp(−j2π frac(n·f_c·R/fs)) with real products and sums each rounded once, as NumPy
+    # writes it; 0.2 s of noise at att's rate, from an absolute index far from 0.
+    bb = ComplexBaseband(100_000.0, 30_000.0, decimation=12, passband_hz=3000.0)
+    start = 987_654_321
+    bb.reset(start)
+    x = np.random.default_rng(27).normal(size=20_000)
+    got = bb.process(x)
+    taps = bb.n_taps
+    buf = np.concatenate((np.zeros(taps - 1), x))
+    first = -(-start // 12)
+    n = np.arange(first, (start + x.size - 1) // 12 + 1, dtype=np.int64)
+    acc_re, acc_im = np.empty(n.size), np.empty(n.size)
+    fir_decimate(buf, first * 12 - start, n.size, 12, bb._g_re, bb._g_im, acc_re, acc_im)
+    rot = np.exp(-2j * np.pi * np.mod(n.astype(np.float64) * bb._cycles_per_output, 1.0))
+    want = np.empty(n.size, dtype=np.complex128)
+    want.real = rot.real * acc_re - rot.imag * acc_im
+    want.imag = rot.real * acc_im + rot.imag * acc_re
+    assert got.shape == want.shape and np.array_equal(got.view(np.float64), want.view(np.float64))

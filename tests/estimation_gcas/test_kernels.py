@@ -12,10 +12,13 @@ from hil.estimation.gcas import NO_SAMPLE, GcasReceiver
 from hil.estimation.gcas.search_two_stage import TwoStageSearch
 from hil.estimation.kernels import (
     _codeword_row,
+    _order_down,
     first_possible_cells,
     masked_peak_cells,
+    median,
     peak_cells,
     peak_indices,
+    runner_up_pairs,
     second_peak_cells,
 )
 
@@ -360,3 +363,73 @@ def test_building_a_receiver_does_not_call_the_map() -> None:
     assert calls == []
     rx.process(np.zeros(12_000))
     assert sum(calls) == 1000  # 12 000 input samples at R = 12
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 7, 64, 255, 256])
+def test_median_is_numpys_bit_for_bit(n: int) -> None:
+    """The coarse search's noise floor: chi-square-like powers, few distinct values (ties
+    across the middle), sorted and one-off-constant arrays, each equal to ``np.median``."""
+    rng = np.random.default_rng(n)
+    cases = [
+        rng.normal(size=n) ** 2 * 1e-3,
+        rng.integers(0, 4, size=n).astype(np.float64),
+        np.sort(rng.normal(size=n)),
+        np.sort(rng.normal(size=n))[::-1].copy(),
+        np.where(np.arange(n) == n // 3, -2.0, 1.5),
+    ]
+    for a in cases:
+        before = a.copy()
+        got = median(a, np.empty(2 * n))
+        assert got == np.median(a)
+        assert np.array_equal(a, before)  # the input is left as it was
+
+
+def test_runner_up_pairs_are_the_masked_argmax() -> None:
+    # (d, d₂): d₂ the first largest value more than one hypothesis from d, d where that value
+    # is not finite; rows of few levels (ties), ±inf and a NaN.
+    rng = np.random.default_rng(30)
+    for trial in range(300):
+        n, n_hyp = int(rng.integers(0, 6)), int(rng.integers(1, 12))
+        if trial % 2:
+            rows = rng.choice([-np.inf, 0.0, 1.0, 2.0, np.inf], size=(n, n_hyp))
+        else:
+            rows = rng.normal(size=(n, n_hyp))
+        if trial % 7 == 0 and n:
+            rows[rng.integers(0, n), rng.integers(0, n_hyp)] = np.nan
+        cols = rng.integers(0, n_hyp, size=n)
+        far = np.abs(np.arange(n_hyp)[None, :] - cols[:, None]) > 1
+        masked = np.where(far, rows, -np.inf)
+        second = np.argmax(masked, axis=1)
+        found = np.isfinite(masked[np.arange(n), second])
+        want = np.stack((cols, np.where(found, second, cols)), axis=1)
+        assert np.array_equal(runner_up_pairs(rows, cols), want.reshape(n, 2))
+
+
+def test_rows_in_decreasing_bound_are_the_stable_argsort() -> None:
+    rng = np.random.default_rng(31)
+    for trial in range(300):
+        n = int(rng.integers(1, 40))
+        v = rng.integers(0, 4, n).astype(np.float64) if trial % 2 else rng.normal(size=n)
+        order = np.empty(n, dtype=np.int64)
+        _order_down(v, order)
+        assert np.array_equal(order, np.argsort(-v, kind="stable"))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_peak_cells_over_every_column_equal_the_written_out_rule(seed: int) -> None:
+    # The second search's candidates (StrongestEcho): the window spans all 64 hypotheses,
+    # the row maxima shortcut; shortlisted cells among −inf, ties across rows, no leak.
+    rng = np.random.default_rng(seed)
+    s = np.full((40, 64), -np.inf)
+    for i in range(40):
+        cols = rng.choice(64, size=8, replace=False)
+        s[i, cols] = rng.integers(0, 6, size=8).astype(np.float64)
+    leak = np.zeros(64)
+    got_rows, got_cols = peak_cells(s, 5, 64, 0, 40, leak)
+    want = _cells_reference(s, 5, 64, leak)
+    assert list(zip(got_rows.tolist(), got_cols.tolist(), strict=True)) == want
+    assert len(want) > 0
+    lo_rows, lo_cols = peak_cells(s, 5, 63, 7, 31, leak)
+    assert list(zip(lo_rows.tolist(), lo_cols.tolist(), strict=True)) == [
+        (i, d) for i, d in want if 7 <= i < 31
+    ]

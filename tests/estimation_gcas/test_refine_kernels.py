@@ -305,3 +305,30 @@ def test_a_searchs_candidate_is_the_candidates_own_c_bit_for_bit() -> None:
             assert np.complex128(alone).tobytes() == np.complex128(full).tobytes()
             compared += abs(full) > 0
     assert compared == 2 * n_t
+
+
+def test_the_ended_test_is_the_numpy_expression_bit_for_bit() -> None:
+    # CoherentRefiner._ended's F test: max_k (M − 1)(F_k − F_{M−1}) − limit (total − F_k) > 0
+    # with F_k = |Σ_{i≤k} h_i|² / Σ_{i≤k} a_i², over seeded hops of M = 3 … 29 (silent first
+    # hops included), at limits on both sides of the decision.
+    rng = np.random.default_rng(27)
+    decided = []
+    for trial in range(400):
+        m = int(rng.integers(3, 30))
+        h = rng.normal(size=m) + 1j * rng.normal(size=m)
+        inv_energy = np.abs(rng.normal(size=m))
+        if trial % 4 == 0:
+            inv_energy[0] = 0.0
+        inv_amp2 = np.abs(rng.normal(size=m))
+        end_m = float(m - 1)
+        limit = end_m * rng.uniform(0.0, 0.5)
+        total = float(np.dot(h.real * h.real + h.imag * h.imag, inv_amp2))
+        c = np.cumsum(h)
+        fitted = (c.real * c.real + c.imag * c.imag) * inv_energy
+        lead = fitted[:-1]
+        want = bool(np.max(end_m * (lead - fitted[-1]) - limit * (total - lead)) > 0.0)
+        assert kernels.ended_gain(h, inv_energy, total, end_m, limit) == want
+        decided.append(want)
+    assert 50 < sum(decided) < 350  # both outcomes are exercised
+    nan_h = np.array([1.0, np.nan, 2.0], dtype=np.complex128)
+    assert not kernels.ended_gain(nan_h, np.ones(3), 1.0, 2.0, 0.1)  # np.max of NaN > 0

@@ -1,7 +1,8 @@
-"""Short built-in runs on virtual time shared across modules: a ``hil tank-run`` for the tests
-that check what the command leaves behind (its summary, folder, figures, run.log, recording)
-and an in-process run for those that check the run itself. One run serves every test that
-reads it, since none changes what it left (a test that edits a recording edits a copy)."""
+"""The short built-in run on virtual time shared across modules: one ``hil tank-run`` in this
+process, for the tests that check what the command leaves behind (its summary, folder,
+figures, run.log, recording) and, through the outcome of its run, for those that check the
+run itself. One run serves every test that reads it, since none changes what it left (a test
+that edits a recording edits a copy)."""
 
 from __future__ import annotations
 
@@ -19,8 +20,8 @@ from typing import Any
 import pytest
 
 from hil.cli.main import main
-from hil.experiments.experiment import DEFAULT_EXPERIMENT, parse_experiment
-from hil.experiments.tank_run import LiveView, RunOutcome, run_experiment
+from hil.experiments.experiment import DEFAULT_EXPERIMENT
+from hil.experiments.tank_run import RunOutcome
 
 #: The built-in run, its pass shortened to 2.1 m (from -1.4 to -3.5 m) to keep the suite quick.
 SHORT_CLI_EXPERIMENT = DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -3.5")
@@ -53,37 +54,85 @@ class CliRun:
     experiment_name: str
 
 
+def cli_run_keeping_the_outcome(
+    exp_file: Path, folder: Path, *options: str
+) -> tuple[int, dict[str, Any], RunOutcome]:
+    """``hil [OPTIONS] tank-run EXP_FILE --out FOLDER --no-live --json --virtual-time`` in this
+    process: its exit status, the JSON summary it printed, and the outcome of its run. The
+    command calls :func:`~hil.experiments.tank_run.run_experiment` (kept here as it returns)
+    with no live view, as an in-process run of the same text does, then writes the summary,
+    figures and run.log of the command."""
+    import hil.experiments.tank_run as tank_run
+
+    argv = [*options, "tank-run", str(exp_file), "--out", str(folder), "--no-live", "--json",
+            "--virtual-time"]  # fmt: skip
+    outcomes: list[RunOutcome] = []
+    original = tank_run.run_experiment
+
+    def keep(*args: Any, **kwargs: Any) -> RunOutcome:
+        outcomes.append(original(*args, **kwargs))
+        return outcomes[-1]
+
+    printed = io.StringIO()
+    with pytest.MonkeyPatch.context() as patch, contextlib.redirect_stdout(printed):
+        patch.setattr(tank_run, "run_experiment", keep)
+        status = main(argv)
+    summary = json.loads(printed.getvalue().strip().splitlines()[-1])
+    (outcome,) = outcomes
+    assert outcome.folder == folder
+    return status, summary, outcome
+
+
 @pytest.fixture(scope="session")
-def cli_virtual_run(tmp_path_factory: pytest.TempPathFactory) -> CliRun:
-    """The short built-in pass run once through the command line on virtual time."""
+def _short_virtual_cli_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[CliRun, RunOutcome]:
+    """The short built-in pass run once through the command line on virtual time, and the
+    outcome of its run (:func:`cli_run_keeping_the_outcome`)."""
     base = tmp_path_factory.mktemp("cli-virtual-run")
     exp_file = base / "short.toml"
     exp_file.write_text(SHORT_CLI_EXPERIMENT)
     folder, log_file = base / "run", base / "hil.log"
-    argv = ["--log-level", "warning", "--log-file", str(log_file),
-            "tank-run", str(exp_file), "--out", str(folder), "--no-live", "--json",
-            "--virtual-time"]  # fmt: skip
-    printed = io.StringIO()
-    with contextlib.redirect_stdout(printed):
-        status = main(argv)
-    summary = json.loads(printed.getvalue().strip().splitlines()[-1])
+    status, summary, outcome = cli_run_keeping_the_outcome(
+        exp_file, folder, "--log-level", "warning", "--log-file", str(log_file)
+    )
     scratch = base / "scratch"
     scratch.mkdir()
-    return CliRun(status, summary, folder, log_file, scratch, "sim-towed-pass")
+    return CliRun(status, summary, folder, log_file, scratch, "sim-towed-pass"), outcome
+
+
+#: The short pass on the simulated audio interface, its board line as docs/tank-run.md
+#: writes it.
+SHORT_AUDIO_EXPERIMENT = SHORT_CLI_EXPERIMENT.replace(
+    'board = "sim://board"', 'board = "sim://audio?blocksize=256"'
+)
 
 
 @pytest.fixture(scope="session")
-def short_virtual_outcome(tmp_path_factory: pytest.TempPathFactory) -> RunOutcome:
-    """The short built-in pass (:data:`SHORT_CLI_EXPERIMENT`, the Python simulated board) run
-    once in this process on virtual time with no live view: the same run for every test that
-    only reads it (test_tank_run_virtual's ``first_run``, the every-device suite's
-    python-board run), whose digests test_tank_run_virtual pins bit for bit."""
-    return run_experiment(
-        parse_experiment(SHORT_CLI_EXPERIMENT),
-        folder=tmp_path_factory.mktemp("virtual") / "a",
-        view=LiveView(enabled=False),
-        virtual_time=True,
-    )
+def audio_virtual_cli_run(
+    tmp_path_factory: pytest.TempPathFactory,
+) -> tuple[int, dict[str, Any], RunOutcome]:
+    """:data:`SHORT_AUDIO_EXPERIMENT` run once through the command line on virtual time (no
+    log options): its exit status, printed summary and run's outcome (folder ``.../run``),
+    for test_tank_run_audio's command and the every-device suite's audio-interface run."""
+    base = tmp_path_factory.mktemp("audio-virtual-run")
+    exp_file = base / "audio.toml"
+    exp_file.write_text(SHORT_AUDIO_EXPERIMENT)
+    return cli_run_keeping_the_outcome(exp_file, base / "run")
+
+
+@pytest.fixture(scope="session")
+def cli_virtual_run(_short_virtual_cli_run: tuple[CliRun, RunOutcome]) -> CliRun:
+    """The short built-in pass run once through the command line on virtual time."""
+    return _short_virtual_cli_run[0]
+
+
+@pytest.fixture(scope="session")
+def short_virtual_outcome(_short_virtual_cli_run: tuple[CliRun, RunOutcome]) -> RunOutcome:
+    """The short built-in pass (:data:`SHORT_CLI_EXPERIMENT`, the Python simulated board) on
+    virtual time with no live view: the outcome of :func:`cli_virtual_run`'s run, the same
+    run for every test that only reads it (test_tank_run_virtual's ``first_run``, the
+    every-device suite's python-board run), whose digests test_tank_run_virtual pins bit for
+    bit. Its folder also holds what the command wrote (summary, figures, run.log)."""
+    return _short_virtual_cli_run[1]
 
 
 #: Deadlock guard (never asserted on): the served tank prints its file within seconds.

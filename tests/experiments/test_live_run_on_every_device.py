@@ -41,7 +41,12 @@ from hil.experiments.jack_tank import DEFAULT_PERIOD
 from hil.experiments.run_scoring import summarize
 from hil.experiments.tank_run import LiveView, RunOutcome, run_experiment
 from hil.recording.reader import RunRecording
-from tests.experiments.conftest import SHORT_CLI_EXPERIMENT, near_home, serve_jack_tank
+from tests.experiments.conftest import (
+    SHORT_AUDIO_EXPERIMENT,
+    SHORT_CLI_EXPERIMENT,
+    near_home,
+    serve_jack_tank,
+)
 
 SHORT = DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -3.5")
 #: SHORT started 0.1 m from home (its run-up from -0.1 m), for the runs stopped mid-pass (by
@@ -231,6 +236,10 @@ def completed(
         assert device.experiment() == SHORT_CLI_EXPERIMENT and device.virtual_time
         outcome: RunOutcome = request.getfixturevalue("short_virtual_outcome")
         return device, outcome
+    if request.param == "audio-interface":
+        # The same run as test_tank_run_audio's on virtual time: the conftest runs it once.
+        assert device.experiment() == SHORT_AUDIO_EXPERIMENT and device.virtual_time
+        return device, request.getfixturevalue("audio_virtual_cli_run")[2]
     base = tmp_path_factory.mktemp(request.param)
     with contextlib.ExitStack() as stack:
         text, _ = _experiment(request.param, stack, base, SHORT if virtual else near_home(SHORT))

@@ -511,45 +511,53 @@ def _carriage_moving(h5: Path) -> bool:
         return False
 
 
-#: The stop signals of a run, each once. SIGINT (a terminal's Ctrl-C) runs in real time over
-#: ptys, the simulated tank in its own process in the run's process group: real time is what
-#: shows that the tank's process outlives the signal the whole group gets (it ignores SIGINT,
-#: SIGTERM and SIGHUP alike, one rule in ``hil.experiments.sim_tank._serve``) and that the
-#: stage, held, ends short of the pass's end. SIGTERM and SIGHUP run on virtual time: what
-#: they check is the run's own handling (``StopSignals``: a RunInterrupted named after the
-#: signal, the safe stop, the summary and the recording's stop event), the same on either
-#: clock and without the pass's seconds of wall time.
-STOP_CASES = [
-    pytest.param(signal.SIGINT, "Ctrl-C", False, id="Ctrl-C-real-time"),
-    pytest.param(signal.SIGTERM, "SIGTERM", True, id="SIGTERM-virtual-time"),
-    pytest.param(signal.SIGHUP, "SIGHUP", True, id="SIGHUP-virtual-time"),
-]
+def _stopped_as_interrupted(
+    code: int, out: str, h5: Path, how: str, said: str
+) -> tuple[dict[str, Any], Any]:
+    """Check a run interrupted by ``how`` (its exit ``code``, the stdout ``out`` of ``hil
+    tank-run --json``, its recording ``h5``; ``said`` shown on a failure): exit 1, a summary
+    that says it was interrupted and how, the recording readable and ending with the stop's
+    event. The summary and the recording's instrument entry."""
+    import h5py
+
+    from hil.recording.instrument import read_entry
+    from hil.recording.reader import RunRecording
+
+    assert code == 1, said  # the run stopped before its end
+    summary = json.loads(out.strip().splitlines()[-1])
+    assert (summary["interrupted"], summary["error"]) == (True, f"interrupted ({how})"), said
+    with RunRecording.open(h5) as rec:
+        assert sum(b.data.shape[0] for b in rec.samples()) > 10_000
+        stop = rec.events()[-1]
+    assert (stop.kind, stop.text) == ("alarm", f"stop: interrupted ({how})")
+    with h5py.File(h5, "r") as f:
+        entry = read_entry(f)
+    assert entry is not None
+    return summary, entry
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("sig", "how", "virtual"), STOP_CASES)
-def test_ctrl_c_sigterm_and_sighup_stop_cleanly_and_keep_the_recording(
-    tmp_path: Path, sig: signal.Signals, how: str, virtual: bool
-) -> None:
-    """SIGINT (a terminal's Ctrl-C), SIGTERM (kill, a service manager) or SIGHUP (the
-    terminal closed) mid-run: transmission stopped, stage held, files closed, a summary
-    written that says the run was interrupted and how, the recording readable and ending
-    with the stop's event."""
-    from hil.recording.reader import RunRecording
-
+def test_ctrl_c_stops_cleanly_in_real_time_and_keeps_the_recording(tmp_path: Path) -> None:
+    """SIGINT (a terminal's Ctrl-C) to the run's process group mid-pass: transmission
+    stopped, stage held, files closed, a summary written that says the run was interrupted
+    and how, the recording readable and ending with the stop's event. In real time over ptys,
+    the simulated tank in its own process in the run's process group: real time is what
+    shows that the tank's process outlives the signal the whole group gets (it ignores SIGINT,
+    SIGTERM and SIGHUP alike, one rule in ``hil.experiments.sim_tank._serve``) and that the
+    stage, held, ends short of the pass's end. SIGTERM and SIGHUP: the next test, on virtual
+    time."""
     exp_file = tmp_path / "slow.toml"
-    # A slow tow (0.5 m/s: a 2.8 m pass takes 14 s of wall time at time_scale 0.4, about
-    # 3 s on virtual time) leaves the interrupt seconds of the pass to land in, even when the
-    # telemetry that shows the carriage moving is read seconds late on a loaded machine (CI
-    # once saw a 1.5 m/s pass, 4.5 s of wall time, all but over before the interrupt arrived).
+    # A slow tow (0.5 m/s: a 2.8 m pass takes 14 s of wall time at time_scale 0.4) leaves
+    # the interrupt seconds of the pass to land in, even when the telemetry that shows the
+    # carriage moving is read seconds late on a loaded machine (CI once saw a 1.5 m/s pass,
+    # 4.5 s of wall time, all but over before the interrupt arrived).
     exp_file.write_text(STOPPED_MID_PASS)
     folder = tmp_path / "run"
     log = tmp_path / "stderr.txt"  # shown if the run did not stop as it should
-    clock = ["--virtual-time"] if virtual else []
     with log.open("w") as err:
         proc = subprocess.Popen(
             [sys.executable, "-m", "hil.cli.main", "tank-run", str(exp_file), "--out",
-             str(folder), "--no-live", "--json", *clock],
+             str(folder), "--no-live", "--json"],
             stdout=subprocess.PIPE, stderr=err, text=True, start_new_session=True,
             preexec_fn=_default_sigint,
         )  # fmt: skip
@@ -559,33 +567,15 @@ def test_ctrl_c_sigterm_and_sighup_stop_cleanly_and_keep_the_recording(
         # fixed delay after the capture starts may land after the pass on a loaded machine,
         # or before the recording exists while a loaded machine builds the receiver).
         _wait_while_running(proc, lambda: _carriage_moving(h5), "the carriage on its pass")
-        os.killpg(proc.pid, sig)  # as a terminal does: the whole process group
+        os.killpg(proc.pid, signal.SIGINT)  # as a terminal does: the whole process group
         out, _ = proc.communicate(timeout=60)
     finally:
         if proc.poll() is None:  # the test failed first: leave nothing running
             os.killpg(proc.pid, signal.SIGKILL)
             proc.communicate()
     said = f"stdout: {out}\nstderr: {log.read_text()}"
-    assert proc.returncode == 1, said  # the run stopped before its end
-    summary = json.loads(out.strip().splitlines()[-1])
-    assert (summary["interrupted"], summary["error"]) == (True, f"interrupted ({how})"), said
-    rec = RunRecording.open(h5)
-    assert sum(b.data.shape[0] for b in rec.samples()) > 10_000
-    stop = rec.events()[-1]
-    assert (stop.kind, stop.text) == ("alarm", f"stop: interrupted ({how})")
-    if virtual:
-        import h5py
-
-        from hil.recording.instrument import read_entry
-
-        # The run was on virtual time (no tank process, so no trajectory file): the hold on
-        # a stop is the same safe stop for every signal, checked here in real time and on
-        # virtual time by test_tank_run_virtual's unplugged board (the in-process carriage).
-        with h5py.File(h5, "r") as f:
-            entry = read_entry(f)
-        assert entry is not None
-        assert entry["instrument"]["board"]["link"] == "sim://board (in process, virtual time)"
-        return
+    _, entry = _stopped_as_interrupted(proc.returncode, out, h5, "Ctrl-C", said)
+    assert entry["instrument"]["board"]["link"].startswith("/dev/pts/"), entry  # over ptys
     # The stage was held: the simulated carriage (its true trajectory, written by the
     # simulated tank at stop) is at rest at the end and stopped short of the end of the pass
     # (end_m - run_down_m = -4.1 m).
@@ -594,6 +584,53 @@ def test_ctrl_c_sigterm_and_sighup_stop_cleanly_and_keep_the_recording(
     late = t >= t[-1] - 0.2
     assert np.ptp(x[late]) < 1e-3
     assert x[-1] > -4.1 + 0.05
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP], ids=lambda s: s.name)
+def test_sigterm_and_sighup_stop_cleanly_on_virtual_time_and_keep_the_recording(
+    tmp_path: Path,
+    sig: signal.Signals,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """SIGTERM (kill, a service manager) or SIGHUP (the terminal closed) mid-pass: what the
+    Ctrl-C test above checks, for the run's own handling of the signal (``StopSignals``: a
+    RunInterrupted named after the signal, the safe stop, the summary and the recording's
+    stop event), the same on either clock. ``hil tank-run --virtual-time`` in this process
+    (no tank process: the signal reaches only the run's), the signal raised in its main
+    thread as the recorded stage telemetry first shows the carriage moving: mid-pass at a
+    known instant, however loaded the machine."""
+    from hil.recording.records import StageTelemetry
+    from hil.recording.writer import RunWriter
+
+    exp_file = tmp_path / "slow.toml"
+    exp_file.write_text(STOPPED_MID_PASS)
+    folder = tmp_path / "run"
+    append_telemetry = RunWriter.append_telemetry
+    raised: list[StageTelemetry] = []
+
+    def signal_once_moving(writer: RunWriter, record: StageTelemetry) -> None:
+        append_telemetry(writer, record)
+        if not raised and abs(record.velocity_mps) > 0.05:
+            raised.append(record)
+            signal.raise_signal(sig)  # its handler runs here, in the run's main thread
+
+    monkeypatch.setattr(RunWriter, "append_telemetry", signal_once_moving)
+    code = main(["tank-run", str(exp_file), "--out", str(folder), "--no-live", "--json",
+                 "--virtual-time"])  # fmt: skip
+    out, err = capsys.readouterr()
+    assert len(raised) == 1, (out, err)
+    how = sig.name
+    summary, entry = _stopped_as_interrupted(
+        code, out, folder / "run.h5", how, f"stdout: {out}\nstderr: {err}"
+    )
+    # On virtual time: the in-process devices (no tank process, so no trajectory file). The
+    # hold on a stop is the same safe stop for every signal, checked above in real time and
+    # on virtual time by test_tank_run_virtual's unplugged board (the in-process carriage).
+    assert entry["instrument"]["board"]["link"] == "sim://board (in process, virtual time)"
+    # Stopped mid-pass: the pass (2.8 m at 0.5 m/s, 5.6 s) was not over.
+    assert summary["signal_s"] < 5.6
 
 
 @pytest.mark.slow
@@ -659,10 +696,10 @@ def test_a_board_stopped_by_its_watchdog_ends_the_run_with_the_reason() -> None:
 def test_the_built_in_tank_lost_mid_run_stops_the_run_naming_it(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """The simulated tank's process killed under the run: the run stops, naming it (not a
-    bare ``OSError: [Errno 5]`` from whichever pty noticed first)."""
-    import threading
-
+    """The simulated tank's process killed under the run, mid-pass (as the run's 30th
+    estimate comes, an event of the run rather than a size of its file polled): the run
+    stops, naming it (not a bare ``OSError: [Errno 5]`` from whichever pty noticed first)."""
+    from hil.estimation.base import Estimate
     from hil.experiments import sim_tank
     from hil.experiments.tank_run import LiveView
     from hil.recording.reader import RunRecording
@@ -677,25 +714,21 @@ def test_the_built_in_tank_lost_mid_run_stops_the_run_naming_it(
     monkeypatch.setattr(sim_tank.SimulatedTankProcess, "__init__", keep)
     folder = tmp_path / "run"
     h5 = folder / "run.h5"
-    done = threading.Event()
+    seen: list[Estimate] = []
 
-    def kill_once_recording() -> None:
-        while not done.wait(0.05):
-            if started and h5.exists() and h5.stat().st_size > 400_000:
-                os.kill(started[0].pid, signal.SIGKILL)
-                return
+    def kill_at_30(estimates: list[Estimate]) -> None:
+        if len(seen) < 30 <= len(seen) + len(estimates):
+            os.kill(started[0].pid, signal.SIGKILL)
+        seen.extend(estimates)
 
-    killer = threading.Thread(target=kill_once_recording, daemon=True)
-    killer.start()
-    try:
-        outcome = run_experiment(
-            parse_experiment(STOPPED_MID_PASS),
-            folder=folder,
-            view=LiveView(enabled=False),
-        )
-    finally:
-        done.set()
-        killer.join(10)
+    # The short pass near home: 1.5 m at 1.5 m/s, its 30th estimate 0.3 s into the capture.
+    outcome = run_experiment(
+        parse_experiment(near_home(SHORT)),
+        folder=folder,
+        view=LiveView(enabled=False),
+        on_estimates=kill_at_30,
+    )
+    assert len(seen) >= 30 and not outcome.interrupted
     pid = started[0].pid
     assert outcome.error == (
         f"DeviceLostError: the built-in simulated tank (process {pid}) lost: its process exited"

@@ -16,9 +16,9 @@ import pytest
 from hil.cli.main import main
 from hil.errors import ConfigError
 from hil.experiments.experiment import DEFAULT_EXPERIMENT, parse_experiment
-from hil.experiments.tank_run import LiveView, run_experiment
+from hil.experiments.tank_run import LiveView, RunOutcome, run_experiment
 from hil.recording.instrument import read_entry
-from tests.experiments.conftest import near_home
+from tests.experiments.conftest import SHORT_AUDIO_EXPERIMENT, near_home
 from tests.thread_lateness import LatenessProbe
 
 SHORT = DEFAULT_EXPERIMENT.replace("end_m = -5.0", "end_m = -3.5")
@@ -67,16 +67,20 @@ def _assert_tracked_as_on_the_board(
 
 @pytest.mark.slow
 def test_hil_tank_run_with_the_simulated_audio_interface_on_virtual_time(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    audio_virtual_cli_run: tuple[int, dict[str, Any], RunOutcome],
 ) -> None:
-    summary = _tank_run(tmp_path, AUDIO, capsys, "--virtual-time")
+    # ``hil tank-run AUDIO --out FOLDER --no-live --json --virtual-time`` (the conftest's run,
+    # shared with the every-device suite's audio-interface run).
+    status, summary, outcome = audio_virtual_cli_run
+    assert AUDIO == SHORT_AUDIO_EXPERIMENT
+    assert status == 0
     _assert_tracked_as_on_the_board(summary)
     assert summary["simulated"] is True
     # The stage's conversation is in the run's log (the interface has no frames to log).
-    log = (tmp_path / "run" / "run.log").read_text(encoding="utf-8")
+    log = (outcome.folder / "run.log").read_text(encoding="utf-8")
     assert "DEBUG   hil.devices.grbl: stage sim://stage (in process, virtual time) -> $$" in log
     # The recording names the interface it ran on.
-    with h5py.File(tmp_path / "run" / "run.h5", "r") as f:
+    with h5py.File(outcome.folder / "run.h5", "r") as f:
         entry = read_entry(f)
     assert entry is not None
     assert entry["instrument"]["audio"] == {

@@ -62,7 +62,8 @@ def recorded(path: Path) -> dict[str, Any]:
 
 @pytest.fixture(scope="module")
 def first_run(short_virtual_outcome: RunOutcome) -> RunOutcome:
-    """``virtual_run`` of SHORT (the conftest's run of the same text, shared)."""
+    """``virtual_run`` of SHORT: the conftest's run of the same text (through ``hil tank-run``,
+    which calls run_experiment as virtual_run does), shared."""
     assert SHORT == SHORT_CLI_EXPERIMENT
     return short_virtual_outcome
 

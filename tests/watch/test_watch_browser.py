@@ -1,6 +1,7 @@
 """The watch page in a real headless browser (chromium through chromedriver and selenium):
-it loads, follows a recording while the test's writer appends to it, and highlights an
-alarm. Each step waits on a DOM condition (WebDriverWait), never on the wall clock.
+it loads, follows a recording while the test's writer (or a tank run on virtual time)
+appends to it, and highlights an alarm. Each step waits on a DOM condition (WebDriverWait),
+never on the wall clock.
 
 Skipped when chromium, chromedriver or selenium is missing; with HIL_REQUIRE_SYSTEM_DEPS=1
 (.ci/run) that fails instead.
@@ -8,20 +9,19 @@ Skipped when chromium, chromedriver or selenium is missing; with HIL_REQUIRE_SYS
 
 from __future__ import annotations
 
-import os
-import signal
-import subprocess
-import sys
-import time
+import queue
+import threading
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 
-from hil.errors import ConfigError
+from hil.estimation.base import Estimate
 from hil.experiments.experiment import DEFAULT_EXPERIMENT
 from hil.recording.records import RunEvent, StageTelemetry
+from hil.recording.writer import RunWriter
 from hil.watch import WatchData, WatchServer
 
 WAIT_S = 60.0
@@ -88,28 +88,70 @@ def test_page_follows_a_recording_and_highlights_an_alarm(browser: Any, recorder
         server.close()
 
 
-def _watchable(h5: Path) -> WatchData | None:
-    """The live recording opened for watching, or None while ``hil tank-run`` has not yet
-    created it in SWMR mode (the file appears before its groups are written)."""
-    if not h5.exists():
-        return None
-    try:
-        return WatchData.open(h5, live_map=True)
-    except ConfigError:
-        return None
+class _FlushGates:
+    """:meth:`RunWriter.append_estimates` wrapped so that the run waits for the test at given
+    numbers of estimates: at the first append that brings the run's estimates to
+    ``gates[0]`` or more, the run's thread flushes the file (as the writer does by itself
+    each second: every pending row written, readers see them), hands the test the count
+    (:meth:`next_flush`) and waits until :meth:`go_on`; then the same at ``gates[1]``, and so
+    on. Paused there, mid-pass, the file holds exactly that many estimates, whatever the
+    machine's speed: what the page shows is checked at known instants of the run."""
+
+    def __init__(self, gates: list[int]) -> None:
+        self.gates = list(gates)
+        self.flushed: queue.Queue[int] = queue.Queue()
+        self._resume = threading.Semaphore(0)
+        self._appended = 0
+
+    def install(self, monkeypatch: pytest.MonkeyPatch) -> None:
+        original = RunWriter.append_estimates
+
+        def append_and_wait(writer: RunWriter, estimates: Iterable[Estimate]) -> None:
+            batch = list(estimates)
+            original(writer, batch)
+            self._appended += len(batch)
+            if self.gates and self._appended >= self.gates[0]:
+                self.gates.pop(0)
+                writer.flush()
+                self.flushed.put(self._appended)
+                self._resume.acquire()
+
+        monkeypatch.setattr(RunWriter, "append_estimates", append_and_wait)
+
+    def next_flush(self) -> int:
+        """The estimates in the file at the run's next gate (the run waits there)."""
+        return self.flushed.get(timeout=RUN_GUARD_S)
+
+    def go_on(self) -> None:
+        self._resume.release()
+
+    def open_all(self) -> None:
+        """No more gates, and a run waiting at one goes on (the test is ending)."""
+        self.gates.clear()
+        self._resume.release()
+
+
+#: Deadlock guard (never asserted on): a short run on virtual time takes seconds of CPU.
+RUN_GUARD_S = 600.0
 
 
 @pytest.mark.slow
-def test_page_follows_a_simulated_tank_run(browser: Any, tmp_path: Path) -> None:
-    """``hil tank-run`` on the built-in simulated tank (a short, slow pass: seconds of
-    estimates to watch) while the page polls its run.h5: the count grows during the run and
-    ends equal to the finished recording's; the server's time–codeword map follows the
-    samples and peaks at the true codeword where the truth says each boundary arrives."""
+def test_page_follows_a_simulated_tank_run(
+    browser: Any, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The built-in simulated tank's run (a short, slow pass) on virtual time in a thread of
+    this process, as ``hil tank-run --virtual-time`` runs it (:func:`hil.experiments.api.run`:
+    summary and figures written), while the page polls its run.h5. The run waits twice with
+    its file flushed (:class:`_FlushGates`): at its 20th estimate, until the page has loaded
+    and shows the estimates in the file; at its 60th, mid-pass, until the page shows the
+    count grown to what the file then holds. At the end the page's count equals the finished
+    recording's; the server's time–codeword map follows the samples and peaks at the true
+    codeword where the truth says each boundary arrives."""
     from selenium.webdriver.support.ui import WebDriverWait
 
-    exp_file = tmp_path / "slow.toml"
-    # A 1 m pass at 0.5 m/s with 0.2 m run-up and run-down, from 0.1 m off home: no
-    # positioning out to a run-up further away, seconds of estimates to watch.
+    from hil.experiments import api
+
+    # A 1 m pass at 0.5 m/s with 0.2 m run-up and run-down, from 0.1 m off home.
     text = DEFAULT_EXPERIMENT
     for old, new in (
         ("start_m = -2.0", "start_m = -0.3"),
@@ -120,29 +162,42 @@ def test_page_follows_a_simulated_tank_run(browser: Any, tmp_path: Path) -> None
     ):
         assert old in text, old
         text = text.replace(old, new)
-    exp_file.write_text(text)
     folder = tmp_path / "run"
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "hil.cli.main", "tank-run", str(exp_file), "--out", str(folder),
-         "--no-live"],
-        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
-    )  # fmt: skip
+    gates = _FlushGates([20, 60])
+    gates.install(monkeypatch)
+    stop = threading.Event()
+    ended: list[Any] = []
+
+    def run() -> None:
+        try:
+            ended.append(api.run(text, folder=folder, stop=stop, virtual_time=True)[1])
+        except BaseException as exc:  # handed to the test's thread
+            ended.append(exc)
+
+    runner = threading.Thread(target=run, name="tank-run", daemon=True)
+    runner.start()
     server = None
     try:
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline and (data := _watchable(folder / "run.h5")) is None:
-            time.sleep(0.2)
-        assert data is not None, "hil tank-run wrote no readable run.h5 within 120 s"
+        first = gates.next_flush()  # the run waits: its file holds `first` estimates
+        data = WatchData.open(folder / "run.h5", live_map=True)
         server = WatchServer(data).start()
         browser.get(server.url)
         wait = WebDriverWait(browser, WAIT_S)
         wait.until(lambda d: _text(d, "file") == "run.h5")
-        first = int(_text(browser, "estimate-count"))
-        wait.until(lambda d: int(_text(d, "estimate-count")) > first)
-        assert proc.wait(timeout=300) == 0
+        wait.until(lambda d: _text(d, "estimate-count") == str(first))
+        gates.go_on()
+        grown = gates.next_flush()  # mid-run again, `grown` estimates in the file
+        assert grown > first >= 20
+        wait.until(lambda d: _text(d, "estimate-count") == str(grown))
+        gates.go_on()
+        runner.join(RUN_GUARD_S)
+        assert not runner.is_alive(), f"the run did not end within {RUN_GUARD_S} s"
+        (summary,) = ended
+        assert isinstance(summary, dict), summary
+        assert summary["error"] == "" and not summary["interrupted"]
         final = data.estimates(0)["total"]
+        assert final == summary["estimates"] > grown
         wait.until(lambda d: _text(d, "estimate-count") == str(final))
-        assert final > first
         assert _text(browser, "experiment") == "experiment sim-towed-pass"
         assert _text(browser, "stage-state") == "IDLE"
         # The map computed in the server, drawn on the page, covers the whole recording.
@@ -156,7 +211,7 @@ def test_page_follows_a_simulated_tank_run(browser: Any, tmp_path: Path) -> None
         inside = (arrival > t[0] + 0.2) & (arrival < t[-1])  # after M = 10 hops of 10 ms
         col = np.searchsorted(t, arrival[inside], side="right") - 1
         assert np.mean(db[col].argmax(axis=1) == codeword[inside]) >= 0.8
-        # The finished run's saved time–codeword map, shown once hil tank-run wrote it.
+        # The finished run's saved time–codeword map, shown once the run wrote it.
         wait.until(
             lambda d: d.execute_script(
                 "const i = document.getElementById('map-img');"
@@ -166,6 +221,6 @@ def test_page_follows_a_simulated_tank_run(browser: Any, tmp_path: Path) -> None
     finally:
         if server is not None:
             server.close()
-        if proc.poll() is None:  # the test failed first: leave nothing running
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
+        stop.set()  # the test failed first: the run stops safely, as on Ctrl-C
+        gates.open_all()
+        runner.join(RUN_GUARD_S)

@@ -61,6 +61,7 @@ from hil.estimation.kernels import (
     first_possible_cells,
     masked_peak_cells,
     peak_cells,
+    runner_up_pairs,
     second_peak_cells,
 )
 from hil.estimation.reverb_band import doppler_resolution_mps
@@ -141,9 +142,11 @@ class EveryEcho:
             r2, c2 = np.concatenate([r3, r2]), np.concatenate([c3, c2])
             kind2 = np.concatenate([np.full(r3.shape[0], SECOND_MAX, dtype=np.int8), kind2])
         keep = self.second_rows[c2]
+        second = np.zeros(rows.shape[0], dtype=np.int8)
+        if not keep.any():  # the usual block: no second maximum where one is looked for
+            return rows, np.ascontiguousarray(cols[:, None]), second
         # A cell both rules give is one candidate, a second maximum.
         key, first = np.unique(r2[keep] * n_cols + c2[keep], return_index=True)
-        second = np.zeros(rows.shape[0], dtype=np.int8)
         if key.size:
             # One row-major order for all (the decisions' order, whatever the blocks).
             rows = np.concatenate([rows, key // n_cols])
@@ -187,15 +190,11 @@ class StrongestEcho:
     @staticmethod
     def _with_runner_up(rows: NDArray[np.float64], cols: NDArray[np.int64]) -> NDArray[np.int64]:
         """``(d, d₂)`` per cell: ``d₂`` its row's best hypothesis more than one step from
-        ``d`` (``d`` itself where there is none), shape ``(C, 2)``."""
-        far = np.abs(np.arange(rows.shape[1])[None, :] - cols[:, None]) > 1
-        masked = np.where(far, rows, -np.inf)
-        second = np.argmax(masked, axis=1)
-        found = np.isfinite(masked[np.arange(cols.size), second])
-        pairs = np.empty((cols.size, 2), dtype=np.int64)
-        pairs[:, 0] = cols
-        pairs[:, 1] = np.where(found, second, cols)
-        return pairs
+        ``d`` (``d`` itself where there is none), shape ``(C, 2)``
+        (:func:`~hil.estimation.kernels.runner_up_pairs`)."""
+        return runner_up_pairs(
+            np.ascontiguousarray(rows, dtype=np.float64), np.ascontiguousarray(cols, dtype=np.int64)
+        )
 
 
 def second_echo_rows(fe: FrontEnd) -> NDArray[np.bool_]:

@@ -56,6 +56,7 @@ from hil.estimation.kernels import (
     masked_peak_cells,
     peak_cells,
     peak_indices,
+    runner_up_pairs,
 )
 from hil.estimation.row_buffer import RowBuffer
 
@@ -444,6 +445,7 @@ class TwoStageSearch:
         peak_cells(np.zeros((3, 2)), 1, 1, 0, 3, np.zeros(2))
         first_possible_cells(np.zeros((3, 2)), 1, 1, 0, 3, np.zeros(2))
         masked_peak_cells(np.zeros((3, 2)), 1, 1, 0, 1, 0, 3, 0.0, 1.0)
+        runner_up_pairs(np.zeros((1, 3)), np.zeros(1, dtype=np.int64))
         one = np.zeros((1, 1), dtype=np.int64)
         w = self.fine_half
         self.exact.sums(one[:, 0], one, w, prune=True)

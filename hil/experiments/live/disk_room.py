@@ -3,10 +3,10 @@ still be closed whole.
 
 A recording that hits a full disk (or the process's file-size limit, ``ulimit -f``) in the
 middle of a write cannot take its stop event or close: HDF5 leaves it unreadable. So the run
-checks, before each block of samples, the bytes the recording may still grow by (the disk's
-free space for this user and the file-size limit minus the file's size) against a reserve
-(:func:`reserve_bytes`: what closing needs) and stops with :class:`RecordingSpaceError`
-while the reserve is still there.
+checks, before the first block of samples and then once every :data:`CHECK_EVERY_S` of
+samples, the bytes the recording may still grow by (the disk's free space for this user and
+the file-size limit minus the file's size) against a reserve (:func:`reserve_bytes`: what
+closing needs) and stops with :class:`RecordingSpaceError` while the reserve is still there.
 """
 
 from __future__ import annotations
@@ -22,6 +22,10 @@ RESERVE_SIGNAL_S = 2.0
 #: Bytes the reserve holds besides the samples: HDF5's metadata, the tables' last chunks
 #: (events, telemetry, estimates), the stop event.
 RESERVE_FIXED_BYTES = 2 * 1024 * 1024
+#: Seconds of samples a recording takes between two checks of its room (a block arrives
+#: every few milliseconds, and a check asks the file system twice): a fortieth of the
+#: reserve, so the reserve left at a check is at least 1.95 s of samples.
+CHECK_EVERY_S = 0.05
 
 
 class RecordingSpaceError(OSError):

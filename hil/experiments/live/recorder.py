@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from hil.estimation.base import Estimate
-from hil.experiments.live.disk_room import check_room, reserve_bytes
+from hil.experiments.live.disk_room import CHECK_EVERY_S, check_room, reserve_bytes
 from hil.interrupts import stops_deferred
 from hil.recording.records import RunEvent, StageTelemetry
 from hil.recording.writer import RunWriter
@@ -30,11 +30,16 @@ class RunRecorder:
         self._telemetry: list[StageTelemetry] = []  # until the writer exists
         self.sync_pairs: list[tuple[int, float]] = []  # every SYNC pair of the run
         self._sync_written = 0
+        fs = float(create_options.get("fs_hz", 0.0))
         self._reserve = reserve_bytes(
-            float(create_options.get("fs_hz", 0.0)),
+            fs,
             int(create_options.get("n_channels", 1)),
             np.dtype(create_options.get("dtype", "int16")).itemsize,
         )
+        #: Samples (per channel) between two checks of the room (CHECK_EVERY_S), and those
+        #: taken since the last one (the first block is checked).
+        self._check_every = int(CHECK_EVERY_S * fs)
+        self._unchecked = self._check_every
 
     @property
     def open_(self) -> bool:
@@ -62,10 +67,15 @@ class RunRecorder:
         """A captured block (from board index ``first_index``). Refused
         (:class:`~hil.experiments.live.disk_room.RecordingSpaceError`) when the disk or the
         file-size limit leaves less room than closing the recording needs: the run stops
-        while its recording can still take its stop event and close readable."""
+        while its recording can still take its stop event and close readable. The room is
+        checked before the first block and then once every
+        :data:`~hil.experiments.live.disk_room.CHECK_EVERY_S` of samples."""
         if self.writer is not None:
-            check_room(self.path, self._reserve)
+            if self._unchecked >= self._check_every:
+                check_room(self.path, self._reserve)
+                self._unchecked = 0
             self.writer.append_samples(first_index, data)
+            self._unchecked += len(data)
 
     def estimates(self, estimates: Sequence[Estimate]) -> None:
         """The receiver's estimates."""
