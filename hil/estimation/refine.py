@@ -159,7 +159,7 @@ RECENT_FITS = 16
 #: many hops from the detection (its echo continues at the fitted delay and time scale).
 KNOWN_HOPS = 3
 #: An echo is followed to the boundaries no detection brought (:meth:`CoherentRefiner.due`)
-#: where its latest fit collected at least this much more E/N0 than the echo test asks
+#: where one of its fits collected at least this much more E/N0 than the echo test asks
 #: (:attr:`EchoTest.min_e_over_n0_db`, 12 dB on GCAS): the leak of a stronger echo into a
 #: ghost's or sidelobe's cells collects 6.7-10.6 dB (att, M = 10), one echo at -20 dB
 #: per-sample SNR about 16 dB, so the gate (15 dB) passes such an echo and no leak. Each
@@ -1484,19 +1484,22 @@ class CoherentRefiner:
         oldest = min(f.t_s for f in fits) - KNOWN_HOPS * self.hop_len_s
         ghost_strength = (0.0,) * self.schedule.period_hops
         kept = []
+        was_held = [False] * len(fits)
         for e in self._echoes:
             if e.t_s < oldest:
                 continue
-            if any(self._same_echo(e, hop_index, f.t_s, f.speed_mps(self.c)) for f in fits):
+            same = [self._same_echo(e, hop_index, f.t_s, f.speed_mps(self.c)) for f in fits]
+            if any(same):
                 ghost_strength = tuple(map(max, ghost_strength, e.ghost_strength or ghost_strength))
+                was_held = [w or (s and e.held) for w, s in zip(was_held, same, strict=True)]
             else:
                 kept.append(e)
         new = [
             _EchoFit(
                 hop_index, f.t_s, f.alpha, f.amplitude, 0.0, ghost_strength, f.e_over_n0_db,
-                cancelled=cancelled, pair=pair, held=f.e_over_n0_db >= self.follow_db,
+                cancelled=cancelled, pair=pair, held=self._holds(f.e_over_n0_db, w),
             )
-            for f in fits if f.amplitude != 0
+            for f, w in zip(fits, was_held, strict=True) if f.amplitude != 0
         ]  # fmt: skip
         self._echoes = [*kept, *new]
 
@@ -1516,7 +1519,7 @@ class CoherentRefiner:
         ghost_strength = (0.0,) * self.schedule.period_hops
         was: bool | None = None
         covered = -1
-        held = fit.e_over_n0_db >= self.follow_db
+        was_held = False
         for e in self._echoes:
             if e.t_s < oldest:
                 continue
@@ -1526,7 +1529,7 @@ class CoherentRefiner:
                 ghost_strength = tuple(map(max, ghost_strength, e.ghost_strength or ghost_strength))
                 was = e.cancelled if was is None else was or e.cancelled
                 covered = max(covered, e.hop_index, e.followed)
-                held = held or e.held
+                was_held = was_held or e.held
             else:
                 kept.append(e)
         if cancelled is None:
@@ -1534,9 +1537,15 @@ class CoherentRefiner:
         gap = covered + 1 if covered >= 0 and 0 < hop_index - covered - 1 <= KNOWN_HOPS else -1
         new = _EchoFit(
             hop_index, fit.t_s, fit.alpha, fit.amplitude, fit.rate(self.c), ghost_strength,
-            fit.e_over_n0_db, cancelled=cancelled, gap=gap, held=held,
+            fit.e_over_n0_db, cancelled=cancelled, gap=gap,
+            held=self._holds(fit.e_over_n0_db, was_held),
         )  # fmt: skip
         self._echoes = [*kept, new]
+
+    def _holds(self, e_over_n0_db: float, was_held: bool) -> bool:
+        """Whether a fit collecting ``e_over_n0_db`` (dB) holds its echo
+        (:attr:`_EchoFit.held`): the echo was held, or the fit reaches :attr:`follow_db`."""
+        return was_held or e_over_n0_db >= self.follow_db
 
     def _same_echo(self, fit: _EchoFit, hop_index: int, t_s: float, speed: float) -> bool:
         """Whether a detection at ``t_s`` (s) ending hop ``hop_index`` at ``speed`` (m/s) is

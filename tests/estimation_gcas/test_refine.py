@@ -470,6 +470,15 @@ def test_an_echo_held_once_stays_held_through_weaker_fits() -> None:
     refiner._remember(weak, first.hop_index + 1, None)
     [echo] = refiner._echoes
     assert not echo.held
+    # The same through a pair's fits (_remember_all, refine_pair): each carries its own
+    # echo's hold, and a new echo of the pair is held only from 15 dB.
+    refiner._echoes = []
+    refiner.refine(first.t_s, first.alpha, first.hop_index)
+    other = dataclasses.replace(weak, t_s=weak.t_s + 0.01)
+    refiner._remember_all([weak, other], first.hop_index + 1, True, True)
+    held = {round(e.t_s, 6): e.held for e in refiner._echoes}
+    assert held == {round(weak.t_s, 6): True, round(other.t_s, 6): False}
+    assert [d[0] for d in refiner.due(weak.t_s + 1.5 * period)] == [first.hop_index + 2]
 
 
 def test_an_echo_that_ended_is_not_followed_on_its_earlier_hops() -> None:
