@@ -653,7 +653,7 @@ class CoherentRefiner:
         alpha_hi = (self.c + v_max) / (self.c - v_max)
         rho = 1.0 - 1.0 / (alpha_hi * self.spacing_hz * self.hop_len_s)
         self.lobe_sure_db = 10.0 * math.log10(LOBE_Z**2 / max(1.0 - rho, 1e-12))
-        #: E/N0 (dB) an echo's latest fit must reach to be followed (:meth:`due`,
+        #: E/N0 (dB) one of an echo's fits must reach for it to be followed (:meth:`due`,
         #: :data:`FOLLOW_MARGIN_DB`, :data:`FOLLOW_MIN_HOPS`).
         self.follow_db = (
             echo_test.min_e_over_n0_db + FOLLOW_MARGIN_DB
@@ -846,8 +846,9 @@ class CoherentRefiner:
         moves, no lobe decision on more hops or without the still water; att, M = 10, an echo
         at -20 dB per-sample SNR beside volume reverberation: those decisions moved a third
         of its followed fits a lobe off, then refused); a stronger fit decides its lobe on
-        its own hops. In open water the lobe decisions stand (a three-state chain followed
-        from a detection 3 m off its echo, at -20 dB, collects 16-17 dB there: the lobe moves
+        its own hops. In open water its lobe is decided as a detection's, and a fit the lobe
+        moves put more than the main lobe from ``t_s`` is refused (a three-state chain
+        followed from a detection off its echo, at -20 dB, collects 16-17 dB: the lobe moves
         end it). A ``residual`` detection is the second search's
         (:meth:`known_input`): its echo, remembered, is not taken out of that search's input
         (a followed fit keeps its echo's own). ``lag_s``: how far (s) the detection may lie
@@ -1132,9 +1133,9 @@ class CoherentRefiner:
     def due(self, t_s: float) -> list[tuple[int, float, float, float]]:
         """The boundaries of echoes measured lately that no detection brought by ``t_s`` (s):
         for each echo one of whose fits reached :attr:`follow_db` (:data:`FOLLOW_MARGIN_DB`;
-        :attr:`_EchoFit.held`: a weak echo's fits scatter about 2 dB either side of their
-        mean, and gated on the latest alone it was dropped at its first dip; att, M = 10, an
-        echo at -20 dB per-sample SNR in reverberation: followed fits of 14.8-18 dB)
+        :attr:`_EchoFit.held`: one weak echo's fits scatter about its mean, so a gate on each
+        fit would drop it at each dip; att, M = 10, the weaker target at -20 dB per-sample
+        SNR beside still reverberation: 14.3-18 dB in one seed)
         outside the still reverberation's Doppler cells, its next boundary where its latest
         fit carries on, received before ``t_s`` and at most :data:`KNOWN_HOPS` hops after
         that fit, each once: ``(hop_index, t, α, E/N0)`` (hop, s, 1, dB: what that fit
@@ -1821,7 +1822,10 @@ class CoherentRefiner:
     def _in_still_water(self, t_s: float, alpha: float) -> bool:
         """Whether the ``M`` hops' window of the boundary at ``t_s`` (s, time scale
         ``alpha``) holds still water, at least :data:`STILL_OVER_REST` of the rest's power:
-        where the grating lobe decisions read its leak through the hops' edges."""
+        where the grating lobe decisions read its leak through the hops' edges. Read at the
+        boundary a followed echo's fit predicts, before that boundary is fitted, so without
+        :meth:`_lobe_without_still`'s conditions on the fitted echo (its power, the
+        canceller's gain at its speed): the lobe kept is the echo's, whatever its fit."""
         still = self._still
         if still is None:
             return False
