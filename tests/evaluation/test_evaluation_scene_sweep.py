@@ -249,13 +249,14 @@ def test_a_weaker_target_followed_beside_still_reverberation_keeps_its_track() -
     # 2: the detector misses a third of the weaker target's boundaries. Followed from its
     # fits, the echo was lost for runs of 7-23 hops where the lobe decisions moved a fit a
     # lobe off its echo's (refused) or its latest fit dipped under 15 dB: 105 of 182 before
-    # (3 false, 6 tracks), 168 (1 false, 2 tracks) with a weak followed fit on its echo's
-    # lobe and the echo held (_EchoFit.held).
+    # (3 false, 6 tracks), 168 (1 false, 2 tracks; -1, the estimates before a track is
+    # confirmed, aside) with a weak followed fit on its echo's lobe and the echo held
+    # (_EchoFit.held).
     params = {"scene": "second-10db-weaker", "snr_db": -10.0, "srr_db": 0.0}
     out = scene_trial(params, np.random.SeedSequence(2626, spawn_key=(39, 2)))
     assert out["expected"] == [185, 182] and out["detected"][0] == 185
     assert out["detected"][1] >= 0.9 * 182
-    assert out["n_false"] <= 2 and len(out["track_ids"][1]) <= 3
+    assert out["n_false"] <= 2 and len(set(out["track_ids"][1]) - {-1}) <= 2
 
 
 @pytest.mark.slow
