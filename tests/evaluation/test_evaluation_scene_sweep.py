@@ -9,6 +9,7 @@ import re
 import shlex
 from pathlib import Path
 from types import SimpleNamespace as NS
+from typing import Any
 
 import numpy as np
 import pytest
@@ -286,3 +287,50 @@ def test_the_documented_still_water_sweep_is_valid() -> None:
     assert len(points) == 48 and {p["receiver"] for p in points} == {"gcas", "gcas-still"}
     for p in points:
         validate_scene_params(p)
+
+
+@pytest.mark.slow
+def test_the_weaker_target_followed_beside_still_reverberation_is_the_same_however_cut(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # The seeded scene above (held echoes, followed fits kept on their echo's lobe beside the
+    # still water) fed in 997-sample blocks and at random cuts: every estimate the same.
+    import itertools
+
+    import hil.evaluation.trials_scene as trials_scene
+
+    build = trials_scene._receiver
+    cuts: list[int] = []
+    pieces: list[int] = []
+
+    class Chunked:
+        def __init__(self, rx: Any) -> None:
+            self._rx = rx
+
+        def process(self, x: np.ndarray) -> list[Any]:
+            edges = [0, *[c for c in cuts if 0 < c < x.shape[0]], x.shape[0]]
+            out: list[Any] = []
+            for a, b in itertools.pairwise(edges):
+                out += self._rx.process(x[a:b])
+            pieces.append(len(edges) - 1)
+            return out
+
+        def __getattr__(self, name: str) -> Any:
+            return getattr(self._rx, name)
+
+    def chunked(p: dict[str, Any]) -> Any:
+        rx, *rest = build(p)
+        return (Chunked(rx), *rest)
+
+    monkeypatch.setattr(trials_scene, "_receiver", chunked)
+    params = {"scene": "second-10db-weaker", "snr_db": -10.0, "srr_db": 0.0}
+    seed = (2626, (39, 2))
+    whole = scene_trial(params, np.random.SeedSequence(seed[0], spawn_key=seed[1]))
+    rng = np.random.default_rng(17)
+    for edges in (list(range(997, 200_000, 997)), sorted(rng.integers(1, 200_000, 40).tolist())):
+        cuts[:] = edges
+        got = scene_trial(params, np.random.SeedSequence(seed[0], spawn_key=seed[1]))
+        for key in ("expected", "detected", "n_false", "range_errors_m", "speed_errors_mps"):
+            assert got[key] == whole[key], key
+    assert pieces == [1, 201, 41]
+    assert whole["detected"][1] >= 0.9 * 182
