@@ -1826,13 +1826,19 @@ class CoherentRefiner:
         boundary a followed echo's fit predicts, before that boundary is fitted, so without
         :meth:`_lobe_without_still`'s conditions on the fitted echo (its power, the
         canceller's gain at its speed): the lobe kept is the echo's, whatever its fit."""
-        still = self._still
-        if still is None:
-            return False
-        stop = int(math.floor(t_s * self.fs_hz))
-        window = int(math.ceil(self.m_hops * self.hop_len_s / alpha * self.fs_hz))
-        s_pow, rest = still.powers(stop - window, stop)
+        s_pow, rest = self._still_powers(t_s, alpha)
         return s_pow > 0 and s_pow >= STILL_OVER_REST * rest
+
+    def _still_powers(self, t_s: float, alpha: float) -> tuple[float, float]:
+        """The still water's power and the rest's per sample (input units²) over the ``M``
+        hops' samples before the boundary at ``t_s`` (s, time scale ``alpha``)
+        (:meth:`~hil.estimation.still_lobe.StillStreams.powers`); ``(0, 0)`` without the
+        still-water streams."""
+        if self._still is None:
+            return 0.0, 0.0
+        stop = int(math.floor(t_s * self.fs_hz))
+        window_s = self.m_hops * self.hop_len_s / alpha
+        return self._still.powers(stop - int(math.ceil(window_s * self.fs_hz)), stop)
 
     def _lobe_without_still(
         self, fit: Refinement, word: _Codeword, hop_ids: NDArray[np.int64], lobe: float,
@@ -1853,9 +1859,7 @@ class CoherentRefiner:
             return fit
         hop_index = int(hop_ids[-1])
         alpha = fit.alpha
-        window_s = self.m_hops * self.hop_len_s / alpha
-        stop = int(math.floor(fit.t_s * self.fs_hz))
-        s_pow, rest = still.powers(stop - int(math.ceil(window_s * self.fs_hz)), stop)
+        s_pow, rest = self._still_powers(fit.t_s, alpha)
         if s_pow <= 0 or s_pow < STILL_OVER_REST * rest:
             return fit  # open water: the echo's power is not needed
         echo_pow = 0.5 * abs(fit.amplitude) ** 2 * float(np.mean(word.hops[4]))
