@@ -299,8 +299,8 @@ def tank_board_design() -> LiveDesign:
             "max_range_m": MAX_RANGE_M,
             "m_hops": M_HOPS,
             # The stand-in's echo is stationary: the default reverberation band ("auto")
-            # hides targets slower than the Doppler resolution, so it is off here (README,
-            # "The GCAS receiver's defaults"); with it on, no estimate comes out at all.
+            # hides targets slower than the Doppler resolution, so it is off here (docs/receiver.md,
+            # "Reverberation band"); with it on, no estimate comes out at all.
             "reverb_speed_mps": 0.0,
         },
         channel=0,
