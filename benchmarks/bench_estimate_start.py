@@ -11,17 +11,23 @@ The cost per added second of input is the difference of the totals on a WAV of `
 is printed beside the figures. ``--kernels`` also lists the CPU of each numba kernel's first
 call (its load from numba's cache; the first one carries numba's one-off initialisation).
 ``--breakdown`` measures, in another fresh interpreter, the parts of the start-up no
-``hil`` code controls, one after the other: ``import numpy``; ``import numba`` (which
-imports scipy's base package to check its version); the import of ``numba.np.arraymath``
-with its BLAS check skipped as ``hil estimate`` does (:mod:`hil.estimation.numba_start`);
-numba's initialisation and the load of one kernel from its cache (its first call); and, for
-comparison, ``import scipy.linalg``, which that check would have imported.
+``hil`` code controls, one after the other: ``import numpy``; numba's import as ``hil
+estimate`` does it (:mod:`hil.estimation.numba_start`: without scipy, cffi and yaml, and
+``numba.np.arraymath`` without its BLAS check); numba's initialisation and the load of one
+kernel from its cache (its first call); and, for comparison, what that start leaves out:
+``import scipy.linalg`` (scipy's base for numba's version check, scipy.linalg for its BLAS
+check) and ``import cffi`` with its parser and ``yaml``.
 ``--whole S`` also runs ``hil estimate`` once on a WAV of ``S`` s (the target going to and fro
 between 40 and 10 m at 9 m/s, so it stays in range) and prints its whole CPU and real-time
 factor (``S`` over the CPU; the issue's goal: at least 25 for 60 s).
 
 The WAVs: a target closing at 9 m/s from 40 m in white noise (as tests/cli/test_cli_estimate),
 ``att`` random-cyclic, 100 kHz, float32; written to a temporary folder.
+
+Every child runs with Python's bytecode cache on (``PYTHONDONTWRITEBYTECODE`` dropped from its
+environment; the first, cache-filling run writes the ``.pyc`` files), as an installed package
+runs: compiling ``hil``'s 78 modules from source on every start would add about 0.15 s
+of CPU (at load 11).
 
 Run: ``python benchmarks/bench_estimate_start.py [--seconds 1] [--repeat 3] [--kernels]
 [--breakdown] [--whole 60] [--quick]``.
@@ -50,6 +56,8 @@ from sim_devices.acoustics.echo import AnalyticEcho
 from sim_devices.acoustics.trajectory import ConstantVelocity, Fixed, Piecewise
 
 ROOT = Path(__file__).resolve().parents[1]
+#: The children's environment: this one with Python's bytecode cache on (see the docstring).
+CHILD_ENV = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
 TARGET_S = 1.0
 FS = 100_000.0
 
@@ -94,16 +102,17 @@ import json, time
 cpu = time.process_time
 parts = {}
 start = cpu(); import numpy as np; parts["import numpy"] = cpu() - start
-start = cpu(); import numba; parts["import numba (with scipy's base)"] = cpu() - start
-from hil.estimation.numba_start import skip_blas_check
-start = cpu(); skip_blas_check()
-parts["numba.np.arraymath without its BLAS check"] = cpu() - start
+from hil.estimation.numba_start import start_numba
+start = cpu(); start_numba()
+parts["numba's import (hil.estimation.numba_start)"] = cpu() - start
 from hil.estimation import kernels
 buf, taps, out = np.zeros(100), np.zeros(5), np.zeros(10)
 start = cpu(); kernels.fir_decimate(buf, 0, 10, 2, taps, taps, out, out.copy())
 parts["numba's initialisation + one kernel's cache load"] = cpu() - start
 start = cpu(); import scipy.linalg
-parts["import scipy.linalg (the BLAS check's, skipped)"] = cpu() - start
+parts["import scipy and scipy.linalg (numba's checks', skipped)"] = cpu() - start
+start = cpu(); import cffi, yaml; cffi.FFI()
+parts["import cffi, its parser and yaml (skipped)"] = cpu() - start
 print(json.dumps(parts))
 """
 
@@ -114,7 +123,7 @@ def breakdown(repeat: int) -> dict[str, float]:
     for _ in range(repeat):
         proc = subprocess.run(
             [sys.executable, "-c", _BREAKDOWN],
-            cwd=ROOT, capture_output=True, text=True, check=True,
+            cwd=ROOT, capture_output=True, text=True, check=True, env=CHILD_ENV,
         )  # fmt: skip
         runs.append(json.loads(proc.stdout.strip().splitlines()[-1]))
     return {part: min(float(r[part]) for r in runs) for part in runs[0]}
@@ -160,7 +169,7 @@ def write_whole(folder: Path, seconds: float) -> Path:
 def child_cpu(command: list[str]) -> float:
     """User + system CPU (s) of ``command`` run to its end in a child process."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    subprocess.run(command, cwd=ROOT, capture_output=True, check=True)
+    subprocess.run(command, cwd=ROOT, capture_output=True, check=True, env=CHILD_ENV)
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
@@ -169,7 +178,7 @@ def probe(estimate: list[str]) -> dict[str, Any]:
     """The probe's figures for one fresh ``hil estimate`` with arguments ``estimate``."""
     proc = subprocess.run(
         [sys.executable, "-c", _PROBE, *estimate],
-        cwd=ROOT, capture_output=True, text=True, check=True,
+        cwd=ROOT, capture_output=True, text=True, check=True, env=CHILD_ENV,
     )  # fmt: skip
     figures: dict[str, Any] = json.loads(proc.stdout.strip().splitlines()[-1])
     return figures
@@ -204,7 +213,7 @@ def main() -> None:
         def estimate(wav: Path) -> list[str]:
             return ["estimate", "--schedule", str(folder / "x.json"), "--input", str(wav)]
 
-        probe(estimate(wavs[args.seconds]))  # fills numba's cache if it is cold
+        probe(estimate(wavs[args.seconds]))  # fills numba's and the bytecode cache if cold
         load = os.getloadavg()[0]
         help_cpu = min(
             child_cpu([sys.executable, "-m", "hil.cli.main", "estimate", "--help"])

