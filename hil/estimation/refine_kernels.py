@@ -847,7 +847,10 @@ def fit_quality(
     (:func:`hil.estimation.refine._fit_quality` states them; ``C`` and ``E_s = Σ a_i² N_i``
     as :func:`candidate_sums`; ``known`` and ``gamma`` as :func:`candidate_sums`); ``tones``
     each hop's tone index (shape ``(M,)``, below ``n_tones``). E/N0 is ``inf`` where the
-    windows hold no noise."""
+    windows hold no noise; the three coherences are then still the hop terms' own (their
+    expected values 1, an echo's at infinite SNR): a windows' energy taken below the fit's
+    by other echoes' parts (their energies are taken out, not their overlaps') says nothing
+    of whether the terms add as one echo's."""
     m_hops = slots.shape[0]
     h = np.empty(m_hops, dtype=np.complex128)
     consts, coef = _scratch(slots, prefix)
@@ -864,10 +867,9 @@ def fit_quality(
         spread += h[i].real * h[i].real + h[i].imag * h[i].imag
     rho = mag2 / (m_hops * spread) if spread > 0.0 else 0.0
     noise = (signal - 2.0 * mag2 / es) / es  # es = Σ a_i² N_i: the windows' samples
-    if not noise > 0.0:
-        return math.inf, rho, 1.0, 1.0, 1.0, 1.0, 1.0, c, es
-    s_hop = max(spread / (es * noise) - 1.0, 0.0)
-    expected = (m_hops * s_hop + 1.0) / (m_hops * (s_hop + 1.0))
+    noiseless = not noise > 0.0
+    s_hop = 0.0 if noiseless else max(spread / (es * noise) - 1.0, 0.0)
+    expected = 1.0 if noiseless else (m_hops * s_hop + 1.0) / (m_hops * (s_hop + 1.0))
     sk = np.zeros(n_tones, dtype=np.complex128)
     nk = np.zeros(n_tones)
     pk = np.zeros(n_tones)
@@ -886,7 +888,7 @@ def fit_quality(
         e_num += nk[g] * nk[g] * s_hop + nk[g]
         e_den += nk[g] * nk[g] * (s_hop + 1.0)
     a_hat = 2.0 * math.sqrt(mag2) / es
-    en0 = a_hat * a_hat * es / (4.0 * noise)
+    en0 = math.inf if noiseless else a_hat * a_hat * es / (4.0 * noise)
     # Over runs of RUN_HOPS consecutive hops (a drifting phase: an accelerating echo).
     sub = RUN_HOPS
     s_num = 0.0
@@ -904,6 +906,8 @@ def fit_quality(
         e_snum += sub * sub * s_hop + sub
         e_sden += sub * sub * (s_hop + 1.0)
     rho_run = s_num / s_den if s_den > 0.0 else 0.0
+    if noiseless:
+        e_num, e_den, e_snum, e_sden = 1.0, 1.0, 1.0, 1.0
     return (
         en0, rho, expected, num / den if den > 0.0 else 0.0, e_num / e_den, rho_run,
         e_snum / e_sden, c, es,

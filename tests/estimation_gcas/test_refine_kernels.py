@@ -332,3 +332,40 @@ def test_the_ended_test_is_the_numpy_expression_bit_for_bit() -> None:
     assert 50 < sum(decided) < 350  # both outcomes are exercised
     nan_h = np.array([1.0, np.nan, 2.0], dtype=np.complex128)
     assert not kernels.ended_gain(nan_h, np.ones(3), 1.0, 2.0, 0.1)  # np.max of NaN > 0
+
+
+def test_windows_left_without_noise_keep_their_hop_terms_coherences() -> None:
+    # Known hops whose energies exceed the windows' (other echoes' fits taken out of a
+    # window they overlap: their energies are subtracted, not their overlaps) leave no noise:
+    # E/N0 is inf, and each coherence is still the hop terms' own, against an expected 1. A
+    # codeword ghost beside two echoes at one speed 1 m apart (att, 0 dB) read a run coherence
+    # of 1 there and was reported 60 m off its echoes.
+    args, alpha, t_s, known = _echo_with_known_hops(3)
+    known[0] *= 3.0  # their energies: several times the windows'
+    schedule = att_schedule()
+    refiner = CoherentRefiner(schedule, FS, 10, C, 0.5, 30.0)
+    tones = refiner._codeword(28).tones
+    n_tones = len(schedule.tones_hz)
+    m = tones.shape[0]
+    per_hop = np.empty((1, m), dtype=np.complex128)
+    sums = (np.empty(1, complex), np.empty(1), np.empty(1))
+    kernels.candidate_sums(
+        *args, np.array([t_s]), np.array([alpha]), np.zeros(1), *sums, per_hop, known
+    )  # fmt: skip
+    c, es, signal = sums[0][0], sums[1][0], sums[2][0]
+    assert signal - 2.0 * abs(c) ** 2 / es <= 0.0  # the windows hold no noise left
+    h = per_hop[0]
+    rho = abs(h.sum()) ** 2 / (m * np.sum(np.abs(h) ** 2))
+    by_tone = [h[tones == g] for g in range(n_tones)]
+    rho_tone = sum(abs(t.sum()) ** 2 for t in by_tone) / sum(
+        t.size * np.sum(np.abs(t) ** 2) for t in by_tone
+    )
+    r = kernels.RUN_HOPS
+    runs = [h[b : b + r] for b in range(m - r + 1)]
+    rho_run = sum(abs(u.sum()) ** 2 for u in runs) / sum(r * np.sum(np.abs(u) ** 2) for u in runs)
+    got = kernels.fit_quality(*args, known, 0.0, tones, n_tones, t_s, alpha)
+    en0, g_rho, e_rho, g_tone, e_tone, g_run, e_run = got[:7]
+    assert en0 == np.inf
+    assert (e_rho, e_tone, e_run) == (1.0, 1.0, 1.0)
+    assert np.allclose([g_rho, g_tone, g_run], [rho, rho_tone, rho_run], rtol=1e-9, atol=0.0)
+    assert rho_run < 0.85  # not one echo's: the echo test's run fraction refuses it
