@@ -841,7 +841,7 @@ class CoherentRefiner:
         :data:`PARTIAL_LEVEL` of the hops' mean power): an echo that ended within the window
         still fits one echo on its earlier hops, and followed on it would go on where it
         is no more; None otherwise. Where its window holds still water
-        (:meth:`_in_still_water`) its grating lobe is its echo's, which that echo's fits
+        (:meth:`in_still_water`) its grating lobe is its echo's, which that echo's fits
         decided: a fit weaker than :attr:`lobe_sure_db` stays on the lobe of ``t_s`` (no lobe
         moves, no lobe decision on more hops or without the still water; att, M = 10, an echo
         at -20 dB per-sample SNR beside volume reverberation: those decisions moved a third
@@ -865,7 +865,7 @@ class CoherentRefiner:
         lobe = 1.0 / (alpha * self.spacing_hz)
         speed0 = self.c * (alpha - 1.0) / (alpha + 1.0)
         known = self._known_hops(hop_index, t_s, speed0, lag_s)
-        keep_lobe = followed and self._in_still_water(t_s, alpha)
+        keep_lobe = followed and self.in_still_water(t_s, alpha)
         fit = self._fit_near(word, hop_ids, t_s, speed0, lobe, hop_index, known, keep_lobe)
         if keep_lobe and fit is not None and fit.e_over_n0_db >= self.lobe_sure_db:
             # Strong enough to tell its lobe from the neighbours' on its own M hops.
@@ -1819,7 +1819,7 @@ class CoherentRefiner:
         args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
         return self._refinement(args, known, word, t, alpha, 0.0, True)
 
-    def _in_still_water(self, t_s: float, alpha: float) -> bool:
+    def in_still_water(self, t_s: float, alpha: float) -> bool:
         """Whether the ``M`` hops' window of the boundary at ``t_s`` (s, time scale
         ``alpha``) holds still water, at least :data:`STILL_OVER_REST` of the rest's power:
         where the grating lobe decisions read its leak through the hops' edges. Read at the

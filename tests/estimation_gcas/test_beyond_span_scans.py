@@ -175,3 +175,24 @@ def test_a_fit_beyond_the_edge_short_of_the_inside_is_refused_and_not_said() -> 
     assert early.check(1.0, _alpha(30.0), 9, 1, _Fit(_alpha(30.5)))
     assert [s.hop_index for s in early.sightings] == [9]
     assert check.sightings[0].speed_mps == pytest.approx(30.5)
+
+
+
+@pytest.mark.parametrize(
+    ("spacings", "cells", "still", "ghost"),
+    [(1, 0.0, True, True), (-1, 1.9, True, True), (2, -1.5, True, True), (1, 0.0, False, False),
+     (1, 2.5, True, False), (-1, -3.0, True, False), (0, 1.0, True, False)],
+)  # fmt: skip
+def test_the_still_waters_ghost_is_told_by_its_speed_and_the_still_water(
+    spacings: int, cells: float, still: bool, ghost: bool
+) -> None:
+    # Within STILL_GHOST_CELLS (two) Doppler cells of a hop of a whole number of tone
+    # spacings' speed from rest (27.5 m/s and 2.5 m/s cells on att), where the window holds
+    # still water; not the still water's own cells.
+    refiner = _Refiner()
+    refiner.spacing_hz = 1000.0  # a tone spacing of 25 m/s, ten 2.5 m/s cells, as on att
+    refiner.in_still_water = lambda t_s, alpha: still  # type: ignore[attr-defined]
+    check = _check(refiner)
+    spacing = check.ghosts.spacing_mps[0]
+    speed = spacings * spacing + cells * check.cell_mps
+    assert check._ghost_of_still(1.0, _alpha(speed)) is ghost

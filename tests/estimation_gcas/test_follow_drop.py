@@ -34,7 +34,7 @@ def test_a_chain_followed_off_its_echo_in_open_water_is_ended_by_the_lobe_decisi
     # from it collect 16-17 dB each. In open water the lobe decisions stand for a followed
     # fit and move it off that chain (refused), so a later detection finds the echo (hop 10):
     # range SSE 2.04 m² over the 29 boundaries. Kept on the chain's lobe (the rule for a
-    # window holding still water, CoherentRefiner._in_still_water) the chain was followed to
+    # window holding still water, CoherentRefiner.in_still_water) the chain was followed to
     # hop 22 and the echo's own detections began at hop 23: 44.2 m².
     from hil.evaluation.trials_ch6 import ch6_receiver_trial
 
