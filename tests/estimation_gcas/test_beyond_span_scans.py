@@ -177,7 +177,6 @@ def test_a_fit_beyond_the_edge_short_of_the_inside_is_refused_and_not_said() -> 
     assert check.sightings[0].speed_mps == pytest.approx(30.5)
 
 
-
 @pytest.mark.parametrize(
     ("spacings", "cells", "still", "ghost"),
     [(1, 0.0, True, True), (-1, 1.9, True, True), (2, -1.5, True, True), (1, 0.0, False, False),
