@@ -10,6 +10,8 @@ next one) but not their phases: its hops' coherence is far below one echo's.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 
@@ -226,15 +228,30 @@ SCENE_S = 1.5
 def _scene(
     targets: tuple[tuple[float, float, float], ...], snr_db: float, **options: object
 ) -> list[Estimate]:
+    """GCAS's estimates over :data:`SCENE_S` of ``targets`` (range m, closing speed m/s,
+    amplitude each) in white noise of per-sample SNR ``snr_db`` (seed 11), read with receiver
+    ``options``. Each scene is read once per process: a target alone is the reference of
+    several pairs (50 m at 10 m/s of eight at each SNR), and its estimates are the same every
+    time (the synthesis, the noise and the receiver are deterministic)."""
+    return list(_scene_once(targets, snr_db, tuple(sorted(options.items()))))
+
+
+@functools.cache
+def _scene_once(
+    targets: tuple[tuple[float, float, float], ...],
+    snr_db: float,
+    options: tuple[tuple[str, object], ...],
+) -> tuple[Estimate, ...]:
+    """:func:`_scene`'s estimates, frozen (shared by every test that reads them)."""
     schedule = att_schedule()
     x = sum(echo_samples(schedule, r, v, SCENE_S, amplitude=a) for r, v, a in targets)
     sigma = 1.0 / np.sqrt(2.0) / 10 ** (snr_db / 20.0)
     x = x + np.random.default_rng(11).normal(0.0, sigma, np.shape(x))
     rx = GcasReceiver.from_options(
         schedule, FS, sound_speed_mps=C, max_speed_mps=30.0, max_range_m=100.0, m_hops=10,
-        **options,
+        **dict(options),
     )  # fmt: skip
-    return run_blocks(rx, x)
+    return tuple(run_blocks(rx, x))
 
 
 def _detection_and_false(
@@ -574,9 +591,6 @@ def _motion_input(
 ) -> tuple[np.ndarray, dict[int, HopTruth]]:
     """The input of :func:`_motion_scene` (shape ``(n,)``) and its truth per hop boundary;
     the reverberation's scatterers (``density_per_m3``) from ``min_range_m`` to 100 m."""
-    from sim_devices.acoustics.beam import OmniBeam, TwoWayAmplitudeTable
-    from sim_devices.acoustics.reverberation import ReverberationSettings, VolumeReverberation
-
     r0, v0, acc = {"still": (40.0, 0.0, 0.0), "slow": (40.0, 0.5, 0.0),
                    "braking": (50.0, 10.0, 5.0), "reversing": (50.0, 8.0, 8.0)}[kind]  # fmt: skip
 
@@ -592,20 +606,39 @@ def _motion_input(
     x = AnalyticEcho(schedule, TwoWayPath.monostatic(sonar, target, C), FS).block(0, n)
     x = x + np.random.default_rng(seed).normal(0.0, np.sqrt(0.5) / 10 ** (snr_db / 20.0), n)
     if srr_db is not None:
-        settings = ReverberationSettings(
-            density_per_m3=density_per_m3, scattering_strength_db=-70.0, max_range_m=100.0,
-            min_range_m=min_range_m, seed=seed + 100,
-        )  # fmt: skip
-        rev = VolumeReverberation(
-            schedule, FS, source_amplitude_upa=1.0, reference_hz=30e3,
-            sonar_position_m=(0.0, 0.0, 0.0), sonar_velocity_mps=(0.0, 0.0, 0.0),
-            beam=TwoWayAmplitudeTable(OmniBeam(), OmniBeam()), beam_axis=(1.0, 0.0, 0.0),
-            sound_speed_mps=C, settings=settings,
-        )  # fmt: skip
-        scale = np.sqrt(0.5 / (10 ** (srr_db / 10.0) * rev.expected_power(0.0)))
-        x = x + scale * rev.generate(n)
+        reverb, power = _reverberation(seed + 100, min_range_m, density_per_m3)
+        scale = np.sqrt(0.5 / (10 ** (srr_db / 10.0) * power))
+        x = x + scale * reverb
     truth = {h.hop_index: h for h in hop_truth(schedule, sonar, target, C, MOTION_S, 0.2)}
     return x, truth
+
+
+@functools.cache
+def _reverberation(
+    seed: int, min_range_m: float, density_per_m3: float
+) -> tuple[np.ndarray, float]:
+    """:func:`_motion_input`'s volume reverberation around the still omni sonar (scatterers
+    from ``min_range_m`` to 100 m, seeded ``seed``), shape ``(MOTION_S·FS,)``, read-only, and
+    its expected power at t = 0 (µPa²). Made once per process: at 0.3 scatterers/m³ it costs
+    about 1.5 s of CPU, and several modules' tests read the same scene (test_still_codewords,
+    test_chunks_in_reverberation, tests/cli's near water)."""
+    from sim_devices.acoustics.beam import OmniBeam, TwoWayAmplitudeTable
+    from sim_devices.acoustics.reverberation import ReverberationSettings, VolumeReverberation
+
+    settings = ReverberationSettings(
+        density_per_m3=density_per_m3, scattering_strength_db=-70.0, max_range_m=100.0,
+        min_range_m=min_range_m, seed=seed,
+    )  # fmt: skip
+    rev = VolumeReverberation(
+        att_schedule(), FS, source_amplitude_upa=1.0, reference_hz=30e3,
+        sonar_position_m=(0.0, 0.0, 0.0), sonar_velocity_mps=(0.0, 0.0, 0.0),
+        beam=TwoWayAmplitudeTable(OmniBeam(), OmniBeam()), beam_axis=(1.0, 0.0, 0.0),
+        sound_speed_mps=C, settings=settings,
+    )  # fmt: skip
+    power = rev.expected_power(0.0)
+    reverb = rev.generate(int(MOTION_S * FS))
+    reverb.flags.writeable = False
+    return reverb, power
 
 
 def _false_and_moving_pd(
