@@ -358,11 +358,15 @@ ACCEL_GAIN = 6.9
 #: acceleration the detections themselves show seeds the fit. The detections of the last
 #: ACCEL_SEED_HOPS hops on this echo's track (delay within ACCEL_SEED_LOBES grating lobes of
 #: this one moved on at its speed; speed within what ACCEL_SEED_MAX_MPS2 reaches plus the
-#: speed span) give the speed's least-squares slope (m/s²) when there are at least
-#: ACCEL_SEED_POINTS of them; where it is at least ACCEL_SEED_MIN_MPS2, the curved fit is
-#: tried from a run coherence of ACCEL_RUN_SEEDED and starts also from the
-#: ACCEL_SEED_STEPS rates either side of the seed (a delay–speed search at each, the best
-#: kept), which the gain and echo tests then judge as any other try.
+#: speed span) give the speed's least-squares slope (m/s²) and its standard error when there
+#: are at least ACCEL_SEED_POINTS of them; where the slope is at least ACCEL_SEED_MIN_MPS2
+#: (below, the rate grid about the constant-speed fit finds the echo: 12 m/s² is), the
+#: curved fit is tried from a run coherence of ACCEL_RUN_SEEDED and starts also from the
+#: grid rates within twice the standard error of the seed's (at least ACCEL_SEED_STEPS
+#: either side, at most ACCEL_SEED_MAX_STEPS: at -10 dB and near the span's edge the
+#: detections' speeds scatter, braking at 25 m/s² from 28 m/s the first slopes read -10 to
+#: -49 m/s²), a delay–speed search at each and the best kept, which the gain and echo tests
+#: then judge as any other try.
 ACCEL_SEED_HOPS = 8
 ACCEL_SEED_LOBES = 1.5
 ACCEL_SEED_POINTS = 4
@@ -370,6 +374,7 @@ ACCEL_SEED_MIN_MPS2 = 8.0
 ACCEL_SEED_MAX_MPS2 = 40.0
 ACCEL_RUN_SEEDED = 0.3
 ACCEL_SEED_STEPS = 2
+ACCEL_SEED_MAX_STEPS = 6
 #: An echo that begins or ends within a detection's window (a target appearing, vanishing
 #: or jumping: the hops on one side hold noise) loses coherence as drift does, but no rate
 #: explains hops that hold no echo: the accelerating fit is not tried where the fit's
@@ -2066,21 +2071,24 @@ class CoherentRefiner:
         trail = int(np.argmin(weak[::-1])) if not weak.all() else weak.size
         return (lead >= PARTIAL_HOPS and trail == 0) or (trail >= PARTIAL_HOPS and lead == 0)
 
-    def _accel_seed(self, hop_index: int, t_s: float, speed: float, lobe: float) -> float | None:
-        """The acceleration (m/s²) the detections of this echo's track show up to this one
-        (:data:`ACCEL_SEED_HOPS`, :func:`speed_trend`), where at least
-        :data:`ACCEL_SEED_MIN_MPS2`; else None. Records this detection."""
+    def _accel_seed(
+        self, hop_index: int, t_s: float, speed: float, lobe: float
+    ) -> tuple[float, float] | None:
+        """The acceleration and its standard error (m/s²) the detections of this echo's
+        track show up to this one (:data:`ACCEL_SEED_HOPS`, :func:`speed_trend`), where the
+        acceleration is at least :data:`ACCEL_SEED_MIN_MPS2`; else None. Records this
+        detection."""
         seen = np.array(self._detections, dtype=np.float64).reshape(-1, 3)
         self._detections.append((hop_index, t_s, speed))
-        accel = speed_trend(
+        trend = speed_trend(
             seen[:, 0], seen[:, 1], seen[:, 2], hop_index, t_s, speed, self.hop_len_s, self.c,
             ACCEL_SEED_LOBES * lobe, self.speed_span_mps,
         )  # fmt: skip
-        return accel if accel is not None and abs(accel) >= ACCEL_SEED_MIN_MPS2 else None
+        return trend if trend is not None and abs(trend[0]) >= ACCEL_SEED_MIN_MPS2 else None
 
     def _with_acceleration(
         self, fit: Refinement, word: _Codeword, hop_ids: NDArray[np.int64], lobe: float,
-        known: NDArray[np.complex128], seed_mps2: float | None = None,
+        known: NDArray[np.complex128], seed: tuple[float, float] | None = None,
     ) -> Refinement:  # fmt: skip
         """``fit`` (constant speed, its maximum found) fitted again with a changing time scale
         (:data:`ACCEL_TRY`): the rate's grid at the fit's delay and time scale (those of the
@@ -2089,9 +2097,9 @@ class CoherentRefiner:
         its two neighbours; from each of the :data:`ACCEL_STARTS` best local maxima, the delay–speed
         fit and a parabola in the rate, :data:`ACCEL_ROUNDS` times. The best accelerating fit
         where it raises the likelihood by :data:`ACCEL_GAIN`, else ``fit``; its time and time
-        scale are the boundary's. With ``seed_mps2`` (m/s², the detections' own acceleration,
-        :meth:`_accel_seed`) one more start: the best of the delay–speed searches at the
-        :data:`ACCEL_SEED_STEPS` grid rates either side of the seed's."""
+        scale are the boundary's. With ``seed`` (m/s², the detections' own acceleration and
+        its standard error, :meth:`_accel_seed`) one more start: the best of the delay–speed
+        searches at the grid rates about the seed's (:meth:`_seeded_start`)."""
         gammas = self._gammas
         n = gammas.shape[0]
         # Each rate's curve through a point of the echo: the fit's own (the hops' centre)
@@ -2130,8 +2138,8 @@ class CoherentRefiner:
             (float(t_c[c] + shifts[r]), float(a_c[c]), float(gammas[c]))
             for r, c in zip(rows[order], cols[order] + 1, strict=True)
         ]
-        if seed_mps2 is not None:
-            seeded = self._seeded_start(args, known, fit, seed_mps2, lobe)
+        if seed is not None:
+            seeded = self._seeded_start(args, known, fit, seed, lobe)
             if seeded is not None:
                 starts.append(seeded)
         best: tuple[float, float, float, float] | None = None
@@ -2150,20 +2158,24 @@ class CoherentRefiner:
 
     def _seeded_start(
         self, args: tuple[Any, ...], known: NDArray[np.complex128], fit: Refinement,
-        seed_mps2: float, lobe: float,
+        seed: tuple[float, float], lobe: float,
     ) -> tuple[float, float, float] | None:  # fmt: skip
-        """The curved fit's start from the acceleration ``seed_mps2`` (m/s²): at each grid
-        rate within :data:`ACCEL_SEED_STEPS` steps of the seed's (``γ = a (α+1)²/(2c)``), the
-        delay–speed search about ``fit`` (±½ lobe, ± the speed span); the best ``(t, alpha,
-        gamma)`` (the hops' centre's line), None where no search finds a maximum inside."""
+        """The curved fit's start from the acceleration ``seed`` (m/s², and its standard
+        error): at each grid rate (``γ = a (α+1)²/(2c)``) within twice the error of the
+        seed's (at least :data:`ACCEL_SEED_STEPS` steps either side, at most
+        :data:`ACCEL_SEED_MAX_STEPS`), the delay–speed search about ``fit`` (±½ lobe, ± the
+        speed span); the best ``(t, alpha, gamma)`` (the hops' centre's line), None where no
+        search finds a maximum inside."""
         step = float(self._gammas[1] - self._gammas[0])
-        seed = float(np.clip(seed_mps2, -ACCEL_SEED_MAX_MPS2, ACCEL_SEED_MAX_MPS2))
-        g_seed = seed * (fit.alpha + 1.0) ** 2 / (2.0 * self.c)
+        to_rate = (fit.alpha + 1.0) ** 2 / (2.0 * self.c)
+        g_seed = float(np.clip(seed[0], -ACCEL_SEED_MAX_MPS2, ACCEL_SEED_MAX_MPS2)) * to_rate
+        reach = 2.0 * seed[1] * to_rate / step
+        steps = int(np.clip(math.ceil(reach), ACCEL_SEED_STEPS, ACCEL_SEED_MAX_STEPS))
         v_fit = fit.speed_mps(self.c)
         grid = (0.5 * lobe, self.speed_span_mps, TIME_POINTS, SPEED_POINTS, FIT_PASSES)
         best: tuple[float, float, float] | None = None
         p_best = -1.0
-        for k in range(-ACCEL_SEED_STEPS, ACCEL_SEED_STEPS + 1):
+        for k in range(-steps, steps + 1):
             g = g_seed + k * step
             t, v, outcome = fit.t_s, v_fit, RECENTRE
             for _ in range(MAX_RECENTRES + 1):
@@ -2429,14 +2441,15 @@ def speed_trend(
     hops: NDArray[np.float64], times: NDArray[np.float64], speeds: NDArray[np.float64],
     hop_index: int, t_s: float, speed: float, hop_s: float, c: float, lobe_s: float,
     span_mps: float,
-) -> float | None:  # fmt: skip
-    """The acceleration (m/s², of the closing speed) that detections show: the least-squares
-    slope of speed against boundary time of the detection ``(hop_index, t_s, speed)`` (its
-    boundary, s; m/s) and the earlier ones (shape ``(K,)`` each: hop index, boundary time s,
-    speed m/s) up to :data:`ACCEL_SEED_HOPS` hops before it on its track: the boundary time
-    within ``lobe_s`` (s) of this one's moved back at hops of ``hop_s / α``, the speed within
-    ``span_mps`` plus what :data:`ACCEL_SEED_MAX_MPS2` changes it by. None where fewer than
-    :data:`ACCEL_SEED_POINTS` detections (this one included) are on the track."""
+) -> tuple[float, float] | None:  # fmt: skip
+    """The acceleration (m/s², of the closing speed) that detections show and its standard
+    error (m/s²): the least-squares slope of speed against time (``hop_s`` a hop) of the
+    detection ``(hop_index, t_s, speed)`` (its boundary, s; m/s) and the earlier ones (shape
+    ``(K,)`` each: hop index, boundary time s, speed m/s) up to :data:`ACCEL_SEED_HOPS` hops
+    before it on its track, one a hop (the latest): the boundary time within ``lobe_s`` (s)
+    of this one's moved back at hops of ``hop_s / α``, the speed within ``span_mps`` (m/s)
+    plus what :data:`ACCEL_SEED_MAX_MPS2` changes it by. None where fewer than
+    :data:`ACCEL_SEED_POINTS` hops (this one's included) are on the track."""
     k = hop_index - hops
     alpha = (c + speed) / (c - speed)
     a_j = (c + speeds) / (c - speeds)
@@ -2448,7 +2461,7 @@ def speed_trend(
     )
     if int(np.count_nonzero(on_track)) + 1 < ACCEL_SEED_POINTS:
         return None
-    # One detection a hop (the latest at each, as the receiver brings them in order).
+    # The latest detection of each hop (the receiver brings them in order).
     k_on, v_on = k[on_track], speeds[on_track]
     _, last = np.unique(k_on[::-1], return_index=True)
     idx = k_on.shape[0] - 1 - last
@@ -2457,7 +2470,9 @@ def speed_trend(
     x = np.concatenate(([0.0], -k_on[idx] * hop_s))
     y = np.concatenate(([speed], v_on[idx]))
     x = x - x.mean()
-    return float(np.dot(x, y - y.mean()) / np.dot(x, x))
+    slope = float(np.dot(x, y - y.mean()) / np.dot(x, x))
+    left = y - y.mean() - slope * x
+    return slope, float(np.sqrt(np.dot(left, left) / (x.shape[0] - 2) / np.dot(x, x)))
 
 
 def _hops_on_curve(
