@@ -2181,9 +2181,17 @@ class CoherentRefiner:
         grid = (0.5 * lobe, self.speed_span_mps, TIME_POINTS, SPEED_POINTS, FIT_PASSES)
         best: tuple[float, float, float] | None = None
         p_best = -1.0
-        for k in range(-steps, steps + 1):
-            g = g_seed + k * step
-            t, v, outcome = fit.t_s, v_fit, RECENTRE
+        starts = [(fit.t_s, v_fit, g_seed + k * step) for k in range(-steps, steps + 1)]
+        # Then the best one's neighbouring grating lobes: at -10 dB a curved fit's lobe is
+        # decided ~1 dB apart as a constant-speed one's (:meth:`_better_lobe`).
+        for i in range(len(starts) + 2):
+            if i == len(starts):
+                if best is None:
+                    break
+                v_best = self.c * (best[1] - 1.0) / (best[1] + 1.0)
+                starts += [(best[0] + d, v_best, best[2]) for d in (-lobe, lobe)]
+            t, v, g = starts[i]
+            outcome = RECENTRE
             for _ in range(MAX_RECENTRES + 1):
                 t, v, outcome = maximise(*args, known, g, self.c, t, v, *grid)
                 if outcome != RECENTRE:
