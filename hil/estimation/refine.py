@@ -67,8 +67,14 @@ accel_mps2`), and the next detections of that echo start from the curve. Over mo
 them (the curvature grows as ``M²``: at M = 29 and 4 m/s² it is 10 rad at the ends, and the
 fit of all M hops at one speed is nowhere near the echo). Below about 1.5 m/s² at M = 10 on
 ``att`` (about 6 m/s² at M = 5) the drift stays within the coherence of one echo and the
-speed lags by ``a M T_h / 2`` (at most 0.075 m/s); above about 12 m/s² at M = 10 some hops'
-runs lose their coherence too and those detections are refused.
+speed lags by ``a M T_h / 2`` (at most 0.075 m/s). Above about 12 m/s² at M = 10 the
+constant-speed fit is no point of the curve (its runs of hops lose their coherence too) and
+the rate grid about it does not reach the echo's rate: there the acceleration the detections
+themselves show (:func:`speed_trend`, :data:`ACCEL_SEED_HOPS`) seeds the curved fit, and once
+one fit is curved the next detections start from it. On ``att`` at M = 10, 0 dB, a target
+from 2 m/s closing keeps 0.955 of its boundaries at 35 m/s² and 0.88 at 40 (the detector
+spreads it over 16 Doppler cells of the window, and the seed, clipped at
+:data:`ACCEL_SEED_MAX_MPS2`, scatters more); about 3 g is the limit.
 
 Beside still water: still water (volume reverberation at rest, a wall) lies on the
 transmitted tones, and where it is stronger than an echo it leaks coherently into the echo's
@@ -352,6 +358,29 @@ ACCEL_POINTS = 41
 ACCEL_ROUNDS = 2
 ACCEL_STARTS = 3
 ACCEL_GAIN = 6.9
+#: Faster accelerations (the rate grid about a constant-speed fit finds none: at 15 m/s² on
+#: att, M = 10, the quadratic phase is 4.7 rad at the window's ends, the constant-speed fit's
+#: delay and speed are no point of the curve and its run coherence falls to 0.4-0.6): the
+#: acceleration the detections themselves show seeds the fit. The detections of the last
+#: ACCEL_SEED_HOPS hops on this echo's track (delay within ACCEL_SEED_LOBES grating lobes of
+#: this one moved on at its speed; speed within what ACCEL_SEED_MAX_MPS2 reaches plus the
+#: speed span) give the speed's least-squares slope (m/s²) and its standard error when there
+#: are at least ACCEL_SEED_POINTS of them; where the slope is at least ACCEL_SEED_MIN_MPS2
+#: (below, the rate grid about the constant-speed fit finds the echo: 12 m/s² is), the
+#: curved fit is tried from a run coherence of ACCEL_RUN_SEEDED and starts also from the
+#: grid rates within twice the standard error of the seed's (at least ACCEL_SEED_STEPS
+#: either side, at most ACCEL_SEED_MAX_STEPS: at -10 dB and near the span's edge the
+#: detections' speeds scatter, braking at 25 m/s² from 28 m/s the first slopes read -10 to
+#: -49 m/s²), a delay–speed search at each and the best kept, which the gain and echo tests
+#: then judge as any other try.
+ACCEL_SEED_HOPS = 8
+ACCEL_SEED_LOBES = 1.5
+ACCEL_SEED_POINTS = 4
+ACCEL_SEED_MIN_MPS2 = 8.0
+ACCEL_SEED_MAX_MPS2 = 40.0
+ACCEL_RUN_SEEDED = 0.3
+ACCEL_SEED_STEPS = 2
+ACCEL_SEED_MAX_STEPS = 6
 #: An echo that begins or ends within a detection's window (a target appearing, vanishing
 #: or jumping: the hops on one side hold noise) loses coherence as drift does, but no rate
 #: explains hops that hold no echo: the accelerating fit is not tried where the fit's
@@ -684,6 +713,9 @@ class CoherentRefiner:
         self._hop_runs: dict[tuple[int, int, int], _HopRun] = {}
         self._sub_words: dict[int, _Codeword] = {}
         self._recent: deque[tuple[int, float, float, float]] = deque(maxlen=RECENT_FITS)
+        #: The detections brought lately, ``(hop_index, t_s, speed m/s)``: the acceleration
+        #: they show seeds the curved fit (:func:`speed_trend`).
+        self._detections: deque[tuple[int, float, float]] = deque(maxlen=4 * ACCEL_SEED_HOPS)
         #: The latest fit of each echo measured lately (:meth:`_known_hops`).
         self._echoes: list[_EchoFit] = []
         #: Refused fits that may be one of two echoes at one speed (:data:`PARTNER_COHERENCE`).
@@ -768,6 +800,7 @@ class CoherentRefiner:
         self._valid_from = int(input_index)
         self._hop[:] = np.iinfo(np.int64).min
         self._recent.clear()
+        self._detections.clear()
         self._echoes.clear()
         self._partners.clear()
         if self._still is not None and self._still_fits is not None:
@@ -865,6 +898,8 @@ class CoherentRefiner:
         lobe = 1.0 / (alpha * self.spacing_hz)
         speed0 = self.c * (alpha - 1.0) / (alpha + 1.0)
         known = self._known_hops(hop_index, t_s, speed0, lag_s)
+        # A followed boundary's time and speed are its echo's fit carried on, no detection.
+        seed = None if followed else self._accel_seed(hop_index, t_s, speed0, lobe)
         keep_lobe = followed and self.in_still_water(t_s, alpha)
         fit = self._fit_near(word, hop_ids, t_s, speed0, lobe, hop_index, known, keep_lobe)
         if keep_lobe and fit is not None and fit.e_over_n0_db >= self.lobe_sure_db:
@@ -882,11 +917,12 @@ class CoherentRefiner:
             and fit.found
             and fit.accel_mps2 == 0.0
             and fit.coherence.fraction < ACCEL_TRY
-            and fit.run_coherence.fraction >= self._accel_run_min
+            and fit.run_coherence.fraction
+            >= (self._accel_run_min if seed is None else min(ACCEL_RUN_SEEDED, self._accel_run_min))
             and fit.e_over_n0_db >= test.min_e_over_n0_db + ACCEL_MARGIN_DB
             and not self._one_sided(fit, word, hop_ids, known)
         ):
-            fit = self._with_acceleration(fit, word, hop_ids, lobe, known)
+            fit = self._with_acceleration(fit, word, hop_ids, lobe, known, seed)
         if (
             fit is not None
             and fit.found
@@ -1551,8 +1587,18 @@ class CoherentRefiner:
     def _same_echo(self, fit: _EchoFit, hop_index: int, t_s: float, speed: float) -> bool:
         """Whether a detection at ``t_s`` (s) ending hop ``hop_index`` at ``speed`` (m/s) is
         the echo of ``fit``: its boundary where the fit's echo puts that hop's (within
-        :data:`SAME_ECHO_LOBES` grating lobes) at a speed within the speed span."""
-        if abs(fit.speed(self.c) - speed) > self.speed_span_mps:
+        :data:`SAME_ECHO_LOBES` grating lobes) at a speed within the speed span. An
+        accelerating fit's speed is carried on to that hop, and a detection may read it at
+        the boundary or as its window's mean (the detector's constant-speed reading, half a
+        window earlier: at 25 m/s² on att, M = 10, 1.25 m/s below the boundary's)."""
+        v_fit = fit.speed(self.c)
+        if fit.rate != 0.0:
+            accel = fit.rate * 2.0 * self.c / (fit.alpha + 1.0) ** 2
+            v_fit += accel * (hop_index - fit.hop_index) * self.hop_len_s
+            v_mean = v_fit - 0.5 * self.m_hops * self.hop_len_s * accel
+            if abs(v_mean - speed) <= self.speed_span_mps:
+                v_fit = v_mean
+        if abs(v_fit - speed) > self.speed_span_mps:
             return False
         t_pred = fit.boundary_s(hop_index, self.hop_len_s)
         return abs(t_pred - t_s) <= SAME_ECHO_LOBES / (fit.alpha * self.spacing_hz)
@@ -2031,9 +2077,24 @@ class CoherentRefiner:
         trail = int(np.argmin(weak[::-1])) if not weak.all() else weak.size
         return (lead >= PARTIAL_HOPS and trail == 0) or (trail >= PARTIAL_HOPS and lead == 0)
 
+    def _accel_seed(
+        self, hop_index: int, t_s: float, speed: float, lobe: float
+    ) -> tuple[float, float] | None:
+        """The acceleration and its standard error (m/s²) the detections of this echo's
+        track show up to this one (:data:`ACCEL_SEED_HOPS`, :func:`speed_trend`), where the
+        acceleration is at least :data:`ACCEL_SEED_MIN_MPS2`; else None. Records this
+        detection."""
+        seen = np.array(self._detections, dtype=np.float64).reshape(-1, 3)
+        self._detections.append((hop_index, t_s, speed))
+        trend = speed_trend(
+            seen[:, 0], seen[:, 1], seen[:, 2], hop_index, t_s, speed, self.hop_len_s, self.c,
+            ACCEL_SEED_LOBES * lobe, self.speed_span_mps,
+        )  # fmt: skip
+        return trend if trend is not None and abs(trend[0]) >= ACCEL_SEED_MIN_MPS2 else None
+
     def _with_acceleration(
         self, fit: Refinement, word: _Codeword, hop_ids: NDArray[np.int64], lobe: float,
-        known: NDArray[np.complex128],
+        known: NDArray[np.complex128], seed: tuple[float, float] | None = None,
     ) -> Refinement:  # fmt: skip
         """``fit`` (constant speed, its maximum found) fitted again with a changing time scale
         (:data:`ACCEL_TRY`): the rate's grid at the fit's delay and time scale (those of the
@@ -2042,7 +2103,9 @@ class CoherentRefiner:
         its two neighbours; from each of the :data:`ACCEL_STARTS` best local maxima, the delay–speed
         fit and a parabola in the rate, :data:`ACCEL_ROUNDS` times. The best accelerating fit
         where it raises the likelihood by :data:`ACCEL_GAIN`, else ``fit``; its time and time
-        scale are the boundary's."""
+        scale are the boundary's. With ``seed`` (m/s², the detections' own acceleration and
+        its standard error, :meth:`_accel_seed`) one more start: the best of the delay–speed
+        searches at the grid rates about the seed's (:meth:`_seeded_start`)."""
         gammas = self._gammas
         n = gammas.shape[0]
         # Each rate's curve through a point of the echo: the fit's own (the hops' centre)
@@ -2077,9 +2140,16 @@ class CoherentRefiner:
         peak = (inner > power[:, :-2]) & (inner >= power[:, 2:])
         rows, cols = np.nonzero(peak)
         order = np.argsort(-inner[rows, cols])[:ACCEL_STARTS]
+        starts = [
+            (float(t_c[c] + shifts[r]), float(a_c[c]), float(gammas[c]))
+            for r, c in zip(rows[order], cols[order] + 1, strict=True)
+        ]
+        if seed is not None:
+            seeded = self._seeded_start(args, known, fit, seed, lobe)
+            if seeded is not None:
+                starts.append(seeded)
         best: tuple[float, float, float, float] | None = None
-        for r, c in zip(rows[order], cols[order] + 1, strict=True):
-            t0, a0, g0 = float(t_c[c] + shifts[r]), float(a_c[c]), float(gammas[c])
+        for t0, a0, g0 in starts:
             found = self._accel_fit(args, known, t0, a0, g0, lobe)
             if found is not None and (best is None or found[3] > best[3]):
                 best = found
@@ -2091,6 +2161,48 @@ class CoherentRefiner:
         if not gain > ACCEL_GAIN:
             return fit
         return self._refinement(args, known, word, t, alpha, gamma, True)
+
+    def _seeded_start(
+        self, args: tuple[Any, ...], known: NDArray[np.complex128], fit: Refinement,
+        seed: tuple[float, float], lobe: float,
+    ) -> tuple[float, float, float] | None:  # fmt: skip
+        """The curved fit's start from the acceleration ``seed`` (m/s², and its standard
+        error): at each grid rate (``γ = a (α+1)²/(2c)``) within twice the error of the
+        seed's (at least :data:`ACCEL_SEED_STEPS` steps either side, at most
+        :data:`ACCEL_SEED_MAX_STEPS`), the delay–speed search about ``fit`` (±½ lobe, ± the
+        speed span); the best ``(t, alpha, gamma)`` (the hops' centre's line), None where no
+        search finds a maximum inside."""
+        step = float(self._gammas[1] - self._gammas[0])
+        to_rate = (fit.alpha + 1.0) ** 2 / (2.0 * self.c)
+        g_seed = float(np.clip(seed[0], -ACCEL_SEED_MAX_MPS2, ACCEL_SEED_MAX_MPS2)) * to_rate
+        reach = 2.0 * seed[1] * to_rate / step
+        steps = int(np.clip(math.ceil(reach), ACCEL_SEED_STEPS, ACCEL_SEED_MAX_STEPS))
+        v_fit = fit.speed_mps(self.c)
+        grid = (0.5 * lobe, self.speed_span_mps, TIME_POINTS, SPEED_POINTS, FIT_PASSES)
+        best: tuple[float, float, float] | None = None
+        p_best = -1.0
+        starts = [(fit.t_s, v_fit, g_seed + k * step) for k in range(-steps, steps + 1)]
+        # Then the best one's neighbouring grating lobes: at -10 dB a curved fit's lobe is
+        # decided ~1 dB apart as a constant-speed one's (:meth:`_better_lobe`).
+        for i in range(len(starts) + 2):
+            if i == len(starts):
+                if best is None:
+                    break
+                v_best = self.c * (best[1] - 1.0) / (best[1] + 1.0)
+                starts += [(best[0] + d, v_best, best[2]) for d in (-lobe, lobe)]
+            t, v, g = starts[i]
+            outcome = RECENTRE
+            for _ in range(MAX_RECENTRES + 1):
+                t, v, outcome = maximise(*args, known, g, self.c, t, v, *grid)
+                if outcome != RECENTRE:
+                    break
+            if outcome != FOUND:
+                continue
+            alpha = (self.c + v) / (self.c - v)
+            p = float(self._powers(args, known, np.array([t]), np.array([alpha]), np.array([g]))[0])
+            if p > p_best:
+                best, p_best = (t, alpha, g), p
+        return best
 
     def _accel_gain(
         self, args: tuple[Any, ...], known: NDArray[np.complex128], word: _Codeword, t: float,
@@ -2337,6 +2449,44 @@ class CoherentRefiner:
             word = _Codeword.of(self.schedule, key, self.m_hops, self.fs_hz)
             self._codewords[key] = word
         return word
+
+
+def speed_trend(
+    hops: NDArray[np.float64], times: NDArray[np.float64], speeds: NDArray[np.float64],
+    hop_index: int, t_s: float, speed: float, hop_s: float, c: float, lobe_s: float,
+    span_mps: float,
+) -> tuple[float, float] | None:  # fmt: skip
+    """The acceleration (m/s², of the closing speed) that detections show and its standard
+    error (m/s²): the least-squares slope of speed against time (``hop_s`` a hop) of the
+    detection ``(hop_index, t_s, speed)`` (its boundary, s; m/s) and the earlier ones (shape
+    ``(K,)`` each: hop index, boundary time s, speed m/s) up to :data:`ACCEL_SEED_HOPS` hops
+    before it on its track, one a hop (the latest): the boundary time within ``lobe_s`` (s)
+    of this one's moved back at hops of ``hop_s / α``, the speed within ``span_mps`` (m/s)
+    plus what :data:`ACCEL_SEED_MAX_MPS2` changes it by. None where fewer than
+    :data:`ACCEL_SEED_POINTS` hops (this one's included) are on the track."""
+    k = hop_index - hops
+    alpha = (c + speed) / (c - speed)
+    a_j = (c + speeds) / (c - speeds)
+    on_track = (
+        (k >= 1)
+        & (k <= ACCEL_SEED_HOPS)
+        & (np.abs(t_s - times - k * hop_s * 2.0 / (a_j + alpha)) <= lobe_s)
+        & (np.abs(speeds - speed) <= span_mps + ACCEL_SEED_MAX_MPS2 * k * hop_s)
+    )
+    if int(np.count_nonzero(on_track)) + 1 < ACCEL_SEED_POINTS:
+        return None
+    # The latest detection of each hop (the receiver brings them in order).
+    k_on, v_on = k[on_track], speeds[on_track]
+    _, last = np.unique(k_on[::-1], return_index=True)
+    idx = k_on.shape[0] - 1 - last
+    if idx.shape[0] + 1 < ACCEL_SEED_POINTS:
+        return None
+    x = np.concatenate(([0.0], -k_on[idx] * hop_s))
+    y = np.concatenate(([speed], v_on[idx]))
+    x = x - x.mean()
+    slope = float(np.dot(x, y - y.mean()) / np.dot(x, x))
+    left = y - y.mean() - slope * x
+    return slope, float(np.sqrt(np.dot(left, left) / (x.shape[0] - 2) / np.dot(x, x)))
 
 
 def _hops_on_curve(
