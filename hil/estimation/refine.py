@@ -377,6 +377,13 @@ ACCEL_SEED_HOPS = 8
 ACCEL_SEED_LOBES = 1.5
 ACCEL_SEED_POINTS = 4
 ACCEL_SEED_MIN_MPS2 = 8.0
+#: The hop length (s) at which ACCEL_SEED_MIN_MPS2 was measured (att random-cyclic, M = 10):
+#: at one M the phase an acceleration puts at the window's ends grows as ``a T_h²``, so a
+#: schedule of longer hops is seeded from ``ACCEL_SEED_MIN_MPS2 (ACCEL_SEED_HOP_S / T_h)²``
+#: (att three-state, 15 ms: 3.6 m/s²; there braking at 10 m/s² and reversing at 8 m/s² were
+#: missed on 7-15 % and 41-49 % of their boundaries seeded from 8 m/s² only, 7 % and 27 %
+#: seeded from 3.6).
+ACCEL_SEED_HOP_S = 0.01
 ACCEL_SEED_MAX_MPS2 = 40.0
 ACCEL_RUN_SEEDED = 0.3
 ACCEL_SEED_STEPS = 2
@@ -2082,15 +2089,16 @@ class CoherentRefiner:
     ) -> tuple[float, float] | None:
         """The acceleration and its standard error (m/s²) the detections of this echo's
         track show up to this one (:data:`ACCEL_SEED_HOPS`, :func:`speed_trend`), where the
-        acceleration is at least :data:`ACCEL_SEED_MIN_MPS2`; else None. Records this
-        detection."""
+        acceleration is at least :data:`ACCEL_SEED_MIN_MPS2`, scaled to the hop length
+        (:data:`ACCEL_SEED_HOP_S`); else None. Records this detection."""
         seen = np.array(self._detections, dtype=np.float64).reshape(-1, 3)
         self._detections.append((hop_index, t_s, speed))
         trend = speed_trend(
             seen[:, 0], seen[:, 1], seen[:, 2], hop_index, t_s, speed, self.hop_len_s, self.c,
             ACCEL_SEED_LOBES * lobe, self.speed_span_mps,
         )  # fmt: skip
-        return trend if trend is not None and abs(trend[0]) >= ACCEL_SEED_MIN_MPS2 else None
+        least = ACCEL_SEED_MIN_MPS2 * (ACCEL_SEED_HOP_S / self.hop_len_s) ** 2
+        return trend if trend is not None and abs(trend[0]) >= least else None
 
     def _with_acceleration(
         self, fit: Refinement, word: _Codeword, hop_ids: NDArray[np.int64], lobe: float,

@@ -28,12 +28,12 @@ HOPS = SECONDS / 0.01
 
 
 def _scene(
-    v0_mps: float, accel_mps2: float, snr_db: float, seed: int
+    v0_mps: float, accel_mps2: float, snr_db: float, seed: int, family: str = "random-cyclic"
 ) -> tuple[list[Estimate], dict[int, HopTruth]]:
     """A target from 40 m closing at ``v0_mps`` (m/s) and speeding up at ``accel_mps2``
-    (m/s², negative: braking), per-sample SNR ``snr_db`` of white noise (seeded), 1 s: the
-    estimates and the truth per hop boundary."""
-    schedule = att_schedule()
+    (m/s², negative: braking), per-sample SNR ``snr_db`` of white noise (seeded), 1 s, on
+    att's ``family``: the estimates and the truth per hop boundary."""
+    schedule = att_schedule(family)
 
     def position(t: np.ndarray) -> np.ndarray:
         x = 40.0 - v0_mps * t - 0.5 * accel_mps2 * t**2
@@ -55,7 +55,9 @@ def _scene(
     return run_blocks(rx, x), {h.hop_index: h for h in truth}
 
 
-def _score(est: list[Estimate], truth: dict[int, HopTruth]) -> tuple[float, float, float, float]:
+def _score(
+    est: list[Estimate], truth: dict[int, HopTruth], hops: float = HOPS
+) -> tuple[float, float, float, float]:
     """Detected fraction of the boundaries (received 0.15 s to 0.97 s, faster than 4 m/s:
     outside the band), false estimates per hop (more than 0.5 m or 0.5 m/s from their
     boundary's truth), and the on-target estimates' range and speed RMSE (m, m/s)."""
@@ -75,7 +77,7 @@ def _score(est: list[Estimate], truth: dict[int, HopTruth]) -> tuple[float, floa
     ]  # fmt: skip
     pd = sum(k in hit for k in scored) / len(scored)
     rms = (float(np.sqrt(np.mean(np.square(d)))) if d else np.inf for d in (dr, dv))
-    return pd, false / HOPS, *rms
+    return pd, false / hops, *rms
 
 
 # Measured (seed 1): pd 1.0 and no false estimate in all eight; range / speed RMSE 1.0 / 5.9,
@@ -100,6 +102,26 @@ def test_a_target_accelerating_at_15_or_25_mps2_is_measured(
     pd, false, range_rms, speed_rms = _score(*_scene(v0, accel, snr_db, seed=1))
     assert pd >= 0.97 and false <= 0.01
     assert range_rms < (0.002 if snr_db == 0.0 else 0.006) and speed_rms < max_speed_rms
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("seed_hop_s", "detected", "false_per_hop"),
+    [(refine.ACCEL_SEED_HOP_S, 52, 0.0), (0.015, 4, 0.015)],
+)
+def test_a_three_state_target_braking_at_6_mps2_is_seeded_from_its_hop_length(
+    seed_hop_s: float, detected: int, false_per_hop: float, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # att three-state hops are 15 ms: at M = 10 the window's curvature at one acceleration is
+    # 2.25 times random-cyclic's, so its seed threshold is 8 (10 / 15)² = 3.6 m/s². Seeded
+    # from 8 m/s² only (ACCEL_SEED_HOP_S at its hop length), a target braking from 20 m/s at
+    # 6 m/s² kept 4 of its 56 boundaries (measured 30 Nov; 7.5 m/s²: 0.96, 10: 0.85-0.93).
+    monkeypatch.setattr(refine, "ACCEL_SEED_HOP_S", seed_hop_s)
+    est, truth = _scene(20.0, -6.0, 0.0, seed=1, family="three-state")
+    pd, false, range_rms, _ = _score(est, truth, SECONDS / 0.015)
+    assert (round(pd * 56), false) == (detected, pytest.approx(false_per_hop, abs=1e-9))
+    if detected > 50:
+        assert range_rms < 0.003
 
 
 def _track(accel: float, noise: float, hops: int = 8, seed: int = 3) -> tuple[np.ndarray, ...]:
