@@ -720,9 +720,10 @@ class CoherentRefiner:
         self._hop_runs: dict[tuple[int, int, int], _HopRun] = {}
         self._sub_words: dict[int, _Codeword] = {}
         self._recent: deque[tuple[int, float, float, float]] = deque(maxlen=RECENT_FITS)
-        #: The detections brought lately, ``(hop_index, t_s, speed m/s)``: the acceleration
-        #: they show seeds the curved fit (:func:`speed_trend`).
-        self._detections: deque[tuple[int, float, float]] = deque(maxlen=4 * ACCEL_SEED_HOPS)
+        #: The detections brought lately, ``(hop_index, t_s, speed m/s)``, the latest last:
+        #: the acceleration the earlier ones show seeds the latest's curved fit
+        #: (:func:`speed_trend`).
+        self._detections: deque[tuple[int, float, float]] = deque(maxlen=4 * ACCEL_SEED_HOPS + 1)
         #: The latest fit of each echo measured lately (:meth:`_known_hops`).
         self._echoes: list[_EchoFit] = []
         #: Refused fits that may be one of two echoes at one speed (:data:`PARTNER_COHERENCE`).
@@ -905,8 +906,9 @@ class CoherentRefiner:
         lobe = 1.0 / (alpha * self.spacing_hz)
         speed0 = self.c * (alpha - 1.0) / (alpha + 1.0)
         known = self._known_hops(hop_index, t_s, speed0, lag_s)
-        # A followed boundary's time and speed are its echo's fit carried on, no detection.
-        seed = None if followed else self._accel_seed(hop_index, t_s, speed0, lobe)
+        if not followed:
+            # A followed boundary's time and speed are its echo's fit carried on, no detection.
+            self._detections.append((hop_index, t_s, speed0))
         keep_lobe = followed and self.in_still_water(t_s, alpha)
         fit = self._fit_near(word, hop_ids, t_s, speed0, lobe, hop_index, known, keep_lobe)
         if keep_lobe and fit is not None and fit.e_over_n0_db >= self.lobe_sure_db:
@@ -924,12 +926,18 @@ class CoherentRefiner:
             and fit.found
             and fit.accel_mps2 == 0.0
             and fit.coherence.fraction < ACCEL_TRY
-            and fit.run_coherence.fraction
-            >= (self._accel_run_min if seed is None else min(ACCEL_RUN_SEEDED, self._accel_run_min))
+            and fit.run_coherence.fraction >= min(ACCEL_RUN_SEEDED, self._accel_run_min)
             and fit.e_over_n0_db >= test.min_e_over_n0_db + ACCEL_MARGIN_DB
-            and not self._one_sided(fit, word, hop_ids, known)
         ):
-            fit = self._with_acceleration(fit, word, hop_ids, lobe, known, seed)
+            # The detections' trend is read only where a curved fit may be tried.
+            seed = None if followed else self._accel_seed(hop_index, t_s, speed0, lobe)
+            run_min = (
+                self._accel_run_min if seed is None else min(ACCEL_RUN_SEEDED, self._accel_run_min)
+            )
+            if fit.run_coherence.fraction >= run_min and not self._one_sided(
+                fit, word, hop_ids, known
+            ):
+                fit = self._with_acceleration(fit, word, hop_ids, lobe, known, seed)
         if (
             fit is not None
             and fit.found
@@ -2090,9 +2098,9 @@ class CoherentRefiner:
         """The acceleration and its standard error (m/s²) the detections of this echo's
         track show up to this one (:data:`ACCEL_SEED_HOPS`, :func:`speed_trend`), where the
         acceleration is at least :data:`ACCEL_SEED_MIN_MPS2`, scaled to the hop length
-        (:data:`ACCEL_SEED_HOP_S`); else None. Records this detection."""
-        seen = np.array(self._detections, dtype=np.float64).reshape(-1, 3)
-        self._detections.append((hop_index, t_s, speed))
+        (:data:`ACCEL_SEED_HOP_S`); else None. This detection is the latest recorded
+        (:meth:`refine`); the earlier ones are the rest."""
+        seen = np.array(self._detections, dtype=np.float64).reshape(-1, 3)[:-1]
         trend = speed_trend(
             seen[:, 0], seen[:, 1], seen[:, 2], hop_index, t_s, speed, self.hop_len_s, self.c,
             ACCEL_SEED_LOBES * lobe, self.speed_span_mps,
@@ -2199,11 +2207,7 @@ class CoherentRefiner:
                 v_best = self.c * (best[1] - 1.0) / (best[1] + 1.0)
                 starts += [(best[0] + d, v_best, best[2]) for d in (-lobe, lobe)]
             t, v, g = starts[i]
-            outcome = RECENTRE
-            for _ in range(MAX_RECENTRES + 1):
-                t, v, outcome = maximise(*args, known, g, self.c, t, v, *grid)
-                if outcome != RECENTRE:
-                    break
+            t, v, outcome = _maximise_recentred(args, known, g, self.c, t, v, grid)
             if outcome != FOUND:
                 continue
             alpha = (self.c + v) / (self.c - v)
@@ -2235,10 +2239,7 @@ class CoherentRefiner:
         grid = (0.125 * lobe, 0.25 * self.speed_span_mps, 5, 5, FIT_PASSES)
         p = np.zeros(3)
         for r in range(ACCEL_ROUNDS):
-            for _ in range(MAX_RECENTRES + 1):
-                t, v, outcome = maximise(*args, known, gamma, self.c, t, v, *grid)
-                if outcome != RECENTRE:
-                    break
+            t, v, outcome = _maximise_recentred(args, known, gamma, self.c, t, v, grid)
             if outcome != FOUND:
                 return None
             alpha = (self.c + v) / (self.c - v)
@@ -2457,6 +2458,21 @@ class CoherentRefiner:
             word = _Codeword.of(self.schedule, key, self.m_hops, self.fs_hz)
             self._codewords[key] = word
         return word
+
+
+def _maximise_recentred(
+    args: tuple[Any, ...], known: NDArray[np.complex128], gamma: float, c: float, t: float,
+    v: float, grid: tuple[Any, ...],
+) -> tuple[float, float, int]:  # fmt: skip
+    """:func:`~hil.estimation.refine_kernels.maximise` at the rate ``gamma`` (1/s) from
+    ``(t, v)`` (s, m/s) over ``grid``, recentred on the grid's edge up to
+    :data:`MAX_RECENTRES` times: ``(t, v, outcome)``."""
+    outcome = RECENTRE
+    for _ in range(MAX_RECENTRES + 1):
+        t, v, outcome = maximise(*args, known, gamma, c, t, v, *grid)
+        if outcome != RECENTRE:
+            break
+    return t, v, outcome
 
 
 def speed_trend(
