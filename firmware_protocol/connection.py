@@ -190,7 +190,8 @@ class Connection:
             raise LocalProtocolError(
                 f"{self.role.name} cannot send {event.NAME}: only the {event.SENDER.name} sends it"
             )
-        problem = self._violation(event, self.role)
+        kind = message_kind(event, self._pending)
+        problem = self._violation(event, self.role, kind)
         if problem:
             raise LocalProtocolError(problem)
         flags = FLAG_OPTIONAL if event.OPTIONAL else 0
@@ -205,7 +206,7 @@ class Connection:
             max_frame_len=self.peer_max_frame_len,
         )
         self._tx_seq = (seq + 1) % SEQ_MODULO
-        self._apply(event, self.role, seq)
+        self._apply(event, self.role, seq, kind)
         return wire
 
     # --- receiving -------------------------------------------------------------------------
@@ -305,14 +306,15 @@ class Connection:
             if cls in (Configure, Start):
                 self._enter_command(cls, frame.seq)
             raise refuse(NakCode.BAD_PAYLOAD, str(error)) from None
-        problem = self._violation(message, self.peer_role)
+        kind = message_kind(message, self._pending)
+        problem = self._violation(message, self.peer_role, kind)
         if problem:
             over_credit = isinstance(message, DacData) and self._credit_problem(message, False)
             code = NakCode.CREDIT_EXCEEDED if over_credit == problem else NakCode.BAD_PAYLOAD
             raise refuse(code, problem)
         if isinstance(message, Version):
             self._check_board_version(message)
-        self._apply(message, self.peer_role, frame.seq)
+        self._apply(message, self.peer_role, frame.seq, kind)
         return message
 
     def _refusal_for(self, frame: Frame) -> Callable[[NakCode, str], RemoteProtocolError]:
@@ -361,10 +363,10 @@ class Connection:
 
     # --- rules shared by both directions ---------------------------------------------------
 
-    def _violation(self, message: Message, sender: Role) -> str | None:
-        """Why ``sender`` may not emit ``message`` now, or None. Same rules both ways."""
+    def _violation(self, message: Message, sender: Role, kind: str) -> str | None:
+        """Why ``sender`` may not emit ``message`` (of :func:`message_kind` ``kind``) now, or
+        None. Same rules both ways."""
         local = sender is self.role
-        kind = message_kind(message, self._pending)
         if next_state(self.state, sender, kind) is None:
             return illegal_message(self.state, sender, kind, local=local)
         if isinstance(message, Ack) and message.ref_type in COMMAND_NAMES:
@@ -395,8 +397,10 @@ class Connection:
         config = self.configuration
         if config is None:
             return f"{message.NAME} without an acknowledged CONFIGURE"
-        mask = getattr(config, f"{side}_channel_mask")
-        fmt = getattr(config, f"{side}_format")
+        if side == "dac":
+            mask, fmt = config.dac_channel_mask, config.dac_format
+        else:
+            mask, fmt = config.adc_channel_mask, config.adc_format
         if message.channel_mask != mask or message.sample_format != fmt:
             return (
                 f"{message.NAME} has channel_mask 0x{message.channel_mask:04x} and format"
@@ -418,9 +422,9 @@ class Connection:
             f" {self.dac_credit} samples of credit; answer NAK CREDIT_EXCEEDED"
         )
 
-    def _apply(self, message: Message, sender: Role, seq: int) -> None:
-        """Move the state and the bookkeeping after a legal message (sent or received)."""
-        kind = message_kind(message, self._pending)
+    def _apply(self, message: Message, sender: Role, seq: int, kind: str) -> None:
+        """Move the state and the bookkeeping after a legal message (sent or received) of
+        :func:`message_kind` ``kind`` (as :meth:`_violation` checked it)."""
         target = next_state(self.state, sender, kind)
         assert target is not None  # checked by _violation
         if isinstance(message, Hello):

@@ -346,15 +346,17 @@ class HopSchedule:
         idx = np.arange(first, first + count, dtype=np.int64)
         q, r = np.divmod(idx, self.period_hops)
         qf = q.astype(float)
+        # Indexing by the array ``r`` gives new arrays: the table shares nothing with the
+        # schedule.
         return HopTable(
             index=idx,
             start_s=self.t0_s + qf * self.period_s + self.start_s[r],
-            duration_s=self.duration_s[r].copy(),
-            tone_index=self.code[r].copy(),
-            freq_hz=self.freq_hz[r].copy(),
-            chirp_hz_per_s=self.chirp_hz_per_s[r].copy(),
+            duration_s=self.duration_s[r],
+            tone_index=self.code[r],
+            freq_hz=self.freq_hz[r],
+            chirp_hz_per_s=self.chirp_hz_per_s[r],
             phase_rad=np.mod(self.phase_rad[r] + qf * self.period_phase_rad, TWO_PI),
-            amplitude=self.amplitude[r].copy(),
+            amplitude=self.amplitude[r],
         )
 
     def hops_in_span(self, t_start_s: float, t_stop_s: float) -> HopTable:
