@@ -211,3 +211,16 @@ def test_a_run_over_the_sources_the_last_warm_up_left_starts_none(
     (project.path / "hil").mkdir()
     (project.path / "hil" / "kernels.py").write_text("SCALE = 2\n")
     assert warmed_parts() == ["warmed-receivers", "warmed-tank"]
+
+
+@pytest.mark.slow
+def test_the_suite_keeps_its_rewritten_test_modules_where_bytecode_is_off(
+    project: pytest.Pytester, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Without the cached bytecode each worker rewrites every test module's assertions again
+    # (the root conftest's pytest_configure).
+    monkeypatch.setenv("PYTHONDONTWRITEBYTECODE", "1")
+    result = project.runpytest_subprocess("-p", "no:xdist", *QUIET)
+    result.assert_outcomes(passed=1, deselected=3)
+    cached = sorted(p.name for p in (project.path / "__pycache__").glob("test_tiers_sample.*.pyc"))
+    assert len(cached) == 1 and "-pytest-" in cached[0], cached
