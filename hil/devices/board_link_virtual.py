@@ -18,7 +18,13 @@ from hil.acquisition import SampleRing
 from hil.devices.board_link import READ_SIZE, BoardLink, LinkHooks
 from hil.devices.board_log import LOG
 from hil.devices.clock import VirtualClock
-from hil.transports import TransportClosedError, TransportError, TransportTimeoutError
+from hil.transports import (
+    QuietTransport,
+    Transport,
+    TransportClosedError,
+    TransportError,
+    TransportTimeoutError,
+)
 
 
 class VirtualTimeBoardLink(BoardLink):
@@ -31,6 +37,9 @@ class VirtualTimeBoardLink(BoardLink):
         self._detach: Callable[[], None] | None = None
         #: The sample index :meth:`wait_for_samples` waits for (see :meth:`quiet_until_ns`).
         self._awaited_index: int | None = None
+        #: The transport's own quiet time (:class:`~hil.transports.QuietTransport`), or None
+        #: where its device does not say it (every tick then services the link).
+        self._device_quiet: Callable[[int | None, int], int] | None = None
 
     def open(self, connect: Callable[[], None]) -> None:
         # Attached first: the handshake's waits sleep on the clock, which services the link.
@@ -41,6 +50,12 @@ class VirtualTimeBoardLink(BoardLink):
             self.close()
             raise
         self._closing.clear()
+
+    def connect(self, transport: Transport) -> None:
+        self._device_quiet = (
+            transport.quiet_until_ns if isinstance(transport, QuietTransport) else None
+        )
+        super().connect(transport)
 
     def close(self) -> None:
         self._closing.set()
@@ -111,8 +126,7 @@ class VirtualTimeBoardLink(BoardLink):
         nothing): the skipped ticks would have read nothing, or their samples arrive, the
         same, at the next service, before the wait can end. A keepalive due, DAC samples to
         send within credit, or frames not yet written end the quiet."""
-        transport, awaited = self.transport, self._awaited_index
-        quiet = getattr(transport, "quiet_until_ns", None)
+        quiet, awaited = self._device_quiet, self._awaited_index
         if quiet is None or not self.up or self.queued:
             return None
         if self.hooks.dac_pending():

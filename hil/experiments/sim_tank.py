@@ -562,10 +562,7 @@ def _serve(argv: list[str]) -> int:
             counters = {
                 "dac_underruns": int(tank.board_sim.call(lambda b: b.dac_underruns)),
                 "adc_overruns": int(tank.board_sim.call(lambda b: b.adc_overruns)),
-                # The C firmware's board counts clipping in C and reports only the alarm.
-                "adc_clipped_samples": tank.board_sim.call(
-                    lambda b: getattr(b, "adc_clipped_samples", None)
-                ),
+                "adc_clipped_samples": int(tank.board_sim.call(lambda b: b.adc_clipped_samples)),
             }
             t_end = tank.clock()
             grid = np.arange(t_first, t_end + 1e-3, 1e-3)

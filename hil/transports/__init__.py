@@ -5,6 +5,8 @@
 """
 
 from hil.transports.base import (
+    IdentifiedTransport,
+    QuietTransport,
     Transport,
     TransportClosedError,
     TransportError,
@@ -16,6 +18,8 @@ from hil.transports.serial_transport import SerialTransport, open_serial
 from hil.transports.spy import SpyTransport
 
 __all__ = [
+    "IdentifiedTransport",
+    "QuietTransport",
     "SerialTransport",
     "SpyTransport",
     "Transport",

@@ -33,6 +33,8 @@ from hil.errors import (
 )
 
 __all__ = [
+    "IdentifiedTransport",
+    "QuietTransport",
     "Transport",
     "TransportClosedError",
     "TransportError",
@@ -53,3 +55,29 @@ class Transport(Protocol):
     def write(self, data: bytes) -> int: ...
 
     def close(self) -> None: ...
+
+
+@runtime_checkable
+class QuietTransport(Transport, Protocol):
+    """A transport whose device says how long it has nothing to send (an in-process
+    simulated board: :class:`~sim_devices.board.port.MemoryBoardLink`), so that a host on
+    virtual time skips the reads that would return nothing
+    (:meth:`~hil.devices.board_link_virtual.VirtualTimeBoardLink.quiet_until_ns`)."""
+
+    def quiet_until_ns(self, awaited_index: int | None, max_bytes: int) -> int:
+        """Device time (ns) before which the device only captures samples below
+        ``awaited_index`` (None: none awaited), or idles, with nothing to send in reads of
+        ``max_bytes``."""
+        ...
+
+
+@runtime_checkable
+class IdentifiedTransport(Transport, Protocol):
+    """A transport that can say what it resolved to, for the run's record of what was
+    connected (:func:`~hil.transports.identity.port_identity`): a serial port, a USB
+    device, a spy around one."""
+
+    def identity(self) -> dict[str, str]:
+        """``port``, ``usb_vid_pid``, ``usb_serial``, ``manufacturer``, ``product`` as far
+        as they are known."""
+        ...

@@ -10,22 +10,22 @@ from __future__ import annotations
 
 from typing import Any
 
+from hil.transports.base import IdentifiedTransport
+
 
 def port_identity(transport: object) -> dict[str, str]:
     """``port``, ``usb_vid_pid``, ``usb_serial``, ``manufacturer``, ``product`` as far as
-    they are known for ``transport`` (a :class:`~hil.transports.serial_transport.
-    SerialTransport`, a :class:`~hil.transports.usb_transport.UsbTransport`, a spy around
-    one, or anything else: nothing known)."""
-    inner = getattr(transport, "inner", None)
-    if inner is not None:
-        return port_identity(inner)
-    serial_port = getattr(getattr(transport, "port", None), "port", None)
-    if isinstance(serial_port, str):
-        return {"port": serial_port, **_usb_of_serial_port(serial_port)}
-    device = getattr(transport, "_dev", None)  # UsbTransport's pyusb device
-    if device is not None and hasattr(device, "idVendor"):
-        return _usb_descriptor(device)
-    return {}
+    they are known for ``transport``: its own
+    :meth:`~hil.transports.base.IdentifiedTransport.identity` (a
+    :class:`~hil.transports.serial_transport.SerialTransport`, a
+    :class:`~hil.transports.usb_transport.UsbTransport`, a spy around one), else nothing."""
+    return transport.identity() if isinstance(transport, IdentifiedTransport) else {}
+
+
+def serial_port_identity(path: str) -> dict[str, str]:
+    """``port`` (the serial device ``path``) and the USB ids pyserial lists for it (none for
+    a pty)."""
+    return {"port": path, **_usb_of_serial_port(path)}
 
 
 def _usb_of_serial_port(path: str) -> dict[str, str]:
@@ -47,7 +47,8 @@ def _usb_of_serial_port(path: str) -> dict[str, str]:
     return {}
 
 
-def _usb_descriptor(device: Any) -> dict[str, str]:
+def usb_descriptor_identity(device: Any) -> dict[str, str]:
+    """``usb_vid_pid`` and the strings of a pyusb ``device``'s descriptor that it answers."""
     out = {"usb_vid_pid": f"{device.idVendor:04x}:{device.idProduct:04x}"}
     for key, attr in (("usb_serial", "serial_number"), ("manufacturer", "manufacturer"),
                       ("product", "product")):  # fmt: skip

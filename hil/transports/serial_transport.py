@@ -39,6 +39,14 @@ class SerialTransport:
         self.closed = False
         self._posix = isinstance(port, _posix_serial_class())
 
+    def identity(self) -> dict[str, str]:
+        """The port's device path (or pyserial URL) and the USB ids pyserial lists for it
+        (none for a pty)."""
+        from hil.transports.identity import serial_port_identity
+
+        path = self.port.port
+        return serial_port_identity(path) if isinstance(path, str) else {}
+
     @property
     def timeout(self) -> float:
         """Seconds one read may wait."""

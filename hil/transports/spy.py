@@ -67,6 +67,12 @@ class SpyTransport:
     def timeout(self, value: float) -> None:
         self.inner.timeout = value
 
+    def identity(self) -> dict[str, str]:
+        """What the inner transport resolved to (:func:`~hil.transports.identity.port_identity`)."""
+        from hil.transports.identity import port_identity
+
+        return port_identity(self.inner)
+
     def _dump(self, direction: str, data: bytes) -> None:
         t = float(self._clock()) - self._t0
         for offset, hexes, text in hexdump_lines(data):

@@ -144,6 +144,12 @@ class UsbTransport:
             raise TransportClosedError(f"{self.url}: link lost while writing ({error})") from error
         return written
 
+    def identity(self) -> dict[str, str]:
+        """The device's vendor:product id and the descriptor strings it answers."""
+        from hil.transports.identity import usb_descriptor_identity
+
+        return usb_descriptor_identity(self._dev)
+
     def close(self) -> None:
         """Release the interface and the device handle; idempotent."""
         if self.closed:

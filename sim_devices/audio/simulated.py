@@ -31,7 +31,7 @@ from __future__ import annotations
 import math
 import threading
 from collections.abc import Callable, Mapping
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -300,6 +300,22 @@ class SimulatedDuplex(SettingsView):
         if self._runner is not None:
             self._runner.raise_pending()
         return True
+
+    @property
+    def abandoned(self) -> None:
+        """None: a simulated stream always stops and closes as asked."""
+        return None
+
+    def describe(self) -> dict[str, Any]:
+        """The simulated interface: its buffering (:attr:`io_delay_samples`) is its input
+        latency (s)."""
+        delay = int(self.io_delay_samples)
+        return {
+            "device": "simulated audio interface",
+            "host_api": "simulated",
+            "io_delay_samples": delay,
+            "input_latency_s": delay / float(self.settings.samplerate),
+        }
 
     def stop(self) -> None:
         """Stop after the current block. Re-raises a callback exception."""

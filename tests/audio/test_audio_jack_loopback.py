@@ -213,3 +213,21 @@ def test_unwired_loop_is_refused_not_trusted_from_the_driver(jack_server: Any) -
     # (silence): the measurement must refuse rather than report the driver's latency.
     with pytest.raises(LatencyMeasurementError, match="the reference chirp was not found cleanly"):
         measure_loopback_latency(SoundDeviceDuplex(_settings(jack_server)))
+
+
+def test_an_opened_stream_describes_its_portaudio_device(jack_server: Any) -> None:
+    backend = SoundDeviceDuplex(_settings(jack_server))
+    with pytest.raises(RuntimeError, match=r"open\(\) the stream first"):
+        backend.describe()
+    backend.open(_silent)
+    try:
+        described = backend.describe()
+        claimed = backend.reported_latency_s
+    finally:
+        backend.close()
+    assert backend.abandoned is None
+    assert described["host_api"].startswith("JACK") and described["device"] == backend.device.name
+    assert described["device_index"] == backend.device.index
+    # The driver's claims, as it makes them (JACK's PortAudio host API says 0 s for input).
+    assert (described["input_latency_s"], described["output_latency_s"]) == claimed
+    assert all(0.0 <= s < 1.0 for s in claimed)

@@ -76,6 +76,17 @@ def test_default_io_delay_is_two_blocks_like_the_jack_dummy_server() -> None:
     assert measure_loopback_latency(sim).latencies[0].samples == 512
 
 
+def test_the_simulated_interface_describes_its_buffering_as_its_latency() -> None:
+    sim = SimulatedDuplex(AudioSettings(samplerate=FS, blocksize=256), io_delay_samples=600)
+    assert sim.describe() == {
+        "device": "simulated audio interface",
+        "host_api": "simulated",
+        "io_delay_samples": 600,
+        "input_latency_s": 600 / FS,
+    }
+    assert sim.abandoned is None
+
+
 def test_callback_receives_the_contract_arguments() -> None:
     s = AudioSettings(samplerate=FS, channels_in=3, channels_out=2, blocksize=64)
     seen: list[tuple[tuple[int, ...], tuple[int, ...], np.dtype, int, BlockTime, StatusFlags]] = []

@@ -171,6 +171,15 @@ class DuplexBackend(Protocol):
     def frames_processed(self) -> int: ...
     @property
     def xruns(self) -> list[tuple[int, StatusFlags]]: ...
+    @property
+    def abandoned(self) -> str | None:
+        """Why the stream was abandoned instead of stopped and closed (its host went away:
+        :mod:`hil.devices.audio.stream_release`), or None."""
+
+    def describe(self) -> dict[str, Any]:
+        """What is connected, for the run's record of its devices (opened): ``device`` and
+        ``host_api`` (str), ``input_latency_s`` (s) and what else the backend knows of its
+        latency."""
 
     def open(self, callback: AudioCallback) -> None: ...
     def start(self) -> None: ...

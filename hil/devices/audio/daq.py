@@ -478,7 +478,7 @@ class AudioDaq:
         try:
             self.backend.close()
         finally:
-            abandoned = getattr(self.backend, "abandoned", None)
+            abandoned = self.backend.abandoned
             if abandoned is not None and not self.annotations.log.of_kind(
                 AnnotationKind.DISCONNECT
             ):

@@ -273,6 +273,21 @@ class SoundDeviceDuplex(SettingsView):
         lat_in, lat_out = self._stream.latency
         return float(lat_in), float(lat_out)
 
+    def describe(self) -> dict[str, Any]:
+        """The PortAudio device this stream opened: its name, index and host API, and the
+        driver's latency claims (s; not trusted: :mod:`hil.devices.audio.latency` measures)."""
+        dev = self.device
+        if dev is None:
+            raise RuntimeError("open() the stream first")
+        lat_in, lat_out = self.reported_latency_s
+        return {
+            "device": str(dev.name),
+            "device_index": int(dev.index),
+            "host_api": str(dev.hostapi),
+            "input_latency_s": lat_in,
+            "output_latency_s": lat_out,
+        }
+
     def open(self, callback: AudioCallback) -> None:
         """Check the settings against the device, then create the stream (not started)."""
         check_callback(callback)

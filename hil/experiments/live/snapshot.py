@@ -53,19 +53,7 @@ def audio_snapshot(daq: Any, url: str) -> dict[str, Any]:
         "blocksize": int(settings.blocksize),
         "latency_setting": str(settings.latency),
     }
-    device = getattr(backend, "device", None)  # the PortAudio device once opened
-    if device is not None:
-        out["device"] = str(device.name)
-        out["device_index"] = int(device.index)
-        out["host_api"] = str(device.hostapi)
-        lat_in, lat_out = backend.reported_latency_s
-        out["input_latency_s"], out["output_latency_s"] = float(lat_in), float(lat_out)
-    else:  # the simulated interface: its buffering is its latency
-        out["device"] = "simulated audio interface"
-        out["host_api"] = "simulated"
-        delay = int(backend.io_delay_samples)
-        out["io_delay_samples"] = delay
-        out["input_latency_s"] = delay / float(settings.samplerate)
+    out.update(backend.describe())
     return out
 
 
