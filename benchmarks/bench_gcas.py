@@ -25,8 +25,10 @@ Figures and targets:
   default coherent refinement: >= 100x; the detector alone (``refine=False``) beside it, and
   the refinement's cost per estimate: the difference over the estimates, and the CPU spent
   inside the refiner's own calls (one more untimed run, each call timed with
-  ``time.process_time``): the rest of the difference is the detector's own work for the
-  refinement (every local maximum a candidate, the still candidates' second codewords);
+  ``time.process_time``), and of that the CPU inside each of the refinement's compiled
+  kernels (the rest of it is the refiner's Python): the rest of the difference is the
+  detector's own work for the refinement (every local maximum a candidate, the still
+  candidates' second codewords);
 - GCAS time for M = 5, 10, 15, 22, 29: max/min <= 1.3 (cost independent of M);
 - memory over a 10-minute stream: tracemalloc peak per minute and RSS at the end of every
   minute; the last minute must not exceed the first (flat, no growth);
@@ -58,6 +60,8 @@ from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+import hil.estimation.refine as refine_module  # noqa: E402
+import hil.estimation.refine_pair as pair_module  # noqa: E402
 from hil.estimation.cost import gcas_mults_per_sample  # noqa: E402
 from hil.estimation.gcas import GcasReceiver  # noqa: E402
 from hil.estimation.mfbank import MatchedFilterBank  # noqa: E402
@@ -159,13 +163,38 @@ def time_interleaved(
     return best
 
 
-def refiner_cpu(sch: HopSchedule, base: np.ndarray, seconds: float) -> tuple[float, float, int]:
+#: The refinement's compiled kernels, timed one by one in :func:`refiner_cpu`.
+REFINE_KERNELS = ("candidate_sums", "assign_slots", "maximise", "grid_sums", "fit_quality")
+
+
+def refiner_cpu(
+    sch: HopSchedule, base: np.ndarray, seconds: float
+) -> tuple[float, float, int, dict[str, float]]:
     """CPU seconds inside the refiner's calls (:class:`~hil.estimation.refine.
     CoherentRefiner`'s methods the receiver calls; nested calls counted once), CPU seconds
-    of the whole run and the estimate count, GCAS at M = 10 over ``seconds`` of input."""
+    of the whole run, the estimate count and the CPU seconds inside each of
+    :data:`REFINE_KERNELS` (wherever the refinement's modules call them; each call timed on
+    its own, about 1-2 us of timer a call), GCAS at M = 10 over ``seconds`` of input."""
     rx = gcas(sch, 10)
     refiner = rx._refiner
     spent = [0.0, 0]  # seconds, depth
+    kernel_s = dict.fromkeys(REFINE_KERNELS, 0.0)
+    saved = [
+        (module, name, getattr(module, name))
+        for module in (refine_module, pair_module)
+        for name in REFINE_KERNELS
+        if hasattr(module, name)
+    ]
+
+    def timed_kernel(name: str, kernel: Any) -> Any:
+        def call(*args: Any) -> Any:
+            t0 = time.process_time()
+            try:
+                return kernel(*args)
+            finally:
+                kernel_s[name] += time.process_time() - t0
+
+        return call
 
     def timed(method: Any) -> Any:
         def call(*args: Any, **kwargs: Any) -> Any:
@@ -182,12 +211,19 @@ def refiner_cpu(sch: HopSchedule, base: np.ndarray, seconds: float) -> tuple[flo
 
     for name in ("refine", "ghost_of_known", "beside_known", "correlation", "known_echoes", "push"):
         setattr(refiner, name, timed(getattr(refiner, name)))
-    c0 = time.process_time()
-    n = 0
-    for blk in blocks(base, seconds):
-        n += len(rx.process(blk))
-    n += len(rx.flush())
-    return spent[0], time.process_time() - c0, n
+    for module, name, kernel in saved:
+        setattr(module, name, timed_kernel(name, kernel))
+    try:
+        c0 = time.process_time()
+        n = 0
+        for blk in blocks(base, seconds):
+            n += len(rx.process(blk))
+        n += len(rx.flush())
+        total = time.process_time() - c0
+    finally:
+        for module, name, kernel in saved:
+            setattr(module, name, kernel)
+    return spent[0], total, n, kernel_s
 
 
 def rss_mib() -> float:
@@ -307,13 +343,19 @@ def main() -> None:
     refine_cpu_us = (timed["gcas", 10]["cpu_s"] - timed["detector", 10]["cpu_s"]) / n_est * 1e6
     refine_wall_us = (timed["gcas", 10]["wall_s"] - timed["detector", 10]["wall_s"]) / n_est * 1e6
     detector_xrt = rows["detector"][0]["xrt"]
-    own_s, own_total_s, own_n = refiner_cpu(sch, base, args.seconds)
+    own_s, own_total_s, own_n, kernel_s = refiner_cpu(sch, base, args.seconds)
     own_us = own_s / max(own_n, 1) * 1e6
+    kernel_us = {name: s / max(own_n, 1) * 1e6 for name, s in kernel_s.items()}
     print(
         f"refinement: {refine_cpu_us:.0f} us CPU ({refine_wall_us:.0f} us wall) per estimate, "
         f"{n_est} estimates; of it {own_us:.0f} us CPU inside the refiner's calls "
         f"({100 * own_s / own_total_s:.0f}% of that run's CPU); detector alone "
         f"{detector_xrt:.1f}x real time"
+    )
+    print(
+        f"  refinement's compiled kernels: {sum(kernel_us.values()):.0f} us CPU per estimate ("
+        + ", ".join(f"{name} {us:.0f}" for name, us in kernel_us.items())
+        + ")"
     )
 
     mem = stream_memory(sch, base, args.stream_minutes)
@@ -359,6 +401,7 @@ def main() -> None:
                 "refine_wall_us_per_estimate": round(refine_wall_us, 1),
                 "refiner_own_cpu_us_per_estimate": round(own_us, 1),
                 "refiner_own_cpu_share": round(own_s / own_total_s, 3),
+                "refine_kernel_cpu_us_per_estimate": {n: round(u, 1) for n, u in kernel_us.items()},
                 "bank_xrt_m10": bank10,
                 "gcas_over_bank_m10": round(bank_ratio, 2),
                 "gcas_over_bank_by_m": {r["m_hops"]: r["gcas_over_bank"] for r in bank_rows},

@@ -746,13 +746,13 @@ class CoherentRefiner:
         tones = np.asarray(schedule.tones_hz, dtype=np.float64)
         self._main_lobe_s = 1.0 / (float(np.ptp(tones)) if tones.size > 1 else 1.0 / self.hop_len_s)
         # :meth:`_ended`'s F test: its degrees of freedom and threshold, and its kernel
-        # call's buffers (one candidate: t, α, rate; C, model and input energy; the hops'
+        # call's buffers (one candidate: t, α, rate; C, model, no input energy; the hops'
         # terms).
         self._end_m = float(self.m_hops - 1)
         self._end_limit = self._end_m * ((self._end_m / ENDED_CHANCE) ** (1.0 / self._end_m) - 1)
         self._end_buffers = (
             np.zeros(1), np.zeros(1), np.zeros(1), np.empty(1, np.complex128), np.empty(1),
-            np.empty(1), np.empty((1, self.m_hops), np.complex128),
+            np.empty(0), np.empty((1, self.m_hops), np.complex128),
         )  # fmt: skip
         #: The input with the still water taken out and a refiner of it, for the lobe
         #: decision beside still water (:meth:`_lobe_without_still`); None where the schedule's
@@ -2041,7 +2041,7 @@ class CoherentRefiner:
         per_hop = np.empty((1, hop_ids.shape[0]), np.complex128)
         candidate_sums(
             *args, np.array([fit.t_s]), np.array([fit.alpha]), np.zeros(1),
-            np.empty(1, np.complex128), np.empty(1), np.empty(1), per_hop, known,
+            np.empty(1, np.complex128), np.empty(1), np.empty(0), per_hop, known,
         )  # fmt: skip
         amp2 = word.hops[4]
         power: NDArray[np.float64] = np.abs(per_hop[0]) ** 2 / np.where(
@@ -2258,9 +2258,9 @@ class CoherentRefiner:
     ) -> NDArray[np.float64]:  # fmt: skip
         """``|C|²`` of the candidates ``(t, alpha, gamma)`` (shape ``(C,)`` each)."""
         n = t.shape[0]
-        c, model, energy = np.empty(n, np.complex128), np.empty(n), np.empty(n)
+        c, model = np.empty(n, np.complex128), np.empty(n)
         candidate_sums(
-            *args, t, alpha, gamma, c, model, energy, np.empty((n, 0), np.complex128), known
+            *args, t, alpha, gamma, c, model, np.empty(0), np.empty((n, 0), np.complex128), known
         )
         return np.abs(c) ** 2
 
@@ -2407,9 +2407,9 @@ class CoherentRefiner:
             return None
         args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
         n = t.size
-        c, e_s, signal = np.empty(n, np.complex128), np.empty(n), np.empty(n)
+        c, e_s = np.empty(n, np.complex128), np.empty(n)
         candidate_sums(
-            *args, t, alphas, rates, c, e_s, signal, np.empty((n, 0), np.complex128), known
+            *args, t, alphas, rates, c, e_s, np.empty(0), np.empty((n, 0), np.complex128), known
         )
         return c, e_s
 

@@ -251,11 +251,15 @@ def _edge(pos: float, last: int) -> tuple[int, float]:
 
 @numba.njit(**_JIT)
 def _window(
-    prefix: Any, energy: Any, s: int, lo: float, hi: float, coef: Any, i: int
+    prefix: Any, energy: Any, s: int, lo: float, hi: float, coef: Any, i: int,
+    with_energy: bool,
 ) -> tuple[complex, float]:  # fmt: skip
     """``Σ_p coef_p (S_hi[p] − S_lo[p])`` (:func:`_window_sum`) and ``E_hi − E_lo`` of slot
     ``s`` between the fractional positions ``lo`` (side 0) and ``hi`` (side 1),
-    ``coef = coef[:, i, :]``."""
+    ``coef = coef[:, i, :]``; the energy 0 unless ``with_energy`` (its four table reads are
+    a sixth of a candidate's time)."""
+    if not with_energy:
+        return _window_sum(prefix, s, lo, hi, coef, i), 0.0
     last = prefix.shape[2] - 2
     j0, w0 = _edge(lo, last)
     j1, w1 = _edge(hi, last)
@@ -271,11 +275,12 @@ def _candidate(
     prefix: Any, energy: Any, first: Any, tail: Any, centre: Any, slots: Any, k: Any,
     amp2: Any, fs: float, t_rx: float, curved: bool, d_c_alpha: float, consts: Any,
     coef: Any, per_hop: Any, known: Any, near: Any, n_near: Any, rot_key: Any, rot: Any,
-    phasors: Any, edges: Any,
+    phasors: Any, edges: Any, with_signal: bool,
 ) -> tuple[complex, float, float]:  # fmt: skip
     """``(C, Σ a_i² N_i, input energy in the windows)`` of one candidate at ``t_rx`` (s) on
     the line whose per-hop constants :func:`_line` made (``consts``, ``coef``, and
-    ``d_c_alpha`` its return; ``curved`` where its rate is not 0).
+    ``d_c_alpha`` its return; ``curved`` where its rate is not 0). The input energy is read
+    only ``with_signal`` (else 0; ``C`` and the model's energy are the same either way).
 
     The time scale's rate ``gamma`` (1/s, :func:`_line`'s) maps transmit time: heard at
     ``t`` is ``T_b + d_c + α (τ − τ_c) + ½ γ (τ − τ_c)²`` with ``τ = t − t_rx``, ``T_b + d_c``
@@ -310,7 +315,7 @@ def _candidate(
         hi_s = t_i + consts[_HI, i]
         lo = lo_s * fs - first[s] + 0.5
         hi = hi_s * fs - first[s] + 0.5
-        z, e_window = _window(prefix, energy, s, lo, hi - tail[s], coef, i)
+        z, e_window = _window(prefix, energy, s, lo, hi - tail[s], coef, i, with_signal)
         if phasors.shape[0]:
             term_i = k[i] * phasors[i] * z
         else:
@@ -577,7 +582,8 @@ def candidate_sums(
 ) -> None:  # fmt: skip
     """:func:`_candidate` for candidates ``(t_rx[c], alpha[c], gamma[c])`` (shape ``(C,)``;
     ``gamma`` the time-scale rate, 1/s) into the outputs (shape ``(C,)``: ``C`` complex, the
-    model's energy, the input's energy) and each hop's term (``per_hop``, complex, shape
+    model's energy, the input's energy, or ``out_signal`` of shape ``(0,)`` where the input's
+    energy is not wanted: not read) and each hop's term (``per_hop``, complex, shape
     ``(C, M)`` or ``(C, 0)`` for none); ``known`` as :func:`_candidate`.
 
     Per hop (shape ``(M,)``): ``slots`` its table slot, ``k`` the transmit phasor
@@ -613,6 +619,7 @@ def candidate_sums(
         rot = np.empty((1, 0), dtype=np.complex128)
     no_rot = np.empty(0, dtype=np.complex128)
     no_edges = np.empty((5, 0, 0), dtype=np.complex128)
+    with_signal = out_signal.shape[0] > 0
     d_c_alpha = 0.0
     for c in range(n_cand):
         if c == 0 or alpha[c] != alpha[c - 1] or gamma[c] != gamma[c - 1]:
@@ -620,11 +627,20 @@ def candidate_sums(
                 alpha0, slots, f, dt_lo, dt_hi, hop_s, alpha[c], gamma[c], consts, coef
             )
         row = np.searchsorted(times, t_rx[c]) if straight else 0
-        out_c[c], out_model[c], out_signal[c] = _candidate(
-            prefix, energy, first, tail, centre, slots, k, amp2, fs, t_rx[c], gamma[c] != 0.0,
-            d_c_alpha, consts, coef, per_hop[c], known, near, n_near, rot_key[row], rot[row],
-            no_rot, no_edges,
-        )  # fmt: skip
+        # The flag is a constant at each call, so the compiled code without the energy has
+        # no test of it left (passed as a variable, the energy's skip saved nothing).
+        if with_signal:
+            out_c[c], out_model[c], out_signal[c] = _candidate(
+                prefix, energy, first, tail, centre, slots, k, amp2, fs, t_rx[c],
+                gamma[c] != 0.0, d_c_alpha, consts, coef, per_hop[c], known, near, n_near,
+                rot_key[row], rot[row], no_rot, no_edges, True,
+            )  # fmt: skip
+        else:
+            out_c[c], out_model[c], _ = _candidate(
+                prefix, energy, first, tail, centre, slots, k, amp2, fs, t_rx[c],
+                gamma[c] != 0.0, d_c_alpha, consts, coef, per_hop[c], known, near, n_near,
+                rot_key[row], rot[row], no_rot, no_edges, False,
+            )  # fmt: skip
 
 
 @numba.njit(**_JIT)
@@ -669,7 +685,7 @@ def grid_sums(
             c, model, _ = _candidate(
                 prefix, energy, first, tail, centre, slots, k, amp2, fs, t0 + j * step_s,
                 False, d_c_a, consts, coef, no_per_hop, known, near, n_near, rot_key[j],
-                rot[j], phasors, edges,
+                rot[j], phasors, edges, False,
             )  # fmt: skip
             out_c[r, j] = c
             out_model[r, j] = model
@@ -859,7 +875,7 @@ def fit_quality(
     c, es, signal = _candidate(
         prefix, energy, first, tail, centre, slots, k, amp2, fs, t_rx, gamma != 0.0,
         d_c_alpha, consts, coef, h, known, *_every_column(m_hops, known), no_key, no_rot,
-        no_rot, np.empty((5, 0, 0), dtype=np.complex128),
+        no_rot, np.empty((5, 0, 0), dtype=np.complex128), True,
     )  # fmt: skip
     mag2 = c.real * c.real + c.imag * c.imag
     spread = 0.0

@@ -79,6 +79,27 @@ def test_a_candidates_sums_do_not_depend_on_its_neighbours() -> None:
     assert np.all(np.abs(together[0]) > 0)
 
 
+def test_sums_without_the_input_energy_keep_every_other_bit() -> None:
+    # candidate_sums with no input-energy output (shape (0,)) skips its table reads: C, the
+    # model's energy and the hops' terms are the bits of the call that reads it, with and
+    # without known hops, straight and curved.
+    args, alpha, t_s, known = _echo_with_known_hops(seed=5)
+    t = t_s + 1e-5 * np.array([-3.0, 0.0, 2.0, 0.0, 1.0])
+    a = alpha + np.array([0.0, 0.0, 1e-4, 0.0, 1e-4])
+    g = np.array([0.0, 0.0, 0.0, 0.003, -0.002])
+    m = args[6].shape[0]
+    for rows in (known, np.zeros((5, 0), dtype=np.complex128)):
+        for gg in (np.zeros(5), g):
+            full = (np.empty(5, complex), np.empty(5), np.empty(5), np.empty((5, m), complex))
+            kernels.candidate_sums(*args, t, a, gg, *full, rows)
+            part = (np.empty(5, complex), np.empty(5), np.empty(0), np.empty((5, m), complex))
+            kernels.candidate_sums(*args, t, a, gg, *part, rows)
+            for i in (0, 1, 3):
+                assert part[i].tobytes() == full[i].tobytes()
+            if not rows.shape[1]:  # the windows' energy was read: an echo in noise
+                assert np.all(full[2] > 0.0)
+
+
 @settings(max_examples=100, deadline=None)
 @given(
     t_s=st.floats(0.5, 5.0),
@@ -166,7 +187,7 @@ def test_a_search_rows_carried_phasors_give_each_candidates_own_sums() -> None:
             row[j] = kernels._candidate(
                 prefix, energy, first, tail, centre, slots, k, amp2, fs, t0 + j * step,
                 curved, d_c_a, consts, coef, no_rot, known, near, n_near, no_key, no_rot,
-                phasors, edges,
+                phasors, edges, True,
             )[0]  # fmt: skip
         t = t0 + step * np.arange(n_t)
         alone = np.empty(n_t, dtype=np.complex128)
@@ -255,7 +276,7 @@ def test_a_grid_with_known_hops_gives_each_candidates_bits_over_every_column() -
         d_c_a = kernels._line(alpha0, slots, f, dt_lo, dt_hi, hop_s, a[c], 0.0, consts, coef)
         want = kernels._candidate(
             prefix, energy, first, tail, centre, slots, k, amp2, fs, t[c], False, d_c_a,
-            consts, coef, no_rot, known, near, n_near, no_key, no_rot, no_rot, no_edges,
+            consts, coef, no_rot, known, near, n_near, no_key, no_rot, no_rot, no_edges, True,
         )  # fmt: skip
         for g, w in zip(got, want, strict=True):
             assert np.asarray(g[c]).tobytes() == np.asarray(w).tobytes()
@@ -297,6 +318,7 @@ def test_a_searchs_candidate_is_the_candidates_own_c_bit_for_bit() -> None:
             full = kernels._candidate(
                 prefix, energy, first, tail, centre, slots, k, amp2, fs, t, curved, d_c_a,
                 consts, coef, no_rot, known, near, n_near, no_key, no_rot, phasors, edges,
+                True,
             )[0]  # fmt: skip
             alone = kernels._candidate_c(
                 prefix, first, tail, slots, k, fs, t, curved, d_c_a, consts, coef, known, near,
