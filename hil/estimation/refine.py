@@ -875,7 +875,7 @@ class CoherentRefiner:
         self, t_s: float, alpha: float, hop_index: int, echo_test: EchoTest | None = None,
         partners: bool = True, followed: bool = False, residual: bool = False,
         lag_s: float = 0.0, pairs: bool = False, new_pairs: bool = False,
-        curve: tuple[float, float, float] | None = None,
+        curve: tuple[float, float, float] | None = None, halves: bool = True,
     ) -> Refinement | None:  # fmt: skip
         """The maximum-likelihood boundary time and time scale near ``(t_s, alpha)`` for the
         boundary that ends hop ``hop_index``; None where the input does not cover the ``M``
@@ -912,7 +912,9 @@ class CoherentRefiner:
         remembered; a pair not measured before is looked for only with ``new_pairs`` too
         (:meth:`_two_echoes`). ``curve``: where an echo's earlier fit carried on puts the
         boundary (s, time scale, rate 1/s; :meth:`band_exit`), the fit's warm start in place
-        of a recent fit's."""
+        of a recent fit's. ``halves``: whether a curved fit may be seeded from the window's
+        halves (:meth:`_halves_seed`; the caller says where not: the span's edges, which
+        gather other echoes' leaks)."""
         test = self.echo_test if echo_test is None else echo_test
         word = self._codeword(hop_index)
         hop_ids = np.arange(hop_index - self.m_hops + 1, hop_index + 1, dtype=np.int64)
@@ -945,7 +947,7 @@ class CoherentRefiner:
             # The detections' trend is read only where a curved fit may be tried.
             seed = None if followed else self._accel_seed(hop_index, t_s, speed0, lobe)
             one_sided: bool | None = None
-            if seed is None and not followed:
+            if seed is None and halves and not followed:
                 # No track to read it from (an echo just detected, or out of the band):
                 # the window's own halves (HALVES_MIN_HOPS).
                 one_sided = self._one_sided(fit, word, hop_ids, known)

@@ -384,6 +384,7 @@ class Readout:
                 t_rx, alpha, hop_index, partners=pair_row, residual=residual,
                 lag_s=self._residual_lag_s if residual else 0.0, pairs=pair_row,
                 new_pairs=bool(self._new_pair_rows[p.d0]), curve=leaving,
+                halves=self._edge_side(p.d0) == 0,
             )  # fmt: skip
             if refined is None:
                 self.unmeasured_count += 1
