@@ -731,8 +731,8 @@ class CoherentRefiner:
         #: (:func:`speed_trend`).
         self._detections: deque[tuple[int, float, float]] = deque(maxlen=4 * ACCEL_SEED_HOPS + 1)
         #: The latest curved fit of each echo accelerating towards rest, ``(hop_index, t_s,
-        #: alpha, rate 1/s)`` (:meth:`passing_band`).
-        self._into_band: deque[tuple[int, float, float, float]] = deque(maxlen=RECENT_FITS)
+        #: alpha, rate 1/s, E/N0 dB)`` (:meth:`band_exit`).
+        self._into_band: deque[tuple[int, float, float, float, float]] = deque(maxlen=RECENT_FITS)
         #: The latest fit of each echo measured lately (:meth:`_known_hops`).
         self._echoes: list[_EchoFit] = []
         #: Refused fits that may be one of two echoes at one speed (:data:`PARTNER_COHERENCE`).
@@ -1005,16 +1005,16 @@ class CoherentRefiner:
 
     def _slowing(self, fit: Refinement, hop_index: int) -> None:
         """Keep ``fit`` (accelerating towards rest, of the boundary ending hop ``hop_index``)
-        as its echo's latest curve into the still band (:meth:`passing_band`), in place of
+        as its echo's latest curve into the still band (:meth:`band_exit`), in place of
         an earlier fit of the same echo (one whose curve puts this boundary within
         :data:`SAME_ECHO_LOBES` grating lobes of the fit)."""
         lobe = 1.0 / (fit.alpha * self.spacing_hz)
-        for i, (hop, t_fit, a_fit, gamma) in enumerate(self._into_band):
+        for i, (hop, t_fit, a_fit, gamma, _) in enumerate(self._into_band):
             curve = self._on_curve(hop, t_fit, a_fit, gamma, hop_index)
             if curve is not None and abs(curve[0] - fit.t_s) <= SAME_ECHO_LOBES * lobe:
                 del self._into_band[i]
                 break
-        self._into_band.append((hop_index, fit.t_s, fit.alpha, fit.rate(self.c)))
+        self._into_band.append((hop_index, fit.t_s, fit.alpha, fit.rate(self.c), fit.e_over_n0_db))
 
     def _on_curve(
         self, hop: int, t_fit: float, a_fit: float, gamma: float, hop_index: int
@@ -1036,21 +1036,21 @@ class CoherentRefiner:
 
     def band_exit(
         self, t_s: float, alpha: float, hop_index: int, least_mps: float
-    ) -> tuple[float, float, float] | None:
+    ) -> tuple[tuple[float, float, float], float] | None:
         """Where the curve of an echo that went into the still band accelerating
         (:meth:`_slowing`) and has come out on the other side puts the boundary ending hop
         ``hop_index`` (its receive time s, time scale and rate 1/s: :meth:`refine`'s
-        ``curve``), where a detection ``(t_s, alpha)`` on the band's edge (refused there as
-        a rule) lies on it: the curve's boundary within :data:`SAME_ECHO_LOBES` grating lobes
-        of the detection, at a speed of the detection's sign at least ``least_mps`` (m/s),
-        and not yet past it by more than a window's lag (``|a| M T_h``: the detections then
-        are off the edge) and the speed span; else None. A target that moves on through rest
-        comes out of the band on its curve while its window still holds hops inside (the
-        detector, reading the window's mean speed, sees it on the edge for ``M/2`` hops);
-        one that stops does not."""
+        ``curve``), and the E/N0 (dB) that echo's fit collected going in, where a detection
+        ``(t_s, alpha)`` on the band's edge (refused there as a rule) lies on it: the
+        curve's boundary within :data:`SAME_ECHO_LOBES` grating lobes of the detection, at a
+        speed of the detection's sign at least ``least_mps`` (m/s), and not yet past it by
+        more than a window's lag (``|a| M T_h``: the detections then are off the edge) and
+        the speed span; else None. A target that moves on through rest comes out of the band
+        on its curve while its window still holds hops inside (the detector, reading the
+        window's mean speed, sees it on the edge for ``M/2`` hops); one that stops does not."""
         lobe = 1.0 / (alpha * self.spacing_hz)
         speed = self.c * (alpha - 1.0) / (alpha + 1.0)
-        for hop, t_fit, a_fit, gamma in reversed(self._into_band):
+        for hop, t_fit, a_fit, gamma, e_db in reversed(self._into_band):
             curve = self._on_curve(hop, t_fit, a_fit, gamma, hop_index)
             if curve is None:
                 continue
@@ -1061,7 +1061,7 @@ class CoherentRefiner:
                 and v * speed > 0.0
                 and least_mps <= abs(v) <= least_mps + lag + self.speed_span_mps
             ):
-                return curve[0], curve[1], gamma
+                return (curve[0], curve[1], gamma), e_db
         return None
 
     def _with_partners(

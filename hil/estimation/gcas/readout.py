@@ -341,10 +341,14 @@ class Readout:
             return None
         # An echo moving on through rest leaves the band on the curve it went in on, its
         # detections on the band's edge for half a window: measured, where its fit's
-        # boundary is outside the band by a hop's Doppler resolution.
-        leaving = None
+        # boundary is outside the band by a hop's Doppler resolution and it collects what
+        # the echo's did going in (within FOLLOW_DROP_DB: what still water or noise leaves
+        # on a curve it does not follow is far weaker).
+        leaving, exit_db = None, math.inf
         if fe.refused_hypotheses[p.d0] and self._refiner is not None and not residual:
-            leaving = self._refiner.band_exit(t_rx, alpha, hop_index, self._out_of_band_mps)
+            exit_ = self._refiner.band_exit(t_rx, alpha, hop_index, self._out_of_band_mps)
+            if exit_ is not None:
+                leaving, exit_db = exit_[0], exit_[1] - FOLLOW_DROP_DB
         if fe.refused_hypotheses[p.d0] and leaving is None:
             self.in_band_count += 1
             if self.hidden is not None:
@@ -392,6 +396,7 @@ class Readout:
             if leaving is not None and not (
                 refined.is_echo(ECHO_TEST)
                 and abs(refined.speed_mps(fe.sound_speed_mps)) >= self._out_of_band_mps
+                and refined.e_over_n0_db >= exit_db
             ):
                 self.in_band_count += 1
                 return None
