@@ -947,9 +947,12 @@ class CoherentRefiner:
             # The detections' trend is read only where a curved fit may be tried.
             seed = None if followed else self._accel_seed(hop_index, t_s, speed0, lobe)
             one_sided: bool | None = None
-            if seed is None and halves and not followed:
+            if seed is None and halves and not followed and not self.in_still_water(t_s, alpha):
                 # No track to read it from (an echo just detected, or out of the band):
-                # the window's own halves (HALVES_MIN_HOPS).
+                # the window's own halves (HALVES_MIN_HOPS). Not where the window holds still
+                # water: there strong incoherent fits are its leaks and ghosts, whose halves
+                # cost 4-7 % of the receiver's CPU (att random-cyclic, 0 dB SRR) and seed
+                # nothing; a target moving there keeps its detections' track.
                 one_sided = self._one_sided(fit, word, hop_ids, known)
                 if not one_sided:
                     seed = self._halves_seed(fit, word, hop_ids, lobe, known)
