@@ -388,6 +388,11 @@ ACCEL_SEED_MAX_MPS2 = 40.0
 ACCEL_RUN_SEEDED = 0.3
 ACCEL_SEED_STEPS = 2
 ACCEL_SEED_MAX_STEPS = 6
+#: Where no track of detections shows the acceleration (an echo just detected, or just out
+#: of the reverberation band, whose detections there were refused), the window's halves
+#: show it (:meth:`CoherentRefiner._halves_seed`) where each holds at least
+#: HALVES_MIN_HOPS hops.
+HALVES_MIN_HOPS = 4
 #: An echo that begins or ends within a detection's window (a target appearing, vanishing
 #: or jumping: the hops on one side hold noise) loses coherence as drift does, but no rate
 #: explains hops that hold no echo: the accelerating fit is not tried where the fit's
@@ -719,11 +724,15 @@ class CoherentRefiner:
         self._codewords: dict[int, _Codeword] = {}
         self._hop_runs: dict[tuple[int, int, int], _HopRun] = {}
         self._sub_words: dict[int, _Codeword] = {}
+        self._half_words: dict[tuple[int, bool], _Codeword] = {}
         self._recent: deque[tuple[int, float, float, float]] = deque(maxlen=RECENT_FITS)
         #: The detections brought lately, ``(hop_index, t_s, speed m/s)``, the latest last:
         #: the acceleration the earlier ones show seeds the latest's curved fit
         #: (:func:`speed_trend`).
         self._detections: deque[tuple[int, float, float]] = deque(maxlen=4 * ACCEL_SEED_HOPS + 1)
+        #: The latest curved fit of each echo accelerating towards rest, ``(hop_index, t_s,
+        #: alpha, rate 1/s, E/N0 dB)`` (:meth:`band_exit`).
+        self._into_band: deque[tuple[int, float, float, float, float]] = deque(maxlen=RECENT_FITS)
         #: The latest fit of each echo measured lately (:meth:`_known_hops`).
         self._echoes: list[_EchoFit] = []
         #: Refused fits that may be one of two echoes at one speed (:data:`PARTNER_COHERENCE`).
@@ -809,6 +818,7 @@ class CoherentRefiner:
         self._hop[:] = np.iinfo(np.int64).min
         self._recent.clear()
         self._detections.clear()
+        self._into_band.clear()
         self._echoes.clear()
         self._partners.clear()
         if self._still is not None and self._still_fits is not None:
@@ -865,6 +875,7 @@ class CoherentRefiner:
         self, t_s: float, alpha: float, hop_index: int, echo_test: EchoTest | None = None,
         partners: bool = True, followed: bool = False, residual: bool = False,
         lag_s: float = 0.0, pairs: bool = False, new_pairs: bool = False,
+        curve: tuple[float, float, float] | None = None, halves: bool = True,
     ) -> Refinement | None:  # fmt: skip
         """The maximum-likelihood boundary time and time scale near ``(t_s, alpha)`` for the
         boundary that ends hop ``hop_index``; None where the input does not cover the ``M``
@@ -899,7 +910,11 @@ class CoherentRefiner:
         of one time scale close in range (:mod:`hil.estimation.refine_pair`): where they are
         resolved the fit returned carries the other as :attr:`Refinement.second`, both
         remembered; a pair not measured before is looked for only with ``new_pairs`` too
-        (:meth:`_two_echoes`)."""
+        (:meth:`_two_echoes`). ``curve``: where an echo's earlier fit carried on puts the
+        boundary (s, time scale, rate 1/s; :meth:`band_exit`), the fit's warm start in place
+        of a recent fit's. ``halves``: whether a curved fit may be seeded from the window's
+        halves (:meth:`_halves_seed`; the caller says where not: the span's edges, which
+        gather other echoes' leaks)."""
         test = self.echo_test if echo_test is None else echo_test
         word = self._codeword(hop_index)
         hop_ids = np.arange(hop_index - self.m_hops + 1, hop_index + 1, dtype=np.int64)
@@ -910,7 +925,7 @@ class CoherentRefiner:
             # A followed boundary's time and speed are its echo's fit carried on, no detection.
             self._detections.append((hop_index, t_s, speed0))
         keep_lobe = followed and self.in_still_water(t_s, alpha)
-        fit = self._fit_near(word, hop_ids, t_s, speed0, lobe, hop_index, known, keep_lobe)
+        fit = self._fit_near(word, hop_ids, t_s, speed0, lobe, hop_index, known, keep_lobe, curve)
         if keep_lobe and fit is not None and fit.e_over_n0_db >= self.lobe_sure_db:
             # Strong enough to tell its lobe from the neighbours' on its own M hops.
             keep_lobe = False
@@ -931,11 +946,21 @@ class CoherentRefiner:
         ):
             # The detections' trend is read only where a curved fit may be tried.
             seed = None if followed else self._accel_seed(hop_index, t_s, speed0, lobe)
+            one_sided: bool | None = None
+            if seed is None and halves and not followed and not self.in_still_water(t_s, alpha):
+                # No track to read it from (an echo just detected, or out of the band):
+                # the window's own halves (HALVES_MIN_HOPS). Not where the window holds still
+                # water: there strong incoherent fits are its leaks and ghosts, whose halves
+                # cost 4-7 % of the receiver's CPU (att random-cyclic, 0 dB SRR) and seed
+                # nothing; a target moving there keeps its detections' track.
+                one_sided = self._one_sided(fit, word, hop_ids, known)
+                if not one_sided:
+                    seed = self._halves_seed(fit, word, hop_ids, lobe, known)
             run_min = (
                 self._accel_run_min if seed is None else min(ACCEL_RUN_SEEDED, self._accel_run_min)
             )
-            if fit.run_coherence.fraction >= run_min and not self._one_sided(
-                fit, word, hop_ids, known
+            if fit.run_coherence.fraction >= run_min and not (
+                self._one_sided(fit, word, hop_ids, known) if one_sided is None else one_sided
             ):
                 fit = self._with_acceleration(fit, word, hop_ids, lobe, known, seed)
         if (
@@ -977,7 +1002,70 @@ class CoherentRefiner:
         if fit is not None and fit.is_echo(test):
             self._recent.append((hop_index, fit.t_s, fit.alpha, fit.rate(self.c)))
             self._remember(fit, hop_index, None if followed else not residual)
+            if fit.accel_mps2 * fit.speed_mps(self.c) < 0.0:
+                self._slowing(fit, hop_index)
         return fit
+
+    def _slowing(self, fit: Refinement, hop_index: int) -> None:
+        """Keep ``fit`` (accelerating towards rest, of the boundary ending hop ``hop_index``)
+        as its echo's latest curve into the still band (:meth:`band_exit`), in place of
+        an earlier fit of the same echo (one whose curve puts this boundary within
+        :data:`SAME_ECHO_LOBES` grating lobes of the fit)."""
+        lobe = 1.0 / (fit.alpha * self.spacing_hz)
+        for i, (hop, t_fit, a_fit, gamma, _) in enumerate(self._into_band):
+            curve = self._on_curve(hop, t_fit, a_fit, gamma, hop_index)
+            if curve is not None and abs(curve[0] - fit.t_s) <= SAME_ECHO_LOBES * lobe:
+                del self._into_band[i]
+                break
+        self._into_band.append((hop_index, fit.t_s, fit.alpha, fit.rate(self.c), fit.e_over_n0_db))
+
+    def _on_curve(
+        self, hop: int, t_fit: float, a_fit: float, gamma: float, hop_index: int
+    ) -> tuple[float, float] | None:
+        """Where the curve of a fit (boundary ending hop ``hop`` at ``t_fit``, s, time scale
+        ``a_fit`` changing at ``gamma``, 1/s) puts the boundary ending hop ``hop_index``:
+        its receive time (s) and time scale; None before the fit or where the curve turns
+        back (its time scale reaches zero first)."""
+        k = hop_index - hop
+        if k < 1:
+            return None
+        # The transmit time heard tau after t_fit is T + a_fit tau + gamma tau² / 2.
+        span = k * self.hop_len_s
+        root = a_fit * a_fit + 2.0 * gamma * span
+        if root <= 0.0:
+            return None
+        tau = 2.0 * span / (a_fit + math.sqrt(root))
+        return t_fit + tau, a_fit + gamma * tau
+
+    def band_exit(
+        self, t_s: float, alpha: float, hop_index: int, least_mps: float
+    ) -> tuple[tuple[float, float, float], float] | None:
+        """Where the curve of an echo that went into the still band accelerating
+        (:meth:`_slowing`) and has come out on the other side puts the boundary ending hop
+        ``hop_index`` (its receive time s, time scale and rate 1/s: :meth:`refine`'s
+        ``curve``), and the E/N0 (dB) that echo's fit collected going in, where a detection
+        ``(t_s, alpha)`` on the band's edge (refused there as a rule) lies on it: the
+        curve's boundary within :data:`SAME_ECHO_LOBES` grating lobes of the detection, at a
+        speed of the detection's sign at least ``least_mps`` (m/s), and not yet past it by
+        more than a window's lag (``|a| M T_h``: the detections then are off the edge) and
+        the speed span; else None. A target that moves on through rest comes out of the band
+        on its curve while its window still holds hops inside (the detector, reading the
+        window's mean speed, sees it on the edge for ``M/2`` hops); one that stops does not."""
+        lobe = 1.0 / (alpha * self.spacing_hz)
+        speed = self.c * (alpha - 1.0) / (alpha + 1.0)
+        for hop, t_fit, a_fit, gamma, e_db in reversed(self._into_band):
+            curve = self._on_curve(hop, t_fit, a_fit, gamma, hop_index)
+            if curve is None:
+                continue
+            v = self.c * (curve[1] - 1.0) / (curve[1] + 1.0)
+            lag = abs(gamma) * self.c / 2.0 * self.m_hops * self.hop_len_s
+            if (
+                abs(curve[0] - t_s) <= SAME_ECHO_LOBES * lobe
+                and v * speed > 0.0
+                and least_mps <= abs(v) <= least_mps + lag + self.speed_span_mps
+            ):
+                return (curve[0], curve[1], gamma), e_db
+        return None
 
     def _with_partners(
         self, fit: Refinement, word: _Codeword, hop_ids: NDArray[np.int64], t_s: float,
@@ -1708,14 +1796,19 @@ class CoherentRefiner:
         warm_hop: int | None,
         known: NDArray[np.complex128],
         keep_lobe: bool = False,
+        curve: tuple[float, float, float] | None = None,
     ) -> Refinement | None:
-        """The fit of the search around ``(t0, v0)`` (s, m/s): from a recent fit's
-        prediction when ``warm_hop`` is given and one agrees, else the full search, then the
-        lobe check (none with ``keep_lobe``: a followed boundary's lobe is its echo's, which
-        that echo's fits decided); None where the input does not cover the hops."""
+        """The fit of the search around ``(t0, v0)`` (s, m/s): from ``curve`` (the boundary's
+        time s, time scale and rate 1/s where an echo's fit carried on puts it) or a recent
+        fit's prediction when ``warm_hop`` is given and one agrees, else the full search,
+        then the lobe check (none with ``keep_lobe``: a followed boundary's lobe is its
+        echo's, which that echo's fits decided); None where the input does not cover the
+        hops."""
         outcome = RECENTRE
         gamma = 0.0
-        start = None if warm_hop is None else self._predicted(warm_hop, t0, v0, lobe)
+        start = curve
+        if start is None and warm_hop is not None:
+            start = self._predicted(warm_hop, t0, v0, lobe)
         if start is not None:
             # Near a recent fit's prediction: a 3 × 3 grid of the fit's first steps (an
             # accelerating fit's: the rate's fit from there, at the hops' centre).
@@ -2108,6 +2201,49 @@ class CoherentRefiner:
         least = ACCEL_SEED_MIN_MPS2 * (ACCEL_SEED_HOP_S / self.hop_len_s) ** 2
         return trend if trend is not None and abs(trend[0]) >= least else None
 
+    def _halves_seed(
+        self, fit: Refinement, word: _Codeword, hop_ids: NDArray[np.int64], lobe: float,
+        known: NDArray[np.complex128],
+    ) -> tuple[float, float] | None:  # fmt: skip
+        """The acceleration and its standard error (m/s²) the window's own halves show
+        (:data:`HALVES_MIN_HOPS`): a constant-speed search over the first ``⌊M/2⌋`` hops and
+        one over the last ``⌊M/2⌋`` about ``fit`` (each line the curve's tangent at its hops'
+        centre), their speeds' difference over the time between those centres; None where
+        either finds no maximum inside or is not one echo by the coherence over all its hops
+        (:attr:`echo_test`), or where the acceleration is below :data:`ACCEL_SEED_MIN_MPS2`
+        scaled to the hop length (:meth:`_accel_seed`'s bound)."""
+        n = self.m_hops // 2
+        if n < HALVES_MIN_HOPS:
+            return None
+        v = fit.speed_mps(self.c)
+        # A half's tangent is up to MAX_ACCEL_MPS2 over a quarter window off the whole
+        # window's line, and a curved echo's constant-speed fit is no point of the curve:
+        # the speed span and that reach, in steps of half a half's Doppler resolution.
+        reach = self.speed_span_mps + 0.25 * MAX_ACCEL_MPS2 * self.m_hops * self.hop_len_s
+        step = 0.5 * self._v_res * self.m_hops / n
+        grid = (0.5 * lobe, reach, TIME_POINTS, 2 * int(math.ceil(reach / step)) + 1)
+        speeds = []
+        for part, ids in ((self._half_word(int(hop_ids[-1]), True), hop_ids[:n]),
+                          (self._half_word(int(hop_ids[-1]), False), hop_ids[-n:])):  # fmt: skip
+            searched = self._search(part, ids, fit.t_s, v, lobe, known, grid)
+            if searched is None or searched[2] != FOUND:
+                return None
+            t_h, v_h, _, args = searched
+            alpha_h = (self.c + v_h) / (self.c - v_h)
+            coherence = _fit_quality(args, known, part, self.n_tones, t_h, alpha_h)[1]
+            if coherence.fraction < self.echo_test.fraction:
+                return None
+            speeds.append(v_h)
+        gap_s = (self.m_hops - n) * self.hop_len_s
+        accel = (speeds[1] - speeds[0]) / gap_s
+        least = ACCEL_SEED_MIN_MPS2 * (ACCEL_SEED_HOP_S / self.hop_len_s) ** 2
+        if abs(accel) < least:
+            return None
+        # Each half's speed error: the M hops' bound with half the energy and half the span
+        # (sqrt(2) x 2), the two halves independent.
+        sigma = 0.0 if fit.bound is None else 2.0 * math.sqrt(2.0) * fit.bound.sigma_speed_mps
+        return accel, math.sqrt(2.0) * sigma / gap_s
+
     def _with_acceleration(
         self, fit: Refinement, word: _Codeword, hop_ids: NDArray[np.int64], lobe: float,
         known: NDArray[np.complex128], seed: tuple[float, float] | None = None,
@@ -2447,6 +2583,17 @@ class CoherentRefiner:
             self._sub_words[key] = word
         return word
 
+    def _half_word(self, hop_index: int, first: bool) -> _Codeword:
+        """The first (``first``) or last ``⌊M/2⌋`` hops of :meth:`_codeword`'s, relative to
+        its end boundary (:meth:`_halves_seed`)."""
+        key = int(hop_index) % self.schedule.period_hops
+        word = self._half_words.get((key, first))
+        if word is None:
+            whole, n = self._codeword(key), self.m_hops // 2
+            word = whole.first(n) if first else whole.last(n)
+            self._half_words[(key, first)] = word
+        return word
+
     def _codeword(self, hop_index: int) -> _Codeword:
         """The ``M`` hops ending with ``hop_index`` relative to their end boundary, kept per
         codeword: made from the first code period (the same hops a period later differ by a
@@ -2595,6 +2742,14 @@ class _Codeword:
             amp2[-n:].copy(),
         )
         return _Codeword(hops, self.b_rms, self.t_rms, self.f0, self.tones[-n:].copy())
+
+    def first(self, n: int) -> _Codeword:
+        """The first ``n`` hops of this codeword, their edges still relative to its end
+        boundary (a search over them fits the line through that boundary that is their
+        hops' tangent; :meth:`last`'s caveat)."""
+        k, f, dt_lo, dt_hi, amp2 = self.hops
+        hops = (k[:n].copy(), f[:n].copy(), dt_lo[:n].copy(), dt_hi[:n].copy(), amp2[:n].copy())
+        return _Codeword(hops, self.b_rms, self.t_rms, self.f0, self.tones[:n].copy())
 
     @classmethod
     def of(cls, schedule: HopSchedule, hop_index: int, m_hops: int, fs_hz: float) -> _Codeword:

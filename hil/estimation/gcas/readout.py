@@ -195,6 +195,9 @@ class Readout:
         #: Speeds below this share their Doppler cells with the still reverberation, m/s
         #: (:func:`~hil.estimation.reverb_band.in_reverberation`'s bound, made once).
         self._still_mps = doppler_resolution_mps(tones, fe.hop_s, c)
+        #: A boundary's speed one hop's Doppler resolution beyond the reverberation band
+        #: (m/s): out of the band whatever the window's other hops are.
+        self._out_of_band_mps = fe.reverb_speed_mps + self._still_mps
         #: The undetected echo inside the span whose ghost an echo's fit may be (with the
         #: beyond-span check, whose geometry it shares: :mod:`hil.estimation.gcas.ghost_inside`).
         self.inside_sources = (
@@ -336,7 +339,17 @@ class Readout:
         ):
             self.leftover_count += 1
             return None
-        if fe.refused_hypotheses[p.d0]:
+        # An echo moving on through rest leaves the band on the curve it went in on, its
+        # detections on the band's edge for half a window: measured, where its fit's
+        # boundary is outside the band by a hop's Doppler resolution and it collects what
+        # the echo's did going in (within FOLLOW_DROP_DB: what still water or noise leaves
+        # on a curve it does not follow is far weaker).
+        leaving, exit_db = None, math.inf
+        if fe.refused_hypotheses[p.d0] and self._refiner is not None and not residual:
+            exit_ = self._refiner.band_exit(t_rx, alpha, hop_index, self._out_of_band_mps)
+            if exit_ is not None:
+                leaving, exit_db = exit_[0], exit_[1] - FOLLOW_DROP_DB
+        if fe.refused_hypotheses[p.d0] and leaving is None:
             self.in_band_count += 1
             if self.hidden is not None:
                 self.hidden.note(t_rx, alpha, hop_index, p.peak - p.mean)
@@ -374,10 +387,18 @@ class Readout:
             refined = self._refiner.refine(
                 t_rx, alpha, hop_index, partners=pair_row, residual=residual,
                 lag_s=self._residual_lag_s if residual else 0.0, pairs=pair_row,
-                new_pairs=bool(self._new_pair_rows[p.d0]),
+                new_pairs=bool(self._new_pair_rows[p.d0]), curve=leaving,
+                halves=self._edge_side(p.d0) == 0,
             )  # fmt: skip
             if refined is None:
                 self.unmeasured_count += 1
+                return None
+            if leaving is not None and not (
+                refined.is_echo(ECHO_TEST)
+                and abs(refined.speed_mps(fe.sound_speed_mps)) >= self._out_of_band_mps
+                and refined.e_over_n0_db >= exit_db
+            ):
+                self.in_band_count += 1
                 return None
             if self.beyond_span is not None and self.beyond_span.check(
                 t_rx, alpha, hop_index, self._edge_side(p.d0), refined,
