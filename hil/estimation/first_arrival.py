@@ -117,8 +117,8 @@ from hil.errors import ConfigError
 from hil.estimation.detection import parabolic_offset
 from hil.estimation.first_arrival_kernels import (
     doppler_score,
-    next_tone_channel,
     ramp_residuals,
+    ring_channel,
     warm_up,
 )
 from hil.estimation.late_taps import LEAD_S, DirectFit, direct_amplitudes
@@ -709,26 +709,24 @@ class FirstArrivalReadout:
         held_from = max(self._valid_from, self._ring.next_index - self._ring.available)
         if first.min() < held_from or n_b.max() + self._post > self._ring.next_index:
             return None
-        idx = n_b[:, None] + self._offsets_ext[None, :]  # (M, L + lead)
-        d = self._ring.rows(idx)
-        if self.period:
-            before = self._ring.rows(idx - self.period)
-            d = d - before if self.sign > 0 else d + before
-        # d · e^{−j2π α f t} (t = idx / fs) summed along each row; ``full``: the boxcar of w
-        # ending at extended index w, w + 1, ... (M, L + w); ``box``: the boxcar's change over
-        # its own length (M, L): every steady tone on the Δf grid (the previous tones, and the
-        # next tone as sounded by late images of earlier boundaries) gives the same boxcar
-        # sum w samples apart and cancels, only switches remain; ``p_all``: |box / w|², as
-        # |box · (1/w)|² (the same bits: see _ramp_residuals). The kernel's operations are
-        # NumPy's (hil.estimation.first_arrival_kernels).
+        # d · e^{−j2π α f t} (t = idx / fs, idx the absolute sample index; d the input, less
+        # or plus the period before behind the canceller) summed along each boundary's row of
+        # L + lead samples; ``full``: the boxcar of w ending at extended index w, w + 1, ...
+        # (M, L + w); ``box``: the boxcar's change over its own length (M, L): every steady
+        # tone on the Δf grid (the previous tones, and the next tone as sounded by late images
+        # of earlier boundaries) gives the same boxcar sum w samples apart and cancels, only
+        # switches remain; ``p_all``: |box / w|², as |box · (1/w)|² (the same bits: see
+        # _ramp_residuals). The kernel reads the rows from the history itself and its
+        # operations are NumPy's (hil.estimation.first_arrival_kernels).
         coef = -2j * np.pi * alpha * f_next  # (M,), complex: its real parts are 0
-        n_ext = idx.shape[1]
+        n_ext = self._offsets_ext.size
+        row_first = n_b + self._offsets_ext[0]  # absolute index of each row's first sample
         full = np.empty((m, n_ext - w), dtype=np.complex128)
         box = np.empty((m, n_ext - 2 * w), dtype=np.complex128)
         p_all = np.empty((m, n_ext - 2 * w))
-        next_tone_channel(
-            np.ascontiguousarray(d, dtype=np.float64), idx, fs, np.ascontiguousarray(coef.imag),
-            w, 1.0 / w, full, box, p_all,
+        ring_channel(
+            self._ring.array, self._ring.position(row_first), self.period, self.sign, row_first,
+            fs, np.ascontiguousarray(coef.imag), w, 1.0 / w, full, box, p_all,
         )  # fmt: skip
         pattern = self._tone_pattern(tones)  # clean, leave: read-only, shared
         clean = pattern.clean

@@ -163,6 +163,44 @@ def complex_abs(re: float, im: float) -> float:
 
 
 @numba.njit(**_JIT)
+def _channel_row(
+    x: Any, index: Any, fs: float, br: float, w: int, inv_w: float, full: Any, box: Any,
+    p_all: Any, cre: Any, cim: Any,
+) -> None:  # fmt: skip
+    """One boundary's row of :func:`next_tone_channel`: ``x`` (shape ``(N,)``) at absolute
+    sample indices ``index`` (shape ``(N,)``, int64), ``br`` its ``b``; ``full``, ``box``,
+    ``p_all`` the row's outputs; ``cre``, ``cim`` (shape ``(N,)``) scratch."""
+    n = x.shape[0]
+    sr = 0.0
+    si = 0.0
+    for k in range(n):
+        # The phase b t: the complex product (0 + j b)(t + j0) has a real part of ±0,
+        # and e^{±0} = 1 leaves (cos, sin) as they are.
+        y = br * (index[k] / fs)
+        c = math.cos(y)
+        s = math.sin(y)
+        xk = x[k]
+        zr = _fma(xk, c, -(0.0 * s))
+        zi = _fma(xk, s, 0.0 * c)
+        if k == 0:
+            sr = zr
+            si = zi
+        else:
+            sr = sr + zr
+            si = si + zi
+        cre[k] = sr
+        cim[k] = si
+    for k in range(n - w):
+        full[k] = complex(cre[k + w] - cre[k], cim[k + w] - cim[k])
+    for k in range(n - 2 * w):
+        fr = full[k + w].real - full[k].real
+        fi = full[k + w].imag - full[k].imag
+        box[k] = complex(fr, fi)
+        a = complex_abs(_fma(fr, inv_w, -(fi * 0.0)), _fma(fr, 0.0, fi * inv_w))
+        p_all[k] = a * a
+
+
+@numba.njit(**_JIT)
 def next_tone_channel(
     d: Any, idx: Any, fs: float, b: Any, w: int, inv_w: float, full: Any, box: Any, p_all: Any
 ) -> None:
@@ -179,34 +217,35 @@ def next_tone_channel(
     cre = np.empty(n)
     cim = np.empty(n)
     for r in range(m):
-        br = b[r]
-        sr = 0.0
-        si = 0.0
+        _channel_row(d[r], idx[r], fs, b[r], w, inv_w, full[r], box[r], p_all[r], cre, cim)
+
+
+@numba.njit(**_JIT)
+def ring_channel(
+    ring: Any, pos: Any, period: int, sign: int, first: Any, fs: float, b: Any, w: int,
+    inv_w: float, full: Any, box: Any, p_all: Any,
+) -> None:  # fmt: skip
+    """:func:`next_tone_channel` of rows read from a history (the same bits): row ``r`` is
+    ``ring[pos[r] : pos[r] + N]`` (``ring`` float, 1-D; ``pos`` shape ``(M,)``, int64), less
+    (``sign`` > 0) or plus the row ``period`` samples before it where ``period`` > 0 (the
+    clutter canceller), at absolute indices ``first[r] .. first[r] + N − 1`` (``N``:
+    ``full``'s columns plus ``w``). No ``(M, N)`` index, gather or difference array."""
+    m = pos.shape[0]
+    n = full.shape[1] + w
+    cre = np.empty(n)
+    cim = np.empty(n)
+    x = np.empty(n)
+    index = np.empty(n, dtype=np.int64)
+    for r in range(m):
+        p = pos[r]
         for k in range(n):
-            # The phase b t: the complex product (0 + j b)(t + j0) has a real part of ±0,
-            # and e^{±0} = 1 leaves (cos, sin) as they are.
-            y = br * (idx[r, k] / fs)
-            c = math.cos(y)
-            s = math.sin(y)
-            x = d[r, k]
-            zr = _fma(x, c, -(0.0 * s))
-            zi = _fma(x, s, 0.0 * c)
-            if k == 0:
-                sr = zr
-                si = zi
-            else:
-                sr = sr + zr
-                si = si + zi
-            cre[k] = sr
-            cim[k] = si
-        for k in range(n - w):
-            full[r, k] = complex(cre[k + w] - cre[k], cim[k + w] - cim[k])
-        for k in range(n - 2 * w):
-            fr = full[r, k + w].real - full[r, k].real
-            fi = full[r, k + w].imag - full[r, k].imag
-            box[r, k] = complex(fr, fi)
-            a = complex_abs(_fma(fr, inv_w, -(fi * 0.0)), _fma(fr, 0.0, fi * inv_w))
-            p_all[r, k] = a * a
+            v = ring[p + k]
+            if period > 0:
+                u = ring[p - period + k]
+                v = v - u if sign > 0 else v + u
+            x[k] = v
+            index[k] = first[r] + k
+        _channel_row(x, index, fs, b[r], w, inv_w, full[r], box[r], p_all[r], cre, cim)
 
 
 @numba.njit(**_JIT)
@@ -359,6 +398,10 @@ def warm_up() -> None:
     p_all = np.zeros((1, 2))
     idx = np.arange(6, dtype=np.int64).reshape(1, 6)
     next_tone_channel(np.zeros((1, 6)), idx, 1.0, np.zeros(1), w, 0.5, full, box, p_all)
+    first = np.zeros(1, dtype=np.int64)
+    for period in (0, 1):
+        ring_channel(np.zeros(8), first + 1, period, 1, first, 1.0, np.zeros(1), w, 0.5, full,
+                     box, p_all)  # fmt: skip
     out = np.zeros(1)
     geometric = np.zeros((1, w + 1), dtype=np.complex128)
     start = np.zeros((1, 3), dtype=np.complex128)
