@@ -120,6 +120,7 @@ from hil.estimation.first_arrival_kernels import (
     ramp_residuals,
     ring_channel,
     warm_up,
+    window_start_phasors,
 )
 from hil.estimation.late_taps import LEAD_S, DirectFit, direct_amplitudes
 from hil.estimation.reverb_band import doppler_resolution_mps
@@ -1408,15 +1409,13 @@ class FirstArrivalReadout:
         # The model's window sums (_ramp_shape with times_w) times 1/w instead of divided by
         # w: NumPy divides a complex by a real w as the product with 1/w, so every nonzero
         # part is the same bits (a zero may change sign, which |·| ignores). The kernel does
-        # in one loop what NumPy's expressions would: |shape|², its mean over the boundaries,
-        # the scale and the residual (hil.estimation.first_arrival_kernels).
-        o = (self._pre + grid)[:, None] + ramp.frac[None, :]  # (C, M)
-        at_o = np.exp(-1j * (ramp.theta[None, :] * o + ramp.jump[None, :]))  # (C, M)
+        # in one loop what NumPy's expressions would: each onset on each boundary and the
+        # beat's phasor there, |shape|², its mean over the boundaries, the scale and the
+        # residual (hil.estimation.first_arrival_kernels).
         out = np.empty(grid.size)
         ramp_residuals(
-            o, np.ascontiguousarray(n, dtype=np.int64), self.boxcar, ramp.geometric,
-            np.ascontiguousarray(start[0]), at_o, 1.0 / self.boxcar,
-            np.ascontiguousarray(excess, dtype=np.float64), level, out,
+            grid, self._pre, ramp.frac, ramp.theta, ramp.jump, n, self.boxcar,
+            ramp.geometric, start[0], 1.0 / self.boxcar, excess, level, out,
         )  # fmt: skip
         return out
 
@@ -1425,8 +1424,9 @@ class FirstArrivalReadout:
     ) -> NDArray[np.complex128]:
         """``e^{jθa}`` of each boundary's beat at the first sample ``a = n − w + 1`` of the
         window ending at each index of ``n`` (shape ``(L,)``): shape ``(1, M, L)``."""
-        w = self.boxcar
-        return np.exp(1j * np.outer(ramp.theta, n - w + 1))[None, :, :]
+        start = np.empty((ramp.theta.size, n.size), dtype=np.complex128)
+        window_start_phasors(ramp.theta, n, self.boxcar, start)
+        return start[None, :, :]
 
     def _ramp_shape(
         self,

@@ -249,13 +249,32 @@ def ring_channel(
 
 
 @numba.njit(**_JIT)
+def window_start_phasors(theta: Any, n: Any, w: int, out: Any) -> None:
+    """``np.exp(1j * np.outer(theta, n − w + 1))`` into ``out`` (shape ``(M, L)``, complex):
+    each boundary's beat ``theta`` (shape ``(M,)``, rad per sample) at the first sample of the
+    window ending at each index of ``n`` (shape ``(L,)``, int64). The product ``1j · v`` is
+    NumPy's fused complex one: real part ±0 (so ``e^{±0} = 1``), imaginary ``fma(0, 0, v)``
+    (``v``, or +0 for −0)."""
+    m = theta.shape[0]
+    length = n.shape[0]
+    for mi in range(m):
+        th = theta[mi]
+        for j in range(length):
+            y = _fma(0.0, 0.0, th * np.float64(n[j] - w + 1))
+            out[mi, j] = complex(math.cos(y), math.sin(y))
+
+
+@numba.njit(**_JIT)
 def ramp_residuals(
-    o: Any,
+    grid: Any,
+    pre: int,
+    frac: Any,
+    theta: Any,
+    jump: Any,
     n: Any,
     w: int,
     geometric: Any,
     start: Any,
-    at_o: Any,
     inv_w: float,
     excess: Any,
     level: bool,
@@ -264,16 +283,23 @@ def ramp_residuals(
     """Least-squares residual of the ramp model for each onset (the body of
     ``FirstArrivalReadout._ramp_residuals``).
 
-    ``o`` (shape ``(C, M)``): each onset on each boundary, window samples; ``n`` (shape
-    ``(L,)``, int64): the window indices; ``geometric`` (shape ``(M, w + 1)``, complex) and
-    ``start`` (shape ``(M, L)``, complex), ``at_o`` (shape ``(C, M)``, complex): the ramp's
-    tables, the beat's phasor at each window's first sample and at each onset; ``excess``
-    (shape ``(L,)``): the measured power less the noise. The model at onset ``c``, boundary
-    ``m``, window ``l``: ``((start · at_o) · geometric[m, w − k] + k) · (1/w)`` with ``k``
-    the window's samples at or after the onset (``n − ⌈o⌉ + 1`` within ``0 .. w``); its
-    power's mean over ``M`` is scaled by least squares to ``excess`` (with ``level``, both
-    less their means). ``out`` (shape ``(C,)``): the squared residual summed over ``L``."""
-    c_count, m = o.shape
+    ``grid`` (shape ``(C,)``): the onsets, samples after each boundary's predicted switch;
+    ``pre``: the window index of boundary 0's sample; ``frac``, ``theta``, ``jump`` (shape
+    ``(M,)`` each): each boundary's predicted switch (samples past its sample), beat (rad per
+    sample) and phase jump (rad); each onset on each boundary is
+    ``o = (pre + grid) + frac`` (window samples) and the beat's phasor there
+    ``at_o = e^{−j(θ o + jump)}`` (NumPy's ``np.exp(-1j * (theta * o + jump))``: the product's
+    real part ±0, its imaginary ``fma(−0, 0, −v)``); ``n`` (shape ``(L,)``, int64): the
+    window indices; ``geometric`` (shape ``(M, w + 1)``, complex) and ``start`` (shape
+    ``(M, L)``, complex): the ramp's table and the beat's phasor at each window's first
+    sample; ``excess`` (shape ``(L,)``): the measured power less the noise. The model at
+    onset ``c``, boundary ``m``, window ``l``: ``((start · at_o) · geometric[m, w − k] + k) ·
+    (1/w)`` with ``k`` the window's samples at or after the onset (``n − ⌈o⌉ + 1`` within
+    ``0 .. w``); its power's mean over ``M`` is scaled by least squares to ``excess`` (with
+    ``level``, both less their means). ``out`` (shape ``(C,)``): the squared residual summed
+    over ``L``."""
+    c_count = grid.shape[0]
+    m = frac.shape[0]
     length = n.shape[0]
     model = np.empty(length)
     prod = np.empty(length)
@@ -284,11 +310,13 @@ def ramp_residuals(
         for j in range(length):
             ex[j] = excess[j] - mean_ex
     for c in range(c_count):
+        base = np.float64(pre) + grid[c]
         for mi in range(m):
-            oc = o[c, mi]
+            oc = base + frac[mi]
             shift = 1 - np.int64(math.ceil(oc))
-            ar = at_o[c, mi].real
-            ai = at_o[c, mi].imag
+            y = _fma(-0.0, 0.0, -(theta[mi] * oc + jump[mi]))
+            ar = math.cos(y)
+            ai = math.sin(y)
             for j in range(length):
                 k = n[j] + shift
                 if k < 0:
@@ -405,10 +433,11 @@ def warm_up() -> None:
     out = np.zeros(1)
     geometric = np.zeros((1, w + 1), dtype=np.complex128)
     start = np.zeros((1, 3), dtype=np.complex128)
-    at_o = np.zeros((1, 1), dtype=np.complex128)
     n = np.arange(3, dtype=np.int64)
+    window_start_phasors(np.zeros(1), n, w, start)
+    one = np.zeros(1)
     for level in (False, True):
-        ramp_residuals(np.zeros((1, 1)), n, w, geometric, start, at_o, 0.5, np.zeros(3), level, out)
+        ramp_residuals(one, 1, one, one, one, n, w, geometric, start, 0.5, np.zeros(3), level, out)
     cols = np.zeros(1, dtype=np.int64)
     starts = np.array([0, 1], dtype=np.int64)
     doppler_score(np.zeros(1), np.zeros(1), np.zeros(1, dtype=np.complex128), cols, starts, out)

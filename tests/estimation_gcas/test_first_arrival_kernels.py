@@ -163,12 +163,18 @@ def test_ramp_residuals_are_the_numpy_expressions(seed: int, length: int, level:
     )
     n = pre - 30 + np.arange(length)
     start = np.exp(1j * np.outer(theta, n - w + 1))
+    got_start = np.empty_like(start)
+    k.window_start_phasors(theta, n, w, got_start)
+    assert got_start.tobytes() == start.tobytes()
     grid = rng.uniform(-20.0, 20.0, 33)
-    o = (pre + grid)[:, None] + rng.uniform(-0.5, 0.5, m)[None, :]
+    grid[:3] = [0.0, -0.0, 5.0]  # whole samples: the coarse grid
+    frac = rng.uniform(-0.5, 0.5, m)
+    o = (pre + grid)[:, None] + frac[None, :]
     excess = rng.normal(1.0, 1.0, length) ** 2
-    at_o = np.exp(-1j * (theta[None, :] * o + jump[None, :]))
     got = np.empty(grid.size)
-    k.ramp_residuals(o, n, w, geometric, start, at_o, 1.0 / w, excess, level, got)
+    k.ramp_residuals(
+        grid, pre, frac, theta, jump, n, w, geometric, start, 1.0 / w, excess, level, got
+    )
     want = _residuals_numpy(o, n, w, geometric, start, theta, jump, excess, level)
     assert got.tobytes() == want.tobytes()
 
