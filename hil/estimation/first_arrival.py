@@ -734,14 +734,14 @@ class FirstArrivalReadout:
         power = _mean(p_all[clean], axis=0)  # (L,)
         base = self._noise_window(power)
         amp = np.sqrt(np.maximum(power - _mean_all(power[base]), 0.0))
-        top_i = self._after + int(np.argmax(amp[self._after :]))
+        top_i = self._after + int(amp[self._after :].argmax())
         leave = pattern.leave
         if self._late_images_seen(p_all, power, clean, leave, top_i):
             clean = clean & ~leave
             power = _mean(p_all[clean], axis=0)
             base = self._noise_window(power)
             amp = np.sqrt(np.maximum(power - _mean_all(power[base]), 0.0))
-            top_i = self._after + int(np.argmax(amp[self._after :]))
+            top_i = self._after + int(amp[self._after :].argmax())
         top = float(amp[top_i])
         noise = math.sqrt(_mean_all(power[base]))
         if not top > 3.0 * noise:
@@ -763,7 +763,7 @@ class FirstArrivalReadout:
             fell = _nonzero(~(amp[j_e : stop + 1] >= max(LO_FRACTION * top, wobble)))
             if fell.size:
                 stop = j_e + int(fell[0]) - 1
-            top_i = j_e + int(np.argmax(amp[j_e : stop + 1]))
+            top_i = j_e + int(amp[j_e : stop + 1].argmax())
             top = float(amp[top_i])
         floor = _mean_all(power[base])
         j_lo, j_hi = self._ramp_bounds(amp, k0, top_i, top, wobble)
@@ -779,7 +779,7 @@ class FirstArrivalReadout:
         for _ in range(MAX_PEDESTALS):
             if j_lo <= k0 or j_hi + w >= top_i or leave.all() or not leave.any():
                 break
-            ped = float(np.max(amp[j_hi : j_hi + w]))
+            ped = float(amp[j_hi : j_hi + w].max())
             if ped >= PEDESTAL_RISE * max(float(amp[j_hi]), wobble):
                 break
             p_box = p_all[:, j_hi : j_hi + w]
@@ -823,8 +823,8 @@ class FirstArrivalReadout:
             seen = np.asarray(box[:, j0 : j1 + 1], dtype=np.complex128) / w
             # Each boundary's complex amplitude by least squares on the model's shape: the
             # previous tone's leak, different at each boundary, is divided out.
-            p = np.sum(np.conj(shape) * seen, axis=1) / np.maximum(
-                np.sum(np.abs(shape) ** 2, axis=1), 1e-300
+            p = np.add.reduce(np.conj(shape) * seen, axis=1) / np.maximum(
+                np.add.reduce(np.abs(shape) ** 2, axis=1), 1e-300
             )
             direct_alpha = self._direct_alpha(
                 p, hops, n_b, alpha, hop_index, onset - ends[0], pattern
@@ -1045,7 +1045,7 @@ class FirstArrivalReadout:
         c = np.empty(seg.size + 1)
         c[0] = 0.0
         np.cumsum(seg, out=c[1:])
-        least = float(np.min(c[part:] - c[:-part])) / part
+        least = float((c[part:] - c[:-part]).min()) / part
         return least if levels.floor > NEAR_RATIO * least else None
 
     def _explained(
@@ -1064,11 +1064,11 @@ class FirstArrivalReadout:
         n = np.arange(i0, i1)
         shape = self._ramp_shape(np.array([rel * self.fs_hz]), n, ramp)[0][clean]  # (K, J)
         seen = box[clean][:, n] / self.boxcar
-        gain = np.sum(np.conj(shape) * seen, axis=1) / np.maximum(
-            np.sum(np.abs(shape) ** 2, axis=1), 1e-300
+        gain = np.add.reduce(np.conj(shape) * seen, axis=1) / np.maximum(
+            np.add.reduce(np.abs(shape) ** 2, axis=1), 1e-300
         )
-        fitted = float(np.sum(np.abs(gain[:, None] * shape) ** 2))
-        return fitted / max(float(np.sum(np.abs(seen) ** 2)), 1e-300)
+        fitted = float(np.add.reduce(np.abs(gain[:, None] * shape) ** 2, axis=None))
+        return fitted / max(float(np.add.reduce(np.abs(seen) ** 2, axis=None)), 1e-300)
 
     def _held_alpha(self, hop_index: int, delay_s: float, alpha: float) -> float | None:
         """The direct path's time scale read at the same echo up to :data:`HOLD_HOPS` hops
@@ -1311,7 +1311,7 @@ class FirstArrivalReadout:
         c[0] = 0.0
         np.cumsum(seg, out=c[1:])
         sums = c[n:] - c[:-n]  # power summed over each stretch
-        k = int(np.argmin(sums))
+        k = int(sums.argmin())
         fixed = _mean_all(power[self._base_slice])
         if fixed <= QUIET_RATIO * sums[k] / n:
             return self._base_slice
@@ -1377,12 +1377,12 @@ class FirstArrivalReadout:
         start = self._window_start_phasors(ramp, n)
         coarse = guess_s * fs + np.arange(-span, span + 1, dtype=np.float64)
         resid = self._ramp_residuals(coarse, excess, n, ramp, start, level)
-        k = int(np.argmin(resid))
+        k = int(resid.argmin())
         if k in (0, coarse.size - 1):
             return guess_s  # no minimum inside the span: the line stands
         fine = coarse[k] + np.arange(-1.0, 1.0 + FIT_STEP / 2, FIT_STEP)
         resid = self._ramp_residuals(fine, excess, n, ramp, start, level)
-        k = int(np.argmin(resid))
+        k = int(resid.argmin())
         best = float(fine[k])
         if 0 < k < fine.size - 1:
             best += FIT_STEP * parabolic_offset(-resid[k - 1], -resid[k], -resid[k + 1])
@@ -1536,7 +1536,7 @@ class FirstArrivalReadout:
         # The summed score chooses the lobe; the present one alone places the peak on it
         # unless the direct path's speed has been steady (a speed that changes over the lags
         # would move a summed peak).
-        g = int(np.argmax(total))
+        g = int(total.argmax())
         own_score = total if self._steady(hop_index, delay_s) else own.score
         while 0 < g < own_score.size - 1 and max(own_score[g - 1], own_score[g + 1]) > own_score[g]:
             g = g - 1 if own_score[g - 1] > own_score[g + 1] else g + 1
