@@ -704,7 +704,8 @@ class FirstArrivalReadout:
         # Receive times of the boundaries, from their transmit spacing compressed by α.
         ends = hops.start_s[::-1]  # start of the hop after boundary m = its transmit time
         t_b = t_c - (ends[0] - ends) / alpha
-        n_b = np.round(t_b * fs).astype(np.int64)
+        t_b_fs = t_b * fs  # receive times, samples
+        n_b = np.rint(t_b_fs).astype(np.int64)  # np.round's own step at 0 decimals
         w = self.boxcar
         first = n_b - self._pre - self._lead - self.period
         held_from = max(self._valid_from, self._ring.next_index - self._ring.available)
@@ -790,7 +791,7 @@ class FirstArrivalReadout:
             k0 = j_hi
             top = float(amp[top_i])
             j_lo, j_hi = self._ramp_bounds(amp, k0, top_i, top, wobble)
-        frac = t_b * fs - n_b  # each boundary's predicted switch, samples past its n_b
+        frac = t_b_fs - n_b  # each boundary's predicted switch, samples past its n_b
         prev_f = np.concatenate([f_next[1:], prev_hop.freq_hz])
         ramp = self._ramp_tables(frac, alpha * (prev_f - f_next), self._phase_jumps(hops, prev_hop))
         copy_after = bool(self.period) and alpha > 1.0
@@ -831,7 +832,7 @@ class FirstArrivalReadout:
             )
             if direct_alpha is None and self._reads_late_taps(alpha):
                 direct_alpha = self._second_reading(
-                    table, hop_index, first_hop, t_b * fs + rel_speed * fs, alpha, hops, n_b,
+                    table, hop_index, first_hop, t_b_fs + rel_speed * fs, alpha, hops, n_b,
                     onset - ends[0],
                 )  # fmt: skip
             self._read_speeds = [r for r in self._read_speeds if 0 < hop_index - r[0] <= HOLD_HOPS]
