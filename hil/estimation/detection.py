@@ -79,7 +79,8 @@ def parabolic_offset(y_minus: float, y0: float, y_plus: float) -> float:
     den = y_minus - 2.0 * y0 + y_plus
     if den >= 0 or not math.isfinite(den):
         return 0.0
-    return float(np.clip(0.5 * (y_minus - y_plus) / den, -1.0, 1.0)) + 0.0
+    # min(max()) on floats is np.clip's result (a NaN passes through) without its wrapper.
+    return float(min(max(0.5 * (y_minus - y_plus) / den, -1.0), 1.0)) + 0.0
 
 
 def parabolic_offsets(

@@ -117,9 +117,10 @@ from hil.errors import ConfigError
 from hil.estimation.detection import parabolic_offset
 from hil.estimation.first_arrival_kernels import (
     doppler_score,
-    next_tone_channel,
     ramp_residuals,
+    ring_channel,
     warm_up,
+    window_start_phasors,
 )
 from hil.estimation.late_taps import LEAD_S, DirectFit, direct_amplitudes
 from hil.estimation.reverb_band import doppler_resolution_mps
@@ -703,46 +704,45 @@ class FirstArrivalReadout:
         # Receive times of the boundaries, from their transmit spacing compressed by α.
         ends = hops.start_s[::-1]  # start of the hop after boundary m = its transmit time
         t_b = t_c - (ends[0] - ends) / alpha
-        n_b = np.round(t_b * fs).astype(np.int64)
+        t_b_fs = t_b * fs  # receive times, samples
+        n_b = np.rint(t_b_fs).astype(np.int64)  # np.round's own step at 0 decimals
         w = self.boxcar
         first = n_b - self._pre - self._lead - self.period
         held_from = max(self._valid_from, self._ring.next_index - self._ring.available)
         if first.min() < held_from or n_b.max() + self._post > self._ring.next_index:
             return None
-        idx = n_b[:, None] + self._offsets_ext[None, :]  # (M, L + lead)
-        d = self._ring.rows(idx)
-        if self.period:
-            before = self._ring.rows(idx - self.period)
-            d = d - before if self.sign > 0 else d + before
-        # d · e^{−j2π α f t} (t = idx / fs) summed along each row; ``full``: the boxcar of w
-        # ending at extended index w, w + 1, ... (M, L + w); ``box``: the boxcar's change over
-        # its own length (M, L): every steady tone on the Δf grid (the previous tones, and the
-        # next tone as sounded by late images of earlier boundaries) gives the same boxcar
-        # sum w samples apart and cancels, only switches remain; ``p_all``: |box / w|², as
-        # |box · (1/w)|² (the same bits: see _ramp_residuals). The kernel's operations are
-        # NumPy's (hil.estimation.first_arrival_kernels).
+        # d · e^{−j2π α f t} (t = idx / fs, idx the absolute sample index; d the input, less
+        # or plus the period before behind the canceller) summed along each boundary's row of
+        # L + lead samples; ``full``: the boxcar of w ending at extended index w, w + 1, ...
+        # (M, L + w); ``box``: the boxcar's change over its own length (M, L): every steady
+        # tone on the Δf grid (the previous tones, and the next tone as sounded by late images
+        # of earlier boundaries) gives the same boxcar sum w samples apart and cancels, only
+        # switches remain; ``p_all``: |box / w|², as |box · (1/w)|² (the same bits: see
+        # _ramp_residuals). The kernel reads the rows from the history itself and its
+        # operations are NumPy's (hil.estimation.first_arrival_kernels).
         coef = -2j * np.pi * alpha * f_next  # (M,), complex: its real parts are 0
-        n_ext = idx.shape[1]
+        n_ext = self._offsets_ext.size
+        row_first = n_b + self._offsets_ext[0]  # absolute index of each row's first sample
         full = np.empty((m, n_ext - w), dtype=np.complex128)
         box = np.empty((m, n_ext - 2 * w), dtype=np.complex128)
         p_all = np.empty((m, n_ext - 2 * w))
-        next_tone_channel(
-            np.ascontiguousarray(d, dtype=np.float64), idx, fs, np.ascontiguousarray(coef.imag),
-            w, 1.0 / w, full, box, p_all,
+        ring_channel(
+            self._ring.array, self._ring.position(row_first), self.period, self.sign, row_first,
+            fs, np.ascontiguousarray(coef.imag), w, 1.0 / w, full, box, p_all,
         )  # fmt: skip
         pattern = self._tone_pattern(tones)  # clean, leave: read-only, shared
         clean = pattern.clean
         power = _mean(p_all[clean], axis=0)  # (L,)
         base = self._noise_window(power)
         amp = np.sqrt(np.maximum(power - _mean_all(power[base]), 0.0))
-        top_i = self._after + int(np.argmax(amp[self._after :]))
+        top_i = self._after + int(amp[self._after :].argmax())
         leave = pattern.leave
         if self._late_images_seen(p_all, power, clean, leave, top_i):
             clean = clean & ~leave
             power = _mean(p_all[clean], axis=0)
             base = self._noise_window(power)
             amp = np.sqrt(np.maximum(power - _mean_all(power[base]), 0.0))
-            top_i = self._after + int(np.argmax(amp[self._after :]))
+            top_i = self._after + int(amp[self._after :].argmax())
         top = float(amp[top_i])
         noise = math.sqrt(_mean_all(power[base]))
         if not top > 3.0 * noise:
@@ -764,7 +764,7 @@ class FirstArrivalReadout:
             fell = _nonzero(~(amp[j_e : stop + 1] >= max(LO_FRACTION * top, wobble)))
             if fell.size:
                 stop = j_e + int(fell[0]) - 1
-            top_i = j_e + int(np.argmax(amp[j_e : stop + 1]))
+            top_i = j_e + int(amp[j_e : stop + 1].argmax())
             top = float(amp[top_i])
         floor = _mean_all(power[base])
         j_lo, j_hi = self._ramp_bounds(amp, k0, top_i, top, wobble)
@@ -780,7 +780,7 @@ class FirstArrivalReadout:
         for _ in range(MAX_PEDESTALS):
             if j_lo <= k0 or j_hi + w >= top_i or leave.all() or not leave.any():
                 break
-            ped = float(np.max(amp[j_hi : j_hi + w]))
+            ped = float(amp[j_hi : j_hi + w].max())
             if ped >= PEDESTAL_RISE * max(float(amp[j_hi]), wobble):
                 break
             p_box = p_all[:, j_hi : j_hi + w]
@@ -791,7 +791,7 @@ class FirstArrivalReadout:
             k0 = j_hi
             top = float(amp[top_i])
             j_lo, j_hi = self._ramp_bounds(amp, k0, top_i, top, wobble)
-        frac = t_b * fs - n_b  # each boundary's predicted switch, samples past its n_b
+        frac = t_b_fs - n_b  # each boundary's predicted switch, samples past its n_b
         prev_f = np.concatenate([f_next[1:], prev_hop.freq_hz])
         ramp = self._ramp_tables(frac, alpha * (prev_f - f_next), self._phase_jumps(hops, prev_hop))
         copy_after = bool(self.period) and alpha > 1.0
@@ -824,15 +824,15 @@ class FirstArrivalReadout:
             seen = np.asarray(box[:, j0 : j1 + 1], dtype=np.complex128) / w
             # Each boundary's complex amplitude by least squares on the model's shape: the
             # previous tone's leak, different at each boundary, is divided out.
-            p = np.sum(np.conj(shape) * seen, axis=1) / np.maximum(
-                np.sum(np.abs(shape) ** 2, axis=1), 1e-300
+            p = np.add.reduce(np.conj(shape) * seen, axis=1) / np.maximum(
+                np.add.reduce(np.abs(shape) ** 2, axis=1), 1e-300
             )
             direct_alpha = self._direct_alpha(
                 p, hops, n_b, alpha, hop_index, onset - ends[0], pattern
             )
             if direct_alpha is None and self._reads_late_taps(alpha):
                 direct_alpha = self._second_reading(
-                    table, hop_index, first_hop, t_b * fs + rel_speed * fs, alpha, hops, n_b,
+                    table, hop_index, first_hop, t_b_fs + rel_speed * fs, alpha, hops, n_b,
                     onset - ends[0],
                 )  # fmt: skip
             self._read_speeds = [r for r in self._read_speeds if 0 < hop_index - r[0] <= HOLD_HOPS]
@@ -1046,7 +1046,7 @@ class FirstArrivalReadout:
         c = np.empty(seg.size + 1)
         c[0] = 0.0
         np.cumsum(seg, out=c[1:])
-        least = float(np.min(c[part:] - c[:-part])) / part
+        least = float((c[part:] - c[:-part]).min()) / part
         return least if levels.floor > NEAR_RATIO * least else None
 
     def _explained(
@@ -1065,11 +1065,11 @@ class FirstArrivalReadout:
         n = np.arange(i0, i1)
         shape = self._ramp_shape(np.array([rel * self.fs_hz]), n, ramp)[0][clean]  # (K, J)
         seen = box[clean][:, n] / self.boxcar
-        gain = np.sum(np.conj(shape) * seen, axis=1) / np.maximum(
-            np.sum(np.abs(shape) ** 2, axis=1), 1e-300
+        gain = np.add.reduce(np.conj(shape) * seen, axis=1) / np.maximum(
+            np.add.reduce(np.abs(shape) ** 2, axis=1), 1e-300
         )
-        fitted = float(np.sum(np.abs(gain[:, None] * shape) ** 2))
-        return fitted / max(float(np.sum(np.abs(seen) ** 2)), 1e-300)
+        fitted = float(np.add.reduce(np.abs(gain[:, None] * shape) ** 2, axis=None))
+        return fitted / max(float(np.add.reduce(np.abs(seen) ** 2, axis=None)), 1e-300)
 
     def _held_alpha(self, hop_index: int, delay_s: float, alpha: float) -> float | None:
         """The direct path's time scale read at the same echo up to :data:`HOLD_HOPS` hops
@@ -1312,7 +1312,7 @@ class FirstArrivalReadout:
         c[0] = 0.0
         np.cumsum(seg, out=c[1:])
         sums = c[n:] - c[:-n]  # power summed over each stretch
-        k = int(np.argmin(sums))
+        k = int(sums.argmin())
         fixed = _mean_all(power[self._base_slice])
         if fixed <= QUIET_RATIO * sums[k] / n:
             return self._base_slice
@@ -1378,12 +1378,12 @@ class FirstArrivalReadout:
         start = self._window_start_phasors(ramp, n)
         coarse = guess_s * fs + np.arange(-span, span + 1, dtype=np.float64)
         resid = self._ramp_residuals(coarse, excess, n, ramp, start, level)
-        k = int(np.argmin(resid))
+        k = int(resid.argmin())
         if k in (0, coarse.size - 1):
             return guess_s  # no minimum inside the span: the line stands
         fine = coarse[k] + np.arange(-1.0, 1.0 + FIT_STEP / 2, FIT_STEP)
         resid = self._ramp_residuals(fine, excess, n, ramp, start, level)
-        k = int(np.argmin(resid))
+        k = int(resid.argmin())
         best = float(fine[k])
         if 0 < k < fine.size - 1:
             best += FIT_STEP * parabolic_offset(-resid[k - 1], -resid[k], -resid[k + 1])
@@ -1410,15 +1410,13 @@ class FirstArrivalReadout:
         # The model's window sums (_ramp_shape with times_w) times 1/w instead of divided by
         # w: NumPy divides a complex by a real w as the product with 1/w, so every nonzero
         # part is the same bits (a zero may change sign, which |·| ignores). The kernel does
-        # in one loop what NumPy's expressions would: |shape|², its mean over the boundaries,
-        # the scale and the residual (hil.estimation.first_arrival_kernels).
-        o = (self._pre + grid)[:, None] + ramp.frac[None, :]  # (C, M)
-        at_o = np.exp(-1j * (ramp.theta[None, :] * o + ramp.jump[None, :]))  # (C, M)
+        # in one loop what NumPy's expressions would: each onset on each boundary and the
+        # beat's phasor there, |shape|², its mean over the boundaries, the scale and the
+        # residual (hil.estimation.first_arrival_kernels).
         out = np.empty(grid.size)
         ramp_residuals(
-            o, np.ascontiguousarray(n, dtype=np.int64), self.boxcar, ramp.geometric,
-            np.ascontiguousarray(start[0]), at_o, 1.0 / self.boxcar,
-            np.ascontiguousarray(excess, dtype=np.float64), level, out,
+            grid, self._pre, ramp.frac, ramp.theta, ramp.jump, n, self.boxcar,
+            ramp.geometric, start[0], 1.0 / self.boxcar, excess, level, out,
         )  # fmt: skip
         return out
 
@@ -1427,8 +1425,9 @@ class FirstArrivalReadout:
     ) -> NDArray[np.complex128]:
         """``e^{jθa}`` of each boundary's beat at the first sample ``a = n − w + 1`` of the
         window ending at each index of ``n`` (shape ``(L,)``): shape ``(1, M, L)``."""
-        w = self.boxcar
-        return np.exp(1j * np.outer(ramp.theta, n - w + 1))[None, :, :]
+        start = np.empty((ramp.theta.size, n.size), dtype=np.complex128)
+        window_start_phasors(ramp.theta, n, self.boxcar, start)
+        return start[None, :, :]
 
     def _ramp_shape(
         self,
@@ -1538,7 +1537,7 @@ class FirstArrivalReadout:
         # The summed score chooses the lobe; the present one alone places the peak on it
         # unless the direct path's speed has been steady (a speed that changes over the lags
         # would move a summed peak).
-        g = int(np.argmax(total))
+        g = int(total.argmax())
         own_score = total if self._steady(hop_index, delay_s) else own.score
         while 0 < g < own_score.size - 1 and max(own_score[g - 1], own_score[g + 1]) > own_score[g]:
             g = g - 1 if own_score[g - 1] > own_score[g + 1] else g + 1

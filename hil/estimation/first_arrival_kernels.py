@@ -163,6 +163,44 @@ def complex_abs(re: float, im: float) -> float:
 
 
 @numba.njit(**_JIT)
+def _channel_row(
+    x: Any, index: Any, fs: float, br: float, w: int, inv_w: float, full: Any, box: Any,
+    p_all: Any, cre: Any, cim: Any,
+) -> None:  # fmt: skip
+    """One boundary's row of :func:`next_tone_channel`: ``x`` (shape ``(N,)``) at absolute
+    sample indices ``index`` (shape ``(N,)``, int64), ``br`` its ``b``; ``full``, ``box``,
+    ``p_all`` the row's outputs; ``cre``, ``cim`` (shape ``(N,)``) scratch."""
+    n = x.shape[0]
+    sr = 0.0
+    si = 0.0
+    for k in range(n):
+        # The phase b t: the complex product (0 + j b)(t + j0) has a real part of ±0,
+        # and e^{±0} = 1 leaves (cos, sin) as they are.
+        y = br * (index[k] / fs)
+        c = math.cos(y)
+        s = math.sin(y)
+        xk = x[k]
+        zr = _fma(xk, c, -(0.0 * s))
+        zi = _fma(xk, s, 0.0 * c)
+        if k == 0:
+            sr = zr
+            si = zi
+        else:
+            sr = sr + zr
+            si = si + zi
+        cre[k] = sr
+        cim[k] = si
+    for k in range(n - w):
+        full[k] = complex(cre[k + w] - cre[k], cim[k + w] - cim[k])
+    for k in range(n - 2 * w):
+        fr = full[k + w].real - full[k].real
+        fi = full[k + w].imag - full[k].imag
+        box[k] = complex(fr, fi)
+        a = complex_abs(_fma(fr, inv_w, -(fi * 0.0)), _fma(fr, 0.0, fi * inv_w))
+        p_all[k] = a * a
+
+
+@numba.njit(**_JIT)
 def next_tone_channel(
     d: Any, idx: Any, fs: float, b: Any, w: int, inv_w: float, full: Any, box: Any, p_all: Any
 ) -> None:
@@ -179,44 +217,64 @@ def next_tone_channel(
     cre = np.empty(n)
     cim = np.empty(n)
     for r in range(m):
-        br = b[r]
-        sr = 0.0
-        si = 0.0
+        _channel_row(d[r], idx[r], fs, b[r], w, inv_w, full[r], box[r], p_all[r], cre, cim)
+
+
+@numba.njit(**_JIT)
+def ring_channel(
+    ring: Any, pos: Any, period: int, sign: int, first: Any, fs: float, b: Any, w: int,
+    inv_w: float, full: Any, box: Any, p_all: Any,
+) -> None:  # fmt: skip
+    """:func:`next_tone_channel` of rows read from a history (the same bits): row ``r`` is
+    ``ring[pos[r] : pos[r] + N]`` (``ring`` float, 1-D; ``pos`` shape ``(M,)``, int64), less
+    (``sign`` > 0) or plus the row ``period`` samples before it where ``period`` > 0 (the
+    clutter canceller), at absolute indices ``first[r] .. first[r] + N − 1`` (``N``:
+    ``full``'s columns plus ``w``). No ``(M, N)`` index, gather or difference array."""
+    m = pos.shape[0]
+    n = full.shape[1] + w
+    cre = np.empty(n)
+    cim = np.empty(n)
+    x = np.empty(n)
+    index = np.empty(n, dtype=np.int64)
+    for r in range(m):
+        p = pos[r]
         for k in range(n):
-            # The phase b t: the complex product (0 + j b)(t + j0) has a real part of ±0,
-            # and e^{±0} = 1 leaves (cos, sin) as they are.
-            y = br * (idx[r, k] / fs)
-            c = math.cos(y)
-            s = math.sin(y)
-            x = d[r, k]
-            zr = _fma(x, c, -(0.0 * s))
-            zi = _fma(x, s, 0.0 * c)
-            if k == 0:
-                sr = zr
-                si = zi
-            else:
-                sr = sr + zr
-                si = si + zi
-            cre[k] = sr
-            cim[k] = si
-        for k in range(n - w):
-            full[r, k] = complex(cre[k + w] - cre[k], cim[k + w] - cim[k])
-        for k in range(n - 2 * w):
-            fr = full[r, k + w].real - full[r, k].real
-            fi = full[r, k + w].imag - full[r, k].imag
-            box[r, k] = complex(fr, fi)
-            a = complex_abs(_fma(fr, inv_w, -(fi * 0.0)), _fma(fr, 0.0, fi * inv_w))
-            p_all[r, k] = a * a
+            v = ring[p + k]
+            if period > 0:
+                u = ring[p - period + k]
+                v = v - u if sign > 0 else v + u
+            x[k] = v
+            index[k] = first[r] + k
+        _channel_row(x, index, fs, b[r], w, inv_w, full[r], box[r], p_all[r], cre, cim)
+
+
+@numba.njit(**_JIT)
+def window_start_phasors(theta: Any, n: Any, w: int, out: Any) -> None:
+    """``np.exp(1j * np.outer(theta, n − w + 1))`` into ``out`` (shape ``(M, L)``, complex):
+    each boundary's beat ``theta`` (shape ``(M,)``, rad per sample) at the first sample of the
+    window ending at each index of ``n`` (shape ``(L,)``, int64). The product ``1j · v`` is
+    NumPy's fused complex one: real part ±0 (so ``e^{±0} = 1``), imaginary ``fma(0, 0, v)``
+    (``v``, or +0 for −0)."""
+    m = theta.shape[0]
+    length = n.shape[0]
+    for mi in range(m):
+        th = theta[mi]
+        for j in range(length):
+            y = _fma(0.0, 0.0, th * np.float64(n[j] - w + 1))
+            out[mi, j] = complex(math.cos(y), math.sin(y))
 
 
 @numba.njit(**_JIT)
 def ramp_residuals(
-    o: Any,
+    grid: Any,
+    pre: int,
+    frac: Any,
+    theta: Any,
+    jump: Any,
     n: Any,
     w: int,
     geometric: Any,
     start: Any,
-    at_o: Any,
     inv_w: float,
     excess: Any,
     level: bool,
@@ -225,16 +283,23 @@ def ramp_residuals(
     """Least-squares residual of the ramp model for each onset (the body of
     ``FirstArrivalReadout._ramp_residuals``).
 
-    ``o`` (shape ``(C, M)``): each onset on each boundary, window samples; ``n`` (shape
-    ``(L,)``, int64): the window indices; ``geometric`` (shape ``(M, w + 1)``, complex) and
-    ``start`` (shape ``(M, L)``, complex), ``at_o`` (shape ``(C, M)``, complex): the ramp's
-    tables, the beat's phasor at each window's first sample and at each onset; ``excess``
-    (shape ``(L,)``): the measured power less the noise. The model at onset ``c``, boundary
-    ``m``, window ``l``: ``((start · at_o) · geometric[m, w − k] + k) · (1/w)`` with ``k``
-    the window's samples at or after the onset (``n − ⌈o⌉ + 1`` within ``0 .. w``); its
-    power's mean over ``M`` is scaled by least squares to ``excess`` (with ``level``, both
-    less their means). ``out`` (shape ``(C,)``): the squared residual summed over ``L``."""
-    c_count, m = o.shape
+    ``grid`` (shape ``(C,)``): the onsets, samples after each boundary's predicted switch;
+    ``pre``: the window index of boundary 0's sample; ``frac``, ``theta``, ``jump`` (shape
+    ``(M,)`` each): each boundary's predicted switch (samples past its sample), beat (rad per
+    sample) and phase jump (rad); each onset on each boundary is
+    ``o = (pre + grid) + frac`` (window samples) and the beat's phasor there
+    ``at_o = e^{−j(θ o + jump)}`` (NumPy's ``np.exp(-1j * (theta * o + jump))``: the product's
+    real part ±0, its imaginary ``fma(−0, 0, −v)``); ``n`` (shape ``(L,)``, int64): the
+    window indices; ``geometric`` (shape ``(M, w + 1)``, complex) and ``start`` (shape
+    ``(M, L)``, complex): the ramp's table and the beat's phasor at each window's first
+    sample; ``excess`` (shape ``(L,)``): the measured power less the noise. The model at
+    onset ``c``, boundary ``m``, window ``l``: ``((start · at_o) · geometric[m, w − k] + k) ·
+    (1/w)`` with ``k`` the window's samples at or after the onset (``n − ⌈o⌉ + 1`` within
+    ``0 .. w``); its power's mean over ``M`` is scaled by least squares to ``excess`` (with
+    ``level``, both less their means). ``out`` (shape ``(C,)``): the squared residual summed
+    over ``L``."""
+    c_count = grid.shape[0]
+    m = frac.shape[0]
     length = n.shape[0]
     model = np.empty(length)
     prod = np.empty(length)
@@ -245,11 +310,13 @@ def ramp_residuals(
         for j in range(length):
             ex[j] = excess[j] - mean_ex
     for c in range(c_count):
+        base = np.float64(pre) + grid[c]
         for mi in range(m):
-            oc = o[c, mi]
+            oc = base + frac[mi]
             shift = 1 - np.int64(math.ceil(oc))
-            ar = at_o[c, mi].real
-            ai = at_o[c, mi].imag
+            y = _fma(-0.0, 0.0, -(theta[mi] * oc + jump[mi]))
+            ar = math.cos(y)
+            ai = math.sin(y)
             for j in range(length):
                 k = n[j] + shift
                 if k < 0:
@@ -359,13 +426,18 @@ def warm_up() -> None:
     p_all = np.zeros((1, 2))
     idx = np.arange(6, dtype=np.int64).reshape(1, 6)
     next_tone_channel(np.zeros((1, 6)), idx, 1.0, np.zeros(1), w, 0.5, full, box, p_all)
+    first = np.zeros(1, dtype=np.int64)
+    for period in (0, 1):
+        ring_channel(np.zeros(8), first + 1, period, 1, first, 1.0, np.zeros(1), w, 0.5, full,
+                     box, p_all)  # fmt: skip
     out = np.zeros(1)
     geometric = np.zeros((1, w + 1), dtype=np.complex128)
     start = np.zeros((1, 3), dtype=np.complex128)
-    at_o = np.zeros((1, 1), dtype=np.complex128)
     n = np.arange(3, dtype=np.int64)
+    window_start_phasors(np.zeros(1), n, w, start)
+    one = np.zeros(1)
     for level in (False, True):
-        ramp_residuals(np.zeros((1, 1)), n, w, geometric, start, at_o, 0.5, np.zeros(3), level, out)
+        ramp_residuals(one, 1, one, one, one, n, w, geometric, start, 0.5, np.zeros(3), level, out)
     cols = np.zeros(1, dtype=np.int64)
     starts = np.array([0, 1], dtype=np.int64)
     doppler_score(np.zeros(1), np.zeros(1), np.zeros(1, dtype=np.complex128), cols, starts, out)

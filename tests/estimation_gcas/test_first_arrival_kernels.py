@@ -85,6 +85,35 @@ def test_next_tone_channel_is_the_numpy_expressions(seed: int) -> None:
         assert got.tobytes() == exp.tobytes()
 
 
+@pytest.mark.parametrize(("period", "sign"), [(0, 1), (1920, 1), (1920, -1), (7, 1)])
+def test_ring_channel_is_the_channel_of_the_rows_it_reads(period: int, sign: int) -> None:
+    """The readout's rows read from its history (less or plus the period before behind the
+    canceller) and passed to next_tone_channel, against the kernel reading them itself."""
+    rng = np.random.default_rng(period + sign)
+    fs, w, m, n = 192_000.0, 96, 10, 1325
+    ring = rng.normal(size=40_000) * 10.0 ** rng.uniform(-6, 1)
+    ring[5000:5100] = 0.0  # zeros: the history before the stream started
+    pos = rng.integers(period, ring.size - n, m)
+    pos[0] = 5000 - 20
+    first = pos + 3_000_000  # absolute indices: the history's positions shifted
+    b = np.ascontiguousarray((-2j * np.pi * 1.001 * rng.uniform(2e4, 6e4, m)).imag)
+    idx = first[:, None] + np.arange(n)[None, :]
+    rows = ring[pos[:, None] + np.arange(n)[None, :]]
+    if period:
+        before = ring[pos[:, None] - period + np.arange(n)[None, :]]
+        rows = rows - before if sign > 0 else rows + before
+    outs = []
+    for _ in range(2):
+        outs.append(
+            (np.empty((m, n - w), complex), np.empty((m, n - 2 * w), complex),
+             np.empty((m, n - 2 * w)))
+        )  # fmt: skip
+    k.next_tone_channel(rows, idx, fs, b, w, 1.0 / w, *outs[0])
+    k.ring_channel(ring, pos, period, sign, first, fs, b, w, 1.0 / w, *outs[1])
+    for want, got in zip(*outs, strict=True):
+        assert got.tobytes() == want.tobytes()
+
+
 def _residuals_numpy(
     o: np.ndarray, n: np.ndarray, w: int, geometric: np.ndarray, start: np.ndarray,
     theta: np.ndarray, jump: np.ndarray, excess: np.ndarray, level: bool,
@@ -134,12 +163,18 @@ def test_ramp_residuals_are_the_numpy_expressions(seed: int, length: int, level:
     )
     n = pre - 30 + np.arange(length)
     start = np.exp(1j * np.outer(theta, n - w + 1))
+    got_start = np.empty_like(start)
+    k.window_start_phasors(theta, n, w, got_start)
+    assert got_start.tobytes() == start.tobytes()
     grid = rng.uniform(-20.0, 20.0, 33)
-    o = (pre + grid)[:, None] + rng.uniform(-0.5, 0.5, m)[None, :]
+    grid[:3] = [0.0, -0.0, 5.0]  # whole samples: the coarse grid
+    frac = rng.uniform(-0.5, 0.5, m)
+    o = (pre + grid)[:, None] + frac[None, :]
     excess = rng.normal(1.0, 1.0, length) ** 2
-    at_o = np.exp(-1j * (theta[None, :] * o + jump[None, :]))
     got = np.empty(grid.size)
-    k.ramp_residuals(o, n, w, geometric, start, at_o, 1.0 / w, excess, level, got)
+    k.ramp_residuals(
+        grid, pre, frac, theta, jump, n, w, geometric, start, 1.0 / w, excess, level, got
+    )
     want = _residuals_numpy(o, n, w, geometric, start, theta, jump, excess, level)
     assert got.tobytes() == want.tobytes()
 
