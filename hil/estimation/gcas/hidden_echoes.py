@@ -126,6 +126,8 @@ class HiddenEchoes:
         self._wait: dict[int, int] = {}
         #: Per side: the latest hidden echo fitted there, (hop index, boundary time s, α).
         self._last: dict[int, tuple[int, float, float]] = {}
+        #: The latest still echo fitted (:meth:`_fit_still`): (hop index, boundary time s, 1).
+        self._still: tuple[int, float, float] | None = None
         #: Per side: the echoes whose measurements find something there but no one echo
         #: (:data:`STILL_WAIT_HOPS`): (hop index of the first such note, of the latest, the
         #: latest's boundary time s, α) each.
@@ -210,13 +212,24 @@ class HiddenEchoes:
         side = 1 if note.alpha > 1.0 else -1
         starts = [(t_b, a) for a in self._starts(note.alpha)]
         last = self._last.get(side)
-        if last is not None and hop - last[0] <= MAX_WAIT_HOPS:
+        if last is not None and last[2] != 1.0 and hop - last[0] <= MAX_WAIT_HOPS:
             # Where that echo's fit puts this boundary: the edge's comb moves the note's time
             # by up to a quarter hop, and from there the refinement would take the echo's
             # own recent fit out of its input as another echo's.
             t_pred = last[1] + (hop - last[0]) * self.hop_s / last[2]
             if abs(t_pred - t_b) <= SAME_HOP * self.hop_s:
                 starts.insert(0, (t_pred, last[2]))
+        # A still echo's boundary: the still water's hops are the transmit's, of length T.
+        k_still = max(0, int(math.floor((t_s - note.t_s) / self.hop_s)))
+        still = (note.t_s + k_still * self.hop_s, note.hop_index + k_still)
+        if self._still is not None:
+            # The still echo fitted before, on either side (its edge detections are on
+            # both): most often the same (one fit, not five).
+            t_pred = self._still[1] + (still[1] - self._still[0]) * self.hop_s
+            if abs(t_pred - still[0]) <= SAME_HOP * self.hop_s:
+                found, _ = self._fit_still(t_pred, still[1], side)
+                if found:
+                    return True, True
         # The refinement remembers the fits that pass the test it is given: here this one.
         strong = False
         for t_start, alpha in starts:
@@ -229,7 +242,24 @@ class HiddenEchoes:
                 self._last[side] = (hop, fit.t_s, fit.alpha)
                 return True, True
             strong = strong or (fit.found and fit.e_over_n0_db >= self.test.min_e_over_n0_db)
+        if strong:
+            # Something there that no moving echo's fit explains: a still point echo?
+            return self._fit_still(still[0], still[1], side)
         return False, strong
+
+    def _fit_still(self, t_b: float, hop: int, side: int) -> tuple[bool, bool]:
+        """Fit a still echo (time scale 1) at the boundary ``t_b`` (s) ending hop ``hop``
+        (:meth:`~hil.estimation.refine.CoherentRefiner.refine_still`, which remembers it
+        where it is one echo by :attr:`test`); as :meth:`_measure`'s outcome."""
+        fit = self.refiner.refine_still(t_b, hop, self.test)
+        self.fit_count += 1
+        if fit is None:
+            return False, False
+        if fit.is_echo(self.test):
+            self._fits.append((hop, fit.t_s, 1.0))
+            self._last[side] = self._still = (hop, fit.t_s, 1.0)
+            return True, True
+        return False, fit.found and fit.e_over_n0_db >= self.test.min_e_over_n0_db
 
     def _starts(self, alpha: float) -> list[float]:
         """Time scales to start a hidden echo's fit from: the edge detection's, then every
