@@ -85,6 +85,12 @@ MAX_WAIT_HOPS = 8
 #: window is full, and a weak one fails short of an echo's E/N0: both keep the shorter wait.
 STILL_WAIT_HOPS = 64
 
+#: A still echo found (:meth:`HiddenEchoes._fit_still`) is fitted again at its edge detections
+#: once its fit is this many hops old (its amplitude and delay kept up to date; att, a wall
+#: 20 dB above a target at -10 dB: no other measurement of it for 60 hops, its fit let go,
+#: and the target's fits a grating lobe off).
+STILL_REFRESH_HOPS = MAX_WAIT_HOPS
+
 
 @dataclass
 class _Note:
@@ -153,6 +159,8 @@ class HiddenEchoes:
         for note in self._notes:
             if note.measured or note.strength < LEAK_FRACTION * strength:
                 continue
+            if self._refresh_still(note, t_s):
+                continue
             side = 1 if note.alpha > 1.0 else -1
             if note.hop_index < self._next.get(side, note.hop_index):
                 continue
@@ -170,6 +178,28 @@ class HiddenEchoes:
                 wait = self._wait.get(side, 1)
                 self._next[side] = note.hop_index + wait
                 self._wait[side] = min(2 * wait, self._longest_wait(note, side, strong))
+
+    def _refresh_still(self, note: _Note, t_s: float) -> bool:
+        """Fit the still echo found before again where ``note`` is its edge detection (its
+        boundary within :data:`SAME_HOP` hops of where that fit puts it) and that fit is
+        :data:`STILL_REFRESH_HOPS` hops old or more, at its last boundary at or before
+        ``t_s`` (s); whether it did. Its edge detections are then read as the leaks of an
+        echo the refinement knows and are not measured otherwise, and the refinement lets
+        its fit go after :data:`~hil.estimation.refine.STILL_KNOWN_HOPS`."""
+        if self._still is None:
+            return False
+        hop0, t0, _ = self._still
+        k = max(0, int(math.floor((t_s - note.t_s) / self.hop_s)))
+        hop = note.hop_index + k
+        t_pred = t0 + (hop - hop0) * self.hop_s
+        if hop - hop0 < STILL_REFRESH_HOPS or abs(t_pred - (note.t_s + k * self.hop_s)) > (
+            SAME_HOP * self.hop_s
+        ):
+            return False
+        note.measured = True
+        side = 1 if note.alpha > 1.0 else -1
+        self._fit_still(t_pred, hop, side)
+        return True
 
     def _longest_wait(self, note: _Note, side: int, strong: bool) -> int:
         """The longest wait (hops) on ``side`` after a measurement of ``note`` that found no
