@@ -180,25 +180,22 @@ class HiddenEchoes:
                 self._wait[side] = min(2 * wait, self._longest_wait(note, side, strong))
 
     def _refresh_still(self, note: _Note, t_s: float) -> bool:
-        """Fit the still echo found before again where ``note`` is its edge detection (its
-        boundary within :data:`SAME_HOP` hops of where that fit puts it) and that fit is
-        :data:`STILL_REFRESH_HOPS` hops old or more, at its last boundary at or before
-        ``t_s`` (s); whether it did. Its edge detections are then read as the leaks of an
-        echo the refinement knows and are not measured otherwise, and the refinement lets
-        its fit go after :data:`~hil.estimation.refine.STILL_KNOWN_HOPS`."""
+        """Fit the still echo found before again at its last boundary at or before ``t_s``
+        (s) where that fit is :data:`STILL_REFRESH_HOPS` hops old or more, beside ``note``
+        (an edge detection strong enough to outshine the detection); whether it did. Its
+        edge detections are read as the leaks of an echo the refinement knows and are not
+        measured otherwise (their boundaries lie up to 0.65 hop from the still echo's: the
+        edge hypothesis's comb, and the hop it names), and the refinement lets its fit go
+        after :data:`~hil.estimation.refine.STILL_KNOWN_HOPS`."""
         if self._still is None:
             return False
         hop0, t0, _ = self._still
-        k = max(0, int(math.floor((t_s - note.t_s) / self.hop_s)))
-        hop = note.hop_index + k
-        t_pred = t0 + (hop - hop0) * self.hop_s
-        if hop - hop0 < STILL_REFRESH_HOPS or abs(t_pred - (note.t_s + k * self.hop_s)) > (
-            SAME_HOP * self.hop_s
-        ):
+        k = int(math.floor((t_s - t0) / self.hop_s))
+        if k < STILL_REFRESH_HOPS:
             return False
         note.measured = True
         side = 1 if note.alpha > 1.0 else -1
-        self._fit_still(t_pred, hop, side)
+        self._fit_still(t0 + k * self.hop_s, hop0 + k, side)
         return True
 
     def _longest_wait(self, note: _Note, side: int, strong: bool) -> int:
@@ -254,10 +251,11 @@ class HiddenEchoes:
         still = (note.t_s + k_still * self.hop_s, note.hop_index + k_still)
         if self._still is not None:
             # The still echo fitted before, on either side (its edge detections are on
-            # both): most often the same (one fit, not five).
-            t_pred = self._still[1] + (still[1] - self._still[0]) * self.hop_s
-            if abs(t_pred - still[0]) <= SAME_HOP * self.hop_s:
-                found, _ = self._fit_still(t_pred, still[1], side)
+            # both): most often the same (one fit, not five), at its last boundary.
+            k_known = int(math.floor((t_s - self._still[1]) / self.hop_s))
+            if k_known >= 0:
+                t_known = self._still[1] + k_known * self.hop_s
+                found, _ = self._fit_still(t_known, self._still[0] + k_known, side)
                 if found:
                     return True, True
         # The refinement remembers the fits that pass the test it is given: here this one.
