@@ -133,6 +133,10 @@ class _Refiner:
     def ghost_of_known(self, t_s: float, alpha: float, hop: int, strength: float) -> bool:
         return self.ghosts
 
+    def ghost_of_rest(self, speed: float) -> bool:
+        # att: a tone spacing's speed 27.5 m/s, two Doppler cells of 2.5 m/s about it.
+        return abs(abs(speed) - 27.5) <= 5.0
+
 
 def _hidden(refiner: _Refiner) -> HiddenEchoes:
     return HiddenEchoes(refiner, HOP_S)  # type: ignore[arg-type]
@@ -312,3 +316,16 @@ def test_no_still_fit_where_the_edge_fits_find_nothing() -> None:
     hidden.note(0.5, _alpha(3.0), 40, strength=10.0)
     hidden.measure_near(0.5, strength=1.0)
     assert [f[1] for f in ref.fits] == pytest.approx([3.0, 2.0, 1.0])
+
+
+@pytest.mark.parametrize(("speed", "still_fits"), [(8.0, 1), (-29.0, 0), (24.0, 0)])
+def test_a_still_echo_is_fitted_only_for_a_detection_away_from_its_ghosts(
+    speed: float, still_fits: int
+) -> None:
+    # The measured still echo is taken out of no detection at its ghosts' speeds (a whole
+    # tone spacing from rest, within two Doppler cells): it is not fitted for one.
+    ref = _Refiner(echo_at=(0.0,), strong=True)
+    hidden = _hidden(ref)
+    hidden.note(0.5, _alpha(3.0), 40, strength=10.0)
+    hidden.measure_near(0.5 + 1.5 * HOP_S, strength=1.0, speed_mps=speed)
+    assert [f[1] for f in ref.fits] == pytest.approx([3.0, 2.0, 1.0, 0.0][: 3 + still_fits])

@@ -94,3 +94,25 @@ def test_a_still_echo_is_measured_at_rest() -> None:
     # Remembered as a still echo: taken out of a detection's fit 40 hops later.
     later = t_true + 40 * HOP_S
     assert [round(v, 9) for v, _ in refiner.known_echoes(later)] == [0.0]
+
+
+def test_a_still_echo_is_taken_out_of_no_detection_at_its_ghosts_speeds() -> None:
+    # att: one tone spacing is 27.5 m/s, a Doppler cell of one hop 2.5 m/s; the ghosts and
+    # their main lobes lie within two cells of whole spacings from rest.
+    refiner = CoherentRefiner(att_schedule(), FS, 10, C, 0.5, 30.0)
+    ghost = [22.6, 27.5, 32.4, -25.0, -29.9, 55.0]
+    away = [0.0, 2.0, 8.0, 20.0, -22.4, 32.6, 40.0]
+    assert all(refiner.ghost_of_rest(v) for v in ghost)
+    assert not any(refiner.ghost_of_rest(v) for v in away)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [2, 4])
+def test_a_lone_slow_echo_measured_at_rest_adds_no_ghost(seed: int) -> None:
+    # A lone echo at 40 m closing 0.05 m/s (0 dB, 2 s): inside the reverberation band,
+    # nothing to report. Its still fit taken out of the detections at its ghosts' speeds
+    # left residues that passed the echo test: 3 and 2 estimates at -24.6 to -25.0 and
+    # +29.8 m/s on these seeds; none where it is left in them (as before it was measured).
+    schedule = att_schedule()
+    x = echo_samples(schedule, 40.0, 0.05, 2.0, snr_db=0.0, seed=seed)
+    assert run_blocks(make_gcas(schedule), x) == []

@@ -150,7 +150,7 @@ class HiddenEchoes:
         self._forget(t_s)
         self._notes.append(_Note(float(t_s), float(alpha), int(hop_index), float(strength)))
 
-    def measure_near(self, t_s: float, strength: float) -> None:
+    def measure_near(self, t_s: float, strength: float, speed_mps: float | None = None) -> None:
         """Measure the hidden echoes noted within :data:`KNOWN_HOPS` hops of a detection at
         ``t_s`` (s) of the detector's statistic ``strength`` above its noise mean: each note
         that could outshine it (noted at least :data:`LEAK_FRACTION` of its strength), that
@@ -160,10 +160,13 @@ class HiddenEchoes:
         waits 1, 2, 4 … up to :data:`MAX_WAIT_HOPS` hops before the next (up to
         :data:`STILL_WAIT_HOPS` while it finds the same echo there and never one echo)."""
         self._forget(t_s)
+        # A still echo is not taken out of a detection at its ghosts' speeds
+        # (:meth:`~hil.estimation.refine.CoherentRefiner.ghost_of_rest`): not fitted for one.
+        still = speed_mps is None or not self.refiner.ghost_of_rest(speed_mps)
         for note in self._notes:
             if note.measured or note.strength < LEAK_FRACTION * strength:
                 continue
-            if self._refresh_still(note, t_s):
+            if still and self._refresh_still(note, t_s):
                 continue
             side = 1 if note.alpha > 1.0 else -1
             if note.hop_index < self._next.get(side, note.hop_index):
@@ -173,7 +176,7 @@ class HiddenEchoes:
                 note.t_s, note.alpha, note.hop_index, strength=note.strength
             ):
                 continue
-            found, strong = self._measure(note, t_s)
+            found, strong = self._measure(note, t_s, still)
             if found:
                 self._next.pop(side, None)
                 self._wait.pop(side, None)
@@ -231,7 +234,7 @@ class HiddenEchoes:
             return STILL_WAIT_HOPS
         return MAX_WAIT_HOPS
 
-    def _measure(self, note: _Note, t_s: float) -> tuple[bool, bool]:
+    def _measure(self, note: _Note, t_s: float, still: bool = True) -> tuple[bool, bool]:
         """Refine the hidden echo of ``note`` at its last boundary at or before ``t_s`` (s)
         from each of :meth:`_starts` until a fit is one echo by :attr:`test`, first from the
         speed of the echo last fitted on its side within :data:`MAX_WAIT_HOPS` hops (the
@@ -252,8 +255,8 @@ class HiddenEchoes:
                 starts.insert(0, (t_pred, last[2]))
         # A still echo's boundary: the still water's hops are the transmit's, of length T.
         k_still = max(0, int(math.floor((t_s - note.t_s) / self.hop_s)))
-        still = (note.t_s + k_still * self.hop_s, note.hop_index + k_still)
-        if self._still is not None:
+        rest_b = (note.t_s + k_still * self.hop_s, note.hop_index + k_still)
+        if still and self._still is not None:
             # The still echo fitted before, on either side (its edge detections are on
             # both): most often the same (one fit, not five), at its last boundary.
             k_known = int(math.floor((t_s - self._still[1]) / self.hop_s))
@@ -274,9 +277,9 @@ class HiddenEchoes:
                 self._last[side] = (hop, fit.t_s, fit.alpha)
                 return True, True
             strong = strong or (fit.found and fit.e_over_n0_db >= self.test.min_e_over_n0_db)
-        if strong:
+        if strong and still:
             # Something there that no moving echo's fit explains: a still point echo?
-            return self._fit_still(still[0], still[1], side)
+            return self._fit_still(rest_b[0], rest_b[1], side)
         return False, strong
 
     def _fit_still(self, t_b: float, hop: int, side: int) -> tuple[bool, bool]:

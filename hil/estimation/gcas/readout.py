@@ -354,7 +354,9 @@ class Readout:
             return None
         if self._refiner is not None:
             if self.hidden is not None:
-                self.hidden.measure_near(t_rx, p.peak - p.mean)
+                self.hidden.measure_near(
+                    t_rx, p.peak - p.mean, fe.sound_speed_mps * (alpha - 1.0) / (alpha + 1.0)
+                )
             if self._refiner.ghost_of_known(
                 t_rx, alpha, hop_index, self._edge_side(p.d0), p.peak - p.mean, residual
             ):
