@@ -133,9 +133,9 @@ class _Refiner:
     def ghost_of_known(self, t_s: float, alpha: float, hop: int, strength: float) -> bool:
         return self.ghosts
 
-    def ghost_of_rest(self, speed: float) -> bool:
-        # att: a tone spacing's speed 27.5 m/s, two Doppler cells of 2.5 m/s about it.
-        return abs(abs(speed) - 27.5) <= 5.0
+    def leak_of_rest(self, speed: float) -> bool:
+        # att: two Doppler cells of 2.5 m/s about rest and about a tone spacing (27.5 m/s).
+        return abs(speed) <= 5.0 or abs(abs(speed) - 27.5) <= 5.0
 
 
 def _hidden(refiner: _Refiner) -> HiddenEchoes:
@@ -318,12 +318,12 @@ def test_no_still_fit_where_the_edge_fits_find_nothing() -> None:
     assert [f[1] for f in ref.fits] == pytest.approx([3.0, 2.0, 1.0])
 
 
-@pytest.mark.parametrize(("speed", "still_fits"), [(8.0, 1), (-29.0, 0), (24.0, 0)])
-def test_a_still_echo_is_fitted_only_for_a_detection_away_from_its_ghosts(
+@pytest.mark.parametrize(("speed", "still_fits"), [(8.0, 1), (-29.0, 0), (24.0, 0), (3.6, 0)])
+def test_a_still_echo_is_fitted_only_for_a_detection_away_from_its_leaks(
     speed: float, still_fits: int
 ) -> None:
-    # The measured still echo is taken out of no detection at its ghosts' speeds (a whole
-    # tone spacing from rest, within two Doppler cells): it is not fitted for one.
+    # The measured still echo is taken out of no detection where it leaks (near rest, and a
+    # whole tone spacing from it: its ghosts): it is not fitted for one.
     ref = _Refiner(echo_at=(0.0,), strong=True)
     hidden = _hidden(ref)
     hidden.note(0.5, _alpha(3.0), 40, strength=10.0)

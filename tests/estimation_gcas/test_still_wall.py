@@ -96,14 +96,15 @@ def test_a_still_echo_is_measured_at_rest() -> None:
     assert [round(v, 9) for v, _ in refiner.known_echoes(later)] == [0.0]
 
 
-def test_a_still_echo_is_taken_out_of_no_detection_at_its_ghosts_speeds() -> None:
-    # att: one tone spacing is 27.5 m/s, a Doppler cell of one hop 2.5 m/s; the ghosts and
-    # their main lobes lie within two cells of whole spacings from rest.
+def test_a_still_echo_is_taken_out_of_no_detection_where_it_leaks() -> None:
+    # att: one tone spacing is 27.5 m/s, a Doppler cell of one hop 2.5 m/s; a still echo's
+    # Doppler response and its ghosts' main lobes lie within two cells of rest and of whole
+    # spacings from it.
     refiner = CoherentRefiner(att_schedule(), FS, 10, C, 0.5, 30.0)
-    ghost = [22.6, 27.5, 32.4, -25.0, -29.9, 55.0]
-    away = [0.0, 2.0, 8.0, 20.0, -22.4, 32.6, 40.0]
-    assert all(refiner.ghost_of_rest(v) for v in ghost)
-    assert not any(refiner.ghost_of_rest(v) for v in away)
+    leaks = [0.0, 2.0, -4.9, 22.6, 27.5, 32.4, -25.0, -29.9, 55.0]
+    away = [5.1, 8.0, -8.0, 20.0, -22.4, 32.6, 40.0]
+    assert all(refiner.leak_of_rest(v) for v in leaks)
+    assert not any(refiner.leak_of_rest(v) for v in away)
 
 
 @pytest.mark.slow

@@ -160,9 +160,10 @@ class HiddenEchoes:
         waits 1, 2, 4 … up to :data:`MAX_WAIT_HOPS` hops before the next (up to
         :data:`STILL_WAIT_HOPS` while it finds the same echo there and never one echo)."""
         self._forget(t_s)
-        # A still echo is not taken out of a detection at its ghosts' speeds
-        # (:meth:`~hil.estimation.refine.CoherentRefiner.ghost_of_rest`): not fitted for one.
-        still = speed_mps is None or not self.refiner.ghost_of_rest(speed_mps)
+        # A still echo is not taken out of a detection where it leaks (near rest, at its
+        # ghosts: :meth:`~hil.estimation.refine.CoherentRefiner.leak_of_rest`): not fitted
+        # for one.
+        still = speed_mps is None or not self.refiner.leak_of_rest(speed_mps)
         for note in self._notes:
             if note.measured or note.strength < LEAK_FRACTION * strength:
                 continue
