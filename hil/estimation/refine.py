@@ -1261,9 +1261,13 @@ class CoherentRefiner:
         complex amplitude are fitted at ``α = 1`` (a point echo at rest repeats as the
         transmit does, the still period's sign included: its hops' phases are the
         schedule's). Remembered, as :meth:`refine` remembers a fit, where it is one echo by
-        ``echo_test``; None where the input does not cover the hops. A fit at the searched
+        ``echo_test`` (replacing its earlier fits); None where the input does not cover the hops
+        or they were not all transmitted (the first ``M`` - 1 boundaries). A fit at the searched
         speed instead (a few cm/s off rest, within the still water's Doppler cell) taken out
         of a moving echo's input leaves that echo a residue growing over its hops."""
+        if hop_index < self.m_hops - 1:
+            # Not all M hops transmitted: every lobe near the echo's collects about as much.
+            return None
         word = self._codeword(hop_index)
         hop_ids = np.arange(hop_index - self.m_hops + 1, hop_index + 1, dtype=np.int64)
         lobe = 1.0 / self.spacing_hz
@@ -1321,7 +1325,15 @@ class CoherentRefiner:
             self._remember(fit, hop_index, True)
             last = self._echoes[-1] if self._echoes else None
             if last is not None and (last.hop_index, last.t_s) == (hop_index, fit.t_s):
-                self._echoes[-1] = replace(last, still=True)
+                # It replaces the earlier fits of this still echo (at rest within the reach:
+                # one a lobe or two off, kept beside it, would be taken out as a second echo).
+                self._echoes = [
+                    e for e in self._echoes[:-1]
+                    if not (
+                        e.still
+                        and abs(e.boundary_s(hop_index, self.hop_len_s) - fit.t_s) <= reach
+                    )
+                ] + [replace(last, still=True)]  # fmt: skip
         return fit
 
     def still_leak(self, fit: Refinement, hop_index: int) -> bool:
