@@ -30,10 +30,10 @@ WALL_M = 30.0
 SCORED_S = (0.15, SECONDS - 2 * HOP_S)
 
 
-def _wall(level_db: float) -> np.ndarray:
-    """The echo of a wall at rest at :data:`WALL_M` (exact, ``level_db`` above a unit echo)."""
+def _wall(level_db: float, range_m: float = WALL_M) -> np.ndarray:
+    """The echo of a wall at rest at ``range_m`` (exact, ``level_db`` above a unit echo)."""
     sonar = Fixed((0.0, 0.0, 0.0))
-    path = TwoWayPath.monostatic(sonar, Fixed((WALL_M, 0.0, 0.0)), C)
+    path = TwoWayPath.monostatic(sonar, Fixed((range_m, 0.0, 0.0)), C)
     echo = AnalyticEcho(att_schedule(), path, FS, amplitude=10 ** (level_db / 20.0))
     return echo.block(0, int(round(SECONDS * FS)))
 
@@ -94,6 +94,34 @@ def test_a_still_echo_is_measured_at_rest() -> None:
     # Remembered as a still echo: taken out of a detection's fit 40 hops later.
     later = t_true + 40 * HOP_S
     assert [round(v, 9) for v, _ in refiner.known_echoes(later)] == [0.0]
+
+
+def test_a_still_echo_s_new_fit_replaces_its_earlier_one_a_few_lobes_off() -> None:
+    # The wall moves two grating lobes (1.36 m) at 0.75 s: each fit is at its own range, and
+    # the later one replaces the earlier (a first fit that many lobes off, kept beside the
+    # right one, was taken out of a target's fits as a second wall).
+    schedule = att_schedule()
+    lobe_m = 2 * C / (2.0 * 1100.0)
+    cut = int(0.75 * FS)
+    x = np.concatenate([_wall(20.0)[:cut], _wall(20.0, WALL_M + lobe_m)[cut:]])
+    refiner = CoherentRefiner(schedule, FS, 10, C, 0.5, 30.0)
+    refiner.push(x, 0)
+    test = EchoTest(HIDDEN_FRACTION, HIDDEN_FRACTION, refiner.echo_test.min_e_over_n0_db)
+    fits = []
+    for hop, range_m in [(60, WALL_M), (90, WALL_M + lobe_m)]:
+        t_true = (hop + 1) * HOP_S + 2.0 * range_m / C
+        fit = refiner.refine_still(t_true, hop, test)
+        assert fit is not None and fit.is_echo(test)
+        assert abs(fit.t_s - t_true) < 2e-6
+        fits.append(fit)
+    assert refiner.known_echoes(fits[1].t_s + 2 * HOP_S) == [(0.0, abs(fits[1].amplitude))]
+
+
+def test_no_still_fit_before_the_first_m_transmitted_hops() -> None:
+    refiner = CoherentRefiner(att_schedule(), FS, 10, C, 0.5, 30.0)
+    refiner.push(_wall(20.0), 0)
+    test = EchoTest(HIDDEN_FRACTION, HIDDEN_FRACTION, refiner.echo_test.min_e_over_n0_db)
+    assert refiner.refine_still(8 * HOP_S + 2.0 * WALL_M / C, 7, test) is None
 
 
 def test_a_still_echo_is_taken_out_of_no_detection_where_it_leaks() -> None:
