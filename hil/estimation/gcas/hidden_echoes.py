@@ -17,7 +17,10 @@ Each of these fits, at low SNR or beside a strong source, can pass the echo test
 point echo (a wall) is measured too, at rest (:meth:`HiddenEchoes._fit_still`), where the
 fits toward rest find something there but no echo: far above a moving target (att, +13 to
 +20 dB at 0 and -10 dB) it otherwise stays in the target's fits and moves them a grating lobe
-off. A measured
+off. It is measured for, and taken out of, only detections away from where it leaks itself
+(near rest and at its ghosts, a whole tone spacing from rest:
+:meth:`~hil.estimation.refine.CoherentRefiner.leak_of_rest`); those are read with it in, as
+where no still echo is measured, and fail the echo test as they did. A measured
 echo's leaks are handled by the refinement (the echo is taken out of every other detection's
 input within a few hops, and a detection where its ghost peaks and weaker than it is refused:
 :meth:`~hil.estimation.refine.CoherentRefiner.ghost_of_known`). So the band's refused
@@ -158,7 +161,9 @@ class HiddenEchoes:
         knows, refined at its last boundary at or before ``t_s`` (the refinement keeps a fit
         that is one echo). After a measurement that finds no echo, that side of the band
         waits 1, 2, 4 … up to :data:`MAX_WAIT_HOPS` hops before the next (up to
-        :data:`STILL_WAIT_HOPS` while it finds the same echo there and never one echo)."""
+        :data:`STILL_WAIT_HOPS` while it finds the same echo there and never one echo). No
+        still echo is measured for a detection whose speed ``speed_mps`` (m/s, closing
+        positive; None: not known) is where a still echo leaks."""
         self._forget(t_s)
         # A still echo is not taken out of a detection where it leaks (near rest, at its
         # ghosts: :meth:`~hil.estimation.refine.CoherentRefiner.leak_of_rest`): not fitted
@@ -304,10 +309,7 @@ class HiddenEchoes:
         from the echo's, and a fit started there can stop on a sidelobe of the likelihood.
         An echo slower than that is the still water's (a wall, a moored object): these fits
         stop short of it, and it is fitted at rest instead (:meth:`_fit_still`) where they
-        find something but no echo. Cost of that (scenes sweep, a lone still or 0.05 m/s
-        echo at 40 m): 2.4-2.5 times the receiver's CPU, and its residues' ghosts at ±24-30
-        m/s pass the echo test more often (false per hop 0.003 -> 0.022 at -10 dB in
-        reverberation, 0 -> 0.018 at 0 dB for 0.05 m/s)."""
+        find something but no echo, for a detection away from its leaks (``measure_near``)."""
         c, step = self.refiner.c, 2.0 * self.refiner.speed_span_mps
         v = c * (alpha - 1.0) / (alpha + 1.0)
         n = max(1, int(math.floor(abs(v) / step)))
