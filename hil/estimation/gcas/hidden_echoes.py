@@ -50,7 +50,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from hil.estimation.refine import KNOWN_HOPS, CoherentRefiner, EchoTest
+from hil.estimation.refine import KNOWN_HOPS, STILL_KNOWN_HOPS, CoherentRefiner, EchoTest
 
 #: A hidden echo is measured for a detection when its edge detection's statistic (above the
 #: noise mean) is at least LEAK_FRACTION of the detection's: what an echo leaks is weaker
@@ -121,6 +121,9 @@ class HiddenEchoes:
     def __init__(self, refiner: CoherentRefiner, hop_s: float) -> None:
         self.refiner = refiner
         self.hop_s = float(hop_s)
+        #: How long (s) the refinement keeps a still echo's fit (:data:`~hil.estimation.
+        #: refine.STILL_KNOWN_HOPS`).
+        self.still_known_s = STILL_KNOWN_HOPS * self.hop_s
         #: What a hidden echo's fit must reach to be kept (:data:`HIDDEN_FRACTION`).
         usual = refiner.echo_test
         self.test = EchoTest(HIDDEN_FRACTION, HIDDEN_FRACTION, usual.min_e_over_n0_db)
@@ -169,6 +172,9 @@ class HiddenEchoes:
         # ghosts: :meth:`~hil.estimation.refine.CoherentRefiner.leak_of_rest`): not fitted
         # for one.
         still = speed_mps is None or not self.refiner.leak_of_rest(speed_mps)
+        # Where none is known, one is sought for any detection: far above a target, its
+        # leaks may be all that is detected until it is taken out of the target's fits.
+        seek = still or self._still is None or t_s - self._still[1] > self.still_known_s
         for note in self._notes:
             if note.measured or note.strength < LEAK_FRACTION * strength:
                 continue
@@ -182,7 +188,7 @@ class HiddenEchoes:
                 note.t_s, note.alpha, note.hop_index, strength=note.strength
             ):
                 continue
-            found, strong = self._measure(note, t_s, still)
+            found, strong = self._measure(note, t_s, still, seek)
             if found:
                 self._next.pop(side, None)
                 self._wait.pop(side, None)
@@ -240,12 +246,16 @@ class HiddenEchoes:
             return STILL_WAIT_HOPS
         return MAX_WAIT_HOPS
 
-    def _measure(self, note: _Note, t_s: float, still: bool = True) -> tuple[bool, bool]:
+    def _measure(
+        self, note: _Note, t_s: float, still: bool = True, seek: bool = True
+    ) -> tuple[bool, bool]:
         """Refine the hidden echo of ``note`` at its last boundary at or before ``t_s`` (s)
         from each of :meth:`_starts` until a fit is one echo by :attr:`test`, first from the
         speed of the echo last fitted on its side within :data:`MAX_WAIT_HOPS` hops (the
         same echo, most often: one fit instead of up to four); whether one was, and whether
-        a fit found its maximum and collected an echo's E/N0 (something is there)."""
+        a fit found its maximum and collected an echo's E/N0 (something is there). With
+        ``still`` the still echo found before is fitted first; with ``seek``, where the
+        moving fits find something but no echo, a still echo is fitted."""
         period = self.hop_s / note.alpha
         k = max(0, int(math.floor((t_s - note.t_s) / period)))
         t_b, hop = note.t_s + k * period, note.hop_index + k
@@ -283,7 +293,7 @@ class HiddenEchoes:
                 self._last[side] = (hop, fit.t_s, fit.alpha)
                 return True, True
             strong = strong or (fit.found and fit.e_over_n0_db >= self.test.min_e_over_n0_db)
-        if strong and still:
+        if strong and seek:
             # Something there that no moving echo's fit explains: a still point echo?
             return self._fit_still(rest_b[0], rest_b[1], side)
         return False, strong
