@@ -1349,12 +1349,20 @@ class CoherentRefiner:
         still = self._amplitude_near(fit.t_s, 1.0, hop_index, known=known)
         return abs(fit.amplitude) <= STILL_SIDELOBE_FRACTION * still
 
-    def known_echoes(self, t_s: float, lag_s: float = 0.0) -> list[tuple[float, float]]:
+    def known_echoes(
+        self, t_s: float, lag_s: float = 0.0, speed: float | None = None
+    ) -> list[tuple[float, float]]:
         """The echoes measured within :data:`KNOWN_HOPS` hops of ``t_s`` (s), the ones taken
         out of a detection's input there: ``(speed m/s, |β|)`` each, ``β`` the fitted
         amplitude (:attr:`Refinement.amplitude`). ``lag_s`` as :meth:`hidden_by_known`'s:
-        also those up to that much later."""
-        return [(e.speed(self.c), abs(e.amplitude)) for e in self._measured_near(t_s, lag_s)]
+        also those up to that much later. Given the detection's ``speed`` (m/s), not the
+        still echoes where it is their leak (:meth:`leak_of_rest`: not taken out there)."""
+        leak = speed is not None and self.leak_of_rest(speed)
+        return [
+            (e.speed(self.c), abs(e.amplitude))
+            for e in self._measured_near(t_s, lag_s)
+            if not (leak and e.still)
+        ]
 
     def forget(self, fit: Refinement) -> None:
         """Forget ``fit``, remembered by :meth:`refine` as one echo, where the caller found it

@@ -319,13 +319,19 @@ def test_no_still_fit_where_the_edge_fits_find_nothing() -> None:
 
 
 @pytest.mark.parametrize(("speed", "still_fits"), [(8.0, 1), (-29.0, 0), (24.0, 0), (3.6, 0)])
-def test_a_still_echo_is_fitted_only_for_a_detection_away_from_its_leaks(
+def test_a_known_still_echo_is_fitted_again_only_for_a_detection_away_from_its_leaks(
     speed: float, still_fits: int
 ) -> None:
-    # The measured still echo is taken out of no detection where it leaks (near rest, and a
-    # whole tone spacing from it: its ghosts): it is not fitted for one.
+    # Sought for any detection while none is known (here its ghost's), the still echo is
+    # then fitted again only for a detection away from where it leaks (near rest, a whole
+    # tone spacing from it): it is taken out of no other.
     ref = _Refiner(echo_at=(0.0,), strong=True)
     hidden = _hidden(ref)
     hidden.note(0.5, _alpha(3.0), 40, strength=10.0)
-    hidden.measure_near(0.5 + 1.5 * HOP_S, strength=1.0, speed_mps=speed)
-    assert [f[1] for f in ref.fits] == pytest.approx([3.0, 2.0, 1.0, 0.0][: 3 + still_fits])
+    hidden.measure_near(0.5 + 1.5 * HOP_S, strength=1.0, speed_mps=-29.0)
+    assert [f[1] for f in ref.fits] == pytest.approx([3.0, 2.0, 1.0, 0.0])
+    # Four hops on (the fit forgotten here, the still echo known to the refinement).
+    t5 = 0.5 + 5 * HOP_S + 0.002
+    hidden.note(t5, _alpha(-3.0), 45, strength=10.0)
+    hidden.measure_near(t5, strength=1.0, speed_mps=speed)
+    assert sum(f[1] == 0.0 for f in ref.fits[4:]) == still_fits
