@@ -97,6 +97,9 @@ def test_a_still_echo_is_measured_at_rest() -> None:
     # Remembered as a still echo: taken out of a detection's fit 40 hops later.
     later = t_true + 40 * HOP_S
     assert [round(v, 9) for v, _ in refiner.known_echoes(later)] == [0.0]
+    # Not known to a detection where it leaks (its ghost's speed, beside rest).
+    assert [round(v, 9) for v, _ in refiner.known_echoes(later, speed=8.0)] == [0.0]
+    assert refiner.known_echoes(later, speed=-27.0) == refiner.known_echoes(later, speed=3.0) == []
 
 
 def test_a_still_echo_s_new_fit_replaces_its_earlier_one_a_few_lobes_off() -> None:
