@@ -164,6 +164,32 @@ RECENT_FITS = 16
 #: Another echo's latest fit is taken out of a detection's input while it is at most this
 #: many hops from the detection (its echo continues at the fitted delay and time scale).
 KNOWN_HOPS = 3
+
+#: How far (hops) a still echo's boundary may lie from where the band's edge detection puts
+#: it (:meth:`CoherentRefiner.refine_still`): the edge hypothesis's comb moves the detection's
+#: time by up to a quarter hop (:mod:`hil.estimation.gcas.hidden_echoes`).
+STILL_REACH_HOPS = 0.3
+#: Grid points per grating lobe of a still echo's time search at rest
+#: (:meth:`CoherentRefiner.refine_still`): a step of 1/32 lobe loses at most 0.2 dB of the
+#: main lobe's peak, within the 0.8 dB that tells it from its neighbours.
+STILL_GRID_PER_LOBE = 32
+#: How long (hops) a still echo's fit (:meth:`CoherentRefiner.refine_still`) is taken out of
+#: other detections' input: it does not move, and it is measured again only beside a
+#: detection that its edge detections could outshine, while a moving echo beside it is
+#: followed on without detections for tens of hops (att, a wall 20 dB above a target at
+#: 8 m/s: with the wall taken out the target's fit collects 36-38 dB at 0 dB, without it
+#: 16-17 dB, and at -10 dB its followed fits moved a grating lobe off 20-25 hops after the
+#: wall's latest fit).
+STILL_KNOWN_HOPS = 64
+#: A still echo's fit is not taken out of a detection within this many Doppler cells of a
+#: whole number of tone spacings' speed from rest (its ghosts and their main lobes), nor
+#: within :data:`STILL_LEAK_CELLS` of rest (its own Doppler response), nor fitted for one
+#: (:meth:`CoherentRefiner.leak_of_rest`): read with it in, such a detection is the still
+#: echo's leak and fails the echo test as it does where no still echo is measured; read
+#: without it, what its fit leaves there passed the test (scenes sweep, a lone echo at 40 m
+#: at rest or 0.05 m/s: 12 -> 59 false estimates in 32 trials, at -24.5 to -25.4 and +24.5
+#: to +29.8 m/s, and one at 3.6 m/s in reverberation).
+STILL_GHOST_CELLS = 2.0
 #: An echo is followed to the boundaries no detection brought (:meth:`CoherentRefiner.due`)
 #: where one of its fits collected at least this much more E/N0 than the echo test asks
 #: (:attr:`EchoTest.min_e_over_n0_db`, 12 dB on GCAS): the leak of a stronger echo into a
@@ -510,6 +536,9 @@ class _EchoFit:
     #: This fit or an earlier one of its echo reached :attr:`CoherentRefiner.follow_db`: the
     #: echo is followed on while its fits pass the echo test (:meth:`CoherentRefiner.due`).
     held: bool = False
+    #: A still echo measured at rest (:meth:`CoherentRefiner.refine_still`): where it is, it
+    #: stays, so it is taken out of other detections' input for :data:`STILL_KNOWN_HOPS`.
+    still: bool = False
 
     def boundary_s(self, hop_index: int, hop_len_s: float) -> float:
         """Where this fit puts the boundary ending hop ``hop_index`` (s of receive time),
@@ -1313,6 +1342,88 @@ class CoherentRefiner:
                 self._echoes[i] = replace(e, followed=hop)
         return out
 
+    def refine_still(self, t_s: float, hop_index: int, echo_test: EchoTest) -> Refinement | None:
+        """The still echo (a wall, a mooring: time scale exactly 1) nearest the boundary at
+        ``t_s`` (s) ending hop ``hop_index``: the search from rest (:meth:`_fit_near`, the
+        other echoes measured lately taken out) finds its grating lobe, then its delay and
+        complex amplitude are fitted at ``α = 1`` (a point echo at rest repeats as the
+        transmit does, the still period's sign included: its hops' phases are the
+        schedule's). Remembered, as :meth:`refine` remembers a fit, where it is one echo by
+        ``echo_test`` (replacing its earlier fits); None where the input does not cover the hops
+        or they were not all transmitted (the first ``M`` - 1 boundaries). A fit at the searched
+        speed instead (a few cm/s off rest, within the still water's Doppler cell) taken out
+        of a moving echo's input leaves that echo a residue growing over its hops."""
+        if hop_index < self.m_hops - 1:
+            # Not all M hops transmitted: every lobe near the echo's collects about as much.
+            return None
+        word = self._codeword(hop_index)
+        hop_ids = np.arange(hop_index - self.m_hops + 1, hop_index + 1, dtype=np.int64)
+        lobe = 1.0 / self.spacing_hz
+        # The other echoes, not this one's earlier fits (at rest within the detection's
+        # uncertainty, STILL_REACH_HOPS: one a lobe off would push this fit away from it).
+        reach = STILL_REACH_HOPS * self.hop_len_s
+        others = [
+            e for e in self._others(hop_index, t_s, 0.0)
+            if not (e.alpha == 1.0 and abs(e.boundary_s(hop_index, self.hop_len_s) - t_s) <= reach)
+        ]  # fmt: skip
+        known = self._rows(others, t_s)
+        near = self._fit_near(word, hop_ids, t_s, 0.0, lobe, None, known)
+        if near is None:
+            return None
+        # The grating lobe at rest: the band's edge detection puts the echo's time up to a
+        # quarter hop off, and at rest every lobe near the echo's collects within 1 dB of its
+        # |C|² (att: continuous-phase hops), so the search's own lobe moves, from a fit a
+        # few cm/s off rest, stop on any. Each lobe within the reach is read at rest on a
+        # grid of ±¼ lobe (main lobe at rest: -1.9 dB 0.1 lobe off), the greatest kept.
+        n_lobes = int(math.ceil(reach / lobe))
+        step = lobe / STILL_GRID_PER_LOBE
+        each = step * np.arange(
+            -(STILL_GRID_PER_LOBE // 4), STILL_GRID_PER_LOBE // 4 + 1, dtype=np.float64
+        )
+        ones, zeros = np.ones(each.size), np.zeros(each.size)
+        best_p, centre = -1.0, near.t_s
+        for k in range(-n_lobes, n_lobes + 1):
+            # Tables of each lobe's own window: a hop's table reaches a few samples beyond it.
+            t_lobe = near.t_s + k * lobe
+            slots = self._slots(hop_ids, word, t_lobe, 1.0)
+            if slots is None:
+                continue
+            lobe_args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
+            power = self._powers(lobe_args, known, t_lobe + each, ones, zeros)
+            i = int(np.argmax(power))
+            if power[i] > best_p:
+                best_p, centre = float(power[i]), float(t_lobe + each[i])
+        slots = self._slots(hop_ids, word, centre, 1.0)
+        if slots is None:
+            return None
+        args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
+        best_t, grid_step = centre, step
+        for _ in range(FIT_PASSES + 1):
+            t3 = best_t + step * np.array([-1.0, 0.0, 1.0])
+            p3 = self._powers(args, known, t3, np.ones(3), np.zeros(3))
+            curve = p3[0] - 2.0 * p3[1] + p3[2]
+            if curve < 0.0:
+                best_t += step * float(np.clip(0.5 * (p3[0] - p3[2]) / curve, -1.0, 1.0))
+            elif p3[0] != p3[2]:
+                best_t = float(t3[0] if p3[0] > p3[2] else t3[2])
+            step *= 0.5
+        found = near.found and abs(best_t - centre) <= grid_step
+        fit = self._refinement(args, known, word, best_t if found else centre, 1.0, 0.0, found)
+        if fit.is_echo(echo_test):
+            self._remember(fit, hop_index, True)
+            last = self._echoes[-1] if self._echoes else None
+            if last is not None and (last.hop_index, last.t_s) == (hop_index, fit.t_s):
+                # It replaces the earlier fits of this still echo (at rest within the reach:
+                # one a lobe or two off, kept beside it, would be taken out as a second echo).
+                self._echoes = [
+                    e for e in self._echoes[:-1]
+                    if not (
+                        e.still
+                        and abs(e.boundary_s(hop_index, self.hop_len_s) - fit.t_s) <= reach
+                    )
+                ] + [replace(last, still=True)]  # fmt: skip
+        return fit
+
     def still_leak(self, fit: Refinement, hop_index: int) -> bool:
         """Whether ``fit`` (the boundary ending hop ``hop_index``), within
         :data:`STILL_LEAK_CELLS` Doppler cells of rest, is the leak of the still water at its
@@ -1326,12 +1437,20 @@ class CoherentRefiner:
         still = self._amplitude_near(fit.t_s, 1.0, hop_index, known=known)
         return abs(fit.amplitude) <= STILL_SIDELOBE_FRACTION * still
 
-    def known_echoes(self, t_s: float, lag_s: float = 0.0) -> list[tuple[float, float]]:
+    def known_echoes(
+        self, t_s: float, lag_s: float = 0.0, speed: float | None = None
+    ) -> list[tuple[float, float]]:
         """The echoes measured within :data:`KNOWN_HOPS` hops of ``t_s`` (s), the ones taken
         out of a detection's input there: ``(speed m/s, |β|)`` each, ``β`` the fitted
         amplitude (:attr:`Refinement.amplitude`). ``lag_s`` as :meth:`hidden_by_known`'s:
-        also those up to that much later."""
-        return [(e.speed(self.c), abs(e.amplitude)) for e in self._measured_near(t_s, lag_s)]
+        also those up to that much later. Given the detection's ``speed`` (m/s), not the
+        still echoes where it is their leak (:meth:`leak_of_rest`: not taken out there)."""
+        leak = speed is not None and self.leak_of_rest(speed)
+        return [
+            (e.speed(self.c), abs(e.amplitude))
+            for e in self._measured_near(t_s, lag_s)
+            if not (leak and e.still)
+        ]
 
     def forget(self, fit: Refinement) -> None:
         """Forget ``fit``, remembered by :meth:`refine` as one echo, where the caller found it
@@ -1347,7 +1466,11 @@ class CoherentRefiner:
         or up to ``lag_s`` (s) more after it (a detection decided that late hears the echoes
         measured since: an echo measured at one speed since is there at that speed before)."""
         reach = KNOWN_HOPS * self.hop_len_s
-        return [e for e in self._echoes if -reach <= e.t_s - t_s <= reach + lag_s]
+        still = STILL_KNOWN_HOPS * self.hop_len_s
+        return [
+            e for e in self._echoes
+            if -(still if e.still else reach) <= e.t_s - t_s <= reach + lag_s
+        ]  # fmt: skip
 
     def left_beside_known(
         self, t_s: float, alpha: float, hop_index: int, max_speed_mps: float
@@ -1626,7 +1749,7 @@ class CoherentRefiner:
         kept = []
         was_held = [False] * len(fits)
         for e in self._echoes:
-            if e.t_s < oldest:
+            if e.t_s < self._oldest_kept(e, oldest):
                 continue
             same = [self._same_echo(e, hop_index, f.t_s, f.speed_mps(self.c)) for f in fits]
             if any(same):
@@ -1661,7 +1784,7 @@ class CoherentRefiner:
         covered = -1
         was_held = False
         for e in self._echoes:
-            if e.t_s < oldest:
+            if e.t_s < self._oldest_kept(e, oldest):
                 continue
             if self._same_echo(e, hop_index, fit.t_s, speed):
                 if e.hop_index > hop_index:
@@ -1681,6 +1804,14 @@ class CoherentRefiner:
             held=self._holds(fit.e_over_n0_db, was_held),
         )  # fmt: skip
         self._echoes = [*kept, new]
+
+    def _oldest_kept(self, echo: _EchoFit, oldest: float) -> float:
+        """The earliest time (s) at which ``echo``'s fit is still kept where fits before
+        ``oldest`` (s, :data:`KNOWN_HOPS` hops back) are forgotten: a still echo's
+        :data:`STILL_KNOWN_HOPS` - :data:`KNOWN_HOPS` hops earlier."""
+        if not echo.still:
+            return oldest
+        return oldest - (STILL_KNOWN_HOPS - KNOWN_HOPS) * self.hop_len_s
 
     def _holds(self, e_over_n0_db: float, was_held: bool) -> bool:
         """Whether a fit collecting ``e_over_n0_db`` (dB) holds its echo
@@ -1732,7 +1863,17 @@ class CoherentRefiner:
             e for e in self._measured_near(t_s, lag_s)
             if abs(e.amplitude) > stronger_than
             and not self._same_echo(e, hop_index, t_s, speed)
+            and not (e.still and self.leak_of_rest(speed))
         ]  # fmt: skip
+
+    def leak_of_rest(self, speed: float) -> bool:
+        """Whether a still echo leaks at ``speed`` (m/s): within :data:`STILL_LEAK_CELLS`
+        Doppler cells of rest (its Doppler response), or within :data:`STILL_GHOST_CELLS` of
+        a whole number of tone spacings' speed from rest (its ghosts and their main lobes).
+        A still echo's fit is not taken out of a detection there (:data:`STILL_GHOST_CELLS`)."""
+        k = round(abs(speed) / self._ghost_speed)
+        cells = STILL_GHOST_CELLS if k >= 1 else STILL_LEAK_CELLS
+        return abs(abs(speed) - k * self._ghost_speed) <= cells * self._cell_speed
 
     def _rows(self, echoes: list[_EchoFit], t_end: float) -> NDArray[np.complex128]:
         """The ``known`` rows (shape ``(5, Q)``) of ``echoes`` over the ``M`` hops whose

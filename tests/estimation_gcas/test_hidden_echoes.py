@@ -125,8 +125,17 @@ class _Refiner:
         echo = any(abs(v - e) < 1e-9 for e in self.echo_at)
         return _Fit(t_s, alpha, echo, self.strong, 20.0 if self.strong else 0.0)
 
+    def refine_still(self, t_s: float, hop: int, echo_test: EchoTest) -> _Fit:
+        self.fits.append((t_s, 0.0, hop, echo_test))
+        echo = any(e == 0.0 for e in self.echo_at)
+        return _Fit(t_s, 1.0, echo, self.strong, 20.0 if self.strong else 0.0)
+
     def ghost_of_known(self, t_s: float, alpha: float, hop: int, strength: float) -> bool:
         return self.ghosts
+
+    def leak_of_rest(self, speed: float) -> bool:
+        # att: two Doppler cells of 2.5 m/s about rest and about a tone spacing (27.5 m/s).
+        return abs(speed) <= 5.0 or abs(abs(speed) - 27.5) <= 5.0
 
 
 def _hidden(refiner: _Refiner) -> HiddenEchoes:
@@ -281,3 +290,48 @@ def test_without_the_refinement_nothing_is_noted() -> None:
         m_hops=10, refine=False,
     )  # fmt: skip
     assert rx.readout.hidden is None
+
+
+def test_a_still_echo_is_fitted_at_rest_where_the_edge_fits_find_something_but_no_echo() -> None:
+    # A wall: fits from the edge speed toward zero collect an echo's E/N0 but are never one
+    # echo; the fit at rest (time scale 1) is, at the still water's boundary (hops of T).
+    ref = _Refiner(echo_at=(0.0,), strong=True)
+    hidden = _hidden(ref)
+    hidden.note(0.5, _alpha(3.0), 40, strength=10.0)
+    hidden.measure_near(0.5 + 1.5 * HOP_S, strength=1.0)
+    assert [f[1] for f in ref.fits] == pytest.approx([3.0, 2.0, 1.0, 0.0])
+    assert ref.fits[-1][0] == pytest.approx(0.5 + HOP_S) and ref.fits[-1][2] == 41
+    # Found: no wait. Four hops on (the fit forgotten), the next note is fitted at rest first,
+    # where the still echo puts it: one fit.
+    t5 = 0.5 + 5 * HOP_S + 0.002
+    hidden.note(t5, _alpha(-3.0), 45, strength=10.0)
+    hidden.measure_near(t5, strength=1.0)
+    assert len(ref.fits) == 5 and ref.fits[-1][1:3] == (0.0, 45)
+    assert ref.fits[-1][0] == pytest.approx(0.5 + 5 * HOP_S)
+
+
+def test_no_still_fit_where_the_edge_fits_find_nothing() -> None:
+    ref = _Refiner(echo_at=(0.0,))
+    hidden = _hidden(ref)
+    hidden.note(0.5, _alpha(3.0), 40, strength=10.0)
+    hidden.measure_near(0.5, strength=1.0)
+    assert [f[1] for f in ref.fits] == pytest.approx([3.0, 2.0, 1.0])
+
+
+@pytest.mark.parametrize(("speed", "still_fits"), [(8.0, 1), (-29.0, 0), (24.0, 0), (3.6, 0)])
+def test_a_known_still_echo_is_fitted_again_only_for_a_detection_away_from_its_leaks(
+    speed: float, still_fits: int
+) -> None:
+    # Sought for any detection while none is known (here its ghost's), the still echo is
+    # then fitted again only for a detection away from where it leaks (near rest, a whole
+    # tone spacing from it): it is taken out of no other.
+    ref = _Refiner(echo_at=(0.0,), strong=True)
+    hidden = _hidden(ref)
+    hidden.note(0.5, _alpha(3.0), 40, strength=10.0)
+    hidden.measure_near(0.5 + 1.5 * HOP_S, strength=1.0, speed_mps=-29.0)
+    assert [f[1] for f in ref.fits] == pytest.approx([3.0, 2.0, 1.0, 0.0])
+    # Four hops on (the fit forgotten here, the still echo known to the refinement).
+    t5 = 0.5 + 5 * HOP_S + 0.002
+    hidden.note(t5, _alpha(-3.0), 45, strength=10.0)
+    hidden.measure_near(t5, strength=1.0, speed_mps=speed)
+    assert sum(f[1] == 0.0 for f in ref.fits[4:]) == still_fits

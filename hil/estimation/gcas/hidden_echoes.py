@@ -13,7 +13,14 @@ not known to come from it:
   only as ``sinc`` of the Doppler offset);
 - the ghosts of those sidelobes (a 2.6 m/s target at 0 dB: +24.3 m/s, 22 m off its range).
 
-Each of these fits, at low SNR or beside a strong source, can pass the echo test. A measured
+Each of these fits, at low SNR or beside a strong source, can pass the echo test. A still
+point echo (a wall) is measured too, at rest (:meth:`HiddenEchoes._fit_still`), where the
+fits toward rest find something there but no echo: far above a moving target (att, +13 to
++20 dB at 0 and -10 dB) it otherwise stays in the target's fits and moves them a grating lobe
+off. It is measured for, and taken out of, only detections away from where it leaks itself
+(near rest and at its ghosts, a whole tone spacing from rest:
+:meth:`~hil.estimation.refine.CoherentRefiner.leak_of_rest`); those are read with it in, as
+where no still echo is measured, and fail the echo test as they did. A measured
 echo's leaks are handled by the refinement (the echo is taken out of every other detection's
 input within a few hops, and a detection where its ghost peaks and weaker than it is refused:
 :meth:`~hil.estimation.refine.CoherentRefiner.ghost_of_known`). So the band's refused
@@ -43,7 +50,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from hil.estimation.refine import KNOWN_HOPS, CoherentRefiner, EchoTest
+from hil.estimation.refine import KNOWN_HOPS, STILL_KNOWN_HOPS, CoherentRefiner, EchoTest
 
 #: A hidden echo is measured for a detection when its edge detection's statistic (above the
 #: noise mean) is at least LEAK_FRACTION of the detection's: what an echo leaks is weaker
@@ -85,6 +92,12 @@ MAX_WAIT_HOPS = 8
 #: window is full, and a weak one fails short of an echo's E/N0: both keep the shorter wait.
 STILL_WAIT_HOPS = 64
 
+#: A still echo found (:meth:`HiddenEchoes._fit_still`) is fitted again at its edge detections
+#: once its fit is this many hops old (its amplitude and delay kept up to date; att, a wall
+#: 20 dB above a target at -10 dB: no other measurement of it for 60 hops, its fit let go,
+#: and the target's fits a grating lobe off).
+STILL_REFRESH_HOPS = MAX_WAIT_HOPS
+
 
 @dataclass
 class _Note:
@@ -108,6 +121,9 @@ class HiddenEchoes:
     def __init__(self, refiner: CoherentRefiner, hop_s: float) -> None:
         self.refiner = refiner
         self.hop_s = float(hop_s)
+        #: How long (s) the refinement keeps a still echo's fit (:data:`~hil.estimation.
+        #: refine.STILL_KNOWN_HOPS`).
+        self.still_known_s = STILL_KNOWN_HOPS * self.hop_s
         #: What a hidden echo's fit must reach to be kept (:data:`HIDDEN_FRACTION`).
         usual = refiner.echo_test
         self.test = EchoTest(HIDDEN_FRACTION, HIDDEN_FRACTION, usual.min_e_over_n0_db)
@@ -126,6 +142,8 @@ class HiddenEchoes:
         self._wait: dict[int, int] = {}
         #: Per side: the latest hidden echo fitted there, (hop index, boundary time s, α).
         self._last: dict[int, tuple[int, float, float]] = {}
+        #: The latest still echo fitted (:meth:`_fit_still`): (hop index, boundary time s, 1).
+        self._still: tuple[int, float, float] | None = None
         #: Per side: the echoes whose measurements find something there but no one echo
         #: (:data:`STILL_WAIT_HOPS`): (hop index of the first such note, of the latest, the
         #: latest's boundary time s, α) each.
@@ -138,7 +156,7 @@ class HiddenEchoes:
         self._forget(t_s)
         self._notes.append(_Note(float(t_s), float(alpha), int(hop_index), float(strength)))
 
-    def measure_near(self, t_s: float, strength: float) -> None:
+    def measure_near(self, t_s: float, strength: float, speed_mps: float | None = None) -> None:
         """Measure the hidden echoes noted within :data:`KNOWN_HOPS` hops of a detection at
         ``t_s`` (s) of the detector's statistic ``strength`` above its noise mean: each note
         that could outshine it (noted at least :data:`LEAK_FRACTION` of its strength), that
@@ -146,10 +164,21 @@ class HiddenEchoes:
         knows, refined at its last boundary at or before ``t_s`` (the refinement keeps a fit
         that is one echo). After a measurement that finds no echo, that side of the band
         waits 1, 2, 4 … up to :data:`MAX_WAIT_HOPS` hops before the next (up to
-        :data:`STILL_WAIT_HOPS` while it finds the same echo there and never one echo)."""
+        :data:`STILL_WAIT_HOPS` while it finds the same echo there and never one echo). No
+        still echo is measured for a detection whose speed ``speed_mps`` (m/s, closing
+        positive; None: not known) is where a still echo leaks."""
         self._forget(t_s)
+        # A still echo is not taken out of a detection where it leaks (near rest, at its
+        # ghosts: :meth:`~hil.estimation.refine.CoherentRefiner.leak_of_rest`): not fitted
+        # for one.
+        still = speed_mps is None or not self.refiner.leak_of_rest(speed_mps)
+        # Where none is known, one is sought for any detection: far above a target, its
+        # leaks may be all that is detected until it is taken out of the target's fits.
+        seek = still or self._still is None or t_s - self._still[1] > self.still_known_s
         for note in self._notes:
             if note.measured or note.strength < LEAK_FRACTION * strength:
+                continue
+            if still and self._refresh_still(note, t_s):
                 continue
             side = 1 if note.alpha > 1.0 else -1
             if note.hop_index < self._next.get(side, note.hop_index):
@@ -159,7 +188,7 @@ class HiddenEchoes:
                 note.t_s, note.alpha, note.hop_index, strength=note.strength
             ):
                 continue
-            found, strong = self._measure(note, t_s)
+            found, strong = self._measure(note, t_s, still, seek)
             if found:
                 self._next.pop(side, None)
                 self._wait.pop(side, None)
@@ -168,6 +197,25 @@ class HiddenEchoes:
                 wait = self._wait.get(side, 1)
                 self._next[side] = note.hop_index + wait
                 self._wait[side] = min(2 * wait, self._longest_wait(note, side, strong))
+
+    def _refresh_still(self, note: _Note, t_s: float) -> bool:
+        """Fit the still echo found before again at its last boundary at or before ``t_s``
+        (s) where that fit is :data:`STILL_REFRESH_HOPS` hops old or more, beside ``note``
+        (an edge detection strong enough to outshine the detection); whether it did. Its
+        edge detections are read as the leaks of an echo the refinement knows and are not
+        measured otherwise (their boundaries lie up to 0.65 hop from the still echo's: the
+        edge hypothesis's comb, and the hop it names), and the refinement lets its fit go
+        after :data:`~hil.estimation.refine.STILL_KNOWN_HOPS`."""
+        if self._still is None:
+            return False
+        hop0, t0, _ = self._still
+        k = int(math.floor((t_s - t0) / self.hop_s))
+        if k < STILL_REFRESH_HOPS:
+            return False
+        note.measured = True
+        side = 1 if note.alpha > 1.0 else -1
+        self._fit_still(t0 + k * self.hop_s, hop0 + k, side)
+        return True
 
     def _longest_wait(self, note: _Note, side: int, strong: bool) -> int:
         """The longest wait (hops) on ``side`` after a measurement of ``note`` that found no
@@ -198,25 +246,44 @@ class HiddenEchoes:
             return STILL_WAIT_HOPS
         return MAX_WAIT_HOPS
 
-    def _measure(self, note: _Note, t_s: float) -> tuple[bool, bool]:
+    def _measure(
+        self, note: _Note, t_s: float, still: bool = True, seek: bool = True
+    ) -> tuple[bool, bool]:
         """Refine the hidden echo of ``note`` at its last boundary at or before ``t_s`` (s)
         from each of :meth:`_starts` until a fit is one echo by :attr:`test`, first from the
         speed of the echo last fitted on its side within :data:`MAX_WAIT_HOPS` hops (the
         same echo, most often: one fit instead of up to four); whether one was, and whether
-        a fit found its maximum and collected an echo's E/N0 (something is there)."""
+        a fit found its maximum and collected an echo's E/N0 (something is there). With
+        ``still`` the still echo found before is fitted first; with ``seek``, where the
+        moving fits find something but no echo, a still echo is fitted. A still echo found
+        is something there but no moving echo: the side waits as where none is found (its
+        notes measured every hop instead, their fits found spurious slow echoes beside it:
+        att, a lone 0.05 m/s echo, -3.9 m/s 5 m from it, reported when followed)."""
         period = self.hop_s / note.alpha
         k = max(0, int(math.floor((t_s - note.t_s) / period)))
         t_b, hop = note.t_s + k * period, note.hop_index + k
         side = 1 if note.alpha > 1.0 else -1
         starts = [(t_b, a) for a in self._starts(note.alpha)]
         last = self._last.get(side)
-        if last is not None and hop - last[0] <= MAX_WAIT_HOPS:
+        if last is not None and last[2] != 1.0 and hop - last[0] <= MAX_WAIT_HOPS:
             # Where that echo's fit puts this boundary: the edge's comb moves the note's time
             # by up to a quarter hop, and from there the refinement would take the echo's
             # own recent fit out of its input as another echo's.
             t_pred = last[1] + (hop - last[0]) * self.hop_s / last[2]
             if abs(t_pred - t_b) <= SAME_HOP * self.hop_s:
                 starts.insert(0, (t_pred, last[2]))
+        # A still echo's boundary: the still water's hops are the transmit's, of length T.
+        k_still = max(0, int(math.floor((t_s - note.t_s) / self.hop_s)))
+        rest_b = (note.t_s + k_still * self.hop_s, note.hop_index + k_still)
+        if still and self._still is not None:
+            # The still echo fitted before, on either side (its edge detections are on
+            # both): most often the same (one fit, not five), at its last boundary.
+            k_known = int(math.floor((t_s - self._still[1]) / self.hop_s))
+            if k_known >= 0:
+                t_known = self._still[1] + k_known * self.hop_s
+                found, _ = self._fit_still(t_known, self._still[0] + k_known, side)
+                if found:
+                    return False, True
         # The refinement remembers the fits that pass the test it is given: here this one.
         strong = False
         for t_start, alpha in starts:
@@ -229,17 +296,34 @@ class HiddenEchoes:
                 self._last[side] = (hop, fit.t_s, fit.alpha)
                 return True, True
             strong = strong or (fit.found and fit.e_over_n0_db >= self.test.min_e_over_n0_db)
+        if strong and seek:
+            # Something there that no moving echo's fit explains: a still point echo?
+            self._fit_still(rest_b[0], rest_b[1], side)
         return False, strong
+
+    def _fit_still(self, t_b: float, hop: int, side: int) -> tuple[bool, bool]:
+        """Fit a still echo (time scale 1) at the boundary ``t_b`` (s) ending hop ``hop``
+        (:meth:`~hil.estimation.refine.CoherentRefiner.refine_still`, which remembers it
+        where it is one echo by :attr:`test`): whether it is, and whether something is there
+        (the fit found its maximum and collected an echo's E/N0)."""
+        fit = self.refiner.refine_still(t_b, hop, self.test)
+        self.fit_count += 1
+        if fit is None:
+            return False, False
+        if fit.is_echo(self.test):
+            self._fits.append((hop, fit.t_s, 1.0))
+            self._last[side] = self._still = (hop, fit.t_s, 1.0)
+            return True, True
+        return False, fit.found and fit.e_over_n0_db >= self.test.min_e_over_n0_db
 
     def _starts(self, alpha: float) -> list[float]:
         """Time scales to start a hidden echo's fit from: the edge detection's, then every
         two speed spans (one fit's reach) toward zero speed while at least two spans from it
         (1 m/s on ``att``). An edge detection's speed is the edge's, up to the band's width
         from the echo's, and a fit started there can stop on a sidelobe of the likelihood.
-        An echo slower than that is the still water's (a wall, a moored object) and is not
-        sought: its ghosts one tone spacing out fail the coherence test as they are, and a
-        still echo measured and taken out left residues that passed it (a still echo at
-        40 m, -10 dB, ±30 m/s span: 0.025 false per hop instead of 0.010)."""
+        An echo slower than that is the still water's (a wall, a moored object): these fits
+        stop short of it, and it is fitted at rest instead (:meth:`_fit_still`) where they
+        find something but no echo, for a detection away from its leaks (``measure_near``)."""
         c, step = self.refiner.c, 2.0 * self.refiner.speed_span_mps
         v = c * (alpha - 1.0) / (alpha + 1.0)
         n = max(1, int(math.floor(abs(v) / step)))

@@ -1,0 +1,153 @@
+"""A still point echo (a wall) far above a moving target (att, M = 10, span 30 m/s, the default
+reverberation band): the wall is measured at rest and taken out of the target's fits
+(:meth:`~hil.estimation.refine.CoherentRefiner.refine_still`, :mod:`hil.estimation.gcas.
+hidden_echoes`), so the target keeps its boundaries and its grating lobe.
+
+Before, the wall's fits from the band's edge toward rest stopped short of it and it was never
+taken out: with the wall at 30 m 20 dB above a target at 50 m closing 8 m/s (0 dB), the
+target's fit collected 16.5 dB instead of about 37, pd 0.27 with 0.41 false estimates per hop,
+each a whole grating lobe (0.68 m) off at the right speed (issue 26, an outside synthesis).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hil.estimation.base import Estimate
+from hil.estimation.gcas.hidden_echoes import HIDDEN_FRACTION
+from hil.estimation.refine import CoherentRefiner, EchoTest
+from sim_devices.acoustics.delay import TwoWayPath
+from sim_devices.acoustics.echo import AnalyticEcho
+from sim_devices.acoustics.trajectory import Fixed
+
+from .conftest import FS, C, att_schedule, count_hits, echo_samples, make_gcas, run_blocks
+
+SECONDS = 1.5
+HOP_S = 0.01
+WALL_M = 30.0
+#: The scored boundaries: received from the first full window on, to two hops before the end.
+SCORED_S = (0.15, SECONDS - 2 * HOP_S)
+
+
+def _wall(level_db: float, range_m: float = WALL_M) -> np.ndarray:
+    """The echo of a wall at rest at ``range_m`` (exact, ``level_db`` above a unit echo)."""
+    sonar = Fixed((0.0, 0.0, 0.0))
+    path = TwoWayPath.monostatic(sonar, Fixed((range_m, 0.0, 0.0)), C)
+    echo = AnalyticEcho(att_schedule(), path, FS, amplitude=10 ** (level_db / 20.0))
+    return echo.block(0, int(round(SECONDS * FS)))
+
+
+def _wall_and_target(wall_db: float, snr_db: float, seed: int) -> list[Estimate]:
+    schedule = att_schedule()
+    x = _wall(wall_db) + echo_samples(schedule, 50.0, 8.0, SECONDS, snr_db=snr_db, seed=seed)
+    return run_blocks(make_gcas(schedule), x)
+
+
+def _expected() -> int:
+    """The target's boundaries received in :data:`SCORED_S` (50 m closing 8 m/s)."""
+    t_tx = HOP_S * np.arange(1, int(SECONDS / HOP_S) + 1)
+    t_rx = t_tx + 2.0 * (50.0 - 8.0 * t_tx) / (C + 8.0)
+    return int(np.count_nonzero((t_rx >= SCORED_S[0]) & (t_rx < SCORED_S[1])))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("wall_db", "snr_db", "pd_min", "false_max"),
+    # Issue 26's goal: pd >= 0.95, at most 0.05 false estimates per hop. Measured (seed 5,
+    # 1.5 s): pd 1.000 and no false estimate at +13, +16 and +20 dB, 0 and -10 dB (+16 dB at
+    # -10 dB before a still echo's new fit replaced its first one two lobes off: pd 0.94 on
+    # an outside synthesis).
+    [
+        (13.0, 0.0, 0.95, 0.05),
+        (13.0, -10.0, 0.95, 0.05),
+        (16.0, -10.0, 0.95, 0.05),
+        (20.0, 0.0, 0.95, 0.05),
+        (20.0, -10.0, 0.95, 0.05),
+    ],
+)
+def test_a_target_beside_a_wall_far_above_it_is_kept(
+    wall_db: float, snr_db: float, pd_min: float, false_max: float
+) -> None:
+    est = [
+        e for e in _wall_and_target(wall_db, snr_db, seed=5) if SCORED_S[0] <= e.t_s < SCORED_S[1]
+    ]
+    hits = count_hits(est, 50.0, 8.0)
+    n_hops = (SCORED_S[1] - SCORED_S[0]) / HOP_S
+    assert hits / _expected() >= pd_min
+    assert (len(est) - hits) / n_hops <= false_max
+
+
+def test_a_still_echo_is_measured_at_rest() -> None:
+    # A wall alone, 20 dB, in noise at 0 dB per-sample SNR of a unit echo: fitted from a
+    # boundary a quarter hop off (as the band's edge detection puts it) at time scale 1,
+    # on its own grating lobe, with the wall's amplitude, and kept as one echo.
+    schedule = att_schedule()
+    x = _wall(20.0) + np.random.default_rng(3).normal(0.0, 1.0 / np.sqrt(2.0), int(SECONDS * FS))
+    refiner = CoherentRefiner(schedule, FS, 10, C, 0.5, 30.0)
+    refiner.push(x, 0)
+    hop = 60
+    t_true = (hop + 1) * HOP_S + 2.0 * WALL_M / C
+    test = EchoTest(HIDDEN_FRACTION, HIDDEN_FRACTION, refiner.echo_test.min_e_over_n0_db)
+    fit = refiner.refine_still(t_true + 0.25 * HOP_S, hop, test)
+    assert fit is not None and fit.found and fit.is_echo(test)
+    assert fit.alpha == 1.0
+    assert abs(fit.t_s - t_true) < 2e-6  # within 1.5 mm of range; a grating lobe is 909 µs
+    assert abs(fit.amplitude) == pytest.approx(10.0, rel=0.02)
+    # Remembered as a still echo: taken out of a detection's fit 40 hops later.
+    later = t_true + 40 * HOP_S
+    assert [round(v, 9) for v, _ in refiner.known_echoes(later)] == [0.0]
+    # Not known to a detection where it leaks (its ghost's speed, beside rest).
+    assert [round(v, 9) for v, _ in refiner.known_echoes(later, speed=8.0)] == [0.0]
+    assert refiner.known_echoes(later, speed=-27.0) == refiner.known_echoes(later, speed=3.0) == []
+
+
+def test_a_still_echo_s_new_fit_replaces_its_earlier_one_a_few_lobes_off() -> None:
+    # The wall moves two grating lobes (1.36 m) at 0.75 s: each fit is at its own range, and
+    # the later one replaces the earlier (a first fit that many lobes off, kept beside the
+    # right one, was taken out of a target's fits as a second wall).
+    schedule = att_schedule()
+    lobe_m = 2 * C / (2.0 * 1100.0)
+    cut = int(0.75 * FS)
+    x = np.concatenate([_wall(20.0)[:cut], _wall(20.0, WALL_M + lobe_m)[cut:]])
+    refiner = CoherentRefiner(schedule, FS, 10, C, 0.5, 30.0)
+    refiner.push(x, 0)
+    test = EchoTest(HIDDEN_FRACTION, HIDDEN_FRACTION, refiner.echo_test.min_e_over_n0_db)
+    fits = []
+    for hop, range_m in [(60, WALL_M), (90, WALL_M + lobe_m)]:
+        t_true = (hop + 1) * HOP_S + 2.0 * range_m / C
+        fit = refiner.refine_still(t_true, hop, test)
+        assert fit is not None and fit.is_echo(test)
+        assert abs(fit.t_s - t_true) < 2e-6
+        fits.append(fit)
+    assert refiner.known_echoes(fits[1].t_s + 2 * HOP_S) == [(0.0, abs(fits[1].amplitude))]
+
+
+def test_no_still_fit_before_the_first_m_transmitted_hops() -> None:
+    refiner = CoherentRefiner(att_schedule(), FS, 10, C, 0.5, 30.0)
+    refiner.push(_wall(20.0), 0)
+    test = EchoTest(HIDDEN_FRACTION, HIDDEN_FRACTION, refiner.echo_test.min_e_over_n0_db)
+    assert refiner.refine_still(8 * HOP_S + 2.0 * WALL_M / C, 7, test) is None
+
+
+def test_a_still_echo_is_taken_out_of_no_detection_where_it_leaks() -> None:
+    # att: one tone spacing is 27.5 m/s, a Doppler cell of one hop 2.5 m/s; a still echo's
+    # Doppler response and its ghosts' main lobes lie within two cells of rest and of whole
+    # spacings from it.
+    refiner = CoherentRefiner(att_schedule(), FS, 10, C, 0.5, 30.0)
+    leaks = [0.0, 2.0, -4.9, 22.6, 27.5, 32.4, -25.0, -29.9, 55.0]
+    away = [5.1, 8.0, -8.0, 20.0, -22.4, 32.6, 40.0]
+    assert all(refiner.leak_of_rest(v) for v in leaks)
+    assert not any(refiner.leak_of_rest(v) for v in away)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [2, 4])
+def test_a_lone_slow_echo_measured_at_rest_adds_no_ghost(seed: int) -> None:
+    # A lone echo at 40 m closing 0.05 m/s (0 dB, 2 s): inside the reverberation band,
+    # nothing to report. Its still fit taken out of the detections at its ghosts' speeds
+    # left residues that passed the echo test: 3 and 2 estimates at -24.6 to -25.0 and
+    # +29.8 m/s on these seeds; none where it is left in them (as before it was measured).
+    schedule = att_schedule()
+    x = echo_samples(schedule, 40.0, 0.05, 2.0, snr_db=0.0, seed=seed)
+    assert run_blocks(make_gcas(schedule), x) == []
