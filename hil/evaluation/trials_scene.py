@@ -3,8 +3,8 @@
 Each scene of :data:`SCENES` is one of issue 26's: objects at rest or slow, a target braking
 to rest or reversing through it, two targets (apart, crossing in range, starting at one range,
 the second 10 dB weaker), a target faster than the span, one at the preset's design speed and
-an opening one, and a still target with the reverberation band off.
-:func:`scene_trial` synthesises it (every target's exact echo,
+an opening one, a still wall 16 dB above a moving target, and a still target with the
+reverberation band off. :func:`scene_trial` synthesises it (every target's exact echo,
 :class:`~sim_devices.acoustics.echo.AnalyticEcho`, at its own level; white noise at
 ``snr_db``; volume reverberation from a sonar at rest where ``srr_db`` is a number), runs the
 receiver as ``hil estimate`` builds it (``receiver``: GCAS unless given, or one of its input
@@ -166,6 +166,10 @@ SCENES: dict[str, Scene] = {
     ),
     "design-speed": Scene((SceneTarget(70.0, 25.0),), "70 m closing at 25 m/s"),
     "opening": Scene((SceneTarget(40.0, -10.0),), "40 m opening at 10 m/s"),
+    "still-wall": Scene(
+        (SceneTarget(30.0, 0.0, level_db=16.0), SceneTarget(50.0, 8.0)),
+        "a still wall at 30 m 16 dB above a target at 50 m closing at 8 m/s",
+    ),
     "still-band-off": Scene(
         (SceneTarget(40.0, 0.0),),
         "at rest at 40 m, the reverberation band off (the "
