@@ -250,7 +250,7 @@ def ring_channel(
 
 @numba.njit(**_JIT)
 def window_start_phasors(theta: Any, n: Any, w: int, out: Any) -> None:
-    """``np.exp(1j * np.outer(theta, n − w + 1))`` into ``out`` (shape ``(M, L)``, complex):
+    """NumPy's ``exp(1j * outer(theta, n − w + 1))`` into ``out`` (shape ``(M, L)``, complex):
     each boundary's beat ``theta`` (shape ``(M,)``, rad per sample) at the first sample of the
     window ending at each index of ``n`` (shape ``(L,)``, int64). The product ``1j · v`` is
     NumPy's fused complex one: real part ±0 (so ``e^{±0} = 1``), imaginary ``fma(0, 0, v)``
