@@ -188,7 +188,10 @@ STILL_KNOWN_HOPS = 64
 #: echo's leak and fails the echo test as it does where no still echo is measured; read
 #: without it, what its fit leaves there passed the test (scenes sweep, a lone echo at 40 m
 #: at rest or 0.05 m/s: 12 -> 59 false estimates in 32 trials, at -24.5 to -25.4 and +24.5
-#: to +29.8 m/s, and one at 3.6 m/s in reverberation).
+#: to +29.8 m/s, and one at 3.6 m/s in reverberation). The same cells tell the still
+#: water's ghost in the beyond-span check (:meth:`CoherentRefiner.ghost_of_rest`: the ghost
+#: and its Doppler response's main lobe, detected from 22.5 to 30 m/s on ``att`` beside a
+#: target at rest), which scans no source beyond the span for it.
 STILL_GHOST_CELLS = 2.0
 #: An echo is followed to the boundaries no detection brought (:meth:`CoherentRefiner.due`)
 #: where one of its fits collected at least this much more E/N0 than the echo test asks
@@ -1868,12 +1871,21 @@ class CoherentRefiner:
 
     def leak_of_rest(self, speed: float) -> bool:
         """Whether a still echo leaks at ``speed`` (m/s): within :data:`STILL_LEAK_CELLS`
-        Doppler cells of rest (its Doppler response), or within :data:`STILL_GHOST_CELLS` of
-        a whole number of tone spacings' speed from rest (its ghosts and their main lobes).
-        A still echo's fit is not taken out of a detection there (:data:`STILL_GHOST_CELLS`)."""
+        Doppler cells of rest (its Doppler response), or at one of its ghosts
+        (:meth:`ghost_of_rest`). A still echo's fit is not taken out of a detection there
+        (:data:`STILL_GHOST_CELLS`)."""
+        near_rest = abs(speed) <= STILL_LEAK_CELLS * self._cell_speed
+        return near_rest or self.ghost_of_rest(speed)
+
+    def ghost_of_rest(self, speed: float) -> bool:
+        """Whether ``speed`` (m/s) is where a still echo's ghost is read: within
+        :data:`STILL_GHOST_CELLS` Doppler cells of one hop of a whole number (one or more)
+        of tone spacings' speed from rest (the ghost and its main lobe; ±27.5 m/s on
+        ``att``). Used also by :mod:`hil.estimation.gcas.beyond_span`, which scans no
+        source beyond the span for such a detection where its window holds still water."""
         k = round(abs(speed) / self._ghost_speed)
-        cells = STILL_GHOST_CELLS if k >= 1 else STILL_LEAK_CELLS
-        return abs(abs(speed) - k * self._ghost_speed) <= cells * self._cell_speed
+        near = STILL_GHOST_CELLS * self._cell_speed
+        return k >= 1 and abs(abs(speed) - k * self._ghost_speed) <= near
 
     def _rows(self, echoes: list[_EchoFit], t_end: float) -> NDArray[np.complex128]:
         """The ``known`` rows (shape ``(5, Q)``) of ``echoes`` over the ``M`` hops whose

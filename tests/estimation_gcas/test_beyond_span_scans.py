@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from hil.estimation.gcas.beyond_span import MAX_SCAN_GAP_HOPS, BeyondSpanCheck
-from hil.estimation.refine import EchoTest
+from hil.estimation.refine import CoherentRefiner, EchoTest
 
-from .conftest import att_schedule
+from .conftest import FS, att_schedule
 
 C = 1500.0
 TEST = EchoTest(fraction=0.5, run_fraction=0.5, min_e_over_n0_db=12.0)
@@ -185,13 +185,13 @@ def test_a_fit_beyond_the_edge_short_of_the_inside_is_refused_and_not_said() -> 
 def test_the_still_waters_ghost_is_told_by_its_speed_and_the_still_water(
     spacings: int, cells: float, still: bool, ghost: bool
 ) -> None:
-    # Within STILL_GHOST_CELLS (two) Doppler cells of a hop of a whole number of tone
-    # spacings' speed from rest (27.5 m/s and 2.5 m/s cells on att), where the window holds
-    # still water; not the still water's own cells.
+    # The refiner's rule for a still echo's ghost speeds (within two Doppler cells of a hop
+    # of a whole number of tone spacings' speed from rest: 27.5 m/s spacings, 2.5 m/s cells
+    # on att), where the window holds still water; not the still water's own cells.
     refiner = _Refiner()
-    refiner.spacing_hz = 1000.0  # a tone spacing of 25 m/s, ten 2.5 m/s cells, as on att
+    att = CoherentRefiner(att_schedule(), FS, 10, C, 0.5, 30.0)
+    refiner.ghost_of_rest = att.ghost_of_rest  # type: ignore[attr-defined]
     refiner.in_still_water = lambda t_s, alpha: still  # type: ignore[attr-defined]
     check = _check(refiner)
-    spacing = check.ghosts.spacing_mps[0]
-    speed = spacings * spacing + cells * check.cell_mps
+    speed = spacings * 27.5 + cells * 2.5
     assert check._ghost_of_still(1.0, _alpha(speed)) is ghost

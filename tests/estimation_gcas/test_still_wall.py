@@ -139,6 +139,10 @@ def test_a_still_echo_is_taken_out_of_no_detection_where_it_leaks() -> None:
     away = [5.1, 8.0, -8.0, 20.0, -22.4, 32.6, 40.0]
     assert all(refiner.leak_of_rest(v) for v in leaks)
     assert not any(refiner.leak_of_rest(v) for v in away)
+    # Its ghosts alone (the beyond-span check's rule): not rest's own cells.
+    ghosts = [v for v in leaks if abs(v) > 5.0]
+    assert all(refiner.ghost_of_rest(v) for v in ghosts)
+    assert not any(refiner.ghost_of_rest(v) for v in [0.0, 2.0, -4.9, *away])
 
 
 @pytest.mark.slow

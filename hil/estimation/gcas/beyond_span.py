@@ -54,11 +54,12 @@ from the latest fit beyond that edge (within :data:`GHOST_FOLLOW_HOPS`), else lo
 over every hop of a code period (every band of a side in one scan, with its own waits per
 side, as above; not from a boundary whose ``M`` hops were not all transmitted) and refined;
 a fit there that is one echo beyond the span and :data:`GHOST_SOURCE_RATIO` times the
-ghost's own is a sighting, and the detection is refused as its. A detection within
-:data:`STILL_GHOST_CELLS` of the still water's ghost speeds (whole tone spacings from rest)
-where its window holds still water (a target at rest, volume reverberation) is that water's
-ghost, and no source beyond the span is scanned for (a scan of every band of a side for each
-one the waits let through: about 0.02 s of CPU a scan on ``att``). An echo fitted inside the
+ghost's own is a sighting, and the detection is refused as its. A detection at the still
+water's ghost speeds (whole tone spacings from rest; the refiner's rule,
+:meth:`~hil.estimation.refine.CoherentRefiner.ghost_of_rest`) where its window holds still
+water (a target at rest, volume reverberation) is that water's ghost, and no source beyond
+the span is scanned for (a scan of every band of a side for each one the waits let through:
+about 0.02 s of CPU a scan on ``att``). An echo fitted inside the
 span where a fit beyond the span lately puts its ghost (one to three tone spacings inward,
 where its comb peaks) and weaker than that fit is refused as that ghost: at low SNR a
 ghost's phases can agree (measured, 35 m/s at -10 dB: 7.44 m/s at 99.67 m; -35 m/s: 19.53
@@ -148,11 +149,6 @@ GHOST_SOURCE_RATIO = 2.0
 #: target's hop).
 LEAK_CELLS = 4.0
 GHOST_CELLS = 1.0
-#: Doppler cells of one hop within which a detection is the still water's ghost (a whole
-#: number of tone spacings from rest, :meth:`BeyondSpanCheck._ghost_of_still`): the ghost and
-#: its Doppler response's main lobe (detected from 22.5 to 30 m/s on ``att`` beside a
-#: target at rest).
-STILL_GHOST_CELLS = 2.0
 
 #: The side of the span an echo is beyond: closing (positive speed) or opening.
 CLOSING, OPENING = "closing", "opening"
@@ -432,17 +428,16 @@ class BeyondSpanCheck:
         return False
 
     def _ghost_of_still(self, t_s: float, alpha: float) -> bool:
-        """Whether a detection at ``t_s`` (s) and ``alpha`` is the still water's ghost: within
-        :data:`STILL_GHOST_CELLS` Doppler cells of a whole number of tone spacings' speed from
-        rest (±27.5 m/s on ``att``), where its ``M`` hops' window holds still water
-        (:meth:`~hil.estimation.refine.CoherentRefiner.in_still_water`: a target at rest,
-        volume reverberation). Its source is that water, hidden in the reverberation band or
-        measured as still: no echo beyond the span is scanned for."""
-        speed = abs(self.c * (alpha - 1.0) / (alpha + 1.0))
-        near = STILL_GHOST_CELLS * self.cell_mps
-        if not any(abs(speed - g) <= near for g in self.ghosts.spacing_mps):
-            return False
-        return self.refiner.in_still_water(t_s, alpha)
+        """Whether a detection at ``t_s`` (s) and ``alpha`` is the still water's ghost: at a
+        still echo's ghost speed (:meth:`~hil.estimation.refine.CoherentRefiner.ghost_of_rest`:
+        within :data:`~hil.estimation.refine.STILL_GHOST_CELLS` Doppler cells of a whole number
+        of tone spacings' speed from rest, ±27.5 m/s on ``att``; the ghost and its main lobe,
+        detected from 22.5 to 30 m/s beside a target at rest), where its ``M`` hops' window
+        holds still water (:meth:`~hil.estimation.refine.CoherentRefiner.in_still_water`: a
+        target at rest, volume reverberation). Its source is that water, hidden in the
+        reverberation band or measured as still: no echo beyond the span is scanned for."""
+        speed = self.c * (alpha - 1.0) / (alpha + 1.0)
+        return self.refiner.ghost_of_rest(speed) and self.refiner.in_still_water(t_s, alpha)
 
     def _ghost_that_passed(self, t_s: float, alpha: float, fit: Refinement) -> bool:
         """Whether an echo fitted inside the span (detected at ``t_s`` s, ``alpha``) is the
