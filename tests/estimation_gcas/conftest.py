@@ -13,7 +13,8 @@ from hil.signals.presets import check_design, get_preset
 from hil.signals.schedule import HopSchedule
 from sim_devices.acoustics.delay import TwoWayPath
 from sim_devices.acoustics.echo import AnalyticEcho
-from sim_devices.acoustics.trajectory import ConstantVelocity, Fixed
+from sim_devices.acoustics.trajectory import ConstantVelocity, Fixed, Trajectory
+from sim_devices.acoustics.truth import HopTruth, hop_truth
 
 C = 1500.0
 FS = 100_000.0
@@ -50,6 +51,31 @@ def echo_samples(
         sigma = amplitude / np.sqrt(2.0) / 10 ** (snr_db / 20.0)
         x = x + np.random.default_rng(seed).normal(0.0, sigma, x.shape)
     return x
+
+
+def trajectory_echo(
+    schedule: HopSchedule, target: Trajectory, duration_s: float, snr_db: float, seed: int
+) -> tuple[np.ndarray, list[HopTruth]]:
+    """The echo of ``target`` (any trajectory; the sonar at rest at the origin) over
+    ``duration_s`` (s) at :data:`FS`, plus white noise of per-sample SNR ``snr_db`` (unit
+    echo amplitude; seeded by ``seed``), and the truth at each hop boundary
+    (:func:`~sim_devices.acoustics.truth.hop_truth`)."""
+    sonar = Fixed((0.0, 0.0, 0.0))
+    path = TwoWayPath.monostatic(sonar, target, C)
+    n = int(duration_s * FS)
+    x = AnalyticEcho(schedule, path, FS).block(0, n)
+    sigma = np.sqrt(0.5 * 10.0 ** (-snr_db / 10.0))
+    x = x + np.random.default_rng(seed).normal(0.0, sigma, n)
+    return x, hop_truth(schedule, sonar, target, C, n / FS, 0.2)
+
+
+def on_boundary(estimate: Estimate, truth: dict[int, HopTruth]) -> HopTruth | None:
+    """The truth (by hop index) of the boundary ``estimate`` belongs to: within 0.5 m and
+    0.5 m/s of it (hil.evaluation.trials_scene's gates); None where it is false."""
+    h = truth.get(estimate.hop_index + 1)
+    if h is None or abs(estimate.range_m - h.range_m) >= 0.5:
+        return None
+    return h if abs(estimate.speed_mps - h.radial_speed_mps) < 0.5 else None
 
 
 def true_range(range_m: float, speed_mps: float, t_tx: float, t_rx: float) -> float:

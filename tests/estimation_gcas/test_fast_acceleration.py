@@ -15,13 +15,10 @@ import pytest
 
 from hil.estimation import refine
 from hil.estimation.base import Estimate
-from hil.estimation.gcas import GcasReceiver
-from sim_devices.acoustics.delay import TwoWayPath
-from sim_devices.acoustics.echo import AnalyticEcho
-from sim_devices.acoustics.trajectory import Fixed, Live
-from sim_devices.acoustics.truth import HopTruth, hop_truth
+from sim_devices.acoustics.trajectory import Live
+from sim_devices.acoustics.truth import HopTruth
 
-from .conftest import FS, C, att_schedule, run_blocks
+from .conftest import C, att_schedule, make_gcas, on_boundary, run_blocks, trajectory_echo
 
 SECONDS = 1.0
 HOPS = SECONDS / 0.01
@@ -43,16 +40,8 @@ def _scene(
         return np.stack([-(v0_mps + accel_mps2 * t), 0 * t, 0 * t], axis=-1)
 
     target = Live(position, velocity, max_speed_mps=30.0)
-    path = TwoWayPath.monostatic(Fixed((0.0, 0.0, 0.0)), target, C)
-    n = int(SECONDS * FS)
-    x = AnalyticEcho(schedule, path, FS).block(0, n)
-    sigma = np.sqrt(0.5 * 10.0 ** (-snr_db / 10.0))
-    x = x + np.random.default_rng(seed).normal(0.0, sigma, n)
-    rx = GcasReceiver.from_options(
-        schedule, FS, sound_speed_mps=C, max_speed_mps=30.0, max_range_m=100.0, m_hops=10
-    )
-    truth = hop_truth(schedule, Fixed((0.0, 0.0, 0.0)), target, C, n / FS, 0.2)
-    return run_blocks(rx, x), {h.hop_index: h for h in truth}
+    x, truth = trajectory_echo(schedule, target, SECONDS, snr_db, seed)
+    return run_blocks(make_gcas(schedule), x), {h.hop_index: h for h in truth}
 
 
 def _score(
@@ -63,12 +52,11 @@ def _score(
     boundary's truth), and the on-target estimates' range and speed RMSE (m, m/s)."""
     dr, dv, hit, false = [], [], set(), 0
     for e in est:
-        h = truth.get(e.hop_index + 1)
-        off = h is None or abs(e.range_m - h.range_m) >= 0.5
-        if off or abs(e.speed_mps - h.radial_speed_mps) >= 0.5:
+        h = on_boundary(e, truth)
+        if h is None:
             false += 1
         else:
-            hit.add(e.hop_index + 1)
+            hit.add(h.hop_index)
             dr.append(e.range_m - h.range_m)
             dv.append(e.speed_mps - h.radial_speed_mps)
     scored = [

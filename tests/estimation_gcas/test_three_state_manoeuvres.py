@@ -21,12 +21,10 @@ from hil.estimation import refine
 from hil.estimation.base import Estimate
 from hil.estimation.gcas import GcasReceiver
 from hil.estimation.reverb_band import doppler_resolution_mps
-from sim_devices.acoustics.delay import TwoWayPath
-from sim_devices.acoustics.echo import AnalyticEcho
-from sim_devices.acoustics.trajectory import Fixed, Live
-from sim_devices.acoustics.truth import HopTruth, hop_truth
+from sim_devices.acoustics.trajectory import Live
+from sim_devices.acoustics.truth import HopTruth
 
-from .conftest import FS, C, att_schedule, run_blocks
+from .conftest import FS, C, att_schedule, make_gcas, on_boundary, run_blocks, trajectory_echo
 
 SECONDS = 1.6
 
@@ -51,15 +49,8 @@ def _scene(
         return np.stack([-v, 0 * t, 0 * t], axis=-1)
 
     target = Live(position, velocity, max_speed_mps=abs(v0_mps) + abs(accel_mps2) * SECONDS)
-    path = TwoWayPath.monostatic(Fixed((0.0, 0.0, 0.0)), target, C)
-    n = int(SECONDS * FS)
-    x = AnalyticEcho(schedule, path, FS).block(0, n)
-    sigma = np.sqrt(0.5 * 10.0 ** (-snr_db / 10.0))
-    x = x + np.random.default_rng(seed).normal(0.0, sigma, n)
-    rx = GcasReceiver.from_options(
-        schedule, FS, sound_speed_mps=C, max_speed_mps=30.0, max_range_m=100.0, m_hops=10
-    )
-    truth = hop_truth(schedule, Fixed((0.0, 0.0, 0.0)), target, C, n / FS, 0.2)
+    x, truth = trajectory_echo(schedule, target, SECONDS, snr_db, seed)
+    rx = make_gcas(schedule)
     return run_blocks(rx, x), truth, rx
 
 
@@ -75,9 +66,8 @@ def _score(
     by = {h.hop_index: h for h in truth}
     hit, false = set(), 0
     for e in est:
-        h = by.get(e.hop_index + 1)
-        off = h is None or abs(e.range_m - h.range_m) >= 0.5
-        if off or abs(e.speed_mps - h.radial_speed_mps) >= 0.5:
+        h = on_boundary(e, by)
+        if h is None:
             false += 1
         else:
             hit.add(h.hop_index)
