@@ -8,8 +8,8 @@ detections shows the acceleration (an echo just detected, or just out of the ban
 detections there were refused) the window's own halves seed the curved fit; and the
 detections of an echo leaving the band sit on the band's edge for half a window (the detector
 reads the window's mean speed), where they are measured from the curve the echo went in on.
-Before both (main at 5cc27d8, the same scenes through ``hil.evaluation.trials_scene``, 1.6 s,
-two seeds, 0 and -10 dB): braking pd 0.93, reversing 0.73.
+Without both (the same scenes through ``hil.evaluation.trials_scene``, 1.6 s, two seeds, 0
+and -10 dB): braking pd 0.93, reversing 0.73.
 """
 
 from __future__ import annotations
