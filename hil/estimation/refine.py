@@ -109,6 +109,7 @@ from numpy.typing import NDArray
 
 from hil.errors import ConfigError
 from hil.estimation.crlb import Crlb, crlb, rms_bandwidth, rms_duration
+from hil.estimation.detection import parabolic_offset
 from hil.estimation.echo_model import echo_samples
 from hil.estimation.refine_kernels import (
     FOUND,
@@ -1406,7 +1407,7 @@ class CoherentRefiner:
             p3 = self._powers(args, known, t3, np.ones(3), np.zeros(3))
             curve = p3[0] - 2.0 * p3[1] + p3[2]
             if curve < 0.0:
-                best_t += step * float(np.clip(0.5 * (p3[0] - p3[2]) / curve, -1.0, 1.0))
+                best_t += step * parabolic_offset(p3[0], p3[1], p3[2])
             elif p3[0] != p3[2]:
                 best_t = float(t3[0] if p3[0] > p3[2] else t3[2])
             step *= 0.5
@@ -2535,9 +2536,7 @@ class CoherentRefiner:
             h = 0.5 * step / 2**r
             rates = gamma + h * np.arange(-1.0, 2.0)
             p = self._powers(args, known, np.full(3, t), np.full(3, alpha), rates)
-            curve = p[0] - 2.0 * p[1] + p[2]
-            if curve < 0.0:
-                gamma += h * float(np.clip(0.5 * (p[0] - p[2]) / curve, -1.0, 1.0))
+            gamma += h * parabolic_offset(p[0], p[1], p[2])  # 0 where p has no maximum
         p_end = self._powers(args, known, np.array([t]), np.array([alpha]), np.array([gamma]))
         return t, alpha, gamma, float(p_end[0])
 

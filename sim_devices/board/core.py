@@ -24,7 +24,6 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -55,7 +54,6 @@ from firmware_protocol import (
     Sync,
     UnknownMessage,
     channel_count,
-    pack_samples,
 )
 from sim_devices.board.dac_fifo import DacFifo
 from sim_devices.board.faults import FaultPlan
@@ -95,18 +93,6 @@ class BoardSnapshot:
 
 # ADC frames computed by one call of the world (see _capture_until).
 _WORLD_FRAMES = 8
-
-
-def _sample_bytes(counts: npt.NDArray[Any], fmt: SampleFormat) -> bytes:
-    """The ADC_DATA sample bytes of ``counts`` (shape ``(n, channels)``, as
-    :func:`~sim_devices.board.scaling.from_full_scale_clipped` gives them: within the
-    format's range by construction): :func:`~firmware_protocol.pack_samples`'s bytes, without
-    its range check (two reductions a frame) where the format is INT16 or FLOAT32."""
-    if fmt is SampleFormat.INT16:
-        return np.ascontiguousarray(counts, dtype="<i2").tobytes()
-    if fmt is SampleFormat.FLOAT32:
-        return np.ascontiguousarray(counts, dtype="<f4").tobytes()
-    return pack_samples(counts, fmt)
 
 
 class SimulatedBoard:
@@ -537,11 +523,11 @@ class SimulatedBoard:
                 self._produced = first + offset + n
                 if lost < n:
                     self._send(
-                        AdcData(
+                        AdcData.from_array(
                             first + offset + lost,
                             config.adc_channel_mask,
                             fmt,
-                            _sample_bytes(counts[offset + lost : offset + n], fmt),
+                            counts[offset + lost : offset + n],
                         )
                     )
                     self.adc_samples_sent += n - lost
