@@ -25,6 +25,7 @@ import numpy as np
 from hil.evaluation.aggregate import records_by_point
 from hil.evaluation.report import write_table
 from hil.evaluation.report_tank import cell_text, point_label
+from hil.evaluation.scenes import GATE_M, GATE_MPS, SCENES
 from hil.evaluation.spec import SweepSpec
 from hil.figures import new_figure, save_figure
 
@@ -148,7 +149,6 @@ def write_scene_report(spec: SweepSpec, records: list[dict[str, Any]], out_dir: 
 
 
 def _markdown(spec: SweepSpec, records: list[dict[str, Any]], rows: list[dict[str, Any]]) -> str:
-    from hil.evaluation.trials_scene import GATE_M, GATE_MPS, SCENES
 
     n_ok = sum(r.get("status") == "ok" for r in records)
     grid = ", ".join(f"{k} = {v}" for k, v in spec.grid.items()) or "none"

@@ -18,7 +18,7 @@ An image is the linear map ``p ↦ sign ⊙ p + offset`` (``sign`` in {±1}³), 
 moving point moves with it (velocity ``sign ⊙ v``), and a ray leaving the real point towards
 ``x`` leaves along ``sign ⊙ (x − image)``: :func:`departure_directions`.
 
->>> from sim_devices.acoustics.tank import Tank
+>>> from sim_devices.acoustics.tank_box import Tank
 >>> im = box_images(Tank(10.0, 4.0, 3.0, 0.9, 0.8, -1.0), 1)
 >>> len(im), im.order.tolist()
 (7, [0, 1, 1, 1, 1, 1, 1])
@@ -41,7 +41,7 @@ from hil.errors import ConfigError
 from sim_devices.acoustics.trajectory import FloatArray, as_point
 
 if TYPE_CHECKING:
-    from sim_devices.acoustics.tank import Tank
+    from sim_devices.acoustics.tank_box import Tank
 
 #: Boundary names in the column order of :attr:`ImageSet.counts`.
 BOUNDARIES = ("wall x=0", "wall x=L", "wall y=0", "wall y=W", "bottom", "surface")

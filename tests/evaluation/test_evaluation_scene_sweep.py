@@ -17,10 +17,9 @@ import pytest
 from hil.cli.main import main
 from hil.errors import ConfigError
 from hil.evaluation.report_scene import scene_rows
+from hil.evaluation.scenes import SCENES, SceneTarget
 from hil.evaluation.sweep_file import find_sweep_file, load_sweep_file
 from hil.evaluation.trials_scene import (
-    SCENES,
-    SceneTarget,
     scene_trial,
     score_scene,
     validate_scene_params,
