@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any, NamedTuple, Protocol
+from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -22,9 +22,6 @@ from numpy.typing import NDArray
 from hil.estimation.detection import noise_moments, parabolic_offsets
 from hil.estimation.kernels import peak_indices
 from hil.estimation.row_buffer import RowBuffer
-
-if TYPE_CHECKING:
-    from hil.estimation.gcas.still_codewords import StillCodewords
 
 #: Noise-floor estimate on every this-many baseband samples (absolute grid).
 NOISE_STRIDE = 32
@@ -68,6 +65,19 @@ class Peak(NamedTuple):
     #: :attr:`second`; not decided where an echo measured at its speed has its boundary
     #: (:meth:`~hil.estimation.refine.CoherentRefiner.followed_near`).
     masked: bool = False
+
+
+class AddsBeside(Protocol):
+    """Where a still peak is followed by its window's second codeword
+    (:class:`~hil.estimation.gcas.still_codewords.StillCodewords`)."""
+
+    def add(
+        self, peaks: list[Peak], windows: NDArray[np.floating], first: NDArray[np.int64]
+    ) -> list[Peak]:
+        """``peaks`` with, after each still one, its window's second codeword where it has
+        one; ``windows[i]``: the exact sums of ``peaks[i]``'s window (shape
+        ``(P, 2w + 1, J)``), whose row 0 is baseband sample ``first[i]`` (shape ``(P,)``)."""
+        ...
 
 
 class NoiseHistory(Protocol):
@@ -172,7 +182,7 @@ def threshold_peaks(
         tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]],
     ],
     runner_up_ratio: float,
-    beside: StillCodewords | None = None,
+    beside: AddsBeside | None = None,
     second: NDArray[np.int8] | None = None,
     pair_rows: NDArray[np.bool_] | None = None,
 ) -> list[Peak]:
