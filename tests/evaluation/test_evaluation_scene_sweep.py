@@ -346,6 +346,21 @@ def test_the_documented_still_water_sweep_is_valid() -> None:
         validate_scene_params(p)
 
 
+def test_the_documented_empty_water_sweep_is_valid() -> None:
+    # docs/results.md, "Scenes": the band-off scene through gcas and gcas-bg, as written there.
+    import tomllib
+
+    from hil.evaluation.sweep_file import sweep_from_dict
+
+    text = RESULTS_DOC.read_text(encoding="utf-8")
+    block = re.search(r'```toml\n(\[sweep\]\nname = "empty-water-scenes".*?)```', text, re.S)
+    assert block is not None
+    points = sweep_from_dict(tomllib.loads(block.group(1))).points()
+    assert len(points) == 8 and {p["receiver"] for p in points} == {"gcas", "gcas-bg"}
+    for p in points:
+        validate_scene_params(p)
+
+
 @pytest.mark.slow
 def test_the_weaker_target_followed_beside_still_reverberation_is_the_same_however_cut(
     monkeypatch: pytest.MonkeyPatch,
