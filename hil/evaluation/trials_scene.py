@@ -8,9 +8,10 @@ target with the reverberation band off. :func:`scene_trial` synthesises it (ever
 echo, :class:`~sim_devices.acoustics.echo.AnalyticEcho`, at its own level; white noise at
 ``snr_db``; volume reverberation from a sonar at rest where ``srr_db`` is a number), runs the
 receiver as ``hil estimate`` builds it (``receiver``: GCAS unless given, or one of its input
-stages of :data:`SCENE_RECEIVERS`; on ``att``, M = 10, ``max_speed_mps`` 30 m/s unless the scene
-or the parameters say otherwise) and scores every estimate against every target's truth per hop
-boundary:
+stages of :data:`SCENE_RECEIVERS`; ``gcas-bg`` on the scene's empty water, captured first:
+:func:`empty_water_background`; on ``att``, M = 10, ``max_speed_mps`` 30 m/s unless the
+scene or the parameters say otherwise) and scores every estimate against every
+target's truth per hop boundary:
 
 - an estimate **belongs** to a target when its boundary's truth (hop index ``h + 1``, receive
   time within half a hop) is within :data:`~hil.evaluation.scenes.GATE_M` in range and
@@ -38,10 +39,14 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Callable
+import tempfile
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from hil.errors import ConfigError
 from hil.estimation.base import CountsRefusals, Estimate, SaysNotices
@@ -77,9 +82,14 @@ SCENE_DEFAULTS: dict[str, Any] = {
     "receiver": "gcas",
     "receiver_options": {},
 }
-#: Receivers a scene runs: the GCAS family that needs no file (the other receivers report one
-#: estimate per hop; ``gcas-bg`` needs an empty-water capture).
-SCENE_RECEIVERS = ("gcas", "gcas-mti", "gcas-still")
+#: Receivers a scene runs: the GCAS family (the other receivers report one estimate per hop).
+#: ``gcas-bg`` is given the scene's empty water, captured by the trial as the calibration
+#: routine captures a tank's (:func:`empty_water_background`).
+SCENE_RECEIVERS = ("gcas", "gcas-mti", "gcas-still", "gcas-bg")
+#: ``gcas-bg``'s settings in a scene unless ``receiver_options`` gives them: the scene's
+#: reverberation band and GCAS's own readout (the refinement, the peak: a scene's echoes
+#: arrive on one path, with no images for a first-arrival readout to find).
+SCENE_BG_OPTIONS: dict[str, Any] = {"refine": True, "range_readout": "peak"}
 
 
 def _number(key: str, value: Any, lo: float, hi: float) -> float:
@@ -142,12 +152,18 @@ def validate_scene_params(params: Params) -> None:
             "receiver",
             p["receiver"],
             f"one of {', '.join(SCENE_RECEIVERS)}",
-            "a scene runs the GCAS receivers that need no file",
+            "a scene runs the GCAS receivers",
         )
     if not isinstance(p["receiver_options"], dict):
         raise ConfigError(
             "receiver_options", p["receiver_options"], f"a table of {p['receiver']} options"
         )
+    if p["receiver"] == "gcas-bg":
+        schedule, _, _ = _schedule_of(p)
+        period = schedule.period_samples(float(schedule.params["fs_hz"]))
+        with _background_file(np.zeros(period)) as path:
+            _receiver(_with_background(p, path))
+        return
     ch6 = _receiver_params(p)
     check_receiver(json.dumps({k: ch6[k] for k in RECEIVER_KEYS}, sort_keys=True))
 
@@ -161,11 +177,63 @@ def _receiver_params(p: dict[str, Any]) -> dict[str, Any]:
             "receiver_options": {name: p["receiver_options"]}}  # fmt: skip
 
 
-def _receiver(p: dict[str, Any]) -> Any:
+def _schedule_of(p: dict[str, Any]) -> tuple[Any, float, dict[str, Any]]:
+    """The scene's schedule, sound speed (m/s) and receiver as a chapter-6 trial's
+    parameters."""
     ch6 = _receiver_params(p)
-    schedule = point_schedule(ch6)
-    c = float(preset_spec(ch6["preset"], ch6["family"]).sound_speed_mps)
+    return (
+        point_schedule(ch6),
+        float(preset_spec(ch6["preset"], ch6["family"]).sound_speed_mps),
+        ch6,
+    )
+
+
+def _receiver(p: dict[str, Any]) -> Any:
+    schedule, c, ch6 = _schedule_of(p)
     return make_receiver(ch6, schedule, c), schedule, c, ch6
+
+
+def _with_background(p: dict[str, Any], path: str) -> dict[str, Any]:
+    """The ``gcas-bg`` settings ``p`` with the background at ``path`` (:data:`SCENE_BG_OPTIONS`
+    and the scene's reverberation band unless its ``receiver_options`` give them)."""
+    band = {"reverb_speed_mps": p["reverb_speed_mps"]}
+    options = {**SCENE_BG_OPTIONS, **band, **p["receiver_options"], "background": path}
+    return {**p, "receiver_options": options}
+
+
+@contextmanager
+def _background_file(background: NDArray[np.float64]) -> Iterator[str]:
+    """``background`` saved as the ``.npy`` file ``gcas-bg`` reads, removed after use."""
+    with tempfile.TemporaryDirectory(prefix="scene-bg-") as folder:
+        path = str(Path(folder) / "background.npy")
+        np.save(path, background)
+        yield path
+
+
+def empty_water_background(
+    schedule: Any, fs: float, c: float, ch6: dict[str, Any], p: dict[str, Any],
+    reverb_seed: int | None, rng: np.random.Generator,
+) -> NDArray[np.float64]:  # fmt: skip
+    """The scene's water without its targets, as the calibration routine captures a tank's
+    (:mod:`hil.experiments.calibration.background`): the same reverberation (its scatterers
+    drawn from ``reverb_seed``; None for none) and noise of its own from ``rng`` at the scene's
+    SNR over ``SETTLE_PERIODS + BACKGROUND_PERIODS`` still periods, averaged over the last
+    ``BACKGROUND_PERIODS``: shape ``(P,)``, P the still period (samples at ``fs``, Hz)."""
+    from hil.estimation.still_period import still_period
+    from hil.experiments.calibration.background import (
+        BACKGROUND_PERIODS,
+        SETTLE_PERIODS,
+        average_periods,
+    )
+
+    period, sign = still_period(schedule, schedule.period_samples(fs))
+    n = (SETTLE_PERIODS + BACKGROUND_PERIODS) * period
+    water = rng.normal(0.0, noise_sigma(float(p["snr_db"])), n)
+    if reverb_seed is not None:
+        reverb = {**ch6, "reverb_min_range_m": float(p["reverb_min_range_m"])}
+        water += volume_reverberation(schedule, fs, c, reverb, float(p["srr_db"]), reverb_seed, n)
+    skip = SETTLE_PERIODS * period
+    return average_periods(water[skip:], period, skip, sign)
 
 
 def _expected_speed_mps(schedule: Any, c: float, p: dict[str, Any]) -> float:
@@ -204,7 +272,11 @@ def scene_trial(params: Params, seed: np.random.SeedSequence) -> dict[str, Any]:
     validate_scene_params(params)
     p = _settings(params)
     scene = SCENES[p["scene"]]
-    receiver, schedule, c, ch6 = _receiver(p)
+    with_bg = p["receiver"] == "gcas-bg"
+    if with_bg:  # built once its background is captured, below
+        schedule, c, ch6 = _schedule_of(p)
+    else:
+        receiver, schedule, c, ch6 = _receiver(p)
     fs = float(schedule.params["fs_hz"])
     rng = np.random.default_rng(seed)
     duration = float(p["duration_s"])
@@ -219,10 +291,15 @@ def scene_trial(params: Params, seed: np.random.SeedSequence) -> dict[str, Any]:
         gain = 10.0 ** (target.level_db / 20.0)
         x += gain * AnalyticEcho(schedule, path, fs).block(0, n)
         truths.append(hop_truth(schedule, sonar, trajectory, c, duration, max_delay))
+    reverb_seed = None
     if p["srr_db"] != "off":
         reverb = {**ch6, "reverb_min_range_m": float(p["reverb_min_range_m"])}
         reverb_seed = int(rng.integers(2**31))
         x += volume_reverberation(schedule, fs, c, reverb, float(p["srr_db"]), reverb_seed, n)
+    if with_bg:
+        background = empty_water_background(schedule, fs, c, ch6, p, reverb_seed, rng)
+        with _background_file(background) as bg_file:
+            receiver = _receiver(_with_background(p, bg_file))[0]
     start = time.process_time()
     estimates = list(receiver.process(x)) + list(receiver.flush())
     cpu = time.process_time() - start
