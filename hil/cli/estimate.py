@@ -81,9 +81,6 @@ OPTION_NAMES = {
 
 # Input samples per block: bounded memory for long recordings.
 _READ_BLOCK = 1 << 16
-#: Strict JSON (no NaN, no infinity), made once: ``json.dumps`` with a keyword makes an
-#: encoder per call (some 15 % of an estimate line's cost).
-_STRICT_JSON = json.JSONEncoder(allow_nan=False)
 
 
 def register(sub: Any) -> None:
@@ -457,7 +454,7 @@ class _Sink:
             if self.json:
                 # Strict JSON: a NaN (no bound, no SNR) is null.
                 finite = {k: _json_value(v) for k, v in row.items()}
-                print(_STRICT_JSON.encode(finite), flush=False)
+                print(json.dumps(finite, allow_nan=False), flush=False)
             if self._writer is not None:
                 self._writer.writerow(row)
             if self.table:

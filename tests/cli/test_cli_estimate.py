@@ -73,8 +73,8 @@ def test_json_lines_track_the_target(recording: Path, capsys: pytest.CaptureFixt
 def test_json_lines_are_json_dumps_strict_with_nan_as_null(
     recording: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    # Each line is json.dumps(allow_nan=False) of the estimate's fields (a non-finite
-    # float as null): the sink's one reused encoder writes the same bytes.
+    # Each line is strict JSON of the estimate's fields as json.dumps writes it (a
+    # non-finite float as null).
     base = ["estimate", "--schedule", str(recording / "x.json"), "--input",
             str(recording / "rx.wav"), "--json"]  # fmt: skip
     assert main(base) == 0
