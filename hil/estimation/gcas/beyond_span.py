@@ -68,6 +68,14 @@ of another whose hops were all transmitted, with that fit's time and speed: a lo
 be noise's, and one of hops partly before the schedule's first (a far echo's first
 boundaries) is read 0.1 m/s off.
 
+A ghost may fall inside the reverberation band, whose edge's detections are refused
+whatever they are (three-state, 15 ms hops: 35 m/s with a 30 m/s span has its only ghost at
+-1.67 m/s; at -10 dB nothing else of it is detected in 2 s). So a detection on the band's
+edge whose source would lie beyond the span is fitted (the fit not remembered as an echo)
+and read as a ghost as above (:meth:`BeyondSpanCheck.in_band_ghost`), where a follow or the
+side's scan is due and its window is known to hold no still water (there the band's edge
+is that water's own leak).
+
 Nothing beyond the span is ever reported as an estimate. A target further than the guard
 band past the edge leaves no edge detection: its ghosts are all that reach the grid, and
 their sources are looked for wherever the tones' ratios put them, so it is said at its own
@@ -403,6 +411,43 @@ class BeyondSpanCheck:
                 self.count += 1
                 return True
         return False
+
+    def in_band_ghost(self, t_s: float, alpha: float, hop_index: int) -> bool:
+        """Whether a detection on the reverberation band's edge at ``t_s`` (s) and ``alpha``
+        (hop ``hop_index``), refused there whatever it is, is the ghost of an echo beyond the
+        span (:meth:`_ghost_refused`; counted and the first per side said where found). A
+        target one tone spacing's speed or more past the span can put its only ghost inside
+        the band (three-state, 15 ms hops: 35 m/s with a 30 m/s span reads at -1.67 m/s);
+        below about 0 dB nothing else of it is detected. Looked at only where its source may
+        lie beyond the span (until it is said beyond either side where it may lie: then taken
+        for that echo's ghost), where a follow or the side's scan is due (the waits of
+        :meth:`_scanned`) and where its window is known to hold no still water
+        (:meth:`~hil.estimation.refine.CoherentRefiner.in_open_water`: elsewhere the band's
+        edge is that water's leak, and before the still-water streams cover the input, a
+        code period, a target at rest's leak there cost five scans of every band in 2 s on
+        three-state); its fit is not remembered as an echo, and where it is one echo it is
+        not read as a ghost."""
+        if hop_index < self.m_hops - 1:
+            return False
+        # Refused whatever it is, such a detection is looked at only to say the echo: not
+        # once a side where its source may lie was said (it is taken for that echo's
+        # ghost), and a follow only from a fit within reach.
+        sides = {band[0] for band in self.ghosts.bands(alpha)}
+        if any(self._seen_on(side) for side in sides):
+            return False
+        due = any(
+            abs(hop_index - self._last.get(side, (-(10**9),))[0]) <= GHOST_FOLLOW_HOPS
+            or hop_index >= self._next_ghost_scan.get(side, hop_index)
+            for side in sides
+        )
+        if not due or not self.refiner.in_open_water(t_s, alpha):
+            return False
+        fit = self.refiner.refine(t_s, alpha, hop_index, partners=False, remember=False)
+        # As inside the span, a fit that is one echo is read as that echo, not as a ghost (a
+        # target reversing through rest: 6 of 9 such looks at -10 dB).
+        if fit is None or fit.is_echo(self.test):
+            return False
+        return self._ghost_refused(t_s, alpha, hop_index, fit)
 
     def _leak_of_known(self, t_s: float, alpha: float, fit: Refinement, lag_s: float = 0.0) -> bool:
         """Whether a detection at ``t_s`` (s) and ``alpha`` whose fit is ``fit`` is explained
