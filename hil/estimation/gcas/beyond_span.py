@@ -131,6 +131,10 @@ FOLLOW_HOPS = 3
 #: then is said at most this many hops late (0.3 s on ``att``).
 MAX_SCAN_GAP_HOPS = 64
 
+#: The first wait, in hops, between two looks at the reverberation band's edge for the ghost
+#: of an echo beyond the span that found nothing (:meth:`BeyondSpanCheck.in_band_ghost`).
+BAND_LOOK_GAP_HOPS = 32
+
 #: Hops from the latest fit beyond an edge within which a ghost of that echo is followed
 #: (its source fitted again where it puts the ghost's boundary, before a scan): its ghosts
 #: come every few hops, and between them the refinement refuses them as the ghosts of a
@@ -261,6 +265,10 @@ class BeyondSpanCheck:
         #: The same for the scans for the source of a ghost beyond each edge.
         self._next_ghost_scan: dict[int, int] = {}
         self._ghost_scan_gap: dict[int, int] = {}
+        #: The same for the looks at the reverberation band's edge (:meth:`in_band_ghost`),
+        #: one wait for both edges (key 0).
+        self._next_band_look: dict[int, int] = {}
+        self._band_look_gap: dict[int, int] = {}
 
     def beyond(self, speed_mps: float) -> bool:
         """Whether a fitted speed (m/s) lies beyond the span (by more than half the
@@ -418,36 +426,98 @@ class BeyondSpanCheck:
         span (:meth:`_ghost_refused`; counted and the first per side said where found). A
         target one tone spacing's speed or more past the span can put its only ghost inside
         the band (three-state, 15 ms hops: 35 m/s with a 30 m/s span reads at -1.67 m/s);
-        below about 0 dB nothing else of it is detected. Looked at only where its source may
-        lie beyond the span (until it is said beyond either side where it may lie: then taken
-        for that echo's ghost), where a follow or the side's scan is due (the waits of
-        :meth:`_scanned`) and where its window is known to hold no still water
-        (:meth:`~hil.estimation.refine.CoherentRefiner.in_open_water`: elsewhere the band's
-        edge is that water's leak, and before the still-water streams cover the input, a
-        code period, a target at rest's leak there cost five scans of every band in 2 s on
-        three-state); its fit is not remembered as an echo, and where it is one echo it is
-        not read as a ghost."""
+        below about 0 dB nothing else of it is detected.
+
+        Such a detection is looked at only to say the echo, so the look is kept cheap. Not
+        once a side where its source may lie was said (it is taken for that echo's ghost).
+        A follow (a fit beyond the span within :data:`GHOST_FOLLOW_HOPS`) is always tried;
+        otherwise looks wait as the scans do (:meth:`_scanned`: 1, 2, 4 … up to
+        :data:`MAX_SCAN_GAP_HOPS` hops after each look that finds nothing, whatever ended
+        it), because a slow or stopped target's edge detections come at every hop and are
+        not ghosts. Not where the window is not known to hold no still water
+        (:meth:`~hil.estimation.refine.CoherentRefiner.in_open_water`: there the band's
+        edge is that water's own leak). Its fit is not remembered as an echo, and where it
+        is one echo it is not read as a ghost (a target reversing through rest). A scan
+        reads only the source's hops whose tones, shifted by the band's tone spacings, are
+        the detection's codeword's, and only the best point over all bands is refined
+        (:meth:`_band_edge_source`)."""
         if hop_index < self.m_hops - 1:
             return False
-        # Refused whatever it is, such a detection is looked at only to say the echo: not
-        # once a side where its source may lie was said (it is taken for that echo's
-        # ghost), and a follow only from a fit within reach.
         sides = {band[0] for band in self.ghosts.bands(alpha)}
         if any(self._seen_on(side) for side in sides):
             return False
-        due = any(
+        following = any(
             abs(hop_index - self._last.get(side, (-(10**9),))[0]) <= GHOST_FOLLOW_HOPS
-            or hop_index >= self._next_ghost_scan.get(side, hop_index)
             for side in sides
         )
-        if not due or not self.refiner.in_open_water(t_s, alpha):
+        if not following and hop_index < self._next_band_look.get(0, hop_index):
+            return False
+        if not self.refiner.in_open_water(t_s, alpha):
             return False
         fit = self.refiner.refine(t_s, alpha, hop_index, partners=False, remember=False)
-        # As inside the span, a fit that is one echo is read as that echo, not as a ghost (a
-        # target reversing through rest: 6 of 9 such looks at -10 dB).
-        if fit is None or fit.is_echo(self.test):
+        found = (
+            fit is not None
+            and not fit.is_echo(self.test)
+            and self._band_edge_source(t_s, alpha, hop_index, fit)
+        )
+        if not following:
+            self._band_looked(hop_index, found)
+        return found
+
+    def _band_looked(self, hop_index: int, found: bool) -> None:
+        """After a look at a band-edge detection at ``hop_index`` (:meth:`in_band_ghost`):
+        the waits start again where it ``found`` an echo beyond the span; else the next
+        look waits :data:`BAND_LOOK_GAP_HOPS` hops, then twice as long after each look that
+        finds nothing, up to :data:`MAX_SCAN_GAP_HOPS`."""
+        if found:
+            self._next_band_look.pop(0, None)
+            self._band_look_gap.pop(0, None)
+            return
+        gap = self._band_look_gap.get(0, BAND_LOOK_GAP_HOPS)
+        self._next_band_look[0] = hop_index + gap
+        self._band_look_gap[0] = min(2 * gap, MAX_SCAN_GAP_HOPS)
+
+    def _band_edge_source(self, t_s: float, alpha: float, hop_index: int, fit: Refinement) -> bool:
+        """Whether a detection on the reverberation band's edge at ``t_s`` (s) and ``alpha``
+        (hop ``hop_index``, its own ``fit`` not one echo) is the ghost of an echo beyond the
+        span (:meth:`in_band_ghost`): followed from the latest fit beyond an edge where one
+        is within reach (:meth:`_follow_ghost`), else, unless an echo measured inside the
+        span explains it (:meth:`_leak_of_known`), the likelihood is read over every band
+        where its source may lie (both sides, one to three tone spacings), each only at the
+        source's hops whose tones, shifted by the band's tone spacings, are the detection's
+        codeword's (:meth:`~hil.estimation.gcas.ghost_source.GhostSources.matching`: a ghost
+        holds only those hops of its source), and only the best point of all is refined.
+        Found, it is counted and the first per side said.
+
+        Cost, three-state, -10 dB: reading every hop of a code period and refining each
+        band's best point (:meth:`_ghost_refused`) cost about 70 ms a look, 40-140 % more
+        receiver CPU for a slow, reversing or braking target, whose band-edge detections
+        come at every hop; this reading is about a tenth of that."""
+        bands = self.ghosts.spaced_bands(alpha)
+        for side, _, v_lo, v_hi in bands:
+            followed = self._follow_ghost(t_s, alpha, (side, v_lo, v_hi), fit, timed=False)
+            if followed is not None:
+                self._seen(followed[0], followed[1], side)
+                self.count += 1
+                return True
+        if self._leak_of_known(t_s, alpha, fit):
             return False
-        return self._ghost_refused(t_s, alpha, hop_index, fit)
+        best: tuple[float, float, float, int, int] | None = None
+        for side, n, v_lo, v_hi in bands:
+            peak = self.ghosts.best_point(t_s, alpha, v_lo, v_hi, (hop_index, side * n))
+            if peak is not None and (best is None or peak[0] > best[0]):
+                best = (*peak, side)
+        if best is None:
+            return False
+        _, t_b, a_b, hop, side = best
+        source = self.refiner.refine(t_b, a_b, hop)
+        if source is None or not self._source(source, side, fit):
+            return False
+        if not self._outshines_inside(source, hop, side):
+            return False
+        self._seen(source, hop, side)
+        self.count += 1
+        return True
 
     def _leak_of_known(self, t_s: float, alpha: float, fit: Refinement, lag_s: float = 0.0) -> bool:
         """Whether a detection at ``t_s`` (s) and ``alpha`` whose fit is ``fit`` is explained
