@@ -209,7 +209,7 @@ class GhostSources:
 
     def best_point(
         self, t_s: float, alpha: float, v_lo: float, v_hi: float,
-        ghost: tuple[int, int] | None = None,
+        ghost: tuple[int, int] | None = None, time_points: int = TIME_POINTS,
     ) -> tuple[float, float, float, int] | None:  # fmt: skip
         """The likelihood's best point over the source's speeds ``[v_lo, v_hi]`` (m/s) for
         a ghost detected at ``t_s`` (s) and ``alpha``: ``(|C|², t_rx s, α, hop index)``
@@ -226,14 +226,14 @@ class GhostSources:
         a_mid = float(alphas[n_v // 2])
         t_c = self.boundary(t_s, alpha, a_mid)
         lobe = 1.0 / (a_mid * ref.spacing_hz)
-        offsets = TIME_HALF_LOBES * lobe * np.linspace(-1.0, 1.0, TIME_POINTS)
+        offsets = TIME_HALF_LOBES * lobe * np.linspace(-1.0, 1.0, time_points)
         # Each speed's boundary drifts with its own time scale about the middle one's.
         t_v = np.array([self.boundary(t_s, alpha, float(a)) for a in alphas]) - t_c
         t_c = self.not_after(t_c + float(np.max(t_v)) + TIME_HALF_LOBES * lobe, a_mid, t_s) - (
             float(np.max(t_v)) + TIME_HALF_LOBES * lobe
         )  # fmt: skip
         tt = t_c + t_v[:, None] + offsets[None, :]
-        aa = np.repeat(alphas[:, None], TIME_POINTS, axis=1)
+        aa = np.repeat(alphas[:, None], time_points, axis=1)
         best: tuple[float, float, float, int] | None = None
         hops: list[int] | range = self._hops_ending_before(t_c)
         if ghost is not None:
