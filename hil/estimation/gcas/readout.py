@@ -351,9 +351,16 @@ class Readout:
             if exit_ is not None:
                 leaving, exit_db = exit_[0], exit_[1] - FOLLOW_DROP_DB
         if fe.refused_hypotheses[p.d0] and leaving is None:
-            self.in_band_count += 1
             if self.hidden is not None:
                 self.hidden.note(t_rx, alpha, hop_index, p.peak - p.mean)
+            if (
+                not residual
+                and self.beyond_span is not None
+                and self.beyond_span.in_band_ghost(t_rx, alpha, hop_index)
+            ):
+                self._say_beyond_span()
+            else:
+                self.in_band_count += 1
             return None
         bound = None
         if p.second and (
@@ -406,9 +413,7 @@ class Readout:
                 t_rx, alpha, hop_index, edge, refined,
                 self._residual_lag_s if residual else 0.0,
             ):  # fmt: skip
-                said = self.beyond_span.sightings
-                if said and said[-1] not in self.notices:
-                    self.notices.append(said[-1])
+                self._say_beyond_span()
                 return None
             if refined.ended:
                 self.ended_count += 1
@@ -449,6 +454,12 @@ class Readout:
         self.last_detection = DetectionInfo(p.n_star, p.threshold, p.mean, p.ratio, consistent)
         self.residual_count += residual
         return est
+
+    def _say_beyond_span(self) -> None:
+        """Add the beyond-span check's latest sighting to :attr:`notices`, once."""
+        said = self.beyond_span.sightings if self.beyond_span is not None else []
+        if said and said[-1] not in self.notices:
+            self.notices.append(said[-1])
 
     def _source_estimate(
         self, fit: Refinement, hop_index: int, p: Peak, residual: bool
