@@ -907,6 +907,7 @@ class CoherentRefiner:
         partners: bool = True, followed: bool = False, residual: bool = False,
         lag_s: float = 0.0, pairs: bool = False, new_pairs: bool = False,
         curve: tuple[float, float, float] | None = None, halves: bool = True,
+        remember: bool = True,
     ) -> Refinement | None:  # fmt: skip
         """The maximum-likelihood boundary time and time scale near ``(t_s, alpha)`` for the
         boundary that ends hop ``hop_index``; None where the input does not cover the ``M``
@@ -945,14 +946,17 @@ class CoherentRefiner:
         boundary (s, time scale, rate 1/s; :meth:`band_exit`), the fit's warm start in place
         of a recent fit's. ``halves``: whether a curved fit may be seeded from the window's
         halves (:meth:`_halves_seed`; the caller says where not: the span's edges, which
-        gather other echoes' leaks)."""
+        gather other echoes' leaks). Without ``remember`` neither the detection nor its fit
+        is kept (no warm start, no echo taken out or followed, no speed trend): a look at a
+        detection that is refused whatever its fit (a ghost on the reverberation band's edge
+        whose source is looked for beyond the span, :mod:`hil.estimation.gcas.beyond_span`)."""
         test = self.echo_test if echo_test is None else echo_test
         word = self._codeword(hop_index)
         hop_ids = np.arange(hop_index - self.m_hops + 1, hop_index + 1, dtype=np.int64)
         lobe = 1.0 / (alpha * self.spacing_hz)
         speed0 = self.c * (alpha - 1.0) / (alpha + 1.0)
         known = self._known_hops(hop_index, t_s, speed0, lag_s)
-        if not followed:
+        if not followed and remember:
             # A followed boundary's time and speed are its echo's fit carried on, no detection.
             self._detections.append((hop_index, t_s, speed0))
         keep_lobe = followed and self.in_still_water(t_s, alpha)
@@ -1024,6 +1028,8 @@ class CoherentRefiner:
             )
             if two is not None:
                 return two
+        if not remember:
+            return fit
         if fit is not None and fit.is_echo(test) and self._ended(fit, word, hop_ids, known):
             # Not remembered as its echo's latest, but the next detections of its windows
             # (up to M - 1 after the end) start from it: a warm start each, not a full
@@ -2117,6 +2123,15 @@ class CoherentRefiner:
         canceller's gain at its speed): the lobe kept is the echo's, whatever its fit."""
         s_pow, rest = self._still_powers(t_s, alpha)
         return s_pow > 0 and s_pow >= STILL_OVER_REST * rest
+
+    def in_open_water(self, t_s: float, alpha: float) -> bool:
+        """Whether the ``M`` hops' window of the boundary at ``t_s`` (s, time scale ``alpha``)
+        is known to hold no still water (less than :data:`STILL_OVER_REST` of the rest's
+        power): False where that is not known (no still-water streams, or a window before
+        they cover the input: a code period from the start or a gap), unlike
+        :meth:`in_still_water`."""
+        s_pow, rest = self._still_powers(t_s, alpha)
+        return rest > 0 and s_pow < STILL_OVER_REST * rest
 
     def _still_powers(self, t_s: float, alpha: float) -> tuple[float, float]:
         """The still water's power and the rest's per sample (input units²) over the ``M``

@@ -70,6 +70,21 @@ def test_json_lines_track_the_target(recording: Path, capsys: pytest.CaptureFixt
     assert [r["track_id"] for r in rows] == [-1, -1] + [0] * (len(rows) - 2)
 
 
+def test_json_lines_are_json_dumps_strict_with_nan_as_null(
+    recording: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Each line is strict JSON of the estimate's fields as json.dumps writes it (a
+    # non-finite float as null).
+    base = ["estimate", "--schedule", str(recording / "x.json"), "--input",
+            str(recording / "rx.wav"), "--json"]  # fmt: skip
+    assert main(base) == 0
+    lines = capsys.readouterr().out.splitlines()
+    rows = [json.loads(line) for line in lines]
+    assert len(rows) > 10
+    for line, row in zip(lines, rows, strict=True):
+        assert line == json.dumps(row, allow_nan=False)
+
+
 def test_plain_listing_counts_and_lists_the_tracks(
     recording: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

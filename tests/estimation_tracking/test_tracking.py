@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 
 from hil.errors import ConfigError
 from hil.estimation.base import Estimate
-from hil.estimation.tracking import Tracker, TrackerSettings
+from hil.estimation.tracking import Tracker, TrackerSettings, _with_track
 
 C = 1500.0
 HOP_S = 0.01
@@ -224,6 +224,19 @@ def test_a_non_finite_estimate_joins_no_track() -> None:
     est[5] = Estimate(**{**est[5].to_dict(), "range_m": math.nan})
     out = Tracker(HOP_S).update(est)
     assert [e.track_id for e in out] == [-1, -1, 0, 0, 0, -1, 0, 0, 0, 0]
+
+
+def test_a_tracked_estimate_keeps_every_other_field() -> None:
+    # The tracker copies each estimate with its track id; dataclasses.replace is the
+    # reference for that copy (NaN, infinities and the receiver's name included).
+    base = target_estimates(20.0, 1.0, range(3), seed=5)[1]
+    odd = Estimate(**{**base.to_dict(), "snr_db": -math.inf, "crlb_speed_mps": math.nan})
+    for e in (base, odd):
+        out = _with_track(e, 7)
+        assert out.track_id == 7 and type(out) is type(e)
+        assert out == dataclasses.replace(e, track_id=7)
+        assert repr(out) == repr(dataclasses.replace(e, track_id=7))
+    assert _with_track(base, base.track_id) is base
 
 
 @settings(max_examples=25, deadline=None)

@@ -162,6 +162,26 @@ def test_a_target_beyond_the_span_is_said_and_not_reported() -> None:
 
 
 @pytest.mark.slow
+def test_a_three_state_target_whose_ghost_is_in_the_band_is_said_and_not_reported(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # Three-state (15 ms hops): 35 m/s with a 30 m/s span at -10 dB puts its only ghost at
+    # -1.67 m/s, on the reverberation band's edge; nothing of it crosses the threshold
+    # elsewhere, so the band's edge detections are where its source is looked for.
+    import hil.evaluation.trials_scene as trials
+
+    defaults = {**trials.RECEIVER_DEFAULTS, "family": "three-state"}
+    monkeypatch.setattr(trials, "RECEIVER_DEFAULTS", defaults)
+    params = {"scene": "beyond-span", "snr_db": -10.0, "duration_s": 2.0}
+    for seed in (31000, 31001):
+        out = scene_trial(params, np.random.SeedSequence(seed))
+        assert out["expected"] == [0] and out["n_false"] == 0, seed
+        assert out["beyond_span_said"] == 1, seed
+        # Said at the second fit beyond the span, each of a detection refused as its ghost.
+        assert out["refused_beyond_span"] >= 2, seed
+
+
+@pytest.mark.slow
 def test_the_band_off_scene_has_its_scatterers_from_1_m_and_expects_the_still_target() -> None:
     out = scene_trial({"scene": "still-band-off", "srr_db": 0.0, "duration_s": 1.0},
                       np.random.SeedSequence(5, spawn_key=(2, 0)))  # fmt: skip

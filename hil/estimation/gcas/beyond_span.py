@@ -68,6 +68,19 @@ of another whose hops were all transmitted, with that fit's time and speed: a lo
 be noise's, and one of hops partly before the schedule's first (a far echo's first
 boundaries) is read 0.1 m/s off.
 
+A ghost may fall inside the reverberation band, whose edge's detections are refused
+whatever they are (three-state, 15 ms hops: 35 m/s with a 30 m/s span has its only ghost at
+-1.67 m/s; at -10 dB nothing else of it is detected in 2 s). So a detection on the band's
+edge whose source would lie beyond the span is fitted (the fit not remembered as an echo)
+and read as a ghost (:meth:`BeyondSpanCheck.in_band_ghost`) where its window is known to
+hold no still water (there the band's edge is that water's own leak). A slow, stopped or
+reversing target's edge detections come at nearly every hop, so these looks are made
+cheap: each edge of the band looks at its first detection, then waits 32, 64 … hops after
+each look that finds nothing, and a look reads the source's likelihood only at the hops
+whose tones, shifted by the band's tone spacings, its codeword holds, refining only the
+best point of all bands (5-8 ms a look on three-state, where reading every hop of a code
+period as above cost about 70 ms).
+
 Nothing beyond the span is ever reported as an estimate. A target further than the guard
 band past the edge leaves no edge detection: its ghosts are all that reach the grid, and
 their sources are looked for wherever the tones' ratios put them, so it is said at its own
@@ -122,6 +135,18 @@ FOLLOW_HOPS = 3
 #: after scans that found nothing (module docstring): an echo beyond the span that appears
 #: then is said at most this many hops late (0.3 s on ``att``).
 MAX_SCAN_GAP_HOPS = 64
+
+#: The first wait, in hops, after a look at a reverberation band's edge for the ghost of an
+#: echo beyond the span that found nothing (:meth:`BeyondSpanCheck.in_band_ghost`): a slow
+#: target's edge detections come at nearly every hop, and each look costs 5-8 ms
+#: (three-state); a beyond-span target is said at most this many hops later than its first
+#: look would have (0.48 s on three-state), then :data:`MAX_SCAN_GAP_HOPS`.
+BAND_LOOK_GAP_HOPS = 32
+
+#: Times read across the ±1 grating lobe of a band-edge look's likelihood reading
+#: (:meth:`BeyondSpanCheck._band_edge_source`; a scan's are
+#: :data:`~hil.estimation.gcas.ghost_source.TIME_POINTS`).
+BAND_LOOK_TIME_POINTS = 9
 
 #: Hops from the latest fit beyond an edge within which a ghost of that echo is followed
 #: (its source fitted again where it puts the ghost's boundary, before a scan): its ghosts
@@ -253,6 +278,10 @@ class BeyondSpanCheck:
         #: The same for the scans for the source of a ghost beyond each edge.
         self._next_ghost_scan: dict[int, int] = {}
         self._ghost_scan_gap: dict[int, int] = {}
+        #: The same for the looks at each edge of the reverberation band (+1, −1;
+        #: :meth:`in_band_ghost`).
+        self._next_band_look: dict[int, int] = {}
+        self._band_look_gap: dict[int, int] = {}
 
     def beyond(self, speed_mps: float) -> bool:
         """Whether a fitted speed (m/s) lies beyond the span (by more than half the
@@ -403,6 +432,110 @@ class BeyondSpanCheck:
                 self.count += 1
                 return True
         return False
+
+    def in_band_ghost(self, t_s: float, alpha: float, hop_index: int) -> bool:
+        """Whether a detection on the reverberation band's edge at ``t_s`` (s) and ``alpha``
+        (hop ``hop_index``), refused there whatever it is, is the ghost of an echo beyond the
+        span (:meth:`_band_edge_source`; counted and the first per side said where found).
+        A target one tone spacing's speed or more past the span can put its only ghost
+        inside the band (three-state, 15 ms hops: 35 m/s with a 30 m/s span reads at
+        -1.67 m/s); below about 0 dB nothing else of it is detected.
+
+        Such a detection is looked at only to say the echo, so the look is kept cheap: a
+        slow, stopped or reversing target's band-edge detections come at nearly every hop
+        and are not ghosts. Not once a side where its source may lie was said (it is taken
+        for that echo's ghost). A follow (a fit beyond the span within
+        :data:`GHOST_FOLLOW_HOPS`) is always tried; otherwise each edge of the band looks
+        at its first detection and, after a look that finds nothing (whatever ended it),
+        waits :data:`BAND_LOOK_GAP_HOPS` hops, then twice as long, up to
+        :data:`MAX_SCAN_GAP_HOPS` (:meth:`_band_looked`). Each edge waits on its own: at
+        0 dB the ghost's Doppler sidelobes on the other edge come first (three-state, 35 m/s:
+        ghost at -1.67 m/s detected at -2.6 and +2.5 m/s; the sources a look at +2.5 m/s
+        reads do not hold 35 m/s). Not where the window is not known to hold no still water
+        (:meth:`~hil.estimation.refine.CoherentRefiner.in_open_water`: there the band's
+        edge is that water's own leak). Its fit is not remembered as an echo, and where it
+        is one echo it is not read as a ghost (a target reversing through rest)."""
+        if hop_index < self.m_hops - 1:
+            return False
+        sides = {band[0] for band in self.ghosts.bands(alpha)}
+        if any(self._seen_on(side) for side in sides):
+            return False
+        following = any(
+            abs(hop_index - self._last.get(side, (-(10**9),))[0]) <= GHOST_FOLLOW_HOPS
+            for side in sides
+        )
+        edge = 1 if alpha > 1.0 else -1
+        if not following and hop_index < self._next_band_look.get(edge, hop_index):
+            return False
+        if not self.refiner.in_open_water(t_s, alpha):
+            return False
+        fit = self.refiner.refine(t_s, alpha, hop_index, partners=False, remember=False)
+        found = (
+            fit is not None
+            and not fit.is_echo(self.test)
+            and self._band_edge_source(t_s, alpha, hop_index, fit)
+        )
+        if not following:
+            self._band_looked(hop_index, found, edge)
+        return found
+
+    def _band_looked(self, hop_index: int, found: bool, edge: int) -> None:
+        """After a look at a detection on the band's ``edge`` (+1, −1) at ``hop_index``
+        (:meth:`in_band_ghost`): that edge's waits start again where it ``found`` an echo
+        beyond the span; else its next look waits :data:`BAND_LOOK_GAP_HOPS` hops, then
+        twice as long after each look that finds nothing, up to :data:`MAX_SCAN_GAP_HOPS`."""
+        if found:
+            self._next_band_look.pop(edge, None)
+            self._band_look_gap.pop(edge, None)
+            return
+        gap = self._band_look_gap.get(edge, BAND_LOOK_GAP_HOPS)
+        self._next_band_look[edge] = hop_index + gap
+        self._band_look_gap[edge] = min(2 * gap, MAX_SCAN_GAP_HOPS)
+
+    def _band_edge_source(self, t_s: float, alpha: float, hop_index: int, fit: Refinement) -> bool:
+        """Whether a detection on the reverberation band's edge at ``t_s`` (s) and ``alpha``
+        (hop ``hop_index``, its own ``fit`` not one echo) is the ghost of an echo beyond the
+        span (:meth:`in_band_ghost`): followed from the latest fit beyond an edge where one
+        is within reach (:meth:`_follow_ghost`), else, unless an echo measured inside the
+        span explains it (:meth:`_leak_of_known`), the likelihood is read over every band
+        where its source may lie (both sides, one to three tone spacings), each only at the
+        source's hops whose tones, shifted by the band's tone spacings, are the detection's
+        codeword's (:meth:`~hil.estimation.gcas.ghost_source.GhostSources.matching`: a ghost
+        holds only those hops of its source; on three-state 5-10 of a code period's 32 one
+        spacing out, two spacings out mostly none), at :data:`BAND_LOOK_TIME_POINTS` times,
+        and only the best point of all bands is refined. Found, it is counted and the first
+        per side said.
+
+        Cost, three-state, -10 dB: reading every hop of a code period and refining each
+        band's best point (:meth:`_ghost_refused`) cost about 70 ms a look (+40-140 %
+        receiver CPU for a slow, reversing or braking target); this reading costs 5-8 ms."""
+        bands = self.ghosts.spaced_bands(alpha)
+        for side, _, v_lo, v_hi in bands:
+            followed = self._follow_ghost(t_s, alpha, (side, v_lo, v_hi), fit, timed=False)
+            if followed is not None:
+                self._seen(followed[0], followed[1], side)
+                self.count += 1
+                return True
+        if self._leak_of_known(t_s, alpha, fit):
+            return False
+        best: tuple[float, float, float, int, int] | None = None
+        for side, n, v_lo, v_hi in bands:
+            peak = self.ghosts.best_point(
+                t_s, alpha, v_lo, v_hi, (hop_index, side * n), BAND_LOOK_TIME_POINTS
+            )
+            if peak is not None and (best is None or peak[0] > best[0]):
+                best = (*peak, side)
+        if best is None:
+            return False
+        _, t_b, a_b, hop, side = best
+        source = self.refiner.refine(t_b, a_b, hop)
+        if source is None or not self._source(source, side, fit):
+            return False
+        if not self._outshines_inside(source, hop, side):
+            return False
+        self._seen(source, hop, side)
+        self.count += 1
+        return True
 
     def _leak_of_known(self, t_s: float, alpha: float, fit: Refinement, lag_s: float = 0.0) -> bool:
         """Whether a detection at ``t_s`` (s) and ``alpha`` whose fit is ``fit`` is explained

@@ -134,8 +134,16 @@ class GhostSources:
         """The speeds (m/s) where the source of a ghost detected at time scale ``alpha`` may
         be beyond the span: ``(side, v_lo, v_hi)`` per edge (+1 closing, −1 opening) and
         tone spacings ``n`` (ascending), ``v_lo < v_hi``; none where no source lies there."""
+        return [(side, lo, hi) for side, _, lo, hi in self.spaced_bands(alpha)]
+
+    def spaced_bands(self, alpha: float) -> list[tuple[int, int, float, float]]:
+        """:meth:`bands` with each band's tone spacings: ``(side, n, v_lo, v_hi)``. The
+        ghost's tones' rank less its source's is ``side * n`` (a closing source's tone
+        ``f_k`` is read as ``f_{k+n}``), the ``shift`` of :meth:`peak`'s ``ghost``."""
         out = []
-        for side, (ratio_lo, ratio_hi) in itertools.product((1, -1), self.ratios):
+        for side, (n, (ratio_lo, ratio_hi)) in itertools.product(
+            (1, -1), enumerate(self.ratios, start=1)
+        ):
             # Closing source: its tone f_k read as f_{k+n}, α = α_g f_{k+n} / f_k.
             r_lo, r_hi = (ratio_lo, ratio_hi) if side > 0 else (1.0 / ratio_hi, 1.0 / ratio_lo)
             v_lo = self._speed(alpha * r_lo) - self.margin_mps
@@ -143,7 +151,7 @@ class GhostSources:
             edge_in = side * (self.max_speed_mps + self.inside_mps)
             lo, hi = (max(v_lo, edge_in), v_hi) if side > 0 else (v_lo, min(v_hi, edge_in))
             if lo < hi:
-                out.append((side, lo, hi))
+                out.append((side, n, lo, hi))
         return out
 
     def inside_bands(self, alpha: float, still_mps: float) -> list[tuple[int, float, float]]:
@@ -195,8 +203,17 @@ class GhostSources:
         self, t_s: float, alpha: float, v_lo: float, v_hi: float,
         ghost: tuple[int, int] | None = None,
     ) -> tuple[float, float, int] | None:  # fmt: skip
+        """:meth:`best_point` without its likelihood: ``(t_rx s, α, hop index)``."""
+        best = self.best_point(t_s, alpha, v_lo, v_hi, ghost)
+        return None if best is None else best[1:]
+
+    def best_point(
+        self, t_s: float, alpha: float, v_lo: float, v_hi: float,
+        ghost: tuple[int, int] | None = None, time_points: int = TIME_POINTS,
+    ) -> tuple[float, float, float, int] | None:  # fmt: skip
         """The likelihood's best point over the source's speeds ``[v_lo, v_hi]`` (m/s) for
-        a ghost detected at ``t_s`` (s) and ``alpha``: ``(t_rx s, α, hop index)``, over
+        a ghost detected at ``t_s`` (s) and ``alpha``: ``(|C|², t_rx s, α, hop index)``
+        (the likelihood the refinement maximises), over
         every hop of one code period (module docstring); None where the input covers none.
         With ``ghost`` = ``(hop index, shift)``, the ghost's boundary and its tones' rank
         less the source's (:meth:`inside_bands`), only the hops whose boundary the ghost
@@ -209,14 +226,14 @@ class GhostSources:
         a_mid = float(alphas[n_v // 2])
         t_c = self.boundary(t_s, alpha, a_mid)
         lobe = 1.0 / (a_mid * ref.spacing_hz)
-        offsets = TIME_HALF_LOBES * lobe * np.linspace(-1.0, 1.0, TIME_POINTS)
+        offsets = TIME_HALF_LOBES * lobe * np.linspace(-1.0, 1.0, time_points)
         # Each speed's boundary drifts with its own time scale about the middle one's.
         t_v = np.array([self.boundary(t_s, alpha, float(a)) for a in alphas]) - t_c
         t_c = self.not_after(t_c + float(np.max(t_v)) + TIME_HALF_LOBES * lobe, a_mid, t_s) - (
             float(np.max(t_v)) + TIME_HALF_LOBES * lobe
         )  # fmt: skip
         tt = t_c + t_v[:, None] + offsets[None, :]
-        aa = np.repeat(alphas[:, None], TIME_POINTS, axis=1)
+        aa = np.repeat(alphas[:, None], time_points, axis=1)
         best: tuple[float, float, float, int] | None = None
         hops: list[int] | range = self._hops_ending_before(t_c)
         if ghost is not None:
@@ -231,7 +248,7 @@ class GhostSources:
             k = int(np.argmax(power))
             if best is None or power.flat[k] > best[0]:
                 best = (float(power.flat[k]), float(tt.flat[k]), float(aa.flat[k]), hop)
-        return None if best is None else best[1:]
+        return best
 
     def matching(self, hops: list[int], back: int, ghost_hop: int, shift: int) -> list[int]:
         """Those of ``hops`` (the source's boundaries, each ``back`` hops before the one the

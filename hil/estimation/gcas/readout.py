@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -331,6 +331,7 @@ class Readout:
         only (the others' ghosts went with them)."""
         fe = self._fe
         t_rx, alpha, t_tx, hop_index = self._boundary(p) if boundary is None else boundary
+        edge = self._edge_side(p.d0)
         if residual and (
             abs(fe.sound_speed_mps * (alpha - 1.0) / (alpha + 1.0)) < self._still_mps
             or self._refiner is None
@@ -350,9 +351,16 @@ class Readout:
             if exit_ is not None:
                 leaving, exit_db = exit_[0], exit_[1] - FOLLOW_DROP_DB
         if fe.refused_hypotheses[p.d0] and leaving is None:
-            self.in_band_count += 1
             if self.hidden is not None:
                 self.hidden.note(t_rx, alpha, hop_index, p.peak - p.mean)
+            if (
+                not residual
+                and self.beyond_span is not None
+                and self.beyond_span.in_band_ghost(t_rx, alpha, hop_index)
+            ):
+                self._say_beyond_span()
+            else:
+                self.in_band_count += 1
             return None
         bound = None
         if p.second and (
@@ -369,7 +377,7 @@ class Readout:
             if self.hidden is not None:
                 self.hidden.measure_near(t_rx, p.peak - p.mean)
             if self._refiner.ghost_of_known(
-                t_rx, alpha, hop_index, self._edge_side(p.d0), p.peak - p.mean, residual
+                t_rx, alpha, hop_index, edge, p.peak - p.mean, residual
             ):
                 self.incoherent_count += 1
                 return None
@@ -379,7 +387,7 @@ class Readout:
             alone = inside is not None and not self._refiner.known_echoes(
                 t_rx, self._residual_lag_s if residual else 0.0
             )
-            if not residual and self._edge_side(p.d0) == 0:
+            if not residual and edge == 0:
                 left = self._refiner.left_beside_known(t_rx, alpha, hop_index, fe.max_speed_mps)
                 if left is not None and left < MIN_ECHO_SNR_DB - LEFT_MARGIN_DB:
                     self.incoherent_count += 1
@@ -388,7 +396,7 @@ class Readout:
                 t_rx, alpha, hop_index, partners=pair_row, residual=residual,
                 lag_s=self._residual_lag_s if residual else 0.0, pairs=pair_row,
                 new_pairs=bool(self._new_pair_rows[p.d0]), curve=leaving,
-                halves=self._edge_side(p.d0) == 0,
+                halves=edge == 0,
             )  # fmt: skip
             if refined is None:
                 self.unmeasured_count += 1
@@ -401,12 +409,10 @@ class Readout:
                 self.in_band_count += 1
                 return None
             if self.beyond_span is not None and self.beyond_span.check(
-                t_rx, alpha, hop_index, self._edge_side(p.d0), refined,
+                t_rx, alpha, hop_index, edge, refined,
                 self._residual_lag_s if residual else 0.0,
             ):  # fmt: skip
-                said = self.beyond_span.sightings
-                if said and said[-1] not in self.notices:
-                    self.notices.append(said[-1])
+                self._say_beyond_span()
                 return None
             if refined.ended:
                 self.ended_count += 1
@@ -440,19 +446,19 @@ class Readout:
                 self._second = self._second_of(refined.second, t_tx, hop_index, p, residual)
         elif self._coherent:
             t_rx, alpha = self._coherent_refine(p.n_star, p.d0, hop_index, t_rx, alpha)
-        est = self._estimate(t_rx, alpha, t_tx, hop_index, bound)
+        est = self._estimate(t_rx, alpha, t_tx, hop_index, bound, *_score(p))
         if est is None:
             return None
         consistent = self._consistent(hop_index, est.t_s, est.alpha)
         self.last_detection = DetectionInfo(p.n_star, p.threshold, p.mean, p.ratio, consistent)
-        mean, thr = p.mean, p.threshold
-        snr = (p.peak - mean) / mean if mean > 0 and math.isfinite(mean) else math.inf
         self.residual_count += residual
-        return replace(
-            est,
-            score=p.peak / thr if thr > 0 else math.inf,
-            snr_db=10.0 * math.log10(snr) if snr > 0 else -math.inf,
-        )
+        return est
+
+    def _say_beyond_span(self) -> None:
+        """Add the beyond-span check's latest sighting to :attr:`notices`, once."""
+        said = self.beyond_span.sightings if self.beyond_span is not None else []
+        if said and said[-1] not in self.notices:
+            self.notices.append(said[-1])
 
     def _source_estimate(
         self, fit: Refinement, hop_index: int, p: Peak, residual: bool
@@ -464,7 +470,7 @@ class Readout:
         word = hop_index % fe.n_codewords
         t_tx = k.hop_end[word] + (hop_index // fe.n_codewords) * k.period
         return self._scored(
-            self._estimate(fit.t_s, fit.alpha, t_tx, hop_index, fit.bound), p, residual
+            self._estimate(fit.t_s, fit.alpha, t_tx, hop_index, fit.bound, *_score(p)), residual
         )
 
     def _second_of(
@@ -478,22 +484,17 @@ class Readout:
         if abs(fit.speed_mps(fe.sound_speed_mps)) > fe.max_speed_mps:
             return None
         return self._scored(
-            self._estimate(fit.t_s, fit.alpha, t_tx, hop_index, fit.bound), p, residual
+            self._estimate(fit.t_s, fit.alpha, t_tx, hop_index, fit.bound, *_score(p)), residual
         )
 
-    def _scored(self, est: Estimate | None, p: Peak, residual: bool) -> Estimate | None:
-        """``est`` (an echo read from peak ``p`` at a boundary of its own) scored as ``p``
-        and counted among the second search's where ``residual``; None for None."""
+    def _scored(self, est: Estimate | None, residual: bool) -> Estimate | None:
+        """``est`` (an echo read from a peak at a boundary of its own, scored as that peak:
+        :func:`_score`) counted among the second search's where ``residual``; None for
+        None."""
         if est is None:
             return None
         self.residual_count += residual
-        mean, thr = p.mean, p.threshold
-        snr = (p.peak - mean) / mean if mean > 0 and math.isfinite(mean) else math.inf
-        return replace(
-            est,
-            score=p.peak / thr if thr > 0 else math.inf,
-            snr_db=10.0 * math.log10(snr) if snr > 0 else -math.inf,
-        )
+        return est
 
     def _boundary(self, p: Peak) -> tuple[float, float, float, int]:
         """A peak's boundary: received at ``t_rx`` (s) at time scale ``α`` (the detector's
@@ -514,12 +515,12 @@ class Readout:
 
     def _estimate(
         self, t_rx: float, alpha: float, t_tx: float, hop_index: int,
-        bound: Crlb | None,
+        bound: Crlb | None, score: float = math.nan, snr_db: float = math.nan,
     ) -> Estimate | None:  # fmt: skip
         """The estimate of the boundary ending hop ``hop_index`` (transmitted at ``t_tx``,
         s) measured at ``t_rx`` (s) and time scale ``alpha``, timed at its first arrival where
-        the multipath readout is on; None beyond the range or already reported. Its score and
-        SNR are NaN (a detection's replace them)."""
+        the multipath readout is on; None beyond the range or already reported. Its ``score``
+        and ``snr_db`` are its detection's (:func:`_score`), NaN for a followed boundary."""
         c = self._fe.sound_speed_mps
         if self._first_arrival is not None:
             first = self._first_arrival.first_arrival(t_rx, alpha, hop_index)
@@ -541,8 +542,8 @@ class Readout:
             range_m=c * delay / 2.0,
             speed_mps=speed,
             hop_index=int(hop_index),
-            score=math.nan,
-            snr_db=math.nan,
+            score=score,
+            snr_db=snr_db,
             alpha=alpha,
             t_tx_s=t_tx,
             codeword=int(hop_index) % self._fe.n_codewords,
@@ -768,6 +769,17 @@ class Readout:
             t_rx = float(b[ib]) + ob * float(b[1] - b[0])
             speed = float(speeds[ia]) + oa * float(speeds[1] - speeds[0])
         return float(t_rx), float(speed_to_alpha(speed, c))
+
+
+def _score(p: Peak) -> tuple[float, float]:
+    """A detection's score (its peak over its threshold) and SNR (dB: its peak above its
+    noise mean, over that mean), as its estimate carries them."""
+    mean, thr = p.mean, p.threshold
+    snr = (p.peak - mean) / mean if mean > 0 and math.isfinite(mean) else math.inf
+    return (
+        p.peak / thr if thr > 0 else math.inf,
+        10.0 * math.log10(snr) if snr > 0 else -math.inf,
+    )
 
 
 def _coherent_power(
