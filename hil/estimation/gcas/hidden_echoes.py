@@ -17,10 +17,9 @@ Each of these fits, at low SNR or beside a strong source, can pass the echo test
 point echo (a wall) is measured too, at rest (:meth:`HiddenEchoes._fit_still`), where the
 fits toward rest find something there but no echo: far above a moving target (att, +13 to
 +20 dB at 0 and -10 dB) it otherwise stays in the target's fits and moves them a grating lobe
-off. It is measured for, and taken out of, only detections away from where it leaks itself
-(near rest and at its ghosts, a whole tone spacing from rest:
-:meth:`~hil.estimation.refine.CoherentRefiner.leak_of_rest`); those are read with it in, as
-where no still echo is measured, and fail the echo test as they did. A measured
+off. It is measured for, and taken out of, every detection, those where it leaks itself
+included (near rest and at its ghosts, a whole tone spacing from rest): left in them, it
+hid every target there. A measured
 echo's leaks are handled by the refinement (the echo is taken out of every other detection's
 input within a few hops, and a detection where its ghost peaks and weaker than it is refused:
 :meth:`~hil.estimation.refine.CoherentRefiner.ghost_of_known`). So the band's refused
