@@ -125,6 +125,11 @@ SCENES: dict[str, Scene] = {
         (SceneTarget(30.0, 0.0, level_db=16.0), SceneTarget(50.0, 8.0)),
         "a still wall at 30 m 16 dB above a target at 50 m closing at 8 m/s",
     ),
+    "wall-ghost-speed": Scene(
+        (SceneTarget(30.0, 0.0, level_db=10.0), SceneTarget(90.0, 27.0)),
+        "a still wall at 30 m 10 dB above a target from 90 m closing at 27 m/s, beside the "
+        "wall's ghost (one tone spacing's speed from rest, 27.5 m/s on att)",
+    ),
     "still-band-off": Scene(
         (SceneTarget(40.0, 0.0),),
         "at rest at 40 m, the reverberation band off (the "

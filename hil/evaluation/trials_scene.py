@@ -3,15 +3,16 @@
 Each scene of :data:`~hil.evaluation.scenes.SCENES` is one of issue 26's: objects at rest or
 slow, a target braking to rest or reversing through it, two targets (apart, crossing in range,
 starting at one range, the second 10 dB weaker), a target faster than the span, one at the
-preset's design speed and an opening one, a still wall 16 dB above a moving target, and a still
-target with the reverberation band off. :func:`scene_trial` synthesises it (every target's exact
-echo, :class:`~sim_devices.acoustics.echo.AnalyticEcho`, at its own level; white noise at
-``snr_db``; volume reverberation from a sonar at rest where ``srr_db`` is a number), runs the
-receiver as ``hil estimate`` builds it (``receiver``: GCAS unless given, or one of its input
-stages of :data:`SCENE_RECEIVERS`; ``gcas-bg`` on the scene's empty water, captured first:
-:func:`empty_water_background`; on ``att``, M = 10, ``max_speed_mps`` 30 m/s unless the
-scene or the parameters say otherwise) and scores every estimate against every
-target's truth per hop boundary:
+preset's design speed and an opening one, a still wall 16 dB above a moving target, one 10 dB
+above a target at its ghost's speed, and a still target with the reverberation band off.
+:func:`scene_trial` synthesises it (every target's exact echo,
+:class:`~sim_devices.acoustics.echo.AnalyticEcho`, at its own level; white noise at ``snr_db``;
+volume reverberation from a sonar at rest where ``srr_db`` is a number), runs the receiver as
+``hil estimate`` builds it (``receiver``: GCAS unless given, or one of its input stages of
+:data:`SCENE_RECEIVERS`; ``gcas-bg`` on the scene's empty water, captured first:
+:func:`empty_water_background`; on ``att``, M = 10, ``max_speed_mps`` 30 m/s unless the scene or
+the parameters say otherwise) and scores every estimate against every target's truth per hop
+boundary:
 
 - an estimate **belongs** to a target when its boundary's truth (hop index ``h + 1``, receive
   time within half a hop) is within :data:`~hil.evaluation.scenes.GATE_M` in range and

@@ -670,7 +670,7 @@ def test_a_target_braking_to_rest_gives_no_false_estimate() -> None:
 
 @pytest.mark.slow
 @pytest.mark.parametrize(
-    ("kind", "snr_db", "srr_db", "pd_min"),
+    ("kind", "snr_db", "srr_db", "pd_min", "false_max"),
     # Measured false per hop / moving pd: still 0 / -, 0.010 / -, 0 / -, 0.005 / -;
     # braking (0 dB, reverberation) 0 / 1.0, (-10 dB) 0.005 / 1.0, (-10 dB, reverberation)
     # 0 / 1.0; reversing 0.005 / 0.964, 0 / 0.964, 0 / 0.976, 0 / 0.976. The fit's time
@@ -680,19 +680,24 @@ def test_a_target_braking_to_rest_gives_no_false_estimate() -> None:
     # edge hypothesis, refused. In reverberation the target was also refused as the ghost of
     # its own ghost beyond the span (a weak fit at -32.5 m/s that passed the echo test first):
     # a ghost is weaker than its echo (CoherentRefiner.ghost_of_known), 0.917 / 0.929 before.
+    # Still at -10 dB in reverberation: 0.025, the target's fit at rest taken out of the
+    # detections where it leaks too (what it leaves at its ghosts passes the echo test on a
+    # few boundaries; left in, a still wall hid every target there: docs/receiver.md, "A
+    # still wall far above a target"); issue 26's goal 0.05.
     [
-        ("still", 0.0, None, 0.0), ("still", -10.0, None, 0.0), ("still", 0.0, 0.0, 0.0),
-        ("still", -10.0, 0.0, 0.0), ("braking", 0.0, 0.0, 0.99), ("braking", -10.0, None, 0.99),
-        ("braking", -10.0, 0.0, 0.99), ("reversing", 0.0, None, 0.95),
-        ("reversing", 0.0, 0.0, 0.95), ("reversing", -10.0, None, 0.95),
-        ("reversing", -10.0, 0.0, 0.95),
+        ("still", 0.0, None, 0.0, 0.015), ("still", -10.0, None, 0.0, 0.015),
+        ("still", 0.0, 0.0, 0.0, 0.015), ("still", -10.0, 0.0, 0.0, 0.03),
+        ("braking", 0.0, 0.0, 0.99, 0.015), ("braking", -10.0, None, 0.99, 0.015),
+        ("braking", -10.0, 0.0, 0.99, 0.015), ("reversing", 0.0, None, 0.95, 0.015),
+        ("reversing", 0.0, 0.0, 0.95, 0.015), ("reversing", -10.0, None, 0.95, 0.015),
+        ("reversing", -10.0, 0.0, 0.95, 0.015),
     ],
 )  # fmt: skip
 def test_still_stopping_and_reversing_echoes_give_no_false_estimate(
-    kind: str, snr_db: float, srr_db: float | None, pd_min: float
+    kind: str, snr_db: float, srr_db: float | None, pd_min: float, false_max: float
 ) -> None:
     false, pd = _false_and_moving_pd(*_motion_scene(kind, snr_db, srr_db))
-    assert false <= 0.015 and pd >= pd_min
+    assert false <= false_max and pd >= pd_min
 
 
 @pytest.mark.slow

@@ -97,9 +97,6 @@ def test_a_still_echo_is_measured_at_rest() -> None:
     # Remembered as a still echo: taken out of a detection's fit 40 hops later.
     later = t_true + 40 * HOP_S
     assert [round(v, 9) for v, _ in refiner.known_echoes(later)] == [0.0]
-    # Not known to a detection where it leaks (its ghost's speed, beside rest).
-    assert [round(v, 9) for v, _ in refiner.known_echoes(later, speed=8.0)] == [0.0]
-    assert refiner.known_echoes(later, speed=-27.0) == refiner.known_echoes(later, speed=3.0) == []
 
 
 def test_a_still_echo_s_new_fit_replaces_its_earlier_one_a_few_lobes_off() -> None:
@@ -130,28 +127,66 @@ def test_no_still_fit_before_the_first_m_transmitted_hops() -> None:
     assert refiner.refine_still(8 * HOP_S + 2.0 * WALL_M / C, 7, test) is None
 
 
-def test_a_still_echo_is_taken_out_of_no_detection_where_it_leaks() -> None:
+def test_a_still_echo_s_ghosts_lie_a_whole_tone_spacing_from_rest() -> None:
     # att: one tone spacing is 27.5 m/s, a Doppler cell of one hop 2.5 m/s; a still echo's
-    # Doppler response and its ghosts' main lobes lie within two cells of rest and of whole
-    # spacings from it.
+    # ghosts' main lobes lie within two cells of whole spacings from rest (the beyond-span
+    # check's rule).
     refiner = CoherentRefiner(att_schedule(), FS, 10, C, 0.5, 30.0)
-    leaks = [0.0, 2.0, -4.9, 22.6, 27.5, 32.4, -25.0, -29.9, 55.0]
-    away = [5.1, 8.0, -8.0, 20.0, -22.4, 32.6, 40.0]
-    assert all(refiner.leak_of_rest(v) for v in leaks)
-    assert not any(refiner.leak_of_rest(v) for v in away)
-    # Its ghosts alone (the beyond-span check's rule): not rest's own cells.
-    ghosts = [v for v in leaks if abs(v) > 5.0]
+    ghosts = [22.6, 27.5, 32.4, -25.0, -29.9, 55.0]
+    away = [0.0, 2.0, -4.9, 8.0, -8.0, 20.0, -22.4, 32.6, 40.0]
     assert all(refiner.ghost_of_rest(v) for v in ghosts)
-    assert not any(refiner.ghost_of_rest(v) for v in [0.0, 2.0, -4.9, *away])
+    assert not any(refiner.ghost_of_rest(v) for v in away)
+
+
+def _moving_expected(range_m: float, speed_mps: float) -> int:
+    """A target's boundaries received in :data:`SCORED_S` (from ``range_m`` m closing at
+    ``speed_mps`` m/s)."""
+    t_tx = HOP_S * np.arange(1, int(SECONDS / HOP_S) + 1)
+    t_rx = t_tx + 2.0 * (range_m - speed_mps * t_tx) / (C + speed_mps)
+    return int(np.count_nonzero((t_rx >= SCORED_S[0]) & (t_rx < SCORED_S[1])))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("wall_db", "speed_mps", "snr_db", "pd_min"),
+    # Where the wall leaks: beside its ghost (27.5 m/s: 25, 27, -27 m/s) and beside rest
+    # (4-5 m/s). Left in those detections, the wall hid the target (12 trials of 2 s each
+    # at 0 and -10 dB, with and without reverberation: pd 0.01-0.03 at 25-27 m/s, 0.27 at
+    # 5 m/s beside a wall 16 dB up, 0.86 at 4 m/s beside one 10 dB up). Measured (seed 5,
+    # 1.5 s): pd 0.89, 1.00, 0.89, 0.92, 1.00, false 0.015, 0, 0, 0.008, 0 per hop; the
+    # boundaries missed are the first ones, before the wall's first fit at rest.
+    [
+        (10.0, 27.0, 0.0, 0.85),
+        (10.0, -27.0, -10.0, 0.95),
+        (16.0, 25.0, -10.0, 0.85),
+        (16.0, 5.0, 0.0, 0.9),
+        (10.0, 4.0, -10.0, 0.95),
+    ],
+)
+def test_a_target_where_a_wall_above_it_leaks_is_kept(
+    wall_db: float, speed_mps: float, snr_db: float, pd_min: float
+) -> None:
+    schedule = att_schedule()
+    range_m = 90.0 if speed_mps > 20.0 else (35.0 if speed_mps < -20.0 else 50.0)
+    x = _wall(wall_db) + echo_samples(schedule, range_m, speed_mps, SECONDS, snr_db=snr_db, seed=5)
+    est = [e for e in run_blocks(make_gcas(schedule), x) if SCORED_S[0] <= e.t_s < SCORED_S[1]]
+    hits = count_hits(est, range_m, speed_mps)
+    n_hops = (SCORED_S[1] - SCORED_S[0]) / HOP_S
+    assert hits / _moving_expected(range_m, speed_mps) >= pd_min
+    assert (len(est) - hits) / n_hops <= 0.05  # issue 26's goal
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", [2, 4])
-def test_a_lone_slow_echo_measured_at_rest_adds_no_ghost(seed: int) -> None:
+def test_a_lone_slow_echo_measured_at_rest_adds_few_ghosts(seed: int) -> None:
     # A lone echo at 40 m closing 0.05 m/s (0 dB, 2 s): inside the reverberation band,
-    # nothing to report. Its still fit taken out of the detections at its ghosts' speeds
-    # left residues that passed the echo test: 3 and 2 estimates at -24.6 to -25.0 and
-    # +29.8 m/s on these seeds; none where it is left in them (as before it was measured).
+    # nothing to report. Its fit at rest is taken out of every detection, its ghosts'
+    # included, and what the fit leaves there (the echo turns 1 rad in 8 hops: a fit at
+    # rest does not hold it) passes the echo test on 2 and 1 boundaries of these seeds (at
+    # +24.7 and 9.2 m/s; -24.9 m/s): 0 where it was left in its leaks' detections, which hid every
+    # target there: test_a_target_where_a_wall_above_it_leaks_is_kept). Issue 26's goal:
+    # at most 0.05 false estimates per hop.
     schedule = att_schedule()
     x = echo_samples(schedule, 40.0, 0.05, 2.0, snr_db=0.0, seed=seed)
-    assert run_blocks(make_gcas(schedule), x) == []
+    est = run_blocks(make_gcas(schedule), x)
+    assert len(est) / (2.0 / HOP_S) <= 0.015

@@ -546,7 +546,7 @@ class BeyondSpanCheck:
         leaks at -24.2 m/s; a ghost holds 0.15-0.34 of its source, so the source of a ghost
         that weak would be weaker than that echo, and is given up while it is measured)."""
         speed = self.c * (alpha - 1.0) / (alpha + 1.0)
-        for v, amplitude in self.refiner.known_echoes(t_s, lag_s, speed):
+        for v, amplitude in self.refiner.known_echoes(t_s, lag_s):
             if self.beyond(v):
                 continue
             apart = abs(speed - v)

@@ -17,10 +17,9 @@ Each of these fits, at low SNR or beside a strong source, can pass the echo test
 point echo (a wall) is measured too, at rest (:meth:`HiddenEchoes._fit_still`), where the
 fits toward rest find something there but no echo: far above a moving target (att, +13 to
 +20 dB at 0 and -10 dB) it otherwise stays in the target's fits and moves them a grating lobe
-off. It is measured for, and taken out of, only detections away from where it leaks itself
-(near rest and at its ghosts, a whole tone spacing from rest:
-:meth:`~hil.estimation.refine.CoherentRefiner.leak_of_rest`); those are read with it in, as
-where no still echo is measured, and fail the echo test as they did. A measured
+off. It is measured for, and taken out of, every detection, those where it leaks itself
+included (near rest and at its ghosts, a whole tone spacing from rest): left in them, it
+hid every target there. A measured
 echo's leaks are handled by the refinement (the echo is taken out of every other detection's
 input within a few hops, and a detection where its ghost peaks and weaker than it is refused:
 :meth:`~hil.estimation.refine.CoherentRefiner.ghost_of_known`). So the band's refused
@@ -156,7 +155,7 @@ class HiddenEchoes:
         self._forget(t_s)
         self._notes.append(_Note(float(t_s), float(alpha), int(hop_index), float(strength)))
 
-    def measure_near(self, t_s: float, strength: float, speed_mps: float | None = None) -> None:
+    def measure_near(self, t_s: float, strength: float) -> None:
         """Measure the hidden echoes noted within :data:`KNOWN_HOPS` hops of a detection at
         ``t_s`` (s) of the detector's statistic ``strength`` above its noise mean: each note
         that could outshine it (noted at least :data:`LEAK_FRACTION` of its strength), that
@@ -164,21 +163,12 @@ class HiddenEchoes:
         knows, refined at its last boundary at or before ``t_s`` (the refinement keeps a fit
         that is one echo). After a measurement that finds no echo, that side of the band
         waits 1, 2, 4 … up to :data:`MAX_WAIT_HOPS` hops before the next (up to
-        :data:`STILL_WAIT_HOPS` while it finds the same echo there and never one echo). No
-        still echo is measured for a detection whose speed ``speed_mps`` (m/s, closing
-        positive; None: not known) is where a still echo leaks."""
+        :data:`STILL_WAIT_HOPS` while it finds the same echo there and never one echo)."""
         self._forget(t_s)
-        # A still echo is not taken out of a detection where it leaks (near rest, at its
-        # ghosts: :meth:`~hil.estimation.refine.CoherentRefiner.leak_of_rest`): not fitted
-        # for one.
-        still = speed_mps is None or not self.refiner.leak_of_rest(speed_mps)
-        # Where none is known, one is sought for any detection: far above a target, its
-        # leaks may be all that is detected until it is taken out of the target's fits.
-        seek = still or self._still is None or t_s - self._still[1] > self.still_known_s
         for note in self._notes:
             if note.measured or note.strength < LEAK_FRACTION * strength:
                 continue
-            if still and self._refresh_still(note, t_s):
+            if self._refresh_still(note, t_s):
                 continue
             side = 1 if note.alpha > 1.0 else -1
             if note.hop_index < self._next.get(side, note.hop_index):
@@ -188,7 +178,7 @@ class HiddenEchoes:
                 note.t_s, note.alpha, note.hop_index, strength=note.strength
             ):
                 continue
-            found, strong = self._measure(note, t_s, still, seek)
+            found, strong = self._measure(note, t_s)
             if found:
                 self._next.pop(side, None)
                 self._wait.pop(side, None)
@@ -246,16 +236,14 @@ class HiddenEchoes:
             return STILL_WAIT_HOPS
         return MAX_WAIT_HOPS
 
-    def _measure(
-        self, note: _Note, t_s: float, still: bool = True, seek: bool = True
-    ) -> tuple[bool, bool]:
+    def _measure(self, note: _Note, t_s: float) -> tuple[bool, bool]:
         """Refine the hidden echo of ``note`` at its last boundary at or before ``t_s`` (s)
         from each of :meth:`_starts` until a fit is one echo by :attr:`test`, first from the
         speed of the echo last fitted on its side within :data:`MAX_WAIT_HOPS` hops (the
         same echo, most often: one fit instead of up to four); whether one was, and whether
-        a fit found its maximum and collected an echo's E/N0 (something is there). With
-        ``still`` the still echo found before is fitted first; with ``seek``, where the
-        moving fits find something but no echo, a still echo is fitted. A still echo found
+        a fit found its maximum and collected an echo's E/N0 (something is there). The still
+        echo found before is fitted first; where the moving fits find something but no echo,
+        a still echo is fitted. A still echo found
         is something there but no moving echo: the side waits as where none is found (its
         notes measured every hop instead, their fits found spurious slow echoes beside it:
         att, a lone 0.05 m/s echo, -3.9 m/s 5 m from it, reported when followed)."""
@@ -275,7 +263,7 @@ class HiddenEchoes:
         # A still echo's boundary: the still water's hops are the transmit's, of length T.
         k_still = max(0, int(math.floor((t_s - note.t_s) / self.hop_s)))
         rest_b = (note.t_s + k_still * self.hop_s, note.hop_index + k_still)
-        if still and self._still is not None:
+        if self._still is not None:
             # The still echo fitted before, on either side (its edge detections are on
             # both): most often the same (one fit, not five), at its last boundary.
             k_known = int(math.floor((t_s - self._still[1]) / self.hop_s))
@@ -296,7 +284,7 @@ class HiddenEchoes:
                 self._last[side] = (hop, fit.t_s, fit.alpha)
                 return True, True
             strong = strong or (fit.found and fit.e_over_n0_db >= self.test.min_e_over_n0_db)
-        if strong and seek:
+        if strong:
             # Something there that no moving echo's fit explains: a still point echo?
             self._fit_still(rest_b[0], rest_b[1], side)
         return False, strong

@@ -374,9 +374,8 @@ class Readout:
         ):
             return None
         if self._refiner is not None:
-            speed = fe.sound_speed_mps * (alpha - 1.0) / (alpha + 1.0)
             if self.hidden is not None:
-                self.hidden.measure_near(t_rx, p.peak - p.mean, speed)
+                self.hidden.measure_near(t_rx, p.peak - p.mean)
             if self._refiner.ghost_of_known(
                 t_rx, alpha, hop_index, edge, p.peak - p.mean, residual
             ):
@@ -386,7 +385,7 @@ class Readout:
             # Whether no echo was measured near, read before the fit remembers its own.
             inside = self.inside_sources
             alone = inside is not None and not self._refiner.known_echoes(
-                t_rx, self._residual_lag_s if residual else 0.0, speed
+                t_rx, self._residual_lag_s if residual else 0.0
             )
             if not residual and edge == 0:
                 left = self._refiner.left_beside_known(t_rx, alpha, hop_index, fe.max_speed_mps)
