@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 
 import numpy as np
@@ -102,6 +103,24 @@ def run_blocks(rx: Receiver, x: np.ndarray, block: int = 10_000) -> list[Estimat
     for i in range(0, x.shape[0], block):
         out += rx.process(x[i : i + block])
     return out + rx.flush()
+
+
+#: The lone target of :func:`lone_target_two_stage`: range at t = 0 (m).
+LONE_TARGET_R0_M = 60.0
+
+
+@functools.cache
+def lone_target_two_stage(speed_mps: float) -> tuple[np.ndarray, tuple[Estimate, ...]]:
+    """A lone target at :data:`LONE_TARGET_R0_M` closing at ``speed_mps`` in white noise
+    (random-cyclic ``att``, 0.8 s, 0 dB per-sample SNR, seed 1; shape ``(80 000,)``, read
+    only) and the default receiver's estimates of it (two-stage search, no reverberation
+    band), made once per process: test_gcas_receiver checks them against the truth and
+    test_gcas_two_stage against the full search's."""
+    schedule = att_schedule("random-cyclic")
+    x = echo_samples(schedule, LONE_TARGET_R0_M, speed_mps, 0.8, snr_db=0.0, seed=1)
+    x.flags.writeable = False
+    rx = make_gcas(schedule, search="two-stage", reverb_speed_mps=0.0)
+    return x, tuple(run_blocks(rx, x))
 
 
 def block_edges(n: int, cut: int | str) -> list[int]:

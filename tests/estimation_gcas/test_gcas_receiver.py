@@ -21,7 +21,17 @@ from hil.estimation.unit_correlators import UnitCorrelatorBank
 from hil.signals.presets import check_design, get_preset
 from hil.signals.schedule import HopSchedule
 
-from .conftest import FS, C, att_schedule, echo_samples, make_gcas, run_blocks, true_range
+from .conftest import (
+    FS,
+    LONE_TARGET_R0_M,
+    C,
+    att_schedule,
+    echo_samples,
+    lone_target_two_stage,
+    make_gcas,
+    run_blocks,
+    true_range,
+)
 
 _receiver = make_gcas
 _run = run_blocks
@@ -64,11 +74,10 @@ def test_is_a_receiver_and_registered(rc_schedule: HopSchedule) -> None:
 
 @pytest.mark.parametrize("speed", [12.0, -8.0, 25.0])
 def test_high_snr_tracks_range_speed_and_codeword(rc_schedule: HopSchedule, speed: float) -> None:
-    r0 = 60.0
-    x = echo_samples(rc_schedule, r0, speed, 0.8, snr_db=0.0, seed=1)
+    r0 = LONE_TARGET_R0_M
     # A lone target in white noise: no reverberation band (its ghost-speed cells near
     # ±27.5 m/s would cost the 25 m/s case accuracy: test_default_band_costs_at_ghost_speeds).
-    est = _run(_receiver(rc_schedule, reverb_speed_mps=0.0), x)
+    est = list(lone_target_two_stage(speed)[1])
     assert len(est) >= 50  # one per hop once M hops have arrived
     dr, dv = _errors(est, r0, speed)
     assert np.sqrt(np.mean(dr**2)) < 0.03

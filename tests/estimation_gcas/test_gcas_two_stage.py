@@ -18,7 +18,16 @@ from hil.estimation.gcas.search_two_stage import TwoStageSearch
 from hil.estimation.unit_correlators import UnitCorrelatorBank
 from hil.signals.schedule import HopSchedule
 
-from .conftest import FS, att_schedule, echo_samples, make_gcas, run_blocks, true_range
+from .conftest import (
+    FS,
+    LONE_TARGET_R0_M,
+    att_schedule,
+    echo_samples,
+    lone_target_two_stage,
+    make_gcas,
+    run_blocks,
+    true_range,
+)
 
 
 def _receiver(schedule: HopSchedule, search: str, **extra: object) -> GcasReceiver:
@@ -187,11 +196,12 @@ def test_exact_stage_two_correlators_equal_the_full_bank(rc_schedule: HopSchedul
 
 @pytest.mark.parametrize("speed", [12.0, -8.0, 25.0])
 def test_two_stage_estimates_match_the_full_search(rc_schedule: HopSchedule, speed: float) -> None:
-    r0 = 60.0
-    x = echo_samples(rc_schedule, r0, speed, 0.8, snr_db=0.0, seed=1)
-    # A lone target in noise, as test_high_snr_tracks_range_speed_and_codeword: no band.
+    r0 = LONE_TARGET_R0_M
+    # A lone target in noise, test_high_snr_tracks_range_speed_and_codeword's (its two-stage
+    # run shared with that test): no band.
+    x, two_stage = lone_target_two_stage(speed)
     full = _run(_receiver(rc_schedule, "full", reverb_speed_mps=0.0), x)
-    two = _run(_receiver(rc_schedule, "two-stage", reverb_speed_mps=0.0), x)
+    two = list(two_stage)
     assert len(two) >= 50 and abs(len(two) - len(full)) <= 1
     dr = np.array([e.range_m - true_range(r0, speed, e.t_tx_s, e.t_s) for e in two])
     dv = np.array([e.speed_mps - speed for e in two])
