@@ -49,7 +49,7 @@ def load_background(path: str | Path, period_samples: int) -> NDArray[np.float64
     p = Path(path)
     try:
         b = np.load(p, allow_pickle=False)
-    except (OSError, ValueError) as exc:
+    except (OSError, ValueError, EOFError) as exc:  # EOFError: an empty file
         raise ConfigError(
             "receiver.options.background",
             str(path),

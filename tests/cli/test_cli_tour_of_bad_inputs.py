@@ -1,0 +1,200 @@
+"""A new user's bad inputs, each run as the user runs it (``hil`` with its argv), refused in
+one line that names the field as written, the value, the allowed range and what to do, with
+exit status 2 and no traceback: out-of-range numbers that used to exhaust memory, an empty
+background file, and a scene sweep's receiver options named where the file gives them."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from hil.cli.main import main
+
+
+def _error(capsys: pytest.CaptureFixture[str], argv: list[str]) -> str:
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and err.count("\n") == 1, err
+    return err.rstrip("\n")
+
+
+@pytest.fixture
+def schedule_and_wav(tmp_path: Path) -> tuple[Path, Path]:
+    wav, schedule = tmp_path / "tx.wav", tmp_path / "tx.json"
+    argv = ["waveform", "--duration", "0.05", "--out", str(wav), "--schedule", str(schedule)]
+    assert main(argv) == 0
+    return schedule, wav
+
+
+@pytest.mark.parametrize("value", ["0", "340", "20000", "1e12", "nan"])
+def test_estimate_takes_a_sound_speed_of_water_only(
+    value: str, schedule_and_wav: tuple[Path, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    # 1e12 m/s used to allocate 26 GiB and 20000 m/s to fail inside the search.
+    schedule, wav = schedule_and_wav
+    capsys.readouterr()
+    argv = ["estimate", "--schedule", str(schedule), "--input", str(wav)]
+    assert _error(capsys, [*argv, "--sound-speed", value]) == (
+        f"hil estimate: error: --sound-speed = {float(value)!r} is not allowed: must be a sound"
+        " speed of water, 1300 .. 1700 m/s; e.g. --sound-speed 1500"
+    )
+
+
+def test_estimate_refuses_a_schedule_written_for_another_sound_speed(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    wav, schedule = tmp_path / "tx.wav", tmp_path / "tx.json"
+    argv = ["waveform", "--duration", "0.05", "--out", str(wav), "--schedule", str(schedule)]
+    assert main(argv) == 0
+    text = schedule.read_text().replace('"sound_speed_mps": 1500.0', '"sound_speed_mps": 1e9')
+    assert '"sound_speed_mps": 1e9' in text
+    schedule.write_text(text)
+    capsys.readouterr()
+    err = _error(capsys, ["estimate", "--schedule", str(schedule), "--input", str(wav)])
+    assert err == (
+        "hil estimate: error: schedule.sound_speed_mps = 1000000000.0 is not allowed: must be"
+        " a sound speed of water, 1300 .. 1700 m/s; give --sound-speed"
+    )
+
+
+def test_waveform_takes_a_sound_speed_of_water_only(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = ["waveform", "--out", str(tmp_path / "w.wav"), "--sound-speed", "340"]
+    assert _error(capsys, argv) == (
+        "hil waveform: error: --sound-speed = 340.0 is not allowed: must be a sound speed of"
+        " water, 1300 .. 1700 m/s; e.g. --sound-speed 1500"
+    )
+
+
+@pytest.mark.parametrize(
+    ("options", "option", "field", "value"),
+    [
+        (["--hop", "1e9"], "--hop", "hop_s", 1e9),
+        (["--family", "fmcw-saw", "--sweep", "1e9"], "--sweep", "sweep_s", 1e9),
+        (["--family", "cw-pulse", "--pulse", "1e4", "--pri", "2e4"], "--pulse", "pulse_s", 1e4),
+    ],
+)
+def test_waveform_refuses_a_hop_too_long_to_hold(
+    options: list[str],
+    option: str,
+    field: str,
+    value: float,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    # A 1e9 s hop used to ask for 728 TiB of tone table.
+    argv = ["waveform", "--duration", "0.05", "--out", str(tmp_path / "w.wav"), *options]
+    assert _error(capsys, argv) == (
+        f"hil waveform: error: {option} ({field}) = {value!r} is not allowed: must be <= 167.772"
+        " s (16777216 samples at 100000 Hz, the longest hop held in memory); shorten it (more"
+        " hops in a period give the same unambiguous range)"
+    )
+
+
+def test_waveform_suggests_only_hops_it_accepts(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = ["waveform", "--out", str(tmp_path / "w.wav"), "--tones", "100000"]
+    err = _error(capsys, argv)
+    assert err.endswith("try --hop 22.7273, or change the bandwidth"), err
+
+
+@pytest.mark.parametrize(
+    ("options", "named"),
+    [
+        (["--family", "costas", "--costas-prime", "4"], "--costas-prime (prime) = 4 is not"),
+        (["--m-hops", "0"], "--m-hops (M) = 0 is not"),
+    ],
+)
+def test_waveform_names_the_option_of_a_design_error(
+    options: list[str], named: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    err = _error(capsys, ["waveform", "--out", str(tmp_path / "w.wav"), *options])
+    assert err.startswith(f"hil waveform: error: {named} allowed: must be "), err
+
+
+def test_estimate_refuses_an_empty_background_file(
+    schedule_and_wav: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # An empty .npy used to end in numpy's EOFError traceback.
+    schedule, wav = schedule_and_wav
+    empty = tmp_path / "bg.npy"
+    empty.write_bytes(b"")
+    capsys.readouterr()
+    argv = ["estimate", "--schedule", str(schedule), "--input", str(wav)]
+    err = _error(capsys, [*argv, "--receiver", "gcas-bg", "--option", f"background={empty}"])
+    assert err == (
+        f"hil estimate: error: receiver.options.background = '{empty}' is not allowed: must be"
+        " a .npy file of one code period; it cannot be read (No data left in file); capture"
+        " one: hil docs tank-run, 'Empty-tank background'"
+    )
+
+
+def _scene_sweep(tmp_path: Path, fixed: str, grid: str = "") -> Path:
+    path = tmp_path / "scene.toml"
+    path.write_text(
+        '[sweep]\nname = "x"\ntrial = "scene"\nseed = 1\n'
+        f'[grid]\nscene = ["still"]\n{grid}\n[fixed]\n{fixed}\n'
+    )
+    return path
+
+
+@pytest.mark.parametrize(
+    ("fixed", "grid", "message"),
+    [
+        (
+            'receiver = "gcas-bg"\nreceiver_options = {background = "bg.npy"}',
+            "",
+            "fixed.receiver_options.background = 'bg.npy' is not allowed: must be left out: a"
+            " scene captures gcas-bg's background from its own empty water; remove it (hil"
+            " estimate and tank runs take a captured one)",
+        ),
+        (
+            'receiver = "gcas-bg"\nreceiver_options = {refine = "yes"}',
+            "",
+            "fixed.receiver_options.refine = 'yes' is not allowed: must be true or false (a"
+            " gcas-bg option); e.g. refine=true",
+        ),
+        (
+            'receiver = "gcas"\nreceiver_options = {n_doppler = -4}',
+            "",
+            "fixed.receiver_options.n_doppler = -4 is not allowed: must be an integer >= 1",
+        ),
+        (
+            'receiver = "gcas-bg"\nreceiver_options = {reverb_speed_mps = inf}',
+            "",
+            "fixed.receiver_options.reverb_speed_mps = inf is not allowed: must be a JSON value:"
+            " a finite number, a string, a list or a table of them; give a finite number",
+        ),
+        (
+            'receiver = "gcas"',
+            "m_hops = [2.5]",
+            "grid.m_hops = 2.5 is not allowed: must be an integer number of hops; at grid point"
+            " {'scene': 'still', 'm_hops': 2.5}; e.g. m_hops = 10",
+        ),
+    ],
+)
+def test_a_scene_sweep_names_the_receiver_option_where_the_file_gives_it(
+    fixed: str, grid: str, message: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # These were blamed on "the trial's default", told to set an option in [fixed] that
+    # [fixed] refuses, silently ignored (background) or shown truncated (m_hops = 2).
+    sweep = _scene_sweep(tmp_path, fixed, grid)
+    argv = ["sweep", str(sweep), "--out", str(tmp_path / "out"), "--serial", "--quiet"]
+    assert _error(capsys, argv) == f"hil sweep: error: {message}"
+    assert not (tmp_path / "out" / "results.jsonl").exists()
+
+
+def test_a_scene_sweep_names_an_unknown_receiver_option(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    sweep = _scene_sweep(tmp_path, 'receiver = "gcas-mti"\nreceiver_options = {bogus = 1}')
+    argv = ["sweep", str(sweep), "--out", str(tmp_path / "out"), "--serial", "--quiet"]
+    err = _error(capsys, argv)
+    assert err.startswith(
+        "hil sweep: error: fixed.receiver_options.bogus = ['bogus'] is not allowed: must be one"
+        " of ['attenuation_db', "
+    ), err
+    assert "'n_doppler'" in err and "'pfa'" in err, err
