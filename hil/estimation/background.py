@@ -46,6 +46,13 @@ def load_background(path: str | Path, period_samples: int) -> NDArray[np.float64
     """The background saved at ``path`` (``.npy``, one still period: shape ``(P,)``, input
     full-scale units, receiver sample index ``n`` at element ``n mod P``,
     :class:`BackgroundSubtractor`)."""
+    if not isinstance(path, str | Path):
+        raise ConfigError(
+            "receiver.options.background",
+            path,
+            "the path of an empty-tank background (.npy), a string",
+            "write it in quotes; capture one: hil docs tank-run, 'Empty-tank background'",
+        )
     p = Path(path)
     try:
         b = np.load(p, allow_pickle=False)

@@ -133,7 +133,7 @@ class StagedGcas:
             )
         where = StageSetting(schedule, float(fs_hz), period, float(sound_speed_mps), int(m_hops))
         parts = cls.stage_from_options(where, dict(extra))
-        check_option_types(GcasReceiver, parts.gcas_options, cls.name)
+        check_option_types(GcasReceiver, parts.gcas_options, cls.name, "receiver.options.")
         common: dict[str, Any] = {
             "sound_speed_mps": sound_speed_mps, "max_speed_mps": max_speed_mps,
             "max_range_m": max_range_m, "m_hops": m_hops,

@@ -65,7 +65,7 @@ def make_receiver(
 ) -> Receiver:
     """Build the receiver ``name`` with the common options and receiver-specific ``extra``."""
     cls = receiver_class(name)
-    check_option_types(cls, extra, name)
+    check_option_types(cls, extra, name, "receiver.options.")
     receiver: Receiver = cls.from_options(
         schedule,
         fs_hz,

@@ -275,31 +275,30 @@ def _fixed(table: dict[str, Any], grid: dict[str, list[Any]]) -> dict[str, Any]:
     return dict(table)
 
 
-def _table_path(tables: dict[str, Any], name: str, value: Any) -> str | None:
+def _table_path(tables: dict[str, Any], name: str) -> str | None:
     """The dotted path of the key ``name`` inside one of the tables the sweep gave (a
-    receiver's options), or of ``value``'s first key when it lists names; None if neither."""
-    names = [name, *(value[:1] if isinstance(value, list) else [])]
+    receiver's options); None if none holds it."""
     for key, table in tables.items():
         if not isinstance(table, dict):
             continue
-        for wanted in names:
-            if isinstance(wanted, str) and wanted in table:
-                return f"{key}.{wanted}"
-        inner = _table_path(table, name, value)
+        if name in table:
+            return f"{key}.{name}"
+        inner = _table_path(table, name)
         if inner is not None:
             return f"{key}.{inner}"
     return None
 
 
-def _where(spec: SweepSpec, point: int, field: str, value: Any) -> str | None:
-    """Where the sweep file gave what the trial refused as ``field``: its dotted path
-    (``grid.m_hops``, ``fixed.receiver_options.refine``); None for a trial default."""
+def _where(spec: SweepSpec, point: int, field: str) -> str | None:
+    """Where the sweep file gave what the trial refused as ``field`` (its last dotted part:
+    ``receiver.options.refine`` is ``refine``): the dotted path in the file (``grid.m_hops``,
+    ``fixed.receiver_options.refine``); None for a trial default."""
     name = field.rsplit(".", 1)[-1]
     for section, table in (("grid", spec.point_values(point)), ("fixed", spec.fixed)):
         if name in table:
             return f"{section}.{name}"
     for section, table in (("grid", spec.point_values(point)), ("fixed", spec.fixed)):
-        inner = _table_path(table, name, value)
+        inner = _table_path(table, name)
         if inner is not None:
             return f"{section}.{inner}"
     return None
@@ -310,7 +309,7 @@ def _validate_point(validate: Any, spec: SweepSpec, point: int) -> None:
         validate(spec.point_params(point))
     except ConfigError as exc:
         at = f"at grid point {spec.point_values(point)}"
-        given = _where(spec, point, exc.field, exc.value)
+        given = _where(spec, point, exc.field)
         if given is not None and given.startswith("grid."):
             where, notes = given, [at]
         elif given is not None:

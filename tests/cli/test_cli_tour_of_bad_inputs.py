@@ -194,7 +194,68 @@ def test_a_scene_sweep_names_an_unknown_receiver_option(
     argv = ["sweep", str(sweep), "--out", str(tmp_path / "out"), "--serial", "--quiet"]
     err = _error(capsys, argv)
     assert err.startswith(
-        "hil sweep: error: fixed.receiver_options.bogus = ['bogus'] is not allowed: must be one"
-        " of ['attenuation_db', "
+        "hil sweep: error: fixed.receiver_options.bogus = 1 is not allowed: must be an option"
+        " of the gcas receiver: attenuation_db, cancel, "
     ), err
-    assert "'n_doppler'" in err and "'pfa'" in err, err
+    assert err.endswith(", search; check its spelling, or choose the receiver it belongs to")
+
+
+@pytest.mark.parametrize(
+    ("receiver", "message"),
+    [
+        ("gcas", "receiver.options.bogus = 2 is not allowed: must be an option of the gcas"),
+        ("stft", "receiver.options.bogus = 2 is not allowed: must be an option of the stft"
+         " receiver: min_frames, n_s, ns_reading, segment, step; check its spelling, or choose"
+         " the receiver it belongs to"),
+    ],
+)  # fmt: skip
+def test_estimate_names_an_unknown_receiver_option_and_its_value(
+    receiver: str,
+    message: str,
+    schedule_and_wav: tuple[Path, Path],
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    # Was "gcas option = ['bogus']" and "extra = ['bogus']": no option, no value.
+    schedule, wav = schedule_and_wav
+    capsys.readouterr()
+    argv = ["estimate", "--schedule", str(schedule), "--input", str(wav), "--receiver", receiver]
+    err = _error(capsys, [*argv, "--option", "bogus=2"])
+    assert err.startswith(f"hil estimate: error: {message}"), err
+
+
+def _experiment(tmp_path: Path, capsys: pytest.CaptureFixture[str], options: str) -> Path:
+    assert main(["tank-run", "--print-default"]) == 0
+    text = capsys.readouterr().out
+    line = 'options = { background = "simulated" }'
+    assert line in text
+    path = tmp_path / "experiment.toml"
+    path.write_text(text.replace(line, f"options = {options}"))
+    return path
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        (
+            "{ background = 3 }",
+            "receiver.options.background = 3 is not allowed: must be the path of an empty-tank"
+            " background (.npy), a string; write it in quotes; capture one: hil docs tank-run,"
+            " 'Empty-tank background'",
+        ),
+        (
+            '{ background = "simulated", refine = "yes" }',
+            "receiver.options.refine = 'yes' is not allowed: must be true or false (a gcas-bg"
+            " option); e.g. refine=true",
+        ),
+    ],
+)
+def test_a_tank_run_names_a_bad_gcas_bg_option(
+    options: str, message: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # background = 3 used to end in a TypeError traceback; refine was named without its table.
+    experiment = _experiment(tmp_path, capsys, options)
+    argv = ["tank-run", str(experiment), "--virtual-time", "--no-live"]
+    assert _error(capsys, [*argv, "--out", str(tmp_path / "run")]) == (
+        f"hil tank-run: error: {message}"
+    )
+    assert not (tmp_path / "run" / "run.h5").exists()
