@@ -259,3 +259,38 @@ def test_a_tank_run_names_a_bad_gcas_bg_option(
         f"hil tank-run: error: {message}"
     )
     assert not (tmp_path / "run" / "run.h5").exists()
+
+
+@pytest.mark.parametrize(
+    ("argv", "field"),
+    [
+        (["simulate", "{d}"], "scenario"),
+        (["tank-run", "{d}"], "experiment"),
+        (["estimate", "--schedule", "{d}", "--input", "x.wav"], "schedule"),
+    ],
+)
+def test_a_folder_given_for_a_text_file_is_named(
+    argv: list[str], field: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Was "error: Is a directory: PATH", naming neither the field nor what to do.
+    folder = tmp_path / "a-folder"
+    folder.mkdir()
+    err = _error(capsys, [a.replace("{d}", str(folder)) for a in argv])
+    assert err == (
+        f"hil {argv[0]}: error: {field} = '{folder}' is not allowed: must be a file, not a"
+        f" folder; give the {field} file in it"
+    )
+
+
+def test_simulate_refuses_a_run_longer_than_a_wav_holds(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Was a struct.error traceback from the WAV header, after the folder was claimed.
+    out = tmp_path / "sim"
+    argv = ["simulate", "att", "--duration", "1e9", "--quiet", "--out", str(out)]
+    assert _error(capsys, argv) == (
+        "hil simulate: error: --duration = 1000000000.0 is not allowed: must be <= 2684.35 s"
+        " (received.wav of 4 float32 channels at 100000 Hz stays within a WAV's 4 GiB);"
+        " simulate a shorter run, or fewer output channels (output.channels)"
+    )
+    assert not out.exists()
