@@ -84,6 +84,8 @@ class StagedGcas:
     #: GCAS's ``refine`` unless the options set it: a staged input is not the one echo the
     #: coherent refinement fits (two copies of a moving echo, or the tank's images).
     refine_default: ClassVar[bool] = False
+    #: The stage's own options (the others are GCAS's): checked by name before a run.
+    STAGE_OPTIONS: ClassVar[tuple[str, ...]] = ()
 
     def __init__(
         self, inner: Any, stage: InputStage, readout: FirstArrivalReadout | None = None

@@ -314,6 +314,8 @@ def _validate_point(validate: Any, spec: SweepSpec, point: int) -> None:
             where, notes = given, [at]
         elif given is not None:
             where, notes = given, []
+        elif not _PARAM_NAME.match(exc.field):  # a field of a file the trial reads
+            where, notes = exc.field, [at]
         else:  # a value the trial defaults, unsuitable with the sweep's other values
             where = f"{exc.field} (the trial's default)"
             notes = [at, f"set {exc.field} in [fixed] or [grid]"]

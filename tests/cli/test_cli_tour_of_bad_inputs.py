@@ -247,18 +247,43 @@ def _experiment(tmp_path: Path, capsys: pytest.CaptureFixture[str], options: str
             "receiver.options.refine = 'yes' is not allowed: must be true or false (a gcas-bg"
             " option); e.g. refine=true",
         ),
+        (
+            '{ background = "simulated", still_periods = 4 }',
+            "receiver.options.still_periods = 4 is not allowed: must be an option of the gcas-bg"
+            " receiver: attenuation_db, background, cancel, ",
+        ),
     ],
 )
 def test_a_tank_run_names_a_bad_gcas_bg_option(
     options: str, message: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    # background = 3 used to end in a TypeError traceback; refine was named without its table.
+    # These were found only once the run folder was claimed and the simulated background
+    # captured (background = 3 as a TypeError traceback, refine named without its table).
     experiment = _experiment(tmp_path, capsys, options)
     argv = ["tank-run", str(experiment), "--virtual-time", "--no-live"]
-    assert _error(capsys, [*argv, "--out", str(tmp_path / "run")]) == (
-        f"hil tank-run: error: {message}"
+    err = _error(capsys, [*argv, "--out", str(tmp_path / "run")])
+    assert err.startswith(f"hil tank-run: error: {message}"), err
+    assert not (tmp_path / "run").exists()
+
+
+def test_a_tank_sweep_refuses_its_experiments_receiver_option_before_any_trial(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Every trial used to fail on it (exit 1), after the sweep had started.
+    experiment = _experiment(tmp_path, capsys, '{ background = "simulated", refine = "yes" }')
+    sweep = tmp_path / "tank.toml"
+    sweep.write_text(
+        '[sweep]\nname = "x"\ntrial = "tank_run"\nseed = 1\n[grid]\ntow_speed_mps = [1.0]\n'
+        f'[fixed]\nexperiment = "{experiment}"\n'
     )
-    assert not (tmp_path / "run" / "run.h5").exists()
+    out = tmp_path / "out"
+    err = _error(capsys, ["sweep", str(sweep), "--out", str(out), "--serial", "--quiet"])
+    assert err == (
+        "hil sweep: error: receiver.options.refine = 'yes' is not allowed: must be true or false"
+        " (a gcas-bg option); at grid point {'tow_speed_mps': 1.0}; in the experiment"
+        f" {experiment} with this point's parameters; e.g. refine=true"
+    )
+    assert not (out / "results.jsonl").exists()
 
 
 @pytest.mark.parametrize(
