@@ -319,3 +319,46 @@ def test_simulate_refuses_a_run_longer_than_a_wav_holds(
         " simulate a shorter run, or fewer output channels (output.channels)"
     )
     assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        (
+            ["response", "--duration", "1e9"],
+            "--duration (duration_s) = 1000000000.0 is not allowed: must be a finite duration"
+            " <= 60 s; a sweep of a few seconds measures the response; repeat the calibration"
+            " to average",
+        ),
+        (
+            ["response", "--taps", "100000000"],
+            "--taps (equaliser_taps) = 100000000 is not allowed: must be an integer in [16,"
+            " 65536]; a transducer's response needs a few thousand taps at most",
+        ),
+        (
+            ["response", "--regularisation", "nan"],
+            "--regularisation (regularisation_db) = nan is not allowed: must be a finite number"
+            " of dB re peak |H|^2; e.g. -40 (deeper: a sharper, noisier inverse)",
+        ),
+        (
+            ["level", "--adc-full-scale", "0"],
+            "--adc-full-scale (adc_full_scale_v) = 0.0 is not allowed: must be a voltage > 0 V",
+        ),
+        (
+            ["level", "--input-gain", "inf"],
+            "--input-gain (input_gain_db) = inf is not allowed: must be a finite gain, dB",
+        ),
+    ],
+)
+def test_calibrate_refuses_a_setting_out_of_range(
+    options: list[str],
+    message: str,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # The first two ran out of memory (a 349 TiB sweep; the OOM killer), the others were
+    # accepted (a full scale of 0 V stood for "not given").
+    monkeypatch.setenv("HIL_CALIBRATION_DIR", str(tmp_path / "store"))
+    assert _error(capsys, ["calibrate", *options]) == f"hil calibrate: error: {message}"
+    assert not (tmp_path / "store" / "simulated" / options[0]).exists()
