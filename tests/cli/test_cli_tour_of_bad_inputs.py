@@ -5,6 +5,7 @@ background file, and a scene sweep's receiver options named where the file gives
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -362,3 +363,18 @@ def test_calibrate_refuses_a_setting_out_of_range(
     monkeypatch.setenv("HIL_CALIBRATION_DIR", str(tmp_path / "store"))
     assert _error(capsys, ["calibrate", *options]) == f"hil calibrate: error: {message}"
     assert not (tmp_path / "store" / "simulated" / options[0]).exists()
+
+
+def test_sweep_refuses_more_pool_workers_than_the_machine_holds(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # --workers 100000 used to start spawning a hundred thousand Pythons.
+    cores = os.cpu_count() or 1
+    out = tmp_path / "out"
+    argv = ["sweep", "scenes", "--quick", "--quiet", "--out", str(out), "--workers", "100000"]
+    assert _error(capsys, argv) == (
+        f"hil sweep: error: --workers = 100000 is not allowed: must be an integer in"
+        f" 1..{4 * cores} (4 per core, {cores} cores); one per core is the default; for more,"
+        " run on a Dask cluster (--scheduler)"
+    )
+    assert not (out / "results.jsonl").exists()
