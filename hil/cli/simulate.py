@@ -86,6 +86,16 @@ def run(args: argparse.Namespace) -> int:
     claim_output_folder(args.out, "--out", holds="a simulation")
     try:
         return _write_simulation(args, sc)
+    except KeyboardInterrupt:
+        # Said before the interruption's own line (hil.cli.main): what the folder holds.
+        written = sorted(p.name for p in args.out.iterdir() if not p.name.startswith("."))
+        print(
+            f"hil simulate: {args.out} holds a partial simulation, cut short at the"
+            f" interruption ({', '.join(written) or 'no files'}): simulate again into a new"
+            " folder",
+            file=sys.stderr,
+        )
+        raise
     finally:
         release_output_folder(args.out)
 

@@ -6,6 +6,10 @@ background file, and a scene sweep's receiver options named where the file gives
 from __future__ import annotations
 
 import os
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -378,3 +382,31 @@ def test_sweep_refuses_more_pool_workers_than_the_machine_holds(
         " run on a Dask cluster (--scheduler)"
     )
     assert not (out / "results.jsonl").exists()
+
+
+def _default_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)  # a background suite hands it ignored
+
+
+@pytest.mark.slow
+def test_simulate_says_its_folder_holds_a_partial_simulation_after_ctrl_c(tmp_path: Path) -> None:
+    # Was only "interrupted (Ctrl-C)", leaving a received.wav whose header claims the whole run.
+    out = tmp_path / "sim"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "hil.cli.main", "simulate", "att", "--duration", "600",
+         "--quiet", "--out", str(out)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=_default_sigint,
+    )  # fmt: skip
+    wav = out / "received.wav"
+    deadline = time.monotonic() + 120.0
+    while not (wav.exists() and wav.stat().st_size > 1_000_000):
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert err.splitlines()[-2:] == [
+        f"hil simulate: {out} holds a partial simulation, cut short at the interruption"
+        " (received.wav): simulate again into a new folder",
+        "hil simulate: interrupted (Ctrl-C)",
+    ], err
