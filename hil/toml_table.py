@@ -69,7 +69,10 @@ def read_toml(path: str | Path, what: str) -> dict[str, Any]:
 
 
 def read_text_file(path: str | Path, what: str) -> str:
-    """The UTF-8 text of the ``what`` file at ``path``; binary content is a ConfigError."""
+    """The UTF-8 text of the ``what`` file at ``path``; binary content or a folder is a
+    ConfigError."""
+    if Path(path).is_dir():
+        raise ConfigError(what, str(path), "a file, not a folder", f"give the {what} file in it")
     raw = Path(path).read_bytes()
     try:
         text = raw.decode("utf-8")

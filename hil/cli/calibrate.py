@@ -57,6 +57,11 @@ OPTION_NAMES = {
     "equaliser_taps": "--taps",
     "frequency_hz": "--frequency",
     "adc_full_scale_v": "--adc-full-scale",
+    "input_gain_db": "--input-gain",
+    "regularisation_db": "--regularisation",
+    "output_channel": "--output-channel",
+    "input_channel": "--input-channel",
+    "latency_samples": "--latency",
     "distance_m": "--distance",
     "temperature_c": "--temperature",
     "salinity_ppt": "--salinity",
@@ -315,7 +320,11 @@ def _level(args: argparse.Namespace, truth: SimTruth) -> tuple[Any, dict[str, An
     sim = _simulated(args)
     channels_in = 2 if isinstance(reference, ReferenceHydrophone) else 1
     device, lines = sim_hydrophones(truth) if sim else (_audio_device(args, channels_in), [])
-    full_scale = args.adc_full_scale or (truth.adc_full_scale_v if sim else 1.0)
+    full_scale = (
+        args.adc_full_scale
+        if args.adc_full_scale is not None
+        else (truth.adc_full_scale_v if sim else 1.0)
+    )
     gain = args.input_gain if args.input_gain is not None else (truth.input_gain_db if sim else 0)
     result = calibrate_level(
         device, frequency_hz=args.frequency, amplitude=args.amplitude,

@@ -288,7 +288,6 @@ def _check_numbers(args: argparse.Namespace) -> None:
     for option, value, allowed in (
         ("--max-speed", args.max_speed, (0.0, "a finite speed >= 0 m/s")),
         ("--max-range", args.max_range, (0.0, "a finite range > 0 m")),
-        ("--sound-speed", args.sound_speed, (0.0, "a finite sound speed > 0 m/s")),
     ):
         low, words = allowed
         if value is None:
@@ -296,6 +295,10 @@ def _check_numbers(args: argparse.Namespace) -> None:
         strict = option != "--max-speed"
         if not math.isfinite(value) or value < low or (strict and value == low):
             raise ConfigError(option, value, words, "give a number such as the default")
+    if args.sound_speed is not None:
+        from hil.signals.presets import check_water_sound_speed
+
+        check_water_sound_speed("--sound-speed", args.sound_speed, "e.g. --sound-speed 1500")
 
 
 def _check_length(path: Path, n_frames: int, fs: float, schedule: Any) -> None:
@@ -327,6 +330,7 @@ def run(args: argparse.Namespace) -> int:
     from hil.estimation.track_summary import track_figures, track_lines
     from hil.recording.records import ReceiverSetup
     from hil.recording.replay import build_receiver
+    from hil.signals.presets import check_water_sound_speed
     from hil.signals.schedule_file import read_schedule_file
 
     check_outputs(args)
@@ -342,7 +346,13 @@ def run(args: argparse.Namespace) -> int:
             f"the schedule's sample rate {float(doc['fs']):g} Hz",
             "resample the recording or write the schedule at the recording's rate",
         )
-    c = float(args.sound_speed if args.sound_speed is not None else doc["sound_speed_mps"])
+    c = (
+        float(args.sound_speed)
+        if args.sound_speed is not None
+        else check_water_sound_speed(
+            "schedule.sound_speed_mps", float(doc["sound_speed_mps"]), "give --sound-speed"
+        )
+    )
     extra = dict(_parse_option(o) for o in args.option)
     collector = _MapCollector() if args.map is not None else None
     if collector is not None:

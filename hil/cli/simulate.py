@@ -80,13 +80,43 @@ def run(args: argparse.Namespace) -> int:
         if not (np.isfinite(args.duration) and args.duration > 0):
             raise ConfigError("--duration", args.duration, "> 0 s")
         sc.duration_s = float(args.duration)
+    _check_wav_size(sc, "--duration" if args.duration is not None else "duration_s")
     if args.out is None:
         args.out = new_simulation_folder(args.scenario, dt.datetime.now())
     claim_output_folder(args.out, "--out", holds="a simulation")
     try:
         return _write_simulation(args, sc)
+    except KeyboardInterrupt:
+        # Said before the interruption's own line (hil.cli.main): what the folder holds.
+        written = sorted(p.name for p in args.out.iterdir() if not p.name.startswith("."))
+        print(
+            f"hil simulate: {args.out} holds a partial simulation, cut short at the"
+            f" interruption ({', '.join(written) or 'no files'}): simulate again into a new"
+            " folder",
+            file=sys.stderr,
+        )
+        raise
     finally:
         release_output_folder(args.out)
+
+
+#: The largest received.wav: a RIFF WAV counts its bytes in 32 bits.
+_WAV_MAX_BYTES = 2**32 - 1 - 64
+
+
+def _check_wav_size(sc: Any, field: str) -> None:
+    """Refuse a scenario whose received.wav (float32, every output channel) would pass the
+    RIFF limit of 4 GiB; ``field`` names the duration as the user gave it."""
+    per_second = 4 * len(sc.output_channels) * sc.fs_hz
+    longest = _WAV_MAX_BYTES / per_second
+    if not sc.duration_s <= longest:
+        raise ConfigError(
+            field,
+            sc.duration_s,
+            f"<= {longest:.6g} s (received.wav of {len(sc.output_channels)} float32 channels"
+            f" at {sc.fs_hz:g} Hz stays within a WAV's 4 GiB)",
+            "simulate a shorter run, or fewer output channels (output.channels)",
+        )
 
 
 def new_simulation_folder(scenario: str, now: dt.datetime) -> Path:

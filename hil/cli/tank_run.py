@@ -14,6 +14,7 @@ import argparse
 import datetime as dt
 import json
 import logging
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -52,7 +53,9 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Execute ``hil tank-run``; 0 on success, 1 if the run stopped on an error."""
+    """Execute ``hil tank-run``; 0 on success, 130 if Ctrl-C or a stop signal stopped the
+    run (safely: its recording, summary and report cover it up to the stop), 1 if an error
+    did."""
     from hil.experiments.experiment import DEFAULT_EXPERIMENT, load_experiment, parse_experiment
 
     if args.print_default:
@@ -73,6 +76,17 @@ def run(args: argparse.Namespace) -> int:
     finally:
         release_output_folder(folder)
     print_summary(summary, outcome.folder, as_json=args.json)
+    if outcome.interrupted:
+        # The same exit status as an interruption before the run (hil.cli.main), and the
+        # output said to be partial: the run stopped early, safely.
+        print(
+            f"hil tank-run: {outcome.error}: the run stopped early and safely; {outcome.folder}"
+            ' holds it up to the stop (summary.json: "interrupted": true)',
+            file=sys.stderr,
+        )
+        from hil.cli.main import EXIT_INTERRUPTED
+
+        return EXIT_INTERRUPTED
     return 1 if outcome.error else 0
 
 

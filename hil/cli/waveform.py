@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from hil.errors import ConfigError
-from hil.signals.presets import PRESETS, check_design, get_preset
+from hil.signals.presets import PRESETS, check_design, check_water_sound_speed, get_preset
 from hil.signals.schedule_file import schedule_document, write_schedule_file
 from hil.signals.synthesis import BlockSynthesizer
 from hil.signals.waveforms import FAMILIES, design_summary
@@ -56,6 +56,8 @@ OPTION_NAMES = {
     "family": "--family",
     "preset": "--preset",
     "n_tones": "--tones",
+    "prime": "--costas-prime",
+    "M": "--m-hops",
 }
 
 
@@ -168,6 +170,8 @@ def run(args: argparse.Namespace) -> int:
     """Execute ``hil waveform``; return the exit status."""
     _validate_io(args)
     overrides = {field: getattr(args, opt) for opt, field in _OVERRIDES.items()}
+    if args.sound_speed is not None:
+        check_water_sound_speed("--sound-speed", args.sound_speed, "e.g. --sound-speed 1500")
     preset = get_preset(args.preset)
     spec = preset.spec(args.family, **overrides)
     schedule = check_design(spec)

@@ -44,10 +44,10 @@ def reject_unknown(extra: dict[str, Any], known: Iterable[str], receiver: str) -
     unknown = sorted(set(extra) - known_set)
     if unknown:
         raise ConfigError(
-            "extra",
-            unknown,
-            f"options of the {receiver} receiver: {sorted(known_set) or 'none'}",
-            "check the spelling of the receiver options",
+            f"receiver.options.{unknown[0]}",
+            extra[unknown[0]],
+            f"an option of the {receiver} receiver: {', '.join(sorted(known_set)) or 'none'}",
+            "check its spelling, or choose the receiver it belongs to",
         )
 
 

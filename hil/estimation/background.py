@@ -42,14 +42,26 @@ from hil.estimation.input_stage import StagedGcas, StageParts, StageSetting
 from hil.estimation.still_period import checked_still_period, still_period
 
 
+def check_background_path(path: Any) -> None:
+    """Refuse a ``background`` option that is not a path (a number, a table)."""
+    if not isinstance(path, str | Path):
+        raise ConfigError(
+            "receiver.options.background",
+            path,
+            "the path of an empty-tank background (.npy), a string",
+            "write it in quotes; capture one: hil docs tank-run, 'Empty-tank background'",
+        )
+
+
 def load_background(path: str | Path, period_samples: int) -> NDArray[np.float64]:
     """The background saved at ``path`` (``.npy``, one still period: shape ``(P,)``, input
     full-scale units, receiver sample index ``n`` at element ``n mod P``,
     :class:`BackgroundSubtractor`)."""
+    check_background_path(path)
     p = Path(path)
     try:
         b = np.load(p, allow_pickle=False)
-    except (OSError, ValueError) as exc:
+    except (OSError, ValueError, EOFError) as exc:  # EOFError: an empty file
         raise ConfigError(
             "receiver.options.background",
             str(path),
@@ -113,6 +125,7 @@ class BackgroundGcas(StagedGcas):
     ``max_spread_s``, and GCAS's others; ``refine`` is False unless given."""
 
     name = "gcas-bg"
+    STAGE_OPTIONS = ("background", "range_readout", "max_spread_s")
     period_reason = "the background repeats every period"
 
     def __init__(

@@ -84,6 +84,8 @@ class StagedGcas:
     #: GCAS's ``refine`` unless the options set it: a staged input is not the one echo the
     #: coherent refinement fits (two copies of a moving echo, or the tank's images).
     refine_default: ClassVar[bool] = False
+    #: The stage's own options (the others are GCAS's): checked by name before a run.
+    STAGE_OPTIONS: ClassVar[tuple[str, ...]] = ()
 
     def __init__(
         self, inner: Any, stage: InputStage, readout: FirstArrivalReadout | None = None
@@ -133,7 +135,7 @@ class StagedGcas:
             )
         where = StageSetting(schedule, float(fs_hz), period, float(sound_speed_mps), int(m_hops))
         parts = cls.stage_from_options(where, dict(extra))
-        check_option_types(GcasReceiver, parts.gcas_options, cls.name)
+        check_option_types(GcasReceiver, parts.gcas_options, cls.name, "receiver.options.")
         common: dict[str, Any] = {
             "sound_speed_mps": sound_speed_mps, "max_speed_mps": max_speed_mps,
             "max_range_m": max_range_m, "m_hops": m_hops,

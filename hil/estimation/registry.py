@@ -15,6 +15,7 @@ length M (receivers without one ignore it). Unknown ``extra`` keys raise a Confi
 from __future__ import annotations
 
 import importlib
+from collections.abc import Mapping
 from typing import Any
 
 from hil.errors import ConfigError
@@ -52,6 +53,41 @@ def receiver_class(name: str) -> Any:
     return getattr(module, attr)
 
 
+def check_receiver_options(name: str, options: Mapping[str, Any]) -> None:
+    """Refuse an option the receiver ``name`` does not have, or of the wrong type, before
+    anything is built (an experiment file's, a sweep's): the first one, as
+    ``receiver.options.KEY``. Options ``track_*`` are the tracker's, not the receiver's."""
+    from hil.estimation.tracking import TRACK_OPTION_PREFIX
+
+    cls = receiver_class(name)
+    own = {k: v for k, v in options.items() if not k.startswith(TRACK_OPTION_PREFIX)}
+    check_option_types(cls, own, name, "receiver.options.")
+    stage = getattr(cls, "STAGE_OPTIONS", None)
+    if hasattr(cls, "OPTIONS"):  # the baselines list theirs
+        known, gcas = set(cls.OPTIONS), {}
+    elif stage is not None or name == "gcas":  # GCAS, alone or behind an input stage
+        from hil.estimation.gcas import GcasReceiver
+        from hil.estimation.gcas.options import OPTION_NAMES
+
+        known = set(OPTION_NAMES) | set(stage or ())
+        gcas = {k: v for k, v in own.items() if k not in (stage or ())}
+        check_option_types(GcasReceiver, gcas, name, "receiver.options.")
+    else:
+        return
+    unknown = sorted(set(own) - known)
+    if unknown:
+        raise ConfigError(
+            f"receiver.options.{unknown[0]}",
+            own[unknown[0]],
+            f"an option of the {name} receiver: {', '.join(sorted(known))}",
+            "check its spelling, or choose the receiver it belongs to",
+        )
+    if "background" in (stage or ()) and "background" in own:
+        from hil.estimation.background import check_background_path
+
+        check_background_path(own["background"])
+
+
 def make_receiver(
     name: str,
     schedule: HopSchedule,
@@ -65,7 +101,7 @@ def make_receiver(
 ) -> Receiver:
     """Build the receiver ``name`` with the common options and receiver-specific ``extra``."""
     cls = receiver_class(name)
-    check_option_types(cls, extra, name)
+    check_option_types(cls, extra, name, "receiver.options.")
     receiver: Receiver = cls.from_options(
         schedule,
         fs_hz,

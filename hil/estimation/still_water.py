@@ -204,6 +204,7 @@ class StillWaterGcas(StagedGcas):
     GCAS's (``reverb_speed_mps``, ``refine`` (on unless given), ...)."""
 
     name = "gcas-still"
+    STAGE_OPTIONS = ("still_periods",)
     period_reason = "the still water repeats every period"
     refine_default = True
 

@@ -60,6 +60,22 @@ MAX_BATCH = 256
 
 #: Bound on the wait for one killed pool worker to be reaped, s.
 _ABORT_JOIN_S = 10.0
+#: Local worker processes per core at most: each is a whole Python with numpy (and numba's
+#: kernels) loaded, started before the first trial; more than the cores only share them.
+WORKERS_PER_CORE_MAX = 4
+
+
+def check_local_workers(option: str, n: Any) -> int:
+    """``n`` local worker processes, or a ConfigError naming ``option``: an integer from 1 to
+    :data:`WORKERS_PER_CORE_MAX` per core of this machine."""
+    cores = os.cpu_count() or 1
+    most = WORKERS_PER_CORE_MAX * cores
+    if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= most:
+        raise ConfigError(
+            option, n, f"an integer in 1..{most} ({WORKERS_PER_CORE_MAX} per core, {cores} cores)",
+            "one per core is the default; for more, run on a Dask cluster (--scheduler)",
+        )  # fmt: skip
+    return n
 
 
 class Runner:
@@ -172,9 +188,7 @@ class LocalPoolRunner(Runner):
     def __init__(self, workers: int | None = None) -> None:
         super().__init__()
         n = (os.cpu_count() or 1) if workers is None else workers
-        if isinstance(n, bool) or not isinstance(n, int) or n < 1:
-            raise ConfigError("--workers", workers, "an integer >= 1")
-        self._workers = n
+        self._workers = check_local_workers("--workers", n)
         self._pool: ProcessPoolExecutor | None = None
         self._barrier: Any = None
         self._warm: set[str] = set()
@@ -359,10 +373,8 @@ class DaskRunner(Runner):
             raise ConfigError(
                 "--scheduler", scheduler, "an address tcp://HOST:PORT (or tls://HOST:PORT)"
             )
-        if n_workers is not None and (
-            isinstance(n_workers, bool) or not isinstance(n_workers, int) or n_workers < 1
-        ):
-            raise ConfigError("--dask-workers", n_workers, "an integer >= 1")
+        if n_workers is not None:
+            check_local_workers("--dask-workers", n_workers)
         self.scheduler = scheduler
         self.n_workers = n_workers
         self.connect_timeout_s = connect_timeout_s

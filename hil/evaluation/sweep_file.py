@@ -275,15 +275,47 @@ def _fixed(table: dict[str, Any], grid: dict[str, list[Any]]) -> dict[str, Any]:
     return dict(table)
 
 
+def _table_path(tables: dict[str, Any], name: str) -> str | None:
+    """The dotted path of the key ``name`` inside one of the tables the sweep gave (a
+    receiver's options); None if none holds it."""
+    for key, table in tables.items():
+        if not isinstance(table, dict):
+            continue
+        if name in table:
+            return f"{key}.{name}"
+        inner = _table_path(table, name)
+        if inner is not None:
+            return f"{key}.{inner}"
+    return None
+
+
+def _where(spec: SweepSpec, point: int, field: str) -> str | None:
+    """Where the sweep file gave what the trial refused as ``field`` (its last dotted part:
+    ``receiver.options.refine`` is ``refine``): the dotted path in the file (``grid.m_hops``,
+    ``fixed.receiver_options.refine``); None for a trial default."""
+    name = field.rsplit(".", 1)[-1]
+    for section, table in (("grid", spec.point_values(point)), ("fixed", spec.fixed)):
+        if name in table:
+            return f"{section}.{name}"
+    for section, table in (("grid", spec.point_values(point)), ("fixed", spec.fixed)):
+        inner = _table_path(table, name)
+        if inner is not None:
+            return f"{section}.{inner}"
+    return None
+
+
 def _validate_point(validate: Any, spec: SweepSpec, point: int) -> None:
     try:
         validate(spec.point_params(point))
     except ConfigError as exc:
         at = f"at grid point {spec.point_values(point)}"
-        if exc.field in spec.grid:
-            where, notes = f"grid.{exc.field}", [at]
-        elif exc.field in spec.fixed:
-            where, notes = f"fixed.{exc.field}", []
+        given = _where(spec, point, exc.field)
+        if given is not None and given.startswith("grid."):
+            where, notes = given, [at]
+        elif given is not None:
+            where, notes = given, []
+        elif not _PARAM_NAME.match(exc.field):  # a field of a file the trial reads
+            where, notes = exc.field, [at]
         else:  # a value the trial defaults, unsuitable with the sweep's other values
             where = f"{exc.field} (the trial's default)"
             notes = [at, f"set {exc.field} in [fixed] or [grid]"]

@@ -279,6 +279,9 @@ def make_receiver(p: dict[str, Any], schedule: HopSchedule, c: float, **hooks: A
     from hil.recording.replay import build_receiver
 
     name = p["receiver"]
+    m_hops = p["m_hops"]
+    if isinstance(m_hops, bool) or not isinstance(m_hops, (int, np.integer)):
+        raise ConfigError("m_hops", m_hops, "an integer number of hops", "e.g. m_hops = 10")
     extra: dict[str, Any] = dict(p["receiver_options"].get(name, {}))
     if name in GCAS_FAMILY:
         extra.setdefault("coherent", bool(p["coherent"]))
@@ -289,7 +292,7 @@ def make_receiver(p: dict[str, Any], schedule: HopSchedule, c: float, **hooks: A
         "sound_speed_mps": c,
         "max_speed_mps": float(p["max_speed_mps"]),
         "max_range_m": float(p["max_range_m"]),
-        "m_hops": int(p["m_hops"]),
+        "m_hops": int(m_hops),
         **extra,
     }
     fs = float(schedule.params["fs_hz"])

@@ -160,6 +160,13 @@ def validate_scene_params(params: Params) -> None:
             "receiver_options", p["receiver_options"], f"a table of {p['receiver']} options"
         )
     if p["receiver"] == "gcas-bg":
+        if "background" in p["receiver_options"]:
+            raise ConfigError(
+                "receiver_options.background",
+                p["receiver_options"]["background"],
+                "left out: a scene captures gcas-bg's background from its own empty water",
+                "remove it (hil estimate and tank runs take a captured one)",
+            )
         schedule, _, _ = _schedule_of(p)
         period = schedule.period_samples(float(schedule.params["fs_hz"]))
         with _background_file(np.zeros(period)) as path:

@@ -294,13 +294,11 @@ class ReceiverSection(Section):
     options: dict[str, Any] = key({}, "table", "receiver options")
 
     def checks(self, path: str) -> Iterator[ConfigError]:
-        from hil.estimation.option_types import check_option_types
-        from hil.estimation.registry import receiver_class
+        from hil.estimation.registry import check_receiver_options
         from hil.estimation.tracking import TrackerSettings
 
         try:
-            check_option_types(receiver_class(self.name), self.options, self.name,
-                               "receiver.options.")  # fmt: skip
+            check_receiver_options(self.name, self.options)
         except ConfigError as exc:
             yield exc
         try:  # the tracker's track_* options (docs/tracks.md)

@@ -116,15 +116,21 @@ class ReceiverSetup:
             raise ConfigError("receiver.channel", self.channel, ">= 0")
         if not (math.isfinite(self.scale) and self.scale != 0.0):
             raise ConfigError("receiver.scale", self.scale, "a finite, non-zero factor")
-        try:
-            json.dumps(dict(self.settings), allow_nan=False)
-        except (TypeError, ValueError) as exc:
-            raise ConfigError(
-                "receiver.settings",
-                dict(self.settings),
-                "JSON-serialisable values (numbers, strings, lists, dicts)",
-                f"{exc}; callbacks such as on_map are not recorded, pass them to replay",
-            ) from None
+        for key, value in self.settings.items():
+            try:
+                json.dumps(value, allow_nan=False)
+            except (TypeError, ValueError):
+                hint = (
+                    "give a finite number"
+                    if isinstance(value, float)
+                    else "callbacks such as on_map are not recorded: pass them to replay"
+                )
+                raise ConfigError(
+                    f"receiver.settings.{key}",
+                    value,
+                    "a JSON value: a finite number, a string, a list or a table of them",
+                    hint,
+                ) from None
 
     def to_json(self) -> str:
         """The setup as one JSON object."""

@@ -21,6 +21,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from hil.errors import ConfigError
 from hil.signals.schedule import HopSchedule
 from hil.signals.waveforms import (
@@ -38,6 +40,12 @@ FRESH_WATER_20C_MPS = 1482.3
 
 # Tolerance for "Δf·T_h is an integer" (relative to the product).
 _INTEGER_TOLERANCE = 1e-6
+#: The longest sounding hop, samples: the synthesiser and the receivers hold a hop's tone
+#: table and correlators in memory (2**24 float64 samples = 128 MiB per table).
+MAX_HOP_SAMPLES = 1 << 24
+#: Sound speeds a design may assume, m/s (water of 0-95 °C and 0-42 ppt, with margin; the
+#: experiment file's ``tank.sound_speed_mps`` allows the same).
+WATER_SOUND_SPEED_MPS = (1300.0, 1700.0)
 
 
 @dataclass(frozen=True)
@@ -186,6 +194,7 @@ def check_design(spec: WaveformSpec, schedule: HopSchedule | None = None) -> Hop
     if not (math.isfinite(spec.fs_hz) and spec.fs_hz > 0):
         raise ConfigError("fs_hz", spec.fs_hz, "> 0 Hz")
     sch = build_schedule(spec) if schedule is None else schedule
+    _check_hop_length(sch, spec.fs_hz)
 
     alpha_max = doppler_scale(spec.max_speed_mps, c)
     f_max = sch.max_frequency_hz()
@@ -210,7 +219,8 @@ def check_design(spec: WaveformSpec, schedule: HopSchedule | None = None) -> Hop
                 sch.hop_s,
                 f"a multiple of 1/Δf = {1 / df:.6g} s so that Δf·T_h is an integer "
                 f"(Δf = {df:.6g} Hz gives Δf·T_h = {product:.6g})",
-                f"try --hop {lo:.6g} or --hop {hi:.6g}, or change the bandwidth",
+                f"try {' or '.join(f'--hop {h:.6g}' for h in (lo, hi) if h > 0)}, "
+                "or change the bandwidth",
             )
 
     r_unamb = sch.unambiguous_range_m(c)
@@ -238,3 +248,39 @@ def check_design(spec: WaveformSpec, schedule: HopSchedule | None = None) -> Hop
                 "raise --min-speed, lengthen --hop, or raise the carrier",
             )
     return sch
+
+
+def check_water_sound_speed(field: str, value: float, hint: str) -> float:
+    """``value`` (m/s) when it is a sound speed of water (:data:`WATER_SOUND_SPEED_MPS`), else
+    a ConfigError naming ``field`` with ``hint``.
+
+    >>> check_water_sound_speed("--sound-speed", 1e12, "e.g. 1500")
+    Traceback (most recent call last):
+    ...
+    hil.errors.ConfigError: --sound-speed = 1000000000000.0 is not allowed: must be a sound \
+speed of water, 1300 .. 1700 m/s; e.g. 1500
+    """
+    lo, hi = WATER_SOUND_SPEED_MPS
+    if not (math.isfinite(value) and lo <= value <= hi):
+        raise ConfigError(field, value, f"a sound speed of water, {lo:g} .. {hi:g} m/s", hint)
+    return float(value)
+
+
+def _check_hop_length(sch: HopSchedule, fs_hz: float) -> None:
+    """Refuse a sounding hop (of one period) longer than :data:`MAX_HOP_SAMPLES` at
+    ``fs_hz`` (Hz): its tables would not fit in memory."""
+    hops = sch.hops(0, sch.period_hops)
+    sounding = hops.duration_s[hops.amplitude > 0]
+    longest = float(np.max(sounding)) if sounding.size else 0.0
+    limit = MAX_HOP_SAMPLES / fs_hz
+    if not longest * fs_hz <= MAX_HOP_SAMPLES:
+        fields = {"fmcw-saw": "sweep_s", "fmcw-tri": "sweep_s", "cw-pulse": "pulse_s",
+                  "lfm-pulse": "pulse_s"}  # fmt: skip
+        field = fields.get(sch.family, "hop_s")
+        raise ConfigError(
+            field,
+            longest,
+            f"<= {limit:.6g} s ({MAX_HOP_SAMPLES} samples at {fs_hz:g} Hz, the longest hop "
+            "held in memory)",
+            "shorten it (more hops in a period give the same unambiguous range)",
+        )

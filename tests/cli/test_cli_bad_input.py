@@ -102,8 +102,8 @@ def test_receiver_option_of_the_wrong_type(
     line = _error(capsys, ["estimate", "--input", wav, "--schedule", schedule,
                            "--option", "n_doppler=abc"])  # fmt: skip
     assert line == (
-        "hil estimate: error: n_doppler = 'abc' is not allowed: must be an integer "
-        "(a gcas option); e.g. n_doppler=64"
+        "hil estimate: error: receiver.options.n_doppler = 'abc' is not allowed: must be an"
+        " integer (a gcas option); e.g. n_doppler=64"
     )
 
 

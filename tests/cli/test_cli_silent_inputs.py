@@ -59,7 +59,6 @@ def test_estimate_refuses_an_empty_or_too_short_wav(
         ("--max-speed", "nan", "a finite speed >= 0 m/s"),
         ("--max-speed", "-1", "a finite speed >= 0 m/s"),
         ("--max-range", "inf", "a finite range > 0 m"),
-        ("--sound-speed", "0", "a finite sound speed > 0 m/s"),
     ],
 )
 def test_estimate_refuses_a_speed_or_range_that_is_not_a_finite_number_in_range(

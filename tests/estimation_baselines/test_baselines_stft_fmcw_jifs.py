@@ -190,7 +190,7 @@ def test_jifs_keeps_a_fall_whose_rise_is_not_yet_ready(kit: Any) -> None:
         ("stft", HFC, {"ns_reading": "frames"}, "ns_reading = 'frames' is not allowed"),
         ("stft", HFC, {"n_s": 0}, "n_s = 0 is not allowed: must be an integer >= 1"),
         ("jifs", HFC, {"rise_ratio": 1.5}, "rise_ratio = 1.5 is not allowed: must be 0 < value"),
-        ("jifs", HFC, {"typo": 1}, "extra = ['typo'] is not allowed"),
+        ("jifs", HFC, {"typo": 1}, "receiver.options.typo = 1 is not allowed"),
         ("fmcw", SAW, {"speed_mode": "x"}, "speed_mode = 'x' is not allowed"),
     ],
 )

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -175,6 +176,13 @@ def test_normalise_result_refuses(result: Any, message: str) -> None:
 # -- runners -----------------------------------------------------------------------------
 
 
+_CORES = os.cpu_count() or 1
+_LOCAL_WORKERS = (
+    f"an integer in 1..{4 * _CORES} (4 per core, {_CORES} cores); one per core is the default;"
+    " for more, run on a Dask cluster (--scheduler)"
+)
+
+
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [
@@ -188,8 +196,9 @@ def test_normalise_result_refuses(result: Any, message: str) -> None:
             "--dask-workers = 2 is not allowed: must be not given together with --scheduler; "
             "pick one",
         ),
-        ({"workers": 0}, "--workers = 0 is not allowed: must be an integer >= 1"),
-        ({"dask_workers": 0}, "--dask-workers = 0 is not allowed: must be an integer >= 1"),
+        ({"workers": 0}, f"--workers = 0 is not allowed: must be {_LOCAL_WORKERS}"),
+        ({"dask_workers": 0}, f"--dask-workers = 0 is not allowed: must be {_LOCAL_WORKERS}"),
+        ({"workers": 100_000}, f"--workers = 100000 is not allowed: must be {_LOCAL_WORKERS}"),
         (
             {"scheduler": "localhost:8786"},
             "--scheduler = 'localhost:8786' is not allowed: must be an address tcp://HOST:PORT "

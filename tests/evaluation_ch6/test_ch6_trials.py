@@ -198,7 +198,7 @@ def test_noise_sigma_golden() -> None:
         ({"m_hops": 2}, "m_hops = 2 is not allowed: must be an integer in 3..64"),
         (
             {"receiver": "stft", "receiver_options": {"stft": {"nope": 1}}},
-            "extra = ['nope'] is not allowed",
+            "receiver.options.nope = 1 is not allowed",
         ),
         ({"bandwidth_hz": 4500.0}, "hop_s = 0.01 is not allowed: must be a multiple of 1/Δf"),
     ],

@@ -515,7 +515,7 @@ def _stopped_as_interrupted(
     code: int, out: str, h5: Path, how: str, said: str
 ) -> tuple[dict[str, Any], Any]:
     """Check a run interrupted by ``how`` (its exit ``code``, the stdout ``out`` of ``hil
-    tank-run --json``, its recording ``h5``; ``said`` shown on a failure): exit 1, a summary
+    tank-run --json``, its recording ``h5``; ``said`` shown on a failure): exit 130, a summary
     that says it was interrupted and how, the recording readable and ending with the stop's
     event. The summary and the recording's instrument entry."""
     import h5py
@@ -523,7 +523,7 @@ def _stopped_as_interrupted(
     from hil.recording.instrument import read_entry
     from hil.recording.reader import RunRecording
 
-    assert code == 1, said  # the run stopped before its end
+    assert code == 130, said  # interrupted: the run stopped before its end
     summary = json.loads(out.strip().splitlines()[-1])
     assert (summary["interrupted"], summary["error"]) == (True, f"interrupted ({how})"), said
     with RunRecording.open(h5) as rec:

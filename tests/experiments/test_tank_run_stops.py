@@ -181,8 +181,12 @@ def test_two_ctrl_c_in_a_row_stop_the_run_once_and_safely(tmp_path: Path) -> Non
     proc.send_signal(signal.SIGINT)
     proc.send_signal(signal.SIGINT)  # at once: during the safe stop the first started
     _, err = proc.communicate(timeout=300)
-    assert proc.returncode == 1, err  # the run stopped early: its summary says why
+    assert proc.returncode == 130, err  # stopped early by Ctrl-C: its summary says so
     assert "Traceback" not in err
+    assert err.endswith(
+        f"hil tank-run: interrupted (Ctrl-C): the run stopped early and safely; {out} holds it"
+        ' up to the stop (summary.json: "interrupted": true)\n'
+    ), err
     summary = json.loads((out / "summary.json").read_text())
     assert summary["interrupted"] is True and summary["error"] == "interrupted (Ctrl-C)"
     with RunRecording.open(out / "run.h5") as rec:
@@ -212,7 +216,7 @@ def test_sigterm_while_the_run_sets_up_ends_it_in_one_line(tmp_path: Path) -> No
 
         with RunRecording.open(out / "run.h5") as rec:
             assert rec.events()[-1].text == "stop: interrupted (SIGTERM)"
-        assert proc.returncode == 1
+        assert proc.returncode == 130
     else:
         assert proc.returncode == 130 and err.endswith("hil tank-run: interrupted (SIGTERM)\n")
 

@@ -7,6 +7,7 @@ range and what to do; the receiver runs them before it builds anything.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -53,11 +54,16 @@ def minimum_m_hops(code: NDArray[np.int64], upper: int = M_MAX) -> int:
     raise ConfigError("code", code.tolist(), f"a code whose codewords differ at some M <= {upper}")
 
 
-def check_option_names(names: set[str]) -> None:
-    """Refuse keyword options that the receiver does not have."""
-    unknown = sorted(names - OPTION_NAMES)
+def check_option_names(options: dict[str, Any]) -> None:
+    """Refuse keyword options that the receiver does not have, naming the first."""
+    unknown = sorted(set(options) - OPTION_NAMES)
     if unknown:
-        raise ConfigError("gcas option", unknown, f"one of {sorted(OPTION_NAMES)}")
+        raise ConfigError(
+            f"receiver.options.{unknown[0]}",
+            options[unknown[0]],
+            f"an option of the gcas receiver: {', '.join(sorted(OPTION_NAMES))}",
+            "check its spelling, or choose the receiver it belongs to",
+        )
 
 
 def check_schedule(schedule: HopSchedule, fs_hz: float, c: float, v_max: float) -> None:

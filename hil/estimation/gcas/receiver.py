@@ -290,7 +290,7 @@ class GcasReceiver:
         **extra: Any,
     ) -> GcasReceiver:
         """The registry's common constructor (:mod:`hil.estimation.registry`)."""
-        check_option_names(set(extra))
+        check_option_names(extra)
         return cls(
             schedule,
             fs_hz,

@@ -194,6 +194,8 @@ def calibrate_level(
         raise ConfigError("amplitude", amplitude, "in (0, 1] (full scale)")
     if not (math.isfinite(adc_full_scale_v) and adc_full_scale_v > 0):
         raise ConfigError("adc_full_scale_v", adc_full_scale_v, "a voltage > 0 V")
+    if not math.isfinite(input_gain_db):
+        raise ConfigError("input_gain_db", input_gain_db, "a finite gain, dB")
     max_lat = round(0.1 * fs) if max_latency_frames is None else max_latency_frames
     check_positive_int("max_latency_frames", max_lat, 0)
     n = round(duration_s * fs)

@@ -41,6 +41,11 @@ from hil.experiments.calibration.device import (
 
 KIND = "response"
 
+#: The longest measuring sweep, s: its samples (and the recording's) are held in memory.
+MAX_SWEEP_S = 60.0
+#: The longest equaliser, taps: its FFTs are of the taps' length.
+MAX_EQUALISER_TAPS = 1 << 16
+
 
 def exponential_sweep(
     samplerate: float,
@@ -74,6 +79,11 @@ def exponential_sweep(
             f"in (f_start_hz = {f_start_hz:g}, {samplerate / 2:g}] Hz (Nyquist)",
             "lower the stop frequency or raise the sample rate",
         )
+    if not (math.isfinite(duration_s) and duration_s <= MAX_SWEEP_S):
+        raise ConfigError(
+            "duration_s", duration_s, f"a finite duration <= {MAX_SWEEP_S:g} s",
+            "a sweep of a few seconds measures the response; repeat the calibration to average",
+        )  # fmt: skip
     n = round(duration_s * samplerate)
     fade_in = round(3 * samplerate / f_start_hz)
     fade_out = round(1e-3 * samplerate)
@@ -334,6 +344,16 @@ def calibrate_response(
     _check_band(band, sweep, fs)
     check_positive_int("ir_length", ir_length, 16)
     check_positive_int("equaliser_taps", equaliser_taps, 16)
+    if equaliser_taps > MAX_EQUALISER_TAPS:
+        raise ConfigError(
+            "equaliser_taps", equaliser_taps, f"an integer in [16, {MAX_EQUALISER_TAPS}]",
+            "a transducer's response needs a few thousand taps at most",
+        )  # fmt: skip
+    if not math.isfinite(regularisation_db):
+        raise ConfigError(
+            "regularisation_db", regularisation_db, "a finite number of dB re peak |H|^2",
+            "e.g. -40 (deeper: a sharper, noisier inverse)",
+        )  # fmt: skip
     if isinstance(pre_samples, bool) or not isinstance(pre_samples, int):
         raise ConfigError("pre_samples", pre_samples, f"an integer in [0, {ir_length // 2}]")
     if not 0 <= pre_samples <= ir_length // 2:
