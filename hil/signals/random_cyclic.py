@@ -21,6 +21,9 @@ IntArray = NDArray[np.int64]
 # Node expansions per randomised depth-first attempt before restarting with fresh randomness.
 _EXPANSIONS_PER_ATTEMPT = 20_000
 _MAX_ATTEMPTS = 50
+#: The most codes a search may draw (``candidates``): each costs about 0.3 ms (N_F = 4-8,
+#: L = 17-64), so this many take about half a minute.
+MAX_CANDIDATES = 100_000
 
 
 def distinct_window_count(n_tones: int, window: int) -> int:
@@ -252,8 +255,13 @@ def random_cyclic_code(
     (17, True, True)
     """
     validate_code_request(n_tones, length, window)
-    if candidates < 1:
-        raise ConfigError("candidates", candidates, ">= 1")
+    if not 1 <= candidates <= MAX_CANDIDATES:
+        raise ConfigError(
+            "candidates",
+            candidates,
+            f"1 to {MAX_CANDIDATES} (each code drawn costs about 0.3 ms)",
+            "draw fewer codes; the best d_min rarely improves after a few hundred",
+        )
     m = int(window if m_hops is None else m_hops)
     if m < 1:
         raise ConfigError("M", m, ">= 1 hop")

@@ -111,6 +111,7 @@ def test_waveform_suggests_only_hops_it_accepts(
     [
         (["--family", "costas", "--costas-prime", "4"], "--costas-prime (prime) = 4 is not"),
         (["--m-hops", "0"], "--m-hops (M) = 0 is not"),
+        (["--candidates", "100000000"], "--candidates (candidates) = 100000000 is not"),
     ],
 )
 def test_waveform_names_the_option_of_a_design_error(

@@ -180,3 +180,12 @@ def test_costas_golden_and_negatives() -> None:
         welch_costas(12)
     with pytest.raises(ConfigError, match="primitive root of 11"):
         welch_costas(11, 3)
+
+
+@pytest.mark.parametrize("candidates", [0, -3, 100_001, 10**8])
+def test_random_cyclic_refuses_candidates_out_of_range(candidates: int) -> None:
+    with pytest.raises(ConfigError) as err:
+        random_cyclic_code(4, 17, 3, seed=1, candidates=candidates)
+    message = str(err.value)
+    assert "candidates" in message and str(candidates) in message
+    assert "1 to 100000" in message and "draw fewer codes" in message
