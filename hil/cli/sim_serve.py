@@ -13,6 +13,7 @@ the simulated GRBL 1.1h controller with stock settings, or the simulated tank's 
 from __future__ import annotations
 
 import argparse
+import math
 import signal
 import sys
 import tempfile
@@ -155,6 +156,8 @@ def _serve(port_name: str, stop: threading.Event, check: Callable[[], None] | No
 def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
     """Serve until Ctrl-C / SIGTERM (or ``stop`` is set, for tests); exit status 0."""
     stop = stop or threading.Event()
+    if args.device == "board" and not math.isfinite(args.gain):
+        raise ConfigError("--gain", args.gain, "a finite number (linear)", "e.g. --gain 0.5")
     if args.device == "tank":
         return _serve_tank(args, stop)
     if args.device == "board" and args.impl == "c":

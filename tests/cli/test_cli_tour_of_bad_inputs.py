@@ -411,3 +411,12 @@ def test_simulate_says_its_folder_holds_a_partial_simulation_after_ctrl_c(tmp_pa
         " (received.wav): simulate again into a new folder",
         "hil simulate: interrupted (Ctrl-C)",
     ], err
+
+
+@pytest.mark.parametrize("impl", ["python", "c"])
+def test_sim_serve_board_names_its_gain_option(
+    impl: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    err = _error(capsys, ["sim-serve", "board", "--impl", impl, "--gain", "nan"])
+    expected = "hil sim-serve: error: --gain = nan is not allowed: must be a finite number"
+    assert err.startswith(expected), err
