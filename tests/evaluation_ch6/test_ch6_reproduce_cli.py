@@ -85,7 +85,7 @@ def test_existing_folder_needs_resume(
         (["--items", "fig9_9"], "--items = 'fig9_9' is not allowed: must be items among"),
         (["--items", " , "], "--items = ' , ' is not allowed"),
         (["--trials-per-point", "0"], "--trials-per-point = 0 is not allowed: must be an integer"),
-        (["--workers", "0"], "--workers = 0 is not allowed: must be an integer >= 1"),
+        (["--workers", "0"], "--workers = 0 is not allowed: must be an integer in 1.."),
         (
             ["--sweeps", "/nonexistent"],
             "--sweeps = '/nonexistent' is not allowed: must be a folder",
