@@ -20,7 +20,7 @@ from hil.errors import ConfigError
 from hil.signals.presets import PRESETS, check_design, check_water_sound_speed, get_preset
 from hil.signals.schedule_file import schedule_document, write_schedule_file
 from hil.signals.synthesis import BlockSynthesizer
-from hil.signals.waveforms import FAMILIES, design_summary
+from hil.signals.waveforms import FAMILIES, check_family_fields, design_summary
 
 # Samples synthesised per block when writing the WAV: bounded memory for long files.
 _WRITE_BLOCK = 1 << 20
@@ -170,6 +170,7 @@ def run(args: argparse.Namespace) -> int:
     """Execute ``hil waveform``; return the exit status."""
     _validate_io(args)
     overrides = {field: getattr(args, opt) for opt, field in _OVERRIDES.items()}
+    check_family_fields(args.family, overrides)
     if args.sound_speed is not None:
         check_water_sound_speed("--sound-speed", args.sound_speed, "e.g. --sound-speed 1500")
     preset = get_preset(args.preset)

@@ -48,7 +48,7 @@ from hil.experiments.experiment_sections import (
 from hil.paths import resolve_calibration_dir, resolve_runs_dir
 from hil.signals.presets import check_design, get_preset
 from hil.signals.schedule import HopSchedule
-from hil.signals.waveforms import HFCCW_FAMILIES, WaveformSpec
+from hil.signals.waveforms import HFCCW_FAMILIES, WaveformSpec, check_family_fields
 from hil.toml_table import parse_toml, read_text_file
 
 __all__ = [
@@ -369,6 +369,7 @@ def _waveform(
     ``r_max`` (m), checked for the receiver; errors named under ``waveform.``."""
     preset = get_preset(wav.preset)
     try:
+        check_family_fields(wav.family, wav.overrides)
         spec = preset.spec(wav.family, sound_speed_mps=c, **wav.overrides)
         spec = spec.with_overrides(max_range_m=min(spec.max_range_m, r_max))
         schedule = check_design(spec)

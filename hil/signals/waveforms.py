@@ -34,6 +34,45 @@ FAMILIES: tuple[str, ...] = (
 HFCCW_FAMILIES: tuple[str, ...] = ("random-cyclic", "three-state")
 TONE_HOP_FAMILIES: tuple[str, ...] = ("random-cyclic", "three-state", "costas", "costas-lfm")
 
+#: The :class:`WaveformSpec` fields every family reads: the carrier and band, the sample rate
+#: and the design checks' sound speed, speeds and range (:func:`~hil.signals.presets.check_design`).
+COMMON_FIELDS: frozenset[str] = frozenset(
+    {"center_hz", "bandwidth_hz", "fs_hz", "sound_speed_mps", "max_speed_mps", "min_speed_mps",
+     "max_range_m"}
+)  # fmt: skip
+#: The fields each family reads besides :data:`COMMON_FIELDS` (:func:`build_schedule`).
+FAMILY_FIELDS: dict[str, frozenset[str]] = {
+    "random-cyclic": frozenset(
+        {"n_tones", "hop_s", "code_length", "window", "seed", "candidates", "m_hops"}
+    ),
+    "three-state": frozenset({"n_tones", "hop_s", "order", "sequence"}),
+    "fmcw-saw": frozenset({"sweep_s"}),
+    "fmcw-tri": frozenset({"sweep_s"}),
+    "costas": frozenset({"costas_prime", "hop_s"}),
+    "costas-lfm": frozenset({"costas_prime", "hop_s", "subchirp_bandwidth_hz"}),
+    "cw-pulse": frozenset({"pulse_s", "pri_s"}),
+    "lfm-pulse": frozenset({"pulse_s", "pri_s"}),
+}
+
+
+def check_family_fields(family: str, given: dict[str, Any]) -> None:
+    """Refuse a field of ``given`` (field -> value; ``None``: not given) that ``family``
+    does not read (:data:`COMMON_FIELDS`, :data:`FAMILY_FIELDS`): a design option a
+    family ignores would otherwise be dropped silently."""
+    if family not in FAMILY_FIELDS:
+        raise ConfigError("family", family, f"one of {', '.join(FAMILIES)}")
+    reads = COMMON_FIELDS | FAMILY_FIELDS[family]
+    for field, value in given.items():
+        if value is not None and field not in reads:
+            users = [f for f, fields in FAMILY_FIELDS.items() if field in fields]
+            raise ConfigError(
+                field,
+                value,
+                f"a setting the {family} family reads",
+                f"only {', '.join(users)} read it: drop it, or choose that family",
+            )
+
+
 Family = Literal[
     "random-cyclic", "three-state", "fmcw-saw", "fmcw-tri", "costas", "costas-lfm",
     "cw-pulse", "lfm-pulse",

@@ -112,6 +112,9 @@ def test_waveform_suggests_only_hops_it_accepts(
         (["--family", "costas", "--costas-prime", "4"], "--costas-prime (prime) = 4 is not"),
         (["--m-hops", "0"], "--m-hops (M) = 0 is not"),
         (["--candidates", "100000000"], "--candidates (candidates) = 100000000 is not"),
+        (["--sweep", "nan"], "--sweep (sweep_s) = nan is not"),
+        (["--family", "three-state", "--m-hops", "5"], "--m-hops (m_hops) = 5 is not"),
+        (["--family", "fmcw-saw", "--tones", "5"], "--tones (n_tones) = 5 is not"),
     ],
 )
 def test_waveform_names_the_option_of_a_design_error(

@@ -56,3 +56,17 @@ def test_a_required_key_left_out_is_still_named_as_required() -> None:
     with pytest.raises(ConfigError) as err:
         parse_experiment(text)
     assert str(err.value) == "tow.speed_mps = None is not allowed: must be a value; it is required"
+
+
+def test_a_waveform_override_the_family_does_not_read_is_refused() -> None:
+    # [waveform] overrides of another family's design would be dropped without a word.
+    text = DEFAULT_EXPERIMENT.replace("\n[waveform]\n", "\n[waveform]\noverrides = { order = 5 }\n")
+    assert text != DEFAULT_EXPERIMENT
+    with pytest.raises(ConfigError) as err:
+        parse_experiment(text)
+    assert str(err.value) == (
+        "waveform.order = 5 is not allowed: must be a setting the random-cyclic family reads; "
+        "only three-state read it: drop it, or choose that family"
+    )
+    three_state = text.replace('family = "random-cyclic"', 'family = "three-state"')
+    assert parse_experiment(three_state).waveform.order == 5

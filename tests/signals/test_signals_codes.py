@@ -22,6 +22,13 @@ from hil.signals.random_cyclic import (
     random_cyclic_code,
 )
 from hil.signals.three_state import states_from_bits, three_state_code
+from hil.signals.waveforms import (
+    COMMON_FIELDS,
+    FAMILIES,
+    FAMILY_FIELDS,
+    WaveformSpec,
+    check_family_fields,
+)
 
 
 def test_issue_golden_three_state() -> None:
@@ -189,3 +196,26 @@ def test_random_cyclic_refuses_candidates_out_of_range(candidates: int) -> None:
     message = str(err.value)
     assert "candidates" in message and str(candidates) in message
     assert "1 to 100000" in message and "draw fewer codes" in message
+
+
+@pytest.mark.parametrize("family", FAMILIES)
+def test_each_family_takes_the_settings_it_reads(family: str) -> None:
+    reads = COMMON_FIELDS | FAMILY_FIELDS[family]
+    check_family_fields(family, {field: 1 for field in reads} | {"order": None})
+    others = sorted(set().union(*FAMILY_FIELDS.values()) - reads)
+    for field in others:
+        with pytest.raises(ConfigError) as err:
+            check_family_fields(family, {field: 7})
+        users = [f for f, fields in FAMILY_FIELDS.items() if field in fields]
+        assert str(err.value) == (
+            f"{field} = 7 is not allowed: must be a setting the {family} family reads; "
+            f"only {', '.join(users)} read it: drop it, or choose that family"
+        )
+
+
+def test_the_family_fields_are_the_spec_s_and_an_unknown_family_is_named() -> None:
+    spec_fields = set(WaveformSpec.__dataclass_fields__) - {"family"}
+    assert COMMON_FIELDS | set().union(*FAMILY_FIELDS.values()) == spec_fields
+    assert set(FAMILY_FIELDS) == set(FAMILIES)
+    with pytest.raises(ConfigError, match=r"^family = 'nope' is not allowed: must be one of "):
+        check_family_fields("nope", {"order": 3})
