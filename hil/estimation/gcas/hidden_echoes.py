@@ -311,7 +311,7 @@ class HiddenEchoes:
         from the echo's, and a fit started there can stop on a sidelobe of the likelihood.
         An echo slower than that is the still water's (a wall, a moored object): these fits
         stop short of it, and it is fitted at rest instead (:meth:`_fit_still`) where they
-        find something but no echo, for a detection away from its leaks (``measure_near``)."""
+        find something but no echo (``measure_near``)."""
         c, step = self.refiner.c, 2.0 * self.refiner.speed_span_mps
         v = c * (alpha - 1.0) / (alpha + 1.0)
         n = max(1, int(math.floor(abs(v) / step)))
