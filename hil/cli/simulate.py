@@ -83,6 +83,7 @@ def run(args: argparse.Namespace) -> int:
     _check_wav_size(sc, "--duration" if args.duration is not None else "duration_s")
     if args.out is None:
         args.out = new_simulation_folder(args.scenario, dt.datetime.now())
+    _check_free_space(sc, args.out)
     claim_output_folder(args.out, "--out", holds="a simulation")
     try:
         return _write_simulation(args, sc)
@@ -116,6 +117,26 @@ def _check_wav_size(sc: Any, field: str) -> None:
             f"<= {longest:.6g} s (received.wav of {len(sc.output_channels)} float32 channels"
             f" at {sc.fs_hz:g} Hz stays within a WAV's 4 GiB)",
             "simulate a shorter run, or fewer output channels (output.channels)",
+        )
+
+
+def _check_free_space(sc: Any, out: Path) -> None:
+    """Refuse a simulation whose received.wav (float32, every output channel) would not fit
+    the free space of the disk that holds ``out`` (its nearest existing folder)."""
+    import shutil
+
+    size = 4 * len(sc.output_channels) * sc.fs_hz * sc.duration_s
+    where = Path(out).resolve()
+    while not where.exists() and where != where.parent:
+        where = where.parent
+    free = shutil.disk_usage(where).free
+    if size > free:
+        raise ConfigError(
+            "--out",
+            str(out),
+            f"a folder on a disk with room for received.wav ({size / 1e9:.3g} GB; "
+            f"{free / 1e9:.3g} GB free there)",
+            "free some space, write --out elsewhere, or simulate a shorter run",
         )
 
 

@@ -330,6 +330,32 @@ def test_simulate_refuses_a_run_longer_than_a_wav_holds(
     assert not out.exists()
 
 
+def test_simulate_refuses_a_run_its_disk_has_no_room_for(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # The disk as full as a lab's can be: 1 MB free where --out would go (2 s of att's
+    # four float32 channels at 100 kHz is 3.2 MB). Nothing is claimed or written.
+    import shutil
+
+    real = shutil.disk_usage
+
+    def nearly_full(path: object) -> object:
+        usage = real(path)  # type: ignore[arg-type]
+        return type(usage)(usage.total, usage.total - 1_000_000, 1_000_000)
+
+    monkeypatch.setattr(shutil, "disk_usage", nearly_full)
+    out = tmp_path / "runs" / "sim"
+    argv = ["simulate", "att", "--duration", "2", "--quiet", "--out", str(out)]
+    assert _error(capsys, argv) == (
+        f"hil simulate: error: --out = '{out}' is not allowed: must be a folder on a disk with"
+        " room for received.wav (0.0032 GB; 0.001 GB free there); free some space, write"
+        " --out elsewhere, or simulate a shorter run"
+    )
+    assert not out.exists()
+    monkeypatch.setattr(shutil, "disk_usage", real)
+    assert main(argv) == 0 and (out / "received.wav").stat().st_size > 3_200_000
+
+
 @pytest.mark.parametrize(
     ("options", "message"),
     [
