@@ -153,9 +153,35 @@ def _serve(port_name: str, stop: threading.Event, check: Callable[[], None] | No
             signal.signal(signal.SIGTERM, previous)
 
 
+#: The options each device reads (argparse's destinations) and their defaults: an option
+#: of another device given a value of its own is refused, not ignored.
+_DEVICE_OPTIONS: dict[str, dict[str, object]] = {
+    "board": {"delay": 0, "gain": 1.0, "impl": "python"},
+    "stage": {"tank": False},
+    "tank": {"jack": False, "experiment": None, "period": DEFAULT_PERIOD, "write": None},
+}
+
+
+def _check_device_options(args: argparse.Namespace) -> None:
+    """Refuse an option given for another device than ``args.device``."""
+    for owner, options in _DEVICE_OPTIONS.items():
+        if owner == args.device:
+            continue
+        for dest, default in options.items():
+            value = getattr(args, dest)
+            if value != default:
+                raise ConfigError(
+                    f"--{dest}",
+                    str(value) if isinstance(value, Path) else value,
+                    f"an option of sim-serve {owner}",
+                    f"sim-serve {args.device} does not read it: drop it",
+                )
+
+
 def run(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
     """Serve until Ctrl-C / SIGTERM (or ``stop`` is set, for tests); exit status 0."""
     stop = stop or threading.Event()
+    _check_device_options(args)
     if args.device == "board" and not math.isfinite(args.gain):
         raise ConfigError("--gain", args.gain, "a finite number (linear)", "e.g. --gain 0.5")
     if args.device == "tank":

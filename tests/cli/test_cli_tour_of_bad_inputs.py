@@ -449,3 +449,38 @@ def test_sim_serve_board_names_its_gain_option(
     err = _error(capsys, ["sim-serve", "board", "--impl", impl, "--gain", "nan"])
     expected = "hil sim-serve: error: --gain = nan is not allowed: must be a finite number"
     assert err.startswith(expected), err
+
+
+@pytest.mark.parametrize(
+    ("argv", "option", "owner"),
+    [
+        (["stage", "--jack"], "--jack = True", "tank"),
+        (["board", "--tank"], "--tank = True", "stage"),
+        (["stage", "--delay", "5"], "--delay = 5", "board"),
+        (["tank", "--gain", "2"], "--gain = 2.0", "board"),
+        (["board", "--period", "256"], "--period = 256", "tank"),
+        (["stage", "--experiment", "x.toml"], "--experiment = 'x.toml'", "tank"),
+    ],
+)
+def test_sim_serve_refuses_another_device_s_option(
+    argv: list[str], option: str, owner: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Each was ignored: sim-serve stage --jack served stock GRBL on a pty.
+    err = _error(capsys, ["sim-serve", *argv])
+    assert err == (
+        f"hil sim-serve: error: {option} is not allowed: must be an option of sim-serve"
+        f" {owner}; sim-serve {argv[0]} does not read it: drop it"
+    )
+
+
+def test_sim_serve_s_device_options_hold_the_parser_s_defaults() -> None:
+    import argparse
+
+    from hil.cli import sim_serve
+
+    parser = argparse.ArgumentParser()
+    sim_serve.register(parser.add_subparsers())
+    args = parser.parse_args(["sim-serve", "board"])
+    for options in sim_serve._DEVICE_OPTIONS.values():
+        for dest, default in options.items():
+            assert getattr(args, dest) == default, dest
