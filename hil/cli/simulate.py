@@ -129,7 +129,10 @@ def _check_free_space(sc: Any, out: Path) -> None:
     where = Path(out).resolve()
     while not where.exists() and where != where.parent:
         where = where.parent
-    free = shutil.disk_usage(where).free
+    usage = shutil.disk_usage(where)
+    if usage.total == 0:
+        return  # not a disk (/proc, /sys): the folder's claim says it cannot be written
+    free = usage.free
     if size > free:
         raise ConfigError(
             "--out",
