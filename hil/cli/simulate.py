@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import datetime as dt
 import json
+import os
 import re
 import sys
 from pathlib import Path
@@ -122,24 +123,25 @@ def _check_wav_size(sc: Any, field: str) -> None:
 
 def _check_free_space(sc: Any, out: Path) -> None:
     """Refuse a simulation whose received.wav (float32, every output channel) would not fit
-    the free space of the disk that holds ``out`` (its nearest existing folder)."""
-    import shutil
+    the room where ``out`` goes (:func:`~hil.experiments.live.disk_room.room_left`: its disk's
+    free space, or the file-size limit ``ulimit -f``), read at its nearest existing folder."""
+    from hil.experiments.live.disk_room import room_left
 
     size = 4 * len(sc.output_channels) * sc.fs_hz * sc.duration_s
     where = Path(out).resolve()
     while not where.exists() and where != where.parent:
         where = where.parent
-    usage = shutil.disk_usage(where)
-    if usage.total == 0:
+    if os.statvfs(where).f_blocks == 0:
         return  # not a disk (/proc, /sys): the folder's claim says it cannot be written
-    free = usage.free
-    if size > free:
+    room, bound = room_left(where / "received.wav")
+    if size > room:
         raise ConfigError(
             "--out",
             str(out),
-            f"a folder on a disk with room for received.wav ({size / 1e9:.3g} GB; "
-            f"{free / 1e9:.3g} GB free there)",
-            "free some space, write --out elsewhere, or simulate a shorter run",
+            f"a folder with room for received.wav ({size / 1e9:.3g} GB; {room / 1e9:.3g} GB"
+            f" left there: {bound})",
+            "free some space (or raise the limit), write --out elsewhere, or simulate a"
+            " shorter run",
         )
 
 

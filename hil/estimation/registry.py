@@ -57,6 +57,7 @@ def check_receiver_options(name: str, options: Mapping[str, Any]) -> None:
     """Refuse an option the receiver ``name`` does not have, or of the wrong type, before
     anything is built (an experiment file's, a sweep's): the first one, as
     ``receiver.options.KEY``. Options ``track_*`` are the tracker's, not the receiver's."""
+    from hil.estimation._baseline_common import reject_unknown
     from hil.estimation.tracking import TRACK_OPTION_PREFIX
 
     cls = receiver_class(name)
@@ -74,14 +75,7 @@ def check_receiver_options(name: str, options: Mapping[str, Any]) -> None:
         check_option_types(GcasReceiver, gcas, name, "receiver.options.")
     else:
         return
-    unknown = sorted(set(own) - known)
-    if unknown:
-        raise ConfigError(
-            f"receiver.options.{unknown[0]}",
-            own[unknown[0]],
-            f"an option of the {name} receiver: {', '.join(sorted(known))}",
-            "check its spelling, or choose the receiver it belongs to",
-        )
+    reject_unknown(own, known, name)
     if "background" in (stage or ()) and "background" in own:
         from hil.estimation.background import check_background_path
 

@@ -13,18 +13,9 @@ from scipy.io import wavfile
 from hil.cli.main import main
 from hil.experiments.experiment import DEFAULT_EXPERIMENT
 
+from .conftest import one_line_error
+
 GARBAGE = bytes(np.random.default_rng(22).integers(0, 256, 3000, dtype=np.uint8))
-
-
-def _error(capsys: pytest.CaptureFixture[str], argv: list[str]) -> str:
-    """Run ``hil ARGV``; assert exit status 2 and one line on stderr; return that line."""
-    status = main(argv)
-    err = capsys.readouterr().err
-    assert status == 2, err
-    assert "Traceback" not in err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1, err
-    return lines[0]
 
 
 @pytest.fixture(scope="module")
@@ -52,7 +43,7 @@ def test_binary_garbage_as_a_toml_file(
 ) -> None:
     path = tmp_path / "garbage.toml"
     path.write_bytes(GARBAGE)
-    line = _error(capsys, [a.format(f=path, d=tmp_path / "o") for a in argv])
+    line = one_line_error(capsys, [a.format(f=path, d=tmp_path / "o") for a in argv])
     assert f"{what} = '{path}' is not allowed: must be a UTF-8 text file; byte " in line
     assert "not text: is it the right file?" in line
 
@@ -63,7 +54,7 @@ def test_binary_garbage_as_a_schedule(
 ) -> None:
     path = tmp_path / "garbage.json"
     path.write_bytes(GARBAGE)
-    line = _error(capsys, ["estimate", "--input", str(sim_run / "received0.wav"),
+    line = one_line_error(capsys, ["estimate", "--input", str(sim_run / "received0.wav"),
                            "--schedule", str(path)])  # fmt: skip
     assert f"schedule = '{path}' is not allowed: must be a UTF-8 text file" in line
 
@@ -75,7 +66,7 @@ def test_schedule_with_text_for_fs(
     doc["fs"] = "fast"
     path = tmp_path / "fast.json"
     path.write_text(json.dumps(doc))
-    line = _error(capsys, ["estimate", "--input", str(sim_run / "received0.wav"),
+    line = one_line_error(capsys, ["estimate", "--input", str(sim_run / "received0.wav"),
                            "--schedule", str(path)])  # fmt: skip
     assert line == (
         "hil estimate: error: schedule.fs = 'fast' is not allowed: must be a number > 0 (Hz); "
@@ -90,7 +81,7 @@ def test_schedule_with_a_garbage_period(
     doc["period"]["code"] = "garbage"
     path = tmp_path / "period.json"
     path.write_text(json.dumps(doc))
-    line = _error(capsys, ["estimate", "--input", str(sim_run / "received0.wav"),
+    line = one_line_error(capsys, ["estimate", "--input", str(sim_run / "received0.wav"),
                            "--schedule", str(path)])  # fmt: skip
     assert line.startswith("hil estimate: error: schedule.code = 'garbage' is not allowed")
 
@@ -99,7 +90,7 @@ def test_receiver_option_of_the_wrong_type(
     sim_run: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     wav, schedule = str(sim_run / "received0.wav"), str(sim_run / "schedule.json")
-    line = _error(capsys, ["estimate", "--input", wav, "--schedule", schedule,
+    line = one_line_error(capsys, ["estimate", "--input", wav, "--schedule", schedule,
                            "--option", "n_doppler=abc"])  # fmt: skip
     assert line == (
         "hil estimate: error: receiver.options.n_doppler = 'abc' is not allowed: must be an"
@@ -122,7 +113,7 @@ def test_receiver_option_text_for_a_speed(
         'options = { background = "simulated" }',
         'options = { background = "simulated", reverb_speed_mps = "fast" }',
     )
-    line = _error(capsys, ["tank-run", str(path)])
+    line = one_line_error(capsys, ["tank-run", str(path)])
     assert line == (
         "hil tank-run: error: receiver.options.reverb_speed_mps = 'fast' is not allowed: must "
         "be 'auto' or a speed >= 0 m/s; give a number such as 0.8, 0 to turn the band off, "
@@ -134,7 +125,7 @@ def test_quoted_false_is_not_read_as_true(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     path = _experiment(tmp_path, "reverberation = true", 'reverberation = "false"')
-    line = _error(capsys, ["tank-run", str(path)])
+    line = one_line_error(capsys, ["tank-run", str(path)])
     assert line == (
         "hil tank-run: error: simulation.reverberation = 'false' is not allowed: must be true "
         "or false (a TOML boolean, unquoted); write reverberation = false"
@@ -144,14 +135,14 @@ def test_quoted_false_is_not_read_as_true(
 def test_quoted_false_in_a_scenario(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = tmp_path / "s.toml"
     path.write_text('preset = "att"\nduration_s = 0.1\n[output]\nplots = "false"\n')
-    line = _error(capsys, ["simulate", str(path), "--out", str(tmp_path / "o")])
+    line = one_line_error(capsys, ["simulate", str(path), "--out", str(tmp_path / "o")])
     assert "output.plots = 'false' is not allowed: must be true or false" in line
     assert line.endswith("write plots = false")
 
 
 def test_misspelt_simulated_device(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = _experiment(tmp_path, 'board = "sim://board"', 'board = "sim://bord"')
-    line = _error(capsys, ["tank-run", str(path)])
+    line = one_line_error(capsys, ["tank-run", str(path)])
     assert line == (
         "hil tank-run: error: devices.board = 'sim://bord' is not allowed: must be sim://board "
         "(a simulated board); did you mean sim://board?"
@@ -162,7 +153,7 @@ def test_wav_over_the_size_limit_is_refused_before_writing(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "big.wav"
-    line = _error(capsys, ["waveform", "--duration", "100000", "--out", str(out)])
+    line = one_line_error(capsys, ["waveform", "--duration", "100000", "--out", str(out)])
     assert line == (
         "hil waveform: error: --duration = 100000.0 is not allowed: must be a WAV of at most "
         "--max-size 4 GB; 100000 s at 100000 Hz is 40 GB of float32 WAV; shorten --duration "
@@ -174,7 +165,9 @@ def test_wav_over_the_size_limit_is_refused_before_writing(
 def test_code_shorter_than_the_window_blames_the_code_length(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    line = _error(capsys, ["waveform", "--code-length", "2", "--out", str(tmp_path / "a.wav")])
+    line = one_line_error(
+        capsys, ["waveform", "--code-length", "2", "--out", str(tmp_path / "a.wav")]
+    )
     assert line == (
         "hil waveform: error: --code-length (code_length) = 2 is not allowed: must be >= the "
         "window W = 3 (a code holds its windows); lengthen the code to >= 3 or shorten the "
@@ -185,7 +178,7 @@ def test_code_shorter_than_the_window_blames_the_code_length(
 def test_calibration_band_given_high_first(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    line = _error(capsys, ["calibrate", "response", "--band", "16000", "4000",
+    line = one_line_error(capsys, ["calibrate", "response", "--band", "16000", "4000",
                            "--store", str(tmp_path)])  # fmt: skip
     assert line == (
         "hil calibrate: error: --band (band_hz) = '16000 4000' is not allowed: must be LOW "

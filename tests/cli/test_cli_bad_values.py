@@ -7,14 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from hil.cli.main import main
-
-
-def _error(capsys: pytest.CaptureFixture[str], argv: list[str]) -> str:
-    assert main(argv) == 2
-    err = capsys.readouterr().err
-    assert "Traceback" not in err and err.count("\n") == 1, err
-    return err.rstrip("\n")
+from .conftest import one_line_error
 
 
 def test_a_symlink_loop_as_the_experiment_file(
@@ -22,13 +15,13 @@ def test_a_symlink_loop_as_the_experiment_file(
 ) -> None:
     loop = tmp_path / "loop.toml"
     loop.symlink_to(loop)
-    assert _error(capsys, ["tank-run", str(loop)]) == (
+    assert one_line_error(capsys, ["tank-run", str(loop)]) == (
         f"hil tank-run: error: Too many levels of symbolic links: {loop}"
     )
 
 
 def test_a_negative_waveform_seed(capsys: pytest.CaptureFixture[str]) -> None:
-    assert _error(capsys, ["waveform", "--duration", "0.05", "--seed", "-1"]) == (
+    assert one_line_error(capsys, ["waveform", "--duration", "0.05", "--seed", "-1"]) == (
         "hil waveform: error: --seed = -1 is not allowed: must be an integer >= 0; e.g. --seed 1"
     )
 
@@ -63,7 +56,7 @@ def test_a_replay_option_of_the_wrong_kind(
     option: str, allowed: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     run = _recording(tmp_path / "run.h5")
-    assert _error(capsys, ["replay", str(run), "--option", option]) == (
+    assert one_line_error(capsys, ["replay", str(run), "--option", option]) == (
         f"hil replay: error: --option = '{option}' is not allowed: must be {allowed}"
     )
 
@@ -79,7 +72,7 @@ def test_watch_blames_an_unusable_host_not_the_port(
     host: str, why: str | None, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     run = _recording(tmp_path / "run.h5")
-    err = _error(capsys, ["watch", str(run), "--host", host])
+    err = one_line_error(capsys, ["watch", str(run), "--host", host])
     assert err.startswith(
         f"hil watch: error: --host (host) = '{host}' is not allowed: must be a name or address"
         " of this machine; cannot listen there: "

@@ -8,22 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from hil.cli.main import main
-
-
-def _error(capsys: pytest.CaptureFixture[str], argv: list[str]) -> str:
-    assert main(argv) == 2
-    err = capsys.readouterr().err
-    assert "Traceback" not in err and err.count("\n") == 1, err
-    return err.rstrip("\n")
-
-
-@pytest.fixture
-def schedule_and_wav(tmp_path: Path) -> tuple[Path, Path]:
-    wav, schedule = tmp_path / "tx.wav", tmp_path / "tx.json"
-    argv = ["waveform", "--duration", "0.05", "--out", str(wav), "--schedule", str(schedule)]
-    assert main(argv) == 0
-    return schedule, wav
+from .conftest import one_line_error
 
 
 def _wav(path: Path, samples: int, fs: int = 100_000) -> Path:
@@ -45,7 +30,7 @@ def test_estimate_refuses_an_empty_or_too_short_wav(
     schedule, _ = schedule_and_wav
     short = _wav(tmp_path / "short.wav", samples)
     capsys.readouterr()
-    err = _error(capsys, ["estimate", "--schedule", str(schedule), "--input", str(short)])
+    err = one_line_error(capsys, ["estimate", "--schedule", str(schedule), "--input", str(short)])
     assert err == (
         f"hil estimate: error: --input = '{short}' is not allowed: must be at least one hop of"
         f" signal (0.01 s = 1000 samples at 100000 Hz); it holds {samples} sample"
@@ -71,7 +56,7 @@ def test_estimate_refuses_a_speed_or_range_that_is_not_a_finite_number_in_range(
     schedule, wav = schedule_and_wav
     capsys.readouterr()
     argv = ["estimate", "--schedule", str(schedule), "--input", str(wav), option, value]
-    err = _error(capsys, argv)
+    err = one_line_error(capsys, argv)
     assert err == (
         f"hil estimate: error: {option} = {float(value)!r} is not allowed: must be {allowed};"
         " give a number such as the default"
@@ -82,12 +67,12 @@ def test_stage_refuses_an_empty_url_from_the_option_or_the_environment(
     capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     allowed = "a stage URL such as sim://stage, /dev/ttyUSB0 or serial:///dev/ttyACM0"
-    assert _error(capsys, ["stage", "status", "--url", ""]) == (
+    assert one_line_error(capsys, ["stage", "status", "--url", ""]) == (
         f"hil stage: error: --url = '' is not allowed: must be {allowed}; give the stage's"
         " URL, or leave --url out for sim://stage"
     )
     monkeypatch.setenv("HIL_STAGE_URL", " ")
-    assert _error(capsys, ["stage", "status"]) == (
+    assert one_line_error(capsys, ["stage", "status"]) == (
         f"hil stage: error: HIL_STAGE_URL = ' ' is not allowed: must be {allowed}; set it to"
         " the stage's URL, or unset it for sim://stage"
     )
@@ -98,7 +83,7 @@ def test_calibrate_refuses_a_block_size_below_one_frame(
     blocksize: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     argv = ["calibrate", "latency", "--blocksize", blocksize, "--store", str(tmp_path)]
-    assert _error(capsys, argv) == (
+    assert one_line_error(capsys, argv) == (
         f"hil calibrate: error: --blocksize = {blocksize} is not allowed: must be an integer"
         " >= 1 frames; e.g. 256"
     )

@@ -16,20 +16,7 @@ import pytest
 
 from hil.cli.main import main
 
-
-def _error(capsys: pytest.CaptureFixture[str], argv: list[str]) -> str:
-    assert main(argv) == 2
-    err = capsys.readouterr().err
-    assert "Traceback" not in err and err.count("\n") == 1, err
-    return err.rstrip("\n")
-
-
-@pytest.fixture
-def schedule_and_wav(tmp_path: Path) -> tuple[Path, Path]:
-    wav, schedule = tmp_path / "tx.wav", tmp_path / "tx.json"
-    argv = ["waveform", "--duration", "0.05", "--out", str(wav), "--schedule", str(schedule)]
-    assert main(argv) == 0
-    return schedule, wav
+from .conftest import one_line_error
 
 
 @pytest.mark.parametrize("value", ["0", "340", "20000", "1e12", "nan"])
@@ -40,7 +27,7 @@ def test_estimate_takes_a_sound_speed_of_water_only(
     schedule, wav = schedule_and_wav
     capsys.readouterr()
     argv = ["estimate", "--schedule", str(schedule), "--input", str(wav)]
-    assert _error(capsys, [*argv, "--sound-speed", value]) == (
+    assert one_line_error(capsys, [*argv, "--sound-speed", value]) == (
         f"hil estimate: error: --sound-speed = {float(value)!r} is not allowed: must be a sound"
         " speed of water, 1300 .. 1700 m/s; e.g. --sound-speed 1500"
     )
@@ -56,7 +43,7 @@ def test_estimate_refuses_a_schedule_written_for_another_sound_speed(
     assert '"sound_speed_mps": 1e9' in text
     schedule.write_text(text)
     capsys.readouterr()
-    err = _error(capsys, ["estimate", "--schedule", str(schedule), "--input", str(wav)])
+    err = one_line_error(capsys, ["estimate", "--schedule", str(schedule), "--input", str(wav)])
     assert err == (
         "hil estimate: error: schedule.sound_speed_mps = 1000000000.0 is not allowed: must be"
         " a sound speed of water, 1300 .. 1700 m/s; give --sound-speed"
@@ -67,7 +54,7 @@ def test_waveform_takes_a_sound_speed_of_water_only(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     argv = ["waveform", "--out", str(tmp_path / "w.wav"), "--sound-speed", "340"]
-    assert _error(capsys, argv) == (
+    assert one_line_error(capsys, argv) == (
         "hil waveform: error: --sound-speed = 340.0 is not allowed: must be a sound speed of"
         " water, 1300 .. 1700 m/s; e.g. --sound-speed 1500"
     )
@@ -91,7 +78,7 @@ def test_waveform_refuses_a_hop_too_long_to_hold(
 ) -> None:
     # A 1e9 s hop used to ask for 728 TiB of tone table.
     argv = ["waveform", "--duration", "0.05", "--out", str(tmp_path / "w.wav"), *options]
-    assert _error(capsys, argv) == (
+    assert one_line_error(capsys, argv) == (
         f"hil waveform: error: {option} ({field}) = {value!r} is not allowed: must be <= 167.772"
         " s (16777216 samples at 100000 Hz, the longest hop held in memory); shorten it (more"
         " hops in a period give the same unambiguous range)"
@@ -102,7 +89,7 @@ def test_waveform_suggests_only_hops_it_accepts(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     argv = ["waveform", "--out", str(tmp_path / "w.wav"), "--tones", "100000"]
-    err = _error(capsys, argv)
+    err = one_line_error(capsys, argv)
     assert err.endswith("try --hop 22.7273, or change the bandwidth"), err
 
 
@@ -120,7 +107,7 @@ def test_waveform_suggests_only_hops_it_accepts(
 def test_waveform_names_the_option_of_a_design_error(
     options: list[str], named: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    err = _error(capsys, ["waveform", "--out", str(tmp_path / "w.wav"), *options])
+    err = one_line_error(capsys, ["waveform", "--out", str(tmp_path / "w.wav"), *options])
     assert err.startswith(f"hil waveform: error: {named} allowed: must be "), err
 
 
@@ -133,7 +120,9 @@ def test_estimate_refuses_an_empty_background_file(
     empty.write_bytes(b"")
     capsys.readouterr()
     argv = ["estimate", "--schedule", str(schedule), "--input", str(wav)]
-    err = _error(capsys, [*argv, "--receiver", "gcas-bg", "--option", f"background={empty}"])
+    err = one_line_error(
+        capsys, [*argv, "--receiver", "gcas-bg", "--option", f"background={empty}"]
+    )
     assert err == (
         f"hil estimate: error: receiver.options.background = '{empty}' is not allowed: must be"
         " a .npy file of one code period; it cannot be read (No data left in file); capture"
@@ -192,7 +181,7 @@ def test_a_scene_sweep_names_the_receiver_option_where_the_file_gives_it(
     # [fixed] refuses, silently ignored (background) or shown truncated (m_hops = 2).
     sweep = _scene_sweep(tmp_path, fixed, grid)
     argv = ["sweep", str(sweep), "--out", str(tmp_path / "out"), "--serial", "--quiet"]
-    assert _error(capsys, argv) == f"hil sweep: error: {message}"
+    assert one_line_error(capsys, argv) == f"hil sweep: error: {message}"
     assert not (tmp_path / "out" / "results.jsonl").exists()
 
 
@@ -201,7 +190,7 @@ def test_a_scene_sweep_names_an_unknown_receiver_option(
 ) -> None:
     sweep = _scene_sweep(tmp_path, 'receiver = "gcas-mti"\nreceiver_options = {bogus = 1}')
     argv = ["sweep", str(sweep), "--out", str(tmp_path / "out"), "--serial", "--quiet"]
-    err = _error(capsys, argv)
+    err = one_line_error(capsys, argv)
     assert err.startswith(
         "hil sweep: error: fixed.receiver_options.bogus = 1 is not allowed: must be an option"
         " of the gcas receiver: attenuation_db, cancel, "
@@ -228,7 +217,7 @@ def test_estimate_names_an_unknown_receiver_option_and_its_value(
     schedule, wav = schedule_and_wav
     capsys.readouterr()
     argv = ["estimate", "--schedule", str(schedule), "--input", str(wav), "--receiver", receiver]
-    err = _error(capsys, [*argv, "--option", "bogus=2"])
+    err = one_line_error(capsys, [*argv, "--option", "bogus=2"])
     assert err.startswith(f"hil estimate: error: {message}"), err
 
 
@@ -270,7 +259,7 @@ def test_a_tank_run_names_a_bad_gcas_bg_option(
     # captured (background = 3 as a TypeError traceback, refine named without its table).
     experiment = _experiment(tmp_path, capsys, options)
     argv = ["tank-run", str(experiment), "--virtual-time", "--no-live"]
-    err = _error(capsys, [*argv, "--out", str(tmp_path / "run")])
+    err = one_line_error(capsys, [*argv, "--out", str(tmp_path / "run")])
     assert err.startswith(f"hil tank-run: error: {message}"), err
     assert not (tmp_path / "run").exists()
 
@@ -286,7 +275,7 @@ def test_a_tank_sweep_refuses_its_experiments_receiver_option_before_any_trial(
         f'[fixed]\nexperiment = "{experiment}"\n'
     )
     out = tmp_path / "out"
-    err = _error(capsys, ["sweep", str(sweep), "--out", str(out), "--serial", "--quiet"])
+    err = one_line_error(capsys, ["sweep", str(sweep), "--out", str(out), "--serial", "--quiet"])
     assert err == (
         "hil sweep: error: receiver.options.refine = 'yes' is not allowed: must be true or false"
         " (a gcas-bg option); at grid point {'tow_speed_mps': 1.0}; in the experiment"
@@ -309,7 +298,7 @@ def test_a_folder_given_for_a_text_file_is_named(
     # Was "error: Is a directory: PATH", naming neither the field nor what to do.
     folder = tmp_path / "a-folder"
     folder.mkdir()
-    err = _error(capsys, [a.replace("{d}", str(folder)) for a in argv])
+    err = one_line_error(capsys, [a.replace("{d}", str(folder)) for a in argv])
     assert err == (
         f"hil {argv[0]}: error: {field} = '{folder}' is not allowed: must be a file, not a"
         f" folder; give the {field} file in it"
@@ -322,7 +311,7 @@ def test_simulate_refuses_a_run_longer_than_a_wav_holds(
     # Was a struct.error traceback from the WAV header, after the folder was claimed.
     out = tmp_path / "sim"
     argv = ["simulate", "att", "--duration", "1e9", "--quiet", "--out", str(out)]
-    assert _error(capsys, argv) == (
+    assert one_line_error(capsys, argv) == (
         "hil simulate: error: --duration = 1000000000.0 is not allowed: must be <= 2684.35 s"
         " (received.wav of 4 float32 channels at 100000 Hz stays within a WAV's 4 GiB);"
         " simulate a shorter run, or fewer output channels (output.channels)"
@@ -330,30 +319,31 @@ def test_simulate_refuses_a_run_longer_than_a_wav_holds(
     assert not out.exists()
 
 
-def test_simulate_refuses_a_run_its_disk_has_no_room_for(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
-) -> None:
-    # The disk as full as a lab's can be: 1 MB free where --out would go (2 s of att's
-    # four float32 channels at 100 kHz is 3.2 MB). Nothing is claimed or written.
-    import shutil
+def test_simulate_refuses_a_run_its_disk_has_no_room_for(tmp_path: Path) -> None:
+    # A real limit: the process's file-size limit (ulimit -f) at 1 MB, under which writes
+    # past it fail as on a full disk; 2 s of att's four float32 channels at 100 kHz is
+    # 3.2 MB. Nothing is claimed or written; without the limit the same run is written.
+    import resource
 
-    real = shutil.disk_usage
+    def one_megabyte() -> None:
+        _default_sigint()
+        resource.setrlimit(resource.RLIMIT_FSIZE, (1_000_000, 1_000_000))
 
-    def nearly_full(path: object) -> object:
-        usage = real(path)  # type: ignore[arg-type]
-        return type(usage)(usage.total, usage.total - 1_000_000, 1_000_000)
-
-    monkeypatch.setattr(shutil, "disk_usage", nearly_full)
     out = tmp_path / "runs" / "sim"
-    argv = ["simulate", "att", "--duration", "2", "--quiet", "--out", str(out)]
-    assert _error(capsys, argv) == (
-        f"hil simulate: error: --out = '{out}' is not allowed: must be a folder on a disk with"
-        " room for received.wav (0.0032 GB; 0.001 GB free there); free some space, write"
-        " --out elsewhere, or simulate a shorter run"
+    argv = [sys.executable, "-m", "hil.cli.main", "simulate", "att", "--duration", "2",
+            "--quiet", "--out", str(out)]  # fmt: skip
+    done = subprocess.run(argv, capture_output=True, text=True, preexec_fn=one_megabyte)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr == (
+        f"hil simulate: error: --out = '{out}' is not allowed: must be a folder with room for"
+        " received.wav (0.0032 GB; 0.001 GB left there: the file-size limit (ulimit -f));"
+        " free some space (or raise the limit), write --out elsewhere, or simulate a shorter"
+        " run\n"
     )
     assert not out.exists()
-    monkeypatch.setattr(shutil, "disk_usage", real)
-    assert main(argv) == 0 and (out / "received.wav").stat().st_size > 3_200_000
+    done = subprocess.run(argv, capture_output=True, text=True, preexec_fn=_default_sigint)
+    assert done.returncode == 0, done.stderr
+    assert (out / "received.wav").stat().st_size > 3_200_000
 
 
 @pytest.mark.parametrize(
@@ -395,7 +385,7 @@ def test_calibrate_refuses_a_setting_out_of_range(
     # The first two ran out of memory (a 349 TiB sweep; the OOM killer), the others were
     # accepted (a full scale of 0 V stood for "not given").
     monkeypatch.setenv("HIL_CALIBRATION_DIR", str(tmp_path / "store"))
-    assert _error(capsys, ["calibrate", *options]) == f"hil calibrate: error: {message}"
+    assert one_line_error(capsys, ["calibrate", *options]) == f"hil calibrate: error: {message}"
     assert not (tmp_path / "store" / "simulated" / options[0]).exists()
 
 
@@ -406,7 +396,7 @@ def test_sweep_refuses_more_pool_workers_than_the_machine_holds(
     cores = os.cpu_count() or 1
     out = tmp_path / "out"
     argv = ["sweep", "scenes", "--quick", "--quiet", "--out", str(out), "--workers", "100000"]
-    assert _error(capsys, argv) == (
+    assert one_line_error(capsys, argv) == (
         f"hil sweep: error: --workers = 100000 is not allowed: must be an integer in"
         f" 1..{4 * cores} (4 per core, {cores} cores); one per core is the default; for more,"
         " run on a Dask cluster (--scheduler)"
@@ -446,7 +436,7 @@ def test_simulate_says_its_folder_holds_a_partial_simulation_after_ctrl_c(tmp_pa
 def test_sim_serve_board_names_its_gain_option(
     impl: str, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    err = _error(capsys, ["sim-serve", "board", "--impl", impl, "--gain", "nan"])
+    err = one_line_error(capsys, ["sim-serve", "board", "--impl", impl, "--gain", "nan"])
     expected = "hil sim-serve: error: --gain = nan is not allowed: must be a finite number"
     assert err.startswith(expected), err
 
@@ -466,7 +456,7 @@ def test_sim_serve_refuses_another_device_s_option(
     argv: list[str], option: str, owner: str, capsys: pytest.CaptureFixture[str]
 ) -> None:
     # Each was ignored: sim-serve stage --jack served stock GRBL on a pty.
-    err = _error(capsys, ["sim-serve", *argv])
+    err = one_line_error(capsys, ["sim-serve", *argv])
     assert err == (
         f"hil sim-serve: error: {option} is not allowed: must be an option of sim-serve"
         f" {owner}; sim-serve {argv[0]} does not read it: drop it"

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from hil.cli.main import main
+from .conftest import one_line_error
 
 SWEEP = Path(__file__).resolve().parents[2] / "hil" / "data" / "sweeps" / "cmp_fmcw.toml"
 
@@ -37,15 +37,6 @@ def read_only(tmp_path: Path) -> Iterator[Path]:
     pytest.skip("running as root without a read-only place (sysfs) to write into")
 
 
-def _refused(capsys: pytest.CaptureFixture[str], argv: list[str]) -> str:
-    assert main(argv) == 2
-    captured = capsys.readouterr()
-    assert "Traceback" not in captured.err
-    lines = captured.err.splitlines()
-    assert len(lines) == 1, captured.err
-    return lines[0]
-
-
 def _cannot_write(option: str, folder: Path) -> str:
     return (
         f"{option} = '{folder}' is not allowed: must be a folder this user can write;"
@@ -53,18 +44,10 @@ def _cannot_write(option: str, folder: Path) -> str:
     )
 
 
-@pytest.fixture
-def waveform_files(tmp_path: Path) -> tuple[Path, Path]:
-    wav, schedule = tmp_path / "tx.wav", tmp_path / "tx.json"
-    argv = ["waveform", "--duration", "0.05", "--out", str(wav), "--schedule", str(schedule)]
-    assert main(argv) == 0
-    return wav, schedule
-
-
 def test_tank_run_out_in_a_read_only_folder(
     read_only: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    line = _refused(capsys, ["tank-run", "--out", str(read_only / "run")])
+    line = one_line_error(capsys, ["tank-run", "--out", str(read_only / "run")])
     assert line == "hil tank-run: error: " + _cannot_write("--out (its parent folder)", read_only)
 
 
@@ -72,14 +55,14 @@ def test_runs_dir_read_only(
     read_only: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     monkeypatch.setenv("HIL_RUNS_DIR", str(read_only))
-    line = _refused(capsys, ["tank-run"])
+    line = one_line_error(capsys, ["tank-run"])
     assert line == "hil tank-run: error: " + _cannot_write("run.output_dir", read_only)
 
 
 def test_report_out_read_only(
     read_only: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    line = _refused(capsys, ["report", str(tmp_path / "run.h5"), "--out", str(read_only)])
+    line = one_line_error(capsys, ["report", str(tmp_path / "run.h5"), "--out", str(read_only)])
     assert line == "hil report: error: " + _cannot_write("--out", read_only)
 
 
@@ -87,7 +70,7 @@ def test_replay_csv_read_only(
     read_only: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     argv = ["replay", str(tmp_path / "run.h5"), "--csv", str(read_only / "est.csv")]
-    line = _refused(capsys, argv)
+    line = one_line_error(capsys, argv)
     assert line == "hil replay: error: " + _cannot_write("--csv (its folder)", read_only)
 
 
@@ -95,12 +78,12 @@ def test_replay_csv_read_only(
 def test_estimate_outputs_read_only(
     option: str,
     read_only: Path,
-    waveform_files: tuple[Path, Path],
+    schedule_and_wav: tuple[Path, Path],
     capsys: pytest.CaptureFixture[str],
 ) -> None:
-    wav, schedule = waveform_files
+    schedule, wav = schedule_and_wav
     argv = ["estimate", "--input", str(wav), "--schedule", str(schedule)]
-    line = _refused(capsys, [*argv, option, str(read_only / "out.x")])
+    line = one_line_error(capsys, [*argv, option, str(read_only / "out.x")])
     assert line == "hil estimate: error: " + _cannot_write(f"{option} (its folder)", read_only)
 
 
@@ -108,18 +91,18 @@ def test_estimate_outputs_read_only(
 def test_waveform_files_read_only(
     option: str, read_only: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    line = _refused(capsys, ["waveform", "--duration", "0.05", option, str(read_only / "x")])
+    line = one_line_error(capsys, ["waveform", "--duration", "0.05", option, str(read_only / "x")])
     assert line == "hil waveform: error: " + _cannot_write(f"{option} (its folder)", read_only)
 
 
 def test_waveform_plot_read_only_or_onto_a_file(
     read_only: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    line = _refused(capsys, ["waveform", "--duration", "0.05", "--plot", str(read_only)])
+    line = one_line_error(capsys, ["waveform", "--duration", "0.05", "--plot", str(read_only)])
     assert line == "hil waveform: error: " + _cannot_write("--plot", read_only)
     a_file = tmp_path / "plots.png"
     a_file.write_text("")
-    line = _refused(capsys, ["waveform", "--duration", "0.05", "--plot", str(a_file)])
+    line = one_line_error(capsys, ["waveform", "--duration", "0.05", "--plot", str(a_file)])
     assert line == (
         f"hil waveform: error: --plot = '{a_file}' is not allowed: must be a folder;"
         " it is a file: choose a folder"
@@ -127,21 +110,21 @@ def test_waveform_plot_read_only_or_onto_a_file(
 
 
 def test_simulate_out_read_only(read_only: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    line = _refused(capsys, ["simulate", "att", "--out", str(read_only / "sim")])
+    line = one_line_error(capsys, ["simulate", "att", "--out", str(read_only / "sim")])
     assert line == "hil simulate: error: " + _cannot_write("--out (its parent folder)", read_only)
 
 
 def test_sweep_and_reproduce_out_read_only(
     read_only: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    line = _refused(capsys, ["sweep", str(SWEEP), "--out", str(read_only)])
+    line = one_line_error(capsys, ["sweep", str(SWEEP), "--out", str(read_only)])
     assert line == "hil sweep: error: " + _cannot_write("--out", read_only)
-    line = _refused(capsys, ["reproduce", "--quick", "--out", str(read_only)])
+    line = one_line_error(capsys, ["reproduce", "--quick", "--out", str(read_only)])
     assert line == "hil reproduce: error: " + _cannot_write("--out", read_only)
 
 
 def test_calibration_store_read_only(read_only: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    line = _refused(capsys, ["calibrate", "latency", "--store", str(read_only)])
+    line = one_line_error(capsys, ["calibrate", "latency", "--store", str(read_only)])
     # A simulated calibration goes into the store's simulated/ folder, made first.
     assert line == (
         f"hil calibrate: error: --store (or HIL_CALIBRATION_DIR) = '{read_only / 'simulated'}'"
@@ -152,19 +135,19 @@ def test_calibration_store_read_only(read_only: Path, capsys: pytest.CaptureFixt
 
 
 def test_log_file_read_only(read_only: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    line = _refused(capsys, ["--log-file", str(read_only / "hil.log"), "devices", "--json"])
+    line = one_line_error(capsys, ["--log-file", str(read_only / "hil.log"), "devices", "--json"])
     assert line == "hil devices: error: " + _cannot_write("--log-file (its folder)", read_only)
 
 
 def test_a_folder_given_for_a_file_and_a_file_for_a_folder(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    line = _refused(capsys, ["waveform", "--duration", "0.05", "--out", str(tmp_path)])
+    line = one_line_error(capsys, ["waveform", "--duration", "0.05", "--out", str(tmp_path)])
     assert line == (
         f"hil waveform: error: --out = '{tmp_path}' is not allowed: must be a file;"
         " it is a folder: give a file name inside it"
     )
-    line = _refused(capsys, ["tank-run", "--out", "/dev/null"])
+    line = one_line_error(capsys, ["tank-run", "--out", "/dev/null"])
     assert line == (
         "hil tank-run: error: --out = '/dev/null' is not allowed: must be a new or empty"
         " folder; it is a file, not a folder"
