@@ -98,7 +98,6 @@ instead, :mod:`hil.estimation.first_arrival`). Tone schedules of equal hops only
 
 from __future__ import annotations
 
-import functools
 import math
 from collections import deque
 from dataclasses import dataclass, replace
@@ -108,7 +107,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hil.errors import ConfigError
-from hil.estimation.crlb import Crlb, crlb, rms_bandwidth, rms_duration
+from hil.estimation.codewords import Codeword, CodewordBook
+from hil.estimation.crlb import Crlb, crlb
 from hil.estimation.detection import parabolic_offset
 from hil.estimation.echo_model import echo_samples
 from hil.estimation.refine_kernels import (
@@ -752,10 +752,10 @@ class CoherentRefiner:
         self._hop = np.full(n_slots, np.iinfo(np.int64).min, dtype=np.int64)
         self._used = np.zeros(n_slots, dtype=np.int64)
         self._clock = 0
-        self._codewords: dict[int, _Codeword] = {}
+        self._codewords = CodewordBook.of(schedule, self.m_hops, self.fs_hz)
         self._hop_runs: dict[tuple[int, int, int], _HopRun] = {}
-        self._sub_words: dict[int, _Codeword] = {}
-        self._half_words: dict[tuple[int, bool], _Codeword] = {}
+        self._sub_words: dict[int, Codeword] = {}
+        self._half_words: dict[tuple[int, bool], Codeword] = {}
         self._recent: deque[tuple[int, float, float, float]] = deque(maxlen=RECENT_FITS)
         #: The detections brought lately, ``(hop_index, t_s, speed m/s)``, the latest last:
         #: the acceleration the earlier ones show seeds the latest's curved fit
@@ -1105,7 +1105,7 @@ class CoherentRefiner:
         return None
 
     def _with_partners(
-        self, fit: Refinement, word: _Codeword, hop_ids: NDArray[np.int64], t_s: float,
+        self, fit: Refinement, word: Codeword, hop_ids: NDArray[np.int64], t_s: float,
         speed: float, lobe: float, hop_index: int, known: NDArray[np.complex128],
         test: EchoTest,
     ) -> Refinement:  # fmt: skip
@@ -1142,7 +1142,7 @@ class CoherentRefiner:
         return fit
 
     def _two_echoes(
-        self, fit: Refinement, word: _Codeword, hop_ids: NDArray[np.int64], hop_index: int,
+        self, fit: Refinement, word: Codeword, hop_ids: NDArray[np.int64], hop_index: int,
         lobe: float, known: NDArray[np.complex128], test: EchoTest, residual: bool,
         new: bool,
     ) -> Refinement | None:  # fmt: skip
@@ -1929,7 +1929,7 @@ class CoherentRefiner:
 
     def _fit_near(
         self,
-        word: _Codeword,
+        word: Codeword,
         hop_ids: NDArray[np.int64],
         t0: float,
         v0: float,
@@ -2058,7 +2058,7 @@ class CoherentRefiner:
         return self._rows(others, t_s - self.m_hops * self.hop_len_s / alpha)
 
     def _lobe_by_more_hops(
-        self, fit: Refinement, word: _Codeword, hop_ids: NDArray[np.int64], t0: float,
+        self, fit: Refinement, word: Codeword, hop_ids: NDArray[np.int64], t0: float,
         v0: float, lobe: float, known: NDArray[np.complex128],
     ) -> Refinement:  # fmt: skip
         """``fit`` (constant speed, found, its E/N0 in the threshold region, :data:`LOBE_Z`)
@@ -2145,7 +2145,7 @@ class CoherentRefiner:
         return self._still.powers(stop - int(math.ceil(window_s * self.fs_hz)), stop)
 
     def _lobe_without_still(
-        self, fit: Refinement, word: _Codeword, hop_ids: NDArray[np.int64], lobe: float,
+        self, fit: Refinement, word: Codeword, hop_ids: NDArray[np.int64], lobe: float,
         known: NDArray[np.complex128],
     ) -> Refinement:  # fmt: skip
         """``fit`` (constant speed, an echo), or the fit on the grating lobe that the input
@@ -2247,7 +2247,7 @@ class CoherentRefiner:
         return replace(echo, t_s=t, amplitude=-echo.amplitude)
 
     def _refinement(
-        self, args: tuple[Any, ...], known: NDArray[np.complex128], word: _Codeword, t: float,
+        self, args: tuple[Any, ...], known: NDArray[np.complex128], word: Codeword, t: float,
         alpha: float, gamma: float, found: bool,
     ) -> Refinement:  # fmt: skip
         """The :class:`Refinement` of the fit ``(t, alpha, gamma)`` (the kernels' parameters:
@@ -2271,7 +2271,7 @@ class CoherentRefiner:
         )  # fmt: skip
 
     def _hop_powers(
-        self, fit: Refinement, word: _Codeword, hop_ids: NDArray[np.int64],
+        self, fit: Refinement, word: Codeword, hop_ids: NDArray[np.int64],
         known: NDArray[np.complex128],
     ) -> NDArray[np.float64] | None:  # fmt: skip
         """Each hop's power at the constant-speed ``fit`` (shape ``(M,)``, the hop's term
@@ -2293,7 +2293,7 @@ class CoherentRefiner:
         return power
 
     def _ended(
-        self, fit: Refinement, word: _Codeword, hop_ids: NDArray[np.int64],
+        self, fit: Refinement, word: Codeword, hop_ids: NDArray[np.int64],
         known: NDArray[np.complex128],
     ) -> bool:  # fmt: skip
         """Whether ``fit``'s echo ended within its window (:data:`ENDED_CHANCE`): the hops'
@@ -2321,7 +2321,7 @@ class CoherentRefiner:
         return bool(ended_gain(h, word.inv_energy, total, self._end_m, self._end_limit))
 
     def _one_sided(
-        self, fit: Refinement, word: _Codeword, hop_ids: NDArray[np.int64],
+        self, fit: Refinement, word: Codeword, hop_ids: NDArray[np.int64],
         known: NDArray[np.complex128],
     ) -> bool:  # fmt: skip
         """Whether the constant-speed ``fit``'s hops hold its echo on one side of the window
@@ -2352,7 +2352,7 @@ class CoherentRefiner:
         return trend if trend is not None and abs(trend[0]) >= least else None
 
     def _halves_seed(
-        self, fit: Refinement, word: _Codeword, hop_ids: NDArray[np.int64], lobe: float,
+        self, fit: Refinement, word: Codeword, hop_ids: NDArray[np.int64], lobe: float,
         known: NDArray[np.complex128],
     ) -> tuple[float, float] | None:  # fmt: skip
         """The acceleration and its standard error (m/s²) the window's own halves show
@@ -2395,7 +2395,7 @@ class CoherentRefiner:
         return accel, math.sqrt(2.0) * sigma / gap_s
 
     def _with_acceleration(
-        self, fit: Refinement, word: _Codeword, hop_ids: NDArray[np.int64], lobe: float,
+        self, fit: Refinement, word: Codeword, hop_ids: NDArray[np.int64], lobe: float,
         known: NDArray[np.complex128], seed: tuple[float, float] | None = None,
     ) -> Refinement:  # fmt: skip
         """``fit`` (constant speed, its maximum found) fitted again with a changing time scale
@@ -2503,7 +2503,7 @@ class CoherentRefiner:
         return best
 
     def _accel_gain(
-        self, args: tuple[Any, ...], known: NDArray[np.complex128], word: _Codeword, t: float,
+        self, args: tuple[Any, ...], known: NDArray[np.complex128], word: Codeword, t: float,
         alpha: float, gamma: float,
     ) -> float:  # fmt: skip
         """What the rate ``gamma`` adds to ``ln Λ = |C|²/(σ² E_s)`` at ``(t, alpha)`` (the
@@ -2549,7 +2549,7 @@ class CoherentRefiner:
         return np.abs(c) ** 2
 
     def _search(
-        self, word: _Codeword, hop_ids: NDArray[np.int64], t0: float, v0: float, lobe: float,
+        self, word: Codeword, hop_ids: NDArray[np.int64], t0: float, v0: float, lobe: float,
         known: NDArray[np.complex128], grid: tuple[float, float, int, int] | None = None,
         gamma: float = 0.0,
     ) -> tuple[float, float, int, tuple[Any, ...]] | None:  # fmt: skip
@@ -2575,7 +2575,7 @@ class CoherentRefiner:
         return best_t, best_v, outcome, args
 
     def _search_from_fewer_hops(
-        self, word: _Codeword, hop_ids: NDArray[np.int64], t0: float, v0: float, lobe: float,
+        self, word: Codeword, hop_ids: NDArray[np.int64], t0: float, v0: float, lobe: float,
         known: NDArray[np.complex128],
     ) -> tuple[float, float, int, tuple[Any, ...]] | None:  # fmt: skip
         """:meth:`_search` by way of the last :attr:`sub_hops` hops (:data:`SUB_HOPS`): their
@@ -2702,7 +2702,7 @@ class CoherentRefiner:
         return (self._prefix, self._energy, self._first, self._tail, self._alpha0, self._centre)
 
     def _slots(
-        self, hop_ids: NDArray[np.int64], word: _Codeword, t_s: float, alpha: float
+        self, hop_ids: NDArray[np.int64], word: Codeword, t_s: float, alpha: float
     ) -> NDArray[np.int64] | None:
         """The table slot of each hop (shape ``(M,)``): a kept one made for this window, or
         one filled now (:func:`~hil.estimation.refine_kernels.assign_slots`); None where the
@@ -2722,7 +2722,7 @@ class CoherentRefiner:
         )  # fmt: skip
         return slots if covered else None
 
-    def _sub_word(self, hop_index: int) -> _Codeword:
+    def _sub_word(self, hop_index: int) -> Codeword:
         """The last :attr:`sub_hops` hops of :meth:`_codeword`'s (the first search's)."""
         key = int(hop_index) % self.schedule.period_hops
         word = self._sub_words.get(key)
@@ -2731,7 +2731,7 @@ class CoherentRefiner:
             self._sub_words[key] = word
         return word
 
-    def _half_word(self, hop_index: int, first: bool) -> _Codeword:
+    def _half_word(self, hop_index: int, first: bool) -> Codeword:
         """The first (``first``) or last ``⌊M/2⌋`` hops of :meth:`_codeword`'s, relative to
         its end boundary (:meth:`_halves_seed`)."""
         key = int(hop_index) % self.schedule.period_hops
@@ -2742,17 +2742,11 @@ class CoherentRefiner:
             self._half_words[(key, first)] = word
         return word
 
-    def _codeword(self, hop_index: int) -> _Codeword:
-        """The ``M`` hops ending with ``hop_index`` relative to their end boundary, kept per
-        codeword: made from the first code period (the same hops a period later differ by a
-        common phase only, which ``|C|`` does not see), so the figures never depend on which
-        period a codeword was first met in."""
-        key = int(hop_index) % self.schedule.period_hops
-        word = self._codewords.get(key)
-        if word is None:
-            word = _Codeword.of(self.schedule, key, self.m_hops, self.fs_hz)
-            self._codewords[key] = word
-        return word
+    def _codeword(self, hop_index: int) -> Codeword:
+        """The ``M`` hops ending with ``hop_index`` relative to their end boundary, from the
+        schedule's :class:`~hil.estimation.codewords.CodewordBook` (each codeword made once
+        per schedule, ``M`` and rate, from the first code period)."""
+        return self._codewords[hop_index]
 
 
 def _maximise_recentred(
@@ -2844,81 +2838,10 @@ def _to_centre(t_b: float, alpha_b: float, gamma: float, d_c: float) -> tuple[fl
     return t_b + (t_b - t_x), alpha
 
 
-@dataclass(frozen=True)
-class _Codeword:
-    """The ``M`` hops ending at a boundary ``T_b``, as :func:`~hil.estimation.refine_kernels.
-    candidate_sums` takes them: ``hops = (k, f, dt_lo, dt_hi, amp2)`` (shape ``(M,)`` each;
-    the transmit phasor ``a_i e^{−j(φ_i + 2π f_i (T_b − T_i))}``, tones in Hz, the hops'
-    edges relative to ``T_b`` in s, squared amplitudes), and the window's ``B_rms`` (Hz),
-    ``T_rms`` (s) and mean frequency (Hz) measured from the waveform
-    (:mod:`hil.estimation.crlb`)."""
-
-    hops: tuple[NDArray[np.complex128], NDArray[np.float64], NDArray[np.float64],
-                NDArray[np.float64], NDArray[np.float64]]  # fmt: skip
-    b_rms: float
-    t_rms: float
-    f0: float
-    tones: NDArray[np.int64]  # each hop's tone index in the schedule, shape (M,)
-
-    @functools.cached_property
-    def inv_amp2(self) -> NDArray[np.float64]:
-        """``1/a_i²`` per hop (0 for a silent hop), shape ``(M,)``."""
-        amp2 = self.hops[4]
-        return np.divide(1.0, amp2, out=np.zeros_like(amp2), where=amp2 > 0)
-
-    @functools.cached_property
-    def inv_energy(self) -> NDArray[np.float64]:
-        """``1/Σ_{j≤i} a_j²`` (0 while the hops so far are silent), shape ``(M,)``."""
-        energy = np.cumsum(self.hops[4])
-        return np.divide(1.0, energy, out=np.zeros_like(energy), where=energy > 0)
-
-    @property
-    def centre_s(self) -> float:
-        """The hops' transmit centre relative to their end boundary, s (negative)."""
-        return 0.5 * float(self.hops[2][0] + self.hops[3][-1])
-
-    def last(self, n: int) -> _Codeword:
-        """The last ``n`` hops of this codeword, for a search over fewer hops (the window's
-        bandwidth, duration and mean frequency are the whole codeword's: a search does not
-        use them)."""
-        k, f, dt_lo, dt_hi, amp2 = self.hops
-        hops = (
-            k[-n:].copy(),
-            f[-n:].copy(),
-            dt_lo[-n:].copy(),
-            dt_hi[-n:].copy(),
-            amp2[-n:].copy(),
-        )
-        return _Codeword(hops, self.b_rms, self.t_rms, self.f0, self.tones[-n:].copy())
-
-    def first(self, n: int) -> _Codeword:
-        """The first ``n`` hops of this codeword, their edges still relative to its end
-        boundary (a search over them fits the line through that boundary that is their
-        hops' tangent; :meth:`last`'s caveat)."""
-        k, f, dt_lo, dt_hi, amp2 = self.hops
-        hops = (k[:n].copy(), f[:n].copy(), dt_lo[:n].copy(), dt_hi[:n].copy(), amp2[:n].copy())
-        return _Codeword(hops, self.b_rms, self.t_rms, self.f0, self.tones[:n].copy())
-
-    @classmethod
-    def of(cls, schedule: HopSchedule, hop_index: int, m_hops: int, fs_hz: float) -> _Codeword:
-        hops = schedule.hops(hop_index - m_hops + 1, m_hops)
-        t_b = float(hops.start_s[-1] + hops.duration_s[-1])
-        dt_lo = hops.start_s - t_b
-        f = hops.freq_hz
-        k = hops.amplitude * np.exp(-1j * (hops.phase_rad - 2 * np.pi * f * dt_lo))
-        t = float(hops.start_s[0]) + np.arange(int(round(-dt_lo[0] * fs_hz))) / fs_hz
-        s = schedule.evaluate_analytic(t)
-        b_rms, f0 = rms_bandwidth(s, fs_hz)
-        return cls(
-            (k, f, dt_lo, dt_lo + hops.duration_s, hops.amplitude**2),
-            b_rms, rms_duration(s, fs_hz), abs(f0), hops.tone_index.astype(np.int64),
-        )  # fmt: skip
-
-
 def _fit_quality(
     args: tuple[Any, ...],
     known: NDArray[np.complex128],
-    word: _Codeword,
+    word: Codeword,
     n_tones: int,
     t_rx: float,
     alpha: float,

@@ -55,7 +55,8 @@ from numpy.typing import NDArray
 from hil.estimation.refine_kernels import FOUND, candidate_sums
 
 if TYPE_CHECKING:
-    from hil.estimation.refine import CoherentRefiner, EchoTest, Refinement, _Codeword, _EchoFit
+    from hil.estimation.codewords import Codeword
+    from hil.estimation.refine import CoherentRefiner, EchoTest, Refinement, _EchoFit
 
 #: The second echo is looked for within this many grating lobes of the one-echo fit (two
 #: echoes further apart each hold their own detector peak, and the one-echo fits with the
@@ -156,7 +157,7 @@ def hop_scatter(terms: NDArray[np.complex128], amp2: NDArray[np.float64]) -> flo
 
 
 def fit_pair(
-    ref: CoherentRefiner, fit: Refinement, word: _Codeword, hop_ids: NDArray[np.int64],
+    ref: CoherentRefiner, fit: Refinement, word: Codeword, hop_ids: NDArray[np.int64],
     hop_index: int, lobe: float, known: NDArray[np.complex128], test: EchoTest,
     seeds: tuple[_EchoFit, _EchoFit] | None = None,
 ) -> PairFit | None:  # fmt: skip
@@ -215,7 +216,7 @@ def _with(known: NDArray[np.complex128], rows: NDArray[np.complex128]) -> NDArra
 
 
 def _fit_one(
-    ref: CoherentRefiner, word: _Codeword, hop_ids: NDArray[np.int64], start: _EchoFit,
+    ref: CoherentRefiner, word: Codeword, hop_ids: NDArray[np.int64], start: _EchoFit,
     lobe: float, rows: NDArray[np.complex128],
 ) -> Refinement | None:  # fmt: skip
     """The one-echo fit near ``start``'s delay and speed with ``rows`` taken out: a grid of
@@ -252,7 +253,7 @@ def _fit_one(
 
 def _joint_amplitudes(
     ref: CoherentRefiner,
-    word: _Codeword,
+    word: Codeword,
     hop_ids: NDArray[np.int64],
     hop_index: int,
     places: list[tuple[float, float]],
@@ -289,7 +290,7 @@ def _joint_amplitudes(
 def _seed(
     ref: CoherentRefiner,
     fit: Refinement,
-    word: _Codeword,
+    word: Codeword,
     hop_ids: NDArray[np.int64],
     hop_index: int,
     lobe: float,
@@ -331,7 +332,7 @@ def _seed(
 
 
 def _gain(
-    ref: CoherentRefiner, word: _Codeword, hop_ids: NDArray[np.int64], hop_index: int,
+    ref: CoherentRefiner, word: Codeword, hop_ids: NDArray[np.int64], hop_index: int,
     one: Refinement, first: Refinement, second: Refinement, known: NDArray[np.complex128],
 ) -> tuple[float, float]:  # fmt: skip
     """:func:`pair_gain` and :func:`interference` of the pair ``first``, ``second`` (the

@@ -18,8 +18,9 @@ truth for what was transmitted.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Hashable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -35,6 +36,7 @@ BOUNDARY_SNAP_S = 1e-11
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
+_Derived = TypeVar("_Derived")
 
 
 @dataclass(frozen=True)
@@ -329,6 +331,38 @@ class HopSchedule:
             float(t0_s),
             dict(self.params),
         )
+
+    # ------------------------------------------------------------------ values kept with it
+    def derived(self, key: Hashable, make: Callable[[], _Derived]) -> _Derived:
+        """The value ``make()`` derives from this schedule, made on the first call with ``key``
+        and kept with the schedule for every later call: a schedule is immutable, so what is
+        derived from it never goes stale, and every user of this schedule object shares one
+        (the refinement's codeword windows, :class:`~hil.estimation.codewords.CodewordBook`).
+        ``key`` names what is derived and the other inputs it is derived with (a class and
+        its parameters). A copy, a pickle or :meth:`shifted` keeps none: each makes its own
+        again.
+
+        >>> s = HopSchedule.from_segments("demo", [1000.0, 2000.0], [0, 1], 0.001)
+        >>> s.derived("energy", lambda: float(s.amplitude @ s.amplitude))
+        2.0
+        >>> s.derived("energy", lambda: -1.0)  # kept: not made again
+        2.0
+        """
+        kept = self.__dict__.get("_derived")
+        if kept is None:
+            kept = {}
+            object.__setattr__(self, "_derived", kept)
+        if key not in kept:
+            kept[key] = make()
+        value: _Derived = kept[key]
+        return value
+
+    def __getstate__(self) -> dict[str, Any]:
+        """The fields only (pickles and copies): :meth:`derived`'s values are made again where
+        they are needed."""
+        state = dict(self.__dict__)
+        state.pop("_derived", None)
+        return state
 
     # ------------------------------------------------------------------ hop look-up
     def hops(self, first: int, count: int) -> HopTable:

@@ -23,9 +23,18 @@ FS = 100_000.0
 EchoFactory = Callable[..., np.ndarray]
 
 
+@functools.cache
+def preset_schedule(preset: str, family: str = "random-cyclic") -> HopSchedule:
+    """The schedule of ``preset`` and ``family``, one object per process: a schedule is
+    immutable, and the receivers built from one object share what is derived from it (the
+    refinement's codewords, made once: :class:`~hil.estimation.codewords.CodewordBook`;
+    tests/estimation_gcas/test_codewords.py builds its own objects)."""
+    return check_design(get_preset(preset).spec(family))
+
+
 def att_schedule(family: str = "random-cyclic") -> HopSchedule:
-    """The ``att`` preset schedule of ``family``."""
-    return check_design(get_preset("att").spec(family))
+    """The ``att`` preset schedule of ``family`` (:func:`preset_schedule`)."""
+    return preset_schedule("att", family)
 
 
 def echo_samples(

@@ -151,3 +151,30 @@ def test_schedule_invariants(durs: list[float], first: int, count: int, t0: floa
     left = s.evaluate(h.start_s[1:] - eps)
     right = s.evaluate(h.start_s[1:] + eps)
     np.testing.assert_allclose(left, right, atol=1e-4)
+
+
+def test_derived_values_are_made_once_and_kept_with_the_schedule() -> None:
+    """``derived`` makes a value on the first call with its key and returns the kept one
+    after (``make`` not called again); another key makes its own. A pickle, a copy and
+    :meth:`shifted` keep none of them (each makes its own again), and the original keeps
+    its own after being pickled."""
+    import copy
+    import pickle
+
+    s = HopSchedule.from_segments("demo", [1000.0, 2000.0], [0, 1, -1], 0.001)
+    calls: list[str] = []
+
+    def make(tag: str) -> list[str]:
+        calls.append(tag)
+        return [tag]
+
+    first = s.derived(("k", 1), lambda: make("a"))
+    assert s.derived(("k", 1), lambda: make("b")) is first
+    assert s.derived(("k", 2), lambda: make("c")) == ["c"]
+    assert calls == ["a", "c"]
+    for other in (pickle.loads(pickle.dumps(s)), copy.copy(s), copy.deepcopy(s), s.shifted(0.5)):
+        assert other.derived(("k", 1), lambda: make("d")) == ["d"]
+        assert np.array_equal(other.phase_rad, s.phase_rad)
+        assert other.period_phase_rad == s.period_phase_rad
+    assert calls == ["a", "c", "d", "d", "d", "d"]
+    assert s.derived(("k", 1), lambda: make("e")) is first
