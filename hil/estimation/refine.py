@@ -100,7 +100,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -108,8 +108,9 @@ from numpy.typing import NDArray
 
 from hil.errors import ConfigError
 from hil.estimation.codewords import Codeword, CodewordBook
-from hil.estimation.crlb import Crlb, crlb
+from hil.estimation.crlb import crlb
 from hil.estimation.detection import parabolic_offset
+from hil.estimation.echo_fits import Coherence, EchoFit, EchoTest, Refinement
 from hil.estimation.echo_model import echo_samples
 from hil.estimation.refine_kernels import (
     FOUND,
@@ -123,7 +124,7 @@ from hil.estimation.refine_kernels import (
     grid_sums,
     maximise,
 )
-from hil.estimation.refine_pair import RESOLVED_LOBES, SEED_LOBES, fit_pair
+from hil.estimation.refine_pair import LOBE_MOVES, RESOLVED_LOBES, SEED_LOBES, fit_pair
 from hil.estimation.reverb_band import doppler_resolution_mps
 from hil.estimation.row_buffer import RowBuffer
 from hil.estimation.still_lobe import StillStreams, canceller_gain, still_free_powers
@@ -286,10 +287,6 @@ GHOST_LEAK_CELLS = 3.0
 #: whose ghost it may be (:meth:`CoherentRefiner._amplitude_near`): the likelihood's main
 #: peak is ``1/B`` wide (``B`` the tones' span), a lobe holds about K of them (att: 4).
 GHOST_POINTS = 9
-#: Lobe checks after a search (each may move the fit by one grating lobe; they stop where
-#: neither neighbour is better): a detector's time can be several lobes off at an echo's
-#: first boundary (att three-state, full search: 2.75 lobes, 1.8 ms).
-LOBE_MOVES = 4
 #: The lobe decision's threshold region (:meth:`CoherentRefiner._lobe_by_more_hops`). The
 #: likelihood's grating lobes one ``1/(α Δf)`` apart differ only by the hops' edges: a
 #: neighbouring lobe keeps ``ρ = 1 − 1/(α Δf D)`` of the main lobe's amplitude (att at
@@ -501,139 +498,8 @@ STILL_WINDOWS = 2
 STILL_SLOTS_PER_HOP = 2 * (2 * STILL_LOBES + 1) * STILL_WINDOWS + 4
 
 
-@dataclass(frozen=True)
-class _EchoFit:
-    """A fit kept to take its echo out of other detections' input: the boundary ending hop
-    ``hop_index`` received at ``t_s`` (s), the time scale ``alpha`` and the fitted complex
-    amplitude ``amplitude`` (``β``: the input is ``Re(β s)`` for the model ``s`` of the
-    codeword's first code period)."""
-
-    hop_index: int
-    t_s: float
-    alpha: float
-    amplitude: complex
-    #: The time scale's rate, 1/s (an accelerating fit's; 0 for a constant speed).
-    rate: float = 0.0
-    #: The largest detector statistic (above its noise mean) of a detection read as this
-    #: echo's ghost (:meth:`CoherentRefiner.ghost_of_known`; 0 before any), by the ghost's
-    #: hop offset from the echo's, modulo a code period (shape ``(period_hops,)``).
-    ghost_strength: tuple[float, ...] = ()
-    #: The fit's E/N0, dB (:attr:`Refinement.e_over_n0_db`).
-    e_over_n0_db: float = math.inf
-    #: The latest hop at which this echo was looked for where the fit puts it, without a
-    #: detection (:meth:`CoherentRefiner.due`; its own hop before any).
-    followed: int = -1
-    #: The first hop before this fit's at which the echo was neither fitted nor looked for
-    #: (this fit's detection came after a boundary that none brought; -1: none): looked for
-    #: where this fit puts it (:meth:`CoherentRefiner.due`).
-    gap: int = -1
-    #: Whether the echo is taken out of the second search's input
-    #: (:meth:`CoherentRefiner.known_input`): measured from a detection of the first search
-    #: (or followed on from such a fit). An echo the second search found is not: that search
-    #: goes on detecting it.
-    cancelled: bool = True
-    #: Measured as one of two echoes in one detection's hops (:mod:`hil.estimation.
-    #: refine_pair`): the next detection of the pair starts from both.
-    pair: bool = False
-    #: This fit or an earlier one of its echo reached :attr:`CoherentRefiner.follow_db`: the
-    #: echo is followed on while its fits pass the echo test (:meth:`CoherentRefiner.due`).
-    held: bool = False
-    #: A still echo measured at rest (:meth:`CoherentRefiner.refine_still`): where it is, it
-    #: stays, so it is taken out of other detections' input for :data:`STILL_KNOWN_HOPS`.
-    still: bool = False
-
-    def boundary_s(self, hop_index: int, hop_len_s: float) -> float:
-        """Where this fit puts the boundary ending hop ``hop_index`` (s of receive time),
-        its echo carried on at the fitted delay and time scale; ``hop_len_s`` the nominal
-        hop length (s)."""
-        return self.t_s + (hop_index - self.hop_index) * hop_len_s / self.alpha
-
-    def speed(self, sound_speed_mps: float) -> float:
-        """Radial speed, m/s (closing positive)."""
-        return sound_speed_mps * (self.alpha - 1.0) / (self.alpha + 1.0)
-
-
-@dataclass(frozen=True)
-class Coherence:
-    """The hops' coherence at a fit (``measured``) and what one echo of the fit's SNR would
-    give (``expected``), both in ``(0, 1]`` (:func:`_fit_quality`)."""
-
-    measured: float
-    expected: float
-
-    @property
-    def fraction(self) -> float:
-        """``measured / expected``: about 1 for one echo of the schedule."""
-        return self.measured / self.expected if self.expected > 0 else 0.0
-
-
-@dataclass(frozen=True)
-class Refinement:
-    """A refined detection: boundary receive time ``t_s`` (s), time scale ``alpha``, the
-    E/N0 collected over the ``M`` hops (dB), its Cramér–Rao bounds (:class:`Crlb`; None
-    where the E/N0 is not finite: no noise, or no echo), the
-    coherence of the hops' terms over all hops, within each tone and over runs of consecutive
-    hops (:func:`_fit_quality`),
-    and whether the search found its maximum inside (else ``t_s`` and ``alpha`` are the
-    detection's own)."""
-
-    t_s: float
-    alpha: float
-    e_over_n0_db: float
-    bound: Crlb | None
-    coherence: Coherence
-    tone_coherence: Coherence
-    run_coherence: Coherence
-    found: bool
-    #: The fitted complex amplitude ``β = 2C/E_s`` (the input is ``Re(β s)`` for the model
-    #: ``s`` of the codeword's first code period); 0 where the windows are empty.
-    amplitude: complex = 0j
-    #: The radial acceleration fitted over the ``M`` hops, m/s² (closing speed growing
-    #: positive); 0 where a constant speed explains them (``alpha`` is the boundary's).
-    accel_mps2: float = 0.0
-    #: The fit's echo ended within the window: its last hops hold none
-    #: (:data:`ENDED_CHANCE`). Not an estimate of the boundary, and not remembered.
-    ended: bool = False
-    #: The other echo of a resolved pair of one time scale (:mod:`hil.estimation.refine_pair`):
-    #: this fit and it are two echoes of the detection's hops, each refined with the other
-    #: taken out; None for one echo.
-    second: Refinement | None = None
-
-    def speed_mps(self, sound_speed_mps: float) -> float:
-        """The fit's radial speed, m/s (closing positive)."""
-        return sound_speed_mps * (self.alpha - 1.0) / (self.alpha + 1.0)
-
-    def rate(self, sound_speed_mps: float) -> float:
-        """The time scale's rate of change, 1/s per receive second (from the acceleration)."""
-        return self.accel_mps2 * (self.alpha + 1.0) ** 2 / (2.0 * sound_speed_mps)
-
-    def is_echo(self, test: EchoTest) -> bool:
-        """Whether the fit is one echo of the schedule by ``test``: a maximum inside the
-        search that collects at least ``test.min_e_over_n0_db`` and whose coherence over all
-        hops is at least ``test.fraction`` of one echo's at its SNR, or over runs of
-        consecutive hops at least ``test.run_fraction`` of it (an accelerating echo). The
-        coherence within each tone is reported, not tested: a still echo's ghost read at the
-        tone spacing's speed is as coherent within each tone as one echo."""
-        return (
-            self.found
-            and self.e_over_n0_db >= test.min_e_over_n0_db
-            and (
-                self.coherence.fraction >= test.fraction
-                or self.run_coherence.fraction >= test.run_fraction
-            )
-        )
-
-
-@dataclass(frozen=True)
-class EchoTest:
-    """What a fit must reach to be one echo of the schedule (:meth:`Refinement.is_echo`):
-    coherence fractions over all hops and over runs of consecutive hops, and the E/N0 (dB)
-    it collects once the other echoes measured lately are taken out (what they leaked into
-    a detection is not an echo of its own)."""
-
-    fraction: float
-    run_fraction: float
-    min_e_over_n0_db: float
+#: The echo test of a refiner built without one (:meth:`Refinement.is_echo`).
+ECHO_TEST = EchoTest(0.8, 0.85, 12.0)
 
 
 class CoherentRefiner:
@@ -674,7 +540,7 @@ class CoherentRefiner:
         sound_speed_mps: float,
         speed_span_mps: float,
         max_speed_mps: float,
-        echo_test: EchoTest = EchoTest(0.8, 0.85, 12.0),
+        echo_test: EchoTest = ECHO_TEST,
         window_speed_mps: float | None = None,
         still_free: bool = True,
         slots_per_hop: int = SLOTS_PER_HOP,
@@ -765,9 +631,9 @@ class CoherentRefiner:
         #: alpha, rate 1/s, E/N0 dB)`` (:meth:`band_exit`).
         self._into_band: deque[tuple[int, float, float, float, float]] = deque(maxlen=RECENT_FITS)
         #: The latest fit of each echo measured lately (:meth:`_known_hops`).
-        self._echoes: list[_EchoFit] = []
+        self._echoes: list[EchoFit] = []
         #: Refused fits that may be one of two echoes at one speed (:data:`PARTNER_COHERENCE`).
-        self._partners: list[_EchoFit] = []
+        self._partners: list[EchoFit] = []
         # The acceleration grid's time-scale rates (1/s): an eighth of a cycle of the highest
         # tone at the window's ends, ±half the window from its centre, a step.
         half_window = 0.5 * self.m_hops * self.hop_len_s
@@ -784,7 +650,7 @@ class CoherentRefiner:
         #: The likelihood's main lobe in time, ``1/B`` (s; ``B`` the tones' span): how far a
         #: followed fit may move from where its echo's fit carried it (:meth:`refine`).
         tones = np.asarray(schedule.tones_hz, dtype=np.float64)
-        self._main_lobe_s = 1.0 / (float(np.ptp(tones)) if tones.size > 1 else 1.0 / self.hop_len_s)
+        self.main_lobe_s = 1.0 / (float(np.ptp(tones)) if tones.size > 1 else 1.0 / self.hop_len_s)
         # :meth:`_ended`'s F test: its degrees of freedom and threshold, and its kernel
         # call's buffers (one candidate: t, α, rate; C, model, no input energy; the hops'
         # terms).
@@ -966,7 +832,7 @@ class CoherentRefiner:
             keep_lobe = False
             fit = self._fit_near(word, hop_ids, t_s, speed0, lobe, hop_index, known)
         if followed and fit is not None:
-            if abs(fit.t_s - t_s) > self._main_lobe_s:
+            if abs(fit.t_s - t_s) > self.main_lobe_s:
                 return None  # another grating lobe, or another echo
             power = self._hop_powers(fit, word, hop_ids, known)
             if power is None or power[-1] < PARTIAL_LEVEL * np.mean(power):
@@ -1130,14 +996,14 @@ class CoherentRefiner:
             and not self._same_echo(p, hop_index, t_s, speed)
         ]  # fmt: skip
         if others:
-            rows = [known, self._rows(others, t_s)]
+            rows = [known, self.echo_rows(others, t_s)]
             with_others = np.ascontiguousarray(np.concatenate(rows, axis=1))
             again = self._fit_near(word, hop_ids, t_s, speed, lobe, hop_index, with_others)
             if again is not None and again.is_echo(test):
                 return again
         v = self.c * (fit.alpha - 1.0) / (fit.alpha + 1.0)
         kept = [p for p in self._partners if not self._same_echo(p, hop_index, fit.t_s, v)]
-        new = _EchoFit(hop_index, fit.t_s, fit.alpha, fit.amplitude, fit.rate(self.c))
+        new = EchoFit(hop_index, fit.t_s, fit.alpha, fit.amplitude, fit.rate(self.c))
         self._partners = [*kept, new]
         return fit
 
@@ -1194,7 +1060,7 @@ class CoherentRefiner:
 
     def _pair_seeds(
         self, hop_index: int, fit: Refinement, lobe: float
-    ) -> tuple[_EchoFit, _EchoFit] | None:
+    ) -> tuple[EchoFit, EchoFit] | None:
         """The two echoes of a pair measured within :data:`WARM_HOPS` hops before
         ``hop_index`` nearest ``fit`` where their fits put this boundary (within the pair's
         search, :data:`~hil.estimation.refine_pair.SEED_LOBES` grating lobes, and the speed
@@ -1218,7 +1084,7 @@ class CoherentRefiner:
 
     def _jumped(
         self, hop_index: int, fit: Refinement, lobe: float
-    ) -> tuple[_EchoFit, _EchoFit] | None:
+    ) -> tuple[EchoFit, EchoFit] | None:
         """An echo measured within :data:`WARM_HOPS` hops before ``hop_index`` whose fit
         puts this boundary a resolution cell or more from ``fit`` (at least
         :data:`~hil.estimation.refine_pair.RESOLVED_LOBES` main lobes, at most
@@ -1232,7 +1098,7 @@ class CoherentRefiner:
         if fit.e_over_n0_db < self.lobe_sure_db:
             return None
         v = fit.speed_mps(self.c)
-        main = self._main_lobe_s
+        main = self.main_lobe_s
         left = None
         for e in self._echoes:
             k = hop_index - e.hop_index
@@ -1245,7 +1111,7 @@ class CoherentRefiner:
                 left = e
         if left is None:
             return None
-        return left, _EchoFit(hop_index, fit.t_s, fit.alpha, fit.amplitude)
+        return left, EchoFit(hop_index, fit.t_s, fit.alpha, fit.amplitude)
 
     def beside_known(self, t_s: float, alpha: float, hop_index: int) -> bool:
         """Whether a second echo at the speed of a detection at ``t_s`` (s) and time scale ``alpha``
@@ -1265,7 +1131,7 @@ class CoherentRefiner:
         speed = self.c * (alpha - 1.0) / (alpha + 1.0)
         reach = KNOWN_HOPS * self.hop_len_s
 
-        def near(e: _EchoFit) -> bool:
+        def near(e: EchoFit) -> bool:
             return abs(e.t_s - t_s) <= reach and abs(e.speed(self.c) - speed) <= self.speed_span_mps
 
         if any(near(e) and not self._same_echo(e, hop_index, t_s, speed) for e in self._partners):
@@ -1292,7 +1158,7 @@ class CoherentRefiner:
     def followed_near(self, t_s: float, alpha: float, hop_index: int) -> bool:
         """Whether a detection at ``t_s`` (s) and time scale ``alpha`` (the boundary ending hop
         ``hop_index``) is the boundary of an echo that :meth:`due` gives: measured before this
-        hop, within :data:`KNOWN_HOPS` hops, held (:attr:`_EchoFit.held`) and
+        hop, within :data:`KNOWN_HOPS` hops, held (:attr:`EchoFit.held`) and
         moving, and the same echo (:meth:`_same_echo`). A peak masked by a greater one of
         another boundary (:attr:`~hil.estimation.gcas.threshold.Peak.masked`) is not decided
         there: the echo is fitted where its fit puts it, and the detector's boundary, read
@@ -1309,7 +1175,7 @@ class CoherentRefiner:
     def due(self, t_s: float) -> list[tuple[int, float, float, float]]:
         """The boundaries of echoes measured lately that no detection brought by ``t_s`` (s):
         for each echo one of whose fits reached :attr:`follow_db` (:data:`FOLLOW_MARGIN_DB`;
-        :attr:`_EchoFit.held`: one weak echo's fits scatter about its mean, so a gate on each
+        :attr:`EchoFit.held`: one weak echo's fits scatter about its mean, so a gate on each
         fit would drop it at each dip; att, M = 10, the weaker target at -20 dB per-sample
         SNR beside still reverberation: 14.3-18 dB in one seed)
         outside the still reverberation's Doppler cells, its next boundary where its latest
@@ -1319,7 +1185,7 @@ class CoherentRefiner:
         Doppler response can hold the row's maximum at an echo's boundary (a weaker echo a
         tone spacing's speed from a stronger one: the ghost's peak beside it); the echo is
         then fitted there (:meth:`refine`) and its echo test decides. So are the boundaries
-        a fit's detection came after without any brought (:attr:`_EchoFit.gap`, where that fit
+        a fit's detection came after without any brought (:attr:`EchoFit.gap`, where that fit
         puts them): a closing echo's next boundary comes less than a hop after a missed one,
         so before the peaks have passed the missed one by the readout's lag. An echo of a
         formation (:meth:`_formation`: another echo of its speed within a few grating lobes)
@@ -1374,7 +1240,7 @@ class CoherentRefiner:
             e for e in self._others(hop_index, t_s, 0.0)
             if not (e.alpha == 1.0 and abs(e.boundary_s(hop_index, self.hop_len_s) - t_s) <= reach)
         ]  # fmt: skip
-        known = self._rows(others, t_s)
+        known = self.echo_rows(others, t_s)
         near = self._fit_near(word, hop_ids, t_s, 0.0, lobe, None, known)
         if near is None:
             return None
@@ -1393,22 +1259,22 @@ class CoherentRefiner:
         for k in range(-n_lobes, n_lobes + 1):
             # Tables of each lobe's own window: a hop's table reaches a few samples beyond it.
             t_lobe = near.t_s + k * lobe
-            slots = self._slots(hop_ids, word, t_lobe, 1.0)
+            slots = self.hop_slots(hop_ids, word, t_lobe, 1.0)
             if slots is None:
                 continue
-            lobe_args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
-            power = self._powers(lobe_args, known, t_lobe + each, ones, zeros)
+            lobe_args = (*self.slot_tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
+            power = self.candidate_powers(lobe_args, known, t_lobe + each, ones, zeros)
             i = int(np.argmax(power))
             if power[i] > best_p:
                 best_p, centre = float(power[i]), float(t_lobe + each[i])
-        slots = self._slots(hop_ids, word, centre, 1.0)
+        slots = self.hop_slots(hop_ids, word, centre, 1.0)
         if slots is None:
             return None
-        args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
+        args = (*self.slot_tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
         best_t, grid_step = centre, step
         for _ in range(FIT_PASSES + 1):
             t3 = best_t + step * np.array([-1.0, 0.0, 1.0])
-            p3 = self._powers(args, known, t3, np.ones(3), np.zeros(3))
+            p3 = self.candidate_powers(args, known, t3, np.ones(3), np.zeros(3))
             curve = p3[0] - 2.0 * p3[1] + p3[2]
             if curve < 0.0:
                 best_t += step * parabolic_offset(p3[0], p3[1], p3[2])
@@ -1416,7 +1282,7 @@ class CoherentRefiner:
                 best_t = float(t3[0] if p3[0] > p3[2] else t3[2])
             step *= 0.5
         found = near.found and abs(best_t - centre) <= grid_step
-        fit = self._refinement(args, known, word, best_t if found else centre, 1.0, 0.0, found)
+        fit = self.refinement_at(args, known, word, best_t if found else centre, 1.0, 0.0, found)
         if fit.is_echo(echo_test):
             self._remember(fit, hop_index, True)
             last = self._echoes[-1] if self._echoes else None
@@ -1461,7 +1327,7 @@ class CoherentRefiner:
         self._recent.clear()
         self._recent.extend(kept)
 
-    def _measured_near(self, t_s: float, lag_s: float = 0.0) -> list[_EchoFit]:
+    def _measured_near(self, t_s: float, lag_s: float = 0.0) -> list[EchoFit]:
         """The echoes whose latest fits lie within :data:`KNOWN_HOPS` hops of ``t_s`` (s),
         or up to ``lag_s`` (s) more after it (a detection decided that late hears the echoes
         measured since: an echo measured at one speed since is there at that speed before)."""
@@ -1509,13 +1375,13 @@ class CoherentRefiner:
             return None
         word = self._codeword(hop_index)
         hop_ids = np.arange(hop_index - self.m_hops + 1, hop_index + 1, dtype=np.int64)
-        slots = self._slots(hop_ids, word, t_s, (self.c + speed) / (self.c - speed))
+        slots = self.hop_slots(hop_ids, word, t_s, (self.c + speed) / (self.c - speed))
         if slots is None:
             return None
         speeds = speed + self.speed_span_mps * np.linspace(-1.0, 1.0, LEFT_SPEEDS)
         alphas = np.ascontiguousarray((self.c + speeds) / (self.c - speeds))
-        known = self._rows(others, t_s)
-        args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
+        known = self.echo_rows(others, t_s)
+        args = (*self.slot_tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
         t_first, step = t_s - LEFT_LOBES * lobe, 2.0 * LEFT_LOBES * lobe / (LEFT_TIMES - 1)
         c = np.empty((LEFT_SPEEDS, LEFT_TIMES), dtype=np.complex128)
         grid_sums(*args, known, t_first, step, alphas, c, np.empty(c.shape))
@@ -1535,7 +1401,7 @@ class CoherentRefiner:
         (``count`` of them; shape ``(count,)``): each echo's latest fit carried on at its
         delay, time scale (and rate) and amplitude (:mod:`hil.estimation.echo_model`), for
         the echoes fitted within :data:`KNOWN_HOPS` hops of those samples that the first
-        search measured (:attr:`_EchoFit.cancelled`); None where there is none. Taken out
+        search measured (:attr:`EchoFit.cancelled`); None where there is none. Taken out
         of the input, what is left is searched again (:mod:`hil.estimation.gcas.residual`)."""
         t_lo = first_index / self.fs_hz
         t_hi = (first_index + count) / self.fs_hz
@@ -1614,7 +1480,7 @@ class CoherentRefiner:
         most :data:`GHOST_LEAK_CELLS`) leaks into it at any time of the echo's hops: there
         the detection is the leak when it is at most :data:`GHOST_LEAK_FRACTION` of the
         echo's strength. A ``residual`` detection (the second search's) is checked against
-        the echoes that were not taken out of its input only (:attr:`_EchoFit.cancelled`:
+        the echoes that were not taken out of its input only (:attr:`EchoFit.cancelled`:
         the others' ghosts went with them)."""
         speed = self.c * (alpha - 1.0) / (alpha + 1.0)
         amplitude: float | None = None
@@ -1660,7 +1526,7 @@ class CoherentRefiner:
                 # Echoes of one speed close in range share their ghosts: all are taken out.
                 group = self._formation(e)
                 left = self._amplitude_near(
-                    t_s, alpha, hop_index, around=True, known=self._rows(group, t_s)
+                    t_s, alpha, hop_index, around=True, known=self.echo_rows(group, t_s)
                 )
                 ref = max(group, key=lambda g: abs(g.amplitude))
                 noise = abs(ref.amplitude) * 10.0 ** (-min(ref.e_over_n0_db, 300.0) / 20.0)
@@ -1673,7 +1539,7 @@ class CoherentRefiner:
                 return True
         return False
 
-    def _formation(self, echo: _EchoFit) -> list[_EchoFit]:
+    def _formation(self, echo: EchoFit) -> list[EchoFit]:
         """``echo`` and the other echoes measured within :data:`KNOWN_HOPS` hops of it at its
         speed (within the speed span) and within
         :data:`~hil.estimation.refine_pair.SEED_LOBES` grating lobes of its delay (each
@@ -1726,13 +1592,13 @@ class CoherentRefiner:
             alphas = (self.c + v) / (self.c - v)
         word = self._codeword(hop_index)
         hop_ids = np.arange(hop_index - self.m_hops + 1, hop_index + 1, dtype=np.int64)
-        slots = self._slots(hop_ids, word, t_s, alpha)
+        slots = self.hop_slots(hop_ids, word, t_s, alpha)
         if slots is None:
             return 0.0
         c = np.empty((alphas.size, GHOST_POINTS), dtype=np.complex128)
         e_s = np.empty((alphas.size, GHOST_POINTS))
         grid_sums(
-            *self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s, known,
+            *self.slot_tables, slots, *word.hops, self.fs_hz, self.hop_len_s, known,
             t_s - 0.5 * lobe, lobe / (GHOST_POINTS - 1), np.ascontiguousarray(alphas), c, e_s,
         )  # fmt: skip
         ok = e_s > 0
@@ -1743,7 +1609,7 @@ class CoherentRefiner:
     ) -> None:
         """Keep ``fits`` (echoes of one detection's hops, :meth:`_two_echoes`) as their
         echoes' latest, replacing every earlier fit of either (:meth:`_same_echo`) and
-        forgetting fits :data:`KNOWN_HOPS` hops old; ``pair`` as :attr:`_EchoFit.pair`."""
+        forgetting fits :data:`KNOWN_HOPS` hops old; ``pair`` as :attr:`EchoFit.pair`."""
         oldest = min(f.t_s for f in fits) - KNOWN_HOPS * self.hop_len_s
         ghost_strength = (0.0,) * self.schedule.period_hops
         kept = []
@@ -1758,7 +1624,7 @@ class CoherentRefiner:
             else:
                 kept.append(e)
         new = [
-            _EchoFit(
+            EchoFit(
                 hop_index, f.t_s, f.alpha, f.amplitude, 0.0, ghost_strength, f.e_over_n0_db,
                 cancelled=cancelled, pair=pair, held=self._holds(f.e_over_n0_db, w),
             )
@@ -1770,13 +1636,13 @@ class CoherentRefiner:
         """Keep ``fit`` as its echo's latest (with its fitted amplitude ``β = 2C/E_s``),
         replacing that echo's earlier fit (the strength of its ghosts read so far carried
         on) and forgetting fits :data:`KNOWN_HOPS` hops old; ``cancelled`` as
-        :attr:`_EchoFit.cancelled` (None: the echo's earlier fit's, True for a new echo). A fit
+        :attr:`EchoFit.cancelled` (None: the echo's earlier fit's, True for a new echo). A fit
         of a boundary before the echo's latest fit (a gap looked for, :meth:`due`) is not kept
         in its place; a fit after boundaries neither fitted nor looked for since the echo's
-        earlier fit notes them (:attr:`_EchoFit.gap`, at most :data:`KNOWN_HOPS` of them)."""
+        earlier fit notes them (:attr:`EchoFit.gap`, at most :data:`KNOWN_HOPS` of them)."""
         if fit.amplitude == 0:
             return
-        speed = self.c * (fit.alpha - 1.0) / (fit.alpha + 1.0)  # _EchoFit.speed
+        speed = self.c * (fit.alpha - 1.0) / (fit.alpha + 1.0)  # EchoFit.speed
         oldest = fit.t_s - KNOWN_HOPS * self.hop_len_s
         kept = []
         ghost_strength = (0.0,) * self.schedule.period_hops
@@ -1798,14 +1664,14 @@ class CoherentRefiner:
         if cancelled is None:
             cancelled = True if was is None else was
         gap = covered + 1 if covered >= 0 and 0 < hop_index - covered - 1 <= KNOWN_HOPS else -1
-        new = _EchoFit(
+        new = EchoFit(
             hop_index, fit.t_s, fit.alpha, fit.amplitude, fit.rate(self.c), ghost_strength,
             fit.e_over_n0_db, cancelled=cancelled, gap=gap,
             held=self._holds(fit.e_over_n0_db, was_held),
         )  # fmt: skip
         self._echoes = [*kept, new]
 
-    def _oldest_kept(self, echo: _EchoFit, oldest: float) -> float:
+    def _oldest_kept(self, echo: EchoFit, oldest: float) -> float:
         """The earliest time (s) at which ``echo``'s fit is still kept where fits before
         ``oldest`` (s, :data:`KNOWN_HOPS` hops back) are forgotten: a still echo's
         :data:`STILL_KNOWN_HOPS` - :data:`KNOWN_HOPS` hops earlier."""
@@ -1815,10 +1681,10 @@ class CoherentRefiner:
 
     def _holds(self, e_over_n0_db: float, was_held: bool) -> bool:
         """Whether a fit collecting ``e_over_n0_db`` (dB) holds its echo
-        (:attr:`_EchoFit.held`): the echo was held, or the fit reaches :attr:`follow_db`."""
+        (:attr:`EchoFit.held`): the echo was held, or the fit reaches :attr:`follow_db`."""
         return was_held or e_over_n0_db >= self.follow_db
 
-    def _same_echo(self, fit: _EchoFit, hop_index: int, t_s: float, speed: float) -> bool:
+    def _same_echo(self, fit: EchoFit, hop_index: int, t_s: float, speed: float) -> bool:
         """Whether a detection at ``t_s`` (s) ending hop ``hop_index`` at ``speed`` (m/s) is
         the echo of ``fit``: its boundary where the fit's echo puts that hop's (within
         :data:`SAME_ECHO_LOBES` grating lobes) at a speed within the speed span. An
@@ -1845,12 +1711,12 @@ class CoherentRefiner:
         rows of :func:`~hil.estimation.refine_kernels.candidate_sums` (shape ``(5, Q)``):
         each echo continues at its fitted delay, time scale and amplitude, before its latest
         fit as after it (``lag_s``: :meth:`_others`)."""
-        return self._rows(self._others(hop_index, t_s, speed, lag_s=lag_s), t_s)
+        return self.echo_rows(self._others(hop_index, t_s, speed, lag_s=lag_s), t_s)
 
     def _others(
         self, hop_index: int, t_s: float, speed: float, stronger_than: float = 0.0,
         lag_s: float = 0.0,
-    ) -> list[_EchoFit]:  # fmt: skip
+    ) -> list[EchoFit]:  # fmt: skip
         """The echoes measured within :data:`KNOWN_HOPS` hops of a detection at ``t_s`` (s)
         and ``speed`` (m/s) ending hop ``hop_index`` that are not its own, with a fitted
         ``|β|`` above ``stronger_than``; a detection decided ``lag_s`` (s) late (the second
@@ -1875,7 +1741,7 @@ class CoherentRefiner:
         near = STILL_GHOST_CELLS * self._cell_speed
         return k >= 1 and abs(abs(speed) - k * self._ghost_speed) <= near
 
-    def _rows(self, echoes: list[_EchoFit], t_end: float) -> NDArray[np.complex128]:
+    def echo_rows(self, echoes: list[EchoFit], t_end: float) -> NDArray[np.complex128]:
         """The ``known`` rows (shape ``(5, Q)``) of ``echoes`` over the ``M`` hops whose
         last boundary is received at ``t_end`` (s), widened by the speed span's drift."""
         if not echoes:
@@ -1887,7 +1753,7 @@ class CoherentRefiner:
         columns = [self._echo_hops(e, t_lo, t_hi) for e in echoes]
         return np.ascontiguousarray(np.concatenate(columns, axis=1))
 
-    def _echo_hops(self, echo: _EchoFit, t_lo: float, t_hi: float) -> NDArray[np.complex128]:
+    def _echo_hops(self, echo: EchoFit, t_lo: float, t_hi: float) -> NDArray[np.complex128]:
         """The ``known`` columns of ``echo``'s hops received within ``[t_lo, t_hi]`` (s)."""
         key = echo.hop_index % self.schedule.period_hops
         t_len = self.hop_len_s / echo.alpha  # a hop's received length, s
@@ -1957,10 +1823,10 @@ class CoherentRefiner:
             if gamma != 0.0:
                 best_t, alpha = _to_centre(best_t, alpha, gamma, word.centre_s)
             best_v = self.c * (alpha - 1.0) / (alpha + 1.0)
-            slots = self._slots(hop_ids, word, best_t, alpha)
+            slots = self.hop_slots(hop_ids, word, best_t, alpha)
             if slots is None:
                 return None
-            args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
+            args = (*self.slot_tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
             if gamma == 0.0:
                 best_t, best_v, outcome = maximise(
                     *args, known, 0.0, self.c, best_t, best_v, WARM_HALF_LOBES * lobe,
@@ -1987,28 +1853,28 @@ class CoherentRefiner:
         if outcome == NO_LOBE and known.shape[1]:
             # Beside another echo the detector's time can be a whole lobe off: its search then
             # rises to an edge. Start again from the better neighbouring lobe.
-            side = self._better_lobe(args, t0, v0, lobe, known, any_side=True)
-            searched = self._search(word, hop_ids, side, v0, lobe, known) if side else None
+            side = self.better_lobe(args, t0, v0, lobe, known, any_side=True)
+            searched = self.search_near(word, hop_ids, side, v0, lobe, known) if side else None
             if searched is not None:
                 best_t, best_v, outcome, args = searched
             if outcome == NO_LOBE:
                 # Still at an edge: the detector's time is more than a lobe off (beside a
                 # stronger echo its envelope can peak two lobes away). Search three lobes.
                 wide = (1.5 * lobe, self.speed_span_mps, 3 * TIME_POINTS - 2, self.speed_points)
-                searched = self._search(word, hop_ids, t0, v0, lobe, known, wide)
+                searched = self.search_near(word, hop_ids, t0, v0, lobe, known, wide)
                 if searched is not None:
                     best_t, best_v, outcome, args = searched
         for _ in range(LOBE_MOVES if outcome == FOUND and not keep_lobe else 0):
             # The lobe: the envelope tells a grating lobe from its neighbours by ~1 dB, which
             # a detector's time (noncoherent, beside a stronger echo) can miss; the
             # likelihood's own neighbours decide.
-            moved = self._better_lobe(args, best_t, best_v, lobe, known, gamma=gamma)
+            moved = self.better_lobe(args, best_t, best_v, lobe, known, gamma=gamma)
             if moved is None:
                 break
-            narrow = self._narrow_grid(lobe)
-            searched = self._search(word, hop_ids, moved, best_v, lobe, known, narrow, gamma)
+            narrow = self.narrow_grid(lobe)
+            searched = self.search_near(word, hop_ids, moved, best_v, lobe, known, narrow, gamma)
             if searched is not None and searched[2] != FOUND:
-                searched = self._search(word, hop_ids, moved, best_v, lobe, known, gamma=gamma)
+                searched = self.search_near(word, hop_ids, moved, best_v, lobe, known, gamma=gamma)
             if searched is None:
                 return None
             best_t, best_v, outcome, args = searched
@@ -2017,7 +1883,7 @@ class CoherentRefiner:
         if outcome != FOUND:
             best_t, best_v, gamma = t0, v0, 0.0
         a_best = (self.c + best_v) / (self.c - best_v)
-        return self._refinement(args, known, word, best_t, a_best, gamma, outcome == FOUND)
+        return self.refinement_at(args, known, word, best_t, a_best, gamma, outcome == FOUND)
 
     def _earlier_power(
         self, hop_ids: NDArray[np.int64], t_s: float, alpha: float, lobe: float,
@@ -2033,15 +1899,15 @@ class CoherentRefiner:
         before = hop_ids - self.m_hops
         word = self._codeword(int(before[-1]))
         centre = t_s - self.m_hops * self.hop_len_s / alpha
-        slots = self._slots(before, word, centre, alpha)
+        slots = self.hop_slots(before, word, centre, alpha)
         if slots is None:
             return None
         v = self.c * (alpha - 1.0) / (alpha + 1.0)
         speeds = v + 0.25 * self._v_res * np.linspace(-1.0, 1.0, LOBE_SPEEDS)
         alphas = np.repeat((self.c + speeds) / (self.c - speeds), LOBE_POINTS)
         t = np.tile(centre + 0.125 * lobe * np.linspace(-1.0, 1.0, LOBE_POINTS), LOBE_SPEEDS)
-        args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
-        return float(np.max(self._powers(args, known, t, alphas, np.zeros(t.size))))
+        args = (*self.slot_tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
+        return float(np.max(self.candidate_powers(args, known, t, alphas, np.zeros(t.size))))
 
     def _known_before(
         self, hop_index: int, t_s: float, alpha: float, amplitude: float
@@ -2055,7 +1921,7 @@ class CoherentRefiner:
         per-sample SNR: 5 of 200 hops a lobe off without them, none with them)."""
         speed = self.c * (alpha - 1.0) / (alpha + 1.0)
         others = self._others(hop_index, t_s, speed, stronger_than=amplitude)
-        return self._rows(others, t_s - self.m_hops * self.hop_len_s / alpha)
+        return self.echo_rows(others, t_s - self.m_hops * self.hop_len_s / alpha)
 
     def _lobe_by_more_hops(
         self, fit: Refinement, word: Codeword, hop_ids: NDArray[np.int64], t0: float,
@@ -2078,11 +1944,13 @@ class CoherentRefiner:
         first = self._earlier_power(hop_ids, fit.t_s, fit.alpha, lobe, before)
         if first is None:
             return fit
-        slots = self._slots(hop_ids, word, fit.t_s, fit.alpha)
+        slots = self.hop_slots(hop_ids, word, fit.t_s, fit.alpha)
         if slots is None:
             return fit
-        args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
-        own = self._powers(args, known, np.array([fit.t_s]), np.array([fit.alpha]), np.zeros(1))
+        args = (*self.slot_tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
+        own = self.candidate_powers(
+            args, known, np.array([fit.t_s]), np.array([fit.alpha]), np.zeros(1)
+        )
         if first < LOBE_HELD * own[0]:
             return fit
         best = (float(own[0]) + first, fit.t_s, v_fit)
@@ -2093,12 +1961,12 @@ class CoherentRefiner:
                 starts.append((t_k, v0))
         moved = False
         for t_k, v_k in starts:
-            searched = self._search(word, hop_ids, t_k, v_k, lobe, known, grid)
+            searched = self.search_near(word, hop_ids, t_k, v_k, lobe, known, grid)
             if searched is None or searched[2] != FOUND:
                 continue
             t, v, _, args = searched
             alpha = (self.c + v) / (self.c - v)
-            p = self._powers(args, known, np.array([t]), np.array([alpha]), np.zeros(1))
+            p = self.candidate_powers(args, known, np.array([t]), np.array([alpha]), np.zeros(1))
             earlier = self._earlier_power(hop_ids, t, alpha, lobe, before)
             if earlier is not None and p[0] + earlier > best[0]:
                 best, moved = (float(p[0]) + earlier, t, v), True
@@ -2108,11 +1976,11 @@ class CoherentRefiner:
         # The winner's tables, made by its search (later searches' fills may have taken some
         # of its slots: those are made again, the others reused).
         alpha = (self.c + v) / (self.c - v)
-        slots = self._slots(hop_ids, word, t, alpha)
+        slots = self.hop_slots(hop_ids, word, t, alpha)
         if slots is None:
             return fit
-        args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
-        return self._refinement(args, known, word, t, alpha, 0.0, True)
+        args = (*self.slot_tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
+        return self.refinement_at(args, known, word, t, alpha, 0.0, True)
 
     def in_still_water(self, t_s: float, alpha: float) -> bool:
         """Whether the ``M`` hops' window of the boundary at ``t_s`` (s, time scale
@@ -2182,15 +2050,15 @@ class CoherentRefiner:
             return fit
         v = fit.speed_mps(self.c)
         grid = (0.125 * lobe, 0.5 * self.speed_span_mps, 5, 5)
-        searched = self._search(word, hop_ids, fit.t_s + ks[j] * lobe, v, lobe, known, grid)
+        searched = self.search_near(word, hop_ids, fit.t_s + ks[j] * lobe, v, lobe, known, grid)
         if searched is None or searched[2] != FOUND:
             return replace(fit, found=False)
         t_new, v_new, _, args = searched
         a_new = (self.c + v_new) / (self.c - v_new)
-        return self._refinement(args, known, word, t_new, a_new, 0.0, True)
+        return self.refinement_at(args, known, word, t_new, a_new, 0.0, True)
 
     def still_free_evidence(
-        self, t_s: float, alpha: float, hop_index: int, others: list[_EchoFit] | None = None
+        self, t_s: float, alpha: float, hop_index: int, others: list[EchoFit] | None = None
     ) -> NDArray[np.float64] | None:
         """The evidence for each grating lobe of an echo whose boundary ending hop
         ``hop_index`` is received at ``t_s`` (s) with time scale ``alpha``, on the input
@@ -2224,7 +2092,7 @@ class CoherentRefiner:
             powers = np.empty_like(evidence)
             for j, k in enumerate(ks):
                 centre = t_s - w * window_s + k * lobe
-                known_y = self._rows(in_y, centre)
+                known_y = self.echo_rows(in_y, centre)
                 t = centre + offsets
                 direct = fits._sums(centre, alpha, hop, t, a, g, known_y)
                 copy = fits._sums(centre + shift, alpha, hop, t + shift, a, g, known_y)
@@ -2239,14 +2107,14 @@ class CoherentRefiner:
         best: NDArray[np.float64] = np.max(evidence, axis=1)
         return best
 
-    def _still_copy(self, echo: _EchoFit) -> _EchoFit:
+    def _still_copy(self, echo: EchoFit) -> EchoFit:
         """What the one-period canceller subtracts of ``echo``: the echo at the receive time
         a still period later less the time scale's stretch (``t + T_Q (1 − 1/α)``), with the
         opposite amplitude (:mod:`hil.estimation.still_lobe`)."""
         t = echo.t_s + self._still_period_s * (1.0 - 1.0 / echo.alpha)
         return replace(echo, t_s=t, amplitude=-echo.amplitude)
 
-    def _refinement(
+    def refinement_at(
         self, args: tuple[Any, ...], known: NDArray[np.complex128], word: Codeword, t: float,
         alpha: float, gamma: float, found: bool,
     ) -> Refinement:  # fmt: skip
@@ -2277,10 +2145,10 @@ class CoherentRefiner:
         """Each hop's power at the constant-speed ``fit`` (shape ``(M,)``, the hop's term
         over its squared amplitude), ``known`` taken out; None where the input does not cover
         the hops."""
-        slots = self._slots(hop_ids, word, fit.t_s, fit.alpha)
+        slots = self.hop_slots(hop_ids, word, fit.t_s, fit.alpha)
         if slots is None:
             return None
-        args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
+        args = (*self.slot_tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
         per_hop = np.empty((1, hop_ids.shape[0]), np.complex128)
         candidate_sums(
             *args, np.array([fit.t_s]), np.array([fit.alpha]), np.zeros(1),
@@ -2305,13 +2173,13 @@ class CoherentRefiner:
         if fit.accel_mps2 != 0.0:
             gamma = fit.rate(self.c)
             t, alpha = _to_centre(t, alpha, gamma, word.centre_s)
-        slots = self._slots(hop_ids, word, t, alpha)
+        slots = self.hop_slots(hop_ids, word, t, alpha)
         if slots is None:
             return False
         b = self._end_buffers
         b[0][0], b[1][0], b[2][0] = t, alpha, gamma
         candidate_sums(
-            *self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s, *b, known
+            *self.slot_tables, slots, *word.hops, self.fs_hz, self.hop_len_s, *b, known
         )  # fmt: skip
         h = b[6][0]
         # G_k > limit, with the residual RSS_k = total − lead_k ≥ 0 (Cauchy–Schwarz); lead_k
@@ -2375,7 +2243,7 @@ class CoherentRefiner:
         speeds = []
         for part, ids in ((self._half_word(int(hop_ids[-1]), True), hop_ids[:n]),
                           (self._half_word(int(hop_ids[-1]), False), hop_ids[-n:])):  # fmt: skip
-            searched = self._search(part, ids, fit.t_s, v, lobe, known, grid)
+            searched = self.search_near(part, ids, fit.t_s, v, lobe, known, grid)
             if searched is None or searched[2] != FOUND:
                 return None
             t_h, v_h, _, args = searched
@@ -2420,7 +2288,9 @@ class CoherentRefiner:
             sub = self._sub_word(int(hop_ids[-1]))
             grid = (0.5 * lobe, self.speed_span_mps, TIME_POINTS, self.sub_speed_points)
             v = fit.speed_mps(self.c)
-            searched = self._search(sub, hop_ids[-self.sub_hops :], fit.t_s, v, lobe, known, grid)
+            searched = self.search_near(
+                sub, hop_ids[-self.sub_hops :], fit.t_s, v, lobe, known, grid
+            )
             if searched is None or searched[2] != FOUND:
                 return fit
             t_sub, a_sub = searched[0], (self.c + searched[1]) / (self.c - searched[1])
@@ -2428,14 +2298,14 @@ class CoherentRefiner:
                 a_b = a_sub - float(g) * sub.centre_s / a_sub
                 t_c[i], a_c[i] = _to_centre(t_sub, a_b, float(g), word.centre_s)
         # The M hops' tables after the fewer hops' search, whose fills may take slots.
-        slots = self._slots(hop_ids, word, fit.t_s, fit.alpha)
+        slots = self.hop_slots(hop_ids, word, fit.t_s, fit.alpha)
         if slots is None:
             return fit
-        args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
+        args = (*self.slot_tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
         # Over the M hops the rate's phase (even about the centre) can alias with the
         # delay's and time scale's (odd) at another grating lobe or rate: several starts.
         shifts = lobe * np.array([-1.0, 0.0, 1.0])
-        power = self._powers(
+        power = self.candidate_powers(
             args, known, (shifts[:, None] + t_c).ravel(), np.tile(a_c, 3), np.tile(gammas, 3)
         ).reshape(3, n)
         inner = power[:, 1:-1]
@@ -2458,11 +2328,13 @@ class CoherentRefiner:
         if best is None:
             return fit
         t, alpha, gamma, p_best = best
-        p0 = self._powers(args, known, np.array([fit.t_s]), np.array([fit.alpha]), np.zeros(1))
+        p0 = self.candidate_powers(
+            args, known, np.array([fit.t_s]), np.array([fit.alpha]), np.zeros(1)
+        )
         gain = 10.0 ** (fit.e_over_n0_db / 10.0) * (p_best / p0[0] - 1.0) if p0[0] > 0 else 0.0
         if not gain > ACCEL_GAIN:
             return fit
-        return self._refinement(args, known, word, t, alpha, gamma, True)
+        return self.refinement_at(args, known, word, t, alpha, gamma, True)
 
     def _seeded_start(
         self, args: tuple[Any, ...], known: NDArray[np.complex128], fit: Refinement,
@@ -2485,7 +2357,7 @@ class CoherentRefiner:
         p_best = -1.0
         starts = [(fit.t_s, v_fit, g_seed + k * step) for k in range(-steps, steps + 1)]
         # Then the best one's neighbouring grating lobes: at -10 dB a curved fit's lobe is
-        # decided ~1 dB apart as a constant-speed one's (:meth:`_better_lobe`).
+        # decided ~1 dB apart as a constant-speed one's (:meth:`better_lobe`).
         for i in range(len(starts) + 2):
             if i == len(starts):
                 if best is None:
@@ -2497,7 +2369,11 @@ class CoherentRefiner:
             if outcome != FOUND:
                 continue
             alpha = (self.c + v) / (self.c - v)
-            p = float(self._powers(args, known, np.array([t]), np.array([alpha]), np.array([g]))[0])
+            p = float(
+                self.candidate_powers(args, known, np.array([t]), np.array([alpha]), np.array([g]))[
+                    0
+                ]
+            )
             if p > p_best:
                 best, p_best = (t, alpha, g), p
         return best
@@ -2509,7 +2385,9 @@ class CoherentRefiner:
         """What the rate ``gamma`` adds to ``ln Λ = |C|²/(σ² E_s)`` at ``(t, alpha)`` (the
         hops' centre's line), ``σ²`` what the accelerating fit leaves of the windows' energy."""
         en0 = _fit_quality(args, known, word, self.n_tones, t, alpha, gamma)[0]
-        p = self._powers(args, known, np.full(2, t), np.full(2, alpha), np.array([0.0, gamma]))
+        p = self.candidate_powers(
+            args, known, np.full(2, t), np.full(2, alpha), np.array([0.0, gamma])
+        )
         return en0 * (1.0 - p[0] / p[1]) if p[1] > 0 else 0.0
 
     def _accel_fit(
@@ -2531,12 +2409,14 @@ class CoherentRefiner:
             alpha = (self.c + v) / (self.c - v)
             h = 0.5 * step / 2**r
             rates = gamma + h * np.arange(-1.0, 2.0)
-            p = self._powers(args, known, np.full(3, t), np.full(3, alpha), rates)
+            p = self.candidate_powers(args, known, np.full(3, t), np.full(3, alpha), rates)
             gamma += h * parabolic_offset(p[0], p[1], p[2])  # 0 where p has no maximum
-        p_end = self._powers(args, known, np.array([t]), np.array([alpha]), np.array([gamma]))
+        p_end = self.candidate_powers(
+            args, known, np.array([t]), np.array([alpha]), np.array([gamma])
+        )
         return t, alpha, gamma, float(p_end[0])
 
-    def _powers(
+    def candidate_powers(
         self, args: tuple[Any, ...], known: NDArray[np.complex128], t: NDArray[np.float64],
         alpha: NDArray[np.float64], gamma: NDArray[np.float64],
     ) -> NDArray[np.float64]:  # fmt: skip
@@ -2548,7 +2428,7 @@ class CoherentRefiner:
         )
         return np.abs(c) ** 2
 
-    def _search(
+    def search_near(
         self, word: Codeword, hop_ids: NDArray[np.int64], t0: float, v0: float, lobe: float,
         known: NDArray[np.complex128], grid: tuple[float, float, int, int] | None = None,
         gamma: float = 0.0,
@@ -2563,10 +2443,10 @@ class CoherentRefiner:
         best_t, best_v, outcome = t0, v0, RECENTRE
         args: tuple[Any, ...] = ()
         for _ in range(MAX_RECENTRES + 1):
-            slots = self._slots(hop_ids, word, best_t, (self.c + best_v) / (self.c - best_v))
+            slots = self.hop_slots(hop_ids, word, best_t, (self.c + best_v) / (self.c - best_v))
             if slots is None:
                 return None
-            args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
+            args = (*self.slot_tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
             best_t, best_v, outcome = maximise(
                 *args, known, gamma, self.c, best_t, best_v, *grid, FIT_PASSES
             )
@@ -2578,33 +2458,38 @@ class CoherentRefiner:
         self, word: Codeword, hop_ids: NDArray[np.int64], t0: float, v0: float, lobe: float,
         known: NDArray[np.complex128],
     ) -> tuple[float, float, int, tuple[Any, ...]] | None:  # fmt: skip
-        """:meth:`_search` by way of the last :attr:`sub_hops` hops (:data:`SUB_HOPS`): their
+        """:meth:`search_near` by way of the last :attr:`sub_hops` hops (:data:`SUB_HOPS`): their
         search's maximum is the centre of a search of all ``M`` hops over the fewer hops'
-        main lobe (:meth:`_narrow_grid`); the full search where either finds no maximum
+        main lobe (:meth:`narrow_grid`); the full search where either finds no maximum
         inside (NO_LOBE where the fewer hops find none within ±½ lobe). None where the input
         does not cover the hops."""
         if self.sub_hops == self.m_hops:
-            return self._search(word, hop_ids, t0, v0, lobe, known)
+            return self.search_near(word, hop_ids, t0, v0, lobe, known)
         sub = self._sub_word(hop_ids[-1])
         sub_grid = (0.5 * lobe, self.speed_span_mps, TIME_POINTS, self.sub_speed_points)
-        first = self._search(sub, hop_ids[-self.sub_hops :], t0, v0, lobe, known, sub_grid)
+        first = self.search_near(sub, hop_ids[-self.sub_hops :], t0, v0, lobe, known, sub_grid)
         if first is None:
             return None
         t1, v1, outcome, _ = first
         if outcome == FOUND:
-            searched = self._search(word, hop_ids, t1, v1, lobe, known, self._narrow_grid(lobe))
+            searched = self.search_near(word, hop_ids, t1, v1, lobe, known, self.narrow_grid(lobe))
             if searched is None or searched[2] == FOUND:
                 return searched
         elif outcome == NO_LOBE:
             # No main lobe within ±½ lobe of the detection over the fewer hops: the caller's
             # NO_LOBE rules apply (the lobe check beside another echo), on all M hops' tables.
-            slots = self._slots(hop_ids, word, t0, (self.c + v0) / (self.c - v0))
+            slots = self.hop_slots(hop_ids, word, t0, (self.c + v0) / (self.c - v0))
             if slots is None:
                 return None
-            return t0, v0, NO_LOBE, (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
-        return self._search(word, hop_ids, t0, v0, lobe, known)
+            return (
+                t0,
+                v0,
+                NO_LOBE,
+                (*self.slot_tables, slots, *word.hops, self.fs_hz, self.hop_len_s),
+            )
+        return self.search_near(word, hop_ids, t0, v0, lobe, known)
 
-    def _narrow_grid(self, lobe: float) -> tuple[float, float, int, int]:
+    def narrow_grid(self, lobe: float) -> tuple[float, float, int, int]:
         """A grid of all ``M`` hops around a point already near their maximum (the fewer
         hops' maximum, or a neighbouring grating lobe's): ±⅛ grating lobe in 5 points, and
         ±½ of the fewer hops' speed resolution in steps of about half the ``M`` hops'."""
@@ -2612,7 +2497,7 @@ class CoherentRefiner:
         half_v = 0.5 * self._v_res * self.m_hops / self.sub_hops
         return (0.125 * lobe, half_v, 5, n_v)
 
-    def _better_lobe(
+    def better_lobe(
         self, args: tuple[Any, ...], t_s: float, speed: float, lobe: float,
         known: NDArray[np.complex128], any_side: bool = False, gamma: float = 0.0,
     ) -> float | None:  # fmt: skip
@@ -2621,7 +2506,7 @@ class CoherentRefiner:
         ``any_side`` the greater of the two whatever ``t_s``'s), or None."""
         alpha = (self.c + speed) / (self.c - speed)
         t = np.array([t_s - lobe, t_s, t_s + lobe])
-        power = self._powers(args, known, t, np.full(3, alpha), np.full(3, gamma))
+        power = self.candidate_powers(args, known, t, np.full(3, alpha), np.full(3, gamma))
         side = 0 if power[0] >= power[2] else 2
         if power[side] > power[1] or any_side:
             return float(t[side])
@@ -2686,10 +2571,10 @@ class CoherentRefiner:
         not cover the hops."""
         word = self._codeword(hop_index)
         hop_ids = np.arange(hop_index - self.m_hops + 1, hop_index + 1, dtype=np.int64)
-        slots = self._slots(hop_ids, word, t_s, alpha)
+        slots = self.hop_slots(hop_ids, word, t_s, alpha)
         if slots is None:
             return None
-        args = (*self._tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
+        args = (*self.slot_tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
         n = t.size
         c, e_s = np.empty(n, np.complex128), np.empty(n)
         candidate_sums(
@@ -2698,10 +2583,10 @@ class CoherentRefiner:
         return c, e_s
 
     @property
-    def _tables(self) -> tuple[NDArray[Any], ...]:
+    def slot_tables(self) -> tuple[NDArray[Any], ...]:
         return (self._prefix, self._energy, self._first, self._tail, self._alpha0, self._centre)
 
-    def _slots(
+    def hop_slots(
         self, hop_ids: NDArray[np.int64], word: Codeword, t_s: float, alpha: float
     ) -> NDArray[np.int64] | None:
         """The table slot of each hop (shape ``(M,)``): a kept one made for this window, or

@@ -47,16 +47,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
+from hil.estimation.codewords import Codeword
+from hil.estimation.echo_fits import EchoFit, EchoTest, Refinement
 from hil.estimation.refine_kernels import FOUND, candidate_sums
-
-if TYPE_CHECKING:
-    from hil.estimation.codewords import Codeword
-    from hil.estimation.refine import CoherentRefiner, EchoTest, Refinement, _EchoFit
 
 #: The second echo is looked for within this many grating lobes of the one-echo fit (two
 #: echoes further apart each hold their own detector peak, and the one-echo fits with the
@@ -82,6 +80,72 @@ PAIR_CHANCE = 1e-3
 #: apart 0.9-2). Half is where the two interfere destructively by more than their own
 #: energy's half: such a pair is not told from a hop's edge structure.
 LEAST_INTERFERENCE = 0.5
+#: Lobe checks after a search (each may move the fit by one grating lobe; they stop where
+#: neither neighbour is better): a detector's time can be several lobes off at an echo's
+#: first boundary (att three-state, full search: 2.75 lobes, 1.8 ms). The one-echo fit's
+#: (:class:`~hil.estimation.refine.CoherentRefiner`) and each echo's of a pair.
+LOBE_MOVES = 4
+
+
+class PairFitHost(Protocol):
+    """What the pair fit reads of the refiner whose detection it fits
+    (:class:`~hil.estimation.refine.CoherentRefiner`): its design and its one-echo search
+    over the input it holds."""
+
+    c: float  #: sound speed, m/s
+    fs_hz: float  #: input rate, Hz
+    hop_len_s: float  #: the hops' length, s
+    m_hops: int  #: hops of a codeword
+    speed_span_mps: float  #: the search's speed span about a detection, m/s
+    main_lobe_s: float  #: the likelihood's main lobe in time, ``1/B`` (s)
+
+    @property
+    def slot_tables(self) -> tuple[NDArray[Any], ...]:
+        """The hops' correlation tables, as the refinement kernels take them."""
+        ...
+
+    def hop_slots(
+        self, hop_ids: NDArray[np.int64], word: Codeword, t_s: float, alpha: float
+    ) -> NDArray[np.int64] | None:
+        """Each hop's table slot for a window at ``(t_s, alpha)`` (None: input not held)."""
+        ...
+
+    def echo_rows(self, echoes: list[EchoFit], t_end: float) -> NDArray[np.complex128]:
+        """The rows that take ``echoes`` out of the ``M`` hops ending at ``t_end`` (s)."""
+        ...
+
+    def search_near(
+        self, word: Codeword, hop_ids: NDArray[np.int64], t0: float, v0: float, lobe: float,
+        known: NDArray[np.complex128], grid: tuple[float, float, int, int] | None = None,
+        gamma: float = 0.0,
+    ) -> tuple[float, float, int, tuple[Any, ...]] | None:  # fmt: skip
+        """The one-echo search around ``(t0 s, v0 m/s)`` with ``known`` taken out."""
+        ...
+
+    def candidate_powers(
+        self, args: tuple[Any, ...], known: NDArray[np.complex128], t: NDArray[np.float64],
+        alpha: NDArray[np.float64], gamma: NDArray[np.float64],
+    ) -> NDArray[np.float64]:  # fmt: skip
+        """``|C|²`` of the candidates ``(t, alpha, gamma)``."""
+        ...
+
+    def narrow_grid(self, lobe: float) -> tuple[float, float, int, int]:
+        """A grid around a point already near the maximum."""
+        ...
+
+    def better_lobe(
+        self, args: tuple[Any, ...], t_s: float, speed: float, lobe: float,
+        known: NDArray[np.complex128], any_side: bool = False, gamma: float = 0.0,
+    ) -> float | None:  # fmt: skip
+        """A neighbouring grating lobe's time (s) where the likelihood is greater, or None."""
+        ...
+
+    def refinement_at(
+        self, args: tuple[Any, ...], known: NDArray[np.complex128], word: Codeword, t: float,
+        alpha: float, gamma: float, found: bool,
+    ) -> Refinement:  # fmt: skip
+        """The :class:`~hil.estimation.echo_fits.Refinement` of the fit ``(t, alpha, gamma)``."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -157,9 +221,9 @@ def hop_scatter(terms: NDArray[np.complex128], amp2: NDArray[np.float64]) -> flo
 
 
 def fit_pair(
-    ref: CoherentRefiner, fit: Refinement, word: Codeword, hop_ids: NDArray[np.int64],
+    ref: PairFitHost, fit: Refinement, word: Codeword, hop_ids: NDArray[np.int64],
     hop_index: int, lobe: float, known: NDArray[np.complex128], test: EchoTest,
-    seeds: tuple[_EchoFit, _EchoFit] | None = None,
+    seeds: tuple[EchoFit, EchoFit] | None = None,
 ) -> PairFit | None:  # fmt: skip
     """Two echoes of one time scale near the refused one-echo ``fit`` of the boundary ending
     hop ``hop_index`` (hops ``hop_ids`` of ``word``; ``lobe`` the grating lobe, s;
@@ -168,7 +232,6 @@ def fit_pair(
     or where the input does not cover the hops. ``seeds``: the pair's echoes measured lately
     (a warm start, instead of the seed search: each carried to this boundary, and taken out
     of the other's input as measured, its amplitude on its own codeword's phase)."""
-    from hil.estimation.refine import _EchoFit
 
     if seeds is None:
         second = _seed(ref, fit, word, hop_ids, hop_index, lobe, known)
@@ -180,16 +243,16 @@ def fit_pair(
     amplitudes = _joint_amplitudes(ref, word, hop_ids, hop_index, places, known)
     if amplitudes is None:
         return None
-    echoes = [_EchoFit(hop_index, t, a, b) for (t, a), b in zip(places, amplitudes, strict=True)]
+    echoes = [EchoFit(hop_index, t, a, b) for (t, a), b in zip(places, amplitudes, strict=True)]
     fits: list[Refinement | None] = [None, None]
     for _ in range(PAIR_ROUNDS):
         for k in (1, 0):
-            rows = _with(known, ref._rows([echoes[1 - k]], echoes[k].t_s))
+            rows = _with(known, ref.echo_rows([echoes[1 - k]], echoes[k].t_s))
             got = _fit_one(ref, word, hop_ids, echoes[k], lobe, rows)
             if got is None:
                 return None
             fits[k] = got
-            echoes[k] = _EchoFit(hop_index, got.t_s, got.alpha, got.amplitude)
+            echoes[k] = EchoFit(hop_index, got.t_s, got.alpha, got.amplitude)
     first, second_fit = fits
     assert first is not None and second_fit is not None
     if abs(first.t_s - second_fit.t_s) > SEED_LOBES * lobe:
@@ -197,15 +260,15 @@ def fit_pair(
     if not (first.is_echo(test) and second_fit.is_echo(test)):
         return None
     gain, together = _gain(ref, word, hop_ids, hop_index, fit, first, second_fit, known)
-    cells = 2.0 * SEED_LOBES * lobe / ref._main_lobe_s
+    cells = 2.0 * SEED_LOBES * lobe / ref.main_lobe_s
     if not (gain > gain_limit(ref.m_hops, cells) and together >= LEAST_INTERFERENCE):
         return None
-    main = ref._main_lobe_s
+    main = ref.main_lobe_s
     resolved = abs(first.t_s - second_fit.t_s) >= RESOLVED_LOBES * main
     return PairFit(first, second_fit, resolved, gain)
 
 
-def _carried(echo: _EchoFit, hop_index: int, hop_s: float) -> float:
+def _carried(echo: EchoFit, hop_index: int, hop_s: float) -> float:
     """Where ``echo``'s fit puts the boundary ending hop ``hop_index``, s."""
     return echo.t_s + (hop_index - echo.hop_index) * hop_s / echo.alpha
 
@@ -216,43 +279,41 @@ def _with(known: NDArray[np.complex128], rows: NDArray[np.complex128]) -> NDArra
 
 
 def _fit_one(
-    ref: CoherentRefiner, word: Codeword, hop_ids: NDArray[np.int64], start: _EchoFit,
+    ref: PairFitHost, word: Codeword, hop_ids: NDArray[np.int64], start: EchoFit,
     lobe: float, rows: NDArray[np.complex128],
 ) -> Refinement | None:  # fmt: skip
     """The one-echo fit near ``start``'s delay and speed with ``rows`` taken out: a grid of
     ±:data:`ROUND_HALF_LOBES` lobe and ±:data:`ROUND_HALF_SPANS` speed spans, re-centred
-    and fitted (:meth:`~hil.estimation.refine.CoherentRefiner._search`), the full ±½ lobe
+    and fitted (:meth:`PairFitHost.search_near`), the full ±½ lobe
     search where its maximum is on that grid's edge in time, then moved to a neighbouring
     grating lobe where that is greater (up to
-    :data:`~hil.estimation.refine.LOBE_MOVES` times); None where the input does not cover
+    :data:`LOBE_MOVES` times); None where the input does not cover
     the hops or no maximum is inside."""
     v0 = start.speed(ref.c)
     grid = (ROUND_HALF_LOBES * lobe, ROUND_HALF_SPANS * ref.speed_span_mps, 5, 5)
-    searched = ref._search(word, hop_ids, start.t_s, v0, lobe, rows, grid)
+    searched = ref.search_near(word, hop_ids, start.t_s, v0, lobe, rows, grid)
     if searched is not None and searched[2] != FOUND:
-        searched = ref._search(word, hop_ids, start.t_s, v0, lobe, rows)
+        searched = ref.search_near(word, hop_ids, start.t_s, v0, lobe, rows)
     if searched is None or searched[2] != FOUND:
         return None
-    from hil.estimation.refine import LOBE_MOVES
-
     t, v, _, args = searched
     for _ in range(LOBE_MOVES):
         # The grating lobe: a lobe of the other echo's neighbour keeps most of its hops'
         # terms (a lobe apart they differ by the hops' edges only), so the likelihood's own
         # neighbours decide, as for one echo.
-        moved = ref._better_lobe(args, t, v, lobe, rows)
+        moved = ref.better_lobe(args, t, v, lobe, rows)
         if moved is None:
             break
-        searched = ref._search(word, hop_ids, moved, v, lobe, rows, ref._narrow_grid(lobe))
+        searched = ref.search_near(word, hop_ids, moved, v, lobe, rows, ref.narrow_grid(lobe))
         if searched is None or searched[2] != FOUND:
             return None
         t, v, _, args = searched
     alpha = (ref.c + v) / (ref.c - v)
-    return ref._refinement(args, rows, word, t, alpha, 0.0, True)
+    return ref.refinement_at(args, rows, word, t, alpha, 0.0, True)
 
 
 def _joint_amplitudes(
-    ref: CoherentRefiner,
+    ref: PairFitHost,
     word: Codeword,
     hop_ids: NDArray[np.int64],
     hop_index: int,
@@ -263,20 +324,19 @@ def _joint_amplitudes(
     squares together, ``β = 2 A⁻¹ c`` (``c`` each one's ``C``, ``A`` the models' Gram
     matrix, its cross term what a unit echo at the second place puts into the first's
     ``C``); None where the input does not cover the hops or the two are one model."""
-    from hil.estimation.refine import _EchoFit
 
     (t1, a1), (t2, a2) = places
-    slots = ref._slots(hop_ids, word, t1, a1)
+    slots = ref.hop_slots(hop_ids, word, t1, a1)
     if slots is None:
         return None
-    args = (*ref._tables, slots, *word.hops, ref.fs_hz, ref.hop_len_s)
+    args = (*ref.slot_tables, slots, *word.hops, ref.fs_hz, ref.hop_len_s)
     c1, e1, _ = _sums(args, known, t1, a1, ref.m_hops)
-    unit = _with(known, ref._rows([_EchoFit(hop_index, t2, a2, 2.0 + 0j)], t1))
+    unit = _with(known, ref.echo_rows([EchoFit(hop_index, t2, a2, 2.0 + 0j)], t1))
     cross = c1 - _sums(args, unit, t1, a1, ref.m_hops)[0]  # Σ s₂ s₁* (a unit β is 2)
-    slots = ref._slots(hop_ids, word, t2, a2)
+    slots = ref.hop_slots(hop_ids, word, t2, a2)
     if slots is None:
         return None
-    args = (*ref._tables, slots, *word.hops, ref.fs_hz, ref.hop_len_s)
+    args = (*ref.slot_tables, slots, *word.hops, ref.fs_hz, ref.hop_len_s)
     c2, e2, _ = _sums(args, known, t2, a2, ref.m_hops)
     det = e1 * e2 - abs(cross) ** 2
     if not det > 0:
@@ -288,7 +348,7 @@ def _joint_amplitudes(
 
 
 def _seed(
-    ref: CoherentRefiner,
+    ref: PairFitHost,
     fit: Refinement,
     word: Codeword,
     hop_ids: NDArray[np.int64],
@@ -300,11 +360,10 @@ def _seed(
     :data:`SEED_LOBES` grating lobes of it (steps of :data:`SEED_STEP` main lobes), ``fit``
     taken out, farther than half a main lobe from it (s); None where the input does not
     cover the hops."""
-    from hil.estimation.refine import _EchoFit
 
-    main = ref._main_lobe_s
-    own = _EchoFit(hop_index, fit.t_s, fit.alpha, fit.amplitude)
-    rows = _with(known, ref._rows([own], fit.t_s))
+    main = ref.main_lobe_s
+    own = EchoFit(hop_index, fit.t_s, fit.alpha, fit.amplitude)
+    rows = _with(known, ref.echo_rows([own], fit.t_s))
     best_p, best_t = -1.0, math.nan
     # Tables are made around each grating lobe's centre (a window reaches about ±¾ lobe
     # from where its tables were made).
@@ -318,11 +377,11 @@ def _seed(
         if not keep.any():
             continue
         t = np.ascontiguousarray(t[keep])
-        slots = ref._slots(hop_ids, word, centre, fit.alpha)
+        slots = ref.hop_slots(hop_ids, word, centre, fit.alpha)
         if slots is None:
             return None
-        args = (*ref._tables, slots, *word.hops, ref.fs_hz, ref.hop_len_s)
-        p = ref._powers(args, rows, t, np.full(t.size, fit.alpha), np.zeros(t.size))
+        args = (*ref.slot_tables, slots, *word.hops, ref.fs_hz, ref.hop_len_s)
+        p = ref.candidate_powers(args, rows, t, np.full(t.size, fit.alpha), np.zeros(t.size))
         i = int(np.argmax(p))
         if p[i] > best_p:
             best_p, best_t = float(p[i]), float(t[i])
@@ -332,7 +391,7 @@ def _seed(
 
 
 def _gain(
-    ref: CoherentRefiner, word: Codeword, hop_ids: NDArray[np.int64], hop_index: int,
+    ref: PairFitHost, word: Codeword, hop_ids: NDArray[np.int64], hop_index: int,
     one: Refinement, first: Refinement, second: Refinement, known: NDArray[np.complex128],
 ) -> tuple[float, float]:  # fmt: skip
     """:func:`pair_gain` and :func:`interference` of the pair ``first``, ``second`` (the
@@ -340,30 +399,29 @@ def _gain(
     each echo's ``C`` with the other in and taken out (their difference is the other's
     fitted amplitude times the models' cross term), the scatter of each one's hops with the
     other taken out (the larger of the two)."""
-    from hil.estimation.refine import _EchoFit
 
     fits = (first, second)
-    echoes = [_EchoFit(hop_index, f.t_s, f.alpha, f.amplitude) for f in fits]
+    echoes = [EchoFit(hop_index, f.t_s, f.alpha, f.amplitude) for f in fits]
     c = np.empty(2, np.complex128)
     model = np.empty(2)
     cross = []
     rss = 0.0
     for k, f in enumerate(fits):
-        slots = ref._slots(hop_ids, word, f.t_s, f.alpha)
+        slots = ref.hop_slots(hop_ids, word, f.t_s, f.alpha)
         if slots is None:
             return -math.inf, 0.0
-        args = (*ref._tables, slots, *word.hops, ref.fs_hz, ref.hop_len_s)
+        args = (*ref.slot_tables, slots, *word.hops, ref.fs_hz, ref.hop_len_s)
         other = echoes[1 - k]
-        rows = _with(known, ref._rows([other], f.t_s))
+        rows = _with(known, ref.echo_rows([other], f.t_s))
         c[k], model[k], _ = _sums(args, known, f.t_s, f.alpha, ref.m_hops)
         c_out, _, terms = _sums(args, rows, f.t_s, f.alpha, ref.m_hops)
         # C_k − C_k(other out) = ½ β_other Σ s_other s_k*.
         cross.append(2.0 * (c[k] - c_out) / other.amplitude if other.amplitude != 0 else 0j)
         rss = max(rss, hop_scatter(terms, word.hops[4]))
-    slots = ref._slots(hop_ids, word, one.t_s, one.alpha)
+    slots = ref.hop_slots(hop_ids, word, one.t_s, one.alpha)
     if slots is None:
         return -math.inf, 0.0
-    args = (*ref._tables, slots, *word.hops, ref.fs_hz, ref.hop_len_s)
+    args = (*ref.slot_tables, slots, *word.hops, ref.fs_hz, ref.hop_len_s)
     c_one, e_one, _ = _sums(args, known, one.t_s, one.alpha, ref.m_hops)
     explained_one = 2.0 * abs(c_one) ** 2 / e_one if e_one > 0 else 0.0
     # Σ s₂ s₁*, read from either side (the second's, conjugated).

@@ -364,7 +364,7 @@ def _beside_an_echo_whose_ghost_it_may_be(
     drift = 0.5 * (10 - 1) * (a_ghost / first.alpha - 1.0)  # hops
     t_ghost = first.t_s - drift * refiner.hop_len_s / a_ghost
     refiner._echoes = [
-        refine_module._EchoFit(
+        refine_module.EchoFit(
             first.hop_index, t_ghost, a_ghost, scale * fit.amplitude,
             ghost_strength=(ghost_strength,) * schedule.period_hops,
         )
@@ -424,7 +424,7 @@ def test_an_echo_measured_at_a_ghosts_speed_is_followed_through_the_ghosts_hops(
     # echo's ghost peaks and weaker than its ghosts read so far, is that echo's, not a ghost.
     refiner, first = _beside_an_echo_whose_ghost_it_may_be(5.0, ghost_strength=4.0)
     earlier = first.t_s - refiner.hop_len_s / first.alpha
-    own = refine_module._EchoFit(first.hop_index - 1, earlier, first.alpha, 1.0)
+    own = refine_module.EchoFit(first.hop_index - 1, earlier, first.alpha, 1.0)
     assert refiner.ghost_of_known(first.t_s, first.alpha, first.hop_index, strength=3.0)
     refiner._echoes = [*refiner._echoes, own]
     assert not refiner.ghost_of_known(first.t_s, first.alpha, first.hop_index, strength=3.0)
@@ -464,7 +464,7 @@ def test_an_echo_measured_lately_is_due_at_its_next_boundary_once() -> None:
 
 
 def test_an_echo_held_once_stays_held_through_weaker_fits() -> None:
-    # A fit of 15 dB or more holds its echo (_EchoFit.held); the echo's next fits replace it
+    # A fit of 15 dB or more holds its echo (EchoFit.held); the echo's next fits replace it
     # and carry that on however weak, while an echo first fitted below the gate is not held.
     refiner, first = _beside_an_echo_whose_ghost_it_may_be(1.0)
     refiner._echoes = []
@@ -521,7 +521,7 @@ def test_a_followed_boundary_is_measured_on_its_own_lobe_only() -> None:
     refiner.push(x, 0)
     lobe = 1.0 / (first.alpha * refiner.spacing_hz)
     free = refiner.refine(t_next + lobe, first.alpha, first.hop_index + 1)
-    assert free is not None and abs(free.t_s - (t_next + lobe)) > refiner._main_lobe_s
+    assert free is not None and abs(free.t_s - (t_next + lobe)) > refiner.main_lobe_s
     refiner = CoherentRefiner(schedule, FS, 10, C, 0.5, 30.0)
     refiner.push(x, 0)
     off = refiner.refine(t_next + lobe, first.alpha, first.hop_index + 1, followed=True)

@@ -43,9 +43,9 @@ def test_a_slot_holds_the_prefix_sums_of_its_moments() -> None:
 def _kernel_args(refiner: CoherentRefiner, hop: int, t_s: float, alpha: float) -> tuple:
     word = refiner._codeword(hop)
     hop_ids = np.arange(hop - refiner.m_hops + 1, hop + 1, dtype=np.int64)
-    slots = refiner._slots(hop_ids, word, t_s, alpha)
+    slots = refiner.hop_slots(hop_ids, word, t_s, alpha)
     assert slots is not None
-    return (*refiner._tables, slots, *word.hops, refiner.fs_hz, refiner.hop_len_s)
+    return (*refiner.slot_tables, slots, *word.hops, refiner.fs_hz, refiner.hop_len_s)
 
 
 def test_a_candidates_sums_do_not_depend_on_its_neighbours() -> None:

@@ -167,13 +167,13 @@ def test_echoes_measured_since_a_late_detection_are_heard_only_with_its_lag() ->
     # out of it (CoherentRefiner._others) and as explaining its leak (known_echoes, for the
     # beyond-span check: on bench_gcas's 20 s input 15 ghost-source scans -> 0, the same
     # 1602 estimates).
-    from hil.estimation.refine import KNOWN_HOPS, _EchoFit
+    from hil.estimation.refine import KNOWN_HOPS, EchoFit
 
     rx = make_gcas(att_schedule())
     refiner = rx._refiner
     assert refiner is not None
     hop = refiner.hop_len_s
-    refiner._echoes = [_EchoFit(60, 0.70, (1500.0 + 12.0) / (1500.0 - 12.0), 0.02 + 0.01j)]
+    refiner._echoes = [EchoFit(60, 0.70, (1500.0 + 12.0) / (1500.0 - 12.0), 0.02 + 0.01j)]
     t_late = 0.70 - (KNOWN_HOPS + 4) * hop  # the detection, 7 hops before that fit
     assert refiner.known_echoes(t_late) == []
     lag = rx.readout._residual_lag_s

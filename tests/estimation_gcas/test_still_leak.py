@@ -69,7 +69,7 @@ def test_beside_fast_targets_at_minus_10_db_srr_false_alarms_stay_below_0_8_per_
     # judged against the noise's reading at its echo's E/N0 (refine.GHOST_NOISE_Z); 1151
     # with the grating lobe judged on the input without its still water
     # (hil.estimation.still_lobe); the same with an echo held on while its fits pass the echo
-    # test (refine._EchoFit.held), with one false estimate more, a cost of holding echoes
+    # test (refine.EchoFit.held), with one false estimate more, a cost of holding echoes
     # that this count tracks: the still water's leak at 6.2 m read at 4.1 m/s, followed one
     # boundary (rep 20).
     outs = [_trial(11, rep) for rep in range(30)]

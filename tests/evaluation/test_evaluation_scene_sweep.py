@@ -294,7 +294,7 @@ def test_the_weaker_target_under_still_reverberation_is_followed_on_its_own_lobe
     # a third of its boundaries. Measured (this seed, the first tried): gcas 161 of 182
     # boundaries, 1 false; gcas-still (the input less its still water) 169, 3 false. With a
     # followed fit's lobe decided anew on its own M hops beside the still water, and the
-    # echo followed only while its latest fit reached 15 dB (before _EchoFit.held): gcas
+    # echo followed only while its latest fit reached 15 dB (before EchoFit.held): gcas
     # 127, gcas-still 146.
     params = {"scene": "second-10db-weaker", "snr_db": -10.0, "srr_db": 0.0}
     seed = np.random.SeedSequence(5, spawn_key=(2, 0))
@@ -346,7 +346,7 @@ def test_a_weaker_target_followed_beside_still_reverberation_keeps_its_track() -
     # lobe off its echo's (refused) or its latest fit dipped under 15 dB: 105 of 182 before
     # (3 false, 6 tracks), 168 (1 false, 2 tracks; -1, the estimates before a track is
     # confirmed, aside) with a weak followed fit on its echo's lobe and the echo held
-    # (_EchoFit.held).
+    # (EchoFit.held).
     out = _weaker_beside_still()
     assert out["expected"] == [185, 182] and out["detected"][0] == 185
     assert out["detected"][1] >= 0.9 * 182
