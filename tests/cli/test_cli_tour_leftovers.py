@@ -1,0 +1,134 @@
+"""A new user's bad inputs the first tour left: calibration options that were silently
+ignored (a thermometer's uncertainty with time of flight, a stage URL on the simulated
+bench), and Ctrl-C while a sweep writes its report. Each is run as the user runs it
+(``hil`` with its argv) and refused in one line naming the option, the value, the allowed
+range and what to do."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from hil.cli.main import main
+
+from .conftest import one_line_error
+
+
+def test_sound_speed_by_time_of_flight_refuses_a_temperature_uncertainty(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # It was accepted and ignored: time of flight reads c's uncertainty off its fit.
+    argv = ["calibrate", "sound-speed", "--method", "tof", "--store", str(tmp_path)]
+    err = one_line_error(capsys, [*argv, "--temperature-uncertainty", "0.3"])
+    assert err == (
+        "hil calibrate: error: --temperature-uncertainty = 0.3 is not allowed: must be left"
+        " out with --method tof, whose c takes its uncertainty from the fit of the echo's time"
+        " of flight (the temperature only cross-checks c); drop it, or use --method temperature"
+        " --temperature °C"
+    )
+    assert not any(tmp_path.rglob("*.json"))
+
+
+def test_sound_speed_by_temperature_uses_the_temperature_uncertainty(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = ["calibrate", "sound-speed", "--temperature", "20", "--store", str(tmp_path)]
+    assert main([*argv, "--temperature-uncertainty", "0.3"]) == 0
+    wide = capsys.readouterr().out.splitlines()[0]
+    assert main(argv) == 0
+    default = capsys.readouterr().out.splitlines()[0]
+    # dc/dT at 20 °C is 3.07 m/s per °C (Marczak): 0.3 °C -> 0.921 m/s, 0.1 °C -> 0.307 m/s.
+    assert wide.startswith("sound speed: 1482.380 m/s +- 0.921 m/s"), wide
+    assert default.startswith("sound speed: 1482.380 m/s +- 0.307 m/s"), default
+
+
+@pytest.mark.parametrize(
+    ("url", "allowed"),
+    [
+        ("bogus://x", "must be a device path or one of serial://, loop://, socket://,"),
+        ("sim://audio", "must be a stage URL (a serial port or transport URL, or sim://stage);"),
+        ("sim://stagex", "must be sim://stage (a simulated stage); did you mean sim://stage?"),
+        ("", "must be a non-empty transport URL or device path"),
+    ],
+)
+@pytest.mark.parametrize("kind", [["stage"], ["sound-speed", "--method", "tof"]])
+def test_calibrating_on_the_simulated_bench_checks_the_stage_url(
+    url: str, allowed: str, kind: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # A bogus --stage was ignored on the simulated bench; it is checked as the tank run
+    # checks devices.stage (hil.devices.table).
+    argv = ["calibrate", *kind, "--stage", url, "--store", str(tmp_path)]
+    err = one_line_error(capsys, argv)
+    assert err.startswith(f"hil calibrate: error: --stage = {url!r} is not allowed: {allowed}"), err
+
+
+def test_the_simulated_bench_refuses_a_real_stage(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = ["calibrate", "stage", "--stage", "/dev/ttyUSB0", "--store", str(tmp_path)]
+    assert one_line_error(capsys, argv) == (
+        "hil calibrate: error: --stage = '/dev/ttyUSB0' is not allowed: must be sim://stage or"
+        " left out on the simulated bench; give --device (the audio interface) to calibrate"
+        " with a real stage"
+    )
+
+
+_TRIALS = '''\
+import signal
+from pathlib import Path
+
+
+def one(params, seed):
+    return {"x": float(params["x"])}
+
+
+def report(spec, records, out_dir):
+    """Ctrl-C after the first half of the first report; the whole report on a resume."""
+    path = Path(out_dir) / "report.md"
+    first = not path.exists()
+    path.write_text("# partial\\n" if first else f"# {len(records)} trials\\n")
+    if first:
+        signal.raise_signal(signal.SIGINT)
+    return [path]
+
+
+one.write_report = report
+'''
+
+
+def _default_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)  # a background suite hands it ignored
+
+
+def test_ctrl_c_while_a_sweep_writes_its_report_says_it_may_be_partial(tmp_path: Path) -> None:
+    # Was only "interrupted (Ctrl-C)": the report left half written looked finished.
+    (tmp_path / "trials.py").write_text(_TRIALS)
+    sweep = tmp_path / "s.toml"
+    sweep.write_text(
+        '[sweep]\nname = "t"\ntrial = "trials.py:one"\ntrials_per_point = 2\nseed = 1\n'
+        "[grid]\nx = [1.0, 2.0]\n"
+    )
+    out = tmp_path / "out"
+    argv = [sys.executable, "-m", "hil.cli.main", "sweep", str(sweep), "--out", str(out)]
+    first = subprocess.run(
+        [*argv, "--serial", "--quiet"], capture_output=True, text=True, timeout=300,
+        preexec_fn=_default_sigint,
+    )  # fmt: skip
+    assert first.returncode == 130, first.stderr
+    assert first.stderr.splitlines() == [
+        f"hil sweep: interrupted (Ctrl-C) while writing the report: all 4 trials are saved in"
+        f" {out / 'results.jsonl'}, but the report in {out} may be partial; rebuild it with:"
+        f" hil sweep {sweep} --out {out} --resume"
+    ]
+    assert (out / "report.md").read_text() == "# partial\n"
+    again = subprocess.run(
+        [*argv, "--serial", "--quiet", "--resume"], capture_output=True, text=True, timeout=300,
+        preexec_fn=_default_sigint,
+    )  # fmt: skip
+    assert again.returncode == 0, again.stderr
+    assert "ran 0 (4 already done)" in again.stdout
+    assert (out / "report.md").read_text() == "# 4 trials\n"
