@@ -1,6 +1,7 @@
 """A new user's bad inputs the first tour left: calibration options that were silently
 ignored (a thermometer's uncertainty with time of flight, a stage URL on the simulated
-bench), and Ctrl-C while a sweep writes its report. Each is run as the user runs it
+bench), Ctrl-C while a sweep writes its report, and the commands it did not try (replay,
+report, docs; estimate's --option of a common setting). Each is run as the user runs it
 (``hil`` with its argv) and refused in one line naming the option, the value, the allowed
 range and what to do."""
 
@@ -15,7 +16,7 @@ import pytest
 
 from hil.cli.main import main
 
-from .conftest import one_line_error
+from .conftest import empty_recording, one_line_error
 
 
 def test_sound_speed_by_time_of_flight_refuses_a_temperature_uncertainty(
@@ -132,3 +133,96 @@ def test_ctrl_c_while_a_sweep_writes_its_report_says_it_may_be_partial(tmp_path:
     assert again.returncode == 0, again.stderr
     assert "ran 0 (4 already done)" in again.stdout
     assert (out / "report.md").read_text() == "# 4 trials\n"
+
+
+# -- the commands the first tour did not try: replay, report, docs, estimate's --option ---
+
+
+@pytest.mark.parametrize(
+    ("value", "shown"), [("1e12", "1000000000000.0"), ("20000", "20000.0"), ("fast", "'fast'")]
+)
+def test_replay_takes_a_sound_speed_of_water_only(
+    value: str, shown: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # 1e12 m/s used to end in numpy's 130 GiB allocation error; 20000 m/s in no estimates.
+    run = empty_recording(tmp_path / "run.h5")
+    argv = ["replay", str(run), "--option", f"sound_speed_mps={value}"]
+    assert one_line_error(capsys, argv) == (
+        f"hil replay: error: --option sound_speed_mps = {shown} is not allowed: must be a sound"
+        " speed of water, 1300 .. 1700 m/s; e.g. --option sound_speed_mps=1500"
+    )
+
+
+def test_replay_names_the_staged_receiver_of_an_unknown_option(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # It named "the gcas receiver" and left the stage's options (background, ...) out.
+    run = empty_recording(tmp_path / "run.h5", "gcas-bg", background="simulated")
+    err = one_line_error(capsys, ["replay", str(run), "--option", "backgroud=x.npy"])
+    assert err.startswith(
+        "hil replay: error: receiver.options.backgroud = 'x.npy' is not allowed: must be an"
+        " option of the gcas-bg receiver: attenuation_db, background, cancel, "
+    ), err
+
+
+@pytest.mark.parametrize(
+    ("option", "flag"),
+    [("sound_speed_mps=1e12", "--sound-speed"), ("m_hops=5", "--m-hops"),
+     ("max_range_m=5", "--max-range"), ("max_speed_mps=2", "--max-speed")],
+)  # fmt: skip
+def test_estimate_sets_the_common_settings_with_their_own_options_only(
+    option: str, flag: str, schedule_and_wav: tuple[Path, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    # --option sound_speed_mps=1e12 overrode the checked --sound-speed (a 26 GiB allocation);
+    # --option m_hops=5 overrode --m-hops unseen.
+    schedule, wav = schedule_and_wav
+    capsys.readouterr()
+    argv = ["estimate", "--schedule", str(schedule), "--input", str(wav), "--option", option]
+    key = option.partition("=")[0]
+    err = one_line_error(capsys, argv)
+    assert err.startswith(f"hil estimate: error: --option {key} = "), err
+    assert err.endswith(
+        f" is not allowed: must be a receiver-specific option; hil estimate sets it with {flag}:"
+        " use that instead"
+    ), err
+
+
+def test_estimate_names_the_staged_receiver_of_an_unknown_option(
+    schedule_and_wav: tuple[Path, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    schedule, wav = schedule_and_wav
+    capsys.readouterr()
+    argv = ["estimate", "--schedule", str(schedule), "--input", str(wav)]
+    err = one_line_error(capsys, [*argv, "--receiver", "gcas-still", "--option", "stil=4"])
+    assert err.startswith(
+        "hil estimate: error: receiver.options.stil = 4 is not allowed: must be an option of"
+        " the gcas-still receiver: "
+    ), err
+    assert "still_periods" in err, err
+
+
+def test_report_refuses_an_exact_truth_that_is_a_folder_or_not_text(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # A folder said only "Is a directory"; a binary file ended in a UnicodeDecodeError.
+    run = empty_recording(tmp_path / "run.h5")
+    argv = ["report", str(run), "--no-map", "--out", str(tmp_path / "out"), "--exact-truth"]
+    folder = tmp_path / "truth"
+    folder.mkdir()
+    assert one_line_error(capsys, [*argv, str(folder)]) == (
+        f"hil report: error: --exact-truth = '{folder}' is not allowed: must be a file, not a"
+        " folder; give the --exact-truth file in it"
+    )
+    binary = tmp_path / "truth.csv"
+    binary.write_bytes(b"time_s,range_m,closing_speed_mps\n\xa0\x00\x01")
+    assert one_line_error(capsys, [*argv, str(binary)]) == (
+        f"hil report: error: --exact-truth = '{binary}' is not allowed: must be a UTF-8 text"
+        " file; byte 33 is 0xa0, not text: is it the right file?"
+    )
+
+
+@pytest.mark.parametrize("topic", ["TANK-RUN", "Tank-Run.md", "docs/tank-run.md"])
+def test_docs_finds_a_topic_in_any_case(topic: str, capsys: pytest.CaptureFixture[str]) -> None:
+    # TANK-RUN was refused, without a suggestion.
+    assert main(["docs", topic, "--path"]) == 0
+    assert Path(capsys.readouterr().out.strip()).name == "tank-run.md"
