@@ -806,7 +806,7 @@ polling at no more than 5 Hz); use the default 0.2
             self._wait(
                 lambda: self.connection.banners > banners,
                 timeout,
-                "the GRBL banner",
+                "banner",
                 raise_alarm=False,
             )
         except StageTimeoutError:
