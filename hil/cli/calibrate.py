@@ -395,6 +395,14 @@ def _sound_speed(
     if method == "temperature":
         if args.temperature is None:
             raise ConfigError("--temperature", None, "a water temperature in °C")
+        for option, value in (("--device", args.device), ("--stage", args.stage),
+                              ("--latency", args.latency)):  # fmt: skip
+            if value is not None:
+                # c from the thermometer: no echo is ranged, so no device would be used.
+                raise ConfigError(
+                    option, value, "left out with --method temperature (nothing is measured)",
+                    "drop it, or use --method tof to measure c by time of flight",
+                )  # fmt: skip
         uncertainty = args.temperature_uncertainty
         if uncertainty is None:
             uncertainty = TEMPERATURE_UNCERTAINTY_C

@@ -48,6 +48,23 @@ def test_sound_speed_by_temperature_uses_the_temperature_uncertainty(
 
 
 @pytest.mark.parametrize(
+    ("option", "value", "shown"),
+    [("--stage", "/dev/ttyUSB0", "'/dev/ttyUSB0'"), ("--device", "sim://audio", "'sim://audio'"),
+     ("--latency", "5", "5")],
+)  # fmt: skip
+def test_sound_speed_by_temperature_refuses_the_options_of_a_measurement(
+    option: str, value: str, shown: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # They were accepted and ignored: a thermometer's c ranges no echo.
+    argv = ["calibrate", "sound-speed", "--temperature", "20", "--store", str(tmp_path)]
+    assert one_line_error(capsys, [*argv, option, value]) == (
+        f"hil calibrate: error: {option} = {shown} is not allowed: must be left out with"
+        " --method temperature (nothing is measured); drop it, or use --method tof to measure"
+        " c by time of flight"
+    )
+
+
+@pytest.mark.parametrize(
     ("url", "allowed"),
     [
         ("bogus://x", "must be a device path or one of serial://, loop://, socket://,"),
