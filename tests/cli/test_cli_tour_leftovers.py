@@ -243,4 +243,3 @@ def test_docs_finds_a_topic_in_any_case(topic: str, capsys: pytest.CaptureFixtur
     # TANK-RUN was refused, without a suggestion.
     assert main(["docs", topic, "--path"]) == 0
     assert Path(capsys.readouterr().out.strip()).name == "tank-run.md"
-
