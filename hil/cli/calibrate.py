@@ -39,6 +39,8 @@ if TYPE_CHECKING:
     from hil.experiments.calibration.store import CalibrationStore
 
 EXIT_MEASUREMENT_FAILED = 1
+#: The thermometer's uncertainty when --temperature-uncertainty is not given, °C.
+TEMPERATURE_UNCERTAINTY_C = 0.1
 SIM_DEVICE = "sim://audio"
 SIMULATED_SUBDIR = "simulated"
 _WHERE = (
@@ -201,7 +203,10 @@ def register(sub: Any) -> None:
                    help="default: temperature if --temperature is given, else tof")  # fmt: skip
     p.add_argument("--temperature", type=float, help="water temperature, °C")
     p.add_argument("--salinity", type=float, help="ppt (Mackenzie); omit for fresh water")
-    p.add_argument("--temperature-uncertainty", type=float, default=0.1, help="°C")
+    p.add_argument(
+        "--temperature-uncertainty", type=float, default=None,
+        help="°C, with --method temperature (default 0.1)",
+    )  # fmt: skip
     _stage_options(p)
     p.set_defaults(func=run, kind_func=_sound_speed)
 
@@ -340,17 +345,25 @@ def _tank(
     args: argparse.Namespace, truth: SimTruth, store: CalibrationStore
 ) -> Iterator[tuple[PositioningStage, EchoRanger, list[str], int]]:
     """Stage and echo ranger: simulated, or the real audio device and GRBL stage."""
+    from hil.devices.table import check_device_url, is_simulated
     from hil.experiments.calibration.ranging import EchoRanger
     from hil.experiments.calibration.simworld import sim_tank
 
     gate = (args.gate_ms[0] * 1e-3, args.gate_ms[1] * 1e-3)
+    stage_url = None if args.stage is None else check_device_url(args.stage, "stage", "--stage")
     if _simulated(args):
+        if stage_url is not None and not is_simulated(stage_url):
+            # The simulated bench tows its own simulated stage: a real one would sit unused.
+            raise ConfigError(
+                "--stage", args.stage, "sim://stage or left out on the simulated bench",
+                "give --device (the audio interface) to calibrate with a real stage",
+            )  # fmt: skip
         with sim_tank(truth) as (stage, tank, lines):
             latency = truth.tank_latency_samples if args.latency is None else args.latency
             ranger = EchoRanger(tank.device(), gate, latency_samples=latency, averages=args.pings)
             yield stage, ranger, lines, latency
         return
-    if args.stage is None or not args.stage.strip():
+    if stage_url is None:
         raise ConfigError("--stage", args.stage, "a GRBL serial URL when --device is given")
     from hil.devices.table import open_stage
 
@@ -359,7 +372,7 @@ def _tank(
         record = store.current("latency")
         latency = 0 if record is None else record.result.latency_samples
     device = _audio_device(args)
-    with open_stage(args.stage, field="--stage") as grbl:
+    with open_stage(stage_url, field="--stage") as grbl:
         # As hil tank-run does: out of any alarm (reset, then $H or $X) before moving.
         grbl.make_ready(lambda step: print(f"stage: {step}", flush=True))
         yield (
@@ -382,12 +395,31 @@ def _sound_speed(
     if method == "temperature":
         if args.temperature is None:
             raise ConfigError("--temperature", None, "a water temperature in °C")
+        for option, value in (("--device", args.device), ("--stage", args.stage),
+                              ("--latency", args.latency)):  # fmt: skip
+            if value is not None:
+                # c from the thermometer: no echo is ranged, so no device would be used.
+                raise ConfigError(
+                    option, value, "left out with --method temperature (nothing is measured)",
+                    "drop it, or use --method tof to measure c by time of flight",
+                )  # fmt: skip
+        uncertainty = args.temperature_uncertainty
+        if uncertainty is None:
+            uncertainty = TEMPERATURE_UNCERTAINTY_C
         result = calibrate_sound_speed_temperature(
-            args.temperature, salinity_ppt=args.salinity,
-            temperature_uncertainty_c=args.temperature_uncertainty,
-        )  # fmt: skip
+            args.temperature, salinity_ppt=args.salinity, temperature_uncertainty_c=uncertainty
+        )
         settings = {"method": method, "temperature_c": args.temperature, "salinity": args.salinity}
         return result, settings, []
+    if args.temperature_uncertainty is not None:
+        # Time of flight takes c's uncertainty from the fit of its slope; the temperature
+        # only gives a cross-check c, reported without an uncertainty.
+        raise ConfigError(
+            "--temperature-uncertainty", args.temperature_uncertainty,
+            "left out with --method tof, whose c takes its uncertainty from the fit of the "
+            "echo's time of flight (the temperature only cross-checks c)",
+            "drop it, or use --method temperature --temperature °C",
+        )  # fmt: skip
     temperature = args.temperature
     if temperature is None and _simulated(args):
         temperature = truth.temperature_c  # the simulated tank's thermometer log

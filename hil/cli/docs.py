@@ -59,7 +59,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"{name:<{width}}  {title(path)}")
         print(f"(hil docs TOPIC prints one; they are in {docs_dir()})")
         return 0
-    topic = args.topic.removesuffix(".md").removeprefix("docs/")
+    # The topics are the files' lower-case stems: TANK-RUN, docs/tank-run.md name one too.
+    topic = args.topic.lower().removesuffix(".md").removeprefix("docs/")
     if topic not in found:
         raise ConfigError(
             "TOPIC",

@@ -151,6 +151,27 @@ def check_option_kinds(options: dict[str, Any], reference: dict[str, Any]) -> No
             )
 
 
+#: The settings every receiver takes, each set by its own option (checked there), never by
+#: ``--option``.
+COMMON_OPTIONS = {
+    "sound_speed_mps": "--sound-speed",
+    "max_speed_mps": "--max-speed",
+    "max_range_m": "--max-range",
+    "m_hops": "--m-hops",
+}
+
+
+def _refuse_common_options(extra: dict[str, Any]) -> None:
+    """Refuse an ``--option`` of a common setting: it would override its own option's
+    value unchecked (a sound speed of 1e12 m/s exhausts memory)."""
+    for key, value in extra.items():
+        if key in COMMON_OPTIONS:
+            raise ConfigError(
+                f"--option {key}", value, "a receiver-specific option",
+                f"hil estimate sets it with {COMMON_OPTIONS[key]}: use that instead",
+            )  # fmt: skip
+
+
 def _parse_option(text: str) -> tuple[str, Any]:
     key, sep, value = text.partition("=")
     if not sep or not key:
@@ -327,6 +348,7 @@ def run(args: argparse.Namespace) -> int:
     # kernel here needs (hil.estimation.numba_start).
     start_numba()
     from hil.estimation.base import CountsRefusals, SaysNotices
+    from hil.estimation.registry import check_receiver_options
     from hil.estimation.track_summary import track_figures, track_lines
     from hil.recording.records import ReceiverSetup
     from hil.recording.replay import build_receiver
@@ -354,6 +376,9 @@ def run(args: argparse.Namespace) -> int:
         )
     )
     extra = dict(_parse_option(o) for o in args.option)
+    _refuse_common_options(extra)
+    # Named for the receiver chosen, with all its options (a staged GCAS's stage's too).
+    check_receiver_options(args.receiver, extra)
     collector = _MapCollector() if args.map is not None else None
     if collector is not None:
         if args.receiver != "gcas":

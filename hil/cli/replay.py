@@ -24,7 +24,13 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from hil.cli.estimate import _parse_option, _Sink, check_option_kinds, check_outputs
+from hil.cli.estimate import (
+    COMMON_OPTIONS,
+    _parse_option,
+    _Sink,
+    check_option_kinds,
+    check_outputs,
+)
 
 # The numeric modules (numpy, numba, h5py through hil.recording) are imported where the
 # command runs, so that building the parser for ``hil replay --help`` stays cheap.
@@ -74,16 +80,24 @@ def register(sub: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     """Execute ``hil replay``; return the exit status."""
     from hil.estimation.base import refusal_text
+    from hil.estimation.registry import check_receiver_options
     from hil.estimation.track_summary import track_figures, track_lines
     from hil.recording import RunRecording, compare_estimates, replay
     from hil.recording.reader import probe_structure
 
     check_outputs(args)
     overrides = dict(_parse_option(o) for o in args.option)
+    if "sound_speed_mps" in overrides:
+        _check_sound_speed(overrides["sound_speed_mps"])
     probe_structure(args.run)
     with RunRecording.open(args.run) as rec:
         live = rec.metadata.receiver
         name = args.receiver or (live.name if live is not None else None)
+        if name is not None:
+            # Named for the receiver replayed, with all its options (a staged GCAS's stage's
+            # too); the common settings are every receiver's.
+            own = {k: v for k, v in overrides.items() if k not in COMMON_OPTIONS}
+            check_receiver_options(name, own)
         if live is not None and args.receiver in (None, live.name):
             check_option_kinds(overrides, dict(live.settings))
         notices: list[Any] = []
@@ -117,3 +131,16 @@ def run(args: argparse.Namespace) -> int:
     if text := refusal_text(refusals):
         print(text, file=sys.stdout if to_stdout else sys.stderr)
     return status
+
+
+def _check_sound_speed(value: Any) -> None:
+    """Refuse an ``--option sound_speed_mps`` that is not a sound speed of water, as
+    ``hil estimate --sound-speed`` does (far above it the search's tables exhaust memory)."""
+    from hil.errors import ConfigError
+    from hil.signals.presets import WATER_SOUND_SPEED_MPS, check_water_sound_speed
+
+    field, hint = "--option sound_speed_mps", "e.g. --option sound_speed_mps=1500"
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        lo, hi = WATER_SOUND_SPEED_MPS
+        raise ConfigError(field, value, f"a sound speed of water, {lo:g} .. {hi:g} m/s", hint)
+    check_water_sound_speed(field, float(value), hint)

@@ -15,8 +15,8 @@ SWEEP is a sweep file or the name of a shipped one (``hil/data/sweeps/``: ``tank
 ``scene_points.csv``, ``figures/``), and prints a summary. Exit status 0 when every trial
 succeeded, 1 when some failed (their errors are in results.jsonl), 2 for a bad sweep file or
 option, 130 when interrupted (Ctrl-C, SIGTERM or SIGHUP: the finished trials are saved and
-``--resume`` continues from them; the pool's workers end with the command, even when it is
-killed with ``kill -9``).
+``--resume`` continues from them, or rebuilds the report that the interruption left partial;
+the pool's workers end with the command, even when it is killed with ``kill -9``).
 """
 
 from __future__ import annotations
@@ -118,10 +118,19 @@ def run(args: argparse.Namespace) -> int:
     except SweepInterrupted as stop:
         # The runner has ended its workers by now (Runner.abort); the finished trials are saved.
         saved = stop.outcome
+        resume = f"hil sweep {args.sweep_file} --out {args.out}{' --quick' * args.quick} --resume"
+        if stop.in_report:
+            print(
+                f"hil sweep: interrupted ({stop.signal_name}) while writing the report: all "
+                f"{spec.n_trials} trials are saved in {saved.store.results_path}, but the "
+                f"report in {args.out} may be partial; rebuild it with: {resume}",
+                file=sys.stderr,
+            )
+            return EXIT_INTERRUPTED
         print(
             f"hil sweep: interrupted ({stop.signal_name}): {len(saved.records)} of "
             f"{spec.n_trials} trials saved in {saved.store.results_path}; continue with: "
-            f"hil sweep {args.sweep_file} --out {args.out}{' --quick' * args.quick} --resume",
+            f"{resume}",
             file=sys.stderr,
         )
         return EXIT_INTERRUPTED

@@ -374,7 +374,8 @@ polling at no more than 5 Hz); use the default 0.2
                 "homing_enabled ($22)",
                 False,
                 "True to run a homing cycle",
-                "enable it with write_setting('homing_enabled', True), or unlock() instead",
+                "set $22=1 on the controller (write_setting('homing_enabled', True)), or unlock"
+                " it with $X instead (GrblStage.unlock(), hil stage unlock)",
             )
         self._require_not_critical()
         # No polling while homing; the timeout covers the longest search of every cycle
@@ -806,7 +807,7 @@ polling at no more than 5 Hz); use the default 0.2
             self._wait(
                 lambda: self.connection.banners > banners,
                 timeout,
-                "the GRBL banner",
+                "banner",
                 raise_alarm=False,
             )
         except StageTimeoutError:

@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hil.errors import ConfigError
+from hil.estimation.option_types import OptionNames
 from hil.signals.schedule import HopSchedule
 
 FloatArray = NDArray[np.float64]
@@ -186,6 +187,11 @@ class RegistryConstructor:
 
     OPTIONS: tuple[str, ...] = ()
     name: str
+
+    @classmethod
+    def option_names(cls) -> OptionNames:
+        """The receiver's own options, ``OPTIONS`` (it is not built on GCAS)."""
+        return OptionNames(frozenset(cls.OPTIONS))
 
     @classmethod
     def from_options(

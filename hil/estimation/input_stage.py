@@ -24,7 +24,7 @@ from numpy.typing import ArrayLike, NDArray
 from hil.errors import ConfigError
 from hil.estimation.base import Estimate
 from hil.estimation.first_arrival import FirstArrivalReadout
-from hil.estimation.option_types import check_option_types
+from hil.estimation.option_types import OptionNames, check_option_types
 from hil.signals.schedule import HopSchedule
 
 
@@ -104,6 +104,13 @@ class StagedGcas:
         self.unread_count = 0
 
     # ------------------------------------------------------------------ construction
+    @classmethod
+    def option_names(cls) -> OptionNames:
+        """The stage's options (``STAGE_OPTIONS``) and GCAS's, which it hands on."""
+        from hil.estimation.gcas.options import OPTION_NAMES
+
+        return OptionNames(frozenset(cls.STAGE_OPTIONS), OPTION_NAMES)
+
     @classmethod
     def stage_from_options(cls, where: StageSetting, options: dict[str, Any]) -> StageParts:
         """The stage of this receiver from its own ``options`` (the rest go to GCAS)."""

@@ -32,7 +32,7 @@ from __future__ import annotations
 import inspect
 import math
 import numbers
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -40,6 +40,27 @@ from hil.errors import ConfigError
 
 _WORDS = {"bool": "true or false", "int": "an integer", "float": "a finite number",
           "str": "a string"}  # fmt: skip
+
+
+class OptionNames(NamedTuple):
+    """The option names a receiver class takes (``receiver.options`` keys, ``--option KEY=``),
+    from its ``option_names()`` classmethod (:mod:`hil.estimation.registry`).
+
+    ``own``: read by the receiver class itself (a baseline's or GCAS's constructor keywords,
+    or an input stage's options); ``gcas``: handed on to the GCAS it is built on, typed by
+    GCAS's constructor (empty for a receiver not built on GCAS). A name in both is its own.
+
+    >>> sorted(OptionNames(frozenset({"still_periods"}), frozenset({"pfa"})).all)
+    ['pfa', 'still_periods']
+    """
+
+    own: frozenset[str]
+    gcas: frozenset[str] = frozenset()
+
+    @property
+    def all(self) -> frozenset[str]:
+        """Every name the receiver accepts."""
+        return self.own | self.gcas
 
 
 def _kinds(annotation: str) -> set[str] | None:

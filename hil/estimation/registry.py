@@ -10,6 +10,13 @@ first input sample is at the schedule's t = 0 unless the receiver is told otherw
 ``extra``), ``fs_hz`` the input sample rate, ``sound_speed_mps`` c, ``max_speed_mps`` the
 Doppler search span (±), ``max_range_m`` the largest range reported, ``m_hops`` the correlator
 length M (receivers without one ignore it). Unknown ``extra`` keys raise a ConfigError.
+
+and names its options::
+
+    Cls.option_names() -> OptionNames
+
+(:class:`~hil.estimation.option_types.OptionNames`: its own, and GCAS's for a receiver built
+on GCAS), which is all :func:`check_receiver_options` asks of it.
 """
 
 from __future__ import annotations
@@ -20,7 +27,7 @@ from typing import Any
 
 from hil.errors import ConfigError
 from hil.estimation.base import Receiver
-from hil.estimation.option_types import check_option_types
+from hil.estimation.option_types import OptionNames, check_option_types
 from hil.signals.schedule import HopSchedule
 
 RECEIVERS: dict[str, str] = {
@@ -62,21 +69,15 @@ def check_receiver_options(name: str, options: Mapping[str, Any]) -> None:
 
     cls = receiver_class(name)
     own = {k: v for k, v in options.items() if not k.startswith(TRACK_OPTION_PREFIX)}
+    names: OptionNames = cls.option_names()
     check_option_types(cls, own, name, "receiver.options.")
-    stage = getattr(cls, "STAGE_OPTIONS", None)
-    if hasattr(cls, "OPTIONS"):  # the baselines list theirs
-        known, gcas = set(cls.OPTIONS), {}
-    elif stage is not None or name == "gcas":  # GCAS, alone or behind an input stage
+    handed = {k: v for k, v in own.items() if k in names.gcas and k not in names.own}
+    if handed:
         from hil.estimation.gcas import GcasReceiver
-        from hil.estimation.gcas.options import OPTION_NAMES
 
-        known = set(OPTION_NAMES) | set(stage or ())
-        gcas = {k: v for k, v in own.items() if k not in (stage or ())}
-        check_option_types(GcasReceiver, gcas, name, "receiver.options.")
-    else:
-        return
-    reject_unknown(own, known, name)
-    if "background" in (stage or ()) and "background" in own:
+        check_option_types(GcasReceiver, handed, name, "receiver.options.")
+    reject_unknown(own, names.all, name)
+    if "background" in names.own and "background" in own:
         from hil.estimation.background import check_background_path
 
         check_background_path(own["background"])

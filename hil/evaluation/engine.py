@@ -133,16 +133,25 @@ def run_sweep(
     reporter = trial_reporter(load_trial(spec.target))
     if reporter is None or not outcome.complete:
         return outcome
-    return replace(outcome, reports=tuple(reporter(spec, outcome.records, store.out_dir)))
+    try:
+        reports = tuple(reporter(spec, outcome.records, store.out_dir))
+    except KeyboardInterrupt as exc:
+        # Every trial is saved; the report's files may be half written. A resume runs no
+        # trial and writes the report again from the saved records.
+        raise SweepInterrupted(outcome, interruption(exc), in_report=True) from None
+    return replace(outcome, reports=reports)
 
 
 class SweepInterrupted(RunInterrupted):
     """Ctrl-C or a stop signal ended :func:`run_sweep` early; ``outcome`` is what is saved
-    (the finished trials and their summary), ``signal_name`` what stopped it."""
+    (the finished trials and their summary), ``signal_name`` what stopped it; ``in_report``:
+    it came while the trial's report was being written (every trial saved, the report's
+    files possibly partial)."""
 
-    def __init__(self, outcome: SweepOutcome, signal_name: str) -> None:
+    def __init__(self, outcome: SweepOutcome, signal_name: str, *, in_report: bool = False) -> None:
         super().__init__(signal_name)
         self.outcome = outcome
+        self.in_report = in_report
 
 
 def _finish(

@@ -33,6 +33,7 @@ import numpy.typing as npt
 
 from hil.errors import ConfigError
 from hil.experiments.experiment import Experiment
+from hil.toml_table import read_text_file
 
 #: The table's columns, in order (see the module docstring).
 COLUMNS = ("time_s", "range_m", "closing_speed_mps")
@@ -75,10 +76,11 @@ def read_truth(path: Path) -> FloatArray:
     increasing. Raises :class:`~hil.errors.ConfigError` naming the file and what is wrong."""
     field = "--exact-truth"
     try:
-        with open(path, encoding="utf-8") as f:
-            header, body = f.readline().strip(), f.read()
+        text = read_text_file(path, field)  # a folder, binary content: refused by name
     except FileNotFoundError:
         raise ConfigError(field, str(path), "an existing file", "check the path") from None
+    header, _, body = text.partition("\n")
+    header = header.strip()
     if header != ",".join(COLUMNS):
         raise ConfigError(
             field, str(path), f"a CSV whose header is {','.join(COLUMNS)!r}",

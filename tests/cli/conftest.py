@@ -1,4 +1,5 @@
-"""Shared by the CLI's bad-input tests: one refused command's line, and a short transmit."""
+"""Shared by the CLI's bad-input tests: one refused command's line, a short transmit, and a
+recording without samples."""
 
 from __future__ import annotations
 
@@ -26,3 +27,23 @@ def schedule_and_wav(tmp_path: Path) -> tuple[Path, Path]:
     argv = ["waveform", "--duration", "0.05", "--out", str(wav), "--schedule", str(schedule)]
     assert main(argv) == 0
     return schedule, wav
+
+
+def empty_recording(path: Path, receiver: str = "gcas", **settings: object) -> Path:
+    """A run recording at ``path`` that holds no samples: the ATT random-cyclic schedule at
+    100 kHz and a live ``receiver`` with ``m_hops`` 10, ``max_speed_mps`` 30 and
+    ``settings``."""
+    from hil.recording.records import ReceiverSetup
+    from hil.recording.writer import RunWriter
+    from hil.signals.presets import check_design, get_preset
+    from hil.signals.schedule_file import schedule_document
+
+    doc = schedule_document(
+        check_design(get_preset("att").spec("random-cyclic")), 100e3, 0.0, sound_speed_mps=1500.0
+    )
+    setup = ReceiverSetup(receiver, {"m_hops": 10, "max_speed_mps": 30.0, **settings})
+    with RunWriter.create(
+        path, fs_hz=100e3, n_channels=1, dtype="int16", schedule_document=doc, receiver=setup
+    ):
+        pass
+    return path

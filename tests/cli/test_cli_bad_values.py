@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from .conftest import one_line_error
+from .conftest import empty_recording, one_line_error
 
 
 def test_a_symlink_loop_as_the_experiment_file(
@@ -26,23 +26,6 @@ def test_a_negative_waveform_seed(capsys: pytest.CaptureFixture[str]) -> None:
     )
 
 
-def _recording(path: Path) -> Path:
-    from hil.recording.records import ReceiverSetup
-    from hil.recording.writer import RunWriter
-    from hil.signals.presets import check_design, get_preset
-    from hil.signals.schedule_file import schedule_document
-
-    doc = schedule_document(
-        check_design(get_preset("att").spec("random-cyclic")), 100e3, 0.0, sound_speed_mps=1500.0
-    )
-    setup = ReceiverSetup("gcas", {"m_hops": 10, "max_speed_mps": 30.0})
-    with RunWriter.create(
-        path, fs_hz=100e3, n_channels=1, dtype="int16", schedule_document=doc, receiver=setup
-    ):
-        pass
-    return path
-
-
 @pytest.mark.parametrize(
     ("option", "allowed"),
     [
@@ -55,7 +38,7 @@ def _recording(path: Path) -> Path:
 def test_a_replay_option_of_the_wrong_kind(
     option: str, allowed: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    run = _recording(tmp_path / "run.h5")
+    run = empty_recording(tmp_path / "run.h5")
     assert one_line_error(capsys, ["replay", str(run), "--option", option]) == (
         f"hil replay: error: --option = '{option}' is not allowed: must be {allowed}"
     )
@@ -71,7 +54,7 @@ def test_a_replay_option_of_the_wrong_kind(
 def test_watch_blames_an_unusable_host_not_the_port(
     host: str, why: str | None, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    run = _recording(tmp_path / "run.h5")
+    run = empty_recording(tmp_path / "run.h5")
     err = one_line_error(capsys, ["watch", str(run), "--host", host])
     assert err.startswith(
         f"hil watch: error: --host (host) = '{host}' is not allowed: must be a name or address"

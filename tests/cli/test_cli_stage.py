@@ -8,6 +8,7 @@ powers up locked (homing enabled) with the carriage 20 mm from its homing switch
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -49,6 +50,22 @@ def test_status_at_power_up_says_locked_and_what_to_do(
         "alarm      locked at power-up or reset: 'hil stage home' (or 'hil stage unlock')"
     )
     assert "message    [MSG:'$H'|'$X' to unlock]" in out
+
+
+def test_home_without_homing_says_how_to_enable_it_or_unlock(
+    simulated: ManualClock, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # The hint named only the Python API (write_setting, unlock()).
+    config = dataclasses.replace(CONFIG, homing=False, soft_limits=False)
+    options = {"clock": simulated, "transport_options": {"config": config}}
+    monkeypatch.setattr(stage_cli, "STAGE_OPTIONS", options)
+    assert main(["stage", "home", *URL]) == 2
+    err = capsys.readouterr().err
+    assert err.splitlines()[-1] == (
+        "hil stage: error: homing_enabled ($22) = False is not allowed: must be True to run a"
+        " homing cycle; set $22=1 on the controller (write_setting('homing_enabled', True)), or"
+        " unlock it with $X instead (GrblStage.unlock(), hil stage unlock)"
+    ), err
 
 
 def test_home_then_status_as_json(capsys: pytest.CaptureFixture[str]) -> None:

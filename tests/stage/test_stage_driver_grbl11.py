@@ -202,7 +202,7 @@ def test_a_reset_given_up_on_is_not_resent_behind_later_commands() -> None:
         [(b"\x18", b""), (b"\x18", b""), (b"$X\n", b"ok\r\n"), (b"?", report("Idle", 0))],
         response_timeout=1.0,
     )
-    with pytest.raises(StageTimeoutError, match="no the GRBL banner from GRBL within 1 s"):
+    with pytest.raises(StageTimeoutError, match="no banner from GRBL within 1 s"):
         stage.reset()
     assert stage.unlock().state is StageState.IDLE  # no 0x18 during the unlock's wait
     assert not peer.script

@@ -258,7 +258,7 @@ def test_silent_controller_times_out_with_advice() -> None:
     # The reset unanswered for RESET_RETRY_S (0.7 s) is sent once more within the 1 s.
     peer = ScriptedSerial([(b"\x18", b""), (b"\x18", b"")])
     stage = GrblStage(peer, clock=ManualClock(), open_timeout=1.0)
-    with pytest.raises(StageTimeoutError, match=r"no the GRBL banner from GRBL within 1 s: "
+    with pytest.raises(StageTimeoutError, match=r"no banner from GRBL within 1 s: "
                        r"check the cable"):  # fmt: skip
         stage.open()
     assert peer.written == [b"\x18", b"\x18"] and not peer.script

@@ -19,6 +19,7 @@ from hil.estimation.gcas.front_end import FrontEnd
 from hil.estimation.gcas.ghost_inside import evidence_history_s
 from hil.estimation.gcas.options import (
     COARSE_STEP,
+    OPTION_NAMES,
     check_geometry,
     check_modes,
     check_option_names,
@@ -31,6 +32,7 @@ from hil.estimation.gcas.search_full import FullSearch
 from hil.estimation.gcas.search_two_stage import TwoStageSearch
 from hil.estimation.gcas.sums import CodewordSums
 from hil.estimation.gcas.threshold import Cfar
+from hil.estimation.option_types import OptionNames
 from hil.estimation.refine import CoherentRefiner
 from hil.estimation.reverb_band import AUTO
 from hil.signals.schedule import HopSchedule
@@ -277,6 +279,11 @@ class GcasReceiver:
         self.reset()
 
     # ------------------------------------------------------------------ construction
+    @classmethod
+    def option_names(cls) -> OptionNames:
+        """The keyword options of :meth:`from_options` (:data:`~.options.OPTION_NAMES`)."""
+        return OptionNames(OPTION_NAMES)
+
     @classmethod
     def from_options(
         cls,
