@@ -53,20 +53,37 @@ def check_background_path(path: Any) -> None:
         )
 
 
+#: The first bytes of every NumPy ``.npy`` file (its format's magic string).
+_NPY_MAGIC = b"\x93NUMPY"
+
+
 def load_background(path: str | Path, period_samples: int) -> NDArray[np.float64]:
     """The background saved at ``path`` (``.npy``, one still period: shape ``(P,)``, input
     full-scale units, receiver sample index ``n`` at element ``n mod P``,
     :class:`BackgroundSubtractor`)."""
     check_background_path(path)
     p = Path(path)
+    field, allowed = "receiver.options.background", "a .npy file of one code period"
+    capture = "capture one: hil docs tank-run, 'Empty-tank background'"
+    try:
+        with open(p, "rb") as f:
+            magic = f.read(len(_NPY_MAGIC))
+    except OSError as exc:
+        raise ConfigError(
+            field, str(path), allowed, f"it cannot be read ({exc}); {capture}"
+        ) from None
+    if magic != _NPY_MAGIC:
+        what = (
+            "it is empty"
+            if not magic
+            else f"it is not a NumPy .npy file (it starts with {magic!r})"
+        )
+        raise ConfigError(field, str(path), allowed, f"{what}; {capture}")
     try:
         b = np.load(p, allow_pickle=False)
-    except (OSError, ValueError, EOFError) as exc:  # EOFError: an empty file
+    except (OSError, ValueError, EOFError) as exc:  # EOFError: a .npy cut short
         raise ConfigError(
-            "receiver.options.background",
-            str(path),
-            "a .npy file of one code period",
-            f"it cannot be read ({exc}); capture one: hil docs tank-run, 'Empty-tank background'",
+            field, str(path), allowed, f"it cannot be read ({exc}); {capture}"
         ) from None
     b = np.asarray(b, dtype=np.float64)
     if b.shape != (period_samples,) or not np.all(np.isfinite(b)):

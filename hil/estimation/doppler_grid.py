@@ -24,6 +24,11 @@ from hil.errors import ConfigError
 
 FloatArray = NDArray[np.float64]
 
+#: The most Doppler hypotheses a grid holds: each holds a codeword correlator row per hop, so
+#: the detector's memory and work grow with it (10^8 asked 3 GiB); hypotheses closer than a
+#: small fraction of the Doppler resolution (c / (2 f M T_h), a few m/s on att) add nothing.
+MAX_HYPOTHESES = 4096
+
 
 @dataclass(frozen=True)
 class DopplerGrid:
@@ -90,8 +95,13 @@ def doppler_grid(
         raise ConfigError("sound_speed_mps", sound_speed_mps, "> 0 m/s")
     if not (math.isfinite(max_speed_mps) and 0 <= max_speed_mps < c):
         raise ConfigError("max_speed_mps", max_speed_mps, f"0 <= v < c = {c} m/s")
-    if int(n_hypotheses) != n_hypotheses or n_hypotheses < 1:
-        raise ConfigError("n_doppler", n_hypotheses, "an integer >= 1")
+    if int(n_hypotheses) != n_hypotheses or not 1 <= n_hypotheses <= MAX_HYPOTHESES:
+        raise ConfigError(
+            "n_doppler",
+            n_hypotheses,
+            f"an integer in 1 .. {MAX_HYPOTHESES}",
+            "GCAS's default is 64; a finer grid than the Doppler resolution adds nothing",
+        )
     if n_hypotheses > 1 and max_speed_mps == 0:
         raise ConfigError("max_speed_mps", max_speed_mps, "> 0 m/s for more than one hypothesis")
     if not (math.isfinite(reverb_speed_mps) and reverb_speed_mps >= 0):

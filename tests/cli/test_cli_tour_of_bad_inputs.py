@@ -125,8 +125,39 @@ def test_estimate_refuses_an_empty_background_file(
     )
     assert err == (
         f"hil estimate: error: receiver.options.background = '{empty}' is not allowed: must be"
-        " a .npy file of one code period; it cannot be read (No data left in file); capture"
-        " one: hil docs tank-run, 'Empty-tank background'"
+        " a .npy file of one code period; it is empty; capture one: hil docs tank-run,"
+        " 'Empty-tank background'"
+    )
+
+
+def test_estimate_refuses_a_background_that_is_not_a_npy_file(
+    schedule_and_wav: tuple[Path, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    # A WAV given as the background passed on numpy's "pickled data ... allow_pickle" text.
+    schedule, wav = schedule_and_wav
+    capsys.readouterr()
+    argv = ["estimate", "--schedule", str(schedule), "--input", str(wav)]
+    err = one_line_error(capsys, [*argv, "--receiver", "gcas-bg", "--option", f"background={wav}"])
+    # The WAV's first six bytes: "RIFF" and the low half of its chunk size.
+    assert err.startswith(
+        f"hil estimate: error: receiver.options.background = '{wav}' is not allowed: must be"
+        " a .npy file of one code period; it is not a NumPy .npy file (it starts with b'RIFF"
+    ), err
+    assert err.endswith("'); capture one: hil docs tank-run, 'Empty-tank background'"), err
+
+
+def test_estimate_refuses_a_doppler_grid_past_its_largest(
+    schedule_and_wav: tuple[Path, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    # 10^8 hypotheses ended in a 3 GiB allocation's traceback.
+    schedule, wav = schedule_and_wav
+    capsys.readouterr()
+    argv = ["estimate", "--schedule", str(schedule), "--input", str(wav)]
+    err = one_line_error(capsys, [*argv, "--option", "n_doppler=100000000"])
+    assert err == (
+        "hil estimate: error: n_doppler = 100000000 is not allowed: must be an integer in"
+        " 1 .. 4096; GCAS's default is 64; a finer grid than the Doppler resolution adds"
+        " nothing"
     )
 
 
@@ -158,7 +189,9 @@ def _scene_sweep(tmp_path: Path, fixed: str, grid: str = "") -> Path:
         (
             'receiver = "gcas"\nreceiver_options = {n_doppler = -4}',
             "",
-            "fixed.receiver_options.n_doppler = -4 is not allowed: must be an integer >= 1",
+            "fixed.receiver_options.n_doppler = -4 is not allowed: must be an integer in"
+            " 1 .. 4096; GCAS's default is 64; a finer grid than the Doppler resolution adds"
+            " nothing",
         ),
         (
             'receiver = "gcas-bg"\nreceiver_options = {reverb_speed_mps = inf}',
