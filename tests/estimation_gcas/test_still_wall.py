@@ -11,12 +11,14 @@ each a whole grating lobe (0.68 m) off at the right speed (issue 26, an outside 
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from hil.estimation.base import Estimate
 from hil.estimation.gcas.hidden_echoes import HIDDEN_FRACTION
-from hil.estimation.refine import CoherentRefiner, EchoTest
+from hil.estimation.refine import CoherentRefiner, EchoTest, Refinement
 from sim_devices.acoustics.delay import TwoWayPath
 from sim_devices.acoustics.echo import AnalyticEcho
 from sim_devices.acoustics.trajectory import Fixed
@@ -136,6 +138,39 @@ def test_a_still_echo_s_ghosts_lie_a_whole_tone_spacing_from_rest() -> None:
     away = [0.0, 2.0, -4.9, 8.0, -8.0, 20.0, -22.4, 32.6, 40.0]
     assert all(refiner.ghost_of_rest(v) for v in ghosts)
     assert not any(refiner.ghost_of_rest(v) for v in away)
+
+
+def test_a_weak_fit_where_a_measured_still_echo_leaks_is_its_leak() -> None:
+    # A wall measured at rest at hop 60 (20 dB, 0 dB per-sample SNR of a unit echo): a fit
+    # within two Doppler cells of one of its ghosts (27.5 m/s) or of rest that collects less
+    # than the follow gate (12 + 3 dB) is refused as what the wall's leak brought; one that
+    # reaches the gate, one away from its leaks, and any before the wall is measured are not.
+    schedule = att_schedule()
+    x = _wall(20.0) + np.random.default_rng(3).normal(0.0, 1.0 / np.sqrt(2.0), int(SECONDS * FS))
+    refiner = CoherentRefiner(schedule, FS, 10, C, 0.5, 30.0)
+    refiner.push(x, 0)
+    hop = 60
+    t_wall = (hop + 1) * HOP_S + 2.0 * WALL_M / C
+    test = EchoTest(HIDDEN_FRACTION, HIDDEN_FRACTION, refiner.echo_test.min_e_over_n0_db)
+    wall = refiner.refine_still(t_wall, hop, test)
+    assert wall is not None and wall.is_echo(test)
+    assert refiner.follow_db == pytest.approx(15.0)
+
+    def fit(speed: float, e_over_n0_db: float, hops_later: float = 10.3) -> Refinement:
+        alpha = (C + speed) / (C - speed)
+        return replace(
+            wall, t_s=t_wall + hops_later * HOP_S, alpha=alpha, e_over_n0_db=e_over_n0_db
+        )
+
+    assert refiner.weak_in_still_leak(fit(-29.0, 13.0))
+    assert refiner.weak_in_still_leak(fit(25.0, 14.9))
+    assert refiner.weak_in_still_leak(fit(4.0, 12.5))
+    assert not refiner.weak_in_still_leak(fit(27.0, 15.0))  # the follow gate reached
+    assert not refiner.weak_in_still_leak(fit(12.0, 13.0))  # away from its leaks
+    assert not refiner.weak_in_still_leak(fit(27.0, 13.0, hops_later=70.0))  # wall's fit let go
+    fresh = CoherentRefiner(schedule, FS, 10, C, 0.5, 30.0)
+    fresh.push(x, 0)
+    assert not fresh.weak_in_still_leak(fit(27.0, 13.0))  # no still echo measured
 
 
 def _moving_expected(range_m: float, speed_mps: float) -> int:
