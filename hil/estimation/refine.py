@@ -1311,6 +1311,24 @@ class CoherentRefiner:
         still = self._amplitude_near(fit.t_s, 1.0, hop_index, known=known)
         return abs(fit.amplitude) <= STILL_SIDELOBE_FRACTION * still
 
+    def weak_in_still_leak(self, fit: Refinement) -> bool:
+        """Whether ``fit`` lies where a still echo measured lately leaks (within
+        :data:`STILL_LEAK_CELLS` Doppler cells of rest, or at one of its ghosts:
+        :meth:`ghost_of_rest`), that echo taken out of its input, and collects less than
+        :attr:`follow_db`, the gate of a fit at a boundary no detection of its own brought
+        (:data:`FOLLOW_MARGIN_DB`). There the detection is the still echo's leak: with the
+        echo taken out, its fit reads the noise and reverberation left in the cells the
+        leak lit, and the echo test, set for detections of their own, passes a few of them
+        (a target at rest or 0.05 m/s at -10 dB: fits of 12.0-17.7 dB, 0.16-0.32 of the
+        still echo's amplitude, at +-24-30 m/s and at any range). False elsewhere, and where
+        no still echo is measured within :data:`STILL_KNOWN_HOPS` hops of it."""
+        if fit.e_over_n0_db >= self.follow_db:
+            return False
+        speed = fit.speed_mps(self.c)
+        if abs(speed) > STILL_LEAK_CELLS * self._cell_speed and not self.ghost_of_rest(speed):
+            return False
+        return any(e.still for e in self._measured_near(fit.t_s))
+
     def known_echoes(self, t_s: float, lag_s: float = 0.0) -> list[tuple[float, float]]:
         """The echoes measured within :data:`KNOWN_HOPS` hops of ``t_s`` (s), the ones taken
         out of a detection's input there: ``(speed m/s, |β|)`` each, ``β`` the fitted

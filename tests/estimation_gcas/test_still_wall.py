@@ -11,12 +11,14 @@ each a whole grating lobe (0.68 m) off at the right speed (issue 26, an outside 
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from hil.estimation.base import Estimate
 from hil.estimation.gcas.hidden_echoes import HIDDEN_FRACTION
-from hil.estimation.refine import CoherentRefiner, EchoTest
+from hil.estimation.refine import CoherentRefiner, EchoTest, Refinement
 from sim_devices.acoustics.delay import TwoWayPath
 from sim_devices.acoustics.echo import AnalyticEcho
 from sim_devices.acoustics.trajectory import Fixed
@@ -138,6 +140,39 @@ def test_a_still_echo_s_ghosts_lie_a_whole_tone_spacing_from_rest() -> None:
     assert not any(refiner.ghost_of_rest(v) for v in away)
 
 
+def test_a_weak_fit_where_a_measured_still_echo_leaks_is_its_leak() -> None:
+    # A wall measured at rest at hop 60 (20 dB, 0 dB per-sample SNR of a unit echo): a fit
+    # within two Doppler cells of one of its ghosts (27.5 m/s) or of rest that collects less
+    # than the follow gate (12 + 3 dB) is refused as what the wall's leak brought; one that
+    # reaches the gate, one away from its leaks, and any before the wall is measured are not.
+    schedule = att_schedule()
+    x = _wall(20.0) + np.random.default_rng(3).normal(0.0, 1.0 / np.sqrt(2.0), int(SECONDS * FS))
+    refiner = CoherentRefiner(schedule, FS, 10, C, 0.5, 30.0)
+    refiner.push(x, 0)
+    hop = 60
+    t_wall = (hop + 1) * HOP_S + 2.0 * WALL_M / C
+    test = EchoTest(HIDDEN_FRACTION, HIDDEN_FRACTION, refiner.echo_test.min_e_over_n0_db)
+    wall = refiner.refine_still(t_wall, hop, test)
+    assert wall is not None and wall.is_echo(test)
+    assert refiner.follow_db == pytest.approx(15.0)
+
+    def fit(speed: float, e_over_n0_db: float, hops_later: float = 10.3) -> Refinement:
+        alpha = (C + speed) / (C - speed)
+        return replace(
+            wall, t_s=t_wall + hops_later * HOP_S, alpha=alpha, e_over_n0_db=e_over_n0_db
+        )
+
+    assert refiner.weak_in_still_leak(fit(-29.0, 13.0))
+    assert refiner.weak_in_still_leak(fit(25.0, 14.9))
+    assert refiner.weak_in_still_leak(fit(4.0, 12.5))
+    assert not refiner.weak_in_still_leak(fit(27.0, 15.0))  # the follow gate reached
+    assert not refiner.weak_in_still_leak(fit(12.0, 13.0))  # away from its leaks
+    assert not refiner.weak_in_still_leak(fit(27.0, 13.0, hops_later=70.0))  # wall's fit let go
+    fresh = CoherentRefiner(schedule, FS, 10, C, 0.5, 30.0)
+    fresh.push(x, 0)
+    assert not fresh.weak_in_still_leak(fit(27.0, 13.0))  # no still echo measured
+
+
 def _moving_expected(range_m: float, speed_mps: float) -> int:
     """A target's boundaries received in :data:`SCORED_S` (from ``range_m`` m closing at
     ``speed_mps`` m/s)."""
@@ -190,3 +225,16 @@ def test_a_lone_slow_echo_measured_at_rest_adds_few_ghosts(seed: int) -> None:
     x = echo_samples(schedule, 40.0, 0.05, 2.0, snr_db=0.0, seed=seed)
     est = run_blocks(make_gcas(schedule), x)
     assert len(est) / (2.0 / HOP_S) <= 0.015
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [2, 4])
+def test_a_lone_slow_echo_at_minus_10_db_gives_no_ghost_where_it_leaks(seed: int) -> None:
+    # The same echo at -10 dB: the detections its leaks bring (near rest, at its ghosts one
+    # tone spacing out) are fitted with its fit at rest taken out, and those fits read the
+    # noise there; 5 and 4 passed the echo test (at +-24-30 m/s, 0.8-89 m) before a fit there
+    # had to collect the follow gate (15 dB), none since.
+    schedule = att_schedule()
+    x = echo_samples(schedule, 40.0, 0.05, 2.0, snr_db=-10.0, seed=seed)
+    est = run_blocks(make_gcas(schedule), x)
+    assert len(est) / (2.0 / HOP_S) <= 0.005

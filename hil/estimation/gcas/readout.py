@@ -420,6 +420,10 @@ class Readout:
             if refined.is_echo(ECHO_TEST) and self._refiner.still_leak(refined, hop_index):
                 self.incoherent_count += 1
                 return None
+            if refined.is_echo(ECHO_TEST) and self._refiner.weak_in_still_leak(refined):
+                self._refiner.forget(refined)
+                self.incoherent_count += 1
+                return None
             if inside is not None and alone and refined.is_echo(ECHO_TEST):
                 source = inside.source_of(t_rx, alpha, hop_index, refined)
                 if source is not None:
