@@ -205,7 +205,7 @@ def register(sub: Any) -> None:
     p.add_argument("--salinity", type=float, help="ppt (Mackenzie); omit for fresh water")
     p.add_argument(
         "--temperature-uncertainty", type=float, default=None,
-        help="°C, with --method temperature (default 0.1)",
+        help=f"°C, with --method temperature (default {TEMPERATURE_UNCERTAINTY_C:g})",
     )  # fmt: skip
     _stage_options(p)
     p.set_defaults(func=run, kind_func=_sound_speed)
