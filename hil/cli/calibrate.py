@@ -118,7 +118,11 @@ def _common(p: argparse.ArgumentParser, audio: bool = True) -> None:
 
 
 def _stage_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--stage", default=None, help="GRBL serial URL (with --device)")
+    p.add_argument(
+        "--stage", default=None,
+        help="stage URL, e.g. serial:///dev/ttyUSB0 (needed with --device; without it, on the"
+        " simulated bench, only sim://stage)",
+    )  # fmt: skip
     p.add_argument(
         "--positions", type=parse_positions, default=parse_positions("-0.4:-0.05:8"),
         help="stage positions, --positions=START:STOP:COUNT or =x1,x2,... m (default -0.4:-0.05:8)",
@@ -205,7 +209,7 @@ def register(sub: Any) -> None:
     p.add_argument("--salinity", type=float, help="ppt (Mackenzie); omit for fresh water")
     p.add_argument(
         "--temperature-uncertainty", type=float, default=None,
-        help="°C, with --method temperature (default 0.1)",
+        help=f"°C, with --method temperature (default {TEMPERATURE_UNCERTAINTY_C:g})",
     )  # fmt: skip
     _stage_options(p)
     p.set_defaults(func=run, kind_func=_sound_speed)

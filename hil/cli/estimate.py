@@ -70,14 +70,16 @@ if TYPE_CHECKING:
 
 _LOG = logging.getLogger(__name__)
 
-# Internal field names -> the options that set them (hil.cli.main names them in errors).
-OPTION_NAMES = {
-    "m_hops": "--m-hops",
-    "receiver": "--receiver",
+#: The settings every receiver takes, each set by its own flag (checked there), never by
+#: ``--option``.
+COMMON_OPTIONS = {
     "sound_speed_mps": "--sound-speed",
     "max_speed_mps": "--max-speed",
     "max_range_m": "--max-range",
+    "m_hops": "--m-hops",
 }
+# Internal field names -> the options that set them (hil.cli.main names them in errors).
+OPTION_NAMES = {**COMMON_OPTIONS, "receiver": "--receiver"}
 
 # Input samples per block: bounded memory for long recordings.
 _READ_BLOCK = 1 << 16
@@ -149,16 +151,6 @@ def check_option_kinds(options: dict[str, Any], reference: dict[str, Any]) -> No
                 f"{kind} for {key} (it is {json.dumps(known)} now)",
                 f"write --option {key}={json.dumps(known)}",
             )
-
-
-#: The settings every receiver takes, each set by its own option (checked there), never by
-#: ``--option``.
-COMMON_OPTIONS = {
-    "sound_speed_mps": "--sound-speed",
-    "max_speed_mps": "--max-speed",
-    "max_range_m": "--max-range",
-    "m_hops": "--m-hops",
-}
 
 
 def _refuse_common_options(extra: dict[str, Any]) -> None:

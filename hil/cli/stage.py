@@ -260,6 +260,7 @@ def _status(stage: Any, args: argparse.Namespace) -> StageStatus:
 
 
 def _home(stage: Any, args: argparse.Namespace) -> StageStatus:
+    stage.check_home()  # refused before the progress line says it homes
     _progress(f"homing ($H, up to {stage.homing_timeout():.0f} s)")
     status: StageStatus = stage.home()
     return status
@@ -276,12 +277,14 @@ def _reset(stage: Any, args: argparse.Namespace) -> StageStatus:
 
 
 def _jog(stage: Any, args: argparse.Namespace) -> StageStatus:
+    stage.check_jog(args.dx, args.speed)  # refused before the progress line
     _progress(f"jogging {1000 * args.dx:+.3f} mm at {1000 * args.speed:g} mm/s")
     status: StageStatus = stage.jog(args.dx, args.speed)
     return status
 
 
 def _move(stage: Any, args: argparse.Namespace) -> StageStatus:
+    stage.check_move(args.x, args.speed, args.accel)  # refused before the progress line
     _progress(f"moving to {1000 * args.x:.3f} mm at {1000 * args.speed:g} mm/s")
     status: StageStatus = stage.move_to(args.x, args.speed, args.accel)
     return status

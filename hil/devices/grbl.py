@@ -367,17 +367,9 @@ polling at no more than 5 Hz); use the default 0.2
         )
 
     def home(self) -> StageStatus:
-        """Run the homing cycle ``$H``; clears alarms and an e-stop latch."""
-        settings = self.settings
-        if not settings.homing_enabled:
-            raise ConfigError(
-                "homing_enabled ($22)",
-                False,
-                "True to run a homing cycle",
-                "set $22=1 on the controller (write_setting('homing_enabled', True)), or unlock"
-                " it with $X instead (GrblStage.unlock(), hil stage unlock)",
-            )
-        self._require_not_critical()
+        """Run the homing cycle ``$H``; clears alarms and an e-stop latch. Refused first as
+        :meth:`check_home` refuses."""
+        self.check_home()
         # No polling while homing; the timeout covers the longest search of every cycle
         # (GRBL gives up with ALARM:9 before it), with a margin for acceleration.
         # Until '$H' is answered GRBL may be homing: a wait abandoned meanwhile (a timeout,
@@ -444,11 +436,7 @@ polling at no more than 5 Hz); use the default 0.2
         With ``wait`` return after the move completed (``G4 P0`` answers then); raises
         :class:`StageHeldError` if it is feed-held on the way.
         """
-        self._check_position("x", x)
-        self._check_speed("v", v)
-        if a is not None:
-            self._check_acceleration(a)
-        self._require_ready()
+        self.check_move(x, v, a)
         if a is not None:
             self._set_acceleration(a)
         start = self._position_estimate()
@@ -459,11 +447,9 @@ polling at no more than 5 Hz); use the default 0.2
         return self.status()
 
     def jog(self, dx: float, v: float, *, wait: bool = True) -> StageStatus:
-        """Jog X by ``dx`` (m) at ``v`` (m/s) with ``$J=``; cancel with :meth:`jog_cancel`."""
-        self._check_speed("v", v)
-        self._require_ready()
-        start = self.status().position
-        self._check_position("jog target x", start + dx)
+        """Jog X by ``dx`` (m) at ``v`` (m/s) with ``$J=``; cancel with :meth:`jog_cancel`.
+        Refused first as :meth:`check_jog` refuses."""
+        start = self.check_jog(dx, v)
         self._direction = 1.0 if dx >= 0 else -1.0
         self._command(format_jog_line(dx * 1000.0, v * 60000.0))
         if not wait:
@@ -607,6 +593,43 @@ polling at no more than 5 Hz); use the default 0.2
         self._settings = self.settings.updated(name, value)
 
     # ------------------------------------------------------------------ checks
+    # Each motion command runs its check first; a caller runs it on its own to be refused
+    # before it reports what it is about to do (hil stage's progress lines).
+    def check_home(self) -> None:
+        """Refuse :meth:`home` before anything is sent: homing disabled (``$22=0``, a
+        :class:`~hil.errors.ConfigError` saying how to enable it or unlock instead) or a
+        critical alarm (:class:`StageAlarmError`: reset first)."""
+        if not self.settings.homing_enabled:
+            raise ConfigError(
+                "homing_enabled ($22)",
+                False,
+                "True to run a homing cycle",
+                "set $22=1 on the controller (write_setting('homing_enabled', True)), or unlock"
+                " it with $X instead (GrblStage.unlock(), hil stage unlock)",
+            )
+        self._require_not_critical()
+
+    def check_move(self, x: float, v: float, a: float | None = None) -> None:
+        """Refuse :meth:`move_to` ``(x m, v m/s, a m/s²)`` before anything is sent: a target
+        outside the soft limits, a speed or acceleration out of range
+        (:class:`StageLimitError`), or a stage that may not move (alarm, e-stop latch:
+        :class:`StageAlarmError`; feed hold: :class:`StageHeldError`)."""
+        self._check_position("x", x)
+        self._check_speed("v", v)
+        if a is not None:
+            self._check_acceleration(a)
+        self._require_ready()
+
+    def check_jog(self, dx: float, v: float) -> float:
+        """Refuse :meth:`jog` ``(dx m, v m/s)`` before anything is sent, as :meth:`check_move`
+        refuses a move to the jog's target; return the position the jog starts from (m,
+        from a status query)."""
+        self._check_speed("v", v)
+        self._require_ready()
+        start = self.status().position
+        self._check_position("jog target x", start + dx)
+        return start
+
     def _check_position(self, name: str, x: float) -> None:
         low, high = self.limits
         tol = 0.5 * self.settings.step

@@ -53,10 +53,6 @@ def check_background_path(path: Any) -> None:
         )
 
 
-#: The first bytes of every NumPy ``.npy`` file (its format's magic string).
-_NPY_MAGIC = b"\x93NUMPY"
-
-
 def load_background(path: str | Path, period_samples: int) -> NDArray[np.float64]:
     """The background saved at ``path`` (``.npy``, one still period: shape ``(P,)``, input
     full-scale units, receiver sample index ``n`` at element ``n mod P``,
@@ -65,14 +61,15 @@ def load_background(path: str | Path, period_samples: int) -> NDArray[np.float64
     p = Path(path)
     field, allowed = "receiver.options.background", "a .npy file of one code period"
     capture = "capture one: hil docs tank-run, 'Empty-tank background'"
+    npy_magic = np.lib.format.MAGIC_PREFIX  # the first bytes of every .npy file
     try:
         with open(p, "rb") as f:
-            magic = f.read(len(_NPY_MAGIC))
+            magic = f.read(len(npy_magic))
     except OSError as exc:
         raise ConfigError(
             field, str(path), allowed, f"it cannot be read ({exc}); {capture}"
         ) from None
-    if magic != _NPY_MAGIC:
+    if magic != npy_magic:
         what = (
             "it is empty"
             if not magic
@@ -88,7 +85,7 @@ def load_background(path: str | Path, period_samples: int) -> NDArray[np.float64
     b = np.asarray(b, dtype=np.float64)
     if b.shape != (period_samples,) or not np.all(np.isfinite(b)):
         raise ConfigError(
-            "receiver.options.background",
+            field,
             str(path),
             f"{period_samples} finite samples (one code period of this waveform and rate)",
             f"it holds shape {b.shape}: capture it again with this experiment's waveform",

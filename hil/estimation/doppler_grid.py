@@ -15,7 +15,9 @@ them from the Doppler decision, a value in (0, 1) down-weights them).
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -24,10 +26,33 @@ from hil.errors import ConfigError
 
 FloatArray = NDArray[np.float64]
 
-#: The most Doppler hypotheses a grid holds: each holds a codeword correlator row per hop, so
-#: the detector's memory and work grow with it (10^8 asked 3 GiB); hypotheses closer than a
-#: small fraction of the Doppler resolution (c / (2 f M T_h), a few m/s on att) add nothing.
+#: The most Doppler hypotheses a receiver's grid holds: each is a row of its correlators
+#: (GCAS: per codeword and hop; the matched-filter bank: per replica), so memory and work grow
+#: with it (10^8 asked 3 GiB of GCAS, 12.7 GiB of the bank); hypotheses closer than a small
+#: fraction of the Doppler resolution (c / (2 f M T_h), a few m/s on att) add nothing.
 MAX_HYPOTHESES = 4096
+
+
+def check_n_doppler(n_doppler: Any) -> int:
+    """``n_doppler``, the count of a receiver's Doppler hypotheses, as an int in 1 ..
+    :data:`MAX_HYPOTHESES`; else a ConfigError naming ``n_doppler``. The one check of every
+    receiver with a Doppler grid (GCAS through :func:`doppler_grid`, the baselines).
+
+    >>> check_n_doppler(64), check_n_doppler(np.int64(15))
+    (64, 15)
+    """
+    whole = isinstance(n_doppler, numbers.Integral) or (
+        isinstance(n_doppler, float) and n_doppler.is_integer()
+    )
+    if isinstance(n_doppler, bool) or not whole or not 1 <= n_doppler <= MAX_HYPOTHESES:
+        raise ConfigError(
+            "n_doppler",
+            n_doppler,
+            f"an integer in 1 .. {MAX_HYPOTHESES}",
+            "hypotheses closer than the Doppler resolution add nothing: leave it out for"
+            " the receiver's default",
+        )
+    return int(n_doppler)
 
 
 @dataclass(frozen=True)
@@ -95,13 +120,7 @@ def doppler_grid(
         raise ConfigError("sound_speed_mps", sound_speed_mps, "> 0 m/s")
     if not (math.isfinite(max_speed_mps) and 0 <= max_speed_mps < c):
         raise ConfigError("max_speed_mps", max_speed_mps, f"0 <= v < c = {c} m/s")
-    if int(n_hypotheses) != n_hypotheses or not 1 <= n_hypotheses <= MAX_HYPOTHESES:
-        raise ConfigError(
-            "n_doppler",
-            n_hypotheses,
-            f"an integer in 1 .. {MAX_HYPOTHESES}",
-            "GCAS's default is 64; a finer grid than the Doppler resolution adds nothing",
-        )
+    n_hypotheses = check_n_doppler(n_hypotheses)
     if n_hypotheses > 1 and max_speed_mps == 0:
         raise ConfigError("max_speed_mps", max_speed_mps, "> 0 m/s for more than one hypothesis")
     if not (math.isfinite(reverb_speed_mps) and reverb_speed_mps >= 0):

@@ -45,7 +45,6 @@ from hil.estimation._baseline_common import (
     common_options,
     parabolic_peak,
     positive,
-    positive_int,
     require_family,
     resolve_transmit_time,
     speed_of_alpha,
@@ -53,6 +52,7 @@ from hil.estimation._baseline_common import (
 )
 from hil.estimation.base import Estimate
 from hil.estimation.baseband import ComplexBaseband
+from hil.estimation.doppler_grid import check_n_doppler
 from hil.estimation.unit_correlators import UnitCorrelatorBank
 from hil.signals.schedule import HopSchedule
 from hil.signals.waveforms import HFCCW_FAMILIES
@@ -119,7 +119,7 @@ class JifsReceiver(EmitsOnAnyBlock, RegistryConstructor):
         if not isinstance(schedule, HopSchedule):
             raise ConfigError("schedule", type(schedule).__name__, "a HopSchedule")
         require_family(schedule, HFCCW_FAMILIES, "jifs")
-        n_dop = positive_int("n_doppler", n_doppler)
+        n_dop = check_n_doppler(n_doppler)
         fractions = {
             "corr_fraction": corr_fraction,
             "edge_fraction": edge_fraction,

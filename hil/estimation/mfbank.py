@@ -82,6 +82,7 @@ from hil.estimation._baseline_common import (
 from hil.estimation.base import Estimate
 from hil.estimation.baseband import ComplexBaseband
 from hil.estimation.cost import fft_mults
+from hil.estimation.doppler_grid import check_n_doppler
 from hil.signals.schedule import HopSchedule
 
 FloatArray = NDArray[np.float64]
@@ -191,7 +192,7 @@ class MatchedFilterBank(EmitsOnAnyBlock, RegistryConstructor):
         )
         if not isinstance(schedule, HopSchedule):
             raise ConfigError("schedule", type(schedule).__name__, "a HopSchedule")
-        n_dop = positive_int("n_doppler", n_doppler)
+        n_dop = check_n_doppler(n_doppler)
         thr = positive("threshold", threshold)
         if thr > 1.0:
             raise ConfigError("threshold", threshold, "0 < threshold <= 1 (normalised correlation)")

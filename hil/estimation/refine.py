@@ -2387,11 +2387,8 @@ class CoherentRefiner:
             if outcome != FOUND:
                 continue
             alpha = (self.c + v) / (self.c - v)
-            p = float(
-                self.candidate_powers(args, known, np.array([t]), np.array([alpha]), np.array([g]))[
-                    0
-                ]
-            )
+            one = (np.array([t]), np.array([alpha]), np.array([g]))
+            p = float(self.candidate_powers(args, known, *one)[0])
             if p > p_best:
                 best, p_best = (t, alpha, g), p
         return best
@@ -2602,6 +2599,9 @@ class CoherentRefiner:
 
     @property
     def slot_tables(self) -> tuple[NDArray[Any], ...]:
+        """The hops' correlation tables by slot (:meth:`hop_slots`), as the refinement
+        kernels take them ahead of the slots (:func:`~hil.estimation.refine_kernels.
+        candidate_sums`)."""
         return (self._prefix, self._energy, self._first, self._tail, self._alpha0, self._centre)
 
     def hop_slots(

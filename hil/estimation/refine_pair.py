@@ -232,7 +232,6 @@ def fit_pair(
     or where the input does not cover the hops. ``seeds``: the pair's echoes measured lately
     (a warm start, instead of the seed search: each carried to this boundary, and taken out
     of the other's input as measured, its amplitude on its own codeword's phase)."""
-
     if seeds is None:
         second = _seed(ref, fit, word, hop_ids, hop_index, lobe, known)
         if second is None:
@@ -324,7 +323,6 @@ def _joint_amplitudes(
     squares together, ``β = 2 A⁻¹ c`` (``c`` each one's ``C``, ``A`` the models' Gram
     matrix, its cross term what a unit echo at the second place puts into the first's
     ``C``); None where the input does not cover the hops or the two are one model."""
-
     (t1, a1), (t2, a2) = places
     slots = ref.hop_slots(hop_ids, word, t1, a1)
     if slots is None:
@@ -360,7 +358,6 @@ def _seed(
     :data:`SEED_LOBES` grating lobes of it (steps of :data:`SEED_STEP` main lobes), ``fit``
     taken out, farther than half a main lobe from it (s); None where the input does not
     cover the hops."""
-
     main = ref.main_lobe_s
     own = EchoFit(hop_index, fit.t_s, fit.alpha, fit.amplitude)
     rows = _with(known, ref.echo_rows([own], fit.t_s))
@@ -399,7 +396,6 @@ def _gain(
     each echo's ``C`` with the other in and taken out (their difference is the other's
     fitted amplitude times the models' cross term), the scatter of each one's hops with the
     other taken out (the larger of the two)."""
-
     fits = (first, second)
     echoes = [EchoFit(hop_index, f.t_s, f.alpha, f.amplitude) for f in fits]
     c = np.empty(2, np.complex128)

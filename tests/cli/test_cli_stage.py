@@ -19,6 +19,8 @@ from hil.cli.main import main
 from hil.experiments.experiment import DEFAULT_EXPERIMENT
 from sim_devices.stage import GrblSimConfig, ManualClock
 
+from .conftest import one_line_error
+
 URL = ["--url", "sim://stage?via=memory"]
 #: Homing on, 400 mm of travel, 600 mm/min, 50 mm/s^2, 20 mm from the switch at power-up.
 CONFIG = GrblSimConfig(
@@ -59,13 +61,40 @@ def test_home_without_homing_says_how_to_enable_it_or_unlock(
     config = dataclasses.replace(CONFIG, homing=False, soft_limits=False)
     options = {"clock": simulated, "transport_options": {"config": config}}
     monkeypatch.setattr(stage_cli, "STAGE_OPTIONS", options)
-    assert main(["stage", "home", *URL]) == 2
-    err = capsys.readouterr().err
-    assert err.splitlines()[-1] == (
+    # The refusal is the only line: no "stage: homing ($H, ...)" progress line before it.
+    assert one_line_error(capsys, ["stage", "home", *URL]) == (
         "hil stage: error: homing_enabled ($22) = False is not allowed: must be True to run a"
         " homing cycle; set $22=1 on the controller (write_setting('homing_enabled', True)), or"
         " unlock it with $X instead (GrblStage.unlock(), hil stage unlock)"
-    ), err
+    )
+
+
+@pytest.mark.parametrize(
+    ("argv", "named"),
+    [
+        (["jog", "nan"], "DX (jog target x (axis X)) = nan"),
+        (["jog", "-0.5"], "DX (jog target x (axis X)) = -0.5"),
+        (["jog", "-0.01", "--speed", "0"], "--speed (v (axis X)) = 0.0"),
+        (["move", "nan"], "X (x (axis X)) = nan"),
+        (["move", "-0.1", "--speed", "inf"], "--speed (v (axis X)) = inf"),
+        (["move", "-0.1", "--accel", "-1"], "--accel (a (axis X)) = -1.0"),
+    ],
+)
+def test_a_refused_jog_or_move_says_only_why(
+    argv: list[str],
+    named: str,
+    monkeypatch: pytest.MonkeyPatch,
+    simulated: ManualClock,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    # The driver's checks run before the progress line ("stage: jogging ..."), which would
+    # announce a motion that never starts. Homing off: the controller powers up Idle at
+    # machine 0, free to move (GRBL's soft limits need homing; the driver's do not).
+    config = dataclasses.replace(CONFIG, homing=False, soft_limits=False)
+    options = {"clock": simulated, "transport_options": {"config": config}}
+    monkeypatch.setattr(stage_cli, "STAGE_OPTIONS", options)
+    err = one_line_error(capsys, ["stage", *argv, *URL])
+    assert err.startswith(f"hil stage: error: {named} is not allowed: must be "), err
 
 
 def test_home_then_status_as_json(capsys: pytest.CaptureFixture[str]) -> None:
@@ -83,9 +112,10 @@ def test_unlock_and_a_jog_refused_while_locked(capsys: pytest.CaptureFixture[str
     assert main(["stage", "unlock", "--json", *URL]) == 0
     assert _json(capsys)["state"] == "Idle"
     assert main(["stage", "jog", "--json", "-0.01", *URL]) == 1
-    err = capsys.readouterr().err
-    assert "hil stage jog: sim://stage?via=memory: stage is in ALARM" in err
-    assert "home with $H" in err
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1, err  # refused before the "stage: jogging" progress line
+    assert err[0].startswith("hil stage jog: sim://stage?via=memory: stage is in ALARM"), err
+    assert "home with $H" in err[0]
 
 
 def test_move_and_jog_after_homing_in_the_same_controller(

@@ -146,18 +146,20 @@ def test_estimate_refuses_a_background_that_is_not_a_npy_file(
     assert err.endswith("'); capture one: hil docs tank-run, 'Empty-tank background'"), err
 
 
+@pytest.mark.parametrize("receiver", ["gcas", "mfbank", "jifs"])
 def test_estimate_refuses_a_doppler_grid_past_its_largest(
-    schedule_and_wav: tuple[Path, Path], capsys: pytest.CaptureFixture[str]
+    receiver: str, schedule_and_wav: tuple[Path, Path], capsys: pytest.CaptureFixture[str]
 ) -> None:
-    # 10^8 hypotheses ended in a 3 GiB allocation's traceback.
+    # 10^8 hypotheses ended in an allocation's traceback: 3 GiB in GCAS, 12.7 GiB in the
+    # matched-filter bank; every receiver with a Doppler grid checks it in one place.
     schedule, wav = schedule_and_wav
     capsys.readouterr()
-    argv = ["estimate", "--schedule", str(schedule), "--input", str(wav)]
+    argv = ["estimate", "--schedule", str(schedule), "--input", str(wav), "--receiver", receiver]
     err = one_line_error(capsys, [*argv, "--option", "n_doppler=100000000"])
     assert err == (
         "hil estimate: error: n_doppler = 100000000 is not allowed: must be an integer in"
-        " 1 .. 4096; GCAS's default is 64; a finer grid than the Doppler resolution adds"
-        " nothing"
+        " 1 .. 4096; hypotheses closer than the Doppler resolution add nothing: leave it out"
+        " for the receiver's default"
     )
 
 
@@ -190,8 +192,8 @@ def _scene_sweep(tmp_path: Path, fixed: str, grid: str = "") -> Path:
             'receiver = "gcas"\nreceiver_options = {n_doppler = -4}',
             "",
             "fixed.receiver_options.n_doppler = -4 is not allowed: must be an integer in"
-            " 1 .. 4096; GCAS's default is 64; a finer grid than the Doppler resolution adds"
-            " nothing",
+            " 1 .. 4096; hypotheses closer than the Doppler resolution add nothing: leave it"
+            " out for the receiver's default",
         ),
         (
             'receiver = "gcas-bg"\nreceiver_options = {reverb_speed_mps = inf}',

@@ -111,7 +111,7 @@ def test_registry_builds_it_and_samples_seen_counts_gaps() -> None:
 @pytest.mark.parametrize(
     ("kwargs", "text"),
     [
-        ({"n_doppler": 0}, "n_doppler = 0 is not allowed: must be an integer >= 1"),
+        ({"n_doppler": 0}, "n_doppler = 0 is not allowed: must be an integer in 1 .. 4096"),
         ({"threshold": 1.5}, "threshold = 1.5 is not allowed"),
         ({"max_range_m": 500.0}, "max_range_m = 500.0 is not allowed: must be <= the unambiguous"),
         ({"bogus": 1}, "receiver.options.bogus = 1 is not allowed"),
