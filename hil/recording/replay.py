@@ -31,7 +31,8 @@ from hil.signals.schedule import HopSchedule
 if TYPE_CHECKING:
     from hil.recording.reader import RunRecording
 
-_COMMON = ("sound_speed_mps", "max_speed_mps", "max_range_m", "m_hops")
+#: The settings every receiver takes (:func:`~hil.estimation.registry.make_receiver`'s).
+_COMMON = ("sound_speed_mps", *COMMON_SETTINGS)
 
 REPLAY_BLOCK_FRAMES = 65536
 """Frames per block fed to the receiver on replay (bounded memory for long runs)."""

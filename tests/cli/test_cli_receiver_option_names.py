@@ -91,3 +91,22 @@ def test_receivers_built_on_gcas_take_its_options_and_their_stage_s() -> None:
     assert receiver_class("fmcw").option_names() == OptionNames(
         frozenset({"speed_mode", "edge_fraction"})
     )
+
+
+def test_the_common_settings_are_one_set_wherever_they_are_named() -> None:
+    # hil estimate's flags, replay's recorded defaults and make_receiver's keyword arguments
+    # name the same four settings: a fifth added to one and not the others fails here.
+    import inspect
+
+    from hil.cli.estimate import COMMON_OPTIONS
+    from hil.estimation.registry import make_receiver
+    from hil.recording.records import COMMON_SETTINGS
+
+    keywords = {
+        name
+        for name, p in inspect.signature(make_receiver).parameters.items()
+        if p.kind is inspect.Parameter.KEYWORD_ONLY
+    }
+    assert keywords == {"sound_speed_mps", "max_speed_mps", "max_range_m", "m_hops"}
+    assert set(COMMON_OPTIONS) == keywords
+    assert {"sound_speed_mps", *COMMON_SETTINGS} == keywords
