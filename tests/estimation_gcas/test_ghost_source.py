@@ -3,6 +3,7 @@ att (tones 28.35-31.65 kHz, 1.1 kHz apart; a 30 m/s span)."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from hil.estimation.gcas.ghost_source import GhostSources
@@ -113,3 +114,83 @@ def test_a_source_boundary_after_the_ghosts_is_moved_back_by_whole_hops() -> Non
     # A closing source's boundary comes before the ghost's and is kept.
     t_c = g.boundary(t_s, _alpha(7.5), _alpha(35.0))
     assert t_c < t_s and g.not_after(t_c, _alpha(35.0), t_s) == t_c
+
+
+def test_the_boundaries_read_are_those_whose_shifted_tones_match_the_ghosts_on_enough_hops() -> (
+    None
+):
+    # GhostSources.matching against its definition, boundary by boundary: the source's M hops
+    # aligned with the ghost's (each boundary `back` hops before), their tones' ranks shifted,
+    # equal to the ghost's codeword's on at least `need` hops; the order of `hops` kept.
+    g = _sources()
+    schedule = att_schedule()
+    rank = np.searchsorted(np.unique(schedule.tones_hz), schedule.tones_hz)
+
+    def agree(h: int, back: int, ghost_hop: int, shift: int) -> int:
+        src = rank[schedule.hops(h + back - 9, 10).tone_index] + shift
+        return int(np.count_nonzero(src == rank[schedule.hops(ghost_hop - 9, 10).tone_index]))
+
+    rng = np.random.default_rng(5)
+    for _ in range(400):
+        ghost_hop, back = int(rng.integers(-20, 400)), int(rng.integers(-2, 3))
+        shift, need = int(rng.integers(-3, 4)), int(rng.integers(0, 6))
+        start = int(rng.integers(-30, 400))
+        hops = list(range(start, start - 17, -1))
+        if rng.random() < 0.3:
+            hops = [int(h) for h in rng.permutation(hops)[:5]]
+        expected = [h for h in hops if agree(h, back, ghost_hop, shift) >= need]
+        assert g.matching(hops, back, ghost_hop, shift, need=need) == expected
+    # One spacing out most boundaries of a period hold a matching hop, three out (where only
+    # the lowest tone has a neighbour that far) about a third: what a scan reads.
+    period = list(range(36, 19, -1))
+    read = {n: sum(len(g.matching(period, 0, 36 - i, n, need=1)) for i in range(17)) / 17**2
+            for n in (1, 2, 3)}  # fmt: skip
+    assert read == pytest.approx({1: 0.907, 2: 0.744, 3: 0.370}, abs=0.001)
+
+
+def _beyond_span_trial(
+    monkeypatch: pytest.MonkeyPatch, need: int
+) -> tuple[list[object], list[object], int, int]:
+    """40 m/s closing from 90 m with a 30 m/s span at -10 dB, 1.5 s, the beyond-span scans
+    reading the boundaries that match the ghost on at least ``need`` hops: the estimates,
+    the sightings, the detections refused as the echo's, and the boundaries read."""
+    from hil.estimation.gcas import ghost_source
+
+    from .conftest import run_blocks
+    from .test_scenes import _receiver
+
+    monkeypatch.setattr(ghost_source, "MIN_BEYOND_MATCHES", need)
+    read = [0]
+    original = GhostSources.read
+
+    def counted(self: GhostSources, grid: ghost_source.SourceGrid) -> object:
+        read[0] += len(grid.hops)
+        return original(self, grid)
+
+    monkeypatch.setattr(GhostSources, "read", counted)
+    rx = _receiver()
+    est = run_blocks(rx, echo_samples(att_schedule(), 90.0, 40.0, 1.5, snr_db=-10.0, seed=4))
+    return est, list(rx.beyond_span), rx.beyond_span_count, read[0]
+
+
+@pytest.mark.slow
+def test_a_source_beyond_the_span_is_read_only_where_its_ghost_can_hold_it(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # A ghost holds its source's energy on the hops where the source's tones, shifted, are
+    # its codeword's; at -10 dB one such hop passes the threshold. Reading only the
+    # boundaries with one (MIN_BEYOND_MATCHES) says the echo as reading every boundary of
+    # the period does, the same estimates and refusals, reading fewer (measured: 64
+    # against 102 boundaries).
+    every = _beyond_span_trial(monkeypatch, 0)
+    monkeypatch.undo()
+    one = _beyond_span_trial(monkeypatch, 1)
+    monkeypatch.undo()
+    assert one[:3] == every[:3]
+    [seen] = one[1]
+    assert seen.hop_index == 11 and seen.speed_mps == pytest.approx(40.003, abs=1e-3)  # type: ignore[attr-defined]
+    assert (one[3], every[3]) == (64, 102)
+    # The rule inside the span (MIN_MATCH_FRACTION, 4 of 10 hops) would miss the boundaries
+    # of the ghosts that hold 1-3 hops of this source: said 15 hops later.
+    four = _beyond_span_trial(monkeypatch, 4)
+    assert [s.hop_index for s in four[1]] == [26]  # type: ignore[attr-defined]

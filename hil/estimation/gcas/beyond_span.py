@@ -98,7 +98,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from hil.estimation.gcas.ghost_source import GhostSources
+from hil.estimation.gcas.ghost_source import GhostSources, SourceGrid
 from hil.estimation.refine import (
     GHOST_HOPS,
     GHOST_LEAK_FRACTION,
@@ -408,22 +408,36 @@ class BeyondSpanCheck:
         # A boundary whose M hops were not all transmitted (the schedule's first M - 1) is
         # not one echo's fit whatever it is: no source is looked for from it (a lone target's
         # first boundaries would each cost a scan of every band).
-        bands = self.ghosts.bands(alpha) if hop_index >= self.m_hops - 1 else []
+        bands = self.ghosts.spaced_bands(alpha) if hop_index >= self.m_hops - 1 else []
         for side in dict.fromkeys(b[0] for b in bands):
             own = [b for b in bands if b[0] == side]
             found = None
-            for band in own:
-                found = found or self._follow_ghost(t_s, alpha, band, fit, timed=False)
+            for _, _, v_lo, v_hi in own:
+                found = found or self._follow_ghost(
+                    t_s, alpha, (side, v_lo, v_hi), fit, timed=False
+                )
             if (
                 found is None
                 and hop_index >= self._next_ghost_scan.get(side, hop_index)
                 and not self._leak_of_known(t_s, alpha, fit, lag_s)
                 and not self._ghost_of_still(t_s, alpha)
             ):
+                # Each band is read only at the source's boundaries whose tones, shifted by its
+                # tone spacings, the detection's codeword holds on a hop at least
+                # (GhostSources.grid): where no band has one, no source beyond this edge can
+                # have this ghost, nothing is read and the waits stand (they space out scans
+                # that read and found nothing).
+                grids = [
+                    self.ghosts.grid(t_s, alpha, v_lo, v_hi, (hop_index, side * n))
+                    for _, n, v_lo, v_hi in own
+                ]
+                if not any(g.hops for g in grids):
+                    continue
                 # One scan of a side reads every band of it (its tone spacings), nearest
                 # first, and waits as one.
-                for _, v_lo, v_hi in own:
-                    found = found or self._scan_ghost(t_s, alpha, side, v_lo, v_hi, fit)
+                for grid in grids:
+                    if grid.hops:
+                        found = found or self._scan_ghost(grid, side, fit)
                 self._scanned(
                     hop_index, side, found is not None, self._next_ghost_scan, self._ghost_scan_gap
                 )
@@ -635,16 +649,16 @@ class BeyondSpanCheck:
         return again, hop + r - back
 
     def _scan_ghost(
-        self, t_s: float, alpha: float, side: int, v_lo: float, v_hi: float, fit: Refinement
+        self, grid: SourceGrid, side: int, fit: Refinement
     ) -> tuple[Refinement, int] | None:
-        """The source of a ghost detected at ``t_s`` (s) and ``alpha`` (its own fit ``fit``)
-        looked for over ``[v_lo, v_hi]`` (m/s) beyond the ``side`` edge and refined:
-        ``(fit, hop index)`` where it is one echo there, stronger than the ghost; else
-        None."""
-        peak = self.ghosts.peak(t_s, alpha, v_lo, v_hi)
-        if peak is None:
+        """The source of a ghost (its own fit ``fit``) looked for on ``grid``
+        (:meth:`~hil.estimation.gcas.ghost_source.GhostSources.grid`: speeds beyond the
+        ``side`` edge) and refined: ``(fit, hop index)`` where it is one echo there, stronger
+        than the ghost; else None."""
+        best = self.ghosts.read(grid)
+        if best is None:
             return None
-        t_b, a_b, hop = peak
+        _, t_b, a_b, hop = best
         source = self.refiner.refine(t_b, a_b, hop)
         if source is None or not self._source(source, side, fit):
             return None

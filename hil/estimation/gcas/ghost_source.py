@@ -14,38 +14,40 @@ any of them may be the one the grid holds (``att``, 55 m/s with a 30 m/s span: i
 at 26.5-28.5 m/s (``n`` = 1, taken for the ghosts of its fit once fitted), about 0 m/s
 (``n`` = 2, hidden by the reverberation band) and -27.6 m/s (``n`` = 3)).
 
-So the source of a ghost is looked for where the ghost puts it: at the time scales
-``α_g f_{k±n} / f_k`` over the tones' ratios, widened by :data:`SPEED_MARGIN_CELLS` Doppler
-cells of one hop (the detector's speed of a ghost, whose tones disagree), wherever they lie
-beyond the span (from the edge plus half the ``M`` hops' resolution; the farthest, a ghost on
-the edge ``n`` spacings in, is :meth:`GhostSources.farthest_mps`). The
-ghost's comb peaks ``(M − 1)/2`` hops of the two time scales' drift after the boundary of the
-source's hops that it aligns with (as :meth:`~hil.estimation.refine.CoherentRefiner.
-ghost_of_known` reads), but which of the schedule's hops those are is not the ghost's own
-codeword: its tones are the source's shifted by ``n``, which matches another codeword only on
-some hops (4-5 of ``M`` = 10 on ``att``). The likelihood ``|C(t_rx, α)|²`` is therefore read
-at every hop of one code period whose boundary there puts the delay in ``[0, period)``, over
-the speeds in steps of the ``M`` hops' Doppler resolution (the caller's) and
-±:data:`TIME_HALF_LOBES` grating lobes about the boundary at :data:`TIME_POINTS` times (the
-detector's time of a ghost is a tenth of a hop off at times, measured on ``att``); its best
-point seeds the refinement, which finds the maximum from there (its own search spans ±½
-lobe and the speed span). A coarse grid: this reading costs a few hundred of the
-likelihood's evaluations per hop of the period. Measured on ``att``, M = 10, 35 m/s at
--10 dB: the source's own hop holds 4 times the likelihood of the next best (8987 against
-2147).
+So the source of a ghost is looked for where the ghost puts it: at the time scales ``α_g
+f_{k±n} / f_k`` over the tones' ratios, widened by :data:`SPEED_MARGIN_CELLS` Doppler cells of
+one hop (the detector's speed of a ghost, whose tones disagree), wherever they lie beyond the
+span (from the edge plus half the ``M`` hops' resolution; the farthest, a ghost on the edge
+``n`` spacings in, is :meth:`GhostSources.farthest_mps`). The ghost's comb peaks ``(M − 1)/2``
+hops of the two time scales' drift after the boundary of the source's hops that it aligns with
+(as :meth:`~hil.estimation.refine.CoherentRefiner. ghost_of_known` reads), but which of the
+schedule's hops those are is not the ghost's own codeword: its tones are the source's shifted
+by ``n``, which matches another codeword only on some hops. The likelihood ``|C(t_rx, α)|²`` is
+therefore read at the hops of one code period whose boundary there puts the delay in ``[0,
+period)`` and whose tones, shifted by ``n``, the ghost's codeword holds on at least
+:data:`MIN_BEYOND_MATCHES` of its ``M`` hops (:meth:`GhostSources.matching`; on ``att``, M = 10,
+91 % of the period's boundaries one spacing out, 74 % two and 37 % three, where fewer tones
+have a neighbour that far), over the speeds in steps of the ``M`` hops' Doppler resolution (the
+caller's) and ±:data:`TIME_HALF_LOBES` grating lobes about the boundary at :data:`TIME_POINTS`
+times (the detector's time of a ghost is a tenth of a hop off at times, measured on ``att``);
+its best point seeds the refinement, which finds the maximum from there (its own search spans
+±½ lobe and the speed span). A coarse grid: this reading costs a few hundred of the
+likelihood's evaluations per hop of the period. Measured on ``att``, M = 10, 35 m/s at -10 dB:
+the source's own hop holds 4 times the likelihood of the next best (8987 against 2147).
 
 The same geometry puts the source of a ghost inside the span, one to :data:`SPACINGS` tone
 spacings either way (:meth:`GhostSources.inside_bands`, for
 :mod:`hil.estimation.gcas.ghost_inside`). There the likelihood is read only at the hops
 whose tones, shifted by the spacings, the ghost's codeword holds on at least
-:data:`MIN_MATCH_FRACTION` of the ``M`` hops (:meth:`GhostSources.matching`): with few hops
-and a weak source, noise on another hop of the period can outdo the source's own.
+:data:`MIN_MATCH_FRACTION` of the ``M`` hops: with few hops and a weak source, noise on
+another hop of the period can outdo the source's own.
 """
 
 from __future__ import annotations
 
 import itertools
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -69,6 +71,27 @@ TIME_POINTS = 17
 #: tone spacings, must be the ghost's codeword's for the ghost to be looked for there
 #: (:meth:`GhostSources.matching`): a ghost collects the source's energy of those hops only.
 MIN_MATCH_FRACTION = 0.4
+#: The least number of the ``M`` hops on which a source beyond the span, its tones shifted by
+#: the ghost's tone spacings, must be the ghost's codeword's for the ghost to be looked for
+#: there: the ghost's codeword sum holds the source's energy on each hop that matches, and
+#: one hop of a source the span does not hold can pass the threshold (``att`` at -10 dB
+#: per-sample SNR: a hop's E/N0 about 20 dB). Measured on ``att``, M = 10, every hop of the
+#: period read (35-55 m/s either side, 20 and 30 m/s spans, -15 to 0 dB, 1.5 s each): each
+#: source found at a boundary matching 1-5 of the ghost's 10 hops (22 at 1 or 2), none at 0.
+MIN_BEYOND_MATCHES = 1
+
+
+class SourceGrid(NamedTuple):
+    """Where the likelihood is read for the source of one ghost (:meth:`GhostSources.grid`):
+    the middle speed's boundary ``t_c`` (s) and time scale ``a_mid``, the points' receive
+    times ``tt`` (s) and time scales ``aa``, both of shape (speeds, times), and the source's
+    ``hops`` read (each the last hop of a boundary, latest first)."""
+
+    t_c: float
+    a_mid: float
+    tt: NDArray[np.float64]
+    aa: NDArray[np.float64]
+    hops: list[int]
 
 
 def _ratios(tones_hz: NDArray[np.float64]) -> list[tuple[float, float]]:
@@ -213,12 +236,28 @@ class GhostSources:
     ) -> tuple[float, float, float, int] | None:  # fmt: skip
         """The likelihood's best point over the source's speeds ``[v_lo, v_hi]`` (m/s) for
         a ghost detected at ``t_s`` (s) and ``alpha``: ``(|C|², t_rx s, α, hop index)``
-        (the likelihood the refinement maximises), over
-        every hop of one code period (module docstring); None where the input covers none.
-        With ``ghost`` = ``(hop index, shift)``, the ghost's boundary and its tones' rank
-        less the source's (:meth:`inside_bands`), only the hops whose boundary the ghost
-        aligns with holds the ghost's tones shifted on at least :data:`MIN_MATCH_FRACTION`
-        of the ``M`` hops (:meth:`matching`) are read."""
+        (the likelihood the refinement maximises), over the hops of :meth:`grid` (every hop
+        of one code period, or with ``ghost`` only those whose tones match on
+        :data:`MIN_MATCH_FRACTION` of the ``M`` hops: a source inside the span); None where
+        the input covers none of them."""
+        need = math.ceil(MIN_MATCH_FRACTION * self.m_hops)
+        return self.read(self.grid(t_s, alpha, v_lo, v_hi, ghost, need, time_points))
+
+    def grid(
+        self, t_s: float, alpha: float, v_lo: float, v_hi: float,
+        ghost: tuple[int, int] | None = None, need: int | None = None,
+        time_points: int = TIME_POINTS,
+    ) -> SourceGrid:  # fmt: skip
+        """Where :meth:`best_point` reads the likelihood for a ghost detected at ``t_s`` (s)
+        and ``alpha``, its source at speeds ``[v_lo, v_hi]`` (m/s): the points over the
+        speeds in steps of ``step_mps`` and ``time_points`` times across
+        ±:data:`TIME_HALF_LOBES` grating lobes (module docstring), at every hop of one code
+        period. With ``ghost`` = ``(hop index, shift)``, the ghost's boundary and its tones'
+        rank less the source's (:meth:`spaced_bands`, :meth:`inside_bands`), only the hops
+        whose boundary the ghost aligns with holds the ghost's tones shifted on at least
+        ``need`` of the ``M`` hops (:meth:`matching`; default :data:`MIN_BEYOND_MATCHES`): a
+        ghost holds only those hops of its source, so where none match it cannot be that
+        boundary's ghost."""
         c, ref = self.c, self.refiner
         n_v = max(2, int(math.ceil((v_hi - v_lo) / self.step_mps)) + 1)
         speeds = np.linspace(v_lo, v_hi, n_v)
@@ -234,42 +273,50 @@ class GhostSources:
         )  # fmt: skip
         tt = t_c + t_v[:, None] + offsets[None, :]
         aa = np.repeat(alphas[:, None], time_points, axis=1)
-        best: tuple[float, float, float, int] | None = None
-        hops: list[int] | range = self._hops_ending_before(t_c)
+        hops: list[int] = list(self._hops_ending_before(t_c))
         if ghost is not None:
             # The boundary the ghost aligns with lies whole hops of the source after t_c.
             back = round((self.boundary(t_s, alpha, a_mid) - t_c) * a_mid / self.hop_s)
-            hops = self.matching(list(hops), back, *ghost)
-        for hop in hops:
-            corr = ref.correlation(t_c, a_mid, hop, tt, aa)
+            need = MIN_BEYOND_MATCHES if need is None else need
+            hops = self.matching(hops, back, *ghost, need=need)
+        return SourceGrid(t_c, a_mid, tt, aa, hops)
+
+    def read(self, grid: SourceGrid) -> tuple[float, float, float, int] | None:
+        """The likelihood's best point on ``grid`` (:meth:`grid`): ``(|C|², t_rx s, α, hop
+        index)``, the first hop's where two are equal; None where the input covers none of
+        its hops."""
+        best: tuple[float, float, float, int] | None = None
+        for hop in grid.hops:
+            corr = self.refiner.correlation(grid.t_c, grid.a_mid, hop, grid.tt, grid.aa)
             if corr is None:
                 continue
             power: NDArray[np.float64] = np.abs(corr) ** 2
             k = int(np.argmax(power))
             if best is None or power.flat[k] > best[0]:
-                best = (float(power.flat[k]), float(tt.flat[k]), float(aa.flat[k]), hop)
+                best = (float(power.flat[k]), float(grid.tt.flat[k]), float(grid.aa.flat[k]), hop)
         return best
 
-    def matching(self, hops: list[int], back: int, ghost_hop: int, shift: int) -> list[int]:
+    def matching(
+        self, hops: list[int], back: int, ghost_hop: int, shift: int, *, need: int | None = None
+    ) -> list[int]:
         """Those of ``hops`` (the source's boundaries, each ``back`` hops before the one the
         ghost aligns with) whose aligned ``M`` hops' tones, ranked and shifted by ``shift``,
-        are the tones of the ghost's ``M`` hops (ending ``ghost_hop``) on at least
-        :data:`MIN_MATCH_FRACTION` of them: where fewer agree the ghost holds too little of
-        the source to be detected and pass the echo test."""
+        are the tones of the ghost's ``M`` hops (ending ``ghost_hop``) on at least ``need``
+        of them (default :data:`MIN_MATCH_FRACTION` of ``M``): where fewer agree the ghost
+        holds too little of the source to be detected and pass the echo test. Order kept."""
+        if not hops:
+            return []
         m = self.m_hops
+        if need is None:
+            need = math.ceil(MIN_MATCH_FRACTION * m)
         ghost_tones = self._rank[self.schedule.hops(ghost_hop - m + 1, m).tone_index]
-        need = math.ceil(MIN_MATCH_FRACTION * m)
-        return [
-            h
-            for h in hops
-            if int(
-                np.count_nonzero(
-                    self._rank[self.schedule.hops(h + back - m + 1, m).tone_index] + shift
-                    == ghost_tones
-                )
-            )
-            >= need
-        ]
+        # One read of the schedule over every boundary's M hops; window i ends hop lo + i.
+        lo, hi = min(hops) + back, max(hops) + back
+        shifted = self._rank[self.schedule.hops(lo - m + 1, hi - lo + m).tone_index] + shift
+        windows = np.lib.stride_tricks.sliding_window_view(shifted, m)
+        agree = np.count_nonzero(windows == ghost_tones, axis=1)
+        keep = agree[np.asarray(hops) + back - lo] >= need
+        return [h for h, k in zip(hops, keep.tolist(), strict=True) if k]
 
     def _hops_ending_before(self, t_s: float) -> range:
         """The hops of one code period whose transmit end is at most ``t_s`` (s) and more
