@@ -15,6 +15,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from numpy.typing import NDArray
 
 from hil.estimation.base import Estimate
 from hil.estimation.gcas.hidden_echoes import HIDDEN_FRACTION
@@ -80,17 +81,24 @@ def test_a_target_beside_a_wall_far_above_it_is_kept(
     assert (len(est) - hits) / n_hops <= false_max
 
 
+def _wall_in_noise() -> tuple[NDArray[np.float64], CoherentRefiner, EchoTest]:
+    """A wall alone at :data:`WALL_M`, 20 dB, in noise at 0 dB per-sample SNR of a unit echo
+    (seed 3): the input, a refiner of att (M = 10) it was pushed into, and the hidden-echo
+    test a still fit takes."""
+    x = _wall(20.0) + np.random.default_rng(3).normal(0.0, 1.0 / np.sqrt(2.0), int(SECONDS * FS))
+    refiner = CoherentRefiner(att_schedule(), FS, 10, C, 0.5, 30.0)
+    refiner.push(x, 0)
+    test = EchoTest(HIDDEN_FRACTION, HIDDEN_FRACTION, refiner.echo_test.min_e_over_n0_db)
+    return x, refiner, test
+
+
 def test_a_still_echo_is_measured_at_rest() -> None:
     # A wall alone, 20 dB, in noise at 0 dB per-sample SNR of a unit echo: fitted from a
     # boundary a quarter hop off (as the band's edge detection puts it) at time scale 1,
     # on its own grating lobe, with the wall's amplitude, and kept as one echo.
-    schedule = att_schedule()
-    x = _wall(20.0) + np.random.default_rng(3).normal(0.0, 1.0 / np.sqrt(2.0), int(SECONDS * FS))
-    refiner = CoherentRefiner(schedule, FS, 10, C, 0.5, 30.0)
-    refiner.push(x, 0)
+    _, refiner, test = _wall_in_noise()
     hop = 60
     t_true = (hop + 1) * HOP_S + 2.0 * WALL_M / C
-    test = EchoTest(HIDDEN_FRACTION, HIDDEN_FRACTION, refiner.echo_test.min_e_over_n0_db)
     fit = refiner.refine_still(t_true + 0.25 * HOP_S, hop, test)
     assert fit is not None and fit.found and fit.is_echo(test)
     assert fit.alpha == 1.0
@@ -145,13 +153,9 @@ def test_a_weak_fit_where_a_measured_still_echo_leaks_is_its_leak() -> None:
     # within two Doppler cells of one of its ghosts (27.5 m/s) or of rest that collects less
     # than the follow gate (12 + 3 dB) is refused as what the wall's leak brought; one that
     # reaches the gate, one away from its leaks, and any before the wall is measured are not.
-    schedule = att_schedule()
-    x = _wall(20.0) + np.random.default_rng(3).normal(0.0, 1.0 / np.sqrt(2.0), int(SECONDS * FS))
-    refiner = CoherentRefiner(schedule, FS, 10, C, 0.5, 30.0)
-    refiner.push(x, 0)
+    x, refiner, test = _wall_in_noise()
     hop = 60
     t_wall = (hop + 1) * HOP_S + 2.0 * WALL_M / C
-    test = EchoTest(HIDDEN_FRACTION, HIDDEN_FRACTION, refiner.echo_test.min_e_over_n0_db)
     wall = refiner.refine_still(t_wall, hop, test)
     assert wall is not None and wall.is_echo(test)
     assert refiner.follow_db == pytest.approx(15.0)
@@ -168,7 +172,7 @@ def test_a_weak_fit_where_a_measured_still_echo_leaks_is_its_leak() -> None:
     assert not refiner.weak_in_still_leak(fit(27.0, 15.0))  # the follow gate reached
     assert not refiner.weak_in_still_leak(fit(12.0, 13.0))  # away from its leaks
     assert not refiner.weak_in_still_leak(fit(27.0, 13.0, hops_later=70.0))  # wall's fit let go
-    fresh = CoherentRefiner(schedule, FS, 10, C, 0.5, 30.0)
+    fresh = CoherentRefiner(att_schedule(), FS, 10, C, 0.5, 30.0)
     fresh.push(x, 0)
     assert not fresh.weak_in_still_leak(fit(27.0, 13.0))  # no still echo measured
 
