@@ -132,6 +132,18 @@ def lone_target_two_stage(speed_mps: float) -> tuple[np.ndarray, tuple[Estimate,
     return x, tuple(run_blocks(rx, x))
 
 
+@functools.cache
+def design_speed_target() -> tuple[tuple[Estimate, ...], tuple[Estimate, ...]]:
+    """A target closing at 25 m/s from 60 m (random-cyclic ``att``, 0.8 s, 0 dB per-sample
+    SNR, seed 1; the default band masks the ghost cells beside it): the default receiver's
+    estimates with the refinement off, then on, made once per process: test_refine and
+    test_reverb_band read the same runs."""
+    schedule = att_schedule("random-cyclic")
+    x = echo_samples(schedule, 60.0, 25.0, 0.8, snr_db=0.0, seed=1)
+    raw = run_blocks(make_gcas(schedule, refine=False), x)
+    return tuple(raw), tuple(run_blocks(make_gcas(schedule), x))
+
+
 def block_edges(n: int, cut: int | str) -> list[int]:
     """Block edges over ``n`` samples: every ``cut`` samples, or 20 random cuts seeded with
     ``cut`` (given as ``"random-<seed>"``)."""

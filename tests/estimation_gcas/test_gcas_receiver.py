@@ -29,6 +29,7 @@ from .conftest import (
     echo_samples,
     lone_target_two_stage,
     make_gcas,
+    preset_schedule,
     run_blocks,
     true_range,
 )
@@ -261,7 +262,7 @@ def test_every_preset_and_family(preset: str, family: str, search: str) -> None:
     # (1.8 ms) late, and the refinement's lobe checks moved it by two lobes at most, leaving
     # a 0.51 m outlier; they move on while a neighbouring lobe is better (LOBE_MOVES).
     spec = get_preset(preset).spec(family)
-    schedule = check_design(spec)
+    schedule = preset_schedule(preset, family)  # the two searches' receivers share its codewords
     c, vmax = spec.sound_speed_mps, spec.max_speed_mps
     r0, v = 0.6 * spec.max_range_m, 0.6 * vmax
     dur = 0.5 if preset != "tank-board" else 0.25

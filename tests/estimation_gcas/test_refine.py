@@ -28,7 +28,16 @@ from hil.estimation.gcas import GcasReceiver
 from hil.estimation.refine import CoherentRefiner
 from hil.evaluation.trials_ch6 import _crlb_fields, ch6_receiver_trial
 
-from .conftest import FS, C, att_schedule, echo_samples, make_gcas, run_blocks, true_range
+from .conftest import (
+    FS,
+    C,
+    att_schedule,
+    design_speed_target,
+    echo_samples,
+    make_gcas,
+    run_blocks,
+    true_range,
+)
 
 R0, V0 = 70.0, 12.0  # the target of the table: 70 m, closing at 12 m/s
 
@@ -175,10 +184,7 @@ def test_the_design_speed_next_to_the_masked_cells_reads_without_bias() -> None:
     # +25 m/s on att: the default reverberation band masks the ghost cells next to it; the
     # detector alone reads it on the tones its hypotheses share (0.33 m/s low on sums of
     # unequal tones), the refinement measures the echo itself.
-    schedule = att_schedule()
-    x = echo_samples(schedule, 60.0, 25.0, 0.8, snr_db=0.0, seed=1)
-    raw = run_blocks(make_gcas(schedule, refine=False), x)
-    est = run_blocks(make_gcas(schedule), x)
+    raw, est = design_speed_target()
     assert len(est) == len(raw) >= 60
     assert abs(np.mean([e.speed_mps for e in raw]) - 25.0) < 0.05
     dv = np.array([e.speed_mps - 25.0 for e in est])

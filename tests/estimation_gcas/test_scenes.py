@@ -67,7 +67,9 @@ def test_a_still_echo_with_the_span_at_the_design_speed_gives_no_ghost() -> None
     assert len(_wrong(est, 40.0, 0.0)) / HOPS <= 0.05
 
 
-@pytest.mark.parametrize("snr_db", [0.0, -10.0])
+# At 0 dB the same run (input, seed and receiver) is test_an_echo_beyond_the_span_is_seen_once_
+# on_its_side's closing case, which asserts at most 0.01 wrong estimates per hop of it.
+@pytest.mark.parametrize("snr_db", [-10.0])
 def test_a_target_faster_than_the_span_is_not_aliased(snr_db: float) -> None:
     est = _run(50.0, 35.0, snr_db, seed=4)
     assert len(_wrong(est, 50.0, 35.0)) / HOPS <= 0.05
