@@ -1314,15 +1314,22 @@ class CoherentRefiner:
     def weak_in_still_leak(self, fit: Refinement) -> bool:
         """Whether ``fit`` lies where a still echo measured lately leaks (within
         :data:`STILL_LEAK_CELLS` Doppler cells of rest, or at one of its ghosts:
-        :meth:`ghost_of_rest`), that echo taken out of its input, and collects less than
-        :attr:`follow_db`, the gate of a fit at a boundary no detection of its own brought
-        (:data:`FOLLOW_MARGIN_DB`). There the detection is the still echo's leak: with the
-        echo taken out, its fit reads the noise and reverberation left in the cells the
-        leak lit, and the echo test, set for detections of their own, passes a few of them
-        (a target at rest or 0.05 m/s at -10 dB: fits of 12.0-17.7 dB, 0.16-0.32 of the
-        still echo's amplitude, at +-24-30 m/s and at any range). False elsewhere, and where
-        no still echo is measured within :data:`STILL_KNOWN_HOPS` hops of it."""
-        if fit.e_over_n0_db >= self.follow_db:
+        :meth:`ghost_of_rest`), that echo taken out of its input, and is not one echo by
+        more than the echo test: it collects less than :attr:`follow_db`, the gate of a fit
+        at a boundary no detection of its own brought (:data:`FOLLOW_MARGIN_DB`), or its
+        coherence over all hops is below the echo test's :attr:`EchoTest.fraction` (it
+        passes over runs of consecutive hops only). There the detection is the still echo's
+        leak: with the echo taken out, its fit reads the noise and reverberation left in the
+        cells the leak lit, and the echo test, set for detections of their own, passes a
+        few of them (a target at rest or 0.05 m/s at -10 dB: fits of 12.0-17.7 dB, 0.16-0.32
+        of the still echo's amplitude, at +-24-30 m/s and at any range; braking to rest in
+        reverberation at -10 dB: fits of 15.3-17.7 dB whose coherence is 0.73-0.80 over all
+        hops and 0.85-0.90 over runs). The run branch is for an echo whose speed drifts over
+        the window (such a fit is tried again with an acceleration, :meth:`refine`); where
+        a still echo leaks it passed the leak's fits.
+        False elsewhere, and where no still echo is measured within :data:`STILL_KNOWN_HOPS`
+        hops of it."""
+        if fit.e_over_n0_db >= self.follow_db and fit.coherence.fraction >= self.echo_test.fraction:
             return False
         speed = fit.speed_mps(self.c)
         if abs(speed) > STILL_LEAK_CELLS * self._cell_speed and not self.ghost_of_rest(speed):

@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from hil.estimation.base import Estimate
+from hil.estimation.echo_fits import Coherence
 from hil.estimation.gcas.hidden_echoes import HIDDEN_FRACTION
 from hil.estimation.refine import CoherentRefiner, EchoTest, Refinement
 from sim_devices.acoustics.delay import TwoWayPath
@@ -168,6 +169,19 @@ def test_a_weak_fit_where_a_measured_still_echo_leaks_is_its_leak() -> None:
     assert not refiner.weak_in_still_leak(fit(27.0, 15.0))  # the follow gate reached
     assert not refiner.weak_in_still_leak(fit(12.0, 13.0))  # away from its leaks
     assert not refiner.weak_in_still_leak(fit(27.0, 13.0, hops_later=70.0))  # wall's fit let go
+
+    # Above the gate but coherent over runs of hops only (0.75 of one echo over all hops,
+    # 0.9 over runs): the echo test's run branch is for a drifting speed, not for a leak.
+    def runs_only(speed: float) -> Refinement:
+        return replace(
+            fit(speed, 16.0), coherence=Coherence(0.75, 1.0), run_coherence=Coherence(0.9, 1.0)
+        )
+
+    assert runs_only(-26.0).is_echo(refiner.echo_test)
+    assert refiner.weak_in_still_leak(runs_only(-26.0))
+    assert refiner.weak_in_still_leak(runs_only(1.0))
+    assert not refiner.weak_in_still_leak(runs_only(12.0))  # away from its leaks
+    assert not refiner.weak_in_still_leak(replace(runs_only(-26.0), coherence=Coherence(0.8, 1.0)))
     fresh = CoherentRefiner(schedule, FS, 10, C, 0.5, 30.0)
     fresh.push(x, 0)
     assert not fresh.weak_in_still_leak(fit(27.0, 13.0))  # no still echo measured
