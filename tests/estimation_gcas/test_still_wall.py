@@ -102,6 +102,24 @@ def test_a_still_echo_is_measured_at_rest() -> None:
     assert [round(v, 9) for v, _ in refiner.known_echoes(later)] == [0.0]
 
 
+@pytest.mark.parametrize("offset_s", [-6.0e-3, -5.0e-3, 0.5e-3, 5.0e-3, 6.0e-3])
+def test_a_still_fit_started_between_two_grating_lobes_finds_the_echo(offset_s: float) -> None:
+    # A wall 10 dB above a unit echo, 0 dB per-sample SNR, hop 10: from starts 0.5, 5 and
+    # 6 ms off its boundary (0.55, 5.5 and 6.6 grating lobes of 909 us: between two lobes)
+    # the search from rest stopped on the saddle and the still fit failed (found False,
+    # coherence 0.10-0.45 of one echo's); started half a lobe either side, it is found.
+    schedule = att_schedule()
+    x = _wall(10.0) + np.random.default_rng(5).normal(0.0, 1.0 / np.sqrt(2.0), int(SECONDS * FS))
+    refiner = CoherentRefiner(schedule, FS, 10, C, 0.5, 30.0)
+    refiner.push(x, 0)
+    hop = 10
+    t_true = (hop + 1) * HOP_S + 2.0 * WALL_M / C
+    test = EchoTest(HIDDEN_FRACTION, HIDDEN_FRACTION, refiner.echo_test.min_e_over_n0_db)
+    fit = refiner.refine_still(t_true + offset_s, hop, test)
+    assert fit is not None and fit.found and fit.is_echo(test)
+    assert abs(fit.t_s - t_true) < 2e-6
+
+
 def test_a_still_echo_s_new_fit_replaces_its_earlier_one_a_few_lobes_off() -> None:
     # The wall moves two grating lobes (1.36 m) at 0.75 s: each fit is at its own range, and
     # the later one replaces the earlier (a first fit that many lobes off, kept beside the
