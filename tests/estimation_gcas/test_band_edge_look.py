@@ -12,6 +12,7 @@ from typing import Any
 import pytest
 
 from hil.estimation.base import Estimate
+from hil.estimation.gcas import ghost_source
 from hil.estimation.gcas.beyond_span import BAND_LOOK_GAP_HOPS, BeyondSpanCheck
 from hil.estimation.gcas.ghost_source import GhostSources
 from hil.estimation.refine import CoherentRefiner
@@ -124,3 +125,29 @@ def test_the_bands_name_their_tone_spacings_and_agree_with_the_plain_bands() -> 
     assert {(s, n) for s, n, _, _ in spaced} == {(1, 1), (1, 2), (-1, 1), (-1, 2)}
     (lo, hi) = next((lo, hi) for s, n, lo, hi in spaced if (s, n) == (1, 1))
     assert lo < 35.0 < hi
+
+
+@pytest.mark.parametrize(
+    ("seed", "said_hop", "said_mps", "said_at_four"), [(2, 46, 35.003, [83]), (3, 41, 35.000, [])]
+)
+def test_a_band_edge_look_reads_every_boundary_matching_the_ghost_on_one_hop(
+    seed: int,
+    said_hop: int,
+    said_mps: float,
+    said_at_four: list[int],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # Three-state, 35 m/s from 95 m with a 30 m/s span at -10 dB: its only ghost is in the
+    # band, and the ghost's codeword holds its source's shifted tones on 1-3 of the 10 hops
+    # of the boundaries its source is found at. Read at every boundary matching on one hop
+    # (MIN_BEYOND_MATCHES, as the scans read), it is said at its speed; reading only those
+    # matching on 4 (the rule inside the span) says it 37 hops later (seed 2) or not at all.
+    estimates, notices, _ = _three_state_run(35.0, 95.0, seed)
+    assert estimates == []
+    assert [(n["notice"], n["side"], n["hop_index"]) for n in notices] == [
+        ("beyond_span", "closing", said_hop)
+    ]
+    assert float(notices[0]["speed_mps"]) == pytest.approx(said_mps, abs=1e-3)  # type: ignore[arg-type]
+    monkeypatch.setattr(ghost_source, "MIN_BEYOND_MATCHES", 4)
+    _, notices, _ = _three_state_run(35.0, 95.0, seed)
+    assert [n["hop_index"] for n in notices] == said_at_four

@@ -237,11 +237,10 @@ class GhostSources:
         """The likelihood's best point over the source's speeds ``[v_lo, v_hi]`` (m/s) for
         a ghost detected at ``t_s`` (s) and ``alpha``: ``(|C|², t_rx s, α, hop index)``
         (the likelihood the refinement maximises), over the hops of :meth:`grid` (every hop
-        of one code period, or with ``ghost`` only those whose tones match on
-        :data:`MIN_MATCH_FRACTION` of the ``M`` hops: a source inside the span); None where
+        of one code period, or with ``ghost`` only those whose tones match on at least
+        :data:`MIN_BEYOND_MATCHES` of the ``M`` hops: a source beyond the span); None where
         the input covers none of them."""
-        need = math.ceil(MIN_MATCH_FRACTION * self.m_hops)
-        return self.read(self.grid(t_s, alpha, v_lo, v_hi, ghost, need, time_points))
+        return self.read(self.grid(t_s, alpha, v_lo, v_hi, ghost, time_points=time_points))
 
     def grid(
         self, t_s: float, alpha: float, v_lo: float, v_hi: float,
