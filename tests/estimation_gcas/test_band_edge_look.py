@@ -66,11 +66,11 @@ def _three_state_run(
     if monkeypatch is not None:
         best_point = GhostSources.best_point
 
-        def counted(self: GhostSources, *args: Any) -> Any:
+        def counted(self: GhostSources, *args: Any, **kwargs: Any) -> Any:
             # (t_s, alpha, v_lo, v_hi, ghost, ...): a band-edge look's readings name the ghost.
             if len(args) > 4 and args[4] is not None:
                 readings.append(args[4])
-            return best_point(self, *args)
+            return best_point(self, *args, **kwargs)
 
         monkeypatch.setattr(GhostSources, "best_point", counted)
     x = echo_samples(schedule, range_m, speed_mps, 2.0, snr_db=-10.0, seed=seed)

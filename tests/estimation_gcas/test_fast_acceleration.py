@@ -95,7 +95,7 @@ def test_a_target_accelerating_at_15_or_25_mps2_is_measured(
 @pytest.mark.slow
 @pytest.mark.parametrize(
     ("seed_hop_s", "detected", "false_per_hop"),
-    [(refine.ACCEL_SEED_HOP_S, 55, 0.0), (0.015, 4, 0.0)],
+    [(refine.ACCEL_SEED_HOP_S, 55, 0.0), (0.015, 4, 0.015)],
 )
 def test_a_three_state_target_braking_at_6_mps2_is_seeded_from_its_hop_length(
     seed_hop_s: float, detected: int, false_per_hop: float, monkeypatch: pytest.MonkeyPatch

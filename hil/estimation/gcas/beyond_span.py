@@ -546,7 +546,12 @@ class BeyondSpanCheck:
         best: tuple[float, float, float, int, int] | None = None
         for side, n, v_lo, v_hi in bands:
             peak = self.ghosts.best_point(
-                t_s, alpha, v_lo, v_hi, (hop_index, side * n), BAND_LOOK_TIME_POINTS
+                t_s,
+                alpha,
+                v_lo,
+                v_hi,
+                (hop_index, side * n),
+                time_points=BAND_LOOK_TIME_POINTS,
             )
             if peak is not None and (best is None or peak[0] > best[0]):
                 best = (*peak, side)

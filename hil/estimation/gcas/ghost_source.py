@@ -226,21 +226,25 @@ class GhostSources:
         self, t_s: float, alpha: float, v_lo: float, v_hi: float,
         ghost: tuple[int, int] | None = None,
     ) -> tuple[float, float, int] | None:  # fmt: skip
-        """:meth:`best_point` without its likelihood: ``(t_rx s, α, hop index)``."""
-        best = self.best_point(t_s, alpha, v_lo, v_hi, ghost)
+        """:meth:`best_point` without its likelihood, for a source inside the span (hops
+        matching on :data:`MIN_MATCH_FRACTION` of the ``M`` hops): ``(t_rx s, α, hop
+        index)``."""
+        need = math.ceil(MIN_MATCH_FRACTION * self.m_hops)
+        best = self.best_point(t_s, alpha, v_lo, v_hi, ghost, need)
         return None if best is None else best[1:]
 
     def best_point(
         self, t_s: float, alpha: float, v_lo: float, v_hi: float,
-        ghost: tuple[int, int] | None = None, time_points: int = TIME_POINTS,
+        ghost: tuple[int, int] | None = None, need: int | None = None,
+        time_points: int = TIME_POINTS,
     ) -> tuple[float, float, float, int] | None:  # fmt: skip
         """The likelihood's best point over the source's speeds ``[v_lo, v_hi]`` (m/s) for
         a ghost detected at ``t_s`` (s) and ``alpha``: ``(|C|², t_rx s, α, hop index)``
         (the likelihood the refinement maximises), over the hops of :meth:`grid` (every hop
         of one code period, or with ``ghost`` only those whose tones match on at least
-        :data:`MIN_BEYOND_MATCHES` of the ``M`` hops: a source beyond the span); None where
-        the input covers none of them."""
-        return self.read(self.grid(t_s, alpha, v_lo, v_hi, ghost, time_points=time_points))
+        ``need`` of the ``M`` hops; default :data:`MIN_BEYOND_MATCHES`, a source beyond the
+        span); None where the input covers none of them."""
+        return self.read(self.grid(t_s, alpha, v_lo, v_hi, ghost, need, time_points))
 
     def grid(
         self, t_s: float, alpha: float, v_lo: float, v_hi: float,
