@@ -117,6 +117,16 @@ def _common(p: argparse.ArgumentParser, audio: bool = True) -> None:
         p.add_argument("--max-latency", type=int, default=None, help="samples (default 0.1 s)")
 
 
+#: The time-of-flight options' values when left out (the ``argparse`` defaults are None, so a
+#: calibration that ranges no echo can tell a given option from a left-out one and refuse it).
+TANK_DEFAULTS: dict[str, Any] = {
+    "positions": "-0.4:-0.05:8",
+    "speed": 0.05,
+    "gate_ms": (1.0, 3.0),
+    "pings": 4,
+}
+
+
 def _stage_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--stage", default=None,
@@ -124,15 +134,20 @@ def _stage_options(p: argparse.ArgumentParser) -> None:
         " simulated bench, only sim://stage)",
     )  # fmt: skip
     p.add_argument(
-        "--positions", type=parse_positions, default=parse_positions("-0.4:-0.05:8"),
-        help="stage positions, --positions=START:STOP:COUNT or =x1,x2,... m (default -0.4:-0.05:8)",
+        "--positions", type=parse_positions, default=None,
+        help="stage positions, --positions=START:STOP:COUNT or =x1,x2,... m (default "
+        f"{TANK_DEFAULTS['positions']})",
     )  # fmt: skip
-    p.add_argument("--speed", type=float, default=0.05, help="move speed, m/s (default 0.05)")
+    p.add_argument("--speed", type=float, default=None,
+                   help=f"move speed, m/s (default {TANK_DEFAULTS['speed']:g})")  # fmt: skip
     p.add_argument(
-        "--gate-ms", type=float, nargs=2, default=(1.0, 3.0), metavar=("EARLIEST", "LATEST"),
+        "--gate-ms", type=float, nargs=2, default=None, metavar=("EARLIEST", "LATEST"),
         help="two-way time-of-flight gate of the target echo, ms (default 1 3)",
     )  # fmt: skip
-    p.add_argument("--pings", type=int, default=4, help="pings averaged per position")
+    p.add_argument(
+        "--pings", type=int, default=None,
+        help=f"pings averaged per position (default {TANK_DEFAULTS['pings']})",
+    )  # fmt: skip
     p.add_argument(
         "--latency", type=int, default=None,
         help="loop latency to subtract, samples (default: the stored latency calibration)",
@@ -227,6 +242,14 @@ def register(sub: Any) -> None:
     p.add_argument("--overtravel", type=float, default=0.005, help="m (default 0.005)")
     _stage_options(p)
     p.set_defaults(func=run, kind_func=_stage)
+
+
+def _tank_options(args: argparse.Namespace) -> None:
+    """Fill the time-of-flight options left out with `TANK_DEFAULTS` (in place)."""
+    for name, default in TANK_DEFAULTS.items():
+        if getattr(args, name) is None:
+            value = parse_positions(default) if name == "positions" else default
+            setattr(args, name, value)
 
 
 def _truth(args: argparse.Namespace) -> SimTruth:
@@ -400,7 +423,9 @@ def _sound_speed(
         if args.temperature is None:
             raise ConfigError("--temperature", None, "a water temperature in °C")
         for option, value in (("--device", args.device), ("--stage", args.stage),
-                              ("--latency", args.latency)):  # fmt: skip
+                              ("--latency", args.latency), ("--positions", args.positions),
+                              ("--speed", args.speed), ("--gate-ms", args.gate_ms),
+                              ("--pings", args.pings)):  # fmt: skip
             if value is not None:
                 # c from the thermometer: no echo is ranged, so no device would be used.
                 raise ConfigError(
@@ -424,6 +449,7 @@ def _sound_speed(
             "echo's time of flight (the temperature only cross-checks c)",
             "drop it, or use --method temperature --temperature °C",
         )  # fmt: skip
+    _tank_options(args)
     temperature = args.temperature
     if temperature is None and _simulated(args):
         temperature = truth.temperature_c  # the simulated tank's thermometer log
@@ -442,6 +468,7 @@ def _stage(
     from hil.experiments.calibration.sound_speed import calibrate_sound_speed_temperature
     from hil.experiments.calibration.stage import calibrate_stage
 
+    _tank_options(args)
     c = args.sound_speed
     source = "--sound-speed"
     if c is None and args.temperature is not None:

@@ -50,15 +50,19 @@ def test_sound_speed_by_temperature_uses_the_temperature_uncertainty(
 @pytest.mark.parametrize(
     ("option", "value", "shown"),
     [("--stage", "/dev/ttyUSB0", "'/dev/ttyUSB0'"), ("--device", "sim://audio", "'sim://audio'"),
-     ("--latency", "5", "5")],
+     ("--latency", "5", "5"), ("--positions=-0.3,-0.2", None, "[-0.3, -0.2]"),
+     ("--speed", "0.02", "0.02"), ("--pings", "8", "8"), ("--gate-ms", "1 4", "[1.0, 4.0]")],
 )  # fmt: skip
 def test_sound_speed_by_temperature_refuses_the_options_of_a_measurement(
-    option: str, value: str, shown: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    option: str, value: str | None, shown: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    # They were accepted and ignored: a thermometer's c ranges no echo.
+    # They were accepted and ignored: a thermometer's c ranges no echo, so neither the stage's
+    # positions and speed nor the echo's gate and pings are used.
     argv = ["calibrate", "sound-speed", "--temperature", "20", "--store", str(tmp_path)]
-    assert one_line_error(capsys, [*argv, option, value]) == (
-        f"hil calibrate: error: {option} = {shown} is not allowed: must be left out with"
+    given = [option] if value is None else [option, *value.split()]
+    name = option.split("=")[0]
+    assert one_line_error(capsys, [*argv, *given]) == (
+        f"hil calibrate: error: {name} = {shown} is not allowed: must be left out with"
         " --method temperature (nothing is measured); drop it, or use --method tof to measure"
         " c by time of flight"
     )
