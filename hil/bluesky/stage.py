@@ -58,7 +58,7 @@ from hil.devices.clock import Clock
 from hil.devices.grbl import GrblStage
 from hil.devices.grbl_protocol import FEED_HOLD
 from hil.devices.stage import StageStatus
-from hil.devices.stage_errors import StageError, StageHeldError, StageLimitError
+from hil.devices.stage_errors import StageError, StageHeldError, check_within_limits
 from hil.devices.table import open_stage
 
 #: Wall seconds between readback refreshes while a move runs (a display rate, not a poll:
@@ -80,17 +80,14 @@ class GrblMoveLogic(MovableLogic[float]):
 
     async def check_move(self, new_position: float) -> None:
         """Refuse (:class:`~hil.devices.stage_errors.StageLimitError`) a target outside the
-        soft limits; nothing is sent."""
-        low, high = self.device.soft_limits()
-        x = float(new_position)
-        if not (math.isfinite(x) and low <= x <= high):
-            raise StageLimitError(
-                f"{self.device.name or 'stage'} target (axis X)",
-                x,
-                f"within the soft limits [{low:.6g}, {high:.6g}] m (machine coordinates:"
-                " 0 at home, negative along the travel)",
-                "choose a target inside the limits",
-            )
+        soft limits; nothing is sent. Connected, the driver's own rule
+        (:meth:`~hil.devices.grbl.GrblStage.check_position`); in mock mode or before
+        connecting, the same rule on the limits given."""
+        name = f"{self.device.name or 'stage'} target"
+        if self.device.opened:
+            self.device.driver.check_position(name, float(new_position))
+        else:
+            check_within_limits(name, float(new_position), self.device.soft_limits())
 
     async def calculate_timeout(self, old_position: float, new_position: float) -> float | None:
         """The move's planned duration (s, cruise plus acceleration and deceleration at
@@ -226,6 +223,12 @@ class GrblStageDevice(StandardReadable, StandardMovable[float]):
     def driver(self) -> GrblStage:
         """The underlying driver (open after ``connect()``); call it only between moves."""
         return self._driver
+
+    @property
+    def opened(self) -> bool:
+        """The controller's port is open (``connect()`` without ``mock``); the driver's
+        limits and settings are read."""
+        return self._opened
 
     @property
     def mock_mode(self) -> bool:

@@ -65,6 +65,7 @@ from hil.devices.stage_errors import (
     StageHeldError,
     StageLimitError,
     StageTimeoutError,
+    check_within_limits,
 )
 from hil.errors import ConfigError
 
@@ -509,8 +510,8 @@ polling at no more than 5 Hz); use the default 0.2
                 )
         d = 1.0 if end > start else -1.0
         x0, x1 = start - d * run_up, end + d * run_down
-        self._check_position("run-up start x (start - run_up)", x0)
-        self._check_position("run-down end x (end + run_down)", x1)
+        self.check_position("run-up start x (start - run_up)", x0)
+        self.check_position("run-down end x (end + run_down)", x1)
         here = self._last_status
         if not (
             here is not None
@@ -614,7 +615,7 @@ polling at no more than 5 Hz); use the default 0.2
         outside the soft limits, a speed or acceleration out of range
         (:class:`StageLimitError`), or a stage that may not move (alarm, e-stop latch:
         :class:`StageAlarmError`; feed hold: :class:`StageHeldError`)."""
-        self._check_position("x", x)
+        self.check_position("x", x)
         self._check_speed("v", v)
         if a is not None:
             self._check_acceleration(a)
@@ -627,20 +628,18 @@ polling at no more than 5 Hz); use the default 0.2
         self._check_speed("v", v)
         self._require_ready()
         start = self.status().position
-        self._check_position("jog target x", start + dx)
+        self.check_position("jog target x", start + dx)
         return start
 
-    def _check_position(self, name: str, x: float) -> None:
-        low, high = self.limits
-        tol = 0.5 * self.settings.step
-        if not (math.isfinite(x) and low - tol <= x <= high + tol):
-            raise StageLimitError(
-                f"{name} (axis X)",
-                x,
-                f"within the soft limits [{low:.6g}, {high:.6g}] m of axis X (max travel "
-                f"$130 = {self.settings.max_travel_x:.3f} mm, machine range [-travel, 0])",
-                "choose a target inside the limits; positions are machine coordinates in m",
-            )
+    def check_position(self, name: str, x: float) -> None:
+        """Refuse a target ``x`` (m) named ``name`` outside :attr:`limits` (half a step of
+        tolerance: GRBL rounds a target to its steps) before anything is sent
+        (:class:`StageLimitError`)."""
+        check_within_limits(
+            name, x, self.limits, tolerance_m=0.5 * self.settings.step,
+            travel=f" (max travel $130 = {self.settings.max_travel_x:.3f} mm, machine range"
+            " [-travel, 0])",
+        )  # fmt: skip
 
     def _check_speed(self, name: str, v: float) -> None:
         vmax = self.settings.max_rate

@@ -16,6 +16,8 @@ driver: ``/dev/ttyUSB0: GRBL rejected ...``).
 
 from __future__ import annotations
 
+import math
+
 from hil.errors import ConfigError, DeviceError, DeviceRefused, DeviceTimedOut
 
 
@@ -29,6 +31,32 @@ class StageLimitError(ConfigError):
     >>> str(StageLimitError("x (axis X)", -0.6, "within [-0.5, 0] m", "stay inside"))
     'x (axis X) = -0.6 is not allowed: must be within [-0.5, 0] m; stay inside'
     """
+
+
+def check_within_limits(
+    name: str, x: float, limits: tuple[float, float], *, tolerance_m: float = 0.0, travel: str = ""
+) -> None:
+    """Refuse a target ``x`` (m, machine coordinates) outside the soft limits ``(low, high)``
+    (m) widened by ``tolerance_m`` (half a step, as the controller rounds a target to its
+    steps): :class:`StageLimitError` naming ``name`` on axis X; ``travel`` adds where the
+    limits come from. The one soft-limit rule of the driver and of the bluesky device.
+
+    >>> check_within_limits("x", -0.6, (-0.5, 0.0))
+    Traceback (most recent call last):
+    ...
+    hil.devices.stage_errors.StageLimitError: x (axis X) = -0.6 is not allowed: must be within \
+the soft limits [-0.5, 0] m of axis X; choose a target inside the limits; positions are \
+machine coordinates in m (0 at home, negative along the travel)
+    """
+    low, high = limits
+    if not (math.isfinite(x) and low - tolerance_m <= x <= high + tolerance_m):
+        raise StageLimitError(
+            f"{name} (axis X)",
+            x,
+            f"within the soft limits [{low:.6g}, {high:.6g}] m of axis X{travel}",
+            "choose a target inside the limits; positions are machine coordinates in m (0 at"
+            " home, negative along the travel)",
+        )
 
 
 class StageCommandError(StageError, DeviceRefused):
