@@ -45,6 +45,21 @@ import pytest
 # pytester: tests/test_tiers.py runs this file's tier selection in a scratch project.
 pytest_plugins = ["pytester"]
 
+# Property tests (hypothesis) run the same examples on every run and never time themselves:
+# derandomised (a seed from each test's source), no per-example deadline and no "too slow"
+# health check, both of which read the wall clock and fail a correct test on a loaded machine.
+if importlib.util.find_spec("hypothesis") is not None:
+    from hypothesis import HealthCheck
+    from hypothesis import settings as _hypothesis_settings
+
+    _hypothesis_settings.register_profile(
+        "hil",
+        derandomize=True,
+        deadline=None,
+        suppress_health_check=[HealthCheck.too_slow],
+    )
+    _hypothesis_settings.load_profile("hil")
+
 collect_ignore_glob: list[str] = []
 if importlib.util.find_spec("bluesky") is None or importlib.util.find_spec("ophyd_async") is None:
     collect_ignore_glob.append("hil/bluesky/*")
