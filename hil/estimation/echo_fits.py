@@ -68,7 +68,7 @@ class EchoFit:
 @dataclass(frozen=True)
 class Coherence:
     """The hops' coherence at a fit (``measured``) and what one echo of the fit's SNR would
-    give (``expected``), both in ``(0, 1]`` (:func:`~hil.estimation.refine._fit_quality`)."""
+    give (``expected``), both in ``(0, 1]`` (:func:`~hil.estimation.fit_steps.echo_quality`)."""
 
     measured: float
     expected: float
@@ -85,7 +85,7 @@ class Refinement:
     E/N0 collected over the ``M`` hops (dB), its Cramér–Rao bounds (:class:`Crlb`; None
     where the E/N0 is not finite: no noise, or no echo), the
     coherence of the hops' terms over all hops, within each tone and over runs of consecutive
-    hops (:func:`~hil.estimation.refine._fit_quality`),
+    hops (:func:`~hil.estimation.fit_steps.echo_quality`),
     and whether the search found its maximum inside (else ``t_s`` and ``alpha`` are the
     detection's own)."""
 

@@ -46,35 +46,16 @@ with a recent fit of its echo starts from that fit's prediction with a small gri
 
 Is it an echo of the schedule: the fit's coherence across the hops, within each tone and
 over runs of consecutive hops, against what one echo of its SNR would give
-(:func:`_fit_quality`; the receiver refuses a detection below all three).
+(:func:`~hil.estimation.fit_steps.echo_quality`; the receiver refuses a detection below all three).
 
 SNR: at the maximum, ``Â = 2|C|/E_s`` (``E_s = Σ a_i² N_i``, ``N_i`` the window's samples) and
 the noise variance is what the echo leaves of the window's energy; ``E/N0 = Â² N / (4 σ²)``
 (:func:`hil.estimation.crlb.sampled_e_over_n0`), from which the estimate's own Cramér–Rao
 bounds follow.
 
-Accelerating echoes: over the ``M`` hops an echo whose speed changes drifts in phase against
-one time scale (a quadratic phase, ``π f γ u²`` at ``u`` from the window's centre, 2.5 rad at
-the ends for 8 m/s² on ``att`` at M = 10), and the constant-speed fit reads the mean speed
-of the window, half a window before the boundary. Where a fit's coherence shows that drift
-(:data:`ACCEL_TRY`), the time scale is let change at a rate ``γ`` (1/s) about the hops' centre
-(:func:`~hil.estimation.refine_kernels.candidate_sums`: each hop heard on the curve's tangent
-at its own centre), fitted from a grid of rates and kept where the likelihood rises by
-:data:`ACCEL_GAIN` (a generalised likelihood ratio test of one more parameter): the estimate
-is then the boundary's own time and speed, with the acceleration (:attr:`Refinement.
-accel_mps2`), and the next detections of that echo start from the curve. Over more than
-:data:`SUB_HOPS` hops the rates' curves pass through a constant-speed fit of the last of
-them (the curvature grows as ``M²``: at M = 29 and 4 m/s² it is 10 rad at the ends, and the
-fit of all M hops at one speed is nowhere near the echo). Below about 1.5 m/s² at M = 10 on
-``att`` (about 6 m/s² at M = 5) the drift stays within the coherence of one echo and the
-speed lags by ``a M T_h / 2`` (at most 0.075 m/s). Above about 12 m/s² at M = 10 the
-constant-speed fit is no point of the curve (its runs of hops lose their coherence too) and
-the rate grid about it does not reach the echo's rate: there the acceleration the detections
-themselves show (:func:`speed_trend`, :data:`ACCEL_SEED_HOPS`) seeds the curved fit, and once
-one fit is curved the next detections start from it. On ``att`` at M = 10, 0 dB, a target
-from 2 m/s closing keeps 0.955 of its boundaries at 35 m/s² and 0.88 at 40 (the detector
-spreads it over 16 Doppler cells of the window, and the seed, clipped at
-:data:`ACCEL_SEED_MAX_MPS2`, scatters more); about 3 g is the limit.
+Accelerating echoes: fitted with a changing time scale where the coherence shows a drift
+(:mod:`hil.estimation.refine_accel`).
+
 
 Beside still water: still water (volume reverberation at rest, a wall) lies on the
 transmitted tones, and where it is stronger than an echo it leaks coherently into the echo's
@@ -110,8 +91,34 @@ from hil.errors import ConfigError
 from hil.estimation.codewords import Codeword, CodewordBook
 from hil.estimation.crlb import crlb
 from hil.estimation.detection import parabolic_offset
-from hil.estimation.echo_fits import Coherence, EchoFit, EchoTest, Refinement
+from hil.estimation.echo_fits import EchoFit, EchoTest, Refinement
 from hil.estimation.echo_model import echo_samples
+from hil.estimation.fit_steps import (
+    FIT_PASSES,
+    MAX_RECENTRES,
+    SPEED_POINTS,
+    TIME_POINTS,
+    echo_quality,
+)
+from hil.estimation.refine_accel import (
+    ACCEL_GAIN,
+    ACCEL_MARGIN_DB,
+    ACCEL_POINTS,
+    ACCEL_RUN_MIN,
+    ACCEL_RUN_MIN_LONG,
+    ACCEL_RUN_SEEDED,
+    ACCEL_SEED_HOPS,
+    ACCEL_TRY,
+    MAX_ACCEL_MPS2,
+    accel_fit,
+    accel_gain,
+    accel_seed,
+    halves_seed,
+    hops_on_curve,
+    to_boundary,
+    to_centre,
+    with_acceleration,
+)
 from hil.estimation.refine_kernels import (
     FOUND,
     N_MOMENTS,
@@ -120,7 +127,6 @@ from hil.estimation.refine_kernels import (
     assign_slots,
     candidate_sums,
     ended_gain,
-    fit_quality,
     grid_sums,
     maximise,
 )
@@ -131,15 +137,6 @@ from hil.estimation.still_lobe import StillStreams, canceller_gain, still_free_p
 from hil.estimation.still_period import still_period
 from hil.signals.schedule import HopSchedule
 
-#: Points of the search's grid: over ±½ grating lobe in time, and at least SPEED_POINTS over
-#: ± the speed span (more where half the M hops' Doppler resolution is finer).
-TIME_POINTS = 9
-SPEED_POINTS = 5
-#: Stencil passes of the quadratic fit (the stencil halves each pass).
-FIT_PASSES = 5
-#: Searches re-centred where the speed line's maximum is at its end (each moves the tables
-#: by one speed span: a detector's speed off by up to this many spans is still refined).
-MAX_RECENTRES = 4
 #: A hop's tables are reused by a later detection whose predicted window edges are within
 #: this many samples of the ones they were made for (and whose time scale is within half the
 #: speed span): consecutive detections of one target share ``M − 1`` hops.
@@ -353,71 +350,6 @@ _HopRun = tuple[
 ]
 #: ``known`` rows of no other echo.
 _NO_KNOWN = np.zeros((5, 0), dtype=np.complex128)
-#: Accelerating echoes (:meth:`CoherentRefiner._with_acceleration`): a fit whose coherence
-#: over all hops is below ACCEL_TRY of one echo's at its SNR while over runs of consecutive
-#: hops it keeps ACCEL_RUN_MIN of it (an echo whose phase drifts slowly: measured 0.85-0.87
-#: at 8 m/s² and 0.55-0.72 at 12 m/s² on att, M = 10; of 830 tries over nine scenes of an
-#: independent synthesiser, braking at 5-15 m/s², reversing, still and moving echoes, at 0
-#: and -10 dB, the 73 whose curved fit passed the echo test kept 0.71-0.97 before it, while
-#: the ghosts of a still echo at 40 m, fitted at 0 dB, keep 0.50-0.85, median 0.55: tried
-#: from 0.5, no try below 0.71 passed, and beside a target at 70 m closing at 12 m/s the
-#: tries took 0.98 s of the receiver's 2.6 s of CPU for 2 s of input; over more than
-#: SUB_HOPS hops the curvature at the window's ends grows as ``M²`` and a braking echo's
-#: runs keep less, so there the tries start from ACCEL_RUN_MIN_LONG: at M = 29 and 4 m/s²
-#: 40 of 71 boundaries are kept from 0.5, 13 from 0.65), and that collects ACCEL_MARGIN_DB more
-#: than an echo must (fits of noise collect 12-16 dB and, given a third parameter, fit it;
-#: an echo's curvature needs that margin for its gain to pass ACCEL_GAIN), is fitted again
-#: with a changing time scale: accelerations up to MAX_ACCEL_MPS2 (m/s²) on a grid that moves
-#: the phase at the window's ends by an eighth of a cycle a step (at most ACCEL_POINTS
-#: points: longer windows cover less), then from the ACCEL_STARTS best of its local maxima
-#: ACCEL_ROUNDS rounds of the delay–speed fit and a parabola in the rate. The acceleration is
-#: kept where it raises the likelihood ``ln Λ = |C|²/(σ² E_s)`` by more than ACCEL_GAIN
-#: (twice that gain is χ² with one degree of freedom for an echo of constant speed: 13.8 is
-#: a chance of 2e-4).
-ACCEL_TRY = 0.98
-ACCEL_RUN_MIN = 0.65
-ACCEL_RUN_MIN_LONG = 0.5
-ACCEL_MARGIN_DB = 6.0
-MAX_ACCEL_MPS2 = 20.0
-ACCEL_POINTS = 41
-ACCEL_ROUNDS = 2
-ACCEL_STARTS = 3
-ACCEL_GAIN = 6.9
-#: Faster accelerations (the rate grid about a constant-speed fit finds none: at 15 m/s² on
-#: att, M = 10, the quadratic phase is 4.7 rad at the window's ends, the constant-speed fit's
-#: delay and speed are no point of the curve and its run coherence falls to 0.4-0.6): the
-#: acceleration the detections themselves show seeds the fit. The detections of the last
-#: ACCEL_SEED_HOPS hops on this echo's track (delay within ACCEL_SEED_LOBES grating lobes of
-#: this one moved on at its speed; speed within what ACCEL_SEED_MAX_MPS2 reaches plus the
-#: speed span) give the speed's least-squares slope (m/s²) and its standard error when there
-#: are at least ACCEL_SEED_POINTS of them; where the slope is at least ACCEL_SEED_MIN_MPS2
-#: (below, the rate grid about the constant-speed fit finds the echo: 12 m/s² is), the
-#: curved fit is tried from a run coherence of ACCEL_RUN_SEEDED and starts also from the
-#: grid rates within twice the standard error of the seed's (at least ACCEL_SEED_STEPS
-#: either side, at most ACCEL_SEED_MAX_STEPS: at -10 dB and near the span's edge the
-#: detections' speeds scatter, braking at 25 m/s² from 28 m/s the first slopes read -10 to
-#: -49 m/s²), a delay–speed search at each and the best kept, which the gain and echo tests
-#: then judge as any other try.
-ACCEL_SEED_HOPS = 8
-ACCEL_SEED_LOBES = 1.5
-ACCEL_SEED_POINTS = 4
-ACCEL_SEED_MIN_MPS2 = 8.0
-#: The hop length (s) at which ACCEL_SEED_MIN_MPS2 was measured (att random-cyclic, M = 10):
-#: at one M the phase an acceleration puts at the window's ends grows as ``a T_h²``, so a
-#: schedule of longer hops is seeded from ``ACCEL_SEED_MIN_MPS2 (ACCEL_SEED_HOP_S / T_h)²``
-#: (att three-state, 15 ms: 3.6 m/s²; there braking at 10 m/s² and reversing at 8 m/s² were
-#: missed on 7-15 % and 41-49 % of their boundaries seeded from 8 m/s² only, 7 % and 27 %
-#: seeded from 3.6).
-ACCEL_SEED_HOP_S = 0.01
-ACCEL_SEED_MAX_MPS2 = 40.0
-ACCEL_RUN_SEEDED = 0.3
-ACCEL_SEED_STEPS = 2
-ACCEL_SEED_MAX_STEPS = 6
-#: Where no track of detections shows the acceleration (an echo just detected, or just out
-#: of the reverberation band, whose detections there were refused), the window's halves
-#: show it (:meth:`CoherentRefiner._halves_seed`) where each holds at least
-#: HALVES_MIN_HOPS hops.
-HALVES_MIN_HOPS = 4
 #: An echo that begins or ends within a detection's window (a target appearing, vanishing
 #: or jumping: the hops on one side hold noise) loses coherence as drift does, but no rate
 #: explains hops that hold no echo: the accelerating fit is not tried where the fit's
@@ -563,10 +495,11 @@ class CoherentRefiner:
         v_res = self.c / (2.0 * float(np.max(schedule.tones_hz)) * m_hops * schedule.hop_s)
         half_steps = int(math.ceil(self.speed_span_mps / (0.5 * v_res)))
         self.speed_points = max(SPEED_POINTS, 2 * half_steps + 1)
-        self._v_res = v_res
+        self.v_res = v_res
         #: Hops of the first search (:data:`SUB_HOPS`; all ``M`` where ``M`` is not more).
         self.sub_hops = min(SUB_HOPS, self.m_hops)
-        #: The run coherence from which the accelerating fit is tried (:data:`ACCEL_RUN_MIN`).
+        #: The run coherence from which the accelerating fit is tried
+        #: (:data:`~hil.estimation.refine_accel.ACCEL_RUN_MIN`).
         self._accel_run_min = ACCEL_RUN_MIN if self.m_hops <= SUB_HOPS else ACCEL_RUN_MIN_LONG
         half_sub = int(math.ceil(self.speed_span_mps * self.sub_hops / (0.5 * v_res * m_hops)))
         self.sub_speed_points = max(SPEED_POINTS, 2 * half_sub + 1)
@@ -625,8 +558,8 @@ class CoherentRefiner:
         self._recent: deque[tuple[int, float, float, float]] = deque(maxlen=RECENT_FITS)
         #: The detections brought lately, ``(hop_index, t_s, speed m/s)``, the latest last:
         #: the acceleration the earlier ones show seeds the latest's curved fit
-        #: (:func:`speed_trend`).
-        self._detections: deque[tuple[int, float, float]] = deque(maxlen=4 * ACCEL_SEED_HOPS + 1)
+        #: (:func:`~hil.estimation.refine_accel.speed_trend`).
+        self.detections: deque[tuple[int, float, float]] = deque(maxlen=4 * ACCEL_SEED_HOPS + 1)
         #: The latest curved fit of each echo accelerating towards rest, ``(hop_index, t_s,
         #: alpha, rate 1/s, E/N0 dB)`` (:meth:`band_exit`).
         self._into_band: deque[tuple[int, float, float, float, float]] = deque(maxlen=RECENT_FITS)
@@ -639,7 +572,7 @@ class CoherentRefiner:
         half_window = 0.5 * self.m_hops * self.hop_len_s
         step = 1.0 / (4.0 * float(np.max(schedule.tones_hz)) * half_window**2)
         n_side = min(int(math.ceil(2.0 * MAX_ACCEL_MPS2 / self.c / step)), ACCEL_POINTS // 2)
-        self._gammas = step * np.arange(-n_side, n_side + 1, dtype=np.float64)
+        self.gammas = step * np.arange(-n_side, n_side + 1, dtype=np.float64)
         # A ghost's speed offset, c Δf / (2 f_c) (m/s), and one Doppler cell of a hop (m/s).
         f_c = 0.5 * float(np.min(schedule.tones_hz) + np.max(schedule.tones_hz))
         self._ghost_speed = self.c * self.spacing_hz / (2.0 * f_c)
@@ -714,7 +647,7 @@ class CoherentRefiner:
         self._valid_from = int(input_index)
         self._hop[:] = np.iinfo(np.int64).min
         self._recent.clear()
-        self._detections.clear()
+        self.detections.clear()
         self._into_band.clear()
         self._echoes.clear()
         self._partners.clear()
@@ -811,11 +744,12 @@ class CoherentRefiner:
         (:meth:`_two_echoes`). ``curve``: where an echo's earlier fit carried on puts the
         boundary (s, time scale, rate 1/s; :meth:`band_exit`), the fit's warm start in place
         of a recent fit's. ``halves``: whether a curved fit may be seeded from the window's
-        halves (:meth:`_halves_seed`; the caller says where not: the span's edges, which
-        gather other echoes' leaks). Without ``remember`` neither the detection nor its fit
-        is kept (no warm start, no echo taken out or followed, no speed trend): a look at a
-        detection that is refused whatever its fit (a ghost on the reverberation band's edge
-        whose source is looked for beyond the span, :mod:`hil.estimation.gcas.beyond_span`)."""
+        halves (:func:`~hil.estimation.refine_accel.halves_seed`; the caller says where not:
+        the span's edges, which gather other echoes' leaks). Without ``remember`` neither the
+        detection nor its fit is kept (no warm start, no echo taken out or followed, no speed
+        trend): a look at a detection that is refused whatever its fit (a ghost on the
+        reverberation band's edge whose source is looked for beyond the span,
+        :mod:`hil.estimation.gcas.beyond_span`)."""
         test = self.echo_test if echo_test is None else echo_test
         word = self._codeword(hop_index)
         hop_ids = np.arange(hop_index - self.m_hops + 1, hop_index + 1, dtype=np.int64)
@@ -824,7 +758,7 @@ class CoherentRefiner:
         known = self._known_hops(hop_index, t_s, speed0, lag_s)
         if not followed and remember:
             # A followed boundary's time and speed are its echo's fit carried on, no detection.
-            self._detections.append((hop_index, t_s, speed0))
+            self.detections.append((hop_index, t_s, speed0))
         keep_lobe = followed and self.in_still_water(t_s, alpha)
         fit = self._fit_near(word, hop_ids, t_s, speed0, lobe, hop_index, known, keep_lobe, curve)
         if keep_lobe and fit is not None and fit.e_over_n0_db >= self.lobe_sure_db:
@@ -846,7 +780,7 @@ class CoherentRefiner:
             and fit.e_over_n0_db >= test.min_e_over_n0_db + ACCEL_MARGIN_DB
         ):
             # The detections' trend is read only where a curved fit may be tried.
-            seed = None if followed else self._accel_seed(hop_index, t_s, speed0, lobe)
+            seed = None if followed else accel_seed(self, hop_index, t_s, speed0, lobe)
             one_sided: bool | None = None
             if seed is None and halves and not followed and not self.in_still_water(t_s, alpha):
                 # No track to read it from (an echo just detected, or out of the band):
@@ -856,14 +790,14 @@ class CoherentRefiner:
                 # nothing; a target moving there keeps its detections' track.
                 one_sided = self._one_sided(fit, word, hop_ids, known)
                 if not one_sided:
-                    seed = self._halves_seed(fit, word, hop_ids, lobe, known)
+                    seed = halves_seed(self, fit, word, hop_ids, lobe, known)
             run_min = (
                 self._accel_run_min if seed is None else min(ACCEL_RUN_SEEDED, self._accel_run_min)
             )
             if fit.run_coherence.fraction >= run_min and not (
                 self._one_sided(fit, word, hop_ids, known) if one_sided is None else one_sided
             ):
-                fit = self._with_acceleration(fit, word, hop_ids, lobe, known, seed)
+                fit = with_acceleration(self, fit, word, hop_ids, lobe, known, seed)
         if (
             fit is not None
             and fit.found
@@ -1431,7 +1365,7 @@ class CoherentRefiner:
             *args, np.array([t_first + j * step]), alphas[i : i + 1], np.zeros(1), one, model,
             signal, np.empty((1, 0), np.complex128), known,
         )  # fmt: skip
-        # E/N0 = |C|² / (E_s σ²), σ² E_s = the windows' energy − 2|C|²/E_s (_fit_quality).
+        # E/N0 = |C|² / (E_s σ²), σ² E_s = the windows' energy − 2|C|²/E_s (echo_quality).
         mag2 = float(one[0].real * one[0].real + one[0].imag * one[0].imag)
         noise = float(signal[0]) - 2.0 * mag2 / float(model[0])
         return 10.0 * math.log10(mag2 / noise) if noise > 0.0 and mag2 > 0.0 else math.inf
@@ -1624,7 +1558,7 @@ class CoherentRefiner:
         if inward or around:
             speed = self.c * (alpha - 1.0) / (alpha + 1.0)
             span = self.speed_span_mps
-            steps = int(math.ceil(span / (0.5 * self._v_res)))
+            steps = int(math.ceil(span / (0.5 * self.v_res)))
             if inward:
                 v = speed + inward * np.linspace(0.0, span, steps + 1)
             else:
@@ -1803,7 +1737,7 @@ class CoherentRefiner:
         k, f, dt_lo, duration = self._hop_run(key, r_lo, r_hi - r_lo + 1)
         # Each hop heard on the tangent of the echo's curve at its centre (an accelerating
         # fit's time scale changes at its rate; the boundary's line where it does not).
-        t_i, a_i = _hops_on_curve(echo.t_s, echo.alpha, echo.rate, dt_lo + 0.5 * duration)
+        t_i, a_i = hops_on_curve(echo.t_s, echo.alpha, echo.rate, dt_lo + 0.5 * duration)
         out = np.empty((5, f.shape[0]), dtype=np.complex128)
         out[0] = 0.5 * echo.amplitude * np.conj(k)
         out[1] = f * a_i
@@ -1861,7 +1795,7 @@ class CoherentRefiner:
             # accelerating fit's: the rate's fit from there, at the hops' centre).
             best_t, alpha, gamma = start
             if gamma != 0.0:
-                best_t, alpha = _to_centre(best_t, alpha, gamma, word.centre_s)
+                best_t, alpha = to_centre(best_t, alpha, gamma, word.centre_s)
             best_v = self.c * (alpha - 1.0) / (alpha + 1.0)
             slots = self.hop_slots(hop_ids, word, best_t, alpha)
             if slots is None:
@@ -1873,11 +1807,11 @@ class CoherentRefiner:
                     WARM_HALF_SPANS * self.speed_span_mps, 3, 3, WARM_FIT_PASSES,
                 )  # fmt: skip
             else:
-                fitted = self._accel_fit(args, known, best_t, alpha, gamma, lobe)
+                fitted = accel_fit(self, args, known, best_t, alpha, gamma, lobe)
                 if fitted is not None:
                     best_t, alpha, gamma = fitted[:3]
                     best_v, outcome = self.c * (alpha - 1.0) / (alpha + 1.0), FOUND
-                    if not self._accel_gain(args, known, word, best_t, alpha, gamma) > ACCEL_GAIN:
+                    if not accel_gain(self, args, known, word, best_t, alpha, gamma) > ACCEL_GAIN:
                         # No longer accelerating: the constant speed's warm fit.
                         gamma, outcome = 0.0, RECENTRE
                         best_t, best_v, outcome = maximise(
@@ -1943,7 +1877,7 @@ class CoherentRefiner:
         if slots is None:
             return None
         v = self.c * (alpha - 1.0) / (alpha + 1.0)
-        speeds = v + 0.25 * self._v_res * np.linspace(-1.0, 1.0, LOBE_SPEEDS)
+        speeds = v + 0.25 * self.v_res * np.linspace(-1.0, 1.0, LOBE_SPEEDS)
         alphas = np.repeat((self.c + speeds) / (self.c - speeds), LOBE_POINTS)
         t = np.tile(centre + 0.125 * lobe * np.linspace(-1.0, 1.0, LOBE_POINTS), LOBE_SPEEDS)
         args = (*self.slot_tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
@@ -2162,7 +2096,7 @@ class CoherentRefiner:
         with a rate, ``t`` and ``alpha`` are the hops' centre's line) with its quality, its
         Cramér–Rao bounds and, with a rate, the boundary's time, time scale and the
         acceleration."""
-        en0, coherence, tone_coherence, run_coherence, amplitude = _fit_quality(
+        en0, coherence, tone_coherence, run_coherence, amplitude = echo_quality(
             args, known, word, self.n_tones, t, alpha, gamma
         )
         en0_db = 10.0 * math.log10(en0) if en0 > 0 else -math.inf
@@ -2171,7 +2105,7 @@ class CoherentRefiner:
         )
         accel = 0.0
         if gamma != 0.0:
-            t, alpha = _to_boundary(t, alpha, gamma, word.centre_s)
+            t, alpha = to_boundary(t, alpha, gamma, word.centre_s)
             accel = 2.0 * self.c * gamma / (alpha + 1.0) ** 2
         return Refinement(
             t, alpha, en0_db, bound, coherence, tone_coherence, run_coherence, found,
@@ -2212,7 +2146,7 @@ class CoherentRefiner:
         t, alpha, gamma = fit.t_s, fit.alpha, 0.0
         if fit.accel_mps2 != 0.0:
             gamma = fit.rate(self.c)
-            t, alpha = _to_centre(t, alpha, gamma, word.centre_s)
+            t, alpha = to_centre(t, alpha, gamma, word.centre_s)
         slots = self.hop_slots(hop_ids, word, t, alpha)
         if slots is None:
             return False
@@ -2243,216 +2177,6 @@ class CoherentRefiner:
         trail = int(np.argmin(weak[::-1])) if not weak.all() else weak.size
         return (lead >= PARTIAL_HOPS and trail == 0) or (trail >= PARTIAL_HOPS and lead == 0)
 
-    def _accel_seed(
-        self, hop_index: int, t_s: float, speed: float, lobe: float
-    ) -> tuple[float, float] | None:
-        """The acceleration and its standard error (m/s²) the detections of this echo's
-        track show up to this one (:data:`ACCEL_SEED_HOPS`, :func:`speed_trend`), where the
-        acceleration is at least :data:`ACCEL_SEED_MIN_MPS2`, scaled to the hop length
-        (:data:`ACCEL_SEED_HOP_S`); else None. This detection is the latest recorded
-        (:meth:`refine`); the earlier ones are the rest."""
-        seen = np.array(self._detections, dtype=np.float64).reshape(-1, 3)[:-1]
-        trend = speed_trend(
-            seen[:, 0], seen[:, 1], seen[:, 2], hop_index, t_s, speed, self.hop_len_s, self.c,
-            ACCEL_SEED_LOBES * lobe, self.speed_span_mps,
-        )  # fmt: skip
-        least = ACCEL_SEED_MIN_MPS2 * (ACCEL_SEED_HOP_S / self.hop_len_s) ** 2
-        return trend if trend is not None and abs(trend[0]) >= least else None
-
-    def _halves_seed(
-        self, fit: Refinement, word: Codeword, hop_ids: NDArray[np.int64], lobe: float,
-        known: NDArray[np.complex128],
-    ) -> tuple[float, float] | None:  # fmt: skip
-        """The acceleration and its standard error (m/s²) the window's own halves show
-        (:data:`HALVES_MIN_HOPS`): a constant-speed search over the first ``⌊M/2⌋`` hops and
-        one over the last ``⌊M/2⌋`` about ``fit`` (each line the curve's tangent at its hops'
-        centre), their speeds' difference over the time between those centres; None where
-        either finds no maximum inside or is not one echo by the coherence over all its hops
-        (:attr:`echo_test`), or where the acceleration is below :data:`ACCEL_SEED_MIN_MPS2`
-        scaled to the hop length (:meth:`_accel_seed`'s bound)."""
-        n = self.m_hops // 2
-        if n < HALVES_MIN_HOPS:
-            return None
-        v = fit.speed_mps(self.c)
-        # A half's tangent is up to MAX_ACCEL_MPS2 over a quarter window off the whole
-        # window's line, and a curved echo's constant-speed fit is no point of the curve:
-        # the speed span and that reach, in steps of half a half's Doppler resolution.
-        reach = self.speed_span_mps + 0.25 * MAX_ACCEL_MPS2 * self.m_hops * self.hop_len_s
-        step = 0.5 * self._v_res * self.m_hops / n
-        grid = (0.5 * lobe, reach, TIME_POINTS, 2 * int(math.ceil(reach / step)) + 1)
-        speeds = []
-        for part, ids in ((self._half_word(int(hop_ids[-1]), True), hop_ids[:n]),
-                          (self._half_word(int(hop_ids[-1]), False), hop_ids[-n:])):  # fmt: skip
-            searched = self.search_near(part, ids, fit.t_s, v, lobe, known, grid)
-            if searched is None or searched[2] != FOUND:
-                return None
-            t_h, v_h, _, args = searched
-            alpha_h = (self.c + v_h) / (self.c - v_h)
-            coherence = _fit_quality(args, known, part, self.n_tones, t_h, alpha_h)[1]
-            if coherence.fraction < self.echo_test.fraction:
-                return None
-            speeds.append(v_h)
-        gap_s = (self.m_hops - n) * self.hop_len_s
-        accel = (speeds[1] - speeds[0]) / gap_s
-        least = ACCEL_SEED_MIN_MPS2 * (ACCEL_SEED_HOP_S / self.hop_len_s) ** 2
-        if abs(accel) < least:
-            return None
-        # Each half's speed error: the M hops' bound with half the energy and half the span
-        # (sqrt(2) x 2), the two halves independent.
-        sigma = 0.0 if fit.bound is None else 2.0 * math.sqrt(2.0) * fit.bound.sigma_speed_mps
-        return accel, math.sqrt(2.0) * sigma / gap_s
-
-    def _with_acceleration(
-        self, fit: Refinement, word: Codeword, hop_ids: NDArray[np.int64], lobe: float,
-        known: NDArray[np.complex128], seed: tuple[float, float] | None = None,
-    ) -> Refinement:  # fmt: skip
-        """``fit`` (constant speed, its maximum found) fitted again with a changing time scale
-        (:data:`ACCEL_TRY`): the rate's grid at the fit's delay and time scale (those of the
-        hops' centre: the curvature is even about it; over more than :data:`SUB_HOPS` hops,
-        each rate's curve through the fit of the last of them) on the fit's grating lobe and
-        its two neighbours; from each of the :data:`ACCEL_STARTS` best local maxima, the delay–speed
-        fit and a parabola in the rate, :data:`ACCEL_ROUNDS` times. The best accelerating fit
-        where it raises the likelihood by :data:`ACCEL_GAIN`, else ``fit``; its time and time
-        scale are the boundary's. With ``seed`` (m/s², the detections' own acceleration and
-        its standard error, :meth:`_accel_seed`) one more start: the best of the delay–speed
-        searches at the grid rates about the seed's (:meth:`_seeded_start`)."""
-        gammas = self._gammas
-        n = gammas.shape[0]
-        # Each rate's curve through a point of the echo: the fit's own (the hops' centre)
-        # or, over more than SUB_HOPS hops (where the curvature, growing as M², leaves the
-        # constant-speed fit of all M hops nowhere near the echo), a constant-speed fit of
-        # the last SUB_HOPS hops, whose line is the curve's tangent at their centre.
-        t_c = np.full(n, fit.t_s)
-        a_c = np.full(n, fit.alpha)
-        if self.sub_hops < self.m_hops:
-            sub = self._sub_word(int(hop_ids[-1]))
-            grid = (0.5 * lobe, self.speed_span_mps, TIME_POINTS, self.sub_speed_points)
-            v = fit.speed_mps(self.c)
-            searched = self.search_near(
-                sub, hop_ids[-self.sub_hops :], fit.t_s, v, lobe, known, grid
-            )
-            if searched is None or searched[2] != FOUND:
-                return fit
-            t_sub, a_sub = searched[0], (self.c + searched[1]) / (self.c - searched[1])
-            for i, g in enumerate(gammas):
-                a_b = a_sub - float(g) * sub.centre_s / a_sub
-                t_c[i], a_c[i] = _to_centre(t_sub, a_b, float(g), word.centre_s)
-        # The M hops' tables after the fewer hops' search, whose fills may take slots.
-        slots = self.hop_slots(hop_ids, word, fit.t_s, fit.alpha)
-        if slots is None:
-            return fit
-        args = (*self.slot_tables, slots, *word.hops, self.fs_hz, self.hop_len_s)
-        # Over the M hops the rate's phase (even about the centre) can alias with the
-        # delay's and time scale's (odd) at another grating lobe or rate: several starts.
-        shifts = lobe * np.array([-1.0, 0.0, 1.0])
-        power = self.candidate_powers(
-            args, known, (shifts[:, None] + t_c).ravel(), np.tile(a_c, 3), np.tile(gammas, 3)
-        ).reshape(3, n)
-        inner = power[:, 1:-1]
-        peak = (inner > power[:, :-2]) & (inner >= power[:, 2:])
-        rows, cols = np.nonzero(peak)
-        order = np.argsort(-inner[rows, cols])[:ACCEL_STARTS]
-        starts = [
-            (float(t_c[c] + shifts[r]), float(a_c[c]), float(gammas[c]))
-            for r, c in zip(rows[order], cols[order] + 1, strict=True)
-        ]
-        if seed is not None:
-            seeded = self._seeded_start(args, known, fit, seed, lobe)
-            if seeded is not None:
-                starts.append(seeded)
-        best: tuple[float, float, float, float] | None = None
-        for t0, a0, g0 in starts:
-            found = self._accel_fit(args, known, t0, a0, g0, lobe)
-            if found is not None and (best is None or found[3] > best[3]):
-                best = found
-        if best is None:
-            return fit
-        t, alpha, gamma, p_best = best
-        p0 = self.candidate_powers(
-            args, known, np.array([fit.t_s]), np.array([fit.alpha]), np.zeros(1)
-        )
-        gain = 10.0 ** (fit.e_over_n0_db / 10.0) * (p_best / p0[0] - 1.0) if p0[0] > 0 else 0.0
-        if not gain > ACCEL_GAIN:
-            return fit
-        return self.refinement_at(args, known, word, t, alpha, gamma, True)
-
-    def _seeded_start(
-        self, args: tuple[Any, ...], known: NDArray[np.complex128], fit: Refinement,
-        seed: tuple[float, float], lobe: float,
-    ) -> tuple[float, float, float] | None:  # fmt: skip
-        """The curved fit's start from the acceleration ``seed`` (m/s², and its standard
-        error): at each grid rate (``γ = a (α+1)²/(2c)``) within twice the error of the
-        seed's (at least :data:`ACCEL_SEED_STEPS` steps either side, at most
-        :data:`ACCEL_SEED_MAX_STEPS`), the delay–speed search about ``fit`` (±½ lobe, ± the
-        speed span); the best ``(t, alpha, gamma)`` (the hops' centre's line), None where no
-        search finds a maximum inside."""
-        step = float(self._gammas[1] - self._gammas[0])
-        to_rate = (fit.alpha + 1.0) ** 2 / (2.0 * self.c)
-        g_seed = float(np.clip(seed[0], -ACCEL_SEED_MAX_MPS2, ACCEL_SEED_MAX_MPS2)) * to_rate
-        reach = 2.0 * seed[1] * to_rate / step
-        steps = int(np.clip(math.ceil(reach), ACCEL_SEED_STEPS, ACCEL_SEED_MAX_STEPS))
-        v_fit = fit.speed_mps(self.c)
-        grid = (0.5 * lobe, self.speed_span_mps, TIME_POINTS, SPEED_POINTS, FIT_PASSES)
-        best: tuple[float, float, float] | None = None
-        p_best = -1.0
-        starts = [(fit.t_s, v_fit, g_seed + k * step) for k in range(-steps, steps + 1)]
-        # Then the best one's neighbouring grating lobes: at -10 dB a curved fit's lobe is
-        # decided ~1 dB apart as a constant-speed one's (:meth:`better_lobe`).
-        for i in range(len(starts) + 2):
-            if i == len(starts):
-                if best is None:
-                    break
-                v_best = self.c * (best[1] - 1.0) / (best[1] + 1.0)
-                starts += [(best[0] + d, v_best, best[2]) for d in (-lobe, lobe)]
-            t, v, g = starts[i]
-            t, v, outcome = _maximise_recentred(args, known, g, self.c, t, v, grid)
-            if outcome != FOUND:
-                continue
-            alpha = (self.c + v) / (self.c - v)
-            one = (np.array([t]), np.array([alpha]), np.array([g]))
-            p = float(self.candidate_powers(args, known, *one)[0])
-            if p > p_best:
-                best, p_best = (t, alpha, g), p
-        return best
-
-    def _accel_gain(
-        self, args: tuple[Any, ...], known: NDArray[np.complex128], word: Codeword, t: float,
-        alpha: float, gamma: float,
-    ) -> float:  # fmt: skip
-        """What the rate ``gamma`` adds to ``ln Λ = |C|²/(σ² E_s)`` at ``(t, alpha)`` (the
-        hops' centre's line), ``σ²`` what the accelerating fit leaves of the windows' energy."""
-        en0 = _fit_quality(args, known, word, self.n_tones, t, alpha, gamma)[0]
-        p = self.candidate_powers(
-            args, known, np.full(2, t), np.full(2, alpha), np.array([0.0, gamma])
-        )
-        return en0 * (1.0 - p[0] / p[1]) if p[1] > 0 else 0.0
-
-    def _accel_fit(
-        self, args: tuple[Any, ...], known: NDArray[np.complex128], t: float, alpha: float,
-        gamma: float, lobe: float,
-    ) -> tuple[float, float, float, float] | None:  # fmt: skip
-        """From ``(t, alpha, gamma)`` (s, the centre's time scale, 1/s): the delay–speed fit at
-        the rate, then a parabola in the rate over half the grid's step (halving each
-        round), :data:`ACCEL_ROUNDS` times; ``(t, alpha, gamma, |C|²)``, None where the fit
-        finds no maximum inside."""
-        step = float(self._gammas[1] - self._gammas[0])
-        v = self.c * (alpha - 1.0) / (alpha + 1.0)
-        grid = (0.125 * lobe, 0.25 * self.speed_span_mps, 5, 5, FIT_PASSES)
-        p = np.zeros(3)
-        for r in range(ACCEL_ROUNDS):
-            t, v, outcome = _maximise_recentred(args, known, gamma, self.c, t, v, grid)
-            if outcome != FOUND:
-                return None
-            alpha = (self.c + v) / (self.c - v)
-            h = 0.5 * step / 2**r
-            rates = gamma + h * np.arange(-1.0, 2.0)
-            p = self.candidate_powers(args, known, np.full(3, t), np.full(3, alpha), rates)
-            gamma += h * parabolic_offset(p[0], p[1], p[2])  # 0 where p has no maximum
-        p_end = self.candidate_powers(
-            args, known, np.array([t]), np.array([alpha]), np.array([gamma])
-        )
-        return t, alpha, gamma, float(p_end[0])
-
     def candidate_powers(
         self, args: tuple[Any, ...], known: NDArray[np.complex128], t: NDArray[np.float64],
         alpha: NDArray[np.float64], gamma: NDArray[np.float64],
@@ -2473,8 +2197,8 @@ class CoherentRefiner:
         """The search around ``(t0, v0)`` over the hops ``hop_ids`` of ``word`` on ``grid``
         (``(half_t, half_v, n_t, n_v)``: ±s, ±m/s, points; default the full search's ±½ lobe,
         ± the speed span, :data:`TIME_POINTS` and :attr:`speed_points`), re-centred up to
-        :data:`MAX_RECENTRES` times: the best point, the outcome and the kernels' arguments
-        of its tables; None where the input does not cover the hops."""
+        :data:`~hil.estimation.fit_steps.MAX_RECENTRES` times: the best point, the outcome and
+        the kernels' arguments of its tables; None where the input does not cover the hops."""
         if grid is None:
             grid = (0.5 * lobe, self.speed_span_mps, TIME_POINTS, self.speed_points)
         best_t, best_v, outcome = t0, v0, RECENTRE
@@ -2502,7 +2226,7 @@ class CoherentRefiner:
         does not cover the hops."""
         if self.sub_hops == self.m_hops:
             return self.search_near(word, hop_ids, t0, v0, lobe, known)
-        sub = self._sub_word(hop_ids[-1])
+        sub = self.sub_word(hop_ids[-1])
         sub_grid = (0.5 * lobe, self.speed_span_mps, TIME_POINTS, self.sub_speed_points)
         first = self.search_near(sub, hop_ids[-self.sub_hops :], t0, v0, lobe, known, sub_grid)
         if first is None:
@@ -2531,7 +2255,7 @@ class CoherentRefiner:
         hops' maximum, or a neighbouring grating lobe's): ±⅛ grating lobe in 5 points, and
         ±½ of the fewer hops' speed resolution in steps of about half the ``M`` hops'."""
         n_v = 2 * int(math.ceil(0.5 * self.m_hops / self.sub_hops)) + 3
-        half_v = 0.5 * self._v_res * self.m_hops / self.sub_hops
+        half_v = 0.5 * self.v_res * self.m_hops / self.sub_hops
         return (0.125 * lobe, half_v, 5, n_v)
 
     def better_lobe(
@@ -2647,7 +2371,7 @@ class CoherentRefiner:
         )  # fmt: skip
         return slots if covered else None
 
-    def _sub_word(self, hop_index: int) -> Codeword:
+    def sub_word(self, hop_index: int) -> Codeword:
         """The last :attr:`sub_hops` hops of :meth:`_codeword`'s (the first search's)."""
         key = int(hop_index) % self.schedule.period_hops
         word = self._sub_words.get(key)
@@ -2656,9 +2380,9 @@ class CoherentRefiner:
             self._sub_words[key] = word
         return word
 
-    def _half_word(self, hop_index: int, first: bool) -> Codeword:
+    def half_word(self, hop_index: int, first: bool) -> Codeword:
         """The first (``first``) or last ``⌊M/2⌋`` hops of :meth:`_codeword`'s, relative to
-        its end boundary (:meth:`_halves_seed`)."""
+        its end boundary (:func:`~hil.estimation.refine_accel.halves_seed`)."""
         key = int(hop_index) % self.schedule.period_hops
         word = self._half_words.get((key, first))
         if word is None:
@@ -2672,133 +2396,3 @@ class CoherentRefiner:
         schedule's :class:`~hil.estimation.codewords.CodewordBook` (each codeword made once
         per schedule, ``M`` and rate, from the first code period)."""
         return self._codewords[hop_index]
-
-
-def _maximise_recentred(
-    args: tuple[Any, ...], known: NDArray[np.complex128], gamma: float, c: float, t: float,
-    v: float, grid: tuple[Any, ...],
-) -> tuple[float, float, int]:  # fmt: skip
-    """:func:`~hil.estimation.refine_kernels.maximise` at the rate ``gamma`` (1/s) from
-    ``(t, v)`` (s, m/s) over ``grid``, recentred on the grid's edge up to
-    :data:`MAX_RECENTRES` times: ``(t, v, outcome)``."""
-    outcome = RECENTRE
-    for _ in range(MAX_RECENTRES + 1):
-        t, v, outcome = maximise(*args, known, gamma, c, t, v, *grid)
-        if outcome != RECENTRE:
-            break
-    return t, v, outcome
-
-
-def speed_trend(
-    hops: NDArray[np.float64], times: NDArray[np.float64], speeds: NDArray[np.float64],
-    hop_index: int, t_s: float, speed: float, hop_s: float, c: float, lobe_s: float,
-    span_mps: float,
-) -> tuple[float, float] | None:  # fmt: skip
-    """The acceleration (m/s², of the closing speed) that detections show and its standard
-    error (m/s²): the least-squares slope of speed against time (``hop_s`` a hop) of the
-    detection ``(hop_index, t_s, speed)`` (its boundary, s; m/s) and the earlier ones (shape
-    ``(K,)`` each: hop index, boundary time s, speed m/s) up to :data:`ACCEL_SEED_HOPS` hops
-    before it on its track, one a hop (the latest): the boundary time within ``lobe_s`` (s)
-    of this one's moved back at hops of ``hop_s / α``, the speed within ``span_mps`` (m/s)
-    plus what :data:`ACCEL_SEED_MAX_MPS2` changes it by. None where fewer than
-    :data:`ACCEL_SEED_POINTS` hops (this one's included) are on the track."""
-    k = hop_index - hops
-    alpha = (c + speed) / (c - speed)
-    a_j = (c + speeds) / (c - speeds)
-    on_track = (
-        (k >= 1)
-        & (k <= ACCEL_SEED_HOPS)
-        & (np.abs(t_s - times - k * hop_s * 2.0 / (a_j + alpha)) <= lobe_s)
-        & (np.abs(speeds - speed) <= span_mps + ACCEL_SEED_MAX_MPS2 * k * hop_s)
-    )
-    if int(np.count_nonzero(on_track)) + 1 < ACCEL_SEED_POINTS:
-        return None
-    # The latest detection of each hop (the receiver brings them in order).
-    k_on, v_on = k[on_track], speeds[on_track]
-    _, last = np.unique(k_on[::-1], return_index=True)
-    idx = k_on.shape[0] - 1 - last
-    if idx.shape[0] + 1 < ACCEL_SEED_POINTS:
-        return None
-    x = np.concatenate(([0.0], -k_on[idx] * hop_s))
-    y = np.concatenate(([speed], v_on[idx]))
-    x = x - x.mean()
-    slope = float(np.dot(x, y - y.mean()) / np.dot(x, x))
-    left = y - y.mean() - slope * x
-    return slope, float(np.sqrt(np.dot(left, left) / (x.shape[0] - 2) / np.dot(x, x)))
-
-
-def _hops_on_curve(
-    t_b: float, alpha_b: float, rate: float, d: NDArray[np.float64]
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Each hop's line ``(t_i, α_i)`` (s; shape of ``d``) on the curve through the boundary
-    ``(t_b, alpha_b)`` whose time scale changes at ``rate`` (1/s): the transmit time heard
-    ``τ`` after ``t_b`` is ``T_b + α_b τ + ½ rate τ²``; ``d`` the hops' transmit centres
-    from ``T_b`` (s). A hop's line passes through its centre's point with the curve's slope
-    there (the kernels' per-hop model); with ``rate = 0`` every hop is the boundary's line."""
-    if rate == 0.0:
-        return np.full(d.shape, t_b), np.full(d.shape, alpha_b)
-    tau = d / alpha_b
-    tau -= 0.5 * rate * tau * tau / (alpha_b + rate * tau)
-    a_i = alpha_b + rate * tau
-    return t_b + tau - d / a_i, a_i
-
-
-def _to_boundary(t: float, alpha: float, gamma: float, d_c: float) -> tuple[float, float]:
-    """The boundary's receive time (s) and time scale of the kernels' accelerating mapping
-    (:func:`~hil.estimation.refine_kernels.candidate_sums`) of parameters ``(t, alpha,
-    gamma)``, ``d_c`` (s) the hops' transmit centre from the boundary: where the curve
-    reaches ``T_b``, ``u`` after the centre (one Newton step, error ``O(γ²)``)."""
-    u = -d_c / alpha
-    u -= 0.5 * gamma * u * u / (alpha + gamma * u)
-    return t + d_c / alpha + u, alpha + gamma * u
-
-
-def _to_centre(t_b: float, alpha_b: float, gamma: float, d_c: float) -> tuple[float, float]:
-    """The inverse of :func:`_to_boundary` (two fixed-point steps: a search's start)."""
-    alpha = alpha_b + gamma * d_c / alpha_b
-    for _ in range(2):
-        t_x, a_x = _to_boundary(t_b, alpha, gamma, d_c)
-        alpha += alpha_b - a_x
-    t_x, _ = _to_boundary(t_b, alpha, gamma, d_c)
-    return t_b + (t_b - t_x), alpha
-
-
-def _fit_quality(
-    args: tuple[Any, ...],
-    known: NDArray[np.complex128],
-    word: Codeword,
-    n_tones: int,
-    t_rx: float,
-    alpha: float,
-    gamma: float = 0.0,
-) -> tuple[float, Coherence, Coherence, Coherence, complex]:
-    """E/N0 (linear) of the echo at a candidate (time-scale rate ``gamma``, 1/s, as
-    :func:`~hil.estimation.refine_kernels.candidate_sums`), its coherence across all hops,
-    within each tone and over runs of consecutive hops, and its fitted amplitude
-    ``β = 2C/E_s`` (:func:`~hil.estimation.refine_kernels.fit_quality`).
-
-    ``Â = 2|C|/E_s``, the noise variance ``σ²`` what the echo leaves of the windows' energy,
-    ``E/N0 = Â² N / (4 σ²)`` (module docstring). Coherence ``ρ = |Σ_i H_i|² / (M Σ_i |H_i|²)``:
-    1 when every hop's term has the phase the one-echo model predicts, about ``1/M`` for
-    noise. One echo of per-hop SNR ``s = mean |H_i|² / (N_i σ²) − 1`` gives
-    ``E[ρ] ≈ (M s + 1) / (M (s + 1))``; an echo of another schedule or speed whose tones
-    match some hops (a still echo read at the tone spacing's speed, a target beyond the
-    span) has strong hops of unrelated phases: ``ρ`` far below that. Multipath a fraction of
-    a millisecond long multiplies each tone by its own complex gain: ``ρ`` falls, the
-    coherence within each tone (the same ratio over the hops of one tone,
-    ``Σ_k |Σ_{i∈k} H_i|² / Σ_k n_k Σ_{i∈k} |H_i|²``, expected
-    ``Σ_k (n_k² s + n_k) / Σ_k n_k² (s + 1)``) does not. An accelerating echo drifts in
-    phase against the constant-speed model: ``ρ`` falls, the coherence over runs of
-    :data:`~hil.estimation.refine_kernels.RUN_HOPS` consecutive hops (the same ratio summed
-    over every run, expected ``(R s + 1) / (R (s + 1))``) holds up to about 7 m/s² on ``att``.
-    """
-    en0, rho, expected, rho_tone, expected_tone, rho_run, expected_run, c, es = fit_quality(
-        *args, known, gamma, word.tones, n_tones, t_rx, alpha
-    )
-    return (
-        en0,
-        Coherence(rho, expected),
-        Coherence(rho_tone, expected_tone),
-        Coherence(rho_run, expected_run),
-        2.0 * complex(c) / es if es > 0 else 0j,
-    )

@@ -860,7 +860,7 @@ def fit_quality(
     known: Any, gamma: float, tones: Any, n_tones: int, t_rx: float, alpha: float,
 ) -> tuple[float, float, float, float, float, float, float, complex, float]:  # fmt: skip
     """``(E/N0, ρ, E[ρ], ρ_tone, E[ρ_tone], ρ_run, E[ρ_run], C, E_s)`` of one candidate
-    (:func:`hil.estimation.refine._fit_quality` states them; ``C`` and ``E_s = Σ a_i² N_i``
+    (:func:`hil.estimation.fit_steps.echo_quality` states them; ``C`` and ``E_s = Σ a_i² N_i``
     as :func:`candidate_sums`; ``known`` and ``gamma`` as :func:`candidate_sums`); ``tones``
     each hop's tone index (shape ``(M,)``, below ``n_tones``). E/N0 is ``inf`` where the
     windows hold no noise; the three coherences are then still the hop terms' own (their

@@ -178,7 +178,7 @@ def reverberation_coherence(
 ) -> float:
     """The coherence over ``M`` hops one echo has against the interference measured beside
     it: ``E[ρ] = (M s + 1) / (M (s + 1))`` with ``s`` its per-hop signal-to-interference
-    ratio (the white-noise form of :func:`hil.estimation.refine._fit_quality`, with the
+    ratio (the white-noise form of :func:`hil.estimation.fit_steps.echo_quality`, with the
     interference measured instead of modelled).
 
     ``on_tone`` (shape ``(M,)``): the hops' unit correlators at the echo's cell, each on its

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hil.estimation import refine
+from hil.estimation import refine_accel
 from hil.estimation.base import Estimate
 from sim_devices.acoustics.trajectory import Live
 from sim_devices.acoustics.truth import HopTruth
@@ -95,7 +95,7 @@ def test_a_target_accelerating_at_15_or_25_mps2_is_measured(
 @pytest.mark.slow
 @pytest.mark.parametrize(
     ("seed_hop_s", "detected", "false_per_hop"),
-    [(refine.ACCEL_SEED_HOP_S, 55, 0.0), (0.015, 4, 0.015)],
+    [(refine_accel.ACCEL_SEED_HOP_S, 55, 0.0), (0.015, 4, 0.015)],
 )
 def test_a_three_state_target_braking_at_6_mps2_is_seeded_from_its_hop_length(
     seed_hop_s: float, detected: int, false_per_hop: float, monkeypatch: pytest.MonkeyPatch
@@ -105,7 +105,7 @@ def test_a_three_state_target_braking_at_6_mps2_is_seeded_from_its_hop_length(
     # from 8 m/s² only (ACCEL_SEED_HOP_S at its hop length), a target braking from 20 m/s at
     # 6 m/s² kept 4 of its 56 boundaries (measured 30 Nov; 7.5 m/s²: 0.96, 10: 0.85-0.93).
     # Seeded also from the window's halves (the same threshold): 55 (52 from the track only).
-    monkeypatch.setattr(refine, "ACCEL_SEED_HOP_S", seed_hop_s)
+    monkeypatch.setattr(refine_accel, "ACCEL_SEED_HOP_S", seed_hop_s)
     est, truth = _scene(20.0, -6.0, 0.0, seed=1, family="three-state")
     pd, false, range_rms, _ = _score(est, truth, SECONDS / 0.015)
     assert (round(pd * 56), false) == (detected, pytest.approx(false_per_hop, abs=1e-9))
@@ -131,7 +131,7 @@ def test_the_seed_is_the_speed_trend_of_the_echo_s_own_detections(accel: float) 
     hops, times, speeds = _track(accel, 0.0)
     last = hops == 7
     last[8:] = False
-    trend = refine.speed_trend(
+    trend = refine_accel.speed_trend(
         hops[~last], times[~last], speeds[~last], 7, float(times[last][0]),
         float(speeds[last][0]), 0.01, C, 0.005, 1.0,
     )  # fmt: skip
@@ -143,7 +143,7 @@ def test_the_seed_s_error_grows_with_the_detections_scatter() -> None:
     hops, times, speeds = _track(20.0, 0.1)
     keep = np.ones(hops.shape[0], dtype=bool)
     keep[7] = False
-    trend = refine.speed_trend(
+    trend = refine_accel.speed_trend(
         hops[keep], times[keep], speeds[keep], 7, float(times[7]), float(speeds[7]), 0.01, C,
         0.005, 1.0,
     )  # fmt: skip
@@ -156,13 +156,13 @@ def test_no_seed_from_too_few_detections_or_from_another_echo() -> None:
     hops, times, speeds = _track(20.0, 0.0, hops=3)
     # Two earlier detections of the echo and this one: fewer than ACCEL_SEED_POINTS.
     assert (
-        refine.speed_trend(hops[:2], times[:2], speeds[:2], 2, float(times[2]),
+        refine_accel.speed_trend(hops[:2], times[:2], speeds[:2], 2, float(times[2]),
                            float(speeds[2]), 0.01, C, 0.005, 1.0) is None
     )  # fmt: skip
     # The still echo's detections are not on a track at 40 m and 10 m/s.
     hops, times, speeds = _track(20.0, 0.0)
     still = slice(8, 15)
     assert (
-        refine.speed_trend(hops[still], times[still], speeds[still], 7, float(times[7]),
+        refine_accel.speed_trend(hops[still], times[still], speeds[still], 7, float(times[7]),
                            float(speeds[7]), 0.01, C, 0.005, 1.0) is None
     )  # fmt: skip

@@ -22,6 +22,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import hil.estimation.refine as refine_module
+import hil.estimation.refine_accel as refine_accel
 from hil.errors import ConfigError
 from hil.estimation.base import Estimate
 from hil.estimation.gcas import GcasReceiver
@@ -277,10 +278,10 @@ def test_the_curves_centre_and_boundary_are_one_curve(
     # the known echo's hop lines (boundary-anchored) meet the same curve: the centre hop's
     # line through (t_c + τ_c, T_b + d_c) has the centre's time scale.
     gamma = 2.0 * accel / C
-    t_c, alpha_c = refine_module._to_centre(t_b, alpha_b, gamma, d_c)
-    t_back, a_back = refine_module._to_boundary(t_c, alpha_c, gamma, d_c)
+    t_c, alpha_c = refine_accel.to_centre(t_b, alpha_b, gamma, d_c)
+    t_back, a_back = refine_accel.to_boundary(t_c, alpha_c, gamma, d_c)
     assert abs(t_back - t_b) < 1e-12 and abs(a_back - alpha_b) < 1e-9
-    t_i, a_i = refine_module._hops_on_curve(t_b, alpha_b, gamma, np.array([d_c]))
+    t_i, a_i = refine_accel.hops_on_curve(t_b, alpha_b, gamma, np.array([d_c]))
     # Each side takes one Newton step from its own anchor (error O(γ² u³)): within 5 ns, a
     # thousandth of a radian of a 30 kHz tone.
     assert abs(a_i[0] - alpha_c) < 1e-8
